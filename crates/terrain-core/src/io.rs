@@ -1,0 +1,1027 @@
+//! Map file I/O: grayscale PNG (8 and 16 bit) and RAW16 reading and writing, RGBA8 PNG
+//! encoding for frame captures, and atomic file replacement. This is the only module of
+//! terrain-core that touches files.
+//!
+//! Readers never trust a file: the image size is checked against [`ReadLimits`] from the PNG
+//! header (or, for RAW16, from the requested size and the file length) before any pixel buffer
+//! is allocated, and every malformed input is reported as a [`MapIoError`], never a panic.
+//!
+//! Formats:
+//! - PNG: single-channel grayscale, 8 or 16 bits per sample, interlaced or not. 16-bit samples
+//!   are big-endian in the file (as the PNG specification requires); decoding keeps their full
+//!   precision.
+//! - RAW16: headerless `u16` samples, little-endian, row-major (row `y = 0` first), as written
+//!   by common terrain tools. The size is not stored in the file and must be given.
+
+use crate::error::CoreError;
+use crate::grid::Grid;
+use glam::UVec2;
+use std::fs::{self, File, OpenOptions};
+use std::io::{self, BufRead, BufReader, Cursor, Read, Seek, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU32, Ordering};
+
+/// Default for [`ReadLimits::max_side`]: the largest width or height a reader accepts.
+pub const DEFAULT_MAX_SIDE: u32 = 16384;
+
+/// Limits checked from the header before any pixel buffer is allocated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReadLimits {
+    /// The largest width and the largest height accepted, in samples. A file whose header
+    /// announces a larger side is rejected with [`MapIoError::TooLarge`].
+    pub max_side: u32,
+}
+
+impl Default for ReadLimits {
+    fn default() -> Self {
+        Self {
+            max_side: DEFAULT_MAX_SIDE,
+        }
+    }
+}
+
+/// A decoded grayscale image.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum GrayImage {
+    /// 8 bits per sample (a detail-map tile, for example).
+    Gray8(Grid<u8>),
+    /// 16 bits per sample (a coarse-map, for example).
+    Gray16(Grid<u16>),
+}
+
+impl GrayImage {
+    /// Bits per sample: 8 or 16.
+    pub fn bit_depth(&self) -> u8 {
+        match self {
+            GrayImage::Gray8(_) => 8,
+            GrayImage::Gray16(_) => 16,
+        }
+    }
+
+    /// Width and height in samples.
+    pub fn size(&self) -> UVec2 {
+        match self {
+            GrayImage::Gray8(g) => g.size(),
+            GrayImage::Gray16(g) => g.size(),
+        }
+    }
+}
+
+/// Errors from reading and writing map files.
+///
+/// Every variant carries the offending values (path, size, bit depth, ...) so the message says
+/// what to fix.
+#[derive(Debug, thiserror::Error)]
+pub enum MapIoError {
+    /// A file could not be opened, read, written, synced or renamed.
+    #[error("I/O error on {}: {source}", path.display())]
+    Io {
+        /// The file (or, for an atomic write, the target file) the operation was on.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: io::Error,
+    },
+    /// The PNG is not single-channel grayscale.
+    #[error(
+        "the PNG is {color_type}, but a map must be single-channel grayscale (8 or 16 bit) \
+         without alpha: convert it to grayscale before loading it"
+    )]
+    NotGrayscale {
+        /// The colour type found in the file, in words.
+        color_type: String,
+    },
+    /// The PNG has a supported bit depth, but not the one the caller asked for.
+    #[error(
+        "the PNG has {found}-bit samples but a {expected}-bit map was requested: \
+         re-export it with {expected} bits per sample, or read it with the {found}-bit reader"
+    )]
+    WrongBitDepth {
+        /// Bits per sample requested.
+        expected: u8,
+        /// Bits per sample in the file.
+        found: u8,
+    },
+    /// The PNG uses a bit depth maps are never stored with (1, 2 or 4 bits per sample).
+    #[error(
+        "the PNG has {bits}-bit samples: only 8-bit and 16-bit grayscale maps are supported, \
+         re-export it with 8 or 16 bits per sample"
+    )]
+    UnsupportedBitDepth {
+        /// Bits per sample in the file.
+        bits: u8,
+    },
+    /// The data ends before the file format says it should.
+    #[error("the file is truncated: {reason}")]
+    Truncated {
+        /// Where the data ended, in words.
+        reason: String,
+    },
+    /// The data is not a valid file of the expected format (bad signature, bad checksum, bad
+    /// compressed stream, invalid header fields, ...).
+    #[error("the file is corrupt: {reason}")]
+    Corrupt {
+        /// What was wrong, in words.
+        reason: String,
+    },
+    /// A zero width or height was announced or requested.
+    #[error("image size {width}x{height} is empty: both sides must be at least 1")]
+    ZeroSize {
+        /// Width announced or requested.
+        width: u32,
+        /// Height announced or requested.
+        height: u32,
+    },
+    /// The image is larger than the reader accepts.
+    #[error(
+        "image size {width}x{height} is too large: each side may be at most {max_side} samples \
+         (raise ReadLimits::max_side to accept it)"
+    )]
+    TooLarge {
+        /// Width announced or requested.
+        width: u32,
+        /// Height announced or requested.
+        height: u32,
+        /// The limit in force.
+        max_side: u32,
+    },
+    /// A RAW16 file or buffer does not hold exactly `width * height` little-endian `u16`s.
+    #[error(
+        "RAW16 data of {actual_bytes} bytes does not match size {width}x{height}, which needs \
+         exactly {expected_bytes} bytes (2 per sample): check the size given for this file"
+    )]
+    RawSizeMismatch {
+        /// Width requested.
+        width: u32,
+        /// Height requested.
+        height: u32,
+        /// Byte count the size needs.
+        expected_bytes: u64,
+        /// Byte count found.
+        actual_bytes: u64,
+    },
+    /// The PNG encoder refused the image.
+    #[error("could not encode {width}x{height} image as PNG: {reason}")]
+    Encode {
+        /// Width of the image.
+        width: u32,
+        /// Height of the image.
+        height: u32,
+        /// The encoder's reason, in words.
+        reason: String,
+    },
+    /// The decoded samples could not form a grid.
+    #[error(transparent)]
+    Grid(#[from] CoreError),
+}
+
+// ---------------------------------------------------------------------------------------------
+// Size checks
+
+/// Checks a size against the limits: zero sides first, then the largest side.
+fn check_size(width: u32, height: u32, limits: &ReadLimits) -> Result<(), MapIoError> {
+    if width == 0 || height == 0 {
+        return Err(MapIoError::ZeroSize { width, height });
+    }
+    if width > limits.max_side || height > limits.max_side {
+        return Err(MapIoError::TooLarge {
+            width,
+            height,
+            max_side: limits.max_side,
+        });
+    }
+    Ok(())
+}
+
+/// The memory the PNG decoder may allocate for itself (row buffers, metadata chunks). The
+/// output image buffer is ours and is sized from the already checked header.
+fn png_decoder_limits(limits: &ReadLimits) -> png::Limits {
+    // A 16-bit row of the widest accepted image plus its filter byte, a few times over, plus a
+    // fixed allowance for ancillary chunks.
+    let row = (limits.max_side as usize)
+        .saturating_mul(2)
+        .saturating_add(1);
+    png::Limits {
+        bytes: row.saturating_mul(4).saturating_add(8 << 20),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// PNG decoding
+
+/// Which step of decoding an error came from, to say where a truncated file ends when its
+/// chunk structure cannot be walked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    Header,
+    Metadata,
+    ImageData,
+    Trailer,
+}
+
+impl Stage {
+    fn truncated_reason(self) -> &'static str {
+        match self {
+            Stage::Header => "the data ends inside the PNG signature or header (IHDR)",
+            Stage::Metadata => "the data ends before the image data (IDAT) starts",
+            Stage::ImageData => "the data ends inside the image data (IDAT)",
+            Stage::Trailer => "the data ends before the end chunk (IEND)",
+        }
+    }
+}
+
+/// Where the bytes come from: memory, or a file (whose read errors are I/O errors).
+#[derive(Debug, Clone, Copy)]
+enum Source<'a> {
+    Memory(&'a [u8]),
+    File(&'a Path),
+}
+
+/// The PNG file signature.
+const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
+
+/// A chunk type as text (`IDAT`), or its bytes when they are not letters.
+fn chunk_name(ty: [u8; 4]) -> String {
+    if ty.iter().all(u8::is_ascii_alphabetic) {
+        ty.iter().map(|&b| char::from(b)).collect()
+    } else {
+        format!("{ty:02x?}")
+    }
+}
+
+/// Reads up to `buf.len()` bytes, stopping early only at the end of the data.
+fn read_up_to(r: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match r.read(&mut buf[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(n)
+}
+
+/// Says where truncated PNG data ends by walking its chunk headers (reading only the 8-byte
+/// headers, seeking over chunk contents). `None` if the structure shows no truncation.
+fn describe_truncation(r: &mut (impl Read + Seek)) -> io::Result<Option<String>> {
+    let total = r.seek(io::SeekFrom::End(0))?;
+    r.seek(io::SeekFrom::Start(0))?;
+    if total < PNG_SIGNATURE.len() as u64 {
+        return Ok(Some(format!(
+            "the data is {total} bytes long and ends inside the 8-byte PNG signature"
+        )));
+    }
+    let mut pos = PNG_SIGNATURE.len() as u64;
+    let mut last: Option<String> = None;
+    loop {
+        r.seek(io::SeekFrom::Start(pos))?;
+        let mut head = [0u8; 8];
+        let n = read_up_to(r, &mut head)?;
+        if n == 0 {
+            return Ok(Some(match last {
+                Some(name) => format!(
+                    "the data ends after the {name} chunk at byte {pos}; more chunks and the \
+                     end chunk (IEND) are missing"
+                ),
+                None => "the data ends right after the PNG signature; the header (IHDR) is \
+                         missing"
+                    .to_owned(),
+            }));
+        }
+        if n < head.len() {
+            return Ok(Some(format!(
+                "the data ends inside the header of the chunk that starts at byte {pos} \
+                 ({n} of 8 bytes present)"
+            )));
+        }
+        let len = u64::from(u32::from_be_bytes([head[0], head[1], head[2], head[3]]));
+        let name = chunk_name([head[4], head[5], head[6], head[7]]);
+        let chunk_len = len + 12;
+        let available = total - pos;
+        if available < chunk_len {
+            let what = if name == "IHDR" {
+                "the header chunk (IHDR)".to_owned()
+            } else {
+                format!("the {name} chunk")
+            };
+            return Ok(Some(format!(
+                "the data ends inside {what} that starts at byte {pos} ({available} of its \
+                 {chunk_len} bytes present)"
+            )));
+        }
+        if name == "IEND" {
+            return Ok(None);
+        }
+        pos += chunk_len;
+        last = Some(name);
+    }
+}
+
+/// Maps a png decoding error to ours.
+fn map_decoding_error(
+    e: png::DecodingError,
+    stage: Stage,
+    source: Source<'_>,
+    size: Option<(u32, u32)>,
+    limits: &ReadLimits,
+) -> MapIoError {
+    match e {
+        png::DecodingError::IoError(io) if io.kind() == io::ErrorKind::UnexpectedEof => {
+            let detail = match source {
+                Source::Memory(bytes) => describe_truncation(&mut Cursor::new(bytes)),
+                Source::File(path) => {
+                    File::open(path).and_then(|mut f| describe_truncation(&mut f))
+                }
+            };
+            MapIoError::Truncated {
+                reason: detail
+                    .ok()
+                    .flatten()
+                    .unwrap_or_else(|| stage.truncated_reason().to_owned()),
+            }
+        }
+        png::DecodingError::IoError(io) => match source {
+            Source::File(path) => MapIoError::Io {
+                path: path.to_path_buf(),
+                source: io,
+            },
+            Source::Memory(_) => MapIoError::Corrupt {
+                reason: format!("reading the PNG data failed: {io}"),
+            },
+        },
+        png::DecodingError::Format(f) => MapIoError::Corrupt {
+            reason: format!("invalid PNG: {f}"),
+        },
+        png::DecodingError::Parameter(p) => MapIoError::Corrupt {
+            reason: format!("the PNG decoder rejected the data: {p}"),
+        },
+        png::DecodingError::LimitsExceeded => match size {
+            Some((width, height)) => MapIoError::TooLarge {
+                width,
+                height,
+                max_side: limits.max_side,
+            },
+            None => MapIoError::Corrupt {
+                reason: "the PNG needs more decoder memory than allowed".to_owned(),
+            },
+        },
+    }
+}
+
+/// Width and height from the IHDR chunk as stored, without validation, if the data is long
+/// enough and starts like a PNG. Used to report a zero size as [`MapIoError::ZeroSize`].
+fn peek_ihdr_size(bytes: &[u8]) -> Option<(u32, u32)> {
+    let head = bytes.get(..24)?;
+    if head[..8] != PNG_SIGNATURE || &head[12..16] != b"IHDR" {
+        return None;
+    }
+    let width = u32::from_be_bytes([head[16], head[17], head[18], head[19]]);
+    let height = u32::from_be_bytes([head[20], head[21], head[22], head[23]]);
+    Some((width, height))
+}
+
+/// The IHDR size of the source, read again after a header error (see [`peek_ihdr_size`]).
+fn peek_source_size(source: Source<'_>) -> Option<(u32, u32)> {
+    match source {
+        Source::Memory(bytes) => peek_ihdr_size(bytes),
+        Source::File(path) => {
+            let mut head = [0u8; 24];
+            let n = File::open(path)
+                .and_then(|mut f| read_up_to(&mut f, &mut head))
+                .ok()?;
+            peek_ihdr_size(&head[..n])
+        }
+    }
+}
+
+/// A readable name for a PNG colour type.
+fn color_type_name(ct: png::ColorType) -> &'static str {
+    match ct {
+        png::ColorType::Grayscale => "grayscale",
+        png::ColorType::Rgb => "RGB colour",
+        png::ColorType::Indexed => "palette (indexed colour)",
+        png::ColorType::GrayscaleAlpha => "grayscale with alpha",
+        png::ColorType::Rgba => "RGBA colour",
+    }
+}
+
+/// Decodes a grayscale PNG from `reader`. `want` is the bit depth the caller requires, if any;
+/// it is checked from the header before the pixels are decoded.
+fn decode_png_from<R: BufRead + Seek>(
+    reader: R,
+    limits: &ReadLimits,
+    want: Option<u8>,
+    source: Source<'_>,
+) -> Result<GrayImage, MapIoError> {
+    let mut decoder = png::Decoder::new_with_limits(reader, png_decoder_limits(limits));
+    decoder.set_transformations(png::Transformations::IDENTITY);
+    // Text and ICC profiles mean nothing to a heightmap; skipping them keeps their memory out.
+    decoder.set_ignore_text_chunk(true);
+    decoder.set_ignore_iccp_chunk(true);
+
+    let (width, height, color_type, bits) = match decoder.read_header_info() {
+        Ok(info) => (
+            info.width,
+            info.height,
+            info.color_type,
+            info.bit_depth as u8,
+        ),
+        Err(e) => {
+            // The png crate rejects a zero side as a generic format error; say what it is.
+            if let Some((w, h)) = peek_source_size(source)
+                && (w == 0 || h == 0)
+            {
+                return Err(MapIoError::ZeroSize {
+                    width: w,
+                    height: h,
+                });
+            }
+            return Err(map_decoding_error(e, Stage::Header, source, None, limits));
+        }
+    };
+
+    // Everything below is decided from the header alone, before any pixel buffer exists.
+    check_size(width, height, limits)?;
+    if color_type != png::ColorType::Grayscale {
+        return Err(MapIoError::NotGrayscale {
+            color_type: color_type_name(color_type).to_owned(),
+        });
+    }
+    if bits != 8 && bits != 16 {
+        return Err(MapIoError::UnsupportedBitDepth { bits });
+    }
+    if let Some(expected) = want
+        && expected != bits
+    {
+        return Err(MapIoError::WrongBitDepth {
+            expected,
+            found: bits,
+        });
+    }
+
+    let size = Some((width, height));
+    let mut reader = decoder
+        .read_info()
+        .map_err(|e| map_decoding_error(e, Stage::Metadata, source, size, limits))?;
+    let buffer_len = reader.output_buffer_size().ok_or(MapIoError::TooLarge {
+        width,
+        height,
+        max_side: limits.max_side,
+    })?;
+    let expected_len = (width as usize)
+        .checked_mul(height as usize)
+        .and_then(|n| n.checked_mul(usize::from(bits / 8)));
+    if expected_len != Some(buffer_len) {
+        return Err(MapIoError::Corrupt {
+            reason: format!(
+                "the PNG decoder wants a {buffer_len}-byte buffer for a {width}x{height} \
+                 {bits}-bit grayscale image"
+            ),
+        });
+    }
+
+    let mut buf = vec![0u8; buffer_len];
+    let frame = reader
+        .next_frame(&mut buf)
+        .map_err(|e| map_decoding_error(e, Stage::ImageData, source, size, limits))?;
+    if frame.width != width || frame.height != height {
+        return Err(MapIoError::Corrupt {
+            reason: format!(
+                "the first frame is {}x{} but the header says {width}x{height}",
+                frame.width, frame.height
+            ),
+        });
+    }
+    // Read up to IEND so that a file cut after the image data or with a damaged trailer is
+    // reported rather than silently accepted.
+    reader
+        .finish()
+        .map_err(|e| map_decoding_error(e, Stage::Trailer, source, size, limits))?;
+
+    if bits == 16 {
+        let samples = buf
+            .chunks_exact(2)
+            .map(|b| u16::from_be_bytes([b[0], b[1]]))
+            .collect();
+        Ok(GrayImage::Gray16(Grid::from_vec(width, height, samples)?))
+    } else {
+        Ok(GrayImage::Gray8(Grid::from_vec(width, height, buf)?))
+    }
+}
+
+/// Decodes an 8-bit or 16-bit grayscale PNG held in memory.
+///
+/// The size is checked against `limits` from the header before the pixel buffer is allocated.
+/// Colour, palette and gray+alpha images are [`MapIoError::NotGrayscale`]; 1, 2 and 4-bit
+/// images are [`MapIoError::UnsupportedBitDepth`]. Interlaced images are supported.
+pub fn decode_png(bytes: &[u8], limits: &ReadLimits) -> Result<GrayImage, MapIoError> {
+    decode_png_from(Cursor::new(bytes), limits, None, Source::Memory(bytes))
+}
+
+/// Decodes a 16-bit grayscale PNG held in memory (a coarse-map, for example).
+///
+/// An 8-bit file is [`MapIoError::WrongBitDepth`] `{ expected: 16, found: 8 }`; see
+/// [`decode_png`] for the other errors.
+pub fn decode_png16(bytes: &[u8], limits: &ReadLimits) -> Result<Grid<u16>, MapIoError> {
+    match decode_png_from(Cursor::new(bytes), limits, Some(16), Source::Memory(bytes))? {
+        GrayImage::Gray16(g) => Ok(g),
+        GrayImage::Gray8(_) => Err(MapIoError::WrongBitDepth {
+            expected: 16,
+            found: 8,
+        }),
+    }
+}
+
+/// Decodes an 8-bit grayscale PNG held in memory (a detail-map tile, for example).
+///
+/// A 16-bit file is [`MapIoError::WrongBitDepth`] `{ expected: 8, found: 16 }`; see
+/// [`decode_png`] for the other errors.
+pub fn decode_png8(bytes: &[u8], limits: &ReadLimits) -> Result<Grid<u8>, MapIoError> {
+    match decode_png_from(Cursor::new(bytes), limits, Some(8), Source::Memory(bytes))? {
+        GrayImage::Gray8(g) => Ok(g),
+        GrayImage::Gray16(_) => Err(MapIoError::WrongBitDepth {
+            expected: 8,
+            found: 16,
+        }),
+    }
+}
+
+/// Reads a PNG file through a buffered reader, without loading the whole file first.
+fn read_png_file(
+    path: &Path,
+    limits: &ReadLimits,
+    want: Option<u8>,
+) -> Result<GrayImage, MapIoError> {
+    let file = File::open(path).map_err(|source| MapIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    decode_png_from(BufReader::new(file), limits, want, Source::File(path))
+}
+
+/// Reads an 8-bit or 16-bit grayscale PNG file. See [`decode_png`] for the checks; a file that
+/// cannot be opened or read is [`MapIoError::Io`] with its path.
+pub fn read_png(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<GrayImage, MapIoError> {
+    read_png_file(path.as_ref(), limits, None)
+}
+
+/// Reads a 16-bit grayscale PNG file. See [`decode_png16`] and [`read_png`].
+pub fn read_png16(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<Grid<u16>, MapIoError> {
+    match read_png_file(path.as_ref(), limits, Some(16))? {
+        GrayImage::Gray16(g) => Ok(g),
+        GrayImage::Gray8(_) => Err(MapIoError::WrongBitDepth {
+            expected: 16,
+            found: 8,
+        }),
+    }
+}
+
+/// Reads an 8-bit grayscale PNG file. See [`decode_png8`] and [`read_png`].
+pub fn read_png8(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<Grid<u8>, MapIoError> {
+    match read_png_file(path.as_ref(), limits, Some(8))? {
+        GrayImage::Gray8(g) => Ok(g),
+        GrayImage::Gray16(_) => Err(MapIoError::WrongBitDepth {
+            expected: 8,
+            found: 16,
+        }),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// PNG encoding
+
+/// Encodes row-major sample bytes as a non-interlaced PNG.
+fn encode_png(
+    width: u32,
+    height: u32,
+    color: png::ColorType,
+    depth: png::BitDepth,
+    data: &[u8],
+) -> Result<Vec<u8>, MapIoError> {
+    let encode_err = |e: png::EncodingError| MapIoError::Encode {
+        width,
+        height,
+        reason: e.to_string(),
+    };
+    let mut out = Vec::new();
+    let mut encoder = png::Encoder::new(&mut out, width, height);
+    encoder.set_color(color);
+    encoder.set_depth(depth);
+    let mut writer = encoder.write_header().map_err(encode_err)?;
+    writer.write_image_data(data).map_err(encode_err)?;
+    writer.finish().map_err(encode_err)?;
+    Ok(out)
+}
+
+/// Encodes a 16-bit grayscale PNG (samples stored big-endian, as PNG requires).
+pub fn encode_png16(grid: &Grid<u16>) -> Result<Vec<u8>, MapIoError> {
+    let data: Vec<u8> = grid
+        .as_slice()
+        .iter()
+        .flat_map(|v| v.to_be_bytes())
+        .collect();
+    encode_png(
+        grid.width(),
+        grid.height(),
+        png::ColorType::Grayscale,
+        png::BitDepth::Sixteen,
+        &data,
+    )
+}
+
+/// Encodes an 8-bit grayscale PNG.
+pub fn encode_png8(grid: &Grid<u8>) -> Result<Vec<u8>, MapIoError> {
+    encode_png(
+        grid.width(),
+        grid.height(),
+        png::ColorType::Grayscale,
+        png::BitDepth::Eight,
+        grid.as_slice(),
+    )
+}
+
+/// Encodes an 8-bit RGBA PNG (frame captures): each sample is `[r, g, b, a]`.
+pub fn encode_png_rgba8(grid: &Grid<[u8; 4]>) -> Result<Vec<u8>, MapIoError> {
+    encode_png(
+        grid.width(),
+        grid.height(),
+        png::ColorType::Rgba,
+        png::BitDepth::Eight,
+        bytemuck::cast_slice(grid.as_slice()),
+    )
+}
+
+/// Writes a 16-bit grayscale PNG file atomically (see [`write_atomic`]).
+pub fn write_png16(path: impl AsRef<Path>, grid: &Grid<u16>) -> Result<(), MapIoError> {
+    write_atomic(path, &encode_png16(grid)?)
+}
+
+/// Writes an 8-bit grayscale PNG file atomically (see [`write_atomic`]).
+pub fn write_png8(path: impl AsRef<Path>, grid: &Grid<u8>) -> Result<(), MapIoError> {
+    write_atomic(path, &encode_png8(grid)?)
+}
+
+/// Writes an 8-bit RGBA PNG file atomically (see [`write_atomic`]).
+pub fn write_png_rgba8(path: impl AsRef<Path>, grid: &Grid<[u8; 4]>) -> Result<(), MapIoError> {
+    write_atomic(path, &encode_png_rgba8(grid)?)
+}
+
+// ---------------------------------------------------------------------------------------------
+// RAW16
+
+/// Checks a RAW16 size and returns the byte count it needs.
+fn raw16_len(size: UVec2, limits: &ReadLimits) -> Result<u64, MapIoError> {
+    check_size(size.x, size.y, limits)?;
+    // (2^32 - 1)^2 * 2 can overflow u64 when the limit is raised that far.
+    u64::from(size.x)
+        .checked_mul(u64::from(size.y))
+        .and_then(|n| n.checked_mul(2))
+        .ok_or(MapIoError::TooLarge {
+            width: size.x,
+            height: size.y,
+            max_side: limits.max_side,
+        })
+}
+
+/// Decodes RAW16 data: `size.x * size.y` little-endian `u16` samples, row-major.
+///
+/// A zero side is [`MapIoError::ZeroSize`], a side over `limits.max_side` is
+/// [`MapIoError::TooLarge`], and any byte count other than `2 * size.x * size.y` (an odd count
+/// included) is [`MapIoError::RawSizeMismatch`].
+pub fn decode_raw16(
+    bytes: &[u8],
+    size: UVec2,
+    limits: &ReadLimits,
+) -> Result<Grid<u16>, MapIoError> {
+    let expected_bytes = raw16_len(size, limits)?;
+    let actual_bytes = bytes.len() as u64;
+    if actual_bytes != expected_bytes {
+        return Err(MapIoError::RawSizeMismatch {
+            width: size.x,
+            height: size.y,
+            expected_bytes,
+            actual_bytes,
+        });
+    }
+    let samples = bytes
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]))
+        .collect();
+    Ok(Grid::from_vec(size.x, size.y, samples)?)
+}
+
+/// Reads a RAW16 file of the given size (see [`decode_raw16`]).
+///
+/// The file length is checked from its metadata before anything is read, so a wrong size
+/// never causes a large read.
+pub fn read_raw16(
+    path: impl AsRef<Path>,
+    size: UVec2,
+    limits: &ReadLimits,
+) -> Result<Grid<u16>, MapIoError> {
+    let path = path.as_ref();
+    let io_err = |source| MapIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let expected_bytes = raw16_len(size, limits)?;
+    let file = File::open(path).map_err(io_err)?;
+    let actual_bytes = file.metadata().map_err(io_err)?.len();
+    if actual_bytes != expected_bytes {
+        return Err(MapIoError::RawSizeMismatch {
+            width: size.x,
+            height: size.y,
+            expected_bytes,
+            actual_bytes,
+        });
+    }
+    // Read at most one byte more than expected, so a file that changed since the metadata
+    // check is still caught without reading it all.
+    let capacity = usize::try_from(expected_bytes).map_err(|_| MapIoError::TooLarge {
+        width: size.x,
+        height: size.y,
+        max_side: limits.max_side,
+    })?;
+    let mut bytes = Vec::with_capacity(capacity);
+    file.take(expected_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(io_err)?;
+    decode_raw16(&bytes, size, limits)
+}
+
+/// Encodes a grid as RAW16: little-endian `u16` samples, row-major, no header.
+pub fn encode_raw16(grid: &Grid<u16>) -> Vec<u8> {
+    grid.as_slice()
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect()
+}
+
+/// Writes a RAW16 file atomically (see [`encode_raw16`] and [`write_atomic`]).
+pub fn write_raw16(path: impl AsRef<Path>, grid: &Grid<u16>) -> Result<(), MapIoError> {
+    write_atomic(path, &encode_raw16(grid))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Atomic writes
+
+/// Distinguishes temp files of concurrent writes from the same process.
+static TEMP_COUNTER: AtomicU32 = AtomicU32::new(0);
+
+/// Creates a new, uniquely named temp file next to the target.
+fn create_temp_file(dir: &Path, file_name: &str) -> io::Result<(PathBuf, File)> {
+    let pid = std::process::id();
+    let mut last_err = None;
+    for _ in 0..64 {
+        let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+        let temp = dir.join(format!(".{file_name}.{pid}.{n}.tmp"));
+        match OpenOptions::new().write(true).create_new(true).open(&temp) {
+            Ok(f) => return Ok((temp, f)),
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => last_err = Some(e),
+            Err(e) => return Err(e),
+        }
+    }
+    Err(last_err.unwrap_or_else(|| io::Error::other("could not create a unique temp file")))
+}
+
+/// Writes, syncs and renames the temp file over the target.
+fn write_and_replace(temp: &Path, mut file: File, bytes: &[u8], target: &Path) -> io::Result<()> {
+    file.write_all(bytes)?;
+    file.sync_all()?;
+    drop(file);
+    fs::rename(temp, target)
+}
+
+/// Makes the rename durable by syncing the directory (unix only; elsewhere a no-op).
+fn sync_dir(dir: &Path) -> io::Result<()> {
+    #[cfg(unix)]
+    {
+        match File::open(dir).and_then(|d| d.sync_all()) {
+            // Some file systems cannot sync directories; the rename has happened regardless.
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::InvalidInput | io::ErrorKind::Unsupported
+                ) =>
+            {
+                Ok(())
+            }
+            other => other,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        Ok(())
+    }
+}
+
+/// Writes bytes atomically: temp file in the same directory, write, fsync, rename over the
+/// target, fsync the directory (on unix). On any error the temp file is removed and the old
+/// target is untouched.
+///
+/// Readers of `path` see either the old content or the new one, never a partial file. The
+/// parent directory must exist; it is not created.
+pub fn write_atomic(path: impl AsRef<Path>, bytes: &[u8]) -> Result<(), MapIoError> {
+    let path = path.as_ref();
+    let io_err = |source| MapIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file_name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .ok_or_else(|| {
+            io_err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                "the path does not name a file",
+            ))
+        })?;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+
+    let (temp, file) = create_temp_file(dir, &file_name).map_err(io_err)?;
+    if let Err(e) = write_and_replace(&temp, file, bytes, path) {
+        // Best effort: the original error is the one worth reporting.
+        let _ = fs::remove_file(&temp);
+        return Err(io_err(e));
+    }
+    sync_dir(dir).map_err(io_err)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_limits() {
+        assert_eq!(ReadLimits::default().max_side, DEFAULT_MAX_SIDE);
+        assert_eq!(DEFAULT_MAX_SIDE, 16384);
+    }
+
+    #[test]
+    fn check_size_orders_zero_then_large() {
+        let l = ReadLimits { max_side: 10 };
+        assert!(check_size(1, 1, &l).is_ok());
+        assert!(check_size(10, 10, &l).is_ok());
+        assert!(matches!(
+            check_size(0, 20, &l),
+            Err(MapIoError::ZeroSize {
+                width: 0,
+                height: 20
+            })
+        ));
+        assert!(matches!(
+            check_size(11, 3, &l),
+            Err(MapIoError::TooLarge {
+                width: 11,
+                height: 3,
+                max_side: 10
+            })
+        ));
+        assert!(matches!(
+            check_size(3, 11, &l),
+            Err(MapIoError::TooLarge { .. })
+        ));
+    }
+
+    #[test]
+    fn decoding_errors_map_to_variants() {
+        let l = ReadLimits::default();
+        let eof = png::DecodingError::IoError(io::ErrorKind::UnexpectedEof.into());
+        // The chunk walk finds no truncation in complete data: the stage names the place.
+        let full = encode_png8(&Grid::new(3, 3, 7u8).unwrap()).unwrap();
+        let e = map_decoding_error(eof, Stage::ImageData, Source::Memory(&full), None, &l);
+        assert!(
+            matches!(&e, MapIoError::Truncated { reason } if reason.contains("image data")),
+            "{e:?}"
+        );
+        // Otherwise the chunk walk says where the data ends.
+        let eof = png::DecodingError::IoError(io::ErrorKind::UnexpectedEof.into());
+        let e = map_decoding_error(eof, Stage::Header, Source::Memory(&full[..3]), None, &l);
+        assert!(
+            matches!(&e, MapIoError::Truncated { reason } if reason.contains("signature")),
+            "{e:?}"
+        );
+
+        let other = png::DecodingError::IoError(io::ErrorKind::PermissionDenied.into());
+        let e = map_decoding_error(
+            other,
+            Stage::Header,
+            Source::File(Path::new("/x/y.png")),
+            None,
+            &l,
+        );
+        assert!(matches!(&e, MapIoError::Io { path, .. } if path == Path::new("/x/y.png")));
+        assert!(e.to_string().contains("/x/y.png"));
+
+        let e = map_decoding_error(
+            png::DecodingError::LimitsExceeded,
+            Stage::ImageData,
+            Source::Memory(&[]),
+            Some((7, 9)),
+            &l,
+        );
+        assert!(matches!(
+            e,
+            MapIoError::TooLarge {
+                width: 7,
+                height: 9,
+                ..
+            }
+        ));
+        let e = map_decoding_error(
+            png::DecodingError::LimitsExceeded,
+            Stage::Header,
+            Source::Memory(&[]),
+            None,
+            &l,
+        );
+        assert!(matches!(e, MapIoError::Corrupt { .. }));
+    }
+
+    #[test]
+    fn peek_ihdr_reads_size_of_encoded_png() {
+        let g = Grid::from_fn(5, 3, |x, y| (x + y) as u8).unwrap();
+        let bytes = encode_png8(&g).unwrap();
+        assert_eq!(peek_ihdr_size(&bytes), Some((5, 3)));
+        assert_eq!(peek_ihdr_size(&bytes[..23]), None);
+        assert_eq!(
+            peek_ihdr_size(b"not a png at all, but 24+ bytes long"),
+            None
+        );
+    }
+
+    #[test]
+    fn truncation_is_located_by_chunk() {
+        let full =
+            encode_png16(&Grid::from_fn(9, 4, |x, y| (x * 1000 + y) as u16).unwrap()).unwrap();
+        let describe = |n: usize| describe_truncation(&mut Cursor::new(&full[..n])).unwrap();
+        assert_eq!(describe(full.len()), None);
+        assert!(describe(5).unwrap().contains("signature"));
+        assert!(describe(8).unwrap().contains("IHDR"));
+        assert!(describe(12).unwrap().contains("header of the chunk"));
+        assert!(describe(20).unwrap().contains("IHDR"));
+        let at_idat = describe(50).unwrap();
+        assert!(
+            at_idat.contains("IDAT") && at_idat.contains("byte 33"),
+            "{at_idat}"
+        );
+        let before_iend = describe(full.len() - 12).unwrap();
+        assert!(before_iend.contains("IEND"), "{before_iend}");
+        assert_eq!(chunk_name(*b"IDAT"), "IDAT");
+        assert_eq!(chunk_name([0, 1, 2, 255]), "[00, 01, 02, ff]");
+    }
+
+    #[test]
+    fn png_decoder_limit_covers_widest_row() {
+        let l = ReadLimits::default();
+        assert!(png_decoder_limits(&l).bytes > DEFAULT_MAX_SIDE as usize * 2 + 1);
+        let huge = ReadLimits { max_side: u32::MAX };
+        assert!(png_decoder_limits(&huge).bytes >= u32::MAX as usize);
+    }
+
+    #[test]
+    fn small_round_trips() {
+        let l = ReadLimits::default();
+        let g16 = Grid::from_fn(3, 2, |x, y| (x * 30000 + y * 7) as u16).unwrap();
+        assert_eq!(decode_png16(&encode_png16(&g16).unwrap(), &l).unwrap(), g16);
+        let g8 = Grid::from_fn(2, 3, |x, y| (x * 100 + y) as u8).unwrap();
+        assert_eq!(decode_png8(&encode_png8(&g8).unwrap(), &l).unwrap(), g8);
+        let raw = encode_raw16(&g16);
+        assert_eq!(raw[..2], (g16.as_slice()[0]).to_le_bytes());
+        assert_eq!(decode_raw16(&raw, g16.size(), &l).unwrap(), g16);
+    }
+
+    #[test]
+    fn messages_carry_values() {
+        let e = MapIoError::RawSizeMismatch {
+            width: 3,
+            height: 4,
+            expected_bytes: 24,
+            actual_bytes: 23,
+        };
+        let s = e.to_string();
+        assert!(
+            s.contains("3x4") && s.contains("24") && s.contains("23"),
+            "{s}"
+        );
+        let s = MapIoError::WrongBitDepth {
+            expected: 16,
+            found: 8,
+        }
+        .to_string();
+        assert!(s.contains("16") && s.contains('8'), "{s}");
+        let s = MapIoError::TooLarge {
+            width: 20000,
+            height: 5,
+            max_side: 16384,
+        }
+        .to_string();
+        assert!(s.contains("20000x5") && s.contains("16384"), "{s}");
+    }
+}

@@ -1,0 +1,66 @@
+//! CPU reference of the deformable terrain workspace: grids and height encodings, PNG / RAW16
+//! I/O, sampling, partial-derivative normal maps, stamps and a procedural default terrain.
+//!
+//! Conventions (stated once for the whole workspace): world units are metres, Y is up,
+//! right-handed. Heightmap column `x` maps to world X and row `y` to world Z; sample `(x, y)`
+//! stands at `(x * texel_size, height, y * texel_size)`. Heights are stored as integers and
+//! converted with a [`HeightEncoding`] (`metres = offset + scale * stored`).
+//!
+//! ```
+//! use glam::Vec2;
+//! use terrain_core::{
+//!     generate_coarse_map, Blend, GaussianStamp, HeightEncoding, StampPlacement, TerrainParams,
+//!     apply_stamp, DerivativeMap,
+//! };
+//!
+//! // A 128 x 128 procedural coarse-map at 0.5 m per texel, heights 0..50 m.
+//! let params = TerrainParams { size: glam::UVec2::splat(128), ..TerrainParams::default() };
+//! let encoding = HeightEncoding::spanning::<u16>(0.0, 50.0)?;
+//! let mut map = generate_coarse_map(&params, encoding, 0.5)?;
+//! let mut normals = DerivativeMap::from_map(&map);
+//!
+//! // A 10 m crater, 2 m deep, centred across the wrap corner: it lands on all four corners.
+//! let mut crater = GaussianStamp::default();
+//! let placement = StampPlacement::new(Vec2::new(1.0, 1.0), Vec2::splat(10.0), -2.0)?;
+//! let dirty = apply_stamp(&mut map, &mut crater, &placement, Blend::Add)?;
+//! for rect in &dirty {
+//!     normals.update_rect(&map, *rect)?;
+//! }
+//! assert_eq!(dirty.len(), 4);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+#![warn(missing_docs)]
+#![warn(clippy::unwrap_used)]
+
+pub mod error;
+pub mod grid;
+pub mod hillshade;
+pub mod io;
+pub mod map;
+pub mod normals;
+pub mod rect;
+pub mod sample;
+pub mod shockwave;
+pub mod stamp;
+pub mod terrain_gen;
+
+pub use error::CoreError;
+pub use grid::{Grid, WrapMode};
+pub use hillshade::{HillshadeParams, hillshade};
+pub use io::MapIoError;
+pub use map::{
+    CoarseMap, DEFAULT_FIXED_POINT_UNITS_PER_M, DETAIL_MAX_RANGE_M, DetailTile, FixedPointMap,
+    HeightEncoding, HeightMap, HeightSample,
+};
+pub use normals::{
+    DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal,
+    normal_from_derivatives,
+};
+pub use rect::{DirtyRect, Rect, WrappedPiece};
+pub use sample::bilinear;
+pub use shockwave::{MAX_SHOCKWAVE_GAMMA, Shockwave, ShockwaveParams};
+pub use stamp::{
+    Blend, DEFAULT_GAUSSIAN_EPSILON_M, GaussianStamp, Stamp, StampPlacement, TextureStamp,
+    apply_stamp,
+};
+pub use terrain_gen::{TerrainParams, generate_coarse_map, generate_heights};

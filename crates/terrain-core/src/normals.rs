@@ -1,0 +1,193 @@
+//! Partial-derivative normal maps (seed 000 sec 3.1.2, 3.2.2): the 4th-order difference of
+//! eq. 3.3, packing to two signed 8-bit components, normal reconstruction, composite normals
+//! (eq. 3.4) and regeneration limited to a dirty rect plus its 2-texel apron.
+//!
+//! A derivative map stores the height gradient `(dh/dX, dh/dZ)` in metres per metre. The unit
+//! normal is `normalize(-dh/dX, 1, -dh/dZ)` (Y up): the `N = t x b` of seed 000 eq. 3.2.
+
+use crate::error::CoreError;
+use crate::grid::{Grid, WrapMode};
+use crate::map::{HeightMap, HeightSample};
+use crate::rect::Rect;
+use crate::sample::{bilinear_taps, check_position};
+use glam::{Vec2, Vec3};
+
+/// Texels the 4th-order difference reads on each side: a height change at a texel changes the
+/// derivatives up to this far away, so regeneration covers the dirty rect plus this apron.
+pub const DERIVATIVE_APRON: u32 = 2;
+
+/// Slope stored at ±127 by [`DerivativeMap::to_snorm8`] by default. Seed 000 packs derivatives
+/// into two 8-bit channels and reconstructs with `N_y = 1`, limiting normals to a 45° cone:
+/// a slope of 1 is the steepest it represents.
+pub const DEFAULT_SNORM_MAX_SLOPE: f32 = 1.0;
+
+/// Height gradients of a map, one per texel, with the map's spacing and wrap mode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DerivativeMap {
+    grid: Grid<Vec2>,
+    texel_size: f32,
+    wrap: WrapMode,
+}
+
+impl DerivativeMap {
+    /// Computes the derivatives of every texel of `map`.
+    pub fn from_map<T: HeightSample>(map: &HeightMap<T>) -> Self {
+        let grid = map.grid().map(|_| Vec2::ZERO);
+        let mut out = Self {
+            grid,
+            texel_size: map.texel_size(),
+            wrap: map.wrap(),
+        };
+        out.fill(map, map.grid().rect());
+        out
+    }
+
+    /// Recomputes the derivatives that a height change inside `dirty` can affect: `dirty` grown
+    /// by [`DERIVATIVE_APRON`] texels, wrapped on a repeating map and clipped on a clamped one.
+    ///
+    /// Fails if `map` is not the size of this derivative map, or if `dirty` does not lie inside
+    /// a clamped map.
+    pub fn update_rect<T: HeightSample>(
+        &mut self,
+        map: &HeightMap<T>,
+        dirty: Rect,
+    ) -> Result<(), CoreError> {
+        if map.size() != self.grid.size() {
+            return Err(CoreError::SizeMismatch {
+                expected: self.grid.size(),
+                actual: map.size(),
+            });
+        }
+        if dirty.is_empty() {
+            return Ok(());
+        }
+        let region = dirty.expand(DERIVATIVE_APRON);
+        match map.wrap() {
+            WrapMode::Repeat => {
+                for piece in region.split_toroidal(map.size()) {
+                    self.fill(map, piece.map);
+                }
+            }
+            WrapMode::Clamp => {
+                if !self.grid.rect().contains_rect(&dirty) {
+                    return Err(CoreError::RegionOutOfBounds {
+                        rect: dirty,
+                        map_size: map.size(),
+                    });
+                }
+                if let Some(r) = region.intersect(&self.grid.rect()) {
+                    self.fill(map, r);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the derivatives of `rect` (inside the map) from the heights of `map`.
+    fn fill<T: HeightSample>(&mut self, map: &HeightMap<T>, rect: Rect) {
+        let h = map.grid();
+        let wrap = map.wrap();
+        let w = i64::from(h.width());
+        // Eq. 3.3 reorganised: h'(x) = (h(x-2) - 8 h(x-1) + 8 h(x+1) - h(x+2)) / (12 xi),
+        // with heights in metres = offset + scale * raw (the offset cancels).
+        let k = f64::from(map.encoding().scale) / (12.0 * f64::from(map.texel_size()));
+        let row_of = |y: i64| wrap.resolve(y, h.height());
+        let col = |x: i64| wrap.resolve(x, h.width()) as usize;
+        for y in rect.min.y as i64..rect.max().y as i64 {
+            let rows = [-2i64, -1, 1, 2].map(|d| h.row(row_of(y + d)));
+            let here = h.row(row_of(y));
+            let out_row = self.grid.row_mut(y as u32);
+            for x in rect.min.x as i64..rect.max().x as i64 {
+                let r = |row: &[T], dx: i64| -> f64 {
+                    let xx = x + dx;
+                    let i = if (0..w).contains(&xx) {
+                        xx as usize
+                    } else {
+                        col(xx)
+                    };
+                    row[i].to_raw_f64()
+                };
+                let dx = r(here, -2) - 8.0 * r(here, -1) + 8.0 * r(here, 1) - r(here, 2);
+                let dz = r(rows[0], 0) - 8.0 * r(rows[1], 0) + 8.0 * r(rows[2], 0) - r(rows[3], 0);
+                out_row[x as usize] = Vec2::new((dx * k) as f32, (dz * k) as f32);
+            }
+        }
+    }
+
+    /// The gradients, one per texel.
+    pub fn grid(&self) -> &Grid<Vec2> {
+        &self.grid
+    }
+
+    /// Metres per texel of the map the derivatives came from.
+    pub fn texel_size(&self) -> f32 {
+        self.texel_size
+    }
+
+    /// Gradient at texel `(x, y)`, or `None` outside the map.
+    pub fn derivative(&self, x: u32, y: u32) -> Option<Vec2> {
+        self.grid.get(x, y)
+    }
+
+    /// Unit normal at texel `(x, y)`, or `None` outside the map.
+    pub fn normal(&self, x: u32, y: u32) -> Option<Vec3> {
+        self.grid.get(x, y).map(normal_from_derivatives)
+    }
+
+    /// Gradient at world position `pos = (X, Z)` in metres, interpolated bilinearly with the
+    /// map's wrap mode: what a detail map's gradient is looked up with for eq. 3.4.
+    pub fn sample(&self, pos: Vec2) -> Result<Vec2, CoreError> {
+        check_position(pos)?;
+        let (taps, [fx, fz]) = bilinear_taps(pos / self.texel_size);
+        let d = taps.map(|t| self.grid.get_wrapped(t, self.wrap));
+        let (fx, fz) = (fx as f32, fz as f32);
+        Ok(d[0].lerp(d[1], fx).lerp(d[2].lerp(d[3], fx), fz))
+    }
+
+    /// Packs the gradients into two signed 8-bit components: `round(clamp(d / max_slope, -1, 1)
+    /// * 127)`, so ±127 stands for a slope of ±`max_slope` and one step is `max_slope / 127`.
+    pub fn to_snorm8(&self, max_slope: f32) -> Result<Grid<[i8; 2]>, CoreError> {
+        check_max_slope(max_slope)?;
+        let pack = |v: f32| ((v / max_slope).clamp(-1.0, 1.0) * 127.0).round() as i8;
+        Ok(self.grid.map(|d| [pack(d.x), pack(d.y)]))
+    }
+
+    /// Unpacks two signed 8-bit components written by [`DerivativeMap::to_snorm8`].
+    pub fn from_snorm8(
+        packed: &Grid<[i8; 2]>,
+        max_slope: f32,
+        texel_size: f32,
+        wrap: WrapMode,
+    ) -> Result<Self, CoreError> {
+        check_max_slope(max_slope)?;
+        crate::map::check_texel_size(texel_size)?;
+        let unpack = |v: i8| f32::from(v.max(-127)) / 127.0 * max_slope;
+        Ok(Self {
+            grid: packed.map(|p| Vec2::new(unpack(p[0]), unpack(p[1]))),
+            texel_size,
+            wrap,
+        })
+    }
+}
+
+fn check_max_slope(max_slope: f32) -> Result<(), CoreError> {
+    if !max_slope.is_finite() || max_slope <= 0.0 {
+        return Err(CoreError::OutOfRange {
+            what: "derivative packing max_slope",
+            value: f64::from(max_slope),
+            expected: "finite and greater than 0",
+        });
+    }
+    Ok(())
+}
+
+/// The unit normal of a height gradient: `normalize(-dh/dX, 1, -dh/dZ)`.
+pub fn normal_from_derivatives(d: Vec2) -> Vec3 {
+    Vec3::new(-d.x, 1.0, -d.y).normalize()
+}
+
+/// The composite normal of a coarse and a detail gradient at the same point (seed 000 eq. 3.4):
+/// derivatives add, so no tangent space is needed.
+pub fn composite_normal(coarse: Vec2, detail: Vec2) -> Vec3 {
+    normal_from_derivatives(coarse + detail)
+}

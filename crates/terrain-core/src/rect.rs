@@ -1,0 +1,187 @@
+//! Integer texel rectangles: dirty rects, stamp footprints and their toroidal split.
+
+use glam::{IVec2, UVec2};
+
+/// A half-open rectangle of texels: columns `min.x .. min.x + size.x`, rows `min.y .. min.y + size.y`.
+///
+/// `min` may be negative or past the map's size: on a toroidally addressed map that means the
+/// rect wraps, and [`Rect::split_toroidal`] cuts it into the pieces that lie inside the map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct Rect {
+    /// First column and row.
+    pub min: IVec2,
+    /// Width and height in texels.
+    pub size: UVec2,
+}
+
+/// The region a deformation changed: normals, density and collision follow it.
+pub type DirtyRect = Rect;
+
+/// One piece of a wrapped rect: where it lies in the map, and where it lies in the unwrapped
+/// plane the rect was defined in (`unwrapped.min - map.min` is a multiple of the map size).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WrappedPiece {
+    /// The piece in map coordinates, inside `0..map_size`.
+    pub map: Rect,
+    /// The same texels in the rect's own, unwrapped coordinates.
+    pub unwrapped: Rect,
+}
+
+impl Rect {
+    /// A rect from its first texel and its size.
+    pub const fn new(min: IVec2, size: UVec2) -> Self {
+        Self { min, size }
+    }
+
+    /// A rect from its corners, `min` inclusive and `max` exclusive; empty if `max <= min`.
+    pub fn from_min_max(min: IVec2, max: IVec2) -> Self {
+        let size = (max - min).max(IVec2::ZERO).as_uvec2();
+        Self { min, size }
+    }
+
+    /// The whole of a map of `size` texels.
+    pub const fn from_size(size: UVec2) -> Self {
+        Self {
+            min: IVec2::ZERO,
+            size,
+        }
+    }
+
+    /// One past the last column and row.
+    pub fn max(&self) -> IVec2 {
+        self.min + self.size.as_ivec2()
+    }
+
+    /// Whether the rect holds no texel.
+    pub fn is_empty(&self) -> bool {
+        self.size.x == 0 || self.size.y == 0
+    }
+
+    /// Number of texels.
+    pub fn area(&self) -> u64 {
+        u64::from(self.size.x) * u64::from(self.size.y)
+    }
+
+    /// Whether texel `p` lies inside.
+    pub fn contains(&self, p: IVec2) -> bool {
+        p.cmpge(self.min).all() && p.cmplt(self.max()).all()
+    }
+
+    /// Whether `other` lies wholly inside `self`.
+    pub fn contains_rect(&self, other: &Rect) -> bool {
+        other.is_empty() || (other.min.cmpge(self.min).all() && other.max().cmple(self.max()).all())
+    }
+
+    /// The overlap of two rects, or `None` if they do not overlap.
+    pub fn intersect(&self, other: &Rect) -> Option<Rect> {
+        let r = Rect::from_min_max(self.min.max(other.min), self.max().min(other.max()));
+        (!r.is_empty()).then_some(r)
+    }
+
+    /// The smallest rect holding both (an empty rect is ignored).
+    pub fn union(&self, other: &Rect) -> Rect {
+        if self.is_empty() {
+            return *other;
+        }
+        if other.is_empty() {
+            return *self;
+        }
+        Rect::from_min_max(self.min.min(other.min), self.max().max(other.max()))
+    }
+
+    /// The rect grown by `margin` texels on every side (the 2-texel apron of the normal map).
+    pub fn expand(&self, margin: u32) -> Rect {
+        let m = margin as i32;
+        Rect::from_min_max(self.min - IVec2::splat(m), self.max() + IVec2::splat(m))
+    }
+
+    /// Cuts a rect on a toroidally addressed map of `map_size` texels into the (up to 4) pieces
+    /// that lie inside it: one if it is inside, two across an edge, four across a corner
+    /// (seed 000 sec 3.2.1). A rect wider than the map is first limited to one period, so every
+    /// map texel appears at most once.
+    pub fn split_toroidal(&self, map_size: UVec2) -> Vec<WrappedPiece> {
+        if self.is_empty() || map_size.x == 0 || map_size.y == 0 {
+            return Vec::new();
+        }
+        let size = self.size.min(map_size);
+        let xs = split_axis(self.min.x, size.x, map_size.x);
+        let ys = split_axis(self.min.y, size.y, map_size.y);
+        let mut pieces = Vec::with_capacity(xs.len() * ys.len());
+        for &(my, uy, h) in &ys {
+            for &(mx, ux, w) in &xs {
+                let size = UVec2::new(w, h);
+                pieces.push(WrappedPiece {
+                    map: Rect::new(IVec2::new(mx, my), size),
+                    unwrapped: Rect::new(IVec2::new(ux, uy), size),
+                });
+            }
+        }
+        pieces
+    }
+}
+
+/// Splits `[start, start + len)` on an axis of period `n` (`len <= n`) into at most two spans:
+/// (start in the map, start unwrapped, length).
+fn split_axis(start: i32, len: u32, n: u32) -> Vec<(i32, i32, u32)> {
+    let n_i = n as i64;
+    let m = (start as i64).rem_euclid(n_i) as u32;
+    let first = len.min(n - m);
+    let mut spans = vec![(m as i32, start, first)];
+    if first < len {
+        spans.push((0, start + first as i32, len - first));
+    }
+    spans
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inside_is_one_piece() {
+        let r = Rect::new(IVec2::new(2, 3), UVec2::new(4, 5));
+        let p = r.split_toroidal(UVec2::new(16, 16));
+        assert_eq!(p.len(), 1);
+        assert_eq!(p[0].map, r);
+        assert_eq!(p[0].unwrapped, r);
+    }
+
+    #[test]
+    fn edge_and_corner_split_into_two_and_four() {
+        let map = UVec2::new(10, 8);
+        let edge = Rect::new(IVec2::new(8, 2), UVec2::new(4, 3)).split_toroidal(map);
+        assert_eq!(edge.len(), 2);
+        let corner = Rect::new(IVec2::new(-2, 6), UVec2::new(5, 4)).split_toroidal(map);
+        assert_eq!(corner.len(), 4);
+        let total: u64 = corner.iter().map(|p| p.map.area()).sum();
+        assert_eq!(total, 20);
+        for p in &corner {
+            assert!(Rect::from_size(map).contains_rect(&p.map));
+            let d = p.unwrapped.min - p.map.min;
+            assert_eq!(d.x.rem_euclid(10), 0);
+            assert_eq!(d.y.rem_euclid(8), 0);
+        }
+    }
+
+    #[test]
+    fn oversized_rect_covers_map_once() {
+        let map = UVec2::new(6, 6);
+        let pieces = Rect::new(IVec2::new(-3, 1), UVec2::new(20, 2)).split_toroidal(map);
+        let total: u64 = pieces.iter().map(|p| p.map.area()).sum();
+        assert_eq!(total, 12);
+    }
+
+    #[test]
+    fn intersect_union_expand() {
+        let a = Rect::new(IVec2::new(0, 0), UVec2::new(4, 4));
+        let b = Rect::new(IVec2::new(2, 2), UVec2::new(4, 4));
+        assert_eq!(
+            a.intersect(&b),
+            Some(Rect::new(IVec2::new(2, 2), UVec2::new(2, 2)))
+        );
+        assert_eq!(a.union(&b), Rect::new(IVec2::ZERO, UVec2::new(6, 6)));
+        assert_eq!(a.expand(2), Rect::new(IVec2::new(-2, -2), UVec2::new(8, 8)));
+        let far = Rect::new(IVec2::new(10, 10), UVec2::new(1, 1));
+        assert_eq!(a.intersect(&far), None);
+    }
+}

@@ -1,0 +1,72 @@
+//! The command line of the demo.
+
+use clap::Parser;
+use std::path::PathBuf;
+
+/// Renders offline frame captures of deformable terrain and a timing report.
+#[derive(Debug, Parser)]
+#[command(version, about)]
+pub struct Cli {
+    /// Folder the captures and report.json are written to.
+    #[arg(long, default_value = "captures")]
+    pub out: PathBuf,
+    /// Side of the procedural default terrain in texels (any size, not only powers of two).
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..=16384))]
+    pub size: u32,
+    /// Seed of the procedural terrain and of the scripted deformations.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Number of frames to capture.
+    #[arg(long, default_value_t = 36, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub frames: u32,
+    /// Use this heightmap instead of the procedural terrain: a 16-bit grayscale PNG, or RAW16
+    /// (little-endian) when --raw-size is given.
+    #[arg(long, conflicts_with = "size")]
+    pub heightmap: Option<PathBuf>,
+    /// Size of a RAW16 heightmap, as WIDTHxHEIGHT.
+    #[arg(long, value_parser = parse_size, requires = "heightmap")]
+    pub raw_size: Option<glam::UVec2>,
+    /// Metres per texel (seed 000 uses 0.1 m).
+    #[arg(long, default_value_t = 0.1)]
+    pub texel_size: f32,
+    /// Height in metres of the largest 16-bit value (the lowest is 0 m).
+    #[arg(long, default_value_t = 12.0)]
+    pub max_height: f32,
+    /// Largest side of the overview frames in pixels (the map is shown nearest-texel).
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..=8192))]
+    pub frame_size: u32,
+}
+
+/// Parses `WIDTHxHEIGHT`.
+fn parse_size(s: &str) -> Result<glam::UVec2, String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|e| format!("`{v}` in `{s}`: {e}"))
+    };
+    Ok(glam::UVec2::new(parse(w)?, parse(h)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_sizes() {
+        assert_eq!(parse_size("640x480"), Ok(glam::UVec2::new(640, 480)));
+        assert!(parse_size("640").is_err());
+        assert!(parse_size("ax3").is_err());
+    }
+
+    #[test]
+    fn rejects_bad_flags() {
+        assert!(Cli::try_parse_from(["demo", "--size", "8"]).is_err());
+        assert!(Cli::try_parse_from(["demo", "--frames", "0"]).is_err());
+        assert!(Cli::try_parse_from(["demo", "--raw-size", "4x4"]).is_err());
+        assert!(Cli::try_parse_from(["demo", "--size", "100", "--heightmap", "a.png"]).is_err());
+        assert!(Cli::try_parse_from(["demo", "--size", "100", "--seed", "3"]).is_ok());
+    }
+}

@@ -1,0 +1,44 @@
+//! `report.json`: what was rendered and how long each step of each frame took.
+
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// The whole run.
+#[derive(Debug, Serialize)]
+pub struct Report {
+    /// Where the heights came from: `procedural` or the heightmap's path.
+    pub source: String,
+    /// Map size in texels.
+    pub size: [u32; 2],
+    /// Metres per texel.
+    pub texel_size_m: f32,
+    /// Scenario (and terrain) seed.
+    pub seed: u64,
+    /// Milliseconds to generate or load the terrain.
+    pub load_ms: f64,
+    /// Milliseconds to compute the first full normal map.
+    pub initial_normals_ms: f64,
+    /// Per frame.
+    pub frames: Vec<FrameReport>,
+    /// Sum of each step over all frames, in milliseconds.
+    pub totals_ms: BTreeMap<String, f64>,
+}
+
+/// One frame.
+#[derive(Debug, Serialize)]
+pub struct FrameReport {
+    /// Frame number from 0.
+    pub index: u32,
+    /// The image, relative to the output folder.
+    pub file: String,
+    /// Footprints stamped this frame.
+    pub footprints: u32,
+    /// Craters stamped this frame.
+    pub craters: u32,
+    /// Shockwave stamps this frame.
+    pub shockwaves: u32,
+    /// Texels inside the rects the stamps covered.
+    pub dirty_texels: u64,
+    /// Milliseconds per step: `stamp`, `normals`, `hillshade`, `write`.
+    pub timings_ms: BTreeMap<String, f64>,
+}
