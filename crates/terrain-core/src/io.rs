@@ -609,6 +609,9 @@ fn encode_png(
     let mut encoder = png::Encoder::new(&mut out, width, height);
     encoder.set_color(color);
     encoder.set_depth(depth);
+    // fdeflate's fast mode: ~10x faster than the default `Balanced` on 16-bit heightmaps for
+    // a file a few per cent larger (criterion `io_and_generation/png16_encode/4096`).
+    encoder.set_compression(png::Compression::Fast);
     let mut writer = encoder.write_header().map_err(encode_err)?;
     writer.write_image_data(data).map_err(encode_err)?;
     writer.finish().map_err(encode_err)?;
