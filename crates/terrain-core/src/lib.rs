@@ -53,14 +53,14 @@ pub use map::{
     HeightEncoding, HeightMap, HeightSample,
 };
 pub use normals::{
-    DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal,
+    DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal, derivative_region,
     normal_from_derivatives,
 };
 pub use rect::{DirtyRect, Rect, WrappedPiece};
 pub use sample::bilinear;
 pub use shockwave::{MAX_SHOCKWAVE_GAMMA, Shockwave, ShockwaveParams};
 pub use stamp::{
-    Blend, DEFAULT_GAUSSIAN_EPSILON_M, GaussianStamp, Stamp, StampPlacement, TextureStamp,
-    apply_stamp,
+    Blend, DEFAULT_GAUSSIAN_EPSILON_M, GaussianStamp, Stamp, StampPlacement, StampRegion,
+    TextureStamp, apply_stamp, stamp_region,
 };
 pub use terrain_gen::{TerrainParams, generate_coarse_map, generate_heights};

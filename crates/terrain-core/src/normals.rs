@@ -10,7 +10,7 @@ use crate::grid::{Grid, WrapMode};
 use crate::map::{HeightMap, HeightSample};
 use crate::rect::Rect;
 use crate::sample::{bilinear_taps, check_position};
-use glam::{Vec2, Vec3};
+use glam::{UVec2, Vec2, Vec3};
 
 /// Texels the 4th-order difference reads on each side: a height change at a texel changes the
 /// derivatives up to this far away, so regeneration covers the dirty rect plus this apron.
@@ -58,26 +58,9 @@ impl DerivativeMap {
                 actual: map.size(),
             });
         }
-        if dirty.is_empty() {
-            return Ok(());
-        }
-        let region = dirty.expand(DERIVATIVE_APRON);
-        match map.wrap() {
-            WrapMode::Repeat => {
-                for piece in region.split_toroidal(map.size()) {
-                    self.fill(map, piece.map);
-                }
-            }
-            WrapMode::Clamp => {
-                if !self.grid.rect().contains_rect(&dirty) {
-                    return Err(CoreError::RegionOutOfBounds {
-                        rect: dirty,
-                        map_size: map.size(),
-                    });
-                }
-                if let Some(r) = region.intersect(&self.grid.rect()) {
-                    self.fill(map, r);
-                }
+        if let Some(region) = derivative_region(map.size(), map.wrap(), dirty)? {
+            for piece in region.split_toroidal(map.size()) {
+                self.fill(map, piece.map);
             }
         }
         Ok(())
@@ -112,6 +95,16 @@ impl DerivativeMap {
                 out_row[x as usize] = Vec2::new((dx * k) as f32, (dz * k) as f32);
             }
         }
+    }
+
+    /// A derivative map from gradients computed elsewhere (a GPU pass's download).
+    pub fn from_grid(grid: Grid<Vec2>, texel_size: f32, wrap: WrapMode) -> Result<Self, CoreError> {
+        crate::map::check_texel_size(texel_size)?;
+        Ok(Self {
+            grid,
+            texel_size,
+            wrap,
+        })
     }
 
     /// The gradients, one per texel.
@@ -167,6 +160,44 @@ impl DerivativeMap {
             texel_size,
             wrap,
         })
+    }
+}
+
+/// The texels whose derivatives change when heights inside `dirty` change, on a map of
+/// `map_size` texels: `dirty` grown by [`DERIVATIVE_APRON`], in unwrapped coordinates on a
+/// repeating map (at most one period per axis) and clipped to a clamped map. `None` for an
+/// empty `dirty`; an error if `dirty` is not inside a clamped map.
+pub fn derivative_region(
+    map_size: UVec2,
+    wrap: WrapMode,
+    dirty: Rect,
+) -> Result<Option<Rect>, CoreError> {
+    if dirty.is_empty() {
+        return Ok(None);
+    }
+    let grown = dirty.expand(DERIVATIVE_APRON);
+    match wrap {
+        WrapMode::Repeat => {
+            // Limit each axis to one period: beyond that the same texels would repeat.
+            let mut r = grown;
+            for axis in 0..2 {
+                if r.size[axis] >= map_size[axis] {
+                    r.min[axis] = 0;
+                    r.size[axis] = map_size[axis];
+                }
+            }
+            Ok(Some(r))
+        }
+        WrapMode::Clamp => {
+            let map = Rect::from_size(map_size);
+            if !map.contains_rect(&dirty) {
+                return Err(CoreError::RegionOutOfBounds {
+                    rect: dirty,
+                    map_size,
+                });
+            }
+            Ok(grown.intersect(&map))
+        }
     }
 }
 

@@ -9,9 +9,9 @@
 use crate::error::CoreError;
 use crate::grid::{Grid, WrapMode};
 use crate::map::{HeightMap, HeightSample};
-use crate::rect::{DirtyRect, Rect};
+use crate::rect::{DirtyRect, Rect, WrappedPiece};
 use crate::sample::bilinear_taps;
-use glam::{IVec2, Vec2};
+use glam::{IVec2, UVec2, Vec2};
 
 /// Where and how strongly a stamp is applied.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -72,6 +72,17 @@ impl StampPlacement {
             });
         }
         Ok(())
+    }
+
+    /// The stamp's local frame in texel units for a map of `texel_size` metres per texel:
+    /// `(centre, 1 / half-size, sin, cos)`. A texel at unwrapped coordinates `u` has
+    /// `d = u - centre` and local coordinates `(d.x cos + d.y sin, d.y cos - d.x sin) * inv_half`;
+    /// the GPU pass receives exactly these values, so both compute the same coordinates.
+    pub fn local_frame(&self, texel_size: f32) -> (Vec2, Vec2, f32, f32) {
+        let center = self.center / texel_size;
+        let inv_half = Vec2::ONE / (self.scale * 0.5 / texel_size);
+        let (sin, cos) = self.rotation.sin_cos();
+        (center, inv_half, sin, cos)
     }
 
     /// The texels whose centres the rotated footprint can cover, on a map with `texel_size`
@@ -279,6 +290,56 @@ fn erf(x: f64) -> f64 {
     y.copysign(x)
 }
 
+/// Where a stamp lands on a map.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StampRegion {
+    /// The texels to visit in unwrapped coordinates: the whole footprint on a repeating map,
+    /// the footprint clipped to the map on a clamped one.
+    pub footprint: Rect,
+    /// The same texels cut into pieces inside the map (1, 2 or 4 on a repeating map).
+    pub pieces: Vec<WrappedPiece>,
+}
+
+/// The region a stamp at `placement` covers on a map of `map_size` texels with `wrap`, or
+/// `None` when it misses a clamped map entirely.
+///
+/// Fails on an invalid placement or texel size, and on a footprint larger than a repeating
+/// map (it would overlap itself).
+pub fn stamp_region(
+    map_size: UVec2,
+    wrap: WrapMode,
+    texel_size: f32,
+    placement: &StampPlacement,
+) -> Result<Option<StampRegion>, CoreError> {
+    let footprint = placement.footprint(texel_size)?;
+    let region = match wrap {
+        WrapMode::Repeat => {
+            if footprint.size.cmpgt(map_size).any() {
+                return Err(CoreError::OutOfRange {
+                    what: "stamp footprint (texels)",
+                    value: f64::from(footprint.size.max_element()),
+                    expected: "no larger than the repeating map it is applied to",
+                });
+            }
+            StampRegion {
+                footprint,
+                pieces: footprint.split_toroidal(map_size),
+            }
+        }
+        WrapMode::Clamp => match footprint.intersect(&Rect::from_size(map_size)) {
+            Some(r) => StampRegion {
+                footprint: r,
+                pieces: vec![WrappedPiece {
+                    map: r,
+                    unwrapped: r,
+                }],
+            },
+            None => return Ok(None),
+        },
+    };
+    Ok((!region.pieces.is_empty()).then_some(region))
+}
+
 /// Applies `stamp` to `map` at `placement` with `blend`, and returns the rects it covered in
 /// map coordinates: one for a footprint inside the map, 2 or 4 across a repeating map's edge
 /// or corner, none for a footprint wholly off a clamped map.
@@ -292,7 +353,6 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
     blend: Blend,
 ) -> Result<Vec<DirtyRect>, CoreError> {
     let ts = map.texel_size();
-    let footprint = placement.footprint(ts)?;
     if let Blend::Min { base_m } | Blend::Max { base_m } = blend
         && !base_m.is_finite()
     {
@@ -301,39 +361,21 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
             value: base_m,
         });
     }
-    // (map rect, offset from map to unwrapped coordinates) for every piece.
-    let pieces: Vec<(Rect, IVec2)> = match map.wrap() {
-        WrapMode::Repeat => {
-            if footprint.size.cmpgt(map.size()).any() {
-                return Err(CoreError::OutOfRange {
-                    what: "stamp footprint (texels)",
-                    value: f64::from(footprint.size.max_element()),
-                    expected: "no larger than the repeating map it is applied to",
-                });
-            }
-            footprint
-                .split_toroidal(map.size())
-                .into_iter()
-                .map(|p| (p.map, p.unwrapped.min - p.map.min))
-                .collect()
-        }
-        WrapMode::Clamp => footprint
-            .intersect(&map.grid().rect())
-            .map(|r| (r, IVec2::ZERO))
-            .into_iter()
-            .collect(),
-    };
-    if pieces.is_empty() {
+    let Some(region) = stamp_region(map.size(), map.wrap(), ts, placement)? else {
         return Ok(Vec::new());
-    }
+    };
+    // (map rect, offset from map to unwrapped coordinates) for every piece.
+    let pieces: Vec<(Rect, IVec2)> = region
+        .pieces
+        .iter()
+        .map(|p| (p.map, p.unwrapped.min - p.map.min))
+        .collect();
     stamp.prepare(placement)?;
 
     let enc = map.encoding();
     // Local coordinates in texel units: the same arithmetic for a texel whatever piece it is
     // in, so a stamp across the wrap edge equals the same stamp on a shifted map.
-    let center = placement.center / ts;
-    let inv_half = Vec2::ONE / (placement.scale * 0.5 / ts);
-    let (sin, cos) = placement.rotation.sin_cos();
+    let (center, inv_half, sin, cos) = placement.local_frame(ts);
     let add_scale = f64::from(placement.intensity) / f64::from(enc.scale);
     let grid = map.grid_mut();
     for &(rect, offset) in &pieces {

@@ -1,0 +1,67 @@
+//! Shared plumbing of the compute passes: pipeline creation from WGSL and dispatch sizes.
+
+use crate::error::GpuError;
+use crate::scope::scoped;
+
+/// Workgroup side of every 2D compute pass (`@workgroup_size(8, 8, 1)`).
+pub const WORKGROUP: u32 = 8;
+
+/// Workgroups needed to cover `n` items.
+pub fn groups(n: u32) -> u32 {
+    n.div_ceil(WORKGROUP)
+}
+
+/// A storage or uniform buffer binding entry for a compute shader.
+pub fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// Compiles `source` and builds a compute pipeline with entry point `main` over `layout`;
+/// shader or pipeline errors become [`GpuError::Validation`].
+pub fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &'static str,
+    source: &str,
+    layout: &wgpu::BindGroupLayout,
+) -> Result<wgpu::ComputePipeline, GpuError> {
+    scoped(device, label, || {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &[Some(layout)],
+            immediate_size: 0,
+        });
+        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+    })
+}
+
+/// The smallest multiple of `map_size` (per axis) that makes `min` non-negative: shaders add it
+/// before taking remainders, since `%` of negative integers is undefined in GLSL.
+pub fn wrap_offset(min: glam::IVec2, map_size: glam::UVec2) -> [i32; 2] {
+    let axis = |m: i32, n: u32| -> i32 {
+        let n = i64::from(n.max(1));
+        let m = i64::from(m);
+        let k = if m < 0 { (-m + n - 1) / n } else { 0 };
+        (k * n).min(i64::from(i32::MAX / 2)) as i32
+    };
+    [axis(min.x, map_size.x), axis(min.y, map_size.y)]
+}

@@ -1,0 +1,221 @@
+//! GPU mirrors of terrain-core maps: `GpuHeightMap` (heights, one u32 per texel) and
+//! `GpuDerivativeMap` (two f32 gradient components per texel), with upload and download.
+//!
+//! Why storage buffers rather than textures: the passes need exact integer read-modify-write of
+//! the heights, which an `R16Uint`/`R16Unorm` storage texture cannot give on every backend (GL
+//! has no writable 16-bit storage formats; WebGPU none at all), and a buffer needs no backup
+//! copy for in-place stamping. One u32 per texel keeps every invocation's writes to its own
+//! element.
+
+use crate::download::download_bytes;
+use crate::error::GpuError;
+use crate::scope::scoped;
+use glam::{UVec2, Vec2};
+use terrain_core::{DerivativeMap, Grid, HeightEncoding, HeightMap, HeightSample, WrapMode};
+
+/// Checks that a buffer of `bytes` fits the device's storage binding and buffer limits.
+fn check_size(device: &wgpu::Device, size: UVec2, bytes: u64) -> Result<(), GpuError> {
+    let limits = device.limits();
+    let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    if bytes > limit {
+        return Err(GpuError::MapTooLarge { size, bytes, limit });
+    }
+    Ok(())
+}
+
+/// A heightmap on the GPU: a storage buffer of one u32 per texel, row-major, with the map's
+/// encoding, spacing and wrap mode. Pairs with [`terrain_core::HeightMap`].
+#[derive(Debug)]
+pub struct GpuHeightMap {
+    buffer: wgpu::Buffer,
+    size: UVec2,
+    encoding: HeightEncoding,
+    texel_size: f32,
+    wrap: WrapMode,
+    max_raw: u32,
+}
+
+impl GpuHeightMap {
+    /// Uploads `map`. Only u8 and u16 samples are accepted: their values are exact in the f32
+    /// arithmetic of the stamp pass.
+    pub fn from_map<T: HeightSample>(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        map: &HeightMap<T>,
+    ) -> Result<Self, GpuError> {
+        if T::MAX_RAW > f64::from(u16::MAX) {
+            return Err(GpuError::UnsupportedSample {
+                what: "GpuHeightMap",
+                max_raw: T::MAX_RAW,
+            });
+        }
+        let size = map.size();
+        let bytes = u64::from(size.x) * u64::from(size.y) * 4;
+        check_size(device, size, bytes)?;
+        let buffer = scoped(device, "height buffer creation", || {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("GpuHeightMap"),
+                size: bytes,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST
+                    | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        })?;
+        let gpu = Self {
+            buffer,
+            size,
+            encoding: map.encoding(),
+            texel_size: map.texel_size(),
+            wrap: map.wrap(),
+            max_raw: T::MAX_RAW as u32,
+        };
+        gpu.write(queue, map)?;
+        Ok(gpu)
+    }
+
+    /// Replaces the heights with those of `map` (same size).
+    pub fn write<T: HeightSample>(
+        &self,
+        queue: &wgpu::Queue,
+        map: &HeightMap<T>,
+    ) -> Result<(), GpuError> {
+        if map.size() != self.size {
+            return Err(GpuError::SizeMismatch {
+                expected: self.size,
+                actual: map.size(),
+            });
+        }
+        let data: Vec<u32> = map
+            .grid()
+            .as_slice()
+            .iter()
+            .map(|v| v.to_raw_f64() as u32)
+            .collect();
+        queue.write_buffer(&self.buffer, 0, bytemuck::cast_slice(&data));
+        Ok(())
+    }
+
+    /// Downloads the heights into a map of sample type `T`, waiting for the GPU.
+    pub fn read<T: HeightSample>(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<HeightMap<T>, GpuError> {
+        let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
+        let raw: &[u32] = bytemuck::cast_slice(&bytes);
+        let grid = Grid::from_vec(
+            self.size.x,
+            self.size.y,
+            raw.iter()
+                .map(|&v| T::from_raw_f64_clamped(f64::from(v)))
+                .collect(),
+        )?;
+        Ok(HeightMap::new(
+            grid,
+            self.encoding,
+            self.texel_size,
+            self.wrap,
+        )?)
+    }
+
+    /// The storage buffer.
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.buffer
+    }
+
+    /// Size in texels.
+    pub fn size(&self) -> UVec2 {
+        self.size
+    }
+
+    /// Height encoding.
+    pub fn encoding(&self) -> HeightEncoding {
+        self.encoding
+    }
+
+    /// Metres per texel.
+    pub fn texel_size(&self) -> f32 {
+        self.texel_size
+    }
+
+    /// Wrap mode.
+    pub fn wrap(&self) -> WrapMode {
+        self.wrap
+    }
+
+    /// Largest stored value (255 or 65535).
+    pub fn max_raw(&self) -> u32 {
+        self.max_raw
+    }
+}
+
+/// Partial-derivative normals on the GPU: a storage buffer of `vec2<f32>` gradients
+/// `(dh/dX, dh/dZ)` per texel. Pairs with [`terrain_core::DerivativeMap`].
+#[derive(Debug)]
+pub struct GpuDerivativeMap {
+    buffer: wgpu::Buffer,
+    size: UVec2,
+    texel_size: f32,
+    wrap: WrapMode,
+}
+
+impl GpuDerivativeMap {
+    /// An all-zero derivative map for a height map of `size`, spacing and wrap.
+    pub fn new(
+        device: &wgpu::Device,
+        size: UVec2,
+        texel_size: f32,
+        wrap: WrapMode,
+    ) -> Result<Self, GpuError> {
+        let bytes = u64::from(size.x) * u64::from(size.y) * 8;
+        check_size(device, size, bytes)?;
+        let buffer = scoped(device, "derivative buffer creation", || {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("GpuDerivativeMap"),
+                size: bytes,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST
+                    | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        })?;
+        Ok(Self {
+            buffer,
+            size,
+            texel_size,
+            wrap,
+        })
+    }
+
+    /// A derivative map shaped for `map`.
+    pub fn for_map(device: &wgpu::Device, map: &GpuHeightMap) -> Result<Self, GpuError> {
+        Self::new(device, map.size(), map.texel_size(), map.wrap())
+    }
+
+    /// Downloads the gradients, waiting for the GPU.
+    pub fn read(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<DerivativeMap, GpuError> {
+        let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
+        let raw: &[[f32; 2]] = bytemuck::cast_slice(&bytes);
+        let grid = Grid::from_vec(
+            self.size.x,
+            self.size.y,
+            raw.iter().map(|&d| Vec2::from(d)).collect(),
+        )?;
+        Ok(DerivativeMap::from_grid(grid, self.texel_size, self.wrap)?)
+    }
+
+    /// The storage buffer.
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.buffer
+    }
+
+    /// Size in texels.
+    pub fn size(&self) -> UVec2 {
+        self.size
+    }
+}

@@ -1,0 +1,229 @@
+//! `RegionReadback`: copies a rect of a GPU height map into one of a small ring of staging
+//! buffers and maps it on submit; `poll` hands over the regions that have arrived without ever
+//! waiting, so the frame is never stalled.
+
+use crate::error::GpuError;
+use crate::maps::GpuHeightMap;
+use glam::UVec2;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
+use terrain_core::{Grid, HeightEncoding, Rect, WrapMode};
+
+/// Identifies one request; regions arrive with the ticket they were requested with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ReadbackTicket(pub u64);
+
+/// A region that arrived: the stored values of `rect`, row-major in the rect's own (unwrapped)
+/// coordinates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RegionData {
+    /// The request it answers.
+    pub ticket: ReadbackTicket,
+    /// The rect asked for (unwrapped on a repeating map).
+    pub rect: Rect,
+    /// Stored values.
+    pub raw: Grid<u32>,
+    /// The map's encoding, to turn values into metres.
+    pub encoding: HeightEncoding,
+}
+
+impl RegionData {
+    /// The rows as u16 (the coarse-map's own encoding).
+    pub fn to_u16(&self) -> Grid<u16> {
+        self.raw.map(|&v| v.min(u32::from(u16::MAX)) as u16)
+    }
+
+    /// The rows as heights in metres.
+    pub fn to_metres(&self) -> Grid<f32> {
+        let e = self.encoding;
+        self.raw.map(|&v| e.to_metres(f64::from(v)))
+    }
+}
+
+const FREE: u8 = 0;
+const PENDING: u8 = 1;
+const MAPPED: u8 = 2;
+const FAILED: u8 = 3;
+
+#[derive(Debug)]
+struct Slot {
+    buffer: Option<wgpu::Buffer>,
+    state: Arc<AtomicU8>,
+    request: Option<(ReadbackTicket, Rect, HeightEncoding)>,
+}
+
+/// A ring of staging buffers for asynchronous region readback.
+#[derive(Debug)]
+pub struct RegionReadback {
+    slots: Vec<Slot>,
+    next_ticket: u64,
+}
+
+/// Most staging buffers a ring may have.
+pub const MAX_READBACK_RING: usize = 16;
+
+impl RegionReadback {
+    /// A ring of `ring` staging buffers (1 to [`MAX_READBACK_RING`]); buffers are created on
+    /// first use and grown as larger regions are asked for.
+    pub fn new(ring: usize) -> Result<Self, GpuError> {
+        if !(1..=MAX_READBACK_RING).contains(&ring) {
+            return Err(terrain_core::CoreError::OutOfRange {
+                what: "readback ring size",
+                value: ring as f64,
+                expected: "1 to 16 buffers",
+            }
+            .into());
+        }
+        let slots = (0..ring)
+            .map(|_| Slot {
+                buffer: None,
+                state: Arc::new(AtomicU8::new(FREE)),
+                request: None,
+            })
+            .collect();
+        Ok(Self {
+            slots,
+            next_ticket: 0,
+        })
+    }
+
+    /// Requests in flight (recorded, not yet handed over by `poll`).
+    pub fn in_flight(&self) -> usize {
+        self.slots.iter().filter(|s| s.request.is_some()).count()
+    }
+
+    /// Records the copy of `rect` of `map` into `encoder` and arranges for the staging buffer to
+    /// be mapped when the encoder's commands are submitted. The encoder must be submitted for the
+    /// region to arrive. On a repeating map `rect` may cross the edges (at most one period per
+    /// axis); on a clamped map it must lie inside.
+    pub fn request(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        map: &GpuHeightMap,
+        rect: Rect,
+    ) -> Result<ReadbackTicket, GpuError> {
+        let size = map.size();
+        let valid = !rect.is_empty()
+            && match map.wrap() {
+                WrapMode::Repeat => rect.size.cmple(size).all(),
+                WrapMode::Clamp => Rect::from_size(size).contains_rect(&rect),
+            };
+        if !valid {
+            return Err(GpuError::BadRegion {
+                rect,
+                map_size: size,
+            });
+        }
+        let ring = self.slots.len();
+        let Some(slot) = self.slots.iter_mut().find(|s| s.request.is_none()) else {
+            return Err(GpuError::ReadbackBusy { ring });
+        };
+        let bytes = rect.area() * 4;
+        if slot.buffer.as_ref().is_none_or(|b| b.size() < bytes) {
+            slot.buffer = Some(device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("RegionReadback staging"),
+                size: bytes,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }));
+        }
+        let Some(buffer) = slot.buffer.as_ref() else {
+            return Err(GpuError::Readback("staging buffer missing".into()));
+        };
+        copy_rows(encoder, map, rect, buffer);
+        slot.state.store(PENDING, Ordering::Release);
+        let state = slot.state.clone();
+        encoder.map_buffer_on_submit(buffer, wgpu::MapMode::Read, 0..bytes, move |r| {
+            state.store(if r.is_ok() { MAPPED } else { FAILED }, Ordering::Release);
+        });
+        let ticket = ReadbackTicket(self.next_ticket);
+        self.next_ticket += 1;
+        slot.request = Some((ticket, rect, map.encoding()));
+        Ok(ticket)
+    }
+
+    /// Hands over every region that has arrived, without waiting for the others.
+    pub fn poll(&mut self, device: &wgpu::Device) -> Result<Vec<RegionData>, GpuError> {
+        device
+            .poll(wgpu::PollType::Poll)
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        self.collect()
+    }
+
+    /// Waits until every request in flight has arrived and hands them over (tests, shutdown).
+    pub fn wait(&mut self, device: &wgpu::Device) -> Result<Vec<RegionData>, GpuError> {
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        self.collect()
+    }
+
+    fn collect(&mut self) -> Result<Vec<RegionData>, GpuError> {
+        let mut out = Vec::new();
+        for slot in &mut self.slots {
+            let state = slot.state.load(Ordering::Acquire);
+            if state != MAPPED && state != FAILED {
+                continue;
+            }
+            let (Some((ticket, rect, encoding)), Some(buffer)) =
+                (slot.request.take(), slot.buffer.as_ref())
+            else {
+                continue;
+            };
+            slot.state.store(FREE, Ordering::Release);
+            if state == FAILED {
+                return Err(GpuError::Readback(format!("mapping {rect:?} failed")));
+            }
+            let bytes = rect.area() * 4;
+            let values: Vec<u32> = {
+                let view = buffer
+                    .get_mapped_range(0..bytes)
+                    .map_err(|e| GpuError::Readback(e.to_string()))?;
+                bytemuck::cast_slice(&view).to_vec()
+            };
+            buffer.unmap();
+            out.push(RegionData {
+                ticket,
+                rect,
+                raw: Grid::from_vec(rect.size.x, rect.size.y, values)?,
+                encoding,
+            });
+        }
+        out.sort_by_key(|r| r.ticket);
+        Ok(out)
+    }
+}
+
+/// Copies the rows of `rect` (wrapped on a repeating map) into `dst`, packed row-major.
+fn copy_rows(
+    encoder: &mut wgpu::CommandEncoder,
+    map: &GpuHeightMap,
+    rect: Rect,
+    dst: &wgpu::Buffer,
+) {
+    let size: UVec2 = map.size();
+    let pieces = match map.wrap() {
+        WrapMode::Repeat => rect.split_toroidal(size),
+        WrapMode::Clamp => vec![terrain_core::WrappedPiece {
+            map: rect,
+            unwrapped: rect,
+        }],
+    };
+    for piece in pieces {
+        for row in 0..piece.map.size.y {
+            let my = piece.map.min.y as u64 + u64::from(row);
+            let src = (my * u64::from(size.x) + piece.map.min.x as u64) * 4;
+            let uy = (piece.unwrapped.min.y - rect.min.y) as u64 + u64::from(row);
+            let ux = (piece.unwrapped.min.x - rect.min.x) as u64;
+            let dst_offset = (uy * u64::from(rect.size.x) + ux) * 4;
+            encoder.copy_buffer_to_buffer(
+                map.buffer(),
+                src,
+                dst,
+                dst_offset,
+                u64::from(piece.map.size.x) * 4,
+            );
+        }
+    }
+}

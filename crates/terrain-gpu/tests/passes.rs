@@ -1,0 +1,409 @@
+//! GPU passes against their terrain-core CPU references, on whatever adapter the machine has
+//! (lavapipe in CI). Without an adapter they skip, or fail under `TERRAIN_REQUIRE_GPU=1`.
+
+use glam::{IVec2, UVec2, Vec2};
+use terrain_core::{
+    Blend, DerivativeMap, GaussianStamp, Grid, HeightEncoding, HeightMap, HeightSample, Rect,
+    Shockwave, ShockwaveParams, Stamp, StampPlacement, TextureStamp, WrapMode, apply_stamp,
+};
+use terrain_gpu::testing::context_or_skip;
+use terrain_gpu::{
+    GpuContext, GpuDerivativeMap, GpuError, GpuHeightMap, GpuProceduralStamp, GpuStamp,
+    GpuTextureStamp, NormalPass, RegionReadback, StampPass,
+};
+
+/// Largest allowed difference between GPU and CPU stamps, in stored units (LSB). The GPU sums
+/// in f32 and its `exp` differs from the CPU's in the last bits, so a value that lands within
+/// rounding error of .5 may round the other way: never by more than one unit.
+const STAMP_BOUND_LSB: u32 = 1;
+
+fn hashed<T: HeightSample>(w: u32, h: u32, lo: u32, span: u32) -> Grid<T> {
+    Grid::from_fn(w, h, |x, y| {
+        let mut z = u64::from(x).wrapping_mul(0x9E37_79B9) ^ u64::from(y).wrapping_mul(0x85EB_CA6B);
+        z ^= z >> 15;
+        T::from_raw_f64_clamped(f64::from(lo + (z % u64::from(span)) as u32))
+    })
+    .unwrap()
+}
+
+/// A ring: 1 inside radius 0.5, the user procedural stamp on both sides.
+struct Ring;
+impl Stamp for Ring {
+    fn value(&self, local: Vec2) -> f32 {
+        let r = local.length();
+        if r < 0.5 { 1.0 - r } else { 0.0 }
+    }
+}
+const RING_WGSL: &str = "fn user_stamp_value(local: vec2<f32>) -> f32 {
+    let r = length(local);
+    return select(0.0, 1.0 - r, r < 0.5);
+}";
+
+/// Applies the same stamps on CPU and GPU and returns (max difference, texels that differ).
+fn compare_stamps<T: HeightSample>(
+    ctx: &GpuContext,
+    mut map: HeightMap<T>,
+    stamps: &mut [(Box<dyn Stamp>, GpuStamp<'_>, StampPlacement, Blend)],
+    pass: &StampPass,
+) -> (u32, usize) {
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let gpu = GpuHeightMap::from_map(device, queue, &map).unwrap();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    for (cpu_stamp, gpu_stamp, placement, blend) in stamps.iter_mut() {
+        let cpu_dirty = apply_stamp(&mut map, cpu_stamp.as_mut(), placement, *blend).unwrap();
+        let gpu_dirty = pass
+            .encode(device, &mut encoder, &gpu, *gpu_stamp, placement, *blend)
+            .unwrap();
+        assert_eq!(cpu_dirty, gpu_dirty, "dirty rects of {placement:?}");
+    }
+    queue.submit([encoder.finish()]);
+    let back: HeightMap<T> = gpu.read(device, queue).unwrap();
+    let mut max = 0;
+    let mut differ = 0;
+    for (a, b) in map.grid().as_slice().iter().zip(back.grid().as_slice()) {
+        let d = (a.to_raw_f64() - b.to_raw_f64()).abs() as u32;
+        max = max.max(d);
+        differ += usize::from(d != 0);
+    }
+    (max, differ)
+}
+
+#[test]
+fn stamps_match_the_cpu_reference_on_a_wrapping_coarse_map() {
+    let Some(ctx) = context_or_skip("stamps_match_the_cpu_reference") else {
+        return;
+    };
+    let device = &ctx.device;
+    let pass = StampPass::new(device).unwrap();
+    let map = HeightMap::new(
+        hashed::<u16>(200, 150, 20_000, 20_000),
+        HeightEncoding::new(0.001, -5.0).unwrap(),
+        0.25,
+        WrapMode::Repeat,
+    )
+    .unwrap();
+
+    let gauss = GaussianStamp::default();
+    let g2 = GaussianStamp::default();
+    let image = Grid::from_fn(13, 7, |x, y| (x * 19 + y * 31) as u8).unwrap();
+    let tex = TextureStamp::from_gray8(&image);
+    let gpu_tex = GpuTextureStamp::new(device, &tex).unwrap();
+    let mut wave = Shockwave::new(ShockwaveParams {
+        resolution: 32,
+        ..Default::default()
+    })
+    .unwrap();
+    for _ in 0..6 {
+        wave.step();
+    }
+    let wave_delta = wave.take_delta().unwrap();
+    let gpu_wave = GpuTextureStamp::new(device, &wave_delta).unwrap();
+    let ring = Ring;
+    let gpu_ring = GpuProceduralStamp::new(device, &pass, RING_WGSL).unwrap();
+
+    let p = |c: Vec2, s: Vec2, i: f32, r: f32| {
+        StampPlacement::new(c, s, i)
+            .unwrap()
+            .with_rotation(r)
+            .unwrap()
+    };
+    let extent = Vec2::new(50.0, 37.5);
+    let mut stamps: Vec<(Box<dyn Stamp>, GpuStamp<'_>, StampPlacement, Blend)> = vec![
+        (
+            Box::new(gauss),
+            GpuStamp::Gaussian(&g2),
+            p(Vec2::new(20.0, 15.0), Vec2::splat(9.0), -3.0, 0.0),
+            Blend::Add,
+        ),
+        // Across the wrap corner: 4 pieces on the CPU, one wrapped dispatch on the GPU.
+        (
+            Box::new(tex),
+            GpuStamp::Texture(&gpu_tex),
+            p(Vec2::new(0.3, 37.0), Vec2::new(6.0, 4.0), 2.5, 0.7),
+            Blend::Add,
+        ),
+        (
+            Box::new(wave_delta),
+            GpuStamp::Texture(&gpu_wave),
+            p(extent - 1.0, Vec2::splat(12.0), 4.0, 0.0),
+            Blend::Add,
+        ),
+        (
+            Box::new(ring),
+            GpuStamp::Procedural(&gpu_ring),
+            p(Vec2::new(49.0, 5.0), Vec2::splat(7.0), 1.5, -0.4),
+            Blend::Add,
+        ),
+        (
+            Box::new(Ring),
+            GpuStamp::Procedural(&gpu_ring),
+            p(Vec2::new(30.0, 30.0), Vec2::splat(8.0), -2.0, 0.0),
+            Blend::Min { base_m: 20.0 },
+        ),
+        (
+            Box::new(Ring),
+            GpuStamp::Procedural(&gpu_ring),
+            p(Vec2::new(10.0, 30.0), Vec2::splat(8.0), 2.0, 0.0),
+            Blend::Max { base_m: 22.0 },
+        ),
+        // Saturates at the top of the encoding.
+        (
+            Box::new(GaussianStamp::default()),
+            GpuStamp::Gaussian(&g2),
+            p(Vec2::new(35.0, 10.0), Vec2::splat(5.0), 90.0, 0.0),
+            Blend::Add,
+        ),
+    ];
+    let (max, differ) = compare_stamps(&ctx, map, &mut stamps, &pass);
+    eprintln!(
+        "stamps on {}: max |GPU - CPU| = {max} LSB, {differ} texels differ",
+        ctx.report().name
+    );
+    assert!(max <= STAMP_BOUND_LSB, "max difference {max} LSB");
+    assert!(differ < 50, "{differ} texels differ");
+}
+
+#[test]
+fn stamps_on_a_clamped_detail_tile_match_and_off_map_is_a_no_op() {
+    let Some(ctx) = context_or_skip("stamps_on_a_clamped_detail_tile") else {
+        return;
+    };
+    let pass = StampPass::new(&ctx.device).unwrap();
+    let tile = HeightMap::<u8>::detail(
+        hashed::<u8>(64, 48, 60, 100),
+        HeightEncoding::spanning::<u8>(-0.5, 0.5).unwrap(),
+        0.03,
+    )
+    .unwrap();
+    let g = GaussianStamp::default();
+    let mut stamps: Vec<(Box<dyn Stamp>, GpuStamp<'_>, StampPlacement, Blend)> = vec![
+        (
+            Box::new(GaussianStamp::default()),
+            GpuStamp::Gaussian(&g),
+            StampPlacement::new(Vec2::new(0.1, 0.7), Vec2::splat(0.6), -0.3).unwrap(),
+            Blend::Add,
+        ),
+        (
+            Box::new(GaussianStamp::default()),
+            GpuStamp::Gaussian(&g),
+            StampPlacement::new(Vec2::new(-5.0, 0.7), Vec2::splat(0.6), -0.3).unwrap(),
+            Blend::Add,
+        ),
+        (
+            Box::new(GaussianStamp::default()),
+            GpuStamp::Gaussian(&g),
+            StampPlacement::new(Vec2::new(1.0, 0.8), Vec2::splat(0.5), 0.9).unwrap(),
+            Blend::Add,
+        ),
+    ];
+    let (max, differ) = compare_stamps(&ctx, tile, &mut stamps, &pass);
+    assert!(
+        max <= STAMP_BOUND_LSB && differ < 20,
+        "max {max}, {differ} differ"
+    );
+}
+
+#[test]
+fn u32_maps_and_oversized_stamps_are_errors() {
+    let Some(ctx) = context_or_skip("u32_maps_and_oversized_stamps_are_errors") else {
+        return;
+    };
+    let fixed = HeightMap::<u32>::fixed_point(Grid::new(8, 8, 0u32).unwrap(), 10_000, 0.1).unwrap();
+    assert!(matches!(
+        GpuHeightMap::from_map(&ctx.device, &ctx.queue, &fixed),
+        Err(GpuError::UnsupportedSample { .. })
+    ));
+    let map = HeightMap::new(
+        hashed::<u16>(32, 32, 0, 100),
+        HeightEncoding::new(0.01, 0.0).unwrap(),
+        1.0,
+        WrapMode::Repeat,
+    )
+    .unwrap();
+    let gpu = GpuHeightMap::from_map(&ctx.device, &ctx.queue, &map).unwrap();
+    let pass = StampPass::new(&ctx.device).unwrap();
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let huge = StampPlacement::new(Vec2::ZERO, Vec2::splat(100.0), 1.0).unwrap();
+    let g = GaussianStamp::default();
+    assert!(
+        pass.encode(
+            &ctx.device,
+            &mut encoder,
+            &gpu,
+            GpuStamp::Gaussian(&g),
+            &huge,
+            Blend::Add
+        )
+        .is_err()
+    );
+    assert!(matches!(
+        GpuProceduralStamp::new(
+            &ctx.device,
+            &pass,
+            "fn user_stamp_value(local: vec2<f32>) -> f32 { return nonsense; }"
+        ),
+        Err(GpuError::Shader(_))
+    ));
+}
+
+/// Largest relative difference between GPU and CPU derivatives: both stencils are exact
+/// integers; only the final scale by `k` rounds (f32 on the GPU, f64 then f32 on the CPU).
+const NORMAL_BOUND_REL: f32 = 1e-6;
+
+fn assert_derivatives_close(cpu: &DerivativeMap, gpu: &DerivativeMap) {
+    for (a, b) in cpu.grid().as_slice().iter().zip(gpu.grid().as_slice()) {
+        let tol = NORMAL_BOUND_REL * a.abs().max_element().max(1e-3);
+        assert!((*a - *b).abs().max_element() <= tol, "cpu {a} gpu {b}");
+    }
+}
+
+#[test]
+fn normals_match_the_cpu_reference_full_and_in_dirty_rects() {
+    let Some(ctx) = context_or_skip("normals_match_the_cpu_reference") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    for wrap in [WrapMode::Repeat, WrapMode::Clamp] {
+        let mut map = HeightMap::new(
+            hashed::<u16>(96, 80, 1000, 60_000),
+            HeightEncoding::new(0.002, 0.0).unwrap(),
+            0.5,
+            wrap,
+        )
+        .unwrap();
+        let gpu_map = GpuHeightMap::from_map(device, queue, &map).unwrap();
+        let gpu_normals = GpuDerivativeMap::for_map(device, &gpu_map).unwrap();
+        let pass = NormalPass::new(device).unwrap();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        pass.encode_full(device, &mut encoder, &gpu_map, &gpu_normals)
+            .unwrap();
+        queue.submit([encoder.finish()]);
+        let mut cpu_normals = DerivativeMap::from_map(&map);
+        assert_derivatives_close(&cpu_normals, &gpu_normals.read(device, queue).unwrap());
+
+        // Change heights in two rects (one across the corner on the repeating map), upload,
+        // regenerate only those rects on both sides.
+        let rects = [
+            Rect::new(IVec2::new(10, 12), UVec2::new(9, 5)),
+            match wrap {
+                WrapMode::Repeat => Rect::new(IVec2::new(93, -2), UVec2::new(6, 6)),
+                WrapMode::Clamp => Rect::new(IVec2::new(90, 0), UVec2::new(6, 6)),
+            },
+        ];
+        for r in &rects {
+            for p in r.split_toroidal(map.size()) {
+                for y in p.map.min.y..p.map.max().y {
+                    for x in p.map.min.x..p.map.max().x {
+                        *map.grid_mut().get_mut(x as u32, y as u32).unwrap() =
+                            64_000 - (x * y) as u16;
+                    }
+                }
+            }
+        }
+        gpu_map.write(queue, &map).unwrap();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        for r in rects {
+            pass.encode(device, &mut encoder, &gpu_map, &gpu_normals, r)
+                .unwrap();
+            cpu_normals.update_rect(&map, r).unwrap();
+        }
+        queue.submit([encoder.finish()]);
+        assert_derivatives_close(&cpu_normals, &gpu_normals.read(device, queue).unwrap());
+        assert_derivatives_close(&DerivativeMap::from_map(&map), &cpu_normals);
+    }
+}
+
+#[test]
+fn readback_delivers_regions_without_waiting_and_equals_the_map() {
+    let Some(ctx) = context_or_skip("readback_delivers_regions") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let map = HeightMap::new(
+        hashed::<u16>(70, 50, 0, 65_000),
+        HeightEncoding::new(0.01, 1.0).unwrap(),
+        1.0,
+        WrapMode::Repeat,
+    )
+    .unwrap();
+    let gpu = GpuHeightMap::from_map(device, queue, &map).unwrap();
+    let mut readback = RegionReadback::new(2).unwrap();
+    let rects = [
+        Rect::new(IVec2::new(5, 7), UVec2::new(20, 11)),
+        Rect::new(IVec2::new(-4, 45), UVec2::new(9, 10)), // across the corner
+    ];
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let tickets: Vec<_> = rects
+        .iter()
+        .map(|r| readback.request(device, &mut encoder, &gpu, *r).unwrap())
+        .collect();
+    // The ring is full until these arrive.
+    assert!(matches!(
+        readback.request(device, &mut encoder, &gpu, rects[0]),
+        Err(GpuError::ReadbackBusy { ring: 2 })
+    ));
+    // Nothing can arrive before the copies are submitted, and poll does not wait.
+    assert!(readback.poll(device).unwrap().is_empty());
+    queue.submit([encoder.finish()]);
+    let arrived = readback.wait(device).unwrap();
+    assert_eq!(arrived.len(), 2);
+    assert_eq!(readback.in_flight(), 0);
+    for (data, (rect, ticket)) in arrived.iter().zip(rects.iter().zip(&tickets)) {
+        assert_eq!(data.ticket, *ticket);
+        assert_eq!(data.rect, *rect);
+        let rows = data.to_u16();
+        let metres = data.to_metres();
+        for y in 0..rect.size.y {
+            for x in 0..rect.size.x {
+                let p = rect.min + IVec2::new(x as i32, y as i32);
+                let want = map.grid().get_wrapped(p, WrapMode::Repeat);
+                assert_eq!(rows.get(x, y), Some(want), "texel {p}");
+                let m = metres.get(x, y).unwrap();
+                assert!((m - map.encoding().to_metres(f64::from(want))).abs() < 1e-3);
+            }
+        }
+    }
+    // A clamped map refuses rects off the map; an empty rect is refused everywhere.
+    let clamped = HeightMap::new(
+        hashed::<u16>(16, 16, 0, 10),
+        HeightEncoding::new(0.01, 0.0).unwrap(),
+        1.0,
+        WrapMode::Clamp,
+    )
+    .unwrap();
+    let gpu_c = GpuHeightMap::from_map(device, queue, &clamped).unwrap();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    assert!(matches!(
+        readback.request(
+            device,
+            &mut encoder,
+            &gpu_c,
+            Rect::new(IVec2::new(10, 10), UVec2::new(8, 2))
+        ),
+        Err(GpuError::BadRegion { .. })
+    ));
+    assert!(
+        readback
+            .request(
+                device,
+                &mut encoder,
+                &gpu,
+                Rect::new(IVec2::ZERO, UVec2::ZERO)
+            )
+            .is_err()
+    );
+    assert!(RegionReadback::new(0).is_err());
+}
+
+#[test]
+fn the_context_reports_its_adapter() {
+    let Some(ctx) = context_or_skip("the_context_reports_its_adapter") else {
+        return;
+    };
+    let r = ctx.report();
+    eprintln!(
+        "adapter: {} ({}, {}), timestamps {}",
+        r.name, r.backend, r.device_type, r.timestamps
+    );
+    assert!(!r.name.is_empty() && !r.backend.is_empty());
+}

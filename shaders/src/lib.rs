@@ -1,0 +1,22 @@
+//! Every WGSL shader of the deformable terrain workspace, as `&'static str` constants, one file
+//! per pass (the file sits in `src/wgsl/` under the pass's name).
+//!
+//! ```
+//! // Shaders are plain WGSL text, ready for `wgpu::ShaderSource::Wgsl`.
+//! assert!(terrain_shaders::STAMP.contains("@compute"));
+//! assert!(terrain_shaders::ALL.iter().all(|(name, src)| !name.is_empty() && !src.is_empty()));
+//! ```
+#![warn(missing_docs)]
+
+/// `StampPass`: one stamp (Gaussian, texture or user procedural) applied in place.
+pub const STAMP: &str = include_str!("wgsl/stamp.wgsl");
+
+/// `NormalPass`: partial-derivative normals (seed 000 eq. 3.3) over a region.
+pub const NORMALS: &str = include_str!("wgsl/normals.wgsl");
+
+/// The markers around the default user procedural stamp function in [`STAMP`]; a user stamp
+/// replaces the text between them with its own `fn user_stamp_value(local: vec2<f32>) -> f32`.
+pub const USER_STAMP_MARKERS: (&str, &str) = ("// USER_STAMP_BEGIN", "// USER_STAMP_END");
+
+/// Every shader with its name, for validation and tooling.
+pub const ALL: &[(&str, &str)] = &[("stamp", STAMP), ("normals", NORMALS)];
