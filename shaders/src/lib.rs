@@ -14,9 +14,20 @@ pub const STAMP: &str = include_str!("wgsl/stamp.wgsl");
 /// `NormalPass`: partial-derivative normals (seed 000 eq. 3.3) over a region.
 pub const NORMALS: &str = include_str!("wgsl/normals.wgsl");
 
+/// `SkyPass`: a full-screen gradient by view-ray elevation.
+pub const SKY: &str = include_str!("wgsl/sky.wgsl");
+
+/// `ClipmapRenderer`: displaced, morphed, lit clipmap blocks.
+pub const CLIPMAP: &str = include_str!("wgsl/clipmap.wgsl");
+
 /// The markers around the default user procedural stamp function in [`STAMP`]; a user stamp
 /// replaces the text between them with its own `fn user_stamp_value(local: vec2<f32>) -> f32`.
 pub const USER_STAMP_MARKERS: (&str, &str) = ("// USER_STAMP_BEGIN", "// USER_STAMP_END");
 
 /// Every shader with its name, for validation and tooling.
-pub const ALL: &[(&str, &str)] = &[("stamp", STAMP), ("normals", NORMALS)];
+pub const ALL: &[(&str, &str)] = &[
+    ("stamp", STAMP),
+    ("normals", NORMALS),
+    ("sky", SKY),
+    ("clipmap", CLIPMAP),
+];

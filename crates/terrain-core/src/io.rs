@@ -91,6 +91,12 @@ pub enum MapIoError {
         /// The colour type found in the file, in words.
         color_type: String,
     },
+    /// An RGBA image was expected (frame captures) but the file has another colour type.
+    #[error("expected an 8-bit RGBA image, found {color_type}")]
+    NotRgba {
+        /// The colour type found.
+        color_type: String,
+    },
     /// The PNG has a supported bit depth, but not the one the caller asked for.
     #[error(
         "the PNG has {found}-bit samples but a {expected}-bit map was requested: \
@@ -409,12 +415,22 @@ fn color_type_name(ct: png::ColorType) -> &'static str {
 
 /// Decodes a grayscale PNG from `reader`. `want` is the bit depth the caller requires, if any;
 /// it is checked from the header before the pixels are decoded.
-fn decode_png_from<R: BufRead + Seek>(
+/// What a caller accepts from a PNG header.
+#[derive(Clone, Copy)]
+enum Accept {
+    /// 8 or 16-bit grayscale, optionally only one of the two depths.
+    Gray(Option<u8>),
+    /// 8-bit RGBA (frame captures).
+    Rgba8,
+}
+
+/// Decodes the pixels of a PNG the caller accepts: `(width, height, bit depth, raw bytes)`.
+fn decode_png_pixels<R: BufRead + Seek>(
     reader: R,
     limits: &ReadLimits,
-    want: Option<u8>,
+    accept: Accept,
     source: Source<'_>,
-) -> Result<GrayImage, MapIoError> {
+) -> Result<(u32, u32, u8, Vec<u8>), MapIoError> {
     let mut decoder = png::Decoder::new_with_limits(reader, png_decoder_limits(limits));
     decoder.set_transformations(png::Transformations::IDENTITY);
     // Text and ICC profiles mean nothing to a heightmap; skipping them keeps their memory out.
@@ -444,22 +460,41 @@ fn decode_png_from<R: BufRead + Seek>(
 
     // Everything below is decided from the header alone, before any pixel buffer exists.
     check_size(width, height, limits)?;
-    if color_type != png::ColorType::Grayscale {
-        return Err(MapIoError::NotGrayscale {
-            color_type: color_type_name(color_type).to_owned(),
-        });
-    }
-    if bits != 8 && bits != 16 {
-        return Err(MapIoError::UnsupportedBitDepth { bits });
-    }
-    if let Some(expected) = want
-        && expected != bits
-    {
-        return Err(MapIoError::WrongBitDepth {
-            expected,
-            found: bits,
-        });
-    }
+    let channels = match accept {
+        Accept::Gray(want) => {
+            if color_type != png::ColorType::Grayscale {
+                return Err(MapIoError::NotGrayscale {
+                    color_type: color_type_name(color_type).to_owned(),
+                });
+            }
+            if bits != 8 && bits != 16 {
+                return Err(MapIoError::UnsupportedBitDepth { bits });
+            }
+            if let Some(expected) = want
+                && expected != bits
+            {
+                return Err(MapIoError::WrongBitDepth {
+                    expected,
+                    found: bits,
+                });
+            }
+            1
+        }
+        Accept::Rgba8 => {
+            if color_type != png::ColorType::Rgba {
+                return Err(MapIoError::NotRgba {
+                    color_type: color_type_name(color_type).to_owned(),
+                });
+            }
+            if bits != 8 {
+                return Err(MapIoError::WrongBitDepth {
+                    expected: 8,
+                    found: bits,
+                });
+            }
+            4
+        }
+    };
 
     let size = Some((width, height));
     let mut reader = decoder
@@ -472,12 +507,12 @@ fn decode_png_from<R: BufRead + Seek>(
     })?;
     let expected_len = (width as usize)
         .checked_mul(height as usize)
-        .and_then(|n| n.checked_mul(usize::from(bits / 8)));
+        .and_then(|n| n.checked_mul(usize::from(bits / 8) * channels));
     if expected_len != Some(buffer_len) {
         return Err(MapIoError::Corrupt {
             reason: format!(
                 "the PNG decoder wants a {buffer_len}-byte buffer for a {width}x{height} \
-                 {bits}-bit grayscale image"
+                 {bits}-bit image of {channels} channel(s)"
             ),
         });
     }
@@ -499,7 +534,17 @@ fn decode_png_from<R: BufRead + Seek>(
     reader
         .finish()
         .map_err(|e| map_decoding_error(e, Stage::Trailer, source, size, limits))?;
+    Ok((width, height, bits, buf))
+}
 
+/// Decodes an accepted grayscale PNG into its grid.
+fn decode_png_from<R: BufRead + Seek>(
+    reader: R,
+    limits: &ReadLimits,
+    want: Option<u8>,
+    source: Source<'_>,
+) -> Result<GrayImage, MapIoError> {
+    let (width, height, bits, buf) = decode_png_pixels(reader, limits, Accept::Gray(want), source)?;
     if bits == 16 {
         let samples = buf
             .chunks_exact(2)
@@ -591,6 +636,47 @@ pub fn read_png8(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<Grid<u8>
 
 // ---------------------------------------------------------------------------------------------
 // PNG encoding
+
+/// Decodes an 8-bit RGBA PNG held in memory (a frame capture): each pixel `[r, g, b, a]`.
+///
+/// Other colour types are [`MapIoError::NotRgba`], 16-bit RGBA is
+/// [`MapIoError::WrongBitDepth`]; sizes and corruption are checked as in [`decode_png`].
+pub fn decode_png_rgba8(bytes: &[u8], limits: &ReadLimits) -> Result<Grid<[u8; 4]>, MapIoError> {
+    let (width, height, _, buf) = decode_png_pixels(
+        Cursor::new(bytes),
+        limits,
+        Accept::Rgba8,
+        Source::Memory(bytes),
+    )?;
+    let pixels = buf
+        .chunks_exact(4)
+        .map(|p| [p[0], p[1], p[2], p[3]])
+        .collect();
+    Ok(Grid::from_vec(width, height, pixels)?)
+}
+
+/// Reads an 8-bit RGBA PNG file. See [`decode_png_rgba8`].
+pub fn read_png_rgba8(
+    path: impl AsRef<Path>,
+    limits: &ReadLimits,
+) -> Result<Grid<[u8; 4]>, MapIoError> {
+    let path = path.as_ref();
+    let file = File::open(path).map_err(|source| MapIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let (width, height, _, buf) = decode_png_pixels(
+        BufReader::new(file),
+        limits,
+        Accept::Rgba8,
+        Source::File(path),
+    )?;
+    let pixels = buf
+        .chunks_exact(4)
+        .map(|p| [p[0], p[1], p[2], p[3]])
+        .collect();
+    Ok(Grid::from_vec(width, height, pixels)?)
+}
 
 /// Encodes row-major sample bytes as a non-interlaced PNG.
 fn encode_png(
@@ -998,6 +1084,20 @@ mod tests {
         let raw = encode_raw16(&g16);
         assert_eq!(raw[..2], (g16.as_slice()[0]).to_le_bytes());
         assert_eq!(decode_raw16(&raw, g16.size(), &l).unwrap(), g16);
+        let rgba = Grid::from_fn(5, 3, |x, y| [x as u8, y as u8, 200, 255 - x as u8]).unwrap();
+        assert_eq!(
+            decode_png_rgba8(&encode_png_rgba8(&rgba).unwrap(), &l).unwrap(),
+            rgba
+        );
+        // A grayscale file is not an RGBA capture, and a capture is not a heightmap.
+        assert!(matches!(
+            decode_png_rgba8(&encode_png8(&g8).unwrap(), &l),
+            Err(MapIoError::NotRgba { .. })
+        ));
+        assert!(matches!(
+            decode_png8(&encode_png_rgba8(&rgba).unwrap(), &l),
+            Err(MapIoError::NotGrayscale { .. })
+        ));
     }
 
     #[test]

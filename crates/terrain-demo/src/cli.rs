@@ -11,7 +11,7 @@ pub struct Cli {
     #[arg(long, default_value = "captures")]
     pub out: PathBuf,
     /// Side of the procedural default terrain in texels (any size, not only powers of two).
-    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..=16384))]
+    #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(16..=16384))]
     pub size: u32,
     /// Seed of the procedural terrain and of the scripted deformations.
     #[arg(long, default_value_t = 1)]
@@ -32,9 +32,25 @@ pub struct Cli {
     /// Height in metres of the largest 16-bit value (the lowest is 0 m).
     #[arg(long, default_value_t = 12.0)]
     pub max_height: f32,
-    /// Largest side of the overview frames in pixels (the map is shown nearest-texel).
-    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..=8192))]
-    pub frame_size: u32,
+    /// Size of the 3D frames, as WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_resolution)]
+    pub resolution: glam::UVec2,
+    /// Side of the hillshade overview: inset in the 3D frames, or the whole frame when no GPU
+    /// adapter exists (the map is shown nearest-texel).
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(16..=8192))]
+    pub overview_size: u32,
+    /// Write top-down overview frames only, without the GPU (as when no adapter exists).
+    #[arg(long)]
+    pub no_gpu: bool,
+}
+
+/// Parses a frame size `WIDTHxHEIGHT`, each side 16 to 8192 pixels.
+fn parse_resolution(s: &str) -> Result<glam::UVec2, String> {
+    let size = parse_size(s)?;
+    if size.min_element() < 16 || size.max_element() > 8192 {
+        return Err(format!("`{s}`: each side must be 16 to 8192 pixels"));
+    }
+    Ok(size)
 }
 
 /// Parses `WIDTHxHEIGHT`.
@@ -68,5 +84,7 @@ mod tests {
         assert!(Cli::try_parse_from(["demo", "--raw-size", "4x4"]).is_err());
         assert!(Cli::try_parse_from(["demo", "--size", "100", "--heightmap", "a.png"]).is_err());
         assert!(Cli::try_parse_from(["demo", "--size", "100", "--seed", "3"]).is_ok());
+        assert!(Cli::try_parse_from(["demo", "--resolution", "8x8"]).is_err());
+        assert!(Cli::try_parse_from(["demo", "--resolution", "640x360"]).is_ok());
     }
 }

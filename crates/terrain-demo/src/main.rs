@@ -2,6 +2,8 @@
 //! `report.json` with per-frame timings. Everything it does is glue over the library crates.
 
 mod cli;
+mod gpu_scene;
+mod images;
 mod report;
 mod scenario;
 
@@ -9,9 +11,10 @@ use anyhow::{Context, Result, bail};
 use clap::Parser;
 use cli::Cli;
 use glam::UVec2;
+use gpu_scene::GpuScene;
 use report::{FrameReport, Report};
+use scenario::StampKind;
 use std::collections::BTreeMap;
-use std::path::Path;
 use std::time::Instant;
 use terrain_core::io::{self, ReadLimits};
 use terrain_core::{
@@ -110,37 +113,87 @@ fn run(cli: &Cli) -> Result<()> {
     let mut normals = DerivativeMap::from_map(&map);
     let initial_normals_ms = ms(t);
 
+    let mut scenario = scenario::Scenario::new(map.extent_m(), cli.seed)?;
+    let mut gpu = if cli.no_gpu {
+        None
+    } else {
+        match GpuScene::new(&map, scenario.footprint(), cli.resolution) {
+            Ok(scene) => Some(scene),
+            Err(e) => {
+                eprintln!("warning: {e:#}; writing top-down overview frames only");
+                None
+            }
+        }
+    };
+    let (adapter, backend) = gpu
+        .as_ref()
+        .map_or(("none".into(), "none".into()), GpuScene::adapter);
+
     let size = map.size();
-    let scale = cli.frame_size as f32 / size.max_element() as f32;
-    let frame_px = (size.as_vec2() * scale.min(1.0))
+    let overview_scale = cli.overview_size as f32 / size.max_element() as f32;
+    let overview_px = (size.as_vec2() * overview_scale)
         .round()
         .as_uvec2()
         .max(UVec2::ONE);
-    let shade = HillshadeParams::with_size(frame_px);
+    let shade = HillshadeParams::with_size(overview_px);
 
-    let mut scenario = scenario::Scenario::new(map.extent_m(), cli.seed)?;
     let mut frames = Vec::with_capacity(cli.frames as usize);
+    let mut thumbs = Vec::new();
+    let thumb_every = cli.frames.div_ceil(12).max(1);
     let mut totals: BTreeMap<String, f64> = BTreeMap::new();
     for index in 0..cli.frames {
         let mut timings = BTreeMap::new();
-        let t = Instant::now();
-        let done = scenario.apply_next_frame(&mut map)?;
-        timings.insert("stamp".to_string(), ms(t));
+        let mut plan = scenario.plan_next_frame()?;
 
+        // The deformations: on the GPU map (rendered) and on the CPU map (overview).
+        if let Some(scene) = gpu.as_mut() {
+            let (_, stamp_ms, normals_ms) = scene.deform(&plan, scenario.crater())?;
+            timings.insert("stamp".to_string(), stamp_ms);
+            timings.insert("normals".to_string(), normals_ms);
+        }
         let t = Instant::now();
-        for rect in &done.dirty {
+        let dirty = scenario.apply_cpu(&mut map, &mut plan)?;
+        for rect in &dirty {
             normals.update_rect(&map, *rect)?;
         }
-        timings.insert("normals".to_string(), ms(t));
+        let cpu_ms = ms(t);
+        let cpu_key = if gpu.is_some() { "cpu_mirror" } else { "stamp" };
+        timings.insert(cpu_key.to_string(), cpu_ms);
 
         let t = Instant::now();
-        let image = hillshade(&map, &normals, &shade)?;
-        timings.insert("hillshade".to_string(), ms(t));
+        let overview = hillshade(&map, &normals, &shade)?;
+        timings.insert("overview".to_string(), ms(t));
+
+        let mut triangles = 0;
+        let image = match gpu.as_mut() {
+            Some(scene) => {
+                let (pos, heading) = plan.walker;
+                let camera = gpu_scene::chase_camera(pos, heading, |p| {
+                    terrain_core::bilinear(&map, p).unwrap_or(0.0)
+                });
+                let mut frame = scene.render(&camera)?;
+                timings.insert("render".to_string(), frame.render_ms);
+                timings.insert("lod".to_string(), frame.lod_ms);
+                timings.insert("capture".to_string(), frame.capture_ms);
+                triangles = frame.triangles;
+                let uv = glam::Vec2::new(camera.position.x, camera.position.z) / map.extent_m();
+                images::inset_overview(&mut frame.image, &overview, uv);
+                frame.image
+            }
+            None => overview,
+        };
 
         let t = Instant::now();
         let file = format!("frame_{index:04}.png");
-        write_frame(&cli.out.join(&file), &image)?;
+        let path = cli.out.join(&file);
+        io::write_png_rgba8(&path, &image)
+            .with_context(|| format!("writing {}", path.display()))?;
         timings.insert("write".to_string(), ms(t));
+        if index % thumb_every == thumb_every - 1 || index + 1 == cli.frames {
+            let w = 320.min(image.width());
+            let h = (u64::from(image.height()) * u64::from(w) / u64::from(image.width())) as u32;
+            thumbs.push(images::downscale(&image, UVec2::new(w, h.max(1))));
+        }
 
         for (k, v) in &timings {
             *totals.entry(k.clone()).or_default() += v;
@@ -148,20 +201,30 @@ fn run(cli: &Cli) -> Result<()> {
         frames.push(FrameReport {
             index,
             file,
-            footprints: done.footprints,
-            craters: done.craters,
-            shockwaves: done.shockwaves,
-            dirty_texels: done.dirty.iter().map(|r| r.area()).sum(),
+            footprints: plan.count(StampKind::Footprint),
+            craters: plan.count(StampKind::Crater),
+            shockwaves: plan.count(StampKind::Shockwave),
+            dirty_texels: dirty.iter().map(|r| r.area()).sum(),
+            triangles,
             timings_ms: timings,
         });
     }
     io::write_png16(cli.out.join("terrain_final.png"), map.grid())?;
+    write_summary(cli, &frames, &thumbs)?;
 
+    let resolution = if gpu.is_some() {
+        cli.resolution
+    } else {
+        overview_px
+    };
     let report = Report {
         source,
         size: [size.x, size.y],
         texel_size_m: map.texel_size(),
         seed: cli.seed,
+        adapter,
+        backend,
+        resolution: resolution.to_array(),
         load_ms,
         initial_normals_ms,
         frames,
@@ -170,17 +233,34 @@ fn run(cli: &Cli) -> Result<()> {
     let json = serde_json::to_vec_pretty(&report)?;
     io::write_atomic(cli.out.join("report.json"), &json)?;
     eprintln!(
-        "wrote {} frames of {}x{} to {} ({:.0} ms stamping, {:.0} ms normals in all)",
+        "wrote {} frames of {}x{} to {} on {} ({})",
         cli.frames,
-        frame_px.x,
-        frame_px.y,
+        resolution.x,
+        resolution.y,
         cli.out.display(),
-        report.totals_ms.get("stamp").copied().unwrap_or(0.0),
-        report.totals_ms.get("normals").copied().unwrap_or(0.0),
+        report.adapter,
+        report.backend,
     );
     Ok(())
 }
 
-fn write_frame(path: &Path, image: &terrain_core::Grid<[u8; 4]>) -> Result<()> {
-    io::write_png_rgba8(path, image).with_context(|| format!("writing {}", path.display()))
+/// Steps shown in the timing plot of `summary.png`, bottom to top.
+const PLOTTED: [&str; 5] = ["stamp", "normals", "render", "capture", "write"];
+
+/// `summary.png`: a contact sheet of frames above a stacked bar chart of the step timings.
+fn write_summary(cli: &Cli, frames: &[FrameReport], thumbs: &[images::Image]) -> Result<()> {
+    let series: Vec<Vec<f64>> = PLOTTED
+        .iter()
+        .map(|k| {
+            frames
+                .iter()
+                .map(|f| f.timings_ms.get(*k).copied().unwrap_or(0.0))
+                .collect()
+        })
+        .collect();
+    let columns = 4;
+    let plot = images::timing_plot(&series, UVec2::new(columns * 324 - 4, 160))?;
+    let sheet = images::contact_sheet(thumbs, columns, 320, &plot)?;
+    io::write_png_rgba8(cli.out.join("summary.png"), &sheet)?;
+    Ok(())
 }

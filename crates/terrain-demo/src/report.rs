@@ -14,6 +14,12 @@ pub struct Report {
     pub texel_size_m: f32,
     /// Scenario (and terrain) seed.
     pub seed: u64,
+    /// The GPU adapter's name, or "none" for overview-only frames.
+    pub adapter: String,
+    /// The wgpu backend ("vulkan", "gl"), or "none".
+    pub backend: String,
+    /// Frame size in pixels.
+    pub resolution: [u32; 2],
     /// Milliseconds to generate or load the terrain.
     pub load_ms: f64,
     /// Milliseconds to compute the first full normal map.
@@ -39,6 +45,11 @@ pub struct FrameReport {
     pub shockwaves: u32,
     /// Texels inside the rects the stamps covered.
     pub dirty_texels: u64,
-    /// Milliseconds per step: `stamp`, `normals`, `hillshade`, `write`.
+    /// Non-degenerate triangles drawn (0 without the GPU).
+    pub triangles: u64,
+    /// Milliseconds per step: `stamp` and `normals` (GPU time when on the GPU), `render` (GPU
+    /// time of sky + terrain), `lod` (clipmap placement and culling), `capture` (image
+    /// readback), `cpu_mirror` (the same stamps and normals on the CPU map behind the
+    /// overview), `overview` (hillshade), `write` (PNG).
     pub timings_ms: BTreeMap<String, f64>,
 }

@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use glam::Vec2;
 use terrain_core::io::{ReadLimits, decode_png8};
 use terrain_core::{
-    Blend, CoarseMap, DirtyRect, GaussianStamp, Shockwave, ShockwaveParams, StampPlacement,
+    Blend, CoarseMap, DirtyRect, GaussianStamp, Shockwave, ShockwaveParams, Stamp, StampPlacement,
     TextureStamp, apply_stamp,
 };
 
@@ -29,17 +29,42 @@ const SHOCK_AMPLITUDE: f32 = 2.5;
 /// Wave steps (eq. 3.7) per frame.
 const SHOCK_STEPS_PER_FRAME: u32 = 2;
 
-/// What one frame of the scenario did to the map.
+/// Which pattern a deformation uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StampKind {
+    /// The footprint texture stamp.
+    Footprint,
+    /// The Gaussian crater.
+    Crater,
+    /// The shockwave's change since the last frame (a dynamic texture stamp).
+    Shockwave,
+}
+
+/// One stamp to apply this frame (always an additive blend).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Deformation {
+    /// The pattern.
+    pub kind: StampKind,
+    /// Where.
+    pub placement: StampPlacement,
+}
+
+/// Everything one frame deforms.
 #[derive(Debug, Default)]
-pub struct FrameDeformations {
-    /// Number of stamps by kind.
-    pub footprints: u32,
-    /// Craters stamped.
-    pub craters: u32,
-    /// Shockwave stamps (0 or 1).
-    pub shockwaves: u32,
-    /// The map rects the stamps covered.
-    pub dirty: Vec<DirtyRect>,
+pub struct FramePlan {
+    /// Stamps in order.
+    pub deformations: Vec<Deformation>,
+    /// The shockwave's change this frame, used by [`StampKind::Shockwave`].
+    pub shock_delta: Option<TextureStamp>,
+    /// The walker's position (metres, X Z) and unit heading after this frame's steps.
+    pub walker: (Vec2, Vec2),
+}
+
+impl FramePlan {
+    /// Number of stamps of `kind`.
+    pub fn count(&self, kind: StampKind) -> u32 {
+        self.deformations.iter().filter(|d| d.kind == kind).count() as u32
+    }
 }
 
 /// Deterministic choices for the scenario (splitmix64).
@@ -83,11 +108,21 @@ impl Scenario {
         })
     }
 
-    /// Applies the next frame's deformations to `map`.
-    pub fn apply_next_frame(&mut self, map: &mut CoarseMap) -> Result<FrameDeformations> {
+    /// The footprint stamp (uploaded once to the GPU).
+    pub fn footprint(&self) -> &TextureStamp {
+        &self.footprint
+    }
+
+    /// The crater stamp.
+    pub fn crater(&self) -> &GaussianStamp {
+        &self.crater
+    }
+
+    /// Plans the next frame's deformations.
+    pub fn plan_next_frame(&mut self) -> Result<FramePlan> {
         let frame = self.frame;
         self.frame += 1;
-        let mut out = FrameDeformations::default();
+        let mut plan = FramePlan::default();
         let min_side = self.extent.min_element();
 
         // The walker loops around the map's middle, alternating left and right feet.
@@ -102,23 +137,21 @@ impl Scenario {
                 + heading.perp() * side;
             let placement = StampPlacement::new(pos, FOOT_SIZE, -FOOT_DEPTH)?
                 .with_rotation(heading.y.atan2(heading.x))?;
-            out.dirty.extend(apply_stamp(
-                map,
-                &mut self.footprint,
-                &placement,
-                Blend::Add,
-            )?);
-            out.footprints += 1;
+            plan.deformations.push(Deformation {
+                kind: StampKind::Footprint,
+                placement,
+            });
+            plan.walker = (pos, heading);
         }
 
         // A crater now and then at a random spot, 6 to 14 m wide, 0.3 times as deep.
         if frame % CRATER_EVERY == 2 {
             let pos = Vec2::new(self.rng.next_f32(), self.rng.next_f32()) * self.extent;
             let size = (6.0 + 8.0 * self.rng.next_f32()).min(min_side * 0.5);
-            let placement = StampPlacement::new(pos, Vec2::splat(size), -0.3 * size)?;
-            out.dirty
-                .extend(apply_stamp(map, &mut self.crater, &placement, Blend::Add)?);
-            out.craters += 1;
+            plan.deformations.push(Deformation {
+                kind: StampKind::Crater,
+                placement: StampPlacement::new(pos, Vec2::splat(size), -0.3 * size)?,
+            });
         }
 
         // The shockwave starts on frame 1 and is stamped as its change every frame.
@@ -136,13 +169,37 @@ impl Scenario {
             }
             let size = min_side * SHOCK_SIZE_FRACTION;
             // Centred near the (0, 0) corner: the footprint wraps over both edges.
-            let placement =
-                StampPlacement::new(Vec2::splat(size * 0.2), Vec2::splat(size), SHOCK_AMPLITUDE)?;
-            let mut delta = wave.take_delta()?;
-            out.dirty
-                .extend(apply_stamp(map, &mut delta, &placement, Blend::Add)?);
-            out.shockwaves += 1;
+            plan.deformations.push(Deformation {
+                kind: StampKind::Shockwave,
+                placement: StampPlacement::new(
+                    Vec2::splat(size * 0.2),
+                    Vec2::splat(size),
+                    SHOCK_AMPLITUDE,
+                )?,
+            });
+            plan.shock_delta = Some(wave.take_delta()?);
         }
-        Ok(out)
+        Ok(plan)
+    }
+
+    /// Applies `plan` to a CPU map with terrain-core's reference stamps; returns the rects.
+    pub fn apply_cpu(
+        &mut self,
+        map: &mut CoarseMap,
+        plan: &mut FramePlan,
+    ) -> Result<Vec<DirtyRect>> {
+        let mut dirty = Vec::new();
+        for d in &plan.deformations {
+            let stamp: &mut dyn Stamp = match d.kind {
+                StampKind::Footprint => &mut self.footprint,
+                StampKind::Crater => &mut self.crater,
+                StampKind::Shockwave => match plan.shock_delta.as_mut() {
+                    Some(s) => s,
+                    None => continue,
+                },
+            };
+            dirty.extend(apply_stamp(map, stamp, &d.placement, Blend::Add)?);
+        }
+        Ok(dirty)
     }
 }

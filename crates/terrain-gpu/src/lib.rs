@@ -1,5 +1,6 @@
 //! wgpu passes for deformable terrain: the headless context, GPU height and derivative maps,
-//! `StampPass`, `NormalPass` and asynchronous `RegionReadback`.
+//! `StampPass`, `NormalPass`, asynchronous `RegionReadback`, and rendering: `SkyPass`,
+//! `ClipmapRenderer` and `OffscreenTarget` captures.
 //!
 //! Every pass is a struct built once with `new(&wgpu::Device)` and recorded with
 //! `encode(&self, .., &mut wgpu::CommandEncoder, ..)`. Passes never create a device: they take
@@ -32,20 +33,30 @@
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
+pub mod camera;
+pub mod clipmap;
 pub mod compute;
 pub mod context;
 pub mod download;
 pub mod error;
 pub mod maps;
 pub mod normals;
+pub mod offscreen;
 pub mod readback;
 pub mod scope;
+pub mod sky;
 pub mod stamp;
 pub mod testing;
+pub mod timer;
 
+pub use camera::Camera;
+pub use clipmap::{ClipmapRenderer, TerrainStyle};
 pub use context::{AdapterReport, GpuContext};
 pub use error::GpuError;
 pub use maps::{GpuDerivativeMap, GpuHeightMap};
 pub use normals::NormalPass;
+pub use offscreen::OffscreenTarget;
 pub use readback::{ReadbackTicket, RegionData, RegionReadback};
+pub use sky::{SkyColors, SkyPass};
 pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampPass};
+pub use timer::{GpuTimer, GpuTiming, TimingSource};

@@ -16,7 +16,9 @@ use terrain_core::{DerivativeMap, Grid, HeightEncoding, HeightMap, HeightSample,
 /// Checks that a buffer of `bytes` fits the device's storage binding and buffer limits.
 fn check_size(device: &wgpu::Device, size: UVec2, bytes: u64) -> Result<(), GpuError> {
     let limits = device.limits();
-    let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    let limit = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
     if bytes > limit {
         return Err(GpuError::MapTooLarge { size, bytes, limit });
     }

@@ -20,6 +20,9 @@ struct NormalParams {
     wrap_offset: [i32; 2],
 }
 
+// The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
+const _: () = assert!(std::mem::size_of::<NormalParams>() == 40);
+
 /// Computes derivatives from a [`GpuHeightMap`] into a [`GpuDerivativeMap`] over a region.
 #[derive(Debug)]
 pub struct NormalPass {

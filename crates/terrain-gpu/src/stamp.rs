@@ -34,6 +34,9 @@ struct StampParams {
     wrap_offset: [i32; 2],
 }
 
+// The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
+const _: () = assert!(std::mem::size_of::<StampParams>() == 96);
+
 const KIND_GAUSSIAN: u32 = 0;
 const KIND_TEXTURE: u32 = 1;
 const KIND_USER: u32 = 2;

@@ -1,1 +1,53 @@
-//! stub
+//! Level of detail for heightfield terrain: geometry clipmaps (GPU Gems 2 ch. 2, seed 000
+//! sec. 2.3.2 and 3.1.3) with CPU frustum culling of their blocks (seed 000 sec. 2.4.3).
+//!
+//! Conventions (those of the whole workspace): world units are metres, Y is up, right-handed.
+//! Heightmap column `x` maps to world X and row `y` to world Z, so texel `(x, y)` stands at
+//! world `(x * texel_size, height, y * texel_size)`. Clipmap geometry is flat: the renderer
+//! takes each vertex's height from the coarse-map at its texel coordinates, wrapping them
+//! toroidally. Triangles are wound counter-clockwise seen from above (+Y).
+//!
+//! ```
+//! use glam::camera::rh::{proj::directx, view::look_to_mat4};
+//! use glam::{Vec2, Vec3};
+//! use terrain_lod::{ClipmapLayout, Frustum};
+//!
+//! // 5 levels of 255 x 255 vertices share one mesh of 71 418 vertices (seed 000 eq. 3.1).
+//! let layout = ClipmapLayout::new(255, 5)?;
+//! assert_eq!(layout.vertex_count(), 71_418);
+//! assert_eq!(layout.mesh().vertices.len(), 71_418);
+//!
+//! // Camera 30 m up at (100 m, 40 m) over a 0.1 m per texel map with heights in 0..50 m,
+//! // looking along +X.
+//! let eye = Vec3::new(100.0, 30.0, 40.0);
+//! let view = look_to_mat4(eye, Vec3::X, Vec3::Y);
+//! // wgpu clip space: depth in [0, 1], as Direct3D.
+//! let proj = directx::perspective(60f32.to_radians(), 16.0 / 9.0, 0.1, 1000.0);
+//! let frustum = Frustum::from_view_proj(proj * view);
+//! let frame = layout.place(Vec2::new(eye.x, eye.z), 0.1, (0.0, 50.0), Some(&frustum))?;
+//! assert_eq!(frame.levels.len(), 5);
+//! assert!(frame.culled > 0, "blocks behind the camera are dropped");
+//!
+//! // What a renderer records: per draw, the part's index range and base vertex, and the
+//! // instance data that places it (texel = offset + pos * scale).
+//! for draw in &frame.draws {
+//!     let part = layout.mesh().part(draw.part).expect("every part kind is in the mesh");
+//!     let _record = (part.indices.clone(), part.base_vertex, draw.instance);
+//! }
+//! let drawn = frame.triangle_count(layout.mesh());
+//! assert!(drawn > 0);
+//! # Ok::<(), terrain_lod::LodError>(())
+//! ```
+#![warn(missing_docs)]
+#![warn(clippy::unwrap_used)]
+
+pub mod clipmap;
+pub mod error;
+pub mod frustum;
+
+pub use clipmap::{
+    ClipmapDraw, ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapMesh, ClipmapVertex,
+    LevelPlacement, MeshPart, PartKind, TrimSide,
+};
+pub use error::LodError;
+pub use frustum::Frustum;

@@ -1,0 +1,182 @@
+//! The GPU side of a demo frame: stamps and normals on the GPU map, clipmap placement, sky and
+//! terrain rendering, capture. Glue only: every step is a library call.
+
+use anyhow::{Context, Result};
+use glam::{UVec2, Vec2, Vec3};
+use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
+use terrain_gpu::{
+    Camera, ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuStamp, GpuTextureStamp,
+    GpuTimer, NormalPass, OffscreenTarget, SkyColors, SkyPass, StampPass, TerrainStyle,
+};
+use terrain_lod::{ClipmapLayout, Frustum};
+
+use crate::scenario::{FramePlan, StampKind};
+
+/// Clipmap vertices per level side (seed 000 sec 3.3 uses 255).
+pub const CLIPMAP_N: u32 = 255;
+/// Clipmap levels, the inner grid included: 5 levels of N = 255 span 406 m at 0.1 m per texel,
+/// about twice the default map, so the toroidal repeat stays in the fog.
+pub const CLIPMAP_LEVELS: u32 = 5;
+
+/// Everything that lives on the GPU for the demo.
+pub struct GpuScene {
+    ctx: GpuContext,
+    map: GpuHeightMap,
+    normals: GpuDerivativeMap,
+    stamps: StampPass,
+    normal_pass: NormalPass,
+    sky: SkyPass,
+    renderer: ClipmapRenderer,
+    layout: ClipmapLayout,
+    target: OffscreenTarget,
+    footprint: GpuTextureStamp,
+    timer: GpuTimer,
+    style: TerrainStyle,
+}
+
+/// What rendering one frame measured.
+pub struct RenderedFrame {
+    /// The captured image.
+    pub image: Grid<[u8; 4]>,
+    /// Non-degenerate triangles drawn.
+    pub triangles: u64,
+    /// GPU milliseconds of the sky and terrain passes.
+    pub render_ms: f64,
+    /// Milliseconds placing and culling the clipmap on the CPU.
+    pub lod_ms: f64,
+    /// Milliseconds copying the image back.
+    pub capture_ms: f64,
+}
+
+impl GpuScene {
+    /// Uploads `map` and builds every pass, rendering at `resolution`.
+    pub fn new(map: &CoarseMap, footprint: &TextureStamp, resolution: UVec2) -> Result<Self> {
+        let ctx = GpuContext::new_headless().context("no GPU adapter for the 3D frames")?;
+        let (device, queue) = (&ctx.device, &ctx.queue);
+        let gpu_map = GpuHeightMap::from_map(device, queue, map)?;
+        let normals = GpuDerivativeMap::for_map(device, &gpu_map)?;
+        let normal_pass = NormalPass::new(device)?;
+        let mut encoder = device.create_command_encoder(&Default::default());
+        normal_pass.encode_full(device, &mut encoder, &gpu_map, &normals)?;
+        queue.submit([encoder.finish()]);
+        let layout = ClipmapLayout::new(CLIPMAP_N, CLIPMAP_LEVELS)?;
+        let (lo, hi) = map.encoding().range::<u16>();
+        Ok(Self {
+            map: gpu_map,
+            normals,
+            stamps: StampPass::new(device)?,
+            normal_pass,
+            sky: SkyPass::new(device)?,
+            renderer: ClipmapRenderer::new(device, &layout)?,
+            layout,
+            target: OffscreenTarget::new(device, resolution)?,
+            footprint: GpuTextureStamp::new(device, footprint)?,
+            timer: GpuTimer::new(device, queue),
+            style: TerrainStyle {
+                ramp: (lo, hi),
+                fog_density: 0.008,
+                ..TerrainStyle::default()
+            },
+            ctx,
+        })
+    }
+
+    /// The adapter's name and backend.
+    pub fn adapter(&self) -> (String, String) {
+        let r = self.ctx.report();
+        (r.name.clone(), r.backend.clone())
+    }
+
+    /// Applies `plan` on the GPU; returns the dirty rects and the GPU milliseconds of the stamps
+    /// and of the normal regeneration.
+    pub fn deform(
+        &mut self,
+        plan: &FramePlan,
+        crater: &terrain_core::GaussianStamp,
+    ) -> Result<(Vec<DirtyRect>, f64, f64)> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let shock = match &plan.shock_delta {
+            Some(s) => Some(GpuTextureStamp::new(device, s)?),
+            None => None,
+        };
+        let mut dirty = Vec::new();
+        let stamp_time = self.timer.time(device, queue, |encoder| {
+            for d in &plan.deformations {
+                let stamp = match (d.kind, &shock) {
+                    (StampKind::Footprint, _) => GpuStamp::Texture(&self.footprint),
+                    (StampKind::Crater, _) => GpuStamp::Gaussian(crater),
+                    (StampKind::Shockwave, Some(s)) => GpuStamp::Texture(s),
+                    (StampKind::Shockwave, None) => continue,
+                };
+                dirty.extend(self.stamps.encode(
+                    device,
+                    encoder,
+                    &self.map,
+                    stamp,
+                    &d.placement,
+                    terrain_core::Blend::Add,
+                )?);
+            }
+            Ok(())
+        })?;
+        let normal_time = self.timer.time(device, queue, |encoder| {
+            for r in &dirty {
+                self.normal_pass
+                    .encode(device, encoder, &self.map, &self.normals, *r)?;
+            }
+            Ok(())
+        })?;
+        Ok((dirty, stamp_time.ms, normal_time.ms))
+    }
+
+    /// Renders the terrain from `camera` and reads the image back.
+    pub fn render(&mut self, camera: &Camera) -> Result<RenderedFrame> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let size = self.target.size().as_vec2();
+        let aspect = size.x / size.y;
+        let t = std::time::Instant::now();
+        let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
+        let placement = self.layout.place(
+            Vec2::new(camera.position.x, camera.position.z),
+            self.map.texel_size(),
+            (self.style.ramp.0, self.style.ramp.1),
+            Some(&frustum),
+        )?;
+        let lod_ms = t.elapsed().as_secs_f64() * 1e3;
+        let view_proj = camera.view_proj_relative(aspect);
+        let sky_colors = SkyColors::default();
+        let timing = self.timer.time(device, queue, |encoder| {
+            self.sky
+                .encode(device, encoder, &self.target, view_proj, &sky_colors);
+            self.renderer.encode(
+                device,
+                encoder,
+                &self.target,
+                &self.map,
+                &self.normals,
+                &placement,
+                camera,
+                &self.style,
+            )
+        })?;
+        let t = std::time::Instant::now();
+        let image = self.target.read_rgba8(device, queue)?;
+        Ok(RenderedFrame {
+            image,
+            triangles: placement.triangle_count(self.layout.mesh()),
+            render_ms: timing.ms,
+            lod_ms,
+            capture_ms: t.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+}
+
+/// The demo camera for a walker at `pos` heading along `heading` (unit, XZ): 9 m behind and
+/// 5 m above the ground there, looking at a point on the ground 12 m ahead of the walker.
+pub fn chase_camera(pos: Vec2, heading: Vec2, ground: impl Fn(Vec2) -> f32) -> Camera {
+    let eye_xz = pos - heading * 9.0;
+    let eye = Vec3::new(eye_xz.x, ground(eye_xz) + 5.0, eye_xz.y);
+    let ahead = pos + heading * 12.0;
+    let target = Vec3::new(ahead.x, ground(ahead), ahead.y);
+    Camera::looking(eye, target - eye)
+}

@@ -1,0 +1,118 @@
+//! A small closed test scene shared by the render tests and the golden-image example.
+
+use glam::{UVec2, Vec2, Vec3};
+use terrain_core::{CoarseMap, Grid, HeightEncoding, TerrainParams, generate_coarse_map};
+use terrain_gpu::{
+    Camera, ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, NormalPass,
+    OffscreenTarget, SkyColors, SkyPass, TerrainStyle,
+};
+use terrain_lod::{ClipmapLayout, Frustum};
+
+/// Heights of the scene span 0..HEIGHT metres.
+pub const HEIGHT: f32 = 40.0;
+
+/// The scene: a 256 x 256 procedural coarse-map at 1 m per texel on the GPU, a small clipmap
+/// (N = 31, so many level boundaries are on screen) and the passes.
+pub struct Scene {
+    pub ctx: GpuContext,
+    pub map: CoarseMap,
+    pub gpu_map: GpuHeightMap,
+    pub normals: GpuDerivativeMap,
+    pub layout: ClipmapLayout,
+    pub sky: SkyPass,
+    pub renderer: ClipmapRenderer,
+}
+
+impl Scene {
+    pub fn new(ctx: GpuContext, n: u32, levels: u32) -> Scene {
+        let params = TerrainParams {
+            size: UVec2::splat(256),
+            seed: 11,
+            octaves: 5,
+            ..TerrainParams::default()
+        };
+        let enc = HeightEncoding::spanning::<u16>(0.0, HEIGHT).unwrap();
+        let map = generate_coarse_map(&params, enc, 1.0).unwrap();
+        let (device, queue) = (&ctx.device, &ctx.queue);
+        let gpu_map = GpuHeightMap::from_map(device, queue, &map).unwrap();
+        let normals = GpuDerivativeMap::for_map(device, &gpu_map).unwrap();
+        let pass = NormalPass::new(device).unwrap();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        pass.encode_full(device, &mut encoder, &gpu_map, &normals)
+            .unwrap();
+        queue.submit([encoder.finish()]);
+        let layout = ClipmapLayout::new(n, levels).unwrap();
+        let sky = SkyPass::new(device).unwrap();
+        let renderer = ClipmapRenderer::new(device, &layout).unwrap();
+        Scene {
+            ctx,
+            map,
+            gpu_map,
+            normals,
+            layout,
+            sky,
+            renderer,
+        }
+    }
+
+    /// Ground height (m) under a world position.
+    pub fn ground(&self, xz: Vec2) -> f32 {
+        terrain_core::bilinear(&self.map, xz).unwrap()
+    }
+
+    /// Renders `camera` at `size` with `sky` colours; returns the image and the triangle count.
+    pub fn render(&self, camera: &Camera, size: UVec2, sky: &SkyColors) -> (Grid<[u8; 4]>, u64) {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let target = OffscreenTarget::new(device, size).unwrap();
+        let aspect = size.x as f32 / size.y as f32;
+        let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
+        let frame = self
+            .layout
+            .place(
+                Vec2::new(camera.position.x, camera.position.z),
+                1.0,
+                (0.0, HEIGHT),
+                Some(&frustum),
+            )
+            .unwrap();
+        let style = TerrainStyle {
+            ramp: (0.0, HEIGHT),
+            ..TerrainStyle::default()
+        };
+        let mut encoder = device.create_command_encoder(&Default::default());
+        self.sky.encode(
+            device,
+            &mut encoder,
+            &target,
+            camera.view_proj_relative(aspect),
+            sky,
+        );
+        self.renderer
+            .encode(
+                device,
+                &mut encoder,
+                &target,
+                &self.gpu_map,
+                &self.normals,
+                &frame,
+                camera,
+                &style,
+            )
+            .unwrap();
+        queue.submit([encoder.finish()]);
+        (
+            target.read_rgba8(device, queue).unwrap(),
+            frame.triangle_count(self.layout.mesh()),
+        )
+    }
+}
+
+/// The fixed view of the golden image.
+pub fn golden_camera(scene: &Scene) -> Camera {
+    let xz = Vec2::new(100.3, 140.7);
+    let eye = Vec3::new(xz.x, scene.ground(xz) + 25.0, xz.y);
+    Camera::looking(eye, Vec3::new(1.0, -0.45, 0.6))
+}
+
+/// Size of the golden image.
+pub const GOLDEN_SIZE: UVec2 = UVec2::new(192, 128);

@@ -1,0 +1,58 @@
+//! The error type of terrain-lod: bad clipmap sizes, level counts and per-frame placement input.
+
+use glam::Vec2;
+
+/// Errors from building a clipmap layout and placing it for a frame.
+///
+/// Every variant carries the offending values so a caller can report them as they are.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LodError {
+    /// The clipmap side `n` is not `2^k - 1` with `3 <= k <= 10`.
+    #[error(
+        "clipmap size {n} is not 2^k - 1 with 3 <= k <= 10: use one of 7, 15, 31, 63, 127, 255, 511, 1023"
+    )]
+    InvalidClipmapSize {
+        /// The requested number of vertices per level side.
+        n: u32,
+    },
+    /// The number of clipmap levels is outside `1..=16`.
+    #[error("clipmap level count {levels} is outside 1..=16")]
+    InvalidLevelCount {
+        /// The requested number of levels.
+        levels: u32,
+    },
+    /// An input that must be a finite number is NaN or infinite.
+    #[error("{what} is {value}: it must be a finite number")]
+    NonFinite {
+        /// Which input (for example `"camera.x"`).
+        what: &'static str,
+        /// The value given.
+        value: f32,
+    },
+    /// The texel size is zero or negative.
+    #[error("texel size {texel_size} m must be greater than zero")]
+    InvalidTexelSize {
+        /// The texel size given, in metres per texel.
+        texel_size: f32,
+    },
+    /// The height range is reversed.
+    #[error("height range ({min} m, {max} m) is reversed: min must not exceed max")]
+    InvalidHeightRange {
+        /// Lower bound given, in metres.
+        min: f32,
+        /// Upper bound given, in metres.
+        max: f32,
+    },
+    /// The camera is so far from the origin (in texels) that the clipmap's texel coordinates
+    /// would not fit in `i32`.
+    #[error(
+        "camera at {camera} m with {texel_size} m per texel lies beyond +-2^30 texels: \
+         wrap the camera position into the map before placing the clipmap"
+    )]
+    CameraOutOfRange {
+        /// The camera position given (world X, world Z), in metres.
+        camera: Vec2,
+        /// The texel size given, in metres per texel.
+        texel_size: f32,
+    },
+}

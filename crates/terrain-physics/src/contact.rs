@@ -1,0 +1,270 @@
+//! Sphere contact against the heightfield: the local-space query
+//! ([`HeightField::contact_local_sphere`]) and its [`Contact`].
+//!
+//! The contact is found from the closest point of the bilinear surface to the sphere's centre.
+//! The ground is solid: a centre above the surface touches when that distance is below the
+//! radius; a centre below the surface is always in contact, and the depth then counts the
+//! distance back up to the surface as well. Cells are visited around the centre and skipped
+//! when a lower bound of their distance (horizontal gap, corner height range) already exceeds
+//! the best found; within a cell the patch is a family of straight segments (fixed `v`, varying
+//! `u`), so the closest point on each segment is exact and only `v` is searched (9 samples, then
+//! golden-section refinement to about 1e-8 of a cell).
+
+use crate::field::{HeightField, Patch};
+use glam::{DVec3, Vec3};
+
+/// How a sphere touches the ground.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Contact {
+    /// The closest point of the surface to the sphere's centre.
+    pub point: Vec3,
+    /// Unit direction to move the sphere out of the ground (from the surface towards the
+    /// centre when the centre is above ground).
+    pub normal: Vec3,
+    /// How far to move the sphere along `normal` until it just touches: `radius - distance`
+    /// above ground, `radius + distance` below (always > 0 for a reported contact, except a
+    /// zero-radius sphere exactly on the surface, which reports none).
+    pub depth: f32,
+}
+
+/// Samples of `v` per cell before the golden-section refinement.
+const V_SAMPLES: usize = 8;
+/// Golden-section iterations (0.618^48 of a cell is about 1e-10).
+const GOLDEN_STEPS: usize = 48;
+
+impl HeightField {
+    /// The contact of a sphere at local `center` with `radius` (>= 0) against the surface, or
+    /// `None` if they do not touch. Inputs must be finite and the radius not negative
+    /// ([`HeightfieldCollider::sphere_contact`] checks them); other inputs give `None`.
+    ///
+    /// Cost: the cells under the sphere (radius / texel size squared), or for a centre below
+    /// ground, the cells within its depth below the surface.
+    ///
+    /// [`HeightfieldCollider::sphere_contact`]: crate::HeightfieldCollider::sphere_contact
+    pub fn contact_local_sphere(&self, center: Vec3, radius: f32) -> Option<Contact> {
+        if !(center.is_finite() && radius.is_finite() && radius >= 0.0) {
+            return None;
+        }
+        let c = center.as_dvec3();
+        let r = f64::from(radius);
+        let (_, hi) = self.height_bounds();
+        if c.y - r > f64::from(hi) + 1e-6 {
+            return None;
+        }
+        let closest = self.closest_point_local(center, r)?;
+        let (p, dist, normal_at_p) = (closest.point, closest.distance, closest.normal);
+        let (depth, normal) = if closest.below {
+            let n = if dist > 1e-12 {
+                (p - c) / dist
+            } else {
+                normal_at_p
+            };
+            (r + dist, n)
+        } else {
+            if dist >= r {
+                return None;
+            }
+            let n = if dist > 1e-12 {
+                (c - p) / dist
+            } else {
+                normal_at_p
+            };
+            (r - dist, n)
+        };
+        Some(Contact {
+            point: p.as_vec3(),
+            normal: normal.as_vec3(),
+            depth: depth as f32,
+        })
+    }
+
+    /// The closest surface point to `q`, searched within `radius` above ground and within the
+    /// depth below ground (the point straight above or below is always a candidate).
+    fn closest_point_local(&self, q: Vec3, radius: f64) -> Option<Closest> {
+        let ts = f64::from(self.texel_size());
+        let c = q.as_dvec3();
+        // The patch under the centre decides above / below, in the same f64 arithmetic as the
+        // search.
+        let cell = (c.x / ts).floor();
+        let row = (c.z / ts).floor();
+        let under = self.patch(cell as i64, row as i64);
+        let h_c = under.height(c.x / ts - cell, c.z / ts - row);
+        let below = c.y < h_c;
+        let mut best = Closest {
+            point: DVec3::new(c.x, h_c, c.z),
+            distance: (h_c - c.y).abs(),
+            normal: under.normal(c.x / ts - cell, c.z / ts - row, ts),
+            below,
+        };
+        // Above ground only distances below the radius matter; below ground the closest point
+        // is no farther than the surface straight above.
+        let reach = if below {
+            best.distance
+        } else {
+            best.distance.min(radius)
+        };
+        let x_lo = ((c.x - reach) / ts).floor() as i64;
+        let x_hi = ((c.x + reach) / ts).floor() as i64;
+        let z_lo = ((c.z - reach) / ts).floor() as i64;
+        let z_hi = ((c.z + reach) / ts).floor() as i64;
+        let mut best_d2 = best.distance * best.distance;
+        let visit = |ix: i64, iz: i64, best: &mut Closest, best_d2: &mut f64| {
+            let patch = self.patch(ix, iz);
+            let (x0, z0) = (ix as f64 * ts, iz as f64 * ts);
+            let gx = (x0 - c.x).max(c.x - (x0 + ts)).max(0.0);
+            let gz = (z0 - c.z).max(c.z - (z0 + ts)).max(0.0);
+            let gy = (patch.min - c.y).max(c.y - patch.max).max(0.0);
+            if gx * gx + gz * gz + gy * gy >= *best_d2 {
+                return;
+            }
+            let local = DVec3::new(c.x - x0, c.y, c.z - z0);
+            let (u, v, d2) = closest_on_patch(&patch, local, ts);
+            if d2 < *best_d2 {
+                *best_d2 = d2;
+                best.point = DVec3::new(x0 + u * ts, patch.height(u, v), z0 + v * ts);
+                best.distance = d2.sqrt();
+                best.normal = patch.normal(u, v, ts);
+            }
+        };
+        // The cell under the centre first, so the bound prunes the rest early.
+        visit(cell as i64, row as i64, &mut best, &mut best_d2);
+        for iz in z_lo..=z_hi {
+            for ix in x_lo..=x_hi {
+                visit(ix, iz, &mut best, &mut best_d2);
+            }
+        }
+        Some(best)
+    }
+}
+
+/// The closest point found so far.
+#[derive(Debug, Clone, Copy)]
+struct Closest {
+    point: DVec3,
+    distance: f64,
+    normal: DVec3,
+    below: bool,
+}
+
+/// The closest point of a cell's patch to `q` (cell-local metres: the cell spans
+/// `[0, ts] x [0, ts]` in X and Z): returns `(u, v, squared distance)`.
+fn closest_on_patch(patch: &Patch, q: DVec3, ts: f64) -> (f64, f64, f64) {
+    // For fixed v the patch is the segment S(u) = A(v) + u B(v), u in [0, 1].
+    let on_segment = |v: f64| -> (f64, f64) {
+        let a = DVec3::new(0.0, patch.a + patch.c * v, v * ts);
+        let b = DVec3::new(ts, patch.b + patch.d * v, 0.0);
+        let w = q - a;
+        let u = (w.dot(b) / b.length_squared()).clamp(0.0, 1.0);
+        (u, (w - b * u).length_squared())
+    };
+    let mut best_i = 0;
+    let mut best = f64::INFINITY;
+    for i in 0..=V_SAMPLES {
+        let (_, d2) = on_segment(i as f64 / V_SAMPLES as f64);
+        if d2 < best {
+            best = d2;
+            best_i = i;
+        }
+    }
+    let step = 1.0 / V_SAMPLES as f64;
+    let mut lo = (best_i as f64 - 1.0) * step;
+    let mut hi = (best_i as f64 + 1.0) * step;
+    lo = lo.max(0.0);
+    hi = hi.min(1.0);
+    let g = 0.5 * (5.0_f64.sqrt() - 1.0);
+    let mut m1 = hi - g * (hi - lo);
+    let mut m2 = lo + g * (hi - lo);
+    let mut f1 = on_segment(m1).1;
+    let mut f2 = on_segment(m2).1;
+    for _ in 0..GOLDEN_STEPS {
+        if f1 <= f2 {
+            hi = m2;
+            m2 = m1;
+            f2 = f1;
+            m1 = hi - g * (hi - lo);
+            f1 = on_segment(m1).1;
+        } else {
+            lo = m1;
+            m1 = m2;
+            f1 = f2;
+            m2 = lo + g * (hi - lo);
+            f2 = on_segment(m2).1;
+        }
+    }
+    // The best of the refined point and the samples (the refinement never loses a sample).
+    let v_ref = 0.5 * (lo + hi);
+    let (u_ref, d_ref) = on_segment(v_ref);
+    let v_best = best_i as f64 * step;
+    if d_ref <= best {
+        (u_ref, v_ref, d_ref)
+    } else {
+        let (u, d) = on_segment(v_best);
+        (u, v_best, d)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use terrain_core::{Grid, HeightEncoding};
+
+    fn flat(raw: u16) -> HeightField {
+        let g = Grid::new(8, 8, raw).expect("grid");
+        HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("field")
+    }
+
+    #[test]
+    fn sphere_on_flat_ground() {
+        let f = flat(200); // 2 m
+        let c = f
+            .contact_local_sphere(Vec3::new(3.5, 2.4, 4.5), 0.5)
+            .expect("contact");
+        assert!((c.depth - 0.1).abs() < 1e-5, "{c:?}");
+        assert!((c.normal - Vec3::Y).length() < 1e-5);
+        assert!((c.point - Vec3::new(3.5, 2.0, 4.5)).length() < 1e-5);
+        assert!(
+            f.contact_local_sphere(Vec3::new(3.5, 2.6, 4.5), 0.5)
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn centre_below_ground_is_pushed_up_past_the_surface() {
+        let f = flat(200);
+        let c = f
+            .contact_local_sphere(Vec3::new(1.2, 1.0, 6.9), 0.5)
+            .expect("contact");
+        assert!((c.depth - 1.5).abs() < 1e-5, "{c:?}");
+        assert!((c.normal - Vec3::Y).length() < 1e-5);
+    }
+
+    #[test]
+    fn zero_radius_on_the_surface_is_no_contact() {
+        let f = flat(200);
+        assert!(
+            f.contact_local_sphere(Vec3::new(1.0, 2.0, 1.0), 0.0)
+                .is_none()
+        );
+        assert!(
+            f.contact_local_sphere(Vec3::new(1.0, 1.0, 1.0), -1.0)
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn sphere_beside_a_step_touches_its_edge() {
+        // Columns 4..12 at 4 m, the rest at 0 m: a ramp rises 4 m between x = 3 and x = 4. A
+        // sphere left of it at 1 m height touches the ramp's face.
+        let g =
+            Grid::from_fn(16, 4, |x, _| if (4..12).contains(&x) { 400 } else { 0 }).expect("grid");
+        let f =
+            HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("field");
+        let centre = Vec3::new(2.5, 1.0, 1.5);
+        let c = f.contact_local_sphere(centre, 1.2).expect("contact");
+        // The face is the plane y = 4 (x - 3) for x in [3, 4]; distance from the centre to it.
+        let n = Vec3::new(-4.0, 1.0, 0.0).normalize();
+        let dist = (centre - Vec3::new(3.0, 0.0, 1.5)).dot(n).abs();
+        assert!((c.depth - (1.2 - dist)).abs() < 1e-4, "{c:?} dist {dist}");
+        assert!((c.normal - n).length() < 1e-3);
+    }
+}

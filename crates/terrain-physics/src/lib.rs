@@ -1,0 +1,96 @@
+//! Heightfield collision over a double-buffered CPU mirror of the coarse-map, kept current by
+//! asynchronous readback of dirty regions (seed 000 sec 3.2.1 and 3.2.5).
+//!
+//! Conventions (the workspace's): metres, Y up, right-handed. Heightmap column `x` maps to
+//! world X and row `y` to world Z; texel `(x, y)` stands at `(x * texel_size, height,
+//! y * texel_size)`. The coarse-map wraps (toroidal addressing), so every query does.
+//!
+//! ```
+//! use glam::{IVec2, UVec2, Vec2, Vec3};
+//! use std::time::{Duration, Instant};
+//! use terrain_core::{
+//!     apply_stamp, Blend, CoarseMap, GaussianStamp, Grid, HeightEncoding, StampPlacement,
+//! };
+//! use terrain_physics::{
+//!     CameraBody, CollisionMirror, CpuRegionSource, DeformationBound, ReadbackScheduler,
+//!     SchedulerConfig,
+//! };
+//!
+//! // A flat 64 x 64 coarse-map at 0.5 m per texel, 10 m high.
+//! let enc = HeightEncoding::spanning::<u16>(0.0, 50.0)?;
+//! let grid = Grid::new(64, 64, enc.to_raw(10.0).round() as u16)?;
+//! let map = CoarseMap::coarse(grid, enc, 0.5)?;
+//!
+//! // The mirror collision reads, the source readbacks come from (here: the map on the CPU;
+//! // terrain-gpu provides one over its RegionReadback), and the scheduler between them.
+//! let mirror = CollisionMirror::from_map(&map)?;
+//! let mut source = CpuRegionSource::new(map);
+//! let mut scheduler = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default())?;
+//!
+//! // A 2 m mound is stamped under the camera.
+//! let t0 = Instant::now();
+//! let placement = StampPlacement::new(Vec2::new(16.0, 16.0), Vec2::splat(8.0), 2.0)?;
+//! let dirty = apply_stamp(source.map_mut(), &mut GaussianStamp::default(), &placement, Blend::Add)?;
+//! for rect in dirty {
+//!     scheduler.note_deformation(rect, DeformationBound::additive(2.0, enc)?, t0)?;
+//! }
+//!
+//! // Before the readback the camera is kept above the mound by the deformation's bound.
+//! let mut camera = CameraBody::new(Vec3::new(16.0, 11.7, 16.0));
+//! let collider = mirror.collider();
+//! camera.step(1.0 / 60.0, Vec3::ZERO, &scheduler.ground(&collider))?;
+//! assert!(camera.position.y >= 12.0 + camera.eye_height - 1e-3);
+//!
+//! // After the 20 ms quiet gap one merged region is requested; it arrives on the next poll.
+//! let report = scheduler.update(t0 + Duration::from_millis(25), &mut source, &mirror)?;
+//! assert_eq!(report.requested.len(), 1);
+//! scheduler.update(t0 + Duration::from_millis(40), &mut source, &mirror)?;
+//! let collider = mirror.collider();
+//! assert!((collider.height(Vec2::new(16.0, 16.0))? - 12.0).abs() < 0.01);
+//!
+//! // Raycast and sphere contact against the new surface.
+//! let hit = collider.raycast(Vec3::new(16.0, 30.0, 16.0), Vec3::NEG_Y, 100.0)?.unwrap();
+//! assert!((hit.distance - 18.0).abs() < 0.01);
+//! let contact = collider.sphere_contact(Vec3::new(16.0, 12.5, 16.0), 1.0)?.unwrap();
+//! assert!(contact.depth > 0.4 && contact.normal.y > 0.9);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! Layout (as parry lays out collision queries): [`HeightField`] is the shape, an immutable
+//! snapshot holding the map's u16 samples, with one local-space method per query kind, each in
+//! its own module ([`field`]: height and normal, [`ray`], [`contact`]);
+//! [`HeightfieldCollider`] places a snapshot in the world and wraps each query with input
+//! checks. [`CollisionMirror`] publishes snapshots; [`ReadbackScheduler`] feeds it through a
+//! [`RegionSource`]; [`CameraBody`] and [`SphereBody`] move over any [`GroundQuery`], such as
+//! the [`BoundedGround`] that covers the gap between a deformation and its readback.
+//!
+//! Surface model: the bilinear patch of listing 3.2 over every cell; heights, normals,
+//! raycasts and contacts all use it.
+#![warn(missing_docs)]
+#![warn(clippy::unwrap_used)]
+
+pub mod camera;
+pub mod collider;
+pub mod contact;
+pub mod error;
+pub mod field;
+pub mod ground;
+pub mod merge;
+pub mod mirror;
+pub mod ray;
+pub mod scheduler;
+pub mod source;
+pub mod sphere;
+
+pub use camera::{CameraBody, GroundClamp, STANDARD_GRAVITY};
+pub use collider::{GroundQuery, HeightfieldCollider};
+pub use contact::Contact;
+pub use error::PhysicsError;
+pub use field::{HeightField, MAX_FIELD_SIDE};
+pub use ground::{BoundedGround, DeformationBound, PendingDeformation};
+pub use merge::DirtyRegions;
+pub use mirror::{CollisionMirror, RegionUpdate};
+pub use ray::{Ray, RayHit};
+pub use scheduler::{ReadbackScheduler, SchedulerConfig, UpdateReport};
+pub use source::{ArrivedRegion, CpuRegionSource, RegionSource, RequestId, read_region};
+pub use sphere::{CONTACT_TOLERANCE, SOLID_SPHERE_ROLLING_FACTOR, SphereBody};

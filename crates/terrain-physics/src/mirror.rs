@@ -1,0 +1,308 @@
+//! `CollisionMirror`: the double-buffered CPU copy of the coarse-map that collision reads.
+//! Readers take an immutable snapshot and never wait for a writer's copy; writers apply
+//! region updates, each with a version, off to the side and swap them in.
+//!
+//! Design: the front buffer is an `Arc<HeightField>` behind a `parking_lot::RwLock`. A reader
+//! holds the lock only to clone the `Arc` (an atomic increment); the writer holds it only to
+//! swap the pointer (O(1)). The writer keeps the previous front as its back buffer, together
+//! with the rects that buffer misses (the last update's pieces). Applying an update copies those
+//! rects from the front into the back (unless the new update covers them), pastes the new
+//! region and swaps: O(region) per update, not O(map). If a reader still holds the old buffer,
+//! the writer clones the front instead (O(map), never blocking the reader). A snapshot is
+//! never written after it is published, so no reader can see a torn update.
+
+use crate::collider::HeightfieldCollider;
+use crate::error::{PhysicsError, check_region};
+use crate::field::{HeightField, min_max};
+use glam::UVec2;
+use parking_lot::{Mutex, RwLock};
+use std::sync::Arc;
+use terrain_core::{CoarseMap, Grid, HeightEncoding, Rect};
+
+/// One region of new heights: the stored values of `rect`, row-major in the rect's own
+/// (unwrapped) coordinates, and the version they bring the mirror to.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RegionUpdate {
+    /// The region, in texels; it may cross the map's edges (it wraps), at most one map in size.
+    pub rect: Rect,
+    /// The stored u16 heights of the region, `rect.size` in size.
+    pub heights: Grid<u16>,
+    /// The version the mirror has after this update; must exceed the mirror's version.
+    pub version: u64,
+}
+
+/// The writer's side: the back buffer and the rects (map coordinates) it lacks.
+#[derive(Debug, Default)]
+struct Writer {
+    back: Option<Arc<HeightField>>,
+    stale: Vec<Rect>,
+}
+
+/// The double-buffered collision mirror. `Send + Sync`: share it with `Arc` between the thread
+/// that applies readbacks and the threads that query.
+#[derive(Debug)]
+pub struct CollisionMirror {
+    front: RwLock<Arc<HeightField>>,
+    writer: Mutex<Writer>,
+    size: UVec2,
+    encoding: HeightEncoding,
+    texel_size: f32,
+}
+
+impl CollisionMirror {
+    /// A mirror starting from `field` (its version is the mirror's first version).
+    pub fn new(field: HeightField) -> Self {
+        Self {
+            size: field.size(),
+            encoding: field.encoding(),
+            texel_size: field.texel_size(),
+            front: RwLock::new(Arc::new(field)),
+            writer: Mutex::new(Writer::default()),
+        }
+    }
+
+    /// A mirror of a copy of `map` (which must wrap) at version 0.
+    pub fn from_map(map: &CoarseMap) -> Result<Self, PhysicsError> {
+        Ok(Self::new(HeightField::from_map(map)?))
+    }
+
+    /// The current snapshot: consistent, immutable, tagged with its version. Never waits for a
+    /// writer's copy (the lock is held for one pointer clone).
+    pub fn snapshot(&self) -> Arc<HeightField> {
+        self.front.read().clone()
+    }
+
+    /// A collider over the current snapshot, at the origin.
+    pub fn collider(&self) -> HeightfieldCollider {
+        HeightfieldCollider::new(self.snapshot())
+    }
+
+    /// The version of the current snapshot.
+    pub fn version(&self) -> u64 {
+        self.front.read().version()
+    }
+
+    /// Map size in texels.
+    pub fn size(&self) -> UVec2 {
+        self.size
+    }
+
+    /// The height encoding of the mirrored map.
+    pub fn encoding(&self) -> HeightEncoding {
+        self.encoding
+    }
+
+    /// Metres per texel.
+    pub fn texel_size(&self) -> f32 {
+        self.texel_size
+    }
+
+    /// Applies `update` and publishes it as one new snapshot.
+    ///
+    /// Fails on a rect off the map (empty, larger than the map, or starting more than one
+    /// period away), heights whose size differs from the rect's, or a version not newer than
+    /// the mirror's. On failure the mirror is unchanged.
+    pub fn apply(&self, update: &RegionUpdate) -> Result<(), PhysicsError> {
+        let mut writer = self.writer.lock();
+        let current = self.version();
+        if update.version <= current {
+            return Err(PhysicsError::StaleVersion {
+                version: update.version,
+                current,
+            });
+        }
+        self.apply_locked(&mut writer, update.rect, &update.heights, update.version)
+    }
+
+    /// Applies the heights of `rect` as the next version (the current version + 1), and
+    /// returns that version. Fails as [`CollisionMirror::apply`] does.
+    pub fn apply_next(&self, rect: Rect, heights: &Grid<u16>) -> Result<u64, PhysicsError> {
+        let mut writer = self.writer.lock();
+        let version = self.version() + 1;
+        self.apply_locked(&mut writer, rect, heights, version)?;
+        Ok(version)
+    }
+
+    fn apply_locked(
+        &self,
+        writer: &mut Writer,
+        rect: Rect,
+        heights: &Grid<u16>,
+        version: u64,
+    ) -> Result<(), PhysicsError> {
+        check_region(rect, self.size)?;
+        if heights.size() != rect.size {
+            return Err(PhysicsError::SizeMismatch {
+                expected: rect.size,
+                actual: heights.size(),
+            });
+        }
+        let pieces = rect.split_toroidal(self.size);
+        let front = self.snapshot();
+        // The back buffer and what it lacks; without one, start from the front (cloned below).
+        let (mut back, stale) = match writer.back.take() {
+            Some(back) => (back, std::mem::take(&mut writer.stale)),
+            None => (front.clone(), Vec::new()),
+        };
+        // Clones only if a reader still holds the back buffer (or it is the front itself).
+        let buf = Arc::make_mut(&mut back);
+        for r in stale {
+            if !pieces.iter().any(|p| p.map.contains_rect(&r)) {
+                copy_rect(front.heights(), buf.heights_mut(), r);
+            }
+        }
+        buf.copy_bounds_from(&front);
+        let grid = buf.heights_mut();
+        for piece in &pieces {
+            let off = (piece.unwrapped.min - rect.min).as_uvec2();
+            let (x0, w) = (piece.map.min.x as usize, piece.map.size.x as usize);
+            for row in 0..piece.map.size.y {
+                let src = &heights.row(off.y + row)[off.x as usize..off.x as usize + w];
+                let dst = grid.row_mut(piece.map.min.y as u32 + row);
+                dst[x0..x0 + w].copy_from_slice(src);
+            }
+        }
+        if rect.size == self.size {
+            buf.reset_bounds();
+        } else {
+            let (lo, hi) = min_max(heights.as_slice());
+            buf.widen_bounds(lo, hi);
+        }
+        buf.set_version(version);
+        let old = std::mem::replace(&mut *self.front.write(), back);
+        drop(front);
+        writer.back = Some(old);
+        writer.stale = pieces.iter().map(|p| p.map).collect();
+        Ok(())
+    }
+}
+
+/// Copies `rect` (inside both grids, which have the same size) from `src` to `dst`.
+fn copy_rect(src: &Grid<u16>, dst: &mut Grid<u16>, rect: Rect) {
+    let (x0, w) = (rect.min.x as usize, rect.size.x as usize);
+    for y in rect.min.y..rect.max().y {
+        let y = y as u32;
+        dst.row_mut(y)[x0..x0 + w].copy_from_slice(&src.row(y)[x0..x0 + w]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::IVec2;
+
+    fn mirror() -> CollisionMirror {
+        let g = Grid::from_fn(16, 12, |x, y| (x + 100 * y) as u16).expect("grid");
+        let f =
+            HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("field");
+        CollisionMirror::new(f)
+    }
+
+    fn expected_after(updates: &[(Rect, u16)]) -> Grid<u16> {
+        let mut g = Grid::from_fn(16, 12, |x, y| (x + 100 * y) as u16).expect("grid");
+        for &(rect, v) in updates {
+            for p in rect.split_toroidal(g.size()) {
+                for y in p.map.min.y..p.map.max().y {
+                    for x in p.map.min.x..p.map.max().x {
+                        *g.get_mut(x as u32, y as u32).expect("inside") = v;
+                    }
+                }
+            }
+        }
+        g
+    }
+
+    #[test]
+    fn updates_accumulate_through_both_buffers() {
+        let m = mirror();
+        let rects = [
+            Rect::new(IVec2::new(2, 3), UVec2::new(4, 2)),
+            Rect::new(IVec2::new(10, 1), UVec2::new(3, 8)),
+            Rect::new(IVec2::new(14, 10), UVec2::new(5, 4)), // wraps a corner
+            Rect::new(IVec2::new(-2, 0), UVec2::new(3, 3)),  // wraps from the left
+            Rect::new(IVec2::new(3, 3), UVec2::new(1, 1)),
+        ];
+        let mut done = Vec::new();
+        for (i, &r) in rects.iter().enumerate() {
+            let v = 1000 + i as u16;
+            let data = Grid::new(r.size.x, r.size.y, v).expect("grid");
+            let version = m.apply_next(r, &data).expect("apply");
+            assert_eq!(version, i as u64 + 1);
+            done.push((r, v));
+            assert_eq!(m.snapshot().heights(), &expected_after(&done), "after {i}");
+        }
+    }
+
+    #[test]
+    fn a_reader_holding_the_back_buffer_keeps_its_snapshot() {
+        let m = mirror();
+        let r = Rect::new(IVec2::new(0, 0), UVec2::new(2, 2));
+        let old = m.snapshot();
+        m.apply_next(r, &Grid::new(2, 2, 7).expect("grid"))
+            .expect("apply");
+        // `old` is now the writer's back buffer: the next update must not write into it.
+        m.apply_next(r, &Grid::new(2, 2, 9).expect("grid"))
+            .expect("apply");
+        assert_eq!(old.heights().get(0, 0), Some(0));
+        assert_eq!(old.version(), 0);
+        assert_eq!(m.snapshot().heights().get(1, 1), Some(9));
+    }
+
+    #[test]
+    fn bad_updates_leave_the_mirror_unchanged() {
+        let m = mirror();
+        let size = m.size();
+        let g = Grid::new(2, 2, 5u16).expect("grid");
+        let off = Rect::new(IVec2::new(40, 0), UVec2::new(2, 2));
+        assert!(matches!(
+            m.apply_next(off, &g),
+            Err(PhysicsError::RegionOffMap { rect, map_size }) if rect == off && map_size == size
+        ));
+        let big = Rect::new(IVec2::ZERO, UVec2::new(17, 2));
+        assert!(
+            m.apply_next(big, &Grid::new(17, 2, 0).expect("grid"))
+                .is_err()
+        );
+        let empty = Rect::new(IVec2::ZERO, UVec2::new(0, 2));
+        assert!(m.apply_next(empty, &g).is_err());
+        let r = Rect::new(IVec2::ZERO, UVec2::new(3, 2));
+        assert!(matches!(
+            m.apply_next(r, &g),
+            Err(PhysicsError::SizeMismatch { .. })
+        ));
+        let ok = Rect::new(IVec2::ZERO, UVec2::new(2, 2));
+        m.apply(&RegionUpdate {
+            rect: ok,
+            heights: g.clone(),
+            version: 5,
+        })
+        .expect("apply");
+        assert!(matches!(
+            m.apply(&RegionUpdate {
+                rect: ok,
+                heights: g,
+                version: 5
+            }),
+            Err(PhysicsError::StaleVersion {
+                version: 5,
+                current: 5
+            })
+        ));
+        assert_eq!(m.version(), 5);
+    }
+
+    #[test]
+    fn bounds_stay_conservative() {
+        let m = mirror();
+        let r = Rect::new(IVec2::new(1, 1), UVec2::new(2, 2));
+        m.apply_next(r, &Grid::new(2, 2, 60_000).expect("grid"))
+            .expect("apply");
+        let (_, hi) = m.snapshot().height_bounds();
+        assert!(hi >= 600.0 - 1e-3);
+        let full = Rect::from_size(m.size());
+        m.apply_next(full, &Grid::new(16, 12, 10).expect("grid"))
+            .expect("apply");
+        let (lo, hi) = m.snapshot().height_bounds();
+        assert!((lo - 0.1).abs() < 1e-6 && (hi - 0.1).abs() < 1e-6);
+    }
+}

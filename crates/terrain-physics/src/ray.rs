@@ -1,0 +1,338 @@
+//! Raycasts against the heightfield: a validated [`Ray`], the local-space cell walk
+//! ([`HeightField::cast_local_ray`]) and its [`RayHit`].
+//!
+//! The walk visits every cell the ray's horizontal projection crosses, in order (a 2D DDA over
+//! the texel grid, Amanatides & Woo), and intersects the ray exactly with each cell's bilinear
+//! patch: along the ray the patch height is a quadratic in the distance, so each cell costs one
+//! quadratic solve. Nothing is sampled, so no thin ridge is stepped over.
+
+use crate::error::{PhysicsError, check_finite, check_finite3};
+use crate::field::{HeightField, Patch};
+use glam::{DVec3, Vec2, Vec3};
+
+/// A ray: an origin and a unit direction, both finite.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    origin: Vec3,
+    dir: Vec3,
+}
+
+impl Ray {
+    /// A ray from `origin` along `dir` (normalised here). Fails on a non-finite component or a
+    /// zero (or denormal-small) direction.
+    pub fn new(origin: Vec3, dir: Vec3) -> Result<Self, PhysicsError> {
+        check_finite3("ray origin", origin)?;
+        check_finite3("ray direction", dir)?;
+        let Some(unit) = dir.try_normalize() else {
+            return Err(PhysicsError::ZeroDirection { dir });
+        };
+        Ok(Self { origin, dir: unit })
+    }
+
+    /// The origin.
+    pub fn origin(&self) -> Vec3 {
+        self.origin
+    }
+
+    /// The unit direction.
+    pub fn dir(&self) -> Vec3 {
+        self.dir
+    }
+
+    /// The point `distance` metres along the ray.
+    pub fn at(&self, distance: f32) -> Vec3 {
+        self.origin + self.dir * distance
+    }
+}
+
+/// Where a ray met the surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayHit {
+    /// The point on the surface.
+    pub point: Vec3,
+    /// Distance from the ray's origin, in metres (0 when the origin is at or below the surface).
+    pub distance: f32,
+    /// Unit surface normal at the point (Y up).
+    pub normal: Vec3,
+}
+
+/// The horizontal part `(X, Z)` of a point.
+#[inline]
+fn xz(p: Vec3) -> Vec2 {
+    Vec2::new(p.x, p.z)
+}
+
+/// Checks a maximum ray distance: finite and not negative.
+pub(crate) fn check_max_dist(max_dist: f32) -> Result<(), PhysicsError> {
+    check_finite("ray maximum distance", max_dist)?;
+    if max_dist < 0.0 {
+        return Err(PhysicsError::OutOfRange {
+            what: "ray maximum distance",
+            value: f64::from(max_dist),
+            expected: "at least 0 metres",
+        });
+    }
+    Ok(())
+}
+
+impl HeightField {
+    /// The first point within `max_dist` metres where `ray` (in the field's local space) meets
+    /// the surface, or `None`.
+    ///
+    /// The ground is solid: a ray whose origin is at or below the surface hits at distance 0
+    /// with the normal there. Otherwise the hit is the first crossing of the bilinear surface,
+    /// found exactly cell by cell. Rays cross the map's edges freely (the surface repeats).
+    /// `max_dist` must be finite and not negative ([`HeightfieldCollider::raycast`] checks it);
+    /// the walk costs one step per cell crossed within the field's height bounds.
+    ///
+    /// [`HeightfieldCollider::raycast`]: crate::HeightfieldCollider::raycast
+    pub fn cast_local_ray(&self, ray: &Ray, max_dist: f32) -> Option<RayHit> {
+        if !(max_dist >= 0.0 && max_dist.is_finite()) {
+            return None;
+        }
+        let ts = f64::from(self.texel_size());
+        let o = ray.origin().as_dvec3();
+        let d = ray.dir().as_dvec3();
+        let max_dist = f64::from(max_dist);
+
+        // At or below the surface at the origin: solid ground, hit at 0.
+        let h0 = f64::from(self.height_local(xz(ray.origin())));
+        if o.y <= h0 {
+            let normal = self.normal_local(xz(ray.origin()));
+            return Some(RayHit {
+                point: ray.origin(),
+                distance: 0.0,
+                normal,
+            });
+        }
+
+        // Only the stretch of the ray between the field's height bounds can hit.
+        let (lo, hi) = self.height_bounds();
+        let (lo, hi) = (f64::from(lo) - 1e-6, f64::from(hi) + 1e-6);
+        let (mut t_start, mut t_end) = (0.0_f64, max_dist);
+        if d.y < 0.0 {
+            if o.y > hi {
+                t_start = (o.y - hi) / -d.y;
+            }
+            t_end = t_end.min((o.y - lo) / -d.y);
+        } else if o.y > hi {
+            return None;
+        } else if d.y > 0.0 {
+            t_end = t_end.min((hi - o.y) / d.y);
+        }
+        if t_start > t_end {
+            return None;
+        }
+        walk(self, o, d, ts, t_start, t_end)
+    }
+}
+
+/// Walks the cells crossed between `t_start` and `t_end` and returns the first hit.
+fn walk(
+    field: &HeightField,
+    o: DVec3,
+    d: DVec3,
+    ts: f64,
+    t_start: f64,
+    t_end: f64,
+) -> Option<RayHit> {
+    // Texel-space position and direction (per metre of ray).
+    let (px, pz) = (o.x / ts, o.z / ts);
+    let (dx, dz) = (d.x / ts, d.z / ts);
+    let sx = px + dx * t_start;
+    let sz = pz + dz * t_start;
+    let mut ix = sx.floor() as i64;
+    let mut iz = sz.floor() as i64;
+    let step_x: i64 = if dx > 0.0 { 1 } else { -1 };
+    let step_z: i64 = if dz > 0.0 { 1 } else { -1 };
+    // Distance along the ray to the next cell boundary on each axis, and between boundaries.
+    let next_boundary = |p: f64, i: i64, dp: f64| -> (f64, f64) {
+        if dp == 0.0 {
+            (f64::INFINITY, f64::INFINITY)
+        } else {
+            let b = if dp > 0.0 { (i + 1) as f64 } else { i as f64 };
+            ((b - p) / dp, 1.0 / dp.abs())
+        }
+    };
+    let (mut t_max_x, delta_x) = next_boundary(px, ix, dx);
+    let (mut t_max_z, delta_z) = next_boundary(pz, iz, dz);
+    // `next_boundary` measured from t = 0; boundaries behind t_start were crossed already.
+    let mut t_in = t_start;
+    // Every cell crossed costs one step; bound the loop by the cells the segment can cross.
+    let span = (t_end - t_start).max(0.0);
+    let max_steps = (span * (dx.abs() + dz.abs())).ceil() + 4.0;
+    let max_steps = if max_steps.is_finite() {
+        max_steps as u64
+    } else {
+        0
+    };
+    for _ in 0..=max_steps {
+        let t_out = t_max_x.min(t_max_z).min(t_end);
+        if t_out >= t_in {
+            let patch = field.patch(ix, iz);
+            if let Some(t) = hit_in_cell(&patch, o, d, px, pz, dx, dz, t_in, t_out) {
+                let p = o + d * t;
+                let (u, v) = (
+                    (p.x / ts - ix as f64).clamp(0.0, 1.0),
+                    (p.z / ts - iz as f64).clamp(0.0, 1.0),
+                );
+                return Some(RayHit {
+                    point: p.as_vec3(),
+                    distance: t as f32,
+                    normal: patch.normal(u, v, ts).as_vec3(),
+                });
+            }
+        }
+        if t_out >= t_end {
+            return None;
+        }
+        t_in = t_in.max(t_out);
+        if t_max_x < t_max_z {
+            ix += step_x;
+            t_max_x += delta_x;
+        } else {
+            iz += step_z;
+            t_max_z += delta_z;
+        }
+    }
+    None
+}
+
+/// The first distance in `[t_in, t_out]` where the ray meets the cell's patch.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn hit_in_cell(
+    patch: &Patch,
+    o: DVec3,
+    d: DVec3,
+    px: f64,
+    pz: f64,
+    dx: f64,
+    dz: f64,
+    t_in: f64,
+    t_out: f64,
+) -> Option<f64> {
+    // Quick rejection: the patch lies within its corner heights, the ray segment within its
+    // end heights.
+    let (y_in, y_out) = (o.y + d.y * t_in, o.y + d.y * t_out);
+    if y_in.min(y_out) > patch.max {
+        return None;
+    }
+    // Along the ray from t_in: u(s) = u0 + dx s, v(s) = v0 + dz s, y(s) = y_in + d.y s, and
+    // f(s) = y(s) - h(u(s), v(s)) = qa s^2 + qb s + qc.
+    let u0 = px + dx * t_in - patch.ix as f64;
+    let v0 = pz + dz * t_in - patch.iz as f64;
+    let qa = -patch.d * dx * dz;
+    let qb = d.y - patch.b * dx - patch.c * dz - patch.d * (u0 * dz + dx * v0);
+    let qc = y_in - patch.height(u0, v0);
+    let len = t_out - t_in;
+    if qc <= 0.0 {
+        return Some(t_in);
+    }
+    let f = |s: f64| (qa * s + qb) * s + qc;
+    let mut best: Option<f64> = None;
+    let mut consider = |s: f64| {
+        if s.is_finite() && (0.0..=len).contains(&s) && best.is_none_or(|b| s < b) {
+            best = Some(s);
+        }
+    };
+    let scale = qa.abs().max(qb.abs()).max(qc.abs());
+    if qa.abs() <= 1e-14 * scale.max(f64::MIN_POSITIVE) {
+        if qb != 0.0 {
+            consider(-qc / qb);
+        }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            // The numerically stable pair of roots.
+            let q = -0.5 * (qb + qb.signum() * disc.sqrt());
+            consider(q / qa);
+            if q != 0.0 {
+                consider(qc / q);
+            }
+        }
+    }
+    if let Some(s) = best {
+        return Some(t_in + s);
+    }
+    // Rounding can lose a root that the end value proves: bisect for it.
+    if f(len) <= 0.0 {
+        let (mut a, mut b) = (0.0, len);
+        for _ in 0..60 {
+            let m = 0.5 * (a + b);
+            if f(m) > 0.0 {
+                a = m;
+            } else {
+                b = m;
+            }
+        }
+        return Some(t_in + b);
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use terrain_core::{Grid, HeightEncoding};
+
+    fn flat(raw: u16) -> HeightField {
+        let g = Grid::new(8, 8, raw).expect("grid");
+        HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("field")
+    }
+
+    #[test]
+    fn straight_down_onto_flat_ground() {
+        let f = flat(500); // 5 m
+        let ray = Ray::new(Vec3::new(3.3, 10.0, 2.7), Vec3::NEG_Y).expect("ray");
+        let hit = f.cast_local_ray(&ray, 100.0).expect("hit");
+        assert!((hit.distance - 5.0).abs() < 1e-5);
+        assert!((hit.point - Vec3::new(3.3, 5.0, 2.7)).length() < 1e-5);
+        assert!((hit.normal - Vec3::Y).length() < 1e-6);
+        assert!(f.cast_local_ray(&ray, 4.9).is_none());
+    }
+
+    #[test]
+    fn horizontal_and_upward_rays_above_ground_miss() {
+        let f = flat(500);
+        let up = Ray::new(Vec3::new(1.0, 6.0, 1.0), Vec3::new(0.3, 1.0, 0.2)).expect("ray");
+        assert!(f.cast_local_ray(&up, 1e6).is_none());
+        let flat_ray = Ray::new(Vec3::new(1.0, 6.0, 1.0), Vec3::X).expect("ray");
+        assert!(f.cast_local_ray(&flat_ray, 1000.0).is_none());
+    }
+
+    #[test]
+    fn origin_below_ground_hits_at_zero() {
+        let f = flat(500);
+        let ray = Ray::new(Vec3::new(1.0, 4.0, 1.0), Vec3::Y).expect("ray");
+        let hit = f.cast_local_ray(&ray, 10.0).expect("hit");
+        assert_eq!(hit.distance, 0.0);
+    }
+
+    #[test]
+    fn a_one_texel_spike_is_not_stepped_over() {
+        let mut g = Grid::new(16, 16, 0u16).expect("grid");
+        *g.get_mut(7, 5).expect("texel") = 1000; // a 10 m spike
+        let f =
+            HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("field");
+        let ray = Ray::new(Vec3::new(0.0, 5.0, 5.0), Vec3::X).expect("ray");
+        let hit = f.cast_local_ray(&ray, 15.0).expect("hit");
+        // The patch between texel 6 (0 m) and 7 (10 m) on row 5 reaches 5 m at x = 6.5.
+        assert!((hit.distance - 6.5).abs() < 1e-5, "{hit:?}");
+        assert!((f.height_local(Vec2::new(6.5, 5.0)) - 5.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn bad_rays_are_errors() {
+        assert!(matches!(
+            Ray::new(Vec3::ZERO, Vec3::ZERO),
+            Err(PhysicsError::ZeroDirection { .. })
+        ));
+        assert!(matches!(
+            Ray::new(Vec3::new(f32::NAN, 0.0, 0.0), Vec3::X),
+            Err(PhysicsError::NonFinite { .. })
+        ));
+        assert!(check_max_dist(-1.0).is_err());
+        assert!(check_max_dist(f32::INFINITY).is_err());
+    }
+}

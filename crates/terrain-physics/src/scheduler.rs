@@ -1,0 +1,382 @@
+//! `ReadbackScheduler`: collects the dirty rects of deformations, waits for a quiet gap, asks a
+//! [`RegionSource`] for their merged union, and applies what arrives to the
+//! [`CollisionMirror`], never blocking the caller (seed 000 sec 3.2.1).
+//!
+//! Time is passed in: every call takes `now: Instant`, so tests run on synthetic instants.
+//!
+//! - `note_deformation(rect, bound, now)` marks a rect dirty and records the deformation's
+//!   bound (see [`crate::ground`]).
+//! - `update(now, source, mirror)` polls the source (non-blocking), applies arrived regions in
+//!   request order (a region that arrives early waits for the older ones, so an older readback
+//!   never overwrites a newer one), retires the bounds a completed batch covered, and, once no
+//!   deformation has been noted for `quiet_gap` (or the oldest dirty rect has waited
+//!   `max_delay`), requests the merged dirty rects as one batch.
+
+use crate::collider::HeightfieldCollider;
+use crate::error::{PhysicsError, check_region};
+use crate::ground::{BoundedGround, DeformationBound, PendingDeformation};
+use crate::merge::DirtyRegions;
+use crate::mirror::CollisionMirror;
+use crate::source::{RegionSource, RequestId};
+use glam::UVec2;
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+use terrain_core::{Grid, Rect};
+
+/// Scheduler parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SchedulerConfig {
+    /// How long no deformation must be noted before the dirty rects are requested. Seed 000
+    /// sec 3.2.1: "the system waits for a gap of approximately 20 milliseconds". Default 20 ms.
+    pub quiet_gap: Duration,
+    /// The longest a dirty rect waits, even while deformations keep coming (so a continuous
+    /// stream of deformations cannot starve collision). Not in the seed; default 250 ms.
+    pub max_delay: Duration,
+    /// Dirty rects closer than this many texels are merged into one request. Default 16.
+    pub merge_distance: u32,
+    /// The most rects one batch requests (the closest are merged beyond it). Default 4.
+    pub max_requests: usize,
+}
+
+impl Default for SchedulerConfig {
+    fn default() -> Self {
+        Self {
+            quiet_gap: Duration::from_millis(20),
+            max_delay: Duration::from_millis(250),
+            merge_distance: 16,
+            max_requests: 4,
+        }
+    }
+}
+
+/// What one [`ReadbackScheduler::update`] did.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct UpdateReport {
+    /// Requests made: id and rect (merged; it may wrap).
+    pub requested: Vec<(RequestId, Rect)>,
+    /// Regions applied to the mirror: request id and the mirror version it produced.
+    pub applied: Vec<(RequestId, u64)>,
+}
+
+/// A request in flight, and what it has delivered.
+#[derive(Debug, Clone)]
+struct InFlight {
+    id: RequestId,
+    rect: Rect,
+    arrived: Option<Grid<u16>>,
+    /// Deformations whose bounds retire when this request is applied (the last request of a
+    /// batch carries the batch's deformations; requests apply in order).
+    retires: Vec<PendingDeformation>,
+}
+
+/// The readback scheduler of one mirrored map.
+#[derive(Debug, Clone)]
+pub struct ReadbackScheduler {
+    config: SchedulerConfig,
+    map_size: UVec2,
+    dirty: DirtyRegions,
+    /// Deformations noted since the last batch was requested.
+    waiting: Vec<PendingDeformation>,
+    first_dirty: Option<Instant>,
+    last_dirty: Option<Instant>,
+    in_flight: VecDeque<InFlight>,
+    /// Bounds of batches in flight, flattened for [`BoundedGround`].
+    in_flight_bounds: Vec<PendingDeformation>,
+}
+
+impl ReadbackScheduler {
+    /// A scheduler for a map of `map_size` texels. Fails on a zero side or `max_requests` 0.
+    pub fn new(map_size: UVec2, config: SchedulerConfig) -> Result<Self, PhysicsError> {
+        if map_size.min_element() == 0 {
+            return Err(PhysicsError::Core(terrain_core::CoreError::EmptyGrid {
+                width: map_size.x,
+                height: map_size.y,
+            }));
+        }
+        if config.max_requests == 0 {
+            return Err(PhysicsError::OutOfRange {
+                what: "max requests per batch",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        Ok(Self {
+            config,
+            map_size,
+            dirty: DirtyRegions::new(map_size, config.merge_distance, config.max_requests),
+            waiting: Vec::new(),
+            first_dirty: None,
+            last_dirty: None,
+            in_flight: VecDeque::new(),
+            in_flight_bounds: Vec::new(),
+        })
+    }
+
+    /// A scheduler for the map `mirror` holds.
+    pub fn for_mirror(
+        mirror: &CollisionMirror,
+        config: SchedulerConfig,
+    ) -> Result<Self, PhysicsError> {
+        Self::new(mirror.size(), config)
+    }
+
+    /// The parameters.
+    pub fn config(&self) -> SchedulerConfig {
+        self.config
+    }
+
+    /// Records a deformation of `rect` (texels; it may wrap) at `now` with its `bound`.
+    ///
+    /// Note it after the deformation is submitted to the map the source reads (for the GPU,
+    /// recorded in the same or an earlier submission than later readback requests), so that
+    /// the readback requested for it sees it. Fails on a rect off the map.
+    pub fn note_deformation(
+        &mut self,
+        rect: Rect,
+        bound: DeformationBound,
+        now: Instant,
+    ) -> Result<(), PhysicsError> {
+        check_region(rect, self.map_size)?;
+        let bound = DeformationBound::new(bound.raise, bound.lower)?;
+        self.dirty.insert(rect);
+        self.waiting.push(PendingDeformation { rect, bound });
+        self.first_dirty.get_or_insert(now);
+        self.last_dirty = Some(self.last_dirty.map_or(now, |t| t.max(now)));
+        Ok(())
+    }
+
+    /// Polls `source`, applies what arrived to `mirror`, and requests the dirty rects once the
+    /// quiet gap has passed. Never waits: it returns as soon as the source's non-blocking calls
+    /// do (applying a region costs a copy of its texels).
+    ///
+    /// Fails if the mirror's size differs from the scheduler's, or on a source error, a region
+    /// nobody asked for, or one of the wrong rect or size. Arrivals that were valid are still
+    /// kept and applied; a failed request keeps its rects dirty for the next update.
+    pub fn update<S: RegionSource + ?Sized>(
+        &mut self,
+        now: Instant,
+        source: &mut S,
+        mirror: &CollisionMirror,
+    ) -> Result<UpdateReport, PhysicsError> {
+        if mirror.size() != self.map_size {
+            return Err(PhysicsError::SizeMismatch {
+                expected: self.map_size,
+                actual: mirror.size(),
+            });
+        }
+        let mut report = UpdateReport::default();
+        let mut first_error: Option<PhysicsError> = None;
+
+        for region in source.poll()? {
+            let slot = self
+                .in_flight
+                .iter_mut()
+                .find(|f| f.id == region.id && f.arrived.is_none());
+            let result = match slot {
+                None => Err(PhysicsError::UnknownRequest { id: region.id }),
+                Some(f) if f.rect != region.rect => Err(PhysicsError::WrongRegion {
+                    id: f.id,
+                    requested: f.rect,
+                    delivered: region.rect,
+                }),
+                Some(f) if region.heights.size() != f.rect.size => {
+                    Err(PhysicsError::SizeMismatch {
+                        expected: f.rect.size,
+                        actual: region.heights.size(),
+                    })
+                }
+                Some(f) => {
+                    f.arrived = Some(region.heights);
+                    Ok(())
+                }
+            };
+            if let Err(e) = result {
+                first_error.get_or_insert(e);
+            }
+        }
+
+        // Apply in request order.
+        while self.in_flight.front().is_some_and(|f| f.arrived.is_some()) {
+            let Some(done) = self.in_flight.pop_front() else {
+                break;
+            };
+            let Some(heights) = done.arrived else { break };
+            match mirror.apply_next(done.rect, &heights) {
+                Ok(version) => report.applied.push((done.id, version)),
+                Err(e) => {
+                    // Cannot happen for a validated arrival; keep the area dirty if it does.
+                    self.dirty.insert(done.rect);
+                    self.waiting.extend(done.retires.iter().copied());
+                    self.first_dirty.get_or_insert(now);
+                    self.last_dirty.get_or_insert(now);
+                    first_error.get_or_insert(e);
+                }
+            }
+            if !done.retires.is_empty() {
+                self.rebuild_in_flight_bounds();
+            }
+        }
+
+        if self.due(now) {
+            self.request_batch(source, &mut report, &mut first_error);
+        }
+        match first_error {
+            Some(e) => Err(e),
+            None => Ok(report),
+        }
+    }
+
+    /// Whether the dirty rects are due: quiet for `quiet_gap`, or waiting for `max_delay`.
+    fn due(&self, now: Instant) -> bool {
+        if self.dirty.is_empty() {
+            return false;
+        }
+        let quiet = self
+            .last_dirty
+            .is_none_or(|t| now.saturating_duration_since(t) >= self.config.quiet_gap);
+        let overdue = self
+            .first_dirty
+            .is_none_or(|t| now.saturating_duration_since(t) >= self.config.max_delay);
+        quiet || overdue
+    }
+
+    fn request_batch<S: RegionSource + ?Sized>(
+        &mut self,
+        source: &mut S,
+        report: &mut UpdateReport,
+        first_error: &mut Option<PhysicsError>,
+    ) {
+        let rects = self.dirty.take();
+        let mut issued = 0;
+        for (k, &rect) in rects.iter().enumerate() {
+            match source.request(rect) {
+                Ok(id) => {
+                    self.in_flight.push_back(InFlight {
+                        id,
+                        rect,
+                        arrived: None,
+                        retires: Vec::new(),
+                    });
+                    report.requested.push((id, rect));
+                    issued += 1;
+                }
+                Err(e) => {
+                    // Keep the rest dirty and every bound of the batch pending; retry later.
+                    for r in &rects[k..] {
+                        self.dirty.insert(*r);
+                    }
+                    first_error.get_or_insert(e);
+                    return;
+                }
+            }
+        }
+        if issued > 0
+            && let Some(last) = self.in_flight.back_mut()
+        {
+            last.retires = std::mem::take(&mut self.waiting);
+        }
+        self.first_dirty = None;
+        self.last_dirty = None;
+        self.rebuild_in_flight_bounds();
+    }
+
+    fn rebuild_in_flight_bounds(&mut self) {
+        self.in_flight_bounds = self
+            .in_flight
+            .iter()
+            .flat_map(|f| f.retires.iter().copied())
+            .collect();
+    }
+
+    /// Deformations not yet covered by an applied readback: waiting for the quiet gap, then
+    /// in flight.
+    pub fn pending_deformations(&self) -> impl Iterator<Item = &PendingDeformation> {
+        self.waiting.iter().chain(&self.in_flight_bounds)
+    }
+
+    /// The dirty rects not yet requested (merged).
+    pub fn dirty_rects(&self) -> &[Rect] {
+        self.dirty.rects()
+    }
+
+    /// Requests made and not yet applied.
+    pub fn in_flight(&self) -> usize {
+        self.in_flight.len()
+    }
+
+    /// Whether nothing is dirty, in flight or pending.
+    pub fn is_idle(&self) -> bool {
+        self.dirty.is_empty() && self.in_flight.is_empty() && self.waiting.is_empty()
+    }
+
+    /// The ground bodies should collide with now: `collider`'s surface raised by the bounds of
+    /// every pending deformation (see [`crate::ground`]).
+    pub fn ground<'a>(&'a self, collider: &'a HeightfieldCollider) -> BoundedGround<'a> {
+        BoundedGround::new(collider, &self.waiting, &self.in_flight_bounds)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::source::CpuRegionSource;
+    use glam::IVec2;
+    use terrain_core::{CoarseMap, HeightEncoding};
+
+    fn setup() -> (CpuRegionSource, CollisionMirror, ReadbackScheduler) {
+        let g = Grid::new(32, 32, 0u16).expect("grid");
+        let m =
+            CoarseMap::coarse(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("map");
+        let mirror = CollisionMirror::from_map(&m).expect("mirror");
+        let s = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default()).expect("s");
+        (CpuRegionSource::new(m), mirror, s)
+    }
+
+    #[test]
+    fn continuous_deformation_is_requested_after_max_delay() {
+        let (mut src, mirror, mut s) = setup();
+        let t0 = Instant::now();
+        let r = Rect::new(IVec2::new(1, 1), UVec2::new(2, 2));
+        let b = DeformationBound::default();
+        for ms in (0..=240).step_by(10) {
+            let now = t0 + Duration::from_millis(ms);
+            s.note_deformation(r, b, now).expect("note");
+            let rep = s.update(now, &mut src, &mirror).expect("update");
+            assert!(rep.requested.is_empty(), "at {ms} ms");
+        }
+        let now = t0 + Duration::from_millis(250);
+        s.note_deformation(r, b, now).expect("note");
+        let rep = s.update(now, &mut src, &mirror).expect("update");
+        assert_eq!(rep.requested.len(), 1);
+    }
+
+    #[test]
+    fn bad_config_and_sizes_are_errors() {
+        let cfg = SchedulerConfig {
+            max_requests: 0,
+            ..SchedulerConfig::default()
+        };
+        assert!(ReadbackScheduler::new(UVec2::splat(8), cfg).is_err());
+        assert!(ReadbackScheduler::new(UVec2::new(0, 8), SchedulerConfig::default()).is_err());
+        let (mut src, mirror, _) = setup();
+        let mut other = ReadbackScheduler::new(UVec2::splat(16), SchedulerConfig::default())
+            .expect("scheduler");
+        assert!(matches!(
+            other.update(Instant::now(), &mut src, &mirror),
+            Err(PhysicsError::SizeMismatch { .. })
+        ));
+        let (_, _, mut s) = setup();
+        let off = Rect::new(IVec2::new(100, 0), UVec2::new(2, 2));
+        assert!(matches!(
+            s.note_deformation(off, DeformationBound::default(), Instant::now()),
+            Err(PhysicsError::RegionOffMap { .. })
+        ));
+        let bad = DeformationBound {
+            raise: -1.0,
+            lower: 0.0,
+        };
+        let ok = Rect::new(IVec2::ZERO, UVec2::ONE);
+        assert!(s.note_deformation(ok, bad, Instant::now()).is_err());
+        assert!(s.is_idle());
+    }
+}

@@ -1,0 +1,206 @@
+//! The readback trait ([`RegionSource`]) the scheduler asks for regions through, and
+//! [`CpuRegionSource`], which serves them from a coarse-map in memory (tests, GPU-less users).
+//!
+//! terrain-gpu implements [`RegionSource`] with its `RegionReadback` (a ring of staging buffers
+//! mapped asynchronously); this crate names no GPU type.
+
+use crate::error::{PhysicsError, check_region};
+use std::collections::VecDeque;
+use terrain_core::{CoarseMap, Grid, Rect};
+
+/// Identifies one request; a region arrives with the id it was requested with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct RequestId(pub u64);
+
+/// A region that arrived: the stored u16 heights of `rect`, row-major in the rect's own
+/// (unwrapped) coordinates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArrivedRegion {
+    /// The request it answers.
+    pub id: RequestId,
+    /// The rect requested (as requested: it may cross the map's edges).
+    pub rect: Rect,
+    /// The heights, `rect.size` in size, in the map's own encoding.
+    pub heights: Grid<u16>,
+}
+
+/// Where region readbacks come from.
+///
+/// Contract for implementers:
+/// - `request` never blocks: it records or queues the copy and returns an id, unique among
+///   the source's requests. The heights delivered must be the map's state at the time of the
+///   request or later (so a deformation submitted before the request is included).
+/// - `rect` may cross the map's edges (the coarse-map wraps; at most one map in size, as the
+///   scheduler guarantees); the heights come back in the rect's own unwrapped coordinates.
+/// - `poll` never blocks: it returns the regions that have arrived since the last call (possibly
+///   none), each exactly once, in any order.
+/// - Failures are reported as [`PhysicsError::Source`] (with the implementation's message).
+pub trait RegionSource {
+    /// Asks for the heights of `rect`.
+    fn request(&mut self, rect: Rect) -> Result<RequestId, PhysicsError>;
+    /// Hands over the regions that have arrived, without waiting for the others.
+    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError>;
+}
+
+/// A [`RegionSource`] over a coarse-map the caller keeps current (apply deformations to
+/// [`CpuRegionSource::map_mut`]).
+///
+/// A request copies the rect at request time (as a GPU copy recorded then would) and delivers
+/// it on the `latency`-th poll after the request (`latency` 1: the next poll), to simulate a
+/// readback in flight.
+#[derive(Debug, Clone)]
+pub struct CpuRegionSource {
+    map: CoarseMap,
+    latency: u32,
+    next_id: u64,
+    queue: VecDeque<(u32, ArrivedRegion)>,
+    requests: Vec<Rect>,
+}
+
+impl CpuRegionSource {
+    /// A source over `map` delivering each region on the next poll.
+    pub fn new(map: CoarseMap) -> Self {
+        Self {
+            map,
+            latency: 1,
+            next_id: 0,
+            queue: VecDeque::new(),
+            requests: Vec::new(),
+        }
+    }
+
+    /// The same source delivering each region on the `polls`-th poll after its request
+    /// (at least 1).
+    pub fn with_latency(self, polls: u32) -> Result<Self, PhysicsError> {
+        if polls == 0 {
+            return Err(PhysicsError::OutOfRange {
+                what: "readback latency (polls)",
+                value: 0.0,
+                expected: "at least 1 poll",
+            });
+        }
+        Ok(Self {
+            latency: polls,
+            ..self
+        })
+    }
+
+    /// The map regions are read from.
+    pub fn map(&self) -> &CoarseMap {
+        &self.map
+    }
+
+    /// The map, to deform it.
+    pub fn map_mut(&mut self) -> &mut CoarseMap {
+        &mut self.map
+    }
+
+    /// Every rect requested so far, in order.
+    pub fn requests(&self) -> &[Rect] {
+        &self.requests
+    }
+
+    /// Requests not yet delivered.
+    pub fn in_flight(&self) -> usize {
+        self.queue.len()
+    }
+}
+
+/// Copies `rect` (which may wrap) out of `map`, row-major in the rect's unwrapped coordinates.
+pub fn read_region(map: &CoarseMap, rect: Rect) -> Result<Grid<u16>, PhysicsError> {
+    let size = map.size();
+    check_region(rect, size)?;
+    let mut out = Grid::new(rect.size.x, rect.size.y, 0u16)?;
+    let src = map.grid();
+    for piece in rect.split_toroidal(size) {
+        let off = (piece.unwrapped.min - rect.min).as_uvec2();
+        let (x0, w) = (piece.map.min.x as usize, piece.map.size.x as usize);
+        for row in 0..piece.map.size.y {
+            let s = &src.row(piece.map.min.y as u32 + row)[x0..x0 + w];
+            out.row_mut(off.y + row)[off.x as usize..off.x as usize + w].copy_from_slice(s);
+        }
+    }
+    Ok(out)
+}
+
+impl RegionSource for CpuRegionSource {
+    fn request(&mut self, rect: Rect) -> Result<RequestId, PhysicsError> {
+        let heights = read_region(&self.map, rect)?;
+        let id = RequestId(self.next_id);
+        self.next_id += 1;
+        self.requests.push(rect);
+        self.queue
+            .push_back((self.latency, ArrivedRegion { id, rect, heights }));
+        Ok(id)
+    }
+
+    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError> {
+        let mut out = Vec::new();
+        let mut keep = VecDeque::with_capacity(self.queue.len());
+        for (polls_left, region) in self.queue.drain(..) {
+            if polls_left <= 1 {
+                out.push(region);
+            } else {
+                keep.push_back((polls_left - 1, region));
+            }
+        }
+        self.queue = keep;
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{IVec2, UVec2};
+    use terrain_core::{HeightEncoding, WrapMode};
+
+    fn map() -> CoarseMap {
+        let g = Grid::from_fn(8, 6, |x, y| (x + 10 * y) as u16).expect("grid");
+        CoarseMap::coarse(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("map")
+    }
+
+    #[test]
+    fn regions_wrap_and_arrive_after_the_latency() {
+        let mut s = CpuRegionSource::new(map())
+            .with_latency(2)
+            .expect("latency");
+        let rect = Rect::new(IVec2::new(6, -1), UVec2::new(4, 3));
+        let id = s.request(rect).expect("request");
+        assert!(s.poll().expect("poll").is_empty());
+        let got = s.poll().expect("poll");
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].id, id);
+        for y in 0..3 {
+            for x in 0..4 {
+                let p = rect.min + IVec2::new(x, y);
+                let want = s.map().grid().get_wrapped(p, WrapMode::Repeat);
+                assert_eq!(got[0].heights.get(x as u32, y as u32), Some(want));
+            }
+        }
+        assert!(s.poll().expect("poll").is_empty());
+        assert_eq!(s.requests(), &[rect]);
+    }
+
+    #[test]
+    fn data_is_taken_at_request_time() {
+        let mut s = CpuRegionSource::new(map());
+        let rect = Rect::new(IVec2::ZERO, UVec2::new(2, 2));
+        s.request(rect).expect("request");
+        *s.map_mut().grid_mut().get_mut(0, 0).expect("texel") = 999;
+        let got = s.poll().expect("poll");
+        assert_eq!(got[0].heights.get(0, 0), Some(0));
+    }
+
+    #[test]
+    fn bad_requests_are_errors() {
+        let mut s = CpuRegionSource::new(map());
+        assert!(matches!(
+            s.request(Rect::new(IVec2::new(100, 0), UVec2::new(2, 2))),
+            Err(PhysicsError::RegionOffMap { .. })
+        ));
+        assert!(s.request(Rect::new(IVec2::ZERO, UVec2::new(9, 1))).is_err());
+        assert!(s.clone().with_latency(0).is_err());
+        assert_eq!(s.in_flight(), 0);
+    }
+}

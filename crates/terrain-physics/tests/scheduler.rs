@@ -1,0 +1,372 @@
+//! The readback scheduler with synthetic time: the quiet gap, merging a burst into one
+//! request, applying on arrival (in request order), never blocking, wrap-edge rects, and the
+//! pending-deformation bound that keeps bodies above ground before the readback arrives.
+
+mod common;
+
+use glam::{IVec2, UVec2, Vec2, Vec3};
+use std::time::{Duration, Instant};
+use terrain_core::{Blend, CoarseMap, GaussianStamp, Rect, StampPlacement, apply_stamp, bilinear};
+use terrain_physics::{
+    ArrivedRegion, CameraBody, CollisionMirror, CpuRegionSource, DeformationBound, GroundQuery,
+    PhysicsError, ReadbackScheduler, RegionSource, RequestId, SchedulerConfig, SphereBody,
+};
+
+fn ms(t0: Instant, m: u64) -> Instant {
+    t0 + Duration::from_millis(m)
+}
+
+struct Rig {
+    source: CpuRegionSource,
+    mirror: CollisionMirror,
+    scheduler: ReadbackScheduler,
+}
+
+fn rig(map: CoarseMap, latency: u32) -> Rig {
+    let mirror = CollisionMirror::from_map(&map).expect("mirror");
+    let scheduler =
+        ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default()).expect("scheduler");
+    let source = CpuRegionSource::new(map)
+        .with_latency(latency)
+        .expect("latency");
+    Rig {
+        source,
+        mirror,
+        scheduler,
+    }
+}
+
+impl Rig {
+    /// Stamps a Gaussian of `intensity` metres at `centre` into the source map and notes it.
+    fn stamp(&mut self, centre: Vec2, size_m: f32, intensity: f32, now: Instant) -> Vec<Rect> {
+        let placement =
+            StampPlacement::new(centre, Vec2::splat(size_m), intensity).expect("placement");
+        let dirty = apply_stamp(
+            self.source.map_mut(),
+            &mut GaussianStamp::default(),
+            &placement,
+            Blend::Add,
+        )
+        .expect("stamp");
+        let bound =
+            DeformationBound::additive(intensity, self.source.map().encoding()).expect("bound");
+        for r in &dirty {
+            self.scheduler
+                .note_deformation(*r, bound, now)
+                .expect("note");
+        }
+        dirty
+    }
+
+    fn update(&mut self, now: Instant) -> terrain_physics::UpdateReport {
+        self.scheduler
+            .update(now, &mut self.source, &self.mirror)
+            .expect("update")
+    }
+
+    fn mirror_equals_source(&self) -> bool {
+        self.mirror.snapshot().heights() == self.source.map().grid()
+    }
+}
+
+#[test]
+fn nothing_is_requested_before_the_quiet_gap() {
+    let mut r = rig(common::hills(64), 1);
+    let t0 = Instant::now();
+    r.stamp(Vec2::new(10.0, 10.0), 3.0, 1.0, t0);
+    for m in [0, 5, 10, 19] {
+        assert!(r.update(ms(t0, m)).requested.is_empty(), "at {m} ms");
+    }
+    assert!(r.source.requests().is_empty());
+    let rep = r.update(ms(t0, 20));
+    assert_eq!(rep.requested.len(), 1);
+}
+
+#[test]
+fn a_burst_of_deformations_yields_one_merged_request_after_the_gap() {
+    let mut r = rig(common::hills(64), 1);
+    let t0 = Instant::now();
+    let mut dirty = Vec::new();
+    // Ten footprints 5 ms apart, walking across the map.
+    for i in 0..10u64 {
+        let now = ms(t0, 5 * i);
+        dirty.extend(r.stamp(Vec2::new(5.0 + i as f32 * 0.8, 8.0), 2.0, -0.3, now));
+        assert!(r.update(now).requested.is_empty());
+    }
+    assert!(r.update(ms(t0, 45 + 19)).requested.is_empty());
+    let rep = r.update(ms(t0, 45 + 20));
+    assert_eq!(rep.requested.len(), 1, "{rep:?}");
+    let (_, merged) = rep.requested[0];
+    for d in &dirty {
+        assert!(merged.contains_rect(d), "{merged:?} misses {d:?}");
+    }
+    assert!(merged.size.cmple(UVec2::splat(64)).all());
+    // It arrives on the next poll and the mirror then equals the source exactly.
+    assert!(!r.mirror_equals_source());
+    let rep = r.update(ms(t0, 70));
+    assert_eq!(rep.applied.len(), 1);
+    assert!(r.mirror_equals_source());
+    assert!(r.scheduler.is_idle());
+}
+
+#[test]
+fn results_apply_on_arrival_and_the_caller_never_waits_for_them() {
+    let mut r = rig(common::hills(64), 3);
+    let t0 = Instant::now();
+    r.stamp(Vec2::new(20.0, 12.0), 4.0, 1.5, t0);
+    assert_eq!(r.update(ms(t0, 20)).requested.len(), 1);
+    let before = r.mirror.version();
+    // The readback is in flight for three polls: each update returns with nothing applied.
+    for m in [21, 22] {
+        let rep = r.update(ms(t0, m));
+        assert!(rep.applied.is_empty());
+        assert_eq!(r.mirror.version(), before);
+        assert_eq!(r.scheduler.in_flight(), 1);
+    }
+    let rep = r.update(ms(t0, 23));
+    assert_eq!(rep.applied.len(), 1);
+    assert_eq!(r.mirror.version(), before + 1);
+    assert!(r.mirror_equals_source());
+}
+
+/// A source whose data never arrives: update must still return at once, every time.
+#[derive(Debug, Default)]
+struct Never {
+    next: u64,
+}
+
+impl RegionSource for Never {
+    fn request(&mut self, _rect: Rect) -> Result<RequestId, PhysicsError> {
+        self.next += 1;
+        Ok(RequestId(self.next))
+    }
+    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError> {
+        Ok(Vec::new())
+    }
+}
+
+#[test]
+fn update_returns_while_a_readback_never_arrives() {
+    let r = rig(common::hills(32), 1);
+    let (mirror, mut scheduler) = (r.mirror, r.scheduler);
+    let mut never = Never::default();
+    let t0 = Instant::now();
+    let rect = Rect::new(IVec2::new(3, 3), UVec2::new(4, 4));
+    let bound = DeformationBound::new(0.5, 0.0).expect("bound");
+    scheduler.note_deformation(rect, bound, t0).expect("note");
+    for m in 0..100 {
+        scheduler
+            .update(ms(t0, 20 + m), &mut never, &mirror)
+            .expect("update");
+    }
+    assert_eq!(scheduler.in_flight(), 1);
+    assert_eq!(mirror.version(), 0);
+    // The bound stays in force while the readback is outstanding.
+    assert_eq!(scheduler.pending_deformations().count(), 1);
+}
+
+#[test]
+fn a_deformation_across_the_corner_is_one_request_that_wraps() {
+    let mut r = rig(common::hills(64), 1);
+    let t0 = Instant::now();
+    // 64 texels at 0.5 m: the map is 32 m; a stamp at the corner lands on all four corners.
+    let dirty = r.stamp(Vec2::new(0.5, 31.8), 3.0, 1.0, t0);
+    assert_eq!(dirty.len(), 4);
+    let rep = r.update(ms(t0, 20));
+    assert_eq!(rep.requested.len(), 1, "{rep:?}");
+    let (_, rect) = rep.requested[0];
+    assert!(
+        rect.max().x > 64 && rect.max().y > 64,
+        "{rect:?} should cross both edges"
+    );
+    assert!(
+        rect.size.cmplt(UVec2::splat(20)).all(),
+        "{rect:?} should stay small"
+    );
+    r.update(ms(t0, 21));
+    assert!(r.mirror_equals_source());
+}
+
+/// A source that hands regions back in reverse order of request.
+#[derive(Debug)]
+struct Reversed {
+    inner: CpuRegionSource,
+    held: Vec<ArrivedRegion>,
+}
+
+impl RegionSource for Reversed {
+    fn request(&mut self, rect: Rect) -> Result<RequestId, PhysicsError> {
+        self.inner.request(rect)
+    }
+    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError> {
+        self.held.extend(self.inner.poll()?);
+        if self.held.len() < 2 {
+            return Ok(Vec::new());
+        }
+        let mut out = std::mem::take(&mut self.held);
+        out.reverse();
+        Ok(out)
+    }
+}
+
+#[test]
+fn regions_arriving_out_of_order_apply_in_request_order() {
+    let mut r = rig(common::hills(64), 1);
+    let t0 = Instant::now();
+    let centre = Vec2::new(12.0, 12.0);
+    // Two batches over the same place: the second's data must win.
+    r.stamp(centre, 4.0, 1.0, t0);
+    let mut src = Reversed {
+        inner: r.source.clone(),
+        held: Vec::new(),
+    };
+    r.scheduler
+        .update(ms(t0, 20), &mut src, &r.mirror)
+        .expect("update");
+    let placement = StampPlacement::new(centre, Vec2::splat(4.0), 1.0).expect("placement");
+    let dirty = apply_stamp(
+        src.inner.map_mut(),
+        &mut GaussianStamp::default(),
+        &placement,
+        Blend::Add,
+    )
+    .expect("stamp");
+    let bound = DeformationBound::additive(1.0, src.inner.map().encoding()).expect("bound");
+    for d in dirty {
+        r.scheduler
+            .note_deformation(d, bound, ms(t0, 30))
+            .expect("note");
+    }
+    let rep = r
+        .scheduler
+        .update(ms(t0, 50), &mut src, &r.mirror)
+        .expect("update");
+    assert_eq!(rep.requested.len(), 1);
+    let rep = r
+        .scheduler
+        .update(ms(t0, 51), &mut src, &r.mirror)
+        .expect("update");
+    let ids: Vec<u64> = rep.applied.iter().map(|(id, _)| id.0).collect();
+    assert_eq!(ids, vec![0, 1]);
+    assert_eq!(r.mirror.snapshot().heights(), src.inner.map().grid());
+    assert!(r.scheduler.is_idle());
+}
+
+/// A source that delivers a region nobody asked for.
+#[derive(Debug)]
+struct Rogue;
+
+impl RegionSource for Rogue {
+    fn request(&mut self, _rect: Rect) -> Result<RequestId, PhysicsError> {
+        Err(PhysicsError::Source("staging ring full".into()))
+    }
+    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError> {
+        Ok(vec![ArrivedRegion {
+            id: RequestId(99),
+            rect: Rect::new(IVec2::ZERO, UVec2::ONE),
+            heights: terrain_core::Grid::new(1, 1, 0).expect("grid"),
+        }])
+    }
+}
+
+#[test]
+fn source_failures_are_errors_and_keep_the_rects_dirty() {
+    let mut r = rig(common::hills(32), 1);
+    let t0 = Instant::now();
+    let e = r.scheduler.update(t0, &mut Rogue, &r.mirror);
+    assert!(matches!(
+        e,
+        Err(PhysicsError::UnknownRequest { id: RequestId(99) })
+    ));
+    r.stamp(Vec2::new(4.0, 4.0), 2.0, 1.0, t0);
+    struct Failing;
+    impl RegionSource for Failing {
+        fn request(&mut self, _rect: Rect) -> Result<RequestId, PhysicsError> {
+            Err(PhysicsError::Source("device lost".into()))
+        }
+        fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError> {
+            Ok(Vec::new())
+        }
+    }
+    let e = r.scheduler.update(ms(t0, 25), &mut Failing, &r.mirror);
+    assert!(matches!(e, Err(PhysicsError::Source(ref m)) if m == "device lost"));
+    assert_eq!(r.scheduler.dirty_rects().len(), 1);
+    // The next update with a working source requests it at once (the gap has passed).
+    let rep = r.update(ms(t0, 26));
+    assert_eq!(rep.requested.len(), 1);
+    r.update(ms(t0, 27));
+    assert!(r.mirror_equals_source());
+}
+
+#[test]
+fn the_deformation_bound_keeps_bodies_above_the_raised_ground_until_the_readback() {
+    let mut r = rig(common::flat(64, 10.0), 4);
+    let t0 = Instant::now();
+    let spot = Vec2::new(16.0, 16.0);
+    let mut camera = CameraBody::new(Vec3::new(spot.x, 10.0 + 1.7, spot.y));
+    let mut ball = SphereBody::new(Vec3::new(spot.x + 1.0, 10.5, spot.y), 0.5).expect("ball");
+    // Settle both on the flat ground.
+    for _ in 0..5 {
+        let c = r.mirror.collider();
+        let g = r.scheduler.ground(&c);
+        camera.step(1.0 / 60.0, Vec3::ZERO, &g).expect("step");
+        ball.step(1.0 / 60.0, Vec3::ZERO, &g).expect("step");
+    }
+    // A 2 m mound rises under both.
+    r.stamp(spot, 8.0, 2.0, t0);
+    let true_height = |r: &Rig, p: Vec2| bilinear(r.source.map(), p).expect("finite");
+    assert!(true_height(&r, spot) > 11.9);
+    let mut frame = 0u64;
+    let mut saw_gap = false;
+    loop {
+        let now = ms(t0, frame * 8);
+        r.update(now);
+        let c = r.mirror.collider();
+        // Without the bound the mirror alone would put the camera 2 m underground.
+        let mirror_only = c.height(spot).expect("h");
+        let stale = mirror_only < true_height(&r, spot) - 1.0;
+        saw_gap |= stale;
+        let g = r.scheduler.ground(&c);
+        camera.step(1.0 / 60.0, Vec3::ZERO, &g).expect("step");
+        ball.step(1.0 / 60.0, Vec3::ZERO, &g).expect("step");
+        let cam_ground = true_height(&r, Vec2::new(camera.position.x, camera.position.z));
+        assert!(
+            camera.position.y >= cam_ground + camera.eye_height - 1e-3,
+            "frame {frame}: camera eye {} under ground {cam_ground} + eye",
+            camera.position.y
+        );
+        let truth = r.source.map().clone();
+        let truth = terrain_physics::HeightfieldCollider::from_map(&truth).expect("collider");
+        let below = truth
+            .height(Vec2::new(ball.center.x, ball.center.z))
+            .expect("h");
+        assert!(
+            ball.center.y >= below,
+            "frame {frame}: ball centre under ground"
+        );
+        let pen = truth
+            .sphere_contact(ball.center, ball.radius)
+            .expect("ok")
+            .map_or(0.0, |k| k.depth);
+        assert!(
+            pen < 2e-3,
+            "frame {frame}: ball sunk {pen} m into the true ground"
+        );
+        if r.scheduler.is_idle() && r.mirror_equals_source() {
+            break;
+        }
+        frame += 1;
+        assert!(frame < 100, "readback never completed");
+    }
+    assert!(
+        saw_gap,
+        "the test never exercised the gap before the readback"
+    );
+    // After the readback the bound is gone and the mirror is exact.
+    let c = r.mirror.collider();
+    let g = r.scheduler.ground(&c);
+    assert_eq!(
+        g.ground_height(spot).expect("h"),
+        c.height(spot).expect("h")
+    );
+}

@@ -1,0 +1,136 @@
+// ClipmapRenderer: geometry clipmap blocks displaced by the coarse-map (GPU Gems 2 ch. 2,
+// seed 000 sec 3.1.3), lit with the partial-derivative normals (diffuse + Phong specular) and
+// coloured by height and slope.
+
+struct Frame {
+    view_proj: mat4x4<f32>,
+    // Camera position in texels: integer part (exact) and fraction; positions are computed
+    // relative to the camera so large worlds keep their precision.
+    camera_texel: vec2<i32>,
+    camera_frac: vec2<f32>,
+    camera_height: f32,
+    texel_size: f32,
+    // Height encoding: metres = offset + scale * stored.
+    height_scale: f32,
+    height_offset: f32,
+    map_size: vec2<u32>,
+    // A multiple of the map size added before `%` (GLSL's `%` of negatives is undefined).
+    wrap_offset: vec2<i32>,
+    // Clipmap N (vertices per side) and number of levels.
+    n: u32,
+    levels: u32,
+    // Transition width of the level morph, in level grid units.
+    morph_width: f32,
+    // Heights (metres) the colour ramp spans.
+    ramp_low: f32,
+    ramp_high: f32,
+    _pad: f32,
+    _pad2: vec2<f32>,
+    light_dir: vec4<f32>,
+    fog_color: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var<storage, read> heights: array<u32>;
+@group(0) @binding(2) var<storage, read> derivatives: array<vec2<f32>>;
+
+fn texel_index(t: vec2<i32>) -> u32 {
+    let x = u32(t.x + frame.wrap_offset.x) % frame.map_size.x;
+    let y = u32(t.y + frame.wrap_offset.y) % frame.map_size.y;
+    return y * frame.map_size.x + x;
+}
+
+fn height_at(t: vec2<i32>) -> f32 {
+    return frame.height_offset + frame.height_scale * f32(heights[texel_index(t)]);
+}
+
+struct VsIn {
+    @location(0) pos: vec2<f32>,
+    @location(1) offset: vec2<i32>,
+    @location(2) scale: u32,
+    @location(3) level: u32,
+}
+
+struct VsOut {
+    @builtin(position) clip: vec4<f32>,
+    // Texel position relative to the camera's integer texel, for the normal lookup.
+    @location(0) rel_texel: vec2<f32>,
+    @location(1) height: f32,
+    @location(2) view_dist: f32,
+}
+
+@vertex
+fn vs_main(in: VsIn) -> VsOut {
+    let s = i32(in.scale);
+    let grid = vec2<i32>(in.pos);
+    let texel = in.offset + grid * s;
+    var h = height_at(texel);
+    // Morph towards the next coarser level near this level's outer edge, so that the edge
+    // vertices lie exactly on the coarser level's edges (no cracks, no popping).
+    if in.level + 1u < frame.levels {
+        let rel = (vec2<f32>(texel - frame.camera_texel) - frame.camera_frac) / f32(s);
+        let d = max(abs(rel.x), abs(rel.y));
+        let half_size = f32(frame.n - 1u) * 0.5;
+        let alpha = clamp((d - (half_size - 1.0 - frame.morph_width)) / frame.morph_width, 0.0, 1.0);
+        if alpha > 0.0 {
+            let odd = vec2<i32>(texel.x / s, texel.y / s) & vec2<i32>(1, 1);
+            let step = odd * s;
+            var coarse: f32;
+            if odd.x == 1 && odd.y == 1 {
+                coarse = 0.25 * (height_at(texel - step) + height_at(texel + step)
+                    + height_at(texel + vec2<i32>(step.x, -step.y)) + height_at(texel + vec2<i32>(-step.x, step.y)));
+            } else {
+                coarse = 0.5 * (height_at(texel - step) + height_at(texel + step));
+            }
+            h = mix(h, coarse, alpha);
+        }
+    }
+    let rel_texel = vec2<f32>(texel - frame.camera_texel) - frame.camera_frac;
+    let world = vec3<f32>(rel_texel.x * frame.texel_size, h - frame.camera_height, rel_texel.y * frame.texel_size);
+    var out: VsOut;
+    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.rel_texel = rel_texel;
+    out.height = h;
+    out.view_dist = length(world);
+    return out;
+}
+
+fn derivative_at(t: vec2<i32>) -> vec2<f32> {
+    return derivatives[texel_index(t)];
+}
+
+@fragment
+fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
+    // Bilinear gradient at the fragment (texel coordinates relative to the camera's texel).
+    let p = in.rel_texel;
+    let p0 = floor(p);
+    let f = p - p0;
+    let t0 = frame.camera_texel + vec2<i32>(p0);
+    let d00 = derivative_at(t0);
+    let d10 = derivative_at(t0 + vec2<i32>(1, 0));
+    let d01 = derivative_at(t0 + vec2<i32>(0, 1));
+    let d11 = derivative_at(t0 + vec2<i32>(1, 1));
+    let d = mix(mix(d00, d10, f.x), mix(d01, d11, f.x), f.y);
+    let n = normalize(vec3<f32>(-d.x, 1.0, -d.y));
+
+    let t = clamp((in.height - frame.ramp_low) / max(frame.ramp_high - frame.ramp_low, 1e-3), 0.0, 1.0);
+    let grass = mix(vec3<f32>(0.20, 0.36, 0.16), vec3<f32>(0.45, 0.55, 0.25), smoothstep(0.0, 0.45, t));
+    let high = mix(vec3<f32>(0.55, 0.46, 0.36), vec3<f32>(0.93, 0.93, 0.96), smoothstep(0.55, 0.9, t));
+    var albedo = mix(grass, high, smoothstep(0.35, 0.65, t));
+    // Steep slopes are bare rock.
+    let slope = length(d);
+    albedo = mix(albedo, vec3<f32>(0.42, 0.38, 0.34), smoothstep(0.6, 1.1, slope));
+
+    let l = normalize(frame.light_dir.xyz);
+    let diffuse = max(dot(n, l), 0.0);
+    // Phong specular towards the camera (at the origin of the camera-relative frame).
+    let world = vec3<f32>(p.x * frame.texel_size, in.height - frame.camera_height, p.y * frame.texel_size);
+    let v = normalize(-world);
+    let r = reflect(-l, n);
+    let specular = 0.15 * pow(max(dot(r, v), 0.0), 24.0);
+    var color = albedo * (0.28 + 0.8 * diffuse) + vec3<f32>(specular);
+    // Aerial perspective: fade towards the fog colour with distance.
+    let fog = 1.0 - exp(-in.view_dist * frame.fog_color.a);
+    color = mix(color, frame.fog_color.rgb, fog);
+    return vec4<f32>(color, 1.0);
+}

@@ -1,0 +1,33 @@
+// SkyPass: a full-screen triangle drawn first, coloured by the elevation of the view ray
+// between a horizon and a zenith colour.
+
+struct SkyParams {
+    inv_view_proj: mat4x4<f32>,
+    horizon: vec4<f32>,
+    zenith: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> sky: SkyParams;
+
+struct VsOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) ndc: vec2<f32>,
+}
+
+@vertex
+fn vs_main(@builtin(vertex_index) i: u32) -> VsOut {
+    let xy = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u)) * 2.0 - 1.0;
+    var out: VsOut;
+    out.clip = vec4<f32>(xy, 0.0, 1.0);
+    out.ndc = xy;
+    return out;
+}
+
+@fragment
+fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
+    let near = sky.inv_view_proj * vec4<f32>(in.ndc, 0.0, 1.0);
+    let far = sky.inv_view_proj * vec4<f32>(in.ndc, 1.0, 1.0);
+    let dir = normalize(far.xyz / far.w - near.xyz / near.w);
+    let t = clamp(dir.y * 2.5, 0.0, 1.0);
+    return vec4<f32>(mix(sky.horizon.rgb, sky.zenith.rgb, sqrt(t)), 1.0);
+}
