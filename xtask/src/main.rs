@@ -11,10 +11,12 @@ fn main() -> Result<()> {
     match args.first().map(String::as_str) {
         Some("ci") => ci(),
         Some("smoke") => smoke(),
+        Some("golden") => golden(),
         _ => {
-            eprintln!("usage: cargo xtask <ci|smoke>");
-            eprintln!("  ci     fmt, clippy, tests, docs and a demo smoke run (what CI runs)");
-            eprintln!("  smoke  only the demo smoke run");
+            eprintln!("usage: cargo xtask <ci|smoke|golden>");
+            eprintln!("  ci      fmt, clippy, tests, docs and demo smoke runs (what CI runs)");
+            eprintln!("  smoke   only the demo smoke runs (default backend, then GL)");
+            eprintln!("  golden  regenerate the render test's golden image (never done by tests)");
             std::process::exit(2);
         }
     }
@@ -107,14 +109,41 @@ fn doc() -> Result<()> {
     )
 }
 
-/// Runs the demo at a tiny size and checks that it wrote its frames and a sane report.
+/// Regenerates `crates/terrain-gpu/tests/data/golden_clipmap.png` on this machine's adapter.
+fn golden() -> Result<()> {
+    let path = root().join("crates/terrain-gpu/tests/data/golden_clipmap.png");
+    cargo(
+        &[
+            "run",
+            "--locked",
+            "-p",
+            "terrain-gpu",
+            "--example",
+            "golden",
+            "--",
+            &path.to_string_lossy(),
+        ],
+        &[],
+    )
+}
+
+/// Runs the demo at a tiny size on the default adapter (Vulkan in CI) and again on GL, so the
+/// fallback formats stay honest, and checks frames, summary and report each time.
 fn smoke() -> Result<()> {
-    let out = root().join("target").join("ci-smoke");
+    smoke_on(None)?;
+    smoke_on(Some("gl"))
+}
+
+/// One smoke run; `backend` sets `WGPU_BACKEND`.
+fn smoke_on(backend: Option<&str>) -> Result<()> {
+    let name = backend.unwrap_or("default");
+    let out = root().join("target").join(format!("ci-smoke-{name}"));
     if out.exists() {
         std::fs::remove_dir_all(&out).context("could not clear the smoke output folder")?;
     }
     let out_s = out.to_string_lossy().into_owned();
     let frames = 4;
+    let env: Vec<(&str, &str)> = backend.map(|b| ("WGPU_BACKEND", b)).into_iter().collect();
     cargo(
         &[
             "run",
@@ -128,16 +157,27 @@ fn smoke() -> Result<()> {
             "4",
             "--seed",
             "7",
+            "--resolution",
+            "160x96",
             "--out",
             &out_s,
         ],
-        &[],
+        &env,
     )?;
     let report_path = out.join("report.json");
     let text = std::fs::read_to_string(&report_path)
         .with_context(|| format!("no report at {}", report_path.display()))?;
     let report: serde_json::Value =
         serde_json::from_str(&text).context("report.json is not valid JSON")?;
+    let backend_found = report["backend"].as_str().unwrap_or("none");
+    if backend_found == "none" {
+        bail!("the demo found no GPU adapter ({name} backend): 3D frames were not rendered");
+    }
+    if let Some(b) = backend
+        && backend_found != b
+    {
+        bail!("asked for the {b} backend, the demo ran on {backend_found}");
+    }
     let listed = report["frames"].as_array().map_or(0, Vec::len);
     if listed != frames {
         bail!("report.json lists {listed} frames, {frames} expected");
@@ -151,21 +191,28 @@ fn smoke() -> Result<()> {
         let timings = frame["timings_ms"]
             .as_object()
             .with_context(|| format!("frame {i} has no timings_ms"))?;
-        if timings.is_empty()
-            || timings
-                .values()
-                .any(|v| !v.as_f64().is_some_and(|t| t >= 0.0))
-        {
-            bail!("frame {i} has empty or invalid timings: {timings:?}");
+        for step in ["stamp", "normals", "render"] {
+            if !timings
+                .get(step)
+                .and_then(|v| v.as_f64())
+                .is_some_and(|t| t >= 0.0)
+            {
+                bail!("frame {i} lacks a valid `{step}` timing: {timings:?}");
+            }
+        }
+        if frame["triangles"].as_u64().unwrap_or(0) == 0 {
+            bail!("frame {i} drew no triangles");
         }
         let file = frame["file"].as_str().unwrap_or_default();
         if !out.join(file).is_file() {
             bail!("frame {i}: image `{file}` is missing");
         }
     }
-    if !out.join("terrain.png").is_file() {
-        bail!("terrain.png is missing");
+    for file in ["terrain.png", "terrain_final.png", "summary.png"] {
+        if !out.join(file).is_file() {
+            bail!("{file} is missing");
+        }
     }
-    eprintln!("smoke: demo wrote {frames} frames and a valid report to {out_s}");
+    eprintln!("smoke ({name}): {frames} frames on {backend_found} and a valid report in {out_s}");
     Ok(())
 }

@@ -6,7 +6,7 @@ use glam::{UVec2, Vec2, Vec3};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_gpu::{
     Camera, ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuStamp, GpuTextureStamp,
-    GpuTimer, NormalPass, OffscreenTarget, SkyColors, SkyPass, StampPass, TerrainStyle,
+    GpuTimer, GpuTiming, NormalPass, OffscreenTarget, SkyColors, SkyPass, StampPass, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -40,8 +40,8 @@ pub struct RenderedFrame {
     pub image: Grid<[u8; 4]>,
     /// Non-degenerate triangles drawn.
     pub triangles: u64,
-    /// GPU milliseconds of the sky and terrain passes.
-    pub render_ms: f64,
+    /// Time of the sky and terrain passes.
+    pub render: GpuTiming,
     /// Milliseconds placing and culling the clipmap on the CPU.
     pub lod_ms: f64,
     /// Milliseconds copying the image back.
@@ -93,7 +93,7 @@ impl GpuScene {
         &mut self,
         plan: &FramePlan,
         crater: &terrain_core::GaussianStamp,
-    ) -> Result<(Vec<DirtyRect>, f64, f64)> {
+    ) -> Result<(Vec<DirtyRect>, GpuTiming, GpuTiming)> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let shock = match &plan.shock_delta {
             Some(s) => Some(GpuTextureStamp::new(device, s)?),
@@ -126,7 +126,7 @@ impl GpuScene {
             }
             Ok(())
         })?;
-        Ok((dirty, stamp_time.ms, normal_time.ms))
+        Ok((dirty, stamp_time, normal_time))
     }
 
     /// Renders the terrain from `camera` and reads the image back.
@@ -164,7 +164,7 @@ impl GpuScene {
         Ok(RenderedFrame {
             image,
             triangles: placement.triangle_count(self.layout.mesh()),
-            render_ms: timing.ms,
+            render: timing,
             lod_ms,
             capture_ms: t.elapsed().as_secs_f64() * 1e3,
         })

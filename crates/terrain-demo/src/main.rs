@@ -143,13 +143,18 @@ fn run(cli: &Cli) -> Result<()> {
     let mut totals: BTreeMap<String, f64> = BTreeMap::new();
     for index in 0..cli.frames {
         let mut timings = BTreeMap::new();
+        let mut timestamps = BTreeMap::new();
         let mut plan = scenario.plan_next_frame()?;
 
         // The deformations: on the GPU map (rendered) and on the CPU map (overview).
         if let Some(scene) = gpu.as_mut() {
-            let (_, stamp_ms, normals_ms) = scene.deform(&plan, scenario.crater())?;
-            timings.insert("stamp".to_string(), stamp_ms);
-            timings.insert("normals".to_string(), normals_ms);
+            let (_, stamp, normals) = scene.deform(&plan, scenario.crater())?;
+            for (step, t) in [("stamp", stamp), ("normals", normals)] {
+                timings.insert(step.to_string(), t.ms);
+                if let Some(ts) = t.timestamp_ms {
+                    timestamps.insert(step.to_string(), ts);
+                }
+            }
         }
         let t = Instant::now();
         let dirty = scenario.apply_cpu(&mut map, &mut plan)?;
@@ -172,7 +177,10 @@ fn run(cli: &Cli) -> Result<()> {
                     terrain_core::bilinear(&map, p).unwrap_or(0.0)
                 });
                 let mut frame = scene.render(&camera)?;
-                timings.insert("render".to_string(), frame.render_ms);
+                timings.insert("render".to_string(), frame.render.ms);
+                if let Some(ts) = frame.render.timestamp_ms {
+                    timestamps.insert("render".to_string(), ts);
+                }
                 timings.insert("lod".to_string(), frame.lod_ms);
                 timings.insert("capture".to_string(), frame.capture_ms);
                 triangles = frame.triangles;
@@ -207,6 +215,7 @@ fn run(cli: &Cli) -> Result<()> {
             dirty_texels: dirty.iter().map(|r| r.area()).sum(),
             triangles,
             timings_ms: timings,
+            gpu_timestamps_ms: timestamps,
         });
     }
     io::write_png16(cli.out.join("terrain_final.png"), map.grid())?;

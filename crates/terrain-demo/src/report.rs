@@ -47,9 +47,12 @@ pub struct FrameReport {
     pub dirty_texels: u64,
     /// Non-degenerate triangles drawn (0 without the GPU).
     pub triangles: u64,
-    /// Milliseconds per step: `stamp` and `normals` (GPU time when on the GPU), `render` (GPU
-    /// time of sky + terrain), `lod` (clipmap placement and culling), `capture` (image
-    /// readback), `cpu_mirror` (the same stamps and normals on the CPU map behind the
-    /// overview), `overview` (hillshade), `write` (PNG).
+    /// Milliseconds per step: `stamp`, `normals` and `render` (sky + terrain) are the wall
+    /// time of submitting the GPU work and waiting for it; `lod` (clipmap placement and
+    /// culling), `capture` (image readback), `cpu_mirror` (the same stamps and normals on the
+    /// CPU map behind the overview), `overview` (hillshade), `write` (PNG).
     pub timings_ms: BTreeMap<String, f64>,
+    /// GPU timestamp spans of `stamp`, `normals` and `render`, where the adapter has timestamp
+    /// queries (on lavapipe they miss deferred compute work: see terrain-gpu's `timer`).
+    pub gpu_timestamps_ms: BTreeMap<String, f64>,
 }

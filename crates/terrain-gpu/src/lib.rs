@@ -59,4 +59,4 @@ pub use offscreen::OffscreenTarget;
 pub use readback::{ReadbackTicket, RegionData, RegionReadback};
 pub use sky::{SkyColors, SkyPass};
 pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampPass};
-pub use timer::{GpuTimer, GpuTiming, TimingSource};
+pub use timer::{GpuTimer, GpuTiming};

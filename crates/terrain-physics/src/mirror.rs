@@ -153,6 +153,8 @@ impl CollisionMirror {
         }
         buf.copy_bounds_from(&front);
         let grid = buf.heights_mut();
+        // The region's value range, taken row by row while each row is in cache.
+        let (mut lo, mut hi) = (u16::MAX, 0u16);
         for piece in &pieces {
             let off = (piece.unwrapped.min - rect.min).as_uvec2();
             let (x0, w) = (piece.map.min.x as usize, piece.map.size.x as usize);
@@ -160,12 +162,15 @@ impl CollisionMirror {
                 let src = &heights.row(off.y + row)[off.x as usize..off.x as usize + w];
                 let dst = grid.row_mut(piece.map.min.y as u32 + row);
                 dst[x0..x0 + w].copy_from_slice(src);
+                let (l, h) = min_max(src);
+                lo = lo.min(l);
+                hi = hi.max(h);
             }
         }
         if rect.size == self.size {
-            buf.reset_bounds();
+            // Every texel was replaced: the bounds are exact again.
+            buf.set_bounds(lo, hi);
         } else {
-            let (lo, hi) = min_max(heights.as_slice());
             buf.widen_bounds(lo, hi);
         }
         buf.set_version(version);

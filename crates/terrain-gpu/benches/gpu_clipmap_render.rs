@@ -1,0 +1,106 @@
+//! GPU time of rendering the geometry clipmap (sky + terrain) at 1024 x 768 for 3, 5, 7, 9 and
+//! 11 levels of N = 255 (seed 000 table 4.4), over a 4096 x 4096 coarse-map at 0.1 m per texel,
+//! with frustum culling. Timestamp queries where the adapter has them, else wall time.
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use glam::{UVec2, Vec2, Vec3};
+use std::time::Duration;
+use terrain_core::{HeightEncoding, TerrainParams};
+use terrain_gpu::{
+    Camera, ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuTimer, NormalPass,
+    OffscreenTarget, SkyColors, SkyPass, TerrainStyle,
+};
+use terrain_lod::{ClipmapLayout, Frustum};
+
+const LEVELS: [u32; 5] = [3, 5, 7, 9, 11];
+
+fn bench(c: &mut Criterion) {
+    let ctx = GpuContext::new_headless().expect("a GPU adapter (lavapipe: mesa-vulkan-drivers)");
+    let r = ctx.report();
+    eprintln!("adapter: {} ({}, {})", r.name, r.backend, r.device_type);
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let params = TerrainParams {
+        size: UVec2::splat(4096),
+        ..TerrainParams::default()
+    };
+    let enc = HeightEncoding::spanning::<u16>(0.0, 60.0).expect("encoding");
+    let map = terrain_core::generate_coarse_map(&params, enc, 0.1).expect("terrain");
+    let gpu_map = GpuHeightMap::from_map(device, queue, &map).expect("upload");
+    let normals = GpuDerivativeMap::for_map(device, &gpu_map).expect("normals");
+    let mut encoder = device.create_command_encoder(&Default::default());
+    NormalPass::new(device)
+        .expect("normal pass")
+        .encode_full(device, &mut encoder, &gpu_map, &normals)
+        .expect("normals");
+    queue.submit([encoder.finish()]);
+    let size = UVec2::new(1024, 768);
+    let target = OffscreenTarget::new(device, size).expect("target");
+    let sky = SkyPass::new(device).expect("sky");
+    let timer = GpuTimer::new(device, queue);
+    eprintln!(
+        "GPU timestamps available: {} (wall time of submit + wait is measured)",
+        timer.has_timestamps()
+    );
+    let xz = Vec2::new(204.8, 204.8);
+    let eye = Vec3::new(
+        xz.x,
+        terrain_core::bilinear(&map, xz).expect("height") + 2.0,
+        xz.y,
+    );
+    let camera = Camera::looking(eye, Vec3::new(1.0, -0.15, 0.3));
+    let aspect = size.x as f32 / size.y as f32;
+    let style = TerrainStyle {
+        ramp: (0.0, 60.0),
+        ..TerrainStyle::default()
+    };
+
+    let mut group = c.benchmark_group("gpu_clipmap_render");
+    group.sample_size(10);
+    group.warm_up_time(Duration::from_millis(200));
+    group.measurement_time(Duration::from_secs(3));
+    for levels in LEVELS {
+        let layout = ClipmapLayout::new(255, levels).expect("layout");
+        let renderer = ClipmapRenderer::new(device, &layout).expect("renderer");
+        let frame = layout
+            .place(
+                xz,
+                0.1,
+                (0.0, 60.0),
+                Some(&Frustum::from_view_proj(camera.view_proj_world(aspect))),
+            )
+            .expect("placement");
+        eprintln!(
+            "{levels} levels: {} triangles drawn, {} parts culled",
+            frame.triangle_count(layout.mesh()),
+            frame.culled
+        );
+        group.bench_function(BenchmarkId::new("1024x768_levels", levels), |b| {
+            b.iter_custom(|iters| {
+                (0..iters)
+                    .map(|_| {
+                        let t = timer
+                            .time(device, queue, |encoder| {
+                                sky.encode(
+                                    device,
+                                    encoder,
+                                    &target,
+                                    camera.view_proj_relative(aspect),
+                                    &SkyColors::default(),
+                                );
+                                renderer.encode(
+                                    device, encoder, &target, &gpu_map, &normals, &frame, &camera,
+                                    &style,
+                                )
+                            })
+                            .expect("render");
+                        Duration::from_secs_f64(t.ms / 1e3)
+                    })
+                    .sum()
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

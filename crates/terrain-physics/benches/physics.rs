@@ -1,0 +1,213 @@
+//! The CPU side of collision streaming (seed 000 table 4.5: a full 4096 x 4096 u16 readback
+//! took 60.5 ms, 51 ms of it the system-memory copy with u16 -> f32 conversion): applying a full
+//! 4096^2 region to the mirror beside converting it to f32 and a plain memcpy; a 256 x 256
+//! dirty-region apply; one million height queries; a thousand raycasts and sphere contacts.
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use glam::{IVec2, UVec2, Vec2, Vec3};
+use std::hint::black_box;
+use std::time::Duration;
+use terrain_core::{CoarseMap, Grid, HeightEncoding, Rect};
+use terrain_physics::CollisionMirror;
+
+const MAP: u32 = 4096;
+const TEXEL: f32 = 0.1; // seed 000 sec 3.3: 4096 texels span 409.6 m
+
+fn encoding() -> HeightEncoding {
+    HeightEncoding::spanning::<u16>(0.0, 100.0).expect("valid encoding")
+}
+
+/// Rolling hills over the whole map (periodic, so the wrap edge is smooth).
+fn heights(size: u32, phase: f32) -> Grid<u16> {
+    let enc = encoding();
+    let tau = std::f32::consts::TAU / size as f32;
+    Grid::from_fn(size, size, |x, y| {
+        let (u, v) = (x as f32 * tau, y as f32 * tau);
+        let h = 50.0
+            + 20.0 * (u * 3.0 + phase).sin() * (v * 2.0).cos()
+            + 8.0 * (u * 11.0 + v * 7.0).sin()
+            + 2.0 * (u * 40.0).cos() * (v * 37.0).sin();
+        enc.to_raw(h).round() as u16
+    })
+    .expect("grid")
+}
+
+/// A small deterministic generator for query positions.
+struct Lcg(u64);
+
+impl Lcg {
+    fn next_f32(&mut self) -> f32 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+fn configure<'a>(
+    c: &'a mut Criterion,
+    name: &str,
+) -> criterion::BenchmarkGroup<'a, criterion::measurement::WallTime> {
+    let mut g = c.benchmark_group(name);
+    g.sample_size(10);
+    g.warm_up_time(Duration::from_millis(300));
+    g.measurement_time(Duration::from_secs(2));
+    g
+}
+
+fn streaming(c: &mut Criterion) {
+    let enc = encoding();
+    let base = heights(MAP, 0.0);
+    let map = CoarseMap::coarse(base.clone(), enc, TEXEL).expect("map");
+    let mirror = CollisionMirror::from_map(&map).expect("mirror");
+    let full = Rect::from_size(UVec2::splat(MAP));
+    let other = heights(MAP, 1.0);
+    let texels = u64::from(MAP) * u64::from(MAP);
+
+    let mut g = configure(c, "mirror");
+    g.throughput(Throughput::Bytes(texels * 2));
+    let updates = [&base, &other];
+    let mut i = 0;
+    g.bench_function(BenchmarkId::new("apply_full", MAP), |b| {
+        b.iter(|| {
+            i ^= 1;
+            mirror
+                .apply_next(full, black_box(updates[i]))
+                .expect("apply")
+        })
+    });
+    let side = 256;
+    let region = Rect::new(IVec2::new(1000, 2000), UVec2::splat(side));
+    let patch = heights(side, 0.5);
+    g.throughput(Throughput::Bytes(u64::from(side * side) * 2));
+    g.bench_function(BenchmarkId::new("apply_region", side), |b| {
+        b.iter(|| {
+            mirror
+                .apply_next(black_box(region), black_box(&patch))
+                .expect("apply")
+        })
+    });
+    // The same region across the map's corner: four pieces.
+    let corner = Rect::new(IVec2::splat(MAP as i32 - 128), UVec2::splat(side));
+    g.bench_function(BenchmarkId::new("apply_region_wrapped", side), |b| {
+        b.iter(|| {
+            mirror
+                .apply_next(black_box(corner), black_box(&patch))
+                .expect("apply")
+        })
+    });
+    g.finish();
+
+    // For comparison: what seed 000 did on every update (u16 -> f32 metres), and a plain copy.
+    let src = other.as_slice();
+    let mut metres = vec![0.0f32; src.len()];
+    let mut g = configure(c, "convert_u16_to_f32");
+    g.throughput(Throughput::Bytes(texels * 2));
+    g.bench_function(BenchmarkId::from_parameter(MAP), |b| {
+        b.iter(|| {
+            let (off, scale) = (enc.offset, enc.scale);
+            for (m, &s) in metres.iter_mut().zip(black_box(src)) {
+                *m = off + scale * f32::from(s);
+            }
+            black_box(&metres);
+        })
+    });
+    g.finish();
+    let mut copy = vec![0u16; src.len()];
+    let mut g = configure(c, "memcpy");
+    g.throughput(Throughput::Bytes(texels * 2));
+    g.bench_function(BenchmarkId::from_parameter(MAP), |b| {
+        b.iter(|| {
+            copy.copy_from_slice(black_box(src));
+            black_box(&copy);
+        })
+    });
+    g.finish();
+}
+
+fn queries(c: &mut Criterion) {
+    let map = CoarseMap::coarse(heights(MAP, 0.0), encoding(), TEXEL).expect("map");
+    let mirror = CollisionMirror::from_map(&map).expect("mirror");
+    let collider = mirror.collider();
+    let extent = MAP as f32 * TEXEL;
+    let mut rng = Lcg(7);
+    let positions: Vec<Vec2> = (0..1_000_000)
+        .map(|_| Vec2::new(rng.next_f32(), rng.next_f32()) * extent)
+        .collect();
+    let mut g = configure(c, "collider");
+    g.throughput(Throughput::Elements(positions.len() as u64));
+    g.bench_function(BenchmarkId::new("height_queries", positions.len()), |b| {
+        b.iter(|| {
+            let mut sum = 0.0f32;
+            for &p in black_box(&positions) {
+                sum += collider.height(p).expect("finite");
+            }
+            sum
+        })
+    });
+    // The same number of queries in raster order over a 100 m square: what bodies moving
+    // over the ground do (the random ones above mostly measure cache misses on a 32 MiB map).
+    let coherent: Vec<Vec2> = (0..1000)
+        .flat_map(|j| (0..1000).map(move |i| Vec2::new(i as f32, j as f32) * 0.1 + 150.0))
+        .collect();
+    g.bench_function(
+        BenchmarkId::new("height_queries_coherent", coherent.len()),
+        |b| {
+            b.iter(|| {
+                let mut sum = 0.0f32;
+                for &p in black_box(&coherent) {
+                    sum += collider.height(p).expect("finite");
+                }
+                sum
+            })
+        },
+    );
+    // Rays from 2 m above the ground, 5 to 30 degrees down, up to 200 m.
+    let rays: Vec<(Vec3, Vec3)> = (0..1000)
+        .map(|_| {
+            let p = Vec2::new(rng.next_f32(), rng.next_f32()) * extent;
+            let o = Vec3::new(p.x, collider.height(p).expect("finite") + 2.0, p.y);
+            let yaw = rng.next_f32() * std::f32::consts::TAU;
+            let pitch = (5.0 + 25.0 * rng.next_f32()).to_radians();
+            let d = Vec3::new(
+                yaw.cos() * pitch.cos(),
+                -pitch.sin(),
+                yaw.sin() * pitch.cos(),
+            );
+            (o, d)
+        })
+        .collect();
+    g.throughput(Throughput::Elements(rays.len() as u64));
+    g.bench_function(BenchmarkId::new("raycast", rays.len()), |b| {
+        b.iter(|| {
+            let mut hits = 0;
+            for &(o, d) in black_box(&rays) {
+                hits += usize::from(collider.raycast(o, d, 200.0).expect("valid").is_some());
+            }
+            hits
+        })
+    });
+    let spheres: Vec<Vec3> = (0..1000)
+        .map(|_| {
+            let p = Vec2::new(rng.next_f32(), rng.next_f32()) * extent;
+            Vec3::new(p.x, collider.height(p).expect("finite") + 0.3, p.y)
+        })
+        .collect();
+    g.bench_function(
+        BenchmarkId::new("sphere_contact_r0.5", spheres.len()),
+        |b| {
+            b.iter(|| {
+                let mut n = 0;
+                for &s in black_box(&spheres) {
+                    n += usize::from(collider.sphere_contact(s, 0.5).expect("valid").is_some());
+                }
+                n
+            })
+        },
+    );
+    g.finish();
+}
+
+criterion_group!(benches, streaming, queries);
+criterion_main!(benches);
