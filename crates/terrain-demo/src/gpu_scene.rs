@@ -2,13 +2,15 @@
 //! terrain rendering, capture. Glue only: every step is a library call.
 
 use anyhow::{Context, Result};
-use glam::{UVec2, Vec2, Vec3};
+use glam::{UVec2, Vec2};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_gpu::{
-    Camera, ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuStamp, GpuTextureStamp,
-    GpuTimer, GpuTiming, NormalPass, OffscreenTarget, SkyColors, SkyPass, StampPass, TerrainStyle,
+    Camera, ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuRegionSource, GpuStamp,
+    GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget, RegionReadback, SkyColors,
+    SkyPass, StampPass, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
+use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 
 use crate::scenario::{FramePlan, StampKind};
 
@@ -30,6 +32,7 @@ pub struct GpuScene {
     layout: ClipmapLayout,
     target: OffscreenTarget,
     footprint: GpuTextureStamp,
+    readback: RegionReadback,
     timer: GpuTimer,
     style: TerrainStyle,
 }
@@ -71,6 +74,7 @@ impl GpuScene {
             layout,
             target: OffscreenTarget::new(device, resolution)?,
             footprint: GpuTextureStamp::new(device, footprint)?,
+            readback: RegionReadback::new(4)?,
             timer: GpuTimer::new(device, queue),
             style: TerrainStyle {
                 ramp: (lo, hi),
@@ -93,7 +97,7 @@ impl GpuScene {
         &mut self,
         plan: &FramePlan,
         crater: &terrain_core::GaussianStamp,
-    ) -> Result<(Vec<DirtyRect>, GpuTiming, GpuTiming)> {
+    ) -> Result<(Vec<(usize, DirtyRect)>, GpuTiming, GpuTiming)> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let shock = match &plan.shock_delta {
             Some(s) => Some(GpuTextureStamp::new(device, s)?),
@@ -101,32 +105,50 @@ impl GpuScene {
         };
         let mut dirty = Vec::new();
         let stamp_time = self.timer.time(device, queue, |encoder| {
-            for d in &plan.deformations {
+            for (i, d) in plan.deformations.iter().enumerate() {
                 let stamp = match (d.kind, &shock) {
                     (StampKind::Footprint, _) => GpuStamp::Texture(&self.footprint),
                     (StampKind::Crater, _) => GpuStamp::Gaussian(crater),
                     (StampKind::Shockwave, Some(s)) => GpuStamp::Texture(s),
                     (StampKind::Shockwave, None) => continue,
                 };
-                dirty.extend(self.stamps.encode(
+                let rects = self.stamps.encode(
                     device,
                     encoder,
                     &self.map,
                     stamp,
                     &d.placement,
                     terrain_core::Blend::Add,
-                )?);
+                )?;
+                dirty.extend(rects.into_iter().map(|r| (i, r)));
             }
             Ok(())
         })?;
         let normal_time = self.timer.time(device, queue, |encoder| {
-            for r in &dirty {
+            for (_, r) in &dirty {
                 self.normal_pass
                     .encode(device, encoder, &self.map, &self.normals, *r)?;
             }
             Ok(())
         })?;
         Ok((dirty, stamp_time, normal_time))
+    }
+
+    /// One step of the collision readback: the scheduler requests merged dirty regions of the
+    /// GPU map after the quiet gap and applies those that arrived to `mirror`, never waiting.
+    pub fn update_collision(
+        &mut self,
+        scheduler: &mut ReadbackScheduler,
+        mirror: &CollisionMirror,
+        now: std::time::Instant,
+    ) -> Result<UpdateReport> {
+        let mut source = GpuRegionSource::new(
+            &self.ctx.device,
+            &self.ctx.queue,
+            &self.map,
+            &mut self.readback,
+        );
+        Ok(scheduler.update(now, &mut source, mirror)?)
     }
 
     /// Renders the terrain from `camera` and reads the image back.
@@ -169,14 +191,4 @@ impl GpuScene {
             capture_ms: t.elapsed().as_secs_f64() * 1e3,
         })
     }
-}
-
-/// The demo camera for a walker at `pos` heading along `heading` (unit, XZ): 9 m behind and
-/// 5 m above the ground there, looking at a point on the ground 12 m ahead of the walker.
-pub fn chase_camera(pos: Vec2, heading: Vec2, ground: impl Fn(Vec2) -> f32) -> Camera {
-    let eye_xz = pos - heading * 9.0;
-    let eye = Vec3::new(eye_xz.x, ground(eye_xz) + 5.0, eye_xz.y);
-    let ahead = pos + heading * 12.0;
-    let target = Vec3::new(ahead.x, ground(ahead), ahead.y);
-    Camera::looking(eye, target - eye)
 }

@@ -1,6 +1,7 @@
 //! The demo: deforms a terrain with a scripted scenario and writes offline frame captures plus
 //! `report.json` with per-frame timings. Everything it does is glue over the library crates.
 
+mod camera_rig;
 mod cli;
 mod gpu_scene;
 mod images;
@@ -14,13 +15,20 @@ use glam::UVec2;
 use gpu_scene::GpuScene;
 use report::{FrameReport, Report};
 use scenario::StampKind;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
+use std::time::Duration;
 use std::time::Instant;
 use terrain_core::io::{self, ReadLimits};
 use terrain_core::{
     CoarseMap, DerivativeMap, HeightEncoding, HillshadeParams, TerrainParams, generate_coarse_map,
     hillshade,
 };
+use terrain_physics::{
+    CollisionMirror, CpuRegionSource, ReadbackScheduler, RequestId, SchedulerConfig,
+};
+
+/// Seconds of scenario time per frame (30 frames per second).
+const FRAME_DT: f64 = 1.0 / 30.0;
 
 fn main() {
     let cli = match Cli::try_parse() {
@@ -137,6 +145,18 @@ fn run(cli: &Cli) -> Result<()> {
         .max(UVec2::ONE);
     let shade = HillshadeParams::with_size(overview_px);
 
+    // Collision: the mirror follows the map through the readback scheduler (from the GPU map
+    // via RegionReadback, or from the CPU map without a GPU); the camera is a body on it.
+    let encoding = map.encoding();
+    let mirror = CollisionMirror::from_map(&map)?;
+    let mut scheduler = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default())?;
+    let mut cpu_source = gpu.is_none().then(|| CpuRegionSource::new(map.clone()));
+    let mut requested_at: HashMap<RequestId, Instant> = HashMap::new();
+    let start_xz = scenario.walker_start();
+    let mut rig = camera_rig::CameraRig::new(start_xz, terrain_core::bilinear(&map, start_xz)?);
+    // Simulated time: the scenario runs at 30 frames per second whatever the render speed.
+    let sim_start = Instant::now();
+
     let mut frames = Vec::with_capacity(cli.frames as usize);
     let mut thumbs = Vec::new();
     let thumb_every = cli.frames.div_ceil(12).max(1);
@@ -145,10 +165,36 @@ fn run(cli: &Cli) -> Result<()> {
         let mut timings = BTreeMap::new();
         let mut timestamps = BTreeMap::new();
         let mut plan = scenario.plan_next_frame()?;
+        // Collision first: 33 ms of scenario time after the last frame's deformations the quiet
+        // gap has passed, so the scheduler requests their regions now; arrivals apply here too.
+        let now = sim_start + Duration::from_secs_f64(f64::from(index) * FRAME_DT);
+        let t = Instant::now();
+        let report = match (gpu.as_mut(), cpu_source.as_mut()) {
+            (Some(scene), _) => scene.update_collision(&mut scheduler, &mirror, now)?,
+            (None, Some(source)) => {
+                *source.map_mut() = map.clone();
+                scheduler.update(now, source, &mirror)?
+            }
+            (None, None) => anyhow::bail!("no region source"),
+        };
+        for (id, _) in &report.requested {
+            requested_at.insert(*id, Instant::now());
+        }
+        let readback_ms = report
+            .applied
+            .iter()
+            .filter_map(|(id, _)| requested_at.remove(id))
+            .map(ms)
+            .reduce(f64::max);
+        let mut physics_ms = ms(t);
 
         // The deformations: on the GPU map (rendered) and on the CPU map (overview).
         if let Some(scene) = gpu.as_mut() {
-            let (_, stamp, normals) = scene.deform(&plan, scenario.crater())?;
+            let (rects, stamp, normals) = scene.deform(&plan, scenario.crater())?;
+            for (i, rect) in rects {
+                let bound = scenario::Scenario::bound(&plan.deformations[i], encoding)?;
+                scheduler.note_deformation(rect, bound, now)?;
+            }
             for (step, t) in [("stamp", stamp), ("normals", normals)] {
                 timings.insert(step.to_string(), t.ms);
                 if let Some(ts) = t.timestamp_ms {
@@ -157,13 +203,35 @@ fn run(cli: &Cli) -> Result<()> {
             }
         }
         let t = Instant::now();
-        let dirty = scenario.apply_cpu(&mut map, &mut plan)?;
+        let dirty_by_deformation = scenario.apply_cpu(&mut map, &mut plan)?;
+        let dirty: Vec<_> = dirty_by_deformation.iter().flatten().copied().collect();
         for rect in &dirty {
             normals.update_rect(&map, *rect)?;
         }
         let cpu_ms = ms(t);
         let cpu_key = if gpu.is_some() { "cpu_mirror" } else { "stamp" };
         timings.insert(cpu_key.to_string(), cpu_ms);
+
+        // Without a GPU the CPU map is the source; its deformations are noted here.
+        if gpu.is_none() {
+            for (d, rects) in plan.deformations.iter().zip(&dirty_by_deformation) {
+                let bound = scenario::Scenario::bound(d, encoding)?;
+                for rect in rects {
+                    scheduler.note_deformation(*rect, bound, now)?;
+                }
+            }
+        }
+        let t = Instant::now();
+        let collider = mirror.collider();
+        let ground = scheduler.ground(&collider);
+        let camera = rig.step(plan.walker, FRAME_DT as f32, &ground, |p| {
+            terrain_core::bilinear(&map, p).unwrap_or(0.0)
+        })?;
+        let eye = rig.eye();
+        let camera_clearance_m =
+            eye.y - terrain_core::bilinear(&map, glam::Vec2::new(eye.x, eye.z))?;
+        physics_ms += ms(t);
+        timings.insert("physics".to_string(), physics_ms);
 
         let t = Instant::now();
         let overview = hillshade(&map, &normals, &shade)?;
@@ -172,10 +240,6 @@ fn run(cli: &Cli) -> Result<()> {
         let mut triangles = 0;
         let image = match gpu.as_mut() {
             Some(scene) => {
-                let (pos, heading) = plan.walker;
-                let camera = gpu_scene::chase_camera(pos, heading, |p| {
-                    terrain_core::bilinear(&map, p).unwrap_or(0.0)
-                });
                 let mut frame = scene.render(&camera)?;
                 timings.insert("render".to_string(), frame.render.ms);
                 if let Some(ts) = frame.render.timestamp_ms {
@@ -214,6 +278,8 @@ fn run(cli: &Cli) -> Result<()> {
             shockwaves: plan.count(StampKind::Shockwave),
             dirty_texels: dirty.iter().map(|r| r.area()).sum(),
             triangles,
+            camera_clearance_m,
+            readback_ms,
             timings_ms: timings,
             gpu_timestamps_ms: timestamps,
         });

@@ -47,6 +47,13 @@ pub struct FrameReport {
     pub dirty_texels: u64,
     /// Non-degenerate triangles drawn (0 without the GPU).
     pub triangles: u64,
+    /// Height of the camera's eye above the true surface under it (never negative: the camera
+    /// is a body on the collision mirror, kept above pending deformations by their bounds).
+    pub camera_clearance_m: f32,
+    /// On frames where a collision readback landed: milliseconds from its request to its
+    /// application (the longest, if several landed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub readback_ms: Option<f64>,
     /// Milliseconds per step: `stamp`, `normals` and `render` (sky + terrain) are the wall
     /// time of submitting the GPU work and waiting for it; `lod` (clipmap placement and
     /// culling), `capture` (image readback), `cpu_mirror` (the same stamps and normals on the

@@ -3,11 +3,13 @@
 
 use anyhow::{Context, Result};
 use glam::Vec2;
+use terrain_core::HeightEncoding;
 use terrain_core::io::{ReadLimits, decode_png8};
 use terrain_core::{
     Blend, CoarseMap, DirtyRect, GaussianStamp, Shockwave, ShockwaveParams, Stamp, StampPlacement,
     TextureStamp, apply_stamp,
 };
+use terrain_physics::DeformationBound;
 
 /// The footprint image: white where the foot presses hardest (see `TextureStamp`).
 const FOOTPRINT_PNG: &[u8] = include_bytes!("../assets/footprint.png");
@@ -125,11 +127,12 @@ impl Scenario {
         let mut plan = FramePlan::default();
         let min_side = self.extent.min_element();
 
-        // The walker loops around the map's middle, alternating left and right feet.
+        // The walker loops around the map's middle, alternating left and right feet. It starts
+        // on the side nearest the (0, 0) corner so it meets the shockwave within the default run.
         let radius = min_side * 0.3;
         for k in 0..STEPS_PER_FRAME {
             let s = (frame * STEPS_PER_FRAME + k) as f32 * STRIDE;
-            let angle = s / radius;
+            let angle = s / radius + std::f32::consts::PI;
             let heading = Vec2::new(-angle.sin(), angle.cos());
             let side = if k % 2 == 0 { 0.2 } else { -0.2 };
             let pos = self.extent * 0.5
@@ -144,9 +147,12 @@ impl Scenario {
             plan.walker = (pos, heading);
         }
 
-        // A crater now and then at a random spot, 6 to 14 m wide, 0.3 times as deep.
+        // A crater now and then on the walker's path 25 m ahead (so the camera walks through it),
+        // 6 to 14 m wide, 0.3 times as deep.
         if frame % CRATER_EVERY == 2 {
-            let pos = Vec2::new(self.rng.next_f32(), self.rng.next_f32()) * self.extent;
+            let (walker, heading) = plan.walker;
+            let side = (self.rng.next_f32() - 0.5) * 6.0;
+            let pos = walker + heading * 25.0 + heading.perp() * side;
             let size = (6.0 + 8.0 * self.rng.next_f32()).min(min_side * 0.5);
             plan.deformations.push(Deformation {
                 kind: StampKind::Crater,
@@ -182,12 +188,32 @@ impl Scenario {
         Ok(plan)
     }
 
-    /// Applies `plan` to a CPU map with terrain-core's reference stamps; returns the rects.
+    /// How far a deformation can move the ground before its readback arrives: footprint and
+    /// crater values lie in [0, 1] (an additive stamp moves by at most its intensity); the
+    /// shockwave's change lies in [-1, 1], so its intensity bounds both ways.
+    pub fn bound(d: &Deformation, encoding: HeightEncoding) -> Result<DeformationBound> {
+        let i = d.placement.intensity;
+        Ok(match d.kind {
+            StampKind::Shockwave => {
+                DeformationBound::new(i.abs() + encoding.scale, i.abs() + encoding.scale)?
+            }
+            _ => DeformationBound::additive(i, encoding)?,
+        })
+    }
+
+    /// Where the walker starts (metres, X Z).
+    pub fn walker_start(&self) -> Vec2 {
+        let radius = self.extent.min_element() * 0.3;
+        self.extent * 0.5 - Vec2::new(radius, 0.0)
+    }
+
+    /// Applies `plan` to a CPU map with terrain-core's reference stamps; returns the rects of
+    /// each deformation, in plan order.
     pub fn apply_cpu(
         &mut self,
         map: &mut CoarseMap,
         plan: &mut FramePlan,
-    ) -> Result<Vec<DirtyRect>> {
+    ) -> Result<Vec<Vec<DirtyRect>>> {
         let mut dirty = Vec::new();
         for d in &plan.deformations {
             let stamp: &mut dyn Stamp = match d.kind {
@@ -195,10 +221,13 @@ impl Scenario {
                 StampKind::Crater => &mut self.crater,
                 StampKind::Shockwave => match plan.shock_delta.as_mut() {
                     Some(s) => s,
-                    None => continue,
+                    None => {
+                        dirty.push(Vec::new());
+                        continue;
+                    }
                 },
             };
-            dirty.extend(apply_stamp(map, stamp, &d.placement, Blend::Add)?);
+            dirty.push(apply_stamp(map, stamp, &d.placement, Blend::Add)?);
         }
         Ok(dirty)
     }

@@ -57,6 +57,16 @@ fn no_cracks_from_grazing_views_across_level_boundaries() {
         Vec2::new(7.5, 250.5), // near the map's wrap corner
     ];
     let headings = [0.0f32, 0.8, 1.6, 2.4, 3.9, 5.1];
+    // The positions put the L-shaped trims on every side at some level.
+    let mut sides = std::collections::HashSet::new();
+    for xz in &positions {
+        let frame = scene
+            .layout
+            .place(*xz, 1.0, (0.0, scene::HEIGHT), None)
+            .unwrap();
+        sides.extend(frame.levels.iter().filter_map(|l| l.trim));
+    }
+    assert_eq!(sides.len(), 4, "trim sides covered: {sides:?}");
     let mut checked = 0;
     for (i, xz) in positions.iter().enumerate() {
         for (j, yaw) in headings.iter().enumerate() {
