@@ -203,10 +203,25 @@ fn smoke_on(backend: Option<&str>) -> Result<()> {
         if frame["triangles"].as_u64().unwrap_or(0) == 0 {
             bail!("frame {i} drew no triangles");
         }
+        match frame["camera_clearance_m"].as_f64() {
+            Some(c) if c >= 0.0 => {}
+            other => {
+                bail!("frame {i}: camera clearance {other:?} (must be present, never negative)")
+            }
+        }
         let file = frame["file"].as_str().unwrap_or_default();
         if !out.join(file).is_file() {
             bail!("frame {i}: image `{file}` is missing");
         }
+    }
+    let landed = report["frames"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|f| f["readback_ms"].as_f64().is_some())
+        .count();
+    if landed == 0 {
+        bail!("no collision readback landed in {frames} frames");
     }
     for file in ["terrain.png", "terrain_final.png", "summary.png"] {
         if !out.join(file).is_file() {

@@ -37,6 +37,16 @@ pub struct GpuScene {
     style: TerrainStyle,
 }
 
+/// What deforming one frame did.
+pub struct Deformed {
+    /// The rects covered, each with the index of the deformation that covered it.
+    pub rects: Vec<(usize, DirtyRect)>,
+    /// Time of the stamps.
+    pub stamp: GpuTiming,
+    /// Time of the normal regeneration.
+    pub normals: GpuTiming,
+}
+
 /// What rendering one frame measured.
 pub struct RenderedFrame {
     /// The captured image.
@@ -97,7 +107,7 @@ impl GpuScene {
         &mut self,
         plan: &FramePlan,
         crater: &terrain_core::GaussianStamp,
-    ) -> Result<(Vec<(usize, DirtyRect)>, GpuTiming, GpuTiming)> {
+    ) -> Result<Deformed> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let shock = match &plan.shock_delta {
             Some(s) => Some(GpuTextureStamp::new(device, s)?),
@@ -131,7 +141,11 @@ impl GpuScene {
             }
             Ok(())
         })?;
-        Ok((dirty, stamp_time, normal_time))
+        Ok(Deformed {
+            rects: dirty,
+            stamp: stamp_time,
+            normals: normal_time,
+        })
     }
 
     /// One step of the collision readback: the scheduler requests merged dirty regions of the

@@ -190,8 +190,9 @@ fn run(cli: &Cli) -> Result<()> {
 
         // The deformations: on the GPU map (rendered) and on the CPU map (overview).
         if let Some(scene) = gpu.as_mut() {
-            let (rects, stamp, normals) = scene.deform(&plan, scenario.crater())?;
-            for (i, rect) in rects {
+            let deformed = scene.deform(&plan, scenario.crater())?;
+            let (stamp, normals) = (deformed.stamp, deformed.normals);
+            for (i, rect) in deformed.rects {
                 let bound = scenario::Scenario::bound(&plan.deformations[i], encoding)?;
                 scheduler.note_deformation(rect, bound, now)?;
             }

@@ -101,7 +101,7 @@ fn mirror_equals_the_gpu_map_after_the_quiet_gap_and_readback() {
         now += Duration::from_millis(16);
     }
     assert!(
-        requested >= 1 && requested <= 2,
+        (1..=2).contains(&requested),
         "merged into {requested} requests"
     );
     assert_eq!(applied, requested);
