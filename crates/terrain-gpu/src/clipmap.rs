@@ -2,6 +2,7 @@
 //! displaced by the coarse-map with wrap addressing and lit with the derivative normals.
 
 use crate::camera::Camera;
+use crate::compute::bind_buffers;
 use crate::error::GpuError;
 use crate::maps::{GpuDerivativeMap, GpuHeightMap};
 use crate::offscreen::{COLOR_FORMAT, DEPTH_FORMAT, OffscreenTarget};
@@ -234,24 +235,12 @@ impl ClipmapRenderer {
             contents: bytemuck::bytes_of(&uniform),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("ClipmapRenderer"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: map.buffer().as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: normals.buffer().as_entire_binding(),
-                },
-            ],
-        });
+        let bind_group = bind_buffers(
+            device,
+            "ClipmapRenderer",
+            &self.layout,
+            &[&uniform, map.buffer(), normals.buffer()],
+        );
 
         // Instances grouped by part, so each part is one instanced draw.
         let mut runs: Vec<(usize, Vec<ClipmapInstance>)> = Vec::new();

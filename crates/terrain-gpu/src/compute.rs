@@ -65,3 +65,26 @@ pub fn wrap_offset(min: glam::IVec2, map_size: glam::UVec2) -> [i32; 2] {
     };
     [axis(min.x, map_size.x), axis(min.y, map_size.y)]
 }
+
+/// A bind group of whole buffers at bindings 0, 1, 2, ... in order (every pass binds a uniform
+/// block and its storage buffers this way).
+pub fn bind_buffers(
+    device: &wgpu::Device,
+    label: &'static str,
+    layout: &wgpu::BindGroupLayout,
+    buffers: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
+}

@@ -20,6 +20,12 @@ pub fn download_bytes(
     let mut encoder = device.create_command_encoder(&Default::default());
     encoder.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
     queue.submit([encoder.finish()]);
+    map_and_read(device, &staging)
+}
+
+/// Maps a `MAP_READ` staging buffer whose copy has been submitted, waits for the GPU, and
+/// returns its bytes (unmapping it again).
+pub fn map_and_read(device: &wgpu::Device, staging: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
     let (tx, rx) = std::sync::mpsc::channel();
     staging.map_async(wgpu::MapMode::Read, .., move |r| {
         let _ = tx.send(r);

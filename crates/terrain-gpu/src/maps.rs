@@ -13,8 +13,14 @@ use crate::scope::scoped;
 use glam::{UVec2, Vec2};
 use terrain_core::{DerivativeMap, Grid, HeightEncoding, HeightMap, HeightSample, WrapMode};
 
-/// Checks that a buffer of `bytes` fits the device's storage binding and buffer limits.
-fn check_size(device: &wgpu::Device, size: UVec2, bytes: u64) -> Result<(), GpuError> {
+/// A storage buffer of `bytes` for a map of `size` texels (copyable both ways), after checking
+/// it fits the device's storage binding and buffer limits.
+fn map_buffer(
+    device: &wgpu::Device,
+    label: &'static str,
+    size: UVec2,
+    bytes: u64,
+) -> Result<wgpu::Buffer, GpuError> {
     let limits = device.limits();
     let limit = limits
         .max_storage_buffer_binding_size
@@ -22,7 +28,16 @@ fn check_size(device: &wgpu::Device, size: UVec2, bytes: u64) -> Result<(), GpuE
     if bytes > limit {
         return Err(GpuError::MapTooLarge { size, bytes, limit });
     }
-    Ok(())
+    scoped(device, label, || {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        })
+    })
 }
 
 /// A heightmap on the GPU: a storage buffer of one u32 per texel, row-major, with the map's
@@ -53,17 +68,7 @@ impl GpuHeightMap {
         }
         let size = map.size();
         let bytes = u64::from(size.x) * u64::from(size.y) * 4;
-        check_size(device, size, bytes)?;
-        let buffer = scoped(device, "height buffer creation", || {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("GpuHeightMap"),
-                size: bytes,
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_DST
-                    | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            })
-        })?;
+        let buffer = map_buffer(device, "GpuHeightMap", size, bytes)?;
         let gpu = Self {
             buffer,
             size,
@@ -171,17 +176,7 @@ impl GpuDerivativeMap {
         wrap: WrapMode,
     ) -> Result<Self, GpuError> {
         let bytes = u64::from(size.x) * u64::from(size.y) * 8;
-        check_size(device, size, bytes)?;
-        let buffer = scoped(device, "derivative buffer creation", || {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("GpuDerivativeMap"),
-                size: bytes,
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_DST
-                    | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            })
-        })?;
+        let buffer = map_buffer(device, "GpuDerivativeMap", size, bytes)?;
         Ok(Self {
             buffer,
             size,

@@ -1,7 +1,7 @@
 //! `NormalPass`: regenerates partial-derivative normals (seed 000 eq. 3.3) in a dirty rect plus
 //! its 2-texel apron, on the GPU.
 
-use crate::compute::{buffer_entry, compute_pipeline, groups, wrap_offset};
+use crate::compute::{bind_buffers, buffer_entry, compute_pipeline, groups, wrap_offset};
 use crate::error::GpuError;
 use crate::maps::{GpuDerivativeMap, GpuHeightMap};
 use bytemuck::{Pod, Zeroable};
@@ -83,24 +83,12 @@ impl NormalPass {
             contents: bytemuck::bytes_of(&params),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("NormalPass"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: map.buffer().as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: out.buffer().as_entire_binding(),
-                },
-            ],
-        });
+        let bind_group = bind_buffers(
+            device,
+            "NormalPass",
+            &self.layout,
+            &[&uniform, map.buffer(), out.buffer()],
+        );
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("NormalPass"),
             timestamp_writes: None,

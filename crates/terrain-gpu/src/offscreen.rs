@@ -1,6 +1,7 @@
 //! `OffscreenTarget`: a colour + depth target of any size, read back to RGBA8 (the frame
 //! capture; writing it as PNG is terrain-core's `io::write_png_rgba8`).
 
+use crate::download::map_and_read;
 use crate::error::GpuError;
 use crate::scope::scoped;
 use glam::UVec2;
@@ -121,28 +122,15 @@ impl OffscreenTarget {
             },
         );
         queue.submit([encoder.finish()]);
-        let (tx, rx) = std::sync::mpsc::channel();
-        staging.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let mut pixels = Vec::with_capacity((w * h) as usize);
-        {
-            let view = staging
-                .get_mapped_range(..)
-                .map_err(|e| GpuError::Readback(e.to_string()))?;
-            for y in 0..h as usize {
+        let bytes = map_and_read(device, &staging)?;
+        let pixels = (0..h as usize)
+            .flat_map(|y| {
                 let start = y * padded as usize;
-                let bytes = &view[start..start + row as usize];
-                pixels.extend(bytes.chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]));
-            }
-        }
-        staging.unmap();
+                bytes[start..start + row as usize]
+                    .chunks_exact(4)
+                    .map(|p| [p[0], p[1], p[2], p[3]])
+            })
+            .collect();
         Ok(Grid::from_vec(w, h, pixels)?)
     }
 }

@@ -1,7 +1,7 @@
 //! `StampPass`: every stamp kind of terrain-core (Gaussian, texture, shockwave as a texture,
 //! user procedural WGSL) applied on the GPU to the stamp's region only, in place.
 
-use crate::compute::{buffer_entry, compute_pipeline, groups, wrap_offset};
+use crate::compute::{bind_buffers, buffer_entry, compute_pipeline, groups, wrap_offset};
 use crate::error::GpuError;
 use crate::maps::GpuHeightMap;
 use crate::scope::scoped;
@@ -208,24 +208,12 @@ impl StampPass {
             contents: bytemuck::bytes_of(&params),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("StampPass"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: map.buffer().as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: values.as_entire_binding(),
-                },
-            ],
-        });
+        let bind_group = bind_buffers(
+            device,
+            "StampPass",
+            &self.layout,
+            &[&uniform, map.buffer(), values],
+        );
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("StampPass"),
             timestamp_writes: None,
