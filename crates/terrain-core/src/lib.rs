@@ -33,6 +33,7 @@
 #![warn(clippy::unwrap_used)]
 
 pub mod error;
+pub mod granular;
 pub mod grid;
 pub mod hillshade;
 pub mod io;
