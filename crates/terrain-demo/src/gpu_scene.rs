@@ -197,6 +197,7 @@ impl GpuScene {
         })?;
         let t = std::time::Instant::now();
         let image = self.target.read_rgba8(device, queue)?;
+        self.ctx.check()?;
         Ok(RenderedFrame {
             image,
             triangles: placement.triangle_count(self.layout.mesh()),

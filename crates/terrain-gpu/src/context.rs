@@ -2,6 +2,7 @@
 //! limits asked for, and a report of what was chosen.
 
 use crate::error::GpuError;
+use std::sync::{Arc, Mutex};
 
 /// What adapter the context runs on and why.
 #[derive(Debug, Clone, PartialEq)]
@@ -36,6 +37,8 @@ pub struct GpuContext {
     /// Its queue.
     pub queue: wgpu::Queue,
     report: AdapterReport,
+    /// Errors wgpu reported outside any error scope (from recorded commands, at submit).
+    errors: Arc<Mutex<Vec<String>>>,
 }
 
 /// Preference of an adapter: lower is better. Hardware first, then software Vulkan
@@ -129,13 +132,40 @@ impl GpuContext {
             timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
             notes,
         };
+        // Errors in recorded commands surface at submit, outside the scopes resource creation
+        // uses; collect them instead of wgpu's default panic, and hand them over in `check`.
+        let errors = Arc::new(Mutex::new(Vec::new()));
+        let sink = errors.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            if let Ok(mut list) = sink.lock() {
+                list.push(e.to_string());
+            }
+        }));
         Ok(Self {
             instance,
             adapter,
             device,
             queue,
             report,
+            errors,
         })
+    }
+
+    /// Returns the errors wgpu reported since the last call outside an error scope (validation
+    /// or out-of-memory errors of submitted work), as one [`GpuError::Validation`].
+    pub fn check(&self) -> Result<(), GpuError> {
+        let messages: Vec<String> = match self.errors.lock() {
+            Ok(mut list) => list.drain(..).collect(),
+            Err(poisoned) => poisoned.into_inner().drain(..).collect(),
+        };
+        if messages.is_empty() {
+            Ok(())
+        } else {
+            Err(GpuError::Validation {
+                context: "submitted GPU work",
+                message: messages.join("; "),
+            })
+        }
     }
 
     /// The adapter and the choices made for it.

@@ -117,4 +117,5 @@ fn mirror_equals_the_gpu_map_after_the_quiet_gap_and_readback() {
         .ground_height(Vec2::new(40.0, 30.0))
         .unwrap();
     assert!((mirror_ground - true_ground).abs() < 1e-4);
+    ctx.check().expect("no GPU validation errors");
 }

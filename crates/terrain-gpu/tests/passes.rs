@@ -58,6 +58,7 @@ fn compare_stamps<T: HeightSample>(
     }
     queue.submit([encoder.finish()]);
     let back: HeightMap<T> = gpu.read(device, queue).unwrap();
+    ctx.check().expect("no GPU validation errors");
     let mut max = 0;
     let mut differ = 0;
     for (a, b) in map.grid().as_slice().iter().zip(back.grid().as_slice()) {
@@ -310,6 +311,7 @@ fn normals_match_the_cpu_reference_full_and_in_dirty_rects() {
         queue.submit([encoder.finish()]);
         assert_derivatives_close(&cpu_normals, &gpu_normals.read(device, queue).unwrap());
         assert_derivatives_close(&DerivativeMap::from_map(&map), &cpu_normals);
+        ctx.check().expect("no GPU validation errors");
     }
 }
 
@@ -393,6 +395,28 @@ fn readback_delivers_regions_without_waiting_and_equals_the_map() {
             .is_err()
     );
     assert!(RegionReadback::new(0).is_err());
+    ctx.check().expect("no GPU validation errors");
+}
+
+#[test]
+fn errors_of_submitted_work_become_results_not_panics() {
+    let Some(ctx) = context_or_skip("errors_of_submitted_work_become_results") else {
+        return;
+    };
+    assert!(ctx.check().is_ok());
+    // A copy past the end of a buffer is a validation error of recorded work.
+    let small = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: 16,
+        usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(&small, 0, &small, 8, 64);
+    ctx.queue.submit([encoder.finish()]);
+    let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+    assert!(matches!(ctx.check(), Err(GpuError::Validation { .. })));
+    assert!(ctx.check().is_ok(), "errors are handed over once");
 }
 
 #[test]

@@ -100,10 +100,9 @@ impl Scene {
             )
             .unwrap();
         queue.submit([encoder.finish()]);
-        (
-            target.read_rgba8(device, queue).unwrap(),
-            frame.triangle_count(self.layout.mesh()),
-        )
+        let image = target.read_rgba8(device, queue).unwrap();
+        self.ctx.check().expect("no GPU validation errors");
+        (image, frame.triangle_count(self.layout.mesh()))
     }
 }
 
