@@ -413,8 +413,6 @@ fn color_type_name(ct: png::ColorType) -> &'static str {
     }
 }
 
-/// Decodes a grayscale PNG from `reader`. `want` is the bit depth the caller requires, if any;
-/// it is checked from the header before the pixels are decoded.
 /// What a caller accepts from a PNG header.
 #[derive(Clone, Copy)]
 enum Accept {
@@ -537,7 +535,8 @@ fn decode_png_pixels<R: BufRead + Seek>(
     Ok((width, height, bits, buf))
 }
 
-/// Decodes an accepted grayscale PNG into its grid.
+/// Decodes a grayscale PNG from `reader` into its grid. `want` is the bit depth the caller
+/// requires, if any; it is checked from the header before the pixels are decoded.
 fn decode_png_from<R: BufRead + Seek>(
     reader: R,
     limits: &ReadLimits,
@@ -634,9 +633,6 @@ pub fn read_png8(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<Grid<u8>
     }
 }
 
-// ---------------------------------------------------------------------------------------------
-// PNG encoding
-
 /// Decodes an 8-bit RGBA PNG held in memory (a frame capture): each pixel `[r, g, b, a]`.
 ///
 /// Other colour types are [`MapIoError::NotRgba`], 16-bit RGBA is
@@ -677,6 +673,9 @@ pub fn read_png_rgba8(
         .collect();
     Ok(Grid::from_vec(width, height, pixels)?)
 }
+
+// ---------------------------------------------------------------------------------------------
+// PNG encoding
 
 /// Encodes row-major sample bytes as a non-interlaced PNG.
 fn encode_png(
@@ -945,12 +944,6 @@ pub fn write_atomic(path: impl AsRef<Path>, bytes: &[u8]) -> Result<(), MapIoErr
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn default_limits() {
-        assert_eq!(ReadLimits::default().max_side, DEFAULT_MAX_SIDE);
-        assert_eq!(DEFAULT_MAX_SIDE, 16384);
-    }
 
     #[test]
     fn check_size_orders_zero_then_large() {

@@ -35,8 +35,13 @@ impl Rect {
 
     /// A rect from its corners, `min` inclusive and `max` exclusive; empty if `max <= min`.
     pub fn from_min_max(min: IVec2, max: IVec2) -> Self {
-        let size = (max - min).max(IVec2::ZERO).as_uvec2();
-        Self { min, size }
+        // i64: `max - min` may not fit i32 for rects near the ends of the range.
+        let side =
+            |a: i32, b: i32| (i64::from(b) - i64::from(a)).clamp(0, i64::from(u32::MAX)) as u32;
+        Self {
+            min,
+            size: UVec2::new(side(min.x, max.x), side(min.y, max.y)),
+        }
     }
 
     /// The whole of a map of `size` texels.
@@ -47,9 +52,10 @@ impl Rect {
         }
     }
 
-    /// One past the last column and row.
+    /// One past the last column and row (saturating at `i32::MAX`).
     pub fn max(&self) -> IVec2 {
-        self.min + self.size.as_ivec2()
+        let end = |m: i32, s: u32| (i64::from(m) + i64::from(s)).min(i64::from(i32::MAX)) as i32;
+        IVec2::new(end(self.min.x, self.size.x), end(self.min.y, self.size.y))
     }
 
     /// Whether the rect holds no texel.
@@ -91,8 +97,11 @@ impl Rect {
 
     /// The rect grown by `margin` texels on every side (the 2-texel apron of the normal map).
     pub fn expand(&self, margin: u32) -> Rect {
-        let m = margin as i32;
-        Rect::from_min_max(self.min - IVec2::splat(m), self.max() + IVec2::splat(m))
+        let m = margin.min(i32::MAX as u32) as i32;
+        Rect::from_min_max(
+            self.min.saturating_sub(IVec2::splat(m)),
+            self.max().saturating_add(IVec2::splat(m)),
+        )
     }
 
     /// Cuts a rect on a toroidally addressed map of `map_size` texels into the (up to 4) pieces
@@ -126,9 +135,10 @@ fn split_axis(start: i32, len: u32, n: u32) -> Vec<(i32, i32, u32)> {
     let n_i = n as i64;
     let m = (start as i64).rem_euclid(n_i) as u32;
     let first = len.min(n - m);
-    let mut spans = vec![(m as i32, start, first)];
+    let to_i32 = |v: i64| v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
+    let mut spans = vec![(to_i32(i64::from(m)), start, first)];
     if first < len {
-        spans.push((0, start + first as i32, len - first));
+        spans.push((0, to_i32(i64::from(start) + i64::from(first)), len - first));
     }
     spans
 }
@@ -169,6 +179,23 @@ mod tests {
         let pieces = Rect::new(IVec2::new(-3, 1), UVec2::new(20, 2)).split_toroidal(map);
         let total: u64 = pieces.iter().map(|p| p.map.area()).sum();
         assert_eq!(total, 12);
+    }
+
+    #[test]
+    fn extreme_rects_saturate_instead_of_overflowing() {
+        let r = Rect::new(IVec2::splat(i32::MAX - 2), UVec2::splat(u32::MAX));
+        assert_eq!(r.max(), IVec2::splat(i32::MAX));
+        let e = Rect::new(IVec2::splat(i32::MIN + 1), UVec2::splat(3)).expand(5);
+        assert_eq!(e.min, IVec2::splat(i32::MIN));
+        let wide = Rect::from_min_max(IVec2::splat(i32::MIN), IVec2::splat(i32::MAX));
+        assert_eq!(wide.size, UVec2::splat(u32::MAX));
+        assert_eq!(
+            wide.split_toroidal(UVec2::splat(8))
+                .iter()
+                .map(|p| p.map.area())
+                .sum::<u64>(),
+            64
+        );
     }
 
     #[test]

@@ -395,8 +395,9 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
                 let old = row[x as usize].to_raw_f64();
                 let new = match blend {
                     Blend::Add => old + add_scale * f64::from(v),
-                    Blend::Min { base_m } => old.min(enc.to_raw(base_m + placement.intensity * v)),
-                    Blend::Max { base_m } => old.max(enc.to_raw(base_m + placement.intensity * v)),
+                    // In stored units, as the GPU pass computes it: base + value * units.
+                    Blend::Min { base_m } => old.min(enc.to_raw(base_m) + add_scale * f64::from(v)),
+                    Blend::Max { base_m } => old.max(enc.to_raw(base_m) + add_scale * f64::from(v)),
                 };
                 row[x as usize] = T::from_raw_f64_clamped(new);
             }

@@ -192,11 +192,19 @@ impl ClipmapRenderer {
         style: &TerrainStyle,
     ) -> Result<(), GpuError> {
         if !camera.is_valid() {
-            return Err(terrain_core::CoreError::NonFinite {
-                what: "camera (position, direction or planes)",
-                value: f32::NAN,
-            }
-            .into());
+            return Err(GpuError::InvalidCamera { camera: *camera });
+        }
+        if map.wrap() != terrain_core::WrapMode::Repeat {
+            return Err(GpuError::Unsupported {
+                what: "ClipmapRenderer",
+                reason: "the clipmap renders toroidal (repeating) coarse-maps only",
+            });
+        }
+        if frame.levels.len() != self.levels as usize {
+            return Err(GpuError::Unsupported {
+                what: "ClipmapRenderer",
+                reason: "the frame was placed by a layout with another number of levels",
+            });
         }
         if normals.size() != map.size() {
             return Err(GpuError::SizeMismatch {
@@ -220,7 +228,7 @@ impl ClipmapRenderer {
             height_scale: enc.scale,
             height_offset: enc.offset,
             map_size: map.size().to_array(),
-            wrap_offset: wrap_offset_for_frame(frame, map),
+            wrap_offset: wrap_offset_for_frame(frame, map)?,
             n: self.n,
             levels: self.levels,
             morph_width: (self.n as f32 / 10.0).max(1.0),
@@ -304,7 +312,7 @@ impl ClipmapRenderer {
 
 /// A multiple of the map size that makes every texel the frame can read non-negative (the
 /// coarsest level's origin, less the morph's one-texel reach).
-fn wrap_offset_for_frame(frame: &ClipmapFrame, map: &GpuHeightMap) -> [i32; 2] {
+fn wrap_offset_for_frame(frame: &ClipmapFrame, map: &GpuHeightMap) -> Result<[i32; 2], GpuError> {
     let min = frame
         .levels
         .iter()

@@ -55,15 +55,40 @@ pub fn compute_pipeline(
 }
 
 /// The smallest multiple of `map_size` (per axis) that makes `min` non-negative: shaders add it
-/// before taking remainders, since `%` of negative integers is undefined in GLSL.
-pub fn wrap_offset(min: glam::IVec2, map_size: glam::UVec2) -> [i32; 2] {
-    let axis = |m: i32, n: u32| -> i32 {
+/// before taking remainders, since `%` of negative integers is undefined in GLSL. Fails when
+/// the offset would not fit the shaders' `i32` arithmetic.
+pub fn wrap_offset(min: glam::IVec2, map_size: glam::UVec2) -> Result<[i32; 2], GpuError> {
+    let axis = |m: i32, n: u32| -> Option<i32> {
         let n = i64::from(n.max(1));
         let m = i64::from(m);
         let k = if m < 0 { (-m + n - 1) / n } else { 0 };
-        (k * n).min(i64::from(i32::MAX / 2)) as i32
+        i32::try_from(k * n).ok().filter(|o| *o <= i32::MAX / 2)
     };
-    [axis(min.x, map_size.x), axis(min.y, map_size.y)]
+    match (axis(min.x, map_size.x), axis(min.y, map_size.y)) {
+        (Some(x), Some(y)) => Ok([x, y]),
+        _ => Err(terrain_core::CoreError::OutOfRange {
+            what: "texel coordinate for wrapping",
+            value: f64::from(min.x.min(min.y)),
+            expected: "no lower than -2^30 texels",
+        }
+        .into()),
+    }
+}
+
+/// Workgroups to cover `size` items per axis, checked against the device's limit (a long thin
+/// map could otherwise need more than 65 535 groups on one axis).
+pub fn dispatch_size(device: &wgpu::Device, size: glam::UVec2) -> Result<(u32, u32), GpuError> {
+    let (x, y) = (groups(size.x), groups(size.y));
+    let limit = device.limits().max_compute_workgroups_per_dimension;
+    if x.max(y) > limit {
+        return Err(terrain_core::CoreError::OutOfRange {
+            what: "compute dispatch (workgroups per axis)",
+            value: f64::from(x.max(y)),
+            expected: "within the device's max_compute_workgroups_per_dimension",
+        }
+        .into());
+    }
+    Ok((x, y))
 }
 
 /// A bind group of whole buffers at bindings 0, 1, 2, ... in order (every pass binds a uniform

@@ -79,6 +79,22 @@ pub enum GpuError {
     /// Mapping a buffer for reading failed, or the device was lost while waiting.
     #[error("reading back from the GPU failed: {0}")]
     Readback(String),
+    /// A camera with a non-finite field, a zero direction, or planes out of order.
+    #[error(
+        "invalid camera {camera:?}: needs finite values, a non-zero direction, 0 < fov < pi and 0 < near < far"
+    )]
+    InvalidCamera {
+        /// The camera given.
+        camera: crate::camera::Camera,
+    },
+    /// An input the operation does not handle.
+    #[error("{what}: {reason}")]
+    Unsupported {
+        /// What refused it.
+        what: &'static str,
+        /// Why.
+        reason: &'static str,
+    },
     /// A user shader did not compile.
     #[error("user shader rejected: {0}")]
     Shader(String),

@@ -87,6 +87,13 @@ impl GpuHeightMap {
         queue: &wgpu::Queue,
         map: &HeightMap<T>,
     ) -> Result<(), GpuError> {
+        self.check_sample::<T>()?;
+        if map.encoding() != self.encoding || map.texel_size() != self.texel_size {
+            return Err(GpuError::Unsupported {
+                what: "GpuHeightMap::write",
+                reason: "the map's encoding or texel size differs from the uploaded map's",
+            });
+        }
         if map.size() != self.size {
             return Err(GpuError::SizeMismatch {
                 expected: self.size,
@@ -109,6 +116,7 @@ impl GpuHeightMap {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<HeightMap<T>, GpuError> {
+        self.check_sample::<T>()?;
         let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
         let raw: &[u32] = bytemuck::cast_slice(&bytes);
         let grid = Grid::from_vec(
@@ -124,6 +132,17 @@ impl GpuHeightMap {
             self.texel_size,
             self.wrap,
         )?)
+    }
+
+    /// Refuses a sample type other than the one uploaded (values would clamp silently).
+    fn check_sample<T: HeightSample>(&self) -> Result<(), GpuError> {
+        if T::MAX_RAW != f64::from(self.max_raw) {
+            return Err(GpuError::UnsupportedSample {
+                what: "GpuHeightMap (sample type differs from the uploaded map's)",
+                max_raw: T::MAX_RAW,
+            });
+        }
+        Ok(())
     }
 
     /// The storage buffer.
@@ -175,6 +194,8 @@ impl GpuDerivativeMap {
         texel_size: f32,
         wrap: WrapMode,
     ) -> Result<Self, GpuError> {
+        // Validate up front: the spacing is only used when reading back.
+        DerivativeMap::from_grid(Grid::new(1, 1, Vec2::ZERO)?, texel_size, wrap)?;
         let bytes = u64::from(size.x) * u64::from(size.y) * 8;
         let buffer = map_buffer(device, "GpuDerivativeMap", size, bytes)?;
         Ok(Self {

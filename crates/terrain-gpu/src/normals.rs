@@ -1,7 +1,7 @@
 //! `NormalPass`: regenerates partial-derivative normals (seed 000 eq. 3.3) in a dirty rect plus
 //! its 2-texel apron, on the GPU.
 
-use crate::compute::{bind_buffers, buffer_entry, compute_pipeline, groups, wrap_offset};
+use crate::compute::{bind_buffers, buffer_entry, compute_pipeline, dispatch_size, wrap_offset};
 use crate::error::GpuError;
 use crate::maps::{GpuDerivativeMap, GpuHeightMap};
 use bytemuck::{Pod, Zeroable};
@@ -76,8 +76,9 @@ impl NormalPass {
             },
             k,
             // Covers the region and the stencil's reach of 2 texels around any wrapped texel.
-            wrap_offset: wrap_offset(region.min.min(glam::IVec2::ZERO) - 2, map.size()),
+            wrap_offset: wrap_offset(region.min.min(glam::IVec2::ZERO) - 2, map.size())?,
         };
+        let (gx, gy) = dispatch_size(device, region.size)?;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("NormalParams"),
             contents: bytemuck::bytes_of(&params),
@@ -95,7 +96,7 @@ impl NormalPass {
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(groups(region.size.x), groups(region.size.y), 1);
+        pass.dispatch_workgroups(gx, gy, 1);
         Ok(())
     }
 

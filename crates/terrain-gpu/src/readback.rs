@@ -57,6 +57,8 @@ struct Slot {
 pub struct RegionReadback {
     slots: Vec<Slot>,
     next_ticket: u64,
+    /// A failure to report on the next poll (regions that arrived with it went out first).
+    failure: Option<String>,
 }
 
 /// Most staging buffers a ring may have.
@@ -84,6 +86,7 @@ impl RegionReadback {
         Ok(Self {
             slots,
             next_ticket: 0,
+            failure: None,
         })
     }
 
@@ -159,8 +162,14 @@ impl RegionReadback {
         self.collect()
     }
 
+    /// Hands over the regions that arrived. A failed mapping (device loss) is reported after the
+    /// others are handed over: on the next call when regions came with it, so none is dropped.
     fn collect(&mut self) -> Result<Vec<RegionData>, GpuError> {
+        if let Some(message) = self.failure.take() {
+            return Err(GpuError::Readback(message));
+        }
         let mut out = Vec::new();
+        let mut failures = Vec::new();
         for slot in &mut self.slots {
             let state = slot.state.load(Ordering::Acquire);
             if state != MAPPED && state != FAILED {
@@ -173,7 +182,9 @@ impl RegionReadback {
             };
             slot.state.store(FREE, Ordering::Release);
             if state == FAILED {
-                return Err(GpuError::Readback(format!("mapping {rect:?} failed")));
+                // Hand over what did arrive; report the failure on its own.
+                failures.push(format!("mapping {rect:?} (ticket {}) failed", ticket.0));
+                continue;
             }
             let bytes = rect.area() * 4;
             let values: Vec<u32> = {
@@ -191,6 +202,13 @@ impl RegionReadback {
             });
         }
         out.sort_by_key(|r| r.ticket);
+        if !failures.is_empty() {
+            let message = failures.join("; ");
+            if out.is_empty() {
+                return Err(GpuError::Readback(message));
+            }
+            self.failure = Some(message);
+        }
         Ok(out)
     }
 }

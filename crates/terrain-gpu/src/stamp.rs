@@ -1,7 +1,7 @@
 //! `StampPass`: every stamp kind of terrain-core (Gaussian, texture, shockwave as a texture,
 //! user procedural WGSL) applied on the GPU to the stamp's region only, in place.
 
-use crate::compute::{bind_buffers, buffer_entry, compute_pipeline, groups, wrap_offset};
+use crate::compute::{bind_buffers, buffer_entry, compute_pipeline, dispatch_size, wrap_offset};
 use crate::error::GpuError;
 use crate::maps::GpuHeightMap;
 use crate::scope::scoped;
@@ -201,8 +201,9 @@ impl StampPass {
             beta,
             pad: 0.0,
             tex_size: tex_size.to_array(),
-            wrap_offset: wrap_offset(region.footprint.min, map.size()),
+            wrap_offset: wrap_offset(region.footprint.min, map.size())?,
         };
+        let (gx, gy) = dispatch_size(device, region.footprint.size)?;
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("StampParams"),
             contents: bytemuck::bytes_of(&params),
@@ -220,11 +221,7 @@ impl StampPass {
         });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(
-            groups(region.footprint.size.x),
-            groups(region.footprint.size.y),
-            1,
-        );
+        pass.dispatch_workgroups(gx, gy, 1);
         Ok(region.pieces.iter().map(|p| p.map).collect())
     }
 }

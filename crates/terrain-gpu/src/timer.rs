@@ -101,7 +101,6 @@ impl GpuTimer {
         }
         let start = Instant::now();
         queue.submit([encoder.finish()]);
-        let submit_ms = start.elapsed().as_secs_f64() * 1e3;
         device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| GpuError::Readback(e.to_string()))?;
@@ -114,11 +113,6 @@ impl GpuTimer {
             }
             None => None,
         };
-        if std::env::var_os("TERRAIN_TIMER_DEBUG").is_some() {
-            eprintln!(
-                "GpuTimer: wall {wall_ms:.3} ms (submit {submit_ms:.3} ms), timestamps {timestamp_ms:?} ms"
-            );
-        }
         Ok(GpuTiming {
             ms: wall_ms,
             timestamp_ms,

@@ -95,8 +95,10 @@ pub const MAX_LOG2_N: u32 = 10;
 /// Largest number of clipmap levels (level 0 and 15 rings).
 pub const MAX_LEVELS: u32 = 16;
 /// Largest camera distance from the texel origin, in texels, that [`ClipmapLayout::place`]
-/// accepts: every texel coordinate it emits then fits in `i32`.
-pub const MAX_CAMERA_TEXELS: f64 = (1u64 << 30) as f64;
+/// accepts (2^26: 6 700 km at 0.1 m per texel). The coarsest level then reaches at most about
+/// 2^27 texels, so renderers can add a multiple of the map size to any emitted texel
+/// coordinate (GLSL's `%` of negative integers is undefined) and stay inside `i32`.
+pub const MAX_CAMERA_TEXELS: f64 = (1u64 << 26) as f64;
 
 /// Which two sides of a ring's hole the L-shaped interior trim covers.
 ///

@@ -101,10 +101,12 @@ fn derivative_at(t: vec2<i32>) -> vec2<f32> {
 
 @fragment
 fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
-    // Bilinear gradient at the fragment (texel coordinates relative to the camera's texel).
+    // Bilinear gradient at the fragment. `rel_texel` is relative to the camera's exact
+    // position; adding the camera's fraction makes it relative to the camera's whole texel.
     let p = in.rel_texel;
-    let p0 = floor(p);
-    let f = p - p0;
+    let q = p + frame.camera_frac;
+    let p0 = floor(q);
+    let f = q - p0;
     let t0 = frame.camera_texel + vec2<i32>(p0);
     let d00 = derivative_at(t0);
     let d10 = derivative_at(t0 + vec2<i32>(1, 0));
