@@ -231,7 +231,7 @@ impl ClipmapRenderer {
             wrap_offset: wrap_offset_for_frame(frame, map)?,
             n: self.n,
             levels: self.levels,
-            morph_width: (self.n as f32 / 10.0).max(1.0),
+            morph_width: terrain_lod::morph::default_morph_width(self.n),
             ramp_low: style.ramp.0,
             ramp_high: style.ramp.1,
             pad: [0.0; 3],

@@ -44,6 +44,7 @@
 pub mod clipmap;
 pub mod error;
 pub mod frustum;
+pub mod morph;
 
 pub use clipmap::{
     ClipmapDraw, ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapMesh, ClipmapVertex,

@@ -66,7 +66,8 @@ fn vs_main(in: VsIn) -> VsOut {
     let texel = in.offset + grid * s;
     var h = height_at(texel);
     // Morph towards the next coarser level near this level's outer edge, so that the edge
-    // vertices lie exactly on the coarser level's edges (no cracks, no popping).
+    // vertices lie exactly on the coarser level's edges (no cracks, no popping). CPU
+    // reference and tests: terrain_lod::morph (morph_alpha, coarse_height).
     if in.level + 1u < frame.levels {
         let rel = (vec2<f32>(texel - frame.camera_texel) - frame.camera_frac) / f32(s);
         let d = max(abs(rel.x), abs(rel.y));

@@ -1,0 +1,64 @@
+//! The level morph of geometry clipmaps (GPU Gems 2 ch. 2, "transition regions"): near a
+//! level's outer edge its vertices blend towards the next coarser level's surface, so the edge
+//! matches the coarser level exactly (no cracks) and levels do not pop. This is the CPU
+//! reference of the morph in terrain-shaders' `clipmap.wgsl`.
+
+use glam::{IVec2, Vec2};
+
+/// Width of the transition region in level grid units: GPU Gems 2 uses `w = n / 10`.
+pub fn default_morph_width(n: u32) -> f32 {
+    (n as f32 / 10.0).max(1.0)
+}
+
+/// Blend factor of a vertex at `texel` on a level of `scale` texels per grid unit, with the
+/// camera at `camera_texel`: 0 in the level's interior, rising over `width` grid units to 1 at
+/// `(n - 1) / 2 - 1` grid units from the camera (the level's edge is at least that far, since
+/// the level is snapped to the coarser grid around the camera).
+pub fn morph_alpha(texel: IVec2, camera_texel: Vec2, scale: u32, n: u32, width: f32) -> f32 {
+    let rel = (texel.as_vec2() - camera_texel) / scale as f32;
+    let d = rel.x.abs().max(rel.y.abs());
+    let half = (n as f32 - 1.0) * 0.5;
+    ((d - (half - 1.0 - width)) / width).clamp(0.0, 1.0)
+}
+
+/// The next coarser level's surface under a vertex at `texel` of a level with `scale` texels
+/// per grid unit: the vertex's own height where it is a coarser vertex too, else the mean of
+/// its two coarser neighbours (odd on one axis) or of the four around it (odd on both).
+pub fn coarse_height(texel: IVec2, scale: u32, height: impl Fn(IVec2) -> f32) -> f32 {
+    let s = scale as i32;
+    let odd = IVec2::new(texel.x.div_euclid(s) & 1, texel.y.div_euclid(s) & 1);
+    let step = odd * s;
+    match (odd.x, odd.y) {
+        (0, 0) => height(texel),
+        (1, 1) => {
+            0.25 * (height(texel - step)
+                + height(texel + step)
+                + height(texel + IVec2::new(step.x, -step.y))
+                + height(texel + IVec2::new(-step.x, step.y)))
+        }
+        _ => 0.5 * (height(texel - step) + height(texel + step)),
+    }
+}
+
+/// The morphed height: `height(texel)` blended towards [`coarse_height`] by [`morph_alpha`]
+/// (the coarsest level has no coarser level and is not morphed).
+#[allow(clippy::too_many_arguments)]
+pub fn morphed_height(
+    texel: IVec2,
+    camera_texel: Vec2,
+    scale: u32,
+    n: u32,
+    width: f32,
+    coarsest: bool,
+    height: impl Fn(IVec2) -> f32,
+) -> f32 {
+    let h = height(texel);
+    if coarsest {
+        return h;
+    }
+    let alpha = morph_alpha(texel, camera_texel, scale, n, width);
+    if alpha <= 0.0 {
+        return h;
+    }
+    h + (coarse_height(texel, scale, &height) - h) * alpha
+}
