@@ -46,7 +46,17 @@ fn main() {
         }
     };
     if let Err(e) = run(&cli) {
-        eprintln!("error: {e:#}");
+        // One line: the error and its causes, skipping a cause whose text is already shown
+        // (library errors often include their source in their own message).
+        let mut line = e.to_string();
+        for cause in e.chain().skip(1) {
+            let text = cause.to_string();
+            if !line.contains(&text) {
+                line.push_str(": ");
+                line.push_str(&text);
+            }
+        }
+        eprintln!("error: {line}");
         std::process::exit(2);
     }
 }
