@@ -1,1 +1,177 @@
-fn main() {}
+//! Granular deformation CPU reference: each step over one active area at map sizes 512 to
+//! 4096 (seed 001 table 5.4 setting: 3 774, 15 100, 60 398 and 241 591 columns, here squares
+//! of 61, 123, 246 and 492 texels a side), and whole steps with 1 to 8 vehicles, active areas
+//! versus the full 2048 map (table 5.7).
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use glam::{Affine3A, IVec2, UVec2, Vec3};
+use std::hint::black_box;
+use std::time::Duration;
+use terrain_core::granular::*;
+use terrain_core::{FixedPointMap, Grid, Rect};
+
+const SIZES: [(u32, u32); 4] = [(512, 61), (1024, 123), (2048, 246), (4096, 492)];
+
+fn snow(size: u32, texel: f32) -> FixedPointMap {
+    FixedPointMap::fixed_point(Grid::new(size, size, 10_000).expect("grid"), 10_000, texel)
+        .expect("map")
+}
+
+fn steps(c: &mut Criterion) {
+    let mut g = c.benchmark_group("granular");
+    g.sample_size(10);
+    g.warm_up_time(Duration::from_millis(300));
+    g.measurement_time(Duration::from_secs(1));
+    let params = GranularParams::default();
+    for (size, side) in SIZES {
+        // terrainSize 200 m (table 5.3).
+        let texel = 200.0 / size as f32;
+        let map = snow(size, texel);
+        let min = IVec2::splat(((size - side) / 2) as i32);
+        let area = Rect::new(min, UVec2::splat(side));
+        let centre = (min.as_vec2() + side as f32 * 0.5) * texel;
+        // A wheel filling about half the area, sunk a quarter of its radius.
+        let r = side as f32 * texel * 0.25;
+        let wheel = TriMesh::wheel(r, r * 0.5, 32).expect("wheel");
+        let obj = [GranularObject::new(
+            &wheel,
+            Affine3A::from_translation(Vec3::new(centre.x, 1.0 + 0.75 * r, centre.y)),
+        )];
+        g.throughput(Throughput::Elements(area.area()));
+        let depth = depth_from_below(&obj, &map, area).expect("depth");
+        let mut pen = Grid::new(
+            side,
+            side,
+            Penetration {
+                seed_x: 0,
+                seed_y: 0,
+                kind: 0,
+                penetration: 0,
+            },
+        )
+        .expect("grid");
+        penetration_texture(&map, &depth, area, 5000, &mut pen).expect("pen");
+        let seeds = jump_flood(&pen, area, params.metric, true).expect("jfa");
+        let t = params.slope_thresholds_units(texel, 10_000.0);
+        let r15 = params.roughness_q15();
+        g.bench_function(BenchmarkId::new("depth_from_below", size), |b| {
+            b.iter(|| depth_from_below(black_box(&obj), &map, area).expect("depth"))
+        });
+        let mut out = pen.clone();
+        g.bench_function(BenchmarkId::new("penetration", size), |b| {
+            b.iter(|| {
+                penetration_texture(&map, black_box(&depth), area, 5000, &mut out).expect("pen")
+            })
+        });
+        g.bench_function(BenchmarkId::new("jump_flood", size), |b| {
+            b.iter(|| jump_flood(black_box(&pen), area, params.metric, true).expect("jfa"))
+        });
+        for (name, method) in [
+            ("displace_iterative10", DisplacementMethod::Iterative),
+            ("displace_closest_seed", DisplacementMethod::ClosestSeed),
+            (
+                "displace_multiple_targets",
+                DisplacementMethod::MultipleTargets,
+            ),
+        ] {
+            g.bench_function(BenchmarkId::new(name, size), |b| {
+                b.iter_batched_ref(
+                    || map.clone(),
+                    |m| {
+                        match method {
+                            DisplacementMethod::Iterative => {
+                                displace_iterative(m, &pen, &seeds, area, 32768, 10, params.metric)
+                            }
+                            DisplacementMethod::ClosestSeed => {
+                                displace_closest_seed(m, &pen, &seeds, area, 32768)
+                            }
+                            DisplacementMethod::MultipleTargets => {
+                                displace_multiple_targets(m, &pen, &seeds, area, 32768)
+                            }
+                        }
+                        .expect("displace")
+                    },
+                    criterion::BatchSize::LargeInput,
+                )
+            });
+        }
+        let mut displaced = map.clone();
+        displace_closest_seed(&mut displaced, &pen, &seeds, area, 32768).expect("displace");
+        for (name, method) in [
+            ("slopes_interleaved10", SlopeMethod::Interleaved),
+            ("slopes_scatter10", SlopeMethod::Scatter),
+        ] {
+            g.bench_function(BenchmarkId::new(name, size), |b| {
+                b.iter_batched_ref(
+                    || displaced.clone(),
+                    |m| {
+                        match method {
+                            SlopeMethod::Interleaved => {
+                                even_out_slopes_interleaved(m, &pen, area, t, r15, 10)
+                            }
+                            SlopeMethod::Scatter => {
+                                even_out_slopes_scatter(m, &pen, area, t, r15, 10)
+                            }
+                        }
+                        .expect("slope")
+                    },
+                    criterion::BatchSize::LargeInput,
+                )
+            });
+        }
+        let mut normals = Grid::new(size, size, Vec3::Y).expect("grid");
+        g.bench_function(BenchmarkId::new("normals_blur1", size), |b| {
+            b.iter(|| {
+                symmetric_normals(&displaced, area, &mut normals).expect("normals");
+                blur_normals(&mut normals, area, 1).expect("blur");
+            })
+        });
+    }
+    g.finish();
+}
+
+fn vehicles(c: &mut Criterion) {
+    let mut g = c.benchmark_group("granular_vehicles_2048");
+    g.sample_size(10);
+    g.warm_up_time(Duration::from_millis(300));
+    g.measurement_time(Duration::from_secs(2));
+    // Table 5.8: 2048 texels over 300 m, one slope iteration; each car's area about 163^2 =
+    // 26 569 columns (margin included). The SSBO combination (closest seed + scatter).
+    let texel = 300.0 / 2048.0;
+    let params = GranularParams {
+        num_iterations_even_out_slopes: 1,
+        active_area_margin: 40,
+        ..GranularParams::default()
+    };
+    let car = TriMesh::cuboid(Vec3::new(2.0, 0.8, 4.0)).expect("car");
+    let sim0 = GranularSim::new(snow(2048, texel), params).expect("sim");
+    for cars in 1..=8u32 {
+        let objs: Vec<GranularObject<'_>> = (0..cars)
+            .map(|i| {
+                GranularObject::new(
+                    &car,
+                    Affine3A::from_translation(Vec3::new(30.0 + 33.0 * i as f32, 1.7, 150.0)),
+                )
+            })
+            .collect();
+        let modes: &[AreaMode] = if cars == 1 || cars == 8 {
+            &[AreaMode::ActiveAreas, AreaMode::FullMap]
+        } else {
+            &[AreaMode::ActiveAreas]
+        };
+        for &mode in modes {
+            let mut sim = sim0.clone().with_area_mode(mode);
+            let name = match mode {
+                AreaMode::ActiveAreas => "active_areas",
+                AreaMode::FullMap => "full_map",
+            };
+            g.bench_function(BenchmarkId::new(name, cars), |b| {
+                b.iter(|| sim.step(black_box(&objs)).expect("step"))
+            });
+        }
+    }
+    g.finish();
+}
+
+criterion_group!(benches, steps, vehicles);
+criterion_main!(benches);

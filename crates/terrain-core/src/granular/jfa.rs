@@ -1,0 +1,210 @@
+//! Jump flooding distance transform (seed 001 sec 2.3.1, 4.1.4): the closest seed of every
+//! column of an active area, with a hashed neighbour order, and a brute-force reference.
+//!
+//! Data: a grid of `[seed_x, seed_y]` in map coordinates ([`NO_SEED`] when none is known),
+//! initialised from the penetration texture. Pass `p` with step `k` reads only the previous
+//! pass's grid (ping-pong): for column `c`, the best starts as the column's own entry; then the
+//! 8 offsets `(i, j) * k`, `i, j in {-1, 0, 1}` minus `(0, 0)`, are visited in the order
+//! [`jfa_neighbour_order`]`(x, y, p)`; a neighbour inside the area whose seed is strictly closer
+//! to `c` (per [`seed_distance`]) replaces the best, so ties keep the earlier candidate.
+//! Steps are `2^(m-1), ..., 2, 1` with `2^m` the smallest power of two `>= max(w, h)` of the
+//! area (`log2 n` passes), then one extra pass of step 1 when asked.
+
+use glam::UVec2;
+
+use super::{DistanceMetric, GranularError, NO_SEED, Penetration};
+use crate::{Grid, Rect};
+
+/// The 8 neighbour offsets in their base order, indexed by [`jfa_neighbour_order`].
+pub const JFA_OFFSETS: [[i32; 2]; 8] = [
+    [-1, -1],
+    [0, -1],
+    [1, -1],
+    [-1, 0],
+    [1, 0],
+    [-1, 1],
+    [0, 1],
+    [1, 1],
+];
+
+/// The PCG hash (`pcg_hash` of Jarzynski and Olano 2020), u32 arithmetic with wrapping:
+/// `s = v * 747796405 + 2891336453; w = ((s >> ((s >> 28) + 4)) ^ s) * 277803737;
+/// (w >> 22) ^ w`.
+pub fn pcg_hash(v: u32) -> u32 {
+    let s = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let w = ((s >> ((s >> 28) + 4)) ^ s).wrapping_mul(277_803_737);
+    (w >> 22) ^ w
+}
+
+/// The hash of a column and pass: `pcg(x + pcg(y + pcg(pass)))` (wrapping adds).
+pub fn jfa_hash(x: u32, y: u32, pass: u32) -> u32 {
+    pcg_hash(x.wrapping_add(pcg_hash(y.wrapping_add(pcg_hash(pass)))))
+}
+
+/// The visiting order of the 8 neighbours (indices into [`JFA_OFFSETS`]): a Fisher-Yates
+/// shuffle of `0..8` driven by `h = jfa_hash(x, y, pass)`: for `i = 7` down to `1`, swap
+/// `order[i]` with `order[h % (i + 1)]`, then `h = pcg_hash(h)`.
+pub fn jfa_neighbour_order(x: u32, y: u32, pass: u32) -> [u8; 8] {
+    let mut order = [0u8, 1, 2, 3, 4, 5, 6, 7];
+    let mut h = jfa_hash(x, y, pass);
+    for i in (1..8usize).rev() {
+        let j = (h % (i as u32 + 1)) as usize;
+        order.swap(i, j);
+        h = pcg_hash(h);
+    }
+    order
+}
+
+/// The distance between a column and a seed under `metric` (Euclidean squared, so exact);
+/// `u32::MAX` when `seed` is `NO_SEED`. Coordinates must be below [`super::MAX_SIDE`] apart.
+pub fn seed_distance(metric: DistanceMetric, column: [u32; 2], seed: [u32; 2]) -> u32 {
+    if seed[0] == NO_SEED {
+        return u32::MAX;
+    }
+    let dx = column[0].abs_diff(seed[0]);
+    let dy = column[1].abs_diff(seed[1]);
+    match metric {
+        DistanceMetric::Euclidean => dx * dx + dy * dy,
+        DistanceMetric::Manhattan => dx + dy,
+        DistanceMetric::Chebyshev => dx.max(dy),
+    }
+}
+
+/// The step of every pass for an area of `size`: `log2 n` halving steps, then a 1 if `extra`.
+pub fn jfa_steps(size: UVec2, extra: bool) -> Vec<u32> {
+    let n = size.max_element().max(1).next_power_of_two();
+    let mut steps = Vec::new();
+    let mut k = n / 2;
+    while k >= 1 {
+        steps.push(k);
+        k /= 2;
+    }
+    if extra {
+        steps.push(1);
+    }
+    steps
+}
+
+/// The initial seed grid: each texel's `[seed_x, seed_y]` from the penetration texture.
+pub fn jfa_init(pen: &Grid<Penetration>) -> Grid<[u32; 2]> {
+    pen.map(|p| [p.seed_x, p.seed_y])
+}
+
+/// One jump flooding pass with step `step` and pass index `pass` over `area` (grids are of
+/// `area.size`, indexed relative to `area.min`).
+pub fn jfa_pass(
+    prev: &Grid<[u32; 2]>,
+    next: &mut Grid<[u32; 2]>,
+    area: Rect,
+    step: u32,
+    pass: u32,
+    metric: DistanceMetric,
+) -> Result<(), GranularError> {
+    for g in [prev.size(), next.size()] {
+        if g != area.size {
+            return Err(GranularError::SizeMismatch {
+                expected: area.size,
+                actual: g,
+            });
+        }
+    }
+    let (w, h) = (area.size.x as i64, area.size.y as i64);
+    let k = i64::from(step);
+    let src = prev.as_slice();
+    for j in 0..h {
+        for i in 0..w {
+            let gx = (area.min.x as i64 + i) as u32;
+            let gy = (area.min.y as i64 + j) as u32;
+            let col = [gx, gy];
+            let mut best = src[(j * w + i) as usize];
+            let mut best_d = seed_distance(metric, col, best);
+            for o in jfa_neighbour_order(gx, gy, pass) {
+                let [ox, oy] = JFA_OFFSETS[o as usize];
+                let (ni, nj) = (i + i64::from(ox) * k, j + i64::from(oy) * k);
+                if ni < 0 || nj < 0 || ni >= w || nj >= h {
+                    continue;
+                }
+                let cand = src[(nj * w + ni) as usize];
+                let d = seed_distance(metric, col, cand);
+                if d < best_d {
+                    best = cand;
+                    best_d = d;
+                }
+            }
+            next.as_mut_slice()[(j * w + i) as usize] = best;
+        }
+    }
+    Ok(())
+}
+
+/// The whole jump flooding over `area`: [`jfa_init`], then [`jfa_pass`] for each of
+/// [`jfa_steps`] with pass index `0, 1, ...`. Returns the closest seed per column.
+pub fn jump_flood(
+    pen: &Grid<Penetration>,
+    area: Rect,
+    metric: DistanceMetric,
+    extra_pass: bool,
+) -> Result<Grid<[u32; 2]>, GranularError> {
+    check_side(area.size)?;
+    let mut a = jfa_init(pen);
+    let mut b = a.clone();
+    for (pass, step) in jfa_steps(area.size, extra_pass).into_iter().enumerate() {
+        jfa_pass(&a, &mut b, area, step, pass as u32, metric)?;
+        std::mem::swap(&mut a, &mut b);
+    }
+    Ok(a)
+}
+
+/// The exact distance to the nearest seed of every column of `area` by brute force
+/// (`u32::MAX` where the area has no seed). For tests and error tables.
+pub fn brute_force_distance(
+    pen: &Grid<Penetration>,
+    area: Rect,
+    metric: DistanceMetric,
+) -> Grid<u32> {
+    let seeds: Vec<[u32; 2]> = pen
+        .as_slice()
+        .iter()
+        .filter(|p| p.seed_x != NO_SEED)
+        .map(|p| [p.seed_x, p.seed_y])
+        .collect();
+    Grid::from_fn(area.size.x, area.size.y, |i, j| {
+        let col = [area.min.x as u32 + i, area.min.y as u32 + j];
+        seeds
+            .iter()
+            .map(|&s| seed_distance(metric, col, s))
+            .min()
+            .unwrap_or(u32::MAX)
+    })
+    .unwrap_or_else(|_| pen.map(|_| u32::MAX))
+}
+
+/// The distance grid of a seed grid over `area` (`u32::MAX` where no seed is known).
+pub fn distance_grid(seeds: &Grid<[u32; 2]>, area: Rect, metric: DistanceMetric) -> Grid<u32> {
+    let w = area.size.x.max(1) as usize;
+    let mut out = seeds.map(|_| 0u32);
+    for (idx, (d, s)) in out
+        .as_mut_slice()
+        .iter_mut()
+        .zip(seeds.as_slice())
+        .enumerate()
+    {
+        let col = [
+            area.min.x as u32 + (idx % w) as u32,
+            area.min.y as u32 + (idx / w) as u32,
+        ];
+        *d = seed_distance(metric, col, *s);
+    }
+    out
+}
+
+pub(crate) fn check_side(size: UVec2) -> Result<(), GranularError> {
+    let side = size.max_element();
+    if side > super::MAX_SIDE {
+        return Err(GranularError::TooLarge {
+            side,
+            limit: super::MAX_SIDE,
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,220 @@
+//! Evening out steep slopes (seed 001 sec 4.1.5, eq. 4.1-4.2, after Sumner et al.): material
+//! moves from a column down to neighbours it is too steep above, never into non-seed columns.
+//!
+//! Outflow of a column `c` with height `h_c` (the same in both methods): its receivers are the
+//! 8 neighbours `q` (in [`super::JFA_OFFSETS`] order) inside the area that are seed columns
+//! of this step's penetration texture and with `dh_q = h_c - h_q > T` (`T` the orthogonal or
+//! diagonal threshold of [`super::GranularParams::slope_thresholds_units`]). With `n`
+//! receivers: `avg = sum(dh_q / n) + sum(dh_q % n) / n` (= `floor(sum dh_q / n)` without u32
+//! overflow, eq. 4.2), each receiver gets `a = mul_q15(avg, roughness_q15) / n` and `c` loses
+//! `n * a` (never more than `h_c`). Integer throughout, so the volume is exactly conserved.
+
+use super::{ColumnKind, GranularError, JFA_OFFSETS, Penetration, check_area, mul_q15};
+use crate::{FixedPointMap, Grid, Rect};
+
+/// The outflow of one column: `(amount per receiver, receiver bit mask)`; bit `k` is
+/// [`JFA_OFFSETS`]`[k]`.
+pub fn column_outflow(
+    heights: &[u32],
+    pen: &[Penetration],
+    size: (usize, usize),
+    at: (usize, usize),
+    thresholds: [u32; 2],
+    roughness_q15: u32,
+) -> (u32, u8) {
+    let (w, h) = size;
+    let (x, y) = at;
+    let hc = heights[y * w + x];
+    let mut mask = 0u8;
+    let mut deltas = [0u32; 8];
+    let mut n = 0u32;
+    for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+        let (nx, ny) = (x as i64 + i64::from(*ox), y as i64 + i64::from(*oy));
+        if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+            continue;
+        }
+        let q = ny as usize * w + nx as usize;
+        if pen[q].column_kind() != ColumnKind::Seed {
+            continue;
+        }
+        let t = thresholds[usize::from(*ox != 0 && *oy != 0)];
+        let hq = heights[q];
+        if hc > hq && hc - hq > t {
+            mask |= 1 << k;
+            deltas[n as usize] = hc - hq;
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return (0, 0);
+    }
+    let ds = &deltas[..n as usize];
+    let avg = ds.iter().map(|d| d / n).sum::<u32>() + ds.iter().map(|d| d % n).sum::<u32>() / n;
+    let a = mul_q15(avg, roughness_q15) / n;
+    if a == 0 { (0, 0) } else { (a, mask) }
+}
+
+fn check(map: &FixedPointMap, pen: &Grid<Penetration>, area: Rect) -> Result<(), GranularError> {
+    check_area(area, map.size())?;
+    if pen.size() != area.size {
+        return Err(GranularError::SizeMismatch {
+            expected: area.size,
+            actual: pen.size(),
+        });
+    }
+    Ok(())
+}
+
+fn read_area(map: &FixedPointMap, area: Rect) -> Vec<u32> {
+    let (ox, oy, w) = (area.min.x as usize, area.min.y as u32, area.size.x as usize);
+    (0..area.size.y)
+        .flat_map(|j| map.grid().row(oy + j)[ox..ox + w].iter().copied())
+        .collect()
+}
+
+fn write_area(map: &mut FixedPointMap, area: Rect, data: &[u32]) {
+    let (ox, oy, w) = (area.min.x as usize, area.min.y as u32, area.size.x as usize);
+    for j in 0..area.size.y {
+        map.grid_mut().row_mut(oy + j)[ox..ox + w]
+            .copy_from_slice(&data[j as usize * w..(j as usize + 1) * w]);
+    }
+}
+
+/// Method 1, pass A (table 4.3): the amounts texture `(a, mask)` of the columns whose map
+/// parity `(x + y) & 1` equals `parity` (others `(0, 0)`), read from `heights` only.
+pub fn slope_amounts_pass(
+    heights: &[u32],
+    pen: &[Penetration],
+    area: Rect,
+    parity: u32,
+    thresholds: [u32; 2],
+    roughness_q15: u32,
+    out: &mut [(u32, u8)],
+) {
+    let (w, h) = (area.size.x as usize, area.size.y as usize);
+    for y in 0..h {
+        for x in 0..w {
+            let gp = (area.min.x as i64 + x as i64 + area.min.y as i64 + y as i64) & 1;
+            out[y * w + x] = if gp as u32 == parity {
+                column_outflow(heights, pen, (w, h), (x, y), thresholds, roughness_q15)
+            } else {
+                (0, 0)
+            };
+        }
+    }
+}
+
+/// Method 1, pass B: `new[c] = h[c] - popcount(mask_c) * a_c + sum of a_q over neighbours q
+/// whose mask names c` (gathered; reads the amounts and old heights, writes `new`).
+pub fn slope_apply_pass(heights: &[u32], amounts: &[(u32, u8)], area: Rect, new: &mut [u32]) {
+    let (w, h) = (area.size.x as i64, area.size.y as i64);
+    for y in 0..h {
+        for x in 0..w {
+            let me = (y * w + x) as usize;
+            let (a, mask) = amounts[me];
+            let mut v = heights[me] - a * mask.count_ones();
+            for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                let (nx, ny) = (x + i64::from(*ox), y + i64::from(*oy));
+                if nx < 0 || ny < 0 || nx >= w || ny >= h {
+                    continue;
+                }
+                let (qa, qmask) = amounts[(ny * w + nx) as usize];
+                if qmask & (1 << (7 - k)) != 0 {
+                    v = v.wrapping_add(qa);
+                }
+            }
+            new[me] = v;
+        }
+    }
+}
+
+/// Method 1 (two interleaved programs): `iterations` times, for parity 0 then 1, an
+/// amounts pass and an apply pass over `area`.
+pub fn even_out_slopes_interleaved(
+    map: &mut FixedPointMap,
+    pen: &Grid<Penetration>,
+    area: Rect,
+    thresholds: [u32; 2],
+    roughness_q15: u32,
+    iterations: u32,
+) -> Result<(), GranularError> {
+    check(map, pen, area)?;
+    let mut h = read_area(map, area);
+    let mut next = h.clone();
+    let mut amounts = vec![(0u32, 0u8); h.len()];
+    for _ in 0..iterations {
+        for parity in 0..2 {
+            slope_amounts_pass(
+                &h,
+                pen.as_slice(),
+                area,
+                parity,
+                thresholds,
+                roughness_q15,
+                &mut amounts,
+            );
+            slope_apply_pass(&h, &amounts, area, &mut next);
+            std::mem::swap(&mut h, &mut next);
+        }
+    }
+    write_area(map, area, &h);
+    Ok(())
+}
+
+/// One scatter pass (method 2): every column adds `h - n * a` to itself and `a` to each
+/// receiver in `acc` (zeroed first), all from the old heights.
+pub fn slope_scatter_pass(
+    heights: &[u32],
+    pen: &[Penetration],
+    area: Rect,
+    thresholds: [u32; 2],
+    roughness_q15: u32,
+    acc: &mut [u32],
+) {
+    let (w, h) = (area.size.x as usize, area.size.y as usize);
+    acc.fill(0);
+    for y in 0..h {
+        for x in 0..w {
+            let me = y * w + x;
+            let (a, mask) = column_outflow(heights, pen, (w, h), (x, y), thresholds, roughness_q15);
+            acc[me] = acc[me].wrapping_add(heights[me] - a * mask.count_ones());
+            if mask == 0 {
+                continue;
+            }
+            for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                if mask & (1 << k) != 0 {
+                    let q = (y as i64 + i64::from(*oy)) as usize * w
+                        + (x as i64 + i64::from(*ox)) as usize;
+                    acc[q] = acc[q].wrapping_add(a);
+                }
+            }
+        }
+    }
+}
+
+/// Method 2 (SSBO): `iterations` [`slope_scatter_pass`]es over `area`.
+pub fn even_out_slopes_scatter(
+    map: &mut FixedPointMap,
+    pen: &Grid<Penetration>,
+    area: Rect,
+    thresholds: [u32; 2],
+    roughness_q15: u32,
+    iterations: u32,
+) -> Result<(), GranularError> {
+    check(map, pen, area)?;
+    let mut h = read_area(map, area);
+    let mut acc = h.clone();
+    for _ in 0..iterations {
+        slope_scatter_pass(
+            &h,
+            pen.as_slice(),
+            area,
+            thresholds,
+            roughness_q15,
+            &mut acc,
+        );
+        std::mem::swap(&mut h, &mut acc);
+    }
+    write_area(map, area, &h);
+    Ok(())
+}
