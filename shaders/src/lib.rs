@@ -20,6 +20,19 @@ pub const SKY: &str = include_str!("wgsl/sky.wgsl");
 /// `ClipmapRenderer`: displaced, morphed, lit clipmap blocks.
 pub const CLIPMAP: &str = include_str!("wgsl/clipmap.wgsl");
 
+/// Granular deformation (seed 001 ch. 4): penetration texture from depth and heights.
+pub const GRANULAR_PENETRATION: &str = include_str!("wgsl/granular_penetration.wgsl");
+/// Granular deformation: jump flooding passes (closest seed per column).
+pub const GRANULAR_JFA: &str = include_str!("wgsl/granular_jfa.wgsl");
+/// Granular deformation: displacement of intersected material (the three methods).
+pub const GRANULAR_DISPLACE: &str = include_str!("wgsl/granular_displace.wgsl");
+/// Granular deformation: evening out slopes (interleaved and scatter).
+pub const GRANULAR_SLOPE: &str = include_str!("wgsl/granular_slope.wgsl");
+/// Granular deformation: symmetric-difference normals and their blur, float heights.
+pub const GRANULAR_NORMALS: &str = include_str!("wgsl/granular_normals.wgsl");
+/// Granular deformation: depth of objects seen from below (render pipeline).
+pub const GRANULAR_DEPTH: &str = include_str!("wgsl/granular_depth.wgsl");
+
 /// The markers around the default user procedural stamp function in [`STAMP`]; a user stamp
 /// replaces the text between them with its own `fn user_stamp_value(local: vec2<f32>) -> f32`.
 pub const USER_STAMP_MARKERS: (&str, &str) = ("// USER_STAMP_BEGIN", "// USER_STAMP_END");
@@ -30,4 +43,10 @@ pub const ALL: &[(&str, &str)] = &[
     ("normals", NORMALS),
     ("sky", SKY),
     ("clipmap", CLIPMAP),
+    ("granular_penetration", GRANULAR_PENETRATION),
+    ("granular_jfa", GRANULAR_JFA),
+    ("granular_displace", GRANULAR_DISPLACE),
+    ("granular_slope", GRANULAR_SLOPE),
+    ("granular_normals", GRANULAR_NORMALS),
+    ("granular_depth", GRANULAR_DEPTH),
 ];

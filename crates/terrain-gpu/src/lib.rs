@@ -38,6 +38,7 @@ pub mod clipmap;
 pub mod compute;
 pub mod context;
 pub mod download;
+pub mod granular;
 pub mod error;
 pub mod maps;
 pub mod normals;

@@ -1,0 +1,1 @@
+//! Depth of objects seen from below on the GPU (being written).

@@ -1,0 +1,3 @@
+// Granular depth pass (placeholder, being written).
+@compute @workgroup_size(1, 1, 1)
+fn main() {}

@@ -1,0 +1,3 @@
+// Granular normals pass (placeholder, being written).
+@compute @workgroup_size(1, 1, 1)
+fn main() {}
