@@ -131,7 +131,53 @@ fn golden() -> Result<()> {
 /// fallback formats stay honest, and checks frames, summary and report each time.
 fn smoke() -> Result<()> {
     smoke_on(None)?;
-    smoke_on(Some("gl"))
+    smoke_on(Some("gl"))?;
+    smoke_snow()
+}
+
+/// The snow scenario at a tiny size: frames, and a granular volume that never changes.
+fn smoke_snow() -> Result<()> {
+    let out = root().join("target").join("ci-smoke-snow");
+    if out.exists() {
+        std::fs::remove_dir_all(&out).context("could not clear the smoke output folder")?;
+    }
+    let out_s = out.to_string_lossy().into_owned();
+    cargo(
+        &[
+            "run",
+            "--locked",
+            "-p",
+            "terrain-demo",
+            "--",
+            "--scenario",
+            "snow",
+            "--size",
+            "128",
+            "--frames",
+            "6",
+            "--resolution",
+            "160x96",
+            "--out",
+            &out_s,
+        ],
+        &[],
+    )?;
+    let text = std::fs::read_to_string(out.join("report.json")).context("no snow report")?;
+    let report: serde_json::Value = serde_json::from_str(&text).context("invalid report.json")?;
+    let volumes: Vec<u64> = report["frames"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|f| f["granular_volume"].as_u64())
+        .collect();
+    if volumes.len() != 6 || volumes.iter().any(|v| *v != volumes[0]) {
+        bail!("snow: granular volume must be reported and constant, got {volumes:?}");
+    }
+    eprintln!(
+        "smoke (snow): 6 frames, granular volume constant at {}",
+        volumes[0]
+    );
+    Ok(())
 }
 
 /// One smoke run; `backend` sets `WGPU_BACKEND`.

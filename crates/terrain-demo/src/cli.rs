@@ -10,9 +10,14 @@ pub struct Cli {
     /// Folder the captures and report.json are written to.
     #[arg(long, default_value = "captures")]
     pub out: PathBuf,
-    /// Side of the procedural default terrain in texels (any size, not only powers of two).
-    #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(16..=16384))]
-    pub size: u32,
+    /// What happens: `default` (footprints, craters and a shockwave on the coarse-map) or
+    /// `snow` (a vehicle and a walker crossing a snow field with granular deformation).
+    #[arg(long, value_enum, default_value_t = ScenarioKind::Default)]
+    pub scenario: ScenarioKind,
+    /// Side of the procedural terrain in texels (any size, not only powers of two); default
+    /// 2048 (205 m at 0.1 m), 512 for the snow field (25.6 m at 0.05 m).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(16..=16384))]
+    pub size: Option<u32>,
     /// Seed of the procedural terrain and of the scripted deformations.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -53,6 +58,15 @@ fn parse_resolution(s: &str) -> Result<glam::UVec2, String> {
     Ok(size)
 }
 
+/// The scenarios the demo can run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ScenarioKind {
+    /// Footprints, Gaussian craters and a shockwave across the wrap corner.
+    Default,
+    /// A four-wheeled vehicle and a walker crossing a snow field.
+    Snow,
+}
+
 /// Parses `WIDTHxHEIGHT`.
 fn parse_size(s: &str) -> Result<glam::UVec2, String> {
     let (w, h) = s
@@ -86,5 +100,7 @@ mod tests {
         assert!(Cli::try_parse_from(["demo", "--size", "100", "--seed", "3"]).is_ok());
         assert!(Cli::try_parse_from(["demo", "--resolution", "8x8"]).is_err());
         assert!(Cli::try_parse_from(["demo", "--resolution", "640x360"]).is_ok());
+        assert!(Cli::try_parse_from(["demo", "--scenario", "snow"]).is_ok());
+        assert!(Cli::try_parse_from(["demo", "--scenario", "mud"]).is_err());
     }
 }

@@ -31,10 +31,12 @@ pub struct GpuScene {
     renderer: ClipmapRenderer,
     layout: ClipmapLayout,
     target: OffscreenTarget,
-    footprint: GpuTextureStamp,
+    footprint: Option<GpuTextureStamp>,
     readback: RegionReadback,
     timer: GpuTimer,
     style: TerrainStyle,
+    /// Lowest and highest height the map can hold (metres): the culling boxes' vertical extent.
+    height_range: (f32, f32),
 }
 
 /// What deforming one frame did.
@@ -63,7 +65,11 @@ pub struct RenderedFrame {
 
 impl GpuScene {
     /// Uploads `map` and builds every pass, rendering at `resolution`.
-    pub fn new(map: &CoarseMap, footprint: &TextureStamp, resolution: UVec2) -> Result<Self> {
+    pub fn new(
+        map: &CoarseMap,
+        footprint: Option<&TextureStamp>,
+        resolution: UVec2,
+    ) -> Result<Self> {
         let ctx = GpuContext::new_headless().context("no GPU adapter for the 3D frames")?;
         let (device, queue) = (&ctx.device, &ctx.queue);
         let gpu_map = GpuHeightMap::from_map(device, queue, map)?;
@@ -83,9 +89,12 @@ impl GpuScene {
             renderer: ClipmapRenderer::new(device, &layout)?,
             layout,
             target: OffscreenTarget::new(device, resolution)?,
-            footprint: GpuTextureStamp::new(device, footprint)?,
+            footprint: footprint
+                .map(|f| GpuTextureStamp::new(device, f))
+                .transpose()?,
             readback: RegionReadback::new(4)?,
             timer: GpuTimer::new(device, queue),
+            height_range: (lo, hi),
             style: TerrainStyle {
                 ramp: (lo, hi),
                 fog_density: 0.008,
@@ -93,6 +102,12 @@ impl GpuScene {
             },
             ctx,
         })
+    }
+
+    /// Sets the heights (metres) the colour ramp spans: below `low` is valley green, above
+    /// `high` snow white.
+    pub fn set_ramp(&mut self, low: f32, high: f32) {
+        self.style.ramp = (low, high);
     }
 
     /// The adapter's name and backend.
@@ -117,7 +132,10 @@ impl GpuScene {
         let stamp_time = self.timer.time(device, queue, |encoder| {
             for (i, d) in plan.deformations.iter().enumerate() {
                 let stamp = match (d.kind, &shock) {
-                    (StampKind::Footprint, _) => GpuStamp::Texture(&self.footprint),
+                    (StampKind::Footprint, _) => match &self.footprint {
+                        Some(f) => GpuStamp::Texture(f),
+                        None => continue,
+                    },
                     (StampKind::Crater, _) => GpuStamp::Gaussian(crater),
                     (StampKind::Shockwave, Some(s)) => GpuStamp::Texture(s),
                     (StampKind::Shockwave, None) => continue,
@@ -148,6 +166,18 @@ impl GpuScene {
         })
     }
 
+    /// Replaces the GPU map with `map` (same size) and recomputes its normals: for maps
+    /// deformed on the CPU (the snow scenario's granular simulation).
+    pub fn upload(&mut self, map: &CoarseMap) -> Result<GpuTiming> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        self.map.write(queue, map)?;
+        let timing = self.timer.time(device, queue, |encoder| {
+            self.normal_pass
+                .encode_full(device, encoder, &self.map, &self.normals)
+        })?;
+        Ok(timing)
+    }
+
     /// One step of the collision readback: the scheduler requests merged dirty regions of the
     /// GPU map after the quiet gap and applies those that arrived to `mirror`, never waiting.
     pub fn update_collision(
@@ -175,7 +205,7 @@ impl GpuScene {
         let placement = self.layout.place(
             Vec2::new(camera.position.x, camera.position.z),
             self.map.texel_size(),
-            (self.style.ramp.0, self.style.ramp.1),
+            self.height_range,
             Some(&frustum),
         )?;
         let lod_ms = t.elapsed().as_secs_f64() * 1e3;

@@ -2,15 +2,18 @@
 //! `report.json` with per-frame timings. Everything it does is glue over the library crates.
 
 mod camera_rig;
+mod capture;
 mod cli;
 mod gpu_scene;
 mod images;
 mod report;
 mod scenario;
+mod snow;
 
 use anyhow::{Context, Result, bail};
+use capture::Capture;
 use clap::Parser;
-use cli::Cli;
+use cli::{Cli, ScenarioKind};
 use glam::UVec2;
 use gpu_scene::GpuScene;
 use report::{FrameReport, Report};
@@ -26,6 +29,9 @@ use terrain_core::{
 use terrain_physics::{
     CollisionMirror, CpuRegionSource, ReadbackScheduler, RequestId, SchedulerConfig,
 };
+
+/// Side of the default scenario's procedural terrain in texels (205 m at 0.1 m).
+const DEFAULT_SIZE: u32 = 2048;
 
 /// Seconds of scenario time per frame (30 frames per second).
 const FRAME_DT: f64 = 1.0 / 30.0;
@@ -86,10 +92,11 @@ fn load_map(cli: &Cli) -> Result<(CoarseMap, String)> {
             let defaults = TerrainParams::default();
             // Octaves whose lattice cells are finer than ~16 texels only add noise that hides
             // the deformations, so stop there.
-            let cells = (cli.size / 16 / defaults.base_period).max(1);
+            let size = cli.size.unwrap_or(DEFAULT_SIZE);
+            let cells = (size / 16 / defaults.base_period).max(1);
             let octaves = (u32::BITS - cells.leading_zeros()).clamp(1, defaults.octaves);
             let params = TerrainParams {
-                size: UVec2::splat(cli.size),
+                size: UVec2::splat(size),
                 seed: cli.seed,
                 octaves,
                 // Gentler small scales than the library default: a walkable landscape.
@@ -120,6 +127,14 @@ fn load_map(cli: &Cli) -> Result<(CoarseMap, String)> {
 }
 
 fn run(cli: &Cli) -> Result<()> {
+    match cli.scenario {
+        ScenarioKind::Default => run_default(cli),
+        ScenarioKind::Snow => run_snow(cli),
+    }
+}
+
+/// The default scenario: footprints, craters and a shockwave on the coarse-map.
+fn run_default(cli: &Cli) -> Result<()> {
     std::fs::create_dir_all(&cli.out)
         .with_context(|| format!("cannot create output folder {}", cli.out.display()))?;
     let t = Instant::now();
@@ -135,7 +150,7 @@ fn run(cli: &Cli) -> Result<()> {
     let mut gpu = if cli.no_gpu {
         None
     } else {
-        match GpuScene::new(&map, scenario.footprint(), cli.resolution) {
+        match GpuScene::new(&map, Some(scenario.footprint()), cli.resolution) {
             Ok(scene) => Some(scene),
             Err(e) => {
                 eprintln!("warning: {e:#}; writing top-down overview frames only");
@@ -167,10 +182,7 @@ fn run(cli: &Cli) -> Result<()> {
     // Simulated time: the scenario runs at 30 frames per second whatever the render speed.
     let sim_start = Instant::now();
 
-    let mut frames = Vec::with_capacity(cli.frames as usize);
-    let mut thumbs = Vec::new();
-    let thumb_every = cli.frames.div_ceil(12).max(1);
-    let mut totals: BTreeMap<String, f64> = BTreeMap::new();
+    let mut capture = Capture::new(&cli.out, cli.frames);
     for index in 0..cli.frames {
         let mut timings = BTreeMap::new();
         let mut timestamps = BTreeMap::new();
@@ -266,45 +278,34 @@ fn run(cli: &Cli) -> Result<()> {
             None => overview,
         };
 
-        let t = Instant::now();
-        let file = format!("frame_{index:04}.png");
-        let path = cli.out.join(&file);
-        io::write_png_rgba8(&path, &image)
-            .with_context(|| format!("writing {}", path.display()))?;
-        timings.insert("write".to_string(), ms(t));
-        if index % thumb_every == thumb_every - 1 || index + 1 == cli.frames {
-            let w = 320.min(image.width());
-            let h = (u64::from(image.height()) * u64::from(w) / u64::from(image.width())) as u32;
-            thumbs.push(images::downscale(&image, UVec2::new(w, h.max(1))));
-        }
-
-        for (k, v) in &timings {
-            *totals.entry(k.clone()).or_default() += v;
-        }
-        frames.push(FrameReport {
-            index,
-            file,
-            footprints: plan.count(StampKind::Footprint),
-            craters: plan.count(StampKind::Crater),
-            shockwaves: plan.count(StampKind::Shockwave),
-            dirty_texels: dirty.iter().map(|r| r.area()).sum(),
-            triangles,
-            camera_clearance_m,
-            readback_ms,
-            timings_ms: timings,
-            gpu_timestamps_ms: timestamps,
-        });
+        capture.push(
+            &image,
+            FrameReport {
+                index,
+                file: String::new(),
+                footprints: plan.count(StampKind::Footprint),
+                craters: plan.count(StampKind::Crater),
+                shockwaves: plan.count(StampKind::Shockwave),
+                dirty_texels: dirty.iter().map(|r| r.area()).sum(),
+                triangles,
+                camera_clearance_m,
+                readback_ms,
+                timings_ms: timings,
+                gpu_timestamps_ms: timestamps,
+                granular_volume: None,
+                granular_removed: None,
+            },
+        )?;
     }
     io::write_png16(cli.out.join("terrain_final.png"), map.grid())?;
-    write_summary(cli, &frames, &thumbs)?;
-
     let resolution = if gpu.is_some() {
         cli.resolution
     } else {
         overview_px
     };
-    let report = Report {
+    let report = capture.finish(Report {
         source,
+        scenario: "default".into(),
         size: [size.x, size.y],
         texel_size_m: map.texel_size(),
         seed: cli.seed,
@@ -313,40 +314,156 @@ fn run(cli: &Cli) -> Result<()> {
         resolution: resolution.to_array(),
         load_ms,
         initial_normals_ms,
-        frames,
-        totals_ms: totals,
-    };
-    let json = serde_json::to_vec_pretty(&report)?;
-    io::write_atomic(cli.out.join("report.json"), &json)?;
+        frames: Vec::new(),
+        totals_ms: BTreeMap::new(),
+    })?;
+    print_done(cli, &report);
+    Ok(())
+}
+
+/// The closing line of a run.
+fn print_done(cli: &Cli, report: &Report) {
     eprintln!(
         "wrote {} frames of {}x{} to {} on {} ({})",
-        cli.frames,
-        resolution.x,
-        resolution.y,
+        report.frames.len(),
+        report.resolution[0],
+        report.resolution[1],
         cli.out.display(),
         report.adapter,
         report.backend,
     );
-    Ok(())
 }
 
-/// Steps shown in the timing plot of `summary.png`, bottom to top.
-const PLOTTED: [&str; 5] = ["stamp", "normals", "render", "capture", "write"];
+/// Side of the snow field in texels by default (25.6 m at 0.05 m).
+const SNOW_SIZE: u32 = 512;
 
-/// `summary.png`: a contact sheet of frames above a stacked bar chart of the step timings.
-fn write_summary(cli: &Cli, frames: &[FrameReport], thumbs: &[images::Image]) -> Result<()> {
-    let series: Vec<Vec<f64>> = PLOTTED
-        .iter()
-        .map(|k| {
-            frames
-                .iter()
-                .map(|f| f.timings_ms.get(*k).copied().unwrap_or(0.0))
-                .collect()
-        })
-        .collect();
-    let columns = 4;
-    let plot = images::timing_plot(&series, UVec2::new(columns * 324 - 4, 160))?;
-    let sheet = images::contact_sheet(thumbs, columns, 320, &plot)?;
-    io::write_png_rgba8(cli.out.join("summary.png"), &sheet)?;
+/// The snow scenario: a vehicle and a walker cross a snow field; the granular simulation
+/// (terrain-core's reference) deforms it, the clipmap renders it, the camera walks on it.
+fn run_snow(cli: &Cli) -> Result<()> {
+    if cli.heightmap.is_some() {
+        bail!("--heightmap is not used by the snow scenario (it generates its snow field)");
+    }
+    std::fs::create_dir_all(&cli.out)
+        .with_context(|| format!("cannot create output folder {}", cli.out.display()))?;
+    let size = cli.size.unwrap_or(SNOW_SIZE);
+    let t = Instant::now();
+    let params = terrain_core::granular::GranularParams::snow();
+    let mut snow = snow::SnowScenario::new(size, cli.seed, params)?;
+    let mut coarse = snow.coarse_map()?;
+    let load_ms = ms(t);
+    io::write_png16(cli.out.join("terrain.png"), coarse.grid())?;
+
+    let mut gpu = if cli.no_gpu {
+        None
+    } else {
+        match GpuScene::new(&coarse, None, cli.resolution) {
+            Ok(mut scene) => {
+                // A snow field is white at any height; only steep rims shade to rock.
+                scene.set_ramp(-20.0, -10.0);
+                Some(scene)
+            }
+            Err(e) => {
+                eprintln!("warning: {e:#}; writing top-down overview frames only");
+                None
+            }
+        }
+    };
+    let (adapter, backend) = gpu
+        .as_ref()
+        .map_or(("none".into(), "none".into()), GpuScene::adapter);
+    let overview_px = UVec2::splat(cli.overview_size.min(size));
+    let shade = HillshadeParams::with_size(overview_px);
+    // The field is deformed on the CPU here, so the collision mirror takes each frame's map
+    // directly (no readback needed); the camera walks on it behind the vehicle.
+    let mirror = CollisionMirror::from_map(&coarse)?;
+    let start = glam::Vec2::new(coarse.extent_m().x * 0.45, 0.5);
+    let mut rig = camera_rig::CameraRig::new(start, terrain_core::bilinear(&coarse, start)?);
+    let mut capture = Capture::new(&cli.out, cli.frames);
+    for _ in 0..cli.frames {
+        let mut timings = BTreeMap::new();
+        let mut timestamps = BTreeMap::new();
+        let t = Instant::now();
+        let frame = snow.step()?;
+        timings.insert("granular".to_string(), ms(t));
+        coarse = snow.coarse_map()?;
+        let t = Instant::now();
+        mirror.apply_next(terrain_core::Rect::from_size(coarse.size()), coarse.grid())?;
+        let collider = mirror.collider();
+        let camera = rig.step(frame.vehicle, FRAME_DT as f32, &collider, |p| {
+            snow.height(p)
+        })?;
+        let eye = rig.eye();
+        let camera_clearance_m =
+            eye.y - terrain_core::bilinear(&coarse, glam::Vec2::new(eye.x, eye.z))?;
+        timings.insert("physics".to_string(), ms(t));
+
+        let t = Instant::now();
+        let normals = DerivativeMap::from_map(&coarse);
+        let overview = hillshade(&coarse, &normals, &shade)?;
+        timings.insert("overview".to_string(), ms(t));
+        let mut triangles = 0;
+        let image = match gpu.as_mut() {
+            Some(scene) => {
+                let upload = scene.upload(&coarse)?;
+                timings.insert("normals".to_string(), upload.ms);
+                let mut rendered = scene.render(&camera)?;
+                timings.insert("render".to_string(), rendered.render.ms);
+                if let Some(ts) = rendered.render.timestamp_ms {
+                    timestamps.insert("render".to_string(), ts);
+                }
+                timings.insert("lod".to_string(), rendered.lod_ms);
+                timings.insert("capture".to_string(), rendered.capture_ms);
+                triangles = rendered.triangles;
+                let uv = glam::Vec2::new(camera.position.x, camera.position.z) / coarse.extent_m();
+                images::inset_overview(&mut rendered.image, &overview, uv);
+                rendered.image
+            }
+            None => overview,
+        };
+        capture.push(
+            &image,
+            FrameReport {
+                index: 0,
+                file: String::new(),
+                footprints: 0,
+                craters: 0,
+                shockwaves: 0,
+                dirty_texels: frame
+                    .report
+                    .active_areas
+                    .iter()
+                    .map(|a| a.rect.area())
+                    .sum(),
+                triangles,
+                camera_clearance_m,
+                readback_ms: None,
+                timings_ms: timings,
+                gpu_timestamps_ms: timestamps,
+                granular_volume: Some(frame.report.volume),
+                granular_removed: Some(snow.removed()),
+            },
+        )?;
+    }
+    io::write_png16(cli.out.join("terrain_final.png"), coarse.grid())?;
+    let resolution = if gpu.is_some() {
+        cli.resolution
+    } else {
+        overview_px
+    };
+    let report = capture.finish(Report {
+        source: "procedural snow field".into(),
+        scenario: "snow".into(),
+        size: [size, size],
+        texel_size_m: coarse.texel_size(),
+        seed: cli.seed,
+        adapter,
+        backend,
+        resolution: resolution.to_array(),
+        load_ms,
+        initial_normals_ms: 0.0,
+        frames: Vec::new(),
+        totals_ms: BTreeMap::new(),
+    })?;
+    print_done(cli, &report);
     Ok(())
 }

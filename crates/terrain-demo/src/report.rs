@@ -12,6 +12,8 @@ pub struct Report {
     pub size: [u32; 2],
     /// Metres per texel.
     pub texel_size_m: f32,
+    /// The scenario: `default` or `snow`.
+    pub scenario: String,
     /// Scenario (and terrain) seed.
     pub seed: u64,
     /// The GPU adapter's name, or "none" for overview-only frames.
@@ -54,6 +56,13 @@ pub struct FrameReport {
     /// application (the longest, if several landed).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub readback_ms: Option<f64>,
+    /// Snow scenario: the u64 sum of the granular heights after the frame (constant with
+    /// compression 0: the volume is preserved).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub granular_volume: Option<u64>,
+    /// Snow scenario: material removed by compression so far, in height units.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub granular_removed: Option<u64>,
     /// Milliseconds per step: `stamp`, `normals` and `render` (sky + terrain) are the wall
     /// time of submitting the GPU work and waiting for it; `lod` (clipmap placement and
     /// culling), `capture` (image readback), `cpu_mirror` (the same stamps and normals on the
