@@ -1,3 +1,65 @@
-// Granular penetration pass (placeholder, being written).
-@compute @workgroup_size(1, 1, 1)
-fn main() {}
+// PenetrationPass: the penetration texture of an active area (seed 001 sec 4.1.3, table 4.1),
+// bit for bit as terrain_core::granular::penetration_texture.
+
+// The uniform block shared by the granular integer passes (GranularUniform in Rust).
+struct Granular {
+    // Active area in map texels.
+    area_min: vec2<u32>,
+    area_size: vec2<u32>,
+    map_width: u32,
+    // Jump flooding step and pass index.
+    step: u32,
+    pass_index: u32,
+    // 0: Euclidean squared, 1: Manhattan, 2: Chebyshev.
+    metric: u32,
+    keep_q15: u32,
+    // Obstacle margin in height units.
+    margin: u32,
+    threshold_orth: u32,
+    threshold_diag: u32,
+    roughness_q15: u32,
+    parity: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+struct Penetration {
+    seed_x: u32,
+    seed_y: u32,
+    kind: i32,
+    penetration: u32,
+}
+
+const NO_SEED: u32 = 0xffffffffu;
+const NO_OBJECT: u32 = 0xffffffffu;
+const SEED: i32 = -3;
+const OBSTACLE: i32 = -2;
+const PENETRATING: i32 = -1;
+
+@group(0) @binding(0) var<uniform> g: Granular;
+@group(0) @binding(1) var<storage, read> heights: array<u32>;
+// Depth from below of the area (area-local, row-major), NO_OBJECT where nothing is above.
+@group(0) @binding(2) var<storage, read> depth: array<u32>;
+@group(0) @binding(3) var<storage, read_write> pen: array<Penetration>;
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= g.area_size.x || id.y >= g.area_size.y {
+        return;
+    }
+    let i = id.y * g.area_size.x + id.x;
+    let gx = g.area_min.x + id.x;
+    let gy = g.area_min.y + id.y;
+    let h = heights[gy * g.map_width + gx];
+    let d = depth[i];
+    let p = h - min(h, d);
+    var out: Penetration;
+    if p > 0u {
+        out = Penetration(NO_SEED, NO_SEED, PENETRATING, p);
+    } else if d != NO_OBJECT && d - h <= g.margin {
+        out = Penetration(NO_SEED, NO_SEED, OBSTACLE, 0u);
+    } else {
+        out = Penetration(gx, gy, SEED, 0u);
+    }
+    pen[i] = out;
+}
