@@ -1,15 +1,20 @@
 //! GPU time of one granular step (penetration, jump flooding, closest-seed displacement and
 //! 10 scatter slope iterations) over one active area of about 3 774, 15 100, 60 398 and
 //! 241 591 columns on maps of 512 to 4096 a side (the setting of seed 001 table 5.4), as the
-//! wall time of submit + wait measured by `GpuTimer`. Prints the adapter first.
+//! wall time of submit + wait measured by `GpuTimer`; then whole steps with 1 to 8 vehicles,
+//! active areas versus the full map (table 5.7). Prints the adapter first.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use glam::{Affine3A, Vec3};
 use glam::{IVec2, UVec2, Vec2};
 use std::time::Duration;
-use terrain_core::granular::{DisplacementMethod, GranularParams, NO_OBJECT, SlopeMethod};
+use terrain_core::granular::{
+    AreaMode, DisplacementMethod, GranularObject, GranularParams, NO_OBJECT, SlopeMethod, TriMesh,
+};
 use terrain_core::{FixedPointMap, Grid, Rect};
 use terrain_gpu::granular::{
-    DisplacePass, GpuGranularMap, GranularScratch, JumpFloodPass, PenetrationPass, SlopePass,
+    DisplacePass, GpuGranularMap, GpuGranularStep, GranularScratch, JumpFloodPass, PenetrationPass,
+    SlopePass,
 };
 use terrain_gpu::{GpuContext, GpuTimer};
 
@@ -100,7 +105,71 @@ fn bench(c: &mut Criterion) {
         });
     }
     group.finish();
+    vehicles(c, &ctx);
     ctx.check().expect("validation");
+}
+
+/// Seed 001 table 5.7 setting, as terrain-core's CPU bench: a 2048 map over 300 m, box cars
+/// sinking 0.1 m into 1 m of snow, closest seed + scatter, one slope iteration; whole steps
+/// (depth rasterised on the CPU and uploaded) over the merged active areas, and over the full
+/// map for 1 and 8 cars.
+fn vehicles(c: &mut Criterion, ctx: &GpuContext) {
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut g = c.benchmark_group("gpu_granular_vehicles_2048");
+    g.sample_size(10);
+    g.warm_up_time(Duration::from_millis(200));
+    g.measurement_time(Duration::from_secs(1));
+    let texel = 300.0 / 2048.0;
+    let params = GranularParams {
+        num_iterations_even_out_slopes: 1,
+        active_area_margin: 40,
+        ..GranularParams::default()
+    };
+    let car = TriMesh::cuboid(Vec3::new(2.0, 0.8, 4.0)).expect("car");
+    let snow = FixedPointMap::fixed_point(
+        Grid::new(2048, 2048, 10_000u32).expect("grid"),
+        10_000,
+        texel,
+    )
+    .expect("map");
+    let gmap = GpuGranularMap::from_map(device, queue, &snow).expect("upload");
+    for cars in 1..=8u32 {
+        let objs: Vec<GranularObject<'_>> = (0..cars)
+            .map(|i| {
+                GranularObject::new(
+                    &car,
+                    Affine3A::from_translation(Vec3::new(30.0 + 33.0 * i as f32, 1.7, 150.0)),
+                )
+            })
+            .collect();
+        let modes: &[AreaMode] = if cars == 1 || cars == 8 {
+            &[AreaMode::ActiveAreas, AreaMode::FullMap]
+        } else {
+            &[AreaMode::ActiveAreas]
+        };
+        for &mode in modes {
+            let mut step = GpuGranularStep::new(device, params).expect("step");
+            step.area_mode = mode;
+            let name = match mode {
+                AreaMode::ActiveAreas => "active_areas",
+                AreaMode::FullMap => "full_map",
+            };
+            g.bench_function(BenchmarkId::new(name, cars), |b| {
+                b.iter_custom(|iters| {
+                    (0..iters)
+                        .map(|_| {
+                            let t = std::time::Instant::now();
+                            step.step(device, queue, &gmap, &objs).expect("gpu step");
+                            t.elapsed()
+                        })
+                        .sum()
+                })
+            });
+            // Restore the snow so every case starts from the same field.
+            gmap.write(queue, &snow).expect("reset");
+        }
+    }
+    g.finish();
 }
 
 criterion_group!(benches, bench);

@@ -233,6 +233,152 @@ fn displace_multiple_targets_matches_cpu_bit_for_bit() {
     run_displace(DisplacementMethod::MultipleTargets, 20000);
 }
 
+/// Runs the iterative method on the GPU and on the CPU from the same penetration texture and
+/// seeds, for every `(keep, iterations)`, and asserts equal maps and removed amounts.
+fn check_iterative(
+    ctx: &GpuContext,
+    pass: &DisplacePass,
+    f: &Fixture,
+    metric: DistanceMetric,
+    runs: &[(u32, u32)],
+) {
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let (_, scratch, idx) = gpu_front(ctx, f, metric, true);
+    let seeds = jump_flood(&f.pen, f.area, metric, true).expect("jfa");
+    for &(keep, iterations) in runs {
+        let gmap = GpuGranularMap::from_map(device, queue, &f.map).expect("upload");
+        let mut enc = device.create_command_encoder(&Default::default());
+        scratch.clear_removed(&mut enc);
+        pass.encode_iterative(
+            device, &mut enc, &gmap, f.area, keep, iterations, metric, idx, &scratch,
+        )
+        .expect("encode");
+        queue.submit([enc.finish()]);
+        let gpu = gmap.read(device, queue).expect("read");
+        let removed = scratch.read_removed(device, queue).expect("removed");
+        ctx.check().expect("validation");
+        let mut cpu = f.map.clone();
+        let cpu_removed =
+            displace_iterative(&mut cpu, &f.pen, &seeds, f.area, keep, iterations, metric)
+                .expect("cpu");
+        // Without seeds, nothing moves unless material is removed.
+        let has_seed = f.pen.as_slice().iter().any(|p| p.seed_x != NO_SEED);
+        assert!(
+            (cpu != f.map) == (has_seed || keep < 32768),
+            "nothing displaced"
+        );
+        let what = format!(
+            "Iterative {metric:?} keep {keep} iterations {iterations} area {:?}",
+            f.area
+        );
+        assert_same(gpu.grid().as_slice(), cpu.grid().as_slice(), &what);
+        assert_eq!(removed, cpu_removed, "{what}");
+        if keep == 32768 {
+            assert_eq!(gpu.raw_sum(), f.map.raw_sum(), "{what}");
+        }
+    }
+}
+
+/// Keep factors of the other displacement tests, with even and odd iteration counts (the
+/// final carried grid is either ping-pong buffer).
+const ITERATIVE_RUNS: [(u32, u32); 6] = [
+    (32768, 10),
+    (32768, 1),
+    (32768, 33),
+    (12345, 10),
+    (20000, 7),
+    (12345, 0),
+];
+
+#[test]
+fn displace_iterative_matches_cpu_bit_for_bit() {
+    let Some(ctx) = context_or_skip("displace_iterative_matches_cpu_bit_for_bit") else {
+        return;
+    };
+    let pass = DisplacePass::new(&ctx.device).expect("pass");
+    for metric in [
+        DistanceMetric::Euclidean,
+        DistanceMetric::Manhattan,
+        DistanceMetric::Chebyshev,
+    ] {
+        for (mw, mh, x, y, w, h) in AREAS {
+            let f = fixture(
+                UVec2::new(mw, mh),
+                Rect::new(IVec2::new(x, y), UVec2::new(w, h)),
+            );
+            // The passes really move material: more iterations give another map.
+            let seeds = jump_flood(&f.pen, f.area, metric, true).expect("jfa");
+            let moved = |it| {
+                let mut m = f.map.clone();
+                displace_iterative(&mut m, &f.pen, &seeds, f.area, 32768, it, metric).expect("cpu");
+                m
+            };
+            assert_ne!(moved(0), moved(10), "{metric:?}: the passes moved nothing");
+            check_iterative(&ctx, &pass, &f, metric, &ITERATIVE_RUNS);
+        }
+    }
+}
+
+/// An area without any seed (every column penetrates): the carried material stays on its
+/// column, as on the CPU.
+#[test]
+fn displace_iterative_without_seeds_matches_cpu() {
+    let Some(ctx) = context_or_skip("displace_iterative_without_seeds_matches_cpu") else {
+        return;
+    };
+    let pass = DisplacePass::new(&ctx.device).expect("pass");
+    let map = bumpy_map(40, 30, 400);
+    let area = Rect::new(IVec2::new(3, 2), UVec2::new(20, 17));
+    let depth = Grid::from_fn(area.size.x, area.size.y, |i, j| {
+        map.grid().as_slice()[map.grid().index(3 + i, 2 + j)] - 800 - (i * 37 + j * 11) % 500
+    })
+    .expect("depth");
+    let mut pen = empty_pen(area.size);
+    penetration_texture(&map, &depth, area, 5000, &mut pen).expect("pen");
+    assert!(
+        pen.as_slice()
+            .iter()
+            .all(|p| p.column_kind() == ColumnKind::Penetrating)
+    );
+    let f = Fixture {
+        map,
+        area,
+        depth,
+        pen,
+    };
+    check_iterative(
+        &ctx,
+        &pass,
+        &f,
+        DistanceMetric::Euclidean,
+        &[(32768, 10), (12345, 3)],
+    );
+}
+
+#[test]
+fn displace_encode_refuses_iterative_without_its_settings() {
+    let Some(ctx) = context_or_skip("displace_encode_refuses_iterative_without_its_settings")
+    else {
+        return;
+    };
+    let f = fixture(UVec2::new(64, 64), Rect::from_size(UVec2::new(64, 64)));
+    let (gmap, scratch, idx) = gpu_front(&ctx, &f, DistanceMetric::Euclidean, true);
+    let pass = DisplacePass::new(&ctx.device).expect("pass");
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    let r = pass.encode(
+        &ctx.device,
+        &mut enc,
+        &gmap,
+        f.area,
+        DisplacementMethod::Iterative,
+        32768,
+        idx,
+        &scratch,
+    );
+    assert!(r.is_err());
+    ctx.check().expect("validation");
+}
+
 fn run_slope(method: SlopeMethod) {
     let Some(ctx) = context_or_skip("slope") else {
         return;

@@ -14,8 +14,9 @@ mod passes;
 mod scratch;
 mod step;
 
+pub use depth::DepthFromBelowPass;
 pub use map::GpuGranularMap;
 pub use normals::GranularNormalsPass;
 pub use passes::{DisplacePass, JumpFloodPass, PenetrationPass, SlopePass};
 pub use scratch::GranularScratch;
-pub use step::{GpuGranularStep, GpuStepReport};
+pub use step::{DepthSource, GpuGranularStep, GpuStepReport};

@@ -201,16 +201,21 @@ impl JumpFloodPass {
     }
 }
 
-/// Displacement of intersected material to the contour (seed 001 sec 4.1.4) by atomic
-/// scatter: [`DisplacementMethod::ClosestSeed`] as
-/// [`terrain_core::granular::displace_closest_seed`] and
+/// Displacement of intersected material to the contour (seed 001 sec 4.1.4):
+/// [`DisplacementMethod::ClosestSeed`] as [`terrain_core::granular::displace_closest_seed`] and
 /// [`DisplacementMethod::MultipleTargets`] as
-/// [`terrain_core::granular::displace_multiple_targets`]. The iterative method is not on the
-/// GPU yet ([`GpuError::Unsupported`]).
+/// [`terrain_core::granular::displace_multiple_targets`] by atomic scatter
+/// ([`DisplacePass::encode`]), and [`DisplacementMethod::Iterative`] as
+/// [`terrain_core::granular::displace_iterative`] by gather passes and a final atomic flush to
+/// the seeds ([`DisplacePass::encode_iterative`], which also takes the iteration count and the
+/// metric).
 #[derive(Debug)]
 pub struct DisplacePass {
     closest: wgpu::ComputePipeline,
     multiple: wgpu::ComputePipeline,
+    iter_init: wgpu::ComputePipeline,
+    iter_pass: wgpu::ComputePipeline,
+    iter_flush: wgpu::ComputePipeline,
     writeback: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
 }
@@ -218,20 +223,55 @@ pub struct DisplacePass {
 impl DisplacePass {
     /// Builds the pipelines.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let layout = layout(device, "DisplacePass", &[false, true, true, false, false]);
+        let layout = layout(
+            device,
+            "DisplacePass",
+            &[false, true, true, false, false, false, false],
+        );
         let src = terrain_shaders::GRANULAR_DISPLACE;
+        let pipe = |label, entry| entry_pipeline(device, label, src, &layout, entry);
         Ok(Self {
-            closest: entry_pipeline(device, "DisplacePass closest", src, &layout, "closest")?,
-            multiple: entry_pipeline(device, "DisplacePass multiple", src, &layout, "multiple")?,
-            writeback: entry_pipeline(device, "DisplacePass writeback", src, &layout, "writeback")?,
+            closest: pipe("DisplacePass closest", "closest")?,
+            multiple: pipe("DisplacePass multiple", "multiple")?,
+            iter_init: pipe("DisplacePass iterative init", "iter_init")?,
+            iter_pass: pipe("DisplacePass iterative pass", "iter_pass")?,
+            iter_flush: pipe("DisplacePass iterative flush", "iter_flush")?,
+            writeback: pipe("DisplacePass writeback", "writeback")?,
             layout,
         })
+    }
+
+    fn bind(
+        &self,
+        device: &wgpu::Device,
+        map: &GpuGranularMap,
+        uniform: &GranularUniform,
+        seeds: usize,
+        scratch: &GranularScratch,
+    ) -> wgpu::BindGroup {
+        bind_buffers(
+            device,
+            "DisplacePass",
+            &self.layout,
+            &[
+                &uniform.buffer(device),
+                map.buffer(),
+                &scratch.pen,
+                &scratch.seeds[seeds & 1],
+                &scratch.acc,
+                &scratch.removed,
+                &scratch.dist,
+                &scratch.carried,
+            ],
+        )
     }
 
     /// Records the displacement over `area` from the penetration texture and seed grid
     /// `seeds` of `scratch` (keep factor `keep_q15`, see
     /// [`terrain_core::granular::GranularParams::keep_q15`]); the removed material is added to
     /// the scratch's removed counter ([`GranularScratch::read_removed`]).
+    /// [`DisplacementMethod::Iterative`] needs more settings: it is refused here
+    /// ([`GpuError::Unsupported`]); use [`DisplacePass::encode_iterative`].
     #[allow(clippy::too_many_arguments)]
     pub fn encode(
         &self,
@@ -252,28 +292,16 @@ impl DisplacePass {
             DisplacementMethod::Iterative => {
                 return Err(GpuError::Unsupported {
                     what: "DisplacePass",
-                    reason: "the iterative displacement method has no GPU pass yet",
+                    reason: "the iterative method needs its iteration count and metric: use \
+                             DisplacePass::encode_iterative",
                 });
             }
         };
         let u = GranularUniform {
             keep_q15,
             ..GranularUniform::for_area(area, map.size().x)
-        }
-        .buffer(device);
-        let bg = bind_buffers(
-            device,
-            "DisplacePass",
-            &self.layout,
-            &[
-                &u,
-                map.buffer(),
-                &scratch.pen,
-                &scratch.seeds[seeds & 1],
-                &scratch.acc,
-                &scratch.removed,
-            ],
-        );
+        };
+        let bg = self.bind(device, map, &u, seeds, scratch);
         encoder.clear_buffer(&scratch.acc, 0, Some(area.area() * 4));
         run(
             encoder,
@@ -281,6 +309,54 @@ impl DisplacePass {
             groups,
             &[(scatter, &bg), (&self.writeback, &bg)],
         );
+        Ok(())
+    }
+
+    /// Records the iterative method (listing 4.2) over `area`, bit for bit as
+    /// [`terrain_core::granular::displace_iterative`]`(.., keep_q15, iterations, metric)`:
+    /// distances to the seeds of grid `seeds` of `scratch` under `metric` (the metric the
+    /// seeds were flooded with) and lower-neighbour counts, the displaced material of every
+    /// penetrating column, `iterations` gather passes (integer shares, remainders stay), and a
+    /// final atomic flush of the carried material to the seeds. The removed material is added
+    /// to the scratch's removed counter.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_iterative(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        map: &GpuGranularMap,
+        area: Rect,
+        keep_q15: u32,
+        iterations: u32,
+        metric: DistanceMetric,
+        seeds: usize,
+        scratch: &GranularScratch,
+    ) -> Result<(), GpuError> {
+        let groups = area_dispatch(device, area, map.size())?;
+        scratch.check(area)?;
+        let base = GranularUniform {
+            keep_q15,
+            metric: metric_index(metric),
+            ..GranularUniform::for_area(area, map.size().x)
+        };
+        let bgs = [0, 1].map(|parity| {
+            self.bind(
+                device,
+                map,
+                &GranularUniform { parity, ..base },
+                seeds,
+                scratch,
+            )
+        });
+        let mut dispatches = vec![(&self.iter_init, &bgs[0])];
+        for k in 0..iterations {
+            dispatches.push((&self.iter_pass, &bgs[(k & 1) as usize]));
+        }
+        let last = &bgs[(iterations & 1) as usize];
+        dispatches.push((&self.iter_flush, last));
+        dispatches.push((&self.writeback, last));
+        encoder.clear_buffer(&scratch.acc, 0, Some(area.area() * 4));
+        run(encoder, "DisplacePass iterative", groups, &dispatches);
         Ok(())
     }
 }

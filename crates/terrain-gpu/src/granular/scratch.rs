@@ -1,5 +1,5 @@
 //! `GranularScratch`: the per-area GPU textures of a granular step (penetration, seed grids,
-//! accumulator, slope amounts, removed counter), and the uniform block the integer passes share.
+//! accumulator, slope amounts, iterative-displacement grids, removed counter), and the uniform block the integer passes share.
 
 use crate::compute::dispatch_size;
 use crate::download::download_bytes;
@@ -100,7 +100,9 @@ pub(crate) fn entry_pipeline(
 /// The per-area buffers of a granular step, for areas of up to [`GranularScratch::capacity`]
 /// columns (all area-local, row-major): the penetration texture (`Penetration`, 16 bytes), two
 /// seed grids (`[u32; 2]`, ping-pong), the scatter accumulator (u32, zero between uses), the
-/// slope amounts (`[u32; 2]`) and the u64 removed counter (low, high words).
+/// slope amounts (`[u32; 2]`), the iterative displacement's distance and lower-neighbour
+/// count per column (`[u32; 2]`) and carried material (two u32 grids, ping-pong: grid 1
+/// starts right after the area's columns), and the u64 removed counter (low, high words).
 #[derive(Debug)]
 pub struct GranularScratch {
     capacity: u64,
@@ -108,6 +110,8 @@ pub struct GranularScratch {
     pub(crate) seeds: [wgpu::Buffer; 2],
     pub(crate) acc: wgpu::Buffer,
     pub(crate) amounts: wgpu::Buffer,
+    pub(crate) dist: wgpu::Buffer,
+    pub(crate) carried: wgpu::Buffer,
     pub(crate) removed: wgpu::Buffer,
 }
 
@@ -147,6 +151,8 @@ impl GranularScratch {
                 ],
                 acc: buf("granular accumulator", columns * 4),
                 amounts: buf("granular slope amounts", columns * 8),
+                dist: buf("granular distance and lower-neighbour count", columns * 8),
+                carried: buf("granular carried material", columns * 8),
                 removed: buf("granular removed", 8),
             }
         })

@@ -1,6 +1,7 @@
 //! `GpuGranularStep`: one granular step on the GPU over the merged active areas of a list of
-//! objects (depth from below on the CPU for now), as `terrain_core::granular::GranularSim::step`.
+//! objects, as `terrain_core::granular::GranularSim::step`.
 
+use super::depth::DepthFromBelowPass;
 use super::map::GpuGranularMap;
 use super::passes::{DisplacePass, JumpFloodPass, PenetrationPass, SlopePass};
 use super::scratch::GranularScratch;
@@ -20,18 +21,33 @@ pub struct GpuStepReport {
     pub active_areas: Vec<ActiveArea>,
 }
 
-/// Chains [`PenetrationPass`], [`JumpFloodPass`], [`DisplacePass`] and [`SlopePass`] over the
-/// active areas of a step, with the settings of [`terrain_core::granular::GranularSim`]. The
-/// depth from below is rasterised on the CPU ([`depth_from_below_into`]) and uploaded per area.
+/// Where a step's depth from below comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DepthSource {
+    /// Rendered on the GPU by [`DepthFromBelowPass`] (coverage may differ from the CPU
+    /// rasterizer on exactly grid-aligned edges: see its tests).
+    #[default]
+    Gpu,
+    /// Rasterised on the CPU ([`depth_from_below_into`]) and uploaded: the whole step then
+    /// equals [`terrain_core::granular::GranularSim::step`] bit for bit.
+    Cpu,
+}
+
+/// Chains [`DepthFromBelowPass`] (or the CPU rasterizer), [`PenetrationPass`],
+/// [`JumpFloodPass`], [`DisplacePass`] and [`SlopePass`] over the active areas of a step, with
+/// the settings of [`terrain_core::granular::GranularSim`].
 #[derive(Debug)]
 pub struct GpuGranularStep {
     penetration: PenetrationPass,
     jfa: JumpFloodPass,
     displace: DisplacePass,
     slope_pass: SlopePass,
+    depth_pass: DepthFromBelowPass,
     scratch: Option<GranularScratch>,
     params: GranularParams,
-    /// Displacement method (closest seed or multiple targets; iterative is refused).
+    /// Where the depth from below comes from.
+    pub depth_source: DepthSource,
+    /// Displacement method.
     pub displacement: DisplacementMethod,
     /// Slope method.
     pub slope: SlopeMethod,
@@ -61,8 +77,10 @@ impl GpuGranularStep {
             jfa: JumpFloodPass::new(device)?,
             displace: DisplacePass::new(device)?,
             slope_pass: SlopePass::new(device)?,
+            depth_pass: DepthFromBelowPass::new(device)?,
             scratch: None,
             params,
+            depth_source: DepthSource::default(),
             displacement: DisplacementMethod::default(),
             slope: SlopeMethod::default(),
             area_mode: AreaMode::default(),
@@ -100,7 +118,7 @@ impl GpuGranularStep {
         Ok(merge_active_areas(&areas, self.params.merge_distance))
     }
 
-    /// Records a step into `encoder` (rasterising the depth on the CPU) and returns its areas;
+    /// Records a step into `encoder` and returns its areas;
     /// the removed amount accumulates in the scratch counter, zeroed at the start.
     pub fn encode(
         &mut self,
@@ -129,10 +147,33 @@ impl GpuGranularStep {
         let thresholds = p.slope_thresholds_units(map.texel_size(), units);
         for area in &areas {
             let rect = area.rect;
-            let mut depth = Grid::new(rect.size.x, rect.size.y, NO_OBJECT)?;
-            depth_from_below_into(objects, map.encoding(), map.texel_size(), rect, &mut depth)
-                .map_err(granular_error)?;
-            let depth_buf = PenetrationPass::upload_depth(device, &depth);
+            let depth_buf = match self.depth_source {
+                DepthSource::Gpu => {
+                    let out = DepthFromBelowPass::create_output(device, rect)?;
+                    self.depth_pass.encode(
+                        device,
+                        encoder,
+                        objects,
+                        map.encoding(),
+                        map.texel_size(),
+                        rect,
+                        &out,
+                    )?;
+                    out
+                }
+                DepthSource::Cpu => {
+                    let mut depth = Grid::new(rect.size.x, rect.size.y, NO_OBJECT)?;
+                    depth_from_below_into(
+                        objects,
+                        map.encoding(),
+                        map.texel_size(),
+                        rect,
+                        &mut depth,
+                    )
+                    .map_err(granular_error)?;
+                    PenetrationPass::upload_depth(device, &depth)
+                }
+            };
             self.penetration
                 .encode(device, encoder, map, &depth_buf, rect, margin, scratch)?;
             let seeds = self.jfa.encode(
@@ -144,16 +185,29 @@ impl GpuGranularStep {
                 p.jfa_extra_pass,
                 scratch,
             )?;
-            self.displace.encode(
-                device,
-                encoder,
-                map,
-                rect,
-                self.displacement,
-                p.keep_q15(),
-                seeds,
-                scratch,
-            )?;
+            match self.displacement {
+                DisplacementMethod::Iterative => self.displace.encode_iterative(
+                    device,
+                    encoder,
+                    map,
+                    rect,
+                    p.keep_q15(),
+                    p.num_iterations_displace_material_to_contour,
+                    p.metric,
+                    seeds,
+                    scratch,
+                )?,
+                method => self.displace.encode(
+                    device,
+                    encoder,
+                    map,
+                    rect,
+                    method,
+                    p.keep_q15(),
+                    seeds,
+                    scratch,
+                )?,
+            }
             self.slope_pass.encode(
                 device,
                 encoder,
