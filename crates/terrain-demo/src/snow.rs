@@ -101,7 +101,11 @@ impl SnowScenario {
         }
         // The walker goes beside the vehicle, one foot down per frame, left and right.
         let walk_z = self.extent.y * 0.2 + f * STRIDE * 0.5;
-        let foot_side = if self.frame.is_multiple_of(2) { 0.12 } else { -0.12 };
+        let foot_side = if self.frame.is_multiple_of(2) {
+            0.12
+        } else {
+            -0.12
+        };
         let foot_xz = Vec2::new(self.extent.x * 0.7 + foot_side, walk_z);
         let foot_y = self.undisturbed(foot_xz) - FOOT_SINK;
         transforms.push((

@@ -464,6 +464,20 @@ fn normals_match_cpu_within_tolerance() {
             worst = worst.max((Vec3::new(g[0], g[1], g[2]) - *c).abs().max_element());
         }
         assert!(worst < 1e-5, "blur {blur}: max error {worst}");
+        // w holds the float copy of the heights (metres) inside the area, after any blur.
+        let mut floats = Grid::new(70, 60, 0.0f32).expect("grid");
+        float_heights(&map, area, &mut floats).expect("floats");
+        for y in area.min.y..area.max().y {
+            for x in area.min.x..area.max().x {
+                let i = (y * 70 + x) as usize;
+                let want = floats.as_slice()[i];
+                assert!(
+                    (gpu[i][3] - want).abs() <= 1e-6 * want.abs().max(1.0),
+                    "height at {x},{y}: {} vs {want}",
+                    gpu[i][3]
+                );
+            }
+        }
     }
 }
 

@@ -1,7 +1,8 @@
 // GranularNormalsPass: normals of the granular map by the symmetric difference (seed 001
 // eq. 4.3, edges clamped) and 3x3 Gaussian blur passes, as
 // terrain_core::granular::{symmetric_normals, blur_normals} within a float tolerance.
-// Normals are vec4<f32> (xyz, w = 0) per map texel, row-major.
+// Output per map texel, row-major: vec4<f32>(unit normal xyz, height in metres): the float
+// copy of the heights for filtered rendering (seed 001 sec 4.3).
 
 struct NormalParams {
     area_min: vec2<u32>,
@@ -9,7 +10,8 @@ struct NormalParams {
     map_size: vec2<u32>,
     // Height units to metres (the encoding scale) * 0.5 / texel size.
     k: f32,
-    _pad: u32,
+    // Height units to metres (the encoding scale), for the float copy in w.
+    scale: f32,
 }
 
 @group(0) @binding(0) var<uniform> p: NormalParams;
@@ -45,7 +47,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let y = i32(p.area_min.y + id.y);
     let sx = diff(h(x + 1, y), h(x - 1, y)) * p.k;
     let sz = diff(h(x, y + 1), h(x, y - 1)) * p.k;
-    normals[u32(y) * p.map_size.x + u32(x)] = vec4<f32>(normalize_or_up(vec3<f32>(-sx, 1.0, -sz)), 0.0);
+    let metres = f32(h(x, y)) * p.scale;
+    normals[u32(y) * p.map_size.x + u32(x)] = vec4<f32>(normalize_or_up(vec3<f32>(-sx, 1.0, -sz)), metres);
 }
 
 // One blur pass of the area from `normals` into `scratch`.
@@ -65,7 +68,9 @@ fn blur(@builtin(global_invocation_id) id: vec3<u32>) {
             s = s + normals[u32(q.y) * p.map_size.x + u32(q.x)].xyz * w;
         }
     }
-    scratch[u32(y) * p.map_size.x + u32(x)] = vec4<f32>(normalize_or_up(s / 16.0), 0.0);
+    // The blur smooths the normal only; the height (w) is kept.
+    let here = normals[u32(y) * p.map_size.x + u32(x)].w;
+    scratch[u32(y) * p.map_size.x + u32(x)] = vec4<f32>(normalize_or_up(s / 16.0), here);
 }
 
 // Copies the blurred area back from `scratch` into `normals`.

@@ -19,12 +19,13 @@ struct NormalParams {
     area_size: [u32; 2],
     map_size: [u32; 2],
     k: f32,
-    _pad: u32,
+    scale: f32,
 }
 
 const _: () = assert!(std::mem::size_of::<NormalParams>() == 32);
 
-/// Writes unit normals (`vec4<f32>` per map texel: xyz and w = 0, row-major) of an area.
+/// Writes unit normals and the float copy of the heights (`vec4<f32>` per map texel: normal
+/// xyz, height in metres in w; row-major) of an area.
 #[derive(Debug)]
 pub struct GranularNormalsPass {
     normals: wgpu::ComputePipeline,
@@ -115,7 +116,7 @@ impl GranularNormalsPass {
             area_size: area.size.to_array(),
             map_size: map.size().to_array(),
             k,
-            _pad: 0,
+            scale: map.encoding().scale,
         };
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("GranularNormalParams"),
