@@ -1,5 +1,5 @@
-//! GPU time of one granular step (penetration, jump flooding, closest-seed displacement and
-//! 10 scatter slope iterations) over one active area of about 3 774, 15 100, 60 398 and
+//! GPU time of each granular step (penetration, jump flooding, closest-seed displacement,
+//! 10 scatter slope iterations) and of the whole step over one active area of about 3 774, 15 100, 60 398 and
 //! 241 591 columns on maps of 512 to 4096 a side (the setting of seed 001 table 5.4), as the
 //! wall time of submit + wait measured by `GpuTimer`; then whole steps with 1 to 8 vehicles,
 //! active areas versus the full map (table 5.7). Prints the adapter first.
@@ -57,50 +57,115 @@ fn bench(c: &mut Criterion) {
         let depth_buf = PenetrationPass::upload_depth(device, &depth);
         let scratch = GranularScratch::new(device, area.area()).expect("scratch");
         let thresholds = params.slope_thresholds_units(0.1, 10_000.0);
-        let id = BenchmarkId::new("step", format!("{map_side}/{}", area.area()));
-        group.bench_function(id, |b| {
+        let label = format!("{map_side}/{}", area.area());
+        // Times one recorded closure as wall time of submit + wait.
+        let time = |b: &mut criterion::Bencher<'_>,
+                    work: &dyn Fn(
+            &mut wgpu::CommandEncoder,
+        ) -> Result<(), terrain_gpu::GpuError>| {
             b.iter_custom(|iters| {
-                let mut total = Duration::ZERO;
-                for _ in 0..iters {
-                    let t = timer
-                        .time(device, queue, |enc| {
-                            pen_pass
-                                .encode(device, enc, &gmap, &depth_buf, area, 5000, &scratch)?;
-                            let s = jfa.encode(
-                                device,
-                                enc,
-                                gmap.size(),
-                                area,
-                                params.metric,
-                                params.jfa_extra_pass,
-                                &scratch,
-                            )?;
-                            displace.encode(
-                                device,
-                                enc,
-                                &gmap,
-                                area,
-                                DisplacementMethod::ClosestSeed,
-                                params.keep_q15(),
-                                s,
-                                &scratch,
-                            )?;
-                            slope.encode(
-                                device,
-                                enc,
-                                &gmap,
-                                area,
-                                SlopeMethod::Scatter,
-                                thresholds,
-                                params.roughness_q15(),
-                                params.num_iterations_even_out_slopes,
-                                &scratch,
-                            )
-                        })
-                        .expect("step");
-                    total += Duration::from_secs_f64(t.ms / 1e3);
-                }
-                total
+                (0..iters)
+                    .map(|_| {
+                        let t = timer
+                            .time(device, queue, |enc| work(enc))
+                            .expect("gpu work");
+                        Duration::from_secs_f64(t.ms / 1e3)
+                    })
+                    .sum()
+            })
+        };
+        // Each step on its own (the steps before it ran once, so its inputs are in place).
+        let penetrate = |enc: &mut wgpu::CommandEncoder| {
+            pen_pass.encode(device, enc, &gmap, &depth_buf, area, 5000, &scratch)
+        };
+        let flood = |enc: &mut wgpu::CommandEncoder| {
+            jfa.encode(
+                device,
+                enc,
+                gmap.size(),
+                area,
+                params.metric,
+                params.jfa_extra_pass,
+                &scratch,
+            )
+            .map(|_| ())
+        };
+        let mut seeds = 0;
+        timer
+            .time(device, queue, |enc| {
+                penetrate(enc)?;
+                seeds = jfa.encode(
+                    device,
+                    enc,
+                    gmap.size(),
+                    area,
+                    params.metric,
+                    params.jfa_extra_pass,
+                    &scratch,
+                )?;
+                Ok(())
+            })
+            .expect("prepare");
+        let displace_closest = |enc: &mut wgpu::CommandEncoder| {
+            displace.encode(
+                device,
+                enc,
+                &gmap,
+                area,
+                DisplacementMethod::ClosestSeed,
+                params.keep_q15(),
+                seeds,
+                &scratch,
+            )
+        };
+        let slopes = |enc: &mut wgpu::CommandEncoder| {
+            slope.encode(
+                device,
+                enc,
+                &gmap,
+                area,
+                SlopeMethod::Scatter,
+                thresholds,
+                params.roughness_q15(),
+                params.num_iterations_even_out_slopes,
+                &scratch,
+            )
+        };
+        group.bench_function(BenchmarkId::new("penetration", &label), |b| {
+            time(b, &penetrate)
+        });
+        group.bench_function(BenchmarkId::new("jump_flooding", &label), |b| {
+            time(b, &flood)
+        });
+        group.bench_function(BenchmarkId::new("displace_closest_seed", &label), |b| {
+            time(b, &displace_closest)
+        });
+        group.bench_function(BenchmarkId::new("slopes_scatter10", &label), |b| {
+            time(b, &slopes)
+        });
+        group.bench_function(BenchmarkId::new("step", &label), |b| {
+            time(b, &|enc| {
+                penetrate(enc)?;
+                let s = jfa.encode(
+                    device,
+                    enc,
+                    gmap.size(),
+                    area,
+                    params.metric,
+                    params.jfa_extra_pass,
+                    &scratch,
+                )?;
+                displace.encode(
+                    device,
+                    enc,
+                    &gmap,
+                    area,
+                    DisplacementMethod::ClosestSeed,
+                    params.keep_q15(),
+                    s,
+                    &scratch,
+                )?;
+                slopes(enc)
             })
         });
     }
