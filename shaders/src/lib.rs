@@ -20,14 +20,31 @@ pub const SKY: &str = include_str!("wgsl/sky.wgsl");
 /// `ClipmapRenderer`: displaced, morphed, lit clipmap blocks.
 pub const CLIPMAP: &str = include_str!("wgsl/clipmap.wgsl");
 
+/// The declarations every granular pass shares (uniform block, penetration texel, column
+/// kinds); already joined in front of [`GRANULAR_PENETRATION`], [`GRANULAR_JFA`],
+/// [`GRANULAR_DISPLACE`] and [`GRANULAR_SLOPE`].
+pub const GRANULAR_COMMON: &str = include_str!("wgsl/granular_common.wgsl");
+
 /// Granular deformation (seed 001 ch. 4): penetration texture from depth and heights.
-pub const GRANULAR_PENETRATION: &str = include_str!("wgsl/granular_penetration.wgsl");
+pub const GRANULAR_PENETRATION: &str = concat!(
+    include_str!("wgsl/granular_common.wgsl"),
+    include_str!("wgsl/granular_penetration.wgsl")
+);
 /// Granular deformation: jump flooding passes (closest seed per column).
-pub const GRANULAR_JFA: &str = include_str!("wgsl/granular_jfa.wgsl");
+pub const GRANULAR_JFA: &str = concat!(
+    include_str!("wgsl/granular_common.wgsl"),
+    include_str!("wgsl/granular_jfa.wgsl")
+);
 /// Granular deformation: displacement of intersected material (the three methods).
-pub const GRANULAR_DISPLACE: &str = include_str!("wgsl/granular_displace.wgsl");
+pub const GRANULAR_DISPLACE: &str = concat!(
+    include_str!("wgsl/granular_common.wgsl"),
+    include_str!("wgsl/granular_displace.wgsl")
+);
 /// Granular deformation: evening out slopes (interleaved and scatter).
-pub const GRANULAR_SLOPE: &str = include_str!("wgsl/granular_slope.wgsl");
+pub const GRANULAR_SLOPE: &str = concat!(
+    include_str!("wgsl/granular_common.wgsl"),
+    include_str!("wgsl/granular_slope.wgsl")
+);
 /// Granular deformation: symmetric-difference normals and their blur, float heights.
 pub const GRANULAR_NORMALS: &str = include_str!("wgsl/granular_normals.wgsl");
 /// Granular deformation: depth of objects seen from below (render pipeline).

@@ -10,34 +10,6 @@
 // after the area's columns); `iter_flush` adds each column's remaining height and its final
 // carried material (grid `parity`) to `acc`, then `writeback`.
 
-struct Granular {
-    area_min: vec2<u32>,
-    area_size: vec2<u32>,
-    map_width: u32,
-    step: u32,
-    pass_index: u32,
-    metric: u32,
-    keep_q15: u32,
-    margin: u32,
-    threshold_orth: u32,
-    threshold_diag: u32,
-    roughness_q15: u32,
-    parity: u32,
-    _pad0: u32,
-    _pad1: u32,
-}
-
-struct Penetration {
-    seed_x: u32,
-    seed_y: u32,
-    kind: i32,
-    penetration: u32,
-}
-
-const NO_SEED: u32 = 0xffffffffu;
-const SEED: i32 = -3;
-const OBSTACLE: i32 = -2;
-const PENETRATING: i32 = -1;
 // MULTI_TARGET_CHUNK and MAX_TARGETS of the CPU reference.
 const CHUNK: u32 = 1000u;
 const MAX_TARGETS: u32 = 64u;

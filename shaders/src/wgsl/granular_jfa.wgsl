@@ -3,32 +3,6 @@
 // bit for bit as terrain_core::granular::jfa_pass. `init` copies the seeds of the penetration
 // texture (jfa_init); `main` is one pass reading `src` and writing `dst` (ping-pong).
 
-struct Granular {
-    area_min: vec2<u32>,
-    area_size: vec2<u32>,
-    map_width: u32,
-    step: u32,
-    pass_index: u32,
-    metric: u32,
-    keep_q15: u32,
-    margin: u32,
-    threshold_orth: u32,
-    threshold_diag: u32,
-    roughness_q15: u32,
-    parity: u32,
-    _pad0: u32,
-    _pad1: u32,
-}
-
-struct Penetration {
-    seed_x: u32,
-    seed_y: u32,
-    kind: i32,
-    penetration: u32,
-}
-
-const NO_SEED: u32 = 0xffffffffu;
-
 @group(0) @binding(0) var<uniform> g: Granular;
 @group(0) @binding(1) var<storage, read> pen: array<Penetration>;
 @group(0) @binding(2) var<storage, read> src: array<vec2<u32>>;

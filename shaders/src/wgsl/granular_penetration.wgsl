@@ -2,39 +2,6 @@
 // bit for bit as terrain_core::granular::penetration_texture.
 
 // The uniform block shared by the granular integer passes (GranularUniform in Rust).
-struct Granular {
-    // Active area in map texels.
-    area_min: vec2<u32>,
-    area_size: vec2<u32>,
-    map_width: u32,
-    // Jump flooding step and pass index.
-    step: u32,
-    pass_index: u32,
-    // 0: Euclidean squared, 1: Manhattan, 2: Chebyshev.
-    metric: u32,
-    keep_q15: u32,
-    // Obstacle margin in height units.
-    margin: u32,
-    threshold_orth: u32,
-    threshold_diag: u32,
-    roughness_q15: u32,
-    parity: u32,
-    _pad0: u32,
-    _pad1: u32,
-}
-
-struct Penetration {
-    seed_x: u32,
-    seed_y: u32,
-    kind: i32,
-    penetration: u32,
-}
-
-const NO_SEED: u32 = 0xffffffffu;
-const NO_OBJECT: u32 = 0xffffffffu;
-const SEED: i32 = -3;
-const OBSTACLE: i32 = -2;
-const PENETRATING: i32 = -1;
 
 @group(0) @binding(0) var<uniform> g: Granular;
 @group(0) @binding(1) var<storage, read> heights: array<u32>;
