@@ -33,6 +33,17 @@ pub fn compute_pipeline(
     source: &str,
     layout: &wgpu::BindGroupLayout,
 ) -> Result<wgpu::ComputePipeline, GpuError> {
+    compute_pipeline_entry(device, label, source, layout, "main")
+}
+
+/// Compiles `source` and builds a compute pipeline of entry point `entry` over `layout`.
+pub fn compute_pipeline_entry(
+    device: &wgpu::Device,
+    label: &'static str,
+    source: &str,
+    layout: &wgpu::BindGroupLayout,
+    entry: &str,
+) -> Result<wgpu::ComputePipeline, GpuError> {
     scoped(device, label, || {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),
@@ -47,7 +58,7 @@ pub fn compute_pipeline(
             label: Some(label),
             layout: Some(&pipeline_layout),
             module: &module,
-            entry_point: Some("main"),
+            entry_point: Some(entry),
             compilation_options: Default::default(),
             cache: None,
         })

@@ -3,7 +3,8 @@
 //! a float tolerance.
 
 use super::map::GpuGranularMap;
-use super::scratch::{area_dispatch, entry_pipeline};
+use super::scratch::area_dispatch;
+use crate::compute::compute_pipeline_entry;
 use crate::compute::{bind_buffers, buffer_entry};
 use crate::error::GpuError;
 use crate::scope::scoped;
@@ -49,9 +50,9 @@ impl GranularNormalsPass {
         });
         let src = terrain_shaders::GRANULAR_NORMALS;
         Ok(Self {
-            normals: entry_pipeline(device, "GranularNormalsPass", src, &layout, "main")?,
-            blur: entry_pipeline(device, "GranularNormalsPass blur", src, &layout, "blur")?,
-            copy_back: entry_pipeline(
+            normals: compute_pipeline_entry(device, "GranularNormalsPass", src, &layout, "main")?,
+            blur: compute_pipeline_entry(device, "GranularNormalsPass blur", src, &layout, "blur")?,
+            copy_back: compute_pipeline_entry(
                 device,
                 "GranularNormalsPass copy",
                 src,

@@ -3,7 +3,8 @@
 //! `terrain_core::granular`.
 
 use super::map::GpuGranularMap;
-use super::scratch::{GranularScratch, GranularUniform, area_dispatch, entry_pipeline};
+use super::scratch::{GranularScratch, GranularUniform, area_dispatch};
+use crate::compute::compute_pipeline_entry;
 use crate::compute::{bind_buffers, buffer_entry};
 use crate::error::GpuError;
 use terrain_core::granular::{DisplacementMethod, DistanceMetric, SlopeMethod, jfa_steps};
@@ -58,7 +59,7 @@ impl PenetrationPass {
     /// Builds the pipeline.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
         let layout = layout(device, "PenetrationPass", &[true, true, false]);
-        let pipeline = entry_pipeline(
+        let pipeline = compute_pipeline_entry(
             device,
             "PenetrationPass",
             terrain_shaders::GRANULAR_PENETRATION,
@@ -139,8 +140,8 @@ impl JumpFloodPass {
         let layout = layout(device, "JumpFloodPass", &[true, true, false]);
         let src = terrain_shaders::GRANULAR_JFA;
         Ok(Self {
-            init: entry_pipeline(device, "JumpFloodPass init", src, &layout, "init")?,
-            pass: entry_pipeline(device, "JumpFloodPass", src, &layout, "main")?,
+            init: compute_pipeline_entry(device, "JumpFloodPass init", src, &layout, "init")?,
+            pass: compute_pipeline_entry(device, "JumpFloodPass", src, &layout, "main")?,
             layout,
         })
     }
@@ -229,7 +230,7 @@ impl DisplacePass {
             &[false, true, true, false, false, false, false],
         );
         let src = terrain_shaders::GRANULAR_DISPLACE;
-        let pipe = |label, entry| entry_pipeline(device, label, src, &layout, entry);
+        let pipe = |label, entry| compute_pipeline_entry(device, label, src, &layout, entry);
         Ok(Self {
             closest: pipe("DisplacePass closest", "closest")?,
             multiple: pipe("DisplacePass multiple", "multiple")?,
@@ -380,10 +381,22 @@ impl SlopePass {
         let layout = layout(device, "SlopePass", &[false, true, false, false]);
         let src = terrain_shaders::GRANULAR_SLOPE;
         Ok(Self {
-            scatter: entry_pipeline(device, "SlopePass scatter", src, &layout, "scatter")?,
-            amounts: entry_pipeline(device, "SlopePass amounts", src, &layout, "amounts_pass")?,
-            apply: entry_pipeline(device, "SlopePass apply", src, &layout, "apply")?,
-            writeback: entry_pipeline(device, "SlopePass writeback", src, &layout, "writeback")?,
+            scatter: compute_pipeline_entry(device, "SlopePass scatter", src, &layout, "scatter")?,
+            amounts: compute_pipeline_entry(
+                device,
+                "SlopePass amounts",
+                src,
+                &layout,
+                "amounts_pass",
+            )?,
+            apply: compute_pipeline_entry(device, "SlopePass apply", src, &layout, "apply")?,
+            writeback: compute_pipeline_entry(
+                device,
+                "SlopePass writeback",
+                src,
+                &layout,
+                "writeback",
+            )?,
             layout,
         })
     }

@@ -68,35 +68,6 @@ pub(crate) fn area_dispatch(
     dispatch_size(device, area.size)
 }
 
-/// Builds a compute pipeline of `entry` in `source` over `layout`.
-pub(crate) fn entry_pipeline(
-    device: &wgpu::Device,
-    label: &'static str,
-    source: &str,
-    layout: &wgpu::BindGroupLayout,
-    entry: &'static str,
-) -> Result<wgpu::ComputePipeline, GpuError> {
-    scoped(device, label, || {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some(label),
-            bind_group_layouts: &[Some(layout)],
-            immediate_size: 0,
-        });
-        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(label),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        })
-    })
-}
-
 /// The per-area buffers of a granular step, for areas of up to [`GranularScratch::capacity`]
 /// columns (all area-local, row-major): the penetration texture (`Penetration`, 16 bytes), two
 /// seed grids (`[u32; 2]`, ping-pong), the scatter accumulator (u32, zero between uses), the
