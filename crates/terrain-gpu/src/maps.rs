@@ -14,8 +14,9 @@ use glam::{UVec2, Vec2};
 use terrain_core::{DerivativeMap, Grid, HeightEncoding, HeightMap, HeightSample, WrapMode};
 
 /// A storage buffer of `bytes` for a map of `size` texels (copyable both ways), after checking
-/// it fits the device's storage binding and buffer limits.
-fn map_buffer(
+/// it fits the device's storage binding and buffer limits. Every per-texel buffer of the crate
+/// is made here.
+pub(crate) fn map_buffer(
     device: &wgpu::Device,
     label: &'static str,
     size: UVec2,

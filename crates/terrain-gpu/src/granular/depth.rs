@@ -50,6 +50,7 @@ use wgpu::util::DeviceExt;
 use crate::compute::bind_buffers;
 use crate::download::download_bytes;
 use crate::error::GpuError;
+use crate::maps::map_buffer;
 use crate::scope::scoped;
 
 /// Largest tile side rendered in one render pass (further limited by the device's
@@ -191,16 +192,7 @@ impl DepthFromBelowPass {
     /// [`Self::encode`] and [`Self::read`] need (`STORAGE | COPY_DST | COPY_SRC`).
     pub fn create_output(device: &wgpu::Device, area: Rect) -> Result<wgpu::Buffer, GpuError> {
         let bytes = output_bytes(device, area)?;
-        scoped(device, "DepthFromBelowPass output", || {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("DepthFromBelowPass output"),
-                size: bytes,
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_DST
-                    | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            })
-        })
+        map_buffer(device, "DepthFromBelowPass output", area.size, bytes)
     }
 
     /// Records the depth from below of `objects` over `area` into `out` (at least

@@ -2,7 +2,7 @@
 
 use crate::download::download_bytes;
 use crate::error::GpuError;
-use crate::scope::scoped;
+use crate::maps::map_buffer;
 use glam::UVec2;
 use terrain_core::{FixedPointMap, Grid, HeightEncoding, WrapMode};
 
@@ -27,23 +27,14 @@ impl GpuGranularMap {
     ) -> Result<Self, GpuError> {
         let size = map.size();
         let bytes = u64::from(size.x) * u64::from(size.y) * 4;
-        let limits = device.limits();
-        let limit = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
-        if bytes > limit || bytes == 0 {
-            return Err(GpuError::MapTooLarge { size, bytes, limit });
+        if bytes == 0 {
+            return Err(terrain_core::CoreError::EmptyGrid {
+                width: size.x,
+                height: size.y,
+            }
+            .into());
         }
-        let buffer = scoped(device, "GpuGranularMap", || {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("GpuGranularMap"),
-                size: bytes,
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_DST
-                    | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            })
-        })?;
+        let buffer = map_buffer(device, "GpuGranularMap", size, bytes)?;
         let gpu = Self {
             buffer,
             size,

@@ -7,7 +7,7 @@ use super::scratch::area_dispatch;
 use crate::compute::compute_pipeline_entry;
 use crate::compute::{bind_buffers, buffer_entry};
 use crate::error::GpuError;
-use crate::scope::scoped;
+use crate::maps::map_buffer;
 use bytemuck::{Pod, Zeroable};
 use terrain_core::Rect;
 use wgpu::util::DeviceExt;
@@ -71,23 +71,7 @@ impl GranularNormalsPass {
     ) -> Result<wgpu::Buffer, GpuError> {
         let size = map.size();
         let bytes = u64::from(size.x) * u64::from(size.y) * 16;
-        let limits = device.limits();
-        let limit = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
-        if bytes > limit {
-            return Err(GpuError::MapTooLarge { size, bytes, limit });
-        }
-        scoped(device, "granular normals", || {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("granular normals"),
-                size: bytes,
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_DST
-                    | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            })
-        })
+        map_buffer(device, "granular normals", size, bytes)
     }
 
     /// Records the normals of `area` into `normals`, then `blur_iterations` blur passes over
