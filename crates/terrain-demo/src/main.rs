@@ -23,8 +23,8 @@ use std::time::Duration;
 use std::time::Instant;
 use terrain_core::io::{self, ReadLimits};
 use terrain_core::{
-    CoarseMap, DerivativeMap, HeightEncoding, HillshadeParams, TerrainParams, generate_coarse_map,
-    hillshade,
+    CoarseMap, DerivativeMap, HeightEncoding, HillshadeParams, TerrainParams, TextureStamp,
+    generate_coarse_map, hillshade,
 };
 use terrain_physics::{
     CollisionMirror, CpuRegionSource, ReadbackScheduler, RequestId, SchedulerConfig,
@@ -147,17 +147,7 @@ fn run_default(cli: &Cli) -> Result<()> {
     let initial_normals_ms = ms(t);
 
     let mut scenario = scenario::Scenario::new(map.extent_m(), cli.seed)?;
-    let mut gpu = if cli.no_gpu {
-        None
-    } else {
-        match GpuScene::new(&map, Some(scenario.footprint()), cli.resolution) {
-            Ok(scene) => Some(scene),
-            Err(e) => {
-                eprintln!("warning: {e:#}; writing top-down overview frames only");
-                None
-            }
-        }
-    };
+    let mut gpu = open_gpu(cli, &map, Some(scenario.footprint()));
     let (adapter, backend) = gpu
         .as_ref()
         .map_or(("none".into(), "none".into()), GpuScene::adapter);
@@ -260,23 +250,14 @@ fn run_default(cli: &Cli) -> Result<()> {
         let overview = hillshade(&map, &normals, &shade)?;
         timings.insert("overview".to_string(), ms(t));
 
-        let mut triangles = 0;
-        let image = match gpu.as_mut() {
-            Some(scene) => {
-                let mut frame = scene.render(&camera)?;
-                timings.insert("render".to_string(), frame.render.ms);
-                if let Some(ts) = frame.render.timestamp_ms {
-                    timestamps.insert("render".to_string(), ts);
-                }
-                timings.insert("lod".to_string(), frame.lod_ms);
-                timings.insert("capture".to_string(), frame.capture_ms);
-                triangles = frame.triangles;
-                let uv = glam::Vec2::new(camera.position.x, camera.position.z) / map.extent_m();
-                images::inset_overview(&mut frame.image, &overview, uv);
-                frame.image
-            }
-            None => overview,
-        };
+        let (image, triangles) = render_frame(
+            gpu.as_mut(),
+            &camera,
+            overview,
+            map.extent_m(),
+            &mut timings,
+            &mut timestamps,
+        )?;
 
         capture.push(
             &image,
@@ -321,6 +302,47 @@ fn run_default(cli: &Cli) -> Result<()> {
     Ok(())
 }
 
+/// The GPU scene for `map`, or `None` (after saying why) with `--no-gpu` or without an adapter:
+/// the run then writes top-down overview frames.
+fn open_gpu(cli: &Cli, map: &CoarseMap, footprint: Option<&TextureStamp>) -> Option<GpuScene> {
+    if cli.no_gpu {
+        return None;
+    }
+    match GpuScene::new(map, footprint, cli.resolution) {
+        Ok(scene) => Some(scene),
+        Err(e) => {
+            eprintln!("warning: {e:#}; writing top-down overview frames only");
+            None
+        }
+    }
+}
+
+/// The frame image: the 3D render from `camera` with `overview` inset when there is a GPU
+/// scene (its timings go into `timings` / `timestamps`), else `overview` itself; and the
+/// triangles drawn.
+fn render_frame(
+    gpu: Option<&mut GpuScene>,
+    camera: &terrain_gpu::Camera,
+    overview: images::Image,
+    extent: glam::Vec2,
+    timings: &mut BTreeMap<String, f64>,
+    timestamps: &mut BTreeMap<String, f64>,
+) -> Result<(images::Image, u64)> {
+    let Some(scene) = gpu else {
+        return Ok((overview, 0));
+    };
+    let mut frame = scene.render(camera)?;
+    timings.insert("render".to_string(), frame.render.ms);
+    if let Some(ts) = frame.render.timestamp_ms {
+        timestamps.insert("render".to_string(), ts);
+    }
+    timings.insert("lod".to_string(), frame.lod_ms);
+    timings.insert("capture".to_string(), frame.capture_ms);
+    let uv = glam::Vec2::new(camera.position.x, camera.position.z) / extent;
+    images::inset_overview(&mut frame.image, &overview, uv);
+    Ok((frame.image, frame.triangles))
+}
+
 /// The closing line of a run.
 fn print_done(cli: &Cli, report: &Report) {
     eprintln!(
@@ -353,21 +375,11 @@ fn run_snow(cli: &Cli) -> Result<()> {
     let load_ms = ms(t);
     io::write_png16(cli.out.join("terrain.png"), coarse.grid())?;
 
-    let mut gpu = if cli.no_gpu {
-        None
-    } else {
-        match GpuScene::new(&coarse, None, cli.resolution) {
-            Ok(mut scene) => {
-                // A snow field is white at any height; only steep rims shade to rock.
-                scene.set_ramp(-20.0, -10.0);
-                Some(scene)
-            }
-            Err(e) => {
-                eprintln!("warning: {e:#}; writing top-down overview frames only");
-                None
-            }
-        }
-    };
+    let mut gpu = open_gpu(cli, &coarse, None);
+    if let Some(scene) = gpu.as_mut() {
+        // A snow field is white at any height; only steep rims shade to rock.
+        scene.set_ramp(-20.0, -10.0);
+    }
     let (adapter, backend) = gpu
         .as_ref()
         .map_or(("none".into(), "none".into()), GpuScene::adapter);
@@ -401,25 +413,18 @@ fn run_snow(cli: &Cli) -> Result<()> {
         let normals = DerivativeMap::from_map(&coarse);
         let overview = hillshade(&coarse, &normals, &shade)?;
         timings.insert("overview".to_string(), ms(t));
-        let mut triangles = 0;
-        let image = match gpu.as_mut() {
-            Some(scene) => {
-                let upload = scene.upload(&coarse)?;
-                timings.insert("normals".to_string(), upload.ms);
-                let mut rendered = scene.render(&camera)?;
-                timings.insert("render".to_string(), rendered.render.ms);
-                if let Some(ts) = rendered.render.timestamp_ms {
-                    timestamps.insert("render".to_string(), ts);
-                }
-                timings.insert("lod".to_string(), rendered.lod_ms);
-                timings.insert("capture".to_string(), rendered.capture_ms);
-                triangles = rendered.triangles;
-                let uv = glam::Vec2::new(camera.position.x, camera.position.z) / coarse.extent_m();
-                images::inset_overview(&mut rendered.image, &overview, uv);
-                rendered.image
-            }
-            None => overview,
-        };
+        if let Some(scene) = gpu.as_mut() {
+            let upload = scene.upload(&coarse)?;
+            timings.insert("normals".to_string(), upload.ms);
+        }
+        let (image, triangles) = render_frame(
+            gpu.as_mut(),
+            &camera,
+            overview,
+            coarse.extent_m(),
+            &mut timings,
+            &mut timestamps,
+        )?;
         capture.push(
             &image,
             FrameReport {
