@@ -109,9 +109,9 @@ fn doc() -> Result<()> {
     )
 }
 
-/// Regenerates `crates/terrain-gpu/tests/data/golden_clipmap.png` on this machine's adapter.
+/// Regenerates `terrain-gpu/tests/data/golden_clipmap.png` on this machine's adapter.
 fn golden() -> Result<()> {
-    let path = root().join("crates/terrain-gpu/tests/data/golden_clipmap.png");
+    let path = root().join("terrain-gpu/tests/data/golden_clipmap.png");
     cargo(
         &[
             "run",

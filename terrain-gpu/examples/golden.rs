@@ -7,7 +7,7 @@ mod scene;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let path = std::env::args()
         .nth(1)
-        .unwrap_or_else(|| "crates/terrain-gpu/tests/data/golden_clipmap.png".into());
+        .unwrap_or_else(|| "terrain-gpu/tests/data/golden_clipmap.png".into());
     let ctx = terrain_gpu::GpuContext::new_headless()?;
     eprintln!("rendering the golden view on {}", ctx.report().name);
     let scene = scene::Scene::new(ctx, 31, 5);
