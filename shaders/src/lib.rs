@@ -8,47 +8,114 @@
 //! ```
 #![warn(missing_docs)]
 
+/// Declares codes shared by Rust and WGSL once: each becomes a Rust `pub const` in [`codes`] and
+/// a WGSL `const` in the prelude that every shader of this crate starts with, so the two
+/// languages cannot drift apart.
+macro_rules! shared_codes {
+    ($($(#[doc = $doc:literal])* $name:ident: $ty:ident = $value:literal $suffix:literal;)*) => {
+        /// Codes shared by Rust and WGSL (wrap modes, blends, stamp kinds, distance metrics,
+        /// column kinds, sentinels). Shaders see the same names as WGSL `const`s.
+        pub mod codes {
+            $($(#[doc = $doc])* pub const $name: $ty = $value;)*
+        }
+        /// The WGSL text declaring every code of [`codes`] (already in front of each shader).
+        macro_rules! wgsl_prelude {
+            () => {
+                concat!(
+                    "// Generated from terrain_shaders::codes: edit the Rust side.\n",
+                    $("const ", stringify!($name), ": ", stringify!($ty), " = ",
+                      stringify!($value), $suffix, ";\n",)*
+                )
+            };
+        }
+    };
+}
+
+shared_codes! {
+    /// `WrapMode::Repeat`: toroidal addressing.
+    WRAP_REPEAT: u32 = 0 "u";
+    /// `WrapMode::Clamp`: edges clamp.
+    WRAP_CLAMP: u32 = 1 "u";
+    /// `Blend::Add`: the stamp is added.
+    BLEND_ADD: u32 = 0 "u";
+    /// `Blend::Min`: the lower of map and base + stamp.
+    BLEND_MIN: u32 = 1 "u";
+    /// `Blend::Max`: the higher of map and base + stamp.
+    BLEND_MAX: u32 = 2 "u";
+    /// Stamp kind: the Gaussian of seed 000 eq. 3.5.
+    STAMP_GAUSSIAN: u32 = 0 "u";
+    /// Stamp kind: a texture stamp (also the shockwave).
+    STAMP_TEXTURE: u32 = 1 "u";
+    /// Stamp kind: a user procedural function.
+    STAMP_USER: u32 = 2 "u";
+    /// `DistanceMetric::Euclidean`.
+    METRIC_EUCLIDEAN: u32 = 0 "u";
+    /// `DistanceMetric::Manhattan`.
+    METRIC_MANHATTAN: u32 = 1 "u";
+    /// `DistanceMetric::Chebyshev`.
+    METRIC_CHEBYSHEV: u32 = 2 "u";
+    /// Column kind (seed 001 table 4.1): material that may receive displaced material.
+    SEED: i32 = -3 "i";
+    /// Column kind: an object rests on or near it; it receives nothing.
+    OBSTACLE: i32 = -2 "i";
+    /// Column kind: an object penetrates it; its material is displaced.
+    PENETRATING: i32 = -1 "i";
+    /// No seed found (`terrain_core::granular::NO_SEED`).
+    NO_SEED: u32 = 0xffffffff "u";
+    /// No object above this column (`terrain_core::granular::NO_OBJECT`).
+    NO_OBJECT: u32 = 0xffffffff "u";
+}
+
+/// The WGSL `const` declarations of [`codes`], as every shader here starts with them.
+pub const PRELUDE: &str = wgsl_prelude!();
+
 /// `StampPass`: one stamp (Gaussian, texture or user procedural) applied in place.
-pub const STAMP: &str = include_str!("wgsl/stamp.wgsl");
+pub const STAMP: &str = concat!(wgsl_prelude!(), include_str!("wgsl/stamp.wgsl"));
 
 /// `NormalPass`: partial-derivative normals (seed 000 eq. 3.3) over a region.
-pub const NORMALS: &str = include_str!("wgsl/normals.wgsl");
+pub const NORMALS: &str = concat!(wgsl_prelude!(), include_str!("wgsl/normals.wgsl"));
 
 /// `SkyPass`: a full-screen gradient by view-ray elevation.
-pub const SKY: &str = include_str!("wgsl/sky.wgsl");
+pub const SKY: &str = concat!(wgsl_prelude!(), include_str!("wgsl/sky.wgsl"));
 
 /// `ClipmapRenderer`: displaced, morphed, lit clipmap blocks.
-pub const CLIPMAP: &str = include_str!("wgsl/clipmap.wgsl");
+pub const CLIPMAP: &str = concat!(wgsl_prelude!(), include_str!("wgsl/clipmap.wgsl"));
 
 /// The declarations every granular pass shares (uniform block, penetration texel, column
 /// kinds); already joined in front of [`GRANULAR_PENETRATION`], [`GRANULAR_JFA`],
 /// [`GRANULAR_DISPLACE`] and [`GRANULAR_SLOPE`].
-pub const GRANULAR_COMMON: &str = include_str!("wgsl/granular_common.wgsl");
+pub const GRANULAR_COMMON: &str = concat!(wgsl_prelude!(), include_str!("wgsl/granular_common.wgsl"));
 
 /// Granular deformation (seed 001 ch. 4): penetration texture from depth and heights.
 pub const GRANULAR_PENETRATION: &str = concat!(
+    wgsl_prelude!(),
     include_str!("wgsl/granular_common.wgsl"),
     include_str!("wgsl/granular_penetration.wgsl")
 );
 /// Granular deformation: jump flooding passes (closest seed per column).
 pub const GRANULAR_JFA: &str = concat!(
+    wgsl_prelude!(),
     include_str!("wgsl/granular_common.wgsl"),
     include_str!("wgsl/granular_jfa.wgsl")
 );
 /// Granular deformation: displacement of intersected material (the three methods).
 pub const GRANULAR_DISPLACE: &str = concat!(
+    wgsl_prelude!(),
     include_str!("wgsl/granular_common.wgsl"),
     include_str!("wgsl/granular_displace.wgsl")
 );
 /// Granular deformation: evening out slopes (interleaved and scatter).
 pub const GRANULAR_SLOPE: &str = concat!(
+    wgsl_prelude!(),
     include_str!("wgsl/granular_common.wgsl"),
     include_str!("wgsl/granular_slope.wgsl")
 );
 /// Granular deformation: symmetric-difference normals and their blur, float heights.
-pub const GRANULAR_NORMALS: &str = include_str!("wgsl/granular_normals.wgsl");
+pub const GRANULAR_NORMALS: &str =
+    concat!(wgsl_prelude!(), include_str!("wgsl/granular_normals.wgsl"));
 /// Granular deformation: depth of objects seen from below (render pipeline).
-pub const GRANULAR_DEPTH: &str = include_str!("wgsl/granular_depth.wgsl");
+pub const GRANULAR_DEPTH: &str =
+    concat!(wgsl_prelude!(), include_str!("wgsl/granular_depth.wgsl"));
 
 /// The markers around the default user procedural stamp function in [`STAMP`]; a user stamp
 /// replaces the text between them with its own `fn user_stamp_value(local: vec2<f32>) -> f32`.

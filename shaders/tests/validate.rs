@@ -45,3 +45,41 @@ fn a_broken_shader_is_caught() {
     };
     assert!(invalid, "a type error must not validate");
 }
+
+#[test]
+fn the_prelude_declares_every_code_with_its_rust_value() {
+    use terrain_shaders::codes;
+    let module = naga::front::wgsl::parse_str(terrain_shaders::PRELUDE).expect("prelude parses");
+    let value = |name: &str| -> i64 {
+        let (_, c) = module
+            .constants
+            .iter()
+            .find(|(_, c)| c.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("{name} missing from the prelude"));
+        match module.global_expressions[c.init] {
+            naga::Expression::Literal(naga::Literal::U32(v)) => i64::from(v),
+            naga::Expression::Literal(naga::Literal::I32(v)) => i64::from(v),
+            ref other => panic!("{name}: unexpected {other:?}"),
+        }
+    };
+    for (name, rust) in [
+        ("WRAP_REPEAT", i64::from(codes::WRAP_REPEAT)),
+        ("WRAP_CLAMP", i64::from(codes::WRAP_CLAMP)),
+        ("BLEND_ADD", i64::from(codes::BLEND_ADD)),
+        ("BLEND_MIN", i64::from(codes::BLEND_MIN)),
+        ("BLEND_MAX", i64::from(codes::BLEND_MAX)),
+        ("STAMP_GAUSSIAN", i64::from(codes::STAMP_GAUSSIAN)),
+        ("STAMP_TEXTURE", i64::from(codes::STAMP_TEXTURE)),
+        ("STAMP_USER", i64::from(codes::STAMP_USER)),
+        ("METRIC_EUCLIDEAN", i64::from(codes::METRIC_EUCLIDEAN)),
+        ("METRIC_MANHATTAN", i64::from(codes::METRIC_MANHATTAN)),
+        ("METRIC_CHEBYSHEV", i64::from(codes::METRIC_CHEBYSHEV)),
+        ("SEED", i64::from(codes::SEED)),
+        ("OBSTACLE", i64::from(codes::OBSTACLE)),
+        ("PENETRATING", i64::from(codes::PENETRATING)),
+        ("NO_SEED", i64::from(codes::NO_SEED)),
+        ("NO_OBJECT", i64::from(codes::NO_OBJECT)),
+    ] {
+        assert_eq!(value(name), rust, "{name}");
+    }
+}

@@ -30,8 +30,3 @@ struct Penetration {
     penetration: u32,
 }
 
-const NO_SEED: u32 = 0xffffffffu;
-const NO_OBJECT: u32 = 0xffffffffu;
-const SEED: i32 = -3;
-const OBSTACLE: i32 = -2;
-const PENETRATING: i32 = -1;

@@ -24,7 +24,6 @@ struct Tile {
     _pad: u32,
 }
 
-const NO_OBJECT: u32 = 0xffffffffu;
 const MAX_DEPTH: u32 = 0xfffffffeu;
 // The largest f32 below 2^32: any larger increment saturates.
 const MAX_ADD_F: f32 = 4294967040.0;

@@ -25,10 +25,10 @@ fn distance(c: vec2<u32>, s: vec2<u32>) -> u32 {
     }
     let dx = absdiff(c.x, s.x);
     let dy = absdiff(c.y, s.y);
-    if g.metric == 1u {
+    if g.metric == METRIC_MANHATTAN {
         return dx + dy;
     }
-    if g.metric == 2u {
+    if g.metric == METRIC_CHEBYSHEV {
         return max(dx, dy);
     }
     return dx * dx + dy * dy;

@@ -20,7 +20,7 @@ struct NormalParams {
 @group(0) @binding(2) var<storage, read_write> derivatives: array<vec2<f32>>;
 
 fn resolve(v: i32, n: u32, offset: i32) -> u32 {
-    if p.wrap == 0u {
+    if p.wrap == WRAP_REPEAT {
         return u32(v + offset) % n;
     }
     return u32(clamp(v, 0, i32(n) - 1));

@@ -63,8 +63,8 @@ fn texture_value(local: vec2<f32>) -> f32 {
 
 fn stamp_value(local: vec2<f32>) -> f32 {
     switch p.kind {
-        case 0u: { return exp(-p.beta * dot(local, local)); }
-        case 1u: { return texture_value(local); }
+        case STAMP_GAUSSIAN: { return exp(-p.beta * dot(local, local)); }
+        case STAMP_TEXTURE: { return texture_value(local); }
         default: { return user_stamp_value(local); }
     }
 }
@@ -87,7 +87,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     var x = u32(u.x);
     var y = u32(u.y);
-    if p.wrap == 0u {
+    if p.wrap == WRAP_REPEAT {
         x = u32(u.x + p.wrap_offset.x) % p.map_size.x;
         y = u32(u.y + p.wrap_offset.y) % p.map_size.y;
     }
@@ -96,8 +96,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var new_raw: f32;
     switch p.blend {
         // Clamped additive blend, rounded half up like the CPU reference.
-        case 0u: { new_raw = old + floor(p.raw_per_value * v + 0.5); }
-        case 1u: { new_raw = floor(min(old, p.base_raw + p.raw_per_value * v) + 0.5); }
+        case BLEND_ADD: { new_raw = old + floor(p.raw_per_value * v + 0.5); }
+        case BLEND_MIN: { new_raw = floor(min(old, p.base_raw + p.raw_per_value * v) + 0.5); }
         default: { new_raw = floor(max(old, p.base_raw + p.raw_per_value * v) + 0.5); }
     }
     heights[i] = u32(clamp(new_raw, 0.0, p.max_raw));
