@@ -1,7 +1,11 @@
-//! Shared plumbing of the compute passes: pipeline creation from WGSL and dispatch sizes.
+//! Shared plumbing of the passes: shader modules and pipelines, the per-pass bindings (a
+//! uniform ring with dynamic offsets and bind groups cached by buffer), and dispatch sizes.
 
 use crate::error::GpuError;
 use crate::scope::scoped;
+use bytemuck::Pod;
+use std::collections::HashMap;
+use std::marker::PhantomData;
 
 /// Workgroup side of every 2D compute pass (`@workgroup_size(8, 8, 1)`).
 pub const WORKGROUP: u32 = 8;
@@ -25,30 +29,30 @@ pub fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGrou
     }
 }
 
-/// Compiles `source` and builds a compute pipeline with entry point `main` over `layout`;
-/// shader or pipeline errors become [`GpuError::Validation`].
+/// Compiles one WGSL module (once per module: every entry point's pipeline is built from it).
+pub fn shader_module(
+    device: &wgpu::Device,
+    label: &'static str,
+    source: &str,
+) -> Result<wgpu::ShaderModule, GpuError> {
+    scoped(device, label, || {
+        device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        })
+    })
+}
+
+/// Builds a compute pipeline of entry point `entry` of `module` over `layout`; pipeline errors
+/// become [`GpuError::Validation`].
 pub fn compute_pipeline(
     device: &wgpu::Device,
     label: &'static str,
-    source: &str,
-    layout: &wgpu::BindGroupLayout,
-) -> Result<wgpu::ComputePipeline, GpuError> {
-    compute_pipeline_entry(device, label, source, layout, "main")
-}
-
-/// Compiles `source` and builds a compute pipeline of entry point `entry` over `layout`.
-pub fn compute_pipeline_entry(
-    device: &wgpu::Device,
-    label: &'static str,
-    source: &str,
+    module: &wgpu::ShaderModule,
     layout: &wgpu::BindGroupLayout,
     entry: &str,
 ) -> Result<wgpu::ComputePipeline, GpuError> {
     scoped(device, label, || {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(label),
             bind_group_layouts: &[Some(layout)],
@@ -57,12 +61,215 @@ pub fn compute_pipeline_entry(
         device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some(label),
             layout: Some(&pipeline_layout),
-            module: &module,
+            module,
             entry_point: Some(entry),
             compilation_options: Default::default(),
             cache: None,
         })
     })
+}
+
+/// One storage buffer binding of a pass (bindings 1, 2, ... after the uniform block).
+#[derive(Debug, Clone, Copy)]
+pub struct StorageBinding {
+    /// Stages that read (or write) it.
+    pub visibility: wgpu::ShaderStages,
+    /// Whether the shader only reads it.
+    pub read_only: bool,
+}
+
+impl StorageBinding {
+    /// A compute-stage binding, read-only or read-write.
+    pub const fn compute(read_only: bool) -> Self {
+        Self {
+            visibility: wgpu::ShaderStages::COMPUTE,
+            read_only,
+        }
+    }
+}
+
+/// Slots a uniform ring starts with, and the most it grows to before it asks for
+/// [`PassBindings::recall`] (4 MiB of uniforms at the usual 256-byte alignment).
+const RING_START: u32 = 64;
+const RING_MAX: u32 = 16_384;
+/// Distinct sets of bound buffers a pass keeps bind groups for before it drops them all.
+const BIND_CACHE: usize = 32;
+
+/// The bindings of one pass, built once: a bind group layout of a uniform block at binding 0
+/// (a ring of slots addressed by dynamic offset, one slot per recorded dispatch) and storage
+/// buffers at bindings 1, 2, ..., and the bind groups over the buffer sets the pass has been
+/// given, cached by buffer.
+///
+/// Why a ring: `queue.write_buffer` lands before the next submit, so dispatches recorded into
+/// one submission must not share a uniform buffer. Every recorded dispatch takes the next slot;
+/// [`PassBindings::recall`] frees them all once the work that used them has been submitted (the
+/// shape of `wgpu::util::StagingBelt`). A ring that fills up grows (a one-off allocation), up to
+/// a bound, so steady-state frames allocate nothing.
+#[derive(Debug)]
+pub struct PassBindings<T: Pod> {
+    label: &'static str,
+    layout: wgpu::BindGroupLayout,
+    ring: wgpu::Buffer,
+    stride: u64,
+    capacity: u32,
+    next: u32,
+    groups: HashMap<Vec<wgpu::Buffer>, wgpu::BindGroup>,
+    _uniform: PhantomData<T>,
+}
+
+impl<T: Pod> PassBindings<T> {
+    /// The layout (uniform `T` at binding 0 with a dynamic offset, then `storage` in order) and
+    /// an empty ring.
+    pub fn new(
+        device: &wgpu::Device,
+        label: &'static str,
+        uniform_visibility: wgpu::ShaderStages,
+        storage: &[StorageBinding],
+    ) -> Self {
+        let mut entries = vec![wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: uniform_visibility,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: true,
+                min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<T>() as u64),
+            },
+            count: None,
+        }];
+        entries.extend(storage.iter().enumerate().map(|(i, s)| {
+            wgpu::BindGroupLayoutEntry {
+                binding: i as u32 + 1,
+                visibility: s.visibility,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage {
+                        read_only: s.read_only,
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }
+        }));
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries: &entries,
+        });
+        let align = u64::from(device.limits().min_uniform_buffer_offset_alignment.max(1));
+        let stride = (std::mem::size_of::<T>() as u64).div_ceil(align) * align;
+        Self {
+            label,
+            ring: ring_buffer(device, label, stride, RING_START),
+            layout,
+            stride,
+            capacity: RING_START,
+            next: 0,
+            groups: HashMap::new(),
+            _uniform: PhantomData,
+        }
+    }
+
+    /// The bind group layout (for the pass's pipelines).
+    pub fn layout(&self) -> &wgpu::BindGroupLayout {
+        &self.layout
+    }
+
+    /// Writes `params` into the next slot of the ring and returns the bind group over `buffers`
+    /// (built on first use of that set) with the slot's dynamic offset, for
+    /// `set_bind_group(0, &group, &[offset])`.
+    pub fn bind(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        params: &T,
+        buffers: &[&wgpu::Buffer],
+    ) -> Result<(wgpu::BindGroup, u32), GpuError> {
+        if self.next == self.capacity {
+            if self.capacity >= RING_MAX {
+                return Err(GpuError::UniformRingFull {
+                    pass: self.label,
+                    slots: self.capacity,
+                });
+            }
+            // Earlier slots stay valid: recorded commands keep the old buffer alive.
+            self.capacity = (self.capacity * 2).min(RING_MAX);
+            self.ring = ring_buffer(device, self.label, self.stride, self.capacity);
+            self.next = 0;
+            self.groups.clear();
+        }
+        let offset = u64::from(self.next) * self.stride;
+        queue.write_buffer(&self.ring, offset, bytemuck::bytes_of(params));
+        self.next += 1;
+        let key: Vec<wgpu::Buffer> = buffers.iter().map(|b| (*b).clone()).collect();
+        if let Some(group) = self.groups.get(&key) {
+            return Ok((group.clone(), offset as u32));
+        }
+        if self.groups.len() >= BIND_CACHE {
+            self.groups.clear();
+        }
+        let mut entries = vec![wgpu::BindGroupEntry {
+            binding: 0,
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: &self.ring,
+                offset: 0,
+                size: wgpu::BufferSize::new(std::mem::size_of::<T>() as u64),
+            }),
+        }];
+        entries.extend(buffers.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32 + 1,
+            resource: b.as_entire_binding(),
+        }));
+        let group = scoped(device, self.label, || {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(self.label),
+                layout: &self.layout,
+                entries: &entries,
+            })
+        })?;
+        self.groups.insert(key, group.clone());
+        Ok((group, offset as u32))
+    }
+
+    /// Frees every slot of the ring. Call it after the submit that carries the work recorded
+    /// since the last recall (as `wgpu::util::StagingBelt::recall`).
+    pub fn recall(&mut self) {
+        self.next = 0;
+    }
+}
+
+fn ring_buffer(device: &wgpu::Device, label: &'static str, stride: u64, slots: u32) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: stride * u64::from(slots),
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// Records one compute pass of `dispatches` (pipeline, bind group, dynamic offset), each over
+/// `groups` workgroups.
+pub fn dispatch(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &'static str,
+    groups: (u32, u32),
+    dispatches: &[(&wgpu::ComputePipeline, &wgpu::BindGroup, u32)],
+) {
+    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: None,
+    });
+    for (pipeline, group, offset) in dispatches {
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, *group, &[*offset]);
+        pass.dispatch_workgroups(groups.0, groups.1, 1);
+    }
+}
+
+/// The shaders' code of a wrap mode (`terrain_shaders::codes`).
+pub fn wrap_code(wrap: terrain_core::WrapMode) -> u32 {
+    match wrap {
+        terrain_core::WrapMode::Repeat => terrain_shaders::codes::WRAP_REPEAT,
+        terrain_core::WrapMode::Clamp => terrain_shaders::codes::WRAP_CLAMP,
+    }
 }
 
 /// The smallest multiple of `map_size` (per axis) that makes `min` non-negative: shaders add it
@@ -100,27 +307,4 @@ pub fn dispatch_size(device: &wgpu::Device, size: glam::UVec2) -> Result<(u32, u
         .into());
     }
     Ok((x, y))
-}
-
-/// A bind group of whole buffers at bindings 0, 1, 2, ... in order (every pass binds a uniform
-/// block and its storage buffers this way).
-pub fn bind_buffers(
-    device: &wgpu::Device,
-    label: &'static str,
-    layout: &wgpu::BindGroupLayout,
-    buffers: &[&wgpu::Buffer],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            resource: b.as_entire_binding(),
-        })
-        .collect();
-    device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout,
-        entries: &entries,
-    })
 }

@@ -38,7 +38,7 @@ pub struct GpuContext {
     pub queue: wgpu::Queue,
     report: AdapterReport,
     /// Errors wgpu reported outside any error scope (from recorded commands, at submit).
-    errors: Arc<Mutex<Vec<String>>>,
+    errors: Arc<Mutex<Vec<wgpu::Error>>>,
 }
 
 /// Preference of an adapter: lower is better. Hardware first, then software Vulkan
@@ -57,6 +57,9 @@ fn rank(info: &wgpu::AdapterInfo) -> u32 {
         _ => 4,
     }
 }
+
+/// Errors of submitted work kept until [`GpuContext::check`] collects them.
+const MAX_KEPT_ERRORS: usize = 64;
 
 impl GpuContext {
     /// Creates a headless context. Honours `WGPU_BACKEND` (e.g. `vulkan`, `gl`) and
@@ -138,7 +141,10 @@ impl GpuContext {
         let sink = errors.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
             if let Ok(mut list) = sink.lock() {
-                list.push(e.to_string());
+                // Bounded: a device that fails every frame must not grow this without end.
+                if list.len() < MAX_KEPT_ERRORS {
+                    list.push(e);
+                }
             }
         }));
         Ok(Self {
@@ -152,19 +158,16 @@ impl GpuContext {
     }
 
     /// Returns the errors wgpu reported since the last call outside an error scope (validation
-    /// or out-of-memory errors of submitted work), as one [`GpuError::Validation`].
+    /// or out-of-memory errors of submitted work), as one [`GpuError::Submitted`].
     pub fn check(&self) -> Result<(), GpuError> {
-        let messages: Vec<String> = match self.errors.lock() {
+        let errors: Vec<wgpu::Error> = match self.errors.lock() {
             Ok(mut list) => list.drain(..).collect(),
             Err(poisoned) => poisoned.into_inner().drain(..).collect(),
         };
-        if messages.is_empty() {
+        if errors.is_empty() {
             Ok(())
         } else {
-            Err(GpuError::Validation {
-                context: "submitted GPU work",
-                message: messages.join("; "),
-            })
+            Err(GpuError::Submitted { errors })
         }
     }
 

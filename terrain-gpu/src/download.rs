@@ -30,16 +30,9 @@ pub fn map_and_read(device: &wgpu::Device, staging: &wgpu::Buffer) -> Result<Vec
     staging.map_async(wgpu::MapMode::Read, .., move |r| {
         let _ = tx.send(r);
     });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| GpuError::Readback(e.to_string()))?
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    let bytes = staging
-        .get_mapped_range(..)
-        .map_err(|e| GpuError::Readback(e.to_string()))?
-        .to_vec();
+    device.poll(wgpu::PollType::wait_indefinitely())?;
+    rx.recv().map_err(|_| GpuError::MapDropped)??;
+    let bytes = staging.get_mapped_range(..)?.to_vec();
     staging.unmap();
     Ok(bytes)
 }

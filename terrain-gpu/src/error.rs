@@ -20,21 +20,28 @@ pub enum GpuError {
     /// The adapter refused to create a device.
     #[error("the adapter could not create a device: {0}")]
     RequestDevice(#[from] wgpu::RequestDeviceError),
-    /// wgpu reported a validation error.
-    #[error("GPU validation error in {context}: {message}")]
+    /// wgpu reported a validation error while a resource or pipeline was created.
+    #[error("GPU validation error in {context}: {source}")]
     Validation {
         /// What was being done.
         context: &'static str,
-        /// wgpu's message.
-        message: String,
+        /// wgpu's error.
+        source: wgpu::Error,
     },
-    /// The device ran out of memory.
-    #[error("GPU out of memory in {context}: {message}")]
+    /// The device ran out of memory while a resource was created.
+    #[error("GPU out of memory in {context}: {source}")]
     OutOfMemory {
         /// What was being done.
         context: &'static str,
-        /// wgpu's message.
-        message: String,
+        /// wgpu's error.
+        source: wgpu::Error,
+    },
+    /// Errors wgpu reported for submitted work (outside any error scope); the first is the
+    /// source, all are listed.
+    #[error("{} error(s) in submitted GPU work: {}", errors.len(), errors.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("; "))]
+    Submitted {
+        /// Every error, in the order wgpu reported them.
+        errors: Vec<wgpu::Error>,
     },
     /// A map is larger than the device can hold in one storage buffer.
     #[error("a {size} map needs {bytes} bytes, over the device's storage buffer limit of {limit}")]
@@ -76,9 +83,34 @@ pub enum GpuError {
         /// Ring size.
         ring: usize,
     },
-    /// Mapping a buffer for reading failed, or the device was lost while waiting.
-    #[error("reading back from the GPU failed: {0}")]
-    Readback(String),
+    /// Waiting for the device failed (device lost, or the wait timed out).
+    #[error("waiting for the GPU failed: {0}")]
+    Poll(#[from] wgpu::PollError),
+    /// Mapping a staging buffer for reading failed (device lost).
+    #[error("mapping a buffer for reading failed: {0}")]
+    Map(#[from] wgpu::BufferAsyncError),
+    /// A mapped buffer's range could not be viewed.
+    #[error("viewing a mapped buffer failed: {0}")]
+    MapRange(#[from] wgpu::MapRangeError),
+    /// The device dropped a map request without answering it.
+    #[error("the device dropped a buffer map request without answering it")]
+    MapDropped,
+    /// Region readbacks whose mapping failed (device lost); regions that did arrive were
+    /// handed over first.
+    #[error("reading back regions {rects:?} failed")]
+    ReadbackFailed {
+        /// The regions that did not arrive.
+        rects: Vec<Rect>,
+    },
+    /// A pass recorded more dispatches than its uniform ring holds without a
+    /// `recall()` after the submit that carried them.
+    #[error("{pass} recorded {slots} dispatches without recall(): call recall() after each submit")]
+    UniformRingFull {
+        /// The pass.
+        pass: &'static str,
+        /// The ring's size in slots.
+        slots: u32,
+    },
     /// A camera with a non-finite field, a zero direction, or planes out of order.
     #[error(
         "invalid camera {camera:?}: needs finite values, a non-zero direction, 0 < fov < pi and 0 < near < far"
@@ -95,9 +127,15 @@ pub enum GpuError {
         /// Why.
         reason: &'static str,
     },
-    /// A user shader did not compile.
-    #[error("user shader rejected: {0}")]
-    Shader(String),
+    /// A user procedural stamp's WGSL did not compile into the stamp shader.
+    #[error("user stamp shader rejected: {source}")]
+    UserShader {
+        /// Why (the shader module's or pipeline's validation error).
+        source: Box<GpuError>,
+    },
+    /// Granular parameters or objects were invalid.
+    #[error(transparent)]
+    Granular(#[from] terrain_core::granular::GranularError),
     /// A parameter error from terrain-core (placement, region, encoding).
     #[error(transparent)]
     Core(#[from] CoreError),

@@ -11,6 +11,7 @@ use crate::download::download_bytes;
 use crate::error::GpuError;
 use crate::scope::scoped;
 use glam::{UVec2, Vec2};
+use std::marker::PhantomData;
 use terrain_core::{DerivativeMap, Grid, HeightEncoding, HeightMap, HeightSample, WrapMode};
 
 /// A storage buffer of `bytes` for a map of `size` texels (copyable both ways), after checking
@@ -41,32 +42,40 @@ pub(crate) fn map_buffer(
     })
 }
 
+/// Sample types whose every stored value is exact in the `f32` arithmetic of the stamp, normal
+/// and clipmap shaders (u8 and u16; u32 fixed-point heights are not, and have their own
+/// granular passes). Sealed: the passes' exactness depends on it.
+pub trait ExactInF32: HeightSample + sealed::Sealed {}
+impl ExactInF32 for u8 {}
+impl ExactInF32 for u16 {}
+
+mod sealed {
+    pub trait Sealed {}
+    impl Sealed for u8 {}
+    impl Sealed for u16 {}
+}
+
 /// A heightmap on the GPU: a storage buffer of one u32 per texel, row-major, with the map's
-/// encoding, spacing and wrap mode. Pairs with [`terrain_core::HeightMap`].
+/// encoding, spacing and wrap mode. Pairs with [`terrain_core::HeightMap<T>`]: `u16` for the
+/// coarse-map, `u8` for detail tiles, `u32` for the fixed-point heights of granular
+/// deformation. The sample type is part of the type, so a download cannot clamp silently.
 #[derive(Debug)]
-pub struct GpuHeightMap {
+pub struct GpuHeightMap<T: HeightSample> {
     buffer: wgpu::Buffer,
     size: UVec2,
     encoding: HeightEncoding,
     texel_size: f32,
     wrap: WrapMode,
-    max_raw: u32,
+    _sample: PhantomData<T>,
 }
 
-impl GpuHeightMap {
-    /// Uploads `map`. Only u8 and u16 samples are accepted: their values are exact in the f32
-    /// arithmetic of the stamp pass.
-    pub fn from_map<T: HeightSample>(
+impl<T: HeightSample> GpuHeightMap<T> {
+    /// Uploads `map`.
+    pub fn from_map(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         map: &HeightMap<T>,
     ) -> Result<Self, GpuError> {
-        if T::MAX_RAW > f64::from(u16::MAX) {
-            return Err(GpuError::UnsupportedSample {
-                what: "GpuHeightMap",
-                max_raw: T::MAX_RAW,
-            });
-        }
         let size = map.size();
         let bytes = u64::from(size.x) * u64::from(size.y) * 4;
         let buffer = map_buffer(device, "GpuHeightMap", size, bytes)?;
@@ -76,19 +85,14 @@ impl GpuHeightMap {
             encoding: map.encoding(),
             texel_size: map.texel_size(),
             wrap: map.wrap(),
-            max_raw: T::MAX_RAW as u32,
+            _sample: PhantomData,
         };
         gpu.write(queue, map)?;
         Ok(gpu)
     }
 
-    /// Replaces the heights with those of `map` (same size).
-    pub fn write<T: HeightSample>(
-        &self,
-        queue: &wgpu::Queue,
-        map: &HeightMap<T>,
-    ) -> Result<(), GpuError> {
-        self.check_sample::<T>()?;
+    /// Replaces the heights with those of `map` (same size, encoding and spacing).
+    pub fn write(&self, queue: &wgpu::Queue, map: &HeightMap<T>) -> Result<(), GpuError> {
         if map.encoding() != self.encoding || map.texel_size() != self.texel_size {
             return Err(GpuError::Unsupported {
                 what: "GpuHeightMap::write",
@@ -101,25 +105,25 @@ impl GpuHeightMap {
                 actual: map.size(),
             });
         }
-        let data: Vec<u32> = map
-            .grid()
-            .as_slice()
-            .iter()
-            .map(|v| v.to_raw_f64() as u32)
-            .collect();
-        queue.write_buffer(&self.buffer, 0, bytemuck::cast_slice(&data));
+        let values = map.grid().as_slice();
+        match bytemuck::try_cast_slice::<T, u32>(values) {
+            // u32 heights go up as they are.
+            Ok(raw) => queue.write_buffer(&self.buffer, 0, bytemuck::cast_slice(raw)),
+            Err(_) => {
+                let data: Vec<u32> = values.iter().map(|v| v.to_raw_f64() as u32).collect();
+                queue.write_buffer(&self.buffer, 0, bytemuck::cast_slice(&data));
+            }
+        }
         Ok(())
     }
 
-    /// Downloads the heights into a map of sample type `T`, waiting for the GPU.
-    pub fn read<T: HeightSample>(
+    /// Downloads the heights (waits for the GPU).
+    pub fn read(
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<HeightMap<T>, GpuError> {
-        self.check_sample::<T>()?;
-        let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
-        let raw: &[u32] = bytemuck::cast_slice(&bytes);
+        let raw = self.read_raw(device, queue)?;
         let grid = Grid::from_vec(
             self.size.x,
             self.size.y,
@@ -135,15 +139,14 @@ impl GpuHeightMap {
         )?)
     }
 
-    /// Refuses a sample type other than the one uploaded (values would clamp silently).
-    fn check_sample<T: HeightSample>(&self) -> Result<(), GpuError> {
-        if T::MAX_RAW != f64::from(self.max_raw) {
-            return Err(GpuError::UnsupportedSample {
-                what: "GpuHeightMap (sample type differs from the uploaded map's)",
-                max_raw: T::MAX_RAW,
-            });
-        }
-        Ok(())
+    /// Downloads the stored values as u32, row-major (waits for the GPU).
+    pub fn read_raw(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<Vec<u32>, GpuError> {
+        let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 
     /// The storage buffer.
@@ -171,9 +174,16 @@ impl GpuHeightMap {
         self.wrap
     }
 
-    /// Largest stored value (255 or 65535).
+    /// Largest stored value of the sample type (255, 65 535 or 2^32 - 1).
     pub fn max_raw(&self) -> u32 {
-        self.max_raw
+        T::MAX_RAW as u32
+    }
+}
+
+impl GpuHeightMap<u32> {
+    /// Fixed-point units per metre (`1 / scale`, rounded) of granular heights.
+    pub fn units_per_metre(&self) -> f64 {
+        (1.0 / f64::from(self.encoding.scale)).round()
     }
 }
 
@@ -208,7 +218,7 @@ impl GpuDerivativeMap {
     }
 
     /// A derivative map shaped for `map`.
-    pub fn for_map(device: &wgpu::Device, map: &GpuHeightMap) -> Result<Self, GpuError> {
+    pub fn for_map<T: HeightSample>(device: &wgpu::Device, map: &GpuHeightMap<T>) -> Result<Self, GpuError> {
         Self::new(device, map.size(), map.texel_size(), map.wrap())
     }
 

@@ -1,12 +1,14 @@
 //! `NormalPass`: regenerates partial-derivative normals (seed 000 eq. 3.3) in a dirty rect plus
 //! its 2-texel apron, on the GPU.
 
-use crate::compute::{bind_buffers, buffer_entry, compute_pipeline, dispatch_size, wrap_offset};
+use crate::compute::{
+    PassBindings, wrap_code, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
+    wrap_offset,
+};
 use crate::error::GpuError;
-use crate::maps::{GpuDerivativeMap, GpuHeightMap};
+use crate::maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
 use bytemuck::{Pod, Zeroable};
-use terrain_core::{Rect, WrapMode, derivative_region};
-use wgpu::util::DeviceExt;
+use terrain_core::{Rect, derivative_region};
 
 /// The uniform block of `normals.wgsl`, byte for byte.
 #[repr(C)]
@@ -27,32 +29,37 @@ const _: () = assert!(std::mem::size_of::<NormalParams>() == 40);
 #[derive(Debug)]
 pub struct NormalPass {
     pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    bindings: PassBindings<NormalParams>,
 }
 
 impl NormalPass {
-    /// Builds the pipeline.
+    /// Builds the pipeline, its bindings and uniform ring.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        use wgpu::BufferBindingType as B;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("NormalPass"),
-            entries: &[
-                buffer_entry(0, B::Uniform),
-                buffer_entry(1, B::Storage { read_only: true }),
-                buffer_entry(2, B::Storage { read_only: false }),
-            ],
-        });
-        let pipeline = compute_pipeline(device, "NormalPass", terrain_shaders::NORMALS, &layout)?;
-        Ok(Self { pipeline, layout })
+        let bindings = PassBindings::new(
+            device,
+            "NormalPass",
+            wgpu::ShaderStages::COMPUTE,
+            &[StorageBinding::compute(true), StorageBinding::compute(false)],
+        );
+        let module = shader_module(device, "normals.wgsl", terrain_shaders::NORMALS)?;
+        let pipeline = compute_pipeline(device, "NormalPass", &module, bindings.layout(), "main")?;
+        Ok(Self { pipeline, bindings })
+    }
+
+    /// Frees the uniform slots of the regions recorded so far: call it after the submit that
+    /// carries them.
+    pub fn recall(&mut self) {
+        self.bindings.recall();
     }
 
     /// Records the regeneration of the derivatives that heights changed inside `dirty` can
     /// affect (the same region as [`terrain_core::DerivativeMap::update_rect`]).
-    pub fn encode(
-        &self,
+    pub fn encode<T: ExactInF32>(
+        &mut self,
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
-        map: &GpuHeightMap,
+        map: &GpuHeightMap<T>,
         out: &GpuDerivativeMap,
         dirty: Rect,
     ) -> Result<(), GpuError> {
@@ -70,44 +77,28 @@ impl NormalPass {
             region_min: region.min.to_array(),
             region_size: region.size.to_array(),
             map_size: map.size().to_array(),
-            wrap: match map.wrap() {
-                WrapMode::Repeat => 0,
-                WrapMode::Clamp => 1,
-            },
+            wrap: wrap_code(map.wrap()),
             k,
             // Covers the region and the stencil's reach of 2 texels around any wrapped texel.
             wrap_offset: wrap_offset(region.min.min(glam::IVec2::ZERO) - 2, map.size())?,
         };
-        let (gx, gy) = dispatch_size(device, region.size)?;
-        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("NormalParams"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let bind_group = bind_buffers(
-            device,
-            "NormalPass",
-            &self.layout,
-            &[&uniform, map.buffer(), out.buffer()],
-        );
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("NormalPass"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(gx, gy, 1);
+        let groups = dispatch_size(device, region.size)?;
+        let (group, offset) =
+            self.bindings
+                .bind(device, queue, &params, &[map.buffer(), out.buffer()])?;
+        dispatch(encoder, "NormalPass", groups, &[(&self.pipeline, &group, offset)]);
         Ok(())
     }
 
     /// Records the derivatives of the whole map.
-    pub fn encode_full(
-        &self,
+    pub fn encode_full<T: ExactInF32>(
+        &mut self,
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
-        map: &GpuHeightMap,
+        map: &GpuHeightMap<T>,
         out: &GpuDerivativeMap,
     ) -> Result<(), GpuError> {
-        self.encode(device, encoder, map, out, Rect::from_size(map.size()))
+        self.encode(device, queue, encoder, map, out, Rect::from_size(map.size()))
     }
 }

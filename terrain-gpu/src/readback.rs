@@ -58,7 +58,7 @@ pub struct RegionReadback {
     slots: Vec<Slot>,
     next_ticket: u64,
     /// A failure to report on the next poll (regions that arrived with it went out first).
-    failure: Option<String>,
+    failure: Option<Vec<Rect>>,
 }
 
 /// Most staging buffers a ring may have.
@@ -123,16 +123,15 @@ impl RegionReadback {
             return Err(GpuError::ReadbackBusy { ring });
         };
         let bytes = rect.area() * 4;
-        if slot.buffer.as_ref().is_none_or(|b| b.size() < bytes) {
-            slot.buffer = Some(device.create_buffer(&wgpu::BufferDescriptor {
+        // A slot keeps its staging buffer; it is only replaced by a larger one.
+        let buffer = match &mut slot.buffer {
+            Some(b) if b.size() >= bytes => b,
+            other => other.insert(device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("RegionReadback staging"),
                 size: bytes,
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
-            }));
-        }
-        let Some(buffer) = slot.buffer.as_ref() else {
-            return Err(GpuError::Readback("staging buffer missing".into()));
+            })),
         };
         copy_rows(encoder, map, rect, buffer);
         slot.state.store(PENDING, Ordering::Release);
@@ -148,25 +147,21 @@ impl RegionReadback {
 
     /// Hands over every region that has arrived, without waiting for the others.
     pub fn poll(&mut self, device: &wgpu::Device) -> Result<Vec<RegionData>, GpuError> {
-        device
-            .poll(wgpu::PollType::Poll)
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        device.poll(wgpu::PollType::Poll)?;
         self.collect()
     }
 
     /// Waits until every request in flight has arrived and hands them over (tests, shutdown).
     pub fn wait(&mut self, device: &wgpu::Device) -> Result<Vec<RegionData>, GpuError> {
-        device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        device.poll(wgpu::PollType::wait_indefinitely())?;
         self.collect()
     }
 
     /// Hands over the regions that arrived. A failed mapping (device loss) is reported after the
     /// others are handed over: on the next call when regions came with it, so none is dropped.
     fn collect(&mut self) -> Result<Vec<RegionData>, GpuError> {
-        if let Some(message) = self.failure.take() {
-            return Err(GpuError::Readback(message));
+        if let Some(rects) = self.failure.take() {
+            return Err(GpuError::ReadbackFailed { rects });
         }
         let mut out = Vec::new();
         let mut failures = Vec::new();
@@ -183,14 +178,12 @@ impl RegionReadback {
             slot.state.store(FREE, Ordering::Release);
             if state == FAILED {
                 // Hand over what did arrive; report the failure on its own.
-                failures.push(format!("mapping {rect:?} (ticket {}) failed", ticket.0));
+                failures.push(rect);
                 continue;
             }
             let bytes = rect.area() * 4;
             let values: Vec<u32> = {
-                let view = buffer
-                    .get_mapped_range(0..bytes)
-                    .map_err(|e| GpuError::Readback(e.to_string()))?;
+                let view = buffer.get_mapped_range(0..bytes)?;
                 bytemuck::cast_slice(&view).to_vec()
             };
             buffer.unmap();
@@ -203,11 +196,10 @@ impl RegionReadback {
         }
         out.sort_by_key(|r| r.ticket);
         if !failures.is_empty() {
-            let message = failures.join("; ");
             if out.is_empty() {
-                return Err(GpuError::Readback(message));
+                return Err(GpuError::ReadbackFailed { rects: failures });
             }
-            self.failure = Some(message);
+            self.failure = Some(failures);
         }
         Ok(out)
     }

@@ -1,6 +1,8 @@
 //! Turns wgpu's validation and out-of-memory errors into `Result`s instead of panics.
 
 use crate::error::GpuError;
+use std::future::Future;
+use std::task::{Context, Poll, Waker};
 
 /// Runs `f` inside validation and out-of-memory error scopes and returns its result, or the
 /// first error wgpu reported while it ran. `context` names the operation in the error.
@@ -13,19 +15,24 @@ pub fn scoped<T>(
     let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let value = f();
     // Scopes pop in reverse order of their creation.
-    let validation_error = pollster::block_on(validation.pop());
-    let oom_error = pollster::block_on(oom.pop());
-    if let Some(e) = oom_error {
-        return Err(GpuError::OutOfMemory {
-            context,
-            message: e.to_string(),
-        });
+    let validation_error = ready(validation.pop());
+    let oom_error = ready(oom.pop());
+    if let Some(source) = oom_error {
+        return Err(GpuError::OutOfMemory { context, source });
     }
-    if let Some(e) = validation_error {
-        return Err(GpuError::Validation {
-            context,
-            message: e.to_string(),
-        });
+    if let Some(source) = validation_error {
+        return Err(GpuError::Validation { context, source });
     }
     Ok(value)
+}
+
+/// The value of a future that is already complete. wgpu's native backends resolve error scopes
+/// at once (validation is synchronous), so this needs no executor; a future that is still
+/// pending (a browser backend, which this crate does not build) counts as "no error".
+fn ready<F: Future<Output = Option<wgpu::Error>>>(future: F) -> Option<wgpu::Error> {
+    let mut future = std::pin::pin!(future);
+    match future.as_mut().poll(&mut Context::from_waker(Waker::noop())) {
+        Poll::Ready(value) => value,
+        Poll::Pending => None,
+    }
 }

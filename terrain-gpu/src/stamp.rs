@@ -1,14 +1,17 @@
 //! `StampPass`: every stamp kind of terrain-core (Gaussian, texture, shockwave as a texture,
 //! user procedural WGSL) applied on the GPU to the stamp's region only, in place.
 
-use crate::compute::{bind_buffers, buffer_entry, compute_pipeline, dispatch_size, wrap_offset};
+use crate::compute::{
+    PassBindings, wrap_code, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
+    wrap_offset,
+};
 use crate::error::GpuError;
-use crate::maps::GpuHeightMap;
+use crate::maps::{ExactInF32, GpuHeightMap};
 use crate::scope::scoped;
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::{
-    Blend, DirtyRect, GaussianStamp, StampPlacement, TextureStamp, WrapMode, stamp_region,
+    Blend, DirtyRect, GaussianStamp, StampPlacement, TextureStamp, stamp_region,
 };
 use wgpu::util::DeviceExt;
 
@@ -37,9 +40,9 @@ struct StampParams {
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
 const _: () = assert!(std::mem::size_of::<StampParams>() == 96);
 
-const KIND_GAUSSIAN: u32 = 0;
-const KIND_TEXTURE: u32 = 1;
-const KIND_USER: u32 = 2;
+use terrain_shaders::codes::{
+    BLEND_ADD, BLEND_MAX, BLEND_MIN, STAMP_GAUSSIAN, STAMP_TEXTURE, STAMP_USER,
+};
 
 /// A texture stamp's values uploaded once (the shockwave uploads its change every frame).
 #[derive(Debug)]
@@ -83,14 +86,24 @@ impl GpuProceduralStamp {
     ) -> Result<Self, GpuError> {
         let (begin, end) = terrain_shaders::USER_STAMP_MARKERS;
         let src = terrain_shaders::STAMP;
-        let (Some(a), Some(b)) = (src.find(begin), src.find(end)) else {
-            return Err(GpuError::Shader(
-                "the stamp shader lost its user markers".into(),
-            ));
+        // terrain-shaders' tests check that the markers are there, in order.
+        let (a, b) = match (src.find(begin), src.find(end)) {
+            (Some(a), Some(b)) if a < b => (a, b),
+            _ => unreachable!("terrain_shaders::STAMP carries its user markers"),
         };
         let source = format!("{}{begin}\n{wgsl_function}\n{}", &src[..a], &src[b..]);
-        let pipeline = compute_pipeline(device, "user procedural stamp", &source, &pass.layout)
-            .map_err(|e| GpuError::Shader(e.to_string()))?;
+        let user = |e| GpuError::UserShader {
+            source: Box::new(e),
+        };
+        let module = shader_module(device, "user procedural stamp", &source).map_err(user)?;
+        let pipeline = compute_pipeline(
+            device,
+            "user procedural stamp",
+            &module,
+            pass.bindings.layout(),
+            "main",
+        )
+        .map_err(user)?;
         Ok(Self { pipeline })
     }
 }
@@ -111,23 +124,21 @@ pub enum GpuStamp<'a> {
 #[derive(Debug)]
 pub struct StampPass {
     pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    bindings: PassBindings<StampParams>,
     empty_values: wgpu::Buffer,
 }
 
 impl StampPass {
-    /// Builds the pipeline.
+    /// Builds the pipeline, its bindings and uniform ring.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        use wgpu::BufferBindingType as B;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("StampPass"),
-            entries: &[
-                buffer_entry(0, B::Uniform),
-                buffer_entry(1, B::Storage { read_only: false }),
-                buffer_entry(2, B::Storage { read_only: true }),
-            ],
-        });
-        let pipeline = compute_pipeline(device, "StampPass", terrain_shaders::STAMP, &layout)?;
+        let bindings = PassBindings::new(
+            device,
+            "StampPass",
+            wgpu::ShaderStages::COMPUTE,
+            &[StorageBinding::compute(false), StorageBinding::compute(true)],
+        );
+        let module = shader_module(device, "stamp.wgsl", terrain_shaders::STAMP)?;
+        let pipeline = compute_pipeline(device, "StampPass", &module, bindings.layout(), "main")?;
         let empty_values = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("StampPass empty texture"),
             contents: bytemuck::cast_slice(&[0.0f32; 4]),
@@ -135,18 +146,25 @@ impl StampPass {
         });
         Ok(Self {
             pipeline,
-            layout,
+            bindings,
             empty_values,
         })
     }
 
+    /// Frees the uniform slots of the stamps recorded so far: call it after the submit that
+    /// carries them.
+    pub fn recall(&mut self) {
+        self.bindings.recall();
+    }
+
     /// Records one stamp into `encoder` and returns the map rects it covers (as
     /// [`terrain_core::apply_stamp`]: 1, 2 or 4 on a repeating map, none off a clamped map).
-    pub fn encode(
-        &self,
+    pub fn encode<T: ExactInF32>(
+        &mut self,
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
-        map: &GpuHeightMap,
+        map: &GpuHeightMap<T>,
         stamp: GpuStamp<'_>,
         placement: &StampPlacement,
         blend: Blend,
@@ -158,9 +176,9 @@ impl StampPass {
         let (center, inv_half, sin, cos) = placement.local_frame(ts);
         let enc = map.encoding();
         let (blend_code, base_m) = match blend {
-            Blend::Add => (0, 0.0),
-            Blend::Min { base_m } => (1, base_m),
-            Blend::Max { base_m } => (2, base_m),
+            Blend::Add => (BLEND_ADD, 0.0),
+            Blend::Min { base_m } => (BLEND_MIN, base_m),
+            Blend::Max { base_m } => (BLEND_MAX, base_m),
         };
         if !base_m.is_finite() {
             return Err(terrain_core::CoreError::NonFinite {
@@ -171,25 +189,22 @@ impl StampPass {
         }
         let (kind, beta, values, tex_size, pipeline) = match stamp {
             GpuStamp::Gaussian(g) => (
-                KIND_GAUSSIAN,
+                STAMP_GAUSSIAN,
                 g.beta_for(placement.intensity),
                 &self.empty_values,
                 UVec2::ONE,
                 &self.pipeline,
             ),
-            GpuStamp::Texture(t) => (KIND_TEXTURE, 0.0, &t.values, t.size, &self.pipeline),
+            GpuStamp::Texture(t) => (STAMP_TEXTURE, 0.0, &t.values, t.size, &self.pipeline),
             GpuStamp::Procedural(p) => {
-                (KIND_USER, 0.0, &self.empty_values, UVec2::ONE, &p.pipeline)
+                (STAMP_USER, 0.0, &self.empty_values, UVec2::ONE, &p.pipeline)
             }
         };
         let params = StampParams {
             region_min: region.footprint.min.to_array(),
             region_size: region.footprint.size.to_array(),
             map_size: map.size().to_array(),
-            wrap: match map.wrap() {
-                WrapMode::Repeat => 0,
-                WrapMode::Clamp => 1,
-            },
+            wrap: wrap_code(map.wrap()),
             kind,
             center: center.to_array(),
             inv_half: inv_half.to_array(),
@@ -203,25 +218,11 @@ impl StampPass {
             tex_size: tex_size.to_array(),
             wrap_offset: wrap_offset(region.footprint.min, map.size())?,
         };
-        let (gx, gy) = dispatch_size(device, region.footprint.size)?;
-        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("StampParams"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let bind_group = bind_buffers(
-            device,
-            "StampPass",
-            &self.layout,
-            &[&uniform, map.buffer(), values],
-        );
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("StampPass"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(gx, gy, 1);
+        let groups = dispatch_size(device, region.footprint.size)?;
+        let (group, offset) =
+            self.bindings
+                .bind(device, queue, &params, &[map.buffer(), values])?;
+        dispatch(encoder, "StampPass", groups, &[(pipeline, &group, offset)]);
         Ok(region.pieces.iter().map(|p| p.map).collect())
     }
 }

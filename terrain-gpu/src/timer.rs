@@ -101,9 +101,7 @@ impl GpuTimer {
         }
         let start = Instant::now();
         queue.submit([encoder.finish()]);
-        device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        device.poll(wgpu::PollType::wait_indefinitely())?;
         let wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let timestamp_ms = match &self.queries {
             Some((_, resolve)) => {
