@@ -76,15 +76,24 @@ pub const STAMP: &str = concat!(wgsl_prelude!(), include_str!("wgsl/stamp.wgsl")
 pub const NORMALS: &str = concat!(wgsl_prelude!(), include_str!("wgsl/normals.wgsl"));
 
 /// `SkyPass`: a full-screen gradient by view-ray elevation.
-pub const SKY: &str = concat!(wgsl_prelude!(), include_str!("wgsl/sky.wgsl"));
+pub const SKY: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/sky.wgsl")
+);
 
 /// `ClipmapRenderer`: displaced, morphed, lit clipmap blocks.
-pub const CLIPMAP: &str = concat!(wgsl_prelude!(), include_str!("wgsl/clipmap.wgsl"));
+pub const CLIPMAP: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/clipmap.wgsl")
+);
 
 /// The declarations every granular pass shares (uniform block, penetration texel, column
 /// kinds); already joined in front of [`GRANULAR_PENETRATION`], [`GRANULAR_JFA`],
 /// [`GRANULAR_DISPLACE`] and [`GRANULAR_SLOPE`].
-pub const GRANULAR_COMMON: &str = concat!(wgsl_prelude!(), include_str!("wgsl/granular_common.wgsl"));
+pub const GRANULAR_COMMON: &str =
+    concat!(wgsl_prelude!(), include_str!("wgsl/granular_common.wgsl"));
 
 /// Granular deformation (seed 001 ch. 4): penetration texture from depth and heights.
 pub const GRANULAR_PENETRATION: &str = concat!(
@@ -114,8 +123,7 @@ pub const GRANULAR_SLOPE: &str = concat!(
 pub const GRANULAR_NORMALS: &str =
     concat!(wgsl_prelude!(), include_str!("wgsl/granular_normals.wgsl"));
 /// Granular deformation: depth of objects seen from below (render pipeline).
-pub const GRANULAR_DEPTH: &str =
-    concat!(wgsl_prelude!(), include_str!("wgsl/granular_depth.wgsl"));
+pub const GRANULAR_DEPTH: &str = concat!(wgsl_prelude!(), include_str!("wgsl/granular_depth.wgsl"));
 
 /// The markers around the default user procedural stamp function in [`STAMP`]; a user stamp
 /// replaces the text between them with its own `fn user_stamp_value(local: vec2<f32>) -> f32`.

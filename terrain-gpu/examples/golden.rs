@@ -10,7 +10,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .unwrap_or_else(|| "terrain-gpu/tests/data/golden_clipmap.png".into());
     let ctx = terrain_gpu::GpuContext::new_headless()?;
     eprintln!("rendering the golden view on {}", ctx.report().name);
-    let scene = scene::Scene::new(ctx, 31, 5);
+    let mut scene = scene::Scene::new(ctx, 31, 5);
     let camera = scene::golden_camera(&scene);
     let (image, _) = scene.render(
         &camera,

@@ -1,15 +1,18 @@
 //! `ClipmapRenderer`: draws a geometry clipmap (terrain-lod's shared mesh, instanced per part)
-//! displaced by the coarse-map with wrap addressing and lit with the derivative normals.
+//! displaced by the coarse-map with wrap addressing and lit with the derivative normals, drawn
+//! into the caller's render pass.
 
 use crate::camera::Camera;
-use crate::compute::bind_buffers;
+use crate::compute::shader_module;
 use crate::error::GpuError;
-use crate::maps::{GpuDerivativeMap, GpuHeightMap};
-use crate::offscreen::{COLOR_FORMAT, DEPTH_FORMAT, OffscreenTarget};
+use crate::maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
 use crate::scope::scoped;
+use crate::target::TargetFormat;
 use bytemuck::{Pod, Zeroable};
-use glam::{Vec3, Vec4};
-use terrain_lod::{ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapVertex, MeshPart};
+use glam::{UVec2, Vec3, Vec4};
+use terrain_lod::{
+    ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapVertex, MAX_DRAWS_PER_LEVEL, MeshPart,
+};
 use wgpu::util::DeviceExt;
 
 /// The uniform block `Frame` of `clipmap.wgsl`, byte for byte.
@@ -30,7 +33,8 @@ struct FrameUniform {
     morph_width: f32,
     ramp_low: f32,
     ramp_high: f32,
-    pad: [f32; 3],
+    srgb_target: u32,
+    pad: [f32; 2],
     light_dir: [f32; 4],
     fog_color: [f32; 4],
 }
@@ -62,22 +66,44 @@ impl Default for TerrainStyle {
     }
 }
 
-/// Renders a placed [`ClipmapFrame`] into an [`OffscreenTarget`] after the sky.
+/// Draws a placed [`ClipmapFrame`] into the caller's render pass: build it once for the pass's
+/// formats, then per frame [`ClipmapRenderer::prepare`] (writes the frame's uniforms and
+/// instances) and [`ClipmapRenderer::draw`] (records the draws), after [`crate::SkyPass`].
+///
+/// Everything is made in `new`: the pipeline, the shared mesh, the uniform buffer and an
+/// instance buffer large enough for any frame of its layout. The bind group over a map and its
+/// normals is made on the first frame that draws them. One renderer draws one view per submit
+/// (its uniforms are rewritten by the next `prepare`); use one renderer per view.
 #[derive(Debug)]
 pub struct ClipmapRenderer {
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
+    target: TargetFormat,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
+    uniform: wgpu::Buffer,
+    instances: wgpu::Buffer,
     parts: Vec<MeshPart>,
     n: u32,
     levels: u32,
+    /// The bind group of the last map drawn, with the buffers it binds.
+    bound: Option<(wgpu::Buffer, wgpu::Buffer, wgpu::BindGroup)>,
+    /// Draws of the prepared frame: (part index, first instance, instance count).
+    runs: Vec<(usize, u32, u32)>,
 }
 
 impl ClipmapRenderer {
-    /// Uploads the shared mesh of `layout` and builds the pipeline.
-    pub fn new(device: &wgpu::Device, layout: &ClipmapLayout) -> Result<Self, GpuError> {
+    /// Uploads the shared mesh of `layout` and builds the pipeline for passes of `target`.
+    pub fn new(
+        device: &wgpu::Device,
+        target: &TargetFormat,
+        layout: &ClipmapLayout,
+    ) -> Result<Self, GpuError> {
+        target.validate(device)?;
         let mesh = layout.mesh();
+        let module = shader_module(device, "clipmap.wgsl", terrain_shaders::CLIPMAP)?;
+        // Every instance a placed frame of this layout can hold.
+        let max_instances = u64::from(layout.levels()) * MAX_DRAWS_PER_LEVEL as u64;
         scoped(device, "ClipmapRenderer", || {
             let storage = |binding, stages| wgpu::BindGroupLayoutEntry {
                 binding,
@@ -105,10 +131,6 @@ impl ClipmapRenderer {
                     storage(1, wgpu::ShaderStages::VERTEX),
                     storage(2, wgpu::ShaderStages::FRAGMENT),
                 ],
-            });
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("clipmap"),
-                source: wgpu::ShaderSource::Wgsl(terrain_shaders::CLIPMAP.into()),
             });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("ClipmapRenderer"),
@@ -139,19 +161,13 @@ impl ClipmapRenderer {
                 },
                 // No culling: degenerate triangles and both windings of the parts are drawn.
                 primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
+                depth_stencil: Some(target.depth_state(true, wgpu::CompareFunction::Less)),
+                multisample: target.multisample(),
                 fragment: Some(wgpu::FragmentState {
                     module: &module,
                     entry_point: Some("fs_main"),
                     compilation_options: Default::default(),
-                    targets: &[Some(COLOR_FORMAT.into())],
+                    targets: &[Some(target.color.into())],
                 }),
                 multiview_mask: None,
                 cache: None,
@@ -166,33 +182,67 @@ impl ClipmapRenderer {
                 contents: bytemuck::cast_slice(&mesh.indices),
                 usage: wgpu::BufferUsages::INDEX,
             });
+            let uniform = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("clipmap frame"),
+                size: std::mem::size_of::<FrameUniform>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let instances = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("clipmap instances"),
+                size: max_instances * std::mem::size_of::<ClipmapInstance>() as u64,
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
             Self {
                 pipeline,
                 layout: bind_layout,
+                target: *target,
                 vertices,
                 indices,
+                uniform,
+                instances,
                 parts: mesh.parts.clone(),
                 n: layout.n(),
                 levels: layout.levels(),
+                bound: None,
+                runs: Vec::new(),
             }
         })
     }
 
-    /// Records the terrain into `target` (after [`crate::SkyPass`], which clears it).
-    #[allow(clippy::too_many_arguments)]
-    pub fn encode(
-        &self,
+    /// The formats this renderer draws into.
+    pub fn target(&self) -> &TargetFormat {
+        &self.target
+    }
+
+    /// Writes the uniforms and instances of one frame: `frame` (placed and culled by
+    /// terrain-lod) seen by `camera` on a target of `target_size` pixels, displaced by `map`
+    /// and lit with `normals`. Checks everything before wgpu sees it.
+    pub fn prepare<T: ExactInF32>(
+        &mut self,
         device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        target: &OffscreenTarget,
-        map: &GpuHeightMap,
-        normals: &GpuDerivativeMap,
-        frame: &ClipmapFrame,
-        camera: &Camera,
-        style: &TerrainStyle,
+        queue: &wgpu::Queue,
+        view: &ClipmapView<'_, T>,
     ) -> Result<(), GpuError> {
+        let ClipmapView {
+            map,
+            normals,
+            frame,
+            camera,
+            style,
+            target_size,
+        } = *view;
         if !camera.is_valid() {
             return Err(GpuError::InvalidCamera { camera: *camera });
+        }
+        if target_size.x == 0 || target_size.y == 0 {
+            return Err(terrain_core::CoreError::OutOfRange {
+                what: "clipmap target size (pixels)",
+                value: f64::from(target_size.min_element()),
+                expected: "at least 1 x 1",
+            }
+            .into());
         }
         if map.wrap() != terrain_core::WrapMode::Repeat {
             return Err(GpuError::Unsupported {
@@ -212,7 +262,7 @@ impl ClipmapRenderer {
                 actual: normals.size(),
             });
         }
-        let size = target.size().as_vec2();
+        let size = target_size.as_vec2();
         let ts = map.texel_size();
         let cam_texel = glam::Vec2::new(camera.position.x, camera.position.z) / ts;
         let cam_int = cam_texel.floor();
@@ -228,95 +278,121 @@ impl ClipmapRenderer {
             height_scale: enc.scale,
             height_offset: enc.offset,
             map_size: map.size().to_array(),
-            wrap_offset: wrap_offset_for_frame(frame, map)?,
+            wrap_offset: wrap_offset_for_frame(frame, map.size())?,
             n: self.n,
             levels: self.levels,
             morph_width: terrain_lod::morph::default_morph_width(self.n),
             ramp_low: style.ramp.0,
             ramp_high: style.ramp.1,
-            pad: [0.0; 3],
+            srgb_target: self.target.srgb_flag(),
+            pad: [0.0; 2],
             light_dir: style.light_dir.extend(0.0).to_array(),
             fog_color: Vec4::from((style.fog_color, style.fog_density)).to_array(),
         };
-        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("clipmap frame"),
-            contents: bytemuck::bytes_of(&uniform),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let bind_group = bind_buffers(
-            device,
-            "ClipmapRenderer",
-            &self.layout,
-            &[&uniform, map.buffer(), normals.buffer()],
-        );
 
         // Instances grouped by part, so each part is one instanced draw.
-        let mut runs: Vec<(usize, Vec<ClipmapInstance>)> = Vec::new();
+        let mut by_part: Vec<Vec<ClipmapInstance>> = vec![Vec::new(); self.parts.len()];
         for draw in &frame.draws {
-            let Some(part) = self.parts.iter().position(|p| p.kind == draw.part) else {
-                continue;
-            };
-            match runs.iter_mut().find(|(p, _)| *p == part) {
-                Some((_, list)) => list.push(draw.instance),
-                None => runs.push((part, vec![draw.instance])),
+            if let Some(part) = self.parts.iter().position(|p| p.kind == draw.part) {
+                by_part[part].push(draw.instance);
             }
         }
-        let all: Vec<ClipmapInstance> = runs.iter().flat_map(|(_, l)| l.iter().copied()).collect();
-        if all.is_empty() {
-            return Ok(());
+        let count: usize = by_part.iter().map(Vec::len).sum();
+        let capacity = self.instances.size() / std::mem::size_of::<ClipmapInstance>() as u64;
+        if count as u64 > capacity {
+            return Err(GpuError::Unsupported {
+                what: "ClipmapRenderer",
+                reason: "the frame holds more instances than its layout can place",
+            });
         }
-        let instances = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("clipmap instances"),
-            contents: bytemuck::cast_slice(&all),
-            usage: wgpu::BufferUsages::VERTEX,
-        });
+        self.runs.clear();
+        let mut all = Vec::with_capacity(count);
+        for (part, list) in by_part.iter().enumerate() {
+            if !list.is_empty() {
+                self.runs.push((part, all.len() as u32, list.len() as u32));
+                all.extend_from_slice(list);
+            }
+        }
+        if !all.is_empty() {
+            queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&all));
+        }
+        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
 
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("ClipmapRenderer"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: target.color_view(),
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Load,
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: target.depth_view(),
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Load,
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.set_vertex_buffer(0, self.vertices.slice(..));
-        pass.set_vertex_buffer(1, instances.slice(..));
-        pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
-        let mut first = 0u32;
-        for (part, list) in &runs {
-            let part = &self.parts[*part];
-            let count = list.len() as u32;
-            pass.draw_indexed(part.indices.clone(), part.base_vertex, first..first + count);
-            first += count;
+        let rebind = match &self.bound {
+            Some((h, n, _)) => h != map.buffer() || n != normals.buffer(),
+            None => true,
+        };
+        if rebind {
+            let group = scoped(device, "ClipmapRenderer bind group", || {
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("ClipmapRenderer"),
+                    layout: &self.layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: self.uniform.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: map.buffer().as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: normals.buffer().as_entire_binding(),
+                        },
+                    ],
+                })
+            })?;
+            self.bound = Some((map.buffer().clone(), normals.buffer().clone(), group));
         }
         Ok(())
     }
+
+    /// Records the prepared frame into `pass` (a pass of this renderer's [`TargetFormat`]).
+    /// Draws nothing before the first [`ClipmapRenderer::prepare`].
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
+        let Some((_, _, group)) = &self.bound else {
+            return;
+        };
+        if self.runs.is_empty() {
+            return;
+        }
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, group, &[]);
+        pass.set_vertex_buffer(0, self.vertices.slice(..));
+        pass.set_vertex_buffer(1, self.instances.slice(..));
+        pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+        for &(part, first, count) in &self.runs {
+            let part = &self.parts[part];
+            pass.draw_indexed(part.indices.clone(), part.base_vertex, first..first + count);
+        }
+    }
+}
+
+/// Everything one clipmap frame is drawn from.
+#[derive(Debug, Clone, Copy)]
+pub struct ClipmapView<'a, T: ExactInF32> {
+    /// The (repeating) heightmap.
+    pub map: &'a GpuHeightMap<T>,
+    /// Its derivative normals.
+    pub normals: &'a GpuDerivativeMap,
+    /// The placed, culled frame of the renderer's layout.
+    pub frame: &'a ClipmapFrame,
+    /// The camera.
+    pub camera: &'a Camera,
+    /// Lighting and colours.
+    pub style: &'a TerrainStyle,
+    /// Size of the render target in pixels (for the aspect ratio).
+    pub target_size: UVec2,
 }
 
 /// A multiple of the map size that makes every texel the frame can read non-negative (the
 /// coarsest level's origin, less the morph's one-texel reach).
-fn wrap_offset_for_frame(frame: &ClipmapFrame, map: &GpuHeightMap) -> Result<[i32; 2], GpuError> {
+fn wrap_offset_for_frame(frame: &ClipmapFrame, map_size: UVec2) -> Result<[i32; 2], GpuError> {
     let min = frame
         .levels
         .iter()
         .map(|l| l.origin - glam::IVec2::splat(l.scale as i32 + 1))
         .fold(glam::IVec2::ZERO, |a, b| a.min(b));
-    crate::compute::wrap_offset(min, map.size())
+    crate::compute::wrap_offset(min, map_size)
 }

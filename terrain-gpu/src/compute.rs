@@ -136,20 +136,23 @@ impl<T: Pod> PassBindings<T> {
             },
             count: None,
         }];
-        entries.extend(storage.iter().enumerate().map(|(i, s)| {
-            wgpu::BindGroupLayoutEntry {
-                binding: i as u32 + 1,
-                visibility: s.visibility,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage {
-                        read_only: s.read_only,
+        entries.extend(
+            storage
+                .iter()
+                .enumerate()
+                .map(|(i, s)| wgpu::BindGroupLayoutEntry {
+                    binding: i as u32 + 1,
+                    visibility: s.visibility,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage {
+                            read_only: s.read_only,
+                        },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
                     },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }
-        }));
+                    count: None,
+                }),
+        );
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some(label),
             entries: &entries,
@@ -214,10 +217,15 @@ impl<T: Pod> PassBindings<T> {
                 size: wgpu::BufferSize::new(std::mem::size_of::<T>() as u64),
             }),
         }];
-        entries.extend(buffers.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry {
-            binding: i as u32 + 1,
-            resource: b.as_entire_binding(),
-        }));
+        entries.extend(
+            buffers
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry {
+                    binding: i as u32 + 1,
+                    resource: b.as_entire_binding(),
+                }),
+        );
         let group = scoped(device, self.label, || {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some(self.label),
@@ -236,7 +244,12 @@ impl<T: Pod> PassBindings<T> {
     }
 }
 
-fn ring_buffer(device: &wgpu::Device, label: &'static str, stride: u64, slots: u32) -> wgpu::Buffer {
+fn ring_buffer(
+    device: &wgpu::Device,
+    label: &'static str,
+    stride: u64,
+    slots: u32,
+) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: stride * u64::from(slots),

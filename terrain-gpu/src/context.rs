@@ -64,6 +64,7 @@ const MAX_KEPT_ERRORS: usize = 64;
 impl GpuContext {
     /// Creates a headless context. Honours `WGPU_BACKEND` (e.g. `vulkan`, `gl`) and
     /// `WGPU_ADAPTER_NAME` (a case-insensitive part of the adapter's name).
+    #[cfg(feature = "blocking")]
     pub fn new_headless() -> Result<Self, GpuError> {
         pollster::block_on(Self::new_headless_async())
     }

@@ -136,6 +136,14 @@ pub enum GpuError {
     /// Granular parameters or objects were invalid.
     #[error(transparent)]
     Granular(#[from] terrain_core::granular::GranularError),
+    /// A renderer cannot draw into a pass of these formats.
+    #[error("cannot render into {format:?}: {reason}")]
+    UnsupportedTarget {
+        /// The formats asked for.
+        format: crate::target::TargetFormat,
+        /// Why not.
+        reason: &'static str,
+    },
     /// A parameter error from terrain-core (placement, region, encoding).
     #[error(transparent)]
     Core(#[from] CoreError),

@@ -40,6 +40,7 @@ pub mod context;
 pub mod download;
 pub mod error;
 pub mod granular;
+pub mod limits;
 pub mod maps;
 pub mod normals;
 pub mod offscreen;
@@ -48,18 +49,26 @@ pub mod region_source;
 pub mod scope;
 pub mod sky;
 pub mod stamp;
+pub mod target;
 pub mod testing;
 pub mod timer;
 
 pub use camera::Camera;
-pub use clipmap::{ClipmapRenderer, TerrainStyle};
+pub use clipmap::{ClipmapRenderer, ClipmapView, TerrainStyle};
 pub use context::{AdapterReport, GpuContext};
 pub use error::GpuError;
-pub use maps::{GpuDerivativeMap, GpuHeightMap};
+pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
+pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
 pub use normals::NormalPass;
 pub use offscreen::OffscreenTarget;
 pub use readback::{ReadbackTicket, RegionData, RegionReadback};
 pub use region_source::GpuRegionSource;
 pub use sky::{SkyColors, SkyPass};
 pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampPass};
+pub use target::TargetFormat;
 pub use timer::{GpuTimer, GpuTiming};
+
+/// The glam of this crate's public API.
+pub use glam;
+/// The wgpu this crate is built against: use it to make devices and passes of the same version.
+pub use wgpu;

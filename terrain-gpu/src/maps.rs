@@ -45,6 +45,18 @@ pub(crate) fn map_buffer(
 /// Sample types whose every stored value is exact in the `f32` arithmetic of the stamp, normal
 /// and clipmap shaders (u8 and u16; u32 fixed-point heights are not, and have their own
 /// granular passes). Sealed: the passes' exactness depends on it.
+///
+/// A u32 map cannot reach the stamp pass:
+///
+/// ```compile_fail
+/// # fn f(device: &wgpu::Device, queue: &wgpu::Queue, pass: &mut terrain_gpu::StampPass,
+/// #      map: &terrain_gpu::GpuHeightMap<u32>, p: &terrain_core::StampPlacement) {
+/// let mut encoder = device.create_command_encoder(&Default::default());
+/// let g = terrain_core::GaussianStamp::default();
+/// pass.encode(device, queue, &mut encoder, map, terrain_gpu::GpuStamp::Gaussian(&g), p,
+///             terrain_core::Blend::Add);
+/// # }
+/// ```
 pub trait ExactInF32: HeightSample + sealed::Sealed {}
 impl ExactInF32 for u8 {}
 impl ExactInF32 for u16 {}
@@ -106,13 +118,12 @@ impl<T: HeightSample> GpuHeightMap<T> {
             });
         }
         let values = map.grid().as_slice();
-        match bytemuck::try_cast_slice::<T, u32>(values) {
+        if T::MAX_RAW == f64::from(u32::MAX) && std::mem::size_of::<T>() == 4 {
             // u32 heights go up as they are.
-            Ok(raw) => queue.write_buffer(&self.buffer, 0, bytemuck::cast_slice(raw)),
-            Err(_) => {
-                let data: Vec<u32> = values.iter().map(|v| v.to_raw_f64() as u32).collect();
-                queue.write_buffer(&self.buffer, 0, bytemuck::cast_slice(&data));
-            }
+            queue.write_buffer(&self.buffer, 0, bytemuck::cast_slice(values));
+        } else {
+            let data: Vec<u32> = values.iter().map(|v| v.to_raw_f64() as u32).collect();
+            queue.write_buffer(&self.buffer, 0, bytemuck::cast_slice(&data));
         }
         Ok(())
     }
@@ -218,7 +229,10 @@ impl GpuDerivativeMap {
     }
 
     /// A derivative map shaped for `map`.
-    pub fn for_map<T: HeightSample>(device: &wgpu::Device, map: &GpuHeightMap<T>) -> Result<Self, GpuError> {
+    pub fn for_map<T: HeightSample>(
+        device: &wgpu::Device,
+        map: &GpuHeightMap<T>,
+    ) -> Result<Self, GpuError> {
         Self::new(device, map.size(), map.texel_size(), map.wrap())
     }
 

@@ -2,8 +2,8 @@
 //! its 2-texel apron, on the GPU.
 
 use crate::compute::{
-    PassBindings, wrap_code, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
-    wrap_offset,
+    PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
+    wrap_code, wrap_offset,
 };
 use crate::error::GpuError;
 use crate::maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
@@ -39,7 +39,10 @@ impl NormalPass {
             device,
             "NormalPass",
             wgpu::ShaderStages::COMPUTE,
-            &[StorageBinding::compute(true), StorageBinding::compute(false)],
+            &[
+                StorageBinding::compute(true),
+                StorageBinding::compute(false),
+            ],
         );
         let module = shader_module(device, "normals.wgsl", terrain_shaders::NORMALS)?;
         let pipeline = compute_pipeline(device, "NormalPass", &module, bindings.layout(), "main")?;
@@ -86,7 +89,12 @@ impl NormalPass {
         let (group, offset) =
             self.bindings
                 .bind(device, queue, &params, &[map.buffer(), out.buffer()])?;
-        dispatch(encoder, "NormalPass", groups, &[(&self.pipeline, &group, offset)]);
+        dispatch(
+            encoder,
+            "NormalPass",
+            groups,
+            &[(&self.pipeline, &group, offset)],
+        );
         Ok(())
     }
 
@@ -99,6 +107,13 @@ impl NormalPass {
         map: &GpuHeightMap<T>,
         out: &GpuDerivativeMap,
     ) -> Result<(), GpuError> {
-        self.encode(device, queue, encoder, map, out, Rect::from_size(map.size()))
+        self.encode(
+            device,
+            queue,
+            encoder,
+            map,
+            out,
+            Rect::from_size(map.size()),
+        )
     }
 }

@@ -1,9 +1,11 @@
-//! `OffscreenTarget`: a colour + depth target of any size, read back to RGBA8 (the frame
-//! capture; writing it as PNG is terrain-core's `io::write_png_rgba8`).
+//! `OffscreenTarget`: a colour + depth target of any size, read back to RGBA8: the convenience
+//! for frame captures (renderers draw into any caller's pass; writing the capture as PNG is
+//! terrain-core's `io::write_png_rgba8`).
 
 use crate::download::map_and_read;
 use crate::error::GpuError;
 use crate::scope::scoped;
+use crate::target::TargetFormat;
 use glam::UVec2;
 use terrain_core::Grid;
 
@@ -19,7 +21,14 @@ pub struct OffscreenTarget {
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
+    /// Where captures land on their way to the CPU (rows padded to the copy alignment).
+    staging: wgpu::Buffer,
     size: UVec2,
+}
+
+/// Bytes per row of a capture of `width` pixels, padded to wgpu's copy alignment.
+fn padded_row(width: u32) -> u32 {
+    (width * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
 }
 
 impl OffscreenTarget {
@@ -39,7 +48,7 @@ impl OffscreenTarget {
             height: size.y,
             depth_or_array_layers: 1,
         };
-        let (color, depth) = scoped(device, "offscreen target", || {
+        let (color, depth, staging) = scoped(device, "offscreen target", || {
             let texture = |label, format, usage| {
                 device.create_texture(&wgpu::TextureDescriptor {
                     label: Some(label),
@@ -63,12 +72,19 @@ impl OffscreenTarget {
                     DEPTH_FORMAT,
                     wgpu::TextureUsages::RENDER_ATTACHMENT,
                 ),
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("capture staging"),
+                    size: u64::from(padded_row(size.x)) * u64::from(size.y),
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }),
             )
         })?;
         Ok(Self {
             color_view: color.create_view(&Default::default()),
             depth_view: depth.create_view(&Default::default()),
             color,
+            staging,
             size,
         })
     }
@@ -88,6 +104,43 @@ impl OffscreenTarget {
         &self.depth_view
     }
 
+    /// The formats of this target, for building renderers that draw into it.
+    pub fn format(&self) -> TargetFormat {
+        TargetFormat::CAPTURE
+    }
+
+    /// Begins a render pass over this target that clears colour to `clear` and depth to 1; the
+    /// sky and the terrain renderers then draw into it.
+    pub fn begin_pass<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        clear: wgpu::Color,
+    ) -> wgpu::RenderPass<'e> {
+        encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("OffscreenTarget"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &self.color_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(clear),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        })
+    }
+
     /// Copies the colour target to the CPU (blocking), as RGBA8 rows from the top.
     pub fn read_rgba8(
         &self,
@@ -96,19 +149,13 @@ impl OffscreenTarget {
     ) -> Result<Grid<[u8; 4]>, GpuError> {
         let (w, h) = (self.size.x, self.size.y);
         let row = w * 4;
-        let padded =
-            row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("capture staging"),
-            size: u64::from(padded) * u64::from(h),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let padded = padded_row(w);
+        let staging = &self.staging;
         let mut encoder = device.create_command_encoder(&Default::default());
         encoder.copy_texture_to_buffer(
             self.color.as_image_copy(),
             wgpu::TexelCopyBufferInfo {
-                buffer: &staging,
+                buffer: staging,
                 layout: wgpu::TexelCopyBufferLayout {
                     offset: 0,
                     bytes_per_row: Some(padded),
@@ -122,7 +169,7 @@ impl OffscreenTarget {
             },
         );
         queue.submit([encoder.finish()]);
-        let bytes = map_and_read(device, &staging)?;
+        let bytes = map_and_read(device, staging)?;
         let pixels = (0..h as usize)
             .flat_map(|y| {
                 let start = y * padded as usize;

@@ -7,7 +7,7 @@ use crate::maps::GpuHeightMap;
 use glam::UVec2;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
-use terrain_core::{Grid, HeightEncoding, Rect, WrapMode};
+use terrain_core::{Grid, HeightEncoding, HeightSample, Rect, WrapMode};
 
 /// Identifies one request; regions arrive with the ticket they were requested with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -99,11 +99,11 @@ impl RegionReadback {
     /// be mapped when the encoder's commands are submitted. The encoder must be submitted for the
     /// region to arrive. On a repeating map `rect` may cross the edges (at most one period per
     /// axis); on a clamped map it must lie inside.
-    pub fn request(
+    pub fn request<T: HeightSample>(
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
-        map: &GpuHeightMap,
+        map: &GpuHeightMap<T>,
         rect: Rect,
     ) -> Result<ReadbackTicket, GpuError> {
         let size = map.size();
@@ -206,9 +206,9 @@ impl RegionReadback {
 }
 
 /// Copies the rows of `rect` (wrapped on a repeating map) into `dst`, packed row-major.
-fn copy_rows(
+fn copy_rows<T: HeightSample>(
     encoder: &mut wgpu::CommandEncoder,
-    map: &GpuHeightMap,
+    map: &GpuHeightMap<T>,
     rect: Rect,
     dst: &wgpu::Buffer,
 ) {

@@ -31,7 +31,10 @@ pub fn scoped<T>(
 /// pending (a browser backend, which this crate does not build) counts as "no error".
 fn ready<F: Future<Output = Option<wgpu::Error>>>(future: F) -> Option<wgpu::Error> {
     let mut future = std::pin::pin!(future);
-    match future.as_mut().poll(&mut Context::from_waker(Waker::noop())) {
+    match future
+        .as_mut()
+        .poll(&mut Context::from_waker(Waker::noop()))
+    {
         Poll::Ready(value) => value,
         Poll::Pending => None,
     }

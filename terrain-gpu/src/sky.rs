@@ -1,12 +1,11 @@
-//! `SkyPass`: clears the target with a sky gradient by view-ray elevation.
+//! `SkyPass`: a sky gradient by view-ray elevation, drawn first into the caller's render pass.
 
-use crate::compute::bind_buffers;
+use crate::compute::shader_module;
 use crate::error::GpuError;
-use crate::offscreen::{COLOR_FORMAT, OffscreenTarget};
 use crate::scope::scoped;
+use crate::target::TargetFormat;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
-use wgpu::util::DeviceExt;
 
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
@@ -14,10 +13,11 @@ struct SkyParams {
     inv_view_proj: [[f32; 4]; 4],
     horizon: [f32; 4],
     zenith: [f32; 4],
+    flags: [u32; 4],
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<SkyParams>() == 96);
+const _: () = assert!(std::mem::size_of::<SkyParams>() == 112);
 
 /// Sky colours at the horizon and straight up (linear 0..1 RGB).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -37,16 +37,22 @@ impl Default for SkyColors {
     }
 }
 
-/// Draws the sky; the first pass of a frame (it clears colour and depth).
+/// Draws the sky into the caller's render pass; the first draw of a frame (it writes no depth
+/// and tests none, so the terrain drawn after covers it). Built once for the pass's formats;
+/// [`SkyPass::prepare`] writes the frame's uniforms, [`SkyPass::draw`] records the draw.
 #[derive(Debug)]
 pub struct SkyPass {
     pipeline: wgpu::RenderPipeline,
-    layout: wgpu::BindGroupLayout,
+    uniform: wgpu::Buffer,
+    group: wgpu::BindGroup,
+    srgb_target: u32,
 }
 
 impl SkyPass {
-    /// Builds the pipeline for [`COLOR_FORMAT`] targets.
-    pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
+    /// Builds the pipeline for passes of `target`.
+    pub fn new(device: &wgpu::Device, target: &TargetFormat) -> Result<Self, GpuError> {
+        target.validate(device)?;
+        let module = shader_module(device, "sky.wgsl", terrain_shaders::SKY)?;
         scoped(device, "SkyPass", || {
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("SkyPass"),
@@ -60,10 +66,6 @@ impl SkyPass {
                     },
                     count: None,
                 }],
-            });
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("sky"),
-                source: wgpu::ShaderSource::Wgsl(terrain_shaders::SKY.into()),
             });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("SkyPass"),
@@ -80,72 +82,69 @@ impl SkyPass {
                     buffers: &[],
                 },
                 primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: crate::offscreen::DEPTH_FORMAT,
-                    depth_write_enabled: Some(false),
-                    depth_compare: Some(wgpu::CompareFunction::Always),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
+                depth_stencil: Some(target.depth_state(false, wgpu::CompareFunction::Always)),
+                multisample: target.multisample(),
                 fragment: Some(wgpu::FragmentState {
                     module: &module,
                     entry_point: Some("fs_main"),
                     compilation_options: Default::default(),
-                    targets: &[Some(COLOR_FORMAT.into())],
+                    targets: &[Some(target.color.into())],
                 }),
                 multiview_mask: None,
                 cache: None,
             });
-            Self { pipeline, layout }
+            let uniform = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("SkyParams"),
+                size: std::mem::size_of::<SkyParams>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("SkyPass"),
+                layout: &layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                }],
+            });
+            Self {
+                pipeline,
+                uniform,
+                group,
+                srgb_target: target.srgb_flag(),
+            }
         })
     }
 
-    /// Records the sky over the whole target, clearing colour and depth first.
-    pub fn encode(
+    /// Writes the frame's uniforms: the camera's `view_proj` (its inverse must exist) and the
+    /// colours.
+    pub fn prepare(
         &self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        target: &OffscreenTarget,
+        queue: &wgpu::Queue,
         view_proj: Mat4,
         colors: &SkyColors,
-    ) {
+    ) -> Result<(), GpuError> {
+        let inverse = view_proj.inverse();
+        if !inverse.is_finite() || !colors.horizon.is_finite() || !colors.zenith.is_finite() {
+            return Err(GpuError::Unsupported {
+                what: "SkyPass::prepare",
+                reason: "the view-projection matrix must be invertible and the colours finite",
+            });
+        }
         let params = SkyParams {
-            inv_view_proj: view_proj.inverse().to_cols_array_2d(),
+            inv_view_proj: inverse.to_cols_array_2d(),
             horizon: colors.horizon.extend(1.0).to_array(),
             zenith: colors.zenith.extend(1.0).to_array(),
+            flags: [self.srgb_target, 0, 0, 0],
         };
-        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("SkyParams"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let bind_group = bind_buffers(device, "SkyPass", &self.layout, &[&uniform]);
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("SkyPass"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: target.color_view(),
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: target.depth_view(),
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&params));
+        Ok(())
+    }
+
+    /// Records the sky into `pass` (a pass of this renderer's [`TargetFormat`]).
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
+        pass.set_bind_group(0, &self.group, &[]);
         pass.draw(0..3, 0..1);
     }
 }

@@ -2,17 +2,15 @@
 //! user procedural WGSL) applied on the GPU to the stamp's region only, in place.
 
 use crate::compute::{
-    PassBindings, wrap_code, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
-    wrap_offset,
+    PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
+    wrap_code, wrap_offset,
 };
 use crate::error::GpuError;
 use crate::maps::{ExactInF32, GpuHeightMap};
 use crate::scope::scoped;
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
-use terrain_core::{
-    Blend, DirtyRect, GaussianStamp, StampPlacement, TextureStamp, stamp_region,
-};
+use terrain_core::{Blend, DirtyRect, GaussianStamp, StampPlacement, TextureStamp, stamp_region};
 use wgpu::util::DeviceExt;
 
 /// The uniform block of `stamp.wgsl` (`StampParams`), byte for byte.
@@ -135,7 +133,10 @@ impl StampPass {
             device,
             "StampPass",
             wgpu::ShaderStages::COMPUTE,
-            &[StorageBinding::compute(false), StorageBinding::compute(true)],
+            &[
+                StorageBinding::compute(false),
+                StorageBinding::compute(true),
+            ],
         );
         let module = shader_module(device, "stamp.wgsl", terrain_shaders::STAMP)?;
         let pipeline = compute_pipeline(device, "StampPass", &module, bindings.layout(), "main")?;

@@ -7,7 +7,9 @@ mod scene;
 use glam::{UVec2, Vec2, Vec3};
 use scene::Scene;
 use terrain_gpu::testing::context_or_skip;
-use terrain_gpu::{Camera, SkyColors};
+use terrain_gpu::{
+    Camera, ClipmapRenderer, ClipmapView, GpuError, SkyColors, SkyPass, TargetFormat, TerrainStyle,
+};
 
 /// Magenta: a colour the terrain's shading (greens, browns, greys, white, blue-grey fog)
 /// cannot produce.
@@ -41,7 +43,7 @@ fn no_cracks_from_grazing_views_across_level_boundaries() {
     let Some(ctx) = context_or_skip("no_cracks_from_grazing_views") else {
         return;
     };
-    let scene = Scene::new(ctx, 31, 5);
+    let mut scene = Scene::new(ctx, 31, 5);
     let magenta = SkyColors {
         horizon: Vec3::new(1.0, 0.0, 1.0),
         zenith: Vec3::new(1.0, 0.0, 1.0),
@@ -120,7 +122,7 @@ fn fixed_view_matches_the_golden_image() {
     let golden_path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/golden_clipmap.png");
     let golden = terrain_core::io::read_png_rgba8(golden_path, &Default::default())
         .expect("golden image missing or unreadable: regenerate it with `cargo xtask golden`");
-    let scene = Scene::new(ctx, 31, 5);
+    let mut scene = Scene::new(ctx, 31, 5);
     let camera = scene::golden_camera(&scene);
     let (image, _) = scene.render(&camera, scene::GOLDEN_SIZE, &SkyColors::default());
     assert_eq!(golden.size(), image.size());
@@ -146,4 +148,221 @@ fn fixed_view_matches_the_golden_image() {
             path.display()
         );
     }
+}
+
+/// The caller's-pass path against the offscreen capture: the mean per-pixel difference (largest
+/// channel) may be at most this (8-bit rounding of the sRGB round trip, MSAA resolve)...
+const CALLER_PASS_MEAN_TOLERANCE: f64 = 2.0;
+/// ...and at most this share of pixels may differ by more than 24 (silhouette edges, which
+/// 4x MSAA blends and the single-sample capture does not).
+const CALLER_PASS_EDGE_SHARE: f64 = 0.04;
+
+#[test]
+fn renderers_draw_into_the_callers_msaa_srgb_pass_like_the_capture() {
+    let Some(ctx) = context_or_skip("renderers_draw_into_the_callers_msaa_srgb_pass") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 31, 5);
+    let camera = scene::golden_camera(&scene);
+    let size = scene::GOLDEN_SIZE;
+    let (capture, _) = scene.render(&camera, size, &SkyColors::default());
+
+    // The engine's side: its own formats, its own textures, its own pass.
+    let format = TargetFormat {
+        color: wgpu::TextureFormat::Bgra8UnormSrgb,
+        depth: wgpu::TextureFormat::Depth24Plus,
+        sample_count: 4,
+    };
+    let device = &scene.ctx.device;
+    let queue = &scene.ctx.queue;
+    let sky = SkyPass::new(device, &format).unwrap();
+    let mut renderer = ClipmapRenderer::new(device, &format, &scene.layout).unwrap();
+    let texture = |label, format, samples, usage| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: size.x,
+                height: size.y,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: samples,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let msaa = texture(
+        "msaa colour",
+        format.color,
+        4,
+        wgpu::TextureUsages::RENDER_ATTACHMENT,
+    );
+    let resolved = texture(
+        "resolved colour",
+        format.color,
+        1,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+    );
+    let depth = texture(
+        "msaa depth",
+        format.depth,
+        4,
+        wgpu::TextureUsages::RENDER_ATTACHMENT,
+    );
+    let (msaa_view, resolved_view, depth_view) = (
+        msaa.create_view(&Default::default()),
+        resolved.create_view(&Default::default()),
+        depth.create_view(&Default::default()),
+    );
+
+    let aspect = size.x as f32 / size.y as f32;
+    let frame = scene
+        .layout
+        .place(
+            Vec2::new(camera.position.x, camera.position.z),
+            1.0,
+            (0.0, scene::HEIGHT),
+            Some(&terrain_lod::Frustum::from_view_proj(
+                camera.view_proj_world(aspect),
+            )),
+        )
+        .unwrap();
+    let style = TerrainStyle {
+        ramp: (0.0, scene::HEIGHT),
+        ..TerrainStyle::default()
+    };
+    sky.prepare(
+        queue,
+        camera.view_proj_relative(aspect),
+        &SkyColors::default(),
+    )
+    .unwrap();
+    let view = ClipmapView {
+        map: &scene.gpu_map,
+        normals: &scene.normals,
+        frame: &frame,
+        camera: &camera,
+        style: &style,
+        target_size: size,
+    };
+    renderer.prepare(device, queue, &view).unwrap();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("engine pass"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &msaa_view,
+                depth_slice: None,
+                resolve_target: Some(&resolved_view),
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                    store: wgpu::StoreOp::Discard,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        sky.draw(&mut pass);
+        renderer.draw(&mut pass);
+    }
+    // Read the resolved BGRA bytes back (rows padded to the copy alignment).
+    let row = size.x * 4;
+    let padded =
+        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("engine readback"),
+        size: u64::from(padded * size.y),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    encoder.copy_texture_to_buffer(
+        resolved.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &staging,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded),
+                rows_per_image: Some(size.y),
+            },
+        },
+        wgpu::Extent3d {
+            width: size.x,
+            height: size.y,
+            depth_or_array_layers: 1,
+        },
+    );
+    queue.submit([encoder.finish()]);
+    let bytes = terrain_gpu::download::map_and_read(device, &staging).unwrap();
+    scene.ctx.check().expect("no GPU validation errors");
+
+    let mut sum = 0.0;
+    let mut edges = 0usize;
+    for y in 0..size.y {
+        for x in 0..size.x {
+            let i = (y * padded + x * 4) as usize;
+            let bgra = &bytes[i..i + 4];
+            let engine = [bgra[2], bgra[1], bgra[0]];
+            let cap = capture.get(x, y).unwrap();
+            let d = (0..3)
+                .map(|c| (i32::from(engine[c]) - i32::from(cap[c])).unsigned_abs())
+                .max()
+                .unwrap_or(0);
+            sum += f64::from(d);
+            edges += usize::from(d > 24);
+        }
+    }
+    let n = f64::from(size.x * size.y);
+    let (mean, share) = (sum / n, edges as f64 / n);
+    eprintln!(
+        "caller's pass vs capture: mean {mean:.3}, {:.2} % of pixels differ by more than 24",
+        share * 100.0
+    );
+    assert!(
+        mean <= CALLER_PASS_MEAN_TOLERANCE && share <= CALLER_PASS_EDGE_SHARE,
+        "caller's pass differs from the capture: mean {mean:.3}, edge share {share:.4}"
+    );
+}
+
+#[test]
+fn renderers_refuse_targets_they_cannot_draw_into() {
+    let Some(ctx) = context_or_skip("renderers_refuse_targets_they_cannot_draw_into") else {
+        return;
+    };
+    let layout = terrain_lod::ClipmapLayout::new(31, 3).unwrap();
+    let bad = [
+        TargetFormat {
+            color: wgpu::TextureFormat::Depth32Float,
+            ..TargetFormat::CAPTURE
+        },
+        TargetFormat {
+            depth: wgpu::TextureFormat::Rgba8Unorm,
+            ..TargetFormat::CAPTURE
+        },
+        TargetFormat {
+            sample_count: 3,
+            ..TargetFormat::CAPTURE
+        },
+    ];
+    for format in bad {
+        assert!(matches!(
+            ClipmapRenderer::new(&ctx.device, &format, &layout),
+            Err(GpuError::UnsupportedTarget { .. })
+        ));
+        assert!(matches!(
+            SkyPass::new(&ctx.device, &format),
+            Err(GpuError::UnsupportedTarget { .. })
+        ));
+    }
+    ctx.check().expect("refused before wgpu saw them");
 }

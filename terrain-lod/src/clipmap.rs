@@ -257,6 +257,11 @@ impl ClipmapMesh {
     }
 }
 
+/// The most part instances one level places: 12 blocks, 2 fix-up draws, 1 L-trim and the
+/// degenerate ring (level 0 draws its inner grid and degenerates only). Renderers size their
+/// instance buffers from it.
+pub const MAX_DRAWS_PER_LEVEL: usize = 16;
+
 /// Per-draw data for a part instance: where and at what scale to draw it.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -434,7 +439,7 @@ impl ClipmapLayout {
             frustum: cull,
             texel_size: f64::from(texel_size),
             height_range,
-            draws: Vec::with_capacity(2 + 16 * (self.levels as usize)),
+            draws: Vec::with_capacity(MAX_DRAWS_PER_LEVEL * self.levels as usize),
             culled: 0,
         };
         let mut levels = Vec::with_capacity(self.levels as usize);

@@ -48,7 +48,7 @@ pub mod morph;
 
 pub use clipmap::{
     ClipmapDraw, ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapMesh, ClipmapVertex,
-    LevelPlacement, MeshPart, PartKind, TrimSide,
+    LevelPlacement, MAX_DRAWS_PER_LEVEL, MeshPart, PartKind, TrimSide,
 };
 pub use error::LodError;
 pub use frustum::Frustum;

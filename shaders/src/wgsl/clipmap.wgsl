@@ -24,7 +24,8 @@ struct Frame {
     // Heights (metres) the colour ramp spans.
     ramp_low: f32,
     ramp_high: f32,
-    _pad: f32,
+    // 1 when the colour target is sRGB (see to_target).
+    srgb_target: u32,
     _pad2: vec2<f32>,
     light_dir: vec4<f32>,
     fog_color: vec4<f32>,
@@ -135,5 +136,5 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     // Aerial perspective: fade towards the fog colour with distance.
     let fog = 1.0 - exp(-in.view_dist * frame.fog_color.a);
     color = mix(color, frame.fog_color.rgb, fog);
-    return vec4<f32>(color, 1.0);
+    return vec4<f32>(to_target(color, frame.srgb_target), 1.0);
 }

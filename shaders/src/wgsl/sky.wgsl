@@ -5,6 +5,8 @@ struct SkyParams {
     inv_view_proj: mat4x4<f32>,
     horizon: vec4<f32>,
     zenith: vec4<f32>,
+    // x: 1 when the colour target is sRGB (see to_target).
+    flags: vec4<u32>,
 }
 
 @group(0) @binding(0) var<uniform> sky: SkyParams;
@@ -29,5 +31,5 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     let far = sky.inv_view_proj * vec4<f32>(in.ndc, 1.0, 1.0);
     let dir = normalize(far.xyz / far.w - near.xyz / near.w);
     let t = clamp(dir.y * 2.5, 0.0, 1.0);
-    return vec4<f32>(mix(sky.horizon.rgb, sky.zenith.rgb, sqrt(t)), 1.0);
+    return vec4<f32>(to_target(mix(sky.horizon.rgb, sky.zenith.rgb, sqrt(t)), sky.flags.x), 1.0);
 }

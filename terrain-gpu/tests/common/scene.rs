@@ -3,8 +3,8 @@
 use glam::{UVec2, Vec2, Vec3};
 use terrain_core::{CoarseMap, Grid, HeightEncoding, TerrainParams, generate_coarse_map};
 use terrain_gpu::{
-    Camera, ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, NormalPass,
-    OffscreenTarget, SkyColors, SkyPass, TerrainStyle,
+    Camera, ClipmapRenderer, ClipmapView, GpuContext, GpuDerivativeMap, GpuHeightMap, NormalPass,
+    OffscreenTarget, SkyColors, SkyPass, TargetFormat, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -16,7 +16,7 @@ pub const HEIGHT: f32 = 40.0;
 pub struct Scene {
     pub ctx: GpuContext,
     pub map: CoarseMap,
-    pub gpu_map: GpuHeightMap,
+    pub gpu_map: GpuHeightMap<u16>,
     pub normals: GpuDerivativeMap,
     pub layout: ClipmapLayout,
     pub sky: SkyPass,
@@ -36,14 +36,14 @@ impl Scene {
         let (device, queue) = (&ctx.device, &ctx.queue);
         let gpu_map = GpuHeightMap::from_map(device, queue, &map).unwrap();
         let normals = GpuDerivativeMap::for_map(device, &gpu_map).unwrap();
-        let pass = NormalPass::new(device).unwrap();
+        let mut pass = NormalPass::new(device).unwrap();
         let mut encoder = device.create_command_encoder(&Default::default());
-        pass.encode_full(device, &mut encoder, &gpu_map, &normals)
+        pass.encode_full(device, queue, &mut encoder, &gpu_map, &normals)
             .unwrap();
         queue.submit([encoder.finish()]);
         let layout = ClipmapLayout::new(n, levels).unwrap();
-        let sky = SkyPass::new(device).unwrap();
-        let renderer = ClipmapRenderer::new(device, &layout).unwrap();
+        let sky = SkyPass::new(device, &TargetFormat::CAPTURE).unwrap();
+        let renderer = ClipmapRenderer::new(device, &TargetFormat::CAPTURE, &layout).unwrap();
         Scene {
             ctx,
             map,
@@ -60,10 +60,10 @@ impl Scene {
         terrain_core::bilinear(&self.map, xz).unwrap()
     }
 
-    /// Renders `camera` at `size` with `sky` colours; returns the image and the triangle count.
-    pub fn render(&self, camera: &Camera, size: UVec2, sky: &SkyColors) -> (Grid<[u8; 4]>, u64) {
+    /// Writes the uniforms of one view of `camera` on a target of `size` with `sky` colours
+    /// (for [`Scene::draw`]); returns the triangle count of the placed frame.
+    pub fn prepare(&mut self, camera: &Camera, size: UVec2, sky: &SkyColors) -> u64 {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let target = OffscreenTarget::new(device, size).unwrap();
         let aspect = size.x as f32 / size.y as f32;
         let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
         let frame = self
@@ -79,30 +79,42 @@ impl Scene {
             ramp: (0.0, HEIGHT),
             ..TerrainStyle::default()
         };
-        let mut encoder = device.create_command_encoder(&Default::default());
-        self.sky.encode(
-            device,
-            &mut encoder,
-            &target,
-            camera.view_proj_relative(aspect),
-            sky,
-        );
-        self.renderer
-            .encode(
-                device,
-                &mut encoder,
-                &target,
-                &self.gpu_map,
-                &self.normals,
-                &frame,
-                camera,
-                &style,
-            )
+        self.sky
+            .prepare(queue, camera.view_proj_relative(aspect), sky)
             .unwrap();
+        let view = ClipmapView {
+            map: &self.gpu_map,
+            normals: &self.normals,
+            frame: &frame,
+            camera,
+            style: &style,
+            target_size: size,
+        };
+        self.renderer.prepare(device, queue, &view).unwrap();
+        frame.triangle_count(self.layout.mesh())
+    }
+
+    /// Renders `camera` at `size` with `sky` colours through an [`OffscreenTarget`]; returns
+    /// the image and the triangle count.
+    pub fn render(
+        &mut self,
+        camera: &Camera,
+        size: UVec2,
+        sky: &SkyColors,
+    ) -> (Grid<[u8; 4]>, u64) {
+        let triangles = self.prepare(camera, size, sky);
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let target = OffscreenTarget::new(device, size).unwrap();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
+            self.sky.draw(&mut pass);
+            self.renderer.draw(&mut pass);
+        }
         queue.submit([encoder.finish()]);
         let image = target.read_rgba8(device, queue).unwrap();
         self.ctx.check().expect("no GPU validation errors");
-        (image, frame.triangle_count(self.layout.mesh()))
+        (image, triangles)
     }
 }
 

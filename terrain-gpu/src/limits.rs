@@ -1,0 +1,117 @@
+//! The device features and limits terrain-gpu needs, and a helper that computes them for a map
+//! size, so an engine can ask for them when it creates its device.
+//!
+//! No feature is required. [`OPTIONAL_FEATURES`] are used when the device has them. Every map
+//! lives in one storage buffer per quantity, so the limits that grow with the map are
+//! `max_storage_buffer_binding_size` and `max_buffer_size`: an 8192^2 map of u32 heights needs
+//! a 256 MiB binding (wgpu's default limit is 128 MiB), its derivative normals 512 MiB, and the
+//! granular normals (`vec4<f32>`) 1 GiB. A map side also bounds the dispatch size:
+//! `max_compute_workgroups_per_dimension` of 65 535 covers sides up to 524 280 texels.
+
+use crate::compute::WORKGROUP;
+use crate::error::GpuError;
+use glam::UVec2;
+
+/// Features used when present: timestamp queries for [`crate::GpuTimer`], adapter-specific
+/// format features for the formats the adapter offers beyond WebGPU's.
+pub const OPTIONAL_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY
+    .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS)
+    .union(wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES);
+
+/// Bytes per texel of the buffers of a map, by what the map is used for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MapUse {
+    /// Stamps, derivative normals and the clipmap: heights (4 B) and `vec2<f32>` gradients (8 B).
+    Coarse,
+    /// Granular deformation: u32 heights (4 B) and `vec4<f32>` normals with float heights (16 B).
+    Granular,
+}
+
+impl MapUse {
+    /// The largest per-texel buffer of this use, in bytes per texel.
+    pub fn max_bytes_per_texel(self) -> u64 {
+        match self {
+            MapUse::Coarse => 8,
+            MapUse::Granular => 16,
+        }
+    }
+}
+
+/// The limits a device needs for maps of `map_size` used as `usage`: `base` (e.g.
+/// `wgpu::Limits::default()`, or an engine's own) with the storage binding, buffer size and
+/// dispatch limits raised as far as the map needs. Fails for an empty map or one whose buffers
+/// could not be addressed at all.
+pub fn required_limits(
+    map_size: UVec2,
+    usage: MapUse,
+    base: wgpu::Limits,
+) -> Result<wgpu::Limits, GpuError> {
+    if map_size.x == 0 || map_size.y == 0 {
+        return Err(terrain_core::CoreError::EmptyGrid {
+            width: map_size.x,
+            height: map_size.y,
+        }
+        .into());
+    }
+    let bytes = u64::from(map_size.x) * u64::from(map_size.y) * usage.max_bytes_per_texel();
+    let groups = map_size.max_element().div_ceil(WORKGROUP);
+    Ok(wgpu::Limits {
+        max_storage_buffer_binding_size: base.max_storage_buffer_binding_size.max(bytes),
+        max_buffer_size: base.max_buffer_size.max(bytes),
+        max_compute_workgroups_per_dimension: base.max_compute_workgroups_per_dimension.max(groups),
+        ..base
+    })
+}
+
+/// Checks that a device (or adapter) with `limits` can hold maps of `map_size` used as `usage`,
+/// naming the first limit that is too small.
+pub fn check_limits(limits: &wgpu::Limits, map_size: UVec2, usage: MapUse) -> Result<(), GpuError> {
+    let needed = required_limits(map_size, usage, wgpu::Limits::downlevel_defaults())?;
+    let bytes = needed.max_storage_buffer_binding_size;
+    let limit = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    if bytes > limit {
+        return Err(GpuError::MapTooLarge {
+            size: map_size,
+            bytes,
+            limit,
+        });
+    }
+    if needed.max_compute_workgroups_per_dimension > limits.max_compute_workgroups_per_dimension {
+        return Err(terrain_core::CoreError::OutOfRange {
+            what: "map side (compute workgroups per axis)",
+            value: f64::from(needed.max_compute_workgroups_per_dimension),
+            expected: "within the device's max_compute_workgroups_per_dimension",
+        }
+        .into());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_8192_map_needs_a_256_mib_height_binding_and_more_for_normals() {
+        let base = wgpu::Limits::default();
+        let coarse = required_limits(UVec2::splat(8192), MapUse::Coarse, base.clone()).unwrap();
+        assert_eq!(coarse.max_storage_buffer_binding_size, 8192 * 8192 * 8);
+        let granular = required_limits(UVec2::splat(8192), MapUse::Granular, base.clone()).unwrap();
+        assert_eq!(granular.max_storage_buffer_binding_size, 1 << 30);
+        assert!(check_limits(&base, UVec2::splat(8192), MapUse::Coarse).is_err());
+        assert!(check_limits(&coarse, UVec2::splat(8192), MapUse::Coarse).is_ok());
+    }
+
+    #[test]
+    fn small_maps_keep_the_base_limits_and_extremes_are_errors_not_panics() {
+        let base = wgpu::Limits::default();
+        let small = required_limits(UVec2::splat(256), MapUse::Coarse, base.clone()).unwrap();
+        assert_eq!(small, base);
+        assert!(required_limits(UVec2::new(0, 5), MapUse::Coarse, base.clone()).is_err());
+        let huge = required_limits(UVec2::splat(u32::MAX), MapUse::Granular, base.clone()).unwrap();
+        assert!(check_limits(&base, UVec2::splat(u32::MAX), MapUse::Granular).is_err());
+        assert!(huge.max_compute_workgroups_per_dimension > 65_535);
+    }
+}
