@@ -39,6 +39,7 @@ pub mod hillshade;
 pub mod io;
 pub mod map;
 pub mod normals;
+pub mod readback;
 pub mod rect;
 pub mod sample;
 pub mod shockwave;
@@ -57,6 +58,7 @@ pub use normals::{
     DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal, derivative_region,
     normal_from_derivatives,
 };
+pub use readback::{ArrivedRegion, RegionSource, RequestId};
 pub use rect::{DirtyRect, Rect, WrappedPiece};
 pub use sample::bilinear;
 pub use shockwave::{MAX_SHOCKWAVE_GAMMA, Shockwave, ShockwaveParams};

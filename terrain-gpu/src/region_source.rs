@@ -1,10 +1,11 @@
-//! `GpuRegionSource`: terrain-physics' [`RegionSource`] over a [`GpuHeightMap`], through a
-//! [`RegionReadback`] ring, so the collision mirror follows the GPU map without stalls.
+//! `GpuRegionSource`: terrain-core's readback contract ([`RegionSource`]) over a
+//! [`GpuHeightMap`], through a [`RegionReadback`] ring, so a collision mirror (terrain-physics'
+//! scheduler) follows the GPU map without stalls.
 
+use crate::error::GpuError;
 use crate::maps::GpuHeightMap;
 use crate::readback::RegionReadback;
-use terrain_core::Rect;
-use terrain_physics::{ArrivedRegion, PhysicsError, RegionSource, RequestId};
+use terrain_core::{ArrivedRegion, Rect, RegionSource, RequestId};
 
 /// Borrows what a readback needs for one scheduler update: create one per frame and pass it
 /// to `ReadbackScheduler::update`.
@@ -34,23 +35,21 @@ impl<'a> GpuRegionSource<'a> {
 }
 
 impl RegionSource for GpuRegionSource<'_> {
+    type Error = GpuError;
+
     /// Records the copy and submits it at once (after every deformation already submitted, so
     /// the region includes them); the staging buffer maps when the GPU gets there.
-    fn request(&mut self, rect: Rect) -> Result<RequestId, PhysicsError> {
+    fn request(&mut self, rect: Rect) -> Result<RequestId, GpuError> {
         let mut encoder = self.device.create_command_encoder(&Default::default());
         let ticket = self
             .readback
-            .request(self.device, &mut encoder, self.map, rect)
-            .map_err(|e| PhysicsError::Source(e.to_string()))?;
+            .request(self.device, &mut encoder, self.map, rect)?;
         self.queue.submit([encoder.finish()]);
         Ok(RequestId(ticket.0))
     }
 
-    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError> {
-        let arrived = self
-            .readback
-            .poll(self.device)
-            .map_err(|e| PhysicsError::Source(e.to_string()))?;
+    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, GpuError> {
+        let arrived = self.readback.poll(self.device)?;
         Ok(arrived
             .into_iter()
             .map(|r| ArrivedRegion {

@@ -1,9 +1,9 @@
-//! The error type of terrain-physics: bad query input, bad regions, and failures of a readback
-//! source.
+//! The error type of terrain-physics: bad query input, bad regions, and regions a readback
+//! source delivered wrongly. (A source's own failures come back in its own error type, wrapped
+//! by [`crate::scheduler::UpdateError`].)
 
-use crate::source::RequestId;
 use glam::{UVec2, Vec3};
-use terrain_core::{CoreError, Rect, WrapMode};
+use terrain_core::{CoreError, Rect, RequestId, WrapMode};
 
 /// Errors from collision queries, the mirror, the readback scheduler and the bodies.
 ///
@@ -92,9 +92,6 @@ pub enum PhysicsError {
     /// An error from terrain-core (building a grid or map).
     #[error(transparent)]
     Core(#[from] CoreError),
-    /// A readback source failed (the GPU implementation reports its own error here, as text).
-    #[error("readback source failed: {0}")]
-    Source(String),
 }
 
 /// Checks that every component of `v` is finite.

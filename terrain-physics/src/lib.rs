@@ -61,8 +61,10 @@
 //! its own module ([`field`]: height and normal, [`ray`], [`contact`]);
 //! [`HeightfieldCollider`] places a snapshot in the world and wraps each query with input
 //! checks. [`CollisionMirror`] publishes snapshots; [`ReadbackScheduler`] feeds it through a
-//! [`RegionSource`]; [`CameraBody`] and [`SphereBody`] move over any [`GroundQuery`], such as
-//! the [`BoundedGround`] that covers the gap between a deformation and its readback.
+//! [`RegionSource`] (terrain-core's readback contract, re-exported here), and hands a source's
+//! failure back in the source's own error type ([`UpdateError`]); [`CameraBody`] and
+//! [`SphereBody`] move over any [`GroundQuery`], such as the [`BoundedGround`] that covers the
+//! gap between a deformation and its readback.
 //!
 //! Surface model: the bilinear patch of listing 3.2 over every cell; heights, normals,
 //! raycasts and contacts all use it.
@@ -91,6 +93,6 @@ pub use ground::{BoundedGround, DeformationBound, PendingDeformation};
 pub use merge::DirtyRegions;
 pub use mirror::{CollisionMirror, RegionUpdate};
 pub use ray::{Ray, RayHit};
-pub use scheduler::{ReadbackScheduler, SchedulerConfig, UpdateReport};
+pub use scheduler::{ReadbackScheduler, SchedulerConfig, UpdateError, UpdateReport};
 pub use source::{ArrivedRegion, CpuRegionSource, RegionSource, RequestId, read_region};
 pub use sphere::{CONTACT_TOLERANCE, SOLID_SPHERE_ROLLING_FACTOR, SphereBody};

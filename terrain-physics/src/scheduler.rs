@@ -17,11 +17,10 @@ use crate::error::{PhysicsError, check_region};
 use crate::ground::{BoundedGround, DeformationBound, PendingDeformation};
 use crate::merge::DirtyRegions;
 use crate::mirror::CollisionMirror;
-use crate::source::{RegionSource, RequestId};
 use glam::UVec2;
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
-use terrain_core::{Grid, Rect};
+use terrain_core::{Grid, Rect, RegionSource, RequestId};
 
 /// Scheduler parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -56,6 +55,19 @@ pub struct UpdateReport {
     pub requested: Vec<(RequestId, Rect)>,
     /// Regions applied to the mirror: request id and the mirror version it produced.
     pub applied: Vec<(RequestId, u64)>,
+}
+
+/// Why a [`ReadbackScheduler::update`] failed: one of the scheduler's own checks, or the
+/// source's failure in the source's own error type `E` ([`RegionSource::Error`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum UpdateError<E> {
+    /// The mirror's size differs from the scheduler's, the source delivered a region nobody
+    /// asked for (or twice) or one of the wrong rect or size, or the mirror refused a region.
+    #[error(transparent)]
+    Physics(#[from] PhysicsError),
+    /// The source's `request` or `poll` failed; its error, unchanged.
+    #[error("readback source failed")]
+    Source(#[source] E),
 }
 
 /// A request in flight, and what it has delivered.
@@ -149,25 +161,28 @@ impl ReadbackScheduler {
     /// quiet gap has passed. Never waits: it returns as soon as the source's non-blocking calls
     /// do (applying a region costs a copy of its texels).
     ///
-    /// Fails if the mirror's size differs from the scheduler's, or on a source error, a region
-    /// nobody asked for, or one of the wrong rect or size. Arrivals that were valid are still
-    /// kept and applied; a failed request keeps its rects dirty for the next update.
+    /// Fails with [`UpdateError::Source`] (the source's own error) when the source's `request`
+    /// or `poll` fails, and with [`UpdateError::Physics`] if the mirror's size differs from the
+    /// scheduler's, or on a region nobody asked for, or one of the wrong rect or size. Arrivals
+    /// that were valid are still kept and applied; a failed request keeps its rects dirty for
+    /// the next update. The first error met is returned.
     pub fn update<S: RegionSource + ?Sized>(
         &mut self,
         now: Instant,
         source: &mut S,
         mirror: &CollisionMirror,
-    ) -> Result<UpdateReport, PhysicsError> {
+    ) -> Result<UpdateReport, UpdateError<S::Error>> {
         if mirror.size() != self.map_size {
             return Err(PhysicsError::SizeMismatch {
                 expected: self.map_size,
                 actual: mirror.size(),
-            });
+            }
+            .into());
         }
         let mut report = UpdateReport::default();
-        let mut first_error: Option<PhysicsError> = None;
+        let mut first_error: Option<UpdateError<S::Error>> = None;
 
-        for region in source.poll()? {
+        for region in source.poll().map_err(UpdateError::Source)? {
             let slot = self
                 .in_flight
                 .iter_mut()
@@ -191,7 +206,7 @@ impl ReadbackScheduler {
                 }
             };
             if let Err(e) = result {
-                first_error.get_or_insert(e);
+                first_error.get_or_insert(e.into());
             }
         }
 
@@ -209,7 +224,7 @@ impl ReadbackScheduler {
                     self.waiting.extend(done.retires.iter().copied());
                     self.first_dirty.get_or_insert(now);
                     self.last_dirty.get_or_insert(now);
-                    first_error.get_or_insert(e);
+                    first_error.get_or_insert(e.into());
                 }
             }
             if !done.retires.is_empty() {
@@ -244,7 +259,7 @@ impl ReadbackScheduler {
         &mut self,
         source: &mut S,
         report: &mut UpdateReport,
-        first_error: &mut Option<PhysicsError>,
+        first_error: &mut Option<UpdateError<S::Error>>,
     ) {
         let rects = self.dirty.take();
         let mut issued = 0;
@@ -265,7 +280,7 @@ impl ReadbackScheduler {
                     for r in &rects[k..] {
                         self.dirty.insert(*r);
                     }
-                    first_error.get_or_insert(e);
+                    first_error.get_or_insert(UpdateError::Source(e));
                     return;
                 }
             }
@@ -363,7 +378,7 @@ mod tests {
             .expect("scheduler");
         assert!(matches!(
             other.update(Instant::now(), &mut src, &mirror),
-            Err(PhysicsError::SizeMismatch { .. })
+            Err(UpdateError::Physics(PhysicsError::SizeMismatch { .. }))
         ));
         let (_, _, mut s) = setup();
         let off = Rect::new(IVec2::new(100, 0), UVec2::new(2, 2));

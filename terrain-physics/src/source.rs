@@ -1,46 +1,14 @@
-//! The readback trait ([`RegionSource`]) the scheduler asks for regions through, and
-//! [`CpuRegionSource`], which serves them from a coarse-map in memory (tests, GPU-less users).
+//! [`CpuRegionSource`], which serves regions from a coarse-map in memory (tests, GPU-less
+//! users), through the readback contract the scheduler asks for regions through
+//! ([`RegionSource`], defined in terrain-core and re-exported here).
 //!
 //! terrain-gpu implements [`RegionSource`] with its `RegionReadback` (a ring of staging buffers
 //! mapped asynchronously); this crate names no GPU type.
 
 use crate::error::{PhysicsError, check_region};
 use std::collections::VecDeque;
+pub use terrain_core::{ArrivedRegion, RegionSource, RequestId};
 use terrain_core::{CoarseMap, Grid, Rect};
-
-/// Identifies one request; a region arrives with the id it was requested with.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct RequestId(pub u64);
-
-/// A region that arrived: the stored u16 heights of `rect`, row-major in the rect's own
-/// (unwrapped) coordinates.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ArrivedRegion {
-    /// The request it answers.
-    pub id: RequestId,
-    /// The rect requested (as requested: it may cross the map's edges).
-    pub rect: Rect,
-    /// The heights, `rect.size` in size, in the map's own encoding.
-    pub heights: Grid<u16>,
-}
-
-/// Where region readbacks come from.
-///
-/// Contract for implementers:
-/// - `request` never blocks: it records or queues the copy and returns an id, unique among
-///   the source's requests. The heights delivered must be the map's state at the time of the
-///   request or later (so a deformation submitted before the request is included).
-/// - `rect` may cross the map's edges (the coarse-map wraps; at most one map in size, as the
-///   scheduler guarantees); the heights come back in the rect's own unwrapped coordinates.
-/// - `poll` never blocks: it returns the regions that have arrived since the last call (possibly
-///   none), each exactly once, in any order.
-/// - Failures are reported as [`PhysicsError::Source`] (with the implementation's message).
-pub trait RegionSource {
-    /// Asks for the heights of `rect`.
-    fn request(&mut self, rect: Rect) -> Result<RequestId, PhysicsError>;
-    /// Hands over the regions that have arrived, without waiting for the others.
-    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError>;
-}
 
 /// A [`RegionSource`] over a coarse-map the caller keeps current (apply deformations to
 /// [`CpuRegionSource::map_mut`]).
@@ -124,6 +92,8 @@ pub fn read_region(map: &CoarseMap, rect: Rect) -> Result<Grid<u16>, PhysicsErro
 }
 
 impl RegionSource for CpuRegionSource {
+    type Error = PhysicsError;
+
     fn request(&mut self, rect: Rect) -> Result<RequestId, PhysicsError> {
         let heights = read_region(&self.map, rect)?;
         let id = RequestId(self.next_id);

@@ -5,11 +5,13 @@
 mod common;
 
 use glam::{IVec2, UVec2, Vec2, Vec3};
+use std::convert::Infallible;
 use std::time::{Duration, Instant};
 use terrain_core::{Blend, CoarseMap, GaussianStamp, Rect, StampPlacement, apply_stamp, bilinear};
 use terrain_physics::{
     ArrivedRegion, CameraBody, CollisionMirror, CpuRegionSource, DeformationBound, GroundQuery,
     PhysicsError, ReadbackScheduler, RegionSource, RequestId, SchedulerConfig, SphereBody,
+    UpdateError,
 };
 
 fn ms(t0: Instant, m: u64) -> Instant {
@@ -136,11 +138,13 @@ struct Never {
 }
 
 impl RegionSource for Never {
-    fn request(&mut self, _rect: Rect) -> Result<RequestId, PhysicsError> {
+    type Error = Infallible;
+
+    fn request(&mut self, _rect: Rect) -> Result<RequestId, Infallible> {
         self.next += 1;
         Ok(RequestId(self.next))
     }
-    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError> {
+    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, Infallible> {
         Ok(Vec::new())
     }
 }
@@ -195,6 +199,8 @@ struct Reversed {
 }
 
 impl RegionSource for Reversed {
+    type Error = PhysicsError;
+
     fn request(&mut self, rect: Rect) -> Result<RequestId, PhysicsError> {
         self.inner.request(rect)
     }
@@ -252,15 +258,29 @@ fn regions_arriving_out_of_order_apply_in_request_order() {
     assert!(r.scheduler.is_idle());
 }
 
+/// A source's own failure, in its own type (as terrain-gpu's source reports a `GpuError`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct SourceFailed(&'static str);
+
+impl std::fmt::Display for SourceFailed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.0)
+    }
+}
+
+impl std::error::Error for SourceFailed {}
+
 /// A source that delivers a region nobody asked for.
 #[derive(Debug)]
 struct Rogue;
 
 impl RegionSource for Rogue {
-    fn request(&mut self, _rect: Rect) -> Result<RequestId, PhysicsError> {
-        Err(PhysicsError::Source("staging ring full".into()))
+    type Error = SourceFailed;
+
+    fn request(&mut self, _rect: Rect) -> Result<RequestId, SourceFailed> {
+        Err(SourceFailed("staging ring full"))
     }
-    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError> {
+    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, SourceFailed> {
         Ok(vec![ArrivedRegion {
             id: RequestId(99),
             rect: Rect::new(IVec2::ZERO, UVec2::ONE),
@@ -276,20 +296,28 @@ fn source_failures_are_errors_and_keep_the_rects_dirty() {
     let e = r.scheduler.update(t0, &mut Rogue, &r.mirror);
     assert!(matches!(
         e,
-        Err(PhysicsError::UnknownRequest { id: RequestId(99) })
+        Err(UpdateError::Physics(PhysicsError::UnknownRequest {
+            id: RequestId(99)
+        }))
     ));
     r.stamp(Vec2::new(4.0, 4.0), 2.0, 1.0, t0);
     struct Failing;
     impl RegionSource for Failing {
-        fn request(&mut self, _rect: Rect) -> Result<RequestId, PhysicsError> {
-            Err(PhysicsError::Source("device lost".into()))
+        type Error = SourceFailed;
+
+        fn request(&mut self, _rect: Rect) -> Result<RequestId, SourceFailed> {
+            Err(SourceFailed("device lost"))
         }
-        fn poll(&mut self) -> Result<Vec<ArrivedRegion>, PhysicsError> {
+        fn poll(&mut self) -> Result<Vec<ArrivedRegion>, SourceFailed> {
             Ok(Vec::new())
         }
     }
     let e = r.scheduler.update(ms(t0, 25), &mut Failing, &r.mirror);
-    assert!(matches!(e, Err(PhysicsError::Source(ref m)) if m == "device lost"));
+    assert_eq!(e, Err(UpdateError::Source(SourceFailed("device lost"))));
+    // The source's error is the update error's source, unchanged.
+    let e = e.expect_err("failed");
+    let cause = std::error::Error::source(&e).expect("a source");
+    assert_eq!(cause.to_string(), "device lost");
     assert_eq!(r.scheduler.dirty_rects().len(), 1);
     // The next update with a working source requests it at once (the gap has passed).
     let rep = r.update(ms(t0, 26));

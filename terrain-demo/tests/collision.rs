@@ -1,6 +1,9 @@
 //! The collision mirror follows the GPU map: deformations on the GPU, a quiet gap, a merged
 //! readback through `GpuRegionSource`, and the mirror equals the GPU map exactly. The body
 //! under a fresh deformation stays above ground before the readback lands.
+//!
+//! It joins terrain-gpu and terrain-physics, which do not name each other, so it lives here in
+//! the crate that glues them.
 
 use glam::{Vec2, Vec3};
 use std::time::{Duration, Instant};
