@@ -11,11 +11,13 @@ fn main() -> Result<()> {
     match args.first().map(String::as_str) {
         Some("ci") => ci(),
         Some("smoke") => smoke(),
+        Some("package") => package(),
         Some("golden") => golden(),
         _ => {
-            eprintln!("usage: cargo xtask <ci|smoke|golden>");
-            eprintln!("  ci      fmt, clippy, tests, docs and demo smoke runs (what CI runs)");
+            eprintln!("usage: cargo xtask <ci|smoke|package|golden>");
+            eprintln!("  ci      fmt, clippy, tests, docs, package, demo smoke (what CI runs)");
             eprintln!("  smoke   only the demo smoke runs (default backend, then GL)");
+            eprintln!("  package package and verify the publishable crates (`cargo package`)");
             eprintln!("  golden  regenerate the render test's golden image (never done by tests)");
             std::process::exit(2);
         }
@@ -51,11 +53,12 @@ fn cargo(args: &[&str], env: &[(&str, &str)]) -> Result<()> {
 type Step = (&'static str, fn() -> Result<()>);
 
 fn ci() -> Result<()> {
-    let steps: [Step; 5] = [
+    let steps: [Step; 6] = [
         ("fmt", fmt),
         ("clippy", clippy),
         ("test", test),
         ("doc", doc),
+        ("package", package),
         ("smoke", smoke),
     ];
     let total = Instant::now();
@@ -107,6 +110,54 @@ fn doc() -> Result<()> {
         &["doc", "--workspace", "--no-deps", "--locked"],
         &[("RUSTDOCFLAGS", "-D warnings")],
     )
+}
+
+/// Packages every publishable crate as crates.io would receive it and verifies that each
+/// package builds on its own from its `.crate` (cargo >= 1.90 packages workspace members that
+/// depend on one another through a local registry, without publishing them first).
+///
+/// Verification is kept: it builds the world again (the packaged manifests carry none of the
+/// workspace's profiles), measured at 69 s from cold and about 10 s warm on the project's
+/// 2-core machine. Resolving the packages' dependencies reads the crates.io index.
+fn package() -> Result<()> {
+    let crates = publishable_crates()?;
+    if crates.is_empty() {
+        bail!("no publishable crate found in `cargo metadata`");
+    }
+    let mut args = vec!["package", "--allow-dirty"];
+    for name in &crates {
+        args.extend(["-p", name.as_str()]);
+    }
+    cargo(&args, &[])?;
+    eprintln!("package: {} crates packaged and verified", crates.len());
+    Ok(())
+}
+
+/// The workspace members without `publish = false`, from `cargo metadata`.
+fn publishable_crates() -> Result<Vec<String>> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let output = Command::new(cargo)
+        .args(["metadata", "--format-version", "1", "--no-deps", "--locked"])
+        .current_dir(root())
+        .output()
+        .context("could not start cargo metadata")?;
+    if !output.status.success() {
+        bail!(
+            "`cargo metadata` exited with {}: {}",
+            output.status,
+            String::from_utf8_lossy(&output.stderr).trim()
+        );
+    }
+    let metadata: serde_json::Value =
+        serde_json::from_slice(&output.stdout).context("cargo metadata is not valid JSON")?;
+    // `publish` is null when publishing is allowed anywhere, `[]` for `publish = false`.
+    Ok(metadata["packages"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|p| p["publish"].as_array().is_none_or(|r| !r.is_empty()))
+        .filter_map(|p| p["name"].as_str().map(str::to_owned))
+        .collect())
 }
 
 /// Regenerates `terrain-gpu/tests/data/golden_clipmap.png` on this machine's adapter.
