@@ -7,8 +7,8 @@ use glam::{UVec2, Vec2, Vec3};
 use std::time::Duration;
 use terrain_core::{HeightEncoding, TerrainParams};
 use terrain_gpu::{
-    Camera, ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuTimer, NormalPass,
-    OffscreenTarget, SkyColors, SkyPass, TerrainStyle,
+    Camera, ClipmapRenderer, ClipmapView, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuTimer,
+    NormalPass, OffscreenTarget, SkyColors, SkyPass, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -30,12 +30,12 @@ fn bench(c: &mut Criterion) {
     let mut encoder = device.create_command_encoder(&Default::default());
     NormalPass::new(device)
         .expect("normal pass")
-        .encode_full(device, &mut encoder, &gpu_map, &normals)
+        .encode_full(device, queue, &mut encoder, &gpu_map, &normals)
         .expect("normals");
     queue.submit([encoder.finish()]);
     let size = UVec2::new(1024, 768);
     let target = OffscreenTarget::new(device, size).expect("target");
-    let sky = SkyPass::new(device).expect("sky");
+    let sky = SkyPass::new(device, &target.format()).expect("sky");
     let timer = GpuTimer::new(device, queue);
     eprintln!(
         "GPU timestamps available: {} (wall time of submit + wait is measured)",
@@ -60,7 +60,8 @@ fn bench(c: &mut Criterion) {
     group.measurement_time(Duration::from_secs(3));
     for levels in LEVELS {
         let layout = ClipmapLayout::new(255, levels).expect("layout");
-        let renderer = ClipmapRenderer::new(device, &layout).expect("renderer");
+        let mut renderer =
+            ClipmapRenderer::new(device, &target.format(), &layout).expect("renderer");
         let frame = layout
             .place(
                 xz,
@@ -74,23 +75,32 @@ fn bench(c: &mut Criterion) {
             frame.triangle_count(layout.mesh()),
             frame.culled
         );
+        sky.prepare(
+            queue,
+            camera.view_proj_relative(aspect),
+            &SkyColors::default(),
+        )
+        .expect("sky uniforms");
+        let view = ClipmapView {
+            map: &gpu_map,
+            normals: &normals,
+            frame: &frame,
+            camera: &camera,
+            style: &style,
+            target_size: size,
+        };
         group.bench_function(BenchmarkId::new("1024x768_levels", levels), |b| {
             b.iter_custom(|iters| {
                 (0..iters)
                     .map(|_| {
                         let t = timer
                             .time(device, queue, |encoder| {
-                                sky.encode(
-                                    device,
-                                    encoder,
-                                    &target,
-                                    camera.view_proj_relative(aspect),
-                                    &SkyColors::default(),
-                                );
-                                renderer.encode(
-                                    device, encoder, &target, &gpu_map, &normals, &frame, &camera,
-                                    &style,
-                                )
+                                // Per frame: write the uniforms and instances, record the draws.
+                                renderer.prepare(device, queue, &view)?;
+                                let mut pass = target.begin_pass(encoder, wgpu::Color::BLACK);
+                                sky.draw(&mut pass);
+                                renderer.draw(&mut pass);
+                                Ok(())
                             })
                             .expect("render");
                         Duration::from_secs_f64(t.ms / 1e3)

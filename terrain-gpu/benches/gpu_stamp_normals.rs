@@ -27,7 +27,7 @@ fn bench(c: &mut Criterion) {
     let map = terrain_core::generate_coarse_map(&params, enc, TEXEL).expect("terrain");
     let gpu_map = GpuHeightMap::from_map(device, queue, &map).expect("upload");
     let normals = GpuDerivativeMap::for_map(device, &gpu_map).expect("normals");
-    let (stamps, normal_pass) = (
+    let (mut stamps, mut normal_pass) = (
         StampPass::new(device).expect("stamp pass"),
         NormalPass::new(device).expect("normal pass"),
     );
@@ -54,6 +54,7 @@ fn bench(c: &mut Criterion) {
                 .time(device, queue, |encoder| {
                     let rects = stamps.encode(
                         device,
+                        queue,
                         encoder,
                         &gpu_map,
                         GpuStamp::Gaussian(&gauss),
@@ -62,12 +63,15 @@ fn bench(c: &mut Criterion) {
                     )?;
                     if with_normals {
                         for r in rects {
-                            normal_pass.encode(device, encoder, &gpu_map, &normals, r)?;
+                            normal_pass.encode(device, queue, encoder, &gpu_map, &normals, r)?;
                         }
                     }
                     Ok(())
                 })
                 .expect("gpu work");
+            // The work was submitted: its uniform slots are free again.
+            stamps.recall();
+            normal_pass.recall();
             Duration::from_secs_f64(t.ms / 1e3)
         };
         group.bench_function(BenchmarkId::new("stamp", side), |b| {

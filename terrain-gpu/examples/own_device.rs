@@ -1,0 +1,266 @@
+//! terrain-gpu in an engine that owns its device: the engine makes its own wgpu instance,
+//! adapter, device and a swap-chain-like colour target (`Bgra8UnormSrgb`, 4x MSAA, its own depth
+//! buffer); terrain-gpu stamps a crater and a ridge into a coarse-map, regenerates the normals,
+//! and draws the sky and the clipmap into the engine's render pass. The frame is written as PNG.
+//!
+//! ```sh
+//! cargo run -p terrain-gpu --example own_device -- [OUT.png]
+//! ```
+
+use glam::{UVec2, Vec2, Vec3};
+use terrain_core::{
+    Blend, GaussianStamp, HeightEncoding, StampPlacement, TerrainParams, TextureStamp,
+    generate_coarse_map,
+};
+use terrain_gpu::{
+    Camera, ClipmapRenderer, ClipmapView, GpuDerivativeMap, GpuHeightMap, GpuStamp,
+    GpuTextureStamp, MapUse, NormalPass, SkyColors, SkyPass, StampPass, TargetFormat, TerrainStyle,
+    wgpu,
+};
+use terrain_lod::{ClipmapLayout, Frustum};
+
+const MAP: u32 = 256;
+const TEXEL: f32 = 0.5;
+const FRAME: UVec2 = UVec2::new(480, 270);
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let out = std::env::args()
+        .nth(1)
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| std::env::temp_dir().join("terrain_own_device.png"));
+
+    // --- The engine's side: its own instance, adapter and device. ---
+    let backends =
+        wgpu::Backends::from_env().unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::GL);
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+        backends,
+        ..wgpu::InstanceDescriptor::new_without_display_handle()
+    });
+    let adapter = pollster::block_on(instance.request_adapter(&Default::default()))?;
+    // Ask for what terrain-gpu needs for this map size (the storage binding grows with it).
+    let limits = terrain_gpu::required_limits(
+        UVec2::splat(MAP),
+        MapUse::Coarse,
+        wgpu::Limits::downlevel_defaults(),
+    )?;
+    terrain_gpu::check_limits(&adapter.limits(), UVec2::splat(MAP), MapUse::Coarse)?;
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("engine device"),
+        required_features: adapter.features() & terrain_gpu::OPTIONAL_FEATURES,
+        required_limits: limits,
+        ..Default::default()
+    }))?;
+    println!("engine device on {}", adapter.get_info().name);
+
+    // The engine's frame: an sRGB colour target with 4x MSAA and its own depth buffer.
+    let format = TargetFormat {
+        color: wgpu::TextureFormat::Bgra8UnormSrgb,
+        depth: wgpu::TextureFormat::Depth24Plus,
+        sample_count: 4,
+    };
+    let texture = |label, format, samples, usage| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: FRAME.x,
+                height: FRAME.y,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: samples,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let msaa = texture(
+        "msaa",
+        format.color,
+        4,
+        wgpu::TextureUsages::RENDER_ATTACHMENT,
+    );
+    let depth = texture(
+        "depth",
+        format.depth,
+        4,
+        wgpu::TextureUsages::RENDER_ATTACHMENT,
+    );
+    let swapchain = texture(
+        "swapchain-like",
+        format.color,
+        1,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+    );
+
+    // --- terrain-gpu: built once. ---
+    let params = TerrainParams {
+        size: UVec2::splat(MAP),
+        seed: 7,
+        ..TerrainParams::default()
+    };
+    let map = generate_coarse_map(&params, HeightEncoding::spanning::<u16>(0.0, 30.0)?, TEXEL)?;
+    let gpu_map = GpuHeightMap::from_map(&device, &queue, &map)?;
+    let normals = GpuDerivativeMap::for_map(&device, &gpu_map)?;
+    let mut stamps = StampPass::new(&device)?;
+    let mut normal_pass = NormalPass::new(&device)?;
+    let layout = ClipmapLayout::new(63, 4)?;
+    let mut renderer = ClipmapRenderer::new(&device, &format, &layout)?;
+    let sky = SkyPass::new(&device, &format)?;
+    let ridge = GpuTextureStamp::new(&device, &TextureStamp::from_values(ridge_profile()?)?)?;
+
+    // --- One frame: deform, regenerate normals, draw into the engine's pass. ---
+    let centre = Vec2::splat(MAP as f32 * TEXEL * 0.5);
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let gauss = GaussianStamp::default();
+    let crater = StampPlacement::new(centre + Vec2::new(8.0, 4.0), Vec2::splat(10.0), -4.0)?;
+    let mut dirty = stamps.encode(
+        &device,
+        &queue,
+        &mut encoder,
+        &gpu_map,
+        GpuStamp::Gaussian(&gauss),
+        &crater,
+        Blend::Add,
+    )?;
+    let wall = StampPlacement::new(centre + Vec2::new(-6.0, 10.0), Vec2::new(20.0, 3.0), 2.0)?;
+    dirty.extend(stamps.encode(
+        &device,
+        &queue,
+        &mut encoder,
+        &gpu_map,
+        GpuStamp::Texture(&ridge),
+        &wall,
+        Blend::Add,
+    )?);
+    normal_pass.encode_full(&device, &queue, &mut encoder, &gpu_map, &normals)?;
+
+    let eye_xz = centre - Vec2::new(18.0, 18.0);
+    let ground = terrain_core::bilinear(&map, eye_xz)?;
+    let camera = Camera::looking(
+        Vec3::new(eye_xz.x, ground + 12.0, eye_xz.y),
+        Vec3::new(1.0, -0.45, 1.0),
+    );
+    let aspect = FRAME.x as f32 / FRAME.y as f32;
+    let frame = layout.place(
+        Vec2::new(camera.position.x, camera.position.z),
+        TEXEL,
+        (0.0, 30.0),
+        Some(&Frustum::from_view_proj(camera.view_proj_world(aspect))),
+    )?;
+    let style = TerrainStyle {
+        ramp: (0.0, 30.0),
+        ..TerrainStyle::default()
+    };
+    sky.prepare(
+        &queue,
+        camera.view_proj_relative(aspect),
+        &SkyColors::default(),
+    )?;
+    renderer.prepare(
+        &device,
+        &queue,
+        &ClipmapView {
+            map: &gpu_map,
+            normals: &normals,
+            frame: &frame,
+            camera: &camera,
+            style: &style,
+            target_size: FRAME,
+        },
+    )?;
+    {
+        let (msaa_view, depth_view, resolve_view) = (
+            msaa.create_view(&Default::default()),
+            depth.create_view(&Default::default()),
+            swapchain.create_view(&Default::default()),
+        );
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("engine main pass"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &msaa_view,
+                depth_slice: None,
+                resolve_target: Some(&resolve_view),
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                    store: wgpu::StoreOp::Discard,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        sky.draw(&mut pass);
+        renderer.draw(&mut pass);
+        // ... the engine would draw its own objects into the same pass here.
+    }
+
+    // Read the "swap chain" back (an engine would present it instead).
+    let row = FRAME.x * 4;
+    let padded =
+        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: u64::from(padded * FRAME.y),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    encoder.copy_texture_to_buffer(
+        swapchain.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &staging,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded),
+                rows_per_image: Some(FRAME.y),
+            },
+        },
+        wgpu::Extent3d {
+            width: FRAME.x,
+            height: FRAME.y,
+            depth_or_array_layers: 1,
+        },
+    );
+    queue.submit([encoder.finish()]);
+    // The submit carried every recorded dispatch: their uniform slots are free again.
+    stamps.recall();
+    normal_pass.recall();
+    let bytes = terrain_gpu::download::map_and_read(&device, &staging)?;
+    let pixels = (0..FRAME.y as usize)
+        .flat_map(|y| {
+            bytes[y * padded as usize..y * padded as usize + row as usize]
+                .chunks_exact(4)
+                .map(|p| [p[2], p[1], p[0], p[3]])
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let image = terrain_core::Grid::from_vec(FRAME.x, FRAME.y, pixels)?;
+    terrain_core::io::write_png_rgba8(&out, &image)?;
+    println!(
+        "stamped {} dirty rect(s), drew {} triangles into the engine's pass; wrote {}",
+        dirty.len(),
+        frame.triangle_count(layout.mesh()),
+        out.display()
+    );
+    Ok(())
+}
+
+/// A 32 x 8 ridge: a tent profile across, constant along.
+fn ridge_profile() -> Result<terrain_core::Grid<f32>, terrain_core::CoreError> {
+    let (w, h) = (32u32, 8u32);
+    let values = (0..h)
+        .flat_map(|y| {
+            let t = (y as f32 + 0.5) / h as f32;
+            std::iter::repeat_n(1.0 - (2.0 * t - 1.0).abs(), w as usize)
+        })
+        .collect();
+    terrain_core::Grid::from_vec(w, h, values)
+}
