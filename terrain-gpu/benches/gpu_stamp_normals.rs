@@ -7,7 +7,7 @@ use glam::{UVec2, Vec2};
 use std::time::Duration;
 use terrain_core::{Blend, GaussianStamp, HeightEncoding, StampPlacement, TerrainParams};
 use terrain_gpu::{
-    GpuContext, GpuDerivativeMap, GpuHeightMap, GpuStamp, GpuTimer, NormalPass, StampPass,
+    GpuContext, GpuDerivativeMap, GpuHeightMap, GpuStamp, GpuTimer, NormalPass, StampOp, StampPass,
 };
 
 const MAP: u32 = 4096;
@@ -57,9 +57,11 @@ fn bench(c: &mut Criterion) {
                         queue,
                         encoder,
                         &gpu_map,
-                        GpuStamp::Gaussian(&gauss),
-                        &p,
-                        Blend::Add,
+                        &StampOp {
+                            stamp: GpuStamp::Gaussian(&gauss),
+                            placement: p,
+                            blend: Blend::Add,
+                        },
                     )?;
                     if with_normals {
                         for r in rects {

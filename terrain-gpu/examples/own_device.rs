@@ -14,8 +14,8 @@ use terrain_core::{
 };
 use terrain_gpu::{
     Camera, ClipmapRenderer, ClipmapView, GpuDerivativeMap, GpuHeightMap, GpuStamp,
-    GpuTextureStamp, MapUse, NormalPass, SkyColors, SkyPass, StampPass, TargetFormat, TerrainStyle,
-    wgpu,
+    GpuTextureStamp, MapUse, NormalPass, SkyColors, SkyPass, StampOp, StampPass, TargetFormat,
+    TerrainStyle, wgpu,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -119,9 +119,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &queue,
         &mut encoder,
         &gpu_map,
-        GpuStamp::Gaussian(&gauss),
-        &crater,
-        Blend::Add,
+        &StampOp {
+            stamp: GpuStamp::Gaussian(&gauss),
+            placement: crater,
+            blend: Blend::Add,
+        },
     )?;
     let wall = StampPlacement::new(centre + Vec2::new(-6.0, 10.0), Vec2::new(20.0, 3.0), 2.0)?;
     dirty.extend(stamps.encode(
@@ -129,9 +131,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &queue,
         &mut encoder,
         &gpu_map,
-        GpuStamp::Texture(&ridge),
-        &wall,
-        Blend::Add,
+        &StampOp {
+            stamp: GpuStamp::Texture(&ridge),
+            placement: wall,
+            blend: Blend::Add,
+        },
     )?);
     normal_pass.encode_full(&device, &queue, &mut encoder, &gpu_map, &normals)?;
 

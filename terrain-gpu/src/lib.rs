@@ -2,15 +2,23 @@
 //! `StampPass`, `NormalPass`, asynchronous `RegionReadback`, and rendering: `SkyPass`,
 //! `ClipmapRenderer` and `OffscreenTarget` captures.
 //!
-//! Every pass is a struct built once with `new(&wgpu::Device)` and recorded with
-//! `encode(&self, .., &mut wgpu::CommandEncoder, ..)`. Passes never create a device: they take
-//! the caller's `&wgpu::Device` / `&wgpu::Queue`, so an engine can use its own. Every pass has
-//! a CPU reference in terrain-core and a test comparing the two.
+//! Every pass is a struct that makes everything long-lived in `new(&wgpu::Device, ..)`
+//! (pipelines, one shader module per WGSL module, layouts, a uniform ring, scratch buffers) and
+//! per frame only writes its uniforms and records commands: compute passes with
+//! `encode(&mut self, device, queue, encoder, ..)` and `recall()` after the submit; renderers
+//! with `prepare(..)` and `draw(&self, &mut wgpu::RenderPass)` into the caller's own pass, for
+//! the caller's [`TargetFormat`]. Passes never create a device: they take the caller's
+//! `&wgpu::Device` / `&wgpu::Queue`, so an engine can use its own ([`required_limits`] says
+//! what to ask for; see `examples/own_device.rs`). Every pass has a CPU reference in
+//! terrain-core and a test comparing the two. Architecture: `docs/ARCHITECTURE.md`; the
+//! theses: `docs/REFERENCES.md`.
 //!
 //! ```no_run
 //! use glam::Vec2;
 //! use terrain_core::{Blend, CoarseMap, GaussianStamp, Grid, HeightEncoding, StampPlacement};
-//! use terrain_gpu::{GpuContext, GpuDerivativeMap, GpuHeightMap, GpuStamp, NormalPass, StampPass};
+//! use terrain_gpu::{
+//!     GpuContext, GpuDerivativeMap, GpuHeightMap, GpuStamp, NormalPass, StampOp, StampPass,
+//! };
 //!
 //! let ctx = GpuContext::new_headless()?;
 //! println!("running on {} ({})", ctx.report().name, ctx.report().backend);
@@ -18,15 +26,21 @@
 //! let map = CoarseMap::coarse(Grid::new(256, 256, 30_000u16)?, HeightEncoding::new(0.001, 0.0)?, 0.1)?;
 //! let gpu_map = GpuHeightMap::from_map(device, queue, &map)?;
 //! let normals = GpuDerivativeMap::for_map(device, &gpu_map)?;
-//! let (stamps, normal_pass) = (StampPass::new(device)?, NormalPass::new(device)?);
+//! // Built once: pipelines, layouts, uniform rings.
+//! let (mut stamps, mut normal_pass) = (StampPass::new(device)?, NormalPass::new(device)?);
 //!
 //! let mut encoder = device.create_command_encoder(&Default::default());
 //! let crater = StampPlacement::new(Vec2::new(0.5, 0.5), Vec2::splat(4.0), -1.0)?;
 //! let gauss = GaussianStamp::default();
-//! for rect in stamps.encode(device, &mut encoder, &gpu_map, GpuStamp::Gaussian(&gauss), &crater, Blend::Add)? {
-//!     normal_pass.encode(device, &mut encoder, &gpu_map, &normals, rect)?;
+//! let op = StampOp { stamp: GpuStamp::Gaussian(&gauss), placement: crater, blend: Blend::Add };
+//! // Per frame: write uniforms, record commands.
+//! for rect in stamps.encode(device, queue, &mut encoder, &gpu_map, &op)? {
+//!     normal_pass.encode(device, queue, &mut encoder, &gpu_map, &normals, rect)?;
 //! }
 //! queue.submit([encoder.finish()]);
+//! // The submit carried the recorded dispatches: their uniform slots are free again.
+//! stamps.recall();
+//! normal_pass.recall();
 //! let deformed: CoarseMap = gpu_map.read(device, queue)?;
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
@@ -64,7 +78,7 @@ pub use offscreen::OffscreenTarget;
 pub use readback::{ReadbackTicket, RegionData, RegionReadback};
 pub use region_source::GpuRegionSource;
 pub use sky::{SkyColors, SkyPass};
-pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampPass};
+pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampOp, StampPass};
 pub use target::TargetFormat;
 pub use timer::{GpuTimer, GpuTiming};
 

@@ -117,6 +117,18 @@ pub enum GpuStamp<'a> {
     Procedural(&'a GpuProceduralStamp),
 }
 
+/// One stamp to apply: what, where, and how it combines with the map (the arguments of
+/// [`terrain_core::apply_stamp`]).
+#[derive(Debug, Clone, Copy)]
+pub struct StampOp<'a> {
+    /// The stamp.
+    pub stamp: GpuStamp<'a>,
+    /// Where, how large, how strong.
+    pub placement: StampPlacement,
+    /// How it combines with the map.
+    pub blend: Blend,
+}
+
 /// Applies stamps to a [`GpuHeightMap`]: one dispatch over the stamp's footprint, wrapped on a
 /// repeating map inside the shader (no split into pieces and no backup copy of the map).
 #[derive(Debug)]
@@ -166,10 +178,13 @@ impl StampPass {
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         map: &GpuHeightMap<T>,
-        stamp: GpuStamp<'_>,
-        placement: &StampPlacement,
-        blend: Blend,
+        op: &StampOp<'_>,
     ) -> Result<Vec<DirtyRect>, GpuError> {
+        let StampOp {
+            stamp,
+            ref placement,
+            blend,
+        } = *op;
         let ts = map.texel_size();
         let Some(region) = stamp_region(map.size(), map.wrap(), ts, placement)? else {
             return Ok(Vec::new());

@@ -9,7 +9,7 @@ use terrain_core::{
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
     GpuContext, GpuDerivativeMap, GpuError, GpuHeightMap, GpuProceduralStamp, GpuStamp,
-    GpuTextureStamp, NormalPass, RegionReadback, StampPass,
+    GpuTextureStamp, NormalPass, RegionReadback, StampOp, StampPass,
 };
 
 /// Largest allowed difference between GPU and CPU stamps, in stored units (LSB). The GPU sums
@@ -57,9 +57,11 @@ fn compare_stamps<T: terrain_gpu::ExactInF32>(
                 queue,
                 &mut encoder,
                 &gpu,
-                *gpu_stamp,
-                placement,
-                *blend,
+                &StampOp {
+                    stamp: *gpu_stamp,
+                    placement: *placement,
+                    blend: *blend,
+                },
             )
             .unwrap();
         assert_eq!(cpu_dirty, gpu_dirty, "dirty rects of {placement:?}");
@@ -236,9 +238,11 @@ fn u32_maps_and_oversized_stamps_are_errors() {
             &ctx.queue,
             &mut encoder,
             &gpu,
-            GpuStamp::Gaussian(&g),
-            &huge,
-            Blend::Add
+            &StampOp {
+                stamp: GpuStamp::Gaussian(&g),
+                placement: huge,
+                blend: Blend::Add,
+            },
         )
         .is_err()
     );
