@@ -86,7 +86,17 @@ pub const SKY: &str = concat!(
 pub const CLIPMAP: &str = concat!(
     wgsl_prelude!(),
     include_str!("wgsl/target_color.wgsl"),
-    include_str!("wgsl/clipmap.wgsl")
+    include_str!("wgsl/clipmap.wgsl"),
+    include_str!("wgsl/clipmap_surface_coarse.wgsl")
+);
+
+/// `ClipmapRenderer` over a granular map: the clipmap drawn from the granular normals pass's
+/// output (unit normal and float height per texel), so nothing is uploaded per frame.
+pub const CLIPMAP_GRANULAR: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/clipmap.wgsl"),
+    include_str!("wgsl/clipmap_surface_granular.wgsl")
 );
 
 /// The declarations every granular pass shares (uniform block, penetration texel, column
@@ -135,6 +145,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("normals", NORMALS),
     ("sky", SKY),
     ("clipmap", CLIPMAP),
+    ("clipmap_granular", CLIPMAP_GRANULAR),
     ("granular_penetration", GRANULAR_PENETRATION),
     ("granular_jfa", GRANULAR_JFA),
     ("granular_displace", GRANULAR_DISPLACE),

@@ -7,8 +7,8 @@ use glam::{UVec2, Vec2, Vec3};
 use std::time::Duration;
 use terrain_core::{HeightEncoding, TerrainParams};
 use terrain_gpu::{
-    Camera, ClipmapRenderer, ClipmapView, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuTimer,
-    NormalPass, OffscreenTarget, SkyColors, SkyPass, TerrainStyle,
+    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuContext, GpuDerivativeMap,
+    GpuHeightMap, GpuTimer, NormalPass, OffscreenTarget, SkyColors, SkyPass, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -82,8 +82,10 @@ fn bench(c: &mut Criterion) {
         )
         .expect("sky uniforms");
         let view = ClipmapView {
-            map: &gpu_map,
-            normals: &normals,
+            surface: ClipmapSurface::Coarse {
+                map: &gpu_map,
+                normals: &normals,
+            },
             frame: &frame,
             camera: &camera,
             style: &style,

@@ -13,7 +13,7 @@ use terrain_core::{
     generate_coarse_map,
 };
 use terrain_gpu::{
-    Camera, ClipmapRenderer, ClipmapView, GpuDerivativeMap, GpuHeightMap, GpuStamp,
+    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuDerivativeMap, GpuHeightMap, GpuStamp,
     GpuTextureStamp, MapUse, NormalPass, SkyColors, SkyPass, StampOp, StampPass, TargetFormat,
     TerrainStyle, wgpu,
 };
@@ -165,8 +165,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &device,
         &queue,
         &ClipmapView {
-            map: &gpu_map,
-            normals: &normals,
+            surface: ClipmapSurface::Coarse {
+                map: &gpu_map,
+                normals: &normals,
+            },
             frame: &frame,
             camera: &camera,
             style: &style,

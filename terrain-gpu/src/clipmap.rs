@@ -5,14 +5,16 @@
 use crate::camera::Camera;
 use crate::compute::shader_module;
 use crate::error::GpuError;
-use crate::maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
+use crate::maps::{GpuDerivativeMap, GpuHeightMap};
 use crate::scope::scoped;
 use crate::target::TargetFormat;
 use bytemuck::{Pod, Zeroable};
 use glam::{UVec2, Vec3, Vec4};
+use terrain_core::WrapMode;
 use terrain_lod::{
     ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapVertex, MAX_DRAWS_PER_LEVEL, MeshPart,
 };
+use terrain_shaders::codes::{WRAP_CLAMP, WRAP_REPEAT};
 use wgpu::util::DeviceExt;
 
 /// The uniform block `Frame` of `clipmap.wgsl`, byte for byte.
@@ -34,7 +36,8 @@ struct FrameUniform {
     ramp_low: f32,
     ramp_high: f32,
     srgb_target: u32,
-    pad: [f32; 2],
+    wrap: u32,
+    pad: f32,
     light_dir: [f32; 4],
     fog_color: [f32; 4],
 }
@@ -76,8 +79,8 @@ impl Default for TerrainStyle {
 /// (its uniforms are rewritten by the next `prepare`); use one renderer per view.
 #[derive(Debug)]
 pub struct ClipmapRenderer {
-    pipeline: wgpu::RenderPipeline,
-    layout: wgpu::BindGroupLayout,
+    coarse: SurfacePipeline,
+    granular: SurfacePipeline,
     target: TargetFormat,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
@@ -86,8 +89,9 @@ pub struct ClipmapRenderer {
     parts: Vec<MeshPart>,
     n: u32,
     levels: u32,
-    /// The bind group of the last map drawn, with the buffers it binds.
-    bound: Option<(wgpu::Buffer, wgpu::Buffer, wgpu::BindGroup)>,
+    /// The bind group of the last surface drawn, with the buffers it binds and whether it is
+    /// a granular surface.
+    bound: Option<(Vec<wgpu::Buffer>, bool, wgpu::BindGroup)>,
     /// Draws of the prepared frame: (part index, first instance, instance count).
     runs: Vec<(usize, u32, u32)>,
 }
@@ -101,77 +105,26 @@ impl ClipmapRenderer {
     ) -> Result<Self, GpuError> {
         target.validate(device)?;
         let mesh = layout.mesh();
-        let module = shader_module(device, "clipmap.wgsl", terrain_shaders::CLIPMAP)?;
         // Every instance a placed frame of this layout can hold.
         let max_instances = u64::from(layout.levels()) * MAX_DRAWS_PER_LEVEL as u64;
+        let coarse = SurfacePipeline::new(
+            device,
+            target,
+            "clipmap.wgsl",
+            terrain_shaders::CLIPMAP,
+            &[
+                (wgpu::ShaderStages::VERTEX, 1),
+                (wgpu::ShaderStages::FRAGMENT, 2),
+            ],
+        )?;
+        let granular = SurfacePipeline::new(
+            device,
+            target,
+            "clipmap granular",
+            terrain_shaders::CLIPMAP_GRANULAR,
+            &[(wgpu::ShaderStages::VERTEX_FRAGMENT, 1)],
+        )?;
         scoped(device, "ClipmapRenderer", || {
-            let storage = |binding, stages| wgpu::BindGroupLayoutEntry {
-                binding,
-                visibility: stages,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            };
-            let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("ClipmapRenderer"),
-                entries: &[
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 0,
-                        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Uniform,
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    },
-                    storage(1, wgpu::ShaderStages::VERTEX),
-                    storage(2, wgpu::ShaderStages::FRAGMENT),
-                ],
-            });
-            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("ClipmapRenderer"),
-                bind_group_layouts: &[Some(&bind_layout)],
-                immediate_size: 0,
-            });
-            let vertex_attrs = wgpu::vertex_attr_array![0 => Float32x2];
-            let instance_attrs = wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
-            let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("ClipmapRenderer"),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[
-                        Some(wgpu::VertexBufferLayout {
-                            array_stride: std::mem::size_of::<ClipmapVertex>() as u64,
-                            step_mode: wgpu::VertexStepMode::Vertex,
-                            attributes: &vertex_attrs,
-                        }),
-                        Some(wgpu::VertexBufferLayout {
-                            array_stride: std::mem::size_of::<ClipmapInstance>() as u64,
-                            step_mode: wgpu::VertexStepMode::Instance,
-                            attributes: &instance_attrs,
-                        }),
-                    ],
-                },
-                // No culling: degenerate triangles and both windings of the parts are drawn.
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: Some(target.depth_state(true, wgpu::CompareFunction::Less)),
-                multisample: target.multisample(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(target.color.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
             let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("clipmap vertices"),
                 contents: bytemuck::cast_slice(&mesh.vertices),
@@ -195,8 +148,8 @@ impl ClipmapRenderer {
                 mapped_at_creation: false,
             });
             Self {
-                pipeline,
-                layout: bind_layout,
+                coarse,
+                granular,
                 target: *target,
                 vertices,
                 indices,
@@ -219,15 +172,14 @@ impl ClipmapRenderer {
     /// Writes the uniforms and instances of one frame: `frame` (placed and culled by
     /// terrain-lod) seen by `camera` on a target of `target_size` pixels, displaced by `map`
     /// and lit with `normals`. Checks everything before wgpu sees it.
-    pub fn prepare<T: ExactInF32>(
+    pub fn prepare(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        view: &ClipmapView<'_, T>,
+        view: &ClipmapView<'_>,
     ) -> Result<(), GpuError> {
         let ClipmapView {
-            map,
-            normals,
+            surface,
             frame,
             camera,
             style,
@@ -244,29 +196,22 @@ impl ClipmapRenderer {
             }
             .into());
         }
-        if map.wrap() != terrain_core::WrapMode::Repeat {
-            return Err(GpuError::Unsupported {
-                what: "ClipmapRenderer",
-                reason: "the clipmap renders toroidal (repeating) coarse-maps only",
-            });
-        }
         if frame.levels.len() != self.levels as usize {
             return Err(GpuError::Unsupported {
                 what: "ClipmapRenderer",
                 reason: "the frame was placed by a layout with another number of levels",
             });
         }
-        if normals.size() != map.size() {
-            return Err(GpuError::SizeMismatch {
-                expected: map.size(),
-                actual: normals.size(),
-            });
-        }
+        let info = surface.check()?;
         let size = target_size.as_vec2();
-        let ts = map.texel_size();
+        let ts = info.texel_size;
         let cam_texel = glam::Vec2::new(camera.position.x, camera.position.z) / ts;
         let cam_int = cam_texel.floor();
-        let enc = map.encoding();
+        let enc = info.encoding;
+        let (wrap, wrap_offset) = match info.wrap {
+            WrapMode::Repeat => (WRAP_REPEAT, wrap_offset_for_frame(frame, info.size)?),
+            WrapMode::Clamp => (WRAP_CLAMP, [0, 0]),
+        };
         let uniform = FrameUniform {
             view_proj: camera
                 .view_proj_relative(size.x / size.y)
@@ -277,15 +222,16 @@ impl ClipmapRenderer {
             texel_size: ts,
             height_scale: enc.scale,
             height_offset: enc.offset,
-            map_size: map.size().to_array(),
-            wrap_offset: wrap_offset_for_frame(frame, map.size())?,
+            map_size: info.size.to_array(),
+            wrap_offset,
             n: self.n,
             levels: self.levels,
             morph_width: terrain_lod::morph::default_morph_width(self.n),
             ramp_low: style.ramp.0,
             ramp_high: style.ramp.1,
             srgb_target: self.target.srgb_flag(),
-            pad: [0.0; 2],
+            wrap,
+            pad: 0.0,
             light_dir: style.light_dir.extend(0.0).to_array(),
             fog_color: Vec4::from((style.fog_color, style.fog_density)).to_array(),
         };
@@ -318,32 +264,39 @@ impl ClipmapRenderer {
         }
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
 
+        let buffers = surface.buffers();
+        let granular = matches!(surface, ClipmapSurface::Granular { .. });
         let rebind = match &self.bound {
-            Some((h, n, _)) => h != map.buffer() || n != normals.buffer(),
+            Some((bound, g, _)) => *g != granular || bound.as_slice() != buffers.as_slice(),
             None => true,
         };
         if rebind {
+            let pipeline = if granular {
+                &self.granular
+            } else {
+                &self.coarse
+            };
+            let mut entries = vec![wgpu::BindGroupEntry {
+                binding: 0,
+                resource: self.uniform.as_entire_binding(),
+            }];
+            entries.extend(
+                buffers
+                    .iter()
+                    .enumerate()
+                    .map(|(i, b)| wgpu::BindGroupEntry {
+                        binding: i as u32 + 1,
+                        resource: b.as_entire_binding(),
+                    }),
+            );
             let group = scoped(device, "ClipmapRenderer bind group", || {
                 device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("ClipmapRenderer"),
-                    layout: &self.layout,
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: self.uniform.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: map.buffer().as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: normals.buffer().as_entire_binding(),
-                        },
-                    ],
+                    layout: &pipeline.layout,
+                    entries: &entries,
                 })
             })?;
-            self.bound = Some((map.buffer().clone(), normals.buffer().clone(), group));
+            self.bound = Some((buffers, granular, group));
         }
         Ok(())
     }
@@ -351,13 +304,18 @@ impl ClipmapRenderer {
     /// Records the prepared frame into `pass` (a pass of this renderer's [`TargetFormat`]).
     /// Draws nothing before the first [`ClipmapRenderer::prepare`].
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
-        let Some((_, _, group)) = &self.bound else {
+        let Some((_, granular, group)) = &self.bound else {
             return;
         };
         if self.runs.is_empty() {
             return;
         }
-        pass.set_pipeline(&self.pipeline);
+        let pipeline = if *granular {
+            &self.granular
+        } else {
+            &self.coarse
+        };
+        pass.set_pipeline(&pipeline.pipeline);
         pass.set_bind_group(0, group, &[]);
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_vertex_buffer(1, self.instances.slice(..));
@@ -371,11 +329,9 @@ impl ClipmapRenderer {
 
 /// Everything one clipmap frame is drawn from.
 #[derive(Debug, Clone, Copy)]
-pub struct ClipmapView<'a, T: ExactInF32> {
-    /// The (repeating) heightmap.
-    pub map: &'a GpuHeightMap<T>,
-    /// Its derivative normals.
-    pub normals: &'a GpuDerivativeMap,
+pub struct ClipmapView<'a> {
+    /// The heights and normals to draw.
+    pub surface: ClipmapSurface<'a>,
     /// The placed, culled frame of the renderer's layout.
     pub frame: &'a ClipmapFrame,
     /// The camera.
@@ -384,6 +340,168 @@ pub struct ClipmapView<'a, T: ExactInF32> {
     pub style: &'a TerrainStyle,
     /// Size of the render target in pixels (for the aspect ratio).
     pub target_size: UVec2,
+}
+
+/// The surface a clipmap displaces and lights. A repeating map wraps (toroidal coarse-map); a
+/// clamped map extends its edge texels outwards.
+#[derive(Debug, Clone, Copy)]
+pub enum ClipmapSurface<'a> {
+    /// A coarse-map and its partial-derivative normals ([`crate::NormalPass`]).
+    Coarse {
+        /// The heights.
+        map: &'a GpuHeightMap<u16>,
+        /// Their derivative normals (same size).
+        normals: &'a GpuDerivativeMap,
+    },
+    /// A granular map drawn straight from [`crate::granular::GranularNormalsPass`]'s output
+    /// (unit normal and float height in metres per texel, 16 bytes): nothing is uploaded.
+    Granular {
+        /// The fixed-point heights (their size, encoding, spacing and wrap; not read).
+        map: &'a GpuHeightMap<u32>,
+        /// The normal-and-height buffer of the map.
+        surface: &'a wgpu::Buffer,
+    },
+}
+
+/// What the renderer needs to know of a surface.
+struct SurfaceInfo {
+    size: UVec2,
+    encoding: terrain_core::HeightEncoding,
+    texel_size: f32,
+    wrap: WrapMode,
+}
+
+impl ClipmapSurface<'_> {
+    /// Checks the parts agree and returns the map's description.
+    fn check(&self) -> Result<SurfaceInfo, GpuError> {
+        let (size, encoding, texel_size, wrap) = match *self {
+            ClipmapSurface::Coarse { map, normals } => {
+                if normals.size() != map.size() {
+                    return Err(GpuError::SizeMismatch {
+                        expected: map.size(),
+                        actual: normals.size(),
+                    });
+                }
+                (map.size(), map.encoding(), map.texel_size(), map.wrap())
+            }
+            ClipmapSurface::Granular { map, surface } => {
+                let need = u64::from(map.size().x) * u64::from(map.size().y) * 16;
+                if surface.size() < need {
+                    return Err(GpuError::Unsupported {
+                        what: "ClipmapRenderer",
+                        reason: "the granular surface buffer holds fewer than 16 bytes per texel",
+                    });
+                }
+                (map.size(), map.encoding(), map.texel_size(), map.wrap())
+            }
+        };
+        Ok(SurfaceInfo {
+            size,
+            encoding,
+            texel_size,
+            wrap,
+        })
+    }
+
+    /// The storage buffers the surface binds at 1, 2, ...
+    fn buffers(&self) -> Vec<wgpu::Buffer> {
+        match *self {
+            ClipmapSurface::Coarse { map, normals } => {
+                vec![map.buffer().clone(), normals.buffer().clone()]
+            }
+            ClipmapSurface::Granular { surface, .. } => vec![surface.clone()],
+        }
+    }
+}
+
+/// The pipeline and bind group layout of one surface kind.
+#[derive(Debug)]
+struct SurfacePipeline {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
+impl SurfacePipeline {
+    /// Builds the pipeline of `source` with the frame uniform at binding 0 and read-only storage
+    /// buffers at the given (stages, binding).
+    fn new(
+        device: &wgpu::Device,
+        target: &TargetFormat,
+        label: &'static str,
+        source: &str,
+        storage: &[(wgpu::ShaderStages, u32)],
+    ) -> Result<Self, GpuError> {
+        let module = shader_module(device, label, source)?;
+        scoped(device, label, || {
+            let mut entries = vec![wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }];
+            entries.extend(storage.iter().map(|&(visibility, binding)| {
+                wgpu::BindGroupLayoutEntry {
+                    binding,
+                    visibility,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                }
+            }));
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries: &entries,
+            });
+            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+            let vertex_attrs = wgpu::vertex_attr_array![0 => Float32x2];
+            let instance_attrs = wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
+            let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[
+                        Some(wgpu::VertexBufferLayout {
+                            array_stride: std::mem::size_of::<ClipmapVertex>() as u64,
+                            step_mode: wgpu::VertexStepMode::Vertex,
+                            attributes: &vertex_attrs,
+                        }),
+                        Some(wgpu::VertexBufferLayout {
+                            array_stride: std::mem::size_of::<ClipmapInstance>() as u64,
+                            step_mode: wgpu::VertexStepMode::Instance,
+                            attributes: &instance_attrs,
+                        }),
+                    ],
+                },
+                // No culling: degenerate triangles and both windings of the parts are drawn.
+                primitive: wgpu::PrimitiveState::default(),
+                depth_stencil: Some(target.depth_state(true, wgpu::CompareFunction::Less)),
+                multisample: target.multisample(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(target.color.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+            Self { pipeline, layout }
+        })
+    }
 }
 
 /// A multiple of the map size that makes every texel the frame can read non-negative (the

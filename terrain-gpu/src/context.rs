@@ -89,7 +89,7 @@ impl GpuContext {
         adapters.sort_by_key(|a| rank(&a.get_info()));
         let Some(adapter) = adapters.into_iter().next() else {
             return Err(GpuError::NoAdapter {
-                backends: format!("{backends:?}"),
+                backends,
                 name_filter,
             });
         };

@@ -8,12 +8,12 @@ use terrain_core::{CoreError, Rect};
 pub enum GpuError {
     /// No adapter matched the backends and name asked for.
     #[error(
-        "no GPU adapter found (backends {backends}{}); install mesa-vulkan-drivers for a software Vulkan adapter, or set WGPU_BACKEND=gl",
+        "no GPU adapter found (backends {backends:?}{}); install mesa-vulkan-drivers for a software Vulkan adapter, or set WGPU_BACKEND=gl",
         name_filter.as_ref().map(|n| format!(", WGPU_ADAPTER_NAME={n}")).unwrap_or_default()
     )]
     NoAdapter {
         /// The backends searched.
-        backends: String,
+        backends: wgpu::Backends,
         /// The adapter name filter, if any.
         name_filter: Option<String>,
     },

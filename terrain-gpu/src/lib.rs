@@ -68,7 +68,7 @@ pub mod testing;
 pub mod timer;
 
 pub use camera::Camera;
-pub use clipmap::{ClipmapRenderer, ClipmapView, TerrainStyle};
+pub use clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};
 pub use context::{AdapterReport, GpuContext};
 pub use error::GpuError;
 pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};

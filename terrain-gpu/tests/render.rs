@@ -8,7 +8,8 @@ use glam::{UVec2, Vec2, Vec3};
 use scene::Scene;
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    Camera, ClipmapRenderer, ClipmapView, GpuError, SkyColors, SkyPass, TargetFormat, TerrainStyle,
+    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuError, SkyColors, SkyPass,
+    TargetFormat, TerrainStyle,
 };
 
 /// Magenta: a colour the terrain's shading (greens, browns, greys, white, blue-grey fog)
@@ -240,8 +241,10 @@ fn renderers_draw_into_the_callers_msaa_srgb_pass_like_the_capture() {
     )
     .unwrap();
     let view = ClipmapView {
-        map: &scene.gpu_map,
-        normals: &scene.normals,
+        surface: ClipmapSurface::Coarse {
+            map: &scene.gpu_map,
+            normals: &scene.normals,
+        },
         frame: &frame,
         camera: &camera,
         style: &style,

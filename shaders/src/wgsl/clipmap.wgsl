@@ -26,23 +26,26 @@ struct Frame {
     ramp_high: f32,
     // 1 when the colour target is sRGB (see to_target).
     srgb_target: u32,
-    _pad2: vec2<f32>,
+    // WRAP_REPEAT (toroidal coarse-map) or WRAP_CLAMP (edges extend flat).
+    wrap: u32,
+    _pad2: f32,
     light_dir: vec4<f32>,
     fog_color: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
-@group(0) @binding(1) var<storage, read> heights: array<u32>;
-@group(0) @binding(2) var<storage, read> derivatives: array<vec2<f32>>;
+// The surface (`height_at`, `derivative_at` and their bindings) comes from a
+// clipmap_surface_*.wgsl placed after this file.
 
+// The map texel a grid texel reads: wrapped on a toroidal map, clamped to the edges otherwise.
 fn texel_index(t: vec2<i32>) -> u32 {
-    let x = u32(t.x + frame.wrap_offset.x) % frame.map_size.x;
-    let y = u32(t.y + frame.wrap_offset.y) % frame.map_size.y;
-    return y * frame.map_size.x + x;
-}
-
-fn height_at(t: vec2<i32>) -> f32 {
-    return frame.height_offset + frame.height_scale * f32(heights[texel_index(t)]);
+    if frame.wrap == WRAP_REPEAT {
+        let x = u32(t.x + frame.wrap_offset.x) % frame.map_size.x;
+        let y = u32(t.y + frame.wrap_offset.y) % frame.map_size.y;
+        return y * frame.map_size.x + x;
+    }
+    let c = clamp(t, vec2<i32>(0, 0), vec2<i32>(frame.map_size) - vec2<i32>(1, 1));
+    return u32(c.y) * frame.map_size.x + u32(c.x);
 }
 
 struct VsIn {
@@ -95,10 +98,6 @@ fn vs_main(in: VsIn) -> VsOut {
     out.height = h;
     out.view_dist = length(world);
     return out;
-}
-
-fn derivative_at(t: vec2<i32>) -> vec2<f32> {
-    return derivatives[texel_index(t)];
 }
 
 @fragment

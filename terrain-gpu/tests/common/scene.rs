@@ -3,8 +3,8 @@
 use glam::{UVec2, Vec2, Vec3};
 use terrain_core::{CoarseMap, Grid, HeightEncoding, TerrainParams, generate_coarse_map};
 use terrain_gpu::{
-    Camera, ClipmapRenderer, ClipmapView, GpuContext, GpuDerivativeMap, GpuHeightMap, NormalPass,
-    OffscreenTarget, SkyColors, SkyPass, TargetFormat, TerrainStyle,
+    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuContext, GpuDerivativeMap,
+    GpuHeightMap, NormalPass, OffscreenTarget, SkyColors, SkyPass, TargetFormat, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -83,8 +83,10 @@ impl Scene {
             .prepare(queue, camera.view_proj_relative(aspect), sky)
             .unwrap();
         let view = ClipmapView {
-            map: &self.gpu_map,
-            normals: &self.normals,
+            surface: ClipmapSurface::Coarse {
+                map: &self.gpu_map,
+                normals: &self.normals,
+            },
             frame: &frame,
             camera,
             style: &style,
