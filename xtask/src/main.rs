@@ -51,11 +51,12 @@ fn cargo(args: &[&str], env: &[(&str, &str)]) -> Result<()> {
 type Step = (&'static str, fn() -> Result<()>);
 
 fn ci() -> Result<()> {
-    let steps: [Step; 5] = [
+    let steps: [Step; 6] = [
         ("fmt", fmt),
         ("clippy", clippy),
         ("test", test),
         ("doc", doc),
+        ("examples", examples),
         ("smoke", smoke),
     ];
     let total = Instant::now();
@@ -107,6 +108,49 @@ fn doc() -> Result<()> {
         &["doc", "--workspace", "--no-deps", "--locked"],
         &[("RUSTDOCFLAGS", "-D warnings")],
     )
+}
+
+/// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
+const EXAMPLES: [(&str, &str, &[&str]); 2] = [
+    (
+        "terrain-core",
+        "stamp_heightmap",
+        &["--size", "64", "--out", "{out}"],
+    ),
+    (
+        "terrain-physics",
+        "drop_spheres",
+        &["--size", "64", "--spheres", "2", "--steps", "90"],
+    ),
+];
+
+/// Runs every example of the library crates once at a tiny size; fails on an example file that
+/// `EXAMPLES` does not list, so none is left unrun.
+fn examples() -> Result<()> {
+    for krate in ["terrain-core", "terrain-physics"] {
+        let dir = root().join(krate).join("examples");
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for entry in entries {
+            let path = entry?.path();
+            let Some(name) = path.file_stem().and_then(|s| s.to_str()) else {
+                continue;
+            };
+            if !EXAMPLES.iter().any(|(k, e, _)| *k == krate && *e == name) {
+                bail!("{} is not listed in xtask's EXAMPLES", path.display());
+            }
+        }
+    }
+    let out = root().join("target").join("ci-examples");
+    let out = out.to_string_lossy();
+    for (krate, example, args) in EXAMPLES {
+        let mut cmd = vec!["run", "--locked", "-p", krate, "--example", example, "--"];
+        let args: Vec<String> = args.iter().map(|a| a.replace("{out}", &out)).collect();
+        cmd.extend(args.iter().map(String::as_str));
+        cargo(&cmd, &[])?;
+    }
+    Ok(())
 }
 
 /// Regenerates `terrain-gpu/tests/data/golden_clipmap.png` on this machine's adapter.
