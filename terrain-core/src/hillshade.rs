@@ -4,7 +4,8 @@
 use crate::error::CoreError;
 use crate::grid::Grid;
 use crate::map::{HeightMap, HeightSample};
-use crate::normals::DerivativeMap;
+use crate::normals::{DerivativeMap, derivative_region};
+use crate::rect::Rect;
 use glam::{UVec2, Vec3};
 
 /// Lighting and colouring of a hillshade.
@@ -45,50 +46,146 @@ fn ramp(t: f32) -> Vec3 {
 }
 
 /// Renders `map` as an RGBA8 hillshade of `params.size` pixels, colouring heights between the
-/// map's lowest and highest stored values.
+/// map's lowest and highest stored values ([`hillshade_range`]).
 pub fn hillshade<T: HeightSample>(
     map: &HeightMap<T>,
     normals: &DerivativeMap,
     params: &HillshadeParams,
 ) -> Result<Grid<[u8; 4]>, CoreError> {
-    if normals.grid().size() != map.size() {
+    let range = hillshade_range(map);
+    let shader = Shader::new(map, normals, params, range)?;
+    Grid::from_fn(params.size.x, params.size.y, |px, py| shader.pixel(px, py))
+}
+
+/// The stored values a [`hillshade`] colours between: the map's lowest and highest.
+pub fn hillshade_range<T: HeightSample>(map: &HeightMap<T>) -> (f64, f64) {
+    map.grid()
+        .as_slice()
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(lo, hi), v| {
+            let v = v.to_raw_f64();
+            (lo.min(v), hi.max(v))
+        })
+}
+
+/// Redraws the pixels of `image`, a hillshade of `map` at `params.size`, that a change of the
+/// heights inside `dirty` can affect (their normals included, so `dirty` grown by
+/// [`DERIVATIVE_APRON`](crate::DERIVATIVE_APRON), wrapped as [`derivative_region`] does),
+/// colouring heights between the stored values `range` (clamped outside it). `normals` must be
+/// current over that region ([`DerivativeMap::update_rect`] with the same `dirty`).
+///
+/// Costs the pixels redrawn, not the map: with `range` kept from the first image
+/// ([`hillshade_range`]) an overview follows deformations frame by frame. With the range of the
+/// new map, the result equals a new [`hillshade`].
+///
+/// Fails as [`hillshade`] does, on an `image` not of `params.size`, on a `range` that is not
+/// finite and ordered, or on a `dirty` rect outside a clamped map.
+pub fn update_hillshade<T: HeightSample>(
+    image: &mut Grid<[u8; 4]>,
+    map: &HeightMap<T>,
+    normals: &DerivativeMap,
+    params: &HillshadeParams,
+    range: (f64, f64),
+    dirty: Rect,
+) -> Result<(), CoreError> {
+    if image.size() != params.size {
         return Err(CoreError::SizeMismatch {
-            expected: map.size(),
-            actual: normals.grid().size(),
+            expected: params.size,
+            actual: image.size(),
         });
     }
-    if !params.light_dir.is_finite() || params.light_dir.length_squared() == 0.0 {
-        return Err(CoreError::OutOfRange {
-            what: "hillshade light direction length",
-            value: f64::from(params.light_dir.length()),
-            expected: "a finite, non-zero vector",
-        });
-    }
-    if !(0.0..=1.0).contains(&params.ambient) {
-        return Err(CoreError::OutOfRange {
-            what: "hillshade ambient",
-            value: f64::from(params.ambient),
-            expected: "in [0, 1]",
-        });
-    }
-    let light = params.light_dir.normalize();
-    let raw = map.grid().as_slice();
-    let (lo, hi) = raw.iter().fold((f64::MAX, f64::MIN), |(lo, hi), v| {
-        let v = v.to_raw_f64();
-        (lo.min(v), hi.max(v))
-    });
-    let span = (hi - lo).max(1.0);
+    let shader = Shader::new(map, normals, params, range)?;
+    let Some(region) = derivative_region(map.size(), map.wrap(), dirty)? else {
+        return Ok(());
+    };
     let size = map.size();
-    Grid::from_fn(params.size.x, params.size.y, |px, py| {
-        let x = ((u64::from(px) * u64::from(size.x)) / u64::from(params.size.x)) as u32;
-        let y = ((u64::from(py) * u64::from(size.y)) / u64::from(params.size.y)) as u32;
-        let i = map.grid().index(x, y);
-        let t = ((raw[i].to_raw_f64() - lo) / span) as f32;
-        let n = normals.normal(x, y).unwrap_or(Vec3::Y);
-        let shade = params.ambient + (1.0 - params.ambient) * n.dot(light).max(0.0);
+    // Pixel `p` shows texel `p * size / out`, so texels `t0..t1` are shown by pixels
+    // `ceil(t0 * out / size)..ceil(t1 * out / size)`.
+    let pixels = |t0: i32, t1: i32, out: u32, n: u32| {
+        let at = |t: i32| (u64::from(t as u32) * u64::from(out)).div_ceil(u64::from(n)) as u32;
+        at(t0)..at(t1)
+    };
+    for piece in region.split_toroidal(size) {
+        let (lo, hi) = (piece.map.min, piece.map.max());
+        for py in pixels(lo.y, hi.y, params.size.y, size.y) {
+            let row = image.row_mut(py);
+            for px in pixels(lo.x, hi.x, params.size.x, size.x) {
+                row[px as usize] = shader.pixel(px, py);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// One hillshade's checked inputs: shades pixel by pixel.
+struct Shader<'a, T> {
+    map: &'a HeightMap<T>,
+    normals: &'a DerivativeMap,
+    light: Vec3,
+    ambient: f32,
+    out: UVec2,
+    lo: f64,
+    span: f64,
+}
+
+impl<'a, T: HeightSample> Shader<'a, T> {
+    fn new(
+        map: &'a HeightMap<T>,
+        normals: &'a DerivativeMap,
+        params: &HillshadeParams,
+        range: (f64, f64),
+    ) -> Result<Self, CoreError> {
+        if normals.grid().size() != map.size() {
+            return Err(CoreError::SizeMismatch {
+                expected: map.size(),
+                actual: normals.grid().size(),
+            });
+        }
+        if !params.light_dir.is_finite() || params.light_dir.length_squared() == 0.0 {
+            return Err(CoreError::OutOfRange {
+                what: "hillshade light direction length",
+                value: f64::from(params.light_dir.length()),
+                expected: "a finite, non-zero vector",
+            });
+        }
+        if !(0.0..=1.0).contains(&params.ambient) {
+            return Err(CoreError::OutOfRange {
+                what: "hillshade ambient",
+                value: f64::from(params.ambient),
+                expected: "in [0, 1]",
+            });
+        }
+        let (lo, hi) = range;
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(CoreError::OutOfRange {
+                what: "hillshade colour range (its low end)",
+                value: lo,
+                expected: "finite, and at most the high end",
+            });
+        }
+        Ok(Self {
+            map,
+            normals,
+            light: params.light_dir.normalize(),
+            ambient: params.ambient,
+            out: params.size,
+            lo,
+            span: (hi - lo).max(1.0),
+        })
+    }
+
+    /// The colour of pixel `(px, py)`, which shows the nearest texel.
+    fn pixel(&self, px: u32, py: u32) -> [u8; 4] {
+        let size = self.map.size();
+        let x = ((u64::from(px) * u64::from(size.x)) / u64::from(self.out.x)) as u32;
+        let y = ((u64::from(py) * u64::from(size.y)) / u64::from(self.out.y)) as u32;
+        let raw = self.map.grid().as_slice()[self.map.grid().index(x, y)].to_raw_f64();
+        let t = ((raw - self.lo) / self.span) as f32;
+        let n = self.normals.normal(x, y).unwrap_or(Vec3::Y);
+        let shade = self.ambient + (1.0 - self.ambient) * n.dot(self.light).max(0.0);
         let c = (ramp(t) * shade * 1.25).clamp(Vec3::ZERO, Vec3::ONE) * 255.0;
         [c.x as u8, c.y as u8, c.z as u8, 255]
-    })
+    }
 }
 
 #[cfg(test)]
@@ -112,5 +209,49 @@ mod tests {
             ..HillshadeParams::with_size(UVec2::new(8, 8))
         };
         assert!(hillshade(&m, &n, &bad).is_err());
+    }
+
+    #[test]
+    fn updating_the_dirty_pixels_matches_a_new_hillshade() {
+        use crate::{Blend, GaussianStamp, StampPlacement, apply_stamp};
+        let g = Grid::from_fn(48, 40, |x, y| (1000 + 37 * x + 23 * y) as u16).unwrap();
+        let enc = HeightEncoding::new(0.01, 0.0).unwrap();
+        // Outputs smaller, larger and neither than the map.
+        for out in [UVec2::new(20, 17), UVec2::new(96, 80), UVec2::new(33, 61)] {
+            let mut m = CoarseMap::coarse(g.clone(), enc, 1.0).unwrap();
+            let mut n = DerivativeMap::from_map(&m);
+            let params = HillshadeParams::with_size(out);
+            // A crater across the wrap corner, then a mound inside.
+            let stamps = [
+                (glam::Vec2::new(1.0, 2.0), -3.0),
+                (glam::Vec2::new(30.0, 20.0), 4.0),
+            ];
+            let mut dirty = Vec::new();
+            for (pos, depth) in stamps {
+                let placement = StampPlacement::new(pos, glam::Vec2::splat(9.0), depth).unwrap();
+                let mut crater = GaussianStamp::default();
+                dirty.extend(apply_stamp(&mut m, &mut crater, &placement, Blend::Add).unwrap());
+            }
+            let range = hillshade_range(&m);
+            // The image before the change, coloured with the final range.
+            let before = CoarseMap::coarse(g.clone(), enc, 1.0).unwrap();
+            let before_n = DerivativeMap::from_map(&before);
+            let shader = Shader::new(&before, &before_n, &params, range).unwrap();
+            let mut img = Grid::from_fn(out.x, out.y, |x, y| shader.pixel(x, y)).unwrap();
+            for r in &dirty {
+                n.update_rect(&m, *r).unwrap();
+                update_hillshade(&mut img, &m, &n, &params, range, *r).unwrap();
+            }
+            assert_eq!(img, hillshade(&m, &n, &params).unwrap(), "output {out}");
+        }
+        let m = CoarseMap::coarse(g, enc, 1.0).unwrap();
+        let n = DerivativeMap::from_map(&m);
+        let params = HillshadeParams::with_size(UVec2::new(8, 8));
+        let mut img = hillshade(&m, &n, &params).unwrap();
+        let r = Rect::from_size(UVec2::ONE);
+        assert!(update_hillshade(&mut img, &m, &n, &params, (5.0, 1.0), r).is_err());
+        assert!(update_hillshade(&mut img, &m, &n, &params, (f64::NAN, 1.0), r).is_err());
+        let small = HillshadeParams::with_size(UVec2::new(4, 8));
+        assert!(update_hillshade(&mut img, &m, &n, &small, (0.0, 1.0), r).is_err());
     }
 }

@@ -48,7 +48,7 @@ pub mod terrain_gen;
 
 pub use error::CoreError;
 pub use grid::{Grid, WrapMode};
-pub use hillshade::{HillshadeParams, hillshade};
+pub use hillshade::{HillshadeParams, hillshade, hillshade_range, update_hillshade};
 pub use io::MapIoError;
 pub use map::{
     CoarseMap, DEFAULT_FIXED_POINT_UNITS_PER_M, DETAIL_MAX_RANGE_M, DetailTile, FixedPointMap,

@@ -1,9 +1,9 @@
 //! The demo camera as a physics body: a `CameraBody` with gravity, pulled along behind the
 //! walker by a damped spring on X/Z, standing on the collision ground at its eye height.
 
+use crate::gpu_scene::Camera;
 use anyhow::Result;
 use glam::{Vec2, Vec3};
-use terrain_gpu::Camera;
 use terrain_physics::{CameraBody, GroundQuery};
 
 /// Eye height above the ground in metres (a tall viewpoint over the trail).

@@ -3,15 +3,21 @@
 
 use crate::images::{self, Image};
 use crate::report::{FrameReport, Report};
+use crate::timings::{Step, Timings};
 use anyhow::{Context, Result};
 use glam::UVec2;
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::time::Instant;
 use terrain_core::io;
 
 /// Steps shown in the timing plot of `summary.png`, bottom to top.
-const PLOTTED: [&str; 5] = ["stamp", "normals", "render", "capture", "write"];
+const PLOTTED: [Step; 5] = [
+    Step::Stamp,
+    Step::Normals,
+    Step::Render,
+    Step::Capture,
+    Step::Write,
+];
 
 /// Collects a run's frames.
 pub struct Capture<'a> {
@@ -34,19 +40,24 @@ impl<'a> Capture<'a> {
         }
     }
 
-    /// Writes `image` as the next frame and records `frame` (its `file` and `write` timing are
-    /// filled in here).
-    pub fn push(&mut self, image: &Image, mut frame: FrameReport) -> Result<()> {
+    /// Writes `image` as the next frame and records `frame` with `timings` (its `index`, `file`
+    /// and timings are filled in here, the `write` step included).
+    pub fn push(
+        &mut self,
+        image: &Image,
+        mut frame: FrameReport,
+        mut timings: Timings,
+    ) -> Result<()> {
         let index = self.frames.len() as u32;
-        let t = Instant::now();
         let file = format!("frame_{index:04}.png");
         let path = self.out.join(&file);
-        io::write_png_rgba8(&path, image).with_context(|| format!("writing {}", path.display()))?;
-        frame
-            .timings_ms
-            .insert("write".to_string(), t.elapsed().as_secs_f64() * 1e3);
+        timings
+            .time(Step::Write, || io::write_png_rgba8(&path, image))
+            .with_context(|| format!("writing {}", path.display()))?;
         frame.index = index;
         frame.file = file;
+        frame.timings_ms = timings.wall_by_name();
+        frame.gpu_timestamps_ms = timings.gpu_by_name();
         if index % self.thumb_every == self.thumb_every - 1 || index + 1 == self.total {
             let w = 320.min(image.width());
             let h = (u64::from(image.height()) * u64::from(w) / u64::from(image.width())) as u32;
@@ -62,10 +73,10 @@ impl<'a> Capture<'a> {
     pub fn finish(self, mut report: Report) -> Result<Report> {
         let series: Vec<Vec<f64>> = PLOTTED
             .iter()
-            .map(|k| {
+            .map(|step| {
                 self.frames
                     .iter()
-                    .map(|f| f.timings_ms.get(*k).copied().unwrap_or(0.0))
+                    .map(|f| f.timings_ms.get(step.name()).copied().unwrap_or(0.0))
                     .collect()
             })
             .collect();
@@ -73,10 +84,10 @@ impl<'a> Capture<'a> {
         let plot = images::timing_plot(&series, UVec2::new(columns * 324 - 4, 160))?;
         let sheet = images::contact_sheet(&self.thumbs, columns, 320, &plot)?;
         io::write_png_rgba8(self.out.join("summary.png"), &sheet)?;
-        let mut totals: BTreeMap<String, f64> = BTreeMap::new();
+        let mut totals: BTreeMap<&'static str, f64> = BTreeMap::new();
         for f in &self.frames {
             for (k, v) in &f.timings_ms {
-                *totals.entry(k.clone()).or_default() += v;
+                *totals.entry(*k).or_default() += v;
             }
         }
         report.frames = self.frames;

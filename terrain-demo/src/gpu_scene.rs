@@ -1,18 +1,22 @@
 //! The GPU side of a demo frame: stamps and normals on the GPU map, clipmap placement, sky and
-//! terrain rendering, capture. Glue only: every step is a library call.
+//! terrain rendering, capture. Glue only: every step is a library call. This is the one file of
+//! the demo that calls terrain-gpu; the rest sees [`GpuScene`] and [`Camera`].
 
 use anyhow::{Context, Result};
 use glam::{UVec2, Vec2};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_gpu::{
-    Camera, ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuRegionSource, GpuStamp,
+    ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuRegionSource, GpuStamp,
     GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget, RegionReadback, SkyColors,
     SkyPass, StampPass, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 
-use crate::scenario::{FramePlan, StampKind};
+use crate::scenarios::{FramePlan, StampKind};
+use crate::timings::{Step, Timings};
+
+pub use terrain_gpu::Camera;
 
 /// Clipmap vertices per level side (seed 000 sec 3.3 uses 255).
 pub const CLIPMAP_N: u32 = 255;
@@ -39,37 +43,22 @@ pub struct GpuScene {
     height_range: (f32, f32),
 }
 
-/// What deforming one frame did.
-pub struct Deformed {
-    /// The rects covered, each with the index of the deformation that covered it.
-    pub rects: Vec<(usize, DirtyRect)>,
-    /// Time of the stamps.
-    pub stamp: GpuTiming,
-    /// Time of the normal regeneration.
-    pub normals: GpuTiming,
-}
-
-/// What rendering one frame measured.
+/// One rendered frame.
 pub struct RenderedFrame {
     /// The captured image.
     pub image: Grid<[u8; 4]>,
     /// Non-degenerate triangles drawn.
     pub triangles: u64,
-    /// Time of the sky and terrain passes.
-    pub render: GpuTiming,
-    /// Milliseconds placing and culling the clipmap on the CPU.
-    pub lod_ms: f64,
-    /// Milliseconds copying the image back.
-    pub capture_ms: f64,
+}
+
+/// Records a GPU timing as `step`.
+fn record(timings: &mut Timings, step: Step, t: GpuTiming) {
+    timings.add_gpu(step, t.ms, t.timestamp_ms);
 }
 
 impl GpuScene {
     /// Uploads `map` and builds every pass, rendering at `resolution`.
-    pub fn new(
-        map: &CoarseMap,
-        footprint: Option<&TextureStamp>,
-        resolution: UVec2,
-    ) -> Result<Self> {
+    pub fn new(map: &CoarseMap, resolution: UVec2) -> Result<Self> {
         let ctx = GpuContext::new_headless().context("no GPU adapter for the 3D frames")?;
         let (device, queue) = (&ctx.device, &ctx.queue);
         let gpu_map = GpuHeightMap::from_map(device, queue, map)?;
@@ -89,9 +78,7 @@ impl GpuScene {
             renderer: ClipmapRenderer::new(device, &layout)?,
             layout,
             target: OffscreenTarget::new(device, resolution)?,
-            footprint: footprint
-                .map(|f| GpuTextureStamp::new(device, f))
-                .transpose()?,
+            footprint: None,
             readback: RegionReadback::new(4)?,
             timer: GpuTimer::new(device, queue),
             height_range: (lo, hi),
@@ -102,6 +89,12 @@ impl GpuScene {
             },
             ctx,
         })
+    }
+
+    /// Uploads the footprint texture stamp that [`StampKind::Footprint`] deformations use.
+    pub fn set_footprint(&mut self, footprint: &TextureStamp) -> Result<()> {
+        self.footprint = Some(GpuTextureStamp::new(&self.ctx.device, footprint)?);
+        Ok(())
     }
 
     /// Sets the heights (metres) the colour ramp spans: below `low` is valley green, above
@@ -116,13 +109,14 @@ impl GpuScene {
         (r.name.clone(), r.backend.clone())
     }
 
-    /// Applies `plan` on the GPU; returns the dirty rects and the GPU milliseconds of the stamps
-    /// and of the normal regeneration.
+    /// Applies `plan` on the GPU and regenerates the normals, timed as [`Step::Stamp`] and
+    /// [`Step::Normals`]; returns the rects covered, each with the index of its deformation.
     pub fn deform(
         &mut self,
         plan: &FramePlan,
         crater: &terrain_core::GaussianStamp,
-    ) -> Result<Deformed> {
+        timings: &mut Timings,
+    ) -> Result<Vec<(usize, DirtyRect)>> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let shock = match &plan.shock_delta {
             Some(s) => Some(GpuTextureStamp::new(device, s)?),
@@ -159,23 +153,22 @@ impl GpuScene {
             }
             Ok(())
         })?;
-        Ok(Deformed {
-            rects: dirty,
-            stamp: stamp_time,
-            normals: normal_time,
-        })
+        record(timings, Step::Stamp, stamp_time);
+        record(timings, Step::Normals, normal_time);
+        Ok(dirty)
     }
 
     /// Replaces the GPU map with `map` (same size) and recomputes its normals: for maps
-    /// deformed on the CPU (the snow scenario's granular simulation).
-    pub fn upload(&mut self, map: &CoarseMap) -> Result<GpuTiming> {
+    /// deformed on the CPU (the snow scenario's granular simulation); timed as [`Step::Normals`].
+    pub fn upload(&mut self, map: &CoarseMap, timings: &mut Timings) -> Result<()> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         self.map.write(queue, map)?;
         let timing = self.timer.time(device, queue, |encoder| {
             self.normal_pass
                 .encode_full(device, encoder, &self.map, &self.normals)
         })?;
-        Ok(timing)
+        record(timings, Step::Normals, timing);
+        Ok(())
     }
 
     /// One step of the collision readback: the scheduler requests merged dirty regions of the
@@ -195,8 +188,9 @@ impl GpuScene {
         Ok(scheduler.update(now, &mut source, mirror)?)
     }
 
-    /// Renders the terrain from `camera` and reads the image back.
-    pub fn render(&mut self, camera: &Camera) -> Result<RenderedFrame> {
+    /// Renders the terrain from `camera` and reads the image back, timed as [`Step::Lod`],
+    /// [`Step::Render`] and [`Step::Capture`].
+    pub fn render(&mut self, camera: &Camera, timings: &mut Timings) -> Result<RenderedFrame> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let size = self.target.size().as_vec2();
         let aspect = size.x / size.y;
@@ -208,7 +202,7 @@ impl GpuScene {
             self.height_range,
             Some(&frustum),
         )?;
-        let lod_ms = t.elapsed().as_secs_f64() * 1e3;
+        timings.add(Step::Lod, crate::timings::ms_since(t));
         let view_proj = camera.view_proj_relative(aspect);
         let sky_colors = SkyColors::default();
         let timing = self.timer.time(device, queue, |encoder| {
@@ -228,12 +222,11 @@ impl GpuScene {
         let t = std::time::Instant::now();
         let image = self.target.read_rgba8(device, queue)?;
         self.ctx.check()?;
+        timings.add(Step::Capture, crate::timings::ms_since(t));
+        record(timings, Step::Render, timing);
         Ok(RenderedFrame {
             image,
             triangles: placement.triangle_count(self.layout.mesh()),
-            render: timing,
-            lod_ms,
-            capture_ms: t.elapsed().as_secs_f64() * 1e3,
         })
     }
 }

@@ -29,7 +29,7 @@ pub struct Report {
     /// Per frame.
     pub frames: Vec<FrameReport>,
     /// Sum of each step over all frames, in milliseconds.
-    pub totals_ms: BTreeMap<String, f64>,
+    pub totals_ms: BTreeMap<&'static str, f64>,
 }
 
 /// One frame.
@@ -39,19 +39,37 @@ pub struct FrameReport {
     pub index: u32,
     /// The image, relative to the output folder.
     pub file: String,
+    /// What the scenario measured.
+    #[serde(flatten)]
+    pub stats: FrameStats,
+    /// Non-degenerate triangles drawn (0 without the GPU).
+    pub triangles: u64,
+    /// Height of the camera's eye above the true surface under it (never negative: the camera
+    /// is a body on the collision mirror, kept above pending deformations by their bounds).
+    pub camera_clearance_m: f32,
+    /// Milliseconds per step, keyed by [`Step::name`](crate::timings::Step::name): `stamp`,
+    /// `normals` and `render` (sky + terrain) are the wall time of submitting the GPU work and
+    /// waiting for it; `lod` (clipmap placement and culling), `capture` (image readback),
+    /// `cpu_mirror` (the same stamps and normals on the CPU map behind the overview),
+    /// `physics` (collision and camera), `overview` (hillshade), `write` (PNG), `granular`.
+    pub timings_ms: BTreeMap<&'static str, f64>,
+    /// GPU timestamp spans of `stamp`, `normals` and `render`, where the adapter has timestamp
+    /// queries (on lavapipe they miss deferred compute work: see terrain-gpu's `timer`).
+    pub gpu_timestamps_ms: BTreeMap<&'static str, f64>,
+}
+
+/// The fields of a frame's report that depend on the scenario (zero or absent where it has
+/// no such thing).
+#[derive(Debug, Default, Serialize)]
+pub struct FrameStats {
     /// Footprints stamped this frame.
     pub footprints: u32,
     /// Craters stamped this frame.
     pub craters: u32,
     /// Shockwave stamps this frame.
     pub shockwaves: u32,
-    /// Texels inside the rects the stamps covered.
+    /// Texels inside the rects the frame deformed (stamps, or granular active areas).
     pub dirty_texels: u64,
-    /// Non-degenerate triangles drawn (0 without the GPU).
-    pub triangles: u64,
-    /// Height of the camera's eye above the true surface under it (never negative: the camera
-    /// is a body on the collision mirror, kept above pending deformations by their bounds).
-    pub camera_clearance_m: f32,
     /// On frames where a collision readback landed: milliseconds from its request to its
     /// application (the longest, if several landed).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -63,12 +81,4 @@ pub struct FrameReport {
     /// Snow scenario: material removed by compression so far, in height units.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub granular_removed: Option<u64>,
-    /// Milliseconds per step: `stamp`, `normals` and `render` (sky + terrain) are the wall
-    /// time of submitting the GPU work and waiting for it; `lod` (clipmap placement and
-    /// culling), `capture` (image readback), `cpu_mirror` (the same stamps and normals on the
-    /// CPU map behind the overview), `overview` (hillshade), `write` (PNG).
-    pub timings_ms: BTreeMap<String, f64>,
-    /// GPU timestamp spans of `stamp`, `normals` and `render`, where the adapter has timestamp
-    /// queries (on lavapipe they miss deferred compute work: see terrain-gpu's `timer`).
-    pub gpu_timestamps_ms: BTreeMap<String, f64>,
 }

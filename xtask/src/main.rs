@@ -59,6 +59,7 @@ fn ci() -> Result<()> {
         ("test", test),
         ("doc", doc),
         ("package", package),
+        ("examples", examples),
         ("smoke", smoke),
     ];
     let total = Instant::now();
@@ -158,6 +159,61 @@ fn publishable_crates() -> Result<Vec<String>> {
         .filter(|p| p["publish"].as_array().is_none_or(|r| !r.is_empty()))
         .filter_map(|p| p["name"].as_str().map(str::to_owned))
         .collect())
+}
+
+/// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
+const EXAMPLES: [(&str, &str, &[&str]); 3] = [
+    (
+        "terrain-core",
+        "stamp_heightmap",
+        &["--size", "64", "--out", "{out}"],
+    ),
+    (
+        "terrain-physics",
+        "drop_spheres",
+        &["--size", "64", "--spheres", "2", "--steps", "90"],
+    ),
+    ("terrain-gpu", "own_device", &["{out}/own_device.png"]),
+];
+
+/// Example files that are tools rather than examples, with why `examples` does not run them.
+const NOT_EXAMPLES: [(&str, &str, &str); 1] = [(
+    "terrain-gpu",
+    "golden",
+    "regenerates the render test's golden image in the repository: `cargo xtask golden`",
+)];
+
+/// Runs every example of the library crates once at a tiny size; fails on an example file that
+/// `EXAMPLES` does not list, so none is left unrun.
+fn examples() -> Result<()> {
+    for krate in ["terrain-core", "terrain-physics", "terrain-gpu"] {
+        let dir = root().join(krate).join("examples");
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for entry in entries {
+            let path = entry?.path();
+            let Some(name) = path.file_stem().and_then(|s| s.to_str()) else {
+                continue;
+            };
+            if NOT_EXAMPLES.iter().any(|(k, e, _)| *k == krate && *e == name) {
+                continue;
+            }
+            if !EXAMPLES.iter().any(|(k, e, _)| *k == krate && *e == name) {
+                bail!("{} is not listed in xtask's EXAMPLES", path.display());
+            }
+        }
+    }
+    let out = root().join("target").join("ci-examples");
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let out = out.to_string_lossy();
+    for (krate, example, args) in EXAMPLES {
+        let mut cmd = vec!["run", "--locked", "-p", krate, "--example", example, "--"];
+        let args: Vec<String> = args.iter().map(|a| a.replace("{out}", &out)).collect();
+        cmd.extend(args.iter().map(String::as_str));
+        cargo(&cmd, &[])?;
+    }
+    Ok(())
 }
 
 /// Regenerates `terrain-gpu/tests/data/golden_clipmap.png` on this machine's adapter.

@@ -1,10 +1,10 @@
-//! The snow scenario (`--scenario snow`): a four-wheeled vehicle and a walker cross a snow field
-//! deformed by volume-preserving granular deformation (seed 001): trails with raised rims.
+//! The snow field of the snow scenario: a four-wheeled vehicle and a walker cross it, deformed
+//! by volume-preserving granular deformation (seed 001): trails with raised rims.
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use glam::{Affine3A, Quat, UVec2, Vec2, Vec3};
 use terrain_core::granular::{GranularObject, GranularParams, GranularSim, StepReport, TriMesh};
-use terrain_core::{CoarseMap, FixedPointMap, Grid, HeightEncoding, TerrainParams};
+use terrain_core::{CoarseMap, FixedPointMap, Grid, HeightEncoding, Rect, TerrainParams};
 
 /// Metres per texel of the snow field.
 pub const SNOW_TEXEL: f32 = 0.05;
@@ -26,7 +26,7 @@ const STRIDE: f32 = 0.7;
 /// Distance per frame of the vehicle and of the walker.
 const VEHICLE_STEP: f32 = 0.35;
 
-/// One frame of the snow scenario.
+/// One frame of the snow field.
 #[derive(Debug)]
 pub struct SnowFrame {
     /// The granular step's report (volume, removed material, active areas).
@@ -37,7 +37,7 @@ pub struct SnowFrame {
 
 /// The snow field, the objects and the simulation.
 #[derive(Debug)]
-pub struct SnowScenario {
+pub struct SnowField {
     sim: GranularSim,
     initial: FixedPointMap,
     wheel: TriMesh,
@@ -46,7 +46,7 @@ pub struct SnowScenario {
     extent: Vec2,
 }
 
-impl SnowScenario {
+impl SnowField {
     /// A snow field of `size` x `size` texels, seeded ground undulation.
     pub fn new(size: u32, seed: u64, params: GranularParams) -> Result<Self> {
         let ground = terrain_core::generate_heights(&TerrainParams {
@@ -138,8 +138,34 @@ impl SnowScenario {
     /// snow heights stay well under the 6.5 m that u16 holds at that scale).
     pub fn coarse_map(&self) -> Result<CoarseMap> {
         let map = self.sim.map();
-        let grid: Grid<u16> = map.grid().map(|&v| v.min(u32::from(u16::MAX)) as u16);
+        let grid: Grid<u16> = map.grid().map(|&v| to_coarse(v));
         let enc = HeightEncoding::new(map.encoding().scale, 0.0)?;
         Ok(CoarseMap::coarse(grid, enc, map.texel_size())?)
     }
+
+    /// Copies the heights of `rect` (inside the field, e.g. an active area of the last step)
+    /// into `coarse`, a map from [`SnowField::coarse_map`]: only what a step changed.
+    pub fn copy_to_coarse(&self, coarse: &mut CoarseMap, rect: Rect) -> Result<()> {
+        let src = self.sim.map().grid();
+        if coarse.size() != src.size() || !src.rect().contains_rect(&rect) {
+            bail!(
+                "rect {rect:?} of a {} snow field cannot go into a {} map",
+                src.size(),
+                coarse.size()
+            );
+        }
+        let (x0, x1) = (rect.min.x as usize, rect.max().x as usize);
+        for y in rect.min.y as u32..rect.max().y as u32 {
+            let dst = &mut coarse.grid_mut().row_mut(y)[x0..x1];
+            for (d, s) in dst.iter_mut().zip(&src.row(y)[x0..x1]) {
+                *d = to_coarse(*s);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A fixed-point height as the coarse-map's u16 (same scale, saturating).
+fn to_coarse(v: u32) -> u16 {
+    v.min(u32::from(u16::MAX)) as u16
 }

@@ -1,5 +1,6 @@
-//! The scripted deformations of the default scenario: a trail of footprints, Gaussian craters
-//! and a shockwave started next to the map's corner so its footprint crosses the wrap edges.
+//! The script of the default scenario: which stamps land where each frame (a trail of
+//! footprints, Gaussian craters, and a shockwave started next to the map's corner so its
+//! footprint crosses the wrap edges), and applying them to a CPU map.
 
 use anyhow::{Context, Result};
 use glam::Vec2;
@@ -12,7 +13,7 @@ use terrain_core::{
 use terrain_physics::DeformationBound;
 
 /// The footprint image: white where the foot presses hardest (see `TextureStamp`).
-const FOOTPRINT_PNG: &[u8] = include_bytes!("../assets/footprint.png");
+const FOOTPRINT_PNG: &[u8] = include_bytes!("../../assets/footprint.png");
 
 /// Footprint size in metres (length along the walking direction, width).
 const FOOT_SIZE: Vec2 = Vec2::new(1.1, 0.45);
@@ -84,9 +85,9 @@ impl Rng {
     }
 }
 
-/// The default scenario over a map of `extent` metres.
+/// The default scenario's script over a map of `extent` metres.
 #[derive(Debug)]
-pub struct Scenario {
+pub struct StampScript {
     extent: Vec2,
     rng: Rng,
     footprint: TextureStamp,
@@ -95,8 +96,8 @@ pub struct Scenario {
     frame: u32,
 }
 
-impl Scenario {
-    /// A scenario for a map of `extent` metres, seeded.
+impl StampScript {
+    /// A script for a map of `extent` metres, seeded.
     pub fn new(extent: Vec2, seed: u64) -> Result<Self> {
         let image = decode_png8(FOOTPRINT_PNG, &ReadLimits::default())
             .context("the embedded footprint image")?;

@@ -1,0 +1,120 @@
+//! The run every scenario shares: output folder, GPU scene (or none), overview, the frame loop
+//! (advance the scenario, update the overview, render, capture), and at the end
+//! `terrain_final.png`, `summary.png` and `report.json`.
+
+use crate::capture::Capture;
+use crate::cli::Cli;
+use crate::gpu_scene::GpuScene;
+use crate::images;
+use crate::overview::Overview;
+use crate::report::{FrameReport, Report};
+use crate::scenarios::{FRAME_DT, FrameContext, Scenario};
+use crate::timings::{Step, Timings};
+use anyhow::{Context, Result};
+use glam::Vec2;
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+use terrain_core::io;
+
+/// Runs `scenario` for `cli.frames` frames into `cli.out` and returns the report written.
+pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
+    std::fs::create_dir_all(&cli.out)
+        .with_context(|| format!("cannot create output folder {}", cli.out.display()))?;
+    io::write_png16(cli.out.join("terrain.png"), scenario.map().grid())?;
+
+    let mut gpu = open_gpu(cli, scenario)?;
+    let (adapter, backend) = gpu
+        .as_ref()
+        .map_or(("none".into(), "none".into()), GpuScene::adapter);
+    let overview_px = scenario.overview_size(cli.overview_size);
+    let mut overview = Overview::new(scenario.map(), scenario.normals(), overview_px)?;
+    let mut capture = Capture::new(&cli.out, cli.frames);
+    // Scenario time: 30 frames per second whatever the render speed.
+    let sim_start = Instant::now();
+    for index in 0..cli.frames {
+        let mut timings = Timings::default();
+        let frame = scenario.advance(&mut FrameContext {
+            now: sim_start + Duration::from_secs_f64(f64::from(index) * FRAME_DT),
+            gpu: gpu.as_mut(),
+            timings: &mut timings,
+        })?;
+        timings.time(Step::Overview, || {
+            overview.update(scenario.map(), scenario.normals(), &frame.dirty)
+        })?;
+        let report = FrameReport {
+            index,
+            file: String::new(),
+            stats: frame.stats,
+            triangles: 0,
+            camera_clearance_m: frame.camera_clearance_m,
+            timings_ms: BTreeMap::new(),
+            gpu_timestamps_ms: BTreeMap::new(),
+        };
+        match gpu.as_mut() {
+            // The 3D frame with the overview inset, the camera marked on it.
+            Some(scene) => {
+                let mut rendered = scene.render(&frame.camera, &mut timings)?;
+                let eye = frame.camera.position;
+                let uv = Vec2::new(eye.x, eye.z) / scenario.map().extent_m();
+                images::inset_overview(&mut rendered.image, overview.image(), uv);
+                let report = FrameReport {
+                    triangles: rendered.triangles,
+                    ..report
+                };
+                capture.push(&rendered.image, report, timings)?;
+            }
+            // Without a GPU the overview is the frame.
+            None => capture.push(overview.image(), report, timings)?,
+        }
+    }
+    io::write_png16(cli.out.join("terrain_final.png"), scenario.map().grid())?;
+
+    let info = scenario.info();
+    let map = scenario.map();
+    let resolution = if gpu.is_some() {
+        cli.resolution
+    } else {
+        overview_px
+    };
+    let report = capture.finish(Report {
+        source: info.source.clone(),
+        scenario: info.name.into(),
+        size: map.size().to_array(),
+        texel_size_m: map.texel_size(),
+        seed: cli.seed,
+        adapter,
+        backend,
+        resolution: resolution.to_array(),
+        load_ms: info.load_ms,
+        initial_normals_ms: info.initial_normals_ms,
+        frames: Vec::new(),
+        totals_ms: BTreeMap::new(),
+    })?;
+    eprintln!(
+        "wrote {} frames of {}x{} to {} on {} ({})",
+        report.frames.len(),
+        report.resolution[0],
+        report.resolution[1],
+        cli.out.display(),
+        report.adapter,
+        report.backend,
+    );
+    Ok(report)
+}
+
+/// The GPU scene for the scenario's map, prepared by the scenario; `None` (after saying why)
+/// with `--no-gpu` or without an adapter: the run then writes top-down overview frames.
+fn open_gpu(cli: &Cli, scenario: &dyn Scenario) -> Result<Option<GpuScene>> {
+    if cli.no_gpu {
+        return Ok(None);
+    }
+    let mut scene = match GpuScene::new(scenario.map(), cli.resolution) {
+        Ok(scene) => scene,
+        Err(e) => {
+            eprintln!("warning: {e:#}; writing top-down overview frames only");
+            return Ok(None);
+        }
+    };
+    scenario.prepare_gpu(&mut scene)?;
+    Ok(Some(scene))
+}

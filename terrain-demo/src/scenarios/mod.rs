@@ -1,0 +1,97 @@
+//! The scenarios behind one [`Scenario`] trait. The driver (`crate::driver`) does what every
+//! run shares: output folder, GPU scene, overview, frame loop, rendering, capture, report. A
+//! scenario owns its terrain and bodies, and per frame deforms, steps and places the camera.
+
+mod heightmap;
+mod snow;
+mod snow_field;
+mod stamp_script;
+mod stamps;
+
+use crate::cli::{Cli, ScenarioKind};
+use crate::gpu_scene::{Camera, GpuScene};
+use crate::report::FrameStats;
+use crate::timings::Timings;
+use anyhow::Result;
+use glam::UVec2;
+use std::time::Instant;
+use terrain_core::{CoarseMap, DerivativeMap, DirtyRect};
+
+pub use stamp_script::{FramePlan, StampKind};
+
+/// Seconds of scenario time per frame (30 frames per second), whatever the render speed.
+pub const FRAME_DT: f64 = 1.0 / 30.0;
+
+/// The scenario `cli` asks for, set up (terrain loaded or generated, bodies placed).
+pub fn open(cli: &Cli) -> Result<Box<dyn Scenario>> {
+    Ok(match cli.scenario {
+        ScenarioKind::Default => Box::new(stamps::StampScenario::new(cli)?),
+        ScenarioKind::Snow => Box::new(snow::SnowScenario::new(cli)?),
+    })
+}
+
+/// What a scenario reports about its setup.
+#[derive(Debug, Clone)]
+pub struct ScenarioInfo {
+    /// The report's `scenario`: `default`, `snow`.
+    pub name: &'static str,
+    /// Where the heights came from (the report's `source`).
+    pub source: String,
+    /// Milliseconds to generate or load the terrain.
+    pub load_ms: f64,
+    /// Milliseconds to compute the first full normal map.
+    pub initial_normals_ms: f64,
+}
+
+/// What the driver hands a scenario for one frame.
+pub struct FrameContext<'a> {
+    /// Scenario time of this frame (frame index times [`FRAME_DT`] after the loop started).
+    pub now: Instant,
+    /// The GPU scene, or `None` without a GPU (`--no-gpu`, or no adapter).
+    pub gpu: Option<&'a mut GpuScene>,
+    /// This frame's timings, by [`Step`](crate::timings::Step).
+    pub timings: &'a mut Timings,
+}
+
+/// What one frame of a scenario did.
+#[derive(Debug)]
+pub struct FrameOutcome {
+    /// Where the camera looks from.
+    pub camera: Camera,
+    /// Height of the camera's eye above the true surface under it.
+    pub camera_clearance_m: f32,
+    /// The rects of [`Scenario::map`] whose heights changed (map coordinates; they may wrap).
+    pub dirty: Vec<DirtyRect>,
+    /// The scenario's fields of the frame's report.
+    pub stats: FrameStats,
+}
+
+/// One scenario: its terrain, what deforms it and what moves over it.
+pub trait Scenario {
+    /// Name, source and setup timings, for the report.
+    fn info(&self) -> &ScenarioInfo;
+
+    /// The terrain as the CPU holds it, current after every [`Scenario::advance`]: written as
+    /// `terrain.png` / `terrain_final.png`, shown in the overview, uploaded to the GPU scene.
+    fn map(&self) -> &CoarseMap;
+
+    /// The normals of [`Scenario::map`], current wherever a frame's `dirty` rects changed it.
+    fn normals(&self) -> &DerivativeMap;
+
+    /// Uploads what the scenario needs on the GPU beyond the map (stamps, colours); once.
+    fn prepare_gpu(&self, _scene: &mut GpuScene) -> Result<()> {
+        Ok(())
+    }
+
+    /// The overview's size in pixels for a requested side of `side`: the map's aspect, its
+    /// longer side `side` (each pixel shows the nearest texel).
+    fn overview_size(&self, side: u32) -> UVec2 {
+        let size = self.map().size();
+        let scale = side as f32 / size.max_element() as f32;
+        (size.as_vec2() * scale).round().as_uvec2().max(UVec2::ONE)
+    }
+
+    /// One frame: deforms the terrain (on `ctx.gpu` when there is one, and on the CPU map),
+    /// steps the bodies and places the camera, timing each step in `ctx.timings`.
+    fn advance(&mut self, ctx: &mut FrameContext<'_>) -> Result<FrameOutcome>;
+}

@@ -1,0 +1,168 @@
+//! The snow scenario (`--scenario snow`): a vehicle and a walker cross a snow field deformed by
+//! the granular simulation (terrain-core's CPU reference); the camera walks on it behind the
+//! vehicle. Each frame only the step's active areas are copied to the coarse-map, its normals
+//! and the collision mirror.
+
+use super::snow_field::SnowField;
+use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo};
+use crate::camera_rig::CameraRig;
+use crate::cli::Cli;
+use crate::gpu_scene::GpuScene;
+use crate::report::FrameStats;
+use crate::timings::{Step, ms_since};
+use anyhow::{Result, bail};
+use glam::{UVec2, Vec2};
+use std::time::Instant;
+use terrain_core::granular::GranularParams;
+use terrain_core::{CoarseMap, DerivativeMap, Rect, bilinear};
+use terrain_physics::CollisionMirror;
+
+/// Side of the snow field in texels by default (25.6 m at 0.05 m).
+const SNOW_SIZE: u32 = 512;
+
+/// The snow scenario.
+#[derive(Debug)]
+pub struct SnowScenario {
+    info: ScenarioInfo,
+    field: SnowField,
+    /// The field's heights as a coarse-map, kept equal to the simulation's over the active areas.
+    coarse: CoarseMap,
+    normals: DerivativeMap,
+    /// Collision reads the field directly (it is deformed on the CPU: no readback needed).
+    mirror: CollisionMirror,
+    rig: CameraRig,
+}
+
+impl SnowScenario {
+    /// Generates the snow field of `--size` (512 by default) and places the camera.
+    pub fn new(cli: &Cli) -> Result<Self> {
+        if cli.heightmap.is_some() {
+            bail!("--heightmap is not used by the snow scenario (it generates its snow field)");
+        }
+        let size = cli.size.unwrap_or(SNOW_SIZE);
+        let t = Instant::now();
+        let field = SnowField::new(size, cli.seed, GranularParams::snow())?;
+        let coarse = field.coarse_map()?;
+        let load_ms = ms_since(t);
+        let t = Instant::now();
+        let normals = DerivativeMap::from_map(&coarse);
+        let initial_normals_ms = ms_since(t);
+        let mirror = CollisionMirror::from_map(&coarse)?;
+        let start = Vec2::new(coarse.extent_m().x * 0.45, 0.5);
+        let rig = CameraRig::new(start, bilinear(&coarse, start)?);
+        Ok(Self {
+            info: ScenarioInfo {
+                name: "snow",
+                source: "procedural snow field".into(),
+                load_ms,
+                initial_normals_ms,
+            },
+            field,
+            coarse,
+            normals,
+            mirror,
+            rig,
+        })
+    }
+}
+
+impl Scenario for SnowScenario {
+    fn info(&self) -> &ScenarioInfo {
+        &self.info
+    }
+
+    fn map(&self) -> &CoarseMap {
+        &self.coarse
+    }
+
+    fn normals(&self) -> &DerivativeMap {
+        &self.normals
+    }
+
+    fn prepare_gpu(&self, scene: &mut GpuScene) -> Result<()> {
+        // A snow field is white at any height; only steep rims shade to rock.
+        scene.set_ramp(-20.0, -10.0);
+        Ok(())
+    }
+
+    /// No larger than the field: a small field is not blown up.
+    fn overview_size(&self, side: u32) -> UVec2 {
+        self.coarse.size().min(UVec2::splat(side))
+    }
+
+    fn advance(&mut self, ctx: &mut FrameContext<'_>) -> Result<FrameOutcome> {
+        // The step, and its active areas (the only texels it writes) into the coarse-map.
+        let (frame, dirty) = ctx.timings.time(Step::Granular, || -> Result<_> {
+            let frame = self.field.step()?;
+            let dirty: Vec<Rect> = frame.report.active_areas.iter().map(|a| a.rect).collect();
+            for rect in &dirty {
+                self.field.copy_to_coarse(&mut self.coarse, *rect)?;
+            }
+            Ok((frame, dirty))
+        })?;
+
+        let t = Instant::now();
+        for rect in &dirty {
+            self.mirror
+                .apply_next(*rect, &self.coarse.grid().copy_rect(*rect)?)?;
+        }
+        let collider = self.mirror.collider();
+        let field = &self.field;
+        let camera = self
+            .rig
+            .step(frame.vehicle, FRAME_DT as f32, &collider, |p| {
+                field.height(p)
+            })?;
+        let eye = self.rig.eye();
+        let camera_clearance_m = eye.y - bilinear(&self.coarse, Vec2::new(eye.x, eye.z))?;
+        ctx.timings.add(Step::Physics, ms_since(t));
+
+        ctx.timings.time(Step::Overview, || -> Result<()> {
+            for rect in &dirty {
+                self.normals.update_rect(&self.coarse, *rect)?;
+            }
+            Ok(())
+        })?;
+        if let Some(scene) = ctx.gpu.as_deref_mut() {
+            scene.upload(&self.coarse, ctx.timings)?;
+        }
+        Ok(FrameOutcome {
+            camera,
+            camera_clearance_m,
+            stats: FrameStats {
+                dirty_texels: dirty.iter().map(Rect::area).sum(),
+                granular_volume: Some(frame.report.volume),
+                granular_removed: Some(self.field.removed()),
+                ..FrameStats::default()
+            },
+            dirty,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[test]
+    fn the_coarse_map_follows_the_field_through_its_active_areas() {
+        let cli = Cli::try_parse_from(["demo", "--scenario", "snow", "--size", "128"]).unwrap();
+        let mut snow = SnowScenario::new(&cli).unwrap();
+        let mut timings = crate::timings::Timings::default();
+        for _ in 0..3 {
+            let mut ctx = FrameContext {
+                now: Instant::now(),
+                gpu: None,
+                timings: &mut timings,
+            };
+            let out = snow.advance(&mut ctx).unwrap();
+            assert!(!out.dirty.is_empty());
+        }
+        let full = snow.field.coarse_map().unwrap();
+        assert_eq!(snow.coarse.grid(), full.grid());
+        assert_eq!(snow.mirror.snapshot().heights(), full.grid());
+        let normals = DerivativeMap::from_map(&full);
+        assert_eq!(snow.normals.grid(), normals.grid());
+    }
+}

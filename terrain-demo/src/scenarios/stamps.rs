@@ -1,0 +1,166 @@
+//! The default scenario: footprints, craters and a shockwave stamped on the coarse-map (on the
+//! GPU map when there is one, and on the CPU map behind the overview), a collision mirror fed
+//! by readbacks of the dirty regions, and a camera walking on it behind the walker.
+
+use super::stamp_script::{StampKind, StampScript};
+use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo, heightmap};
+use crate::camera_rig::CameraRig;
+use crate::cli::Cli;
+use crate::gpu_scene::GpuScene;
+use crate::report::FrameStats;
+use crate::timings::{Step, ms_since};
+use anyhow::Result;
+use glam::Vec2;
+use std::collections::HashMap;
+use std::time::Instant;
+use terrain_core::{CoarseMap, DerivativeMap, bilinear};
+use terrain_physics::{
+    CollisionMirror, CpuRegionSource, ReadbackScheduler, RequestId, SchedulerConfig,
+};
+
+/// The default scenario.
+#[derive(Debug)]
+pub struct StampScenario {
+    info: ScenarioInfo,
+    script: StampScript,
+    /// The CPU map, held by a region source: without a GPU the scheduler reads collision
+    /// regions straight from it (with a GPU they come from the GPU map, and this map only
+    /// follows the stamps for the overview).
+    cpu: CpuRegionSource,
+    normals: DerivativeMap,
+    mirror: CollisionMirror,
+    scheduler: ReadbackScheduler,
+    /// When each collision readback in flight was requested.
+    requested_at: HashMap<RequestId, Instant>,
+    rig: CameraRig,
+}
+
+impl StampScenario {
+    /// Loads or generates the terrain and places the walker and the camera.
+    pub fn new(cli: &Cli) -> Result<Self> {
+        let t = Instant::now();
+        let (map, source) = heightmap::load(cli)?;
+        let load_ms = ms_since(t);
+        let t = Instant::now();
+        let normals = DerivativeMap::from_map(&map);
+        let initial_normals_ms = ms_since(t);
+        let script = StampScript::new(map.extent_m(), cli.seed)?;
+        let mirror = CollisionMirror::from_map(&map)?;
+        let scheduler = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default())?;
+        let start = script.walker_start();
+        let rig = CameraRig::new(start, bilinear(&map, start)?);
+        Ok(Self {
+            info: ScenarioInfo {
+                name: "default",
+                source,
+                load_ms,
+                initial_normals_ms,
+            },
+            script,
+            cpu: CpuRegionSource::new(map),
+            normals,
+            mirror,
+            scheduler,
+            requested_at: HashMap::new(),
+            rig,
+        })
+    }
+}
+
+impl Scenario for StampScenario {
+    fn info(&self) -> &ScenarioInfo {
+        &self.info
+    }
+
+    fn map(&self) -> &CoarseMap {
+        self.cpu.map()
+    }
+
+    fn normals(&self) -> &DerivativeMap {
+        &self.normals
+    }
+
+    fn prepare_gpu(&self, scene: &mut GpuScene) -> Result<()> {
+        scene.set_footprint(self.script.footprint())
+    }
+
+    fn advance(&mut self, ctx: &mut FrameContext<'_>) -> Result<FrameOutcome> {
+        let mut plan = self.script.plan_next_frame()?;
+        let encoding = self.cpu.map().encoding();
+        let now = ctx.now;
+
+        // Collision first: a frame of scenario time after the last frame's deformations the
+        // quiet gap has passed, so the scheduler requests their regions now; arrivals apply here.
+        let t = Instant::now();
+        let report = match ctx.gpu.as_deref_mut() {
+            Some(scene) => scene.update_collision(&mut self.scheduler, &self.mirror, now)?,
+            None => self.scheduler.update(now, &mut self.cpu, &self.mirror)?,
+        };
+        for (id, _) in &report.requested {
+            self.requested_at.insert(*id, Instant::now());
+        }
+        let readback_ms = report
+            .applied
+            .iter()
+            .filter_map(|(id, _)| self.requested_at.remove(id))
+            .map(ms_since)
+            .reduce(f64::max);
+        ctx.timings.add(Step::Physics, ms_since(t));
+
+        // The stamps: on the GPU map (rendered, read back for collision) and on the CPU map
+        // (the overview; and without a GPU, the source of the collision readbacks).
+        if let Some(scene) = ctx.gpu.as_deref_mut() {
+            for (i, rect) in scene.deform(&plan, self.script.crater(), ctx.timings)? {
+                let bound = StampScript::bound(&plan.deformations[i], encoding)?;
+                self.scheduler.note_deformation(rect, bound, now)?;
+            }
+        }
+        let cpu_step = if ctx.gpu.is_some() {
+            Step::CpuMirror
+        } else {
+            Step::Stamp
+        };
+        let dirty_by_deformation = ctx.timings.time(cpu_step, || -> Result<_> {
+            let dirty = self.script.apply_cpu(self.cpu.map_mut(), &mut plan)?;
+            for rect in dirty.iter().flatten() {
+                self.normals.update_rect(self.cpu.map(), *rect)?;
+            }
+            Ok(dirty)
+        })?;
+        if ctx.gpu.is_none() {
+            for (d, rects) in plan.deformations.iter().zip(&dirty_by_deformation) {
+                let bound = StampScript::bound(d, encoding)?;
+                for rect in rects {
+                    self.scheduler.note_deformation(*rect, bound, now)?;
+                }
+            }
+        }
+
+        // The camera: a body on the mirror, kept above pending deformations by their bounds.
+        let t = Instant::now();
+        let collider = self.mirror.collider();
+        let ground = self.scheduler.ground(&collider);
+        let map = self.cpu.map();
+        let camera = self.rig.step(plan.walker, FRAME_DT as f32, &ground, |p| {
+            bilinear(map, p).unwrap_or(0.0)
+        })?;
+        let eye = self.rig.eye();
+        let camera_clearance_m = eye.y - bilinear(map, Vec2::new(eye.x, eye.z))?;
+        ctx.timings.add(Step::Physics, ms_since(t));
+
+        let dirty: Vec<_> = dirty_by_deformation.into_iter().flatten().collect();
+        Ok(FrameOutcome {
+            camera,
+            camera_clearance_m,
+            stats: FrameStats {
+                footprints: plan.count(StampKind::Footprint),
+                craters: plan.count(StampKind::Crater),
+                shockwaves: plan.count(StampKind::Shockwave),
+                dirty_texels: dirty.iter().map(|r| r.area()).sum(),
+                readback_ms,
+                ..FrameStats::default()
+            },
+            dirty,
+        })
+    }
+}

@@ -1,0 +1,129 @@
+//! The steps a frame is timed in ([`Step`], named once for the report and the plot) and one
+//! frame's measurements ([`Timings`]).
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// One timed step of a frame. [`Step::name`] is its key in `report.json`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Step {
+    /// Stamps: on the GPU map, or on the CPU map without a GPU.
+    Stamp,
+    /// Normal regeneration on the GPU (after stamps, or after uploading a CPU-deformed map).
+    Normals,
+    /// Sky and terrain passes.
+    Render,
+    /// Clipmap placement and culling on the CPU.
+    Lod,
+    /// Copying the rendered image back.
+    Capture,
+    /// The same stamps and normals on the CPU map behind the overview, beside the GPU.
+    CpuMirror,
+    /// Collision readback scheduling and the camera body.
+    Physics,
+    /// The hillshade overview (and, for the snow field, its normals).
+    Overview,
+    /// Writing the frame's PNG.
+    Write,
+    /// One granular deformation step (snow).
+    Granular,
+}
+
+impl Step {
+    /// The report key.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Step::Stamp => "stamp",
+            Step::Normals => "normals",
+            Step::Render => "render",
+            Step::Lod => "lod",
+            Step::Capture => "capture",
+            Step::CpuMirror => "cpu_mirror",
+            Step::Physics => "physics",
+            Step::Overview => "overview",
+            Step::Write => "write",
+            Step::Granular => "granular",
+        }
+    }
+}
+
+/// Milliseconds since `t`.
+pub fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// One frame's timings: wall-clock milliseconds per step (a step timed twice adds up), and GPU
+/// timestamp spans where the adapter has them.
+#[derive(Debug, Default)]
+pub struct Timings {
+    wall: BTreeMap<Step, f64>,
+    gpu: BTreeMap<Step, f64>,
+}
+
+impl Timings {
+    /// Adds `ms` to `step`.
+    pub fn add(&mut self, step: Step, ms: f64) {
+        *self.wall.entry(step).or_default() += ms;
+    }
+
+    /// Runs `f`, adding its wall time to `step`.
+    pub fn time<T>(&mut self, step: Step, f: impl FnOnce() -> T) -> T {
+        let t = Instant::now();
+        let out = f();
+        self.add(step, ms_since(t));
+        out
+    }
+
+    /// Records a GPU measurement of `step`: its wall time (submit and wait) and, if the adapter
+    /// has timestamp queries, its timestamp span.
+    pub fn add_gpu(&mut self, step: Step, wall_ms: f64, timestamp_ms: Option<f64>) {
+        self.add(step, wall_ms);
+        if let Some(ts) = timestamp_ms {
+            *self.gpu.entry(step).or_default() += ts;
+        }
+    }
+
+    /// Wall-clock milliseconds by report key.
+    pub fn wall_by_name(&self) -> BTreeMap<&'static str, f64> {
+        self.wall.iter().map(|(s, v)| (s.name(), *v)).collect()
+    }
+
+    /// GPU timestamp milliseconds by report key.
+    pub fn gpu_by_name(&self) -> BTreeMap<&'static str, f64> {
+        self.gpu.iter().map(|(s, v)| (s.name(), *v)).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn steps_add_up_under_their_names() {
+        let mut t = Timings::default();
+        t.add(Step::Physics, 1.0);
+        t.add(Step::Physics, 2.0);
+        t.add_gpu(Step::Stamp, 4.0, Some(0.5));
+        t.add_gpu(Step::Render, 3.0, None);
+        let wall = t.wall_by_name();
+        assert_eq!(wall.get("physics"), Some(&3.0));
+        assert_eq!(wall.get("stamp"), Some(&4.0));
+        assert_eq!(t.gpu_by_name().len(), 1);
+        let names: std::collections::BTreeSet<_> = [
+            Step::Stamp,
+            Step::Normals,
+            Step::Render,
+            Step::Lod,
+            Step::Capture,
+            Step::CpuMirror,
+            Step::Physics,
+            Step::Overview,
+            Step::Write,
+            Step::Granular,
+        ]
+        .map(Step::name)
+        .into_iter()
+        .collect();
+        assert_eq!(names.len(), 10, "names are distinct");
+    }
+}
