@@ -6,9 +6,9 @@ use anyhow::{Context, Result};
 use glam::{UVec2, Vec2};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_gpu::{
-    ClipmapRenderer, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuRegionSource, GpuStamp,
-    GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget, RegionReadback, SkyColors,
-    SkyPass, StampPass, TerrainStyle,
+    ClipmapRenderer, ClipmapSurface, ClipmapView, GpuContext, GpuDerivativeMap, GpuHeightMap,
+    GpuRegionSource, GpuStamp, GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget,
+    RegionReadback, SkyColors, SkyPass, StampOp, StampPass, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
@@ -27,7 +27,7 @@ pub const CLIPMAP_LEVELS: u32 = 5;
 /// Everything that lives on the GPU for the demo.
 pub struct GpuScene {
     ctx: GpuContext,
-    map: GpuHeightMap,
+    map: GpuHeightMap<u16>,
     normals: GpuDerivativeMap,
     stamps: StampPass,
     normal_pass: NormalPass,
@@ -36,6 +36,8 @@ pub struct GpuScene {
     layout: ClipmapLayout,
     target: OffscreenTarget,
     footprint: Option<GpuTextureStamp>,
+    /// The shockwave's change of the frame, rewritten in place each frame.
+    shock: Option<GpuTextureStamp>,
     readback: RegionReadback,
     timer: GpuTimer,
     style: TerrainStyle,
@@ -63,10 +65,12 @@ impl GpuScene {
         let (device, queue) = (&ctx.device, &ctx.queue);
         let gpu_map = GpuHeightMap::from_map(device, queue, map)?;
         let normals = GpuDerivativeMap::for_map(device, &gpu_map)?;
-        let normal_pass = NormalPass::new(device)?;
+        let mut normal_pass = NormalPass::new(device)?;
         let mut encoder = device.create_command_encoder(&Default::default());
-        normal_pass.encode_full(device, &mut encoder, &gpu_map, &normals)?;
+        normal_pass.encode_full(device, queue, &mut encoder, &gpu_map, &normals)?;
         queue.submit([encoder.finish()]);
+        normal_pass.recall();
+        let target = OffscreenTarget::new(device, resolution)?;
         let layout = ClipmapLayout::new(CLIPMAP_N, CLIPMAP_LEVELS)?;
         let (lo, hi) = map.encoding().range::<u16>();
         Ok(Self {
@@ -74,11 +78,12 @@ impl GpuScene {
             normals,
             stamps: StampPass::new(device)?,
             normal_pass,
-            sky: SkyPass::new(device)?,
-            renderer: ClipmapRenderer::new(device, &layout)?,
+            sky: SkyPass::new(device, &target.format())?,
+            renderer: ClipmapRenderer::new(device, &target.format(), &layout)?,
             layout,
-            target: OffscreenTarget::new(device, resolution)?,
+            target,
             footprint: None,
+            shock: None,
             readback: RegionReadback::new(4)?,
             timer: GpuTimer::new(device, queue),
             height_range: (lo, hi),
@@ -118,10 +123,13 @@ impl GpuScene {
         timings: &mut Timings,
     ) -> Result<Vec<(usize, DirtyRect)>> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let shock = match &plan.shock_delta {
-            Some(s) => Some(GpuTextureStamp::new(device, s)?),
-            None => None,
-        };
+        if let Some(delta) = &plan.shock_delta {
+            match &mut self.shock {
+                Some(shock) => shock.update(device, queue, delta)?,
+                None => self.shock = Some(GpuTextureStamp::new(device, delta)?),
+            }
+        }
+        let shock = plan.shock_delta.as_ref().and(self.shock.as_ref());
         let mut dirty = Vec::new();
         let stamp_time = self.timer.time(device, queue, |encoder| {
             for (i, d) in plan.deformations.iter().enumerate() {
@@ -134,14 +142,12 @@ impl GpuScene {
                     (StampKind::Shockwave, Some(s)) => GpuStamp::Texture(s),
                     (StampKind::Shockwave, None) => continue,
                 };
-                let rects = self.stamps.encode(
-                    device,
-                    encoder,
-                    &self.map,
+                let op = StampOp {
                     stamp,
-                    &d.placement,
-                    terrain_core::Blend::Add,
-                )?;
+                    placement: d.placement,
+                    blend: terrain_core::Blend::Add,
+                };
+                let rects = self.stamps.encode(device, queue, encoder, &self.map, &op)?;
                 dirty.extend(rects.into_iter().map(|r| (i, r)));
             }
             Ok(())
@@ -149,10 +155,13 @@ impl GpuScene {
         let normal_time = self.timer.time(device, queue, |encoder| {
             for (_, r) in &dirty {
                 self.normal_pass
-                    .encode(device, encoder, &self.map, &self.normals, *r)?;
+                    .encode(device, queue, encoder, &self.map, &self.normals, *r)?;
             }
             Ok(())
         })?;
+        // Both submits are done: the passes' uniform slots are free again.
+        self.stamps.recall();
+        self.normal_pass.recall();
         record(timings, Step::Stamp, stamp_time);
         record(timings, Step::Normals, normal_time);
         Ok(dirty)
@@ -165,8 +174,9 @@ impl GpuScene {
         self.map.write(queue, map)?;
         let timing = self.timer.time(device, queue, |encoder| {
             self.normal_pass
-                .encode_full(device, encoder, &self.map, &self.normals)
+                .encode_full(device, queue, encoder, &self.map, &self.normals)
         })?;
+        self.normal_pass.recall();
         record(timings, Step::Normals, timing);
         Ok(())
     }
@@ -205,19 +215,23 @@ impl GpuScene {
         timings.add(Step::Lod, crate::timings::ms_since(t));
         let view_proj = camera.view_proj_relative(aspect);
         let sky_colors = SkyColors::default();
+        let view = ClipmapView {
+            surface: ClipmapSurface::Coarse {
+                map: &self.map,
+                normals: &self.normals,
+            },
+            frame: &placement,
+            camera,
+            style: &self.style,
+            target_size: self.target.size(),
+        };
         let timing = self.timer.time(device, queue, |encoder| {
-            self.sky
-                .encode(device, encoder, &self.target, view_proj, &sky_colors);
-            self.renderer.encode(
-                device,
-                encoder,
-                &self.target,
-                &self.map,
-                &self.normals,
-                &placement,
-                camera,
-                &self.style,
-            )
+            self.sky.prepare(queue, view_proj, &sky_colors)?;
+            self.renderer.prepare(device, queue, &view)?;
+            let mut pass = self.target.begin_pass(encoder, wgpu::Color::BLACK);
+            self.sky.draw(&mut pass);
+            self.renderer.draw(&mut pass);
+            Ok(())
         })?;
         let t = std::time::Instant::now();
         let image = self.target.read_rgba8(device, queue)?;

@@ -9,7 +9,7 @@ use glam::{Vec2, Vec3};
 use std::time::{Duration, Instant};
 use terrain_core::{Blend, CoarseMap, GaussianStamp, Grid, HeightEncoding, StampPlacement};
 use terrain_gpu::testing::context_or_skip;
-use terrain_gpu::{GpuHeightMap, GpuRegionSource, GpuStamp, RegionReadback, StampPass};
+use terrain_gpu::{GpuHeightMap, GpuRegionSource, GpuStamp, RegionReadback, StampOp, StampPass};
 use terrain_physics::{
     CameraBody, CollisionMirror, DeformationBound, GroundQuery, ReadbackScheduler, SchedulerConfig,
 };
@@ -26,7 +26,7 @@ fn mirror_equals_the_gpu_map_after_the_quiet_gap_and_readback() {
     let mirror = CollisionMirror::from_map(&map).unwrap();
     let mut scheduler = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default()).unwrap();
     let mut readback = RegionReadback::new(4).unwrap();
-    let pass = StampPass::new(device).unwrap();
+    let mut pass = StampPass::new(device).unwrap();
     let gauss = GaussianStamp::default();
 
     // A body standing where a 3 m mound is about to rise.
@@ -52,14 +52,18 @@ fn mirror_equals_the_gpu_map_after_the_quiet_gap_and_readback() {
         let rects = pass
             .encode(
                 device,
+                queue,
                 &mut encoder,
                 &gpu,
-                GpuStamp::Gaussian(&gauss),
-                &p,
-                Blend::Add,
+                &StampOp {
+                    stamp: GpuStamp::Gaussian(&gauss),
+                    placement: p,
+                    blend: Blend::Add,
+                },
             )
             .unwrap();
         queue.submit([encoder.finish()]);
+        pass.recall();
         for r in rects {
             scheduler
                 .note_deformation(r, DeformationBound::additive(intensity, enc).unwrap(), now)

@@ -64,6 +64,31 @@ impl GpuTextureStamp {
             size: stamp.values().size(),
         })
     }
+
+    /// Replaces the values with those of `stamp` (a dynamic stamp such as the shockwave, whose
+    /// change is uploaded every frame). The buffer is reused while the new values fit and only
+    /// grows (once) when they do not.
+    pub fn update(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        stamp: &TextureStamp,
+    ) -> Result<(), GpuError> {
+        let values = stamp.values().as_slice();
+        let bytes = std::mem::size_of_val(values) as u64;
+        if bytes > self.values.size() {
+            *self = Self::new(device, stamp)?;
+            return Ok(());
+        }
+        queue.write_buffer(&self.values, 0, bytemuck::cast_slice(values));
+        self.size = stamp.values().size();
+        Ok(())
+    }
+
+    /// Size of the stamp's values in texels.
+    pub fn size(&self) -> UVec2 {
+        self.size
+    }
 }
 
 /// A user-defined procedural stamp: a WGSL function

@@ -196,7 +196,10 @@ fn examples() -> Result<()> {
             let Some(name) = path.file_stem().and_then(|s| s.to_str()) else {
                 continue;
             };
-            if NOT_EXAMPLES.iter().any(|(k, e, _)| *k == krate && *e == name) {
+            if NOT_EXAMPLES
+                .iter()
+                .any(|(k, e, _)| *k == krate && *e == name)
+            {
                 continue;
             }
             if !EXAMPLES.iter().any(|(k, e, _)| *k == krate && *e == name) {
