@@ -49,6 +49,7 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
             camera_clearance_m: frame.camera_clearance_m,
             timings_ms: BTreeMap::new(),
             gpu_timestamps_ms: BTreeMap::new(),
+            gpu_objects: None,
         };
         match gpu.as_mut() {
             // The 3D frame with the overview inset, the camera marked on it.
@@ -59,6 +60,7 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
                 images::inset_overview(&mut rendered.image, overview.image(), uv);
                 let report = FrameReport {
                     triangles: rendered.triangles,
+                    gpu_objects: Some(scene.live_objects()),
                     ..report
                 };
                 capture.push(&rendered.image, report, timings)?;

@@ -13,6 +13,7 @@ use terrain_gpu::{
 use terrain_lod::{ClipmapLayout, Frustum};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 
+use crate::report::GpuObjects;
 use crate::scenarios::{FramePlan, StampKind};
 use crate::timings::{Step, Timings};
 
@@ -84,7 +85,7 @@ impl GpuScene {
             target,
             footprint: None,
             shock: None,
-            readback: RegionReadback::new(4)?,
+            readback: RegionReadback::new(device, 4)?,
             timer: GpuTimer::new(device, queue),
             height_range: (lo, hi),
             style: TerrainStyle {
@@ -106,6 +107,18 @@ impl GpuScene {
     /// `high` snow white.
     pub fn set_ramp(&mut self, low: f32, high: f32) {
         self.style.ramp = (low, high);
+    }
+
+    /// The GPU objects alive on the device now.
+    pub fn live_objects(&self) -> GpuObjects {
+        let hal = self.ctx.device.get_internal_counters().hal;
+        GpuObjects {
+            buffers: hal.buffers.read(),
+            textures: hal.textures.read(),
+            bind_groups: hal.bind_groups.read(),
+            shader_modules: hal.shader_modules.read(),
+            pipelines: hal.render_pipelines.read() + hal.compute_pipelines.read(),
+        }
     }
 
     /// The adapter's name and backend.

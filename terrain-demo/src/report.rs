@@ -56,6 +56,25 @@ pub struct FrameReport {
     /// GPU timestamp spans of `stamp`, `normals` and `render`, where the adapter has timestamp
     /// queries (on lavapipe they miss deferred compute work: see terrain-gpu's `timer`).
     pub gpu_timestamps_ms: BTreeMap<&'static str, f64>,
+    /// GPU objects alive after the frame (wgpu's internal counters), with a GPU: they stop
+    /// changing after the first frames, since passes allocate only when built.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gpu_objects: Option<GpuObjects>,
+}
+
+/// Live GPU objects of the device, from wgpu's internal counters (`counters` feature).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct GpuObjects {
+    /// Buffers.
+    pub buffers: isize,
+    /// Textures.
+    pub textures: isize,
+    /// Bind groups.
+    pub bind_groups: isize,
+    /// Shader modules.
+    pub shader_modules: isize,
+    /// Render and compute pipelines.
+    pub pipelines: isize,
 }
 
 /// The fields of a frame's report that depend on the scenario (zero or absent where it has

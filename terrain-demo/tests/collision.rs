@@ -25,7 +25,7 @@ fn mirror_equals_the_gpu_map_after_the_quiet_gap_and_readback() {
     let gpu = GpuHeightMap::from_map(device, queue, &map).unwrap();
     let mirror = CollisionMirror::from_map(&map).unwrap();
     let mut scheduler = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default()).unwrap();
-    let mut readback = RegionReadback::new(4).unwrap();
+    let mut readback = RegionReadback::new(device, 4).unwrap();
     let mut pass = StampPass::new(device).unwrap();
     let gauss = GaussianStamp::default();
 

@@ -19,7 +19,7 @@ fn bench(c: &mut Criterion) {
     let map =
         CoarseMap::coarse(grid, HeightEncoding::new(0.01, 0.0).expect("enc"), 0.1).expect("map");
     let gpu = GpuHeightMap::from_map(device, queue, &map).expect("upload");
-    let mut readback = RegionReadback::new(2).expect("ring");
+    let mut readback = RegionReadback::new(device, 2).expect("ring");
 
     let mut group = c.benchmark_group("gpu_readback");
     group.sample_size(10);

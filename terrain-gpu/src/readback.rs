@@ -47,7 +47,7 @@ const FAILED: u8 = 3;
 
 #[derive(Debug)]
 struct Slot {
-    buffer: Option<wgpu::Buffer>,
+    buffer: wgpu::Buffer,
     state: Arc<AtomicU8>,
     request: Option<(ReadbackTicket, Rect, HeightEncoding)>,
 }
@@ -61,13 +61,26 @@ pub struct RegionReadback {
     failure: Option<Vec<Rect>>,
 }
 
+/// Bytes each staging buffer starts with (a 128 x 128 region of u32 heights).
+const INITIAL_SLOT_BYTES: u64 = 128 * 128 * 4;
+
+fn staging(device: &wgpu::Device, bytes: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("RegionReadback staging"),
+        size: bytes,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
 /// Most staging buffers a ring may have.
 pub const MAX_READBACK_RING: usize = 16;
 
 impl RegionReadback {
-    /// A ring of `ring` staging buffers (1 to [`MAX_READBACK_RING`]); buffers are created on
-    /// first use and grown as larger regions are asked for.
-    pub fn new(ring: usize) -> Result<Self, GpuError> {
+    /// A ring of `ring` staging buffers (1 to [`MAX_READBACK_RING`]), made now with room for a
+    /// 128 x 128 region each; a slot's buffer is replaced by a larger one when a larger region is
+    /// asked for, so the ring holds `ring` buffers from the start and never more.
+    pub fn new(device: &wgpu::Device, ring: usize) -> Result<Self, GpuError> {
         if !(1..=MAX_READBACK_RING).contains(&ring) {
             return Err(terrain_core::CoreError::OutOfRange {
                 what: "readback ring size",
@@ -78,7 +91,7 @@ impl RegionReadback {
         }
         let slots = (0..ring)
             .map(|_| Slot {
-                buffer: None,
+                buffer: staging(device, INITIAL_SLOT_BYTES),
                 state: Arc::new(AtomicU8::new(FREE)),
                 request: None,
             })
@@ -124,15 +137,10 @@ impl RegionReadback {
         };
         let bytes = rect.area() * 4;
         // A slot keeps its staging buffer; it is only replaced by a larger one.
-        let buffer = match &mut slot.buffer {
-            Some(b) if b.size() >= bytes => b,
-            other => other.insert(device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("RegionReadback staging"),
-                size: bytes,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })),
-        };
+        if slot.buffer.size() < bytes {
+            slot.buffer = staging(device, bytes);
+        }
+        let buffer = &slot.buffer;
         copy_rows(encoder, map, rect, buffer);
         slot.state.store(PENDING, Ordering::Release);
         let state = slot.state.clone();
@@ -170,11 +178,10 @@ impl RegionReadback {
             if state != MAPPED && state != FAILED {
                 continue;
             }
-            let (Some((ticket, rect, encoding)), Some(buffer)) =
-                (slot.request.take(), slot.buffer.as_ref())
-            else {
+            let Some((ticket, rect, encoding)) = slot.request.take() else {
                 continue;
             };
+            let buffer = &slot.buffer;
             slot.state.store(FREE, Ordering::Release);
             if state == FAILED {
                 // Hand over what did arrive; report the failure on its own.

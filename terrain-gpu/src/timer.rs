@@ -6,7 +6,7 @@
 //! blocking wait), so the wall time of submit-and-wait is the figure reported; it is an upper
 //! bound of the GPU time that includes one submission's overhead (about 0.1 ms).
 
-use crate::download::download_bytes;
+use crate::download::map_and_read;
 use crate::error::GpuError;
 use std::time::Instant;
 
@@ -22,7 +22,9 @@ pub struct GpuTiming {
 /// Brackets recorded work with two timestamps (two empty compute passes that write them).
 #[derive(Debug)]
 pub struct GpuTimer {
-    queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+    /// The query set, the buffer its timestamps resolve into, and the staging buffer they are
+    /// read back through (all made once).
+    queries: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
     /// Whether timestamps can be written between passes (`TIMESTAMP_QUERY_INSIDE_ENCODERS`),
     /// which brackets the work exactly; else they come from empty compute passes.
     inside_encoders: bool,
@@ -47,7 +49,13 @@ impl GpuTimer {
                     usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
                     mapped_at_creation: false,
                 });
-                (set, resolve)
+                let staging = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("GpuTimer staging"),
+                    size: 16,
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                (set, resolve, staging)
             });
         Self {
             queries,
@@ -68,7 +76,7 @@ impl GpuTimer {
     /// be taken once earlier work has *started* (Vulkan's top of pipe), so a closing
     /// beginning-of-pass stamp can land before the timed dispatches finish.
     fn stamp(&self, encoder: &mut wgpu::CommandEncoder, index: u32, closing: bool) {
-        if let Some((set, _)) = &self.queries {
+        if let Some((set, ..)) = &self.queries {
             if self.inside_encoders {
                 encoder.write_timestamp(set, index);
                 return;
@@ -96,16 +104,17 @@ impl GpuTimer {
         self.stamp(&mut encoder, 0, false);
         work(&mut encoder)?;
         self.stamp(&mut encoder, 1, true);
-        if let Some((set, resolve)) = &self.queries {
+        if let Some((set, resolve, staging)) = &self.queries {
             encoder.resolve_query_set(set, 0..2, resolve, 0);
+            encoder.copy_buffer_to_buffer(resolve, 0, staging, 0, 16);
         }
         let start = Instant::now();
         queue.submit([encoder.finish()]);
         device.poll(wgpu::PollType::wait_indefinitely())?;
         let wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let timestamp_ms = match &self.queries {
-            Some((_, resolve)) => {
-                let bytes = download_bytes(device, queue, resolve, 0, 16)?;
+            Some((_, _, staging)) => {
+                let bytes = map_and_read(device, staging)?;
                 let t: &[u64] = bytemuck::cast_slice(&bytes);
                 Some(t[1].saturating_sub(t[0]) as f64 * self.period_ns / 1e6)
             }

@@ -338,7 +338,7 @@ fn readback_delivers_regions_without_waiting_and_equals_the_map() {
     )
     .unwrap();
     let gpu = GpuHeightMap::from_map(device, queue, &map).unwrap();
-    let mut readback = RegionReadback::new(2).unwrap();
+    let mut readback = RegionReadback::new(device, 2).unwrap();
     let rects = [
         Rect::new(IVec2::new(5, 7), UVec2::new(20, 11)),
         Rect::new(IVec2::new(-4, 45), UVec2::new(9, 10)), // across the corner
@@ -403,7 +403,7 @@ fn readback_delivers_regions_without_waiting_and_equals_the_map() {
             )
             .is_err()
     );
-    assert!(RegionReadback::new(0).is_err());
+    assert!(RegionReadback::new(device, 0).is_err());
     ctx.check().expect("no GPU validation errors");
 }
 
