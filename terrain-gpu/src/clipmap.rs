@@ -2,7 +2,6 @@
 //! displaced by the coarse-map with wrap addressing and lit with the derivative normals.
 
 use crate::camera::Camera;
-use crate::compute::bind_buffers;
 use crate::error::GpuError;
 use crate::maps::{GpuDerivativeMap, GpuHeightMap};
 use crate::offscreen::{COLOR_FORMAT, DEPTH_FORMAT, OffscreenTarget};
@@ -185,7 +184,7 @@ impl ClipmapRenderer {
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         target: &OffscreenTarget,
-        map: &GpuHeightMap,
+        map: &GpuHeightMap<u16>,
         normals: &GpuDerivativeMap,
         frame: &ClipmapFrame,
         camera: &Camera,
@@ -243,12 +242,15 @@ impl ClipmapRenderer {
             contents: bytemuck::bytes_of(&uniform),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let bind_group = bind_buffers(
-            device,
-            "ClipmapRenderer",
-            &self.layout,
-            &[&uniform, map.buffer(), normals.buffer()],
-        );
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("ClipmapRenderer"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: map.buffer().as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: normals.buffer().as_entire_binding() },
+            ],
+        });
 
         // Instances grouped by part, so each part is one instanced draw.
         let mut runs: Vec<(usize, Vec<ClipmapInstance>)> = Vec::new();
@@ -312,7 +314,7 @@ impl ClipmapRenderer {
 
 /// A multiple of the map size that makes every texel the frame can read non-negative (the
 /// coarsest level's origin, less the morph's one-texel reach).
-fn wrap_offset_for_frame(frame: &ClipmapFrame, map: &GpuHeightMap) -> Result<[i32; 2], GpuError> {
+fn wrap_offset_for_frame(frame: &ClipmapFrame, map: &GpuHeightMap<u16>) -> Result<[i32; 2], GpuError> {
     let min = frame
         .levels
         .iter()

@@ -103,7 +103,7 @@ impl RegionReadback {
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
-        map: &GpuHeightMap,
+        map: &GpuHeightMap<u16>,
         rect: Rect,
     ) -> Result<ReadbackTicket, GpuError> {
         let size = map.size();
@@ -208,7 +208,7 @@ impl RegionReadback {
 /// Copies the rows of `rect` (wrapped on a repeating map) into `dst`, packed row-major.
 fn copy_rows(
     encoder: &mut wgpu::CommandEncoder,
-    map: &GpuHeightMap,
+    map: &GpuHeightMap<u16>,
     rect: Rect,
     dst: &wgpu::Buffer,
 ) {

@@ -12,7 +12,7 @@ use terrain_physics::{ArrivedRegion, PhysicsError, RegionSource, RequestId};
 pub struct GpuRegionSource<'a> {
     device: &'a wgpu::Device,
     queue: &'a wgpu::Queue,
-    map: &'a GpuHeightMap,
+    map: &'a GpuHeightMap<u16>,
     readback: &'a mut RegionReadback,
 }
 
@@ -21,7 +21,7 @@ impl<'a> GpuRegionSource<'a> {
     pub fn new(
         device: &'a wgpu::Device,
         queue: &'a wgpu::Queue,
-        map: &'a GpuHeightMap,
+        map: &'a GpuHeightMap<u16>,
         readback: &'a mut RegionReadback,
     ) -> Self {
         Self {

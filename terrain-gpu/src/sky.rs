@@ -1,6 +1,5 @@
 //! `SkyPass`: clears the target with a sky gradient by view-ray elevation.
 
-use crate::compute::bind_buffers;
 use crate::error::GpuError;
 use crate::offscreen::{COLOR_FORMAT, OffscreenTarget};
 use crate::scope::scoped;
@@ -120,7 +119,11 @@ impl SkyPass {
             contents: bytemuck::bytes_of(&params),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let bind_group = bind_buffers(device, "SkyPass", &self.layout, &[&uniform]);
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("SkyPass"),
+            layout: &self.layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
+        });
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("SkyPass"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
