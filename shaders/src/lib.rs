@@ -134,6 +134,10 @@ pub const GRANULAR_NORMALS: &str =
     concat!(wgsl_prelude!(), include_str!("wgsl/granular_normals.wgsl"));
 /// Granular deformation: depth of objects seen from below (render pipeline).
 pub const GRANULAR_DEPTH: &str = concat!(wgsl_prelude!(), include_str!("wgsl/granular_depth.wgsl"));
+/// Granular deformation: the exact u64 sum of a height map (the conserved volume), reduced on
+/// the GPU.
+pub const GRANULAR_VOLUME: &str =
+    concat!(wgsl_prelude!(), include_str!("wgsl/granular_volume.wgsl"));
 
 /// The markers around the default user procedural stamp function in [`STAMP`]; a user stamp
 /// replaces the text between them with its own `fn user_stamp_value(local: vec2<f32>) -> f32`.
@@ -152,4 +156,5 @@ pub const ALL: &[(&str, &str)] = &[
     ("granular_slope", GRANULAR_SLOPE),
     ("granular_normals", GRANULAR_NORMALS),
     ("granular_depth", GRANULAR_DEPTH),
+    ("granular_volume", GRANULAR_VOLUME),
 ];

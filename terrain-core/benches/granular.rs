@@ -67,7 +67,7 @@ fn steps(c: &mut Criterion) {
             b.iter(|| jump_flood(black_box(&pen), area, params.metric, true).expect("jfa"))
         });
         for (name, method) in [
-            ("displace_iterative10", DisplacementMethod::Iterative),
+            ("displace_iterative10", DisplacementMethod::iterative()),
             ("displace_closest_seed", DisplacementMethod::ClosestSeed),
             (
                 "displace_multiple_targets",
@@ -79,9 +79,15 @@ fn steps(c: &mut Criterion) {
                     || map.clone(),
                     |m| {
                         match method {
-                            DisplacementMethod::Iterative => {
-                                displace_iterative(m, &pen, &seeds, area, 32768, 10, params.metric)
-                            }
+                            DisplacementMethod::Iterative { iterations } => displace_iterative(
+                                m,
+                                &pen,
+                                &seeds,
+                                area,
+                                32768,
+                                iterations,
+                                params.metric,
+                            ),
                             DisplacementMethod::ClosestSeed => {
                                 displace_closest_seed(m, &pen, &seeds, area, 32768)
                             }

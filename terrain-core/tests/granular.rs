@@ -35,9 +35,12 @@ fn empty_pen(size: UVec2) -> Grid<Penetration> {
     .expect("grid")
 }
 
+/// The iterative method with the 4 passes these tests use.
+const ITERATIVE: DisplacementMethod = DisplacementMethod::Iterative { iterations: 4 };
+
 const COMBOS: [(DisplacementMethod, SlopeMethod); 6] = [
-    (DisplacementMethod::Iterative, SlopeMethod::Interleaved),
-    (DisplacementMethod::Iterative, SlopeMethod::Scatter),
+    (ITERATIVE, SlopeMethod::Interleaved),
+    (ITERATIVE, SlopeMethod::Scatter),
     (DisplacementMethod::ClosestSeed, SlopeMethod::Interleaved),
     (DisplacementMethod::ClosestSeed, SlopeMethod::Scatter),
     (
@@ -88,7 +91,6 @@ fn objects_at<'a>(m: &'a Meshes, frame: u32, extent: f32) -> Vec<GranularObject<
 
 fn small_params() -> GranularParams {
     GranularParams {
-        num_iterations_displace_material_to_contour: 4,
         num_iterations_even_out_slopes: 2,
         active_area_margin: 6,
         ..GranularParams::snow()
@@ -614,7 +616,7 @@ fn merged_active_areas_give_the_full_map_displacement() {
     for metric in METRICS {
         let seeds = jump_flood(&pen, full, metric, true).expect("jfa");
         for method in [
-            DisplacementMethod::Iterative,
+            DisplacementMethod::Iterative { iterations: 20 },
             DisplacementMethod::ClosestSeed,
             DisplacementMethod::MultipleTargets,
         ] {
@@ -623,8 +625,8 @@ fn merged_active_areas_give_the_full_map_displacement() {
                        seeds: &Grid<[u32; 2]>,
                        r: Rect| {
                 match method {
-                    DisplacementMethod::Iterative => {
-                        displace_iterative(map, pen, seeds, r, 32768, 20, metric)
+                    DisplacementMethod::Iterative { iterations } => {
+                        displace_iterative(map, pen, seeds, r, 32768, iterations, metric)
                     }
                     DisplacementMethod::ClosestSeed => {
                         displace_closest_seed(map, pen, seeds, r, 32768)
@@ -737,6 +739,23 @@ fn bad_parameters_and_meshes_are_errors() {
         Err(GranularError::BadVertex { .. })
     ));
     assert_eq!(sim.map(), &before);
+    // Too many iterative displacement passes: refused before the map is touched.
+    let too_many = DisplacementMethod::Iterative {
+        iterations: MAX_ITERATIONS + 1,
+    };
+    assert!(matches!(
+        too_many.validate(),
+        Err(GranularError::ParamOutOfRange { .. })
+    ));
+    let mut refused = GranularSim::new(flat_map(8, 1.0, 0.1), GranularParams::default())
+        .expect("sim")
+        .with_methods(too_many, SlopeMethod::Scatter);
+    let untouched = refused.map().clone();
+    assert!(matches!(
+        refused.step(&[]),
+        Err(GranularError::ParamOutOfRange { .. })
+    ));
+    assert_eq!(refused.map(), &untouched);
     // Regions outside the map.
     let map = flat_map(8, 1.0, 0.1);
     let outside = Rect::new(IVec2::new(4, 4), UVec2::new(8, 8));
@@ -778,6 +797,13 @@ fn presets_are_valid_and_match_the_captions() {
         assert_eq!((p.compression, p.roughness, p.slope_threshold), (c, r, s));
     }
     assert_eq!(GranularParams::default().num_iterations_even_out_slopes, 10);
+    assert_eq!(
+        DisplacementMethod::iterative(),
+        DisplacementMethod::Iterative { iterations: 10 }
+    );
+    DisplacementMethod::iterative()
+        .validate()
+        .expect("valid method");
     assert_eq!(GranularParams::mud().keep_q15(), 1638);
 }
 

@@ -13,14 +13,53 @@ use terrain_core::granular::{
 };
 use terrain_core::{FixedPointMap, Grid, Rect};
 use terrain_gpu::granular::{
-    DisplacePass, GpuGranularMap, GpuGranularStep, GranularScratch, JumpFloodPass, PenetrationPass,
-    SlopePass,
+    DisplacePass, GpuGranularStep, GranularArea, GranularScratch, JumpFloodPass, PenetrationPass,
+    SlopePass, SlopeSettings,
 };
-use terrain_gpu::{GpuContext, GpuTimer};
+use terrain_gpu::{GpuContext, GpuError, GpuHeightMap, GpuTimer};
 
 /// (map side, active-area side): sides of 61, 123, 246 and 492 give 3 721, 15 129, 60 516 and
 /// 242 064 columns.
 const CASES: [(u32, u32); 4] = [(512, 61), (1024, 123), (2048, 246), (4096, 492)];
+
+/// The integer passes, built once for every case.
+struct Passes {
+    penetration: PenetrationPass,
+    jfa: JumpFloodPass,
+    displace: DisplacePass,
+    slope: SlopePass,
+}
+
+impl Passes {
+    fn recall(&mut self) {
+        self.penetration.recall();
+        self.jfa.recall();
+        self.displace.recall();
+        self.slope.recall();
+    }
+}
+
+/// Times `work`, recorded into a fresh encoder per iteration, as the wall time of submit +
+/// wait; the passes recall after each submit.
+fn time(
+    b: &mut criterion::Bencher<'_>,
+    ctx: &GpuContext,
+    timer: &GpuTimer,
+    passes: &mut Passes,
+    mut work: impl FnMut(&mut Passes, &mut wgpu::CommandEncoder) -> Result<(), GpuError>,
+) {
+    b.iter_custom(|iters| {
+        (0..iters)
+            .map(|_| {
+                let t = timer
+                    .time(&ctx.device, &ctx.queue, |enc| work(passes, enc))
+                    .expect("gpu work");
+                passes.recall();
+                Duration::from_secs_f64(t.ms / 1e3)
+            })
+            .sum()
+    })
+}
 
 fn bench(c: &mut Criterion) {
     let ctx = GpuContext::new_headless().expect("a GPU adapter (lavapipe: mesa-vulkan-drivers)");
@@ -29,10 +68,12 @@ fn bench(c: &mut Criterion) {
     let (device, queue) = (&ctx.device, &ctx.queue);
     let timer = GpuTimer::new(device, queue);
     let params = GranularParams::snow();
-    let pen_pass = PenetrationPass::new(device).expect("pen");
-    let jfa = JumpFloodPass::new(device).expect("jfa");
-    let displace = DisplacePass::new(device).expect("displace");
-    let slope = SlopePass::new(device).expect("slope");
+    let mut passes = Passes {
+        penetration: PenetrationPass::new(device).expect("pen"),
+        jfa: JumpFloodPass::new(device).expect("jfa"),
+        displace: DisplacePass::new(device).expect("displace"),
+        slope: SlopePass::new(device).expect("slope"),
+    };
 
     let mut group = c.benchmark_group("gpu_granular");
     group.sample_size(10);
@@ -41,9 +82,9 @@ fn bench(c: &mut Criterion) {
     for (map_side, side) in CASES {
         let grid = Grid::new(map_side, map_side, 10_000u32).expect("grid");
         let map = FixedPointMap::fixed_point(grid, 10_000, 0.1).expect("map");
-        let gmap = GpuGranularMap::from_map(device, queue, &map).expect("upload");
+        let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
         let min = IVec2::splat(((map_side - side) / 2) as i32);
-        let area = Rect::new(min, UVec2::splat(side));
+        let rect = Rect::new(min, UVec2::splat(side));
         // An object sinking 0.05 m into the middle third of the area.
         let centre = Vec2::splat(side as f32 * 0.5);
         let depth = Grid::from_fn(side, side, |i, j| {
@@ -54,118 +95,90 @@ fn bench(c: &mut Criterion) {
             }
         })
         .expect("depth");
-        let depth_buf = PenetrationPass::upload_depth(device, &depth);
-        let scratch = GranularScratch::new(device, area.area()).expect("scratch");
-        let thresholds = params.slope_thresholds_units(0.1, 10_000.0);
-        let label = format!("{map_side}/{}", area.area());
-        // Times one recorded closure as wall time of submit + wait.
-        let time = |b: &mut criterion::Bencher<'_>,
-                    work: &dyn Fn(
-            &mut wgpu::CommandEncoder,
-        ) -> Result<(), terrain_gpu::GpuError>| {
-            b.iter_custom(|iters| {
-                (0..iters)
-                    .map(|_| {
-                        let t = timer
-                            .time(device, queue, |enc| work(enc))
-                            .expect("gpu work");
-                        Duration::from_secs_f64(t.ms / 1e3)
-                    })
-                    .sum()
-            })
-        };
-        // Each step on its own (the steps before it ran once, so its inputs are in place).
-        let penetrate = |enc: &mut wgpu::CommandEncoder| {
-            pen_pass.encode(device, enc, &gmap, &depth_buf, area, 5000, &scratch)
-        };
-        let flood = |enc: &mut wgpu::CommandEncoder| {
-            jfa.encode(
-                device,
-                enc,
-                gmap.size(),
-                area,
-                params.metric,
-                params.jfa_extra_pass,
-                &scratch,
-            )
-            .map(|_| ())
-        };
-        let mut seeds = 0;
+        let scratch = GranularScratch::new(device, rect.area()).expect("scratch");
+        let area = GranularArea::new(device, &gmap, rect, &scratch).expect("area");
+        let slopes = SlopeSettings::from_params(&params, 0.1, 10_000.0);
+        let label = format!("{map_side}/{}", rect.area());
+        // The depth goes up once; each step is timed on its own (the steps before it ran once,
+        // so its inputs are in place).
+        let mut flooded = None;
         timer
             .time(device, queue, |enc| {
-                penetrate(enc)?;
-                seeds = jfa.encode(
+                let p = &mut passes;
+                p.penetration
+                    .upload_depth(device, queue, enc, &area, &depth)?;
+                p.penetration.encode(device, queue, enc, &area, 5000)?;
+                flooded = Some(p.jfa.encode(
                     device,
+                    queue,
                     enc,
-                    gmap.size(),
-                    area,
+                    &area,
                     params.metric,
                     params.jfa_extra_pass,
-                    &scratch,
-                )?;
+                )?);
                 Ok(())
             })
             .expect("prepare");
-        let displace_closest = |enc: &mut wgpu::CommandEncoder| {
-            displace.encode(
-                device,
-                enc,
-                &gmap,
-                area,
-                DisplacementMethod::ClosestSeed,
-                params.keep_q15(),
-                seeds,
-                &scratch,
-            )
-        };
-        let slopes = |enc: &mut wgpu::CommandEncoder| {
-            slope.encode(
-                device,
-                enc,
-                &gmap,
-                area,
-                SlopeMethod::Scatter,
-                thresholds,
-                params.roughness_q15(),
-                params.num_iterations_even_out_slopes,
-                &scratch,
-            )
-        };
+        passes.recall();
+        let flooded = flooded.expect("flooded");
         group.bench_function(BenchmarkId::new("penetration", &label), |b| {
-            time(b, &penetrate)
+            time(b, &ctx, &timer, &mut passes, |p, enc| {
+                p.penetration.encode(device, queue, enc, &area, 5000)
+            })
         });
         group.bench_function(BenchmarkId::new("jump_flooding", &label), |b| {
-            time(b, &flood)
+            time(b, &ctx, &timer, &mut passes, |p, enc| {
+                p.jfa
+                    .encode(
+                        device,
+                        queue,
+                        enc,
+                        &area,
+                        params.metric,
+                        params.jfa_extra_pass,
+                    )
+                    .map(|_| ())
+            })
         });
         group.bench_function(BenchmarkId::new("displace_closest_seed", &label), |b| {
-            time(b, &displace_closest)
-        });
-        group.bench_function(BenchmarkId::new("slopes_scatter10", &label), |b| {
-            time(b, &slopes)
-        });
-        group.bench_function(BenchmarkId::new("step", &label), |b| {
-            time(b, &|enc| {
-                penetrate(enc)?;
-                let s = jfa.encode(
+            time(b, &ctx, &timer, &mut passes, |p, enc| {
+                p.displace.encode(
                     device,
+                    queue,
                     enc,
-                    gmap.size(),
-                    area,
-                    params.metric,
-                    params.jfa_extra_pass,
-                    &scratch,
-                )?;
-                displace.encode(
-                    device,
-                    enc,
-                    &gmap,
-                    area,
+                    &flooded,
                     DisplacementMethod::ClosestSeed,
                     params.keep_q15(),
-                    s,
-                    &scratch,
+                )
+            })
+        });
+        group.bench_function(BenchmarkId::new("slopes_scatter10", &label), |b| {
+            time(b, &ctx, &timer, &mut passes, |p, enc| {
+                p.slope
+                    .encode(device, queue, enc, &area, SlopeMethod::Scatter, &slopes)
+            })
+        });
+        group.bench_function(BenchmarkId::new("step", &label), |b| {
+            time(b, &ctx, &timer, &mut passes, |p, enc| {
+                p.penetration.encode(device, queue, enc, &area, 5000)?;
+                let flooded = p.jfa.encode(
+                    device,
+                    queue,
+                    enc,
+                    &area,
+                    params.metric,
+                    params.jfa_extra_pass,
                 )?;
-                slopes(enc)
+                p.displace.encode(
+                    device,
+                    queue,
+                    enc,
+                    &flooded,
+                    DisplacementMethod::ClosestSeed,
+                    params.keep_q15(),
+                )?;
+                p.slope
+                    .encode(device, queue, enc, &area, SlopeMethod::Scatter, &slopes)
             })
         });
     }
@@ -197,7 +210,7 @@ fn vehicles(c: &mut Criterion, ctx: &GpuContext) {
         texel,
     )
     .expect("map");
-    let gmap = GpuGranularMap::from_map(device, queue, &snow).expect("upload");
+    let gmap = GpuHeightMap::from_map(device, queue, &snow).expect("upload");
     for cars in 1..=8u32 {
         let objs: Vec<GranularObject<'_>> = (0..cars)
             .map(|i| {

@@ -242,6 +242,12 @@ impl<T: Pod> PassBindings<T> {
     pub fn recall(&mut self) {
         self.next = 0;
     }
+
+    /// Drops the cached bind groups (and with them the buffers they hold), for when the
+    /// buffers a pass binds were replaced, e.g. by larger scratch buffers.
+    pub fn clear_bind_groups(&mut self) {
+        self.groups.clear();
+    }
 }
 
 fn ring_buffer(

@@ -111,6 +111,15 @@ pub enum GpuError {
         /// The ring's size in slots.
         slots: u32,
     },
+    /// A pass uploaded more data than its upload buffer may grow to without a `recall()`
+    /// after the submit that carried it.
+    #[error("{pass} uploaded {bytes} bytes without recall(): call recall() after each submit")]
+    UploadRingFull {
+        /// The pass.
+        pass: &'static str,
+        /// Bytes uploaded since the last recall, including the refused upload.
+        bytes: u64,
+    },
     /// A camera with a non-finite field, a zero direction, or planes out of order.
     #[error(
         "invalid camera {camera:?}: needs finite values, a non-zero direction, 0 < fov < pi and 0 < near < far"

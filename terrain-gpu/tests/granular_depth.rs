@@ -5,7 +5,7 @@ use glam::{Affine3A, IVec2, Quat, UVec2, Vec3};
 use terrain_core::granular::{GranularObject, NO_OBJECT, TriMesh, depth_from_below_into};
 use terrain_core::{Grid, HeightEncoding, Rect};
 use terrain_gpu::GpuContext;
-use terrain_gpu::granular::depth::DepthFromBelowPass;
+use terrain_gpu::granular::{DepthArea, DepthFromBelowPass};
 use terrain_gpu::testing::context_or_skip;
 
 /// Largest height difference, in units, between GPU and CPU on columns covered by both whose
@@ -35,13 +35,18 @@ impl Agreement {
 
 fn gpu_depth(
     ctx: &GpuContext,
-    pass: &DepthFromBelowPass,
+    pass: &mut DepthFromBelowPass,
     objects: &[GranularObject<'_>],
     ts: f32,
     area: Rect,
 ) -> Grid<u32> {
     let grid = pass
-        .run(&ctx.device, &ctx.queue, objects, enc(), ts, area)
+        .run(
+            &ctx.device,
+            &ctx.queue,
+            objects,
+            &DepthArea::new(enc(), ts, area).unwrap(),
+        )
         .unwrap();
     ctx.check().unwrap();
     grid
@@ -141,7 +146,7 @@ fn compare_within(name: &str, gpu: &Grid<u32>, cpu: &Grid<u32>, share_bound: f64
 
 fn check(
     ctx: &GpuContext,
-    pass: &DepthFromBelowPass,
+    pass: &mut DepthFromBelowPass,
     name: &str,
     objects: &[GranularObject<'_>],
     ts: f32,
@@ -173,7 +178,7 @@ fn box_wheel_and_foot_match_the_cpu_rasterizer() {
     let Some(ctx) = context_or_skip("box_wheel_and_foot_match_the_cpu_rasterizer") else {
         return;
     };
-    let pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     let cuboid = TriMesh::cuboid(Vec3::new(0.5, 0.2, 0.3)).unwrap();
     let wheel = TriMesh::wheel(0.5, 0.2, 24).unwrap();
     let foot = TriMesh::foot(0.9, 0.35, 0.1).unwrap();
@@ -185,7 +190,7 @@ fn box_wheel_and_foot_match_the_cpu_rasterizer() {
         for (mesh_name, mesh) in [("box", &cuboid), ("wheel", &wheel), ("foot", &foot)] {
             let a = check(
                 &ctx,
-                &pass,
+                &mut pass,
                 &format!("{mesh_name} #{k}"),
                 &[GranularObject::new(mesh, at)],
                 ts,
@@ -207,13 +212,13 @@ fn flat_box_bottom_is_one_height() {
     let Some(ctx) = context_or_skip("flat_box_bottom_is_one_height") else {
         return;
     };
-    let pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     let cuboid = TriMesh::cuboid(Vec3::new(0.4, 0.2, 0.25)).unwrap();
     let at =
         Affine3A::from_rotation_translation(Quat::from_rotation_y(0.4), Vec3::new(1.0, 0.7, 1.1));
     let area = Rect::new(IVec2::ZERO, UVec2::new(64, 64));
     let objects = [GranularObject::new(&cuboid, at)];
-    let gpu = gpu_depth(&ctx, &pass, &objects, 0.04, area);
+    let gpu = gpu_depth(&ctx, &mut pass, &objects, 0.04, area);
     let cpu = cpu_depth(&objects, 0.04, area);
     let expected = cpu
         .as_slice()
@@ -234,14 +239,14 @@ fn texel_aligned_box_matches_exactly() {
     let Some(ctx) = context_or_skip("texel_aligned_box_matches_exactly") else {
         return;
     };
-    let pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     // Corners on sample points (texel size a power of two): the half-open footprint [a, b) of
     // the CPU's top-left rule must come out identical if pixel centres are aligned.
     let cuboid = TriMesh::cuboid(Vec3::new(1.0, 0.25, 0.75)).unwrap();
     let at = Affine3A::from_translation(Vec3::new(3.0, 1.0, 2.5));
     let area = Rect::new(IVec2::new(2, 1), UVec2::new(24, 20));
     let objects = [GranularObject::new(&cuboid, at)];
-    let gpu = gpu_depth(&ctx, &pass, &objects, 0.25, area);
+    let gpu = gpu_depth(&ctx, &mut pass, &objects, 0.25, area);
     let cpu = cpu_depth(&objects, 0.25, area);
     assert_eq!(gpu, cpu);
     // Box from x = 2 .. 4 m, z = 1.75 .. 3.25 m: columns 8..16, 7..13.
@@ -259,7 +264,7 @@ fn overlapping_objects_keep_the_lowest_surface() {
     let Some(ctx) = context_or_skip("overlapping_objects_keep_the_lowest_surface") else {
         return;
     };
-    let pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     let cuboid = TriMesh::cuboid(Vec3::new(0.6, 0.1, 0.6)).unwrap();
     let wheel = TriMesh::wheel(0.4, 0.15, 32).unwrap();
     let objects = [
@@ -276,7 +281,7 @@ fn overlapping_objects_keep_the_lowest_surface() {
         ),
     ];
     let area = Rect::new(IVec2::ZERO, UVec2::new(80, 80));
-    check(&ctx, &pass, "box + wheel", &objects, 0.03, area);
+    check(&ctx, &mut pass, "box + wheel", &objects, 0.03, area);
 }
 
 #[test]
@@ -284,7 +289,7 @@ fn objects_partly_or_wholly_outside_the_area() {
     let Some(ctx) = context_or_skip("objects_partly_or_wholly_outside_the_area") else {
         return;
     };
-    let pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     let wheel = TriMesh::wheel(0.5, 0.2, 24).unwrap();
     let area = Rect::new(IVec2::new(20, 30), UVec2::new(40, 30));
     let ts = 0.05;
@@ -301,7 +306,7 @@ fn objects_partly_or_wholly_outside_the_area() {
         );
         let a = check(
             &ctx,
-            &pass,
+            &mut pass,
             &format!("wheel at corner {k}"),
             &[GranularObject::new(&wheel, at)],
             ts,
@@ -310,7 +315,13 @@ fn objects_partly_or_wholly_outside_the_area() {
         assert!(a.footprint > 20 && a.footprint < 40 * 30);
     }
     let far = Affine3A::from_translation(Vec3::new(-5.0, 0.6, 40.0));
-    let gpu = gpu_depth(&ctx, &pass, &[GranularObject::new(&wheel, far)], ts, area);
+    let gpu = gpu_depth(
+        &ctx,
+        &mut pass,
+        &[GranularObject::new(&wheel, far)],
+        ts,
+        area,
+    );
     assert!(gpu.as_slice().iter().all(|&v| v == NO_OBJECT));
 }
 
@@ -319,7 +330,7 @@ fn empty_object_list_gives_no_object_everywhere() {
     let Some(ctx) = context_or_skip("empty_object_list_gives_no_object_everywhere") else {
         return;
     };
-    let pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     let area = Rect::new(IVec2::new(3, 4), UVec2::new(17, 9));
     // A buffer holding an earlier result is overwritten.
     let out = DepthFromBelowPass::create_output(&ctx.device, area).unwrap();
@@ -330,9 +341,11 @@ fn empty_object_list_gives_no_object_everywhere() {
     )];
     for objects in [&big[..], &[][..]] {
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        pass.encode(&ctx.device, &mut encoder, objects, enc(), 0.1, area, &out)
+        let view = DepthArea::new(enc(), 0.1, area).unwrap();
+        pass.encode(&ctx.device, &ctx.queue, &mut encoder, objects, &view, &out)
             .unwrap();
         ctx.queue.submit([encoder.finish()]);
+        pass.recall();
     }
     let grid = DepthFromBelowPass::read(&ctx.device, &ctx.queue, &out, area).unwrap();
     ctx.check().unwrap();
@@ -345,7 +358,7 @@ fn heights_clamp_like_the_cpu() {
     let Some(ctx) = context_or_skip("heights_clamp_like_the_cpu") else {
         return;
     };
-    let pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     let area = Rect::new(IVec2::ZERO, UVec2::new(32, 32));
     let cuboid = TriMesh::cuboid(Vec3::new(0.5, 0.3, 0.5)).unwrap();
     // Below the encoding's zero: 0; above u32 units (1e6 m * 1e4): NO_OBJECT - 1.
@@ -353,7 +366,7 @@ fn heights_clamp_like_the_cpu() {
         // Off the sample grid: edges exactly on sample points are the f32 snapping case.
         let at = Affine3A::from_translation(Vec3::new(1.613, y, 1.587));
         let objects = [GranularObject::new(&cuboid, at)];
-        let gpu = gpu_depth(&ctx, &pass, &objects, 0.1, area);
+        let gpu = gpu_depth(&ctx, &mut pass, &objects, 0.1, area);
         let cpu = cpu_depth(&objects, 0.1, area);
         assert_eq!(gpu, cpu);
         assert!(cpu.as_slice().contains(&expected));
@@ -365,7 +378,7 @@ fn heights_clamp_like_the_cpu() {
     );
     check(
         &ctx,
-        &pass,
+        &mut pass,
         "box across zero",
         &[GranularObject::new(&cuboid, at)],
         0.1,
@@ -378,7 +391,7 @@ fn areas_wider_than_a_tile_are_rendered_in_tiles() {
     let Some(ctx) = context_or_skip("areas_wider_than_a_tile_are_rendered_in_tiles") else {
         return;
     };
-    let pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     let side = terrain_gpu::granular::depth::MAX_TILE_SIDE
         .min(ctx.device.limits().max_texture_dimension_2d);
     let area = Rect::new(IVec2::new(-3, 0), UVec2::new(side + 37, 6));
@@ -391,7 +404,7 @@ fn areas_wider_than_a_tile_are_rendered_in_tiles() {
     );
     let a = check(
         &ctx,
-        &pass,
+        &mut pass,
         "box across the tile seam",
         &[GranularObject::new(&cuboid, at)],
         ts,
@@ -405,7 +418,7 @@ fn bad_inputs_are_errors() {
     let Some(ctx) = context_or_skip("bad_inputs_are_errors") else {
         return;
     };
-    let pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     let device = &ctx.device;
     let area = Rect::new(IVec2::ZERO, UVec2::new(8, 8));
     let cuboid = TriMesh::cuboid(Vec3::splat(0.2)).unwrap();
@@ -415,45 +428,45 @@ fn bad_inputs_are_errors() {
     assert!(bad[0].validate().is_err());
     let mut cpu = Grid::new(8, 8, 0).unwrap();
     assert!(depth_from_below_into(&bad, enc(), 0.1, area, &mut cpu).is_err());
-    assert!(
-        pass.run(device, &ctx.queue, &bad, enc(), 0.1, area)
-            .is_err()
-    );
+    let view = DepthArea::new(enc(), 0.1, area).unwrap();
+    assert!(pass.run(device, &ctx.queue, &bad, &view).is_err());
     let far = Affine3A::from_translation(Vec3::new(2.0e6, 0.0, 0.0));
     assert!(
         pass.run(
             device,
             &ctx.queue,
             &[GranularObject::new(&cuboid, far)],
-            enc(),
-            0.1,
-            area
+            &view
         )
         .is_err()
     );
 
+    // Bad texel sizes, encodings and empty areas cannot make a `DepthArea`.
     for ts in [0.0, -1.0, f32::NAN, f32::INFINITY] {
-        assert!(pass.run(device, &ctx.queue, &[], enc(), ts, area).is_err());
+        assert!(DepthArea::new(enc(), ts, area).is_err());
     }
     let mut bad_enc = enc();
     bad_enc.scale = 0.0;
-    assert!(
-        pass.run(device, &ctx.queue, &[], bad_enc, 0.1, area)
-            .is_err()
-    );
+    assert!(DepthArea::new(bad_enc, 0.1, area).is_err());
     let empty = Rect::new(IVec2::ZERO, UVec2::new(0, 8));
-    assert!(
-        pass.run(device, &ctx.queue, &[], enc(), 0.1, empty)
-            .is_err()
-    );
+    assert!(DepthArea::new(enc(), 0.1, empty).is_err());
     assert!(DepthFromBelowPass::create_output(device, empty).is_err());
 
     let small =
         DepthFromBelowPass::create_output(device, Rect::from_size(UVec2::new(4, 4))).unwrap();
     let mut encoder = device.create_command_encoder(&Default::default());
     assert!(
-        pass.encode(device, &mut encoder, &[], enc(), 0.1, area, &small)
+        pass.encode(device, &ctx.queue, &mut encoder, &[], &view, &small)
             .is_err()
+    );
+    pass.recall();
+    // The pass still works after the refusals.
+    assert!(
+        pass.run(device, &ctx.queue, &[], &view)
+            .unwrap()
+            .as_slice()
+            .iter()
+            .all(|&v| v == NO_OBJECT)
     );
     ctx.check().unwrap();
 }
@@ -464,7 +477,7 @@ fn edges_a_hair_off_sample_points_differ_only_at_the_edge() {
     else {
         return;
     };
-    let pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     // 0.6 / 0.03 in f32 inputs is 20.000001 texels: the CPU leaves column 20 out, the GPU
     // (f32 position snapped to 1/256 texel) takes it in. A whole edge row or column of the
     // footprint may flip, never an interior column (`compare` asserts that).
@@ -474,7 +487,7 @@ fn edges_a_hair_off_sample_points_differ_only_at_the_edge() {
         Affine3A::from_translation(Vec3::new(1.2, 0.75, 1.2)),
     )];
     let area = Rect::new(IVec2::ZERO, UVec2::new(64, 64));
-    let gpu = gpu_depth(&ctx, &pass, &objects, 0.03, area);
+    let gpu = gpu_depth(&ctx, &mut pass, &objects, 0.03, area);
     let cpu = cpu_depth(&objects, 0.03, area);
     let a = compare_within("box with edges on sample points", &gpu, &cpu, 0.15);
     // At most the four edge lines of a 40 x 40 footprint.

@@ -1,15 +1,16 @@
 //! GPU-vs-CPU tests of the granular deformation passes: penetration, jump flooding,
-//! displacement and slope evening bit for bit, normals within a tolerance, and the chained step.
+//! displacement and slope evening bit for bit, normals within a tolerance, the volume sum
+//! exactly.
 
 use glam::{IVec2, UVec2, Vec3};
 use terrain_core::granular::*;
 use terrain_core::{FixedPointMap, Grid, Rect};
-use terrain_gpu::GpuContext;
 use terrain_gpu::granular::{
-    DisplacePass, GpuGranularMap, GranularNormalsPass, GranularScratch, JumpFloodPass,
-    PenetrationPass, SlopePass,
+    DisplacePass, FloodedArea, GpuGranularNormals, GranularArea, GranularNormalsPass,
+    GranularScratch, JumpFloodPass, PenetrationPass, SlopePass, SlopeSettings, VolumePass,
 };
 use terrain_gpu::testing::context_or_skip;
+use terrain_gpu::{GpuContext, GpuError, GpuHeightMap};
 
 const UNITS: u32 = 10_000;
 
@@ -98,36 +99,50 @@ const AREAS: [(u32, u32, i32, i32, u32, u32); 3] = [
     (100, 90, 30, 12, 37, 70),
 ];
 
-/// Uploads the fixture and records penetration + JFA; returns (gpu map, scratch, seeds index).
-fn gpu_front(
+/// The fixture's map on the GPU and scratch buffers for its area.
+fn upload(ctx: &GpuContext, f: &Fixture) -> (GpuHeightMap<u32>, GranularScratch) {
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let gmap = GpuHeightMap::from_map(device, queue, &f.map).expect("upload");
+    let scratch = GranularScratch::new(device, f.area.area()).expect("scratch");
+    (gmap, scratch)
+}
+
+/// Records the depth upload, penetration and JFA of the fixture's area and submits them;
+/// returns the flooded area.
+fn gpu_front<'a>(
     ctx: &GpuContext,
     f: &Fixture,
+    area: &GranularArea<'a>,
     metric: DistanceMetric,
     extra: bool,
-) -> (GpuGranularMap, GranularScratch, usize) {
+) -> FloodedArea<'a> {
     let (device, queue) = (&ctx.device, &ctx.queue);
-    let gmap = GpuGranularMap::from_map(device, queue, &f.map).expect("upload");
-    let scratch = GranularScratch::new(device, f.area.area()).expect("scratch");
-    let pen_pass = PenetrationPass::new(device).expect("pen pass");
-    let jfa = JumpFloodPass::new(device).expect("jfa");
-    let depth = PenetrationPass::upload_depth(device, &f.depth);
+    let mut pen_pass = PenetrationPass::new(device).expect("pen pass");
+    let mut jfa = JumpFloodPass::new(device).expect("jfa");
     let mut enc = device.create_command_encoder(&Default::default());
     pen_pass
-        .encode(device, &mut enc, &gmap, &depth, f.area, 5000, &scratch)
+        .upload_depth(device, queue, &mut enc, area, &f.depth)
+        .expect("upload depth");
+    pen_pass
+        .encode(device, queue, &mut enc, area, 5000)
         .expect("encode pen");
-    let idx = jfa
-        .encode(
-            device,
-            &mut enc,
-            gmap.size(),
-            f.area,
-            metric,
-            extra,
-            &scratch,
-        )
+    let flooded = jfa
+        .encode(device, queue, &mut enc, area, metric, extra)
         .expect("encode jfa");
     queue.submit([enc.finish()]);
-    (gmap, scratch, idx)
+    pen_pass.recall();
+    jfa.recall();
+    flooded
+}
+
+/// The fixture's area over `gmap` and `scratch`.
+fn area_of<'a>(
+    ctx: &GpuContext,
+    f: &Fixture,
+    gmap: &'a GpuHeightMap<u32>,
+    scratch: &'a GranularScratch,
+) -> GranularArea<'a> {
+    GranularArea::new(&ctx.device, gmap, f.area, scratch).expect("area")
 }
 
 #[test]
@@ -140,7 +155,14 @@ fn penetration_matches_cpu_bit_for_bit() {
             UVec2::new(mw, mh),
             Rect::new(IVec2::new(x, y), UVec2::new(w, h)),
         );
-        let (_, scratch, _) = gpu_front(&ctx, &f, DistanceMetric::Euclidean, true);
+        let (gmap, scratch) = upload(&ctx, &f);
+        gpu_front(
+            &ctx,
+            &f,
+            &area_of(&ctx, &f, &gmap, &scratch),
+            DistanceMetric::Euclidean,
+            true,
+        );
         let gpu = scratch
             .read_penetration(&ctx.device, &ctx.queue, f.area.area())
             .expect("read");
@@ -167,9 +189,12 @@ fn jump_flood_matches_cpu_bit_for_bit() {
                     UVec2::new(mw, mh),
                     Rect::new(IVec2::new(x, y), UVec2::new(w, h)),
                 );
-                let (_, scratch, idx) = gpu_front(&ctx, &f, metric, extra);
+                let (gmap, scratch) = upload(&ctx, &f);
+                let area = area_of(&ctx, &f, &gmap, &scratch);
+                let flooded = gpu_front(&ctx, &f, &area, metric, extra);
+                assert_eq!(flooded.metric(), metric);
                 let gpu = scratch
-                    .read_seeds(&ctx.device, &ctx.queue, idx, f.area.area())
+                    .read_seeds(&ctx.device, &ctx.queue, flooded.seed_grid(), f.area.area())
                     .expect("read");
                 ctx.check().expect("validation");
                 let cpu = jump_flood(&f.pen, f.area, metric, extra).expect("cpu");
@@ -184,18 +209,21 @@ fn run_displace(method: DisplacementMethod, keep: u32) {
         return;
     };
     let (device, queue) = (&ctx.device, &ctx.queue);
-    let pass = DisplacePass::new(device).expect("pass");
+    let mut pass = DisplacePass::new(device).expect("pass");
     for (mw, mh, x, y, w, h) in AREAS {
         let f = fixture(
             UVec2::new(mw, mh),
             Rect::new(IVec2::new(x, y), UVec2::new(w, h)),
         );
-        let (gmap, scratch, idx) = gpu_front(&ctx, &f, DistanceMetric::Euclidean, true);
+        let (gmap, scratch) = upload(&ctx, &f);
+        let area = area_of(&ctx, &f, &gmap, &scratch);
+        let flooded = gpu_front(&ctx, &f, &area, DistanceMetric::Euclidean, true);
         let mut enc = device.create_command_encoder(&Default::default());
         scratch.clear_removed(&mut enc);
-        pass.encode(device, &mut enc, &gmap, f.area, method, keep, idx, &scratch)
+        pass.encode(device, queue, &mut enc, &flooded, method, keep)
             .expect("encode");
         queue.submit([enc.finish()]);
+        pass.recall();
         let gpu = gmap.read(device, queue).expect("read");
         let removed = scratch.read_removed(device, queue).expect("removed");
         ctx.check().expect("validation");
@@ -237,23 +265,26 @@ fn displace_multiple_targets_matches_cpu_bit_for_bit() {
 /// seeds, for every `(keep, iterations)`, and asserts equal maps and removed amounts.
 fn check_iterative(
     ctx: &GpuContext,
-    pass: &DisplacePass,
+    pass: &mut DisplacePass,
     f: &Fixture,
     metric: DistanceMetric,
     runs: &[(u32, u32)],
 ) {
     let (device, queue) = (&ctx.device, &ctx.queue);
-    let (_, scratch, idx) = gpu_front(ctx, f, metric, true);
+    let (gmap, scratch) = upload(ctx, f);
+    let area = area_of(ctx, f, &gmap, &scratch);
+    let flooded = gpu_front(ctx, f, &area, metric, true);
     let seeds = jump_flood(&f.pen, f.area, metric, true).expect("jfa");
     for &(keep, iterations) in runs {
-        let gmap = GpuGranularMap::from_map(device, queue, &f.map).expect("upload");
+        // Every run starts from the fixture's map (the seeds stay in the scratch).
+        gmap.write(queue, &f.map).expect("upload");
         let mut enc = device.create_command_encoder(&Default::default());
         scratch.clear_removed(&mut enc);
-        pass.encode_iterative(
-            device, &mut enc, &gmap, f.area, keep, iterations, metric, idx, &scratch,
-        )
-        .expect("encode");
+        let method = DisplacementMethod::Iterative { iterations };
+        pass.encode(device, queue, &mut enc, &flooded, method, keep)
+            .expect("encode");
         queue.submit([enc.finish()]);
+        pass.recall();
         let gpu = gmap.read(device, queue).expect("read");
         let removed = scratch.read_removed(device, queue).expect("removed");
         ctx.check().expect("validation");
@@ -295,7 +326,7 @@ fn displace_iterative_matches_cpu_bit_for_bit() {
     let Some(ctx) = context_or_skip("displace_iterative_matches_cpu_bit_for_bit") else {
         return;
     };
-    let pass = DisplacePass::new(&ctx.device).expect("pass");
+    let mut pass = DisplacePass::new(&ctx.device).expect("pass");
     for metric in [
         DistanceMetric::Euclidean,
         DistanceMetric::Manhattan,
@@ -314,7 +345,7 @@ fn displace_iterative_matches_cpu_bit_for_bit() {
                 m
             };
             assert_ne!(moved(0), moved(10), "{metric:?}: the passes moved nothing");
-            check_iterative(&ctx, &pass, &f, metric, &ITERATIVE_RUNS);
+            check_iterative(&ctx, &mut pass, &f, metric, &ITERATIVE_RUNS);
         }
     }
 }
@@ -326,7 +357,7 @@ fn displace_iterative_without_seeds_matches_cpu() {
     let Some(ctx) = context_or_skip("displace_iterative_without_seeds_matches_cpu") else {
         return;
     };
-    let pass = DisplacePass::new(&ctx.device).expect("pass");
+    let mut pass = DisplacePass::new(&ctx.device).expect("pass");
     let map = bumpy_map(40, 30, 400);
     let area = Rect::new(IVec2::new(3, 2), UVec2::new(20, 17));
     let depth = Grid::from_fn(area.size.x, area.size.y, |i, j| {
@@ -348,35 +379,65 @@ fn displace_iterative_without_seeds_matches_cpu() {
     };
     check_iterative(
         &ctx,
-        &pass,
+        &mut pass,
         &f,
         DistanceMetric::Euclidean,
         &[(32768, 10), (12345, 3)],
     );
 }
 
+/// The iterative method carries its iteration count; a count over the bound is refused
+/// before anything is recorded, by the GPU pass as by the CPU step.
 #[test]
-fn displace_encode_refuses_iterative_without_its_settings() {
-    let Some(ctx) = context_or_skip("displace_encode_refuses_iterative_without_its_settings")
-    else {
+fn displace_refuses_too_many_iterations() {
+    let Some(ctx) = context_or_skip("displace_refuses_too_many_iterations") else {
         return;
     };
     let f = fixture(UVec2::new(64, 64), Rect::from_size(UVec2::new(64, 64)));
-    let (gmap, scratch, idx) = gpu_front(&ctx, &f, DistanceMetric::Euclidean, true);
-    let pass = DisplacePass::new(&ctx.device).expect("pass");
+    let (gmap, scratch) = upload(&ctx, &f);
+    let area = area_of(&ctx, &f, &gmap, &scratch);
+    let flooded = gpu_front(&ctx, &f, &area, DistanceMetric::Euclidean, true);
+    let mut pass = DisplacePass::new(&ctx.device).expect("pass");
     let mut enc = ctx.device.create_command_encoder(&Default::default());
-    let r = pass.encode(
-        &ctx.device,
-        &mut enc,
-        &gmap,
-        f.area,
-        DisplacementMethod::Iterative,
-        32768,
-        idx,
-        &scratch,
-    );
-    assert!(r.is_err());
+    let method = DisplacementMethod::Iterative {
+        iterations: MAX_ITERATIONS + 1,
+    };
+    let r = pass.encode(&ctx.device, &ctx.queue, &mut enc, &flooded, method, 32768);
+    assert!(matches!(
+        r,
+        Err(GpuError::Granular(GranularError::ParamOutOfRange { .. }))
+    ));
     ctx.check().expect("validation");
+}
+
+/// Areas that are empty, off the map or larger than the scratch are refused when the area is
+/// made, before any pass sees them.
+#[test]
+fn bad_areas_are_refused() {
+    let Some(ctx) = context_or_skip("bad_areas_are_refused") else {
+        return;
+    };
+    let f = fixture(UVec2::new(64, 64), Rect::from_size(UVec2::new(64, 64)));
+    let (gmap, _) = upload(&ctx, &f);
+    let small = GranularScratch::new(&ctx.device, 100).expect("scratch");
+    for rect in [
+        Rect::new(IVec2::new(3, 3), UVec2::new(0, 5)),
+        Rect::new(IVec2::new(60, 0), UVec2::new(8, 8)),
+        Rect::new(IVec2::new(-1, 0), UVec2::new(8, 8)),
+        Rect::new(IVec2::ZERO, UVec2::new(11, 10)),
+    ] {
+        assert!(
+            GranularArea::new(&ctx.device, &gmap, rect, &small).is_err(),
+            "{rect:?}"
+        );
+    }
+    GranularArea::new(
+        &ctx.device,
+        &gmap,
+        Rect::new(IVec2::ZERO, UVec2::new(10, 10)),
+        &small,
+    )
+    .expect("an area that fits");
 }
 
 fn run_slope(method: SlopeMethod) {
@@ -384,7 +445,7 @@ fn run_slope(method: SlopeMethod) {
         return;
     };
     let (device, queue) = (&ctx.device, &ctx.queue);
-    let pass = SlopePass::new(device).expect("pass");
+    let mut pass = SlopePass::new(device).expect("pass");
     for (mw, mh, x, y, w, h) in AREAS {
         // Steep noise so that many columns flow.
         let mut f = fixture(
@@ -393,14 +454,20 @@ fn run_slope(method: SlopeMethod) {
         );
         f.map = bumpy_map(mw, mh, 6000);
         penetration_texture(&f.map, &f.depth, f.area, 5000, &mut f.pen).expect("pen");
-        let (gmap, scratch, _) = gpu_front(&ctx, &f, DistanceMetric::Euclidean, true);
+        let (gmap, scratch) = upload(&ctx, &f);
+        let area = area_of(&ctx, &f, &gmap, &scratch);
+        gpu_front(&ctx, &f, &area, DistanceMetric::Euclidean, true);
         let thresholds = [300, 424];
+        let settings = SlopeSettings {
+            thresholds,
+            roughness_q15: 19661,
+            iterations: 5,
+        };
         let mut enc = device.create_command_encoder(&Default::default());
-        pass.encode(
-            device, &mut enc, &gmap, f.area, method, thresholds, 19661, 5, &scratch,
-        )
-        .expect("encode");
+        pass.encode(device, queue, &mut enc, &area, method, &settings)
+            .expect("encode");
         queue.submit([enc.finish()]);
+        pass.recall();
         let gpu = gmap.read(device, queue).expect("read");
         ctx.check().expect("validation");
         let mut cpu = f.map.clone();
@@ -441,21 +508,21 @@ fn normals_match_cpu_within_tolerance() {
     let (device, queue) = (&ctx.device, &ctx.queue);
     let map = bumpy_map(70, 60, 3000);
     let area = Rect::new(IVec2::new(0, 5), UVec2::new(50, 55));
-    let gmap = GpuGranularMap::from_map(device, queue, &map).expect("upload");
-    let pass = GranularNormalsPass::new(device).expect("pass");
-    let normals = GranularNormalsPass::normal_buffer(device, &gmap).expect("buf");
-    let scratch = GranularNormalsPass::normal_buffer(device, &gmap).expect("buf");
+    let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
+    let mut pass = GranularNormalsPass::new(device).expect("pass");
+    let normals = GpuGranularNormals::for_map(device, &gmap).expect("normals");
     for blur in [0u32, 1, 3] {
         let mut enc = device.create_command_encoder(&Default::default());
-        enc.clear_buffer(&normals, 0, None);
-        pass.encode(device, &mut enc, &gmap, &normals, &scratch, area, blur)
+        enc.clear_buffer(normals.buffer(), 0, None);
+        pass.encode(device, queue, &mut enc, &gmap, &normals, area)
             .expect("encode");
+        pass.encode_blur(device, queue, &mut enc, &normals, area, blur)
+            .expect("blur");
         queue.submit([enc.finish()]);
-        let bytes =
-            terrain_gpu::download::download_bytes(device, queue, &normals, 0, normals.size())
-                .expect("download");
+        pass.recall();
+        let grid = normals.read(device, queue).expect("download");
         ctx.check().expect("validation");
-        let gpu: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
+        let gpu: Vec<[f32; 4]> = grid.as_slice().iter().map(|v| v.to_array()).collect();
         let mut cpu = Grid::new(70, 60, Vec3::ZERO).expect("grid");
         symmetric_normals(&map, area, &mut cpu).expect("cpu");
         blur_normals(&mut cpu, area, blur).expect("blur");
@@ -488,4 +555,80 @@ fn fixture_areas_are_valid() {
         let r = Rect::new(IVec2::new(x, y), UVec2::new(w, h));
         assert!(Rect::from_size(UVec2::new(mw, mh)).contains_rect(&r));
     }
+}
+
+/// Random heights over the whole u32 range, with runs near `u32::MAX`.
+fn random_heights(w: u32, h: u32, seed: u32) -> FixedPointMap {
+    let grid = Grid::from_fn(w, h, |x, y| {
+        let r = pcg_hash(pcg_hash(x + seed) ^ (y.wrapping_mul(0x9e37_79b9)));
+        match r % 4 {
+            0 => u32::MAX - (r >> 8) % 1000,
+            1 => r,
+            2 => r % 10_000,
+            _ => u32::MAX,
+        }
+    })
+    .expect("grid");
+    FixedPointMap::fixed_point(grid, UNITS, 0.05).expect("map")
+}
+
+/// The GPU sum equals the u64 sum on the CPU and the sum of the whole map downloaded, on
+/// random maps with values near `u32::MAX` and sizes that are not multiples of the workgroup
+/// (including one that needs several rounds per invocation).
+#[test]
+fn volume_sum_is_exact() {
+    let Some(ctx) = context_or_skip("volume_sum_is_exact") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut volume = VolumePass::new(device).expect("pass");
+    let sizes = [
+        (1, 1),
+        (7, 3),
+        (255, 1),
+        (16, 16),
+        (257, 3),
+        (100, 91),
+        (513, 511),
+        (1100, 1003),
+    ];
+    for (k, (w, h)) in sizes.into_iter().enumerate() {
+        let map = random_heights(w, h, k as u32);
+        let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
+        let gpu = volume.sum(device, queue, &gmap).expect("sum");
+        ctx.check().expect("validation");
+        let cpu: u64 = map.grid().as_slice().iter().map(|&v| u64::from(v)).sum();
+        assert_eq!(gpu, cpu, "{w} x {h}");
+        assert_eq!(map.raw_sum(), cpu);
+        // The whole-map download agrees (the check this pass replaces).
+        let downloaded = gmap.read(device, queue).expect("read").raw_sum();
+        assert_eq!(gpu, downloaded, "{w} x {h}");
+    }
+    // Every value u32::MAX: the high word carries on every add.
+    let full =
+        FixedPointMap::fixed_point(Grid::new(2048, 1031, u32::MAX).expect("grid"), UNITS, 0.05)
+            .expect("map");
+    let gmap = GpuHeightMap::from_map(device, queue, &full).expect("upload");
+    assert_eq!(
+        volume.sum(device, queue, &gmap).expect("sum"),
+        2048 * 1031 * u64::from(u32::MAX)
+    );
+    // Several sums recorded into one encoder before one read: the last one is read.
+    let zeros = GpuHeightMap::from_map(
+        device,
+        queue,
+        &FixedPointMap::fixed_point(Grid::new(9, 9, 0).expect("grid"), UNITS, 0.05).expect("map"),
+    )
+    .expect("upload");
+    let mut enc = device.create_command_encoder(&Default::default());
+    volume
+        .encode(device, queue, &mut enc, &gmap)
+        .expect("encode");
+    volume
+        .encode(device, queue, &mut enc, &zeros)
+        .expect("encode");
+    queue.submit([enc.finish()]);
+    volume.recall();
+    assert_eq!(volume.read(device).expect("read"), 0);
+    ctx.check().expect("validation");
 }

@@ -1,10 +1,12 @@
 //! The chained GPU granular step: volume conservation over 500 frames with three moving
-//! objects, and equality with the CPU `GranularSim` step by step.
+//! objects (checked every frame by the GPU sum), equality with the CPU `GranularSim` step by
+//! step, and no GPU objects made per frame once the step has run.
 
 use glam::{Affine3A, Quat, Vec3};
 use terrain_core::granular::*;
 use terrain_core::{FixedPointMap, Grid};
-use terrain_gpu::granular::{DepthSource, GpuGranularMap, GpuGranularStep};
+use terrain_gpu::GpuHeightMap;
+use terrain_gpu::granular::{DepthSource, GpuGranularStep, VolumePass};
 use terrain_gpu::testing::context_or_skip;
 
 const UNITS: u32 = 10_000;
@@ -72,8 +74,8 @@ const METHODS: [(DisplacementMethod, SlopeMethod); 6] = [
         DisplacementMethod::MultipleTargets,
         SlopeMethod::Interleaved,
     ),
-    (DisplacementMethod::Iterative, SlopeMethod::Scatter),
-    (DisplacementMethod::Iterative, SlopeMethod::Interleaved),
+    (DisplacementMethod::iterative(), SlopeMethod::Scatter),
+    (DisplacementMethod::iterative(), SlopeMethod::Interleaved),
 ];
 
 /// The method pair of `frame` of `frames`: each pair for an equal run of frames.
@@ -90,8 +92,10 @@ fn gpu_volume_constant_over_500_frames_three_objects() {
     let m = meshes();
     let map = bumpy_map(96, 0.05);
     let v0 = map.raw_sum();
-    let gmap = GpuGranularMap::from_map(device, queue, &map).expect("upload");
+    let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
     let mut step = GpuGranularStep::new(device, params()).expect("step");
+    let mut volume = VolumePass::new(device).expect("volume");
+    assert_eq!(volume.sum(device, queue, &gmap).expect("sum"), v0);
     let t0 = std::time::Instant::now();
     for frame in 0..500u32 {
         let (d, s) = methods_at(frame, 500);
@@ -101,7 +105,7 @@ fn gpu_volume_constant_over_500_frames_three_objects() {
         let r = step.step(device, queue, &gmap, &objs).expect("step");
         assert_eq!(r.removed, 0, "frame {frame}");
         assert_eq!(
-            gmap.raw_sum(device, queue).expect("sum"),
+            volume.sum(device, queue, &gmap).expect("sum"),
             v0,
             "frame {frame}"
         );
@@ -125,13 +129,14 @@ fn gpu_step_matches_cpu_sim_bit_for_bit() {
         compression: 0.3,
         ..params()
     };
-    let gmap = GpuGranularMap::from_map(device, queue, &map).expect("upload");
+    let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
     let mut step = GpuGranularStep::new(device, p).expect("step");
     // The CPU rasterizer's depth, so the whole step can be compared bit for bit (the GPU
     // depth pass is compared with it on its own in granular_depth.rs).
     step.depth_source = DepthSource::Cpu;
     let mut sim = GranularSim::new(map, p).expect("sim");
     let mut removed = [0u64; METHODS.len()];
+    let mut several_areas = 0;
     for frame in 0..80u32 {
         let (d, s) = methods_at(frame, 80);
         step.displacement = d;
@@ -143,6 +148,7 @@ fn gpu_step_matches_cpu_sim_bit_for_bit() {
         let c = sim.step(&objs).expect("cpu step");
         assert_eq!(g.active_areas, c.active_areas, "frame {frame}");
         assert_eq!(g.removed, c.removed, "frame {frame}");
+        several_areas += u32::from(g.active_areas.len() > 1);
         removed[frame as usize * METHODS.len() / 80] += g.removed;
         let gpu = gmap.read(device, queue).expect("read");
         assert!(
@@ -151,9 +157,108 @@ fn gpu_step_matches_cpu_sim_bit_for_bit() {
         );
     }
     ctx.check().expect("validation");
+    // Some frames recorded several areas into one encoder (their depth uploads and uniforms
+    // must not overwrite each other).
+    assert!(several_areas > 0, "every frame had a single active area");
     // Every method pair ran with penetrating objects.
     assert!(
         removed.iter().all(|&r| r > 0),
         "compression removed nothing under some methods: {removed:?}"
     );
+}
+
+/// The GPU objects alive on the device (wgpu's `counters` feature).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct LiveObjects {
+    buffers: isize,
+    textures: isize,
+    texture_views: isize,
+    bind_groups: isize,
+    bind_group_layouts: isize,
+    shader_modules: isize,
+    pipelines: isize,
+}
+
+fn live_objects(device: &wgpu::Device) -> LiveObjects {
+    let hal = device.get_internal_counters().hal;
+    LiveObjects {
+        buffers: hal.buffers.read(),
+        textures: hal.textures.read(),
+        texture_views: hal.texture_views.read(),
+        bind_groups: hal.bind_groups.read(),
+        bind_group_layouts: hal.bind_group_layouts.read(),
+        shader_modules: hal.shader_modules.read(),
+        pipelines: hal.render_pipelines.read() + hal.compute_pipelines.read(),
+    }
+}
+
+/// Once a step has run with a set of areas, recording further steps (both depth sources, every
+/// method pair, several areas per encoder) and volume sums makes no buffer, texture, view, bind
+/// group, layout, shader module or pipeline: they only write uniforms and record commands.
+#[test]
+fn steady_state_steps_make_no_gpu_objects() {
+    let Some(ctx) = context_or_skip("steady_state_steps_make_no_gpu_objects") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let m = meshes();
+    let map = bumpy_map(96, 0.05);
+    let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
+    let mut step = GpuGranularStep::new(device, params()).expect("step");
+    let mut volume = VolumePass::new(device).expect("volume");
+    // Objects apart, so each frame has several areas; the same placements every frame.
+    let objs = objects_at(&m, 140, 96.0 * 0.05);
+    let frame =
+        |step: &mut GpuGranularStep, volume: &mut VolumePass, check: Option<LiveObjects>| {
+            let mut encoder = device.create_command_encoder(&Default::default());
+            let areas = step
+                .encode(device, queue, &mut encoder, &gmap, &objs)
+                .expect("encode");
+            volume
+                .encode(device, queue, &mut encoder, &gmap)
+                .expect("volume");
+            if let Some(before) = check {
+                // Anything made while recording is still held by the unsubmitted encoder here.
+                // Every `queue.write_buffer` stages through a buffer of wgpu's own until the submit
+                // that carries it is done: an empty submit carries them (before the encoder's
+                // commands, as a submit of the encoder would) and the poll frees them.
+                queue.submit([]);
+                device
+                    .poll(wgpu::PollType::wait_indefinitely())
+                    .expect("poll");
+                assert_eq!(live_objects(device), before, "while recording");
+            }
+            queue.submit([encoder.finish()]);
+            step.recall();
+            volume.recall();
+            volume.read(device).expect("read");
+            areas.len()
+        };
+    let settings: Vec<_> = [DepthSource::Gpu, DepthSource::Cpu]
+        .into_iter()
+        .flat_map(|d| METHODS.map(|m| (d, m)))
+        .collect();
+    let mut areas = 0;
+    for &(source, (d, s)) in &settings {
+        (step.depth_source, step.displacement, step.slope) = (source, d, s);
+        areas = areas.max(frame(&mut step, &mut volume, None));
+    }
+    assert!(areas > 1, "the objects should be in separate areas");
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
+    let before = live_objects(device);
+    assert!(
+        before.buffers > 0 && before.pipelines > 0,
+        "wgpu's counters are off: {before:?}"
+    );
+    for &(source, (d, s)) in &settings {
+        (step.depth_source, step.displacement, step.slope) = (source, d, s);
+        frame(&mut step, &mut volume, Some(before));
+    }
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
+    assert_eq!(live_objects(device), before, "after the frames");
+    ctx.check().expect("validation");
 }

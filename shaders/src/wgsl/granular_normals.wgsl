@@ -14,10 +14,12 @@ struct NormalParams {
     scale: f32,
 }
 
+// `main` binds all three buffers; `blur` and `copy_back` only the first two (their pipelines
+// have a layout without the heights), so a blur needs no map.
 @group(0) @binding(0) var<uniform> p: NormalParams;
-@group(0) @binding(1) var<storage, read> heights: array<u32>;
-@group(0) @binding(2) var<storage, read_write> normals: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read_write> scratch: array<vec4<f32>>;
+@group(0) @binding(1) var<storage, read_write> normals: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> scratch: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> heights: array<u32>;
 
 fn h(x: i32, y: i32) -> u32 {
     let cx = u32(clamp(x, 0, i32(p.map_size.x) - 1));

@@ -15,16 +15,43 @@ pub enum DistanceMetric {
     Chebyshev,
 }
 
-/// How intersected material reaches the contour (seed 001 sec 4.1.4).
+/// How intersected material reaches the contour (seed 001 sec 4.1.4). A method carries the
+/// settings only it uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum DisplacementMethod {
     /// Method 1: iterative transfer to neighbours closer to a seed, remainders kept (listing 4.2).
-    Iterative,
+    Iterative {
+        /// `numIterationsDisplaceMaterialToContour` (table 4.4; 10 in table 5.3, see
+        /// [`DisplacementMethod::iterative`]): gather passes before the carried material is
+        /// flushed to the seeds. At most [`MAX_ITERATIONS`].
+        iterations: u32,
+    },
     /// Method 2: everything to the closest seed with atomic adds (listing 4.4).
     #[default]
     ClosestSeed,
     /// Method 3: split over several targets marching away from the object (listing 4.5).
     MultipleTargets,
+}
+
+impl DisplacementMethod {
+    /// The iterative method with the 10 passes of seed 001 table 5.3.
+    pub const fn iterative() -> Self {
+        Self::Iterative { iterations: 10 }
+    }
+
+    /// Checks the method's settings: at most [`MAX_ITERATIONS`] iterative passes.
+    pub fn validate(&self) -> Result<(), GranularError> {
+        match *self {
+            Self::Iterative { iterations } => check_range(
+                "numIterationsDisplaceMaterialToContour",
+                f64::from(iterations),
+                0.0,
+                f64::from(MAX_ITERATIONS),
+                "0..=1024",
+            ),
+            Self::ClosestSeed | Self::MultipleTargets => Ok(()),
+        }
+    }
 }
 
 /// How steep slopes are evened out (seed 001 sec 4.1.5).
@@ -40,7 +67,9 @@ pub enum SlopeMethod {
 
 /// Parameters of granular deformation. Names follow seed 001 table 4.4 (sec 4.2);
 /// `terrainSize`, `numVerticesPerRow` and `heightmapSize` belong to the map
-/// ([`crate::FixedPointMap`] size and texel size) and the renderer, not here.
+/// ([`crate::FixedPointMap`] size and texel size) and the renderer, not here;
+/// `numIterationsDisplaceMaterialToContour` belongs to the method that uses it
+/// ([`DisplacementMethod::Iterative`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GranularParams {
     /// `compression` in `[0, 1]` (table 4.4, sec 4.1.4): share of intersected material that is
@@ -55,9 +84,6 @@ pub struct GranularParams {
     /// `d` of eq. 4.1 (artistic, `> 0`). Default 0.2, so the threshold of 3.1 is an angle of
     /// 0.62 rad (35.5 degrees, about the angle of repose of snow).
     pub slope_d: f32,
-    /// `numIterationsDisplaceMaterialToContour` (table 4.4; default 10 from table 5.3): passes
-    /// of the iterative displacement method.
-    pub num_iterations_displace_material_to_contour: u32,
     /// `numIterations-EvenOutSlopes` (table 4.4; default 10 from table 5.3).
     pub num_iterations_even_out_slopes: u32,
     /// `numIterations-BlurNormals` (table 4.4; default 1 from table 5.3).
@@ -83,7 +109,6 @@ impl Default for GranularParams {
             roughness: 0.6,
             slope_threshold: 3.1,
             slope_d: 0.2,
-            num_iterations_displace_material_to_contour: 10,
             num_iterations_even_out_slopes: 10,
             num_iterations_blur_normals: 1,
             obstacle_margin_m: 0.5,
@@ -172,13 +197,6 @@ impl GranularParams {
             "[0, 1e4] m",
         )?;
         let iters = f64::from(MAX_ITERATIONS);
-        check_range(
-            "numIterationsDisplaceMaterialToContour",
-            f64::from(self.num_iterations_displace_material_to_contour),
-            0.0,
-            iters,
-            "0..=1024",
-        )?;
         check_range(
             "numIterationsEvenOutSlopes",
             f64::from(self.num_iterations_even_out_slopes),

@@ -152,7 +152,10 @@ impl GranularSim {
 
     /// One step: per merged active area, depth from below -> penetration -> jump flooding ->
     /// displacement -> slope evening. Objects are checked first; on error the map is untouched.
+    /// Fails with [`GranularError::ParamOutOfRange`] when the displacement method's settings
+    /// are out of range ([`DisplacementMethod::validate`]).
     pub fn step(&mut self, objects: &[GranularObject<'_>]) -> Result<StepReport, GranularError> {
+        self.displacement.validate()?;
         let areas = self.active_areas(objects)?;
         let p = self.params;
         let units = self.units_per_metre();
@@ -183,13 +186,13 @@ impl GranularSim {
             }
             let seeds = jump_flood(&pen, rect, p.metric, p.jfa_extra_pass)?;
             removed += match self.displacement {
-                DisplacementMethod::Iterative => displace_iterative(
+                DisplacementMethod::Iterative { iterations } => displace_iterative(
                     &mut self.map,
                     &pen,
                     &seeds,
                     rect,
                     keep,
-                    p.num_iterations_displace_material_to_contour,
+                    iterations,
                     p.metric,
                 )?,
                 DisplacementMethod::ClosestSeed => {

@@ -40,17 +40,26 @@
 //! `floor((y - offset) / scale)` clamped to `0 ..= NO_OBJECT - 1`.
 //!
 //! Areas larger than the device's largest texture (or 4096 texels) are rendered in tiles.
+//!
+//! # Resources
+//!
+//! The pipeline, its bind group layout and a uniform ring (one slot per tile) are made in
+//! [`DepthFromBelowPass::new`]. The tile target, the buffer of [`NO_OBJECT`]s the output is
+//! cleared from and the vertex buffer persist in the pass and are replaced only by larger ones
+//! when an area or an object list needs more; triangles are written with `queue.write_buffer`
+//! at the next free offset of the vertex buffer, so several areas can be recorded into one
+//! encoder. Call [`DepthFromBelowPass::recall`] after the submit that carries them.
 
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
-use terrain_core::granular::{GranularError, GranularObject, NO_OBJECT};
-use terrain_core::{CoreError, Grid, HeightEncoding, Rect};
-use wgpu::util::DeviceExt;
+use terrain_core::granular::{GranularObject, NO_OBJECT};
+use terrain_core::{CoreError, Grid, HeightEncoding, HeightSample, Rect};
 
-use crate::compute::bind_buffers;
+use super::upload::UploadRing;
+use crate::compute::{PassBindings, StorageBinding, shader_module};
 use crate::download::download_bytes;
 use crate::error::GpuError;
-use crate::maps::map_buffer;
+use crate::maps::{GpuHeightMap, map_buffer};
 use crate::scope::scoped;
 
 /// Largest tile side rendered in one render pass (further limited by the device's
@@ -83,12 +92,72 @@ struct TileParams {
 const _: () = assert!(std::mem::size_of::<TileParams>() == 32);
 const _: () = assert!(std::mem::size_of::<DepthVertex>() == 16);
 
+/// What a depth-from-below render looks at: a non-empty area (in map columns) and the map's
+/// height encoding and texel size (positive and finite), checked when made. The arguments of
+/// [`terrain_core::granular::depth_from_below_into`] besides the objects and the output.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DepthArea {
+    encoding: HeightEncoding,
+    texel_size: f32,
+    rect: Rect,
+}
+
+impl DepthArea {
+    /// Checks the encoding, the texel size and the area.
+    pub fn new(encoding: HeightEncoding, texel_size: f32, rect: Rect) -> Result<Self, GpuError> {
+        check_params(encoding, texel_size)?;
+        if rect.is_empty() {
+            return Err(CoreError::EmptyGrid {
+                width: rect.size.x,
+                height: rect.size.y,
+            }
+            .into());
+        }
+        Ok(Self {
+            encoding,
+            texel_size,
+            rect,
+        })
+    }
+
+    /// `rect` of `map`, in its encoding and texel size.
+    pub fn for_map<T: HeightSample>(map: &GpuHeightMap<T>, rect: Rect) -> Result<Self, GpuError> {
+        Self::new(map.encoding(), map.texel_size(), rect)
+    }
+
+    /// The height encoding the depths are written in.
+    pub fn encoding(&self) -> HeightEncoding {
+        self.encoding
+    }
+
+    /// Metres per texel.
+    pub fn texel_size(&self) -> f32 {
+        self.texel_size
+    }
+
+    /// The area in map columns.
+    pub fn rect(&self) -> Rect {
+        self.rect
+    }
+}
+
 /// Renders [`GranularObject`]s from below over an active area into a `u32` per column
-/// (seed 001 sec 4.1.2); see the module docs for the method and its precision.
+/// (seed 001 sec 4.1.2); see the module docs for the method, its precision and its resources.
 #[derive(Debug)]
 pub struct DepthFromBelowPass {
     pipeline: wgpu::RenderPipeline,
-    layout: wgpu::BindGroupLayout,
+    bindings: PassBindings<TileParams>,
+    tile_side: u32,
+    target: Option<(wgpu::Texture, wgpu::TextureView)>,
+    clear: Option<wgpu::Buffer>,
+    vertices: UploadRing,
+    triangles: Vec<DepthVertex>,
+}
+
+/// A size that grows by half again at least, so an input that grows a little every frame
+/// does not reallocate every frame.
+fn grown(old: u64, need: u64) -> u64 {
+    need.max(old + old / 2)
 }
 
 impl DepthFromBelowPass {
@@ -102,9 +171,10 @@ impl DepthFromBelowPass {
             .contains(wgpu::DownlevelFlags::FRAGMENT_WRITABLE_STORAGE)
     }
 
-    /// Builds the pipeline. Fails with [`GpuError::Unsupported`] on devices without storage
-    /// buffers, or [`GpuError::Validation`] if the shader is rejected (which is what a device
-    /// without fragment-stage storage writes gives: check [`Self::is_supported`] first).
+    /// Builds the pipeline (one shader module), its bindings and uniform ring. Fails with
+    /// [`GpuError::Unsupported`] on devices without storage buffers, or
+    /// [`GpuError::Validation`] if the shader is rejected (which is what a device without
+    /// fragment-stage storage writes gives: check [`Self::is_supported`] first).
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
         // `Device::limits` reflects what the device was created with; downlevel support is the
         // adapter's, which the device does not expose, so the limit stands in for it.
@@ -115,43 +185,28 @@ impl DepthFromBelowPass {
                          (FRAGMENT_WRITABLE_STORAGE)",
             });
         }
-        scoped(device, "DepthFromBelowPass", || {
-            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("DepthFromBelowPass"),
-                entries: &[
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 0,
-                        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Uniform,
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    },
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 1,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Storage { read_only: false },
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    },
-                ],
-            });
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("granular_depth"),
-                source: wgpu::ShaderSource::Wgsl(terrain_shaders::GRANULAR_DEPTH.into()),
-            });
+        let bindings = PassBindings::new(
+            device,
+            "DepthFromBelowPass",
+            wgpu::ShaderStages::VERTEX_FRAGMENT,
+            &[StorageBinding {
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                read_only: false,
+            }],
+        );
+        let module = shader_module(
+            device,
+            "granular_depth.wgsl",
+            terrain_shaders::GRANULAR_DEPTH,
+        )?;
+        let pipeline = scoped(device, "DepthFromBelowPass", || {
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("DepthFromBelowPass"),
-                bind_group_layouts: &[Some(&layout)],
+                bind_group_layouts: &[Some(bindings.layout())],
                 immediate_size: 0,
             });
             let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32];
-            let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some("DepthFromBelowPass"),
                 layout: Some(&pipeline_layout),
                 vertex: wgpu::VertexState {
@@ -183,91 +238,93 @@ impl DepthFromBelowPass {
                 }),
                 multiview_mask: None,
                 cache: None,
-            });
-            Self { pipeline, layout }
+            })
+        })?;
+        Ok(Self {
+            pipeline,
+            bindings,
+            tile_side: device
+                .limits()
+                .max_texture_dimension_2d
+                .clamp(1, MAX_TILE_SIDE),
+            target: None,
+            clear: None,
+            vertices: UploadRing::new("DepthFromBelowPass vertices", wgpu::BufferUsages::VERTEX),
+            triangles: Vec::new(),
         })
     }
 
+    /// Frees the uniform slots and vertex uploads recorded so far: call it after the submit
+    /// that carries them.
+    pub fn recall(&mut self) {
+        self.bindings.recall();
+        self.vertices.recall();
+    }
+
+    pub(crate) fn clear_bind_groups(&mut self) {
+        self.bindings.clear_bind_groups();
+    }
+
     /// A buffer for the depth of `area`: one `u32` per column, row-major, with the usages
-    /// [`Self::encode`] and [`Self::read`] need (`STORAGE | COPY_DST | COPY_SRC`).
+    /// [`Self::encode`] and [`Self::read`] need (`STORAGE | COPY_DST | COPY_SRC`). A granular
+    /// step renders into its scratch's [`super::GranularScratch::depth`] instead.
     pub fn create_output(device: &wgpu::Device, area: Rect) -> Result<wgpu::Buffer, GpuError> {
         let bytes = output_bytes(device, area)?;
         map_buffer(device, "DepthFromBelowPass output", area.size, bytes)
     }
 
-    /// Records the depth from below of `objects` over `area` into `out` (at least
-    /// `4 * area.size.x * area.size.y` bytes, usages `STORAGE | COPY_DST`; see
-    /// [`Self::create_output`]): element `j * area.size.x + i` is column `area.min + (i, j)`,
-    /// in units of `encoding` (`floor((y - offset) / scale)` clamped to `0 ..= NO_OBJECT - 1`),
-    /// or [`NO_OBJECT`] where no object covers it. The whole area is overwritten.
-    ///
-    /// The objects' world-space triangles are uploaded on every call (triangles with zero
-    /// projected area, or wholly outside the area, are dropped on the CPU as the reference
-    /// does). Whether `area` lies inside the map is the caller's concern, as with the CPU
-    /// reference's `_into` form: any non-empty area is rendered.
-    ///
-    /// Fails on an empty area, a non-positive or non-finite `texel_size` or encoding, an
-    /// output buffer that is too small, an object that fails
-    /// [`GranularObject::validate`] (non-finite transform, vertices beyond
-    /// `MAX_COORDINATE_M`; reported as [`GpuError::Core`]), more triangles than the device's
-    /// largest buffer holds, or a wgpu validation error.
-    #[allow(clippy::too_many_arguments)]
-    pub fn encode(
-        &self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        objects: &[GranularObject<'_>],
-        encoding: HeightEncoding,
-        texel_size: f32,
-        area: Rect,
-        out: &wgpu::Buffer,
-    ) -> Result<(), GpuError> {
-        check_params(encoding, texel_size)?;
-        let bytes = output_bytes(device, area)?;
-        if out.size() < bytes {
-            return Err(CoreError::OutOfRange {
-                what: "DepthFromBelowPass output buffer size in bytes",
-                value: out.size() as f64,
-                expected: "at least 4 bytes per column of the area",
-            }
-            .into());
+    /// Makes the buffer of [`NO_OBJECT`]s the output is cleared from hold at least `bytes`.
+    fn ensure_clear(&mut self, device: &wgpu::Device, bytes: u64) -> Result<(), GpuError> {
+        let old = self.clear.as_ref().map_or(0, wgpu::Buffer::size);
+        if old >= bytes {
+            return Ok(());
         }
-        let vertices = world_triangles(objects, encoding, texel_size, area)?;
-        let vertex_bytes = (vertices.len() * std::mem::size_of::<DepthVertex>()) as u64;
-        if vertex_bytes > device.limits().max_buffer_size || vertices.len() > u32::MAX as usize {
-            return Err(CoreError::OutOfRange {
-                what: "DepthFromBelowPass vertex bytes (3 vertices of 16 bytes per triangle)",
-                value: vertex_bytes as f64,
-                expected: "within the device's max_buffer_size",
-            }
-            .into());
-        }
-        let tile_side = device
-            .limits()
-            .max_texture_dimension_2d
-            .clamp(1, MAX_TILE_SIDE);
-        scoped(device, "DepthFromBelowPass::encode", || {
-            let count = (u64::from(area.size.x) * u64::from(area.size.y)) as usize;
-            let clear = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        // Whole u32s (so whole COPY_BUFFER_ALIGNMENT units, as mapping at creation needs).
+        let size = (grown(old, bytes).min(device.limits().max_buffer_size.max(bytes)) / 4) * 4;
+        let buffer = scoped(device, "DepthFromBelowPass clear", || {
+            device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("DepthFromBelowPass clear"),
-                contents: bytemuck::cast_slice(&vec![NO_OBJECT; count]),
+                size,
                 usage: wgpu::BufferUsages::COPY_SRC,
-            });
-            encoder.copy_buffer_to_buffer(&clear, 0, out, 0, bytes);
-            if vertices.is_empty() {
-                return;
+                mapped_at_creation: true,
+            })
+        })?;
+        // NO_OBJECT is all ones.
+        buffer
+            .slice(..)
+            .get_mapped_range_mut()?
+            .slice(..)
+            .fill(0xff);
+        buffer.unmap();
+        self.clear = Some(buffer);
+        Ok(())
+    }
+
+    /// Makes the tile target cover `size` texels.
+    fn ensure_target(&mut self, device: &wgpu::Device, size: UVec2) -> Result<(), GpuError> {
+        let old = self
+            .target
+            .as_ref()
+            .map_or(UVec2::ZERO, |(t, _)| UVec2::new(t.width(), t.height()));
+        if old.cmpge(size).all() {
+            return Ok(());
+        }
+        let side = |o: u32, n: u32| {
+            if o >= n {
+                o
+            } else {
+                (grown(u64::from(o), u64::from(n)) as u32)
+                    .min(self.tile_side)
+                    .max(n)
             }
-            let vertex_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("DepthFromBelowPass vertices"),
-                contents: bytemuck::cast_slice(&vertices),
-                usage: wgpu::BufferUsages::VERTEX,
-            });
-            let target_size = area.size.min(UVec2::splat(tile_side));
-            let target = device.create_texture(&wgpu::TextureDescriptor {
+        };
+        let new = UVec2::new(side(old.x, size.x), side(old.y, size.y));
+        let texture = scoped(device, "DepthFromBelowPass tile target", || {
+            device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("DepthFromBelowPass tile target"),
                 size: wgpu::Extent3d {
-                    width: target_size.x,
-                    height: target_size.y,
+                    width: new.x,
+                    height: new.y,
                     depth_or_array_layers: 1,
                 },
                 mip_level_count: 1,
@@ -276,50 +333,115 @@ impl DepthFromBelowPass {
                 format: TILE_FORMAT,
                 usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
                 view_formats: &[],
-            });
-            let view = target.create_view(&Default::default());
-            for ty in (0..area.size.y).step_by(tile_side as usize) {
-                for tx in (0..area.size.x).step_by(tile_side as usize) {
-                    let size = (area.size - UVec2::new(tx, ty)).min(UVec2::splat(tile_side));
-                    let params = TileParams {
-                        origin_f: [tx as f32, ty as f32],
-                        size_f: [size.x as f32, size.y as f32],
-                        origin: [tx, ty],
-                        area_width: area.size.x,
-                        _pad: 0,
-                    };
-                    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("DepthFromBelowPass tile"),
-                        contents: bytemuck::bytes_of(&params),
-                        usage: wgpu::BufferUsages::UNIFORM,
-                    });
-                    let bind_group =
-                        bind_buffers(device, "DepthFromBelowPass", &self.layout, &[&uniform, out]);
-                    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                        label: Some("DepthFromBelowPass"),
-                        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                            view: &view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                                store: wgpu::StoreOp::Discard,
-                            },
-                        })],
-                        depth_stencil_attachment: None,
-                        timestamp_writes: None,
-                        occlusion_query_set: None,
-                        multiview_mask: None,
-                    });
-                    pass.set_viewport(0.0, 0.0, size.x as f32, size.y as f32, 0.0, 1.0);
-                    pass.set_scissor_rect(0, 0, size.x, size.y);
-                    pass.set_pipeline(&self.pipeline);
-                    pass.set_bind_group(0, &bind_group, &[]);
-                    pass.set_vertex_buffer(0, vertex_buffer.slice(..));
-                    pass.draw(0..vertices.len() as u32, 0..1);
-                }
+            })
+        })?;
+        let view = texture.create_view(&Default::default());
+        self.target = Some((texture, view));
+        Ok(())
+    }
+
+    /// Records the depth from below of `objects` over `area` into `out` (at least
+    /// `4 * area.size.x * area.size.y` bytes, usages `STORAGE | COPY_DST`; see
+    /// [`Self::create_output`]): element `j * area.size.x + i` is column `area.min + (i, j)`,
+    /// in units of the area's encoding (`floor((y - offset) / scale)` clamped to
+    /// `0 ..= NO_OBJECT - 1`), or [`NO_OBJECT`] where no object covers it. The whole area is
+    /// overwritten.
+    ///
+    /// The objects' world-space triangles are written into the pass's vertex buffer on every
+    /// call (triangles with zero projected area, or wholly outside the area, are dropped on the
+    /// CPU as the reference does). Whether the area lies inside the map is the caller's
+    /// concern, as with the CPU reference's `_into` form: any non-empty area is rendered.
+    ///
+    /// Fails on an output buffer that is too small, an object that fails
+    /// [`GranularObject::validate`] (non-finite transform, vertices beyond
+    /// `MAX_COORDINATE_M`; reported as [`GpuError::Granular`]), more triangles than the
+    /// device's largest buffer holds, or a wgpu validation error.
+    pub fn encode(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        objects: &[GranularObject<'_>],
+        area: &DepthArea,
+        out: &wgpu::Buffer,
+    ) -> Result<(), GpuError> {
+        let rect = area.rect;
+        let bytes = output_bytes(device, rect)?;
+        if out.size() < bytes {
+            return Err(CoreError::OutOfRange {
+                what: "DepthFromBelowPass output buffer size in bytes",
+                value: out.size() as f64,
+                expected: "at least 4 bytes per column of the area",
             }
-        })
+            .into());
+        }
+        world_triangles(objects, area, &mut self.triangles)?;
+        let vertex_bytes = std::mem::size_of_val(self.triangles.as_slice()) as u64;
+        if vertex_bytes > device.limits().max_buffer_size
+            || self.triangles.len() > u32::MAX as usize
+        {
+            return Err(CoreError::OutOfRange {
+                what: "DepthFromBelowPass vertex bytes (3 vertices of 16 bytes per triangle)",
+                value: vertex_bytes as f64,
+                expected: "within the device's max_buffer_size",
+            }
+            .into());
+        }
+        self.ensure_clear(device, bytes)?;
+        if let Some(clear) = &self.clear {
+            encoder.copy_buffer_to_buffer(clear, 0, out, 0, bytes);
+        }
+        if self.triangles.is_empty() {
+            return Ok(());
+        }
+        let (vertex_buffer, vertex_offset) =
+            self.vertices
+                .push(device, queue, bytemuck::cast_slice(&self.triangles))?;
+        let vertex_count = self.triangles.len() as u32;
+        let tile_side = self.tile_side;
+        self.ensure_target(device, rect.size.min(UVec2::splat(tile_side)))?;
+        let Some((_, view)) = &self.target else {
+            return Ok(());
+        };
+        for ty in (0..rect.size.y).step_by(tile_side as usize) {
+            for tx in (0..rect.size.x).step_by(tile_side as usize) {
+                let size = (rect.size - UVec2::new(tx, ty)).min(UVec2::splat(tile_side));
+                let params = TileParams {
+                    origin_f: [tx as f32, ty as f32],
+                    size_f: [size.x as f32, size.y as f32],
+                    origin: [tx, ty],
+                    area_width: rect.size.x,
+                    _pad: 0,
+                };
+                let (group, offset) = self.bindings.bind(device, queue, &params, &[out])?;
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("DepthFromBelowPass"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                            store: wgpu::StoreOp::Discard,
+                        },
+                    })],
+                    depth_stencil_attachment: None,
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_viewport(0.0, 0.0, size.x as f32, size.y as f32, 0.0, 1.0);
+                pass.set_scissor_rect(0, 0, size.x, size.y);
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &group, &[offset]);
+                pass.set_vertex_buffer(
+                    0,
+                    vertex_buffer.slice(vertex_offset..vertex_offset + vertex_bytes),
+                );
+                pass.draw(0..vertex_count, 0..1);
+            }
+        }
+        Ok(())
     }
 
     /// Reads a depth buffer written by [`Self::encode`] for `area` into a grid of `area.size`
@@ -337,30 +459,25 @@ impl DepthFromBelowPass {
         Ok(Grid::from_vec(area.size.x, area.size.y, values)?)
     }
 
-    /// Convenience: allocates an output, encodes, submits and reads back; the GPU counterpart
-    /// of [`terrain_core::granular::depth_from_below_into`] for tests and CPU-side users.
+    /// Convenience: allocates an output, encodes, submits, recalls and reads back; the GPU
+    /// counterpart of [`terrain_core::granular::depth_from_below_into`] for tests and CPU-side
+    /// users.
     pub fn run(
-        &self,
+        &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         objects: &[GranularObject<'_>],
-        encoding: HeightEncoding,
-        texel_size: f32,
-        area: Rect,
+        area: &DepthArea,
     ) -> Result<Grid<u32>, GpuError> {
-        let out = Self::create_output(device, area)?;
+        let out = Self::create_output(device, area.rect)?;
         let mut encoder = device.create_command_encoder(&Default::default());
-        self.encode(
-            device,
-            &mut encoder,
-            objects,
-            encoding,
-            texel_size,
-            area,
-            &out,
-        )?;
-        queue.submit([encoder.finish()]);
-        Self::read(device, queue, &out, area)
+        let recorded = self.encode(device, queue, &mut encoder, objects, area, &out);
+        if recorded.is_ok() {
+            queue.submit([encoder.finish()]);
+        }
+        self.recall();
+        recorded?;
+        Self::read(device, queue, &out, area.rect)
     }
 }
 
@@ -414,61 +531,22 @@ fn check_params(encoding: HeightEncoding, texel_size: f32) -> Result<(), GpuErro
     Ok(())
 }
 
-/// The error of a failed [`GranularObject::validate`] as a [`GpuError`] (terrain-gpu's error
-/// has no granular variant: the values travel in a [`CoreError`]).
-fn object_error(e: GranularError) -> GpuError {
-    match e {
-        GranularError::Core(c) => c.into(),
-        GranularError::NonFiniteTransform(cols) => {
-            let value = cols
-                .iter()
-                .copied()
-                .find(|v| !v.is_finite())
-                .unwrap_or(f32::NAN);
-            CoreError::NonFinite {
-                what: "granular object transform",
-                value,
-            }
-            .into()
-        }
-        GranularError::BadVertex { value, limit, .. } => {
-            let worst = value
-                .iter()
-                .copied()
-                .find(|v| !v.is_finite() || v.abs() > limit)
-                .unwrap_or(value[0]);
-            CoreError::OutOfRange {
-                what: "granular object world vertex coordinate (m)",
-                value: f64::from(worst),
-                expected: "finite and within MAX_COORDINATE_M of the origin",
-            }
-            .into()
-        }
-        _ => CoreError::OutOfRange {
-            what: "granular object",
-            value: f64::NAN,
-            expected: "an object that passes GranularObject::validate",
-        }
-        .into(),
-    }
-}
-
 /// Every triangle of `objects` that may cover a column of `area`, as area-relative vertices.
 fn world_triangles(
     objects: &[GranularObject<'_>],
-    encoding: HeightEncoding,
-    texel_size: f32,
-    area: Rect,
-) -> Result<Vec<DepthVertex>, GpuError> {
-    let ts = f64::from(texel_size);
-    let scale = f64::from(encoding.scale);
-    let offset = f64::from(encoding.offset);
-    let (x0, y0) = (f64::from(area.min.x), f64::from(area.min.y));
-    let (x1, y1) = (x0 + f64::from(area.size.x), y0 + f64::from(area.size.y));
+    area: &DepthArea,
+    out: &mut Vec<DepthVertex>,
+) -> Result<(), GpuError> {
+    let ts = f64::from(area.texel_size);
+    let scale = f64::from(area.encoding.scale);
+    let offset = f64::from(area.encoding.offset);
+    let rect = area.rect;
+    let (x0, y0) = (f64::from(rect.min.x), f64::from(rect.min.y));
+    let (x1, y1) = (x0 + f64::from(rect.size.x), y0 + f64::from(rect.size.y));
     let max_depth = f64::from(NO_OBJECT - 1);
-    let mut out = Vec::new();
+    out.clear();
     for object in objects {
-        let verts = object.world_vertices().map_err(object_error)?;
+        let verts = object.world_vertices()?;
         for tri in object.mesh.triangles() {
             // Indices were checked by `TriMesh::new`; `get` keeps a bad one from panicking.
             let mut p = [glam::DVec3::ZERO; 3];
@@ -512,5 +590,5 @@ fn world_triangles(
             }
         }
     }
-    Ok(out)
+    Ok(())
 }

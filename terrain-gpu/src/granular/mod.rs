@@ -3,20 +3,30 @@
 //!
 //! The integer passes ([`PenetrationPass`], [`JumpFloodPass`], [`DisplacePass`],
 //! [`SlopePass`]) reproduce the CPU reference bit for bit; [`GranularNormalsPass`] is a float
-//! pass that agrees within a tolerance. Heights live in a [`GpuGranularMap`] (one u32 per
-//! column); per-area textures in a [`GranularScratch`]. [`GpuGranularStep`] chains the passes
-//! over the merged active areas of a list of objects, as `terrain_core::granular::GranularSim`.
+//! pass that agrees within a tolerance; [`VolumePass`] sums a map exactly. Heights live in a
+//! [`crate::GpuHeightMap<u32>`] (one u32 per column); per-area buffers in a
+//! [`GranularScratch`], which a [`GranularArea`] pairs with the map and an area.
+//! [`GpuGranularStep`] chains the passes over the merged active areas of a list of objects, as
+//! `terrain_core::granular::GranularSim`.
+//!
+//! Every pass is built once with `new(&wgpu::Device)` (one shader module, its pipelines, bind
+//! group layouts and a uniform ring) and records with `encode(&mut self, device, queue,
+//! encoder, ..)`, which writes uniforms into the next slots of its ring and records commands;
+//! call `recall()` on it after the submit that carries them.
 
 pub mod depth;
-mod map;
 mod normals;
 mod passes;
 mod scratch;
 mod step;
+mod upload;
+mod volume;
 
-pub use depth::DepthFromBelowPass;
-pub use map::GpuGranularMap;
-pub use normals::GranularNormalsPass;
-pub use passes::{DisplacePass, JumpFloodPass, PenetrationPass, SlopePass};
-pub use scratch::GranularScratch;
+pub use depth::{DepthArea, DepthFromBelowPass};
+pub use normals::{GpuGranularNormals, GranularNormalsPass};
+pub use passes::{
+    DisplacePass, FloodedArea, JumpFloodPass, PenetrationPass, SlopePass, SlopeSettings,
+};
+pub use scratch::{GranularArea, GranularScratch};
 pub use step::{DepthSource, GpuGranularStep, GpuStepReport};
+pub use volume::VolumePass;

@@ -1,16 +1,17 @@
-//! `GranularNormalsPass`: normals of the granular map by the symmetric difference with 3x3
-//! Gaussian blur passes, as `terrain_core::granular::{symmetric_normals, blur_normals}` within
-//! a float tolerance.
+//! `GranularNormalsPass`: normals of the granular map by the symmetric difference and 3x3
+//! Gaussian blur passes, as `terrain_core::granular::{symmetric_normals, blur_normals}` within a
+//! float tolerance, into a `GpuGranularNormals`.
 
-use super::map::GpuGranularMap;
-use super::scratch::area_dispatch;
-use crate::compute::compute_pipeline_entry;
-use crate::compute::{bind_buffers, buffer_entry};
+use crate::compute::{
+    PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
+};
+use crate::download::download_bytes;
 use crate::error::GpuError;
-use crate::maps::map_buffer;
+use crate::maps::{GpuHeightMap, map_buffer};
 use bytemuck::{Pod, Zeroable};
-use terrain_core::Rect;
-use wgpu::util::DeviceExt;
+use glam::{UVec2, Vec4};
+use terrain_core::granular::{GranularError, MAX_ITERATIONS};
+use terrain_core::{Grid, Rect};
 
 /// The uniform block of `granular_normals.wgsl`, byte for byte.
 #[repr(C)]
@@ -25,108 +26,223 @@ struct NormalParams {
 
 const _: () = assert!(std::mem::size_of::<NormalParams>() == 32);
 
-/// Writes unit normals and the float copy of the heights (`vec4<f32>` per map texel: normal
-/// xyz, height in metres in w; row-major) of an area.
+/// The normals of a granular map on the GPU: one `vec4<f32>` per map texel, row-major (unit
+/// normal xyz, height in metres in w: the float copy of the heights for filtered rendering,
+/// seed 001 sec 4.3), and the blur's scratch of the same size. Pairs with the grids of
+/// [`terrain_core::granular::symmetric_normals`] and [`terrain_core::granular::float_heights`].
+#[derive(Debug)]
+pub struct GpuGranularNormals {
+    normals: wgpu::Buffer,
+    scratch: wgpu::Buffer,
+    size: UVec2,
+}
+
+impl GpuGranularNormals {
+    /// Zeroed normals for a map of `size` texels.
+    pub fn new(device: &wgpu::Device, size: UVec2) -> Result<Self, GpuError> {
+        let bytes = u64::from(size.x) * u64::from(size.y) * 16;
+        if bytes == 0 {
+            return Err(terrain_core::CoreError::EmptyGrid {
+                width: size.x,
+                height: size.y,
+            }
+            .into());
+        }
+        Ok(Self {
+            normals: map_buffer(device, "granular normals", size, bytes)?,
+            scratch: map_buffer(device, "granular normals blur scratch", size, bytes)?,
+            size,
+        })
+    }
+
+    /// Zeroed normals shaped for `map`.
+    pub fn for_map(device: &wgpu::Device, map: &GpuHeightMap<u32>) -> Result<Self, GpuError> {
+        Self::new(device, map.size())
+    }
+
+    /// The normal buffer (`vec4<f32>` per texel; copyable both ways).
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.normals
+    }
+
+    /// Size in texels.
+    pub fn size(&self) -> UVec2 {
+        self.size
+    }
+
+    /// Downloads the normals (xyz) and float heights (w), waiting for the GPU.
+    pub fn read(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Grid<Vec4>, GpuError> {
+        let bytes = download_bytes(device, queue, &self.normals, 0, self.normals.size())?;
+        let raw: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok(Grid::from_vec(
+            self.size.x,
+            self.size.y,
+            raw.iter().map(|&v| Vec4::from(v)).collect(),
+        )?)
+    }
+}
+
+/// Writes unit normals and the float copy of the heights of an area of a granular map into a
+/// [`GpuGranularNormals`] ([`Self::encode`]), and blurs them ([`Self::encode_blur`]).
 #[derive(Debug)]
 pub struct GranularNormalsPass {
     normals: wgpu::ComputePipeline,
     blur: wgpu::ComputePipeline,
     copy_back: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    normal_bindings: PassBindings<NormalParams>,
+    blur_bindings: PassBindings<NormalParams>,
+}
+
+/// The uniform block for `area` of `out` (other fields zero), after checking the area lies
+/// inside it; with the area's dispatch.
+fn area_params(
+    device: &wgpu::Device,
+    out: &GpuGranularNormals,
+    area: Rect,
+) -> Result<(NormalParams, (u32, u32)), GpuError> {
+    if area.is_empty() || !Rect::from_size(out.size).contains_rect(&area) {
+        return Err(GpuError::BadRegion {
+            rect: area,
+            map_size: out.size,
+        });
+    }
+    let params = NormalParams {
+        area_min: [area.min.x as u32, area.min.y as u32],
+        area_size: area.size.to_array(),
+        map_size: out.size.to_array(),
+        k: 0.0,
+        scale: 0.0,
+    };
+    Ok((params, dispatch_size(device, area.size)?))
 }
 
 impl GranularNormalsPass {
-    /// Builds the pipelines.
+    /// Builds the pipelines (one shader module), their bindings and uniform rings.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        use wgpu::BufferBindingType as B;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("GranularNormalsPass"),
-            entries: &[
-                buffer_entry(0, B::Uniform),
-                buffer_entry(1, B::Storage { read_only: true }),
-                buffer_entry(2, B::Storage { read_only: false }),
-                buffer_entry(3, B::Storage { read_only: false }),
-            ],
-        });
-        let src = terrain_shaders::GRANULAR_NORMALS;
+        let rw = StorageBinding::compute(false);
+        let normal_bindings = PassBindings::new(
+            device,
+            "GranularNormalsPass",
+            wgpu::ShaderStages::COMPUTE,
+            &[rw, rw, StorageBinding::compute(true)],
+        );
+        let blur_bindings = PassBindings::new(
+            device,
+            "GranularNormalsPass blur",
+            wgpu::ShaderStages::COMPUTE,
+            &[rw, rw],
+        );
+        let module = shader_module(
+            device,
+            "granular_normals.wgsl",
+            terrain_shaders::GRANULAR_NORMALS,
+        )?;
         Ok(Self {
-            normals: compute_pipeline_entry(device, "GranularNormalsPass", src, &layout, "main")?,
-            blur: compute_pipeline_entry(device, "GranularNormalsPass blur", src, &layout, "blur")?,
-            copy_back: compute_pipeline_entry(
+            normals: compute_pipeline(
+                device,
+                "GranularNormalsPass",
+                &module,
+                normal_bindings.layout(),
+                "main",
+            )?,
+            blur: compute_pipeline(
+                device,
+                "GranularNormalsPass blur",
+                &module,
+                blur_bindings.layout(),
+                "blur",
+            )?,
+            copy_back: compute_pipeline(
                 device,
                 "GranularNormalsPass copy",
-                src,
-                &layout,
+                &module,
+                blur_bindings.layout(),
                 "copy_back",
             )?,
-            layout,
+            normal_bindings,
+            blur_bindings,
         })
     }
 
-    /// A normal buffer for `map` (16 bytes per texel, zeroed; copyable both ways). The pass
-    /// needs two: the normals and a blur scratch.
-    pub fn normal_buffer(
-        device: &wgpu::Device,
-        map: &GpuGranularMap,
-    ) -> Result<wgpu::Buffer, GpuError> {
-        let size = map.size();
-        let bytes = u64::from(size.x) * u64::from(size.y) * 16;
-        map_buffer(device, "granular normals", size, bytes)
+    /// Frees the uniform slots recorded so far: call it after the submit that carries them.
+    pub fn recall(&mut self) {
+        self.normal_bindings.recall();
+        self.blur_bindings.recall();
     }
 
-    /// Records the normals of `area` into `normals`, then `blur_iterations` blur passes over
-    /// `area` (through `scratch`); both buffers from [`Self::normal_buffer`].
-    #[allow(clippy::too_many_arguments)]
+    /// Records the normals and float heights of `area` of `map` into `out` (shaped for `map`),
+    /// as [`terrain_core::granular::symmetric_normals`] and
+    /// [`terrain_core::granular::float_heights`].
     pub fn encode(
-        &self,
+        &mut self,
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
-        map: &GpuGranularMap,
-        normals: &wgpu::Buffer,
-        scratch: &wgpu::Buffer,
+        map: &GpuHeightMap<u32>,
+        out: &GpuGranularNormals,
         area: Rect,
-        blur_iterations: u32,
     ) -> Result<(), GpuError> {
-        let groups = area_dispatch(device, area, map.size())?;
-        let need = map.size().x as u64 * map.size().y as u64 * 16;
-        if normals.size() < need || scratch.size() < need {
-            return Err(GpuError::Unsupported {
-                what: "GranularNormalsPass",
-                reason: "the normal buffers are smaller than the map",
+        if out.size != map.size() {
+            return Err(GpuError::SizeMismatch {
+                expected: map.size(),
+                actual: out.size,
             });
         }
-        let k = (f64::from(map.encoding().scale) * 0.5 / f64::from(map.texel_size())) as f32;
+        let (params, groups) = area_params(device, out, area)?;
+        let scale = f64::from(map.encoding().scale);
         let params = NormalParams {
-            area_min: [area.min.x as u32, area.min.y as u32],
-            area_size: area.size.to_array(),
-            map_size: map.size().to_array(),
-            k,
+            k: (scale * 0.5 / f64::from(map.texel_size())) as f32,
             scale: map.encoding().scale,
+            ..params
         };
-        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("GranularNormalParams"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let bg = bind_buffers(
+        let (group, offset) = self.normal_bindings.bind(
             device,
+            queue,
+            &params,
+            &[&out.normals, &out.scratch, map.buffer()],
+        )?;
+        dispatch(
+            encoder,
             "GranularNormalsPass",
-            &self.layout,
-            &[&uniform, map.buffer(), normals, scratch],
+            groups,
+            &[(&self.normals, &group, offset)],
         );
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("GranularNormalsPass"),
-            timestamp_writes: None,
-        });
-        pass.set_bind_group(0, &bg, &[]);
-        pass.set_pipeline(&self.normals);
-        pass.dispatch_workgroups(groups.0, groups.1, 1);
-        for _ in 0..blur_iterations {
-            pass.set_pipeline(&self.blur);
-            pass.dispatch_workgroups(groups.0, groups.1, 1);
-            pass.set_pipeline(&self.copy_back);
-            pass.dispatch_workgroups(groups.0, groups.1, 1);
+        Ok(())
+    }
+
+    /// Records `iterations` 3x3 Gaussian blur passes of the normals of `area` of `out` (the
+    /// heights in w stay), as [`terrain_core::granular::blur_normals`]. Fails with
+    /// [`GpuError::Granular`] for more than [`MAX_ITERATIONS`] iterations.
+    pub fn encode_blur(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        out: &GpuGranularNormals,
+        area: Rect,
+        iterations: u32,
+    ) -> Result<(), GpuError> {
+        if iterations > MAX_ITERATIONS {
+            return Err(GranularError::ParamOutOfRange {
+                name: "numIterationsBlurNormals",
+                value: f64::from(iterations),
+                range: "0..=1024",
+            }
+            .into());
         }
+        let (params, groups) = area_params(device, out, area)?;
+        if iterations == 0 {
+            return Ok(());
+        }
+        let (group, offset) =
+            self.blur_bindings
+                .bind(device, queue, &params, &[&out.normals, &out.scratch])?;
+        let mut dispatches = Vec::with_capacity(2 * iterations as usize);
+        for _ in 0..iterations {
+            dispatches.push((&self.blur, &group, offset));
+            dispatches.push((&self.copy_back, &group, offset));
+        }
+        dispatch(encoder, "GranularNormalsPass blur", groups, &dispatches);
         Ok(())
     }
 }

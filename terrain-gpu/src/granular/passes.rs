@@ -1,118 +1,176 @@
 //! The integer passes of a granular step over one active area: `PenetrationPass`,
 //! `JumpFloodPass`, `DisplacePass` and `SlopePass`, bit for bit as their CPU references in
 //! `terrain_core::granular`.
+//!
+//! Each is built once (`new`: one shader module, its pipelines, a bind group layout and a
+//! uniform ring) and records with `encode(&mut self, device, queue, encoder, ..)`, which only
+//! writes the pass's uniforms into the next ring slots and records dispatches; bind groups are
+//! made on first use of a set of buffers and kept. Call `recall()` on every pass after the
+//! submit that carries what it recorded.
 
-use super::map::GpuGranularMap;
-use super::scratch::{GranularScratch, GranularUniform, area_dispatch};
-use crate::compute::compute_pipeline_entry;
-use crate::compute::{bind_buffers, buffer_entry};
+use super::scratch::{GranularArea, GranularUniform};
+use super::upload::UploadRing;
+use crate::compute::{PassBindings, StorageBinding, compute_pipeline, dispatch, shader_module};
 use crate::error::GpuError;
-use terrain_core::granular::{DisplacementMethod, DistanceMetric, SlopeMethod, jfa_steps};
-use terrain_core::{Grid, Rect};
-use wgpu::util::DeviceExt;
+use terrain_core::Grid;
+use terrain_core::granular::{
+    DisplacementMethod, DistanceMetric, GranularError, GranularParams, MAX_ITERATIONS, SlopeMethod,
+    jfa_steps,
+};
+use terrain_shaders::codes::{METRIC_CHEBYSHEV, METRIC_EUCLIDEAN, METRIC_MANHATTAN};
 
-/// Records one compute pass that runs `dispatches` (pipeline, bind group) over `groups`.
-fn run(
-    encoder: &mut wgpu::CommandEncoder,
-    label: &'static str,
-    groups: (u32, u32),
-    dispatches: &[(&wgpu::ComputePipeline, &wgpu::BindGroup)],
-) {
-    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-        label: Some(label),
-        timestamp_writes: None,
-    });
-    for (pipeline, bind_group) in dispatches {
-        pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, *bind_group, &[]);
-        pass.dispatch_workgroups(groups.0, groups.1, 1);
-    }
-}
-
-fn layout(
+/// The bindings of a granular pass: the `Granular` uniform block, then `storage` in order
+/// (`true`: read-only).
+fn granular_bindings(
     device: &wgpu::Device,
     label: &'static str,
     storage_read_only: &[bool],
-) -> wgpu::BindGroupLayout {
-    let mut entries = vec![buffer_entry(0, wgpu::BufferBindingType::Uniform)];
-    for (i, &read_only) in storage_read_only.iter().enumerate() {
-        entries.push(buffer_entry(
-            i as u32 + 1,
-            wgpu::BufferBindingType::Storage { read_only },
-        ));
-    }
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some(label),
-        entries: &entries,
-    })
+) -> PassBindings<GranularUniform> {
+    let storage: Vec<StorageBinding> = storage_read_only
+        .iter()
+        .map(|&read_only| StorageBinding::compute(read_only))
+        .collect();
+    PassBindings::new(device, label, wgpu::ShaderStages::COMPUTE, &storage)
 }
 
 /// Computes the penetration texture of an area (seed 001 table 4.1) from the map and the
-/// area's depth from below, as [`terrain_core::granular::penetration_texture`].
+/// area's depth from below in the scratch, as [`terrain_core::granular::penetration_texture`].
 #[derive(Debug)]
 pub struct PenetrationPass {
     pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    bindings: PassBindings<GranularUniform>,
+    depth_upload: UploadRing,
 }
 
 impl PenetrationPass {
-    /// Builds the pipeline.
+    /// Builds the pipeline, its bindings and uniform ring.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let layout = layout(device, "PenetrationPass", &[true, true, false]);
-        let pipeline = compute_pipeline_entry(
+        let bindings = granular_bindings(device, "PenetrationPass", &[true, true, false]);
+        let module = shader_module(
+            device,
+            "granular_penetration.wgsl",
+            terrain_shaders::GRANULAR_PENETRATION,
+        )?;
+        let pipeline = compute_pipeline(
             device,
             "PenetrationPass",
-            terrain_shaders::GRANULAR_PENETRATION,
-            &layout,
+            &module,
+            bindings.layout(),
             "main",
         )?;
-        Ok(Self { pipeline, layout })
-    }
-
-    /// A storage buffer holding a depth grid (one u32 per column of the area, row-major, as
-    /// [`terrain_core::granular::depth_from_below`] returns it).
-    pub fn upload_depth(device: &wgpu::Device, depth: &Grid<u32>) -> wgpu::Buffer {
-        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("granular depth"),
-            contents: bytemuck::cast_slice(depth.as_slice()),
-            usage: wgpu::BufferUsages::STORAGE,
+        Ok(Self {
+            pipeline,
+            bindings,
+            depth_upload: UploadRing::new(
+                "PenetrationPass depth upload",
+                wgpu::BufferUsages::COPY_SRC,
+            ),
         })
     }
 
-    /// Records the penetration texture of `area` into `scratch`, from `depth` (a buffer of at
-    /// least `area.area()` u32, area-local) and `obstacle_margin` in height units.
-    #[allow(clippy::too_many_arguments)]
-    pub fn encode(
-        &self,
+    /// Frees the uniform slots and depth uploads recorded so far: call it after the submit that
+    /// carries them.
+    pub fn recall(&mut self) {
+        self.bindings.recall();
+        self.depth_upload.recall();
+    }
+
+    pub(crate) fn clear_bind_groups(&mut self) {
+        self.bindings.clear_bind_groups();
+    }
+
+    /// Records the upload of a depth grid computed on the CPU (one u32 per column of the area,
+    /// row-major, as [`terrain_core::granular::depth_from_below_into`] writes it) into the
+    /// area's [`super::GranularScratch::depth`]. The grid goes through the pass's upload buffer
+    /// at its own offset, so several areas can be uploaded into one encoder.
+    pub fn upload_depth(
+        &mut self,
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
-        map: &GpuGranularMap,
-        depth: &wgpu::Buffer,
-        area: Rect,
-        obstacle_margin: u32,
-        scratch: &GranularScratch,
+        area: &GranularArea<'_>,
+        depth: &Grid<u32>,
     ) -> Result<(), GpuError> {
-        let groups = area_dispatch(device, area, map.size())?;
-        scratch.check(area)?;
-        if depth.size() < area.area() * 4 {
-            return Err(GpuError::Unsupported {
-                what: "PenetrationPass",
-                reason: "the depth buffer is smaller than the area",
+        if depth.size() != area.rect().size {
+            return Err(GpuError::SizeMismatch {
+                expected: area.rect().size,
+                actual: depth.size(),
             });
         }
+        let data: &[u8] = bytemuck::cast_slice(depth.as_slice());
+        let (buffer, offset) = self.depth_upload.push(device, queue, data)?;
+        encoder.copy_buffer_to_buffer(&buffer, offset, &area.scratch().depth, 0, data.len() as u64);
+        Ok(())
+    }
+
+    /// Records the penetration texture of `area` into its scratch, from the depth from below in
+    /// [`super::GranularScratch::depth`] and `obstacle_margin` in height units (columns whose
+    /// object is at most that far above the terrain are obstacles).
+    pub fn encode(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        area: &GranularArea<'_>,
+        obstacle_margin: u32,
+    ) -> Result<(), GpuError> {
         let uniform = GranularUniform {
             margin: obstacle_margin,
-            ..GranularUniform::for_area(area, map.size().x)
-        }
-        .buffer(device);
-        let bg = bind_buffers(
+            ..GranularUniform::for_area(area)
+        };
+        let scratch = area.scratch();
+        let (group, offset) = self.bindings.bind(
             device,
+            queue,
+            &uniform,
+            &[area.map().buffer(), &scratch.depth, &scratch.pen],
+        )?;
+        dispatch(
+            encoder,
             "PenetrationPass",
-            &self.layout,
-            &[&uniform, map.buffer(), depth, &scratch.pen],
+            area.groups(),
+            &[(&self.pipeline, &group, offset)],
         );
-        run(encoder, "PenetrationPass", groups, &[(&self.pipeline, &bg)]);
         Ok(())
+    }
+}
+
+/// The value of a metric in the shaders' `metric` field.
+fn metric_code(metric: DistanceMetric) -> u32 {
+    match metric {
+        DistanceMetric::Euclidean => METRIC_EUCLIDEAN,
+        DistanceMetric::Manhattan => METRIC_MANHATTAN,
+        DistanceMetric::Chebyshev => METRIC_CHEBYSHEV,
+    }
+}
+
+/// An area whose closest seeds a [`JumpFloodPass`] has recorded into its scratch: which seed
+/// grid holds them and the metric they were flooded with. The displacement that follows takes
+/// it, so it reads the right grid and measures distances with the same metric. Commands run
+/// in recording order: record the displacement before flooding another area into the same
+/// scratch.
+#[derive(Debug, Clone, Copy)]
+pub struct FloodedArea<'a> {
+    area: GranularArea<'a>,
+    seed_grid: usize,
+    metric: DistanceMetric,
+}
+
+impl<'a> FloodedArea<'a> {
+    /// The area.
+    pub fn area(&self) -> &GranularArea<'a> {
+        &self.area
+    }
+
+    /// The index of the seed grid of the scratch that holds the closest seeds
+    /// ([`super::GranularScratch::seeds`], [`super::GranularScratch::read_seeds`]).
+    pub fn seed_grid(&self) -> usize {
+        self.seed_grid
+    }
+
+    /// The metric the seeds were flooded with.
+    pub fn metric(&self) -> DistanceMetric {
+        self.metric
     }
 }
 
@@ -122,94 +180,91 @@ impl PenetrationPass {
 pub struct JumpFloodPass {
     init: wgpu::ComputePipeline,
     pass: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
-}
-
-/// The value of a metric in the shaders' `metric` field.
-fn metric_index(metric: DistanceMetric) -> u32 {
-    match metric {
-        DistanceMetric::Euclidean => 0,
-        DistanceMetric::Manhattan => 1,
-        DistanceMetric::Chebyshev => 2,
-    }
+    bindings: PassBindings<GranularUniform>,
 }
 
 impl JumpFloodPass {
-    /// Builds the pipelines.
+    /// Builds the pipelines, their bindings and uniform ring.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let layout = layout(device, "JumpFloodPass", &[true, true, false]);
-        let src = terrain_shaders::GRANULAR_JFA;
+        let bindings = granular_bindings(device, "JumpFloodPass", &[true, true, false]);
+        let module = shader_module(device, "granular_jfa.wgsl", terrain_shaders::GRANULAR_JFA)?;
+        let layout = bindings.layout();
         Ok(Self {
-            init: compute_pipeline_entry(device, "JumpFloodPass init", src, &layout, "init")?,
-            pass: compute_pipeline_entry(device, "JumpFloodPass", src, &layout, "main")?,
-            layout,
+            init: compute_pipeline(device, "JumpFloodPass init", &module, layout, "init")?,
+            pass: compute_pipeline(device, "JumpFloodPass", &module, layout, "main")?,
+            bindings,
         })
     }
 
-    /// Records the seed initialisation from the penetration texture in `scratch` and every
-    /// pass of [`jfa_steps`]`(area.size, extra_pass)`; returns the index of the seed grid of
-    /// `scratch` ([`GranularScratch::seeds`]) that holds the closest seeds.
-    #[allow(clippy::too_many_arguments)]
-    pub fn encode(
-        &self,
+    /// Frees the uniform slots recorded so far: call it after the submit that carries them.
+    pub fn recall(&mut self) {
+        self.bindings.recall();
+    }
+
+    pub(crate) fn clear_bind_groups(&mut self) {
+        self.bindings.clear_bind_groups();
+    }
+
+    /// Records the seed initialisation from the penetration texture in the area's scratch and
+    /// every pass of [`jfa_steps`]`(area size, extra_pass)` under `metric`; returns the flooded
+    /// area for the displacement.
+    pub fn encode<'a>(
+        &mut self,
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
-        map_size: glam::UVec2,
-        area: Rect,
+        area: &GranularArea<'a>,
         metric: DistanceMetric,
         extra_pass: bool,
-        scratch: &GranularScratch,
-    ) -> Result<usize, GpuError> {
-        let groups = area_dispatch(device, area, map_size)?;
-        scratch.check(area)?;
+    ) -> Result<FloodedArea<'a>, GpuError> {
         let base = GranularUniform {
-            metric: metric_index(metric),
-            ..GranularUniform::for_area(area, map_size.x)
+            metric: metric_code(metric),
+            ..GranularUniform::for_area(area)
         };
+        let scratch = area.scratch();
         let [a, b] = &scratch.seeds;
-        let init_u = base.buffer(device);
-        let mut groups_list = vec![(
-            &self.init,
-            bind_buffers(
-                device,
-                "JumpFloodPass",
-                &self.layout,
-                &[&init_u, &scratch.pen, b, a],
-            ),
-        )];
-        let steps = jfa_steps(area.size, extra_pass);
+        let steps = jfa_steps(area.rect().size, extra_pass);
+        let mut groups = Vec::with_capacity(steps.len() + 1);
+        groups.push(
+            self.bindings
+                .bind(device, queue, &base, &[&scratch.pen, b, a])?,
+        );
         for (p, &step) in steps.iter().enumerate() {
-            let u = GranularUniform {
+            let uniform = GranularUniform {
                 step,
                 pass_index: p as u32,
                 ..base
-            }
-            .buffer(device);
+            };
             let (src, dst) = if p % 2 == 0 { (a, b) } else { (b, a) };
-            groups_list.push((
-                &self.pass,
-                bind_buffers(
-                    device,
-                    "JumpFloodPass",
-                    &self.layout,
-                    &[&u, &scratch.pen, src, dst],
-                ),
-            ));
+            groups.push(
+                self.bindings
+                    .bind(device, queue, &uniform, &[&scratch.pen, src, dst])?,
+            );
         }
-        let dispatches: Vec<_> = groups_list.iter().map(|(p, g)| (*p, g)).collect();
-        run(encoder, "JumpFloodPass", groups, &dispatches);
-        Ok(steps.len() % 2)
+        let dispatches: Vec<_> = groups
+            .iter()
+            .enumerate()
+            .map(|(k, (group, offset))| {
+                let pipeline = if k == 0 { &self.init } else { &self.pass };
+                (pipeline, group, *offset)
+            })
+            .collect();
+        dispatch(encoder, "JumpFloodPass", area.groups(), &dispatches);
+        Ok(FloodedArea {
+            area: *area,
+            seed_grid: steps.len() % 2,
+            metric,
+        })
     }
 }
 
-/// Displacement of intersected material to the contour (seed 001 sec 4.1.4):
-/// [`DisplacementMethod::ClosestSeed`] as [`terrain_core::granular::displace_closest_seed`] and
+/// Displacement of intersected material to the contour (seed 001 sec 4.1.4), one method per
+/// [`DisplacementMethod`] variant: [`DisplacementMethod::ClosestSeed`] as
+/// [`terrain_core::granular::displace_closest_seed`] and
 /// [`DisplacementMethod::MultipleTargets`] as
-/// [`terrain_core::granular::displace_multiple_targets`] by atomic scatter
-/// ([`DisplacePass::encode`]), and [`DisplacementMethod::Iterative`] as
-/// [`terrain_core::granular::displace_iterative`] by gather passes and a final atomic flush to
-/// the seeds ([`DisplacePass::encode_iterative`], which also takes the iteration count and the
-/// metric).
+/// [`terrain_core::granular::displace_multiple_targets`] by atomic scatter, and
+/// [`DisplacementMethod::Iterative`] as [`terrain_core::granular::displace_iterative`] by
+/// gather passes and a final atomic flush to the seeds.
 #[derive(Debug)]
 pub struct DisplacePass {
     closest: wgpu::ComputePipeline,
@@ -218,19 +273,24 @@ pub struct DisplacePass {
     iter_pass: wgpu::ComputePipeline,
     iter_flush: wgpu::ComputePipeline,
     writeback: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    bindings: PassBindings<GranularUniform>,
 }
 
 impl DisplacePass {
-    /// Builds the pipelines.
+    /// Builds the pipelines, their bindings and uniform ring.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let layout = layout(
+        let bindings = granular_bindings(
             device,
             "DisplacePass",
             &[false, true, true, false, false, false, false],
         );
-        let src = terrain_shaders::GRANULAR_DISPLACE;
-        let pipe = |label, entry| compute_pipeline_entry(device, label, src, &layout, entry);
+        let module = shader_module(
+            device,
+            "granular_displace.wgsl",
+            terrain_shaders::GRANULAR_DISPLACE,
+        )?;
+        let layout = bindings.layout();
+        let pipe = |label, entry| compute_pipeline(device, label, &module, layout, entry);
         Ok(Self {
             closest: pipe("DisplacePass closest", "closest")?,
             multiple: pipe("DisplacePass multiple", "multiple")?,
@@ -238,127 +298,122 @@ impl DisplacePass {
             iter_pass: pipe("DisplacePass iterative pass", "iter_pass")?,
             iter_flush: pipe("DisplacePass iterative flush", "iter_flush")?,
             writeback: pipe("DisplacePass writeback", "writeback")?,
-            layout,
+            bindings,
         })
     }
 
-    fn bind(
-        &self,
-        device: &wgpu::Device,
-        map: &GpuGranularMap,
-        uniform: &GranularUniform,
-        seeds: usize,
-        scratch: &GranularScratch,
-    ) -> wgpu::BindGroup {
-        bind_buffers(
-            device,
-            "DisplacePass",
-            &self.layout,
-            &[
-                &uniform.buffer(device),
-                map.buffer(),
-                &scratch.pen,
-                &scratch.seeds[seeds & 1],
-                &scratch.acc,
-                &scratch.removed,
-                &scratch.dist,
-                &scratch.carried,
-            ],
-        )
+    /// Frees the uniform slots recorded so far: call it after the submit that carries them.
+    pub fn recall(&mut self) {
+        self.bindings.recall();
     }
 
-    /// Records the displacement over `area` from the penetration texture and seed grid
-    /// `seeds` of `scratch` (keep factor `keep_q15`, see
-    /// [`terrain_core::granular::GranularParams::keep_q15`]); the removed material is added to
-    /// the scratch's removed counter ([`GranularScratch::read_removed`]).
-    /// [`DisplacementMethod::Iterative`] needs more settings: it is refused here
-    /// ([`GpuError::Unsupported`]); use [`DisplacePass::encode_iterative`].
-    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn clear_bind_groups(&mut self) {
+        self.bindings.clear_bind_groups();
+    }
+
+    /// Records `method` over the flooded area, from its penetration texture and closest seeds
+    /// (keep factor `keep_q15`, see [`GranularParams::keep_q15`]); the removed material is added
+    /// to the scratch's removed counter ([`super::GranularScratch::read_removed`]). The
+    /// iterative method measures distances with the metric the seeds were flooded with and
+    /// runs its `iterations` gather passes (integer shares, remainders stay), bit for bit as
+    /// [`terrain_core::granular::displace_iterative`]`(.., keep_q15, iterations, metric)`.
+    ///
+    /// Fails with [`GpuError::Granular`] when the method's settings are out of range
+    /// ([`DisplacementMethod::validate`]).
     pub fn encode(
-        &self,
+        &mut self,
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
-        map: &GpuGranularMap,
-        area: Rect,
+        seeds: &FloodedArea<'_>,
         method: DisplacementMethod,
         keep_q15: u32,
-        seeds: usize,
-        scratch: &GranularScratch,
     ) -> Result<(), GpuError> {
-        let groups = area_dispatch(device, area, map.size())?;
-        scratch.check(area)?;
-        let scatter = match method {
-            DisplacementMethod::ClosestSeed => &self.closest,
-            DisplacementMethod::MultipleTargets => &self.multiple,
-            DisplacementMethod::Iterative => {
-                return Err(GpuError::Unsupported {
-                    what: "DisplacePass",
-                    reason: "the iterative method needs its iteration count and metric: use \
-                             DisplacePass::encode_iterative",
-                });
-            }
-        };
-        let u = GranularUniform {
-            keep_q15,
-            ..GranularUniform::for_area(area, map.size().x)
-        };
-        let bg = self.bind(device, map, &u, seeds, scratch);
-        encoder.clear_buffer(&scratch.acc, 0, Some(area.area() * 4));
-        run(
-            encoder,
-            "DisplacePass",
-            groups,
-            &[(scatter, &bg), (&self.writeback, &bg)],
-        );
-        Ok(())
-    }
-
-    /// Records the iterative method (listing 4.2) over `area`, bit for bit as
-    /// [`terrain_core::granular::displace_iterative`]`(.., keep_q15, iterations, metric)`:
-    /// distances to the seeds of grid `seeds` of `scratch` under `metric` (the metric the
-    /// seeds were flooded with) and lower-neighbour counts, the displaced material of every
-    /// penetrating column, `iterations` gather passes (integer shares, remainders stay), and a
-    /// final atomic flush of the carried material to the seeds. The removed material is added
-    /// to the scratch's removed counter.
-    #[allow(clippy::too_many_arguments)]
-    pub fn encode_iterative(
-        &self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        map: &GpuGranularMap,
-        area: Rect,
-        keep_q15: u32,
-        iterations: u32,
-        metric: DistanceMetric,
-        seeds: usize,
-        scratch: &GranularScratch,
-    ) -> Result<(), GpuError> {
-        let groups = area_dispatch(device, area, map.size())?;
-        scratch.check(area)?;
+        method.validate()?;
+        let area = seeds.area();
+        let scratch = area.scratch();
         let base = GranularUniform {
             keep_q15,
-            metric: metric_index(metric),
-            ..GranularUniform::for_area(area, map.size().x)
+            metric: metric_code(seeds.metric()),
+            ..GranularUniform::for_area(area)
         };
-        let bgs = [0, 1].map(|parity| {
-            self.bind(
-                device,
-                map,
-                &GranularUniform { parity, ..base },
-                seeds,
-                scratch,
-            )
-        });
-        let mut dispatches = vec![(&self.iter_init, &bgs[0])];
-        for k in 0..iterations {
-            dispatches.push((&self.iter_pass, &bgs[(k & 1) as usize]));
+        let buffers = [
+            area.map().buffer(),
+            &scratch.pen,
+            &scratch.seeds[seeds.seed_grid() & 1],
+            &scratch.acc,
+            &scratch.removed,
+            &scratch.dist,
+            &scratch.carried,
+        ];
+        encoder.clear_buffer(&scratch.acc, 0, Some(area.rect().area() * 4));
+        match method {
+            DisplacementMethod::ClosestSeed | DisplacementMethod::MultipleTargets => {
+                let scatter = if method == DisplacementMethod::ClosestSeed {
+                    &self.closest
+                } else {
+                    &self.multiple
+                };
+                let (group, offset) = self.bindings.bind(device, queue, &base, &buffers)?;
+                dispatch(
+                    encoder,
+                    "DisplacePass",
+                    area.groups(),
+                    &[(scatter, &group, offset), (&self.writeback, &group, offset)],
+                );
+            }
+            DisplacementMethod::Iterative { iterations } => {
+                let even = self.bindings.bind(device, queue, &base, &buffers)?;
+                let odd = self.bindings.bind(
+                    device,
+                    queue,
+                    &GranularUniform { parity: 1, ..base },
+                    &buffers,
+                )?;
+                let by_parity = |k: u32| if k & 1 == 0 { &even } else { &odd };
+                let mut dispatches = Vec::with_capacity(iterations as usize + 3);
+                dispatches.push((&self.iter_init, &even.0, even.1));
+                for k in 0..iterations {
+                    let (group, offset) = by_parity(k);
+                    dispatches.push((&self.iter_pass, group, *offset));
+                }
+                let (last, offset) = by_parity(iterations);
+                dispatches.push((&self.iter_flush, last, *offset));
+                dispatches.push((&self.writeback, last, *offset));
+                dispatch(
+                    encoder,
+                    "DisplacePass iterative",
+                    area.groups(),
+                    &dispatches,
+                );
+            }
         }
-        let last = &bgs[(iterations & 1) as usize];
-        dispatches.push((&self.iter_flush, last));
-        dispatches.push((&self.writeback, last));
-        encoder.clear_buffer(&scratch.acc, 0, Some(area.area() * 4));
-        run(encoder, "DisplacePass iterative", groups, &dispatches);
         Ok(())
+    }
+}
+
+/// The settings of slope evening over an area, in the integer form the passes and their CPU
+/// references take (seed 001 sec 4.1.5, eq. 4.1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SlopeSettings {
+    /// `(orthogonal, diagonal)` height differences, in height units, above which material
+    /// flows ([`GranularParams::slope_thresholds_units`]).
+    pub thresholds: [u32; 2],
+    /// The roughness in Q15 ([`GranularParams::roughness_q15`]).
+    pub roughness_q15: u32,
+    /// Iterations (`numIterations-EvenOutSlopes`).
+    pub iterations: u32,
+}
+
+impl SlopeSettings {
+    /// The settings of `params` on a map of `texel_size` metres per texel and
+    /// `units_per_metre` height units per metre.
+    pub fn from_params(params: &GranularParams, texel_size: f32, units_per_metre: f64) -> Self {
+        Self {
+            thresholds: params.slope_thresholds_units(texel_size, units_per_metre),
+            roughness_q15: params.roughness_q15(),
+            iterations: params.num_iterations_even_out_slopes,
+        }
     }
 }
 
@@ -372,100 +427,105 @@ pub struct SlopePass {
     amounts: wgpu::ComputePipeline,
     apply: wgpu::ComputePipeline,
     writeback: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    bindings: PassBindings<GranularUniform>,
 }
 
 impl SlopePass {
-    /// Builds the pipelines.
+    /// Builds the pipelines, their bindings and uniform ring.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let layout = layout(device, "SlopePass", &[false, true, false, false]);
-        let src = terrain_shaders::GRANULAR_SLOPE;
+        let bindings = granular_bindings(device, "SlopePass", &[false, true, false, false]);
+        let module = shader_module(
+            device,
+            "granular_slope.wgsl",
+            terrain_shaders::GRANULAR_SLOPE,
+        )?;
+        let layout = bindings.layout();
+        let pipe = |label, entry| compute_pipeline(device, label, &module, layout, entry);
         Ok(Self {
-            scatter: compute_pipeline_entry(device, "SlopePass scatter", src, &layout, "scatter")?,
-            amounts: compute_pipeline_entry(
-                device,
-                "SlopePass amounts",
-                src,
-                &layout,
-                "amounts_pass",
-            )?,
-            apply: compute_pipeline_entry(device, "SlopePass apply", src, &layout, "apply")?,
-            writeback: compute_pipeline_entry(
-                device,
-                "SlopePass writeback",
-                src,
-                &layout,
-                "writeback",
-            )?,
-            layout,
+            scatter: pipe("SlopePass scatter", "scatter")?,
+            amounts: pipe("SlopePass amounts", "amounts_pass")?,
+            apply: pipe("SlopePass apply", "apply")?,
+            writeback: pipe("SlopePass writeback", "writeback")?,
+            bindings,
         })
     }
 
-    /// Records `iterations` iterations of `method` over `area`, with receivers limited to the
-    /// seed columns of the penetration texture in `scratch`; `thresholds` are
-    /// `(orthogonal, diagonal)` in height units
-    /// ([`terrain_core::granular::GranularParams::slope_thresholds_units`]).
-    #[allow(clippy::too_many_arguments)]
+    /// Frees the uniform slots recorded so far: call it after the submit that carries them.
+    pub fn recall(&mut self) {
+        self.bindings.recall();
+    }
+
+    pub(crate) fn clear_bind_groups(&mut self) {
+        self.bindings.clear_bind_groups();
+    }
+
+    /// Records `settings.iterations` iterations of `method` over `area`, with receivers limited
+    /// to the seed columns of the penetration texture in the area's scratch. Fails with
+    /// [`GpuError::Granular`] for more than [`MAX_ITERATIONS`] iterations.
     pub fn encode(
-        &self,
+        &mut self,
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
-        map: &GpuGranularMap,
-        area: Rect,
+        area: &GranularArea<'_>,
         method: SlopeMethod,
-        thresholds: [u32; 2],
-        roughness_q15: u32,
-        iterations: u32,
-        scratch: &GranularScratch,
+        settings: &SlopeSettings,
     ) -> Result<(), GpuError> {
-        let groups = area_dispatch(device, area, map.size())?;
-        scratch.check(area)?;
-        if iterations == 0 {
+        if settings.iterations > MAX_ITERATIONS {
+            return Err(GranularError::ParamOutOfRange {
+                name: "numIterationsEvenOutSlopes",
+                value: f64::from(settings.iterations),
+                range: "0..=1024",
+            }
+            .into());
+        }
+        if settings.iterations == 0 {
             return Ok(());
         }
         let base = GranularUniform {
-            threshold_orth: thresholds[0],
-            threshold_diag: thresholds[1],
-            roughness_q15,
-            ..GranularUniform::for_area(area, map.size().x)
+            threshold_orth: settings.thresholds[0],
+            threshold_diag: settings.thresholds[1],
+            roughness_q15: settings.roughness_q15,
+            ..GranularUniform::for_area(area)
         };
-        let bind = |u: &wgpu::Buffer| {
-            bind_buffers(
-                device,
-                "SlopePass",
-                &self.layout,
-                &[
-                    u,
-                    map.buffer(),
-                    &scratch.pen,
-                    &scratch.acc,
-                    &scratch.amounts,
-                ],
-            )
-        };
-        encoder.clear_buffer(&scratch.acc, 0, Some(area.area() * 4));
+        let scratch = area.scratch();
+        let buffers = [
+            area.map().buffer(),
+            &scratch.pen,
+            &scratch.acc,
+            &scratch.amounts,
+        ];
+        encoder.clear_buffer(&scratch.acc, 0, Some(area.rect().area() * 4));
+        let iterations = settings.iterations as usize;
         match method {
             SlopeMethod::Scatter => {
-                let bg = bind(&base.buffer(device));
-                let mut dispatches = Vec::new();
+                let (group, offset) = self.bindings.bind(device, queue, &base, &buffers)?;
+                let mut dispatches = Vec::with_capacity(2 * iterations);
                 for _ in 0..iterations {
-                    dispatches.push((&self.scatter, &bg));
-                    dispatches.push((&self.writeback, &bg));
+                    dispatches.push((&self.scatter, &group, offset));
+                    dispatches.push((&self.writeback, &group, offset));
                 }
-                run(encoder, "SlopePass scatter", groups, &dispatches);
+                dispatch(encoder, "SlopePass scatter", area.groups(), &dispatches);
             }
             SlopeMethod::Interleaved => {
-                let bgs =
-                    [0, 1].map(|parity| bind(&GranularUniform { parity, ..base }.buffer(device)));
-                let mut dispatches = Vec::new();
+                let parities = [
+                    self.bindings.bind(device, queue, &base, &buffers)?,
+                    self.bindings.bind(
+                        device,
+                        queue,
+                        &GranularUniform { parity: 1, ..base },
+                        &buffers,
+                    )?,
+                ];
+                let mut dispatches = Vec::with_capacity(6 * iterations);
                 for _ in 0..iterations {
-                    for bg in &bgs {
-                        dispatches.push((&self.amounts, bg));
-                        dispatches.push((&self.apply, bg));
-                        dispatches.push((&self.writeback, bg));
+                    for (group, offset) in &parities {
+                        dispatches.push((&self.amounts, group, *offset));
+                        dispatches.push((&self.apply, group, *offset));
+                        dispatches.push((&self.writeback, group, *offset));
                     }
                 }
-                run(encoder, "SlopePass interleaved", groups, &dispatches);
+                dispatch(encoder, "SlopePass interleaved", area.groups(), &dispatches);
             }
         }
         Ok(())

@@ -1,14 +1,16 @@
-//! `GranularScratch`: the per-area GPU textures of a granular step (penetration, seed grids,
-//! accumulator, slope amounts, iterative-displacement grids, removed counter), and the uniform block the integer passes share.
+//! `GranularScratch`: the per-area GPU buffers of a granular step (depth from below,
+//! penetration, seed grids, accumulator, slope amounts, iterative-displacement grids, removed
+//! counter); `GranularArea`, the inputs every pass over one active area shares; and the uniform
+//! block the integer passes share.
 
 use crate::compute::dispatch_size;
-use crate::download::download_bytes;
+use crate::download::{download_bytes, map_and_read};
 use crate::error::GpuError;
+use crate::maps::GpuHeightMap;
 use crate::scope::scoped;
 use bytemuck::{Pod, Zeroable};
 use terrain_core::Rect;
-use terrain_core::granular::Penetration;
-use wgpu::util::DeviceExt;
+use terrain_core::granular::{GranularError, MAX_SIDE, Penetration};
 
 /// The `Granular` uniform block of the granular WGSL files, byte for byte.
 #[repr(C)]
@@ -33,50 +35,29 @@ pub(crate) struct GranularUniform {
 const _: () = assert!(std::mem::size_of::<GranularUniform>() == 64);
 
 impl GranularUniform {
-    /// The block for `area` of a map `map_width` columns wide (other fields zero).
-    pub fn for_area(area: Rect, map_width: u32) -> Self {
+    /// The block for `area` (other fields zero).
+    pub fn for_area(area: &GranularArea<'_>) -> Self {
+        let rect = area.rect();
         Self {
-            area_min: [area.min.x as u32, area.min.y as u32],
-            area_size: area.size.to_array(),
-            map_width,
+            area_min: [rect.min.x as u32, rect.min.y as u32],
+            area_size: rect.size.to_array(),
+            map_width: area.map().size().x,
             ..Self::default()
         }
     }
-
-    /// A uniform buffer holding `self`.
-    pub fn buffer(&self, device: &wgpu::Device) -> wgpu::Buffer {
-        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("GranularUniform"),
-            contents: bytemuck::bytes_of(self),
-            usage: wgpu::BufferUsages::UNIFORM,
-        })
-    }
-}
-
-/// Checks that `area` is non-empty and inside a map of `map_size`, and returns its dispatch.
-pub(crate) fn area_dispatch(
-    device: &wgpu::Device,
-    area: Rect,
-    map_size: glam::UVec2,
-) -> Result<(u32, u32), GpuError> {
-    if area.is_empty() || !Rect::from_size(map_size).contains_rect(&area) {
-        return Err(GpuError::BadRegion {
-            rect: area,
-            map_size,
-        });
-    }
-    dispatch_size(device, area.size)
 }
 
 /// The per-area buffers of a granular step, for areas of up to [`GranularScratch::capacity`]
-/// columns (all area-local, row-major): the penetration texture (`Penetration`, 16 bytes), two
-/// seed grids (`[u32; 2]`, ping-pong), the scatter accumulator (u32, zero between uses), the
-/// slope amounts (`[u32; 2]`), the iterative displacement's distance and lower-neighbour
-/// count per column (`[u32; 2]`) and carried material (two u32 grids, ping-pong: grid 1
-/// starts right after the area's columns), and the u64 removed counter (low, high words).
+/// columns (all area-local, row-major): the depth from below (u32), the penetration texture
+/// (`Penetration`, 16 bytes), two seed grids (`[u32; 2]`, ping-pong), the scatter accumulator
+/// (u32, zero between uses), the slope amounts (`[u32; 2]`), the iterative displacement's
+/// distance and lower-neighbour count per column (`[u32; 2]`) and carried material (two u32
+/// grids, ping-pong: grid 1 starts right after the area's columns), and the u64 removed counter
+/// (low, high words) with its readback buffer. Made once, and again only for a larger area.
 #[derive(Debug)]
 pub struct GranularScratch {
     capacity: u64,
+    pub(crate) depth: wgpu::Buffer,
     pub(crate) pen: wgpu::Buffer,
     pub(crate) seeds: [wgpu::Buffer; 2],
     pub(crate) acc: wgpu::Buffer,
@@ -84,6 +65,7 @@ pub struct GranularScratch {
     pub(crate) dist: wgpu::Buffer,
     pub(crate) carried: wgpu::Buffer,
     pub(crate) removed: wgpu::Buffer,
+    removed_readback: wgpu::Buffer,
 }
 
 impl GranularScratch {
@@ -94,7 +76,7 @@ impl GranularScratch {
         let limit = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
-        let pen_bytes = columns * std::mem::size_of::<Penetration>() as u64;
+        let pen_bytes = columns.saturating_mul(std::mem::size_of::<Penetration>() as u64);
         if pen_bytes > limit {
             return Err(GpuError::MapTooLarge {
                 size: glam::UVec2::new(u32::try_from(columns).unwrap_or(u32::MAX), 1),
@@ -115,6 +97,7 @@ impl GranularScratch {
             };
             Self {
                 capacity: columns,
+                depth: buf("granular depth from below", columns * 4),
                 pen: buf("granular penetration", pen_bytes),
                 seeds: [
                     buf("granular seeds A", columns * 8),
@@ -125,6 +108,12 @@ impl GranularScratch {
                 dist: buf("granular distance and lower-neighbour count", columns * 8),
                 carried: buf("granular carried material", columns * 8),
                 removed: buf("granular removed", 8),
+                removed_readback: device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("granular removed readback"),
+                    size: 8,
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }),
             }
         })
     }
@@ -134,15 +123,11 @@ impl GranularScratch {
         self.capacity
     }
 
-    /// Fails unless an area of `area` fits.
-    pub(crate) fn check(&self, area: Rect) -> Result<(), GpuError> {
-        if area.area() > self.capacity {
-            return Err(GpuError::Unsupported {
-                what: "GranularScratch",
-                reason: "the active area has more columns than the scratch buffers hold",
-            });
-        }
-        Ok(())
+    /// The depth-from-below buffer (one u32 per column of the area, row-major): what
+    /// [`super::PenetrationPass`] reads. Write it with [`super::DepthFromBelowPass::encode`] or
+    /// [`super::PenetrationPass::upload_depth`].
+    pub fn depth(&self) -> &wgpu::Buffer {
+        &self.depth
     }
 
     /// The penetration texture buffer.
@@ -160,13 +145,17 @@ impl GranularScratch {
         encoder.clear_buffer(&self.removed, 0, None);
     }
 
-    /// Downloads the removed counter (waits for the GPU).
+    /// Reads the removed counter back through the scratch's own 8-byte readback buffer
+    /// (submits a copy and waits for the GPU).
     pub fn read_removed(
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<u64, GpuError> {
-        let bytes = download_bytes(device, queue, &self.removed, 0, 8)?;
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&self.removed, 0, &self.removed_readback, 0, 8);
+        queue.submit([encoder.finish()]);
+        let bytes = map_and_read(device, &self.removed_readback)?;
         let w: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
         Ok(w.iter().rev().fold(0u64, |a, &v| (a << 32) | u64::from(v)))
     }
@@ -198,5 +187,74 @@ impl GranularScratch {
             columns.min(self.capacity) * 8,
         )?;
         Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+}
+
+/// What every pass over one active area works on: the map, the area (in map columns) and the
+/// scratch buffers, checked once when made: the area is non-empty, inside the map, at most
+/// [`MAX_SIDE`] a side (as the CPU reference), fits the scratch, and its dispatch fits the
+/// device.
+#[derive(Debug, Clone, Copy)]
+pub struct GranularArea<'a> {
+    map: &'a GpuHeightMap<u32>,
+    rect: Rect,
+    scratch: &'a GranularScratch,
+    groups: (u32, u32),
+}
+
+impl<'a> GranularArea<'a> {
+    /// Checks `rect` against `map`, `scratch` and the device.
+    pub fn new(
+        device: &wgpu::Device,
+        map: &'a GpuHeightMap<u32>,
+        rect: Rect,
+        scratch: &'a GranularScratch,
+    ) -> Result<Self, GpuError> {
+        if rect.is_empty() || !Rect::from_size(map.size()).contains_rect(&rect) {
+            return Err(GpuError::BadRegion {
+                rect,
+                map_size: map.size(),
+            });
+        }
+        let side = rect.size.max_element();
+        if side > MAX_SIDE {
+            return Err(GranularError::TooLarge {
+                side,
+                limit: MAX_SIDE,
+            }
+            .into());
+        }
+        if rect.area() > scratch.capacity() {
+            return Err(GpuError::Unsupported {
+                what: "GranularArea",
+                reason: "the active area has more columns than the scratch buffers hold",
+            });
+        }
+        Ok(Self {
+            map,
+            rect,
+            scratch,
+            groups: dispatch_size(device, rect.size)?,
+        })
+    }
+
+    /// The map.
+    pub fn map(&self) -> &'a GpuHeightMap<u32> {
+        self.map
+    }
+
+    /// The area in map columns.
+    pub fn rect(&self) -> Rect {
+        self.rect
+    }
+
+    /// The scratch buffers.
+    pub fn scratch(&self) -> &'a GranularScratch {
+        self.scratch
+    }
+
+    /// Workgroups covering the area.
+    pub(crate) fn groups(&self) -> (u32, u32) {
+        self.groups
     }
 }

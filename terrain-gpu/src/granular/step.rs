@@ -1,15 +1,15 @@
 //! `GpuGranularStep`: one granular step on the GPU over the merged active areas of a list of
 //! objects, as `terrain_core::granular::GranularSim::step`.
 
-use super::depth::DepthFromBelowPass;
-use super::map::GpuGranularMap;
-use super::passes::{DisplacePass, JumpFloodPass, PenetrationPass, SlopePass};
-use super::scratch::GranularScratch;
+use super::depth::{DepthArea, DepthFromBelowPass};
+use super::passes::{DisplacePass, JumpFloodPass, PenetrationPass, SlopePass, SlopeSettings};
+use super::scratch::{GranularArea, GranularScratch};
 use crate::error::GpuError;
+use crate::maps::GpuHeightMap;
 use terrain_core::Grid;
 use terrain_core::granular::{
-    ActiveArea, AreaMode, DisplacementMethod, GranularError, GranularObject, GranularParams,
-    NO_OBJECT, SlopeMethod, depth_from_below_into, merge_active_areas, object_active_area,
+    ActiveArea, AreaMode, DisplacementMethod, GranularObject, GranularParams, NO_OBJECT,
+    SlopeMethod, depth_from_below_into, merge_active_areas, object_active_area,
 };
 
 /// What one GPU step did.
@@ -36,6 +36,11 @@ pub enum DepthSource {
 /// Chains [`DepthFromBelowPass`] (or the CPU rasterizer), [`PenetrationPass`],
 /// [`JumpFloodPass`], [`DisplacePass`] and [`SlopePass`] over the active areas of a step, with
 /// the settings of [`terrain_core::granular::GranularSim`].
+///
+/// The passes are built in [`Self::new`]; the scratch buffers on the first step, and again only
+/// when an area has more columns than they hold. A recorded step only writes uniforms (and, with
+/// [`DepthSource::Cpu`], the depth grids) and records commands. [`Self::encode`] leaves the
+/// submit to the caller, who then calls [`Self::recall`]; [`Self::step`] does all three.
 #[derive(Debug)]
 pub struct GpuGranularStep {
     penetration: PenetrationPass,
@@ -47,7 +52,7 @@ pub struct GpuGranularStep {
     params: GranularParams,
     /// Where the depth from below comes from.
     pub depth_source: DepthSource,
-    /// Displacement method.
+    /// Displacement method, with its settings (checked at each step).
     pub displacement: DisplacementMethod,
     /// Slope method.
     pub slope: SlopeMethod,
@@ -55,23 +60,11 @@ pub struct GpuGranularStep {
     pub area_mode: AreaMode,
 }
 
-/// A CPU-side granular error (objects, parameters) as a [`GpuError`]: core errors as they are,
-/// others as a validation error carrying the message.
-fn granular_error(e: GranularError) -> GpuError {
-    match e {
-        GranularError::Core(c) => GpuError::Core(c),
-        other => GpuError::Validation {
-            context: "granular step",
-            message: other.to_string(),
-        },
-    }
-}
-
 impl GpuGranularStep {
     /// Builds the passes, with validated `params`, closest-seed displacement, scatter slopes
     /// and active areas (the defaults of `GranularSim`).
     pub fn new(device: &wgpu::Device, params: GranularParams) -> Result<Self, GpuError> {
-        params.validate().map_err(granular_error)?;
+        params.validate()?;
         Ok(Self {
             penetration: PenetrationPass::new(device)?,
             jfa: JumpFloodPass::new(device)?,
@@ -92,51 +85,89 @@ impl GpuGranularStep {
         &self.params
     }
 
+    /// The scratch buffers of the last step (none before the first).
+    pub fn scratch(&self) -> Option<&GranularScratch> {
+        self.scratch.as_ref()
+    }
+
+    /// Frees what every pass recorded (uniform slots, uploads): call it after the submit that
+    /// carries a step recorded by [`Self::encode`].
+    pub fn recall(&mut self) {
+        self.penetration.recall();
+        self.jfa.recall();
+        self.displace.recall();
+        self.slope_pass.recall();
+        self.depth_pass.recall();
+    }
+
     /// The areas a step with `objects` runs over on `map`.
     pub fn active_areas(
         &self,
-        map: &GpuGranularMap,
+        map: &GpuHeightMap<u32>,
         objects: &[GranularObject<'_>],
     ) -> Result<Vec<ActiveArea>, GpuError> {
+        for o in objects {
+            o.validate()?;
+        }
         if self.area_mode == AreaMode::FullMap {
             return Ok(vec![ActiveArea::full_map(map.size())]);
         }
         let mut areas = Vec::with_capacity(objects.len());
         for o in objects {
-            o.validate().map_err(granular_error)?;
             if let Some(a) = object_active_area(
                 o,
                 map.texel_size(),
                 map.size(),
                 self.params.active_area_margin,
-            )
-            .map_err(granular_error)?
-            {
+            )? {
                 areas.push(a);
             }
         }
         Ok(merge_active_areas(&areas, self.params.merge_distance))
     }
 
-    /// Records a step into `encoder` and returns its areas;
-    /// the removed amount accumulates in the scratch counter, zeroed at the start.
+    /// Makes the scratch hold areas of `columns` columns (of a map of `map_columns`): regrown
+    /// by half again at least, so areas that grow a little every frame do not reallocate every
+    /// frame. The passes drop their bind groups over the old buffers.
+    fn reserve(
+        &mut self,
+        device: &wgpu::Device,
+        columns: u64,
+        map_columns: u64,
+    ) -> Result<(), GpuError> {
+        let old = self.scratch.as_ref().map_or(0, GranularScratch::capacity);
+        if old >= columns {
+            return Ok(());
+        }
+        let capacity = columns.max(old + old / 2).min(map_columns.max(columns));
+        self.scratch = Some(GranularScratch::new(device, capacity)?);
+        self.penetration.clear_bind_groups();
+        self.jfa.clear_bind_groups();
+        self.displace.clear_bind_groups();
+        self.slope_pass.clear_bind_groups();
+        self.depth_pass.clear_bind_groups();
+        Ok(())
+    }
+
+    /// Records a step into `encoder` and returns its areas; the removed amount accumulates in
+    /// the scratch's counter ([`GranularScratch::read_removed`]), zeroed at the start. Submit
+    /// the encoder, then call [`Self::recall`]. Objects and settings are checked before
+    /// anything is recorded.
     pub fn encode(
         &mut self,
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
-        map: &GpuGranularMap,
+        map: &GpuHeightMap<u32>,
         objects: &[GranularObject<'_>],
     ) -> Result<Vec<ActiveArea>, GpuError> {
+        self.displacement.validate()?;
         let areas = self.active_areas(map, objects)?;
         let need = areas.iter().map(|a| a.columns()).max().unwrap_or(1);
-        if self.scratch.as_ref().is_none_or(|s| s.capacity() < need) {
-            self.scratch = Some(GranularScratch::new(device, need)?);
-        }
+        let map_columns = u64::from(map.size().x) * u64::from(map.size().y);
+        self.reserve(device, need, map_columns)?;
         let Some(scratch) = self.scratch.as_ref() else {
-            return Err(GpuError::Unsupported {
-                what: "GpuGranularStep",
-                reason: "no scratch buffers",
-            });
+            return Ok(areas);
         };
         scratch.clear_removed(encoder);
         let p = self.params;
@@ -144,23 +175,19 @@ impl GpuGranularStep {
         let margin = (f64::from(p.obstacle_margin_m) * units)
             .round()
             .min(f64::from(u32::MAX)) as u32;
-        let thresholds = p.slope_thresholds_units(map.texel_size(), units);
-        for area in &areas {
-            let rect = area.rect;
-            let depth_buf = match self.depth_source {
-                DepthSource::Gpu => {
-                    let out = DepthFromBelowPass::create_output(device, rect)?;
-                    self.depth_pass.encode(
-                        device,
-                        encoder,
-                        objects,
-                        map.encoding(),
-                        map.texel_size(),
-                        rect,
-                        &out,
-                    )?;
-                    out
-                }
+        let slopes = SlopeSettings::from_params(&p, map.texel_size(), units);
+        for active in &areas {
+            let rect = active.rect;
+            let area = GranularArea::new(device, map, rect, scratch)?;
+            match self.depth_source {
+                DepthSource::Gpu => self.depth_pass.encode(
+                    device,
+                    queue,
+                    encoder,
+                    objects,
+                    &DepthArea::for_map(map, rect)?,
+                    &scratch.depth,
+                )?,
                 DepthSource::Cpu => {
                     let mut depth = Grid::new(rect.size.x, rect.size.y, NO_OBJECT)?;
                     depth_from_below_into(
@@ -169,71 +196,46 @@ impl GpuGranularStep {
                         map.texel_size(),
                         rect,
                         &mut depth,
-                    )
-                    .map_err(granular_error)?;
-                    PenetrationPass::upload_depth(device, &depth)
+                    )?;
+                    self.penetration
+                        .upload_depth(device, queue, encoder, &area, &depth)?;
                 }
-            };
-            self.penetration
-                .encode(device, encoder, map, &depth_buf, rect, margin, scratch)?;
-            let seeds = self.jfa.encode(
-                device,
-                encoder,
-                map.size(),
-                rect,
-                p.metric,
-                p.jfa_extra_pass,
-                scratch,
-            )?;
-            match self.displacement {
-                DisplacementMethod::Iterative => self.displace.encode_iterative(
-                    device,
-                    encoder,
-                    map,
-                    rect,
-                    p.keep_q15(),
-                    p.num_iterations_displace_material_to_contour,
-                    p.metric,
-                    seeds,
-                    scratch,
-                )?,
-                method => self.displace.encode(
-                    device,
-                    encoder,
-                    map,
-                    rect,
-                    method,
-                    p.keep_q15(),
-                    seeds,
-                    scratch,
-                )?,
             }
-            self.slope_pass.encode(
+            self.penetration
+                .encode(device, queue, encoder, &area, margin)?;
+            let flooded =
+                self.jfa
+                    .encode(device, queue, encoder, &area, p.metric, p.jfa_extra_pass)?;
+            self.displace.encode(
                 device,
+                queue,
                 encoder,
-                map,
-                rect,
-                self.slope,
-                thresholds,
-                p.roughness_q15(),
-                p.num_iterations_even_out_slopes,
-                scratch,
+                &flooded,
+                self.displacement,
+                p.keep_q15(),
             )?;
+            self.slope_pass
+                .encode(device, queue, encoder, &area, self.slope, &slopes)?;
         }
         Ok(areas)
     }
 
-    /// Runs a step: records it, submits it, and reads back the removed amount.
+    /// Runs a step: records it, submits it, recalls the passes, and reads back the removed
+    /// amount (8 bytes, through the scratch's readback buffer).
     pub fn step(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        map: &GpuGranularMap,
+        map: &GpuHeightMap<u32>,
         objects: &[GranularObject<'_>],
     ) -> Result<GpuStepReport, GpuError> {
         let mut encoder = device.create_command_encoder(&Default::default());
-        let active_areas = self.encode(device, &mut encoder, map, objects)?;
-        queue.submit([encoder.finish()]);
+        let recorded = self.encode(device, queue, &mut encoder, map, objects);
+        if recorded.is_ok() {
+            queue.submit([encoder.finish()]);
+        }
+        self.recall();
+        let active_areas = recorded?;
         let removed = match &self.scratch {
             Some(s) => s.read_removed(device, queue)?,
             None => 0,
