@@ -106,7 +106,7 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
 
 /// The GPU scene for the scenario's map, prepared by the scenario; `None` (after saying why)
 /// with `--no-gpu` or without an adapter: the run then writes top-down overview frames.
-fn open_gpu(cli: &Cli, scenario: &dyn Scenario) -> Result<Option<GpuScene>> {
+fn open_gpu(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Option<GpuScene>> {
     if cli.no_gpu {
         return Ok(None);
     }

@@ -4,7 +4,10 @@
 
 use anyhow::{Context, Result};
 use glam::{UVec2, Vec2};
+use terrain_core::granular::{GranularObject, GranularParams};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
+use terrain_core::{FixedPointMap, Rect};
+use terrain_gpu::granular::{GpuGranularNormals, GpuGranularStep, GranularNormalsPass, VolumePass};
 use terrain_gpu::{
     ClipmapRenderer, ClipmapSurface, ClipmapView, GpuContext, GpuDerivativeMap, GpuHeightMap,
     GpuRegionSource, GpuStamp, GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget,
@@ -44,6 +47,34 @@ pub struct GpuScene {
     style: TerrainStyle,
     /// Lowest and highest height the map can hold (metres): the culling boxes' vertical extent.
     height_range: (f32, f32),
+    /// Granular deformation on the GPU (the snow scenario), drawn instead of the coarse-map.
+    granular: Option<GranularScene>,
+}
+
+/// The GPU side of the snow scenario: the fixed-point map, the step, the normals and float
+/// heights it is rendered from, the volume sum, and the readback of the areas a step changed.
+struct GranularScene {
+    map: GpuHeightMap<u32>,
+    step: GpuGranularStep,
+    normal_pass: GranularNormalsPass,
+    normals: GpuGranularNormals,
+    blur_iterations: u32,
+    volume: VolumePass,
+    readback: RegionReadback,
+    /// Changed areas not yet requested (the ring was busy).
+    pending: Vec<Rect>,
+}
+
+/// What one GPU granular step did.
+pub struct GranularFrame {
+    /// The merged active areas the step ran over.
+    pub areas: Vec<Rect>,
+    /// Material removed by compression this step, in height units.
+    pub removed: u64,
+    /// The u64 sum of all heights after the step (read back as 8 bytes).
+    pub volume: u64,
+    /// Regions of earlier steps that arrived on the CPU: (rect, fixed-point heights).
+    pub arrived: Vec<(Rect, Grid<u32>)>,
 }
 
 /// One rendered frame.
@@ -88,6 +119,7 @@ impl GpuScene {
             readback: RegionReadback::new(device, 4)?,
             timer: GpuTimer::new(device, queue),
             height_range: (lo, hi),
+            granular: None,
             style: TerrainStyle {
                 ramp: (lo, hi),
                 fog_density: 0.008,
@@ -107,6 +139,123 @@ impl GpuScene {
     /// `high` snow white.
     pub fn set_ramp(&mut self, low: f32, high: f32) {
         self.style.ramp = (low, high);
+    }
+
+    /// Moves granular deformation onto the GPU: uploads `map` once (after this, the GPU map is
+    /// the one deformed and drawn), builds the passes and computes the first normals.
+    pub fn enable_granular(&mut self, map: &FixedPointMap, params: GranularParams) -> Result<()> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let gpu_map = GpuHeightMap::from_map(device, queue, map)?;
+        let normals = GpuGranularNormals::for_map(device, &gpu_map)?;
+        let mut normal_pass = GranularNormalsPass::new(device)?;
+        let full = Rect::from_size(map.size());
+        let blur_iterations = params.num_iterations_blur_normals;
+        let mut encoder = device.create_command_encoder(&Default::default());
+        normal_pass.encode(device, queue, &mut encoder, &gpu_map, &normals, full)?;
+        normal_pass.encode_blur(device, queue, &mut encoder, &normals, full, blur_iterations)?;
+        queue.submit([encoder.finish()]);
+        normal_pass.recall();
+        // Culling boxes: granular material only moves where objects push it, so the surface
+        // stays within a couple of metres of the initial heights.
+        let enc = map.encoding();
+        let (lo, hi) = map
+            .grid()
+            .as_slice()
+            .iter()
+            .fold((u32::MAX, 0), |(lo, hi), &h| (lo.min(h), hi.max(h)));
+        self.height_range = (
+            enc.to_metres(f64::from(lo)) - 1.0,
+            enc.to_metres(f64::from(hi)) + 2.0,
+        );
+        self.granular = Some(GranularScene {
+            step: GpuGranularStep::new(device, params)?,
+            map: gpu_map,
+            normal_pass,
+            normals,
+            blur_iterations,
+            volume: VolumePass::new(device)?,
+            readback: RegionReadback::new(device, 8)?,
+            pending: Vec::new(),
+        });
+        Ok(())
+    }
+
+    /// One granular step on the GPU with `objects`: the step, the normals of the changed
+    /// areas, the volume sum, and readback requests for the changed areas (they arrive in a
+    /// later frame's [`GranularFrame::arrived`]). Timed as [`Step::Granular`] and
+    /// [`Step::Normals`].
+    pub fn granular_step(
+        &mut self,
+        objects: &[GranularObject<'_>],
+        timings: &mut Timings,
+    ) -> Result<GranularFrame> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let Some(g) = self.granular.as_mut() else {
+            anyhow::bail!("granular deformation was not enabled on the GPU scene");
+        };
+        // Regions requested by earlier frames that have arrived.
+        let arrived: Vec<(Rect, Grid<u32>)> = g
+            .readback
+            .poll(device)?
+            .into_iter()
+            .map(|r| (r.rect, r.raw))
+            .collect();
+        let mut areas = Vec::new();
+        let step_time = self.timer.time(device, queue, |encoder| {
+            areas = g.step.encode(device, queue, encoder, &g.map, objects)?;
+            Ok(())
+        })?;
+        g.step.recall();
+        let removed = match g.step.scratch() {
+            Some(s) => s.read_removed(device, queue)?,
+            None => 0,
+        };
+        let areas: Vec<Rect> = areas.iter().map(|a| a.rect).collect();
+        // Normals reach one texel past the heights a step changed, and the blur one more per
+        // iteration.
+        let full = Rect::from_size(g.map.size());
+        let reach = 1 + g.blur_iterations;
+        let normal_time = self.timer.time(device, queue, |encoder| {
+            for rect in &areas {
+                let Some(r) = rect.expand(reach).intersect(&full) else {
+                    continue;
+                };
+                g.normal_pass
+                    .encode(device, queue, encoder, &g.map, &g.normals, r)?;
+                g.normal_pass.encode_blur(
+                    device,
+                    queue,
+                    encoder,
+                    &g.normals,
+                    r,
+                    g.blur_iterations,
+                )?;
+            }
+            g.volume.encode(device, queue, encoder, &g.map)?;
+            // The changed areas go to the CPU copy behind the overview and collision.
+            g.pending.extend(areas.iter().copied());
+            let mut waiting = Vec::new();
+            for rect in g.pending.drain(..) {
+                match g.readback.request(device, encoder, &g.map, rect) {
+                    Ok(_) => {}
+                    Err(terrain_gpu::GpuError::ReadbackBusy { .. }) => waiting.push(rect),
+                    Err(e) => return Err(e),
+                }
+            }
+            g.pending = waiting;
+            Ok(())
+        })?;
+        g.normal_pass.recall();
+        g.volume.recall();
+        let volume = g.volume.read(device)?;
+        record(timings, Step::Granular, step_time);
+        record(timings, Step::Normals, normal_time);
+        Ok(GranularFrame {
+            areas,
+            removed,
+            volume,
+            arrived,
+        })
     }
 
     /// The GPU objects alive on the device now.
@@ -180,20 +329,6 @@ impl GpuScene {
         Ok(dirty)
     }
 
-    /// Replaces the GPU map with `map` (same size) and recomputes its normals: for maps
-    /// deformed on the CPU (the snow scenario's granular simulation); timed as [`Step::Normals`].
-    pub fn upload(&mut self, map: &CoarseMap, timings: &mut Timings) -> Result<()> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        self.map.write(queue, map)?;
-        let timing = self.timer.time(device, queue, |encoder| {
-            self.normal_pass
-                .encode_full(device, queue, encoder, &self.map, &self.normals)
-        })?;
-        self.normal_pass.recall();
-        record(timings, Step::Normals, timing);
-        Ok(())
-    }
-
     /// One step of the collision readback: the scheduler requests merged dirty regions of the
     /// GPU map after the quiet gap and applies those that arrived to `mirror`, never waiting.
     pub fn update_collision(
@@ -228,11 +363,18 @@ impl GpuScene {
         timings.add(Step::Lod, crate::timings::ms_since(t));
         let view_proj = camera.view_proj_relative(aspect);
         let sky_colors = SkyColors::default();
-        let view = ClipmapView {
-            surface: ClipmapSurface::Coarse {
+        let surface = match &self.granular {
+            Some(g) => ClipmapSurface::Granular {
+                map: &g.map,
+                surface: g.normals.buffer(),
+            },
+            None => ClipmapSurface::Coarse {
                 map: &self.map,
                 normals: &self.normals,
             },
+        };
+        let view = ClipmapView {
+            surface,
             frame: &placement,
             camera,
             style: &self.style,

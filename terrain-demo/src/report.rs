@@ -97,6 +97,10 @@ pub struct FrameStats {
     /// compression 0: the volume is preserved).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub granular_volume: Option<u64>,
+    /// Snow scenario: where the granular steps run, `gpu` or `cpu` (without an adapter, or
+    /// `--no-gpu`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub granular_backend: Option<&'static str>,
     /// Snow scenario: material removed by compression so far, in height units.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub granular_removed: Option<u64>,

@@ -90,7 +90,7 @@ impl StorageBinding {
 
 /// Slots a uniform ring starts with, and the most it grows to before it asks for
 /// [`PassBindings::recall`] (4 MiB of uniforms at the usual 256-byte alignment).
-const RING_START: u32 = 64;
+const RING_START: u32 = 256;
 const RING_MAX: u32 = 16_384;
 /// Distinct sets of bound buffers a pass keeps bind groups for before it drops them all.
 const BIND_CACHE: usize = 32;
@@ -202,9 +202,29 @@ impl<T: Pod> PassBindings<T> {
         let offset = u64::from(self.next) * self.stride;
         queue.write_buffer(&self.ring, offset, bytemuck::bytes_of(params));
         self.next += 1;
+        Ok((self.group_for(device, buffers)?, offset as u32))
+    }
+
+    /// Builds the bind group over `buffers` now if it is not cached yet, without taking a ring
+    /// slot: for the other half of a ping-pong pair, so that which half a frame ends on never
+    /// makes a bind group later.
+    pub fn warm(
+        &mut self,
+        device: &wgpu::Device,
+        buffers: &[&wgpu::Buffer],
+    ) -> Result<(), GpuError> {
+        self.group_for(device, buffers).map(|_| ())
+    }
+
+    /// The cached bind group over `buffers`, built on first use.
+    fn group_for(
+        &mut self,
+        device: &wgpu::Device,
+        buffers: &[&wgpu::Buffer],
+    ) -> Result<wgpu::BindGroup, GpuError> {
         let key: Vec<wgpu::Buffer> = buffers.iter().map(|b| (*b).clone()).collect();
         if let Some(group) = self.groups.get(&key) {
-            return Ok((group.clone(), offset as u32));
+            return Ok(group.clone());
         }
         if self.groups.len() >= BIND_CACHE {
             self.groups.clear();
@@ -234,7 +254,7 @@ impl<T: Pod> PassBindings<T> {
             })
         })?;
         self.groups.insert(key, group.clone());
-        Ok((group, offset as u32))
+        Ok(group)
     }
 
     /// Frees every slot of the ring. Call it after the submit that carries the work recorded

@@ -54,8 +54,8 @@ pub fn required_limits(
         .into());
     }
     // Saturates: a map past 2^64 bytes needs more than any device has, which check_limits says.
-    let bytes = (u64::from(map_size.x) * u64::from(map_size.y))
-        .saturating_mul(usage.max_bytes_per_texel());
+    let bytes =
+        (u64::from(map_size.x) * u64::from(map_size.y)).saturating_mul(usage.max_bytes_per_texel());
     let groups = map_size.max_element().div_ceil(WORKGROUP);
     Ok(wgpu::Limits {
         max_storage_buffer_binding_size: base.max_storage_buffer_binding_size.max(bytes),

@@ -78,8 +78,9 @@ pub trait Scenario {
     /// The normals of [`Scenario::map`], current wherever a frame's `dirty` rects changed it.
     fn normals(&self) -> &DerivativeMap;
 
-    /// Uploads what the scenario needs on the GPU beyond the map (stamps, colours); once.
-    fn prepare_gpu(&self, _scene: &mut GpuScene) -> Result<()> {
+    /// Uploads what the scenario needs on the GPU beyond the map (stamps, colours, a granular
+    /// map to deform there); once, when the run has a GPU.
+    fn prepare_gpu(&mut self, _scene: &mut GpuScene) -> Result<()> {
         Ok(())
     }
 

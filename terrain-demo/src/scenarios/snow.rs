@@ -1,7 +1,11 @@
 //! The snow scenario (`--scenario snow`): a vehicle and a walker cross a snow field deformed by
-//! the granular simulation (terrain-core's CPU reference); the camera walks on it behind the
-//! vehicle. Each frame only the step's active areas are copied to the coarse-map, its normals
-//! and the collision mirror.
+//! volume-preserving granular deformation; the camera walks on it behind the vehicle.
+//!
+//! With a GPU the step runs there (`GpuGranularStep`, depth from below on the GPU) and the
+//! frame is drawn straight from the GPU map; the areas a step changed come back by region
+//! readback a frame later and update the CPU copy (overview, collision, `terrain_final.png`).
+//! Without one, terrain-core's `GranularSim` steps on the CPU. Either way only the changed
+//! areas are copied to the coarse-map, its normals and the collision mirror.
 
 use super::snow_field::SnowField;
 use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo};
@@ -31,6 +35,10 @@ pub struct SnowScenario {
     /// Collision reads the field directly (it is deformed on the CPU: no readback needed).
     mirror: CollisionMirror,
     rig: CameraRig,
+    /// Material removed by compression so far on the GPU, in height units.
+    gpu_removed: u64,
+    /// Whether the GPU scene runs the granular steps (set by `prepare_gpu`).
+    on_gpu: bool,
 }
 
 impl SnowScenario {
@@ -62,6 +70,8 @@ impl SnowScenario {
             normals,
             mirror,
             rig,
+            gpu_removed: 0,
+            on_gpu: false,
         })
     }
 }
@@ -79,9 +89,11 @@ impl Scenario for SnowScenario {
         &self.normals
     }
 
-    fn prepare_gpu(&self, scene: &mut GpuScene) -> Result<()> {
+    fn prepare_gpu(&mut self, scene: &mut GpuScene) -> Result<()> {
         // A snow field is white at any height; only steep rims shade to rock.
         scene.set_ramp(-20.0, -10.0);
+        scene.enable_granular(self.field.map(), *self.field.params())?;
+        self.on_gpu = true;
         Ok(())
     }
 
@@ -91,15 +103,33 @@ impl Scenario for SnowScenario {
     }
 
     fn advance(&mut self, ctx: &mut FrameContext<'_>) -> Result<FrameOutcome> {
-        // The step, and its active areas (the only texels it writes) into the coarse-map.
-        let (frame, dirty) = ctx.timings.time(Step::Granular, || -> Result<_> {
-            let frame = self.field.step()?;
-            let dirty: Vec<Rect> = frame.report.active_areas.iter().map(|a| a.rect).collect();
-            for rect in &dirty {
-                self.field.copy_to_coarse(&mut self.coarse, *rect)?;
+        let poses = self.field.next_poses();
+        // The step, and the areas whose heights reached the CPU this frame: on the GPU those
+        // of earlier steps as their readback arrives, on the CPU this step's active areas.
+        let (volume, removed, deformed_texels, dirty, backend) = match ctx.gpu.as_deref_mut() {
+            Some(scene) if self.on_gpu => {
+                let objects = self.field.objects(&poses);
+                let frame = scene.granular_step(&objects, ctx.timings)?;
+                self.gpu_removed += frame.removed;
+                let mut dirty = Vec::with_capacity(frame.arrived.len());
+                for (rect, heights) in &frame.arrived {
+                    self.field.write_region(*rect, heights)?;
+                    self.field.copy_to_coarse(&mut self.coarse, *rect)?;
+                    dirty.push(*rect);
+                }
+                let deformed: u64 = frame.areas.iter().map(Rect::area).sum();
+                (frame.volume, self.gpu_removed, deformed, dirty, "gpu")
             }
-            Ok((frame, dirty))
-        })?;
+            _ => ctx.timings.time(Step::Granular, || -> Result<_> {
+                let report = self.field.step(&poses)?;
+                let dirty: Vec<Rect> = report.active_areas.iter().map(|a| a.rect).collect();
+                for rect in &dirty {
+                    self.field.copy_to_coarse(&mut self.coarse, *rect)?;
+                }
+                let deformed = dirty.iter().map(Rect::area).sum();
+                Ok((report.volume, self.field.removed(), deformed, dirty, "cpu"))
+            })?,
+        };
 
         let t = Instant::now();
         for rect in &dirty {
@@ -110,7 +140,7 @@ impl Scenario for SnowScenario {
         let field = &self.field;
         let camera = self
             .rig
-            .step(frame.vehicle, FRAME_DT as f32, &collider, |p| {
+            .step(poses.vehicle, FRAME_DT as f32, &collider, |p| {
                 field.height(p)
             })?;
         let eye = self.rig.eye();
@@ -123,16 +153,14 @@ impl Scenario for SnowScenario {
             }
             Ok(())
         })?;
-        if let Some(scene) = ctx.gpu.as_deref_mut() {
-            scene.upload(&self.coarse, ctx.timings)?;
-        }
         Ok(FrameOutcome {
             camera,
             camera_clearance_m,
             stats: FrameStats {
-                dirty_texels: dirty.iter().map(Rect::area).sum(),
-                granular_volume: Some(frame.report.volume),
-                granular_removed: Some(self.field.removed()),
+                dirty_texels: deformed_texels,
+                granular_volume: Some(volume),
+                granular_removed: Some(removed),
+                granular_backend: Some(backend),
                 ..FrameStats::default()
             },
             dirty,

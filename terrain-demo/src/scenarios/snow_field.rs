@@ -26,11 +26,13 @@ const STRIDE: f32 = 0.7;
 /// Distance per frame of the vehicle and of the walker.
 const VEHICLE_STEP: f32 = 0.35;
 
-/// One frame of the snow field.
-#[derive(Debug)]
-pub struct SnowFrame {
-    /// The granular step's report (volume, removed material, active areas).
-    pub report: StepReport,
+/// Where the objects are in one frame.
+#[derive(Debug, Clone, Copy)]
+pub struct SnowPoses {
+    /// The four wheels.
+    wheels: [Affine3A; 4],
+    /// The walker's foot down this frame.
+    foot: Affine3A,
     /// Where the vehicle is (metres, X Z) and its unit heading.
     pub vehicle: (Vec2, Vec2),
 }
@@ -82,23 +84,20 @@ impl SnowField {
         (Vec2::new(x, z), Vec2::new(dx, 1.0).normalize())
     }
 
-    /// Runs one granular step with the objects at this frame's positions.
-    pub fn step(&mut self) -> Result<SnowFrame> {
+    /// The objects' poses of the next frame (and advances the frame counter).
+    pub fn next_poses(&mut self) -> SnowPoses {
         let f = self.frame as f32;
         self.frame += 1;
         let (centre, heading) = self.vehicle_at(f);
         let rotation = Quat::from_rotation_y(heading.x.atan2(heading.y));
         let side = heading.perp();
-        let mut transforms = Vec::new();
-        for (along, across) in [(1.0f32, 1.0f32), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
+        let corners = [(1.0f32, 1.0f32), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)];
+        let wheels = corners.map(|(along, across)| {
             let xz = centre + heading * (along * WHEELBASE * 0.5) + side * (across * TRACK * 0.5);
             // The wheel's centre sits so its bottom is WHEEL_SINK under the undisturbed snow.
             let y = self.undisturbed(xz) - WHEEL_SINK + WHEEL_RADIUS;
-            transforms.push((
-                &self.wheel,
-                Affine3A::from_rotation_translation(rotation, Vec3::new(xz.x, y, xz.y)),
-            ));
-        }
+            Affine3A::from_rotation_translation(rotation, Vec3::new(xz.x, y, xz.y))
+        });
         // The walker goes beside the vehicle, one foot down per frame, left and right.
         let walk_z = self.extent.y * 0.2 + f * STRIDE * 0.5;
         let foot_side = if self.frame.is_multiple_of(2) {
@@ -108,19 +107,52 @@ impl SnowField {
         };
         let foot_xz = Vec2::new(self.extent.x * 0.7 + foot_side, walk_z);
         let foot_y = self.undisturbed(foot_xz) - FOOT_SINK;
-        transforms.push((
-            &self.foot,
-            Affine3A::from_translation(Vec3::new(foot_xz.x, foot_y, foot_xz.y)),
-        ));
-        let objects: Vec<GranularObject<'_>> = transforms
-            .iter()
-            .map(|(m, t)| GranularObject::new(m, *t))
-            .collect();
-        let report = self.sim.step(&objects)?;
-        Ok(SnowFrame {
-            report,
+        SnowPoses {
+            wheels,
+            foot: Affine3A::from_translation(Vec3::new(foot_xz.x, foot_y, foot_xz.y)),
             vehicle: (centre, heading),
-        })
+        }
+    }
+
+    /// The granular objects at `poses`.
+    pub fn objects(&self, poses: &SnowPoses) -> Vec<GranularObject<'_>> {
+        let mut objects: Vec<GranularObject<'_>> = poses
+            .wheels
+            .iter()
+            .map(|t| GranularObject::new(&self.wheel, *t))
+            .collect();
+        objects.push(GranularObject::new(&self.foot, poses.foot));
+        objects
+    }
+
+    /// Runs one granular step on the CPU with the objects at `poses`.
+    pub fn step(&mut self, poses: &SnowPoses) -> Result<StepReport> {
+        let objects: Vec<GranularObject<'_>> = poses
+            .wheels
+            .iter()
+            .map(|t| GranularObject::new(&self.wheel, *t))
+            .chain(std::iter::once(GranularObject::new(&self.foot, poses.foot)))
+            .collect();
+        Ok(self.sim.step(&objects)?)
+    }
+
+    /// The fixed-point heights (the CPU simulation's, or the GPU's as they arrive).
+    pub fn map(&self) -> &FixedPointMap {
+        self.sim.map()
+    }
+
+    /// The simulation's parameters.
+    pub fn params(&self) -> &GranularParams {
+        self.sim.params()
+    }
+
+    /// Writes heights that a GPU step made (read back) into the field's map at `rect`.
+    pub fn write_region(&mut self, rect: Rect, heights: &Grid<u32>) -> Result<()> {
+        if heights.size() != rect.size {
+            bail!("region {rect:?} came with {} heights", heights.size());
+        }
+        self.sim.map_mut().grid_mut().paste(heights, rect.min)?;
+        Ok(())
     }
 
     /// The snow surface before any deformation: the objects' reference height, so a wheel

@@ -80,7 +80,7 @@ impl Scenario for StampScenario {
         &self.normals
     }
 
-    fn prepare_gpu(&self, scene: &mut GpuScene) -> Result<()> {
+    fn prepare_gpu(&mut self, scene: &mut GpuScene) -> Result<()> {
         scene.set_footprint(self.script.footprint())
     }
 

@@ -346,6 +346,11 @@ impl DisplacePass {
             &scratch.dist,
             &scratch.carried,
         ];
+        // The other seed grid's bind group is made now too (a ping-pong pair built once), so
+        // which grid a flood ends on never makes a bind group in a later frame.
+        let mut other = buffers;
+        other[2] = &scratch.seeds[(seeds.seed_grid() & 1) ^ 1];
+        self.bindings.warm(device, &other)?;
         encoder.clear_buffer(&scratch.acc, 0, Some(area.rect().area() * 4));
         match method {
             DisplacementMethod::ClosestSeed | DisplacementMethod::MultipleTargets => {
