@@ -247,50 +247,70 @@ fn smoke() -> Result<()> {
 
 /// The snow scenario at a tiny size: frames, and a granular volume that never changes.
 fn smoke_snow() -> Result<()> {
-    let out = root().join("target").join("ci-smoke-snow");
+    let gpu = snow_run("gpu", &[])?;
+    let cpu = snow_run("cpu", &["--no-gpu"])?;
+    if gpu != cpu {
+        bail!("snow: the GPU run's volume {gpu} differs from the CPU run's {cpu}");
+    }
+    Ok(())
+}
+
+/// Runs the snow scenario (6 frames, 128^2) with `extra` flags; checks every frame reports
+/// `backend` as its granular backend and the same granular volume; returns that volume.
+fn snow_run(backend: &str, extra: &[&str]) -> Result<u64> {
+    let out = root()
+        .join("target")
+        .join(format!("ci-smoke-snow-{backend}"));
     if out.exists() {
         std::fs::remove_dir_all(&out).context("could not clear the smoke output folder")?;
     }
     let out_s = out.to_string_lossy().into_owned();
-    cargo(
-        &[
-            "run",
-            "--locked",
-            "-p",
-            "terrain-demo",
-            "--",
-            "--scenario",
-            "snow",
-            "--size",
-            "128",
-            "--frames",
-            "6",
-            "--resolution",
-            "160x96",
-            "--out",
-            &out_s,
-        ],
-        &[],
-    )?;
+    let mut args = vec![
+        "run",
+        "--locked",
+        "-p",
+        "terrain-demo",
+        "--",
+        "--scenario",
+        "snow",
+        "--size",
+        "128",
+        "--frames",
+        "6",
+        "--resolution",
+        "160x96",
+        "--out",
+        &out_s,
+    ];
+    args.extend_from_slice(extra);
+    cargo(&args, &[])?;
     let text = std::fs::read_to_string(out.join("report.json")).context("no snow report")?;
     let report: serde_json::Value = serde_json::from_str(&text).context("invalid report.json")?;
-    let volumes: Vec<u64> = report["frames"]
-        .as_array()
-        .into_iter()
-        .flatten()
+    let frames = report["frames"].as_array().cloned().unwrap_or_default();
+    let volumes: Vec<u64> = frames
+        .iter()
         .filter_map(|f| f["granular_volume"].as_u64())
         .collect();
     if volumes.len() != 6 || volumes.iter().any(|v| *v != volumes[0]) {
-        bail!("snow: granular volume must be reported and constant, got {volumes:?}");
+        bail!("snow ({backend}): granular volume must be reported and constant, got {volumes:?}");
+    }
+    if let Some(f) = frames
+        .iter()
+        .find(|f| f["granular_backend"].as_str() != Some(backend))
+    {
+        bail!(
+            "snow: granular steps expected on the {backend}, frame {} reports {}",
+            f["index"],
+            f["granular_backend"]
+        );
     }
     eprintln!(
-        "smoke (snow): 6 frames, granular volume constant at {}",
+        "smoke (snow on the {backend}): 6 frames, granular volume constant at {}",
         volumes[0]
     );
-    Ok(())
+    Ok(volumes[0])
 }
 
-/// One smoke run; `backend` sets `WGPU_BACKEND`.
 fn smoke_on(backend: Option<&str>) -> Result<()> {
     let name = backend.unwrap_or("default");
     let out = root().join("target").join(format!("ci-smoke-{name}"));
