@@ -53,7 +53,7 @@ fn cargo(args: &[&str], env: &[(&str, &str)]) -> Result<()> {
 type Step = (&'static str, fn() -> Result<()>);
 
 fn ci() -> Result<()> {
-    let steps: [Step; 6] = [
+    let steps: [Step; 7] = [
         ("fmt", fmt),
         ("clippy", clippy),
         ("test", test),
