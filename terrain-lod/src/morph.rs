@@ -40,25 +40,34 @@ pub fn coarse_height(texel: IVec2, scale: u32, height: impl Fn(IVec2) -> f32) ->
     }
 }
 
+/// What the morph needs to know of a vertex's level.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MorphLevel {
+    /// Texels per grid step of the level (`2^level`).
+    pub scale: u32,
+    /// Clipmap N (vertices per side).
+    pub n: u32,
+    /// Transition width in level grid units ([`default_morph_width`]).
+    pub width: f32,
+    /// Whether this is the coarsest level (which has no coarser level and is not morphed).
+    pub coarsest: bool,
+}
+
 /// The morphed height: `height(texel)` blended towards [`coarse_height`] by [`morph_alpha`]
-/// (the coarsest level has no coarser level and is not morphed).
-#[allow(clippy::too_many_arguments)]
+/// (the coarsest level is not morphed).
 pub fn morphed_height(
     texel: IVec2,
     camera_texel: Vec2,
-    scale: u32,
-    n: u32,
-    width: f32,
-    coarsest: bool,
+    level: &MorphLevel,
     height: impl Fn(IVec2) -> f32,
 ) -> f32 {
     let h = height(texel);
-    if coarsest {
+    if level.coarsest {
         return h;
     }
-    let alpha = morph_alpha(texel, camera_texel, scale, n, width);
+    let alpha = morph_alpha(texel, camera_texel, level.scale, level.n, level.width);
     if alpha <= 0.0 {
         return h;
     }
-    h + (coarse_height(texel, scale, &height) - h) * alpha
+    h + (coarse_height(texel, level.scale, &height) - h) * alpha
 }

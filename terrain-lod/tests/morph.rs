@@ -4,7 +4,9 @@
 use glam::{IVec2, Vec2};
 use proptest::prelude::*;
 use terrain_lod::ClipmapLayout;
-use terrain_lod::morph::{coarse_height, default_morph_width, morph_alpha, morphed_height};
+use terrain_lod::morph::{
+    MorphLevel, coarse_height, default_morph_width, morph_alpha, morphed_height,
+};
 
 /// A height field with no symmetry, so a wrong neighbour shows.
 fn h(t: IVec2) -> f32 {
@@ -35,7 +37,17 @@ proptest! {
                     let a = morph_alpha(t, camera, level.scale, n, w);
                     prop_assert_eq!(a, 1.0, "level {} edge vertex {} alpha {}", level.level, t, a);
                     // Fully morphed: the vertex lies on the coarser level's surface.
-                    let m = morphed_height(t, camera, level.scale, n, w, false, h);
+                    let m = morphed_height(
+                        t,
+                        camera,
+                        &MorphLevel {
+                            scale: level.scale,
+                            n,
+                            width: w,
+                            coarsest: false,
+                        },
+                        h,
+                    );
                     prop_assert!((m - coarse_height(t, level.scale, h)).abs() < 1e-4);
                 }
             }
@@ -72,7 +84,17 @@ fn coarse_height_interpolates_the_coarser_grid() {
     // The coarsest level is never morphed.
     let t = IVec2::new(1, 0);
     assert_eq!(
-        morphed_height(t, Vec2::new(1000.0, 0.0), 1, 15, 1.5, true, h),
+        morphed_height(
+            t,
+            Vec2::new(1000.0, 0.0),
+            &MorphLevel {
+                scale: 1,
+                n: 15,
+                width: 1.5,
+                coarsest: true,
+            },
+            h,
+        ),
         h(t)
     );
 }

@@ -139,6 +139,14 @@ fn walk(
     // Texel-space position and direction (per metre of ray).
     let (px, pz) = (o.x / ts, o.z / ts);
     let (dx, dz) = (d.x / ts, d.z / ts);
+    let ray = GridRay {
+        o,
+        d,
+        px,
+        pz,
+        dx,
+        dz,
+    };
     let sx = px + dx * t_start;
     let sz = pz + dz * t_start;
     let mut ix = sx.floor() as i64;
@@ -170,7 +178,7 @@ fn walk(
         let t_out = t_max_x.min(t_max_z).min(t_end);
         if t_out >= t_in {
             let patch = field.patch(ix, iz);
-            if let Some(t) = hit_in_cell(&patch, o, d, px, pz, dx, dz, t_in, t_out) {
+            if let Some(t) = hit_in_cell(&patch, &ray, t_in, t_out) {
                 let p = o + d * t;
                 let (u, v) = (
                     (p.x / ts - ix as f64).clamp(0.0, 1.0),
@@ -198,20 +206,29 @@ fn walk(
     None
 }
 
-/// The first distance in `[t_in, t_out]` where the ray meets the cell's patch.
-#[allow(clippy::too_many_arguments)]
-#[inline]
-fn hit_in_cell(
-    patch: &Patch,
+/// A ray in world units (`o`, `d`) and in texel units over the grid (`px`, `pz` the origin,
+/// `dx`, `dz` the direction).
+#[derive(Debug, Clone, Copy)]
+struct GridRay {
     o: DVec3,
     d: DVec3,
     px: f64,
     pz: f64,
     dx: f64,
     dz: f64,
-    t_in: f64,
-    t_out: f64,
-) -> Option<f64> {
+}
+
+/// The first distance in `[t_in, t_out]` where the ray meets the cell's patch.
+#[inline]
+fn hit_in_cell(patch: &Patch, ray: &GridRay, t_in: f64, t_out: f64) -> Option<f64> {
+    let GridRay {
+        o,
+        d,
+        px,
+        pz,
+        dx,
+        dz,
+    } = *ray;
     // Quick rejection: the patch lies within its corner heights, the ray segment within its
     // end heights.
     let (y_in, y_out) = (o.y + d.y * t_in, o.y + d.y * t_out);

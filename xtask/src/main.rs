@@ -120,12 +120,63 @@ fn doc() -> Result<()> {
 /// Verification is kept: it builds the world again (the packaged manifests carry none of the
 /// workspace's profiles), measured at 69 s from cold and about 10 s warm on the project's
 /// 2-core machine. Resolving the packages' dependencies reads the crates.io index.
+/// Removes cargo's extracted copies of earlier workspace packages. `cargo package` verifies
+/// against a local registry of the freshly packaged crates, cached under
+/// `$CARGO_HOME/registry/{src,cache}/-<hash>` by the registry's path; cargo does not extract a
+/// package again when a copy of the same name and version is there, so a second run from the
+/// same folder (or another checkout sharing the target folder) would verify against the old
+/// sources. Only those overlay folders (their names start with `-`) are removed.
+fn clear_package_overlays() -> Result<()> {
+    let home = std::env::var_os("CARGO_HOME")
+        .map(std::path::PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| std::path::PathBuf::from(h).join(".cargo")));
+    let Some(home) = home else {
+        return Ok(());
+    };
+    for kind in ["src", "cache", "index"] {
+        let Ok(entries) = std::fs::read_dir(home.join("registry").join(kind)) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            if entry.file_name().to_string_lossy().starts_with('-') {
+                std::fs::remove_dir_all(entry.path())
+                    .with_context(|| format!("removing {}", entry.path().display()))?;
+            }
+        }
+    }
+    Ok(())
+}
+
 fn package() -> Result<()> {
     let crates = publishable_crates()?;
     if crates.is_empty() {
         bail!("no publishable crate found in `cargo metadata`");
     }
-    let mut args = vec!["package", "--allow-dirty"];
+    clear_package_overlays()?;
+    // Verification builds our packaged crates as registry crates, which cargo never rebuilds
+    // for a changed source (registry packages are immutable to it): build them in a target
+    // folder of their own and drop our crates' artifacts there first; wgpu and the other
+    // dependencies stay built.
+    let target = root().join("target").join("package-verify");
+    for sub in ["deps", ".fingerprint", "build"] {
+        let Ok(entries) = std::fs::read_dir(target.join("debug").join(sub)) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if name.starts_with("terrain") || name.starts_with("libterrain") {
+                let path = entry.path();
+                let removed = if path.is_dir() {
+                    std::fs::remove_dir_all(&path)
+                } else {
+                    std::fs::remove_file(&path)
+                };
+                removed.with_context(|| format!("removing {}", path.display()))?;
+            }
+        }
+    }
+    let target_s = target.to_string_lossy().into_owned();
+    let mut args = vec!["package", "--allow-dirty", "--target-dir", &target_s];
     for name in &crates {
         args.extend(["-p", name.as_str()]);
     }
