@@ -19,3 +19,7 @@ pub use tile::{Layer, TileData, TileId};
 pub use world::{LevelBounds, TileRead, World};
 pub mod build;
 pub use build::{BuildProgress, BuildReport, MapSource, ProceduralSource, Raw16Source, TileSource, build_world, rebuild_ancestors};
+pub mod policy;
+pub mod pool;
+pub use policy::{BandSelection, CameraState, FrustumSelection, SelectionPolicy, SphericalSelection, TileGrid, Want};
+pub use pool::{FrameReport, PoolConfig, RamPool, RequestHandle, TileState, TileStatus};
