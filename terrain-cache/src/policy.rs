@@ -144,8 +144,9 @@ impl TileGrid {
         let lo = ((xz - r) / t).floor();
         let hi = ((xz + r) / t).floor();
         let n = g.tiles.as_dvec2();
-        for axis_y in axis_range(lo.y, hi.y, n.y, self.wrap) {
-            for axis_x in axis_range(lo.x, hi.x, n.x, self.wrap) {
+        let c = xz / t;
+        for axis_y in axis_range(lo.y, hi.y, n.y, c.y, self.wrap) {
+            for axis_x in axis_range(lo.x, hi.x, n.x, c.x, self.wrap) {
                 let (ix, ox) = axis_x;
                 let (iy, oy) = axis_y;
                 f(TileId::new(level, ix, iy), DVec2::new(ox, oy) * t);
@@ -186,8 +187,9 @@ impl TileGrid {
 }
 
 /// Tile indices `lo..=hi` on one axis (tile units), with the offset (in tiles) of the periodic
-/// image each index stands for; clamped to `0..n` without wrap, at most `n` indices with wrap.
-fn axis_range(lo: f64, hi: f64, n: f64, wrap: WrapMode) -> Vec<(u32, f64)> {
+/// image each index stands for; clamped to `0..n` without wrap, at most `n` indices with wrap
+/// (then each tile once, at its image nearest `centre`, the camera in tile units).
+fn axis_range(lo: f64, hi: f64, n: f64, centre: f64, wrap: WrapMode) -> Vec<(u32, f64)> {
     let mut out = Vec::new();
     match wrap {
         WrapMode::Clamp => {
@@ -199,17 +201,20 @@ fn axis_range(lo: f64, hi: f64, n: f64, wrap: WrapMode) -> Vec<(u32, f64)> {
                 i += 1.0;
             }
         }
+        WrapMode::Repeat if hi - lo + 1.0 >= n => {
+            let mut w = 0.0;
+            while w < n {
+                let shift = ((centre - (w + 0.5)) / n).round() * n;
+                out.push((w as u32, shift));
+                w += 1.0;
+            }
+        }
         WrapMode::Repeat => {
-            // Visit at most n consecutive indices centred on the middle of the range.
-            let count = (hi - lo + 1.0).min(n);
-            let centre = ((lo + hi) * 0.5).floor();
-            let start = if count >= n { centre - (n / 2.0).floor() } else { lo };
-            let mut k = 0.0;
-            while k < count {
-                let i = start + k;
+            let mut i = lo;
+            while i <= hi {
                 let wrapped = i.rem_euclid(n);
                 out.push((wrapped as u32, i - wrapped));
-                k += 1.0;
+                i += 1.0;
             }
         }
     }

@@ -39,7 +39,7 @@ fn pump(pool: &mut RamPool, cam: &CameraState, mut done: impl FnMut(&RamPool, &t
 fn loads_selection_within_budget_and_falls_back_to_coarser() {
     let world = mem_world(512, 32);
     let tb = 32 * 32 * 2;
-    let mut pool = RamPool::new(world, PoolConfig::new(Layer::Height, 40 * tb)).unwrap();
+    let mut pool = RamPool::new(world, PoolConfig::new(Layer::Height, 80 * tb)).unwrap();
     let cam = CameraState::at(Vec3::new(100.0, 50.0, 100.0));
     pump(&mut pool, &cam, |p, r| {
         r.wanted_resident == r.wanted && p.status(TileId::new(0, 3, 3)).is_some_and(|s| s.state == TileState::Loaded)
