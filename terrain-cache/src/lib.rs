@@ -23,3 +23,5 @@ pub mod policy;
 pub mod pool;
 pub use policy::{BandSelection, CameraState, FrustumSelection, SelectionPolicy, SphericalSelection, TileGrid, Want};
 pub use pool::{FrameReport, PoolConfig, RamPool, RequestHandle, TileState, TileStatus};
+pub mod sim;
+pub use sim::{CameraPath, SimConfig, SimPolicy, SimResult, comparison_table, simulate};
