@@ -19,7 +19,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .unwrap_or_else(|| std::env::temp_dir().join(format!("terrain-cache-world-{side}")));
     let _ = std::fs::remove_dir_all(&dir);
     let store: Arc<dyn TileStore> = Arc::new(FsStore::open(&dir)?);
-    let base = TerrainParams { size: UVec2::splat(1024), ..TerrainParams::default() };
+    let base = TerrainParams {
+        size: UVec2::splat(1024),
+        ..TerrainParams::default()
+    };
     let source = ProceduralSource::new(UVec2::splat(side), &base, 4, 0.02)?;
     let manifest = Manifest::new(
         UVec2::splat(side),
@@ -30,7 +33,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )?;
     let (world, report) = build_world(store, manifest, &source, &|p| {
         if p.done % 64 == 0 || p.done == p.total {
-            print!("\rbuilding {side}^2: {}/{} tiles ({} stored, {} zero)", p.done, p.total, p.stored, p.zero);
+            print!(
+                "\rbuilding {side}^2: {}/{} tiles ({} stored, {} zero)",
+                p.done, p.total, p.stored, p.zero
+            );
             let _ = std::io::stdout().flush();
         }
         true
@@ -38,7 +44,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!();
     let peak = std::fs::read_to_string("/proc/self/status")
         .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM")).map(str::to_owned))
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM"))
+                .map(str::to_owned)
+        })
         .unwrap_or_else(|| "VmHWM: n/a".into());
     println!(
         "{} levels, {} tiles ({} stored, {} zero), {:.1} MiB of PNG16 in {:.1} s into {}; map would be {:.0} MiB; peak RSS {}",

@@ -95,10 +95,14 @@ impl TileSource for Raw16Source {
         let mut row = vec![0u8; w * 2];
         let mut data = Vec::with_capacity(w * rect.size.y as usize);
         for y in rect.min.y..rect.max().y {
-            let off = (u64::from(y as u32) * u64::from(self.size.x) + u64::from(rect.min.x as u32)) * 2;
+            let off =
+                (u64::from(y as u32) * u64::from(self.size.x) + u64::from(rect.min.x as u32)) * 2;
             f.seek(SeekFrom::Start(off))?;
             f.read_exact(&mut row)?;
-            data.extend(row.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]])));
+            data.extend(
+                row.chunks_exact(2)
+                    .map(|c| u16::from_le_bytes([c[0], c[1]])),
+            );
         }
         Grid::from_vec(rect.size.x, rect.size.y, data).map_err(std::io::Error::other)
     }
@@ -363,7 +367,10 @@ pub fn build_world<S: TileSource>(
 }
 
 /// Builds, stores and returns tile `id` (`None` beyond the level's tiles).
-fn build_node<S: TileSource>(ctx: &BuildCtx<'_, S>, id: TileId) -> Result<Option<Node>, CacheError> {
+fn build_node<S: TileSource>(
+    ctx: &BuildCtx<'_, S>,
+    id: TileId,
+) -> Result<Option<Node>, CacheError> {
     let m = ctx.world.manifest();
     let tiles = m.tiles_at(id.level);
     if id.x >= tiles.x || id.y >= tiles.y {
@@ -465,7 +472,10 @@ fn reduce_children(m: &Manifest, id: TileId, children: &[Option<Node>; 4]) -> No
             let r1 = c.grid.row(2 * j + 1);
             let dst = &mut out[((qy + j) * ts + qx) as usize..][..half as usize];
             for (i, d) in dst.iter_mut().enumerate() {
-                let s = u32::from(r0[2 * i]) + u32::from(r0[2 * i + 1]) + u32::from(r1[2 * i]) + u32::from(r1[2 * i + 1]);
+                let s = u32::from(r0[2 * i])
+                    + u32::from(r0[2 * i + 1])
+                    + u32::from(r1[2 * i])
+                    + u32::from(r1[2 * i + 1]);
                 *d = ((s + 2) / 4) as u16;
             }
         }
@@ -478,7 +488,11 @@ fn reduce_children(m: &Manifest, id: TileId, children: &[Option<Node>; 4]) -> No
     Node { grid, min, max }
 }
 
-fn store_node<S: TileSource>(ctx: &BuildCtx<'_, S>, id: TileId, node: &Node) -> Result<(), CacheError> {
+fn store_node<S: TileSource>(
+    ctx: &BuildCtx<'_, S>,
+    id: TileId,
+    node: &Node,
+) -> Result<(), CacheError> {
     let world = ctx.world;
     let written = world.write_grid16(id, &node.grid)?;
     if written > 0 {
@@ -489,7 +503,10 @@ fn store_node<S: TileSource>(ctx: &BuildCtx<'_, S>, id: TileId, node: &Node) -> 
     }
     let t = world.manifest().tiles_at(id.level);
     if let Some(slot) = ctx.bounds[id.level as usize].get((id.y * t.x + id.x) as usize) {
-        slot.store((u32::from(node.min) << 16) | u32::from(node.max), Ordering::Relaxed);
+        slot.store(
+            (u32::from(node.min) << 16) | u32::from(node.max),
+            Ordering::Relaxed,
+        );
     }
     let done = ctx.done.fetch_add(1, Ordering::Relaxed) + 1;
     let p = BuildProgress {
@@ -594,7 +611,12 @@ fn level_bounds<'a>(
     })
 }
 
-fn set_bounds(world: &World, cache: &mut [Option<LevelBounds>], id: TileId, v: [u16; 2]) -> Result<(), CacheError> {
+fn set_bounds(
+    world: &World,
+    cache: &mut [Option<LevelBounds>],
+    id: TileId,
+    v: [u16; 2],
+) -> Result<(), CacheError> {
     level_bounds(world, cache, id.level)?;
     if let Some(b) = cache[id.level as usize].as_mut() {
         let i = id.y as usize * b.tiles.x as usize + id.x as usize;
@@ -618,8 +640,18 @@ mod tests {
     /// Reference pyramid computed whole, in memory.
     fn reference_level(prev: &Grid<u16>, size: UVec2) -> Grid<u16> {
         Grid::from_fn(size.x, size.y, |i, j| {
-            let at = |x: u32, y: u32| u32::from(prev.get(x.min(prev.width() - 1), y.min(prev.height() - 1)).unwrap());
-            ((at(2 * i, 2 * j) + at(2 * i + 1, 2 * j) + at(2 * i, 2 * j + 1) + at(2 * i + 1, 2 * j + 1) + 2) / 4) as u16
+            let at = |x: u32, y: u32| {
+                u32::from(
+                    prev.get(x.min(prev.width() - 1), y.min(prev.height() - 1))
+                        .unwrap(),
+                )
+            };
+            ((at(2 * i, 2 * j)
+                + at(2 * i + 1, 2 * j)
+                + at(2 * i, 2 * j + 1)
+                + at(2 * i + 1, 2 * j + 1)
+                + 2)
+                / 4) as u16
         })
         .unwrap()
     }
@@ -627,7 +659,10 @@ mod tests {
     #[test]
     fn pyramid_matches_whole_map_reduction_and_bounds() {
         let size = UVec2::new(150, 90);
-        let grid = Grid::from_fn(size.x, size.y, |x, y| ((x * 37 + y * 101) % 5000 + 1) as u16).unwrap();
+        let grid = Grid::from_fn(size.x, size.y, |x, y| {
+            ((x * 37 + y * 101) % 5000 + 1) as u16
+        })
+        .unwrap();
         let map = CoarseMap::coarse(grid.clone(), enc(), 1.0).unwrap();
         let m = Manifest::new(size, 32, 1.0, enc(), WrapMode::Repeat).unwrap();
         let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
@@ -657,7 +692,11 @@ mod tests {
                 }
             }
             let b = world.bounds(l).unwrap().unwrap();
-            assert!(b.min_max.iter().all(|&[lo, hi]| lo >= 1 && hi <= 5000 && lo <= hi));
+            assert!(
+                b.min_max
+                    .iter()
+                    .all(|&[lo, hi]| lo >= 1 && hi <= 5000 && lo <= hi)
+            );
         }
         let top = world.bounds(m.levels - 1).unwrap().unwrap();
         assert_eq!(top.min_max, vec![[1, 5000]]);
@@ -666,7 +705,8 @@ mod tests {
     #[test]
     fn zero_tiles_are_not_stored_and_cancel_works() {
         let size = UVec2::new(128, 128);
-        let grid = Grid::from_fn(size.x, size.y, |x, y| if x < 32 && y < 32 { 9 } else { 0 }).unwrap();
+        let grid =
+            Grid::from_fn(size.x, size.y, |x, y| if x < 32 && y < 32 { 9 } else { 0 }).unwrap();
         let map = CoarseMap::coarse(grid, enc(), 1.0).unwrap();
         let m = Manifest::new(size, 32, 1.0, enc(), WrapMode::Clamp).unwrap();
         let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
@@ -676,17 +716,28 @@ mod tests {
         let keys = store.list("height").unwrap();
         assert_eq!(keys.iter().filter(|k| k.ends_with(".png")).count(), 3);
         let store2: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
-        let e = build_world(store2.clone(), m, &MapSource { map: &map }, &|p| p.done < 5).unwrap_err();
+        let e =
+            build_world(store2.clone(), m, &MapSource { map: &map }, &|p| p.done < 5).unwrap_err();
         assert!(matches!(e, CacheError::Cancelled { .. }), "{e}");
-        assert!(World::open(store2).is_err(), "no manifest after a cancelled build");
+        assert!(
+            World::open(store2).is_err(),
+            "no manifest after a cancelled build"
+        );
     }
 
     #[test]
     fn procedural_source_is_region_consistent_and_rebuild_ancestors_refreshes() {
-        let base = TerrainParams { size: UVec2::splat(32), ..TerrainParams::default() };
+        let base = TerrainParams {
+            size: UVec2::splat(32),
+            ..TerrainParams::default()
+        };
         let src = ProceduralSource::new(UVec2::splat(256), &base, 3, 0.05).unwrap();
-        let a = src.region(Rect::new(IVec2::new(10, 20), UVec2::new(40, 30))).unwrap();
-        let b = src.region(Rect::new(IVec2::new(0, 0), UVec2::new(64, 64))).unwrap();
+        let a = src
+            .region(Rect::new(IVec2::new(10, 20), UVec2::new(40, 30)))
+            .unwrap();
+        let b = src
+            .region(Rect::new(IVec2::new(0, 0), UVec2::new(64, 64)))
+            .unwrap();
         assert_eq!(a.get(0, 0), b.get(10, 20));
         assert_eq!(a.get(39, 29), b.get(49, 49));
         let m = Manifest::new(UVec2::splat(256), 64, 1.0, enc(), WrapMode::Repeat).unwrap();
@@ -695,7 +746,11 @@ mod tests {
         // Raise one level-0 tile, refresh its ancestors, compare with a full rebuild.
         let id = TileId::new(0, 1, 2);
         let mut t = (*world.load_tile(Layer::Height, id).unwrap()).clone();
-        t.as_u16_mut().unwrap().as_mut_slice().iter_mut().for_each(|v| *v = v.saturating_add(1000));
+        t.as_u16_mut()
+            .unwrap()
+            .as_mut_slice()
+            .iter_mut()
+            .for_each(|v| *v = v.saturating_add(1000));
         world.write_tile(Layer::Height, id, &t).unwrap();
         let up = rebuild_ancestors(&world, &[id]).unwrap();
         assert_eq!(up, vec![TileId::new(1, 0, 1), TileId::new(2, 0, 0)]);
@@ -703,14 +758,22 @@ mod tests {
         let mut full = Grid::new(256, 256, 0u16).unwrap();
         for tid in m.tiles_of(Layer::Height, 0) {
             let tile = world.load_tile(Layer::Height, tid).unwrap();
-            full.paste(tile.as_u16().unwrap(), IVec2::new(tid.x as i32 * 64, tid.y as i32 * 64)).unwrap();
+            full.paste(
+                tile.as_u16().unwrap(),
+                IVec2::new(tid.x as i32 * 64, tid.y as i32 * 64),
+            )
+            .unwrap();
         }
         let map = CoarseMap::coarse(full, enc(), 1.0).unwrap();
         let store2: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
         let (w2, _) = build_world(store2, m, &MapSource { map: &map }, &|_| true).unwrap();
         for l in 0..m.levels {
             for tid in m.tiles_of(Layer::Height, l) {
-                assert_eq!(world.load_tile(Layer::Height, tid).unwrap(), w2.load_tile(Layer::Height, tid).unwrap(), "{tid}");
+                assert_eq!(
+                    world.load_tile(Layer::Height, tid).unwrap(),
+                    w2.load_tile(Layer::Height, tid).unwrap(),
+                    "{tid}"
+                );
             }
             assert_eq!(world.bounds(l).unwrap(), w2.bounds(l).unwrap(), "level {l}");
         }

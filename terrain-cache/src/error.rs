@@ -131,7 +131,9 @@ pub enum CacheError {
         layer: Layer,
     },
     /// Tile data of the wrong sample type or size was handed to a layer.
-    #[error("{layer:?} tiles are {expected_bits}-bit {size}x{size}; got {found_bits}-bit {found_w}x{found_h}")]
+    #[error(
+        "{layer:?} tiles are {expected_bits}-bit {size}x{size}; got {found_bits}-bit {found_w}x{found_h}"
+    )]
     TileDataMismatch {
         /// The layer.
         layer: Layer,

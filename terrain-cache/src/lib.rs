@@ -67,10 +67,16 @@ pub use store::{FsStore, TileStore};
 pub use tile::{Layer, TileData, TileId};
 pub use world::{LevelBounds, TileRead, World};
 pub mod build;
-pub use build::{BuildProgress, BuildReport, MapSource, ProceduralSource, Raw16Source, TileSource, build_world, rebuild_ancestors};
+pub use build::{
+    BuildProgress, BuildReport, MapSource, ProceduralSource, Raw16Source, TileSource, build_world,
+    rebuild_ancestors,
+};
 pub mod policy;
 pub mod pool;
-pub use policy::{BandSelection, CameraState, FrustumSelection, SelectionPolicy, SphericalSelection, TileGrid, Want};
+pub use policy::{
+    BandSelection, CameraState, FrustumSelection, SelectionPolicy, SphericalSelection, TileGrid,
+    Want,
+};
 pub use pool::{FrameReport, PoolConfig, RamPool, RequestHandle, TileState, TileStatus};
 pub mod sim;
 pub use sim::{CameraPath, SimConfig, SimPolicy, SimResult, comparison_table, simulate};

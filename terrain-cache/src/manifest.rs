@@ -44,7 +44,11 @@ pub struct DetailLayout {
 impl DetailLayout {
     /// Detail tiles of `tile_size` covering a world of `extent_m` metres at `texel_size` metres
     /// per texel, encoded over `[-0.5, 0.5]` m, zero deformation as the fill.
-    pub fn covering(extent_m: glam::Vec2, tile_size: u32, texel_size: f32) -> Result<Self, CacheError> {
+    pub fn covering(
+        extent_m: glam::Vec2,
+        tile_size: u32,
+        texel_size: f32,
+    ) -> Result<Self, CacheError> {
         check_tile_size(tile_size)?;
         check_positive("detail texel_size", texel_size)?;
         let tile_m = f64::from(tile_size) * f64::from(texel_size);
@@ -296,11 +300,10 @@ impl Manifest {
 
     /// Parses and validates the JSON text of a manifest.
     pub fn from_json(text: &str) -> Result<Self, CacheError> {
-        let file: ManifestFile =
-            serde_json::from_str(text).map_err(|e| CacheError::Manifest {
-                key: MANIFEST_KEY.into(),
-                reason: e.to_string(),
-            })?;
+        let file: ManifestFile = serde_json::from_str(text).map_err(|e| CacheError::Manifest {
+            key: MANIFEST_KEY.into(),
+            reason: e.to_string(),
+        })?;
         if file.format_version != FORMAT_VERSION {
             return Err(CacheError::ManifestVersion {
                 found: file.format_version,
@@ -409,7 +412,8 @@ struct DetailFile {
     fill: u8,
 }
 
-const REDUCTION: &str = "2x2 average, rounded to nearest; bounds.bin holds level-0 min/max per tile";
+const REDUCTION: &str =
+    "2x2 average, rounded to nearest; bounds.bin holds level-0 min/max per tile";
 
 impl From<&Manifest> for ManifestFile {
     fn from(m: &Manifest) -> Self {
@@ -534,7 +538,10 @@ mod tests {
         let bad = text.replace("\"tile_size\": 64", "\"tile_size\": 65");
         assert!(matches!(
             Manifest::from_json(&bad),
-            Err(CacheError::OutOfRange { what: "tile_size", .. })
+            Err(CacheError::OutOfRange {
+                what: "tile_size",
+                ..
+            })
         ));
         let nan = text.replace("\"texel_size\": 0.25", "\"texel_size\": -1.0");
         assert!(Manifest::from_json(&nan).is_err());
@@ -547,8 +554,14 @@ mod tests {
         assert_eq!(k, "height/03/00ff/001a.png");
         assert_eq!(parse_tile_key(&k), Some((Layer::Height, id)));
         assert_eq!(parse_tile_key("detail/00/0000/0001.png").unwrap().1.x, 1);
-        for bad in ["height/03/00ff/001a.png.tmp", "x/00/0000/0000.png", "height/3/00ff/001a.png",
-            "height/03/00FF/001a.png", "height/03/00ff/001a", "height/03/bounds.bin"] {
+        for bad in [
+            "height/03/00ff/001a.png.tmp",
+            "x/00/0000/0000.png",
+            "height/3/00ff/001a.png",
+            "height/03/00FF/001a.png",
+            "height/03/00ff/001a",
+            "height/03/bounds.bin",
+        ] {
             assert_eq!(parse_tile_key(bad), None, "{bad}");
         }
         assert_eq!(bounds_key(Layer::Height, 2), "height/02/bounds.bin");

@@ -110,14 +110,21 @@ impl ObjectTileStore {
         })
     }
 
-    fn block_on<F: std::future::Future>(&self, op: &'static str, fut: F) -> Result<F::Output, CacheError> {
+    fn block_on<F: std::future::Future>(
+        &self,
+        op: &'static str,
+        fut: F,
+    ) -> Result<F::Output, CacheError> {
         if tokio::runtime::Handle::try_current().is_ok() {
             return Err(CacheError::InsideAsyncRuntime { op });
         }
         Ok(self.runtime.block_on(fut))
     }
 
-    fn os_err<'k>(op: &'static str, key: &'k str) -> impl FnOnce(object_store::Error) -> CacheError + 'k {
+    fn os_err<'k>(
+        op: &'static str,
+        key: &'k str,
+    ) -> impl FnOnce(object_store::Error) -> CacheError + 'k {
         move |source| CacheError::ObjectStore {
             op,
             key: key.to_owned(),
@@ -191,10 +198,12 @@ impl TileStore for ObjectTileStore {
         let list_path = if full.is_empty() {
             None
         } else {
-            Some(ObjectPath::parse(&full).map_err(|_| CacheError::InvalidKey {
-                key: prefix.to_owned(),
-                reason: "not a valid object_store path",
-            })?)
+            Some(
+                ObjectPath::parse(&full).map_err(|_| CacheError::InvalidKey {
+                    key: prefix.to_owned(),
+                    reason: "not a valid object_store path",
+                })?,
+            )
         };
         let metas: Vec<object_store::ObjectMeta> = self
             .block_on("list", self.store.list(list_path.as_ref()).try_collect())?
@@ -206,7 +215,13 @@ impl TileStore for ObjectTileStore {
         };
         let mut keys: Vec<String> = metas
             .into_iter()
-            .map(|m| m.location.as_ref().get(strip..).unwrap_or_default().to_owned())
+            .map(|m| {
+                m.location
+                    .as_ref()
+                    .get(strip..)
+                    .unwrap_or_default()
+                    .to_owned()
+            })
             .filter(|k| !k.is_empty() && !k.split('/').any(|p| p.starts_with('.')))
             .collect();
         keys.sort();

@@ -56,7 +56,11 @@ impl CameraState {
         for v in self.forward.to_array() {
             check("camera forward", v, true)?;
         }
-        check("camera fov_y", self.fov_y, self.fov_y > 0.0 && self.fov_y < std::f32::consts::PI)?;
+        check(
+            "camera fov_y",
+            self.fov_y,
+            self.fov_y > 0.0 && self.fov_y < std::f32::consts::PI,
+        )?;
         check("camera aspect", self.aspect, self.aspect > 0.0)
     }
 
@@ -98,7 +102,11 @@ impl TileGrid {
         let (lo, hi) = m.encoding.range::<u16>();
         Self {
             levels,
-            wrap: if layer == Layer::Detail { WrapMode::Clamp } else { m.wrap },
+            wrap: if layer == Layer::Detail {
+                WrapMode::Clamp
+            } else {
+                m.wrap
+            },
             height_range_m: (lo.min(hi), lo.max(hi)),
         }
     }
@@ -126,7 +134,9 @@ impl TileGrid {
         let p = DVec2::new(f64::from(position.x), f64::from(position.z));
         let e = self.extent_m();
         match self.wrap {
-            WrapMode::Repeat if e.min_element() > 0.0 => DVec2::new(p.x.rem_euclid(e.x), p.y.rem_euclid(e.y)),
+            WrapMode::Repeat if e.min_element() > 0.0 => {
+                DVec2::new(p.x.rem_euclid(e.x), p.y.rem_euclid(e.y))
+            }
             _ => p,
         }
     }
@@ -135,8 +145,10 @@ impl TileGrid {
     /// given once with the offset of its nearest periodic image (wrapping worlds), clamped to
     /// the world: at most the level's tile count, whatever `radius` is.
     pub fn square(&self, level: u32, xz: DVec2, radius: f64, mut f: impl FnMut(TileId, DVec2)) {
-        let Some(g) = self.levels.get(level as usize) else { return };
-        if g.tiles.min_element() == 0 || !(radius >= 0.0) {
+        let Some(g) = self.levels.get(level as usize) else {
+            return;
+        };
+        if g.tiles.min_element() == 0 || radius.is_nan() || radius < 0.0 {
             return;
         }
         let t = g.tile_m;
@@ -157,12 +169,17 @@ impl TileGrid {
     /// 3D distance in metres from `eye` (x, y, z with `xz` already wrapped) to the box of tile
     /// `id` shifted by `offset` metres (its periodic image), spanning the height range.
     pub fn distance(&self, eye: DVec3, id: TileId, offset: DVec2) -> f64 {
-        let Some(g) = self.levels.get(id.level as usize) else { return f64::INFINITY };
+        let Some(g) = self.levels.get(id.level as usize) else {
+            return f64::INFINITY;
+        };
         let min = DVec2::new(f64::from(id.x), f64::from(id.y)) * g.tile_m + offset;
         let max = min + g.tile_m;
         let dx = (min.x - eye.x).max(eye.x - max.x).max(0.0);
         let dz = (min.y - eye.z).max(eye.z - max.y).max(0.0);
-        let (lo, hi) = (f64::from(self.height_range_m.0), f64::from(self.height_range_m.1));
+        let (lo, hi) = (
+            f64::from(self.height_range_m.0),
+            f64::from(self.height_range_m.1),
+        );
         let dy = (lo - eye.y).max(eye.y - hi).max(0.0);
         (dx * dx + dy * dy + dz * dz).sqrt()
     }
@@ -170,16 +187,26 @@ impl TileGrid {
     /// Eviction score of a tile: its horizontal distance from the camera in tiles of its own
     /// level (far and fine tiles first; coarse tiles serve more views and stay longer).
     pub fn eviction_score(&self, camera: Vec3, id: TileId) -> f64 {
-        let Some(g) = self.levels.get(id.level as usize) else { return f64::INFINITY };
+        let Some(g) = self.levels.get(id.level as usize) else {
+            return f64::INFINITY;
+        };
         let xz = self.camera_xz(camera);
         let eye = DVec3::new(xz.x, f64::from(camera.y), xz.y);
         let mut best = f64::INFINITY;
-        let shifts: &[f64] = if self.wrap == WrapMode::Repeat { &[-1.0, 0.0, 1.0] } else { &[0.0] };
+        let shifts: &[f64] = if self.wrap == WrapMode::Repeat {
+            &[-1.0, 0.0, 1.0]
+        } else {
+            &[0.0]
+        };
         let level_extent = g.tiles.as_dvec2() * g.tile_m;
         for &sy in shifts {
             for &sx in shifts {
                 let off = DVec2::new(sx, sy) * level_extent;
-                best = best.min(self.distance(DVec3::new(eye.x, f64::from(self.height_range_m.0), eye.z), id, off));
+                best = best.min(self.distance(
+                    DVec3::new(eye.x, f64::from(self.height_range_m.0), eye.z),
+                    id,
+                    off,
+                ));
             }
         }
         best / g.tile_m
@@ -276,7 +303,7 @@ impl SelectionPolicy for SphericalSelection {
         let eye = DVec3::new(xz.x, f64::from(camera.position.y), xz.y);
         for level in 0..grid.levels.len() as u32 {
             let thr = self.threshold(level);
-            if !(thr > 0.0) {
+            if thr.is_nan() || thr <= 0.0 {
                 continue;
             }
             grid.square(level, xz, self.view_distance.min(thr), |id, off| {
@@ -335,7 +362,9 @@ impl FrustumSelection {
 
 impl SelectionPolicy for FrustumSelection {
     fn select(&mut self, camera: &CameraState, grid: &TileGrid, out: &mut Vec<Want>) {
-        let Some(g) = grid.levels.get(self.level as usize) else { return };
+        let Some(g) = grid.levels.get(self.level as usize) else {
+            return;
+        };
         let xz = grid.camera_xz(camera.position);
         let eye = DVec3::new(xz.x, f64::from(camera.position.y), xz.y);
         let fwd = DVec2::new(f64::from(camera.forward.x), f64::from(camera.forward.z));
@@ -345,7 +374,8 @@ impl SelectionPolicy for FrustumSelection {
             _ => 0.0,
         };
         self.last_forward = fwd;
-        let half = (camera.half_fov_x() + self.fov_margin + self.turn_gain * turn).min(std::f64::consts::PI);
+        let half = (camera.half_fov_x() + self.fov_margin + self.turn_gain * turn)
+            .min(std::f64::consts::PI);
         let radius = g.tile_m * std::f64::consts::FRAC_1_SQRT_2;
         let far = self.far.max(0.0);
         grid.square(self.level, xz, far + g.tile_m, |id, off| {
@@ -412,7 +442,9 @@ impl BandSelection {
 
 impl SelectionPolicy for BandSelection {
     fn select(&mut self, camera: &CameraState, grid: &TileGrid, out: &mut Vec<Want>) {
-        let Some(g) = grid.levels.get(self.level as usize) else { return };
+        let Some(g) = grid.levels.get(self.level as usize) else {
+            return;
+        };
         if g.tiles.min_element() == 0 {
             return;
         }
@@ -432,7 +464,11 @@ impl SelectionPolicy for BandSelection {
                         p
                     }
                 };
-                let prio = if dx == 0 && dy == 0 { 0.0 } else { 0.5 + 0.25 * f32::from((dx != 0) as u8 + (dy != 0) as u8) };
+                let prio = if dx == 0 && dy == 0 {
+                    0.0
+                } else {
+                    0.5 + 0.25 * f32::from((dx != 0) as u8 + (dy != 0) as u8)
+                };
                 push_unique(out, TileId::new(self.level, p.x as u32, p.y as u32), prio);
             }
         }
@@ -446,9 +482,18 @@ mod tests {
     fn grid3() -> TileGrid {
         TileGrid {
             levels: vec![
-                LevelGrid { tiles: UVec2::splat(8), tile_m: 10.0 },
-                LevelGrid { tiles: UVec2::splat(4), tile_m: 20.0 },
-                LevelGrid { tiles: UVec2::splat(2), tile_m: 40.0 },
+                LevelGrid {
+                    tiles: UVec2::splat(8),
+                    tile_m: 10.0,
+                },
+                LevelGrid {
+                    tiles: UVec2::splat(4),
+                    tile_m: 20.0,
+                },
+                LevelGrid {
+                    tiles: UVec2::splat(2),
+                    tile_m: 40.0,
+                },
             ],
             wrap: WrapMode::Clamp,
             height_range_m: (0.0, 0.0),
@@ -458,22 +503,37 @@ mod tests {
     #[test]
     fn spherical_nests_levels_and_is_bounded_for_any_camera() {
         let g = grid3();
-        let mut p = SphericalSelection { view_distance: 60.0, lod0_range: 12.0, lod_ratio: 2.0 };
+        let mut p = SphericalSelection {
+            view_distance: 60.0,
+            lod0_range: 12.0,
+            lod_ratio: 2.0,
+        };
         let mut out = Vec::new();
         p.select(&CameraState::at(Vec3::new(35.0, 0.0, 35.0)), &g, &mut out);
         let l0: Vec<_> = out.iter().filter(|w| w.id.level == 0).collect();
         assert!(l0.len() >= 4 && l0.len() <= 16, "{}", l0.len());
-        assert!(out.iter().any(|w| w.id == TileId::new(0, 3, 3) && w.priority == 0.0));
+        assert!(
+            out.iter()
+                .any(|w| w.id == TileId::new(0, 3, 3) && w.priority == 0.0)
+        );
         // Every wanted level-0 tile has its parent wanted.
         for w in &l0 {
             assert!(out.iter().any(|v| Some(v.id) == w.id.parent()));
         }
-        for pos in [Vec3::splat(f32::MAX), Vec3::splat(f32::MIN), Vec3::new(1e30, -1e30, 0.0)] {
+        for pos in [
+            Vec3::splat(f32::MAX),
+            Vec3::splat(f32::MIN),
+            Vec3::new(1e30, -1e30, 0.0),
+        ] {
             out.clear();
             p.select(&CameraState::at(pos), &g, &mut out);
             assert!(out.len() <= 64 + 16 + 4);
         }
-        let mut huge = SphericalSelection { view_distance: f64::MAX, lod0_range: f64::MAX, lod_ratio: 2.0 };
+        let mut huge = SphericalSelection {
+            view_distance: f64::MAX,
+            lod0_range: f64::MAX,
+            lod_ratio: 2.0,
+        };
         out.clear();
         huge.select(&CameraState::at(Vec3::ZERO), &g, &mut out);
         assert_eq!(out.len(), 64 + 16 + 4);

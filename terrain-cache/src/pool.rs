@@ -316,7 +316,11 @@ impl RamPool {
     }
 
     /// A pool over `world` selecting with `policy`.
-    pub fn with_policy(world: World, cfg: PoolConfig, policy: Box<dyn SelectionPolicy>) -> Result<Self, CacheError> {
+    pub fn with_policy(
+        world: World,
+        cfg: PoolConfig,
+        policy: Box<dyn SelectionPolicy>,
+    ) -> Result<Self, CacheError> {
         let tile_size = world.manifest().layer_tile_size(cfg.layer)?;
         let tile_bytes = cfg.layer.tile_bytes(tile_size);
         if cfg.budget_bytes < 2 * tile_bytes {
@@ -341,7 +345,11 @@ impl RamPool {
         check("max_in_flight", cfg.max_in_flight, 4096)?;
         check("max_loads_per_frame", cfg.max_loads_per_frame, 1 << 20)?;
         check("max_writes_per_frame", cfg.max_writes_per_frame, 1 << 20)?;
-        check("max_requests_per_frame", cfg.max_requests_per_frame, 1 << 24)?;
+        check(
+            "max_requests_per_frame",
+            cfg.max_requests_per_frame,
+            1 << 24,
+        )?;
         let zero = world.zero_tile(cfg.layer)?;
         let grid = TileGrid::from_manifest(world.manifest(), cfg.layer);
         let (load_tx, load_rx) = unbounded::<LoadJob>();
@@ -482,7 +490,12 @@ impl RamPool {
         for (&id, &p) in &self.explicit {
             wants.push(Want { id, priority: p });
         }
-        wants.sort_by(|a, b| a.priority.total_cmp(&b.priority).then(b.id.level.cmp(&a.id.level)).then(a.id.cmp(&b.id)));
+        wants.sort_by(|a, b| {
+            a.priority
+                .total_cmp(&b.priority)
+                .then(b.id.level.cmp(&a.id.level))
+                .then(a.id.cmp(&b.id))
+        });
         wants.dedup_by_key(|w| w.id);
         r.wanted = wants.len();
         for w in &wants {
@@ -524,9 +537,10 @@ impl RamPool {
         for w in &wants {
             let retry = match self.entries.get(&w.id) {
                 None => true,
-                Some(Entry { slot: Slot::Failed { frame: f }, .. }) => {
-                    frame.saturating_sub(*f) >= self.cfg.retry_failed_frames
-                }
+                Some(Entry {
+                    slot: Slot::Failed { frame: f },
+                    ..
+                }) => frame.saturating_sub(*f) >= self.cfg.retry_failed_frames,
                 Some(_) => false,
             };
             if !retry {
@@ -550,7 +564,9 @@ impl RamPool {
             let due: Vec<TileId> = self
                 .entries
                 .iter()
-                .filter(|(_, e)| e.dirty && e.writing.is_none() && frame.saturating_sub(e.modified_frame) >= idle)
+                .filter(|(_, e)| {
+                    e.dirty && e.writing.is_none() && frame.saturating_sub(e.modified_frame) >= idle
+                })
                 .map(|(&id, _)| id)
                 .take(self.cfg.max_writes_per_frame)
                 .collect();
@@ -589,9 +605,13 @@ impl RamPool {
                 Err(TryRecvError::Empty | TryRecvError::Disconnected) => break,
             };
             let (id, ticket) = match &msg {
-                LoadDone::Loaded { id, ticket, .. } | LoadDone::Skipped { id, ticket } => (*id, *ticket),
+                LoadDone::Loaded { id, ticket, .. } | LoadDone::Skipped { id, ticket } => {
+                    (*id, *ticket)
+                }
             };
-            let Some(e) = self.entries.get_mut(&id) else { continue };
+            let Some(e) = self.entries.get_mut(&id) else {
+                continue;
+            };
             match &e.slot {
                 Slot::InFlight { ticket: t, .. } if *t == ticket => {}
                 _ => continue,
@@ -605,7 +625,9 @@ impl RamPool {
                 LoadDone::Skipped { .. } => {
                     self.entries.remove(&id);
                 }
-                LoadDone::Loaded { result: Ok(data), .. } => {
+                LoadDone::Loaded {
+                    result: Ok(data), ..
+                } => {
                     let zero = Arc::ptr_eq(&data, &self.zero);
                     if !zero {
                         self.ram_bytes += self.tile_bytes;
@@ -614,7 +636,9 @@ impl RamPool {
                     r.loaded += 1;
                     self.newly_loaded.push(id);
                 }
-                LoadDone::Loaded { result: Err(err), .. } => {
+                LoadDone::Loaded {
+                    result: Err(err), ..
+                } => {
                     e.slot = Slot::Failed { frame: self.frame };
                     r.failed += 1;
                     self.errors.push((id, err));
@@ -631,7 +655,9 @@ impl RamPool {
             };
             self.writes_in_flight -= 1;
             r.written += 1;
-            let Some(e) = self.entries.get_mut(&done.id) else { continue };
+            let Some(e) = self.entries.get_mut(&done.id) else {
+                continue;
+            };
             e.writing = None;
             if e.snapshot_extra {
                 e.snapshot_extra = false;
@@ -654,18 +680,22 @@ impl RamPool {
                 }
             }
             let id = done.id;
-            if let Some(e) = self.entries.get(&id) {
-                if e.evict_after_write && !e.dirty && e.pins == 0 {
-                    self.free(id);
-                    r.evictions += 1;
-                }
+            if let Some(e) = self.entries.get(&id)
+                && e.evict_after_write
+                && !e.dirty
+                && e.pins == 0
+            {
+                self.free(id);
+                r.evictions += 1;
             }
         }
         // Ancestors rewritten on disk: clean, unpinned copies are dropped (reloaded when
         // wanted); others are flagged stale.
         for i in 0..self.refreshed.len() {
             let a = self.refreshed[i];
-            let Some(e) = self.entries.get_mut(&a) else { continue };
+            let Some(e) = self.entries.get_mut(&a) else {
+                continue;
+            };
             match e.slot {
                 Slot::Resident { .. } if !e.dirty && e.pins == 0 && e.writing.is_none() => {
                     self.free(a);
@@ -685,8 +715,10 @@ impl RamPool {
                 .entries
                 .iter()
                 .filter(|(_, e)| {
-                    matches!(e.slot, Slot::Resident { zero: false, .. } | Slot::Failed { .. })
-                        && e.wanted_frame != frame
+                    matches!(
+                        e.slot,
+                        Slot::Resident { zero: false, .. } | Slot::Failed { .. }
+                    ) && e.wanted_frame != frame
                         && e.pins == 0
                         && e.writing.is_none()
                         && !e.evict_after_write
@@ -696,7 +728,9 @@ impl RamPool {
                     (id, free_now, self.grid.eviction_score(camera.position, id))
                 })
                 .max_by(|a, b| a.1.cmp(&b.1).then(a.2.total_cmp(&b.2)).then(b.0.cmp(&a.0)));
-            let Some((id, _, _)) = victim else { return false };
+            let Some((id, _, _)) = victim else {
+                return false;
+            };
             let dirty = self.entries.get(&id).is_some_and(|e| e.dirty);
             if dirty {
                 self.issue_write(id, true);
@@ -715,7 +749,9 @@ impl RamPool {
 
     /// Drops a tile; returns whether it freed tile bytes.
     fn free(&mut self, id: TileId) -> bool {
-        let Some(e) = self.entries.remove(&id) else { return false };
+        let Some(e) = self.entries.remove(&id) else {
+            return false;
+        };
         let mut freed = false;
         if let Slot::Resident { zero: false, .. } = e.slot {
             self.ram_bytes -= self.tile_bytes;
@@ -742,23 +778,27 @@ impl RamPool {
         self.ram_bytes += self.tile_bytes;
         self.entries.insert(id, e);
         self.in_flight += 1;
-        if let Some(tx) = &self.load_tx {
-            if tx.send(LoadJob { id, ticket, cell }).is_err() {
-                // Workers gone (a panic): report and leave the tile missing.
-                self.errors.push((
-                    id,
-                    CacheError::Worker {
-                        what: "loader",
-                        reason: "the load queue is closed".into(),
-                    },
-                ));
-            }
+        if let Some(tx) = &self.load_tx
+            && tx.send(LoadJob { id, ticket, cell }).is_err()
+        {
+            // Workers gone (a panic): report and leave the tile missing.
+            self.errors.push((
+                id,
+                CacheError::Worker {
+                    what: "loader",
+                    reason: "the load queue is closed".into(),
+                },
+            ));
         }
     }
 
     fn issue_write(&mut self, id: TileId, evict_after: bool) {
-        let Some(e) = self.entries.get_mut(&id) else { return };
-        let Slot::Resident { data, .. } = &e.slot else { return };
+        let Some(e) = self.entries.get_mut(&id) else {
+            return;
+        };
+        let Slot::Resident { data, .. } = &e.slot else {
+            return;
+        };
         if e.writing.is_some() {
             e.evict_after_write |= evict_after;
             return;
@@ -771,11 +811,11 @@ impl RamPool {
             data: data.clone(),
         };
         self.writes_in_flight += 1;
-        if let Some(tx) = &self.write_tx {
-            if tx.send(job).is_err() {
-                self.writes_in_flight -= 1;
-                e.writing = None;
-            }
+        if let Some(tx) = &self.write_tx
+            && tx.send(job).is_err()
+        {
+            self.writes_in_flight -= 1;
+            e.writing = None;
         }
     }
 
@@ -796,7 +836,9 @@ impl RamPool {
             if let Some(d) = self.tile(c) {
                 return Some((c, d));
             }
-            cur = c.parent().filter(|p| p.level < self.grid.levels.len() as u32);
+            cur = c
+                .parent()
+                .filter(|p| p.level < self.grid.levels.len() as u32);
         }
         None
     }
@@ -849,11 +891,20 @@ impl RamPool {
     /// whose previous version is still being written back, is copied first (copy on write);
     /// the copy must fit in the budget, evicting marked tiles if needed
     /// ([`CacheError::OverBudget`] otherwise).
-    pub fn modify<R>(&mut self, id: TileId, f: impl FnOnce(&mut TileData) -> R) -> Result<R, CacheError> {
+    pub fn modify<R>(
+        &mut self,
+        id: TileId,
+        f: impl FnOnce(&mut TileData) -> R,
+    ) -> Result<R, CacheError> {
         let (needs_copy, zero) = match self.entries.get(&id) {
-            Some(Entry { slot: Slot::Resident { data, zero }, writing, .. }) => {
-                (*zero || (writing.is_some() && Arc::strong_count(data) > 1), *zero)
-            }
+            Some(Entry {
+                slot: Slot::Resident { data, zero },
+                writing,
+                ..
+            }) => (
+                *zero || (writing.is_some() && Arc::strong_count(data) > 1),
+                *zero,
+            ),
             _ => return Err(CacheError::NotResident { id }),
         };
         if needs_copy {
@@ -861,7 +912,9 @@ impl RamPool {
             if let Some(e) = self.entries.get_mut(&id) {
                 e.pins += 1;
             }
-            let camera = self.last_camera.unwrap_or(CameraState::at(glam::Vec3::ZERO));
+            let camera = self
+                .last_camera
+                .unwrap_or(CameraState::at(glam::Vec3::ZERO));
             let mut r = FrameReport::default();
             let ok = self.make_room(self.tile_bytes, &camera, &mut r);
             if let Some(e) = self.entries.get_mut(&id) {
@@ -877,7 +930,10 @@ impl RamPool {
             self.ram_bytes += self.tile_bytes;
         }
         let frame = self.frame;
-        let e = self.entries.get_mut(&id).ok_or(CacheError::NotResident { id })?;
+        let e = self
+            .entries
+            .get_mut(&id)
+            .ok_or(CacheError::NotResident { id })?;
         if needs_copy && !zero {
             // The writer keeps the old snapshot alive until it finishes.
             e.snapshot_extra = true;
@@ -1038,12 +1094,22 @@ fn loader(world: World, layer: Layer, rx: Receiver<LoadJob>, tx: Sender<LoadDone
         let take = loop {
             match job.cell.state.load(Ordering::Acquire) {
                 QUEUED => {
-                    if job.cell.state.compare_exchange(QUEUED, LOADING, Ordering::AcqRel, Ordering::Acquire).is_ok() {
+                    if job
+                        .cell
+                        .state
+                        .compare_exchange(QUEUED, LOADING, Ordering::AcqRel, Ordering::Acquire)
+                        .is_ok()
+                    {
                         break true;
                     }
                 }
                 CANCELLED => {
-                    if job.cell.state.compare_exchange(CANCELLED, SKIPPED, Ordering::AcqRel, Ordering::Acquire).is_ok() {
+                    if job
+                        .cell
+                        .state
+                        .compare_exchange(CANCELLED, SKIPPED, Ordering::AcqRel, Ordering::Acquire)
+                        .is_ok()
+                    {
                         break false;
                     }
                 }
@@ -1068,7 +1134,13 @@ fn loader(world: World, layer: Layer, rx: Receiver<LoadJob>, tx: Sender<LoadDone
     }
 }
 
-fn writer(world: World, layer: Layer, propagate: bool, rx: Receiver<WriteJob>, tx: Sender<WriteDone>) {
+fn writer(
+    world: World,
+    layer: Layer,
+    propagate: bool,
+    rx: Receiver<WriteJob>,
+    tx: Sender<WriteDone>,
+) {
     while let Ok(job) = rx.recv() {
         let result = world.write_tile(layer, job.id, &job.data).and_then(|_| {
             if propagate {

@@ -15,7 +15,10 @@
 //! capacity needs to hold every demanded tile when used, and its hit rate the most any
 //! demand-fetch policy reaches.
 
-use crate::policy::{BandSelection, CameraState, FrustumSelection, SelectionPolicy, SphericalSelection, TileGrid, Want};
+use crate::policy::{
+    BandSelection, CameraState, FrustumSelection, SelectionPolicy, SphericalSelection, TileGrid,
+    Want,
+};
 use crate::tile::TileId;
 use glam::{UVec2, Vec3};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -37,7 +40,12 @@ pub enum CameraPath {
 
 impl CameraPath {
     /// All paths.
-    pub const ALL: [CameraPath; 4] = [CameraPath::Walk, CameraPath::Drive, CameraPath::Fly, CameraPath::FastTurn];
+    pub const ALL: [CameraPath; 4] = [
+        CameraPath::Walk,
+        CameraPath::Drive,
+        CameraPath::Fly,
+        CameraPath::FastTurn,
+    ];
 
     /// The camera of every frame at 60 frames per second, starting at `start`.
     pub fn cameras(self, frames: u32, start: Vec3) -> Vec<CameraState> {
@@ -61,11 +69,19 @@ impl CameraPath {
                 };
                 heading += turn_rate * dt;
                 let dir = glam::DVec2::new(heading.cos(), heading.sin());
-                let move_dir = if self == CameraPath::FastTurn { glam::DVec2::X } else { dir };
+                let move_dir = if self == CameraPath::FastTurn {
+                    glam::DVec2::X
+                } else {
+                    dir
+                };
                 pos += move_dir * speed * dt;
                 CameraState {
                     position: Vec3::new(pos.x as f32, height, pos.y as f32),
-                    forward: Vec3::new(dir.x as f32, if self == CameraPath::Fly { -0.3 } else { 0.0 }, dir.y as f32),
+                    forward: Vec3::new(
+                        dir.x as f32,
+                        if self == CameraPath::Fly { -0.3 } else { 0.0 },
+                        dir.y as f32,
+                    ),
                     ..CameraState::at(Vec3::ZERO)
                 }
             })
@@ -114,8 +130,13 @@ impl SimPolicy {
     /// The default set compared by [`comparison_table`].
     pub fn defaults() -> [SimPolicy; 5] {
         [
-            SimPolicy::Frustum { margin_m: 32.0, margin_deg: 15.0 },
-            SimPolicy::Band { band_width: 1.0 / 3.0 },
+            SimPolicy::Frustum {
+                margin_m: 32.0,
+                margin_deg: 15.0,
+            },
+            SimPolicy::Band {
+                band_width: 1.0 / 3.0,
+            },
             SimPolicy::Spherical { margin_m: 32.0 },
             SimPolicy::LruOnDemand,
             SimPolicy::Belady,
@@ -125,7 +146,10 @@ impl SimPolicy {
     /// A short name.
     pub fn name(&self) -> String {
         match self {
-            SimPolicy::Frustum { margin_m, margin_deg } => format!("frustum +{margin_m} m +{margin_deg} deg"),
+            SimPolicy::Frustum {
+                margin_m,
+                margin_deg,
+            } => format!("frustum +{margin_m} m +{margin_deg} deg"),
             SimPolicy::Band { band_width } => format!("band regions w={band_width:.2}"),
             SimPolicy::Spherical { margin_m } => format!("spherical +{margin_m} m"),
             SimPolicy::LruOnDemand => "LRU on demand".into(),
@@ -217,7 +241,11 @@ fn demand_sets(cfg: &SimConfig, cams: &[CameraState]) -> Vec<Vec<TileId>> {
 /// Simulates `policy` on `path`.
 pub fn simulate(cfg: &SimConfig, path: CameraPath, policy: SimPolicy) -> SimResult {
     let extent = cfg.tiles.as_dvec2() * cfg.tile_m;
-    let start = Vec3::new((extent.x * 0.5 + 7.0) as f32, 0.0, (extent.y * 0.5 + 11.0) as f32);
+    let start = Vec3::new(
+        (extent.x * 0.5 + 7.0) as f32,
+        0.0,
+        (extent.y * 0.5 + 11.0) as f32,
+    );
     let cams = path.cameras(cfg.frames, start);
     let demand = demand_sets(cfg, &cams);
     if policy == SimPolicy::Belady {
@@ -225,7 +253,10 @@ pub fn simulate(cfg: &SimConfig, path: CameraPath, policy: SimPolicy) -> SimResu
     }
     let grid = TileGrid::flat(cfg.tiles, cfg.tile_m, WrapMode::Repeat);
     let mut selector: Option<Box<dyn SelectionPolicy>> = match policy {
-        SimPolicy::Frustum { margin_m, margin_deg } => Some(Box::new(FrustumSelection {
+        SimPolicy::Frustum {
+            margin_m,
+            margin_deg,
+        } => Some(Box::new(FrustumSelection {
             level: 0,
             far: cfg.demand_radius + margin_m,
             near: cfg.tile_m * 0.25,
@@ -233,10 +264,17 @@ pub fn simulate(cfg: &SimConfig, path: CameraPath, policy: SimPolicy) -> SimResu
             turn_gain: 8.0,
             last_forward: None,
         })),
-        SimPolicy::Band { band_width } => Some(Box::new(BandSelection { level: 0, band_width })),
+        SimPolicy::Band { band_width } => Some(Box::new(BandSelection {
+            level: 0,
+            band_width,
+        })),
         SimPolicy::Spherical { margin_m } => {
             let r = cfg.demand_radius + margin_m;
-            Some(Box::new(SphericalSelection { view_distance: r, lod0_range: r, lod_ratio: 2.0 }))
+            Some(Box::new(SphericalSelection {
+                view_distance: r,
+                lod0_range: r,
+                lod_ratio: 2.0,
+            }))
         }
         _ => None,
     };
@@ -248,7 +286,11 @@ pub fn simulate(cfg: &SimConfig, path: CameraPath, policy: SimPolicy) -> SimResu
     let mut wants: Vec<Want> = Vec::new();
     for (f, cam) in cams.iter().enumerate() {
         let f = f as u32;
-        let arrived: Vec<TileId> = in_flight.iter().filter(|&(_, &a)| a <= f).map(|(&id, _)| id).collect();
+        let arrived: Vec<TileId> = in_flight
+            .iter()
+            .filter(|&(_, &a)| a <= f)
+            .map(|(&id, _)| id)
+            .collect();
         for id in arrived {
             in_flight.remove(&id);
             resident.insert(id, 0);
@@ -276,7 +318,10 @@ pub fn simulate(cfg: &SimConfig, path: CameraPath, policy: SimPolicy) -> SimResu
         }
         wants.clear();
         for id in d {
-            wants.push(Want { id: *id, priority: -1.0 });
+            wants.push(Want {
+                id: *id,
+                priority: -1.0,
+            });
         }
         if let Some(s) = selector.as_mut() {
             s.select(cam, &grid, &mut wants);
@@ -296,7 +341,11 @@ pub fn simulate(cfg: &SimConfig, path: CameraPath, policy: SimPolicy) -> SimResu
                     .iter()
                     .filter(|(id, _)| !keep.contains(id))
                     .map(|(&id, &last)| {
-                        let key = if selector.is_some() { -grid.eviction_score(cam.position, id) } else { f64::from(last) };
+                        let key = if selector.is_some() {
+                            -grid.eviction_score(cam.position, id)
+                        } else {
+                            f64::from(last)
+                        };
                         (id, key)
                     })
                     .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
@@ -315,11 +364,19 @@ pub fn simulate(cfg: &SimConfig, path: CameraPath, policy: SimPolicy) -> SimResu
     SimResult {
         path,
         policy,
-        hit_rate: if refs == 0 { 1.0 } else { hits as f64 / refs as f64 },
+        hit_rate: if refs == 0 {
+            1.0
+        } else {
+            hits as f64 / refs as f64
+        },
         missing_frames,
         loads,
         bytes_moved: loads * cfg.tile_bytes,
-        mean_latency: if lat_n == 0 { 0.0 } else { lat_sum as f64 / lat_n as f64 },
+        mean_latency: if lat_n == 0 {
+            0.0
+        } else {
+            lat_sum as f64 / lat_n as f64
+        },
         max_latency: lat_max,
     }
 }
@@ -370,7 +427,11 @@ fn belady(cfg: &SimConfig, path: CameraPath, demand: &[Vec<TileId>]) -> SimResul
     SimResult {
         path,
         policy: SimPolicy::Belady,
-        hit_rate: if refs == 0 { 1.0 } else { hits as f64 / refs as f64 },
+        hit_rate: if refs == 0 {
+            1.0
+        } else {
+            hits as f64 / refs as f64
+        },
         missing_frames,
         loads,
         bytes_moved: loads * cfg.tile_bytes,
@@ -386,10 +447,21 @@ pub fn comparison_table(cfg: &SimConfig) -> (Vec<SimResult>, String) {
     let _ = writeln!(
         s,
         "{} frames, {}x{} tiles of {} m, demand radius {} m, capacity {} tiles, latency {} frames, {} loads/frame, {} KiB/tile",
-        cfg.frames, cfg.tiles.x, cfg.tiles.y, cfg.tile_m, cfg.demand_radius, cfg.capacity, cfg.latency_frames, cfg.loads_per_frame, cfg.tile_bytes / 1024
+        cfg.frames,
+        cfg.tiles.x,
+        cfg.tiles.y,
+        cfg.tile_m,
+        cfg.demand_radius,
+        cfg.capacity,
+        cfg.latency_frames,
+        cfg.loads_per_frame,
+        cfg.tile_bytes / 1024
     );
     let _ = writeln!(s);
-    let _ = writeln!(s, "| path | policy | hit rate | frames missing a tile | loads | MiB moved | mean latency (frames) | max latency |");
+    let _ = writeln!(
+        s,
+        "| path | policy | hit rate | frames missing a tile | loads | MiB moved | mean latency (frames) | max latency |"
+    );
     let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|");
     for path in CameraPath::ALL {
         for policy in SimPolicy::defaults() {
@@ -418,20 +490,30 @@ mod tests {
 
     #[test]
     fn deterministic_and_belady_bounds_demand_fetch() {
-        let cfg = SimConfig { frames: 600, ..SimConfig::default() };
+        let cfg = SimConfig {
+            frames: 600,
+            ..SimConfig::default()
+        };
         let (a, table) = comparison_table(&cfg);
         let (b, _) = comparison_table(&cfg);
         assert_eq!(a, b, "deterministic");
         assert!(table.contains("Belady"));
         for path in CameraPath::ALL {
-            let of = |p: &str| a.iter().find(|r| r.path == path && r.policy.name().starts_with(p)).unwrap();
+            let of = |p: &str| {
+                a.iter()
+                    .find(|r| r.path == path && r.policy.name().starts_with(p))
+                    .unwrap()
+            };
             let min = of("Belady");
             let lru = of("LRU");
             assert!(min.hit_rate >= lru.hit_rate, "{path:?}");
             assert!(min.loads <= lru.loads, "{path:?}");
             // Prefetching beats demand fetch on misses for moving cameras.
             if path != CameraPath::Walk {
-                assert!(of("spherical").missing_frames <= lru.missing_frames, "{path:?}");
+                assert!(
+                    of("spherical").missing_frames <= lru.missing_frames,
+                    "{path:?}"
+                );
             }
         }
     }

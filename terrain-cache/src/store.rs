@@ -168,7 +168,12 @@ fn sync_dir(dir: &Path) -> Result<(), CacheError> {
     {
         match File::open(dir).and_then(|d| d.sync_all()) {
             Ok(()) => Ok(()),
-            Err(e) if matches!(e.kind(), io::ErrorKind::InvalidInput | io::ErrorKind::Unsupported) => {
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::InvalidInput | io::ErrorKind::Unsupported
+                ) =>
+            {
                 Ok(())
             }
             Err(source) => Err(CacheError::Io {
@@ -341,12 +346,17 @@ pub(crate) mod tests {
         store.write("a/b.png", b"bye").unwrap();
         assert_eq!(store.read("a/b.png", 100).unwrap().unwrap(), b"bye");
         assert_eq!(store.list("a").unwrap(), vec!["a/b.png", "a/c/d.png"]);
-        assert_eq!(store.list("").unwrap(), vec!["a/b.png", "a/c/d.png", "top.json"]);
+        assert_eq!(
+            store.list("").unwrap(),
+            vec!["a/b.png", "a/c/d.png", "top.json"]
+        );
         assert_eq!(store.list("zzz").unwrap(), Vec::<String>::new());
         store.remove("a/b.png").unwrap();
         store.remove("a/b.png").unwrap();
         assert_eq!(store.read("a/b.png", 100).unwrap(), None);
-        for bad in ["", "/abs", "a/../b", "a//b", "a/./b", ".hidden", "a\\b", "a/"] {
+        for bad in [
+            "", "/abs", "a/../b", "a//b", "a/./b", ".hidden", "a\\b", "a/",
+        ] {
             assert!(
                 matches!(store.write(bad, b"x"), Err(CacheError::InvalidKey { .. })),
                 "{bad:?}"

@@ -27,7 +27,11 @@ impl TileId {
 
     /// The tile one level coarser that covers this one, or `None` at `u32::MAX` levels.
     pub fn parent(self) -> Option<Self> {
-        Some(Self::new(self.level.checked_add(1)?, self.x / 2, self.y / 2))
+        Some(Self::new(
+            self.level.checked_add(1)?,
+            self.x / 2,
+            self.y / 2,
+        ))
     }
 
     /// The four tiles one level finer (row-major: `(2x, 2y)`, `(2x+1, 2y)`, `(2x, 2y+1)`,

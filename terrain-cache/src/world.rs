@@ -2,10 +2,10 @@
 //! PNG8 detail through `terrain_core::io`), the shared zero tile, and the per-level min/max side
 //! files ([`LevelBounds`]).
 
+use crate::CacheError;
 use crate::manifest::{MANIFEST_KEY, MAX_MANIFEST_BYTES, Manifest, bounds_key, tile_key};
 use crate::store::TileStore;
 use crate::tile::{Layer, TileData, TileId};
-use crate::CacheError;
 use glam::UVec2;
 use std::sync::{Arc, OnceLock};
 use terrain_core::Grid;
@@ -114,7 +114,12 @@ impl World {
             Ok(Some(b)) => b,
             Ok(None) => return Ok(TileRead::Zero),
             Err(CacheError::TooLarge { len, max, .. }) => {
-                return Err(CacheError::TileTooLarge { layer, id, len, max });
+                return Err(CacheError::TileTooLarge {
+                    layer,
+                    id,
+                    len,
+                    max,
+                });
             }
             Err(e) => return Err(e),
         };
@@ -130,7 +135,12 @@ impl World {
     }
 
     /// Decodes the bytes of a tile file of `layer` and checks its shape.
-    pub fn decode_tile(&self, layer: Layer, id: TileId, bytes: &[u8]) -> Result<TileData, CacheError> {
+    pub fn decode_tile(
+        &self,
+        layer: Layer,
+        id: TileId,
+        bytes: &[u8],
+    ) -> Result<TileData, CacheError> {
         let size = self.manifest.layer_tile_size(layer)?;
         let limits = ReadLimits { max_side: size };
         let corrupt = |source| CacheError::CorruptTile { layer, id, source };
@@ -207,7 +217,11 @@ impl World {
     /// [`write_tile`](Self::write_tile) of a height tile held as a bare grid.
     pub(crate) fn write_grid16(&self, id: TileId, grid: &Grid<u16>) -> Result<u64, CacheError> {
         let key = tile_key(Layer::Height, id);
-        if grid.as_slice().iter().all(|&v| v == self.manifest.height_fill) {
+        if grid
+            .as_slice()
+            .iter()
+            .all(|&v| v == self.manifest.height_fill)
+        {
             self.store.remove(&key)?;
             return Ok(0);
         }
@@ -243,7 +257,9 @@ impl World {
     /// Writes the min/max side file of height level `level` atomically.
     pub fn write_bounds(&self, level: u32, bounds: &LevelBounds) -> Result<(), CacheError> {
         let tiles = self.manifest.layer_tiles(Layer::Height, level);
-        if bounds.tiles != tiles || bounds.min_max.len() as u64 != u64::from(tiles.x) * u64::from(tiles.y) {
+        if bounds.tiles != tiles
+            || bounds.min_max.len() as u64 != u64::from(tiles.x) * u64::from(tiles.y)
+        {
             return Err(CacheError::OutOfRange {
                 what: "bounds tiles",
                 value: f64::from(bounds.tiles.x) * f64::from(bounds.tiles.y),
@@ -337,7 +353,8 @@ impl LevelBounds {
             ));
         }
         let (body, sum) = bytes.split_at(bytes.len() - 8);
-        let u32_at = |i: usize| u32::from_le_bytes([body[i], body[i + 1], body[i + 2], body[i + 3]]);
+        let u32_at =
+            |i: usize| u32::from_le_bytes([body[i], body[i + 1], body[i + 2], body[i + 3]]);
         if &body[..4] != Self::MAGIC || u32_at(4) != 1 {
             return Err("not a version-1 bounds file".into());
         }
@@ -349,7 +366,12 @@ impl LevelBounds {
         }
         let min_max = body[16..]
             .chunks_exact(4)
-            .map(|c| [u16::from_le_bytes([c[0], c[1]]), u16::from_le_bytes([c[2], c[3]])])
+            .map(|c| {
+                [
+                    u16::from_le_bytes([c[0], c[1]]),
+                    u16::from_le_bytes([c[2], c[3]]),
+                ]
+            })
             .collect();
         Ok(Self { tiles, min_max })
     }
@@ -395,17 +417,27 @@ mod tests {
         assert!(Arc::ptr_eq(&a, &b), "one shared zero tile");
         let data = TileData::U16(Grid::from_fn(32, 32, |x, y| (x * 100 + y) as u16).unwrap());
         assert!(w.write_tile(Layer::Height, id, &data).unwrap() > 0);
-        assert_eq!(w.read_tile(Layer::Height, id).unwrap(), TileRead::Stored(data));
+        assert_eq!(
+            w.read_tile(Layer::Height, id).unwrap(),
+            TileRead::Stored(data)
+        );
         // Writing the zero tile removes the file.
         assert_eq!(w.write_tile(Layer::Height, id, &a).unwrap(), 0);
         assert_eq!(w.read_tile(Layer::Height, id).unwrap(), TileRead::Zero);
         // Detail tiles: PNG8, fill = zero deformation.
         let d = w.zero_tile(Layer::Detail).unwrap();
-        assert_eq!(d.uniform_value(), Some(u16::from(w.manifest().detail.unwrap().fill)));
+        assert_eq!(
+            d.uniform_value(),
+            Some(u16::from(w.manifest().detail.unwrap().fill))
+        );
         let mut dd = (*d).clone();
         dd.as_u8_mut().unwrap().as_mut_slice()[5] = 3;
-        w.write_tile(Layer::Detail, TileId::new(0, 1, 1), &dd).unwrap();
-        assert_eq!(w.read_tile(Layer::Detail, TileId::new(0, 1, 1)).unwrap(), TileRead::Stored(dd));
+        w.write_tile(Layer::Detail, TileId::new(0, 1, 1), &dd)
+            .unwrap();
+        assert_eq!(
+            w.read_tile(Layer::Detail, TileId::new(0, 1, 1)).unwrap(),
+            TileRead::Stored(dd)
+        );
         // Wrong data for the layer.
         assert!(matches!(
             w.write_tile(Layer::Detail, id, &a),
@@ -427,7 +459,9 @@ mod tests {
         assert_eq!(w.bounds(0).unwrap(), None);
         let mut bytes = b.to_bytes();
         bytes[17] ^= 1;
-        w.store().write(&bounds_key(Layer::Height, 1), &bytes).unwrap();
+        w.store()
+            .write(&bounds_key(Layer::Height, 1), &bytes)
+            .unwrap();
         assert!(matches!(w.bounds(1), Err(CacheError::Manifest { .. })));
         assert!(w.bounds(40).is_err());
     }

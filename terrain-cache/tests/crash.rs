@@ -22,7 +22,9 @@ const TILE: u32 = 32;
 /// Version `v` of tile `id`: sample 0 holds `v`, the rest is a hash of `(id, v, i)`.
 fn version(id: TileId, v: u16) -> TileData {
     let mut rng = Rng(u64::from(v) << 32 ^ u64::from(id.x) << 16 ^ u64::from(id.y));
-    let mut data: Vec<u16> = (0..TILE * TILE).map(|_| rng.next_u64() as u16 | 1).collect();
+    let mut data: Vec<u16> = (0..TILE * TILE)
+        .map(|_| rng.next_u64() as u16 | 1)
+        .collect();
     data[0] = v;
     TileData::U16(terrain_core::Grid::from_vec(TILE, TILE, data).unwrap())
 }
@@ -73,7 +75,9 @@ fn killed_writers_leave_old_or_new_tiles_and_a_valid_manifest() {
     // Version 1 of every level-0 tile as the starting point.
     let ids: Vec<TileId> = world.manifest().tiles_of(Layer::Height, 0).collect();
     for &id in &ids {
-        world.write_tile(Layer::Height, id, &version(id, 1)).unwrap();
+        world
+            .write_tile(Layer::Height, id, &version(id, 1))
+            .unwrap();
     }
     let exe = std::env::current_exe().unwrap();
     let mut rng = Rng(2013);
@@ -106,8 +110,16 @@ fn killed_writers_leave_old_or_new_tiles_and_a_valid_manifest() {
         for (i, &id) in ids.iter().enumerate() {
             let tile = world.load_tile(Layer::Height, id).unwrap();
             let v = tile.as_u16().unwrap().as_slice()[0];
-            assert_eq!(*tile, version(id, v), "round {round}: {id} is not a whole version");
-            assert!(v >= last[i], "round {round}: {id} went back from {} to {v}", last[i]);
+            assert_eq!(
+                *tile,
+                version(id, v),
+                "round {round}: {id} is not a whole version"
+            );
+            assert!(
+                v >= last[i],
+                "round {round}: {id} went back from {} to {v}",
+                last[i]
+            );
             if v > last[i] {
                 advanced += 1;
             }

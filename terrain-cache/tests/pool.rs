@@ -11,8 +11,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use terrain_cache::{
-    CameraState, DetailLayout, Layer, PoolConfig, RamPool, TileData, TileId, TileState, TileStore,
-    ObjectTileStore, World,
+    CameraState, DetailLayout, Layer, ObjectTileStore, PoolConfig, RamPool, TileData, TileId,
+    TileState, TileStore, World,
 };
 
 fn mem_world(size: u32, tile: u32) -> World {
@@ -21,7 +21,11 @@ fn mem_world(size: u32, tile: u32) -> World {
 }
 
 /// Runs updates until `done` says so or 5 s pass.
-fn pump(pool: &mut RamPool, cam: &CameraState, mut done: impl FnMut(&RamPool, &terrain_cache::FrameReport) -> bool) {
+fn pump(
+    pool: &mut RamPool,
+    cam: &CameraState,
+    mut done: impl FnMut(&RamPool, &terrain_cache::FrameReport) -> bool,
+) {
     let start = Instant::now();
     while start.elapsed() < Duration::from_secs(5) {
         let r = pool.update(cam).unwrap();
@@ -42,7 +46,9 @@ fn loads_selection_within_budget_and_falls_back_to_coarser() {
     let mut pool = RamPool::new(world, PoolConfig::new(Layer::Height, 80 * tb)).unwrap();
     let cam = CameraState::at(Vec3::new(100.0, 50.0, 100.0));
     pump(&mut pool, &cam, |p, r| {
-        r.wanted_resident == r.wanted && p.status(TileId::new(0, 3, 3)).is_some_and(|s| s.state == TileState::Loaded)
+        r.wanted_resident == r.wanted
+            && p.status(TileId::new(0, 3, 3))
+                .is_some_and(|s| s.state == TileState::Loaded)
     });
     let (id, _) = pool.best_available(TileId::new(0, 3, 3)).unwrap();
     assert_eq!(id, TileId::new(0, 3, 3));
@@ -53,7 +59,8 @@ fn loads_selection_within_budget_and_falls_back_to_coarser() {
     // Move far away: old tiles are marked, then evicted as new ones need room.
     let cam2 = CameraState::at(Vec3::new(400.0, 50.0, 400.0));
     pump(&mut pool, &cam2, |p, _| {
-        p.status(TileId::new(0, 12, 12)).is_some_and(|s| s.state == TileState::Loaded)
+        p.status(TileId::new(0, 12, 12))
+            .is_some_and(|s| s.state == TileState::Loaded)
     });
     let r = pool.update(&cam2).unwrap();
     assert!(r.ram_bytes <= r.budget_bytes);
@@ -62,7 +69,11 @@ fn loads_selection_within_budget_and_falls_back_to_coarser() {
         Err(terrain_cache::CacheError::OutOfRange { .. })
     ));
     // Far-off cameras are fine and bounded.
-    for p in [Vec3::splat(f32::MAX), Vec3::splat(f32::MIN), Vec3::new(1e38, -1e38, 3.0)] {
+    for p in [
+        Vec3::splat(f32::MAX),
+        Vec3::splat(f32::MIN),
+        Vec3::new(1e38, -1e38, 3.0),
+    ] {
         let r = pool.update(&CameraState::at(p)).unwrap();
         assert!(r.wanted <= 256 + 64 + 16 + 4 + 1, "{r:?}");
     }
@@ -79,7 +90,8 @@ fn dirty_tiles_are_written_back_before_eviction_and_reload_new_data() {
     let near = CameraState::at(Vec3::new(16.0, 0.0, 16.0));
     let id = TileId::new(0, 0, 0);
     pump(&mut pool, &near, |p, _| p.tile(id).is_some());
-    pool.modify(id, |d| d.as_u16_mut().unwrap().as_mut_slice()[0] = 12345).unwrap();
+    pool.modify(id, |d| d.as_u16_mut().unwrap().as_mut_slice()[0] = 12345)
+        .unwrap();
     assert!(pool.status(id).unwrap().dirty);
     // Walk away: the tile is written back, then freed; nothing written while it stayed loaded.
     let far = CameraState::at(Vec3::new(144.0, 0.0, 144.0));
@@ -88,7 +100,10 @@ fn dirty_tiles_are_written_back_before_eviction_and_reload_new_data() {
     assert_eq!(on_disk.as_u16().unwrap().as_slice()[0], 12345);
     // Coming back reloads the new version; the coarser ancestor was refreshed on disk.
     pump(&mut pool, &near, |p, _| p.tile(id).is_some());
-    assert_eq!(pool.tile(id).unwrap().as_u16().unwrap().as_slice()[0], 12345);
+    assert_eq!(
+        pool.tile(id).unwrap().as_u16().unwrap().as_slice()[0],
+        12345
+    );
     pool.shutdown(Duration::from_secs(5)).unwrap();
 }
 
@@ -104,14 +119,20 @@ fn zero_tiles_are_shared_and_copied_on_write() {
     let tb = 16 * 16;
     let mut cfg = PoolConfig::new(Layer::Detail, 8 * tb);
     cfg.write_back_idle_frames = Some(2);
-    let mut pool = RamPool::with_policy(world.clone(), cfg, Box::new(terrain_cache::BandSelection::default())).unwrap();
+    let mut pool = RamPool::with_policy(
+        world.clone(),
+        cfg,
+        Box::new(terrain_cache::BandSelection::default()),
+    )
+    .unwrap();
     let cam = CameraState::at(Vec3::new(40.0, 0.0, 40.0));
     pump(&mut pool, &cam, |_, r| r.wanted_resident == 9);
     // Nine zero tiles cost nothing but the one shared zero tile.
     assert_eq!(pool.ram_bytes(), tb);
     let id = TileId::new(0, 2, 2);
     assert!(pool.status(id).unwrap().zero);
-    pool.modify(id, |d| d.as_u8_mut().unwrap().as_mut_slice()[7] = 200).unwrap();
+    pool.modify(id, |d| d.as_u8_mut().unwrap().as_mut_slice()[7] = 200)
+        .unwrap();
     assert_eq!(pool.ram_bytes(), 2 * tb);
     assert!(!pool.status(id).unwrap().zero);
     // Idle write-back after 2 frames writes only that tile.
@@ -131,13 +152,23 @@ fn marked_tiles_are_rescued_without_io() {
     let mut pool = RamPool::new(world, PoolConfig::new(Layer::Height, 200 * tb)).unwrap();
     let a = CameraState::at(Vec3::new(16.0, 0.0, 16.0));
     let b = CameraState::at(Vec3::new(144.0, 0.0, 144.0));
-    pump(&mut pool, &a, |p, r| r.in_flight == 0 && p.tile(TileId::new(0, 0, 0)).is_some());
-    pump(&mut pool, &b, |p, r| r.in_flight == 0 && p.tile(TileId::new(0, 4, 4)).is_some());
-    assert_eq!(pool.status(TileId::new(0, 0, 0)).unwrap().state, TileState::MarkedForDeletion);
+    pump(&mut pool, &a, |p, r| {
+        r.in_flight == 0 && p.tile(TileId::new(0, 0, 0)).is_some()
+    });
+    pump(&mut pool, &b, |p, r| {
+        r.in_flight == 0 && p.tile(TileId::new(0, 4, 4)).is_some()
+    });
+    assert_eq!(
+        pool.status(TileId::new(0, 0, 0)).unwrap().state,
+        TileState::MarkedForDeletion
+    );
     let reads = slow.reads.load(Ordering::Relaxed);
     let r = pool.update(&a).unwrap();
     assert!(r.rescued > 0 && r.loads == 0, "{r:?}");
-    assert_eq!(pool.status(TileId::new(0, 0, 0)).unwrap().state, TileState::Loaded);
+    assert_eq!(
+        pool.status(TileId::new(0, 0, 0)).unwrap().state,
+        TileState::Loaded
+    );
     assert_eq!(slow.reads.load(Ordering::Relaxed), reads);
 }
 
@@ -162,11 +193,19 @@ fn stress_random_requests_cancels_and_rerequests() {
     #[derive(Debug)]
     struct Nothing;
     impl terrain_cache::SelectionPolicy for Nothing {
-        fn select(&mut self, _: &CameraState, _: &terrain_cache::TileGrid, _: &mut Vec<terrain_cache::Want>) {}
+        fn select(
+            &mut self,
+            _: &CameraState,
+            _: &terrain_cache::TileGrid,
+            _: &mut Vec<terrain_cache::Want>,
+        ) {
+        }
     }
     let mut pool = RamPool::with_policy(world.clone(), cfg, Box::new(Nothing)).unwrap();
     let stop = Arc::new(AtomicBool::new(false));
-    let tiles: Vec<TileId> = (0..32u32).flat_map(|y| (0..32u32).map(move |x| TileId::new(0, x, y))).collect();
+    let tiles: Vec<TileId> = (0..32u32)
+        .flat_map(|y| (0..32u32).map(move |x| TileId::new(0, x, y)))
+        .collect();
     let tiles = Arc::new(tiles);
     let mut threads = Vec::new();
     for t in 0..6u64 {
@@ -200,8 +239,10 @@ fn stress_random_requests_cancels_and_rerequests() {
     let mut frames = 0u64;
     let mut loads = 0usize;
     let map = common::test_map(UVec2::splat(512));
-    let originals: HashMap<TileId, u16> =
-        tiles.iter().map(|&id| (id, map.grid().get(id.x * 16, id.y * 16).unwrap())).collect();
+    let originals: HashMap<TileId, u16> = tiles
+        .iter()
+        .map(|&id| (id, map.grid().get(id.x * 16, id.y * 16).unwrap()))
+        .collect();
     let check = |pool: &RamPool, expected: &HashMap<TileId, u16>| {
         for &id in tiles.iter() {
             if let Some(d) = pool.tile(id) {
@@ -251,10 +292,17 @@ fn stress_random_requests_cancels_and_rerequests() {
         if still_wanted.iter().all(|&id| pool.tile(id).is_some()) && r.in_flight == 0 {
             break;
         }
-        assert!(settle.elapsed() < Duration::from_secs(5), "requested tiles never arrived: {r:?}");
+        assert!(
+            settle.elapsed() < Duration::from_secs(5),
+            "requested tiles never arrived: {r:?}"
+        );
         std::thread::sleep(Duration::from_millis(1));
     }
-    assert_eq!(slow.max_overlap.load(Ordering::Relaxed), 1, "a tile was loaded twice at once");
+    assert_eq!(
+        slow.max_overlap.load(Ordering::Relaxed),
+        1,
+        "a tile was loaded twice at once"
+    );
     assert!(frames > 100 && loads > 50, "frames {frames}, loads {loads}");
     // Everything written back survives: the store holds the last versions.
     pool.shutdown(Duration::from_secs(10)).unwrap();
@@ -262,7 +310,11 @@ fn stress_random_requests_cancels_and_rerequests() {
         let d = world.load_tile(Layer::Height, *id).unwrap();
         assert_eq!(d.as_u16().unwrap().as_slice()[0], *v, "{id}");
     }
-    eprintln!("stress: {frames} frames, {loads} loads, {} reads, {} tiles modified", slow.reads.load(Ordering::Relaxed), expected.len());
+    eprintln!(
+        "stress: {frames} frames, {loads} loads, {} reads, {} tiles modified",
+        slow.reads.load(Ordering::Relaxed),
+        expected.len()
+    );
 }
 
 #[test]
@@ -273,7 +325,10 @@ fn write_replaces_and_rejects_wrong_shapes() {
     let id = TileId::new(0, 0, 0);
     pump(&mut pool, &cam, |p, _| p.tile(id).is_some());
     let bad = TileData::filled(Layer::Detail, 32, 1).unwrap();
-    assert!(matches!(pool.write(id, bad), Err(terrain_cache::CacheError::TileDataMismatch { .. })));
+    assert!(matches!(
+        pool.write(id, bad),
+        Err(terrain_cache::CacheError::TileDataMismatch { .. })
+    ));
     let good = TileData::filled(Layer::Height, 32, 77).unwrap();
     pool.write(id, good.clone()).unwrap();
     assert_eq!(pool.tile(id), Some(&good));

@@ -57,7 +57,9 @@ pub fn test_map(size: UVec2) -> CoarseMap {
 pub fn build(store: Arc<dyn TileStore>, size: UVec2, tile: u32) -> World {
     let map = test_map(size);
     let m = Manifest::new(size, tile, 1.0, encoding(), WrapMode::Repeat).unwrap();
-    build_world(store, m, &MapSource { map: &map }, &|_| true).unwrap().0
+    build_world(store, m, &MapSource { map: &map }, &|_| true)
+        .unwrap()
+        .0
 }
 
 /// A store wrapper that delays reads by a pseudo-random 0..max_delay and tracks reads in flight
