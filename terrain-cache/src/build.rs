@@ -1,0 +1,781 @@
+//! Building a world: level-0 tiles from a [`TileSource`] (an in-memory coarse-map, a procedural
+//! generator evaluated per region, a RAW16 DEM read row by row), coarser levels by 2x2 averaging,
+//! per tile in parallel (rayon), with a progress callback; and [`rebuild_ancestors`] to refresh
+//! coarser levels after tiles were written back.
+//!
+//! The pyramid is built depth first: a tile of level `l + 1` is made from its four children
+//! right after they are built, so a build holds at most (rayon threads) x (levels) x 4 tiles,
+//! never the whole map: a 16384^2 world builds in a few MiB.
+//!
+//! Reduction: level `l + 1` texel `(i, j)` is the mean of level-`l` texels `(2i..2i+2, 2j..2j+2)`
+//! rounded to nearest (`(a + b + c + d + 2) / 4`), for rendering. The bounds side file of each
+//! level keeps, per tile, the min and max of the level-0 samples under it (not of the
+//! averages), for LOD bounds. Tiles equal to the zero tile are not stored.
+
+use crate::CacheError;
+use crate::manifest::Manifest;
+use crate::store::TileStore;
+use crate::tile::{Layer, TileData, TileId};
+use crate::world::{LevelBounds, World};
+use glam::{IVec2, UVec2};
+use rayon::prelude::*;
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+use terrain_core::{CoarseMap, Grid, Rect, TerrainParams, WrapMode, generate_coarse_map};
+
+/// Produces the level-0 samples of any rect of the world, so a world can be built without
+/// holding the whole map.
+pub trait TileSource: Sync {
+    /// What a failed region reports.
+    type Error: std::error::Error + Send + Sync + 'static;
+    /// Level-0 size in texels.
+    fn size(&self) -> UVec2;
+    /// The samples of `rect` (inside `0..size`), row-major, `rect.size` in size.
+    fn region(&self, rect: Rect) -> Result<Grid<u16>, Self::Error>;
+}
+
+/// A source over a coarse-map in memory (the demo's procedural default, or a DEM already read).
+#[derive(Debug, Clone, Copy)]
+pub struct MapSource<'a> {
+    /// The map.
+    pub map: &'a CoarseMap,
+}
+
+impl TileSource for MapSource<'_> {
+    type Error = terrain_core::CoreError;
+    fn size(&self) -> UVec2 {
+        self.map.size()
+    }
+    fn region(&self, rect: Rect) -> Result<Grid<u16>, Self::Error> {
+        self.map.grid().copy_rect(rect)
+    }
+}
+
+/// A RAW16 DEM (little-endian u16, row-major, no header) read row by row: worlds larger than RAM.
+#[derive(Debug, Clone)]
+pub struct Raw16Source {
+    path: PathBuf,
+    size: UVec2,
+}
+
+impl Raw16Source {
+    /// A source over `path`, which must hold exactly `size.x * size.y` samples.
+    pub fn open(path: impl AsRef<Path>, size: UVec2) -> Result<Self, CacheError> {
+        let path = path.as_ref().to_path_buf();
+        let len = std::fs::metadata(&path)
+            .map_err(|source| CacheError::Io {
+                path: path.clone(),
+                source,
+            })?
+            .len();
+        let expected = 2 * u64::from(size.x) * u64::from(size.y);
+        if len != expected || size.min_element() == 0 {
+            return Err(CacheError::OutOfRange {
+                what: "RAW16 file length (bytes)",
+                value: len as f64,
+                expected: "2 * width * height of the given size",
+            });
+        }
+        Ok(Self { path, size })
+    }
+}
+
+impl TileSource for Raw16Source {
+    type Error = std::io::Error;
+    fn size(&self) -> UVec2 {
+        self.size
+    }
+    fn region(&self, rect: Rect) -> Result<Grid<u16>, Self::Error> {
+        let mut f = File::open(&self.path)?;
+        let w = rect.size.x as usize;
+        let mut row = vec![0u8; w * 2];
+        let mut data = Vec::with_capacity(w * rect.size.y as usize);
+        for y in rect.min.y..rect.max().y {
+            let off =
+                (u64::from(y as u32) * u64::from(self.size.x) + u64::from(rect.min.x as u32)) * 2;
+            f.seek(SeekFrom::Start(off))?;
+            f.read_exact(&mut row)?;
+            data.extend(
+                row.chunks_exact(2)
+                    .map(|c| u16::from_le_bytes([c[0], c[1]])),
+            );
+        }
+        Grid::from_vec(rect.size.x, rect.size.y, data).map_err(std::io::Error::other)
+    }
+}
+
+/// A procedural world of any size, evaluated per region: terrain-core's default terrain at a
+/// base size (held in memory, `base.size` texels) magnified to the world size by bilinear
+/// interpolation with wrap addressing, plus `detail_octaves` of periodic value noise for the
+/// finer scales. Deterministic, seamless under wrap, and bounded in memory by the base map.
+#[derive(Debug, Clone)]
+pub struct ProceduralSource {
+    base: CoarseMap,
+    size: UVec2,
+    seed: u64,
+    detail_octaves: u32,
+    detail_amplitude: f64,
+}
+
+impl ProceduralSource {
+    /// A world of `size` texels from the default terrain `base` (its `size` is the base map's,
+    /// e.g. 1024 x 1024), with `detail_octaves` (0..=8) of value noise of total amplitude
+    /// `detail_amplitude` (fraction of the u16 range, `0..=0.5`).
+    pub fn new(
+        size: UVec2,
+        base: &TerrainParams,
+        detail_octaves: u32,
+        detail_amplitude: f32,
+    ) -> Result<Self, CacheError> {
+        if size.min_element() == 0 {
+            return Err(CacheError::OutOfRange {
+                what: "procedural world size",
+                value: f64::from(size.min_element()),
+                expected: "at least 1 texel on each side",
+            });
+        }
+        if detail_octaves > 8 || !(0.0..=0.5).contains(&detail_amplitude) {
+            return Err(CacheError::OutOfRange {
+                what: "detail octaves / amplitude",
+                value: f64::from(detail_amplitude),
+                expected: "octaves 0..=8, amplitude 0..=0.5",
+            });
+        }
+        let enc = terrain_core::HeightEncoding::new(1.0, 0.0)?;
+        let base_map = generate_coarse_map(base, enc, 1.0)?;
+        Ok(Self {
+            base: base_map,
+            size,
+            seed: base.seed,
+            detail_octaves,
+            detail_amplitude: f64::from(detail_amplitude),
+        })
+    }
+
+    /// The stored height at world texel `(x, y)` (what [`TileSource::region`] returns).
+    pub fn sample(&self, x: u32, y: u32) -> u16 {
+        let bs = self.base.size().as_dvec2();
+        let ws = self.size.as_dvec2();
+        let u = f64::from(x) * bs.x / ws.x;
+        let v = f64::from(y) * bs.y / ws.y;
+        let g = self.base.grid();
+        let (x0, y0) = (u.floor(), v.floor());
+        let (fx, fy) = (u - x0, v - y0);
+        let at = |dx: i64, dy: i64| {
+            f64::from(g.get_wrapped(
+                IVec2::new(
+                    WrapMode::Repeat.resolve(x0 as i64 + dx, g.width()) as i32,
+                    WrapMode::Repeat.resolve(y0 as i64 + dy, g.height()) as i32,
+                ),
+                WrapMode::Repeat,
+            ))
+        };
+        let top = at(0, 0) + (at(1, 0) - at(0, 0)) * fx;
+        let bot = at(0, 1) + (at(1, 1) - at(0, 1)) * fx;
+        let mut h = (top + (bot - top) * fy) / 65535.0;
+        // Value-noise octaves, periodic over the world: octave o has 2 * base * 2^o cells.
+        let mut amp = self.detail_amplitude;
+        let mut norm = 0.0;
+        let mut a = 1.0;
+        for _ in 0..self.detail_octaves {
+            norm += a;
+            a *= 0.5;
+        }
+        if norm > 0.0 {
+            amp /= norm;
+        }
+        for o in 0..self.detail_octaves {
+            let period = (bs * f64::from(2u32 << o)).as_uvec2();
+            let cu = f64::from(x) * f64::from(period.x) / ws.x;
+            let cv = f64::from(y) * f64::from(period.y) / ws.y;
+            h += amp * value_noise(self.seed, o, cu, cv, period);
+            amp *= 0.5;
+        }
+        (h.clamp(0.0, 1.0) * 65535.0).round() as u16
+    }
+}
+
+/// Periodic value noise in `[-1, 1]` with smoothstep interpolation.
+fn value_noise(seed: u64, octave: u32, u: f64, v: f64, period: UVec2) -> f64 {
+    let (i, j) = (u.floor(), v.floor());
+    let (fx, fy) = (u - i, v - j);
+    let (sx, sy) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
+    let lat = |di: u64, dj: u64| {
+        let ii = (i as u64 + di) % u64::from(period.x.max(1));
+        let jj = (j as u64 + dj) % u64::from(period.y.max(1));
+        let h = mix64(seed ^ (u64::from(octave) << 58) ^ (ii << 29) ^ jj ^ 0x9E37_79B9_7F4A_7C15);
+        (h >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let top = lat(0, 0) + (lat(1, 0) - lat(0, 0)) * sx;
+    let bot = lat(0, 1) + (lat(1, 1) - lat(0, 1)) * sx;
+    top + (bot - top) * sy
+}
+
+fn mix64(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+impl TileSource for ProceduralSource {
+    type Error = std::convert::Infallible;
+    fn size(&self) -> UVec2 {
+        self.size
+    }
+    fn region(&self, rect: Rect) -> Result<Grid<u16>, Self::Error> {
+        let (x0, y0) = (rect.min.x as u32, rect.min.y as u32);
+        let data = (0..rect.size.y)
+            .flat_map(|y| (0..rect.size.x).map(move |x| (x, y)))
+            .map(|(x, y)| self.sample(x0 + x, y0 + y))
+            .collect();
+        // The rect is non-empty and its area fits (a tile at most), so this cannot fail.
+        Ok(Grid::from_vec(rect.size.x, rect.size.y, data).unwrap_or_else(|_| unreachable_grid()))
+    }
+}
+
+#[cold]
+fn unreachable_grid() -> Grid<u16> {
+    // Only reached if a caller passes an empty rect; a 1x1 grid keeps the call panic-free.
+    Grid::from_vec(1, 1, vec![0]).unwrap_or_else(|_| unreachable!("1x1 grid"))
+}
+
+/// Progress of a build, handed to the callback after each tile.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BuildProgress {
+    /// Tiles finished (all levels).
+    pub done: u64,
+    /// Tiles in all.
+    pub total: u64,
+    /// Tiles that got a file.
+    pub stored: u64,
+    /// Tiles equal to the zero tile (no file).
+    pub zero: u64,
+}
+
+/// What a build did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BuildReport {
+    /// Tiles in the pyramid.
+    pub tiles: u64,
+    /// Tiles written as files.
+    pub stored: u64,
+    /// Tiles equal to the zero tile, not stored.
+    pub zero: u64,
+    /// Bytes of tile files written.
+    pub bytes_written: u64,
+    /// Wall time.
+    pub elapsed: Duration,
+}
+
+struct BuildCtx<'a, S: TileSource> {
+    world: &'a World,
+    source: &'a S,
+    progress: &'a (dyn Fn(BuildProgress) -> bool + Sync),
+    cancel: AtomicBool,
+    done: AtomicU64,
+    stored: AtomicU64,
+    zero: AtomicU64,
+    bytes: AtomicU64,
+    total: u64,
+    bounds: Vec<Vec<AtomicU32>>,
+}
+
+struct Node {
+    grid: Grid<u16>,
+    min: u16,
+    max: u16,
+}
+
+/// Builds the height pyramid of `manifest` from `source` into `store` and writes the manifest
+/// last (a store without a manifest is not a world, so an interrupted build is never opened).
+///
+/// `progress` is called after every tile from the building threads; returning `false` cancels
+/// the build ([`CacheError::Cancelled`]). `source.size()` must equal `manifest.world_size`.
+pub fn build_world<S: TileSource>(
+    store: Arc<dyn TileStore>,
+    manifest: Manifest,
+    source: &S,
+    progress: &(dyn Fn(BuildProgress) -> bool + Sync),
+) -> Result<(World, BuildReport), CacheError> {
+    let start = Instant::now();
+    manifest.validate()?;
+    if source.size() != manifest.world_size {
+        return Err(CacheError::OutOfRange {
+            what: "source size (texels, larger side)",
+            value: f64::from(source.size().max_element()),
+            expected: "the manifest's world_size",
+        });
+    }
+    let world = World::unwritten(store.clone(), manifest);
+    let levels = manifest.levels;
+    let total: u64 = (0..levels)
+        .map(|l| {
+            let t = manifest.tiles_at(l);
+            u64::from(t.x) * u64::from(t.y)
+        })
+        .sum();
+    let bounds = (0..levels)
+        .map(|l| {
+            let t = manifest.tiles_at(l);
+            (0..t.x as usize * t.y as usize)
+                .map(|_| AtomicU32::new(0xFFFF_0000))
+                .collect()
+        })
+        .collect();
+    let ctx = BuildCtx {
+        world: &world,
+        source,
+        progress,
+        cancel: AtomicBool::new(false),
+        done: AtomicU64::new(0),
+        stored: AtomicU64::new(0),
+        zero: AtomicU64::new(0),
+        bytes: AtomicU64::new(0),
+        total,
+        bounds,
+    };
+    let top = levels - 1;
+    let tops: Vec<TileId> = manifest.tiles_of(Layer::Height, top).collect();
+    tops.par_iter()
+        .try_for_each(|&id| build_node(&ctx, id).map(|_| ()))?;
+    for level in 0..levels {
+        let t = manifest.tiles_at(level);
+        let min_max = ctx.bounds[level as usize]
+            .iter()
+            .map(|a| {
+                let v = a.load(Ordering::Relaxed);
+                [(v >> 16) as u16, v as u16]
+            })
+            .collect();
+        world.write_bounds(level, &LevelBounds { tiles: t, min_max })?;
+    }
+    let world = World::create(store, manifest)?;
+    Ok((
+        world,
+        BuildReport {
+            tiles: total,
+            stored: ctx.stored.load(Ordering::Relaxed),
+            zero: ctx.zero.load(Ordering::Relaxed),
+            bytes_written: ctx.bytes.load(Ordering::Relaxed),
+            elapsed: start.elapsed(),
+        },
+    ))
+}
+
+/// Builds, stores and returns tile `id` (`None` beyond the level's tiles).
+fn build_node<S: TileSource>(
+    ctx: &BuildCtx<'_, S>,
+    id: TileId,
+) -> Result<Option<Node>, CacheError> {
+    let m = ctx.world.manifest();
+    let tiles = m.tiles_at(id.level);
+    if id.x >= tiles.x || id.y >= tiles.y {
+        return Ok(None);
+    }
+    if ctx.cancel.load(Ordering::Relaxed) {
+        return Err(cancelled(ctx));
+    }
+    let node = if id.level == 0 {
+        level0_tile(ctx, id)?
+    } else {
+        let kids = id.children().ok_or(CacheError::TileOutOfRange {
+            id,
+            levels: m.levels,
+            tiles_x: tiles.x,
+            tiles_y: tiles.y,
+        })?;
+        let ((a, b), (c, d)) = rayon::join(
+            || rayon::join(|| build_node(ctx, kids[0]), || build_node(ctx, kids[1])),
+            || rayon::join(|| build_node(ctx, kids[2]), || build_node(ctx, kids[3])),
+        );
+        let children = [a?, b?, c?, d?];
+        reduce_children(m, id, &children)
+    };
+    store_node(ctx, id, &node)?;
+    Ok(Some(node))
+}
+
+fn uniform_grid(size: u32, v: u16) -> Result<Grid<u16>, CacheError> {
+    Ok(Grid::new(size, size, v)?)
+}
+
+fn level0_tile<S: TileSource>(ctx: &BuildCtx<'_, S>, id: TileId) -> Result<Node, CacheError> {
+    let m = ctx.world.manifest();
+    let ts = m.tile_size;
+    let origin = UVec2::new(id.x, id.y) * ts;
+    let valid = (m.world_size - origin).min(UVec2::splat(ts));
+    let rect = Rect::new(origin.as_ivec2(), valid);
+    let region = ctx.source.region(rect).map_err(|e| CacheError::Source {
+        id,
+        source: Box::new(e),
+    })?;
+    if region.size() != valid {
+        return Err(CacheError::Source {
+            id,
+            source: format!(
+                "the source returned {}x{} samples for a {}x{} rect",
+                region.width(),
+                region.height(),
+                valid.x,
+                valid.y
+            )
+            .into(),
+        });
+    }
+    let (mut min, mut max) = (u16::MAX, 0);
+    for &v in region.as_slice() {
+        min = min.min(v);
+        max = max.max(v);
+    }
+    let mut grid = Grid::new(ts, ts, 0u16)?;
+    grid.paste(&region, IVec2::ZERO)?;
+    pad_clamped(&mut grid, valid);
+    Ok(Node { grid, min, max })
+}
+
+/// Fills samples beyond `valid` with the last valid sample of their row, then column.
+fn pad_clamped(grid: &mut Grid<u16>, valid: UVec2) {
+    let (w, h) = (grid.width(), grid.height());
+    if valid.x < w {
+        for y in 0..valid.y.min(h) {
+            let row = grid.row_mut(y);
+            let edge = row[valid.x as usize - 1];
+            row[valid.x as usize..].fill(edge);
+        }
+    }
+    if valid.y < h {
+        let last: Vec<u16> = grid.row(valid.y - 1).to_vec();
+        for y in valid.y..h {
+            grid.row_mut(y).copy_from_slice(&last);
+        }
+    }
+}
+
+/// The parent tile from its (up to four) children: 2x2 mean into each quadrant, then clamped
+/// padding beyond the parent level's size.
+fn reduce_children(m: &Manifest, id: TileId, children: &[Option<Node>; 4]) -> Node {
+    let ts = m.tile_size;
+    let half = ts / 2;
+    let mut out = vec![0u16; (ts * ts) as usize];
+    let (mut min, mut max) = (u16::MAX, 0u16);
+    for (q, c) in children.iter().enumerate() {
+        let Some(c) = c else { continue };
+        min = min.min(c.min);
+        max = max.max(c.max);
+        let (qx, qy) = ((q as u32 % 2) * half, (q as u32 / 2) * half);
+        for j in 0..half {
+            let r0 = c.grid.row(2 * j);
+            let r1 = c.grid.row(2 * j + 1);
+            let dst = &mut out[((qy + j) * ts + qx) as usize..][..half as usize];
+            for (i, d) in dst.iter_mut().enumerate() {
+                let s = u32::from(r0[2 * i])
+                    + u32::from(r0[2 * i + 1])
+                    + u32::from(r1[2 * i])
+                    + u32::from(r1[2 * i + 1]);
+                *d = ((s + 2) / 4) as u16;
+            }
+        }
+    }
+    // The grid has ts*ts samples by construction.
+    let mut grid = Grid::from_vec(ts, ts, out).unwrap_or_else(|_| unreachable_grid());
+    let origin = UVec2::new(id.x, id.y) * ts;
+    let valid = (m.level_size(id.level) - origin).min(UVec2::splat(ts));
+    pad_clamped(&mut grid, valid);
+    Node { grid, min, max }
+}
+
+fn store_node<S: TileSource>(
+    ctx: &BuildCtx<'_, S>,
+    id: TileId,
+    node: &Node,
+) -> Result<(), CacheError> {
+    let world = ctx.world;
+    let written = world.write_grid16(id, &node.grid)?;
+    if written > 0 {
+        ctx.stored.fetch_add(1, Ordering::Relaxed);
+        ctx.bytes.fetch_add(written, Ordering::Relaxed);
+    } else {
+        ctx.zero.fetch_add(1, Ordering::Relaxed);
+    }
+    let t = world.manifest().tiles_at(id.level);
+    if let Some(slot) = ctx.bounds[id.level as usize].get((id.y * t.x + id.x) as usize) {
+        slot.store(
+            (u32::from(node.min) << 16) | u32::from(node.max),
+            Ordering::Relaxed,
+        );
+    }
+    let done = ctx.done.fetch_add(1, Ordering::Relaxed) + 1;
+    let p = BuildProgress {
+        done,
+        total: ctx.total,
+        stored: ctx.stored.load(Ordering::Relaxed),
+        zero: ctx.zero.load(Ordering::Relaxed),
+    };
+    if !(ctx.progress)(p) {
+        ctx.cancel.store(true, Ordering::Relaxed);
+    }
+    Ok(())
+}
+
+fn cancelled<S: TileSource>(ctx: &BuildCtx<'_, S>) -> CacheError {
+    CacheError::Cancelled {
+        done: ctx.done.load(Ordering::Relaxed),
+        total: ctx.total,
+    }
+}
+
+/// Recomputes, in the store, every coarser-level ancestor of `changed` (tiles of any level)
+/// from its four children, and updates the bounds side files; returns the ancestors rewritten,
+/// finest first. Run it on a worker after write-back (the pool's writer does), never on the
+/// frame thread.
+pub fn rebuild_ancestors(world: &World, changed: &[TileId]) -> Result<Vec<TileId>, CacheError> {
+    let m = *world.manifest();
+    let mut rewritten = Vec::new();
+    let mut level_set: Vec<TileId> = changed.to_vec();
+    let mut bounds_cache: Vec<Option<LevelBounds>> = vec![None; m.levels as usize];
+    // Level of the changed tiles themselves: refresh their own bounds from their data.
+    for &id in changed {
+        m.check_tile(Layer::Height, id)?;
+        let data = world.load_tile(Layer::Height, id)?;
+        let (lo, hi) = data.min_max();
+        if id.level == 0 {
+            set_bounds(world, &mut bounds_cache, id, [lo, hi])?;
+        }
+    }
+    while !level_set.is_empty() {
+        let mut parents: Vec<TileId> = level_set
+            .iter()
+            .filter_map(|id| id.parent())
+            .filter(|p| p.level < m.levels)
+            .collect();
+        parents.sort();
+        parents.dedup();
+        for &p in &parents {
+            let kids = p.children().ok_or(CacheError::TileOutOfRange {
+                id: p,
+                levels: m.levels,
+                tiles_x: 0,
+                tiles_y: 0,
+            })?;
+            let mut nodes: [Option<Node>; 4] = [None, None, None, None];
+            let t = m.tiles_at(p.level - 1);
+            let child_bounds = level_bounds(world, &mut bounds_cache, p.level - 1)?;
+            for (slot, k) in nodes.iter_mut().zip(kids) {
+                if k.x >= t.x || k.y >= t.y {
+                    continue;
+                }
+                let grid = match world.load_tile(Layer::Height, k)?.as_ref() {
+                    TileData::U16(g) => g.clone(),
+                    TileData::U8(_) => uniform_grid(m.tile_size, m.height_fill)?,
+                };
+                let [min, max] = child_bounds.get(k.x, k.y).unwrap_or([u16::MAX, 0]);
+                *slot = Some(Node { grid, min, max });
+            }
+            let node = reduce_children(&m, p, &nodes);
+            let (min, max) = (node.min, node.max);
+            world.write_tile(Layer::Height, p, &TileData::U16(node.grid))?;
+            set_bounds(world, &mut bounds_cache, p, [min, max])?;
+            rewritten.push(p);
+        }
+        level_set = parents;
+    }
+    for (level, b) in bounds_cache.iter().enumerate() {
+        if let Some(b) = b {
+            world.write_bounds(level as u32, b)?;
+        }
+    }
+    Ok(rewritten)
+}
+
+fn level_bounds<'a>(
+    world: &World,
+    cache: &'a mut [Option<LevelBounds>],
+    level: u32,
+) -> Result<&'a LevelBounds, CacheError> {
+    let slot = &mut cache[level as usize];
+    if slot.is_none() {
+        let b = match world.bounds(level) {
+            Ok(Some(b)) => b,
+            // Missing or unreadable: start from empty bounds, rebuilt as tiles are refreshed.
+            _ => LevelBounds::empty(world.manifest().tiles_at(level)),
+        };
+        *slot = Some(b);
+    }
+    slot.as_ref().ok_or(CacheError::Manifest {
+        key: String::new(),
+        reason: "bounds".into(),
+    })
+}
+
+fn set_bounds(
+    world: &World,
+    cache: &mut [Option<LevelBounds>],
+    id: TileId,
+    v: [u16; 2],
+) -> Result<(), CacheError> {
+    level_bounds(world, cache, id.level)?;
+    if let Some(b) = cache[id.level as usize].as_mut() {
+        let i = id.y as usize * b.tiles.x as usize + id.x as usize;
+        if let Some(s) = b.min_max.get_mut(i) {
+            *s = v;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::object::ObjectTileStore;
+    use terrain_core::HeightEncoding;
+
+    fn enc() -> HeightEncoding {
+        HeightEncoding::spanning::<u16>(0.0, 100.0).unwrap()
+    }
+
+    /// Reference pyramid computed whole, in memory.
+    fn reference_level(prev: &Grid<u16>, size: UVec2) -> Grid<u16> {
+        Grid::from_fn(size.x, size.y, |i, j| {
+            let at = |x: u32, y: u32| {
+                u32::from(
+                    prev.get(x.min(prev.width() - 1), y.min(prev.height() - 1))
+                        .unwrap(),
+                )
+            };
+            ((at(2 * i, 2 * j)
+                + at(2 * i + 1, 2 * j)
+                + at(2 * i, 2 * j + 1)
+                + at(2 * i + 1, 2 * j + 1)
+                + 2)
+                / 4) as u16
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn pyramid_matches_whole_map_reduction_and_bounds() {
+        let size = UVec2::new(150, 90);
+        let grid = Grid::from_fn(size.x, size.y, |x, y| {
+            ((x * 37 + y * 101) % 5000 + 1) as u16
+        })
+        .unwrap();
+        let map = CoarseMap::coarse(grid.clone(), enc(), 1.0).unwrap();
+        let m = Manifest::new(size, 32, 1.0, enc(), WrapMode::Repeat).unwrap();
+        let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
+        let calls = AtomicU64::new(0);
+        let (world, report) = build_world(store, m, &MapSource { map: &map }, &|p| {
+            calls.fetch_add(1, Ordering::Relaxed);
+            assert!(p.done <= p.total);
+            true
+        })
+        .unwrap();
+        assert_eq!(report.tiles, calls.load(Ordering::Relaxed));
+        assert_eq!(m.levels, 4);
+        let mut level = grid;
+        for l in 0..m.levels {
+            if l > 0 {
+                level = reference_level(&level, m.level_size(l));
+            }
+            for id in m.tiles_of(Layer::Height, l) {
+                let tile = world.load_tile(Layer::Height, id).unwrap();
+                let t = tile.as_u16().unwrap();
+                for y in 0..32 {
+                    for x in 0..32 {
+                        let gx = (id.x * 32 + x).min(level.width() - 1);
+                        let gy = (id.y * 32 + y).min(level.height() - 1);
+                        assert_eq!(t.get(x, y), level.get(gx, gy), "{id} ({x},{y})");
+                    }
+                }
+            }
+            let b = world.bounds(l).unwrap().unwrap();
+            assert!(
+                b.min_max
+                    .iter()
+                    .all(|&[lo, hi]| lo >= 1 && hi <= 5000 && lo <= hi)
+            );
+        }
+        let top = world.bounds(m.levels - 1).unwrap().unwrap();
+        assert_eq!(top.min_max, vec![[1, 5000]]);
+    }
+
+    #[test]
+    fn zero_tiles_are_not_stored_and_cancel_works() {
+        let size = UVec2::new(128, 128);
+        let grid =
+            Grid::from_fn(size.x, size.y, |x, y| if x < 32 && y < 32 { 9 } else { 0 }).unwrap();
+        let map = CoarseMap::coarse(grid, enc(), 1.0).unwrap();
+        let m = Manifest::new(size, 32, 1.0, enc(), WrapMode::Clamp).unwrap();
+        let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
+        let (_, r) = build_world(store.clone(), m, &MapSource { map: &map }, &|_| true).unwrap();
+        // Level 0: 1 of 16 stored; level 1: 1 of 4; level 2: 1 of 1.
+        assert_eq!((r.tiles, r.stored, r.zero), (21, 3, 18));
+        let keys = store.list("height").unwrap();
+        assert_eq!(keys.iter().filter(|k| k.ends_with(".png")).count(), 3);
+        let store2: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
+        let e =
+            build_world(store2.clone(), m, &MapSource { map: &map }, &|p| p.done < 5).unwrap_err();
+        assert!(matches!(e, CacheError::Cancelled { .. }), "{e}");
+        assert!(
+            World::open(store2).is_err(),
+            "no manifest after a cancelled build"
+        );
+    }
+
+    #[test]
+    fn procedural_source_is_region_consistent_and_rebuild_ancestors_refreshes() {
+        let base = TerrainParams {
+            size: UVec2::splat(32),
+            ..TerrainParams::default()
+        };
+        let src = ProceduralSource::new(UVec2::splat(256), &base, 3, 0.05).unwrap();
+        let a = src
+            .region(Rect::new(IVec2::new(10, 20), UVec2::new(40, 30)))
+            .unwrap();
+        let b = src
+            .region(Rect::new(IVec2::new(0, 0), UVec2::new(64, 64)))
+            .unwrap();
+        assert_eq!(a.get(0, 0), b.get(10, 20));
+        assert_eq!(a.get(39, 29), b.get(49, 49));
+        let m = Manifest::new(UVec2::splat(256), 64, 1.0, enc(), WrapMode::Repeat).unwrap();
+        let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
+        let (world, _) = build_world(store, m, &src, &|_| true).unwrap();
+        // Raise one level-0 tile, refresh its ancestors, compare with a full rebuild.
+        let id = TileId::new(0, 1, 2);
+        let mut t = (*world.load_tile(Layer::Height, id).unwrap()).clone();
+        t.as_u16_mut()
+            .unwrap()
+            .as_mut_slice()
+            .iter_mut()
+            .for_each(|v| *v = v.saturating_add(1000));
+        world.write_tile(Layer::Height, id, &t).unwrap();
+        let up = rebuild_ancestors(&world, &[id]).unwrap();
+        assert_eq!(up, vec![TileId::new(1, 0, 1), TileId::new(2, 0, 0)]);
+        // Full rebuild from the modified level 0 as a map.
+        let mut full = Grid::new(256, 256, 0u16).unwrap();
+        for tid in m.tiles_of(Layer::Height, 0) {
+            let tile = world.load_tile(Layer::Height, tid).unwrap();
+            full.paste(
+                tile.as_u16().unwrap(),
+                IVec2::new(tid.x as i32 * 64, tid.y as i32 * 64),
+            )
+            .unwrap();
+        }
+        let map = CoarseMap::coarse(full, enc(), 1.0).unwrap();
+        let store2: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
+        let (w2, _) = build_world(store2, m, &MapSource { map: &map }, &|_| true).unwrap();
+        for l in 0..m.levels {
+            for tid in m.tiles_of(Layer::Height, l) {
+                assert_eq!(
+                    world.load_tile(Layer::Height, tid).unwrap(),
+                    w2.load_tile(Layer::Height, tid).unwrap(),
+                    "{tid}"
+                );
+            }
+            assert_eq!(world.bounds(l).unwrap(), w2.bounds(l).unwrap(), "level {l}");
+        }
+    }
+}

@@ -1,0 +1,82 @@
+//! The disk / RAM side of the three-pool streamed tile cache (seed 004 ch. 4-6, seed 000 sec
+//! 2.4.2 and 3.2.3): a world is a pyramid of square tiles behind a [`TileStore`] (local files
+//! named by hex level / row / column, or the `object_store` crate for buckets), built from any
+//! [`TileSource`] without holding the whole map; a [`RamPool`] fed by worker threads over
+//! lock-free queues, selected by square area then spherical distance per level, within a byte
+//! budget, with dirty tiles written back atomically off the frame thread; selection policies
+//! (spherical, frustum with a motion-dependent margin, band regions) and a deterministic trace
+//! simulator that compares them with LRU and Belady's optimum.
+//!
+//! Conventions: world metres, Y up, right-handed; tile column `x` runs along world X, row `y`
+//! along world Z; level 0 is the finest, each level up is a 2x2 average of the one below.
+//!
+//! ```
+//! use std::sync::Arc;
+//! use glam::{UVec2, Vec3};
+//! use terrain_cache::{
+//!     build_world, CameraState, Layer, Manifest, ObjectTileStore, PoolConfig, ProceduralSource,
+//!     RamPool, TileId, TileStore,
+//! };
+//! use terrain_core::{HeightEncoding, TerrainParams, WrapMode};
+//!
+//! // A 512 x 512 procedural world in 64-texel tiles, in memory (a folder: `FsStore::open`).
+//! let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory()?);
+//! let base = TerrainParams { size: UVec2::splat(64), ..TerrainParams::default() };
+//! let source = ProceduralSource::new(UVec2::splat(512), &base, 2, 0.02)?;
+//! let encoding = HeightEncoding::spanning::<u16>(0.0, 100.0)?;
+//! let manifest = Manifest::new(UVec2::splat(512), 64, 1.0, encoding, WrapMode::Repeat)?;
+//! let (world, report) = build_world(store, manifest, &source, &|_progress| true)?;
+//! assert_eq!(report.tiles, 64 + 16 + 4 + 1);
+//!
+//! // A RAM pool of at most 64 tiles around the camera; `update` never blocks on I/O.
+//! let mut pool = RamPool::new(world, PoolConfig::new(Layer::Height, 64 * 64 * 64 * 2))?;
+//! let camera = CameraState::at(Vec3::new(100.0, 30.0, 100.0));
+//! let here = TileId::new(0, 1, 1);
+//! while pool.tile(here).is_none() {
+//!     let frame = pool.update(&camera)?;
+//!     assert!(frame.ram_bytes <= frame.budget_bytes);
+//!     std::thread::sleep(std::time::Duration::from_millis(1));
+//! }
+//! // Deform it: the tile becomes dirty and is written back atomically by the writer thread.
+//! pool.modify(here, |tile| tile.as_u16_mut().unwrap().as_mut_slice()[0] = 0)?;
+//! pool.shutdown(std::time::Duration::from_secs(10))?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! For the VRAM pool (a later crate): [`RamPool::newly_loaded`] lists the tiles that arrived
+//! this frame, [`RamPool::tile`] lends their samples for the upload, [`RamPool::pin`] /
+//! [`RamPool::unpin`] keep tiles the GPU holds from eviction, [`RamPool::write`] takes a
+//! deformed tile read back from the GPU, and [`RamPool::refreshed`] names coarser tiles
+//! rewritten on disk whose GPU copies are stale.
+#![warn(missing_docs)]
+#![warn(clippy::unwrap_used)]
+
+pub mod error;
+pub mod manifest;
+#[cfg(feature = "object-store")]
+pub mod object;
+pub mod store;
+pub mod tile;
+pub mod world;
+
+pub use error::CacheError;
+pub use manifest::{DetailLayout, Manifest, tile_key};
+#[cfg(feature = "object-store")]
+pub use object::ObjectTileStore;
+pub use store::{FsStore, TileStore};
+pub use tile::{Layer, TileData, TileId};
+pub use world::{LevelBounds, TileRead, World};
+pub mod build;
+pub use build::{
+    BuildProgress, BuildReport, MapSource, ProceduralSource, Raw16Source, TileSource, build_world,
+    rebuild_ancestors,
+};
+pub mod policy;
+pub mod pool;
+pub use policy::{
+    BandSelection, CameraState, FrustumSelection, SelectionPolicy, SphericalSelection, TileGrid,
+    Want,
+};
+pub use pool::{FrameReport, PoolConfig, RamPool, RequestHandle, TileState, TileStatus};
+pub mod sim;
+pub use sim::{CameraPath, SimConfig, SimPolicy, SimResult, comparison_table, simulate};

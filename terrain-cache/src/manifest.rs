@@ -1,0 +1,569 @@
+//! The world layout: [`Manifest`] (format version, tile size, levels, texel size, height
+//! encoding, wrap mode, world size, the zero tile's value, the optional detail layer), stored as
+//! a small JSON file, and the store keys of tiles (folders per level and row, hex names, seed
+//! 004 fig. 5.1).
+
+use crate::CacheError;
+use crate::tile::{Layer, TileId};
+use glam::{DVec2, UVec2};
+use serde::{Deserialize, Serialize};
+use terrain_core::{HeightEncoding, WrapMode};
+
+/// The manifest format version this build writes and reads.
+pub const FORMAT_VERSION: u32 = 1;
+/// The store key of the manifest.
+pub const MANIFEST_KEY: &str = "manifest.json";
+/// Largest manifest file accepted, in bytes (it is a few hundred bytes when valid).
+pub const MAX_MANIFEST_BYTES: u64 = 64 * 1024;
+/// Default tile side in texels (seed 004 sec 5.1: 256 x 256 blocks).
+pub const DEFAULT_TILE_SIZE: u32 = 256;
+/// Most tiles along one side of a level: four hex digits in a file name (seed 004 sec 5.1:
+/// "the current limit of blocks are 65536").
+pub const MAX_TILES_PER_SIDE: u32 = 65536;
+/// Smallest accepted tile side.
+pub const MIN_TILE_SIZE: u32 = 16;
+/// Largest accepted tile side (seed 000's 2048 detail tiles fit).
+pub const MAX_TILE_SIZE: u32 = 4096;
+
+/// The optional detail layer (seed 000 sec 2.4.2): one level of u8 tiles over the world, all
+/// sharing the zero tile until first written.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DetailLayout {
+    /// Tile side in texels (power of two).
+    pub tile_size: u32,
+    /// Tiles across and down.
+    pub tiles: UVec2,
+    /// Metres per detail texel.
+    pub texel_size: f32,
+    /// Detail height encoding (at most 1 m of range, as terrain-core's `DetailTile`).
+    pub encoding: HeightEncoding,
+    /// The value of the zero tile (no deformation); tiles equal to it are not stored.
+    pub fill: u8,
+}
+
+impl DetailLayout {
+    /// Detail tiles of `tile_size` covering a world of `extent_m` metres at `texel_size` metres
+    /// per texel, encoded over `[-0.5, 0.5]` m, zero deformation as the fill.
+    pub fn covering(
+        extent_m: glam::Vec2,
+        tile_size: u32,
+        texel_size: f32,
+    ) -> Result<Self, CacheError> {
+        check_tile_size(tile_size)?;
+        check_positive("detail texel_size", texel_size)?;
+        let tile_m = f64::from(tile_size) * f64::from(texel_size);
+        let tiles = (extent_m.as_dvec2() / tile_m).ceil().max(DVec2::ONE);
+        if tiles.max_element() > f64::from(MAX_TILES_PER_SIDE) {
+            return Err(CacheError::OutOfRange {
+                what: "detail tiles per side",
+                value: tiles.max_element(),
+                expected: "at most 65536",
+            });
+        }
+        let encoding = HeightEncoding::spanning::<u8>(-0.5, 0.5)?;
+        let fill = encoding.to_raw(0.0).round().clamp(0.0, 255.0) as u8;
+        Ok(Self {
+            tile_size,
+            tiles: tiles.as_uvec2(),
+            texel_size,
+            encoding,
+            fill,
+        })
+    }
+}
+
+/// The layout of a world: everything needed to name, decode and place its tiles.
+///
+/// Level 0 is the finest; level `l` has `ceil(world_size / 2^l)` texels, made from level
+/// `l - 1` by 2x2 averaging (rounded to nearest), cut into square tiles of `tile_size`. The
+/// samples of an edge tile beyond its level's size repeat the last valid sample of their row or
+/// column (clamped padding), so every tile is built from itself and its four children only.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Manifest {
+    /// Format version ([`FORMAT_VERSION`]).
+    pub format_version: u32,
+    /// Tile side in texels, a power of two in `16..=4096` (default 256).
+    pub tile_size: u32,
+    /// Level-0 size in texels.
+    pub world_size: UVec2,
+    /// Levels in the pyramid, `1..=max_levels()`.
+    pub levels: u32,
+    /// Metres per texel at level 0.
+    pub texel_size: f32,
+    /// Stored u16 to metres.
+    pub encoding: HeightEncoding,
+    /// How the world is addressed beyond its edges (a coarse-map wraps).
+    pub wrap: WrapMode,
+    /// The value of the shared zero tile of the height layer: a tile all of whose samples equal
+    /// it is not stored, and a missing tile file reads as it.
+    pub height_fill: u16,
+    /// Bumped on every rewrite of the manifest.
+    pub generation: u64,
+    /// The detail layer, if the world has one.
+    pub detail: Option<DetailLayout>,
+}
+
+impl Manifest {
+    /// A manifest for a world of `world_size` texels with every level down to one tile.
+    pub fn new(
+        world_size: UVec2,
+        tile_size: u32,
+        texel_size: f32,
+        encoding: HeightEncoding,
+        wrap: WrapMode,
+    ) -> Result<Self, CacheError> {
+        let mut m = Self {
+            format_version: FORMAT_VERSION,
+            tile_size,
+            world_size,
+            levels: 1,
+            texel_size,
+            encoding,
+            wrap,
+            height_fill: 0,
+            generation: 0,
+            detail: None,
+        };
+        check_tile_size(tile_size)?;
+        m.levels = m.max_levels();
+        m.validate()?;
+        Ok(m)
+    }
+
+    /// Checks every field; a manifest read from a store is validated before use.
+    pub fn validate(&self) -> Result<(), CacheError> {
+        if self.format_version != FORMAT_VERSION {
+            return Err(CacheError::ManifestVersion {
+                found: self.format_version,
+                supported: FORMAT_VERSION,
+            });
+        }
+        check_tile_size(self.tile_size)?;
+        if self.world_size.min_element() == 0 {
+            return Err(CacheError::OutOfRange {
+                what: "world size (texels)",
+                value: f64::from(self.world_size.min_element()),
+                expected: "at least 1 on each side",
+            });
+        }
+        let tiles0 = self.tiles_at(0);
+        if tiles0.max_element() > MAX_TILES_PER_SIDE {
+            return Err(CacheError::OutOfRange {
+                what: "level-0 tiles per side",
+                value: f64::from(tiles0.max_element()),
+                expected: "at most 65536 (four hex digits)",
+            });
+        }
+        if self.levels == 0 || self.levels > self.max_levels() {
+            return Err(CacheError::OutOfRange {
+                what: "levels",
+                value: f64::from(self.levels),
+                expected: "1 ..= levels down to a single tile",
+            });
+        }
+        check_positive("texel_size", self.texel_size)?;
+        HeightEncoding::new(self.encoding.scale, self.encoding.offset)?;
+        if let Some(d) = &self.detail {
+            check_tile_size(d.tile_size)?;
+            check_positive("detail texel_size", d.texel_size)?;
+            HeightEncoding::new(d.encoding.scale, d.encoding.offset)?;
+            let (lo, hi) = d.encoding.range::<u8>();
+            if hi - lo > terrain_core::DETAIL_MAX_RANGE_M * (1.0 + f32::EPSILON) {
+                return Err(CacheError::OutOfRange {
+                    what: "detail height range (m)",
+                    value: f64::from(hi - lo),
+                    expected: "at most 1 m",
+                });
+            }
+            if d.tiles.min_element() == 0 || d.tiles.max_element() > MAX_TILES_PER_SIDE {
+                return Err(CacheError::OutOfRange {
+                    what: "detail tiles per side",
+                    value: f64::from(d.tiles.max_element().max(d.tiles.min_element())),
+                    expected: "1 ..= 65536",
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The most levels this world can have: down to a level of one tile.
+    pub fn max_levels(&self) -> u32 {
+        let mut l = 0;
+        while l < 31 && self.tiles_at(l).max_element() > 1 {
+            l += 1;
+        }
+        l + 1
+    }
+
+    /// Texels of level `level` (`ceil(world_size / 2^level)`, at least 1).
+    pub fn level_size(&self, level: u32) -> UVec2 {
+        let s = level.min(31);
+        let ceil_shift = |v: u32| (((u64::from(v)) + (1u64 << s) - 1) >> s).max(1) as u32;
+        UVec2::new(ceil_shift(self.world_size.x), ceil_shift(self.world_size.y))
+    }
+
+    /// Tiles across and down level `level`.
+    pub fn tiles_at(&self, level: u32) -> UVec2 {
+        let s = self.level_size(level);
+        let t = self.tile_size.max(1);
+        UVec2::new(s.x.div_ceil(t), s.y.div_ceil(t))
+    }
+
+    /// Tiles of `layer` across and down `level` (zero where the layer has no such level).
+    pub fn layer_tiles(&self, layer: Layer, level: u32) -> UVec2 {
+        match layer {
+            Layer::Height if level < self.levels => self.tiles_at(level),
+            Layer::Detail => match &self.detail {
+                Some(d) if level == 0 => d.tiles,
+                _ => UVec2::ZERO,
+            },
+            _ => UVec2::ZERO,
+        }
+    }
+
+    /// Levels of `layer` (the detail layer has one).
+    pub fn layer_levels(&self, layer: Layer) -> u32 {
+        match layer {
+            Layer::Height => self.levels,
+            Layer::Detail => u32::from(self.detail.is_some()),
+        }
+    }
+
+    /// Tile side of `layer`.
+    pub fn layer_tile_size(&self, layer: Layer) -> Result<u32, CacheError> {
+        match layer {
+            Layer::Height => Ok(self.tile_size),
+            Layer::Detail => self
+                .detail
+                .map(|d| d.tile_size)
+                .ok_or(CacheError::NoSuchLayer { layer }),
+        }
+    }
+
+    /// The zero tile's value of `layer`.
+    pub fn layer_fill(&self, layer: Layer) -> Result<u16, CacheError> {
+        match layer {
+            Layer::Height => Ok(self.height_fill),
+            Layer::Detail => self
+                .detail
+                .map(|d| u16::from(d.fill))
+                .ok_or(CacheError::NoSuchLayer { layer }),
+        }
+    }
+
+    /// Side of one tile of `layer` at `level`, in metres.
+    pub fn tile_extent_m(&self, layer: Layer, level: u32) -> f64 {
+        match (layer, &self.detail) {
+            (Layer::Detail, Some(d)) => f64::from(d.tile_size) * f64::from(d.texel_size),
+            _ => {
+                f64::from(self.tile_size)
+                    * f64::from(self.texel_size)
+                    * f64::from(2u32.pow(level.min(31)))
+            }
+        }
+    }
+
+    /// Size of the world in metres.
+    pub fn extent_m(&self) -> DVec2 {
+        self.world_size.as_dvec2() * f64::from(self.texel_size)
+    }
+
+    /// Checks that `id` lies in `layer`'s pyramid.
+    pub fn check_tile(&self, layer: Layer, id: TileId) -> Result<(), CacheError> {
+        if layer == Layer::Detail && self.detail.is_none() {
+            return Err(CacheError::NoSuchLayer { layer });
+        }
+        let t = self.layer_tiles(layer, id.level);
+        if id.x >= t.x || id.y >= t.y {
+            return Err(CacheError::TileOutOfRange {
+                id,
+                levels: self.layer_levels(layer),
+                tiles_x: t.x,
+                tiles_y: t.y,
+            });
+        }
+        Ok(())
+    }
+
+    /// Every tile of `layer` at `level`, row-major.
+    pub fn tiles_of(&self, layer: Layer, level: u32) -> impl Iterator<Item = TileId> {
+        let t = self.layer_tiles(layer, level);
+        (0..t.y).flat_map(move |y| (0..t.x).map(move |x| TileId::new(level, x, y)))
+    }
+
+    /// Serialises to the JSON text stored under [`MANIFEST_KEY`].
+    pub fn to_json(&self) -> String {
+        let file = ManifestFile::from(self);
+        // Serialising plain numbers, strings and options cannot fail.
+        serde_json::to_string_pretty(&file).unwrap_or_default() + "\n"
+    }
+
+    /// Parses and validates the JSON text of a manifest.
+    pub fn from_json(text: &str) -> Result<Self, CacheError> {
+        let file: ManifestFile = serde_json::from_str(text).map_err(|e| CacheError::Manifest {
+            key: MANIFEST_KEY.into(),
+            reason: e.to_string(),
+        })?;
+        if file.format_version != FORMAT_VERSION {
+            return Err(CacheError::ManifestVersion {
+                found: file.format_version,
+                supported: FORMAT_VERSION,
+            });
+        }
+        let m = file.into_manifest()?;
+        m.validate()?;
+        Ok(m)
+    }
+}
+
+/// The store key of a tile: `{layer}/{level:02x}/{y:04x}/{x:04x}.png` (one folder per level,
+/// one per row, hex names: seed 004 fig. 5.1).
+pub fn tile_key(layer: Layer, id: TileId) -> String {
+    format!(
+        "{}/{:02x}/{:04x}/{:04x}.png",
+        layer.folder(),
+        id.level,
+        id.y,
+        id.x
+    )
+}
+
+/// The store key of the min/max side file of a level of a layer (see
+/// [`World::bounds`](crate::World::bounds)).
+pub fn bounds_key(layer: Layer, level: u32) -> String {
+    format!("{}/{:02x}/bounds.bin", layer.folder(), level)
+}
+
+/// Parses a tile key back into its layer and id (`None` for any other key).
+pub fn parse_tile_key(key: &str) -> Option<(Layer, TileId)> {
+    let mut parts = key.split('/');
+    let layer = match parts.next()? {
+        "height" => Layer::Height,
+        "detail" => Layer::Detail,
+        _ => return None,
+    };
+    let level = parts.next()?;
+    let y = parts.next()?;
+    let x = parts.next()?.strip_suffix(".png")?;
+    if parts.next().is_some() || level.len() != 2 || y.len() != 4 || x.len() != 4 {
+        return None;
+    }
+    let hex = |s: &str| {
+        s.bytes()
+            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+            .then(|| u32::from_str_radix(s, 16).ok())
+            .flatten()
+    };
+    Some((layer, TileId::new(hex(level)?, hex(x)?, hex(y)?)))
+}
+
+fn check_tile_size(t: u32) -> Result<(), CacheError> {
+    if !t.is_power_of_two() || !(MIN_TILE_SIZE..=MAX_TILE_SIZE).contains(&t) {
+        return Err(CacheError::OutOfRange {
+            what: "tile_size",
+            value: f64::from(t),
+            expected: "a power of two in 16..=4096",
+        });
+    }
+    Ok(())
+}
+
+fn check_positive(what: &'static str, v: f32) -> Result<(), CacheError> {
+    if !(v.is_finite() && v > 0.0) {
+        return Err(CacheError::OutOfRange {
+            what,
+            value: f64::from(v),
+            expected: "finite and > 0",
+        });
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// The file format (private mirror with plain arrays, so the public types stay glam's).
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ManifestFile {
+    format_version: u32,
+    tile_size: u32,
+    world_size: [u32; 2],
+    levels: u32,
+    texel_size: f32,
+    height_scale: f32,
+    height_offset: f32,
+    wrap: String,
+    height_fill: u16,
+    /// Stated, not configurable: how coarser levels are made.
+    reduction: String,
+    generation: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    detail: Option<DetailFile>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DetailFile {
+    tile_size: u32,
+    tiles: [u32; 2],
+    texel_size: f32,
+    scale: f32,
+    offset: f32,
+    fill: u8,
+}
+
+const REDUCTION: &str =
+    "2x2 average, rounded to nearest; bounds.bin holds level-0 min/max per tile";
+
+impl From<&Manifest> for ManifestFile {
+    fn from(m: &Manifest) -> Self {
+        Self {
+            format_version: m.format_version,
+            tile_size: m.tile_size,
+            world_size: m.world_size.to_array(),
+            levels: m.levels,
+            texel_size: m.texel_size,
+            height_scale: m.encoding.scale,
+            height_offset: m.encoding.offset,
+            wrap: match m.wrap {
+                WrapMode::Repeat => "repeat".into(),
+                WrapMode::Clamp => "clamp".into(),
+            },
+            height_fill: m.height_fill,
+            reduction: REDUCTION.into(),
+            generation: m.generation,
+            detail: m.detail.map(|d| DetailFile {
+                tile_size: d.tile_size,
+                tiles: d.tiles.to_array(),
+                texel_size: d.texel_size,
+                scale: d.encoding.scale,
+                offset: d.encoding.offset,
+                fill: d.fill,
+            }),
+        }
+    }
+}
+
+impl ManifestFile {
+    fn into_manifest(self) -> Result<Manifest, CacheError> {
+        let wrap = match self.wrap.as_str() {
+            "repeat" => WrapMode::Repeat,
+            "clamp" => WrapMode::Clamp,
+            other => {
+                return Err(CacheError::Manifest {
+                    key: MANIFEST_KEY.into(),
+                    reason: format!("wrap {other:?} is neither \"repeat\" nor \"clamp\""),
+                });
+            }
+        };
+        let detail = match self.detail {
+            None => None,
+            Some(d) => Some(DetailLayout {
+                tile_size: d.tile_size,
+                tiles: UVec2::from(d.tiles),
+                texel_size: d.texel_size,
+                encoding: HeightEncoding::new(d.scale, d.offset)?,
+                fill: d.fill,
+            }),
+        };
+        Ok(Manifest {
+            format_version: self.format_version,
+            tile_size: self.tile_size,
+            world_size: UVec2::from(self.world_size),
+            levels: self.levels,
+            texel_size: self.texel_size,
+            encoding: HeightEncoding::new(self.height_scale, self.height_offset)?,
+            wrap,
+            height_fill: self.height_fill,
+            generation: self.generation,
+            detail,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn enc() -> HeightEncoding {
+        HeightEncoding::spanning::<u16>(0.0, 100.0).unwrap()
+    }
+
+    #[test]
+    fn levels_and_tiles() {
+        let m = Manifest::new(UVec2::new(1000, 600), 256, 0.5, enc(), WrapMode::Repeat).unwrap();
+        assert_eq!(m.tiles_at(0), UVec2::new(4, 3));
+        assert_eq!(m.level_size(1), UVec2::new(500, 300));
+        assert_eq!(m.tiles_at(1), UVec2::new(2, 2));
+        assert_eq!(m.tiles_at(2), UVec2::new(1, 1));
+        assert_eq!(m.levels, 3);
+        assert_eq!(m.tiles_of(Layer::Height, 0).count(), 12);
+        assert!(m.check_tile(Layer::Height, TileId::new(0, 3, 2)).is_ok());
+        assert!(matches!(
+            m.check_tile(Layer::Height, TileId::new(0, 4, 0)),
+            Err(CacheError::TileOutOfRange { .. })
+        ));
+        assert!(matches!(
+            m.check_tile(Layer::Height, TileId::new(9, 0, 0)),
+            Err(CacheError::TileOutOfRange { .. })
+        ));
+        assert!(matches!(
+            m.check_tile(Layer::Detail, TileId::new(0, 0, 0)),
+            Err(CacheError::NoSuchLayer { .. })
+        ));
+        let one = Manifest::new(UVec2::splat(16), 16, 1.0, enc(), WrapMode::Clamp).unwrap();
+        assert_eq!(one.levels, 1);
+        let huge = Manifest::new(UVec2::splat(u32::MAX), 4096, 1.0, enc(), WrapMode::Clamp);
+        assert!(matches!(huge, Err(CacheError::OutOfRange { .. })));
+        let big = Manifest::new(UVec2::splat(1 << 24), 256, 1.0, enc(), WrapMode::Clamp).unwrap();
+        assert_eq!(big.levels, 17);
+    }
+
+    #[test]
+    fn json_round_trip_and_rejections() {
+        let mut m = Manifest::new(UVec2::new(300, 200), 64, 0.25, enc(), WrapMode::Clamp).unwrap();
+        m.detail = Some(DetailLayout::covering(glam::Vec2::new(75.0, 50.0), 128, 0.05).unwrap());
+        m.generation = 7;
+        let text = m.to_json();
+        assert_eq!(Manifest::from_json(&text).unwrap(), m);
+        assert!(matches!(
+            Manifest::from_json("{nope"),
+            Err(CacheError::Manifest { .. })
+        ));
+        let v2 = text.replace("\"format_version\": 1", "\"format_version\": 2");
+        assert!(matches!(
+            Manifest::from_json(&v2),
+            Err(CacheError::ManifestVersion { found: 2, .. })
+        ));
+        let bad = text.replace("\"tile_size\": 64", "\"tile_size\": 65");
+        assert!(matches!(
+            Manifest::from_json(&bad),
+            Err(CacheError::OutOfRange {
+                what: "tile_size",
+                ..
+            })
+        ));
+        let nan = text.replace("\"texel_size\": 0.25", "\"texel_size\": -1.0");
+        assert!(Manifest::from_json(&nan).is_err());
+    }
+
+    #[test]
+    fn keys_are_hex_per_level_and_row() {
+        let id = TileId::new(3, 0x1a, 0xff);
+        let k = tile_key(Layer::Height, id);
+        assert_eq!(k, "height/03/00ff/001a.png");
+        assert_eq!(parse_tile_key(&k), Some((Layer::Height, id)));
+        assert_eq!(parse_tile_key("detail/00/0000/0001.png").unwrap().1.x, 1);
+        for bad in [
+            "height/03/00ff/001a.png.tmp",
+            "x/00/0000/0000.png",
+            "height/3/00ff/001a.png",
+            "height/03/00FF/001a.png",
+            "height/03/00ff/001a",
+            "height/03/bounds.bin",
+        ] {
+            assert_eq!(parse_tile_key(bad), None, "{bad}");
+        }
+        assert_eq!(bounds_key(Layer::Height, 2), "height/02/bounds.bin");
+    }
+}
