@@ -15,9 +15,24 @@ pub struct Cli {
     #[arg(long, value_enum, default_value_t = ScenarioKind::Default)]
     pub scenario: ScenarioKind,
     /// Side of the procedural terrain in texels (any size, not only powers of two); default
-    /// 2048 (205 m at 0.1 m), 512 for the snow field (25.6 m at 0.05 m).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(16..=16384))]
+    /// 2048 (205 m at 0.1 m), 512 for the snow field (25.6 m at 0.05 m), 16384 for the
+    /// flyover's streamed world (8.2 km at 0.5 m).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(16..=65536))]
     pub size: Option<u32>,
+    /// Flyover: the folder of the streamed world (built there on first use, from the
+    /// procedural default or --heightmap; deformations are written back into it).
+    #[arg(long, default_value = "worlds/default")]
+    pub world: PathBuf,
+    /// Flyover: RAM pool budget in MiB.
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..=1_048_576))]
+    pub ram_budget: u64,
+    /// Flyover: camera speed in metres per second (it flies, then drives).
+    #[arg(long, default_value_t = 40.0)]
+    pub speed: f32,
+    /// Decode every tile of the world in DIR and check its manifest, then exit: 0 when all
+    /// are valid, 1 with a list of the bad ones.
+    #[arg(long, value_name = "DIR")]
+    pub verify_world: Option<PathBuf>,
     /// Seed of the procedural terrain and of the scripted deformations.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -65,6 +80,9 @@ pub enum ScenarioKind {
     Default,
     /// A four-wheeled vehicle and a walker crossing a snow field.
     Snow,
+    /// A camera flying, then driving, over a streamed world larger than the cache budgets,
+    /// stamping craters on its path (they persist in the world's folder).
+    Flyover,
 }
 
 /// Parses `WIDTHxHEIGHT`.

@@ -70,6 +70,7 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
         }
     }
     io::write_png16(cli.out.join("terrain_final.png"), scenario.map().grid())?;
+    let finish = scenario.finish()?;
 
     let info = scenario.info();
     let map = scenario.map();
@@ -89,6 +90,7 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
         resolution: resolution.to_array(),
         load_ms: info.load_ms,
         initial_normals_ms: info.initial_normals_ms,
+        written_back_tiles: finish.written_back_tiles,
         frames: Vec::new(),
         totals_ms: BTreeMap::new(),
     })?;

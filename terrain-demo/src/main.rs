@@ -49,6 +49,21 @@ fn main() {
 }
 
 fn run(cli: &Cli) -> Result<()> {
+    if let Some(dir) = &cli.verify_world {
+        let bad = scenarios::world_files::verify(dir)?;
+        if bad.is_empty() {
+            println!(
+                "world {}: every tile and the manifest are valid",
+                dir.display()
+            );
+            return Ok(());
+        }
+        for line in &bad {
+            println!("{line}");
+        }
+        eprintln!("world {}: {} bad tile(s)", dir.display(), bad.len());
+        std::process::exit(1);
+    }
     let mut scenario = scenarios::open(cli)?;
     driver::run(cli, scenario.as_mut())?;
     Ok(())

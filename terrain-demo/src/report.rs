@@ -26,6 +26,9 @@ pub struct Report {
     pub load_ms: f64,
     /// Milliseconds to compute the first full normal map.
     pub initial_normals_ms: f64,
+    /// Flyover: tiles written back into the world during and at the end of the run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub written_back_tiles: Option<u64>,
     /// Per frame.
     pub frames: Vec<FrameReport>,
     /// Sum of each step over all frames, in milliseconds.
@@ -97,6 +100,9 @@ pub struct FrameStats {
     /// compression 0: the volume is preserved).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub granular_volume: Option<u64>,
+    /// Flyover: the tile cache this frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cache: Option<CacheStats>,
     /// Snow scenario: where the granular steps run, `gpu` or `cpu` (without an adapter, or
     /// `--no-gpu`).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -104,4 +110,28 @@ pub struct FrameStats {
     /// Snow scenario: material removed by compression so far, in height units.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub granular_removed: Option<u64>,
+}
+
+/// The flyover's tile cache in one frame.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct CacheStats {
+    /// Tiles the selection wants near the camera that are not in RAM yet (the frame falls back
+    /// to coarser data there).
+    pub tiles_missing: usize,
+    /// Tiles the selection wants further out (ahead of the camera) still loading.
+    pub prefetching: usize,
+    /// Bytes the RAM pool holds, and its budget (never exceeded).
+    pub ram_bytes: u64,
+    /// The RAM pool's budget.
+    pub ram_budget_bytes: u64,
+    /// Loads issued this frame.
+    pub loads: usize,
+    /// Tiles dropped to make room this frame.
+    pub evictions: usize,
+    /// Tiles changed and not yet written back.
+    pub dirty_tiles: usize,
+    /// Craters waiting for a tile they touch to be resident.
+    pub pending_craters: usize,
+    /// Milliseconds the frame thread spent in cache calls (and applying craters to tiles).
+    pub frame_thread_ms: f64,
 }

@@ -27,6 +27,9 @@ pub enum Step {
     Write,
     /// One granular deformation step (snow).
     Granular,
+    /// The frame thread's work with the tile cache (flyover): craters on resident tiles and
+    /// the pool's update; the loading happens on worker threads.
+    Cache,
 }
 
 impl Step {
@@ -43,6 +46,7 @@ impl Step {
             Step::Overview => "overview",
             Step::Write => "write",
             Step::Granular => "granular",
+            Step::Cache => "cache",
         }
     }
 }

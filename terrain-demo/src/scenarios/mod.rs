@@ -2,11 +2,13 @@
 //! run shares: output folder, GPU scene, overview, frame loop, rendering, capture, report. A
 //! scenario owns its terrain and bodies, and per frame deforms, steps and places the camera.
 
+mod flyover;
 mod heightmap;
 mod snow;
 mod snow_field;
 mod stamp_script;
 mod stamps;
+pub mod world_files;
 
 use crate::cli::{Cli, ScenarioKind};
 use crate::gpu_scene::{Camera, GpuScene};
@@ -27,6 +29,7 @@ pub fn open(cli: &Cli) -> Result<Box<dyn Scenario>> {
     Ok(match cli.scenario {
         ScenarioKind::Default => Box::new(stamps::StampScenario::new(cli)?),
         ScenarioKind::Snow => Box::new(snow::SnowScenario::new(cli)?),
+        ScenarioKind::Flyover => Box::new(flyover::FlyoverScenario::new(cli)?),
     })
 }
 
@@ -66,6 +69,13 @@ pub struct FrameOutcome {
     pub stats: FrameStats,
 }
 
+/// What a scenario did at the end of the run.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FinishStats {
+    /// Flyover: tiles written back into the world during and at the end of the run.
+    pub written_back_tiles: Option<u64>,
+}
+
 /// One scenario: its terrain, what deforms it and what moves over it.
 pub trait Scenario {
     /// Name, source and setup timings, for the report.
@@ -90,6 +100,12 @@ pub trait Scenario {
         let size = self.map().size();
         let scale = side as f32 / size.max_element() as f32;
         (size.as_vec2() * scale).round().as_uvec2().max(UVec2::ONE)
+    }
+
+    /// Ends the run: writes back what the scenario keeps outside the report (the flyover's
+    /// dirty tiles) and says what it did.
+    fn finish(&mut self) -> Result<FinishStats> {
+        Ok(FinishStats::default())
     }
 
     /// One frame: deforms the terrain (on `ctx.gpu` when there is one, and on the CPU map),

@@ -1,0 +1,453 @@
+//! The flyover scenario (`--scenario flyover`): a camera flies, then drives, over a streamed
+//! world larger than the cache budgets (built once into `--world`), and stamps craters on its
+//! path. terrain-cache's `RamPool` streams the tiles around the camera on worker threads; the
+//! craters change the resident tiles, which are written back into the world (atomically, off
+//! the frame thread) when evicted and at the end, so a second run starts from the deformed
+//! world.
+//!
+//! The overview and the 3D frame show an overview level of the world (the level whose side is
+//! at most [`OVERVIEW_MAX`] texels) kept current with the same craters; the camera's ground is
+//! the finest resident tile under it.
+
+use super::world_files;
+use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
+use crate::cli::Cli;
+use crate::gpu_scene::Camera;
+use crate::report::{CacheStats, FrameStats};
+use crate::timings::{Step, ms_since};
+use anyhow::{Result, bail};
+use glam::{IVec2, UVec2, Vec2, Vec3};
+use std::time::{Duration, Instant};
+use terrain_cache::{CameraState, Layer, PoolConfig, RamPool, TileId, World};
+use terrain_core::{
+    Blend, CoarseMap, DerivativeMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement,
+    WrapMode, apply_stamp,
+};
+
+/// Longest side of the overview level in texels.
+pub const OVERVIEW_MAX: u32 = 1024;
+/// Seconds of flight before the camera comes down to drive.
+const FLY_SECONDS: f32 = 0.6;
+/// Eye height above ground while flying and while driving (metres).
+const FLY_HEIGHT: f32 = 80.0;
+const DRIVE_HEIGHT: f32 = 2.5;
+/// A crater every this many frames, this far ahead of the camera (metres), this wide and deep.
+const CRATER_EVERY: u32 = 6;
+const CRATER_AHEAD: f32 = 30.0;
+const CRATER_SIZE: f32 = 12.0;
+const CRATER_DEPTH: f32 = -2.0;
+/// How long the end of the run may wait for the last write-backs.
+const SHUTDOWN_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// A crater waiting for the level-0 tiles it touches to be resident.
+#[derive(Debug, Clone, Copy)]
+struct PendingStamp {
+    placement: StampPlacement,
+    tiles: [u32; 4],
+}
+
+/// The flyover scenario.
+#[derive(Debug)]
+pub struct FlyoverScenario {
+    info: ScenarioInfo,
+    pool: Option<RamPool>,
+    tile_size: u32,
+    texel_size: f32,
+    /// The overview level and the world's extent in metres.
+    overview_level: u32,
+    extent: Vec2,
+    overview: CoarseMap,
+    normals: DerivativeMap,
+    /// Path: start, unit heading, speed (m/s).
+    start: Vec2,
+    heading: Vec2,
+    speed: f32,
+    frame: u32,
+    gauss: GaussianStamp,
+    /// Craters not yet applied to every tile they touch.
+    pending: Vec<PendingStamp>,
+    /// A tile-sized map the craters are applied through.
+    scratch: CoarseMap,
+    written_back: u64,
+}
+
+impl FlyoverScenario {
+    /// Opens (or builds) the world and starts the RAM pool.
+    pub fn new(cli: &Cli) -> Result<Self> {
+        if !(cli.speed.is_finite() && cli.speed > 0.0 && cli.speed <= 1000.0) {
+            bail!(
+                "--speed must be 0 to 1000 metres per second, got {}",
+                cli.speed
+            );
+        }
+        let t = Instant::now();
+        let (world, source) = world_files::open_or_build(cli)?;
+        let manifest = world.manifest().clone();
+        if manifest.world_size.max_element() < manifest.tile_size {
+            bail!(
+                "the world in {} is smaller than one tile",
+                cli.world.display()
+            );
+        }
+        let overview_level = (0..manifest.levels)
+            .find(|&l| manifest.level_size(l).max_element() <= OVERVIEW_MAX)
+            .unwrap_or(manifest.levels - 1);
+        let overview = overview_map(&world, overview_level)?;
+        let load_ms = ms_since(t);
+        let t = Instant::now();
+        let normals = DerivativeMap::from_map(&overview);
+        let initial_normals_ms = ms_since(t);
+        let budget = cli.ram_budget.saturating_mul(1 << 20);
+        let pool = RamPool::new(world, PoolConfig::new(Layer::Height, budget))?;
+        let extent = manifest.world_size.as_vec2() * manifest.texel_size;
+        let tile = manifest.tile_size;
+        let scratch = CoarseMap::new(
+            Grid::new(tile, tile, 0u16)?,
+            manifest.encoding,
+            manifest.texel_size,
+            WrapMode::Clamp,
+        )?;
+        Ok(Self {
+            info: ScenarioInfo {
+                name: "flyover",
+                source,
+                load_ms,
+                initial_normals_ms,
+            },
+            pool: Some(pool),
+            tile_size: tile,
+            texel_size: manifest.texel_size,
+            overview_level,
+            extent,
+            overview,
+            normals,
+            start: extent * 0.3,
+            heading: Vec2::new(1.0, 0.6).normalize(),
+            speed: cli.speed,
+            frame: 0,
+            gauss: GaussianStamp::default(),
+            pending: Vec::new(),
+            scratch,
+            written_back: 0,
+        })
+    }
+
+    fn pool(&mut self) -> Result<&mut RamPool> {
+        self.pool
+            .as_mut()
+            .ok_or_else(|| anyhow::anyhow!("the flyover's pool was shut down"))
+    }
+
+    /// Ground height (metres) at `xz`: the finest resident tile under it, else the overview.
+    fn ground(&self, xz: Vec2) -> f32 {
+        let xz = xz.clamp(Vec2::ZERO, self.extent);
+        let texel = xz / self.texel_size;
+        if let Some(pool) = &self.pool {
+            let t = texel.as_uvec2();
+            let id = TileId::new(0, t.x / self.tile_size, t.y / self.tile_size);
+            if let Some((found, data)) = pool.best_available(id)
+                && let Some(grid) = data.as_u16()
+            {
+                let scale = (1u32 << found.level.min(31)) as f32;
+                let origin = UVec2::new(found.x, found.y).as_vec2() * self.tile_size as f32;
+                let local = texel / scale - origin;
+                let raw = bilinear_clamped(grid, local);
+                return self.overview.encoding().to_metres(raw);
+            }
+        }
+        terrain_core::bilinear(&self.overview, xz).unwrap_or(0.0)
+    }
+
+    /// Level-0 tiles the frame needs now (those within half a tile of the camera: under it
+    /// and what the near view and collision read) that are not in RAM, so coarser data stands
+    /// in. Tiles further out that the selection wants are prefetches, not missing.
+    fn tiles_missing(&self, xz: Vec2) -> usize {
+        let Some(pool) = &self.pool else {
+            return 0;
+        };
+        let tile_m = self.tile_size as f32 * self.texel_size;
+        let tiles = (self.extent / tile_m).ceil().as_ivec2();
+        let here = (xz / tile_m).floor().as_ivec2();
+        let mut missing = 0;
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let t = here + IVec2::new(dx, dy);
+                if t.x < 0 || t.y < 0 || t.x >= tiles.x || t.y >= tiles.y {
+                    continue;
+                }
+                let lo = t.as_vec2() * tile_m;
+                let nearest = xz.clamp(lo, lo + tile_m);
+                let id = TileId::new(0, t.x as u32, t.y as u32);
+                if nearest.distance(xz) <= 0.5 * tile_m && pool.tile(id).is_none() {
+                    missing += 1;
+                }
+            }
+        }
+        missing
+    }
+
+    /// Applies `stamp` to every resident level-0 tile it touches that it has not changed yet;
+    /// returns whether all of them are done.
+    fn apply_to_tiles(&mut self, stamp: &mut PendingStamp) -> Result<bool> {
+        let footprint = stamp.placement.footprint(self.texel_size)?;
+        let world = Rect::from_size(self.overview.size() * (1 << self.overview_level));
+        let Some(rect) = footprint.intersect(&world) else {
+            return Ok(true);
+        };
+        let ts = self.tile_size as i32;
+        let (lo, hi) = (rect.min / ts, (rect.max() - IVec2::ONE) / ts);
+        let mut all = true;
+        let mut bit = 0;
+        for ty in lo.y..=hi.y {
+            for tx in lo.x..=hi.x {
+                // (At most 4 tiles: craters are at most a tile wide.)
+                let done = bit < 128 && stamp.tiles[bit / 32] & (1 << (bit % 32)) != 0;
+                bit += 1;
+                if done {
+                    continue;
+                }
+                let id = TileId::new(0, tx as u32, ty as u32);
+                // The tile's own frame: the placement moves by the tile's origin.
+                let origin =
+                    Vec2::new(tx as f32, ty as f32) * self.tile_size as f32 * self.texel_size;
+                let local = StampPlacement {
+                    center: stamp.placement.center - origin,
+                    ..stamp.placement
+                };
+                let (scratch, gauss) = (&mut self.scratch, &mut self.gauss);
+                let pool = self
+                    .pool
+                    .as_mut()
+                    .ok_or_else(|| anyhow::anyhow!("no pool"))?;
+                if pool.tile(id).is_none() {
+                    all = false;
+                    continue;
+                }
+                pool.modify(id, |tile| -> Result<()> {
+                    let Some(grid) = tile.as_u16_mut() else {
+                        return Ok(());
+                    };
+                    if grid.size() != scratch.size() {
+                        return Ok(());
+                    }
+                    scratch
+                        .grid_mut()
+                        .as_mut_slice()
+                        .copy_from_slice(grid.as_slice());
+                    apply_stamp(scratch, gauss, &local, Blend::Add)?;
+                    grid.as_mut_slice()
+                        .copy_from_slice(scratch.grid().as_slice());
+                    Ok(())
+                })??;
+                let b = bit - 1;
+                if b < 128 {
+                    stamp.tiles[b / 32] |= 1 << (b % 32);
+                }
+            }
+        }
+        Ok(all)
+    }
+}
+
+/// The level `level` of `world` as one clamped coarse-map.
+fn overview_map(world: &World, level: u32) -> Result<CoarseMap> {
+    let m = world.manifest();
+    let size = m.level_size(level);
+    let mut grid = Grid::new(size.x, size.y, 0u16)?;
+    let tiles = m.tiles_at(level);
+    for ty in 0..tiles.y {
+        for tx in 0..tiles.x {
+            let data = world.load_tile(Layer::Height, TileId::new(level, tx, ty))?;
+            let Some(tile) = data.as_u16() else {
+                bail!("tile ({level}, {tx}, {ty}) is not a height tile");
+            };
+            let origin = UVec2::new(tx, ty) * m.tile_size;
+            let part = (size - origin).min(tile.size());
+            let piece = tile.copy_rect(Rect::new(IVec2::ZERO, part))?;
+            grid.paste(&piece, origin.as_ivec2())?;
+        }
+    }
+    let scale = (1u32 << level) as f32;
+    Ok(CoarseMap::new(
+        grid,
+        m.encoding,
+        m.texel_size * scale,
+        WrapMode::Clamp,
+    )?)
+}
+
+/// Bilinear sample of `grid` at texel coordinates `p`, clamped to its edges (raw units).
+fn bilinear_clamped(grid: &Grid<u16>, p: Vec2) -> f64 {
+    let max = (grid.size() - UVec2::ONE).as_vec2();
+    let p = p.clamp(Vec2::ZERO, max);
+    let p0 = p.floor();
+    let f = p - p0;
+    let (x0, y0) = (p0.x as u32, p0.y as u32);
+    let (x1, y1) = (
+        (x0 + 1).min(grid.width() - 1),
+        (y0 + 1).min(grid.height() - 1),
+    );
+    let at = |x, y| f64::from(grid.get(x, y).unwrap_or(0));
+    let top = at(x0, y0) + (at(x1, y0) - at(x0, y0)) * f64::from(f.x);
+    let bottom = at(x0, y1) + (at(x1, y1) - at(x0, y1)) * f64::from(f.x);
+    top + (bottom - top) * f64::from(f.y)
+}
+
+impl Scenario for FlyoverScenario {
+    fn info(&self) -> &ScenarioInfo {
+        &self.info
+    }
+
+    fn map(&self) -> &CoarseMap {
+        &self.overview
+    }
+
+    fn normals(&self) -> &DerivativeMap {
+        &self.normals
+    }
+
+    fn advance(&mut self, ctx: &mut FrameContext<'_>) -> Result<FrameOutcome> {
+        let t_frame = Instant::now();
+        let time = self.frame as f32 / 30.0;
+        self.frame += 1;
+        // Along a straight path, reflected at the world's edges so it stays inside.
+        let travelled = self.start + self.heading * (self.speed * time);
+        let xz = reflect_into(travelled, self.extent);
+        let ahead = reflect_into(travelled + self.heading * 5.0, self.extent);
+        let forward2 = (ahead - xz).normalize_or(self.heading);
+        let ground = self.ground(xz);
+        let height = if time < FLY_SECONDS {
+            FLY_HEIGHT
+        } else {
+            DRIVE_HEIGHT
+        };
+        let eye = Vec3::new(xz.x, ground + height, xz.y);
+        let look = Vec3::new(forward2.x, -0.18, forward2.y);
+        let camera = Camera::looking(eye, look);
+
+        // Craters on the path ahead: on the resident tiles (persisted by write-back) and on
+        // the overview level.
+        let mut dirty: Vec<DirtyRect> = Vec::new();
+        if self.frame % CRATER_EVERY == 0 {
+            let center = reflect_into(travelled + self.heading * CRATER_AHEAD, self.extent);
+            // Between 8 texels and one tile wide: a crater touches at most 4 tiles.
+            let ts = self.texel_size;
+            let size = CRATER_SIZE.clamp(8.0 * ts, self.tile_size as f32 * ts);
+            let placement = StampPlacement::new(center, Vec2::splat(size), CRATER_DEPTH)?;
+            dirty.extend(apply_stamp(
+                &mut self.overview,
+                &mut self.gauss,
+                &placement,
+                Blend::Add,
+            )?);
+            for r in &dirty {
+                self.normals.update_rect(&self.overview, *r)?;
+            }
+            self.pending.push(PendingStamp {
+                placement,
+                tiles: [0; 4],
+            });
+        }
+        let mut pending = std::mem::take(&mut self.pending);
+        let mut still = Vec::with_capacity(pending.len());
+        for mut stamp in pending.drain(..) {
+            if !self.apply_to_tiles(&mut stamp)? {
+                still.push(stamp);
+            }
+        }
+        self.pending = still;
+
+        let state = CameraState {
+            position: eye,
+            forward: look,
+            fov_y: camera.fov_y,
+            aspect: 16.0 / 9.0,
+        };
+        let report = self.pool()?.update(&state)?;
+        self.written_back += report.written as u64;
+        ctx.timings.add(Step::Cache, ms_since(t_frame));
+        let camera_clearance_m = eye.y - self.ground(xz);
+        Ok(FrameOutcome {
+            camera,
+            camera_clearance_m,
+            stats: FrameStats {
+                craters: u32::from(!dirty.is_empty()),
+                dirty_texels: dirty.iter().map(Rect::area).sum(),
+                cache: Some(CacheStats {
+                    tiles_missing: self.tiles_missing(xz),
+                    prefetching: report.wanted.saturating_sub(report.wanted_resident),
+                    ram_bytes: report.ram_bytes,
+                    ram_budget_bytes: report.budget_bytes,
+                    loads: report.loads,
+                    evictions: report.evictions,
+                    dirty_tiles: report.dirty,
+                    pending_craters: self.pending.len(),
+                    frame_thread_ms: ms_since(t_frame),
+                }),
+                ..FrameStats::default()
+            },
+            dirty,
+        })
+    }
+
+    fn finish(&mut self) -> Result<FinishStats> {
+        let Some(mut pool) = self.pool.take() else {
+            return Ok(FinishStats::default());
+        };
+        // Every dirty tile goes back into the world before the run ends.
+        let issued = pool.flush();
+        pool.shutdown(SHUTDOWN_TIMEOUT)?;
+        Ok(FinishStats {
+            written_back_tiles: Some(self.written_back + issued as u64),
+        })
+    }
+}
+
+use super::FinishStats;
+
+/// `p` folded into `[0, extent]` by reflection at the edges (a path that bounces).
+fn reflect_into(p: Vec2, extent: Vec2) -> Vec2 {
+    let fold = |v: f32, e: f32| {
+        if e <= 0.0 {
+            return 0.0;
+        }
+        let period = 2.0 * e;
+        let m = v.rem_euclid(period);
+        if m > e { period - m } else { m }
+    };
+    Vec2::new(fold(p.x, extent.x), fold(p.y, extent.y))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_path_stays_inside_the_world_for_any_distance() {
+        let e = Vec2::new(100.0, 50.0);
+        for p in [
+            Vec2::new(-1e30, 3.0),
+            Vec2::new(1e30, -1e30),
+            Vec2::new(250.0, 120.0),
+            Vec2::ZERO,
+        ] {
+            let q = reflect_into(p, e);
+            assert!(
+                q.x >= 0.0 && q.x <= e.x && q.y >= 0.0 && q.y <= e.y,
+                "{p} -> {q}"
+            );
+        }
+        assert_eq!(
+            reflect_into(Vec2::new(120.0, 10.0), e),
+            Vec2::new(80.0, 10.0)
+        );
+    }
+
+    #[test]
+    fn bilinear_sampling_clamps_at_tile_edges() {
+        let g = Grid::from_vec(2, 2, vec![0u16, 100, 200, 300]).unwrap();
+        assert_eq!(bilinear_clamped(&g, Vec2::new(0.5, 0.5)), 150.0);
+        assert_eq!(bilinear_clamped(&g, Vec2::new(-5.0, -5.0)), 0.0);
+        assert_eq!(bilinear_clamped(&g, Vec2::new(9.0, 9.0)), 300.0);
+    }
+}

@@ -1,0 +1,100 @@
+//! The flyover over a streamed world, run as a user runs it (without a GPU, so it needs no
+//! adapter): the world is built on first use, the RAM pool stays within its budget and has
+//! every wanted tile after the first second, the craters are written back and the next run
+//! starts from them, and `--verify-world` tells a valid world from one with a corrupt tile.
+
+use std::path::Path;
+use std::process::Command;
+
+fn demo() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_terrain-demo"))
+}
+
+fn run(world: &Path, out: &Path, frames: u32) -> serde_json::Value {
+    let status = demo()
+        .args(["--scenario", "flyover", "--no-gpu", "--size", "1024"])
+        .args(["--ram-budget", "4", "--overview-size", "64"])
+        .args(["--frames", &frames.to_string()])
+        .arg("--world")
+        .arg(world)
+        .arg("--out")
+        .arg(out)
+        .status()
+        .expect("demo runs");
+    assert!(status.success(), "flyover failed: {status}");
+    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
+    serde_json::from_str(&text).expect("valid report")
+}
+
+#[test]
+fn flyover_streams_within_budget_and_craters_persist() {
+    let root = std::env::temp_dir().join(format!("terrain_flyover_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let world = root.join("world");
+    let first = run(&world, &root.join("run1"), 60);
+    assert!(world.join("manifest.json").is_file(), "the world was built");
+
+    let frames = first["frames"].as_array().expect("frames");
+    assert_eq!(frames.len(), 60);
+    for f in frames {
+        let cache = &f["cache"];
+        let (ram, budget) = (
+            cache["ram_bytes"].as_u64(),
+            cache["ram_budget_bytes"].as_u64(),
+        );
+        assert!(
+            ram.is_some() && ram <= budget,
+            "frame {}: {cache}",
+            f["index"]
+        );
+        // After the first second every tile the selection wants is resident.
+        if f["index"].as_u64() >= Some(30) {
+            assert_eq!(
+                cache["tiles_missing"].as_u64(),
+                Some(0),
+                "frame {}: {cache}",
+                f["index"]
+            );
+        }
+    }
+    let craters: u64 = frames.iter().filter_map(|f| f["craters"].as_u64()).sum();
+    assert!(craters >= 5, "craters stamped: {craters}");
+    assert!(
+        first["written_back_tiles"].as_u64() >= Some(1),
+        "craters written back"
+    );
+
+    // The second run starts from the deformed world.
+    let start1 = std::fs::read(root.join("run1/terrain.png")).expect("terrain.png");
+    run(&world, &root.join("run2"), 2);
+    let start2 = std::fs::read(root.join("run2/terrain.png")).expect("terrain.png");
+    assert_ne!(
+        start1, start2,
+        "the craters of the first run persist in the world"
+    );
+
+    // --verify-world: valid, then one corrupt tile is listed and the exit status is 1.
+    let ok = demo()
+        .arg("--verify-world")
+        .arg(&world)
+        .output()
+        .expect("runs");
+    assert_eq!(
+        ok.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&ok.stdout)
+    );
+    let tile = world.join("height/00/0000/0001.png");
+    assert!(tile.is_file());
+    std::fs::write(&tile, b"not a png").expect("corrupt a tile");
+    let bad = demo()
+        .arg("--verify-world")
+        .arg(&world)
+        .output()
+        .expect("runs");
+    assert_eq!(bad.status.code(), Some(1));
+    let listed = String::from_utf8_lossy(&bad.stdout);
+    assert!(listed.contains("height/00/0000/0001.png"), "{listed}");
+    let _ = std::fs::remove_dir_all(&root);
+}
