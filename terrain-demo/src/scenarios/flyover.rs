@@ -82,7 +82,7 @@ impl FlyoverScenario {
         }
         let t = Instant::now();
         let (world, source) = world_files::open_or_build(cli)?;
-        let manifest = world.manifest().clone();
+        let manifest = *world.manifest();
         if manifest.world_size.max_element() < manifest.tile_size {
             bail!(
                 "the world in {} is smaller than one tile",
@@ -328,7 +328,7 @@ impl Scenario for FlyoverScenario {
         // Craters on the path ahead: on the resident tiles (persisted by write-back) and on
         // the overview level.
         let mut dirty: Vec<DirtyRect> = Vec::new();
-        if self.frame % CRATER_EVERY == 0 {
+        if self.frame.is_multiple_of(CRATER_EVERY) {
             let center = reflect_into(travelled + self.heading * CRATER_AHEAD, self.extent);
             // Between 8 texels and one tile wide: a crater touches at most 4 tiles.
             let ts = self.texel_size;

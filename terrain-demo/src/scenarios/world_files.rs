@@ -106,7 +106,7 @@ pub fn verify(dir: &Path) -> Result<Vec<String>> {
     let store: Arc<dyn TileStore> = Arc::new(FsStore::open(dir)?);
     let world =
         World::open(store).with_context(|| format!("no valid world in {}", dir.display()))?;
-    let manifest = world.manifest().clone();
+    let manifest = *world.manifest();
     let mut bad = Vec::new();
     for level in 0..manifest.levels {
         for id in manifest.tiles_of(Layer::Height, level) {
