@@ -341,9 +341,9 @@ pub struct ProbeSample {
     pub derivative: Vec2,
 }
 
-/// Texel coordinates a probe accepts on each axis: `±2^30`, so the shaders' `i32` arithmetic
-/// (neighbours, wrap offsets) cannot overflow.
-pub const PROBE_TEXEL_LIMIT: i32 = 1 << 30;
+/// Texel coordinates a probe accepts on each axis: `±2^29`, so the shaders' `i32` arithmetic
+/// (neighbours, wrap offsets of up to `2^29` plus the world size) cannot overflow.
+pub const PROBE_TEXEL_LIMIT: i32 = 1 << 29;
 
 /// Reads what [`crate::ClipmapSurface::Atlas`] draws at a list of level-0 texels, with the
 /// renderer's own WGSL functions (`height_at`, `derivative_at`): for the comparison with
@@ -406,7 +406,7 @@ impl AtlasProbe {
     }
 
     /// What the atlas surface reads at each of `texels` (level-0 texels, addressed like the
-    /// world: clamped or wrapped; each coordinate within [`PROBE_TEXEL_LIMIT`]). Submits the
+    /// world: clamped or wrapped; each coordinate within ±[`PROBE_TEXEL_LIMIT`]). Submits the
     /// atlas's pending uploads with the dispatch and waits for the GPU.
     pub fn read(
         &mut self,
@@ -428,11 +428,12 @@ impl AtlasProbe {
         }
         let mut lo = IVec2::MAX;
         for t in texels {
-            if t.abs().max_element() > PROBE_TEXEL_LIMIT || t.x == i32::MIN || t.y == i32::MIN {
+            let reach = t.x.unsigned_abs().max(t.y.unsigned_abs());
+            if reach > PROBE_TEXEL_LIMIT as u32 {
                 return Err(CoreError::OutOfRange {
                     what: "AtlasProbe texel coordinate",
-                    value: f64::from(t.x.unsigned_abs().max(t.y.unsigned_abs())),
-                    expected: "within ±2^30",
+                    value: f64::from(reach),
+                    expected: "within ±2^29",
                 }
                 .into());
             }
