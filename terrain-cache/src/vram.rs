@@ -252,7 +252,11 @@ impl VramPool {
             expected,
         };
         if config.grid.levels.is_empty()
-            || config.grid.levels.iter().any(|l| l.tiles.min_element() == 0)
+            || config
+                .grid
+                .levels
+                .iter()
+                .any(|l| l.tiles.min_element() == 0)
         {
             return Err(out(
                 "VRAM pool levels",
@@ -261,11 +265,7 @@ impl VramPool {
             ));
         }
         if config.slots == 0 || config.slots == terrain_core::INVALID_SLOT {
-            return Err(out(
-                "VRAM slots",
-                f64::from(config.slots),
-                "1 ..= 2^32 - 2",
-            ));
+            return Err(out("VRAM slots", f64::from(config.slots), "1 ..= 2^32 - 2"));
         }
         if config.tile_size == 0 {
             return Err(out("VRAM tile size", 0.0, "at least 1"));
@@ -358,7 +358,10 @@ impl VramPool {
     }
 
     /// Unmaps every resident tile (e.g. before switching worlds); the slots become free.
-    pub fn clear<T: TileUploadTarget>(&mut self, target: &mut T) -> Result<(), VramError<T::Error>> {
+    pub fn clear<T: TileUploadTarget>(
+        &mut self,
+        target: &mut T,
+    ) -> Result<(), VramError<T::Error>> {
         let ids: Vec<TileId> = self.resident.keys().copied().collect();
         for id in ids {
             target
@@ -533,9 +536,8 @@ impl VramPool {
 
     /// Checks that the target indexes this pool's world with enough slots.
     fn check_target<T: TileUploadTarget>(&self, target: &T) -> Result<(), CacheError> {
-        let mismatch = |what, pool: u64, target: u64| {
-            Err(CacheError::TargetMismatch { what, pool, target })
-        };
+        let mismatch =
+            |what, pool: u64, target: u64| Err(CacheError::TargetMismatch { what, pool, target });
         let layout = target.layout();
         if layout.tile_size != self.cfg.tile_size {
             return mismatch(
@@ -807,7 +809,10 @@ mod tests {
         ) -> Result<u64, Self::Error> {
             let id = TileId::new(level, tile.x, tile.y);
             for (&other, &s) in &self.mapped {
-                assert!(s != slot || other == id, "slot {slot} overwritten under {other}");
+                assert!(
+                    s != slot || other == id,
+                    "slot {slot} overwritten under {other}"
+                );
             }
             self.holds.insert(slot, id);
             self.uploads.push(id);
@@ -876,7 +881,10 @@ mod tests {
             assert_eq!(spent, r.upload_bytes);
             assert!(r.upload_bytes <= r.budget_bytes, "{r:?}");
             assert!(r.uploads <= 3);
-            assert!(r.resident <= 24 && target.atlas.mapped() == r.resident, "{r:?}");
+            assert!(
+                r.resident <= 24 && target.atlas.mapped() == r.resident,
+                "{r:?}"
+            );
             // Mapped slots are distinct.
             let mut slots: Vec<u32> = target.mapped.values().copied().collect();
             slots.sort_unstable();
@@ -890,7 +898,10 @@ mod tests {
                     expect.push(*id);
                 }
             }
-            assert_eq!(target.uploads, expect, "frame {frame}: uploads out of rank order");
+            assert_eq!(
+                target.uploads, expect,
+                "frame {frame}: uploads out of rank order"
+            );
             if r.uploads == 3 {
                 // Nothing more urgent than the last upload was left missing.
                 let last = *target.uploads.last().unwrap();
@@ -902,7 +913,10 @@ mod tests {
             uploaded += r.uploads;
             assert_fallback(&pool, &target.atlas, &m);
         }
-        assert!(uploaded > 24, "the move must have evicted and re-filled slots");
+        assert!(
+            uploaded > 24,
+            "the move must have evicted and re-filled slots"
+        );
         // Settled: the most urgent tiles fill the slots.
         let r = pool.update(&cam, &ram, &mut target).unwrap();
         assert_eq!(r.tiles_missing, r.tiles_wanted.saturating_sub(24), "{r:?}");
@@ -951,7 +965,10 @@ mod tests {
         for _ in 0..20 {
             r = pool.update(&cam, &ram, &mut atlas).unwrap();
         }
-        assert!(r.waiting_for_ram > 0 && r.tiles_missing == r.waiting_for_ram, "{r:?}");
+        assert!(
+            r.waiting_for_ram > 0 && r.tiles_missing == r.waiting_for_ram,
+            "{r:?}"
+        );
         assert_eq!(r.deferred, 0);
         for id in &removed {
             assert!(pool.slot_of(*id).is_none());
@@ -1042,7 +1059,11 @@ mod tests {
             assert_eq!(r.tiles_missing, 0, "{r:?}");
             assert!(r.tiles_wanted <= 9 * 4 + 1);
             let after = pool.resident_ids();
-            let evicted: Vec<TileId> = before.iter().filter(|id| !after.contains(id)).copied().collect();
+            let evicted: Vec<TileId> = before
+                .iter()
+                .filter(|id| !after.contains(id))
+                .copied()
+                .collect();
             evictions += evicted.len();
             // Each evicted tile was wanted no later than any unwanted tile that stayed.
             for e in &evicted {
@@ -1090,7 +1111,10 @@ mod tests {
     fn extreme_cameras_are_bounded_and_nan_is_refused_without_change() {
         let m = manifest(WrapMode::Repeat);
         let ram = MockRam::all(&m);
-        for selection in [VramSelection::default(), VramSelection::Band { band_width: 0.5 }] {
+        for selection in [
+            VramSelection::default(),
+            VramSelection::Band { band_width: 0.5 },
+        ] {
             let mut cfg = VramConfig::new(&m, 16);
             cfg.selection = selection;
             let mut pool = VramPool::new(cfg).unwrap();
@@ -1116,7 +1140,10 @@ mod tests {
                     assert!(r.upload_bytes <= r.budget_bytes);
                 }
             }
-            let frame = pool.update(&camera(1.0, 1.0, 0.0), &ram, &mut atlas).unwrap().frame;
+            let frame = pool
+                .update(&camera(1.0, 1.0, 0.0), &ram, &mut atlas)
+                .unwrap()
+                .frame;
             let table = atlas.table().to_vec();
             for bad in [
                 CameraState::at(Vec3::new(f32::NAN, 0.0, 0.0)),
@@ -1136,7 +1163,9 @@ mod tests {
                 ));
             }
             assert_eq!(atlas.table(), table.as_slice());
-            let next = pool.update(&camera(1.0, 1.0, 0.0), &ram, &mut atlas).unwrap();
+            let next = pool
+                .update(&camera(1.0, 1.0, 0.0), &ram, &mut atlas)
+                .unwrap();
             assert_eq!(next.frame, frame + 1);
         }
     }
@@ -1150,7 +1179,9 @@ mod tests {
         cfg.upload_budget_bytes = 10;
         assert!(VramPool::new(cfg.clone()).is_err());
         cfg.upload_budget_bytes = DEFAULT_UPLOAD_BUDGET_BYTES;
-        cfg.selection = VramSelection::Band { band_width: f64::NAN };
+        cfg.selection = VramSelection::Band {
+            band_width: f64::NAN,
+        };
         assert!(VramPool::new(cfg.clone()).is_err());
         cfg.selection = VramSelection::Frustum {
             far_tiles: f64::INFINITY,
@@ -1166,14 +1197,20 @@ mod tests {
         let mut few = TileAtlas::new(m.tile_layout(), 4).unwrap();
         assert!(matches!(
             pool.update(&cam, &ram, &mut few),
-            Err(VramError::Cache(CacheError::TargetMismatch { what: "slot count", .. }))
+            Err(VramError::Cache(CacheError::TargetMismatch {
+                what: "slot count",
+                ..
+            }))
         ));
         let other = Manifest::new(UVec2::splat(512), TS, 1.0, m.encoding, WrapMode::Clamp).unwrap();
         let mut wrong = TileAtlas::new(other.tile_layout(), 8).unwrap();
         assert!(pool.update(&cam, &ram, &mut wrong).is_err());
         // A tile of the wrong shape in RAM is reported, not uploaded.
         let mut bad = MockRam::all(&m);
-        bad.tiles.insert(TileId::new(4, 0, 0), TileData::filled(Layer::Detail, TS, 3).unwrap());
+        bad.tiles.insert(
+            TileId::new(4, 0, 0),
+            TileData::filled(Layer::Detail, TS, 3).unwrap(),
+        );
         let mut atlas = TileAtlas::new(m.tile_layout(), 8).unwrap();
         assert!(matches!(
             pool.update(&cam, &bad, &mut atlas),

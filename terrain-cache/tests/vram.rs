@@ -29,12 +29,19 @@ fn assert_atlas_matches_world(pool: &VramPool, atlas: &TileAtlas, ram: &RamPool)
             };
             let c = t >> level;
             let id = TileId::new(level, c.x / ts, c.y / ts);
-            assert!(pool.slot_of(id).is_some(), "{id} mapped but not in the pool");
+            assert!(
+                pool.slot_of(id).is_some(),
+                "{id} mapped but not in the pool"
+            );
             let data = tiles
                 .entry(id)
                 .or_insert_with(|| ram.world().load_tile(Layer::Height, id).unwrap());
             let want = data.as_u16().unwrap().get(c.x % ts, c.y % ts).unwrap();
-            assert_eq!(atlas.stored_at(t.as_ivec2()), u32::from(want), "texel {t} ({id})");
+            assert_eq!(
+                atlas.stored_at(t.as_ivec2()),
+                u32::from(want),
+                "texel {t} ({id})"
+            );
         }
     }
 }
@@ -85,7 +92,10 @@ fn streams_from_the_ram_pool_within_budget_and_slots_and_stays_exact() {
         }
         std::thread::sleep(Duration::from_millis(1));
     }
-    assert!(atlas.uploads() > slots as u64, "the flight must reuse slots: {last:?}");
+    assert!(
+        atlas.uploads() > slots as u64,
+        "the flight must reuse slots: {last:?}"
+    );
 
     // Hover until everything wanted that RAM holds is resident.
     let camera = CameraState::at(Vec3::new(300.0, 40.0, 280.0));
@@ -105,8 +115,10 @@ fn streams_from_the_ram_pool_within_budget_and_slots_and_stays_exact() {
     // A deformation in RAM reaches the atlas on the next update.
     let here = TileId::new(0, 9, 8);
     assert!(vram.slot_of(here).is_some());
-    ram.modify(here, |t| *t.as_u16_mut().unwrap().get_mut(3, 4).unwrap() = 4242)
-        .unwrap();
+    ram.modify(here, |t| {
+        *t.as_u16_mut().unwrap().get_mut(3, 4).unwrap() = 4242
+    })
+    .unwrap();
     ram.update(&camera).unwrap();
     let r = vram.update(&camera, &ram, &mut atlas).unwrap();
     assert_eq!(r.refreshes, 1, "{r:?}");

@@ -255,7 +255,10 @@ mod tests {
         assert!(a.upload(2, 0, UVec2::ZERO, &t).is_err());
         assert!(a.upload(0, 4, UVec2::ZERO, &t).is_err());
         assert!(a.upload(0, 0, UVec2::new(5, 0), &t).is_err());
-        assert!(a.upload(0, 0, UVec2::ZERO, &Grid::new(4, 4, 0).unwrap()).is_err());
+        assert!(
+            a.upload(0, 0, UVec2::ZERO, &Grid::new(4, 4, 0).unwrap())
+                .is_err()
+        );
         assert!(a.map(0, UVec2::new(0, 3), Some(0)).is_err());
         assert!(a.map(0, UVec2::ZERO, Some(2)).is_err());
         assert!(a.map(0, UVec2::ZERO, Some(INVALID_SLOT)).is_err());

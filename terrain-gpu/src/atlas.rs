@@ -381,8 +381,13 @@ impl AtlasProbe {
             &[ro, ro, ro, ro, StorageBinding::compute(false)],
         );
         let module = shader_module(device, "atlas_probe.wgsl", terrain_shaders::ATLAS_PROBE)?;
-        let pipeline =
-            compute_pipeline(device, "AtlasProbe", &module, bindings.layout(), "probe_main")?;
+        let pipeline = compute_pipeline(
+            device,
+            "AtlasProbe",
+            &module,
+            bindings.layout(),
+            "probe_main",
+        )?;
         let n = u64::from(capacity);
         let size = UVec2::new(capacity, 1);
         let texels = map_buffer(device, "AtlasProbe texels", size, n * 8)?;

@@ -100,12 +100,7 @@ fn map_both(gpu: &mut GpuTileAtlas, cpu: &mut TileAtlas, level: u32, t: UVec2, s
 /// Random residency: every tile of each level resident with that level's probability (coarser
 /// levels likelier; the root missing in some patterns, so the fill shows), then a round of
 /// evictions whose slots take other tiles, as a pool would do it.
-fn random_residency(
-    gpu: &mut GpuTileAtlas,
-    cpu: &mut TileAtlas,
-    pyramid: &Pyramid,
-    rng: &mut Rng,
-) {
+fn random_residency(gpu: &mut GpuTileAtlas, cpu: &mut TileAtlas, pyramid: &Pyramid, rng: &mut Rng) {
     let layout = *cpu.layout();
     let slots = cpu.slot_count();
     let mut free: Vec<u32> = (0..slots).rev().collect();
@@ -203,13 +198,16 @@ fn the_atlas_surface_reads_what_the_cpu_reference_reads_for_random_residency() {
         for round in 0..3 {
             random_residency(&mut gpu, &mut cpu, &pyramid, &mut rng);
             let table = gpu.read_table(device, queue).unwrap();
-            assert_eq!(table, cpu.table(), "case {case} round {round}: tables differ");
+            assert_eq!(
+                table,
+                cpu.table(),
+                "case {case} round {round}: tables differ"
+            );
             let got = probe.read(device, queue, &gpu, &texels).unwrap();
             assert_eq!(got.len(), texels.len());
             let ts = layout.texel_size;
-            let h = |t: IVec2| {
-                layout.encoding.offset + layout.encoding.scale * cpu.stored_at(t) as f32
-            };
+            let h =
+                |t: IVec2| layout.encoding.offset + layout.encoding.scale * cpu.stored_at(t) as f32;
             for (t, g) in texels.iter().zip(&got) {
                 let stored = cpu.stored_at(*t);
                 assert_eq!(g.stored, stored, "case {case} round {round} texel {t}");
@@ -232,7 +230,10 @@ fn the_atlas_surface_reads_what_the_cpu_reference_reads_for_random_residency() {
             }
             // Some texels resolve to the fill, some to each level, in most rounds.
             let fills = got.iter().filter(|g| g.stored == 1234).count();
-            eprintln!("case {case} round {round}: {} texels, {fills} fill", got.len());
+            eprintln!(
+                "case {case} round {round}: {} texels, {fills} fill",
+                got.len()
+            );
         }
     }
     assert!(checked > 3 * 3 * 29_000);
@@ -359,7 +360,9 @@ fn a_partly_resident_world_draws_without_holes() {
     // Level 0 as a checkerboard, level 1 every third tile, level 2 all but one, the root.
     let mut slot = 0;
     let mut put = |atlas: &mut GpuTileAtlas, level: u32, t: UVec2| {
-        atlas.upload(slot, level, t, &pyramid.tile(level, t)).unwrap();
+        atlas
+            .upload(slot, level, t, &pyramid.tile(level, t))
+            .unwrap();
         atlas.map(level, t, Some(slot)).unwrap();
         slot += 1;
     };
@@ -384,23 +387,23 @@ fn a_partly_resident_world_draws_without_holes() {
         zenith: Vec3::new(1.0, 0.0, 1.0),
     };
     let size = UVec2::new(200, 120);
-    for (i, xz) in [Vec2::new(100.3, 120.6), Vec2::new(30.2, 200.7)].iter().enumerate() {
+    for (i, xz) in [Vec2::new(100.3, 120.6), Vec2::new(30.2, 200.7)]
+        .iter()
+        .enumerate()
+    {
         for (j, yaw) in [0.0f32, 1.7, 3.3, 4.9].iter().enumerate() {
             let eye = Vec3::new(xz.x, scene.ground(*xz) + 2.0, xz.y);
             let camera = Camera::looking(eye, Vec3::new(yaw.cos(), 0.0, yaw.sin()));
-            let image = render(
-                &mut scene,
-                Surface::Atlas(&atlas),
-                &camera,
-                size,
-                &magenta,
-            );
+            let image = render(&mut scene, Surface::Atlas(&atlas), &camera, size, &magenta);
             let (holes, terrain) = holes(&image);
             assert!(terrain > (size.x * size.y / 4) as usize, "view {i}/{j}");
             if holes > 0 {
                 let path = std::env::temp_dir().join(format!("atlas_hole_{i}_{j}.png"));
                 let _ = terrain_core::io::write_png_rgba8(&path, &image);
-                panic!("view {i}/{j}: {holes} sky pixels inside the terrain ({})", path.display());
+                panic!(
+                    "view {i}/{j}: {holes} sky pixels inside the terrain ({})",
+                    path.display()
+                );
             }
         }
     }
@@ -408,13 +411,7 @@ fn a_partly_resident_world_draws_without_holes() {
     let empty = GpuTileAtlas::new(&device, &queue, &config).unwrap();
     let eye = Vec3::new(100.0, 3.0, 100.0);
     let camera = Camera::looking(eye, Vec3::new(1.0, 0.0, 0.2));
-    let image = render(
-        &mut scene,
-        Surface::Atlas(&empty),
-        &camera,
-        size,
-        &magenta,
-    );
+    let image = render(&mut scene, Surface::Atlas(&empty), &camera, size, &magenta);
     let (holes, terrain) = holes(&image);
     assert_eq!(holes, 0);
     assert!(terrain > (size.x * size.y / 4) as usize);
@@ -446,20 +443,8 @@ fn a_fully_resident_world_draws_like_the_coarse_map() {
     let camera = scene::golden_camera(&scene);
     let size = scene::GOLDEN_SIZE;
     let sky = SkyColors::default();
-    let coarse = render(
-        &mut scene,
-        Surface::Coarse,
-        &camera,
-        size,
-        &sky,
-    );
-    let from_atlas = render(
-        &mut scene,
-        Surface::Atlas(&atlas),
-        &camera,
-        size,
-        &sky,
-    );
+    let coarse = render(&mut scene, Surface::Coarse, &camera, size, &sky);
+    let from_atlas = render(&mut scene, Surface::Atlas(&atlas), &camera, size, &sky);
     let mut sum = 0.0;
     for (a, b) in coarse.as_slice().iter().zip(from_atlas.as_slice()) {
         let d = (0..3)
@@ -534,11 +519,29 @@ fn bad_calls_are_errors_not_panics() {
     assert_eq!(limits.max_storage_buffer_binding_size, 65_535 * 65_536 * 4);
     // The probe refuses texels its i32 arithmetic cannot take, and too many.
     let mut probe = AtlasProbe::new(device, 8).unwrap();
-    assert!(probe.read(device, queue, &atlas, &[IVec2::new(i32::MAX, 0)]).is_err());
-    assert!(probe.read(device, queue, &atlas, &[IVec2::new(0, i32::MIN)]).is_err());
-    assert!(probe.read(device, queue, &atlas, &[IVec2::new((1 << 29) + 1, 0)]).is_err());
-    assert!(probe.read(device, queue, &atlas, &[IVec2::ZERO; 9]).is_err());
-    let got = probe.read(device, queue, &atlas, &[IVec2::new(70, -3)]).unwrap();
+    assert!(
+        probe
+            .read(device, queue, &atlas, &[IVec2::new(i32::MAX, 0)])
+            .is_err()
+    );
+    assert!(
+        probe
+            .read(device, queue, &atlas, &[IVec2::new(0, i32::MIN)])
+            .is_err()
+    );
+    assert!(
+        probe
+            .read(device, queue, &atlas, &[IVec2::new((1 << 29) + 1, 0)])
+            .is_err()
+    );
+    assert!(
+        probe
+            .read(device, queue, &atlas, &[IVec2::ZERO; 9])
+            .is_err()
+    );
+    let got = probe
+        .read(device, queue, &atlas, &[IVec2::new(70, -3)])
+        .unwrap();
     assert_eq!(got[0].stored, 5);
     ctx.check().expect("no GPU validation errors");
 }
