@@ -64,6 +64,8 @@ shared_codes! {
     NO_SEED: u32 = 0xffffffff "u";
     /// No object above this column (`terrain_core::granular::NO_OBJECT`).
     NO_OBJECT: u32 = 0xffffffff "u";
+    /// An indirection table entry of a tile that is not resident (`terrain_core::INVALID_SLOT`).
+    INVALID_SLOT: u32 = 0xffffffff "u";
 }
 
 /// The WGSL `const` declarations of [`codes`], as every shader here starts with them.
@@ -97,6 +99,25 @@ pub const CLIPMAP_GRANULAR: &str = concat!(
     include_str!("wgsl/target_color.wgsl"),
     include_str!("wgsl/clipmap.wgsl"),
     include_str!("wgsl/clipmap_surface_granular.wgsl")
+);
+
+/// `ClipmapRenderer` over a tile atlas (`GpuTileAtlas`): heights from the finest resident level
+/// of the tile pyramid through the indirection table, normals by central differences.
+pub const CLIPMAP_ATLAS: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/clipmap.wgsl"),
+    include_str!("wgsl/tile_atlas.wgsl"),
+    include_str!("wgsl/clipmap_surface_atlas.wgsl")
+);
+
+/// `AtlasProbe`: the atlas surface's stored height, height and gradient at a list of texels
+/// (the same functions the clipmap draws with).
+pub const ATLAS_PROBE: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/tile_atlas.wgsl"),
+    include_str!("wgsl/clipmap_surface_atlas.wgsl"),
+    include_str!("wgsl/atlas_probe.wgsl")
 );
 
 /// The declarations every granular pass shares (uniform block, penetration texel, column
@@ -150,6 +171,8 @@ pub const ALL: &[(&str, &str)] = &[
     ("sky", SKY),
     ("clipmap", CLIPMAP),
     ("clipmap_granular", CLIPMAP_GRANULAR),
+    ("clipmap_atlas", CLIPMAP_ATLAS),
+    ("atlas_probe", ATLAS_PROBE),
     ("granular_penetration", GRANULAR_PENETRATION),
     ("granular_jfa", GRANULAR_JFA),
     ("granular_displace", GRANULAR_DISPLACE),

@@ -79,6 +79,7 @@ fn the_prelude_declares_every_code_with_its_rust_value() {
         ("PENETRATING", i64::from(codes::PENETRATING)),
         ("NO_SEED", i64::from(codes::NO_SEED)),
         ("NO_OBJECT", i64::from(codes::NO_OBJECT)),
+        ("INVALID_SLOT", i64::from(codes::INVALID_SLOT)),
     ] {
         assert_eq!(value(name), rust, "{name}");
     }

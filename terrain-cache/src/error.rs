@@ -224,6 +224,16 @@ pub enum CacheError {
         /// What happened.
         reason: String,
     },
+    /// A tile upload target does not index the world or hold the slots a VRAM pool needs.
+    #[error("the upload target's {what} is {target}, the VRAM pool needs {pool}")]
+    TargetMismatch {
+        /// What differs (tile size, levels, tiles of a level, slots).
+        what: &'static str,
+        /// What the pool needs.
+        pool: u64,
+        /// What the target has.
+        target: u64,
+    },
     /// A grid operation of terrain-core failed.
     #[error(transparent)]
     Core(#[from] CoreError),

@@ -1,4 +1,4 @@
-//! The disk / RAM side of the three-pool streamed tile cache (seed 004 ch. 4-6, seed 000 sec
+//! The three-pool streamed tile cache (seed 004 ch. 4-6, seed 000 sec
 //! 2.4.2 and 3.2.3): a world is a pyramid of square tiles behind a [`TileStore`] (local files
 //! named by hex level / row / column, or the `object_store` crate for buckets), built from any
 //! [`TileSource`] without holding the whole map; a [`RamPool`] fed by worker threads over
@@ -43,11 +43,15 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
-//! For the VRAM pool (a later crate): [`RamPool::newly_loaded`] lists the tiles that arrived
-//! this frame, [`RamPool::tile`] lends their samples for the upload, [`RamPool::pin`] /
-//! [`RamPool::unpin`] keep tiles the GPU holds from eviction, [`RamPool::write`] takes a
-//! deformed tile read back from the GPU, and [`RamPool::refreshed`] names coarser tiles
-//! rewritten on disk whose GPU copies are stale.
+//! The [`VramPool`] decides which loaded tiles to hold in a fixed number of GPU slots (frustum
+//! with a turn-dependent margin, or band regions, per level; a per-frame upload budget in
+//! bytes, nearest first; least recently wanted evicted first) and uploads them into any
+//! [`terrain_core::TileUploadTarget`] (terrain-gpu's `GpuTileAtlas`, or terrain-core's CPU
+//! `TileAtlas`), keeping the target's indirection table current so a renderer falls back to
+//! the coarser resident level where a tile is missing. It reads the RAM pool through
+//! [`RamTiles`]: [`RamPool::tile`], [`RamPool::generation`] (a modified tile is re-uploaded)
+//! and [`RamPool::refreshed`] (coarser tiles rewritten on disk). [`RamPool::write`] takes a
+//! deformed tile read back from the GPU.
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
@@ -78,5 +82,10 @@ pub use policy::{
     Want,
 };
 pub use pool::{FrameReport, PoolConfig, RamPool, RequestHandle, TileState, TileStatus};
+pub mod vram;
+pub use vram::{
+    DEFAULT_UPLOAD_BUDGET_BYTES, RamTiles, VramConfig, VramError, VramPool, VramReport,
+    VramSelection,
+};
 pub mod sim;
 pub use sim::{CameraPath, SimConfig, SimPolicy, SimResult, comparison_table, simulate};

@@ -843,6 +843,14 @@ impl RamPool {
         None
     }
 
+    /// A counter bumped by every [`modify`](Self::modify) / [`write`](Self::write) of a loaded
+    /// tile (restarting when the tile is loaded again), `None` when it is not loaded: a copy
+    /// made at one generation (a VRAM upload) is stale once the generation differs.
+    pub fn generation(&self, id: TileId) -> Option<u64> {
+        let e = self.entries.get(&id)?;
+        matches!(e.slot, Slot::Resident { .. }).then_some(e.generation)
+    }
+
     /// The state of `id`, `None` if the pool has no record of it.
     pub fn status(&self, id: TileId) -> Option<TileStatus> {
         let e = self.entries.get(&id)?;

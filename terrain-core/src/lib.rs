@@ -45,6 +45,8 @@ pub mod sample;
 pub mod shockwave;
 pub mod stamp;
 pub mod terrain_gen;
+pub mod tile_atlas;
+pub mod tile_upload;
 
 pub use error::CoreError;
 pub use grid::{Grid, WrapMode};
@@ -67,3 +69,5 @@ pub use stamp::{
     TextureStamp, apply_stamp, stamp_region,
 };
 pub use terrain_gen::{TerrainParams, generate_coarse_map, generate_heights};
+pub use tile_atlas::TileAtlas;
+pub use tile_upload::{INVALID_SLOT, MAX_TILE_LEVELS, TileLayout, TileUploadTarget};

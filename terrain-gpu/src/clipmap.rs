@@ -1,7 +1,9 @@
 //! `ClipmapRenderer`: draws a geometry clipmap (terrain-lod's shared mesh, instanced per part)
 //! displaced by the coarse-map with wrap addressing and lit with the derivative normals, drawn
-//! into the caller's render pass.
+//! into the caller's render pass. The surface may also be a granular map or a tile atlas
+//! ([`ClipmapSurface`]).
 
+use crate::atlas::GpuTileAtlas;
 use crate::camera::Camera;
 use crate::compute::shader_module;
 use crate::error::GpuError;
@@ -81,6 +83,7 @@ impl Default for TerrainStyle {
 pub struct ClipmapRenderer {
     coarse: SurfacePipeline,
     granular: SurfacePipeline,
+    atlas: SurfacePipeline,
     target: TargetFormat,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
@@ -89,9 +92,8 @@ pub struct ClipmapRenderer {
     parts: Vec<MeshPart>,
     n: u32,
     levels: u32,
-    /// The bind group of the last surface drawn, with the buffers it binds and whether it is
-    /// a granular surface.
-    bound: Option<(Vec<wgpu::Buffer>, bool, wgpu::BindGroup)>,
+    /// The bind group of the last surface drawn, with the buffers it binds and its kind.
+    bound: Option<(Vec<wgpu::Buffer>, SurfaceKind, wgpu::BindGroup)>,
     /// Draws of the prepared frame: (part index, first instance, instance count).
     runs: Vec<(usize, u32, u32)>,
 }
@@ -124,6 +126,17 @@ impl ClipmapRenderer {
             terrain_shaders::CLIPMAP_GRANULAR,
             &[(wgpu::ShaderStages::VERTEX_FRAGMENT, 1)],
         )?;
+        let atlas = SurfacePipeline::new(
+            device,
+            target,
+            "clipmap atlas",
+            terrain_shaders::CLIPMAP_ATLAS,
+            &[
+                (wgpu::ShaderStages::VERTEX_FRAGMENT, 1),
+                (wgpu::ShaderStages::VERTEX_FRAGMENT, 2),
+                (wgpu::ShaderStages::VERTEX_FRAGMENT, 3),
+            ],
+        )?;
         scoped(device, "ClipmapRenderer", || {
             let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("clipmap vertices"),
@@ -150,6 +163,7 @@ impl ClipmapRenderer {
             Self {
                 coarse,
                 granular,
+                atlas,
                 target: *target,
                 vertices,
                 indices,
@@ -265,17 +279,13 @@ impl ClipmapRenderer {
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
 
         let buffers = surface.buffers();
-        let granular = matches!(surface, ClipmapSurface::Granular { .. });
+        let kind = surface.kind();
         let rebind = match &self.bound {
-            Some((bound, g, _)) => *g != granular || bound.as_slice() != buffers.as_slice(),
+            Some((bound, k, _)) => *k != kind || bound.as_slice() != buffers.as_slice(),
             None => true,
         };
         if rebind {
-            let pipeline = if granular {
-                &self.granular
-            } else {
-                &self.coarse
-            };
+            let pipeline = self.pipeline(kind);
             let mut entries = vec![wgpu::BindGroupEntry {
                 binding: 0,
                 resource: self.uniform.as_entire_binding(),
@@ -296,7 +306,7 @@ impl ClipmapRenderer {
                     entries: &entries,
                 })
             })?;
-            self.bound = Some((buffers, granular, group));
+            self.bound = Some((buffers, kind, group));
         }
         Ok(())
     }
@@ -304,17 +314,13 @@ impl ClipmapRenderer {
     /// Records the prepared frame into `pass` (a pass of this renderer's [`TargetFormat`]).
     /// Draws nothing before the first [`ClipmapRenderer::prepare`].
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
-        let Some((_, granular, group)) = &self.bound else {
+        let Some((_, kind, group)) = &self.bound else {
             return;
         };
         if self.runs.is_empty() {
             return;
         }
-        let pipeline = if *granular {
-            &self.granular
-        } else {
-            &self.coarse
-        };
+        let pipeline = self.pipeline(*kind);
         pass.set_pipeline(&pipeline.pipeline);
         pass.set_bind_group(0, group, &[]);
         pass.set_vertex_buffer(0, self.vertices.slice(..));
@@ -325,6 +331,24 @@ impl ClipmapRenderer {
             pass.draw_indexed(part.indices.clone(), part.base_vertex, first..first + count);
         }
     }
+}
+
+impl ClipmapRenderer {
+    fn pipeline(&self, kind: SurfaceKind) -> &SurfacePipeline {
+        match kind {
+            SurfaceKind::Coarse => &self.coarse,
+            SurfaceKind::Granular => &self.granular,
+            SurfaceKind::Atlas => &self.atlas,
+        }
+    }
+}
+
+/// Which pipeline a surface is drawn with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum SurfaceKind {
+    Coarse,
+    Granular,
+    Atlas,
 }
 
 /// Everything one clipmap frame is drawn from.
@@ -361,6 +385,14 @@ pub enum ClipmapSurface<'a> {
         /// The normal-and-height buffer of the map.
         surface: &'a wgpu::Buffer,
     },
+    /// The resident tiles of a streamed world (seed 004 sec 5.6): each texel from the finest
+    /// level resident in the atlas (a missing tile shows as its coarser ancestor, never as a
+    /// hole), the world clamped at its edges (or wrapped, as its layout says), normals by
+    /// central differences of those heights.
+    Atlas {
+        /// The tile slots and indirection table.
+        atlas: &'a GpuTileAtlas,
+    },
 }
 
 /// What the renderer needs to know of a surface.
@@ -394,6 +426,10 @@ impl ClipmapSurface<'_> {
                 }
                 (map.size(), map.encoding(), map.texel_size(), map.wrap())
             }
+            ClipmapSurface::Atlas { atlas } => {
+                let w = &atlas.config().world;
+                (w.world_size, w.encoding, w.texel_size, w.wrap)
+            }
         };
         Ok(SurfaceInfo {
             size,
@@ -410,6 +446,19 @@ impl ClipmapSurface<'_> {
                 vec![map.buffer().clone(), normals.buffer().clone()]
             }
             ClipmapSurface::Granular { surface, .. } => vec![surface.clone()],
+            ClipmapSurface::Atlas { atlas } => vec![
+                atlas.info_buffer().clone(),
+                atlas.heights_buffer().clone(),
+                atlas.table_buffer().clone(),
+            ],
+        }
+    }
+
+    fn kind(&self) -> SurfaceKind {
+        match self {
+            ClipmapSurface::Coarse { .. } => SurfaceKind::Coarse,
+            ClipmapSurface::Granular { .. } => SurfaceKind::Granular,
+            ClipmapSurface::Atlas { .. } => SurfaceKind::Atlas,
         }
     }
 }

@@ -1,6 +1,7 @@
 //! wgpu passes for deformable terrain: the headless context, GPU height and derivative maps,
 //! `StampPass`, `NormalPass`, asynchronous `RegionReadback`, and rendering: `SkyPass`,
-//! `ClipmapRenderer` and `OffscreenTarget` captures.
+//! `ClipmapRenderer` and `OffscreenTarget` captures; `GpuTileAtlas`, the tile slots and
+//! indirection table of a streamed world that the clipmap can draw from.
 //!
 //! Every pass is a struct that makes everything long-lived in `new(&wgpu::Device, ..)`
 //! (pipelines, one shader module per WGSL module, layouts, a uniform ring, scratch buffers) and
@@ -47,6 +48,7 @@
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
+pub mod atlas;
 pub mod camera;
 pub mod clipmap;
 pub mod compute;
@@ -67,6 +69,7 @@ pub mod target;
 pub mod testing;
 pub mod timer;
 
+pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample};
 pub use camera::Camera;
 pub use clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};
 pub use context::{AdapterReport, GpuContext};

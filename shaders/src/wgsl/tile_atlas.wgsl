@@ -1,0 +1,42 @@
+// Tile atlas lookup (seed 004 sec 4.2, 5.6): tile slots of u32 heights and an indirection
+// table over every tile of every level of the world (a slot, or INVALID_SLOT). A level-0 texel
+// t reads the finest level l whose tile covering t >> l is resident, so a missing tile shows as
+// a coarser one, never as a hole. CPU reference: terrain_core::TileAtlas::stored_at.
+
+struct AtlasInfo {
+    world_size: vec2<u32>,
+    // log2 of the tile side.
+    tile_shift: u32,
+    levels: u32,
+    // Stored value where no level is resident.
+    fill: u32,
+    slot_count: u32,
+    _pad0: u32,
+    _pad1: u32,
+    // Per level: tiles across, tiles down, first table entry, unused.
+    level: array<vec4<u32>, 32>,
+}
+
+@group(0) @binding(1) var<storage, read> atlas: AtlasInfo;
+@group(0) @binding(2) var<storage, read> atlas_heights: array<u32>;
+@group(0) @binding(3) var<storage, read> atlas_table: array<u32>;
+
+// The stored height at level-0 texel `t`, which lies inside the world.
+fn atlas_stored(t: vec2<u32>) -> u32 {
+    let shift = atlas.tile_shift;
+    let mask = (1u << shift) - 1u;
+    for (var l = 0u; l < atlas.levels; l = l + 1u) {
+        let c = t >> vec2<u32>(l, l);
+        let tile = c >> vec2<u32>(shift, shift);
+        let info = atlas.level[l];
+        if tile.x < info.x && tile.y < info.y {
+            let slot = atlas_table[info.z + tile.y * info.x + tile.x];
+            // INVALID_SLOT (and anything else out of range) is not resident.
+            if slot < atlas.slot_count {
+                let w = c & vec2<u32>(mask, mask);
+                return atlas_heights[(slot << (2u * shift)) + (w.y << shift) + w.x];
+            }
+        }
+    }
+    return atlas.fill;
+}

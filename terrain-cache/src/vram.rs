@@ -1,0 +1,1228 @@
+//! The VRAM pool (seed 004 sec 4.2, 5.3, 5.4.2, 5.6): which tiles of the RAM pool to hold in a
+//! fixed number of GPU slots, and when to upload them. Policy only: the slots and the
+//! indirection table live behind terrain-core's [`TileUploadTarget`] (terrain-gpu's
+//! `GpuTileAtlas`, or terrain-core's CPU `TileAtlas`), which this crate never names.
+//!
+//! Per [`VramPool::update`]:
+//! 1. **Stale copies.** Tiles the RAM pool reports as [`RamTiles::refreshed`] (coarser tiles
+//!    rewritten on disk after a deformation was written back) or whose RAM copy was modified
+//!    since the upload ([`RamTiles::version`]) are marked stale; they stay drawn until
+//!    re-uploaded.
+//! 2. **Selection.** Per level, tiles in the view frustum widened by a margin that grows with
+//!    the camera's turn rate ([`FrustumSelection`], seed 004 sec 5.4.2 and fig. 5.5) or the band
+//!    regions of the camera's tile ([`BandSelection`], seed 000 fig. 2.4), each level out to the
+//!    same number of its own tiles; plus the whole coarsest level when it fits, the fallback of
+//!    every texel. Wanted tiles are ranked nearest first (3D distance to the tile's box), the
+//!    coarsest level ahead of all, coarser ahead of finer at equal distance.
+//! 3. **Uploads within the budget** (seed 004 sec 5.3): in rank order, tiles that are loaded in
+//!    RAM and not resident (or stale) are uploaded until the next would pass the frame's byte
+//!    budget; the rest wait for the next frame. A slot comes from the free list, else from the
+//!    resident tile wanted least recently (farthest first among equals): unwanted tiles stay
+//!    resident, marked for deletion, until their slot is needed, so a tile wanted again soon is
+//!    rescued without a transfer. Tiles ranked within the slot count are never evicted for
+//!    others; tiles ranked beyond it only take free slots or unwanted ones.
+//! 4. **Indirection.** An evicted tile is unmapped before its slot is reused; an uploaded tile
+//!    is mapped after its upload. A renderer reading the table takes, per texel, the finest
+//!    mapped level, so a missing tile is drawn from a coarser one.
+
+use crate::CacheError;
+use crate::manifest::Manifest;
+use crate::policy::{
+    BandSelection, CameraState, FrustumSelection, SelectionPolicy, TileGrid, Want,
+};
+use crate::pool::RamPool;
+use crate::tile::{Layer, TileData, TileId};
+use glam::{DVec2, DVec3, UVec2};
+use std::collections::HashMap;
+use terrain_core::{Grid, TileLayout, TileUploadTarget, WrapMode};
+
+/// Default per-frame upload budget: 2 MiB, eight 256^2 tiles of u32 heights. Seed 004 sec 5.3
+/// limits transfers to a fixed share of the frame (2 ms of 16.7 ms); the bytes that take depend
+/// on the hardware, so the budget is a plain number to tune (see the atlas upload bench).
+pub const DEFAULT_UPLOAD_BUDGET_BYTES: u64 = 2 << 20;
+
+/// How the VRAM pool selects tiles on each level.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum VramSelection {
+    /// Seed 004 sec 5.4.2: per level, tiles in the horizontal view cone widened by `fov_margin`
+    /// plus `turn_gain` times the turn of the last frame, out to `far_tiles` tiles of that
+    /// level, and every tile within `near_tiles` tiles of the camera (behind it too).
+    Frustum {
+        /// Reach, in tiles of each level.
+        far_tiles: f64,
+        /// Tiles this close (in tiles of each level, 3D) are wanted whatever the heading.
+        near_tiles: f64,
+        /// Extra half-angle in radians beyond the camera's horizontal half field of view.
+        fov_margin: f64,
+        /// Extra half-angle per radian turned in the last frame.
+        turn_gain: f64,
+    },
+    /// Seed 000 sec 2.4.2, fig. 2.4: per level, the camera's tile and the neighbours its band
+    /// region asks for (4, 6 or 9 tiles).
+    Band {
+        /// Band width as a fraction of the tile side (1/3: nine equal regions).
+        band_width: f64,
+    },
+}
+
+impl Default for VramSelection {
+    /// Frustum: 3 tiles of each level ahead, 1 around, a 15 degree margin, 8 radians of margin
+    /// per radian turned per frame.
+    fn default() -> Self {
+        VramSelection::Frustum {
+            far_tiles: 3.0,
+            near_tiles: 1.0,
+            fov_margin: 15f64.to_radians(),
+            turn_gain: 8.0,
+        }
+    }
+}
+
+/// Settings of a [`VramPool`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct VramConfig {
+    /// The tile layout of the world's height layer.
+    pub grid: TileGrid,
+    /// Tile side in texels (the target must have the same).
+    pub tile_size: u32,
+    /// Tile slots the pool uses (the target must have at least this many).
+    pub slots: u32,
+    /// Bytes uploaded per frame at most (at least one tile's upload).
+    pub upload_budget_bytes: u64,
+    /// The selection on each level.
+    pub selection: VramSelection,
+}
+
+impl VramConfig {
+    /// `slots` tiles of the height layer of the world of `manifest`, with the default budget
+    /// and frustum selection.
+    pub fn new(manifest: &Manifest, slots: u32) -> Self {
+        Self {
+            grid: TileGrid::from_manifest(manifest, Layer::Height),
+            tile_size: manifest.tile_size,
+            slots,
+            upload_budget_bytes: DEFAULT_UPLOAD_BUDGET_BYTES,
+            selection: VramSelection::default(),
+        }
+    }
+}
+
+impl Manifest {
+    /// The layout of the height pyramid as a tile upload target indexes it (the world's size,
+    /// tile size, levels, texel size, encoding, wrap, and the zero tile's value as the fill).
+    pub fn tile_layout(&self) -> TileLayout {
+        TileLayout {
+            world_size: self.world_size,
+            tile_size: self.tile_size,
+            levels: self.levels,
+            texel_size: self.texel_size,
+            encoding: self.encoding,
+            wrap: self.wrap,
+            fill: self.height_fill,
+        }
+    }
+}
+
+/// What the VRAM pool reads from the RAM pool: implemented by [`RamPool`]; tests and tools
+/// can implement it over tiles in memory.
+pub trait RamTiles {
+    /// The samples of a loaded tile.
+    fn tile(&self, id: TileId) -> Option<&TileData>;
+    /// A number that changes whenever a loaded tile's samples change (`None` when not loaded).
+    fn version(&self, id: TileId) -> Option<u64>;
+    /// Tiles whose data on disk changed under any copy of them in the last update.
+    fn refreshed(&self) -> &[TileId];
+}
+
+impl RamTiles for RamPool {
+    fn tile(&self, id: TileId) -> Option<&TileData> {
+        RamPool::tile(self, id)
+    }
+    fn version(&self, id: TileId) -> Option<u64> {
+        RamPool::generation(self, id)
+    }
+    fn refreshed(&self) -> &[TileId] {
+        RamPool::refreshed(self)
+    }
+}
+
+/// What one [`VramPool::update`] did and where the pool stands.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct VramReport {
+    /// The frame number (updates so far).
+    pub frame: u64,
+    /// Tiles the selection wanted.
+    pub tiles_wanted: usize,
+    /// Wanted tiles not resident after this update: drawn from a coarser level.
+    pub tiles_missing: usize,
+    /// Of the missing tiles, those not loaded in RAM (nothing to upload yet).
+    pub waiting_for_ram: usize,
+    /// Of the missing tiles, those loaded in RAM but left for a later frame by the budget or
+    /// for lack of a slot.
+    pub deferred: usize,
+    /// Tiles resident (mapped in the target).
+    pub resident: usize,
+    /// Resident tiles whose data changed in RAM or on disk, not yet re-uploaded.
+    pub stale: usize,
+    /// Bytes of the resident tiles in the target.
+    pub vram_bytes: u64,
+    /// Bytes of all slots.
+    pub capacity_bytes: u64,
+    /// Bytes uploaded this frame (never more than `budget_bytes`).
+    pub upload_bytes: u64,
+    /// The per-frame budget.
+    pub budget_bytes: u64,
+    /// Tiles uploaded this frame (re-uploads of stale tiles included).
+    pub uploads: usize,
+    /// Of the uploads, re-uploads of stale tiles.
+    pub refreshes: usize,
+    /// Tiles evicted this frame to free a slot.
+    pub evictions: usize,
+}
+
+/// Why an update failed.
+#[derive(Debug, thiserror::Error)]
+pub enum VramError<E> {
+    /// A bad camera, a target that does not match the pool, or tile data of the wrong shape.
+    #[error(transparent)]
+    Cache(#[from] CacheError),
+    /// The upload target refused an upload or a table write; its error, unchanged.
+    #[error("the upload target failed on tile {id}")]
+    Target {
+        /// The tile being uploaded, mapped or unmapped.
+        id: TileId,
+        /// The target's error.
+        #[source]
+        source: E,
+    },
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Resident {
+    slot: u32,
+    /// The last frame that wanted it.
+    wanted_frame: u64,
+    /// Its rank in the frame that last wanted it.
+    rank: usize,
+    /// The RAM version it was uploaded from.
+    version: Option<u64>,
+    stale: bool,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Ranked {
+    id: TileId,
+    root: bool,
+    distance: f64,
+}
+
+/// The VRAM pool: a fixed number of slots of a [`TileUploadTarget`], filled from the RAM pool
+/// around the camera within a per-frame byte budget (see the module docs).
+#[derive(Debug)]
+pub struct VramPool {
+    cfg: VramConfig,
+    policies: Vec<Box<dyn SelectionPolicy>>,
+    resident: HashMap<TileId, Resident>,
+    free: Vec<u32>,
+    frame: u64,
+    wants: Vec<Want>,
+    ranked: Vec<Ranked>,
+    victims: Vec<Victim>,
+}
+
+/// A resident tile that may give up its slot, ordered so that the first to go sorts last.
+#[derive(Debug, Clone, Copy)]
+struct Victim {
+    id: TileId,
+    /// Not wanted this frame (marked for deletion).
+    unwanted: bool,
+    /// Frames since last wanted (unwanted tiles).
+    age: u64,
+    /// Distance in metres (unwanted tiles) or rank (wanted tiles beyond the slot count).
+    order: f64,
+}
+
+impl VramPool {
+    /// A pool of `config.slots` slots, nothing resident. Fails on an empty grid, zero slots, a
+    /// budget below one tile (even at 2 bytes per texel) or a bad selection parameter.
+    pub fn new(config: VramConfig) -> Result<Self, CacheError> {
+        let out = |what, value: f64, expected| CacheError::OutOfRange {
+            what,
+            value,
+            expected,
+        };
+        if config.grid.levels.is_empty()
+            || config
+                .grid
+                .levels
+                .iter()
+                .any(|l| l.tiles.min_element() == 0)
+        {
+            return Err(out(
+                "VRAM pool levels",
+                config.grid.levels.len() as f64,
+                "at least one level, each with tiles",
+            ));
+        }
+        if config.slots == 0 || config.slots == terrain_core::INVALID_SLOT {
+            return Err(out("VRAM slots", f64::from(config.slots), "1 ..= 2^32 - 2"));
+        }
+        if config.tile_size == 0 {
+            return Err(out("VRAM tile size", 0.0, "at least 1"));
+        }
+        let min_tile = u64::from(config.tile_size) * u64::from(config.tile_size) * 2;
+        if config.upload_budget_bytes < min_tile {
+            return Err(out(
+                "upload_budget_bytes",
+                config.upload_budget_bytes as f64,
+                "at least one tile's upload",
+            ));
+        }
+        let policies: Vec<Box<dyn SelectionPolicy>> = match config.selection {
+            VramSelection::Frustum {
+                far_tiles,
+                near_tiles,
+                fov_margin,
+                turn_gain,
+            } => {
+                for (what, v) in [
+                    ("far_tiles", far_tiles),
+                    ("near_tiles", near_tiles),
+                    ("fov_margin", fov_margin),
+                    ("turn_gain", turn_gain),
+                ] {
+                    if !v.is_finite() || v < 0.0 {
+                        return Err(out(what, v, "finite and not negative"));
+                    }
+                }
+                config
+                    .grid
+                    .levels
+                    .iter()
+                    .enumerate()
+                    .map(|(l, g)| {
+                        Box::new(FrustumSelection {
+                            level: l as u32,
+                            far: far_tiles * g.tile_m,
+                            near: near_tiles * g.tile_m,
+                            fov_margin,
+                            turn_gain,
+                            last_forward: None,
+                        }) as Box<dyn SelectionPolicy>
+                    })
+                    .collect()
+            }
+            VramSelection::Band { band_width } => {
+                if !(0.0..=1.0).contains(&band_width) {
+                    return Err(out("band_width", band_width, "0 ..= 1"));
+                }
+                (0..config.grid.levels.len() as u32)
+                    .map(|level| {
+                        Box::new(BandSelection { level, band_width }) as Box<dyn SelectionPolicy>
+                    })
+                    .collect()
+            }
+        };
+        // Popped from the end: slot 0 first.
+        let free = (0..config.slots).rev().collect();
+        Ok(Self {
+            cfg: config,
+            policies,
+            resident: HashMap::new(),
+            free,
+            frame: 0,
+            wants: Vec::new(),
+            ranked: Vec::new(),
+            victims: Vec::new(),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &VramConfig {
+        &self.cfg
+    }
+
+    /// The slot holding `id`, if resident.
+    pub fn slot_of(&self, id: TileId) -> Option<u32> {
+        self.resident.get(&id).map(|r| r.slot)
+    }
+
+    /// Ids of the resident tiles, unordered.
+    pub fn resident_ids(&self) -> Vec<TileId> {
+        self.resident.keys().copied().collect()
+    }
+
+    /// The tiles wanted by the last update, most urgent first.
+    pub fn wanted(&self) -> impl Iterator<Item = TileId> + '_ {
+        self.ranked.iter().map(|r| r.id)
+    }
+
+    /// Unmaps every resident tile (e.g. before switching worlds); the slots become free.
+    pub fn clear<T: TileUploadTarget>(
+        &mut self,
+        target: &mut T,
+    ) -> Result<(), VramError<T::Error>> {
+        let ids: Vec<TileId> = self.resident.keys().copied().collect();
+        for id in ids {
+            target
+                .map(id.level, UVec2::new(id.x, id.y), None)
+                .map_err(|source| VramError::Target { id, source })?;
+            if let Some(r) = self.resident.remove(&id) {
+                self.free.push(r.slot);
+            }
+        }
+        Ok(())
+    }
+
+    /// One frame: marks stale copies, selects tiles for `camera`, evicts and uploads from `ram`
+    /// into `target` within the budget, and updates the indirection table (see the module
+    /// docs). Its work is bounded by the selection (each level's square around the camera,
+    /// clamped to the world), the slots and the budget, whatever the camera's coordinates; a
+    /// non-finite camera is refused before anything changes.
+    pub fn update<R, T>(
+        &mut self,
+        camera: &CameraState,
+        ram: &R,
+        target: &mut T,
+    ) -> Result<VramReport, VramError<T::Error>>
+    where
+        R: RamTiles + ?Sized,
+        T: TileUploadTarget,
+    {
+        camera.validate()?;
+        self.check_target(target)?;
+        self.frame += 1;
+        let frame = self.frame;
+        let cost = target.upload_bytes();
+        let slots = self.cfg.slots as usize;
+        let mut r = VramReport {
+            frame,
+            budget_bytes: self.cfg.upload_budget_bytes,
+            capacity_bytes: cost * u64::from(self.cfg.slots),
+            ..VramReport::default()
+        };
+
+        // 1. Stale copies.
+        for id in ram.refreshed() {
+            if let Some(e) = self.resident.get_mut(id) {
+                e.stale = true;
+            }
+        }
+        for (id, e) in self.resident.iter_mut() {
+            if let (Some(up), Some(now)) = (e.version, ram.version(*id))
+                && up != now
+            {
+                e.stale = true;
+            }
+        }
+
+        // 2. Selection, ranked.
+        self.select(camera);
+        for (rank, w) in self.ranked.iter().enumerate() {
+            if let Some(e) = self.resident.get_mut(&w.id) {
+                e.wanted_frame = frame;
+                e.rank = rank;
+            }
+        }
+
+        // 3. Uploads in rank order within the budget.
+        let mut spent = 0u64;
+        self.victims.clear();
+        let mut victims_built = false;
+        let mut budget_left = true;
+        for rank in 0..self.ranked.len() {
+            let id = self.ranked[rank].id;
+            let (is_resident, stale) = match self.resident.get(&id) {
+                Some(e) => (true, e.stale),
+                None => (false, false),
+            };
+            if is_resident && !stale {
+                continue;
+            }
+            let Some(data) = ram.tile(id) else {
+                if !is_resident {
+                    r.waiting_for_ram += 1;
+                }
+                continue;
+            };
+            if !budget_left || spent + cost > self.cfg.upload_budget_bytes {
+                budget_left = false;
+                if !is_resident {
+                    r.deferred += 1;
+                }
+                continue;
+            }
+            let heights = tile_heights(data, self.cfg.tile_size)?;
+            let slot = if let Some(e) = self.resident.get(&id) {
+                e.slot
+            } else if let Some(s) = self.free.pop() {
+                s
+            } else {
+                if !victims_built {
+                    self.build_victims(camera, frame);
+                    victims_built = true;
+                }
+                match self.take_victim(rank < slots, frame) {
+                    Some(victim) => {
+                        let e = self.resident.remove(&victim).map(|e| e.slot);
+                        let Some(s) = e else {
+                            continue;
+                        };
+                        if let Err(source) =
+                            target.map(victim.level, UVec2::new(victim.x, victim.y), None)
+                        {
+                            self.free.push(s);
+                            return Err(VramError::Target { id: victim, source });
+                        }
+                        r.evictions += 1;
+                        s
+                    }
+                    None => {
+                        r.deferred += 1;
+                        continue;
+                    }
+                }
+            };
+            let xy = UVec2::new(id.x, id.y);
+            let bytes = match target.upload(slot, id.level, xy, heights) {
+                Ok(b) => b,
+                Err(source) => {
+                    if !is_resident {
+                        self.free.push(slot);
+                    }
+                    return Err(VramError::Target { id, source });
+                }
+            };
+            spent += bytes;
+            r.upload_bytes += bytes;
+            r.uploads += 1;
+            let version = ram.version(id);
+            if is_resident {
+                r.refreshes += 1;
+                if let Some(e) = self.resident.get_mut(&id) {
+                    e.stale = false;
+                    e.version = version;
+                }
+            } else {
+                if let Err(source) = target.map(id.level, xy, Some(slot)) {
+                    self.free.push(slot);
+                    return Err(VramError::Target { id, source });
+                }
+                self.resident.insert(
+                    id,
+                    Resident {
+                        slot,
+                        wanted_frame: frame,
+                        rank,
+                        version,
+                        stale: false,
+                    },
+                );
+            }
+        }
+
+        // 4. Report.
+        r.tiles_wanted = self.ranked.len();
+        r.tiles_missing = self
+            .ranked
+            .iter()
+            .filter(|w| !self.resident.contains_key(&w.id))
+            .count();
+        r.resident = self.resident.len();
+        r.stale = self.resident.values().filter(|e| e.stale).count();
+        r.vram_bytes = cost * r.resident as u64;
+        Ok(r)
+    }
+
+    /// Checks that the target indexes this pool's world with enough slots.
+    fn check_target<T: TileUploadTarget>(&self, target: &T) -> Result<(), CacheError> {
+        let mismatch =
+            |what, pool: u64, target: u64| Err(CacheError::TargetMismatch { what, pool, target });
+        let layout = target.layout();
+        if layout.tile_size != self.cfg.tile_size {
+            return mismatch(
+                "tile size",
+                u64::from(self.cfg.tile_size),
+                u64::from(layout.tile_size),
+            );
+        }
+        let levels = self.cfg.grid.levels.len() as u64;
+        if u64::from(layout.levels) != levels {
+            return mismatch("levels", levels, u64::from(layout.levels));
+        }
+        for (l, g) in self.cfg.grid.levels.iter().enumerate() {
+            let t = layout.tiles_at(l as u32);
+            if t != g.tiles {
+                return mismatch(
+                    "tiles of a level (x * 2^32 + y)",
+                    (u64::from(g.tiles.x) << 32) | u64::from(g.tiles.y),
+                    (u64::from(t.x) << 32) | u64::from(t.y),
+                );
+            }
+        }
+        if target.slot_count() < self.cfg.slots {
+            return mismatch(
+                "slot count",
+                u64::from(self.cfg.slots),
+                u64::from(target.slot_count()),
+            );
+        }
+        let bytes = target.upload_bytes();
+        if bytes == 0 || bytes > self.cfg.upload_budget_bytes {
+            return mismatch(
+                "upload size (bytes, at most the budget)",
+                self.cfg.upload_budget_bytes,
+                bytes,
+            );
+        }
+        Ok(())
+    }
+
+    /// Fills `ranked` with this frame's wanted tiles, most urgent first.
+    fn select(&mut self, camera: &CameraState) {
+        let grid = &self.cfg.grid;
+        self.wants.clear();
+        for p in &mut self.policies {
+            p.select(camera, grid, &mut self.wants);
+        }
+        let top = grid.levels.len() as u32 - 1;
+        let root_tiles = grid.levels[top as usize].tiles;
+        // The whole coarsest level is every texel's fallback, when it fits in half the slots.
+        let root_whole =
+            u64::from(root_tiles.x) * u64::from(root_tiles.y) <= u64::from(self.cfg.slots / 2);
+        if root_whole {
+            let xz = grid.camera_xz(camera.position);
+            grid.square(top, xz, f64::MAX, |id, _| {
+                self.wants.push(Want { id, priority: 0.0 });
+            });
+        }
+        let xz = grid.camera_xz(camera.position);
+        let eye = DVec3::new(xz.x, f64::from(camera.position.y), xz.y);
+        self.ranked.clear();
+        self.ranked.extend(self.wants.iter().map(|w| Ranked {
+            id: w.id,
+            root: root_whole && w.id.level == top,
+            distance: tile_distance(grid, eye, w.id),
+        }));
+        self.ranked.sort_by(|a, b| {
+            b.root
+                .cmp(&a.root)
+                .then(a.distance.total_cmp(&b.distance))
+                .then(b.id.level.cmp(&a.id.level))
+                .then(a.id.cmp(&b.id))
+        });
+        self.ranked.dedup_by_key(|w| w.id);
+    }
+
+    /// Resident tiles that may give up their slot this frame, the first to go last: unwanted
+    /// ones (least recently wanted, then farthest, go first), then wanted ones ranked beyond the
+    /// slot count (lowest rank last to go).
+    fn build_victims(&mut self, camera: &CameraState, frame: u64) {
+        let grid = &self.cfg.grid;
+        let xz = grid.camera_xz(camera.position);
+        let eye = DVec3::new(xz.x, f64::from(camera.position.y), xz.y);
+        let slots = self.cfg.slots as usize;
+        self.victims.clear();
+        for (&id, e) in &self.resident {
+            if e.wanted_frame != frame {
+                self.victims.push(Victim {
+                    id,
+                    unwanted: true,
+                    age: frame - e.wanted_frame,
+                    order: tile_distance(grid, eye, id),
+                });
+            } else if e.rank >= slots {
+                self.victims.push(Victim {
+                    id,
+                    unwanted: false,
+                    age: 0,
+                    order: e.rank as f64,
+                });
+            }
+        }
+        // Ascending: the first to go is popped from the end.
+        self.victims.sort_by(|a, b| {
+            a.unwanted
+                .cmp(&b.unwanted)
+                .then(a.age.cmp(&b.age))
+                .then(a.order.total_cmp(&b.order))
+                .then(b.id.cmp(&a.id))
+        });
+    }
+
+    /// The next victim: an unwanted tile, or, if `may_take_wanted`, a tile ranked beyond the
+    /// slot count.
+    fn take_victim(&mut self, may_take_wanted: bool, frame: u64) -> Option<TileId> {
+        let v = *self.victims.last()?;
+        let unwanted = self
+            .resident
+            .get(&v.id)
+            .is_some_and(|e| e.wanted_frame != frame);
+        if unwanted || may_take_wanted {
+            self.victims.pop();
+            Some(v.id)
+        } else {
+            None
+        }
+    }
+}
+
+/// The u16 heights of a height tile of side `tile_size`, or the mismatch as an error.
+fn tile_heights(data: &TileData, tile_size: u32) -> Result<&Grid<u16>, CacheError> {
+    match data.as_u16() {
+        Some(g) if g.size() == UVec2::splat(tile_size) => Ok(g),
+        _ => {
+            let s = data.size();
+            Err(CacheError::TileDataMismatch {
+                layer: Layer::Height,
+                expected_bits: 16,
+                size: tile_size,
+                found_bits: data.bits(),
+                found_w: s.x,
+                found_h: s.y,
+            })
+        }
+    }
+}
+
+/// 3D distance in metres from `eye` (x and z wrapped into the world) to tile `id`'s box, at its
+/// nearest periodic image on a repeating world.
+fn tile_distance(grid: &TileGrid, eye: DVec3, id: TileId) -> f64 {
+    let Some(g) = grid.levels.get(id.level as usize) else {
+        return f64::INFINITY;
+    };
+    let shifts: &[f64] = if grid.wrap == WrapMode::Repeat {
+        &[-1.0, 0.0, 1.0]
+    } else {
+        &[0.0]
+    };
+    let extent = g.tiles.as_dvec2() * g.tile_m;
+    let mut best = f64::INFINITY;
+    for &sy in shifts {
+        for &sx in shifts {
+            best = best.min(grid.distance(eye, id, DVec2::new(sx, sy) * extent));
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use terrain_core::{HeightEncoding, TileAtlas};
+
+    const TS: u32 = 16;
+
+    /// The stored value of texel `c` of `level`: different on every level.
+    fn truth(level: u32, c: UVec2) -> u16 {
+        ((level * 7919 + c.x * 31 + c.y * 17) % 65_000) as u16
+    }
+
+    fn tile(id: TileId) -> TileData {
+        TileData::U16(
+            Grid::from_fn(TS, TS, |x, y| {
+                truth(id.level, UVec2::new(id.x * TS + x, id.y * TS + y))
+            })
+            .unwrap(),
+        )
+    }
+
+    /// A 256^2 world of 16-texel tiles at 1 m: 16, 8, 4, 2, 1 tiles per side.
+    fn manifest(wrap: WrapMode) -> Manifest {
+        let enc = HeightEncoding::spanning::<u16>(0.0, 50.0).unwrap();
+        Manifest::new(UVec2::splat(256), TS, 1.0, enc, wrap).unwrap()
+    }
+
+    #[derive(Debug, Default)]
+    struct MockRam {
+        tiles: HashMap<TileId, TileData>,
+        versions: HashMap<TileId, u64>,
+        refreshed: Vec<TileId>,
+    }
+
+    impl MockRam {
+        fn all(m: &Manifest) -> Self {
+            let mut ram = MockRam::default();
+            for l in 0..m.levels {
+                for id in m.tiles_of(Layer::Height, l) {
+                    ram.tiles.insert(id, tile(id));
+                }
+            }
+            ram
+        }
+    }
+
+    impl RamTiles for MockRam {
+        fn tile(&self, id: TileId) -> Option<&TileData> {
+            self.tiles.get(&id)
+        }
+        fn version(&self, id: TileId) -> Option<u64> {
+            self.tiles
+                .contains_key(&id)
+                .then(|| self.versions.get(&id).copied().unwrap_or(0))
+        }
+        fn refreshed(&self) -> &[TileId] {
+            &self.refreshed
+        }
+    }
+
+    /// A CPU atlas that logs its calls and checks the contract's ordering: a slot is only
+    /// uploaded into while no tile is mapped to it (or for the tile mapped to it), and a tile
+    /// is only mapped to a slot that holds its upload.
+    #[derive(Debug)]
+    struct Logged {
+        atlas: TileAtlas,
+        holds: HashMap<u32, TileId>,
+        mapped: HashMap<TileId, u32>,
+        uploads: Vec<TileId>,
+    }
+
+    impl Logged {
+        fn new(m: &Manifest, slots: u32) -> Self {
+            Self {
+                atlas: TileAtlas::new(m.tile_layout(), slots).unwrap(),
+                holds: HashMap::new(),
+                mapped: HashMap::new(),
+                uploads: Vec::new(),
+            }
+        }
+    }
+
+    impl TileUploadTarget for Logged {
+        type Error = terrain_core::CoreError;
+        fn layout(&self) -> &TileLayout {
+            self.atlas.layout()
+        }
+        fn slot_count(&self) -> u32 {
+            self.atlas.slot_count()
+        }
+        fn upload_bytes(&self) -> u64 {
+            self.atlas.upload_bytes()
+        }
+        fn upload(
+            &mut self,
+            slot: u32,
+            level: u32,
+            tile: UVec2,
+            heights: &Grid<u16>,
+        ) -> Result<u64, Self::Error> {
+            let id = TileId::new(level, tile.x, tile.y);
+            for (&other, &s) in &self.mapped {
+                assert!(
+                    s != slot || other == id,
+                    "slot {slot} overwritten under {other}"
+                );
+            }
+            self.holds.insert(slot, id);
+            self.uploads.push(id);
+            self.atlas.upload(slot, level, tile, heights)
+        }
+        fn map(&mut self, level: u32, tile: UVec2, slot: Option<u32>) -> Result<(), Self::Error> {
+            let id = TileId::new(level, tile.x, tile.y);
+            match slot {
+                Some(s) => {
+                    assert_eq!(self.holds.get(&s), Some(&id), "mapped before its upload");
+                    self.mapped.insert(id, s);
+                }
+                None => {
+                    self.mapped.remove(&id);
+                }
+            }
+            self.atlas.map(level, tile, slot)
+        }
+    }
+
+    fn camera(x: f32, z: f32, heading: f32) -> CameraState {
+        CameraState {
+            forward: Vec3::new(heading.cos(), -0.2, heading.sin()),
+            ..CameraState::at(Vec3::new(x, 20.0, z))
+        }
+    }
+
+    /// Every texel of the world resolves to the finest level the pool holds, and reads that
+    /// level's true value: the fallback chain.
+    fn assert_fallback(pool: &VramPool, atlas: &TileAtlas, m: &Manifest) {
+        for y in 0..m.world_size.y {
+            for x in 0..m.world_size.x {
+                let t = UVec2::new(x, y);
+                let finest = (0..m.levels).find(|&l| {
+                    let c = (t >> l) / TS;
+                    pool.slot_of(TileId::new(l, c.x, c.y)).is_some()
+                });
+                let got = atlas.stored_at(t.as_ivec2());
+                match finest {
+                    Some(l) => assert_eq!(got, u32::from(truth(l, t >> l)), "texel {t} level {l}"),
+                    None => assert_eq!(got, u32::from(m.height_fill)),
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn uploads_stay_within_budget_nearest_first_and_within_the_slots() {
+        let m = manifest(WrapMode::Clamp);
+        let ram = MockRam::all(&m);
+        let mut cfg = VramConfig::new(&m, 24);
+        let tile_bytes = u64::from(TS * TS) * 4;
+        cfg.upload_budget_bytes = 3 * tile_bytes + 5;
+        let mut pool = VramPool::new(cfg).unwrap();
+        let mut target = Logged::new(&m, 24);
+        let mut cam = camera(100.0, 120.0, 0.3);
+        let mut uploaded = 0;
+        for frame in 0..60 {
+            if frame == 30 {
+                cam = camera(30.0, 200.0, 2.0);
+            }
+            let before = target.atlas.uploaded_bytes();
+            target.uploads.clear();
+            let r = pool.update(&cam, &ram, &mut target).unwrap();
+            let spent = target.atlas.uploaded_bytes() - before;
+            assert_eq!(spent, r.upload_bytes);
+            assert!(r.upload_bytes <= r.budget_bytes, "{r:?}");
+            assert!(r.uploads <= 3);
+            assert!(
+                r.resident <= 24 && target.atlas.mapped() == r.resident,
+                "{r:?}"
+            );
+            // Mapped slots are distinct.
+            let mut slots: Vec<u32> = target.mapped.values().copied().collect();
+            slots.sort_unstable();
+            slots.dedup();
+            assert_eq!(slots.len(), target.mapped.len());
+            // This frame's uploads are the most urgent missing tiles, in rank order.
+            let wanted: Vec<TileId> = pool.wanted().collect();
+            let mut expect = Vec::new();
+            for id in &wanted {
+                if target.uploads.contains(id) {
+                    expect.push(*id);
+                }
+            }
+            assert_eq!(
+                target.uploads, expect,
+                "frame {frame}: uploads out of rank order"
+            );
+            if r.uploads == 3 {
+                // Nothing more urgent than the last upload was left missing.
+                let last = *target.uploads.last().unwrap();
+                let pos = wanted.iter().position(|w| *w == last).unwrap();
+                for w in &wanted[..pos] {
+                    assert!(pool.slot_of(*w).is_some(), "frame {frame}: {w} skipped");
+                }
+            }
+            uploaded += r.uploads;
+            assert_fallback(&pool, &target.atlas, &m);
+        }
+        assert!(
+            uploaded > 24,
+            "the move must have evicted and re-filled slots"
+        );
+        // Settled: the most urgent tiles fill the slots.
+        let r = pool.update(&cam, &ram, &mut target).unwrap();
+        assert_eq!(r.tiles_missing, r.tiles_wanted.saturating_sub(24), "{r:?}");
+        assert_eq!(r.vram_bytes, r.resident as u64 * tile_bytes);
+    }
+
+    #[test]
+    fn ranking_puts_the_root_first_then_nearest_coarser_before_finer() {
+        let m = manifest(WrapMode::Clamp);
+        let mut pool = VramPool::new(VramConfig::new(&m, 64)).unwrap();
+        let mut target = TileAtlas::new(m.tile_layout(), 64).unwrap();
+        let cam = camera(100.0, 120.0, 0.3);
+        pool.update(&cam, &MockRam::default(), &mut target).unwrap();
+        let wanted: Vec<TileId> = pool.wanted().collect();
+        assert_eq!(wanted[0], TileId::new(4, 0, 0));
+        let grid = &pool.config().grid;
+        let xz = grid.camera_xz(cam.position);
+        let eye = DVec3::new(xz.x, f64::from(cam.position.y), xz.y);
+        let d: Vec<f64> = wanted[1..]
+            .iter()
+            .map(|id| tile_distance(grid, eye, *id))
+            .collect();
+        assert!(d.windows(2).all(|w| w[0] <= w[1]), "{d:?}");
+        // The tiles under the camera, coarse to fine, come right after the root.
+        let under: Vec<u32> = wanted[1..5].iter().map(|w| w.level).collect();
+        assert_eq!(under, [3, 2, 1, 0]);
+    }
+
+    #[test]
+    fn missing_fine_tiles_fall_back_to_coarser_ones_and_come_in_when_loaded() {
+        let m = manifest(WrapMode::Clamp);
+        let mut ram = MockRam::all(&m);
+        // Level 0 and level 1 partly missing in RAM around the camera.
+        let removed: Vec<TileId> = [(0, 6, 7), (0, 7, 7), (0, 6, 8), (1, 3, 3), (0, 5, 6)]
+            .iter()
+            .map(|&(l, x, y)| TileId::new(l, x, y))
+            .collect();
+        let mut held = HashMap::new();
+        for id in &removed {
+            held.insert(*id, ram.tiles.remove(id).unwrap());
+        }
+        let mut pool = VramPool::new(VramConfig::new(&m, 128)).unwrap();
+        let mut atlas = TileAtlas::new(m.tile_layout(), 128).unwrap();
+        let cam = camera(110.0, 115.0, 0.0);
+        let mut r = VramReport::default();
+        for _ in 0..20 {
+            r = pool.update(&cam, &ram, &mut atlas).unwrap();
+        }
+        assert!(
+            r.waiting_for_ram > 0 && r.tiles_missing == r.waiting_for_ram,
+            "{r:?}"
+        );
+        assert_eq!(r.deferred, 0);
+        for id in &removed {
+            assert!(pool.slot_of(*id).is_none());
+        }
+        assert_fallback(&pool, &atlas, &m);
+        // Texel (100, 115) lies in level-0 tile (6, 7), missing: level 1 tile (3, 3) is
+        // missing too, so level 2 answers.
+        assert_eq!(
+            atlas.stored_at(glam::IVec2::new(100, 115)),
+            u32::from(truth(2, UVec2::new(25, 28)))
+        );
+        // They arrive: uploaded, and the fine values show.
+        ram.tiles.extend(held);
+        for _ in 0..5 {
+            r = pool.update(&cam, &ram, &mut atlas).unwrap();
+        }
+        assert_eq!(r.tiles_missing, 0, "{r:?}");
+        assert_eq!(
+            atlas.stored_at(glam::IVec2::new(100, 115)),
+            u32::from(truth(0, UVec2::new(100, 115)))
+        );
+        assert_fallback(&pool, &atlas, &m);
+    }
+
+    #[test]
+    fn modified_and_refreshed_tiles_are_uploaded_again() {
+        let m = manifest(WrapMode::Clamp);
+        let mut ram = MockRam::all(&m);
+        let mut pool = VramPool::new(VramConfig::new(&m, 64)).unwrap();
+        let mut atlas = TileAtlas::new(m.tile_layout(), 64).unwrap();
+        let cam = camera(110.0, 115.0, 0.0);
+        for _ in 0..20 {
+            pool.update(&cam, &ram, &mut atlas).unwrap();
+        }
+        let here = TileId::new(0, 6, 7);
+        let parent = TileId::new(1, 3, 3);
+        assert!(pool.slot_of(here).is_some() && pool.slot_of(parent).is_some());
+        // A deformation modifies the level-0 tile in RAM; its write-back refreshes the parent.
+        if let Some(TileData::U16(g)) = ram.tiles.get_mut(&here) {
+            *g.get_mut(4, 3).unwrap() = 12_345;
+        }
+        ram.versions.insert(here, 1);
+        ram.refreshed.push(parent);
+        let r = pool.update(&cam, &ram, &mut atlas).unwrap();
+        assert_eq!((r.uploads, r.refreshes, r.stale), (2, 2, 0), "{r:?}");
+        assert_eq!(atlas.stored_at(glam::IVec2::new(100, 115)), 12_345);
+        ram.refreshed.clear();
+        let r = pool.update(&cam, &ram, &mut atlas).unwrap();
+        assert_eq!(r.uploads, 0);
+        // A stale tile whose RAM copy is gone stays drawn (its old data) until it is back.
+        ram.refreshed.push(parent);
+        let data = ram.tiles.remove(&parent).unwrap();
+        let r = pool.update(&cam, &ram, &mut atlas).unwrap();
+        assert_eq!((r.uploads, r.stale), (0, 1), "{r:?}");
+        assert!(pool.slot_of(parent).is_some());
+        ram.refreshed.clear();
+        ram.tiles.insert(parent, data);
+        let r = pool.update(&cam, &ram, &mut atlas).unwrap();
+        assert_eq!((r.refreshes, r.stale), (1, 0), "{r:?}");
+    }
+
+    #[test]
+    fn the_least_recently_wanted_tiles_are_evicted_first() {
+        let m = manifest(WrapMode::Clamp);
+        let ram = MockRam::all(&m);
+        let mut cfg = VramConfig::new(&m, 34);
+        cfg.selection = VramSelection::Band {
+            band_width: 1.0 / 3.0,
+        };
+        cfg.upload_budget_bytes = 64 * u64::from(TS * TS) * 4;
+        let mut pool = VramPool::new(cfg).unwrap();
+        let mut atlas = TileAtlas::new(m.tile_layout(), 34).unwrap();
+        // A tour of the world; each place wants at most 9 tiles per level.
+        let places = [
+            (40.0, 40.0),
+            (200.0, 40.0),
+            (200.0, 200.0),
+            (40.0, 200.0),
+            (120.0, 130.0),
+            (40.0, 40.0),
+            (250.0, 10.0),
+        ];
+        let mut last_wanted: HashMap<TileId, usize> = HashMap::new();
+        let mut evictions = 0;
+        for (frame, &(x, z)) in places.iter().enumerate() {
+            let before = pool.resident_ids();
+            let r = pool.update(&camera(x, z, 0.0), &ram, &mut atlas).unwrap();
+            assert_eq!(r.tiles_missing, 0, "{r:?}");
+            assert!(r.tiles_wanted <= 9 * 4 + 1);
+            let after = pool.resident_ids();
+            let evicted: Vec<TileId> = before
+                .iter()
+                .filter(|id| !after.contains(id))
+                .copied()
+                .collect();
+            evictions += evicted.len();
+            // Each evicted tile was wanted no later than any unwanted tile that stayed.
+            for e in &evicted {
+                for s in after.iter().filter(|s| !pool.wanted().any(|w| w == **s)) {
+                    assert!(
+                        last_wanted[e] <= last_wanted[s],
+                        "frame {frame}: evicted {e} (wanted {}) before {s} (wanted {})",
+                        last_wanted[e],
+                        last_wanted[s]
+                    );
+                }
+            }
+            for w in pool.wanted() {
+                last_wanted.insert(w, frame);
+            }
+            assert_fallback(&pool, &atlas, &m);
+        }
+        assert!(evictions > 0);
+    }
+
+    #[test]
+    fn tiles_beyond_the_slot_count_never_evict_nearer_ones() {
+        let m = manifest(WrapMode::Repeat);
+        let ram = MockRam::all(&m);
+        let mut cfg = VramConfig::new(&m, 6);
+        cfg.upload_budget_bytes = 100 * u64::from(TS * TS) * 4;
+        let mut pool = VramPool::new(cfg).unwrap();
+        let mut atlas = TileAtlas::new(m.tile_layout(), 6).unwrap();
+        let cam = camera(128.0, 128.0, 1.0);
+        let r = pool.update(&cam, &ram, &mut atlas).unwrap();
+        assert_eq!(r.resident, 6);
+        assert_eq!(r.tiles_missing, r.tiles_wanted - 6);
+        let top: Vec<TileId> = pool.wanted().take(6).collect();
+        for _ in 0..5 {
+            let r = pool.update(&cam, &ram, &mut atlas).unwrap();
+            assert_eq!((r.uploads, r.evictions), (0, 0), "{r:?}");
+        }
+        for id in &top {
+            assert!(pool.slot_of(*id).is_some());
+        }
+        assert_fallback(&pool, &atlas, &m);
+    }
+
+    #[test]
+    fn extreme_cameras_are_bounded_and_nan_is_refused_without_change() {
+        let m = manifest(WrapMode::Repeat);
+        let ram = MockRam::all(&m);
+        for selection in [
+            VramSelection::default(),
+            VramSelection::Band { band_width: 0.5 },
+        ] {
+            let mut cfg = VramConfig::new(&m, 16);
+            cfg.selection = selection;
+            let mut pool = VramPool::new(cfg).unwrap();
+            let mut atlas = TileAtlas::new(m.tile_layout(), 16).unwrap();
+            let total: usize = (0..m.levels)
+                .map(|l| m.tiles_of(Layer::Height, l).count())
+                .sum();
+            for p in [
+                Vec3::splat(f32::MAX),
+                Vec3::splat(f32::MIN),
+                Vec3::new(1e30, -1e30, -1e-30),
+                Vec3::new(-3e38, 0.0, 3e38),
+            ] {
+                for fwd in [Vec3::X, Vec3::ZERO, Vec3::splat(f32::MAX), Vec3::NEG_Y] {
+                    let cam = CameraState {
+                        position: p,
+                        forward: fwd,
+                        fov_y: 3.1,
+                        aspect: 1e30,
+                    };
+                    let r = pool.update(&cam, &ram, &mut atlas).unwrap();
+                    assert!(r.tiles_wanted <= total && r.resident <= 16, "{r:?}");
+                    assert!(r.upload_bytes <= r.budget_bytes);
+                }
+            }
+            let frame = pool
+                .update(&camera(1.0, 1.0, 0.0), &ram, &mut atlas)
+                .unwrap()
+                .frame;
+            let table = atlas.table().to_vec();
+            for bad in [
+                CameraState::at(Vec3::new(f32::NAN, 0.0, 0.0)),
+                CameraState::at(Vec3::new(0.0, f32::INFINITY, 0.0)),
+                CameraState {
+                    forward: Vec3::new(0.0, f32::NAN, 1.0),
+                    ..CameraState::at(Vec3::ZERO)
+                },
+                CameraState {
+                    fov_y: f32::NAN,
+                    ..CameraState::at(Vec3::ZERO)
+                },
+            ] {
+                assert!(matches!(
+                    pool.update(&bad, &ram, &mut atlas),
+                    Err(VramError::Cache(_))
+                ));
+            }
+            assert_eq!(atlas.table(), table.as_slice());
+            let next = pool
+                .update(&camera(1.0, 1.0, 0.0), &ram, &mut atlas)
+                .unwrap();
+            assert_eq!(next.frame, frame + 1);
+        }
+    }
+
+    #[test]
+    fn bad_configs_and_mismatched_targets_are_errors() {
+        let m = manifest(WrapMode::Clamp);
+        let mut cfg = VramConfig::new(&m, 0);
+        assert!(VramPool::new(cfg.clone()).is_err());
+        cfg.slots = 8;
+        cfg.upload_budget_bytes = 10;
+        assert!(VramPool::new(cfg.clone()).is_err());
+        cfg.upload_budget_bytes = DEFAULT_UPLOAD_BUDGET_BYTES;
+        cfg.selection = VramSelection::Band {
+            band_width: f64::NAN,
+        };
+        assert!(VramPool::new(cfg.clone()).is_err());
+        cfg.selection = VramSelection::Frustum {
+            far_tiles: f64::INFINITY,
+            near_tiles: 1.0,
+            fov_margin: 0.1,
+            turn_gain: 1.0,
+        };
+        assert!(VramPool::new(cfg.clone()).is_err());
+        cfg.selection = VramSelection::default();
+        let mut pool = VramPool::new(cfg).unwrap();
+        let ram = MockRam::all(&m);
+        let cam = camera(10.0, 10.0, 0.0);
+        let mut few = TileAtlas::new(m.tile_layout(), 4).unwrap();
+        assert!(matches!(
+            pool.update(&cam, &ram, &mut few),
+            Err(VramError::Cache(CacheError::TargetMismatch {
+                what: "slot count",
+                ..
+            }))
+        ));
+        let other = Manifest::new(UVec2::splat(512), TS, 1.0, m.encoding, WrapMode::Clamp).unwrap();
+        let mut wrong = TileAtlas::new(other.tile_layout(), 8).unwrap();
+        assert!(pool.update(&cam, &ram, &mut wrong).is_err());
+        // A tile of the wrong shape in RAM is reported, not uploaded.
+        let mut bad = MockRam::all(&m);
+        bad.tiles.insert(
+            TileId::new(4, 0, 0),
+            TileData::filled(Layer::Detail, TS, 3).unwrap(),
+        );
+        let mut atlas = TileAtlas::new(m.tile_layout(), 8).unwrap();
+        assert!(matches!(
+            pool.update(&cam, &bad, &mut atlas),
+            Err(VramError::Cache(CacheError::TileDataMismatch { .. }))
+        ));
+        // Cleared: nothing mapped, every slot free again.
+        pool.update(&cam, &ram, &mut atlas).unwrap();
+        assert!(atlas.mapped() > 0);
+        pool.clear(&mut atlas).unwrap();
+        assert_eq!(atlas.mapped(), 0);
+        assert!(pool.resident_ids().is_empty());
+        let r = pool.update(&cam, &ram, &mut atlas).unwrap();
+        assert_eq!(r.resident, atlas.mapped());
+    }
+}

@@ -1,0 +1,547 @@
+//! The tile atlas on the GPU against terrain-core's `TileAtlas`: what the atlas surface reads
+//! (stored height exact, metres and central-difference gradients within float rounding) for
+//! random residency patterns, clamped and wrapped worlds; a partly resident world drawn
+//! without holes; a fully resident one drawn like the coarse-map it was cut from; and refusals
+//! instead of panics.
+
+#[path = "common/scene.rs"]
+#[allow(dead_code)] // Scene::render draws the coarse surface only; these tests draw their own.
+mod scene;
+
+use glam::{IVec2, UVec2, Vec2, Vec3};
+use scene::Scene;
+use terrain_core::{
+    Grid, HeightEncoding, INVALID_SLOT, TileAtlas, TileLayout, TileUploadTarget, WrapMode,
+};
+use terrain_gpu::testing::context_or_skip;
+use terrain_gpu::{
+    AtlasConfig, AtlasProbe, Camera, ClipmapSurface, ClipmapView, GpuError, GpuTileAtlas,
+    OffscreenTarget, SkyColors, TerrainStyle,
+};
+use terrain_lod::Frustum;
+
+/// splitmix64.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn chance(&mut self, p: f64) -> bool {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64 <= p
+    }
+}
+
+/// A level pyramid of `base` (2x2 averages, rounded; odd edges repeat their last sample) cut
+/// into tiles: `tile(level, xy)` is the tile's samples, edge tiles padded by clamping.
+struct Pyramid {
+    levels: Vec<Grid<u16>>,
+    tile_size: u32,
+}
+
+impl Pyramid {
+    fn new(base: Grid<u16>, levels: u32, tile_size: u32) -> Self {
+        let mut out = vec![base];
+        for _ in 1..levels {
+            let prev = out.last().unwrap();
+            let size = (prev.size() + 1) / 2;
+            let next = Grid::from_fn(size.x, size.y, |x, y| {
+                let mut sum = 0u32;
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let p = IVec2::new((2 * x + dx) as i32, (2 * y + dy) as i32);
+                    sum += u32::from(prev.get_wrapped(p, WrapMode::Clamp));
+                }
+                ((sum + 2) / 4) as u16
+            })
+            .unwrap();
+            out.push(next);
+        }
+        Self {
+            levels: out,
+            tile_size,
+        }
+    }
+
+    fn tile(&self, level: u32, t: UVec2) -> Grid<u16> {
+        let g = &self.levels[level as usize];
+        let ts = self.tile_size;
+        Grid::from_fn(ts, ts, |x, y| {
+            let p = (t * ts + UVec2::new(x, y)).as_ivec2();
+            g.get_wrapped(p, WrapMode::Clamp)
+        })
+        .unwrap()
+    }
+}
+
+/// Applies one call to both atlases.
+fn upload_both(
+    gpu: &mut GpuTileAtlas,
+    cpu: &mut TileAtlas,
+    pyramid: &Pyramid,
+    slot: u32,
+    level: u32,
+    t: UVec2,
+) {
+    let tile = pyramid.tile(level, t);
+    let a = gpu.upload(slot, level, t, &tile).unwrap();
+    let b = cpu.upload(slot, level, t, &tile).unwrap();
+    assert_eq!(a, b);
+}
+
+fn map_both(gpu: &mut GpuTileAtlas, cpu: &mut TileAtlas, level: u32, t: UVec2, slot: Option<u32>) {
+    gpu.map(level, t, slot).unwrap();
+    cpu.map(level, t, slot).unwrap();
+}
+
+/// Random residency: every tile of each level resident with that level's probability (coarser
+/// levels likelier; the root missing in some patterns, so the fill shows), then a round of
+/// evictions whose slots take other tiles, as a pool would do it.
+fn random_residency(gpu: &mut GpuTileAtlas, cpu: &mut TileAtlas, pyramid: &Pyramid, rng: &mut Rng) {
+    let layout = *cpu.layout();
+    let slots = cpu.slot_count();
+    let mut free: Vec<u32> = (0..slots).rev().collect();
+    let mut resident = Vec::new();
+    let root_missing = rng.chance(0.25);
+    for level in (0..layout.levels).rev() {
+        let p = match level {
+            0 => 0.3,
+            1 => 0.5,
+            _ => 0.7,
+        };
+        let t = layout.tiles_at(level);
+        for y in 0..t.y {
+            for x in 0..t.x {
+                let top = level + 1 == layout.levels;
+                let want = if top { !root_missing } else { rng.chance(p) };
+                if !want {
+                    continue;
+                }
+                let Some(slot) = free.pop() else { continue };
+                let xy = UVec2::new(x, y);
+                upload_both(gpu, cpu, pyramid, slot, level, xy);
+                map_both(gpu, cpu, level, xy, Some(slot));
+                resident.push((level, xy, slot));
+            }
+        }
+    }
+    // Evict a third of the resident tiles and reuse their slots for tiles not resident.
+    for i in (0..resident.len()).rev() {
+        if !rng.chance(0.33) {
+            continue;
+        }
+        let (level, xy, slot) = resident.swap_remove(i);
+        map_both(gpu, cpu, level, xy, None);
+        let l = (rng.next() % u64::from(layout.levels)) as u32;
+        let t = layout.tiles_at(l);
+        let n = UVec2::new(
+            (rng.next() % u64::from(t.x)) as u32,
+            (rng.next() % u64::from(t.y)) as u32,
+        );
+        if cpu.slot_of(l, n).is_none() {
+            upload_both(gpu, cpu, pyramid, slot, l, n);
+            map_both(gpu, cpu, l, n, Some(slot));
+        }
+    }
+}
+
+fn noise_grid(size: UVec2, seed: u64) -> Grid<u16> {
+    let mut rng = Rng(seed);
+    Grid::from_fn(size.x, size.y, |_, _| (rng.next() % 65_536) as u16).unwrap()
+}
+
+#[test]
+fn the_atlas_surface_reads_what_the_cpu_reference_reads_for_random_residency() {
+    let Some(ctx) = context_or_skip("atlas_probe_matches_cpu") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut probe = AtlasProbe::new(device, 32_768).unwrap();
+    let mut checked = 0usize;
+    for (case, wrap) in [WrapMode::Clamp, WrapMode::Repeat, WrapMode::Clamp]
+        .into_iter()
+        .enumerate()
+    {
+        // 200 x 136 texels in 16-texel tiles: 13x9, 7x5, 4x3, 2x2, 1x1 tiles; padded edges.
+        let layout = TileLayout {
+            world_size: UVec2::new(200, 136),
+            tile_size: 16,
+            levels: 5,
+            texel_size: 0.25,
+            encoding: HeightEncoding::new(0.01, -3.0).unwrap(),
+            wrap,
+            fill: 1234,
+        };
+        let config = AtlasConfig {
+            slots: 48,
+            world: layout,
+        };
+        let pyramid = Pyramid::new(noise_grid(layout.world_size, case as u64), 5, 16);
+        let mut gpu = GpuTileAtlas::new(device, queue, &config).unwrap();
+        let mut cpu = TileAtlas::new(layout, config.slots).unwrap();
+        let mut rng = Rng(0xA71A5 + case as u64);
+        // Every texel of the world, a margin around it, and far-off texels.
+        let mut texels = Vec::new();
+        for y in -3..139 {
+            for x in -3..203 {
+                texels.push(IVec2::new(x, y));
+            }
+        }
+        texels.extend([
+            IVec2::new(-(1 << 29), 5),
+            IVec2::new(1 << 29, -(1 << 29)),
+            IVec2::new(12_345, -987),
+        ]);
+        for round in 0..3 {
+            random_residency(&mut gpu, &mut cpu, &pyramid, &mut rng);
+            let table = gpu.read_table(device, queue).unwrap();
+            assert_eq!(
+                table,
+                cpu.table(),
+                "case {case} round {round}: tables differ"
+            );
+            let got = probe.read(device, queue, &gpu, &texels).unwrap();
+            assert_eq!(got.len(), texels.len());
+            let ts = layout.texel_size;
+            let h =
+                |t: IVec2| layout.encoding.offset + layout.encoding.scale * cpu.stored_at(t) as f32;
+            for (t, g) in texels.iter().zip(&got) {
+                let stored = cpu.stored_at(*t);
+                assert_eq!(g.stored, stored, "case {case} round {round} texel {t}");
+                let want_h = h(*t);
+                assert!(
+                    (g.height - want_h).abs() <= 1e-4,
+                    "texel {t}: height {} vs {want_h}",
+                    g.height
+                );
+                let d = Vec2::new(
+                    h(*t + IVec2::X) - h(*t - IVec2::X),
+                    h(*t + IVec2::Y) - h(*t - IVec2::Y),
+                ) / (2.0 * ts);
+                assert!(
+                    (g.derivative - d).abs().max_element() <= 1e-3 * d.abs().max_element().max(1.0),
+                    "texel {t}: gradient {} vs {d}",
+                    g.derivative
+                );
+                checked += 1;
+            }
+            // Some texels resolve to the fill, some to each level, in most rounds.
+            let fills = got.iter().filter(|g| g.stored == 1234).count();
+            eprintln!(
+                "case {case} round {round}: {} texels, {fills} fill",
+                got.len()
+            );
+        }
+    }
+    assert!(checked > 3 * 3 * 29_000);
+    ctx.check().expect("no GPU validation errors");
+}
+
+/// Magenta: a colour the terrain's shading cannot produce (as in render.rs).
+fn is_sky(p: [u8; 4]) -> bool {
+    p[0] > 200 && p[1] < 70 && p[2] > 200
+}
+
+/// Sky pixels below the terrain's silhouette, and terrain pixels (see render.rs).
+fn holes(image: &Grid<[u8; 4]>) -> (usize, usize) {
+    let mut holes = 0;
+    let mut terrain = 0;
+    for x in 0..image.width() {
+        let mut seen_terrain = false;
+        for y in 0..image.height() {
+            if !is_sky(image.get(x, y).unwrap()) {
+                seen_terrain = true;
+                terrain += 1;
+            } else if seen_terrain {
+                holes += 1;
+            }
+        }
+    }
+    (holes, terrain)
+}
+
+/// Renders `surface` from `camera` with the scene's layout, sky and renderer.
+fn render(
+    scene: &mut Scene,
+    surface: Surface<'_>,
+    camera: &Camera,
+    size: UVec2,
+    sky: &SkyColors,
+) -> Grid<[u8; 4]> {
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let aspect = size.x as f32 / size.y as f32;
+    let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
+    let frame = scene
+        .layout
+        .place(
+            Vec2::new(camera.position.x, camera.position.z),
+            1.0,
+            (0.0, scene::HEIGHT),
+            Some(&frustum),
+        )
+        .unwrap();
+    let style = TerrainStyle {
+        ramp: (0.0, scene::HEIGHT),
+        ..TerrainStyle::default()
+    };
+    scene
+        .sky
+        .prepare(queue, camera.view_proj_relative(aspect), sky)
+        .unwrap();
+    let surface = match surface {
+        Surface::Coarse => ClipmapSurface::Coarse {
+            map: &scene.gpu_map,
+            normals: &scene.normals,
+        },
+        Surface::Atlas(atlas) => ClipmapSurface::Atlas { atlas },
+    };
+    let view = ClipmapView {
+        surface,
+        frame: &frame,
+        camera,
+        style: &style,
+        target_size: size,
+    };
+    scene.renderer.prepare(device, queue, &view).unwrap();
+    let target = OffscreenTarget::new(device, size).unwrap();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
+        scene.sky.draw(&mut pass);
+        scene.renderer.draw(&mut pass);
+    }
+    queue.submit([encoder.finish()]);
+    let image = target.read_rgba8(device, queue).unwrap();
+    scene.ctx.check().expect("no GPU validation errors");
+    image
+}
+
+/// Which surface [`render`] draws.
+enum Surface<'a> {
+    /// The scene's coarse-map and derivative normals.
+    Coarse,
+    /// An atlas.
+    Atlas(&'a GpuTileAtlas),
+}
+
+/// The scene's map as a tiled world of 32-texel tiles (8x8, 4x4, 2x2, 1x1).
+fn scene_world(scene: &Scene, wrap: WrapMode) -> (AtlasConfig, Pyramid) {
+    let layout = TileLayout {
+        world_size: scene.map.size(),
+        tile_size: 32,
+        levels: 4,
+        texel_size: scene.map.texel_size(),
+        encoding: scene.map.encoding(),
+        wrap,
+        fill: 0,
+    };
+    let pyramid = Pyramid::new(scene.map.grid().clone(), 4, 32);
+    (
+        AtlasConfig {
+            slots: 85,
+            world: layout,
+        },
+        pyramid,
+    )
+}
+
+#[test]
+fn a_partly_resident_world_draws_without_holes() {
+    let Some(ctx) = context_or_skip("atlas_partly_resident_no_holes") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 31, 5);
+    let (config, pyramid) = scene_world(&scene, WrapMode::Clamp);
+    let (device, queue) = (scene.ctx.device.clone(), scene.ctx.queue.clone());
+    let mut atlas = GpuTileAtlas::new(&device, &queue, &config).unwrap();
+    // Level 0 as a checkerboard, level 1 every third tile, level 2 all but one, the root.
+    let mut slot = 0;
+    let mut put = |atlas: &mut GpuTileAtlas, level: u32, t: UVec2| {
+        atlas
+            .upload(slot, level, t, &pyramid.tile(level, t))
+            .unwrap();
+        atlas.map(level, t, Some(slot)).unwrap();
+        slot += 1;
+    };
+    for y in 0..8 {
+        for x in 0..8 {
+            if (x + y) % 2 == 0 {
+                put(&mut atlas, 0, UVec2::new(x, y));
+            }
+        }
+    }
+    for i in 0..16 {
+        if i % 3 == 0 {
+            put(&mut atlas, 1, UVec2::new(i % 4, i / 4));
+        }
+    }
+    for i in 1..4 {
+        put(&mut atlas, 2, UVec2::new(i % 2, i / 2));
+    }
+    put(&mut atlas, 3, UVec2::ZERO);
+    let magenta = SkyColors {
+        horizon: Vec3::new(1.0, 0.0, 1.0),
+        zenith: Vec3::new(1.0, 0.0, 1.0),
+    };
+    let size = UVec2::new(200, 120);
+    for (i, xz) in [Vec2::new(100.3, 120.6), Vec2::new(30.2, 200.7)]
+        .iter()
+        .enumerate()
+    {
+        for (j, yaw) in [0.0f32, 1.7, 3.3, 4.9].iter().enumerate() {
+            let eye = Vec3::new(xz.x, scene.ground(*xz) + 2.0, xz.y);
+            let camera = Camera::looking(eye, Vec3::new(yaw.cos(), 0.0, yaw.sin()));
+            let image = render(&mut scene, Surface::Atlas(&atlas), &camera, size, &magenta);
+            let (holes, terrain) = holes(&image);
+            assert!(terrain > (size.x * size.y / 4) as usize, "view {i}/{j}");
+            if holes > 0 {
+                let path = std::env::temp_dir().join(format!("atlas_hole_{i}_{j}.png"));
+                let _ = terrain_core::io::write_png_rgba8(&path, &image);
+                panic!(
+                    "view {i}/{j}: {holes} sky pixels inside the terrain ({})",
+                    path.display()
+                );
+            }
+        }
+    }
+    // Nothing resident at all: the fill's flat plane, still without holes.
+    let empty = GpuTileAtlas::new(&device, &queue, &config).unwrap();
+    let eye = Vec3::new(100.0, 3.0, 100.0);
+    let camera = Camera::looking(eye, Vec3::new(1.0, 0.0, 0.2));
+    let image = render(&mut scene, Surface::Atlas(&empty), &camera, size, &magenta);
+    let (holes, terrain) = holes(&image);
+    assert_eq!(holes, 0);
+    assert!(terrain > (size.x * size.y / 4) as usize);
+}
+
+/// A fully resident atlas of the scene's map against the coarse-map surface: the same heights
+/// (so the same silhouette), lit with central differences instead of the 4th-order derivative
+/// map, so colours differ a little (measured on lavapipe: 1.74).
+const FULL_ATLAS_MEAN_TOLERANCE: f64 = 3.0;
+
+#[test]
+fn a_fully_resident_world_draws_like_the_coarse_map() {
+    let Some(ctx) = context_or_skip("atlas_full_matches_coarse") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 31, 5);
+    let (config, pyramid) = scene_world(&scene, WrapMode::Repeat);
+    let (device, queue) = (scene.ctx.device.clone(), scene.ctx.queue.clone());
+    let mut atlas = GpuTileAtlas::new(&device, &queue, &config).unwrap();
+    // Only level 0: every texel reads the map itself.
+    for y in 0..8 {
+        for x in 0..8 {
+            let t = UVec2::new(x, y);
+            let slot = y * 8 + x;
+            atlas.upload(slot, 0, t, &pyramid.tile(0, t)).unwrap();
+            atlas.map(0, t, Some(slot)).unwrap();
+        }
+    }
+    let camera = scene::golden_camera(&scene);
+    let size = scene::GOLDEN_SIZE;
+    let sky = SkyColors::default();
+    let coarse = render(&mut scene, Surface::Coarse, &camera, size, &sky);
+    let from_atlas = render(&mut scene, Surface::Atlas(&atlas), &camera, size, &sky);
+    let mut sum = 0.0;
+    for (a, b) in coarse.as_slice().iter().zip(from_atlas.as_slice()) {
+        let d = (0..3)
+            .map(|c| (i32::from(a[c]) - i32::from(b[c])).unsigned_abs())
+            .max()
+            .unwrap_or(0);
+        sum += f64::from(d);
+    }
+    let mean = sum / coarse.as_slice().len() as f64;
+    eprintln!("atlas vs coarse: mean difference {mean:.2}");
+    if mean > FULL_ATLAS_MEAN_TOLERANCE {
+        let dir = std::env::temp_dir();
+        let _ = terrain_core::io::write_png_rgba8(dir.join("atlas_full.png"), &from_atlas);
+        let _ = terrain_core::io::write_png_rgba8(dir.join("atlas_coarse.png"), &coarse);
+        panic!("atlas render differs from the coarse render: mean {mean:.2}");
+    }
+}
+
+#[test]
+fn bad_calls_are_errors_not_panics() {
+    let Some(ctx) = context_or_skip("atlas_bad_calls") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let layout = TileLayout {
+        world_size: UVec2::new(64, 64),
+        tile_size: 16,
+        levels: 3,
+        texel_size: 1.0,
+        encoding: HeightEncoding::new(0.01, 0.0).unwrap(),
+        wrap: WrapMode::Clamp,
+        fill: 0,
+    };
+    let config = AtlasConfig {
+        slots: 4,
+        world: layout,
+    };
+    let mut atlas = GpuTileAtlas::new(device, queue, &config).unwrap();
+    let tile = Grid::new(16, 16, 5u16).unwrap();
+    assert!(atlas.upload(4, 0, UVec2::ZERO, &tile).is_err());
+    assert!(atlas.upload(0, 3, UVec2::ZERO, &tile).is_err());
+    assert!(atlas.upload(0, 1, UVec2::new(2, 0), &tile).is_err());
+    assert!(matches!(
+        atlas.upload(0, 0, UVec2::ZERO, &Grid::new(8, 16, 0).unwrap()),
+        Err(GpuError::SizeMismatch { .. })
+    ));
+    assert!(atlas.map(0, UVec2::ZERO, Some(4)).is_err());
+    assert!(atlas.map(0, UVec2::ZERO, Some(INVALID_SLOT)).is_err());
+    assert!(atlas.map(2, UVec2::new(1, 0), None).is_err());
+    assert_eq!(atlas.upload(3, 2, UVec2::ZERO, &tile).unwrap(), 16 * 16 * 4);
+    atlas.map(2, UVec2::ZERO, Some(3)).unwrap();
+    assert_eq!((atlas.uploads(), atlas.uploaded_bytes()), (1, 1024));
+    // Sizes past the device's limits or the shaders' u32 indices.
+    let huge = AtlasConfig {
+        slots: 65_535,
+        world: TileLayout {
+            tile_size: 256,
+            ..layout
+        },
+    };
+    assert!(matches!(
+        GpuTileAtlas::new(device, queue, &huge),
+        Err(GpuError::MapTooLarge { .. })
+    ));
+    let too_many = AtlasConfig {
+        slots: 65_537,
+        ..huge
+    };
+    assert!(GpuTileAtlas::new(device, queue, &too_many).is_err());
+    assert!(GpuTileAtlas::new(device, queue, &AtlasConfig { slots: 0, ..config }).is_err());
+    let limits = huge.required_limits(wgpu::Limits::default()).unwrap();
+    assert_eq!(limits.max_storage_buffer_binding_size, 65_535 * 65_536 * 4);
+    // The probe refuses texels its i32 arithmetic cannot take, and too many.
+    let mut probe = AtlasProbe::new(device, 8).unwrap();
+    assert!(
+        probe
+            .read(device, queue, &atlas, &[IVec2::new(i32::MAX, 0)])
+            .is_err()
+    );
+    assert!(
+        probe
+            .read(device, queue, &atlas, &[IVec2::new(0, i32::MIN)])
+            .is_err()
+    );
+    assert!(
+        probe
+            .read(device, queue, &atlas, &[IVec2::new((1 << 29) + 1, 0)])
+            .is_err()
+    );
+    assert!(
+        probe
+            .read(device, queue, &atlas, &[IVec2::ZERO; 9])
+            .is_err()
+    );
+    let got = probe
+        .read(device, queue, &atlas, &[IVec2::new(70, -3)])
+        .unwrap();
+    assert_eq!(got[0].stored, 5);
+    ctx.check().expect("no GPU validation errors");
+}
