@@ -26,6 +26,9 @@ pub struct Cli {
     /// Flyover: RAM pool budget in MiB.
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..=1_048_576))]
     pub ram_budget: u64,
+    /// Flyover: VRAM pool budget in MiB (tile slots of the GPU atlas, 256 KiB each).
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u64).range(1..=65_536))]
+    pub vram_budget: u64,
     /// Flyover: camera speed in metres per second (it flies, then drives).
     #[arg(long, default_value_t = 40.0)]
     pub speed: f32,

@@ -49,7 +49,12 @@ pub struct GpuScene {
     height_range: (f32, f32),
     /// Granular deformation on the GPU (the snow scenario), drawn instead of the coarse-map.
     granular: Option<GranularScene>,
+    /// A streamed world's tile atlas (the flyover), drawn instead of the coarse-map.
+    atlas: Option<GpuTileAtlas>,
 }
+
+/// The streamed world's tiles on the GPU: slots, indirection table, coarser fallback.
+pub use terrain_gpu::{AtlasConfig, GpuTileAtlas};
 
 /// The GPU side of the snow scenario: the fixed-point map, the step, the normals and float
 /// heights it is rendered from, the volume sum, and the readback of the areas a step changed.
@@ -120,6 +125,7 @@ impl GpuScene {
             timer: GpuTimer::new(device, queue),
             height_range: (lo, hi),
             granular: None,
+            atlas: None,
             style: TerrainStyle {
                 ramp: (lo, hi),
                 fog_density: 0.008,
@@ -258,6 +264,21 @@ impl GpuScene {
         })
     }
 
+    /// Draws a streamed world from now on: a tile atlas of `config` (slots, the world's tile
+    /// layout) that a VRAM pool fills through [`GpuScene::atlas_mut`].
+    pub fn enable_atlas(&mut self, config: &AtlasConfig) -> Result<()> {
+        let atlas = GpuTileAtlas::new(&self.ctx.device, &self.ctx.queue, config)?;
+        let enc = config.world.encoding;
+        self.height_range = (enc.to_metres(0.0), enc.to_metres(f64::from(u16::MAX)));
+        self.atlas = Some(atlas);
+        Ok(())
+    }
+
+    /// The tile atlas, when a streamed world is drawn.
+    pub fn atlas_mut(&mut self) -> Option<&mut GpuTileAtlas> {
+        self.atlas.as_mut()
+    }
+
     /// The GPU objects alive on the device now.
     pub fn live_objects(&self) -> GpuObjects {
         let hal = self.ctx.device.get_internal_counters().hal;
@@ -354,21 +375,27 @@ impl GpuScene {
         let aspect = size.x / size.y;
         let t = std::time::Instant::now();
         let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
+        // The texel size of the surface drawn (a streamed world's finest level).
+        let texel_size = match &self.atlas {
+            Some(atlas) if self.granular.is_none() => atlas.config().world.texel_size,
+            _ => self.map.texel_size(),
+        };
         let placement = self.layout.place(
             Vec2::new(camera.position.x, camera.position.z),
-            self.map.texel_size(),
+            texel_size,
             self.height_range,
             Some(&frustum),
         )?;
         timings.add(Step::Lod, crate::timings::ms_since(t));
         let view_proj = camera.view_proj_relative(aspect);
         let sky_colors = SkyColors::default();
-        let surface = match &self.granular {
-            Some(g) => ClipmapSurface::Granular {
+        let surface = match (&self.granular, &self.atlas) {
+            (Some(g), _) => ClipmapSurface::Granular {
                 map: &g.map,
                 surface: g.normals.buffer(),
             },
-            None => ClipmapSurface::Coarse {
+            (None, Some(atlas)) => ClipmapSurface::Atlas { atlas },
+            (None, None) => ClipmapSurface::Coarse {
                 map: &self.map,
                 normals: &self.normals,
             },

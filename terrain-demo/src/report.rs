@@ -118,6 +118,15 @@ pub struct CacheStats {
     /// Tiles the selection wants near the camera that are not in RAM yet (the frame falls back
     /// to coarser data there).
     pub tiles_missing: usize,
+    /// With a GPU: bytes of the tiles resident in the atlas.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vram_bytes: Option<u64>,
+    /// With a GPU: bytes uploaded this frame (never above the per-frame budget).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub upload_bytes: Option<u64>,
+    /// With a GPU: tiles uploaded this frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uploads: Option<usize>,
     /// Tiles the selection wants further out (ahead of the camera) still loading.
     pub prefetching: usize,
     /// Bytes the RAM pool holds, and its budget (never exceeded).

@@ -11,8 +11,13 @@ fn demo() -> Command {
 }
 
 fn run(world: &Path, out: &Path, frames: u32) -> serde_json::Value {
+    run_with(world, out, frames, &["--no-gpu"])
+}
+
+fn run_with(world: &Path, out: &Path, frames: u32, extra: &[&str]) -> serde_json::Value {
     let status = demo()
-        .args(["--scenario", "flyover", "--no-gpu", "--size", "1024"])
+        .args(["--scenario", "flyover", "--size", "1024"])
+        .args(extra)
         .args(["--ram-budget", "4", "--overview-size", "64"])
         .args(["--frames", &frames.to_string()])
         .arg("--world")
@@ -96,5 +101,41 @@ fn flyover_streams_within_budget_and_craters_persist() {
     assert_eq!(bad.status.code(), Some(1));
     let listed = String::from_utf8_lossy(&bad.stdout);
     assert!(listed.contains("height/00/0000/0001.png"), "{listed}");
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+#[test]
+fn with_a_gpu_the_vram_pool_streams_the_world_within_its_budgets() {
+    let Some(_ctx) = terrain_gpu::testing::context_or_skip("flyover_vram") else {
+        return;
+    };
+    let root = std::env::temp_dir().join(format!("terrain_flyover_gpu_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let report = run_with(
+        &root.join("world"),
+        &root.join("out"),
+        45,
+        &["--resolution", "96x64", "--vram-budget", "8"],
+    );
+    for f in report["frames"].as_array().expect("frames") {
+        let cache = &f["cache"];
+        let vram = cache["vram_bytes"].as_u64().expect("vram_bytes with a GPU");
+        assert!(vram <= 8 << 20, "frame {}: {cache}", f["index"]);
+        let upload = cache["upload_bytes"].as_u64().expect("upload_bytes");
+        assert!(
+            upload <= 2 << 20,
+            "frame {}: over the upload budget: {cache}",
+            f["index"]
+        );
+        if f["index"].as_u64() >= Some(30) {
+            assert_eq!(
+                cache["tiles_missing"].as_u64(),
+                Some(0),
+                "frame {}: {cache}",
+                f["index"]
+            );
+        }
+        assert!(f["triangles"].as_u64() > Some(0));
+    }
     let _ = std::fs::remove_dir_all(&root);
 }

@@ -12,13 +12,16 @@
 use super::world_files;
 use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
 use crate::cli::Cli;
-use crate::gpu_scene::Camera;
+use crate::gpu_scene::{AtlasConfig, Camera, GpuScene};
 use crate::report::{CacheStats, FrameStats};
 use crate::timings::{Step, ms_since};
 use anyhow::{Result, bail};
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use std::time::{Duration, Instant};
-use terrain_cache::{CameraState, Layer, PoolConfig, RamPool, TileId, World};
+use terrain_cache::{
+    CameraState, Layer, Manifest, PoolConfig, RamPool, SphericalSelection, TileGrid, TileId,
+    VramConfig, VramPool, World,
+};
 use terrain_core::{
     Blend, CoarseMap, DerivativeMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement,
     WrapMode, apply_stamp,
@@ -51,6 +54,10 @@ struct PendingStamp {
 pub struct FlyoverScenario {
     info: ScenarioInfo,
     pool: Option<RamPool>,
+    /// The VRAM pool, with a GPU: which tiles sit in the atlas's slots.
+    vram: Option<VramPool>,
+    manifest: Manifest,
+    vram_budget: u64,
     tile_size: u32,
     texel_size: f32,
     /// The overview level and the world's extent in metres.
@@ -98,7 +105,17 @@ impl FlyoverScenario {
         let normals = DerivativeMap::from_map(&overview);
         let initial_normals_ms = ms_since(t);
         let budget = cli.ram_budget.saturating_mul(1 << 20);
-        let pool = RamPool::new(world, PoolConfig::new(Layer::Height, budget))?;
+        // The RAM selection reaches further than the VRAM pool's (3 tiles ahead per level), so
+        // what the GPU wants next is already in RAM (seed 004 sec 4.3).
+        let grid = TileGrid::from_manifest(&manifest, Layer::Height);
+        let mut spherical = SphericalSelection::for_grid(&grid);
+        spherical.lod0_range *= 3.0;
+        spherical.view_distance *= 3.0;
+        let pool = RamPool::with_policy(
+            world,
+            PoolConfig::new(Layer::Height, budget),
+            Box::new(spherical),
+        )?;
         let extent = manifest.world_size.as_vec2() * manifest.texel_size;
         let tile = manifest.tile_size;
         let scratch = CoarseMap::new(
@@ -115,6 +132,9 @@ impl FlyoverScenario {
                 initial_normals_ms,
             },
             pool: Some(pool),
+            vram: None,
+            manifest,
+            vram_budget: cli.vram_budget.saturating_mul(1 << 20),
             tile_size: tile,
             texel_size: manifest.texel_size,
             overview_level,
@@ -302,6 +322,25 @@ impl Scenario for FlyoverScenario {
         &self.overview
     }
 
+    /// With a GPU the world is drawn from a tile atlas of as many slots as the VRAM budget
+    /// holds (u32 per texel), filled by the VRAM pool.
+    fn prepare_gpu(&mut self, scene: &mut GpuScene) -> Result<()> {
+        let slot_bytes = u64::from(self.tile_size).pow(2) * 4;
+        let slots = u32::try_from(self.vram_budget / slot_bytes).unwrap_or(u32::MAX);
+        if slots < 2 {
+            bail!(
+                "--vram-budget holds {slots} tile(s) of {} KiB: at least 2 are needed",
+                slot_bytes >> 10
+            );
+        }
+        scene.enable_atlas(&AtlasConfig {
+            slots,
+            world: self.manifest.tile_layout(),
+        })?;
+        self.vram = Some(VramPool::new(VramConfig::new(&self.manifest, slots))?);
+        Ok(())
+    }
+
     fn normals(&self) -> &DerivativeMap {
         &self.normals
     }
@@ -365,6 +404,16 @@ impl Scenario for FlyoverScenario {
         };
         let report = self.pool()?.update(&state)?;
         self.written_back += report.written as u64;
+        // The VRAM pool uploads the nearest wanted tiles in RAM, within the per-frame budget.
+        let mut vram_report = None;
+        if let (Some(vram), Some(pool), Some(scene)) = (
+            self.vram.as_mut(),
+            self.pool.as_ref(),
+            ctx.gpu.as_deref_mut(),
+        ) && let Some(atlas) = scene.atlas_mut()
+        {
+            vram_report = Some(vram.update(&state, pool, atlas)?);
+        }
         ctx.timings.add(Step::Cache, ms_since(t_frame));
         let camera_clearance_m = eye.y - self.ground(xz);
         Ok(FrameOutcome {
@@ -374,7 +423,12 @@ impl Scenario for FlyoverScenario {
                 craters: u32::from(!dirty.is_empty()),
                 dirty_texels: dirty.iter().map(Rect::area).sum(),
                 cache: Some(CacheStats {
-                    tiles_missing: self.tiles_missing(xz),
+                    // With a GPU: wanted tiles drawn from a coarser level; without one, the
+                    // tiles under and around the camera not in RAM.
+                    tiles_missing: vram_report.map_or(self.tiles_missing(xz), |v| v.tiles_missing),
+                    vram_bytes: vram_report.map(|v| v.vram_bytes),
+                    upload_bytes: vram_report.map(|v| v.upload_bytes),
+                    uploads: vram_report.map(|v| v.uploads),
                     prefetching: report.wanted.saturating_sub(report.wanted_resident),
                     ram_bytes: report.ram_bytes,
                     ram_budget_bytes: report.budget_bytes,
