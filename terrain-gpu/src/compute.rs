@@ -92,7 +92,8 @@ impl StorageBinding {
 /// [`PassBindings::recall`] (4 MiB of uniforms at the usual 256-byte alignment).
 const RING_START: u32 = 256;
 const RING_MAX: u32 = 16_384;
-/// Distinct sets of bound buffers a pass keeps bind groups for before it drops them all.
+/// Distinct sets of bound buffers a pass keeps bind groups for; past it the least recently
+/// used one is dropped (a bind group holds its buffers alive, so the cache is bounded).
 const BIND_CACHE: usize = 32;
 
 /// The bindings of one pass, built once: a bind group layout of a uniform block at binding 0
@@ -113,7 +114,9 @@ pub struct PassBindings<T: Pod> {
     stride: u64,
     capacity: u32,
     next: u32,
-    groups: HashMap<Vec<wgpu::Buffer>, wgpu::BindGroup>,
+    /// Bind groups by the buffers they bind, with the use count of their last use.
+    groups: HashMap<Vec<wgpu::Buffer>, (wgpu::BindGroup, u64)>,
+    uses: u64,
     _uniform: PhantomData<T>,
 }
 
@@ -167,6 +170,7 @@ impl<T: Pod> PassBindings<T> {
             capacity: RING_START,
             next: 0,
             groups: HashMap::new(),
+            uses: 0,
             _uniform: PhantomData,
         }
     }
@@ -223,11 +227,20 @@ impl<T: Pod> PassBindings<T> {
         buffers: &[&wgpu::Buffer],
     ) -> Result<wgpu::BindGroup, GpuError> {
         let key: Vec<wgpu::Buffer> = buffers.iter().map(|b| (*b).clone()).collect();
-        if let Some(group) = self.groups.get(&key) {
+        self.uses += 1;
+        if let Some((group, last)) = self.groups.get_mut(&key) {
+            *last = self.uses;
             return Ok(group.clone());
         }
         if self.groups.len() >= BIND_CACHE {
-            self.groups.clear();
+            let oldest = self
+                .groups
+                .iter()
+                .min_by_key(|(_, (_, last))| *last)
+                .map(|(k, _)| k.clone());
+            if let Some(k) = oldest {
+                self.groups.remove(&k);
+            }
         }
         let mut entries = vec![wgpu::BindGroupEntry {
             binding: 0,
@@ -253,7 +266,7 @@ impl<T: Pod> PassBindings<T> {
                 entries: &entries,
             })
         })?;
-        self.groups.insert(key, group.clone());
+        self.groups.insert(key, (group.clone(), self.uses));
         Ok(group)
     }
 

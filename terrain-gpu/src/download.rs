@@ -2,6 +2,19 @@
 
 use crate::error::GpuError;
 
+/// The longest a blocking call waits for the GPU before it reports [`GpuError::Poll`] (a lost
+/// or hung device must not hang the caller). Generous: a software adapter renders a large
+/// frame in about a second.
+pub const WAIT_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(60);
+
+/// A blocking poll for the latest submission, bounded by [`WAIT_TIMEOUT`].
+pub fn wait_bounded() -> wgpu::PollType {
+    wgpu::PollType::Wait {
+        submission_index: None,
+        timeout: Some(WAIT_TIMEOUT),
+    }
+}
+
 /// Copies `size` bytes from `offset` of `buffer` (which needs `COPY_SRC`) to the CPU, waiting
 /// for the GPU. `offset` and `size` must be multiples of 4.
 pub fn download_bytes(
@@ -30,7 +43,7 @@ pub fn map_and_read(device: &wgpu::Device, staging: &wgpu::Buffer) -> Result<Vec
     staging.map_async(wgpu::MapMode::Read, .., move |r| {
         let _ = tx.send(r);
     });
-    device.poll(wgpu::PollType::wait_indefinitely())?;
+    device.poll(wait_bounded())?;
     rx.recv().map_err(|_| GpuError::MapDropped)??;
     let bytes = staging.get_mapped_range(..)?.to_vec();
     staging.unmap();

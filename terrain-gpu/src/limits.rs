@@ -28,6 +28,15 @@ pub enum MapUse {
 }
 
 impl MapUse {
+    /// Storage buffers one shader stage binds at most: 3 for the coarse passes (the stamp, the
+    /// normals, the atlas lookup), 7 for the granular displacement pass.
+    pub fn storage_buffers_per_stage(self) -> u32 {
+        match self {
+            MapUse::Coarse => 3,
+            MapUse::Granular => 7,
+        }
+    }
+
     /// The largest per-texel buffer of this use, in bytes per texel.
     pub fn max_bytes_per_texel(self) -> u64 {
         match self {
@@ -53,11 +62,11 @@ pub fn required_limits(
         }
         .into());
     }
-    // Saturates: a map past 2^64 bytes needs more than any device has, which check_limits says.
-    let bytes =
-        (u64::from(map_size.x) * u64::from(map_size.y)).saturating_mul(usage.max_bytes_per_texel());
-    let groups = map_size.max_element().div_ceil(WORKGROUP);
+    let (bytes, groups) = needs(map_size, usage);
     Ok(wgpu::Limits {
+        max_storage_buffers_per_shader_stage: base
+            .max_storage_buffers_per_shader_stage
+            .max(usage.storage_buffers_per_stage()),
         max_storage_buffer_binding_size: base.max_storage_buffer_binding_size.max(bytes),
         max_buffer_size: base.max_buffer_size.max(bytes),
         max_compute_workgroups_per_dimension: base.max_compute_workgroups_per_dimension.max(groups),
@@ -68,8 +77,14 @@ pub fn required_limits(
 /// Checks that a device (or adapter) with `limits` can hold maps of `map_size` used as `usage`,
 /// naming the first limit that is too small.
 pub fn check_limits(limits: &wgpu::Limits, map_size: UVec2, usage: MapUse) -> Result<(), GpuError> {
-    let needed = required_limits(map_size, usage, wgpu::Limits::downlevel_defaults())?;
-    let bytes = needed.max_storage_buffer_binding_size;
+    if map_size.x == 0 || map_size.y == 0 {
+        return Err(terrain_core::CoreError::EmptyGrid {
+            width: map_size.x,
+            height: map_size.y,
+        }
+        .into());
+    }
+    let (bytes, groups) = needs(map_size, usage);
     let limit = limits
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size);
@@ -80,15 +95,31 @@ pub fn check_limits(limits: &wgpu::Limits, map_size: UVec2, usage: MapUse) -> Re
             limit,
         });
     }
-    if needed.max_compute_workgroups_per_dimension > limits.max_compute_workgroups_per_dimension {
+    if groups > limits.max_compute_workgroups_per_dimension {
         return Err(terrain_core::CoreError::OutOfRange {
             what: "map side (compute workgroups per axis)",
-            value: f64::from(needed.max_compute_workgroups_per_dimension),
+            value: f64::from(groups),
             expected: "within the device's max_compute_workgroups_per_dimension",
         }
         .into());
     }
+    if usage.storage_buffers_per_stage() > limits.max_storage_buffers_per_shader_stage {
+        return Err(terrain_core::CoreError::OutOfRange {
+            what: "storage buffers per shader stage",
+            value: f64::from(usage.storage_buffers_per_stage()),
+            expected: "within the device's max_storage_buffers_per_shader_stage",
+        }
+        .into());
+    }
     Ok(())
+}
+
+/// The bytes of the largest per-texel buffer and the workgroups per axis of a map (the bytes
+/// saturate: a map past 2^64 bytes needs more than any device has, which check_limits says).
+fn needs(map_size: UVec2, usage: MapUse) -> (u64, u32) {
+    let bytes =
+        (u64::from(map_size.x) * u64::from(map_size.y)).saturating_mul(usage.max_bytes_per_texel());
+    (bytes, map_size.max_element().div_ceil(WORKGROUP))
 }
 
 #[cfg(test)]
@@ -104,6 +135,12 @@ mod tests {
         assert_eq!(granular.max_storage_buffer_binding_size, 1 << 30);
         assert!(check_limits(&base, UVec2::splat(8192), MapUse::Coarse).is_err());
         assert!(check_limits(&coarse, UVec2::splat(8192), MapUse::Coarse).is_ok());
+        // A small map fits the smallest devices; granular needs 7 storage buffers a stage.
+        let low = wgpu::Limits::downlevel_defaults();
+        assert!(check_limits(&low, UVec2::splat(64), MapUse::Coarse).is_ok());
+        assert!(check_limits(&low, UVec2::splat(64), MapUse::Granular).is_err());
+        let raised = required_limits(UVec2::splat(64), MapUse::Granular, low).unwrap();
+        assert!(check_limits(&raised, UVec2::splat(64), MapUse::Granular).is_ok());
     }
 
     #[test]

@@ -83,7 +83,13 @@ impl NormalPass {
             wrap: wrap_code(map.wrap()),
             k,
             // Covers the region and the stencil's reach of 2 texels around any wrapped texel.
-            wrap_offset: wrap_offset(region.min.min(glam::IVec2::ZERO) - 2, map.size())?,
+            wrap_offset: wrap_offset(
+                region
+                    .min
+                    .min(glam::IVec2::ZERO)
+                    .saturating_sub(glam::IVec2::splat(2)),
+                map.size(),
+            )?,
         };
         let groups = dispatch_size(device, region.size)?;
         let (group, offset) =

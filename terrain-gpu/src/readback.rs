@@ -161,7 +161,7 @@ impl RegionReadback {
 
     /// Waits until every request in flight has arrived and hands them over (tests, shutdown).
     pub fn wait(&mut self, device: &wgpu::Device) -> Result<Vec<RegionData>, GpuError> {
-        device.poll(wgpu::PollType::wait_indefinitely())?;
+        device.poll(crate::download::wait_bounded())?;
         self.collect()
     }
 
@@ -188,18 +188,23 @@ impl RegionReadback {
                 failures.push(rect);
                 continue;
             }
+            // A region that cannot be viewed counts as failed, like a failed mapping: the
+            // regions already collected are still handed over.
             let bytes = rect.area() * 4;
-            let values: Vec<u32> = {
-                let view = buffer.get_mapped_range(0..bytes)?;
-                bytemuck::cast_slice(&view).to_vec()
-            };
+            let values: Option<Vec<u32>> = buffer
+                .get_mapped_range(0..bytes)
+                .ok()
+                .map(|view| bytemuck::cast_slice(&view).to_vec());
             buffer.unmap();
-            out.push(RegionData {
-                ticket,
-                rect,
-                raw: Grid::from_vec(rect.size.x, rect.size.y, values)?,
-                encoding,
-            });
+            match values.and_then(|v| Grid::from_vec(rect.size.x, rect.size.y, v).ok()) {
+                Some(raw) => out.push(RegionData {
+                    ticket,
+                    rect,
+                    raw,
+                    encoding,
+                }),
+                None => failures.push(rect),
+            }
         }
         out.sort_by_key(|r| r.ticket);
         if !failures.is_empty() {

@@ -110,7 +110,7 @@ impl GpuTimer {
         }
         let start = Instant::now();
         queue.submit([encoder.finish()]);
-        device.poll(wgpu::PollType::wait_indefinitely())?;
+        device.poll(crate::download::wait_bounded())?;
         let wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let timestamp_ms = match &self.queries {
             Some((_, _, staging)) => {

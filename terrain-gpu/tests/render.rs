@@ -309,6 +309,19 @@ fn renderers_draw_into_the_callers_msaa_srgb_pass_like_the_capture() {
     let bytes = terrain_gpu::download::map_and_read(device, &staging).unwrap();
     scene.ctx.check().expect("no GPU validation errors");
 
+    // Both paths must show terrain, not only sky (the same renderer drawing nothing would
+    // otherwise pass).
+    // Sky pixels are blue over red by 43 (horizon) to 133 (zenith); lit terrain (greens,
+    // browns, rock, snow) is not.
+    let terrain = capture
+        .as_slice()
+        .iter()
+        .filter(|p| i32::from(p[2]) - i32::from(p[0]) < 30)
+        .count();
+    assert!(
+        terrain as f64 > 0.3 * f64::from(size.x * size.y),
+        "the capture shows terrain: {terrain} pixels"
+    );
     let mut sum = 0.0;
     let mut edges = 0usize;
     for y in 0..size.y {

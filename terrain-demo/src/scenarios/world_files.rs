@@ -31,7 +31,11 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
         FsStore::open(&cli.world)
             .with_context(|| format!("cannot use world folder {}", cli.world.display()))?,
     );
-    if let Ok(world) = World::open(store.clone()) {
+    // A folder with a manifest is a world: opened, or its error reported; never rebuilt over
+    // (it may hold deformations of earlier runs).
+    if store.exists(terrain_cache::manifest::MANIFEST_KEY)? {
+        let world = World::open(store.clone())
+            .with_context(|| format!("the world in {} cannot be opened", cli.world.display()))?;
         eprintln!(
             "world {}: {} texels, {} levels (deformations of earlier runs included)",
             cli.world.display(),

@@ -30,3 +30,14 @@ pub use passes::{
 pub use scratch::{GranularArea, GranularScratch};
 pub use step::{DepthSource, GpuGranularStep, GpuStepReport};
 pub use volume::VolumePass;
+
+// The shaders' codes are terrain-core's values: a mismatch fails the build.
+const _: () = {
+    use terrain_core::granular::{ColumnKind, NO_OBJECT, NO_SEED};
+    use terrain_shaders::codes;
+    assert!(codes::SEED == ColumnKind::Seed as i32);
+    assert!(codes::OBSTACLE == ColumnKind::Obstacle as i32);
+    assert!(codes::PENETRATING == ColumnKind::Penetrating as i32);
+    assert!(codes::NO_SEED == NO_SEED);
+    assert!(codes::NO_OBJECT == NO_OBJECT);
+};
