@@ -69,8 +69,8 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
             None => capture.push(overview.image(), report, timings)?,
         }
     }
+    let finish = scenario.finish(gpu.as_mut())?;
     io::write_png16(cli.out.join("terrain_final.png"), scenario.map().grid())?;
-    let finish = scenario.finish()?;
 
     let info = scenario.info();
     let map = scenario.map();

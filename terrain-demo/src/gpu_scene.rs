@@ -279,6 +279,37 @@ impl GpuScene {
         self.atlas.as_mut()
     }
 
+    /// Ends granular deformation on the GPU: requests the changed areas still waiting for a
+    /// ring slot and waits for every readback in flight, so the CPU copy gets the last steps.
+    pub fn drain_granular(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let Some(g) = self.granular.as_mut() else {
+            return Ok(Vec::new());
+        };
+        let mut arrived = Vec::new();
+        // Bounded: each round frees every slot, and the pending list only shrinks.
+        while !g.pending.is_empty() || g.readback.in_flight() > 0 {
+            let mut encoder = device.create_command_encoder(&Default::default());
+            let mut waiting = Vec::new();
+            for rect in std::mem::take(&mut g.pending) {
+                match g.readback.request(device, &mut encoder, &g.map, rect) {
+                    Ok(_) => {}
+                    Err(terrain_gpu::GpuError::ReadbackBusy { .. }) => waiting.push(rect),
+                    Err(e) => return Err(e.into()),
+                }
+            }
+            g.pending = waiting;
+            queue.submit([encoder.finish()]);
+            arrived.extend(
+                g.readback
+                    .wait(device)?
+                    .into_iter()
+                    .map(|r| (r.rect, r.raw)),
+            );
+        }
+        Ok(arrived)
+    }
+
     /// The GPU objects alive on the device now.
     pub fn live_objects(&self) -> GpuObjects {
         let hal = self.ctx.device.get_internal_counters().hal;

@@ -444,7 +444,7 @@ impl Scenario for FlyoverScenario {
         })
     }
 
-    fn finish(&mut self) -> Result<FinishStats> {
+    fn finish(&mut self, _gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
         let Some(mut pool) = self.pool.take() else {
             return Ok(FinishStats::default());
         };

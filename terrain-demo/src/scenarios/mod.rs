@@ -104,7 +104,7 @@ pub trait Scenario {
 
     /// Ends the run: writes back what the scenario keeps outside the report (the flyover's
     /// dirty tiles) and says what it did.
-    fn finish(&mut self) -> Result<FinishStats> {
+    fn finish(&mut self, _gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
         Ok(FinishStats::default())
     }
 

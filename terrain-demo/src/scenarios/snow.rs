@@ -8,7 +8,7 @@
 //! areas are copied to the coarse-map, its normals and the collision mirror.
 
 use super::snow_field::SnowField;
-use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo};
+use super::{FRAME_DT, FinishStats, FrameContext, FrameOutcome, Scenario, ScenarioInfo};
 use crate::camera_rig::CameraRig;
 use crate::cli::Cli;
 use crate::gpu_scene::GpuScene;
@@ -100,6 +100,20 @@ impl Scenario for SnowScenario {
     /// No larger than the field: a small field is not blown up.
     fn overview_size(&self, side: u32) -> UVec2 {
         self.coarse.size().min(UVec2::splat(side))
+    }
+
+    /// The last steps' areas come back from the GPU before `terrain_final.png` is written.
+    fn finish(&mut self, gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
+        if let Some(scene) = gpu
+            && self.on_gpu
+        {
+            for (rect, heights) in scene.drain_granular()? {
+                self.field.write_region(rect, &heights)?;
+                self.field.copy_to_coarse(&mut self.coarse, rect)?;
+                self.normals.update_rect(&self.coarse, rect)?;
+            }
+        }
+        Ok(FinishStats::default())
     }
 
     fn advance(&mut self, ctx: &mut FrameContext<'_>) -> Result<FrameOutcome> {
