@@ -60,8 +60,7 @@ pub struct FlyoverScenario {
     vram_budget: u64,
     tile_size: u32,
     texel_size: f32,
-    /// The overview level and the world's extent in metres.
-    overview_level: u32,
+    /// The world's extent in metres.
     extent: Vec2,
     overview: CoarseMap,
     normals: DerivativeMap,
@@ -137,7 +136,6 @@ impl FlyoverScenario {
             vram_budget: cli.vram_budget.saturating_mul(1 << 20),
             tile_size: tile,
             texel_size: manifest.texel_size,
-            overview_level,
             extent,
             overview,
             normals,
@@ -206,66 +204,85 @@ impl FlyoverScenario {
         missing
     }
 
-    /// Applies `stamp` to every resident level-0 tile it touches that it has not changed yet;
-    /// returns whether all of them are done.
-    fn apply_to_tiles(&mut self, stamp: &mut PendingStamp) -> Result<bool> {
-        let footprint = stamp.placement.footprint(self.texel_size)?;
-        let world = Rect::from_size(self.overview.size() * (1 << self.overview_level));
-        let Some(rect) = footprint.intersect(&world) else {
-            return Ok(true);
+    /// The level-0 tiles a crater's footprint touches.
+    fn tiles_of(&self, placement: &StampPlacement) -> Result<Vec<TileId>> {
+        let footprint = placement.footprint(self.texel_size)?;
+        let Some(rect) = footprint.intersect(&Rect::from_size(self.manifest.world_size)) else {
+            return Ok(Vec::new());
         };
         let ts = self.tile_size as i32;
         let (lo, hi) = (rect.min / ts, (rect.max() - IVec2::ONE) / ts);
-        let mut all = true;
-        let mut bit = 0;
+        let mut ids = Vec::new();
         for ty in lo.y..=hi.y {
             for tx in lo.x..=hi.x {
-                // (At most 4 tiles: craters are at most a tile wide.)
-                let done = bit < 128 && stamp.tiles[bit / 32] & (1 << (bit % 32)) != 0;
-                bit += 1;
-                if done {
-                    continue;
-                }
-                let id = TileId::new(0, tx as u32, ty as u32);
-                // The tile's own frame: the placement moves by the tile's origin.
-                let origin =
-                    Vec2::new(tx as f32, ty as f32) * self.tile_size as f32 * self.texel_size;
-                let local = StampPlacement {
-                    center: stamp.placement.center - origin,
-                    ..stamp.placement
-                };
-                let (scratch, gauss) = (&mut self.scratch, &mut self.gauss);
-                let pool = self
-                    .pool
-                    .as_mut()
-                    .ok_or_else(|| anyhow::anyhow!("no pool"))?;
-                if pool.tile(id).is_none() {
-                    all = false;
-                    continue;
-                }
-                pool.modify(id, |tile| -> Result<()> {
-                    let Some(grid) = tile.as_u16_mut() else {
-                        return Ok(());
-                    };
-                    if grid.size() != scratch.size() {
-                        return Ok(());
-                    }
-                    scratch
-                        .grid_mut()
-                        .as_mut_slice()
-                        .copy_from_slice(grid.as_slice());
-                    apply_stamp(scratch, gauss, &local, Blend::Add)?;
-                    grid.as_mut_slice()
-                        .copy_from_slice(scratch.grid().as_slice());
-                    Ok(())
-                })??;
-                let b = bit - 1;
-                if b < 128 {
-                    stamp.tiles[b / 32] |= 1 << (b % 32);
-                }
+                ids.push(TileId::new(0, tx as u32, ty as u32));
             }
         }
+        Ok(ids)
+    }
+
+    /// A crater's placement in the frame of level-0 tile `id`.
+    fn local_placement(&self, placement: &StampPlacement, id: TileId) -> StampPlacement {
+        let origin = Vec2::new(id.x as f32, id.y as f32) * self.tile_size as f32 * self.texel_size;
+        StampPlacement {
+            center: placement.center - origin,
+            ..*placement
+        }
+    }
+
+    /// Applies `stamp` to every resident level-0 tile it touches that it has not changed yet;
+    /// returns whether all of them are done.
+    fn apply_to_tiles(&mut self, stamp: &mut PendingStamp) -> Result<bool> {
+        let mut all = true;
+        // (A crater is at most a tile wide, so it touches at most 4 tiles.)
+        for (bit, id) in self
+            .tiles_of(&stamp.placement)?
+            .into_iter()
+            .enumerate()
+            .take(128)
+        {
+            if stamp.is_done(bit) {
+                continue;
+            }
+            let local = self.local_placement(&stamp.placement, id);
+            let (scratch, gauss) = (&mut self.scratch, &mut self.gauss);
+            let pool = self
+                .pool
+                .as_mut()
+                .ok_or_else(|| anyhow::anyhow!("no pool"))?;
+            if pool.tile(id).is_none() {
+                all = false;
+                continue;
+            }
+            pool.modify(id, |tile| -> Result<()> {
+                let Some(grid) = tile.as_u16_mut() else {
+                    return Ok(());
+                };
+                if grid.size() != scratch.size() {
+                    return Ok(());
+                }
+                scratch
+                    .grid_mut()
+                    .as_mut_slice()
+                    .copy_from_slice(grid.as_slice());
+                apply_stamp(scratch, gauss, &local, Blend::Add)?;
+                grid.as_mut_slice()
+                    .copy_from_slice(scratch.grid().as_slice());
+                Ok(())
+            })??;
+            stamp.mark_done(bit);
+        }
         Ok(all)
+    }
+}
+
+impl PendingStamp {
+    fn is_done(&self, bit: usize) -> bool {
+        self.tiles[bit / 32] & (1 << (bit % 32)) != 0
+    }
+
+    fn mark_done(&mut self, bit: usize) {
+        self.tiles[bit / 32] |= 1 << (bit % 32);
     }
 }
 
@@ -449,10 +466,45 @@ impl Scenario for FlyoverScenario {
             return Ok(FinishStats::default());
         };
         // Every dirty tile goes back into the world before the run ends.
+        let world = pool.world().clone();
         let issued = pool.flush();
         pool.shutdown(SHUTDOWN_TIMEOUT)?;
+        let mut written = self.written_back + issued as u64;
+        // Craters whose tiles never became resident go straight into the world's files.
+        let mut changed = Vec::new();
+        for stamp in std::mem::take(&mut self.pending) {
+            for (bit, id) in self
+                .tiles_of(&stamp.placement)?
+                .into_iter()
+                .enumerate()
+                .take(128)
+            {
+                if stamp.is_done(bit) {
+                    continue;
+                }
+                let mut data = (*world.load_tile(Layer::Height, id)?).clone();
+                if let Some(grid) = data.as_u16_mut()
+                    && grid.size() == self.scratch.size()
+                {
+                    let local = self.local_placement(&stamp.placement, id);
+                    self.scratch
+                        .grid_mut()
+                        .as_mut_slice()
+                        .copy_from_slice(grid.as_slice());
+                    apply_stamp(&mut self.scratch, &mut self.gauss, &local, Blend::Add)?;
+                    grid.as_mut_slice()
+                        .copy_from_slice(self.scratch.grid().as_slice());
+                    world.write_tile(Layer::Height, id, &data)?;
+                    changed.push(id);
+                }
+            }
+        }
+        if !changed.is_empty() {
+            written += changed.len() as u64;
+            terrain_cache::rebuild_ancestors(&world, &changed)?;
+        }
         Ok(FinishStats {
-            written_back_tiles: Some(self.written_back + issued as u64),
+            written_back_tiles: Some(written),
         })
     }
 }
