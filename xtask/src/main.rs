@@ -213,7 +213,7 @@ fn publishable_crates() -> Result<Vec<String>> {
 }
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 3] = [
+const EXAMPLES: [(&str, &str, &[&str]); 6] = [
     (
         "terrain-core",
         "stamp_heightmap",
@@ -225,6 +225,9 @@ const EXAMPLES: [(&str, &str, &[&str]); 3] = [
         &["--size", "64", "--spheres", "2", "--steps", "90"],
     ),
     ("terrain-gpu", "own_device", &["{out}/own_device.png"]),
+    ("terrain-lod", "clipmap_frame", &["63", "4"]),
+    ("terrain-cache", "build_world", &["512", "{out}/world"]),
+    ("terrain-cache", "trace_sim", &[]),
 ];
 
 /// Example files that are tools rather than examples, with why `examples` does not run them.
@@ -237,7 +240,13 @@ const NOT_EXAMPLES: [(&str, &str, &str); 1] = [(
 /// Runs every example of the library crates once at a tiny size; fails on an example file that
 /// `EXAMPLES` does not list, so none is left unrun.
 fn examples() -> Result<()> {
-    for krate in ["terrain-core", "terrain-physics", "terrain-gpu"] {
+    for krate in [
+        "terrain-core",
+        "terrain-physics",
+        "terrain-gpu",
+        "terrain-lod",
+        "terrain-cache",
+    ] {
         let dir = root().join(krate).join("examples");
         let Ok(entries) = std::fs::read_dir(&dir) else {
             continue;
@@ -259,6 +268,9 @@ fn examples() -> Result<()> {
         }
     }
     let out = root().join("target").join("ci-examples");
+    if out.exists() {
+        std::fs::remove_dir_all(&out).with_context(|| format!("clearing {}", out.display()))?;
+    }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let out = out.to_string_lossy();
     for (krate, example, args) in EXAMPLES {
