@@ -20,7 +20,7 @@ pub const DEFAULT_WORLD_SIZE: u32 = 16_384;
 /// Metres per texel of the procedural world.
 pub const WORLD_TEXEL: f32 = 0.5;
 /// Height in metres of the largest stored value of the procedural world.
-pub const WORLD_MAX_HEIGHT: f32 = 400.0;
+pub const WORLD_MAX_HEIGHT: f32 = 200.0;
 /// Tile side in texels (seed 004's 256^2 blocks).
 pub const TILE_SIZE: u32 = 256;
 
