@@ -13,6 +13,13 @@ pub trait HeightSample: Copy + bytemuck::Pod + Send + Sync + 'static {
     fn to_raw_f64(self) -> f64;
     /// The nearest stored value to `raw`, clamped to `0..=MAX_RAW` (NaN gives 0).
     fn from_raw_f64_clamped(raw: f64) -> Self;
+    /// `floor(raw)` clamped to `0..=MAX_RAW` (NaN gives 0): one saturating cast, no call to
+    /// `floor`, so loops over it vectorise. `from_raw_f64_floor_clamped(v + 0.5)` equals
+    /// [`HeightSample::from_raw_f64_clamped`]`(v)` except where `v + 0.5` rounds (fractions
+    /// within 2^-53 of one half).
+    fn from_raw_f64_floor_clamped(raw: f64) -> Self {
+        Self::from_raw_f64_clamped(raw.floor())
+    }
 }
 
 macro_rules! impl_height_sample {
@@ -27,6 +34,17 @@ macro_rules! impl_height_sample {
             fn from_raw_f64_clamped(raw: f64) -> Self {
                 // `as` saturates and maps NaN to 0, which is the clamp we want.
                 raw.round() as $t
+            }
+            #[inline]
+            fn from_raw_f64_floor_clamped(raw: f64) -> Self {
+                // Branch-free and vectorisable without SSE4.1's `floor`: clamp (NaN gives 0),
+                // round to an integer by adding and removing 2^52 (exact below 2^51), step
+                // down where that rounded up, and read the integer from the mantissa bits.
+                const MAGIC: f64 = 4_503_599_627_370_496.0; // 2^52
+                let c = raw.max(0.0).min(Self::MAX_RAW);
+                let r = (c + MAGIC) - MAGIC;
+                let f = if r > c { r - 1.0 } else { r };
+                (f + MAGIC).to_bits() as $t
             }
         }
     };

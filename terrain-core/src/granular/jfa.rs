@@ -92,7 +92,86 @@ pub fn jfa_init(pen: &Grid<Penetration>) -> Grid<[u32; 2]> {
 
 /// One jump flooding pass with step `step` and pass index `pass` over `area` (grids are of
 /// `area.size`, indexed relative to `area.min`).
+///
+/// Rows run in parallel. Each column first computes all 8 candidates' distances; the hashed
+/// visiting order only decides between distinct seeds tied at the smallest distance, so it is
+/// computed only then. The result is the one the sequential visit in
+/// [`jfa_neighbour_order`] gives (strictly closer replaces, so the first of the tied minima in
+/// that order wins, and only if it beats the column's own entry), bit for bit.
 pub fn jfa_pass(
+    prev: &Grid<[u32; 2]>,
+    next: &mut Grid<[u32; 2]>,
+    area: Rect,
+    step: u32,
+    pass: u32,
+    metric: DistanceMetric,
+) -> Result<(), GranularError> {
+    for g in [prev.size(), next.size()] {
+        if g != area.size {
+            return Err(GranularError::SizeMismatch {
+                expected: area.size,
+                actual: g,
+            });
+        }
+    }
+    let (w, h) = (area.size.x as usize, area.size.y as usize);
+    let k = step as usize;
+    let src = prev.as_slice();
+    crate::par::for_each_chunk(next.as_mut_slice(), w, |j, out| {
+        let gy = (i64::from(area.min.y) + j as i64) as u32;
+        let rows: [Option<&[[u32; 2]]>; 3] = [
+            j.checked_sub(k).map(|r| &src[r * w..(r + 1) * w]),
+            Some(&src[j * w..(j + 1) * w]),
+            (j + k < h).then(|| &src[(j + k) * w..(j + k + 1) * w]),
+        ];
+        for (i, o) in out.iter_mut().enumerate() {
+            let gx = (i64::from(area.min.x) + i as i64) as u32;
+            let col = [gx, gy];
+            let own = rows[1].map_or([NO_SEED; 2], |r| r[i]);
+            let own_d = seed_distance(metric, col, own);
+            let mut cand = [[NO_SEED; 2]; 8];
+            let mut d = [u32::MAX; 8];
+            let cols = [i.checked_sub(k), Some(i), (i + k < w).then_some(i + k)];
+            for (n, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                if let (Some(r), Some(c)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize]) {
+                    cand[n] = r[c];
+                    d[n] = seed_distance(metric, col, cand[n]);
+                }
+            }
+            let m = d.iter().copied().min().unwrap_or(u32::MAX);
+            if m >= own_d {
+                *o = own;
+                continue;
+            }
+            let mut first = None;
+            let mut tied = false;
+            for n in 0..8 {
+                if d[n] == m {
+                    match first {
+                        None => first = Some(n),
+                        Some(f) if cand[f] != cand[n] => tied = true,
+                        Some(_) => {}
+                    }
+                }
+            }
+            let pick = if tied {
+                jfa_neighbour_order(gx, gy, pass)
+                    .into_iter()
+                    .map(usize::from)
+                    .find(|&n| d[n] == m)
+            } else {
+                first
+            };
+            *o = pick.map_or(own, |n| cand[n]);
+        }
+    });
+    Ok(())
+}
+
+/// The sequential form of [`jfa_pass`] (each column visits its neighbours in
+/// [`jfa_neighbour_order`] and keeps a strictly closer one), as the seed describes it and as
+/// the GPU pass runs; kept as the reference the fast pass is tested against.
+pub fn jfa_pass_reference(
     prev: &Grid<[u32; 2]>,
     next: &mut Grid<[u32; 2]>,
     area: Rect,
@@ -150,6 +229,23 @@ pub fn jump_flood(
     let mut b = a.clone();
     for (pass, step) in jfa_steps(area.size, extra_pass).into_iter().enumerate() {
         jfa_pass(&a, &mut b, area, step, pass as u32, metric)?;
+        std::mem::swap(&mut a, &mut b);
+    }
+    Ok(a)
+}
+
+/// [`jump_flood`] with [`jfa_pass_reference`]: the sequential form, for tests and benches.
+pub fn jump_flood_reference(
+    pen: &Grid<Penetration>,
+    area: Rect,
+    metric: DistanceMetric,
+    extra_pass: bool,
+) -> Result<Grid<[u32; 2]>, GranularError> {
+    check_side(area.size)?;
+    let mut a = jfa_init(pen);
+    let mut b = a.clone();
+    for (pass, step) in jfa_steps(area.size, extra_pass).into_iter().enumerate() {
+        jfa_pass_reference(&a, &mut b, area, step, pass as u32, metric)?;
         std::mem::swap(&mut a, &mut b);
     }
     Ok(a)

@@ -33,6 +33,7 @@
 mod active;
 mod depth;
 mod displace;
+mod edt;
 mod error;
 mod jfa;
 mod mesh;
@@ -48,15 +49,17 @@ pub use displace::{
     MAX_TARGETS, MULTI_TARGET_CHUNK, displace_closest_seed, displace_iterative,
     displace_multiple_targets, iterative_pass, lower_neighbour_counts,
 };
+pub use edt::exact_nearest_seed;
 pub use error::GranularError;
 pub use jfa::{
     JFA_OFFSETS, brute_force_distance, distance_grid, jfa_hash, jfa_init, jfa_neighbour_order,
-    jfa_pass, jfa_steps, jump_flood, pcg_hash, seed_distance,
+    jfa_pass, jfa_pass_reference, jfa_steps, jump_flood, jump_flood_reference, pcg_hash,
+    seed_distance,
 };
 pub use mesh::{GranularObject, MAX_COORDINATE_M, MAX_MESH_ELEMENTS, TriMesh};
 pub use normals::{blur_normals, float_heights, symmetric_normals};
 pub use params::{
-    DisplacementMethod, DistanceMetric, GranularParams, MAX_ITERATIONS, MAX_MARGIN, SlopeMethod,
+    DisplacementMethod, DistanceMetric, DistanceTransform, GranularParams, MAX_ITERATIONS, MAX_MARGIN, SlopeMethod,
     mul_q15,
 };
 pub use penetration::{ColumnKind, NO_SEED, Penetration, penetration_texture};
