@@ -47,8 +47,7 @@ fn bench(c: &mut Criterion) {
         if side <= 500 {
             group.bench_function(BenchmarkId::new("stamp_reference", side), |b| {
                 b.iter(|| {
-                    apply_stamp_reference(&mut map, &mut gauss, &next(), Blend::Add)
-                        .expect("stamp")
+                    apply_stamp_reference(&mut map, &mut gauss, &next(), Blend::Add).expect("stamp")
                 })
             });
         }
@@ -63,7 +62,9 @@ fn bench(c: &mut Criterion) {
             .expect("valid rotation")
         };
         group.bench_function(BenchmarkId::new("stamp_gaussian_rotated", side), |b| {
-            b.iter(|| apply_stamp(&mut map, &mut gauss, &rotated(next()), Blend::Add).expect("stamp"))
+            b.iter(|| {
+                apply_stamp(&mut map, &mut gauss, &rotated(next()), Blend::Add).expect("stamp")
+            })
         });
         let mut tex = TextureStamp::from_gray8(
             &Grid::from_fn(64, 64, |x, y| ((x * 7 + y * 13) % 256) as u8).expect("image"),

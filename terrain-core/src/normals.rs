@@ -85,13 +85,19 @@ impl DerivativeMap {
         crate::par::for_each_chunk(out, w, |j, out_row| {
             let y = (y0 + j) as i64;
             let row_of = |d: i64| h.row(wrap.resolve(y + d, hh));
-            let (up2, up1, here, dn1, dn2) = (row_of(-2), row_of(-1), row_of(0), row_of(1), row_of(2));
+            let (up2, up1, here, dn1, dn2) =
+                (row_of(-2), row_of(-1), row_of(0), row_of(1), row_of(2));
             let col = |x: i64| wrap.resolve(x, w as u32) as usize;
             // Columns whose 4 horizontal taps are inside the row need no wrapping.
             let (ia, ib) = (x0.max(2), x1.min(w.saturating_sub(2)).max(x0.max(2)));
             let edge = |x: usize, out: &mut Vec2| {
                 let xi = x as i64;
-                let dx = diff(here[col(xi - 2)], here[col(xi - 1)], here[col(xi + 1)], here[col(xi + 2)]);
+                let dx = diff(
+                    here[col(xi - 2)],
+                    here[col(xi - 1)],
+                    here[col(xi + 1)],
+                    here[col(xi + 2)],
+                );
                 let dz = diff(up2[x], up1[x], dn1[x], dn2[x]);
                 *out = Vec2::new((dx * k) as f32, (dz * k) as f32);
             };

@@ -400,7 +400,9 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
     let footprint_x = pieces
         .iter()
         .map(|&(r, o)| (r.min.x + o.x, r.max().x + o.x))
-        .fold((i32::MAX, i32::MIN), |(a, b), (lo, hi)| (a.min(lo), b.max(hi)));
+        .fold((i32::MAX, i32::MIN), |(a, b), (lo, hi)| {
+            (a.min(lo), b.max(hi))
+        });
     let kernel = match stamp.kernel() {
         // A footprint too small for its texel size gives non-finite local coordinates, which
         // only the per-texel path treats exactly as the reference does.
@@ -783,7 +785,11 @@ macro_rules! apply_small {
                         let y = bfh + sign * w.min(131_072.0);
                         let t = floor_small(y);
                         let level = (bi + t).clamp(0, <$t>::MAX as i32) as $t;
-                        *d = if kind == 1 { (*d).min(level) } else { (*d).max(level) };
+                        *d = if kind == 1 {
+                            (*d).min(level)
+                        } else {
+                            (*d).max(level)
+                        };
                     }
                 }
             }
@@ -829,10 +835,7 @@ struct GaussianRow {
 impl GaussianKernel {
     /// `None` (use the per-texel path) when a cross factor could overflow f64.
     fn new(frame: &Frame, beta: f32, xs: (i32, i32), pieces: &[(Rect, IVec2)]) -> Option<Self> {
-        let (a, b) = (
-            f64::from(frame.inv_half.x),
-            f64::from(frame.inv_half.y),
-        );
+        let (a, b) = (f64::from(frame.inv_half.x), f64::from(frame.inv_half.y));
         let (s, c) = (f64::from(frame.sin), f64::from(frame.cos));
         let (a2, b2) = (a * a, b * b);
         let coef_a = a2 * c * c + b2 * s * s;
@@ -847,9 +850,17 @@ impl GaussianKernel {
             let ys = pieces
                 .iter()
                 .map(|&(r, o)| (r.min.y + o.y, r.max().y + o.y))
-                .fold((i32::MAX, i32::MIN), |(p, q), (lo, hi)| (p.min(lo), q.max(hi)));
-            let mx = (f64::from(xs.0) - cx).abs().max((f64::from(xs.1) - cx).abs()) + 1.0;
-            let my = (f64::from(ys.0) - cy).abs().max((f64::from(ys.1) - cy).abs()) + 1.0;
+                .fold((i32::MAX, i32::MIN), |(p, q), (lo, hi)| {
+                    (p.min(lo), q.max(hi))
+                });
+            let mx = (f64::from(xs.0) - cx)
+                .abs()
+                .max((f64::from(xs.1) - cx).abs())
+                + 1.0;
+            let my = (f64::from(ys.0) - cy)
+                .abs()
+                .max((f64::from(ys.1) - cy).abs())
+                + 1.0;
             // The cross factor at any texel and the row's power table (k < BLOCK).
             let worst = (2.0 * beta * coef_b * my * (mx + BLOCK as f64)).abs();
             if !(worst < 600.0) {

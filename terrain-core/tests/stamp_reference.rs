@@ -45,7 +45,11 @@ struct Ring;
 impl Stamp for Ring {
     fn value(&self, local: Vec2) -> f32 {
         let r = local.length();
-        if (0.4..0.8).contains(&r) { 1.0 - r } else { f32::NAN }
+        if (0.4..0.8).contains(&r) {
+            1.0 - r
+        } else {
+            f32::NAN
+        }
     }
 }
 
@@ -175,7 +179,11 @@ proptest! {
 fn extreme_gaussians_stay_within_one_unit() {
     for intensity in [650.0f32, -650.0, 1e30, -1e30, 1e-30] {
         for rot in [0.0f32, 0.3, 1.0] {
-            for scale in [Vec2::splat(20.0), Vec2::new(20.0, 2.0), Vec2::new(0.3, 19.0)] {
+            for scale in [
+                Vec2::splat(20.0),
+                Vec2::new(20.0, 2.0),
+                Vec2::new(0.3, 19.0),
+            ] {
                 let p = StampPlacement::new(Vec2::new(12.0, 10.0), scale, intensity)
                     .unwrap()
                     .with_rotation(rot)
@@ -183,8 +191,13 @@ fn extreme_gaussians_stay_within_one_unit() {
                 let mut fast = map16(WrapMode::Clamp);
                 let mut reference = fast.clone();
                 apply_stamp(&mut fast, &mut GaussianStamp::default(), &p, Blend::Add).unwrap();
-                apply_stamp_reference(&mut reference, &mut GaussianStamp::default(), &p, Blend::Add)
-                    .unwrap();
+                apply_stamp_reference(
+                    &mut reference,
+                    &mut GaussianStamp::default(),
+                    &p,
+                    Blend::Add,
+                )
+                .unwrap();
                 let max = fast
                     .grid()
                     .as_slice()
@@ -193,7 +206,10 @@ fn extreme_gaussians_stay_within_one_unit() {
                     .map(|(a, b)| a.abs_diff(*b))
                     .max()
                     .unwrap();
-                assert!(max <= 1, "intensity {intensity} rot {rot} scale {scale}: {max}");
+                assert!(
+                    max <= 1,
+                    "intensity {intensity} rot {rot} scale {scale}: {max}"
+                );
             }
         }
     }
@@ -205,9 +221,12 @@ fn naive_derivatives<T: HeightSample>(map: &HeightMap<T>) -> Vec<Vec2> {
     let k = f64::from(map.encoding().scale) / (12.0 * f64::from(map.texel_size()));
     let at = |x: i64, y: i64| {
         let g = map.grid();
-        g.get(map.wrap().resolve(x, w as u32), map.wrap().resolve(y, h as u32))
-            .unwrap()
-            .to_raw_f64()
+        g.get(
+            map.wrap().resolve(x, w as u32),
+            map.wrap().resolve(y, h as u32),
+        )
+        .unwrap()
+        .to_raw_f64()
     };
     let mut out = Vec::new();
     for y in 0..h {

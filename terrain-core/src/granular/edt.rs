@@ -80,8 +80,8 @@ pub fn exact_nearest_seed(
         }
     }
     // Phase 2: per row, the lower envelope of the columns that have a seed.
-    let mut out = Grid::new(area.size.x, area.size.y, [NO_SEED; 2])
-        .map_err(|_| GranularError::TooLarge {
+    let mut out =
+        Grid::new(area.size.x, area.size.y, [NO_SEED; 2]).map_err(|_| GranularError::TooLarge {
             side: area.size.max_element(),
             limit: super::MAX_SIDE,
         })?;
@@ -96,7 +96,8 @@ pub fn exact_nearest_seed(
             loop {
                 match (s.last(), t.last()) {
                     (Some(&sq), Some(&tq))
-                        if envelope_f(metric, tq, sq, gi(sq)) > envelope_f(metric, tq, u, gi(u)) =>
+                        if envelope_f(metric, tq, sq, gi(sq))
+                            > envelope_f(metric, tq, u, gi(u)) =>
                     {
                         s.pop();
                         t.pop();

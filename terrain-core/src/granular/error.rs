@@ -88,7 +88,9 @@ pub enum GranularError {
     },
     /// A seed texel of a penetration texture names a column other than its own (the exact
     /// transform places each seed at its column).
-    #[error("seed texel at column {column:?} names seed {seed:?}; the exact transform needs seeds at their own columns")]
+    #[error(
+        "seed texel at column {column:?} names seed {seed:?}; the exact transform needs seeds at their own columns"
+    )]
     SeedNotAtColumn {
         /// The texel's column (map coordinates).
         column: [u32; 2],

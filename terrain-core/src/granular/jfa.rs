@@ -279,18 +279,13 @@ pub fn brute_force_distance(
 pub fn distance_grid(seeds: &Grid<[u32; 2]>, area: Rect, metric: DistanceMetric) -> Grid<u32> {
     let w = area.size.x.max(1) as usize;
     let mut out = seeds.map(|_| 0u32);
-    for (idx, (d, s)) in out
-        .as_mut_slice()
-        .iter_mut()
-        .zip(seeds.as_slice())
-        .enumerate()
-    {
-        let col = [
-            area.min.x as u32 + (idx % w) as u32,
-            area.min.y as u32 + (idx / w) as u32,
-        ];
-        *d = seed_distance(metric, col, *s);
-    }
+    let src = seeds.as_slice();
+    crate::par::for_each_chunk(out.as_mut_slice(), w, |j, row| {
+        let y = area.min.y as u32 + j as u32;
+        for (i, d) in row.iter_mut().enumerate() {
+            *d = seed_distance(metric, [area.min.x as u32 + i as u32, y], src[j * w + i]);
+        }
+    });
     out
 }
 

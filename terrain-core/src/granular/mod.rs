@@ -6,7 +6,8 @@
 //! [`ActiveArea`] (sec 4.5), runs:
 //! 1. [`depth_from_below`] (sec 4.1.2): lowest object surface over each column, in height units.
 //! 2. [`penetration_texture`] (sec 4.1.3, table 4.1): [`ColumnKind`] and penetration per column.
-//! 3. [`jump_flood`] (sec 2.3.1, 4.1.4): closest seed per column, hashed neighbour order.
+//! 3. [`jump_flood`] (sec 2.3.1, 4.1.4): closest seed per column, hashed neighbour order (or,
+//!    on the CPU, the exact [`exact_nearest_seed`]; see [`DistanceTransform`]).
 //! 4. displacement (sec 4.1.4): [`displace_iterative`], [`displace_closest_seed`] or
 //!    [`displace_multiple_targets`].
 //! 5. slope evening (sec 4.1.5): [`even_out_slopes_interleaved`] or [`even_out_slopes_scatter`].
@@ -59,8 +60,8 @@ pub use jfa::{
 pub use mesh::{GranularObject, MAX_COORDINATE_M, MAX_MESH_ELEMENTS, TriMesh};
 pub use normals::{blur_normals, float_heights, symmetric_normals};
 pub use params::{
-    DisplacementMethod, DistanceMetric, DistanceTransform, GranularParams, MAX_ITERATIONS, MAX_MARGIN, SlopeMethod,
-    mul_q15,
+    DisplacementMethod, DistanceMetric, DistanceTransform, GranularParams, MAX_ITERATIONS,
+    MAX_MARGIN, SlopeMethod, mul_q15,
 };
 pub use penetration::{ColumnKind, NO_SEED, Penetration, penetration_texture};
 pub use sim::{AreaMode, GranularSim, StepReport};

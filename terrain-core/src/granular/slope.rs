@@ -54,6 +54,97 @@ pub fn column_outflow(
     if a == 0 { (0, 0) } else { (a, mask) }
 }
 
+/// [`column_outflow`] for every column of row `y`, with the seed test precomputed (`seed[q]`
+/// is 1 for seed columns); `only_parity` limits senders to map parity `(x + y) & 1` (others
+/// get `(0, 0)`).
+#[allow(clippy::too_many_arguments)]
+fn outflow_row(
+    heights: &[u32],
+    seed: &[u8],
+    size: (usize, usize),
+    y: usize,
+    thresholds: [u32; 2],
+    roughness_q15: u32,
+    only_parity: Option<(u32, i64)>,
+    out: &mut [(u32, u8)],
+) {
+    let (w, h) = size;
+    let rows = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
+    for (x, o) in out.iter_mut().enumerate() {
+        if let Some((parity, base)) = only_parity
+            && ((base + x as i64 + y as i64) & 1) as u32 != parity
+        {
+            *o = (0, 0);
+            continue;
+        }
+        let hc = heights[y * w + x];
+        let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
+        let mut mask = 0u8;
+        let mut deltas = [0u32; 8];
+        let mut n = 0u32;
+        for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+            let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize]) else {
+                continue;
+            };
+            let q = ny * w + nx;
+            if seed[q] == 0 {
+                continue;
+            }
+            let t = thresholds[usize::from(*ox != 0 && *oy != 0)];
+            let hq = heights[q];
+            if hc > hq && hc - hq > t {
+                mask |= 1 << k;
+                deltas[n as usize] = hc - hq;
+                n += 1;
+            }
+        }
+        *o = if n == 0 {
+            (0, 0)
+        } else {
+            let ds = &deltas[..n as usize];
+            let avg =
+                ds.iter().map(|d| d / n).sum::<u32>() + ds.iter().map(|d| d % n).sum::<u32>() / n;
+            let a = mul_q15(avg, roughness_q15) / n;
+            if a == 0 { (0, 0) } else { (a, mask) }
+        };
+    }
+}
+
+/// Gathers row `y` of the apply step: `h - popcount(mask) * a + sum of a_q over neighbours
+/// q whose mask names this column` (wrapping adds, so equal to any scatter order).
+fn gather_row(
+    heights: &[u32],
+    amounts: &[(u32, u8)],
+    size: (usize, usize),
+    y: usize,
+    out: &mut [u32],
+) {
+    let (w, h) = size;
+    let rows = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
+    for (x, o) in out.iter_mut().enumerate() {
+        let me = y * w + x;
+        let (a, mask) = amounts[me];
+        let mut v = heights[me] - a * mask.count_ones();
+        let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
+        for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+            let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize]) else {
+                continue;
+            };
+            let (qa, qmask) = amounts[ny * w + nx];
+            if qmask & (1 << (7 - k)) != 0 {
+                v = v.wrapping_add(qa);
+            }
+        }
+        *o = v;
+    }
+}
+
+fn seed_flags(pen: &[Penetration]) -> Vec<u8> {
+    pen.iter()
+        .map(|p| u8::from(p.column_kind() == ColumnKind::Seed))
+        .collect()
+}
+
 fn check(map: &FixedPointMap, pen: &Grid<Penetration>, area: Rect) -> Result<(), GranularError> {
     check_area(area, map.size())?;
     if pen.size() != area.size {
@@ -92,40 +183,29 @@ pub fn slope_amounts_pass(
     out: &mut [(u32, u8)],
 ) {
     let (w, h) = (area.size.x as usize, area.size.y as usize);
-    for y in 0..h {
-        for x in 0..w {
-            let gp = (area.min.x as i64 + x as i64 + area.min.y as i64 + y as i64) & 1;
-            out[y * w + x] = if gp as u32 == parity {
-                column_outflow(heights, pen, (w, h), (x, y), thresholds, roughness_q15)
-            } else {
-                (0, 0)
-            };
-        }
-    }
+    let seed = seed_flags(pen);
+    let base = i64::from(area.min.x) + i64::from(area.min.y);
+    crate::par::for_each_chunk(out, w, |y, row| {
+        outflow_row(
+            heights,
+            &seed,
+            (w, h),
+            y,
+            thresholds,
+            roughness_q15,
+            Some((parity, base)),
+            row,
+        )
+    });
 }
 
 /// Method 1, pass B: `new[c] = h[c] - popcount(mask_c) * a_c + sum of a_q over neighbours q
 /// whose mask names c` (gathered; reads the amounts and old heights, writes `new`).
 pub fn slope_apply_pass(heights: &[u32], amounts: &[(u32, u8)], area: Rect, new: &mut [u32]) {
-    let (w, h) = (area.size.x as i64, area.size.y as i64);
-    for y in 0..h {
-        for x in 0..w {
-            let me = (y * w + x) as usize;
-            let (a, mask) = amounts[me];
-            let mut v = heights[me] - a * mask.count_ones();
-            for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
-                let (nx, ny) = (x + i64::from(*ox), y + i64::from(*oy));
-                if nx < 0 || ny < 0 || nx >= w || ny >= h {
-                    continue;
-                }
-                let (qa, qmask) = amounts[(ny * w + nx) as usize];
-                if qmask & (1 << (7 - k)) != 0 {
-                    v = v.wrapping_add(qa);
-                }
-            }
-            new[me] = v;
-        }
-    }
+    let (w, h) = (area.size.x as usize, area.size.y as usize);
+    crate::par::for_each_chunk(new, w, |y, row| {
+        gather_row(heights, amounts, (w, h), y, row)
+    });
 }
 
 /// Method 1 (two interleaved programs): `iterations` times, for parity 0 then 1, an
@@ -162,7 +242,8 @@ pub fn even_out_slopes_interleaved(
 }
 
 /// One scatter pass (method 2): every column adds `h - n * a` to itself and `a` to each
-/// receiver in `acc` (zeroed first), all from the old heights.
+/// receiver in `acc`, all from the old heights. Computed as an outflow pass then a gather
+/// (rows in parallel): the same wrapping sums as the scatter, in any order, so the same bits.
 pub fn slope_scatter_pass(
     heights: &[u32],
     pen: &[Penetration],
@@ -171,25 +252,44 @@ pub fn slope_scatter_pass(
     roughness_q15: u32,
     acc: &mut [u32],
 ) {
+    let mut amounts = vec![(0u32, 0u8); heights.len()];
+    scatter_pass_with(
+        heights,
+        &seed_flags(pen),
+        area,
+        thresholds,
+        roughness_q15,
+        &mut amounts,
+        acc,
+    );
+}
+
+fn scatter_pass_with(
+    heights: &[u32],
+    seed: &[u8],
+    area: Rect,
+    thresholds: [u32; 2],
+    roughness_q15: u32,
+    amounts: &mut [(u32, u8)],
+    acc: &mut [u32],
+) {
     let (w, h) = (area.size.x as usize, area.size.y as usize);
-    acc.fill(0);
-    for y in 0..h {
-        for x in 0..w {
-            let me = y * w + x;
-            let (a, mask) = column_outflow(heights, pen, (w, h), (x, y), thresholds, roughness_q15);
-            acc[me] = acc[me].wrapping_add(heights[me] - a * mask.count_ones());
-            if mask == 0 {
-                continue;
-            }
-            for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
-                if mask & (1 << k) != 0 {
-                    let q = (y as i64 + i64::from(*oy)) as usize * w
-                        + (x as i64 + i64::from(*ox)) as usize;
-                    acc[q] = acc[q].wrapping_add(a);
-                }
-            }
-        }
-    }
+    crate::par::for_each_chunk(amounts, w, |y, row| {
+        outflow_row(
+            heights,
+            seed,
+            (w, h),
+            y,
+            thresholds,
+            roughness_q15,
+            None,
+            row,
+        )
+    });
+    let amounts = &*amounts;
+    crate::par::for_each_chunk(acc, w, |y, row| {
+        gather_row(heights, amounts, (w, h), y, row)
+    });
 }
 
 /// Method 2 (SSBO): `iterations` [`slope_scatter_pass`]es over `area`.
@@ -204,13 +304,16 @@ pub fn even_out_slopes_scatter(
     check(map, pen, area)?;
     let mut h = read_area(map, area);
     let mut acc = h.clone();
+    let seed = seed_flags(pen.as_slice());
+    let mut amounts = vec![(0u32, 0u8); h.len()];
     for _ in 0..iterations {
-        slope_scatter_pass(
+        scatter_pass_with(
             &h,
-            pen.as_slice(),
+            &seed,
             area,
             thresholds,
             roughness_q15,
+            &mut amounts,
             &mut acc,
         );
         std::mem::swap(&mut h, &mut acc);
