@@ -66,6 +66,55 @@ fn steps(c: &mut Criterion) {
         g.bench_function(BenchmarkId::new("jump_flood", size), |b| {
             b.iter(|| jump_flood(black_box(&pen), area, params.metric, true).expect("jfa"))
         });
+        // Before: the sequential pass with the hashed order computed for every column.
+        if size == 4096 {
+            g.bench_function(BenchmarkId::new("jump_flood_reference", size), |b| {
+                b.iter(|| {
+                    jump_flood_reference(black_box(&pen), area, params.metric, true).expect("jfa")
+                })
+            });
+        }
+        for (name, metric) in [
+            ("exact_nearest_seed", DistanceMetric::Euclidean),
+            ("exact_nearest_seed_manhattan", DistanceMetric::Manhattan),
+            ("exact_nearest_seed_chebyshev", DistanceMetric::Chebyshev),
+        ] {
+            g.bench_function(BenchmarkId::new(name, size), |b| {
+                b.iter(|| exact_nearest_seed(black_box(&pen), area, metric).expect("edt"))
+            });
+        }
+        // One whole step over the area as GranularSim::step runs it (depth, penetration,
+        // nearest seeds, 10 iterative displacement passes, 10 scatter slope passes).
+        for (name, exact) in [
+            ("step_jfa_iterative10_scatter10", false),
+            ("step_exact_iterative10_scatter10", true),
+        ] {
+            g.bench_function(BenchmarkId::new(name, size), |b| {
+                b.iter_batched_ref(
+                    || map.clone(),
+                    |m| {
+                        let depth = depth_from_below(&obj, m, area).expect("depth");
+                        let mut pen = pen.clone();
+                        penetration_texture(m, &depth, area, 5000, &mut pen).expect("pen");
+                        let seeds = if exact {
+                            exact_nearest_seed(&pen, area, params.metric).expect("edt")
+                        } else {
+                            jump_flood(&pen, area, params.metric, true).expect("jfa")
+                        };
+                        displace_iterative(m, &pen, &seeds, area, 32768, 10, params.metric)
+                            .expect("displace");
+                        even_out_slopes_scatter(m, &pen, area, t, r15, 10).expect("slope");
+                    },
+                    criterion::BatchSize::LargeInput,
+                )
+            });
+        }
+        // The baseline: copying the area's u32 heights once.
+        let src = vec![7u32; area.area() as usize];
+        let mut dst = vec![0u32; area.area() as usize];
+        g.bench_function(BenchmarkId::new("memcpy_u32", size), |b| {
+            b.iter(|| dst.copy_from_slice(black_box(&src)))
+        });
         for (name, method) in [
             ("displace_iterative10", DisplacementMethod::iterative()),
             ("displace_closest_seed", DisplacementMethod::ClosestSeed),
