@@ -57,6 +57,7 @@ pub fn jfa_neighbour_order(x: u32, y: u32, pass: u32) -> [u8; 8] {
 
 /// The distance between a column and a seed under `metric` (Euclidean squared, so exact);
 /// `u32::MAX` when `seed` is `NO_SEED`. Coordinates must be below [`super::MAX_SIDE`] apart.
+#[inline]
 pub fn seed_distance(metric: DistanceMetric, column: [u32; 2], seed: [u32; 2]) -> u32 {
     if seed[0] == NO_SEED {
         return u32::MAX;
@@ -124,35 +125,54 @@ pub fn jfa_pass(
             Some(&src[j * w..(j + 1) * w]),
             (j + k < h).then(|| &src[(j + k) * w..(j + k + 1) * w]),
         ];
+        let full_rows = match rows {
+            [Some(a), Some(b), Some(c)] => Some([a, b, c]),
+            _ => None,
+        };
         for (i, o) in out.iter_mut().enumerate() {
             let gx = (i64::from(area.min.x) + i as i64) as u32;
             let col = [gx, gy];
-            let own = rows[1].map_or([NO_SEED; 2], |r| r[i]);
-            let own_d = seed_distance(metric, col, own);
             let mut cand = [[NO_SEED; 2]; 8];
-            let mut d = [u32::MAX; 8];
-            let cols = [i.checked_sub(k), Some(i), (i + k < w).then_some(i + k)];
-            for (n, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
-                if let (Some(r), Some(c)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize]) {
-                    cand[n] = r[c];
-                    d[n] = seed_distance(metric, col, cand[n]);
+            let own;
+            match full_rows {
+                // Interior: all 8 candidates exist; no bounds tests.
+                Some(r) if i >= k && i + k < w => {
+                    own = r[1][i];
+                    let cs = [i - k, i, i + k];
+                    for (n, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                        cand[n] = r[(oy + 1) as usize][cs[(ox + 1) as usize]];
+                    }
                 }
+                _ => {
+                    own = rows[1].map_or([NO_SEED; 2], |r| r[i]);
+                    let cols = [i.checked_sub(k), Some(i), (i + k < w).then_some(i + k)];
+                    for (n, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                        if let (Some(r), Some(c)) =
+                            (rows[(oy + 1) as usize], cols[(ox + 1) as usize])
+                        {
+                            cand[n] = r[c];
+                        }
+                    }
+                }
+            }
+            let own_d = seed_distance(metric, col, own);
+            let mut d = [u32::MAX; 8];
+            for n in 0..8 {
+                d[n] = seed_distance(metric, col, cand[n]);
             }
             let m = d.iter().copied().min().unwrap_or(u32::MAX);
             if m >= own_d {
                 *o = own;
                 continue;
             }
-            let mut first = None;
+            // Branch-free: the first candidate at distance m, and whether another seed ties.
+            let mut first = 7;
+            for n in (0..8).rev() {
+                first = if d[n] == m { n } else { first };
+            }
             let mut tied = false;
             for n in 0..8 {
-                if d[n] == m {
-                    match first {
-                        None => first = Some(n),
-                        Some(f) if cand[f] != cand[n] => tied = true,
-                        Some(_) => {}
-                    }
-                }
+                tied |= (d[n] == m) & (cand[n] != cand[first]);
             }
             let pick = if tied {
                 jfa_neighbour_order(gx, gy, pass)
@@ -160,7 +180,7 @@ pub fn jfa_pass(
                     .map(usize::from)
                     .find(|&n| d[n] == m)
             } else {
-                first
+                Some(first)
             };
             *o = pick.map_or(own, |n| cand[n]);
         }

@@ -54,9 +54,33 @@ pub fn column_outflow(
     if a == 0 { (0, 0) } else { (a, mask) }
 }
 
-/// [`column_outflow`] for every column of row `y`, with the seed test precomputed (`seed[q]`
-/// is 1 for seed columns); `only_parity` limits senders to map parity `(x + y) & 1` (others
-/// get `(0, 0)`).
+/// Neighbour index offsets of [`JFA_OFFSETS`] in a grid `w` wide.
+fn offsets(w: usize) -> [isize; 8] {
+    JFA_OFFSETS.map(|[ox, oy]| oy as isize * w as isize + ox as isize)
+}
+
+/// The outflow of one column from its height and mask of receivers (see [`column_outflow`]).
+#[inline]
+fn outflow_of(hc: u32, mask: u8, hq: [u32; 8], roughness_q15: u32) -> (u32, u8) {
+    if mask == 0 {
+        return (0, 0);
+    }
+    let n = mask.count_ones();
+    let (mut q, mut r) = (0u32, 0u32);
+    for (k, &h) in hq.iter().enumerate() {
+        if mask & (1 << k) != 0 {
+            let d = hc - h;
+            q += d / n;
+            r += d % n;
+        }
+    }
+    let a = mul_q15(q + r / n, roughness_q15) / n;
+    if a == 0 { (0, 0) } else { (a, mask) }
+}
+
+/// [`column_outflow`] for every column of row `y` into `(amount, mask)` rows, with the seed
+/// test precomputed (`seed[q]` is 1 for seed columns); `only_parity` limits senders to map
+/// parity `(x + y) & 1` (others get `(0, 0)`). Interior columns take a branch-free path.
 #[allow(clippy::too_many_arguments)]
 fn outflow_row(
     heights: &[u32],
@@ -66,47 +90,46 @@ fn outflow_row(
     thresholds: [u32; 2],
     roughness_q15: u32,
     only_parity: Option<(u32, i64)>,
-    out: &mut [(u32, u8)],
+    amount: &mut [u32],
+    masks: &mut [u8],
 ) {
     let (w, h) = size;
+    let off = offsets(w);
+    let t: [u32; 8] = JFA_OFFSETS.map(|[ox, oy]| thresholds[usize::from(ox != 0 && oy != 0)]);
+    let interior = y >= 1 && y + 1 < h;
     let rows = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
-    for (x, o) in out.iter_mut().enumerate() {
+    for x in 0..w {
         if let Some((parity, base)) = only_parity
             && ((base + x as i64 + y as i64) & 1) as u32 != parity
         {
-            *o = (0, 0);
+            (amount[x], masks[x]) = (0, 0);
             continue;
         }
-        let hc = heights[y * w + x];
-        let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
+        let me = y * w + x;
+        let hc = heights[me];
+        let mut hq = [0u32; 8];
         let mut mask = 0u8;
-        let mut deltas = [0u32; 8];
-        let mut n = 0u32;
-        for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
-            let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize]) else {
-                continue;
-            };
-            let q = ny * w + nx;
-            if seed[q] == 0 {
-                continue;
+        if interior && x >= 1 && x + 1 < w {
+            for k in 0..8 {
+                let q = (me as isize + off[k]) as usize;
+                hq[k] = heights[q];
+                let steep = (seed[q] != 0) & (hc > hq[k]) & (hc.wrapping_sub(hq[k]) > t[k]);
+                mask |= u8::from(steep) << k;
             }
-            let t = thresholds[usize::from(*ox != 0 && *oy != 0)];
-            let hq = heights[q];
-            if hc > hq && hc - hq > t {
-                mask |= 1 << k;
-                deltas[n as usize] = hc - hq;
-                n += 1;
+        } else {
+            let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
+            for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize])
+                else {
+                    continue;
+                };
+                let q = ny * w + nx;
+                hq[k] = heights[q];
+                let steep = (seed[q] != 0) & (hc > hq[k]) & (hc.wrapping_sub(hq[k]) > t[k]);
+                mask |= u8::from(steep) << k;
             }
         }
-        *o = if n == 0 {
-            (0, 0)
-        } else {
-            let ds = &deltas[..n as usize];
-            let avg =
-                ds.iter().map(|d| d / n).sum::<u32>() + ds.iter().map(|d| d % n).sum::<u32>() / n;
-            let a = mul_q15(avg, roughness_q15) / n;
-            if a == 0 { (0, 0) } else { (a, mask) }
-        };
+        (amount[x], masks[x]) = outflow_of(hc, mask, hq, roughness_q15);
     }
 }
 
@@ -114,25 +137,36 @@ fn outflow_row(
 /// q whose mask names this column` (wrapping adds, so equal to any scatter order).
 fn gather_row(
     heights: &[u32],
-    amounts: &[(u32, u8)],
+    amount: &[u32],
+    masks: &[u8],
     size: (usize, usize),
     y: usize,
     out: &mut [u32],
 ) {
     let (w, h) = size;
+    let off = offsets(w);
+    let interior = y >= 1 && y + 1 < h;
     let rows = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
     for (x, o) in out.iter_mut().enumerate() {
         let me = y * w + x;
-        let (a, mask) = amounts[me];
-        let mut v = heights[me] - a * mask.count_ones();
-        let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
-        for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
-            let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize]) else {
-                continue;
-            };
-            let (qa, qmask) = amounts[ny * w + nx];
-            if qmask & (1 << (7 - k)) != 0 {
-                v = v.wrapping_add(qa);
+        let mut v = heights[me] - amount[me] * masks[me].count_ones();
+        if interior && x >= 1 && x + 1 < w {
+            for k in 0..8 {
+                let q = (me as isize + off[k]) as usize;
+                let names_me = (masks[q] >> (7 - k)) & 1;
+                v = v.wrapping_add(amount[q] * u32::from(names_me));
+            }
+        } else {
+            let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
+            for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize])
+                else {
+                    continue;
+                };
+                let q = ny * w + nx;
+                if masks[q] & (1 << (7 - k)) != 0 {
+                    v = v.wrapping_add(amount[q]);
+                }
             }
         }
         *o = v;
@@ -185,7 +219,9 @@ pub fn slope_amounts_pass(
     let (w, h) = (area.size.x as usize, area.size.y as usize);
     let seed = seed_flags(pen);
     let base = i64::from(area.min.x) + i64::from(area.min.y);
-    crate::par::for_each_chunk(out, w, |y, row| {
+    let mut amount = vec![0u32; w * h];
+    let mut masks = vec![0u8; w * h];
+    crate::par::for_each_chunk2(&mut amount, w, &mut masks, w, |y, a, m| {
         outflow_row(
             heights,
             &seed,
@@ -194,17 +230,23 @@ pub fn slope_amounts_pass(
             thresholds,
             roughness_q15,
             Some((parity, base)),
-            row,
+            a,
+            m,
         )
     });
+    for (o, (a, m)) in out.iter_mut().zip(amount.into_iter().zip(masks)) {
+        *o = (a, m);
+    }
 }
 
 /// Method 1, pass B: `new[c] = h[c] - popcount(mask_c) * a_c + sum of a_q over neighbours q
 /// whose mask names c` (gathered; reads the amounts and old heights, writes `new`).
 pub fn slope_apply_pass(heights: &[u32], amounts: &[(u32, u8)], area: Rect, new: &mut [u32]) {
     let (w, h) = (area.size.x as usize, area.size.y as usize);
+    let amount: Vec<u32> = amounts.iter().map(|a| a.0).collect();
+    let masks: Vec<u8> = amounts.iter().map(|a| a.1).collect();
     crate::par::for_each_chunk(new, w, |y, row| {
-        gather_row(heights, amounts, (w, h), y, row)
+        gather_row(heights, &amount, &masks, (w, h), y, row)
     });
 }
 
@@ -252,14 +294,15 @@ pub fn slope_scatter_pass(
     roughness_q15: u32,
     acc: &mut [u32],
 ) {
-    let mut amounts = vec![(0u32, 0u8); heights.len()];
+    let mut amount = vec![0u32; heights.len()];
+    let mut masks = vec![0u8; heights.len()];
     scatter_pass_with(
         heights,
         &seed_flags(pen),
         area,
         thresholds,
         roughness_q15,
-        &mut amounts,
+        (&mut amount, &mut masks),
         acc,
     );
 }
@@ -270,11 +313,11 @@ fn scatter_pass_with(
     area: Rect,
     thresholds: [u32; 2],
     roughness_q15: u32,
-    amounts: &mut [(u32, u8)],
+    (amount, masks): (&mut [u32], &mut [u8]),
     acc: &mut [u32],
 ) {
     let (w, h) = (area.size.x as usize, area.size.y as usize);
-    crate::par::for_each_chunk(amounts, w, |y, row| {
+    crate::par::for_each_chunk2(amount, w, masks, w, |y, a, m| {
         outflow_row(
             heights,
             seed,
@@ -283,12 +326,13 @@ fn scatter_pass_with(
             thresholds,
             roughness_q15,
             None,
-            row,
+            a,
+            m,
         )
     });
-    let amounts = &*amounts;
+    let (amount, masks) = (&*amount, &*masks);
     crate::par::for_each_chunk(acc, w, |y, row| {
-        gather_row(heights, amounts, (w, h), y, row)
+        gather_row(heights, amount, masks, (w, h), y, row)
     });
 }
 
@@ -305,7 +349,8 @@ pub fn even_out_slopes_scatter(
     let mut h = read_area(map, area);
     let mut acc = h.clone();
     let seed = seed_flags(pen.as_slice());
-    let mut amounts = vec![(0u32, 0u8); h.len()];
+    let mut amount = vec![0u32; h.len()];
+    let mut masks = vec![0u8; h.len()];
     for _ in 0..iterations {
         scatter_pass_with(
             &h,
@@ -313,7 +358,7 @@ pub fn even_out_slopes_scatter(
             area,
             thresholds,
             roughness_q15,
-            &mut amounts,
+            (&mut amount, &mut masks),
             &mut acc,
         );
         std::mem::swap(&mut h, &mut acc);
