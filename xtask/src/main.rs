@@ -217,11 +217,16 @@ fn publishable_crates() -> Result<Vec<String>> {
 }
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 3] = [
+const EXAMPLES: [(&str, &str, &[&str]); 4] = [
     (
         "terrain-core",
         "stamp_heightmap",
         &["--size", "64", "--out", "{out}"],
+    ),
+    (
+        "terrain-core",
+        "edt_masks",
+        &["--size", "48", "--repeat", "1", "--out", "{out}"],
     ),
     (
         "terrain-physics",
