@@ -228,5 +228,41 @@ fn vehicles(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, steps, vehicles);
+/// The whole CPU step of `GranularSim` on the 4096 map (200 m, table 5.3 settings: iterative
+/// displacement with 10 passes, 10 scatter slope passes) over one 492^2 = 242 064-column active
+/// area (a drum 23.2 m wide and long, sunk 0.25 m, plus the 8-texel margin), volume included;
+/// jump flooding (as the GPU) or the exact transform.
+fn full_step(c: &mut Criterion) {
+    let mut g = c.benchmark_group("granular_step");
+    g.sample_size(10);
+    g.warm_up_time(Duration::from_millis(500));
+    g.measurement_time(Duration::from_secs(3));
+    let texel = 200.0 / 4096.0;
+    let half = 237.25 * texel;
+    let centre = 2048.5 * texel;
+    let drum = TriMesh::wheel(half, half, 64).expect("drum");
+    let obj = [GranularObject::new(
+        &drum,
+        Affine3A::from_translation(Vec3::new(centre, 1.0 + half - 0.25, centre)),
+    )];
+    for (name, distance) in [
+        ("jfa_iterative10_scatter10", DistanceTransform::JumpFlood),
+        ("exact_iterative10_scatter10", DistanceTransform::Exact),
+    ] {
+        let mut sim = GranularSim::new(snow(4096, texel), GranularParams::default())
+            .expect("sim")
+            .with_methods(DisplacementMethod::iterative(), SlopeMethod::Scatter)
+            .with_distance_transform(distance);
+        let areas = sim.active_areas(&obj).expect("areas");
+        assert_eq!(areas.len(), 1);
+        assert_eq!(areas[0].columns(), 242_064, "{:?}", areas[0]);
+        g.throughput(Throughput::Elements(areas[0].columns()));
+        g.bench_function(BenchmarkId::new(name, 4096), |b| {
+            b.iter(|| sim.step(black_box(&obj)).expect("step"))
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, steps, vehicles, full_step);
 criterion_main!(benches);

@@ -51,3 +51,16 @@ pub(crate) fn for_each_chunk2<A: Send, B: Send>(
             .for_each(|(i, (x, y))| f(i, x, y));
     }
 }
+
+/// The sum of `f` over `items` (u64 addition is associative, so any split gives the same sum).
+pub(crate) fn map_sum<I: Sync>(items: &[I], f: impl Fn(&I) -> u64 + Sync + Send) -> u64 {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        items.par_iter().map(f).sum()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        items.iter().map(f).sum()
+    }
+}

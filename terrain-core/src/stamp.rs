@@ -742,11 +742,15 @@ impl SmallOp {
     }
 
     fn apply<T: HeightSample>(&self, dst: &mut [T], w: &[f32]) {
-        if let Ok(d) = bytemuck::try_cast_slice_mut::<T, u16>(dst)
-            && std::mem::size_of::<T>() == 2
+        use std::any::TypeId;
+        let t = TypeId::of::<T>();
+        if t == TypeId::of::<u16>()
+            && let Ok(d) = bytemuck::try_cast_slice_mut::<T, u16>(dst)
         {
             apply_small_u16(self, d, w);
-        } else if let Ok(d) = bytemuck::try_cast_slice_mut::<T, u8>(dst) {
+        } else if t == TypeId::of::<u8>()
+            && let Ok(d) = bytemuck::try_cast_slice_mut::<T, u8>(dst)
+        {
             apply_small_u8(self, d, w);
         }
     }

@@ -54,11 +54,6 @@ pub fn column_outflow(
     if a == 0 { (0, 0) } else { (a, mask) }
 }
 
-/// Neighbour index offsets of [`JFA_OFFSETS`] in a grid `w` wide.
-fn offsets(w: usize) -> [isize; 8] {
-    JFA_OFFSETS.map(|[ox, oy]| oy as isize * w as isize + ox as isize)
-}
-
 /// The outflow of one column from its height and mask of receivers (see [`column_outflow`]).
 #[inline]
 fn outflow_of(hc: u32, mask: u8, hq: [u32; 8], roughness_q15: u32) -> (u32, u8) {
@@ -94,30 +89,54 @@ fn outflow_row(
     masks: &mut [u8],
 ) {
     let (w, h) = size;
-    let off = offsets(w);
     let t: [u32; 8] = JFA_OFFSETS.map(|[ox, oy]| thresholds[usize::from(ox != 0 && oy != 0)]);
-    let interior = y >= 1 && y + 1 < h;
     let rows = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
-    for x in 0..w {
-        if let Some((parity, base)) = only_parity
-            && ((base + x as i64 + y as i64) & 1) as u32 != parity
-        {
-            (amount[x], masks[x]) = (0, 0);
-            continue;
+    let here = &heights[y * w..(y + 1) * w];
+    // Interior columns of interior rows: the receiver masks direction by direction over the
+    // whole row (contiguous, vectorisable loops), then the amounts where a mask is set.
+    let inner = if y >= 1 && y + 1 < h && w >= 3 {
+        1..w - 1
+    } else {
+        0..0
+    };
+    if !inner.is_empty() {
+        masks[inner.clone()].fill(0);
+        for (k, &[ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+            let ny = (y as isize + oy as isize) as usize;
+            let (a, b) = ((1 + ox) as usize, (w as isize - 1 + ox as isize) as usize);
+            let hq = &heights[ny * w + a..ny * w + b];
+            let sq = &seed[ny * w + a..ny * w + b];
+            let tk = t[k];
+            for (((m, &hc), &hq), &sq) in masks[inner.clone()]
+                .iter_mut()
+                .zip(&here[inner.clone()])
+                .zip(hq)
+                .zip(sq)
+            {
+                let steep = (sq != 0) & (hc > hq) & (hc.wrapping_sub(hq) > tk);
+                *m |= u8::from(steep) << k;
+            }
         }
-        let me = y * w + x;
-        let hc = heights[me];
+    }
+    for x in 0..w {
+        let sender = match only_parity {
+            Some((parity, base)) => ((base + x as i64 + y as i64) & 1) as u32 == parity,
+            None => true,
+        };
+        let hc = here[x];
+        let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
         let mut hq = [0u32; 8];
         let mut mask = 0u8;
-        if interior && x >= 1 && x + 1 < w {
-            for k in 0..8 {
-                let q = (me as isize + off[k]) as usize;
-                hq[k] = heights[q];
-                let steep = (seed[q] != 0) & (hc > hq[k]) & (hc.wrapping_sub(hq[k]) > t[k]);
-                mask |= u8::from(steep) << k;
+        if inner.contains(&x) {
+            mask = masks[x];
+            if mask != 0 {
+                for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                    let q = (y as isize + *oy as isize) as usize * w
+                        + (x as isize + *ox as isize) as usize;
+                    hq[k] = heights[q];
+                }
             }
         } else {
-            let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
             for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
                 let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize])
                 else {
@@ -129,7 +148,11 @@ fn outflow_row(
                 mask |= u8::from(steep) << k;
             }
         }
-        (amount[x], masks[x]) = outflow_of(hc, mask, hq, roughness_q15);
+        (amount[x], masks[x]) = if sender {
+            outflow_of(hc, mask, hq, roughness_q15)
+        } else {
+            (0, 0)
+        };
     }
 }
 
@@ -144,32 +167,44 @@ fn gather_row(
     out: &mut [u32],
 ) {
     let (w, h) = size;
-    let off = offsets(w);
-    let interior = y >= 1 && y + 1 < h;
     let rows = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
-    for (x, o) in out.iter_mut().enumerate() {
-        let me = y * w + x;
-        let mut v = heights[me] - amount[me] * masks[me].count_ones();
-        if interior && x >= 1 && x + 1 < w {
-            for k in 0..8 {
-                let q = (me as isize + off[k]) as usize;
-                let names_me = (masks[q] >> (7 - k)) & 1;
-                v = v.wrapping_add(amount[q] * u32::from(names_me));
-            }
-        } else {
-            let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
-            for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
-                let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize])
-                else {
-                    continue;
-                };
-                let q = ny * w + nx;
-                if masks[q] & (1 << (7 - k)) != 0 {
-                    v = v.wrapping_add(amount[q]);
-                }
+    let r = y * w..(y + 1) * w;
+    for ((o, &hv), (&a, &m)) in out
+        .iter_mut()
+        .zip(&heights[r.clone()])
+        .zip(amount[r.clone()].iter().zip(&masks[r]))
+    {
+        *o = hv - a * m.count_ones();
+    }
+    // Interior columns of interior rows: direction by direction over the row (vectorisable).
+    let inner = if y >= 1 && y + 1 < h && w >= 3 {
+        1..w - 1
+    } else {
+        0..0
+    };
+    if !inner.is_empty() {
+        for (k, &[ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+            let ny = (y as isize + oy as isize) as usize;
+            let (a, b) = ((1 + ox) as usize, (w as isize - 1 + ox as isize) as usize);
+            let qa = &amount[ny * w + a..ny * w + b];
+            let qm = &masks[ny * w + a..ny * w + b];
+            let shift = 7 - k;
+            for ((o, &qa), &qm) in out[inner.clone()].iter_mut().zip(qa).zip(qm) {
+                *o = o.wrapping_add(qa * u32::from((qm >> shift) & 1));
             }
         }
-        *o = v;
+    }
+    for x in (0..w).filter(|x| !inner.contains(x)) {
+        let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
+        for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+            let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize]) else {
+                continue;
+            };
+            let q = ny * w + nx;
+            if masks[q] & (1 << (7 - k)) != 0 {
+                out[x] = out[x].wrapping_add(amount[q]);
+            }
+        }
     }
 }
 
