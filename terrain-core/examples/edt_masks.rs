@@ -25,6 +25,8 @@ use terrain_core::granular::{
 use terrain_core::{Grid, Rect};
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
+/// Whether column `(x, y)` of a mask is a seed.
+type SeedTest = dyn Fn(u32, u32) -> bool;
 
 fn main() -> Result<()> {
     let (mut size, mut repeat, mut out) = (492u32, 20u32, std::env::temp_dir());
@@ -47,7 +49,7 @@ fn main() -> Result<()> {
     let n = size as f32;
     // A wheel-like footprint (no seeds inside an ellipse, as under an object), sparse random
     // seeds, and a footprint with scattered obstacles.
-    let masks: [(&str, Box<dyn Fn(u32, u32) -> bool>); 3] = [
+    let masks: [(&str, Box<SeedTest>); 3] = [
         (
             "footprint",
             Box::new(move |x, y| {
@@ -60,7 +62,7 @@ fn main() -> Result<()> {
         ),
         (
             "sparse",
-            Box::new(|x, y| pcg_hash(x ^ pcg_hash(y)) % 1000 == 0),
+            Box::new(|x, y| pcg_hash(x ^ pcg_hash(y)).is_multiple_of(1000)),
         ),
         (
             "footprint_obstacles",
@@ -69,7 +71,7 @@ fn main() -> Result<()> {
                     (x as f32 - n * 0.5) / (n * 0.3),
                     (y as f32 - n * 0.5) / (n * 0.3),
                 );
-                dx * dx + dy * dy > 1.0 && pcg_hash(x * 7 ^ pcg_hash(y * 13)) % 8 != 0
+                dx * dx + dy * dy > 1.0 && !pcg_hash((x * 7) ^ pcg_hash(y * 13)).is_multiple_of(8)
             }),
         ),
     ];

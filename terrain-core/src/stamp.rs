@@ -421,7 +421,7 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
         let (y0, y1) = (rect.min.y as usize, rect.max().y as usize);
         let (x0, x1) = (rect.min.x, rect.max().x);
         let rows = &mut grid.as_mut_slice()[y0 * width..y1 * width];
-        let run = |j: usize, row: &mut [T], eval: &dyn Fn(i32, i32, i32, &mut [f64])| {
+        let run = |j: usize, row: &mut [T], eval: &RowEval<'_>| {
             let uy = (y0 + j) as i32 + offset.y;
             let (a, b) = frame.row_span(uy, x0 + offset.x, x1 + offset.x);
             let row = &mut row[(a - offset.x) as usize..(b - offset.x) as usize];
@@ -476,6 +476,9 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
     }
     Ok(pieces.into_iter().map(|(r, _)| r).collect())
 }
+
+/// Fills stamp terms for `(uy, ux, n, out)`: row, first unwrapped column, count, terms.
+type RowEval<'a> = dyn Fn(i32, i32, i32, &mut [f64]) + 'a;
 
 /// Texels a row is evaluated in at once (a stack buffer of stamp values).
 const BLOCK: usize = 64;
@@ -626,11 +629,14 @@ impl Frame {
     /// is monotone along a row (an f32 affine function of x, every rounding monotone), so each
     /// holds on a prefix or a suffix, found by bisection: `O(log(hi - lo))` evaluations.
     fn row_span(&self, uy: i32, lo: i32, hi: i32) -> (i32, i32) {
+        // `!(v > 1)` rather than `v <= 1`: NaN passes, as in the per-texel test.
+        use std::cmp::Ordering::Greater;
+        use std::cmp::Ordering::Less;
         let tests: [&dyn Fn(i32) -> bool; 4] = [
-            &|x| !(self.local(x, uy).x > 1.0),
-            &|x| !(self.local(x, uy).x < -1.0),
-            &|x| !(self.local(x, uy).y > 1.0),
-            &|x| !(self.local(x, uy).y < -1.0),
+            &|x| self.local(x, uy).x.partial_cmp(&1.0) != Some(Greater),
+            &|x| self.local(x, uy).x.partial_cmp(&-1.0) != Some(Less),
+            &|x| self.local(x, uy).y.partial_cmp(&1.0) != Some(Greater),
+            &|x| self.local(x, uy).y.partial_cmp(&-1.0) != Some(Less),
         ];
         let (mut a, mut b) = (lo, hi);
         for t in tests {
@@ -867,7 +873,7 @@ impl GaussianKernel {
                 + 1.0;
             // The cross factor at any texel and the row's power table (k < BLOCK).
             let worst = (2.0 * beta * coef_b * my * (mx + BLOCK as f64)).abs();
-            if !(worst < 600.0) {
+            if worst.is_nan() || worst >= 600.0 {
                 return None;
             }
         }

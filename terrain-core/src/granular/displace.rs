@@ -283,7 +283,10 @@ pub fn displace_iterative(
         crate::par::for_each_chunk2(&mut share, w, &mut keep, w, |y, srow, krow| {
             for x in 0..w {
                 let (cv, n) = (c[y * w + x], counts[y * w + x]);
-                (srow[x], krow[x]) = if n > 0 { (cv / n, cv % n) } else { (0, cv) };
+                (srow[x], krow[x]) = match (cv.checked_div(n), cv.checked_rem(n)) {
+                    (Some(q), Some(r)) => (q, r),
+                    _ => (0, cv),
+                };
             }
         });
         let (share, keep, higher) = (&share, &keep, &higher);

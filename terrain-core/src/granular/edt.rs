@@ -179,8 +179,9 @@ fn row_transform<M: Metric>(gr: &[u32], sr: &[u32], w: usize, o: (u32, u32), row
             let xi = x as i64;
             let mut best = M::f(xi, xi, i64::from(gx));
             let r = gx as usize;
-            for i in x.saturating_sub(r)..(x + r + 1).min(w) {
-                let v = M::f(xi, i as i64, i64::from(gr[i]));
+            let lo = x.saturating_sub(r);
+            for (i, &gi) in gr.iter().enumerate().take((x + r + 1).min(w)).skip(lo) {
+                let v = M::f(xi, i as i64, i64::from(gi));
                 if v < best {
                     best = v;
                     best_i = i;
