@@ -481,7 +481,7 @@ struct Headline {
 /// The figures `bench-report` reports. Thesis figures: seed 000 table 4.3 (GTX295, deform and
 /// normal generation at 0.1 m per texel: 50 m = 500^2 texels, 200 m = 2000^2), seed 001 tables
 /// 5.4 (iterative approach) and 5.5 (SSBO approach) at heightmapSize 4096 (241 591 columns).
-const HEADLINES: [Headline; 16] = [
+const HEADLINES: [Headline; 18] = [
     Headline {
         id: "stamp_normals/stamp/500",
         thesis_ms: Some(0.971),
@@ -607,7 +607,7 @@ fn bench_report(quick: bool) -> Result<()> {
         ),
         (
             "granular",
-            "^granular/(jump_flood|jump_flood_reference|exact_nearest_seed|displace_iterative10|slopes_scatter10|step_jfa_iterative10_scatter10|step_exact_iterative10_scatter10|memcpy_u32)/4096$",
+            "^granular/(jump_flood|jump_flood_reference|exact_nearest_seed|displace_iterative10|slopes_scatter10|step_jfa_iterative10_scatter10|step_exact_iterative10_scatter10|memcpy_u32)/4096$|^granular_step/",
         ),
     ];
     for (bench, filter) in benches {
