@@ -578,6 +578,18 @@ const HEADLINES: [Headline; 18] = [
         thesis: "seed 001 table 5.4, the same steps",
         copy_id: "granular/memcpy_u32/4096",
     },
+    Headline {
+        id: "granular_step/jfa_iterative10_scatter10/4096",
+        thesis_ms: Some(38.08),
+        thesis: "seed 001 table 5.4, the same steps (GranularSim::step, volume included)",
+        copy_id: "granular/memcpy_u32/4096",
+    },
+    Headline {
+        id: "granular_step/exact_iterative10_scatter10/4096",
+        thesis_ms: Some(38.08),
+        thesis: "seed 001 table 5.4, the same steps (GranularSim::step, exact transform)",
+        copy_id: "granular/memcpy_u32/4096",
+    },
 ];
 
 /// Reads criterion's median estimate (ns) of `id` from `criterion_dir`.
