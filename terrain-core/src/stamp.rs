@@ -617,7 +617,7 @@ struct Frame {
 impl Frame {
     /// Local coordinates of the texel at unwrapped coordinates `(ux, uy)`, in f32 exactly as
     /// the GPU pass computes them.
-    #[inline]
+    #[inline(always)]
     fn local(&self, ux: i32, uy: i32) -> Vec2 {
         let dx = ux as f32 - self.center.x;
         let dy = uy as f32 - self.center.y;
@@ -951,7 +951,9 @@ impl GaussianKernel {
 
 /// A texture stamp sampled inline, with the arithmetic of [`TextureStamp::value`].
 struct TextureKernel<'a> {
-    values: &'a Grid<f32>,
+    values: &'a [f32],
+    w: i32,
+    h: i32,
     size: Vec2,
 }
 
@@ -960,33 +962,34 @@ impl<'a> TextureKernel<'a> {
     fn new(values: &'a Grid<f32>) -> Option<Self> {
         let size = values.size();
         (size.max_element() < 1 << 22 && size.min_element() > 0).then(|| Self {
-            values,
+            values: values.as_slice(),
+            w: size.x as i32,
+            h: size.y as i32,
             size: size.as_vec2(),
         })
     }
 
     /// [`TextureStamp::value`] for `local` inside `[-1, 1]^2` (or NaN): the same f32
     /// operations, with `floor` as a cast and a correction (exact below 2^23).
-    #[inline]
+    #[inline(always)]
     fn value(&self, local: Vec2) -> f32 {
         let p = (local + 1.0) * 0.5 * self.size - 0.5;
-        if p.is_nan() {
-            return f32::NAN;
-        }
+        // NaN casts to 0 and leaves fx NaN, so the value is NaN as the reference's.
         let fl = |v: f32| {
             let t = v as i32;
             if t as f32 > v { t - 1 } else { t }
         };
         let (x0, z0) = (fl(p.x), fl(p.y));
         let (fx, fz) = (p.x - x0 as f32, p.y - z0 as f32);
-        let (w, h) = (self.values.width() as i32, self.values.height() as i32);
+        let (w, h) = (self.w, self.h);
         let xa = x0.clamp(0, w - 1) as usize;
         let xb = (x0 + 1).clamp(0, w - 1) as usize;
-        let r0 = self.values.row(z0.clamp(0, h - 1) as u32);
-        let r1 = self.values.row((z0 + 1).clamp(0, h - 1) as u32);
-        let v = [r0[xa], r0[xb], r1[xa], r1[xb]];
-        let top = v[0] + (v[1] - v[0]) * fx;
-        let bot = v[2] + (v[3] - v[2]) * fx;
+        let ra = z0.clamp(0, h - 1) as usize * w as usize;
+        let rb = (z0 + 1).clamp(0, h - 1) as usize * w as usize;
+        let v = self.values;
+        let (v0, v1, v2, v3) = (v[ra + xa], v[ra + xb], v[rb + xa], v[rb + xb]);
+        let top = v0 + (v1 - v0) * fx;
+        let bot = v2 + (v3 - v2) * fx;
         top + (bot - top) * fz
     }
 }
