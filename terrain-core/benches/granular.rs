@@ -66,6 +66,55 @@ fn steps(c: &mut Criterion) {
         g.bench_function(BenchmarkId::new("jump_flood", size), |b| {
             b.iter(|| jump_flood(black_box(&pen), area, params.metric, true).expect("jfa"))
         });
+        // Before: the sequential pass with the hashed order computed for every column.
+        if size == 4096 {
+            g.bench_function(BenchmarkId::new("jump_flood_reference", size), |b| {
+                b.iter(|| {
+                    jump_flood_reference(black_box(&pen), area, params.metric, true).expect("jfa")
+                })
+            });
+        }
+        for (name, metric) in [
+            ("exact_nearest_seed", DistanceMetric::Euclidean),
+            ("exact_nearest_seed_manhattan", DistanceMetric::Manhattan),
+            ("exact_nearest_seed_chebyshev", DistanceMetric::Chebyshev),
+        ] {
+            g.bench_function(BenchmarkId::new(name, size), |b| {
+                b.iter(|| exact_nearest_seed(black_box(&pen), area, metric).expect("edt"))
+            });
+        }
+        // One whole step over the area as GranularSim::step runs it (depth, penetration,
+        // nearest seeds, 10 iterative displacement passes, 10 scatter slope passes).
+        for (name, exact) in [
+            ("step_jfa_iterative10_scatter10", false),
+            ("step_exact_iterative10_scatter10", true),
+        ] {
+            g.bench_function(BenchmarkId::new(name, size), |b| {
+                b.iter_batched_ref(
+                    || map.clone(),
+                    |m| {
+                        let depth = depth_from_below(&obj, m, area).expect("depth");
+                        let mut pen = pen.clone();
+                        penetration_texture(m, &depth, area, 5000, &mut pen).expect("pen");
+                        let seeds = if exact {
+                            exact_nearest_seed(&pen, area, params.metric).expect("edt")
+                        } else {
+                            jump_flood(&pen, area, params.metric, true).expect("jfa")
+                        };
+                        displace_iterative(m, &pen, &seeds, area, 32768, 10, params.metric)
+                            .expect("displace");
+                        even_out_slopes_scatter(m, &pen, area, t, r15, 10).expect("slope");
+                    },
+                    criterion::BatchSize::LargeInput,
+                )
+            });
+        }
+        // The baseline: copying the area's u32 heights once.
+        let src = vec![7u32; area.area() as usize];
+        let mut dst = vec![0u32; area.area() as usize];
+        g.bench_function(BenchmarkId::new("memcpy_u32", size), |b| {
+            b.iter(|| dst.copy_from_slice(black_box(&src)))
+        });
         for (name, method) in [
             ("displace_iterative10", DisplacementMethod::iterative()),
             ("displace_closest_seed", DisplacementMethod::ClosestSeed),
@@ -179,5 +228,41 @@ fn vehicles(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, steps, vehicles);
+/// The whole CPU step of `GranularSim` on the 4096 map (200 m, table 5.3 settings: iterative
+/// displacement with 10 passes, 10 scatter slope passes) over one 492^2 = 242 064-column active
+/// area (a drum 23.2 m wide and long, sunk 0.25 m, plus the 8-texel margin), volume included;
+/// jump flooding (as the GPU) or the exact transform.
+fn full_step(c: &mut Criterion) {
+    let mut g = c.benchmark_group("granular_step");
+    g.sample_size(10);
+    g.warm_up_time(Duration::from_millis(500));
+    g.measurement_time(Duration::from_secs(3));
+    let texel = 200.0 / 4096.0;
+    let half = 237.25 * texel;
+    let centre = 2048.5 * texel;
+    let drum = TriMesh::wheel(half, half, 64).expect("drum");
+    let obj = [GranularObject::new(
+        &drum,
+        Affine3A::from_translation(Vec3::new(centre, 1.0 + half - 0.25, centre)),
+    )];
+    for (name, distance) in [
+        ("jfa_iterative10_scatter10", DistanceTransform::JumpFlood),
+        ("exact_iterative10_scatter10", DistanceTransform::Exact),
+    ] {
+        let mut sim = GranularSim::new(snow(4096, texel), GranularParams::default())
+            .expect("sim")
+            .with_methods(DisplacementMethod::iterative(), SlopeMethod::Scatter)
+            .with_distance_transform(distance);
+        let areas = sim.active_areas(&obj).expect("areas");
+        assert_eq!(areas.len(), 1);
+        assert_eq!(areas[0].columns(), 242_064, "{:?}", areas[0]);
+        g.throughput(Throughput::Elements(areas[0].columns()));
+        g.bench_function(BenchmarkId::new(name, 4096), |b| {
+            b.iter(|| sim.step(black_box(&obj)).expect("step"))
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, steps, vehicles, full_step);
 criterion_main!(benches);

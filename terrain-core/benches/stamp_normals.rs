@@ -5,8 +5,8 @@ use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_m
 use glam::{IVec2, UVec2, Vec2};
 use std::hint::black_box;
 use terrain_core::{
-    Blend, CoarseMap, DerivativeMap, GaussianStamp, HeightEncoding, Rect, StampPlacement,
-    TerrainParams, apply_stamp, generate_coarse_map,
+    Blend, CoarseMap, DerivativeMap, GaussianStamp, Grid, HeightEncoding, Rect, StampPlacement,
+    TerrainParams, TextureStamp, apply_stamp, apply_stamp_reference, generate_coarse_map,
 };
 
 const MAP: u32 = 4096;
@@ -42,6 +42,47 @@ fn bench(c: &mut Criterion) {
         let mut gauss = GaussianStamp::default();
         group.bench_function(BenchmarkId::new("stamp", side), |b| {
             b.iter(|| apply_stamp(&mut map, &mut gauss, &next(), Blend::Add).expect("stamp"))
+        });
+        // The per-texel evaluation stamps used before (slow: the small sizes only).
+        if side <= 500 {
+            group.bench_function(BenchmarkId::new("stamp_reference", side), |b| {
+                b.iter(|| {
+                    apply_stamp_reference(&mut map, &mut gauss, &next(), Blend::Add).expect("stamp")
+                })
+            });
+        }
+        // A rotated, non-square Gaussian (the cross factor), a rotated texture stamp and the
+        // min / max blends.
+        let rotated = move |p: StampPlacement| {
+            StampPlacement {
+                scale: Vec2::new(p.scale.x, p.scale.y * 0.5),
+                ..p
+            }
+            .with_rotation(0.6)
+            .expect("valid rotation")
+        };
+        group.bench_function(BenchmarkId::new("stamp_gaussian_rotated", side), |b| {
+            b.iter(|| {
+                apply_stamp(&mut map, &mut gauss, &rotated(next()), Blend::Add).expect("stamp")
+            })
+        });
+        let mut tex = TextureStamp::from_gray8(
+            &Grid::from_fn(64, 64, |x, y| ((x * 7 + y * 13) % 256) as u8).expect("image"),
+        );
+        group.bench_function(BenchmarkId::new("stamp_texture_rotated", side), |b| {
+            b.iter(|| apply_stamp(&mut map, &mut tex, &rotated(next()), Blend::Add).expect("stamp"))
+        });
+        let mut flip = false;
+        group.bench_function(BenchmarkId::new("stamp_min_max", side), |b| {
+            b.iter(|| {
+                flip = !flip;
+                let blend = if flip {
+                    Blend::Min { base_m: 50.0 }
+                } else {
+                    Blend::Max { base_m: 50.0 }
+                };
+                apply_stamp(&mut map, &mut gauss, &next(), blend).expect("stamp")
+            })
         });
         let rect = Rect::new(
             (centre / TEXEL).as_ivec2() - IVec2::splat(side as i32 / 2),

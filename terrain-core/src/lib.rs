@@ -39,6 +39,7 @@ pub mod hillshade;
 pub mod io;
 pub mod map;
 pub mod normals;
+mod par;
 pub mod readback;
 pub mod rect;
 pub mod sample;
@@ -65,8 +66,9 @@ pub use rect::{DirtyRect, Rect, WrappedPiece};
 pub use sample::bilinear;
 pub use shockwave::{MAX_SHOCKWAVE_GAMMA, Shockwave, ShockwaveParams};
 pub use stamp::{
-    Blend, DEFAULT_GAUSSIAN_EPSILON_M, GaussianStamp, Stamp, StampPlacement, StampRegion,
-    TextureStamp, apply_stamp, stamp_region,
+    Blend, DEFAULT_GAUSSIAN_EPSILON_M, GaussianStamp, Stamp, StampKernel, StampPlacement,
+    StampRegion, TextureStamp, apply_stamp, apply_stamp_reference, gaussian_rounding_bound,
+    stamp_region,
 };
 pub use terrain_gen::{TerrainParams, generate_coarse_map, generate_heights};
 pub use tile_atlas::TileAtlas;

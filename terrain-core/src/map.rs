@@ -13,6 +13,13 @@ pub trait HeightSample: Copy + bytemuck::Pod + Send + Sync + 'static {
     fn to_raw_f64(self) -> f64;
     /// The nearest stored value to `raw`, clamped to `0..=MAX_RAW` (NaN gives 0).
     fn from_raw_f64_clamped(raw: f64) -> Self;
+    /// `floor(raw)` clamped to `0..=MAX_RAW` (NaN gives 0): one saturating cast, no call to
+    /// `floor`, so loops over it vectorise. `from_raw_f64_floor_clamped(v + 0.5)` equals
+    /// [`HeightSample::from_raw_f64_clamped`]`(v)` except where `v + 0.5` rounds (fractions
+    /// within 2^-53 of one half).
+    fn from_raw_f64_floor_clamped(raw: f64) -> Self {
+        Self::from_raw_f64_clamped(raw.floor())
+    }
 }
 
 macro_rules! impl_height_sample {
@@ -27,6 +34,17 @@ macro_rules! impl_height_sample {
             fn from_raw_f64_clamped(raw: f64) -> Self {
                 // `as` saturates and maps NaN to 0, which is the clamp we want.
                 raw.round() as $t
+            }
+            #[inline]
+            fn from_raw_f64_floor_clamped(raw: f64) -> Self {
+                // Branch-free and vectorisable without SSE4.1's `floor`: clamp (NaN gives 0),
+                // round to an integer by adding and removing 2^52 (exact below 2^51), step
+                // down where that rounded up, and read the integer from the mantissa bits.
+                const MAGIC: f64 = 4_503_599_627_370_496.0; // 2^52
+                let c = raw.max(0.0).min(Self::MAX_RAW);
+                let r = (c + MAGIC) - MAGIC;
+                let f = if r > c { r - 1.0 } else { r };
+                (f + MAGIC).to_bits() as $t
             }
         }
     };
@@ -203,11 +221,25 @@ impl<T: HeightSample> HeightMap<T> {
 
     /// The u64 sum of all stored values: the conserved volume of integer maps.
     pub fn raw_sum(&self) -> u64 {
-        self.grid
-            .as_slice()
-            .iter()
-            .map(|v| v.to_raw_f64() as u64)
-            .sum()
+        // Integer sums for the built-in samples (a float conversion per texel is most of the
+        // cost of summing a 4096^2 map), row-parallel.
+        let w = self.grid.width().max(1) as usize;
+        let rows: Vec<&[T]> = self.grid.as_slice().chunks(w).collect();
+        use std::any::TypeId;
+        let t = TypeId::of::<T>();
+        crate::par::map_sum(&rows, |row: &&[T]| {
+            if t == TypeId::of::<u32>()
+                && let Ok(r) = bytemuck::try_cast_slice::<T, u32>(row)
+            {
+                r.iter().map(|&v| u64::from(v)).sum()
+            } else if t == TypeId::of::<u16>()
+                && let Ok(r) = bytemuck::try_cast_slice::<T, u16>(row)
+            {
+                r.iter().map(|&v| u64::from(v)).sum()
+            } else {
+                row.iter().map(|v| v.to_raw_f64() as u64).sum()
+            }
+        })
     }
 }
 

@@ -66,35 +66,60 @@ impl DerivativeMap {
         Ok(())
     }
 
-    /// Writes the derivatives of `rect` (inside the map) from the heights of `map`.
+    /// Writes the derivatives of `rect` (inside the map) from the heights of `map`, rows in
+    /// parallel. Eq. 3.3 on integer samples is an exact integer in f64 (|sum| < 18 * 2^32), so
+    /// the order of its terms does not matter and every path gives the same bits.
     fn fill<T: HeightSample>(&mut self, map: &HeightMap<T>, rect: Rect) {
         let h = map.grid();
         let wrap = map.wrap();
-        let w = i64::from(h.width());
+        let (w, hh) = (h.width() as usize, h.height());
         // Eq. 3.3 reorganised: h'(x) = (h(x-2) - 8 h(x-1) + 8 h(x+1) - h(x+2)) / (12 xi),
         // with heights in metres = offset + scale * raw (the offset cancels).
         let k = f64::from(map.encoding().scale) / (12.0 * f64::from(map.texel_size()));
-        let row_of = |y: i64| wrap.resolve(y, h.height());
-        let col = |x: i64| wrap.resolve(x, h.width()) as usize;
-        for y in rect.min.y as i64..rect.max().y as i64 {
-            let rows = [-2i64, -1, 1, 2].map(|d| h.row(row_of(y + d)));
-            let here = h.row(row_of(y));
-            let out_row = self.grid.row_mut(y as u32);
-            for x in rect.min.x as i64..rect.max().x as i64 {
-                let r = |row: &[T], dx: i64| -> f64 {
-                    let xx = x + dx;
-                    let i = if (0..w).contains(&xx) {
-                        xx as usize
-                    } else {
-                        col(xx)
-                    };
-                    row[i].to_raw_f64()
-                };
-                let dx = r(here, -2) - 8.0 * r(here, -1) + 8.0 * r(here, 1) - r(here, 2);
-                let dz = r(rows[0], 0) - 8.0 * r(rows[1], 0) + 8.0 * r(rows[2], 0) - r(rows[3], 0);
-                out_row[x as usize] = Vec2::new((dx * k) as f32, (dz * k) as f32);
+        let (x0, x1) = (rect.min.x as usize, rect.max().x as usize);
+        let (y0, y1) = (rect.min.y as usize, rect.max().y as usize);
+        let out = &mut self.grid.as_mut_slice()[y0 * w..y1 * w];
+        let diff = |a: T, b: T, c: T, d: T| {
+            (a.to_raw_f64() - d.to_raw_f64()) + 8.0 * (c.to_raw_f64() - b.to_raw_f64())
+        };
+        crate::par::for_each_chunk(out, w, |j, out_row| {
+            let y = (y0 + j) as i64;
+            let row_of = |d: i64| h.row(wrap.resolve(y + d, hh));
+            let (up2, up1, here, dn1, dn2) =
+                (row_of(-2), row_of(-1), row_of(0), row_of(1), row_of(2));
+            let col = |x: i64| wrap.resolve(x, w as u32) as usize;
+            // Columns whose 4 horizontal taps are inside the row need no wrapping.
+            let (ia, ib) = (x0.max(2), x1.min(w.saturating_sub(2)).max(x0.max(2)));
+            let edge = |x: usize, out: &mut Vec2| {
+                let xi = x as i64;
+                let dx = diff(
+                    here[col(xi - 2)],
+                    here[col(xi - 1)],
+                    here[col(xi + 1)],
+                    here[col(xi + 2)],
+                );
+                let dz = diff(up2[x], up1[x], dn1[x], dn2[x]);
+                *out = Vec2::new((dx * k) as f32, (dz * k) as f32);
+            };
+            for x in (x0..ia.min(x1)).chain(ib.max(x0)..x1) {
+                edge(x, &mut out_row[x]);
             }
-        }
+            if ia < ib {
+                let n = ib - ia;
+                let o = &mut out_row[ia..ib];
+                let (hl2, hl1) = (&here[ia - 2..ib - 2], &here[ia - 1..ib - 1]);
+                let (hr1, hr2) = (&here[ia + 1..ib + 1], &here[ia + 2..ib + 2]);
+                let (u2, u1, d1, d2) = (&up2[ia..ib], &up1[ia..ib], &dn1[ia..ib], &dn2[ia..ib]);
+                let taps = [hl2, hl1, hr1, hr2, u2, u1, d1, d2];
+                if !interior_small::<T, u16>(taps, o, k) && !interior_small::<T, u8>(taps, o, k) {
+                    for i in 0..n {
+                        let dx = diff(hl2[i], hl1[i], hr1[i], hr2[i]);
+                        let dz = diff(u2[i], u1[i], d1[i], d2[i]);
+                        o[i] = Vec2::new((dx * k) as f32, (dz * k) as f32);
+                    }
+                }
+            }
+        });
     }
 
     /// A derivative map from gradients computed elsewhere (a GPU pass's download).
@@ -161,6 +186,39 @@ impl DerivativeMap {
             wrap,
         })
     }
+}
+
+/// The interior loop of [`DerivativeMap::fill`] for u8 / u16 samples (when `T` is `S`): eq. 3.3
+/// in i32 (exact: |sum| < 18 * 65 536), then the same f64 product and f32 rounding as the
+/// generic loop, so the same bits. Returns false (and does nothing) for other sample types.
+fn interior_small<T: HeightSample, S: bytemuck::Pod + Into<i32>>(
+    taps: [&[T]; 8],
+    out: &mut [Vec2],
+    k: f64,
+) -> bool {
+    if std::any::TypeId::of::<T>() != std::any::TypeId::of::<S>() {
+        return false;
+    }
+    let Ok(t) = taps
+        .iter()
+        .map(|s| bytemuck::try_cast_slice::<T, S>(s))
+        .collect::<Result<Vec<&[S]>, _>>()
+    else {
+        return false;
+    };
+    let d = |a: S, b: S, c: S, e: S| {
+        let (a, b, c, e): (i32, i32, i32, i32) = (a.into(), b.into(), c.into(), e.into());
+        f64::from((a - e) + 8 * (c - b))
+    };
+    let n = out.len();
+    let (hl2, hl1, hr1, hr2) = (&t[0][..n], &t[1][..n], &t[2][..n], &t[3][..n]);
+    let (u2, u1, d1, d2) = (&t[4][..n], &t[5][..n], &t[6][..n], &t[7][..n]);
+    for i in 0..n {
+        let dx = d(hl2[i], hl1[i], hr1[i], hr2[i]);
+        let dz = d(u2[i], u1[i], d1[i], d2[i]);
+        out[i] = Vec2::new((dx * k) as f32, (dz * k) as f32);
+    }
+    true
 }
 
 /// The texels whose derivatives change when heights inside `dirty` change, on a map of

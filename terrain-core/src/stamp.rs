@@ -141,6 +141,30 @@ pub trait Stamp {
 
     /// The stamp's value at `local` in `[-1, 1]^2`.
     fn value(&self, local: Vec2) -> f32;
+
+    /// A closed form [`apply_stamp`] may evaluate instead of calling [`Stamp::value`] per
+    /// texel (after [`Stamp::prepare`]). The default, [`StampKernel::PerTexel`], is always
+    /// right; return another kernel only if it describes `value` exactly.
+    fn kernel(&self) -> StampKernel<'_> {
+        StampKernel::PerTexel
+    }
+}
+
+/// How [`apply_stamp`] evaluates a stamp (see [`Stamp::kernel`]).
+#[derive(Debug, Clone, Copy)]
+#[non_exhaustive]
+pub enum StampKernel<'a> {
+    /// `value(local) = exp(-beta |local|^2)`: evaluated separably in map coordinates, without
+    /// an `exp` per texel.
+    Gaussian {
+        /// The falloff in units of the normalised radius.
+        beta: f32,
+    },
+    /// Bilinear, clamped sampling of these values with pixel centres at `(i + 0.5) / n` of
+    /// the footprint, as [`TextureStamp`] samples: evaluated inline and row-parallel.
+    Texture(&'a Grid<f32>),
+    /// [`Stamp::value`] for every texel, on the calling thread.
+    PerTexel,
 }
 
 /// A stamp from a grayscale image (seed 000 sec 3.4.1), sampled bilinearly.
@@ -186,6 +210,10 @@ impl TextureStamp {
 }
 
 impl Stamp for TextureStamp {
+    fn kernel(&self) -> StampKernel<'_> {
+        StampKernel::Texture(&self.values)
+    }
+
     fn value(&self, local: Vec2) -> f32 {
         // Pixel i covers [i, i + 1) of the image; its centre i + 0.5 maps to local
         // (i + 0.5) / n * 2 - 1, so the image fills the footprint edge to edge.
@@ -277,6 +305,10 @@ impl Stamp for GaussianStamp {
     fn value(&self, local: Vec2) -> f32 {
         (-self.beta * local.length_squared()).exp()
     }
+
+    fn kernel(&self) -> StampKernel<'_> {
+        StampKernel::Gaussian { beta: self.beta }
+    }
 }
 
 /// The error function (Abramowitz & Stegun 7.1.26; absolute error below 1.5e-7).
@@ -344,6 +376,16 @@ pub fn stamp_region(
 /// map coordinates: one for a footprint inside the map, 2 or 4 across a repeating map's edge
 /// or corner, none for a footprint wholly off a clamped map.
 ///
+/// How values are evaluated depends on [`Stamp::kernel`]. A texture stamp is sampled exactly
+/// as [`TextureStamp::value`] does, inline and row-parallel: the result equals
+/// [`apply_stamp_reference`] (the per-texel evaluation) bit for bit. A Gaussian is evaluated
+/// separably in map coordinates, `exp(-beta (A dx^2 + 2 B dx dy + C dy^2))` as a product of a
+/// column table, a row factor and (for a rotated, non-square footprint) a cross factor built
+/// incrementally per row, all in f64: no `exp` per texel. It differs from the per-texel f32
+/// evaluation by at most 1 stored unit, only where the exact value lies within
+/// [`gaussian_rounding_bound`] of a rounding boundary (the reference's own f32 error is of
+/// that size). Other stamps call [`Stamp::value`] per texel, on one thread.
+///
 /// Fails on an invalid placement, an error from the stamp's `prepare`, a non-finite blend
 /// base, or a footprint larger than a repeating map (it would overlap itself).
 pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
@@ -352,6 +394,125 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
     placement: &StampPlacement,
     blend: Blend,
 ) -> Result<Vec<DirtyRect>, CoreError> {
+    let Some((pieces, frame, op)) = prepare_stamp(map, stamp, placement, blend)? else {
+        return Ok(Vec::new());
+    };
+    let footprint_x = pieces
+        .iter()
+        .map(|&(r, o)| (r.min.x + o.x, r.max().x + o.x))
+        .fold((i32::MAX, i32::MIN), |(a, b), (lo, hi)| {
+            (a.min(lo), b.max(hi))
+        });
+    let kernel = match stamp.kernel() {
+        // A footprint too small for its texel size gives non-finite local coordinates, which
+        // only the per-texel path treats exactly as the reference does.
+        _ if !frame.inv_half.is_finite() => Kernel::PerTexel,
+        StampKernel::Gaussian { beta } => GaussianKernel::new(&frame, beta, footprint_x, &pieces)
+            .map_or(Kernel::PerTexel, Kernel::Gaussian),
+        StampKernel::Texture(values) => match TextureKernel::new(values) {
+            Some(t) => Kernel::Texture(t),
+            None => Kernel::PerTexel,
+        },
+        StampKernel::PerTexel => Kernel::PerTexel,
+    };
+    let width = map.size().x as usize;
+    let grid = map.grid_mut();
+    for &(rect, offset) in &pieces {
+        let (y0, y1) = (rect.min.y as usize, rect.max().y as usize);
+        let (x0, x1) = (rect.min.x, rect.max().x);
+        let rows = &mut grid.as_mut_slice()[y0 * width..y1 * width];
+        let run = |j: usize, row: &mut [T], eval: &RowEval<'_>| {
+            let uy = (y0 + j) as i32 + offset.y;
+            let (a, b) = frame.row_span(uy, x0 + offset.x, x1 + offset.x);
+            let row = &mut row[(a - offset.x) as usize..(b - offset.x) as usize];
+            let mut z = [0.0f64; BLOCK];
+            for (k, dst) in row.chunks_mut(BLOCK).enumerate() {
+                let ux = a + (k * BLOCK) as i32;
+                eval(uy, ux, dst.len() as i32, &mut z[..dst.len()]);
+                op.apply(dst, &z[..dst.len()]);
+            }
+        };
+        match &kernel {
+            Kernel::Gaussian(g) if SmallOp::fits::<T>(&op) => {
+                let small = SmallOp::new(&op);
+                crate::par::for_each_chunk(rows, width, |j, row| {
+                    let uy = (y0 + j) as i32 + offset.y;
+                    let (a, b) = frame.row_span(uy, x0 + offset.x, x1 + offset.x);
+                    let row = &mut row[(a - offset.x) as usize..(b - offset.x) as usize];
+                    let rg = g.row(uy, op.add_scale.abs());
+                    let mut w = [0.0f32; BLOCK];
+                    for (k, dst) in row.chunks_mut(BLOCK).enumerate() {
+                        let w = &mut w[..dst.len()];
+                        g.eval32(&rg, a + (k * BLOCK) as i32, w);
+                        small.apply(dst, w);
+                    }
+                });
+            }
+            Kernel::Gaussian(g) => {
+                crate::par::for_each_chunk(rows, width, |j, row| {
+                    let uy = (y0 + j) as i32 + offset.y;
+                    let rg = g.row(uy, op.add_scale);
+                    run(j, row, &|_, ux, n, z: &mut [f64]| g.eval(&rg, ux, n, z));
+                });
+            }
+            Kernel::Texture(t) => crate::par::for_each_chunk(rows, width, |j, row| {
+                run(j, row, &|uy, ux, _, z: &mut [f64]| {
+                    for (i, z) in z.iter_mut().enumerate() {
+                        let v = t.value(frame.local(ux + i as i32, uy));
+                        *z = op.z(v);
+                    }
+                })
+            }),
+            Kernel::PerTexel => {
+                for (j, row) in rows.chunks_mut(width).enumerate() {
+                    run(j, row, &|uy, ux, _, z: &mut [f64]| {
+                        for (i, z) in z.iter_mut().enumerate() {
+                            *z = op.z(stamp.value(frame.local(ux + i as i32, uy)));
+                        }
+                    })
+                }
+            }
+        }
+    }
+    Ok(pieces.into_iter().map(|(r, _)| r).collect())
+}
+
+/// Fills stamp terms for `(uy, ux, n, out)`: row, first unwrapped column, count, terms.
+type RowEval<'a> = dyn Fn(i32, i32, i32, &mut [f64]) + 'a;
+
+/// Texels a row is evaluated in at once (a stack buffer of stamp values).
+const BLOCK: usize = 64;
+
+/// The relative size of the difference between [`apply_stamp`]'s separable Gaussian and the
+/// per-texel f32 evaluation of [`apply_stamp_reference`] before rounding: the two stored
+/// results differ (by exactly 1 unit) only at texels whose exact unrounded new value lies
+/// within `gaussian_rounding_bound(beta, placement) * |intensity / encoding scale|` of a
+/// half-integer.
+///
+/// The bound is the reference's own f32 error, with a factor 2 of margin: local coordinates
+/// rounded in 3 operations each, whose cancellation grows with the footprint's aspect ratio
+/// `k = max(sx / sz, sz / sx)` (`|d local| <= 3 eps (1 + k)`), the squared radius
+/// (`|d r^2| <= 4 |d local| + 2 eps r^2`, `r^2 <= 2`), `beta` times it and `exp` (2 eps):
+/// `2 eps (beta (12 (1 + k) + 6) + 2)`; plus 4 eps for the u8 and u16 path, which multiplies
+/// and rounds in f32 (min and max blends add the base's fraction in f32 too, a further
+/// `2^-22` stored units at most, which the bound does not scale).
+pub fn gaussian_rounding_bound(beta: f32, placement: &StampPlacement) -> f64 {
+    let eps = f64::from(f32::EPSILON) * 0.5;
+    let s = placement.scale.as_dvec2().abs();
+    let k = (s.x / s.y).max(s.y / s.x);
+    let k = if k.is_finite() { k } else { f64::MAX };
+    2.0 * eps * (f64::from(beta.abs()) * (12.0 * (1.0 + k) + 6.0) + 2.0) + 4.0 * eps
+}
+
+/// Per-placement state shared by every path of [`apply_stamp`] and [`apply_stamp_reference`]:
+/// validates, cuts the footprint into pieces and prepares the stamp.
+#[allow(clippy::type_complexity)]
+fn prepare_stamp<T: HeightSample, S: Stamp + ?Sized>(
+    map: &HeightMap<T>,
+    stamp: &mut S,
+    placement: &StampPlacement,
+    blend: Blend,
+) -> Result<Option<(Vec<(Rect, IVec2)>, Frame, BlendOp)>, CoreError> {
     let ts = map.texel_size();
     if let Blend::Min { base_m } | Blend::Max { base_m } = blend
         && !base_m.is_finite()
@@ -362,7 +523,7 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
         });
     }
     let Some(region) = stamp_region(map.size(), map.wrap(), ts, placement)? else {
-        return Ok(Vec::new());
+        return Ok(None);
     };
     // (map rect, offset from map to unwrapped coordinates) for every piece.
     let pieces: Vec<(Rect, IVec2)> = region
@@ -371,20 +532,59 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
         .map(|p| (p.map, p.unwrapped.min - p.map.min))
         .collect();
     stamp.prepare(placement)?;
-
     let enc = map.encoding();
     // Local coordinates in texel units: the same arithmetic for a texel whatever piece it is
     // in, so a stamp across the wrap edge equals the same stamp on a shifted map.
     let (center, inv_half, sin, cos) = placement.local_frame(ts);
     let add_scale = f64::from(placement.intensity) / f64::from(enc.scale);
+    let op = match blend {
+        Blend::Add => BlendOp {
+            kind: 0,
+            add_scale,
+            base_raw: 0.0,
+        },
+        // In stored units, as the GPU pass computes it: base + value * units.
+        Blend::Min { base_m } => BlendOp {
+            kind: 1,
+            add_scale,
+            base_raw: enc.to_raw(base_m),
+        },
+        Blend::Max { base_m } => BlendOp {
+            kind: 2,
+            add_scale,
+            base_raw: enc.to_raw(base_m),
+        },
+    };
+    let frame = Frame {
+        center,
+        inv_half,
+        sin,
+        cos,
+    };
+    Ok(Some((pieces, frame, op)))
+}
+
+/// The per-texel evaluation: [`Stamp::value`] at every texel of the footprint through the
+/// trait, each result rounded on its own. This is how [`apply_stamp`] worked before its fast
+/// paths, kept as the reference they are tested and benchmarked against; it is several
+/// hundred times slower than a copy of the region's bytes.
+///
+/// Fails as [`apply_stamp`] does.
+pub fn apply_stamp_reference<T: HeightSample, S: Stamp + ?Sized>(
+    map: &mut HeightMap<T>,
+    stamp: &mut S,
+    placement: &StampPlacement,
+    blend: Blend,
+) -> Result<Vec<DirtyRect>, CoreError> {
+    let Some((pieces, frame, op)) = prepare_stamp(map, stamp, placement, blend)? else {
+        return Ok(Vec::new());
+    };
     let grid = map.grid_mut();
     for &(rect, offset) in &pieces {
         for y in rect.min.y..rect.max().y {
-            let dy = (y + offset.y) as f32 - center.y;
             let row = grid.row_mut(y as u32);
             for x in rect.min.x..rect.max().x {
-                let dx = (x + offset.x) as f32 - center.x;
-                let local = Vec2::new(dx * cos + dy * sin, dy * cos - dx * sin) * inv_half;
+                let local = frame.local(x + offset.x, y + offset.y);
                 if local.x.abs() > 1.0 || local.y.abs() > 1.0 {
                     continue;
                 }
@@ -393,17 +593,405 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
                     continue;
                 }
                 let old = row[x as usize].to_raw_f64();
-                let new = match blend {
-                    Blend::Add => old + add_scale * f64::from(v),
-                    // In stored units, as the GPU pass computes it: base + value * units.
-                    Blend::Min { base_m } => old.min(enc.to_raw(base_m) + add_scale * f64::from(v)),
-                    Blend::Max { base_m } => old.max(enc.to_raw(base_m) + add_scale * f64::from(v)),
+                let new = match op.kind {
+                    0 => old + op.add_scale * f64::from(v),
+                    1 => old.min(op.base_raw + op.add_scale * f64::from(v)),
+                    _ => old.max(op.base_raw + op.add_scale * f64::from(v)),
                 };
                 row[x as usize] = T::from_raw_f64_clamped(new);
             }
         }
     }
     Ok(pieces.into_iter().map(|(r, _)| r).collect())
+}
+
+/// A placement's local frame in texel units (see [`StampPlacement::local_frame`]).
+#[derive(Debug, Clone, Copy)]
+struct Frame {
+    center: Vec2,
+    inv_half: Vec2,
+    sin: f32,
+    cos: f32,
+}
+
+impl Frame {
+    /// Local coordinates of the texel at unwrapped coordinates `(ux, uy)`, in f32 exactly as
+    /// the GPU pass computes them.
+    #[inline(always)]
+    fn local(&self, ux: i32, uy: i32) -> Vec2 {
+        let dx = ux as f32 - self.center.x;
+        let dy = uy as f32 - self.center.y;
+        Vec2::new(dx * self.cos + dy * self.sin, dy * self.cos - dx * self.sin) * self.inv_half
+    }
+
+    /// The texels `[a, b)` of row `uy` within `[lo, hi)` that are inside the footprint
+    /// (`!(|local.x| > 1 || |local.y| > 1)`, the per-texel test). Each of the four half-tests
+    /// is monotone along a row (an f32 affine function of x, every rounding monotone), so each
+    /// holds on a prefix or a suffix, found by bisection: `O(log(hi - lo))` evaluations.
+    fn row_span(&self, uy: i32, lo: i32, hi: i32) -> (i32, i32) {
+        // `!(v > 1)` rather than `v <= 1`: NaN passes, as in the per-texel test.
+        use std::cmp::Ordering::Greater;
+        use std::cmp::Ordering::Less;
+        let tests: [&dyn Fn(i32) -> bool; 4] = [
+            &|x| self.local(x, uy).x.partial_cmp(&1.0) != Some(Greater),
+            &|x| self.local(x, uy).x.partial_cmp(&-1.0) != Some(Less),
+            &|x| self.local(x, uy).y.partial_cmp(&1.0) != Some(Greater),
+            &|x| self.local(x, uy).y.partial_cmp(&-1.0) != Some(Less),
+        ];
+        let (mut a, mut b) = (lo, hi);
+        for t in tests {
+            let (ta, tb) = monotone_span(lo, hi, t);
+            a = a.max(ta);
+            b = b.min(tb);
+        }
+        if a >= b { (lo, lo) } else { (a, b) }
+    }
+}
+
+/// Where a predicate that is monotone over `[lo, hi)` holds: a prefix or a suffix (or all,
+/// or nothing), by bisection.
+fn monotone_span(lo: i32, hi: i32, p: &dyn Fn(i32) -> bool) -> (i32, i32) {
+    if lo >= hi {
+        return (lo, lo);
+    }
+    match (p(lo), p(hi - 1)) {
+        (true, true) => (lo, hi),
+        (false, false) => (lo, lo),
+        (first, _) => {
+            // p(l) == first and p(h) != first; bisect to adjacent l, h.
+            let (mut l, mut h) = (lo, hi - 1);
+            while h - l > 1 {
+                let m = l + (h - l) / 2;
+                if p(m) == first { l = m } else { h = m }
+            }
+            if first { (lo, h) } else { (h, hi) }
+        }
+    }
+}
+
+/// The blend of one stamp value into a stored height, in f64 stored units.
+#[derive(Debug, Clone, Copy)]
+struct BlendOp {
+    /// 0 add, 1 min, 2 max.
+    kind: u8,
+    add_scale: f64,
+    base_raw: f64,
+}
+
+impl BlendOp {
+    /// The stored-unit term of value `v`, or the value that leaves a texel unchanged when `v`
+    /// is NaN or infinite (0 for add, +inf for min, -inf for max).
+    #[inline]
+    fn z(&self, v: f32) -> f64 {
+        if v.is_finite() {
+            self.add_scale * f64::from(v)
+        } else {
+            [0.0, f64::INFINITY, f64::NEG_INFINITY][usize::from(self.kind)]
+        }
+    }
+
+    /// Blends the terms `z` into `dst`: `round(old + z)`, `round(min(old, base + z))` or
+    /// `round(max(old, base + z))`, rounded half up and clamped to the sample's range.
+    #[inline]
+    fn apply<T: HeightSample>(&self, dst: &mut [T], z: &[f64]) {
+        let base = self.base_raw;
+        match self.kind {
+            0 => {
+                for (d, &z) in dst.iter_mut().zip(z) {
+                    *d = T::from_raw_f64_floor_clamped(d.to_raw_f64() + z + 0.5);
+                }
+            }
+            1 => {
+                for (d, &z) in dst.iter_mut().zip(z) {
+                    *d = T::from_raw_f64_floor_clamped(d.to_raw_f64().min(base + z) + 0.5);
+                }
+            }
+            _ => {
+                for (d, &z) in dst.iter_mut().zip(z) {
+                    *d = T::from_raw_f64_floor_clamped(d.to_raw_f64().max(base + z) + 0.5);
+                }
+            }
+        }
+    }
+}
+
+/// The blend of non-negative f32 magnitudes `w` (the stamp term is `+w` or `-w` stored units)
+/// into u8 or u16 samples with integer SIMD-friendly operations: `old +/- floor(w + 1/2)`
+/// saturating, or `min` / `max` with `floor(base + z + 1/2)` computed as the integer part of
+/// the base plus `floor(frac(base) + 1/2 + z)` in f32.
+#[derive(Debug, Clone, Copy)]
+struct SmallOp {
+    kind: u8,
+    negative: bool,
+    base_int: i32,
+    base_frac_half: f32,
+}
+
+impl SmallOp {
+    /// Whether this path applies: u8 or u16 samples and `|add_scale| <= 1e9` (so every
+    /// product stays far inside f32's range).
+    fn fits<T: HeightSample>(op: &BlendOp) -> bool {
+        use std::any::TypeId;
+        let t = TypeId::of::<T>();
+        (t == TypeId::of::<u16>() || t == TypeId::of::<u8>()) && op.add_scale.abs() <= 1e9
+    }
+
+    fn new(op: &BlendOp) -> Self {
+        let b = op.base_raw.floor();
+        Self {
+            kind: op.kind,
+            negative: op.add_scale < 0.0,
+            // Bases far outside the sample range behave like one just outside it.
+            base_int: b.clamp(-1e6, 1e6) as i32,
+            base_frac_half: (op.base_raw - b + 0.5) as f32,
+        }
+    }
+
+    fn apply<T: HeightSample>(&self, dst: &mut [T], w: &[f32]) {
+        use std::any::TypeId;
+        let t = TypeId::of::<T>();
+        if t == TypeId::of::<u16>()
+            && let Ok(d) = bytemuck::try_cast_slice_mut::<T, u16>(dst)
+        {
+            apply_small_u16(self, d, w);
+        } else if t == TypeId::of::<u8>()
+            && let Ok(d) = bytemuck::try_cast_slice_mut::<T, u8>(dst)
+        {
+            apply_small_u8(self, d, w);
+        }
+    }
+}
+
+/// `floor(y)` for `|y| < 2^22`, with f32 adds, a compare and a bit cast only (SSE2 has no
+/// vector `floor`, and a saturating cast does not vectorise): adding `1.5 * 2^23` rounds to an
+/// integer and leaves it in the low mantissa bits.
+#[inline(always)]
+fn floor_small(y: f32) -> i32 {
+    const M: f32 = 12_582_912.0; // 1.5 * 2^23
+    let r = (y + M) - M;
+    let f = if r > y { r - 1.0 } else { r };
+    (f + M).to_bits() as i32 - 0x4B40_0000
+}
+
+macro_rules! apply_small {
+    ($name:ident, $t:ty) => {
+        fn $name(op: &SmallOp, dst: &mut [$t], w: &[f32]) {
+            const MAX: f32 = <$t>::MAX as f32;
+            let (bi, bfh) = (op.base_int, op.base_frac_half);
+            match (op.kind, op.negative) {
+                (0, false) => {
+                    for (d, &w) in dst.iter_mut().zip(w) {
+                        *d = d.saturating_add(floor_small(w.min(MAX) + 0.5) as $t);
+                    }
+                }
+                (0, true) => {
+                    for (d, &w) in dst.iter_mut().zip(w) {
+                        *d = d.saturating_sub(floor_small(w.min(MAX) + 0.5) as $t);
+                    }
+                }
+                (kind, negative) => {
+                    let sign = if negative { -1.0f32 } else { 1.0 };
+                    for (d, &w) in dst.iter_mut().zip(w) {
+                        let y = bfh + sign * w.min(131_072.0);
+                        let t = floor_small(y);
+                        let level = (bi + t).clamp(0, <$t>::MAX as i32) as $t;
+                        *d = if kind == 1 {
+                            (*d).min(level)
+                        } else {
+                            (*d).max(level)
+                        };
+                    }
+                }
+            }
+        }
+    };
+}
+apply_small!(apply_small_u16, u16);
+apply_small!(apply_small_u8, u8);
+
+/// The evaluation [`apply_stamp`] chose.
+enum Kernel<'a> {
+    Gaussian(GaussianKernel),
+    Texture(TextureKernel<'a>),
+    PerTexel,
+}
+
+/// The Gaussian `exp(-beta |local|^2)` in texel offsets `(dx, dy)` from the centre: with
+/// `local = ((c dx + s dy) a, (c dy - s dx) b)`, `|local|^2 = A dx^2 + 2 B dx dy + C dy^2`
+/// where `A = a^2 c^2 + b^2 s^2`, `C = a^2 s^2 + b^2 c^2`, `B = c s (a^2 - b^2)` (zero for a
+/// square or unrotated footprint). Evaluated in f64 as `ex[x] * ey(y) * cross(x, y)`.
+struct GaussianKernel {
+    /// `exp(-beta A dx^2)` for unwrapped columns `x0..`.
+    ex: Vec<f64>,
+    /// `ex` rounded to f32.
+    ex32: Vec<f32>,
+    x0: i32,
+    cx: f64,
+    cy: f64,
+    /// `beta * B`; 0 when the form is separable.
+    beta_b: f64,
+    beta_c: f64,
+}
+
+/// Per-row state of [`GaussianKernel`].
+struct GaussianRow {
+    /// `add_scale * exp(-beta C dy^2)`.
+    scale: f64,
+    dy: f64,
+    /// `exp(-2 beta B dy)^k` for `k < BLOCK` (empty when separable).
+    pow: [f64; BLOCK],
+}
+
+impl GaussianKernel {
+    /// `None` (use the per-texel path) when a cross factor could overflow f64.
+    fn new(frame: &Frame, beta: f32, xs: (i32, i32), pieces: &[(Rect, IVec2)]) -> Option<Self> {
+        let (a, b) = (f64::from(frame.inv_half.x), f64::from(frame.inv_half.y));
+        let (s, c) = (f64::from(frame.sin), f64::from(frame.cos));
+        let (a2, b2) = (a * a, b * b);
+        let coef_a = a2 * c * c + b2 * s * s;
+        let coef_b = c * s * (a2 - b2);
+        let coef_c = a2 * s * s + b2 * c * c;
+        let beta = f64::from(beta);
+        let (cx, cy) = (f64::from(frame.center.x), f64::from(frame.center.y));
+        if !beta.is_finite() {
+            return None;
+        }
+        if coef_b != 0.0 {
+            let ys = pieces
+                .iter()
+                .map(|&(r, o)| (r.min.y + o.y, r.max().y + o.y))
+                .fold((i32::MAX, i32::MIN), |(p, q), (lo, hi)| {
+                    (p.min(lo), q.max(hi))
+                });
+            let mx = (f64::from(xs.0) - cx)
+                .abs()
+                .max((f64::from(xs.1) - cx).abs())
+                + 1.0;
+            let my = (f64::from(ys.0) - cy)
+                .abs()
+                .max((f64::from(ys.1) - cy).abs())
+                + 1.0;
+            // The cross factor at any texel and the row's power table (k < BLOCK).
+            let worst = (2.0 * beta * coef_b * my * (mx + BLOCK as f64)).abs();
+            if worst.is_nan() || worst >= 600.0 {
+                return None;
+            }
+        }
+        let ex: Vec<f64> = (xs.0..xs.1)
+            .map(|x| {
+                let dx = f64::from(x) - cx;
+                (-beta * coef_a * dx * dx).exp()
+            })
+            .collect();
+        Some(Self {
+            ex32: ex.iter().map(|&e| e as f32).collect(),
+            ex,
+            x0: xs.0,
+            cx,
+            cy,
+            beta_b: beta * coef_b,
+            beta_c: beta * coef_c,
+        })
+    }
+
+    fn row(&self, uy: i32, add_scale: f64) -> GaussianRow {
+        let dy = f64::from(uy) - self.cy;
+        let mut pow = [1.0; BLOCK];
+        if self.beta_b != 0.0 {
+            let r = (-2.0 * self.beta_b * dy).exp();
+            for k in 1..BLOCK {
+                pow[k] = pow[k - 1] * r;
+            }
+        }
+        GaussianRow {
+            scale: add_scale * (-self.beta_c * dy * dy).exp(),
+            dy,
+            pow,
+        }
+    }
+
+    /// [`GaussianKernel::eval`] in f32 (the row built with `|add_scale|`).
+    #[inline]
+    fn eval32(&self, row: &GaussianRow, ux: i32, w: &mut [f32]) {
+        let i0 = (ux - self.x0) as usize;
+        if self.beta_b == 0.0 {
+            let s = row.scale as f32;
+            let n = w.len();
+            for (w, &e) in w.iter_mut().zip(&self.ex32[i0..i0 + n]) {
+                *w = s * e;
+            }
+        } else {
+            let mut z = [0.0f64; BLOCK];
+            let z = &mut z[..w.len()];
+            self.eval(row, ux, w.len() as i32, z);
+            for (w, &z) in w.iter_mut().zip(z.iter()) {
+                *w = z as f32;
+            }
+        }
+    }
+
+    /// Stored-unit terms of `n` texels of a row from unwrapped column `ux`.
+    #[inline]
+    fn eval(&self, row: &GaussianRow, ux: i32, n: i32, z: &mut [f64]) {
+        let i0 = (ux - self.x0) as usize;
+        let ex = &self.ex[i0..i0 + n as usize];
+        if self.beta_b == 0.0 {
+            for (z, &e) in z.iter_mut().zip(ex) {
+                *z = row.scale * e;
+            }
+        } else {
+            let dx = f64::from(ux) - self.cx;
+            let s = row.scale * (-2.0 * self.beta_b * dx * row.dy).exp();
+            for ((z, &e), &p) in z.iter_mut().zip(ex).zip(&row.pow) {
+                *z = s * e * p;
+            }
+        }
+    }
+}
+
+/// A texture stamp sampled inline, with the arithmetic of [`TextureStamp::value`].
+struct TextureKernel<'a> {
+    values: &'a [f32],
+    w: i32,
+    h: i32,
+    size: Vec2,
+}
+
+impl<'a> TextureKernel<'a> {
+    /// `None` for an image too large for the exact floor below (2^22 pixels a side).
+    fn new(values: &'a Grid<f32>) -> Option<Self> {
+        let size = values.size();
+        (size.max_element() < 1 << 22 && size.min_element() > 0).then(|| Self {
+            values: values.as_slice(),
+            w: size.x as i32,
+            h: size.y as i32,
+            size: size.as_vec2(),
+        })
+    }
+
+    /// [`TextureStamp::value`] for `local` inside `[-1, 1]^2` (or NaN): the same f32
+    /// operations, with `floor` as a cast and a correction (exact below 2^23).
+    #[inline(always)]
+    fn value(&self, local: Vec2) -> f32 {
+        let p = (local + 1.0) * 0.5 * self.size - 0.5;
+        // NaN casts to 0 and leaves fx NaN, so the value is NaN as the reference's.
+        let fl = |v: f32| {
+            let t = v as i32;
+            if t as f32 > v { t - 1 } else { t }
+        };
+        let (x0, z0) = (fl(p.x), fl(p.y));
+        let (fx, fz) = (p.x - x0 as f32, p.y - z0 as f32);
+        let (w, h) = (self.w, self.h);
+        let xa = x0.clamp(0, w - 1) as usize;
+        let xb = (x0 + 1).clamp(0, w - 1) as usize;
+        let ra = z0.clamp(0, h - 1) as usize * w as usize;
+        let rb = (z0 + 1).clamp(0, h - 1) as usize * w as usize;
+        let v = self.values;
+        let (v0, v1, v2, v3) = (v[ra + xa], v[ra + xb], v[rb + xa], v[rb + xb]);
+        let top = v0 + (v1 - v0) * fx;
+        let bot = v2 + (v3 - v2) * fx;
+        top + (bot - top) * fz
+    }
 }
 
 #[cfg(test)]

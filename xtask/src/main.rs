@@ -13,12 +13,16 @@ fn main() -> Result<()> {
         Some("smoke") => smoke(),
         Some("package") => package(),
         Some("golden") => golden(),
+        Some("bench-report") => bench_report(args.iter().any(|a| a == "--quick")),
         _ => {
-            eprintln!("usage: cargo xtask <ci|smoke|package|golden>");
+            eprintln!("usage: cargo xtask <ci|smoke|package|golden|bench-report [--quick]>");
             eprintln!("  ci      fmt, clippy, tests, docs, package, demo smoke (what CI runs)");
             eprintln!("  smoke   only the demo smoke runs (default backend, then GL)");
             eprintln!("  package package and verify the publishable crates (`cargo package`)");
             eprintln!("  golden  regenerate the render test's golden image (never done by tests)");
+            eprintln!(
+                "  bench-report  run the headline CPU benches briefly; write target/bench-report.{{json,md}}"
+            );
             std::process::exit(2);
         }
     }
@@ -213,11 +217,16 @@ fn publishable_crates() -> Result<Vec<String>> {
 }
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 6] = [
+const EXAMPLES: [(&str, &str, &[&str]); 7] = [
     (
         "terrain-core",
         "stamp_heightmap",
         &["--size", "64", "--out", "{out}"],
+    ),
+    (
+        "terrain-core",
+        "edt_masks",
+        &["--size", "48", "--repeat", "1", "--out", "{out}"],
     ),
     (
         "terrain-physics",
@@ -468,5 +477,225 @@ fn smoke_on(backend: Option<&str>) -> Result<()> {
         }
     }
     eprintln!("smoke ({name}): {frames} frames on {backend_found} and a valid report in {out_s}");
+    Ok(())
+}
+
+/// One headline figure of `bench-report`: a criterion benchmark id (`group/function/param`),
+/// the thesis figure it is compared with (milliseconds, and where it comes from), and the id
+/// of the plain copy of the same bytes measured in the same run.
+struct Headline {
+    id: &'static str,
+    thesis_ms: Option<f64>,
+    thesis: &'static str,
+    copy_id: &'static str,
+}
+
+/// The figures `bench-report` reports. Thesis figures: seed 000 table 4.3 (GTX295, deform and
+/// normal generation at 0.1 m per texel: 50 m = 500^2 texels, 200 m = 2000^2), seed 001 tables
+/// 5.4 (iterative approach) and 5.5 (SSBO approach) at heightmapSize 4096 (241 591 columns).
+const HEADLINES: [Headline; 18] = [
+    Headline {
+        id: "stamp_normals/stamp/500",
+        thesis_ms: Some(0.971),
+        thesis: "seed 000 table 4.3, Deform 50 m, GTX295",
+        copy_id: "stamp_normals/memcpy/500",
+    },
+    Headline {
+        id: "stamp_normals/stamp/2000",
+        thesis_ms: Some(1.875),
+        thesis: "seed 000 table 4.3, Deform 200 m, GTX295",
+        copy_id: "stamp_normals/memcpy/2000",
+    },
+    Headline {
+        id: "stamp_normals/stamp_reference/500",
+        thesis_ms: Some(0.971),
+        thesis: "seed 000 table 4.3, Deform 50 m (per-texel reference)",
+        copy_id: "stamp_normals/memcpy/500",
+    },
+    Headline {
+        id: "stamp_normals/stamp_gaussian_rotated/2000",
+        thesis_ms: Some(1.875),
+        thesis: "seed 000 table 4.3, Deform 200 m",
+        copy_id: "stamp_normals/memcpy/2000",
+    },
+    Headline {
+        id: "stamp_normals/stamp_texture_rotated/500",
+        thesis_ms: Some(0.971),
+        thesis: "seed 000 table 4.3, Deform 50 m",
+        copy_id: "stamp_normals/memcpy/500",
+    },
+    Headline {
+        id: "stamp_normals/stamp_texture_rotated/2000",
+        thesis_ms: Some(1.875),
+        thesis: "seed 000 table 4.3, Deform 200 m",
+        copy_id: "stamp_normals/memcpy/2000",
+    },
+    Headline {
+        id: "stamp_normals/stamp_min_max/2000",
+        thesis_ms: Some(1.875),
+        thesis: "seed 000 table 4.3, Deform 200 m",
+        copy_id: "stamp_normals/memcpy/2000",
+    },
+    Headline {
+        id: "stamp_normals/normals/500",
+        thesis_ms: Some(0.828),
+        thesis: "seed 000 table 4.3, Normal Gen 50 m, GTX295",
+        copy_id: "stamp_normals/memcpy/500",
+    },
+    Headline {
+        id: "stamp_normals/normals/2000",
+        thesis_ms: Some(1.329),
+        thesis: "seed 000 table 4.3, Normal Gen 200 m, GTX295",
+        copy_id: "stamp_normals/memcpy/2000",
+    },
+    Headline {
+        id: "granular/jump_flood/4096",
+        thesis_ms: Some(10.692),
+        thesis: "seed 001 table 5.4, Jump flooding, 4096",
+        copy_id: "granular/memcpy_u32/4096",
+    },
+    Headline {
+        id: "granular/jump_flood_reference/4096",
+        thesis_ms: Some(10.692),
+        thesis: "seed 001 table 5.4, Jump flooding (sequential reference)",
+        copy_id: "granular/memcpy_u32/4096",
+    },
+    Headline {
+        id: "granular/exact_nearest_seed/4096",
+        thesis_ms: Some(10.692),
+        thesis: "seed 001 table 5.4, Jump flooding (scipy EDT: 13.4 ms)",
+        copy_id: "granular/memcpy_u32/4096",
+    },
+    Headline {
+        id: "granular/displace_iterative10/4096",
+        thesis_ms: Some(11.864),
+        thesis: "seed 001 table 5.4, Displace material, 4096",
+        copy_id: "granular/memcpy_u32/4096",
+    },
+    Headline {
+        id: "granular/slopes_scatter10/4096",
+        thesis_ms: Some(5.486),
+        thesis: "seed 001 table 5.5, Even out steep slopes, 4096",
+        copy_id: "granular/memcpy_u32/4096",
+    },
+    Headline {
+        id: "granular/step_jfa_iterative10_scatter10/4096",
+        thesis_ms: Some(38.08),
+        thesis: "seed 001 table 5.4, depth + penetration + JFA + displace + slopes",
+        copy_id: "granular/memcpy_u32/4096",
+    },
+    Headline {
+        id: "granular/step_exact_iterative10_scatter10/4096",
+        thesis_ms: Some(38.08),
+        thesis: "seed 001 table 5.4, the same steps",
+        copy_id: "granular/memcpy_u32/4096",
+    },
+    Headline {
+        id: "granular_step/jfa_iterative10_scatter10/4096",
+        thesis_ms: Some(38.08),
+        thesis: "seed 001 table 5.4, the same steps (GranularSim::step, volume included)",
+        copy_id: "granular/memcpy_u32/4096",
+    },
+    Headline {
+        id: "granular_step/exact_iterative10_scatter10/4096",
+        thesis_ms: Some(38.08),
+        thesis: "seed 001 table 5.4, the same steps (GranularSim::step, exact transform)",
+        copy_id: "granular/memcpy_u32/4096",
+    },
+];
+
+/// Reads criterion's median estimate (ns) of `id` from `criterion_dir`.
+fn criterion_median_ns(criterion_dir: &Path, id: &str) -> Result<f64> {
+    let path = criterion_dir.join(id).join("new").join("estimates.json");
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    v["median"]["point_estimate"]
+        .as_f64()
+        .with_context(|| format!("no median in {}", path.display()))
+}
+
+/// Runs the headline CPU benches briefly (criterion's `--quick` mode with `--quick`), then
+/// writes `target/bench-report.json` and `target/bench-report.md`: each figure, the thesis
+/// figure it is compared with and its ratio to a plain copy of the same bytes measured in the
+/// same run. Timings on a shared 2-core machine are noisy; the report says so.
+fn bench_report(quick: bool) -> Result<()> {
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target"));
+    let benches: [(&str, &str); 2] = [
+        (
+            "stamp_normals",
+            "^stamp_normals/(stamp|stamp_reference|stamp_gaussian_rotated|stamp_texture_rotated|stamp_min_max|normals|memcpy)/(500|2000)$",
+        ),
+        (
+            "granular",
+            "^granular/(jump_flood|jump_flood_reference|exact_nearest_seed|displace_iterative10|slopes_scatter10|step_jfa_iterative10_scatter10|step_exact_iterative10_scatter10|memcpy_u32)/4096$|^granular_step/",
+        ),
+    ];
+    for (bench, filter) in benches {
+        let mut args = vec![
+            "bench",
+            "--locked",
+            "-p",
+            "terrain-core",
+            "--bench",
+            bench,
+            "--",
+        ];
+        if quick {
+            args.push("--quick");
+        }
+        args.push(filter);
+        cargo(&args, &[])?;
+    }
+    let criterion_dir = target.join("criterion");
+    let mut rows = Vec::new();
+    let mut md = String::from(
+        "| benchmark | median (ms) | thesis (ms) | thesis figure | x thesis | x copy of the same bytes |\n|---|---|---|---|---|---|\n",
+    );
+    for h in HEADLINES {
+        let ns = criterion_median_ns(&criterion_dir, h.id)?;
+        let copy_ns = criterion_median_ns(&criterion_dir, h.copy_id)?;
+        let ms = ns / 1e6;
+        let vs_thesis = h.thesis_ms.map(|t| ms / t);
+        let vs_copy = ns / copy_ns;
+        md.push_str(&format!(
+            "| `{}` | {:.3} | {} | {} | {} | {:.1} (copy {:.1} us) |\n",
+            h.id,
+            ms,
+            h.thesis_ms.map_or("-".into(), |t| format!("{t:.3}")),
+            h.thesis,
+            vs_thesis.map_or("-".into(), |r| format!("{r:.2}")),
+            vs_copy,
+            copy_ns / 1e3,
+        ));
+        rows.push(serde_json::json!({
+            "id": h.id,
+            "median_ms": ms,
+            "thesis_ms": h.thesis_ms,
+            "thesis": h.thesis,
+            "ratio_to_thesis": vs_thesis,
+            "copy_id": h.copy_id,
+            "copy_ms": copy_ns / 1e6,
+            "ratio_to_copy": vs_copy,
+        }));
+    }
+    md.push_str(&format!(
+        "\nCriterion medians{}, CPU threads: {}. Figures from a shared machine are noisy; compare \
+         ratios measured in the same run.\n",
+        if quick { " (--quick)" } else { "" },
+        std::thread::available_parallelism().map_or(1, |n| n.get()),
+    ));
+    let json = serde_json::json!({ "quick": quick, "figures": rows });
+    std::fs::create_dir_all(&target)?;
+    let json_path = target.join("bench-report.json");
+    let md_path = target.join("bench-report.md");
+    std::fs::write(&json_path, serde_json::to_string_pretty(&json)?)
+        .with_context(|| format!("writing {}", json_path.display()))?;
+    std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
+    println!("{md}");
+    eprintln!("wrote {} and {}", json_path.display(), md_path.display());
     Ok(())
 }

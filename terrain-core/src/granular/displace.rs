@@ -215,6 +215,20 @@ pub fn iterative_pass(
     }
 }
 
+/// Calls `f(k, index)` for each of the 8 neighbours (`JFA_OFFSETS[k]`) of `(x, y)` inside a
+/// `size` grid.
+#[inline]
+fn for_neighbours(size: (usize, usize), (x, y): (usize, usize), mut f: impl FnMut(usize, usize)) {
+    let (w, h) = size;
+    let rows = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
+    let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
+    for (k, [ox, oy]) in super::JFA_OFFSETS.iter().enumerate() {
+        if let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize]) {
+            f(k, ny * w + nx);
+        }
+    }
+}
+
 /// Method 1 (listing 4.2): penetrating columns drop to `h - p` and carry `disp`; `iterations`
 /// [`iterative_pass`]es move carried material to neighbours closer to a seed (remainders
 /// stay); finally each column's carried material is added to the column itself if it is a seed,
@@ -230,7 +244,24 @@ pub fn displace_iterative(
 ) -> Result<u64, GranularError> {
     check_inputs(map, pen, seeds, area)?;
     let dist = super::distance_grid(seeds, area, metric);
-    let counts = lower_neighbour_counts(&dist);
+    let (w, h) = (area.size.x as usize, area.size.y as usize);
+    let d = dist.as_slice();
+    // Per column, once: the receiver count (lower neighbours) and the mask of the higher
+    // neighbours it gathers from (bit k: JFA_OFFSETS[k]).
+    let mut counts = vec![0u32; w * h];
+    let mut higher = vec![0u8; w * h];
+    crate::par::for_each_chunk2(&mut counts, w, &mut higher, w, |y, crow, hrow| {
+        for x in 0..w {
+            let me = d[y * w + x];
+            let (mut n, mut mask) = (0u32, 0u8);
+            for_neighbours((w, h), (x, y), |k, q| {
+                n += u32::from(d[q] < me);
+                mask |= u8::from(d[q] > me) << k;
+            });
+            crow[x] = n;
+            hrow[x] = mask;
+        }
+    });
     let mut heights = area_heights(map, area);
     let mut removed = 0u64;
     let mut carried = pen.map(|_| 0u32);
@@ -242,9 +273,38 @@ pub fn displace_iterative(
             carried.as_mut_slice()[idx] = disp;
         }
     }
+    // Each iteration (listing 4.2): a column keeps `c % n` (all of it without receivers) and
+    // gathers `c_q / n_q` from every higher neighbour q; wrapping sums, rows in parallel.
     let mut next = carried.clone();
+    let mut share = vec![0u32; w * h];
+    let mut keep = vec![0u32; w * h];
     for _ in 0..iterations {
-        iterative_pass(&dist, &counts, &carried, &mut next);
+        let c = carried.as_slice();
+        crate::par::for_each_chunk2(&mut share, w, &mut keep, w, |y, srow, krow| {
+            for x in 0..w {
+                let (cv, n) = (c[y * w + x], counts[y * w + x]);
+                (srow[x], krow[x]) = match (cv.checked_div(n), cv.checked_rem(n)) {
+                    (Some(q), Some(r)) => (q, r),
+                    _ => (0, cv),
+                };
+            }
+        });
+        let (share, keep, higher) = (&share, &keep, &higher);
+        crate::par::for_each_chunk(next.as_mut_slice(), w, |y, row| {
+            for (x, o) in row.iter_mut().enumerate() {
+                let me = y * w + x;
+                let mut v = keep[me];
+                let mask = higher[me];
+                if mask != 0 {
+                    for_neighbours((w, h), (x, y), |k, q| {
+                        if mask & (1 << k) != 0 {
+                            v = v.wrapping_add(share[q]);
+                        }
+                    });
+                }
+                *o = v;
+            }
+        });
         std::mem::swap(&mut carried, &mut next);
     }
     for (idx, (&c, p)) in carried.as_slice().iter().zip(pen.as_slice()).enumerate() {

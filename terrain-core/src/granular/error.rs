@@ -86,6 +86,17 @@ pub enum GranularError {
         /// The limit.
         limit: u32,
     },
+    /// A seed texel of a penetration texture names a column other than its own (the exact
+    /// transform places each seed at its column).
+    #[error(
+        "seed texel at column {column:?} names seed {seed:?}; the exact transform needs seeds at their own columns"
+    )]
+    SeedNotAtColumn {
+        /// The texel's column (map coordinates).
+        column: [u32; 2],
+        /// The seed it names.
+        seed: [u32; 2],
+    },
     /// The map's height encoding is not a fixed-point encoding (offset 0, whole units per metre).
     #[error("map encoding (scale {scale}, offset {offset}) is not a fixed-point encoding")]
     NotFixedPoint {

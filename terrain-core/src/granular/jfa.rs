@@ -57,6 +57,7 @@ pub fn jfa_neighbour_order(x: u32, y: u32, pass: u32) -> [u8; 8] {
 
 /// The distance between a column and a seed under `metric` (Euclidean squared, so exact);
 /// `u32::MAX` when `seed` is `NO_SEED`. Coordinates must be below [`super::MAX_SIDE`] apart.
+#[inline]
 pub fn seed_distance(metric: DistanceMetric, column: [u32; 2], seed: [u32; 2]) -> u32 {
     if seed[0] == NO_SEED {
         return u32::MAX;
@@ -92,7 +93,105 @@ pub fn jfa_init(pen: &Grid<Penetration>) -> Grid<[u32; 2]> {
 
 /// One jump flooding pass with step `step` and pass index `pass` over `area` (grids are of
 /// `area.size`, indexed relative to `area.min`).
+///
+/// Rows run in parallel. Each column first computes all 8 candidates' distances; the hashed
+/// visiting order only decides between distinct seeds tied at the smallest distance, so it is
+/// computed only then. The result is the one the sequential visit in
+/// [`jfa_neighbour_order`] gives (strictly closer replaces, so the first of the tied minima in
+/// that order wins, and only if it beats the column's own entry), bit for bit.
 pub fn jfa_pass(
+    prev: &Grid<[u32; 2]>,
+    next: &mut Grid<[u32; 2]>,
+    area: Rect,
+    step: u32,
+    pass: u32,
+    metric: DistanceMetric,
+) -> Result<(), GranularError> {
+    for g in [prev.size(), next.size()] {
+        if g != area.size {
+            return Err(GranularError::SizeMismatch {
+                expected: area.size,
+                actual: g,
+            });
+        }
+    }
+    let (w, h) = (area.size.x as usize, area.size.y as usize);
+    let k = step as usize;
+    let src = prev.as_slice();
+    crate::par::for_each_chunk(next.as_mut_slice(), w, |j, out| {
+        let gy = (i64::from(area.min.y) + j as i64) as u32;
+        let rows: [Option<&[[u32; 2]]>; 3] = [
+            j.checked_sub(k).map(|r| &src[r * w..(r + 1) * w]),
+            Some(&src[j * w..(j + 1) * w]),
+            (j + k < h).then(|| &src[(j + k) * w..(j + k + 1) * w]),
+        ];
+        let full_rows = match rows {
+            [Some(a), Some(b), Some(c)] => Some([a, b, c]),
+            _ => None,
+        };
+        for (i, o) in out.iter_mut().enumerate() {
+            let gx = (i64::from(area.min.x) + i as i64) as u32;
+            let col = [gx, gy];
+            let mut cand = [[NO_SEED; 2]; 8];
+            let own;
+            match full_rows {
+                // Interior: all 8 candidates exist; no bounds tests.
+                Some(r) if i >= k && i + k < w => {
+                    own = r[1][i];
+                    let cs = [i - k, i, i + k];
+                    for (n, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                        cand[n] = r[(oy + 1) as usize][cs[(ox + 1) as usize]];
+                    }
+                }
+                _ => {
+                    own = rows[1].map_or([NO_SEED; 2], |r| r[i]);
+                    let cols = [i.checked_sub(k), Some(i), (i + k < w).then_some(i + k)];
+                    for (n, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                        if let (Some(r), Some(c)) =
+                            (rows[(oy + 1) as usize], cols[(ox + 1) as usize])
+                        {
+                            cand[n] = r[c];
+                        }
+                    }
+                }
+            }
+            let own_d = seed_distance(metric, col, own);
+            let mut d = [u32::MAX; 8];
+            for n in 0..8 {
+                d[n] = seed_distance(metric, col, cand[n]);
+            }
+            let m = d.iter().copied().min().unwrap_or(u32::MAX);
+            if m >= own_d {
+                *o = own;
+                continue;
+            }
+            // Branch-free: the first candidate at distance m, and whether another seed ties.
+            let mut first = 7;
+            for n in (0..8).rev() {
+                first = if d[n] == m { n } else { first };
+            }
+            let mut tied = false;
+            for n in 0..8 {
+                tied |= (d[n] == m) & (cand[n] != cand[first]);
+            }
+            let pick = if tied {
+                jfa_neighbour_order(gx, gy, pass)
+                    .into_iter()
+                    .map(usize::from)
+                    .find(|&n| d[n] == m)
+            } else {
+                Some(first)
+            };
+            *o = pick.map_or(own, |n| cand[n]);
+        }
+    });
+    Ok(())
+}
+
+/// The sequential form of [`jfa_pass`] (each column visits its neighbours in
+/// [`jfa_neighbour_order`] and keeps a strictly closer one), as the seed describes it and as
+/// the GPU pass runs; kept as the reference the fast pass is tested against.
+pub fn jfa_pass_reference(
     prev: &Grid<[u32; 2]>,
     next: &mut Grid<[u32; 2]>,
     area: Rect,
@@ -155,6 +254,23 @@ pub fn jump_flood(
     Ok(a)
 }
 
+/// [`jump_flood`] with [`jfa_pass_reference`]: the sequential form, for tests and benches.
+pub fn jump_flood_reference(
+    pen: &Grid<Penetration>,
+    area: Rect,
+    metric: DistanceMetric,
+    extra_pass: bool,
+) -> Result<Grid<[u32; 2]>, GranularError> {
+    check_side(area.size)?;
+    let mut a = jfa_init(pen);
+    let mut b = a.clone();
+    for (pass, step) in jfa_steps(area.size, extra_pass).into_iter().enumerate() {
+        jfa_pass_reference(&a, &mut b, area, step, pass as u32, metric)?;
+        std::mem::swap(&mut a, &mut b);
+    }
+    Ok(a)
+}
+
 /// The exact distance to the nearest seed of every column of `area` by brute force
 /// (`u32::MAX` where the area has no seed). For tests and error tables.
 pub fn brute_force_distance(
@@ -183,18 +299,13 @@ pub fn brute_force_distance(
 pub fn distance_grid(seeds: &Grid<[u32; 2]>, area: Rect, metric: DistanceMetric) -> Grid<u32> {
     let w = area.size.x.max(1) as usize;
     let mut out = seeds.map(|_| 0u32);
-    for (idx, (d, s)) in out
-        .as_mut_slice()
-        .iter_mut()
-        .zip(seeds.as_slice())
-        .enumerate()
-    {
-        let col = [
-            area.min.x as u32 + (idx % w) as u32,
-            area.min.y as u32 + (idx / w) as u32,
-        ];
-        *d = seed_distance(metric, col, *s);
-    }
+    let src = seeds.as_slice();
+    crate::par::for_each_chunk(out.as_mut_slice(), w, |j, row| {
+        let y = area.min.y as u32 + j as u32;
+        for (i, d) in row.iter_mut().enumerate() {
+            *d = seed_distance(metric, [area.min.x as u32 + i as u32, y], src[j * w + i]);
+        }
+    });
     out
 }
 

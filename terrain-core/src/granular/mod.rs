@@ -6,7 +6,8 @@
 //! [`ActiveArea`] (sec 4.5), runs:
 //! 1. [`depth_from_below`] (sec 4.1.2): lowest object surface over each column, in height units.
 //! 2. [`penetration_texture`] (sec 4.1.3, table 4.1): [`ColumnKind`] and penetration per column.
-//! 3. [`jump_flood`] (sec 2.3.1, 4.1.4): closest seed per column, hashed neighbour order.
+//! 3. [`jump_flood`] (sec 2.3.1, 4.1.4): closest seed per column, hashed neighbour order (or,
+//!    on the CPU, the exact [`exact_nearest_seed`]; see [`DistanceTransform`]).
 //! 4. displacement (sec 4.1.4): [`displace_iterative`], [`displace_closest_seed`] or
 //!    [`displace_multiple_targets`].
 //! 5. slope evening (sec 4.1.5): [`even_out_slopes_interleaved`] or [`even_out_slopes_scatter`].
@@ -33,6 +34,7 @@
 mod active;
 mod depth;
 mod displace;
+mod edt;
 mod error;
 mod jfa;
 mod mesh;
@@ -48,16 +50,18 @@ pub use displace::{
     MAX_TARGETS, MULTI_TARGET_CHUNK, displace_closest_seed, displace_iterative,
     displace_multiple_targets, iterative_pass, lower_neighbour_counts,
 };
+pub use edt::exact_nearest_seed;
 pub use error::GranularError;
 pub use jfa::{
     JFA_OFFSETS, brute_force_distance, distance_grid, jfa_hash, jfa_init, jfa_neighbour_order,
-    jfa_pass, jfa_steps, jump_flood, pcg_hash, seed_distance,
+    jfa_pass, jfa_pass_reference, jfa_steps, jump_flood, jump_flood_reference, pcg_hash,
+    seed_distance,
 };
 pub use mesh::{GranularObject, MAX_COORDINATE_M, MAX_MESH_ELEMENTS, TriMesh};
 pub use normals::{blur_normals, float_heights, symmetric_normals};
 pub use params::{
-    DisplacementMethod, DistanceMetric, GranularParams, MAX_ITERATIONS, MAX_MARGIN, SlopeMethod,
-    mul_q15,
+    DisplacementMethod, DistanceMetric, DistanceTransform, GranularParams, MAX_ITERATIONS,
+    MAX_MARGIN, SlopeMethod, mul_q15,
 };
 pub use penetration::{ColumnKind, NO_SEED, Penetration, penetration_texture};
 pub use sim::{AreaMode, GranularSim, StepReport};

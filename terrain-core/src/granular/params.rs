@@ -15,6 +15,19 @@ pub enum DistanceMetric {
     Chebyshev,
 }
 
+/// How a step finds each column's nearest seed (seed 001 sec 4.1.4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum DistanceTransform {
+    /// Jump flooding with the hashed neighbour order ([`super::jump_flood`]): what the GPU
+    /// runs, bit for bit; approximate (a few columns get a seed slightly farther than the
+    /// nearest).
+    #[default]
+    JumpFlood,
+    /// The exact separable transform ([`super::exact_nearest_seed`]): every column gets a
+    /// nearest seed (among equally near seeds, possibly another than jump flooding's). CPU only.
+    Exact,
+}
+
 /// How intersected material reaches the contour (seed 001 sec 4.1.4). A method carries the
 /// settings only it uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]

@@ -2,10 +2,11 @@
 //! displacement and slope evening over the merged active areas.
 
 use super::{
-    ActiveArea, DisplacementMethod, GranularError, GranularObject, GranularParams, Penetration,
-    SlopeMethod, depth_from_below, displace_closest_seed, displace_iterative,
-    displace_multiple_targets, even_out_slopes_interleaved, even_out_slopes_scatter, jump_flood,
-    merge_active_areas, object_active_area, penetration_texture,
+    ActiveArea, DisplacementMethod, DistanceTransform, GranularError, GranularObject,
+    GranularParams, Penetration, SlopeMethod, depth_from_below, displace_closest_seed,
+    displace_iterative, displace_multiple_targets, even_out_slopes_interleaved,
+    even_out_slopes_scatter, jump_flood, merge_active_areas, object_active_area,
+    penetration_texture,
 };
 use crate::{FixedPointMap, Grid};
 
@@ -39,6 +40,9 @@ pub struct GranularSim {
     pub displacement: DisplacementMethod,
     /// Slope method used by [`GranularSim::step`].
     pub slope: SlopeMethod,
+    /// Nearest-seed transform used by [`GranularSim::step`] (jump flooding by default, as the
+    /// GPU runs; [`DistanceTransform::Exact`] for exact nearest seeds on the CPU).
+    pub distance: DistanceTransform,
     /// Area mode used by [`GranularSim::step`].
     pub area_mode: AreaMode,
     total_removed: u64,
@@ -68,6 +72,7 @@ impl GranularSim {
             params,
             displacement: DisplacementMethod::default(),
             slope: SlopeMethod::default(),
+            distance: DistanceTransform::default(),
             area_mode: AreaMode::default(),
             total_removed: 0,
         })
@@ -77,6 +82,12 @@ impl GranularSim {
     pub fn with_methods(mut self, displacement: DisplacementMethod, slope: SlopeMethod) -> Self {
         self.displacement = displacement;
         self.slope = slope;
+        self
+    }
+
+    /// Builder: sets the nearest-seed transform.
+    pub fn with_distance_transform(mut self, distance: DistanceTransform) -> Self {
+        self.distance = distance;
         self
     }
 
@@ -184,7 +195,10 @@ impl GranularSim {
             {
                 continue;
             }
-            let seeds = jump_flood(&pen, rect, p.metric, p.jfa_extra_pass)?;
+            let seeds = match self.distance {
+                DistanceTransform::JumpFlood => jump_flood(&pen, rect, p.metric, p.jfa_extra_pass)?,
+                DistanceTransform::Exact => super::exact_nearest_seed(&pen, rect, p.metric)?,
+            };
             removed += match self.displacement {
                 DisplacementMethod::Iterative { iterations } => displace_iterative(
                     &mut self.map,

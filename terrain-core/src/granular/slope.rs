@@ -54,6 +54,166 @@ pub fn column_outflow(
     if a == 0 { (0, 0) } else { (a, mask) }
 }
 
+/// The outflow of one column from its height and mask of receivers (see [`column_outflow`]).
+#[inline]
+fn outflow_of(hc: u32, mask: u8, hq: [u32; 8], roughness_q15: u32) -> (u32, u8) {
+    if mask == 0 {
+        return (0, 0);
+    }
+    let n = mask.count_ones();
+    let (mut q, mut r) = (0u32, 0u32);
+    for (k, &h) in hq.iter().enumerate() {
+        if mask & (1 << k) != 0 {
+            let d = hc - h;
+            q += d / n;
+            r += d % n;
+        }
+    }
+    let a = mul_q15(q + r / n, roughness_q15) / n;
+    if a == 0 { (0, 0) } else { (a, mask) }
+}
+
+/// [`column_outflow`] for every column of row `y` into `(amount, mask)` rows, with the seed
+/// test precomputed (`seed[q]` is 1 for seed columns); `only_parity` limits senders to map
+/// parity `(x + y) & 1` (others get `(0, 0)`). Interior columns take a branch-free path.
+#[allow(clippy::too_many_arguments)]
+fn outflow_row(
+    heights: &[u32],
+    seed: &[u8],
+    size: (usize, usize),
+    y: usize,
+    thresholds: [u32; 2],
+    roughness_q15: u32,
+    only_parity: Option<(u32, i64)>,
+    amount: &mut [u32],
+    masks: &mut [u8],
+) {
+    let (w, h) = size;
+    let t: [u32; 8] = JFA_OFFSETS.map(|[ox, oy]| thresholds[usize::from(ox != 0 && oy != 0)]);
+    let rows = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
+    let here = &heights[y * w..(y + 1) * w];
+    // Interior columns of interior rows: the receiver masks direction by direction over the
+    // whole row (contiguous, vectorisable loops), then the amounts where a mask is set.
+    let inner = if y >= 1 && y + 1 < h && w >= 3 {
+        1..w - 1
+    } else {
+        0..0
+    };
+    if !inner.is_empty() {
+        masks[inner.clone()].fill(0);
+        for (k, &[ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+            let ny = (y as isize + oy as isize) as usize;
+            let (a, b) = ((1 + ox) as usize, (w as isize - 1 + ox as isize) as usize);
+            let hq = &heights[ny * w + a..ny * w + b];
+            let sq = &seed[ny * w + a..ny * w + b];
+            let tk = t[k];
+            for (((m, &hc), &hq), &sq) in masks[inner.clone()]
+                .iter_mut()
+                .zip(&here[inner.clone()])
+                .zip(hq)
+                .zip(sq)
+            {
+                let steep = (sq != 0) & (hc > hq) & (hc.wrapping_sub(hq) > tk);
+                *m |= u8::from(steep) << k;
+            }
+        }
+    }
+    for x in 0..w {
+        let sender = match only_parity {
+            Some((parity, base)) => ((base + x as i64 + y as i64) & 1) as u32 == parity,
+            None => true,
+        };
+        let hc = here[x];
+        let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
+        let mut hq = [0u32; 8];
+        let mut mask = 0u8;
+        if inner.contains(&x) {
+            mask = masks[x];
+            if mask != 0 {
+                for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                    let q = (y as isize + *oy as isize) as usize * w
+                        + (x as isize + *ox as isize) as usize;
+                    hq[k] = heights[q];
+                }
+            }
+        } else {
+            for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+                let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize])
+                else {
+                    continue;
+                };
+                let q = ny * w + nx;
+                hq[k] = heights[q];
+                let steep = (seed[q] != 0) & (hc > hq[k]) & (hc.wrapping_sub(hq[k]) > t[k]);
+                mask |= u8::from(steep) << k;
+            }
+        }
+        (amount[x], masks[x]) = if sender {
+            outflow_of(hc, mask, hq, roughness_q15)
+        } else {
+            (0, 0)
+        };
+    }
+}
+
+/// Gathers row `y` of the apply step: `h - popcount(mask) * a + sum of a_q over neighbours
+/// q whose mask names this column` (wrapping adds, so equal to any scatter order).
+fn gather_row(
+    heights: &[u32],
+    amount: &[u32],
+    masks: &[u8],
+    size: (usize, usize),
+    y: usize,
+    out: &mut [u32],
+) {
+    let (w, h) = size;
+    let rows = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
+    let r = y * w..(y + 1) * w;
+    for ((o, &hv), (&a, &m)) in out
+        .iter_mut()
+        .zip(&heights[r.clone()])
+        .zip(amount[r.clone()].iter().zip(&masks[r]))
+    {
+        *o = hv - a * m.count_ones();
+    }
+    // Interior columns of interior rows: direction by direction over the row (vectorisable).
+    let inner = if y >= 1 && y + 1 < h && w >= 3 {
+        1..w - 1
+    } else {
+        0..0
+    };
+    if !inner.is_empty() {
+        for (k, &[ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+            let ny = (y as isize + oy as isize) as usize;
+            let (a, b) = ((1 + ox) as usize, (w as isize - 1 + ox as isize) as usize);
+            let qa = &amount[ny * w + a..ny * w + b];
+            let qm = &masks[ny * w + a..ny * w + b];
+            let shift = 7 - k;
+            for ((o, &qa), &qm) in out[inner.clone()].iter_mut().zip(qa).zip(qm) {
+                *o = o.wrapping_add(qa * u32::from((qm >> shift) & 1));
+            }
+        }
+    }
+    for x in (0..w).filter(|x| !inner.contains(x)) {
+        let cols = [x.checked_sub(1), Some(x), (x + 1 < w).then_some(x + 1)];
+        for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
+            let (Some(ny), Some(nx)) = (rows[(oy + 1) as usize], cols[(ox + 1) as usize]) else {
+                continue;
+            };
+            let q = ny * w + nx;
+            if masks[q] & (1 << (7 - k)) != 0 {
+                out[x] = out[x].wrapping_add(amount[q]);
+            }
+        }
+    }
+}
+
+fn seed_flags(pen: &[Penetration]) -> Vec<u8> {
+    pen.iter()
+        .map(|p| u8::from(p.column_kind() == ColumnKind::Seed))
+        .collect()
+}
+
 fn check(map: &FixedPointMap, pen: &Grid<Penetration>, area: Rect) -> Result<(), GranularError> {
     check_area(area, map.size())?;
     if pen.size() != area.size {
@@ -92,40 +252,37 @@ pub fn slope_amounts_pass(
     out: &mut [(u32, u8)],
 ) {
     let (w, h) = (area.size.x as usize, area.size.y as usize);
-    for y in 0..h {
-        for x in 0..w {
-            let gp = (area.min.x as i64 + x as i64 + area.min.y as i64 + y as i64) & 1;
-            out[y * w + x] = if gp as u32 == parity {
-                column_outflow(heights, pen, (w, h), (x, y), thresholds, roughness_q15)
-            } else {
-                (0, 0)
-            };
-        }
+    let seed = seed_flags(pen);
+    let base = i64::from(area.min.x) + i64::from(area.min.y);
+    let mut amount = vec![0u32; w * h];
+    let mut masks = vec![0u8; w * h];
+    crate::par::for_each_chunk2(&mut amount, w, &mut masks, w, |y, a, m| {
+        outflow_row(
+            heights,
+            &seed,
+            (w, h),
+            y,
+            thresholds,
+            roughness_q15,
+            Some((parity, base)),
+            a,
+            m,
+        )
+    });
+    for (o, (a, m)) in out.iter_mut().zip(amount.into_iter().zip(masks)) {
+        *o = (a, m);
     }
 }
 
 /// Method 1, pass B: `new[c] = h[c] - popcount(mask_c) * a_c + sum of a_q over neighbours q
 /// whose mask names c` (gathered; reads the amounts and old heights, writes `new`).
 pub fn slope_apply_pass(heights: &[u32], amounts: &[(u32, u8)], area: Rect, new: &mut [u32]) {
-    let (w, h) = (area.size.x as i64, area.size.y as i64);
-    for y in 0..h {
-        for x in 0..w {
-            let me = (y * w + x) as usize;
-            let (a, mask) = amounts[me];
-            let mut v = heights[me] - a * mask.count_ones();
-            for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
-                let (nx, ny) = (x + i64::from(*ox), y + i64::from(*oy));
-                if nx < 0 || ny < 0 || nx >= w || ny >= h {
-                    continue;
-                }
-                let (qa, qmask) = amounts[(ny * w + nx) as usize];
-                if qmask & (1 << (7 - k)) != 0 {
-                    v = v.wrapping_add(qa);
-                }
-            }
-            new[me] = v;
-        }
-    }
+    let (w, h) = (area.size.x as usize, area.size.y as usize);
+    let amount: Vec<u32> = amounts.iter().map(|a| a.0).collect();
+    let masks: Vec<u8> = amounts.iter().map(|a| a.1).collect();
+    crate::par::for_each_chunk(new, w, |y, row| {
+        gather_row(heights, &amount, &masks, (w, h), y, row)
+    });
 }
 
 /// Method 1 (two interleaved programs): `iterations` times, for parity 0 then 1, an
@@ -162,7 +319,8 @@ pub fn even_out_slopes_interleaved(
 }
 
 /// One scatter pass (method 2): every column adds `h - n * a` to itself and `a` to each
-/// receiver in `acc` (zeroed first), all from the old heights.
+/// receiver in `acc`, all from the old heights. Computed as an outflow pass then a gather
+/// (rows in parallel): the same wrapping sums as the scatter, in any order, so the same bits.
 pub fn slope_scatter_pass(
     heights: &[u32],
     pen: &[Penetration],
@@ -171,25 +329,46 @@ pub fn slope_scatter_pass(
     roughness_q15: u32,
     acc: &mut [u32],
 ) {
+    let mut amount = vec![0u32; heights.len()];
+    let mut masks = vec![0u8; heights.len()];
+    scatter_pass_with(
+        heights,
+        &seed_flags(pen),
+        area,
+        thresholds,
+        roughness_q15,
+        (&mut amount, &mut masks),
+        acc,
+    );
+}
+
+fn scatter_pass_with(
+    heights: &[u32],
+    seed: &[u8],
+    area: Rect,
+    thresholds: [u32; 2],
+    roughness_q15: u32,
+    (amount, masks): (&mut [u32], &mut [u8]),
+    acc: &mut [u32],
+) {
     let (w, h) = (area.size.x as usize, area.size.y as usize);
-    acc.fill(0);
-    for y in 0..h {
-        for x in 0..w {
-            let me = y * w + x;
-            let (a, mask) = column_outflow(heights, pen, (w, h), (x, y), thresholds, roughness_q15);
-            acc[me] = acc[me].wrapping_add(heights[me] - a * mask.count_ones());
-            if mask == 0 {
-                continue;
-            }
-            for (k, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
-                if mask & (1 << k) != 0 {
-                    let q = (y as i64 + i64::from(*oy)) as usize * w
-                        + (x as i64 + i64::from(*ox)) as usize;
-                    acc[q] = acc[q].wrapping_add(a);
-                }
-            }
-        }
-    }
+    crate::par::for_each_chunk2(amount, w, masks, w, |y, a, m| {
+        outflow_row(
+            heights,
+            seed,
+            (w, h),
+            y,
+            thresholds,
+            roughness_q15,
+            None,
+            a,
+            m,
+        )
+    });
+    let (amount, masks) = (&*amount, &*masks);
+    crate::par::for_each_chunk(acc, w, |y, row| {
+        gather_row(heights, amount, masks, (w, h), y, row)
+    });
 }
 
 /// Method 2 (SSBO): `iterations` [`slope_scatter_pass`]es over `area`.
@@ -204,13 +383,17 @@ pub fn even_out_slopes_scatter(
     check(map, pen, area)?;
     let mut h = read_area(map, area);
     let mut acc = h.clone();
+    let seed = seed_flags(pen.as_slice());
+    let mut amount = vec![0u32; h.len()];
+    let mut masks = vec![0u8; h.len()];
     for _ in 0..iterations {
-        slope_scatter_pass(
+        scatter_pass_with(
             &h,
-            pen.as_slice(),
+            &seed,
             area,
             thresholds,
             roughness_q15,
+            (&mut amount, &mut masks),
             &mut acc,
         );
         std::mem::swap(&mut h, &mut acc);

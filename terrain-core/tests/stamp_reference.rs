@@ -1,0 +1,276 @@
+//! The fast stamp paths of `apply_stamp` against the per-texel `apply_stamp_reference` (how
+//! stamps were applied before): textures and user stamps bit for bit, the separable Gaussian
+//! within `gaussian_rounding_bound`, and every path identical for 1 and 4 threads.
+
+use glam::Vec2;
+use proptest::prelude::*;
+use terrain_core::{
+    Blend, GaussianStamp, Grid, HeightEncoding, HeightMap, HeightSample, Stamp, StampPlacement,
+    TextureStamp, WrapMode, apply_stamp, apply_stamp_reference, gaussian_rounding_bound,
+};
+
+fn hashed<T: HeightSample>(w: u32, h: u32, lo: u32, span: u32) -> Grid<T> {
+    Grid::from_fn(w, h, |x, y| {
+        let mut z = u64::from(x).wrapping_mul(0x9E37_79B9) ^ u64::from(y).wrapping_mul(0x85EB_CA6B);
+        z ^= z >> 15;
+        T::from_raw_f64_clamped(f64::from(lo + (z % u64::from(span)) as u32))
+    })
+    .unwrap()
+}
+
+fn map16(wrap: WrapMode) -> HeightMap<u16> {
+    let e = HeightEncoding::new(0.01, -100.0).unwrap();
+    HeightMap::new(hashed::<u16>(96, 80, 1_000, 60_000), e, 0.25, wrap).unwrap()
+}
+
+fn map8(wrap: WrapMode) -> HeightMap<u8> {
+    let e = HeightEncoding::spanning::<u8>(-0.5, 0.5).unwrap();
+    HeightMap::new(hashed::<u8>(64, 48, 20, 200), e, 0.03, wrap).unwrap()
+}
+
+fn blend(kind: u8, base_m: f32) -> Blend {
+    match kind {
+        0 => Blend::Add,
+        1 => Blend::Min { base_m },
+        _ => Blend::Max { base_m },
+    }
+}
+
+fn ramp() -> TextureStamp {
+    TextureStamp::from_gray8(&Grid::from_fn(13, 7, |x, y| (x * 19 + y * 11) as u8).unwrap())
+}
+
+/// A ring, evaluated through the trait per texel.
+struct Ring;
+impl Stamp for Ring {
+    fn value(&self, local: Vec2) -> f32 {
+        let r = local.length();
+        if (0.4..0.8).contains(&r) {
+            1.0 - r
+        } else {
+            f32::NAN
+        }
+    }
+}
+
+fn in_pool<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}
+
+prop_compose! {
+    fn placement(ts: f32, w: f32, h: f32)(
+        cx in -0.3f32..1.3, cz in -0.3f32..1.3,
+        sx in 0.5f32..30.0, sz in 0.5f32..30.0,
+        rot in -7.0f32..7.0, square in any::<bool>(), axis in any::<bool>(),
+        intensity in -3.0f32..3.0,
+    ) -> StampPlacement {
+        let scale = Vec2::new(sx, if square { sx } else { sz }) * ts;
+        let rot = if axis { (rot * 2.0 / std::f32::consts::PI).round() * std::f32::consts::FRAC_PI_2 } else { rot };
+        StampPlacement::new(Vec2::new(cx * w, cz * h) * ts, scale, intensity)
+            .unwrap()
+            .with_rotation(rot)
+            .unwrap()
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(96))]
+
+    /// Texture and user stamps: the inline, row-parallel texture path and the per-texel path
+    /// equal the reference bit for bit, on u16 and u8 maps, wrapping and clamped, every blend.
+    #[test]
+    fn texture_and_user_stamps_equal_the_reference(
+        p in placement(0.25, 96.0, 80.0),
+        wrap in any::<bool>(), kind in 0u8..3, base in -0.5f32..1.0, user in any::<bool>(),
+        eight in any::<bool>(),
+    ) {
+        let wrap = if wrap { WrapMode::Repeat } else { WrapMode::Clamp };
+        let b = blend(kind, base * 600.0 - 100.0);
+        let mk = || -> Box<dyn Stamp> { if user { Box::new(Ring) } else { Box::new(ramp()) } };
+        if eight {
+            let mut fast = map8(wrap);
+            let p = StampPlacement { center: p.center * 0.12, scale: p.scale * 0.12, intensity: p.intensity * 0.1, ..p };
+            let b = blend(kind, base * 0.5);
+            let mut reference = fast.clone();
+            let r1 = apply_stamp(&mut fast, mk().as_mut(), &p, b);
+            let r2 = apply_stamp_reference(&mut reference, mk().as_mut(), &p, b);
+            prop_assert_eq!(r1.is_ok(), r2.is_ok());
+            prop_assert!(fast == reference);
+        } else {
+            let mut fast = map16(wrap);
+            let mut reference = fast.clone();
+            let r1 = apply_stamp(&mut fast, mk().as_mut(), &p, b);
+            let r2 = apply_stamp_reference(&mut reference, mk().as_mut(), &p, b);
+            prop_assert_eq!(r1.is_ok(), r2.is_ok());
+            prop_assert!(fast == reference);
+        }
+    }
+
+    /// The separable Gaussian on a clamped map: every texel that differs from the reference
+    /// differs by one unit, and its exact (f64) unrounded value lies within the stated bound
+    /// of a rounding boundary.
+    #[test]
+    fn separable_gaussian_is_within_the_rounding_bound(
+        p in placement(0.25, 96.0, 80.0),
+        kind in 0u8..3, base in 0.0f32..1.0, eps in 1e-4f32..1e-1,
+    ) {
+        let before = map16(WrapMode::Clamp);
+        let b = blend(kind, base * 600.0 - 100.0);
+        let mut fast = before.clone();
+        let mut reference = before.clone();
+        let mut g = GaussianStamp::new(eps).unwrap();
+        apply_stamp(&mut fast, &mut g, &p, b).unwrap();
+        apply_stamp_reference(&mut reference, &mut GaussianStamp::new(eps).unwrap(), &p, b).unwrap();
+        let enc = before.encoding();
+        let add_scale = f64::from(p.intensity) / f64::from(enc.scale);
+        let tol = gaussian_rounding_bound(g.beta(), &p) * add_scale.abs() + 2f64.powi(-22);
+        let (center, inv_half, sin, cos) = p.local_frame(before.texel_size());
+        let mut differ = 0;
+        for y in 0..before.size().y {
+            for x in 0..before.size().x {
+                let (f, r) = (fast.grid().get(x, y).unwrap(), reference.grid().get(x, y).unwrap());
+                if f == r {
+                    continue;
+                }
+                differ += 1;
+                prop_assert!(f.abs_diff(r) == 1, "({x}, {y}): {f} vs {r}");
+                let dx = f64::from(x) - f64::from(center.x);
+                let dy = f64::from(y) - f64::from(center.y);
+                let (c, s) = (f64::from(cos), f64::from(sin));
+                let lx = (dx * c + dy * s) * f64::from(inv_half.x);
+                let ly = (dy * c - dx * s) * f64::from(inv_half.y);
+                let v = (-f64::from(g.beta()) * (lx * lx + ly * ly)).exp();
+                let old = f64::from(before.grid().get(x, y).unwrap());
+                let exact = match b {
+                    Blend::Add => old + add_scale * v,
+                    Blend::Min { base_m } => old.min(enc.to_raw(base_m) + add_scale * v),
+                    Blend::Max { base_m } => old.max(enc.to_raw(base_m) + add_scale * v),
+                };
+                let off = (exact - exact.floor() - 0.5).abs();
+                prop_assert!(off <= tol, "({x}, {y}): exact {exact} is {off} from a boundary, bound {tol}");
+            }
+        }
+        prop_assert!(differ * 100 <= before.grid().as_slice().len(), "{differ} texels differ");
+    }
+
+    /// Results do not depend on the thread count.
+    #[test]
+    fn stamps_are_identical_for_1_and_4_threads(
+        p in placement(0.25, 96.0, 80.0), gaussian in any::<bool>(), kind in 0u8..3,
+    ) {
+        let b = blend(kind, 150.0);
+        let run = |threads| in_pool(threads, || {
+            let mut m = map16(WrapMode::Repeat);
+            let mut s: Box<dyn Stamp + Send> =
+                if gaussian { Box::new(GaussianStamp::default()) } else { Box::new(ramp()) };
+            let _ = apply_stamp(&mut m, s.as_mut(), &p, b);
+            m
+        });
+        prop_assert!(run(1) == run(4));
+    }
+}
+
+/// Full-range intensities on u16 and absurd ones: still within one unit, never a panic.
+#[test]
+fn extreme_gaussians_stay_within_one_unit() {
+    for intensity in [650.0f32, -650.0, 1e30, -1e30, 1e-30] {
+        for rot in [0.0f32, 0.3, 1.0] {
+            for scale in [
+                Vec2::splat(20.0),
+                Vec2::new(20.0, 2.0),
+                Vec2::new(0.3, 19.0),
+            ] {
+                let p = StampPlacement::new(Vec2::new(12.0, 10.0), scale, intensity)
+                    .unwrap()
+                    .with_rotation(rot)
+                    .unwrap();
+                let mut fast = map16(WrapMode::Clamp);
+                let mut reference = fast.clone();
+                apply_stamp(&mut fast, &mut GaussianStamp::default(), &p, Blend::Add).unwrap();
+                apply_stamp_reference(
+                    &mut reference,
+                    &mut GaussianStamp::default(),
+                    &p,
+                    Blend::Add,
+                )
+                .unwrap();
+                let max = fast
+                    .grid()
+                    .as_slice()
+                    .iter()
+                    .zip(reference.grid().as_slice())
+                    .map(|(a, b)| a.abs_diff(*b))
+                    .max()
+                    .unwrap();
+                assert!(
+                    max <= 1,
+                    "intensity {intensity} rot {rot} scale {scale}: {max}"
+                );
+            }
+        }
+    }
+}
+
+/// Eq. 3.3 per texel as `DerivativeMap` computed it before its row-parallel fast path.
+fn naive_derivatives<T: HeightSample>(map: &HeightMap<T>) -> Vec<Vec2> {
+    let (w, h) = (map.size().x as i64, map.size().y as i64);
+    let k = f64::from(map.encoding().scale) / (12.0 * f64::from(map.texel_size()));
+    let at = |x: i64, y: i64| {
+        let g = map.grid();
+        g.get(
+            map.wrap().resolve(x, w as u32),
+            map.wrap().resolve(y, h as u32),
+        )
+        .unwrap()
+        .to_raw_f64()
+    };
+    let mut out = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let dx = at(x - 2, y) - 8.0 * at(x - 1, y) + 8.0 * at(x + 1, y) - at(x + 2, y);
+            let dz = at(x, y - 2) - 8.0 * at(x, y - 1) + 8.0 * at(x, y + 1) - at(x, y + 2);
+            out.push(Vec2::new((dx * k) as f32, (dz * k) as f32));
+        }
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+
+    /// Derivatives (whole map and dirty rects, wrapping and clamped, u16 and u32 at full range)
+    /// equal the per-texel formula bit for bit, for 1 and 3 threads.
+    #[test]
+    fn derivatives_equal_the_per_texel_formula(
+        w in 1u32..40, h in 1u32..40, wrap in any::<bool>(), full in any::<bool>(),
+        rx in 0u32..40, ry in 0u32..40, rw in 0u32..40, rh in 0u32..40,
+    ) {
+        let wrap = if wrap { WrapMode::Repeat } else { WrapMode::Clamp };
+        let e = HeightEncoding::new(0.003, 1.0).unwrap();
+        let m16 = HeightMap::new(hashed::<u16>(w, h, 0, 65_536), e, 0.7, wrap).unwrap();
+        let span = if full { u32::MAX } else { 1000 };
+        let m32 = HeightMap::new(hashed::<u32>(w, h, 0, span), e, 0.7, wrap).unwrap();
+        for threads in [1, 3] {
+            let (d16, d32) = in_pool(threads, || {
+                (terrain_core::DerivativeMap::from_map(&m16), terrain_core::DerivativeMap::from_map(&m32))
+            });
+            prop_assert!(d16.grid().as_slice() == naive_derivatives(&m16).as_slice());
+            prop_assert!(d32.grid().as_slice() == naive_derivatives(&m32).as_slice());
+            // A dirty rect refreshed into a zeroed map equals the full map inside its region.
+            let rect = terrain_core::Rect::new(
+                glam::IVec2::new((rx % w) as i32, (ry % h) as i32),
+                glam::UVec2::new(rw.min(w - rx % w), rh.min(h - ry % h)),
+            );
+            let mut part = terrain_core::DerivativeMap::from_grid(
+                Grid::new(w, h, Vec2::ZERO).unwrap(), 0.7, wrap).unwrap();
+            in_pool(threads, || part.update_rect(&m16, rect)).unwrap();
+            for (p, f) in part.grid().as_slice().iter().zip(d16.grid().as_slice()) {
+                prop_assert!(*p == Vec2::ZERO || p == f);
+            }
+        }
+    }
+}
