@@ -12,11 +12,17 @@ fn main() -> Result<()> {
         Some("ci") => ci(),
         Some("smoke") => smoke(),
         Some("package") => package(),
+        Some("examples") => examples(),
         Some("golden") => golden(),
         Some("bench-report") => bench_report(args.iter().any(|a| a == "--quick")),
         _ => {
-            eprintln!("usage: cargo xtask <ci|smoke|package|golden|bench-report [--quick]>");
-            eprintln!("  ci      fmt, clippy, tests, docs, package, demo smoke (what CI runs)");
+            eprintln!(
+                "usage: cargo xtask <ci|smoke|package|examples|golden|bench-report [--quick]>"
+            );
+            eprintln!(
+                "  ci      fmt, clippy, tests, docs, package, examples, demo smoke (what CI runs)"
+            );
+            eprintln!("  examples  run every library example once at a tiny size");
             eprintln!("  smoke   only the demo smoke runs (default backend, then GL)");
             eprintln!("  package package and verify the publishable crates (`cargo package`)");
             eprintln!("  golden  regenerate the render test's golden image (never done by tests)");
@@ -282,11 +288,30 @@ fn examples() -> Result<()> {
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let out = out.to_string_lossy();
+    // One build of every example with the workspace's features (what the test step built
+    // already), then each binary runs: `cargo run -p` would resolve each crate's features on
+    // its own and rebuild the dependencies for it.
+    cargo(&["build", "--locked", "--workspace", "--examples"], &[])?;
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| root().join("target"));
     for (krate, example, args) in EXAMPLES {
-        let mut cmd = vec!["run", "--locked", "-p", krate, "--example", example, "--"];
         let args: Vec<String> = args.iter().map(|a| a.replace("{out}", &out)).collect();
-        cmd.extend(args.iter().map(String::as_str));
-        cargo(&cmd, &[])?;
+        let exe = target
+            .join("debug")
+            .join("examples")
+            .join(format!("{example}{}", std::env::consts::EXE_SUFFIX));
+        let status = Command::new(&exe)
+            .args(&args)
+            .current_dir(root())
+            .status()
+            .with_context(|| format!("could not start {krate}'s example {}", exe.display()))?;
+        if !status.success() {
+            bail!(
+                "{krate}'s example `{example} {}` exited with {status}",
+                args.join(" ")
+            );
+        }
     }
     Ok(())
 }
