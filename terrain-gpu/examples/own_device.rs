@@ -209,46 +209,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // ... the engine would draw its own objects into the same pass here.
     }
 
-    // Read the "swap chain" back (an engine would present it instead).
-    let row = FRAME.x * 4;
-    let padded =
-        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let staging = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("readback"),
-        size: u64::from(padded * FRAME.y),
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    encoder.copy_texture_to_buffer(
-        swapchain.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &staging,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(padded),
-                rows_per_image: Some(FRAME.y),
-            },
-        },
-        wgpu::Extent3d {
-            width: FRAME.x,
-            height: FRAME.y,
-            depth_or_array_layers: 1,
-        },
-    );
     queue.submit([encoder.finish()]);
     // The submit carried every recorded dispatch: their uniform slots are free again.
     stamps.recall();
     normal_pass.recall();
-    let bytes = terrain_gpu::download::map_and_read(&device, &staging)?;
-    let pixels = (0..FRAME.y as usize)
-        .flat_map(|y| {
-            bytes[y * padded as usize..y * padded as usize + row as usize]
-                .chunks_exact(4)
-                .map(|p| [p[2], p[1], p[0], p[3]])
-                .collect::<Vec<_>>()
-        })
-        .collect();
-    let image = terrain_core::Grid::from_vec(FRAME.x, FRAME.y, pixels)?;
+    // Read the "swap chain" back (an engine would present it instead).
+    let image = terrain_gpu::download::read_texture_rgba8(&device, &queue, &swapchain)?;
     terrain_core::io::write_png_rgba8(&out, &image)?;
     println!(
         "stamped {} dirty rect(s), drew {} triangles into the engine's pass; wrote {}",

@@ -279,34 +279,9 @@ fn renderers_draw_into_the_callers_msaa_srgb_pass_like_the_capture() {
         sky.draw(&mut pass);
         renderer.draw(&mut pass);
     }
-    // Read the resolved BGRA bytes back (rows padded to the copy alignment).
-    let row = size.x * 4;
-    let padded =
-        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let staging = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("engine readback"),
-        size: u64::from(padded * size.y),
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    encoder.copy_texture_to_buffer(
-        resolved.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &staging,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(padded),
-                rows_per_image: Some(size.y),
-            },
-        },
-        wgpu::Extent3d {
-            width: size.x,
-            height: size.y,
-            depth_or_array_layers: 1,
-        },
-    );
     queue.submit([encoder.finish()]);
-    let bytes = terrain_gpu::download::map_and_read(device, &staging).unwrap();
+    // The resolved BGRA target, as RGBA rows.
+    let engine = terrain_gpu::download::read_texture_rgba8(device, queue, &resolved).unwrap();
     scene.ctx.check().expect("no GPU validation errors");
 
     // Both paths must show terrain, not only sky (the same renderer drawing nothing would
@@ -326,9 +301,7 @@ fn renderers_draw_into_the_callers_msaa_srgb_pass_like_the_capture() {
     let mut edges = 0usize;
     for y in 0..size.y {
         for x in 0..size.x {
-            let i = (y * padded + x * 4) as usize;
-            let bgra = &bytes[i..i + 4];
-            let engine = [bgra[2], bgra[1], bgra[0]];
+            let engine = engine.get(x, y).unwrap();
             let cap = capture.get(x, y).unwrap();
             let d = (0..3)
                 .map(|c| (i32::from(engine[c]) - i32::from(cap[c])).unsigned_abs())
