@@ -10,7 +10,7 @@
 use crate::compute::{PassBindings, StorageBinding, compute_pipeline, shader_module, wrap_offset};
 use crate::download::map_and_read;
 use crate::error::GpuError;
-use crate::maps::map_buffer;
+use crate::maps::{MapView, map_buffer};
 use crate::scope::scoped;
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2};
@@ -229,6 +229,32 @@ impl GpuTileAtlas {
         let bytes =
             crate::download::download_bytes(device, queue, &self.table, 0, self.table.size())?;
         Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+
+    /// The tile in `slot`, a tile of level `level`, as the stamp pass and the readback address
+    /// it: a clamped `tile_size^2` map at the level's texel size.
+    pub(crate) fn slot_view(&self, slot: u32, level: u32) -> Result<MapView<'_>, GpuError> {
+        self.check_slot(slot)?;
+        let layout = &self.config.world;
+        if level >= layout.levels {
+            return Err(CoreError::OutOfRange {
+                what: "atlas tile level",
+                value: f64::from(level),
+                expected: "below the atlas's levels",
+            }
+            .into());
+        }
+        let ts = layout.tile_size;
+        Ok(MapView {
+            buffer: &self.heights,
+            // Below 2^32 texels in all: `validate` checked slots x tile texels.
+            base: slot * ts * ts,
+            size: UVec2::splat(ts),
+            wrap: WrapMode::Clamp,
+            encoding: layout.encoding,
+            texel_size: layout.texel_size * (1u32 << level) as f32,
+            max_raw: u32::from(u16::MAX),
+        })
     }
 
     fn table_index(&self, level: u32, tile: UVec2) -> Result<u64, GpuError> {

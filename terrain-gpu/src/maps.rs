@@ -189,6 +189,34 @@ impl<T: HeightSample> GpuHeightMap<T> {
     pub fn max_raw(&self) -> u32 {
         T::MAX_RAW as u32
     }
+
+    /// The whole map as the passes address it.
+    pub(crate) fn view(&self) -> MapView<'_> {
+        MapView {
+            buffer: &self.buffer,
+            base: 0,
+            size: self.size,
+            wrap: self.wrap,
+            encoding: self.encoding,
+            texel_size: self.texel_size,
+            max_raw: self.max_raw(),
+        }
+    }
+}
+
+/// A height map as the stamp pass and the region readback address it: `size` u32 texels,
+/// row-major, from element `base` of `buffer`. A [`GpuHeightMap`] is one from element 0; a
+/// tile slot of a [`crate::GpuTileAtlas`] is one from its slot's first texel, so both passes
+/// work on either without a copy.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct MapView<'a> {
+    pub buffer: &'a wgpu::Buffer,
+    pub base: u32,
+    pub size: UVec2,
+    pub wrap: WrapMode,
+    pub encoding: HeightEncoding,
+    pub texel_size: f32,
+    pub max_raw: u32,
 }
 
 impl GpuHeightMap<u32> {

@@ -3,7 +3,7 @@
 //! waiting, so the frame is never stalled.
 
 use crate::error::GpuError;
-use crate::maps::GpuHeightMap;
+use crate::maps::{GpuHeightMap, MapView};
 use glam::UVec2;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
@@ -119,9 +119,35 @@ impl RegionReadback {
         map: &GpuHeightMap<T>,
         rect: Rect,
     ) -> Result<ReadbackTicket, GpuError> {
-        let size = map.size();
+        self.request_view(device, encoder, map.view(), rect)
+    }
+
+    /// Records the copy of `rect` (tile texels, inside the tile) of the tile in `slot` of
+    /// `atlas`, a tile of level `level`: how a tile deformed on the GPU
+    /// ([`crate::StampPass::encode_tile`]) reaches the CPU, its changed rect only.
+    pub fn request_tile(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        atlas: &crate::GpuTileAtlas,
+        slot: u32,
+        level: u32,
+        rect: Rect,
+    ) -> Result<ReadbackTicket, GpuError> {
+        let view = atlas.slot_view(slot, level)?;
+        self.request_view(device, encoder, view, rect)
+    }
+
+    fn request_view(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        map: MapView<'_>,
+        rect: Rect,
+    ) -> Result<ReadbackTicket, GpuError> {
+        let size = map.size;
         let valid = !rect.is_empty()
-            && match map.wrap() {
+            && match map.wrap {
                 WrapMode::Repeat => rect.size.cmple(size).all(),
                 WrapMode::Clamp => Rect::from_size(size).contains_rect(&rect),
             };
@@ -149,7 +175,7 @@ impl RegionReadback {
         });
         let ticket = ReadbackTicket(self.next_ticket);
         self.next_ticket += 1;
-        slot.request = Some((ticket, rect, map.encoding()));
+        slot.request = Some((ticket, rect, map.encoding));
         Ok(ticket)
     }
 
@@ -218,29 +244,25 @@ impl RegionReadback {
 }
 
 /// Copies the rows of `rect` (wrapped on a repeating map) into `dst`, packed row-major.
-fn copy_rows<T: HeightSample>(
-    encoder: &mut wgpu::CommandEncoder,
-    map: &GpuHeightMap<T>,
-    rect: Rect,
-    dst: &wgpu::Buffer,
-) {
-    let size: UVec2 = map.size();
-    let pieces = match map.wrap() {
+fn copy_rows(encoder: &mut wgpu::CommandEncoder, map: MapView<'_>, rect: Rect, dst: &wgpu::Buffer) {
+    let size: UVec2 = map.size;
+    let pieces = match map.wrap {
         WrapMode::Repeat => rect.split_toroidal(size),
         WrapMode::Clamp => vec![terrain_core::WrappedPiece {
             map: rect,
             unwrapped: rect,
         }],
     };
+    let base = u64::from(map.base);
     for piece in pieces {
         for row in 0..piece.map.size.y {
             let my = piece.map.min.y as u64 + u64::from(row);
-            let src = (my * u64::from(size.x) + piece.map.min.x as u64) * 4;
+            let src = (base + my * u64::from(size.x) + piece.map.min.x as u64) * 4;
             let uy = (piece.unwrapped.min.y - rect.min.y) as u64 + u64::from(row);
             let ux = (piece.unwrapped.min.x - rect.min.x) as u64;
             let dst_offset = (uy * u64::from(rect.size.x) + ux) * 4;
             encoder.copy_buffer_to_buffer(
-                map.buffer(),
+                map.buffer,
                 src,
                 dst,
                 dst_offset,

@@ -6,7 +6,7 @@ use crate::compute::{
     wrap_code, wrap_offset,
 };
 use crate::error::GpuError;
-use crate::maps::{ExactInF32, GpuHeightMap};
+use crate::maps::{ExactInF32, GpuHeightMap, MapView};
 use crate::scope::scoped;
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
@@ -30,7 +30,7 @@ struct StampParams {
     base_raw: f32,
     max_raw: f32,
     beta: f32,
-    pad: f32,
+    base: u32,
     tex_size: [u32; 2],
     wrap_offset: [i32; 2],
 }
@@ -205,17 +205,48 @@ impl StampPass {
         map: &GpuHeightMap<T>,
         op: &StampOp<'_>,
     ) -> Result<Vec<DirtyRect>, GpuError> {
+        self.encode_view(device, queue, encoder, map.view(), op)
+    }
+
+    /// Records one stamp on the tile in `slot` of `atlas` (the tile of level `level` that the
+    /// VRAM pool put there) and returns the tile rects it covers. The placement is in the
+    /// tile's own frame: metres from its first texel, at the level's texel size (the world's
+    /// times `2^level`); the tile is a clamped map, so a stamp across a tile edge is applied to
+    /// each tile it touches with the centre moved into that tile's frame, exactly as
+    /// [`terrain_core::apply_stamp`] on the tile's [`terrain_core::Grid<u16>`] would.
+    pub fn encode_tile(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        atlas: &crate::GpuTileAtlas,
+        slot: u32,
+        level: u32,
+        op: &StampOp<'_>,
+    ) -> Result<Vec<DirtyRect>, GpuError> {
+        let view = atlas.slot_view(slot, level)?;
+        self.encode_view(device, queue, encoder, view, op)
+    }
+
+    fn encode_view(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        map: MapView<'_>,
+        op: &StampOp<'_>,
+    ) -> Result<Vec<DirtyRect>, GpuError> {
         let StampOp {
             stamp,
             ref placement,
             blend,
         } = *op;
-        let ts = map.texel_size();
-        let Some(region) = stamp_region(map.size(), map.wrap(), ts, placement)? else {
+        let ts = map.texel_size;
+        let Some(region) = stamp_region(map.size, map.wrap, ts, placement)? else {
             return Ok(Vec::new());
         };
         let (center, inv_half, sin, cos) = placement.local_frame(ts);
-        let enc = map.encoding();
+        let enc = map.encoding;
         let (blend_code, base_m) = match blend {
             Blend::Add => (BLEND_ADD, 0.0),
             Blend::Min { base_m } => (BLEND_MIN, base_m),
@@ -244,8 +275,8 @@ impl StampPass {
         let params = StampParams {
             region_min: region.footprint.min.to_array(),
             region_size: region.footprint.size.to_array(),
-            map_size: map.size().to_array(),
-            wrap: wrap_code(map.wrap()),
+            map_size: map.size.to_array(),
+            wrap: wrap_code(map.wrap),
             kind,
             center: center.to_array(),
             inv_half: inv_half.to_array(),
@@ -253,16 +284,16 @@ impl StampPass {
             blend: blend_code,
             raw_per_value: placement.intensity / enc.scale,
             base_raw: enc.to_raw(base_m) as f32,
-            max_raw: map.max_raw() as f32,
+            max_raw: map.max_raw as f32,
             beta,
-            pad: 0.0,
+            base: map.base,
             tex_size: tex_size.to_array(),
-            wrap_offset: wrap_offset(region.footprint.min, map.size())?,
+            wrap_offset: wrap_offset(region.footprint.min, map.size)?,
         };
         let groups = dispatch_size(device, region.footprint.size)?;
-        let (group, offset) =
-            self.bindings
-                .bind(device, queue, &params, &[map.buffer(), values])?;
+        let (group, offset) = self
+            .bindings
+            .bind(device, queue, &params, &[map.buffer, values])?;
         dispatch(encoder, "StampPass", groups, &[(pipeline, &group, offset)]);
         Ok(region.pieces.iter().map(|p| p.map).collect())
     }

@@ -2,7 +2,8 @@
 //! (stored height exact, metres and central-difference gradients within float rounding) for
 //! random residency patterns, clamped and wrapped worlds; a partly resident world drawn
 //! without holes; a fully resident one drawn like the coarse-map it was cut from; and refusals
-//! instead of panics.
+//! instead of panics; stamps on tiles in their slots and the readback of the changed rects
+//! against terrain-core's `apply_stamp` on the same tiles.
 
 #[path = "common/scene.rs"]
 #[allow(dead_code)] // Scene::render draws the coarse surface only; these tests draw their own.
@@ -543,5 +544,203 @@ fn bad_calls_are_errors_not_panics() {
         .read(device, queue, &atlas, &[IVec2::new(70, -3)])
         .unwrap();
     assert_eq!(got[0].stored, 5);
+    ctx.check().expect("no GPU validation errors");
+}
+
+/// The tile `grid` of level `level` as the clamped map the CPU stamps it through.
+fn tile_map(grid: &Grid<u16>, layout: &TileLayout, level: u32) -> terrain_core::CoarseMap {
+    terrain_core::CoarseMap::new(
+        grid.clone(),
+        layout.encoding,
+        layout.texel_size * (1u32 << level) as f32,
+        WrapMode::Clamp,
+    )
+    .unwrap()
+}
+
+#[test]
+fn stamps_on_atlas_tiles_match_the_cpu_stamp_on_each_tile_and_read_back_by_rect() {
+    use terrain_core::{Blend, GaussianStamp, Rect, StampPlacement, TextureStamp, apply_stamp};
+    use terrain_gpu::{GpuStamp, GpuTextureStamp, RegionReadback, StampOp, StampPass};
+    let Some(ctx) = context_or_skip("atlas_tile_stamps") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let layout = TileLayout {
+        world_size: UVec2::new(128, 96),
+        tile_size: 32,
+        levels: 3,
+        texel_size: 0.5,
+        encoding: HeightEncoding::new(0.01, -100.0).unwrap(),
+        wrap: WrapMode::Clamp,
+        fill: 7,
+    };
+    let config = AtlasConfig {
+        slots: 5,
+        world: layout,
+    };
+    let mut atlas = GpuTileAtlas::new(device, queue, &config).unwrap();
+    // (slot, level, tile): two neighbours at level 0, one tile each of levels 1 and 2, and one
+    // slot never stamped.
+    let placed = [
+        (3u32, 0u32, UVec2::new(1, 0)),
+        (0, 0, UVec2::new(2, 0)),
+        (4, 1, UVec2::new(1, 1)),
+        (1, 2, UVec2::ZERO),
+        (2, 0, UVec2::new(0, 2)),
+    ];
+    let mut tiles: Vec<Grid<u16>> = Vec::new();
+    for (i, &(slot, level, t)) in placed.iter().enumerate() {
+        // Mid-range noise so both the add and the clamped min blends change values.
+        let g = noise_grid(UVec2::splat(32), 40 + i as u64).map(|&v| 20_000 + v / 4);
+        atlas.upload(slot, level, t, &g).unwrap();
+        atlas.map(level, t, Some(slot)).unwrap();
+        tiles.push(g);
+    }
+    let mut pass = StampPass::new(device).unwrap();
+    let crater = GaussianStamp::default();
+    let image = Grid::from_fn(9, 5, |x, y| (x * 29 + y * 41) as u8).unwrap();
+    let tex = TextureStamp::from_gray8(&image);
+    let gpu_tex = GpuTextureStamp::new(device, &tex).unwrap();
+    // A crater across the edge between the two level-0 tiles (world metres), applied to each
+    // in its own frame; a rotated texture stamp with a min blend on the level-1 tile; a bump
+    // on the level-2 tile that reaches past its corner.
+    let crater_at =
+        StampPlacement::new(Vec2::new(63.0 * 0.5, 10.0), Vec2::splat(9.0), -3.0).unwrap();
+    let ops: Vec<(usize, StampPlacement, bool, Blend)> = vec![
+        (0, crater_at, false, Blend::Add),
+        (1, crater_at, false, Blend::Add),
+        (
+            2,
+            StampPlacement::new(Vec2::new(40.0, 36.0), Vec2::new(20.0, 11.0), 2.5)
+                .unwrap()
+                .with_rotation(0.7)
+                .unwrap(),
+            true,
+            Blend::Min { base_m: 30.0 },
+        ),
+        (
+            3,
+            StampPlacement::new(Vec2::new(-3.0, 60.0), Vec2::splat(40.0), 1.5).unwrap(),
+            false,
+            Blend::Add,
+        ),
+    ];
+    let mut readback = RegionReadback::new(device, 10).unwrap();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let mut expected = tiles.clone();
+    let mut tickets = Vec::new();
+    let mut cpu_crater = GaussianStamp::default();
+    let mut cpu_tex = tex.clone();
+    for &(i, world_placement, texture, blend) in &ops {
+        let (slot, level, t) = placed[i];
+        let tile_m = 32.0 * layout.texel_size * (1u32 << level) as f32;
+        let local = StampPlacement {
+            center: world_placement.center - t.as_vec2() * tile_m,
+            ..world_placement
+        };
+        let stamp = if texture {
+            GpuStamp::Texture(&gpu_tex)
+        } else {
+            GpuStamp::Gaussian(&crater)
+        };
+        let op = StampOp {
+            stamp,
+            placement: local,
+            blend,
+        };
+        let rects = pass
+            .encode_tile(device, queue, &mut encoder, &atlas, slot, level, &op)
+            .unwrap();
+        let mut map = tile_map(&expected[i], &layout, level);
+        let cpu_rects = if texture {
+            apply_stamp(&mut map, &mut cpu_tex, &local, blend).unwrap()
+        } else {
+            apply_stamp(&mut map, &mut cpu_crater, &local, blend).unwrap()
+        };
+        assert_eq!(rects, cpu_rects, "tile {i}: the rects each side reports");
+        assert_eq!(rects.len(), 1, "tile {i}: a stamp that touches the tile");
+        expected[i] = map.into_grid();
+        for r in rects {
+            let ticket = readback
+                .request_tile(device, &mut encoder, &atlas, slot, level, r)
+                .unwrap();
+            tickets.push((ticket, i, r));
+        }
+    }
+    // Whole tiles afterwards, the untouched slot included.
+    let mut whole = Vec::new();
+    for (i, &(slot, level, _)) in placed.iter().enumerate() {
+        let full = Rect::from_size(UVec2::splat(32));
+        whole.push((
+            readback
+                .request_tile(device, &mut encoder, &atlas, slot, level, full)
+                .unwrap(),
+            i,
+        ));
+    }
+    queue.submit([encoder.finish()]);
+    pass.recall();
+    let arrived = readback.wait(device).unwrap();
+    assert_eq!(arrived.len(), tickets.len() + whole.len());
+    for (ticket, i, r) in &tickets {
+        let got = arrived.iter().find(|a| a.ticket == *ticket).unwrap();
+        // The changed rect as it was after that tile's own stamps (each tile is stamped once).
+        let want = expected[*i].copy_rect(*r).unwrap();
+        assert_eq!(got.rect, *r);
+        assert_eq!(got.to_u16(), want, "tile {i}: the rect read back");
+    }
+    for (ticket, i) in &whole {
+        let got = arrived.iter().find(|a| a.ticket == *ticket).unwrap();
+        assert_eq!(got.to_u16(), expected[*i], "tile {i}: GPU and CPU stamps");
+        if *i == 4 {
+            assert_eq!(got.to_u16(), tiles[4], "a slot never stamped is unchanged");
+        } else {
+            assert_ne!(got.to_u16(), tiles[*i], "tile {i} was stamped");
+        }
+    }
+    // Off the tile, past the slots or the levels: errors, not panics.
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let op = StampOp {
+        stamp: GpuStamp::Gaussian(&crater),
+        placement: crater_at,
+        blend: Blend::Add,
+    };
+    assert!(
+        pass.encode_tile(device, queue, &mut encoder, &atlas, 5, 0, &op)
+            .is_err()
+    );
+    assert!(
+        pass.encode_tile(device, queue, &mut encoder, &atlas, 0, 3, &op)
+            .is_err()
+    );
+    let off = StampOp {
+        placement: StampPlacement::new(Vec2::splat(-500.0), Vec2::splat(4.0), 1.0).unwrap(),
+        ..op
+    };
+    assert!(
+        pass.encode_tile(device, queue, &mut encoder, &atlas, 0, 0, &off)
+            .unwrap()
+            .is_empty()
+    );
+    let outside = Rect::new(IVec2::new(20, 20), UVec2::splat(13));
+    assert!(matches!(
+        readback.request_tile(device, &mut encoder, &atlas, 0, 0, outside),
+        Err(GpuError::BadRegion { .. })
+    ));
+    assert!(
+        readback
+            .request_tile(
+                device,
+                &mut encoder,
+                &atlas,
+                9,
+                0,
+                Rect::from_size(UVec2::ONE)
+            )
+            .is_err()
+    );
+    queue.submit([encoder.finish()]);
+    pass.recall();
     ctx.check().expect("no GPU validation errors");
 }

@@ -25,7 +25,8 @@ struct StampParams {
     max_raw: f32,
     // Gaussian falloff in units of the normalised radius.
     beta: f32,
-    _pad: f32,
+    // Element of `heights` where the map starts (a tile slot of an atlas; 0 for a whole map).
+    base: u32,
     // Size of the texture stamp's values.
     tex_size: vec2<u32>,
     // A multiple of the map size that makes every unwrapped coordinate of the region
@@ -91,7 +92,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         x = u32(u.x + p.wrap_offset.x) % p.map_size.x;
         y = u32(u.y + p.wrap_offset.y) % p.map_size.y;
     }
-    let i = y * p.map_size.x + x;
+    let i = p.base + y * p.map_size.x + x;
     let old = f32(heights[i]);
     var new_raw: f32;
     switch p.blend {
