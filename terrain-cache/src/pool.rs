@@ -29,11 +29,13 @@ use crate::policy::{CameraState, SelectionPolicy, SphericalSelection, TileGrid, 
 use crate::tile::{Layer, TileData, TileId};
 use crate::world::World;
 use crossbeam_channel::{Receiver, Sender, TryRecvError, unbounded};
+use glam::UVec2;
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
+use terrain_core::{CoreError, Grid, Rect};
 
 /// Settings of a [`RamPool`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -966,6 +968,106 @@ impl RamPool {
     pub fn write(&mut self, id: TileId, data: TileData) -> Result<(), CacheError> {
         self.world.check_data(self.cfg.layer, &data)?;
         self.modify(id, move |d| *d = data)
+    }
+
+    /// Pastes `heights` into the loaded tile `id` with its first sample at `rect.min` (tile
+    /// texels; `rect` inside the tile, `heights` of its size) and marks the tile dirty: how the
+    /// rect a GPU deformation changed, read back from its atlas slot, reaches RAM. Copy on
+    /// write as [`modify`](Self::modify). A height-layer call only.
+    pub fn write_rect(
+        &mut self,
+        id: TileId,
+        rect: Rect,
+        heights: &Grid<u16>,
+    ) -> Result<(), CacheError> {
+        let ts = self.world.manifest().tile_size;
+        if heights.size() != rect.size || !Rect::from_size(UVec2::splat(ts)).contains_rect(&rect) {
+            return Err(CoreError::RegionOutOfBounds {
+                rect,
+                map_size: UVec2::splat(ts),
+            }
+            .into());
+        }
+        match self.tile(id) {
+            Some(TileData::U16(_)) => {}
+            Some(TileData::U8(_)) => {
+                return Err(CacheError::NoSuchLayer {
+                    layer: Layer::Height,
+                });
+            }
+            None => return Err(CacheError::NotResident { id }),
+        }
+        self.modify(id, |tile| match tile.as_u16_mut() {
+            Some(grid) => grid.paste(heights, rect.min),
+            None => Ok(()),
+        })??;
+        Ok(())
+    }
+
+    /// Fills `out` with the level-0 heights of `rect` (world texels, inside the world; `out` of
+    /// its size) from the loaded tiles, never waiting: each texel from level 0 where its tile
+    /// is loaded, else the nearest sample of the finest loaded coarser level, else the
+    /// world's fill value. Returns how many texels did not come from level 0 (0: exact). What
+    /// a collision window around the camera is filled from; the work is `rect`'s area plus one
+    /// lookup per tile it touches.
+    pub fn read_region(&self, rect: Rect, out: &mut Grid<u16>) -> Result<u64, CacheError> {
+        let m = *self.world.manifest();
+        if self.cfg.layer != Layer::Height {
+            return Err(CacheError::NoSuchLayer {
+                layer: Layer::Height,
+            });
+        }
+        if out.size() != rect.size || !Rect::from_size(m.world_size).contains_rect(&rect) {
+            return Err(CoreError::RegionOutOfBounds {
+                rect,
+                map_size: m.world_size,
+            }
+            .into());
+        }
+        if rect.is_empty() {
+            return Ok(0);
+        }
+        let ts = m.tile_size;
+        let lo = rect.min.as_uvec2();
+        let hi = lo + rect.size; // exclusive
+        let mut coarse = 0u64;
+        for ty in lo.y / ts..=(hi.y - 1) / ts {
+            for tx in lo.x / ts..=(hi.x - 1) / ts {
+                let origin = UVec2::new(tx, ty) * ts;
+                let a = lo.max(origin);
+                let b = hi.min(origin + ts);
+                let found = self.best_available(TileId::new(0, tx, ty));
+                for y in a.y..b.y {
+                    let dst =
+                        &mut out.row_mut(y - lo.y)[(a.x - lo.x) as usize..(b.x - lo.x) as usize];
+                    match found {
+                        Some((t, TileData::U16(g))) if t.level == 0 => {
+                            let row = g.row(y - origin.y);
+                            dst.copy_from_slice(
+                                &row[(a.x - origin.x) as usize..(b.x - origin.x) as usize],
+                            );
+                        }
+                        Some((t, TileData::U16(g))) => {
+                            // Nearest sample of the coarser tile `t` (level < 32: the pyramid's).
+                            let l = t.level;
+                            let base = UVec2::new(t.x, t.y) * ts;
+                            let cy = ((y >> l) - base.y).min(ts - 1);
+                            let row = g.row(cy);
+                            for (i, d) in dst.iter_mut().enumerate() {
+                                let cx = (((a.x + i as u32) >> l) - base.x).min(ts - 1);
+                                *d = row[cx as usize];
+                            }
+                            coarse += u64::from(b.x - a.x);
+                        }
+                        _ => {
+                            dst.fill(m.height_fill);
+                            coarse += u64::from(b.x - a.x);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(coarse)
     }
 
     /// Queues every dirty tile for write-back now (they stay loaded).

@@ -207,6 +207,9 @@ struct Resident {
     /// The RAM version it was uploaded from.
     version: Option<u64>,
     stale: bool,
+    /// Holds by [`VramPool::hold`]: while any, the slot is the tile's newest copy (changed on
+    /// the GPU, not yet read back), so it is neither evicted nor overwritten from RAM.
+    holds: u32,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -347,6 +350,40 @@ impl VramPool {
         self.resident.get(&id).map(|r| r.slot)
     }
 
+    /// Keeps `id` in its slot, unchanged from RAM, until [`release`](Self::release): for a tile
+    /// deformed on the GPU in its slot whose change is on its way back to RAM by readback.
+    /// Until then the slot is the newest copy, so re-uploading the RAM copy (or evicting the
+    /// slot and uploading it again) would lose the change. Returns the slot, `None` (and
+    /// holds nothing) when `id` is not resident. Holds nest.
+    pub fn hold(&mut self, id: TileId) -> Option<u32> {
+        let e = self.resident.get_mut(&id)?;
+        e.holds = e.holds.saturating_add(1);
+        Some(e.slot)
+    }
+
+    /// Ends one [`hold`](Self::hold) of `id`. `ram_version` is the RAM tile's version after
+    /// the readback the hold waited for was written into it ([`RamTiles::version`]): the slot
+    /// holds everything that version holds, so when the last hold ends the slot is current
+    /// for it and is not uploaded again. Releasing a tile that is not held does nothing.
+    pub fn release(&mut self, id: TileId, ram_version: Option<u64>) {
+        let Some(e) = self.resident.get_mut(&id) else {
+            return;
+        };
+        if e.holds == 0 {
+            return;
+        }
+        e.holds -= 1;
+        if e.holds == 0 {
+            e.version = ram_version;
+            e.stale = false;
+        }
+    }
+
+    /// Tiles held by [`hold`](Self::hold) now.
+    pub fn held(&self) -> usize {
+        self.resident.values().filter(|e| e.holds > 0).count()
+    }
+
     /// Ids of the resident tiles, unordered.
     pub fn resident_ids(&self) -> Vec<TileId> {
         self.resident.keys().copied().collect()
@@ -357,7 +394,8 @@ impl VramPool {
         self.ranked.iter().map(|r| r.id)
     }
 
-    /// Unmaps every resident tile (e.g. before switching worlds); the slots become free.
+    /// Unmaps every resident tile (e.g. before switching worlds); the slots become free. Held
+    /// tiles are unmapped too: read their changes back first.
     pub fn clear<T: TileUploadTarget>(
         &mut self,
         target: &mut T,
@@ -433,7 +471,8 @@ impl VramPool {
         for rank in 0..self.ranked.len() {
             let id = self.ranked[rank].id;
             let (is_resident, stale) = match self.resident.get(&id) {
-                Some(e) => (true, e.stale),
+                // A held slot is newer than RAM: never overwritten from it.
+                Some(e) => (true, e.stale && e.holds == 0),
                 None => (false, false),
             };
             if is_resident && !stale {
@@ -516,6 +555,7 @@ impl VramPool {
                         rank,
                         version,
                         stale: false,
+                        holds: 0,
                     },
                 );
             }
@@ -624,6 +664,9 @@ impl VramPool {
         let slots = self.cfg.slots as usize;
         self.victims.clear();
         for (&id, e) in &self.resident {
+            if e.holds > 0 {
+                continue;
+            }
             if e.wanted_frame != frame {
                 self.victims.push(Victim {
                     id,
@@ -1028,6 +1071,74 @@ mod tests {
         ram.tiles.insert(parent, data);
         let r = pool.update(&cam, &ram, &mut atlas).unwrap();
         assert_eq!((r.refreshes, r.stale), (1, 0), "{r:?}");
+    }
+
+    #[test]
+    fn a_held_tile_keeps_its_slot_and_is_not_overwritten_from_ram_until_released() {
+        let m = manifest(WrapMode::Clamp);
+        let mut ram = MockRam::all(&m);
+        let slots = 24;
+        let mut cfg = VramConfig::new(&m, slots);
+        cfg.upload_budget_bytes = 64 * u64::from(TS * TS) * 4;
+        let mut pool = VramPool::new(cfg).unwrap();
+        let mut atlas = TileAtlas::new(m.tile_layout(), slots).unwrap();
+        let here = camera(40.0, 40.0, 0.0);
+        pool.update(&here, &ram, &mut atlas).unwrap();
+        let id = TileId::new(0, 2, 2);
+        assert!(pool.hold(TileId::new(0, 15, 15)).is_none(), "not resident");
+        let slot = pool.hold(id).expect("resident");
+        assert_eq!(pool.hold(id), Some(slot), "holds nest");
+        assert_eq!(pool.held(), 1);
+        // The GPU changed the slot (here: the CPU atlas standing in for it); RAM then changes
+        // too (the first readback) and the camera goes where the tile is not wanted and every
+        // slot is needed: the slot is neither refreshed from RAM nor taken.
+        let mut changed = tile(id);
+        if let TileData::U16(g) = &mut changed {
+            *g.get_mut(1, 1).unwrap() = 777;
+        }
+        // The slot also has a later change that RAM does not have yet.
+        let mut newer = changed.clone();
+        if let TileData::U16(g) = &mut newer {
+            *g.get_mut(2, 2).unwrap() = 888;
+        }
+        atlas
+            .upload(slot, 0, UVec2::new(2, 2), newer.as_u16().unwrap())
+            .unwrap();
+        ram.tiles.insert(id, changed.clone());
+        ram.versions.insert(id, 1);
+        let far = camera(230.0, 230.0, 3.0);
+        for _ in 0..5 {
+            let r = pool.update(&far, &ram, &mut atlas).unwrap();
+            assert!(r.evictions > 0 || r.uploads == 0, "{r:?}");
+            assert_eq!(pool.slot_of(id), Some(slot));
+        }
+        assert_eq!(atlas.stored_at(glam::IVec2::new(33, 33)), 777);
+        assert_eq!(
+            atlas.stored_at(glam::IVec2::new(34, 34)),
+            888,
+            "not overwritten"
+        );
+        // One release: still held.
+        pool.release(id, Some(1));
+        pool.update(&far, &ram, &mut atlas).unwrap();
+        assert_eq!(pool.slot_of(id), Some(slot));
+        // The last release: current for RAM version 1 (no upload of it), and free to go.
+        pool.release(id, Some(1));
+        assert_eq!(pool.held(), 0);
+        pool.release(id, Some(1));
+        let before = atlas.uploads();
+        let r = pool.update(&here, &ram, &mut atlas).unwrap();
+        if pool.slot_of(id) == Some(slot) {
+            assert_eq!(atlas.uploads() - before, r.uploads as u64);
+            assert_eq!(atlas.stored_at(glam::IVec2::new(33, 33)), 777);
+        }
+        for _ in 0..5 {
+            pool.update(&far, &ram, &mut atlas).unwrap();
+        }
+        assert!(
+            pool.slot_of(id).is_none(),
+            "released tiles are evicted again"
+        );
     }
 
     #[test]

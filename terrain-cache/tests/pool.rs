@@ -338,3 +338,103 @@ fn write_replaces_and_rejects_wrong_shapes() {
     ));
     pool.shutdown(Duration::from_secs(5)).unwrap();
 }
+
+#[test]
+fn read_region_takes_level_0_where_loaded_and_the_nearest_coarser_sample_elsewhere() {
+    use terrain_core::{Grid, Rect};
+    let world = mem_world(512, 32);
+    let truth0 = common::test_map(UVec2::splat(512));
+    let tb = 32 * 32 * 2;
+    let mut pool = RamPool::new(world.clone(), PoolConfig::new(Layer::Height, 80 * tb)).unwrap();
+    let cam = CameraState::at(Vec3::new(100.0, 50.0, 100.0));
+    pump(&mut pool, &cam, |_, r| r.wanted_resident == r.wanted);
+    // A rect across several tiles, some loaded at level 0 and some not.
+    let rect = Rect::new(glam::IVec2::new(70, 40), UVec2::new(300, 170));
+    let mut out = Grid::new(300, 170, 0u16).unwrap();
+    let coarse = pool.read_region(rect, &mut out).unwrap();
+    let mut expect_coarse = 0u64;
+    for y in 0..170u32 {
+        for x in 0..300u32 {
+            let (wx, wy) = (70 + x, 40 + y);
+            let (found, data) = pool
+                .best_available(TileId::new(0, wx / 32, wy / 32))
+                .unwrap();
+            let l = found.level;
+            let want = if l == 0 {
+                truth0.grid().get(wx, wy).unwrap()
+            } else {
+                expect_coarse += 1;
+                let (cx, cy) = (wx >> l, wy >> l);
+                data.as_u16()
+                    .unwrap()
+                    .get(cx - found.x * 32, cy - found.y * 32)
+                    .unwrap()
+            };
+            assert_eq!(
+                out.get(x, y).unwrap(),
+                want,
+                "texel ({wx}, {wy}) from {found}"
+            );
+        }
+    }
+    assert_eq!(coarse, expect_coarse);
+    assert!(coarse > 0 && coarse < 300 * 170, "both kinds: {coarse}");
+    // write_rect pastes into a loaded tile and marks it dirty; a read sees it.
+    let id = TileId::new(0, 3, 3);
+    let patch = Grid::from_fn(5, 4, |x, y| (1000 + x + 10 * y) as u16).unwrap();
+    let local = Rect::new(glam::IVec2::new(27, 28), UVec2::new(5, 4));
+    pool.write_rect(id, local, &patch).unwrap();
+    assert!(pool.status(id).unwrap().dirty);
+    let mut small = Grid::new(5, 4, 0u16).unwrap();
+    let exact = pool
+        .read_region(
+            Rect::new(glam::IVec2::new(96 + 27, 96 + 28), UVec2::new(5, 4)),
+            &mut small,
+        )
+        .unwrap();
+    assert_eq!((exact, &small), (0, &patch));
+
+    // Off the world, off the tile, wrong sizes, tiles not loaded: errors, nothing changed.
+    let gen_before = pool.generation(id);
+    for bad in [
+        Rect::new(glam::IVec2::new(-1, 0), UVec2::new(5, 4)),
+        Rect::new(glam::IVec2::new(510, 0), UVec2::new(5, 4)),
+        Rect::new(glam::IVec2::new(i32::MAX, i32::MAX), UVec2::new(5, 4)),
+    ] {
+        assert!(pool.read_region(bad, &mut small).is_err(), "{bad:?}");
+    }
+    assert!(pool.read_region(rect, &mut small).is_err(), "size mismatch");
+    assert!(
+        pool.write_rect(
+            id,
+            Rect::new(glam::IVec2::new(28, 28), UVec2::new(5, 4)),
+            &patch
+        )
+        .is_err()
+    );
+    assert!(
+        pool.write_rect(
+            id,
+            Rect::new(glam::IVec2::new(-1, 0), UVec2::new(5, 4)),
+            &patch
+        )
+        .is_err()
+    );
+    assert!(
+        pool.write_rect(
+            id,
+            local,
+            &small
+                .map(|_| 0)
+                .copy_rect(Rect::from_size(UVec2::new(2, 2)))
+                .unwrap()
+        )
+        .is_err()
+    );
+    assert!(matches!(
+        pool.write_rect(TileId::new(0, 15, 15), local, &patch),
+        Err(terrain_cache::CacheError::NotResident { .. })
+    ));
+    assert_eq!(pool.generation(id), gen_before);
+    pool.shutdown(Duration::from_secs(5)).unwrap();
+}
