@@ -345,7 +345,7 @@ fn read_region_takes_level_0_where_loaded_and_the_nearest_coarser_sample_elsewhe
     let world = mem_world(512, 32);
     let truth0 = common::test_map(UVec2::splat(512));
     let tb = 32 * 32 * 2;
-    let mut pool = RamPool::new(world.clone(), PoolConfig::new(Layer::Height, 80 * tb)).unwrap();
+    let mut pool = RamPool::new(world, PoolConfig::new(Layer::Height, 80 * tb)).unwrap();
     let cam = CameraState::at(Vec3::new(100.0, 50.0, 100.0));
     pump(&mut pool, &cam, |_, r| r.wanted_resident == r.wanted);
     // A rect across several tiles, some loaded at level 0 and some not.

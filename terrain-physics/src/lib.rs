@@ -83,6 +83,7 @@ pub mod ray;
 pub mod scheduler;
 pub mod source;
 pub mod sphere;
+pub mod window;
 
 pub use camera::{CameraBody, GroundClamp, STANDARD_GRAVITY};
 pub use collider::{GroundQuery, HeightfieldCollider};
@@ -96,3 +97,4 @@ pub use ray::{Ray, RayHit};
 pub use scheduler::{ReadbackScheduler, SchedulerConfig, UpdateError, UpdateReport};
 pub use source::{ArrivedRegion, CpuRegionSource, RegionSource, RequestId, read_region};
 pub use sphere::{CONTACT_TOLERANCE, SOLID_SPHERE_ROLLING_FACTOR, SphereBody};
+pub use window::{CollisionWindow, MAX_WINDOW_SIDE, WINDOW_STEP, WindowError};

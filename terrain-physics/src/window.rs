@@ -1,0 +1,421 @@
+//! `CollisionWindow`: collision for a world larger than memory. A [`CollisionMirror`] of a
+//! fixed square of level-0 texels that follows the camera over a streamed world (terrain-cache
+//! fills it from the RAM pool) and still takes the dirty-region readbacks of deformations.
+//!
+//! Design: the mirror is addressed toroidally, world texel `(x, y)` at `(x mod w, y mod h)`,
+//! like a clipmap level. Moving the window only fills the strips that come into it (the rest
+//! stays where it is), and queries take world metres unchanged: the toroidal mirror answers
+//! for world texel `(x, y)` exactly when the window covers it. The window's corner moves in
+//! steps of [`WINDOW_STEP`] texels, so a walking camera refills a strip every few metres, not
+//! a column every frame.
+
+use crate::collider::HeightfieldCollider;
+use crate::error::PhysicsError;
+use crate::field::{HeightField, MAX_FIELD_SIDE};
+use crate::mirror::CollisionMirror;
+use glam::{IVec2, UVec2, Vec2};
+use std::sync::Arc;
+use terrain_core::{Grid, HeightEncoding, Rect};
+
+/// The window's corner moves in multiples of this many texels.
+pub const WINDOW_STEP: u32 = 16;
+
+/// Longest window side accepted (texels): 8192^2 u16 is 128 MiB, twice with the back buffer.
+pub const MAX_WINDOW_SIDE: u32 = 8192;
+
+/// Why moving or refreshing the window failed: the mirror's own checks, or the fill
+/// callback's failure in its own error type.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum WindowError<E> {
+    /// A bad position, or the mirror refused a region.
+    #[error(transparent)]
+    Physics(#[from] PhysicsError),
+    /// The fill callback failed; its error, unchanged. The window keeps what it had.
+    #[error("filling the collision window failed")]
+    Fill(#[source] E),
+}
+
+/// A collision mirror over a moving square of a larger world (see the module docs).
+#[derive(Debug)]
+pub struct CollisionWindow {
+    mirror: CollisionMirror,
+    /// Mirror size: the window side, or the world's where the world is smaller.
+    size: UVec2,
+    world_size: UVec2,
+    texel_size: f32,
+    /// World texels the mirror holds now; `None` until the first [`recenter`](Self::recenter).
+    window: Option<Rect>,
+}
+
+impl CollisionWindow {
+    /// A window of `side` x `side` level-0 texels (at most the world's size per axis) over a
+    /// world of `world_size` texels of `texel_size` metres, heights in `encoding`. Nothing is
+    /// filled until the first [`recenter`](Self::recenter).
+    pub fn new(
+        side: u32,
+        world_size: UVec2,
+        encoding: HeightEncoding,
+        texel_size: f32,
+    ) -> Result<Self, PhysicsError> {
+        if !(2 * WINDOW_STEP..=MAX_WINDOW_SIDE).contains(&side) {
+            return Err(PhysicsError::OutOfRange {
+                what: "collision window side (texels)",
+                value: f64::from(side),
+                expected: "32 to 8192 texels",
+            });
+        }
+        if world_size.min_element() < 2 || world_size.max_element() > MAX_FIELD_SIDE {
+            return Err(PhysicsError::OutOfRange {
+                what: "world side (texels)",
+                value: f64::from(world_size.min_element().min(world_size.max_element())),
+                expected: "2 to 2^28 texels",
+            });
+        }
+        let size = UVec2::splat(side).min(world_size);
+        let grid = Grid::new(size.x, size.y, 0u16)?;
+        let field = HeightField::new(grid, encoding, texel_size)?;
+        Ok(Self {
+            mirror: CollisionMirror::new(field),
+            size,
+            world_size,
+            texel_size,
+            window: None,
+        })
+    }
+
+    /// The world texels the window holds, `None` before the first fill.
+    pub fn window(&self) -> Option<Rect> {
+        self.window
+    }
+
+    /// The mirror (snapshots for other threads; its version counts every fill and update).
+    pub fn mirror(&self) -> &CollisionMirror {
+        &self.mirror
+    }
+
+    /// The window a camera at `center` (world metres, X and Z) gets: the mirror's size, its
+    /// corner on a [`WINDOW_STEP`] grid nearest to centring it, clamped inside the world.
+    pub fn window_at(&self, center: Vec2) -> Result<Rect, PhysicsError> {
+        if !center.is_finite() {
+            return Err(PhysicsError::NonFinite {
+                what: "collision window centre",
+                value: if center.x.is_finite() {
+                    center.y
+                } else {
+                    center.x
+                },
+            });
+        }
+        let texel = (
+            f64::from(center.x) / f64::from(self.texel_size),
+            f64::from(center.y) / f64::from(self.texel_size),
+        );
+        let axis = |t: f64, size: u32, world: u32| -> i32 {
+            let step = f64::from(WINDOW_STEP);
+            let corner = ((t - f64::from(size) / 2.0) / step).round() * step;
+            // Clamped in f64 first: any finite centre gives a corner inside the world.
+            corner.clamp(0.0, f64::from(world - size)) as i32
+        };
+        let min = IVec2::new(
+            axis(texel.0, self.size.x, self.world_size.x),
+            axis(texel.1, self.size.y, self.world_size.y),
+        );
+        Ok(Rect::new(min, self.size))
+    }
+
+    /// Moves the window to the camera at `center` (world metres). The world texels that come
+    /// into it are filled by `fill(rect, out)` (world texels; `out` is `rect.size`), at most
+    /// four strips, each applied to the mirror as one update; the rest is kept. Returns the
+    /// texels filled (0 when the window did not move). On a failure the window keeps the
+    /// strips already applied and reports the one that failed.
+    pub fn recenter<E>(
+        &mut self,
+        center: Vec2,
+        mut fill: impl FnMut(Rect, &mut Grid<u16>) -> Result<(), E>,
+    ) -> Result<u64, WindowError<E>> {
+        let new = self.window_at(center)?;
+        if self.window == Some(new) {
+            return Ok(0);
+        }
+        let strips = match self.window.and_then(|old| old.intersect(&new)) {
+            Some(keep) => difference(new, keep),
+            None => vec![new],
+        };
+        // Until every strip is in, the window is what the old one and the new share.
+        self.window = self.window.and_then(|old| old.intersect(&new));
+        let mut filled = 0;
+        for strip in strips {
+            self.fill_rect(strip, &mut fill)?;
+            filled += strip.area();
+        }
+        self.window = Some(new);
+        Ok(filled)
+    }
+
+    /// Fills again the part of `rect` (world texels) inside the window: for data that got
+    /// better (a level-0 tile loaded where a coarser one stood in). Returns the texels filled.
+    pub fn refresh<E>(
+        &mut self,
+        rect: Rect,
+        mut fill: impl FnMut(Rect, &mut Grid<u16>) -> Result<(), E>,
+    ) -> Result<u64, WindowError<E>> {
+        let Some(part) = self.window.and_then(|w| w.intersect(&rect)) else {
+            return Ok(0);
+        };
+        self.fill_rect(part, &mut fill)?;
+        Ok(part.area())
+    }
+
+    /// Applies new heights of `rect` (world texels; `heights` of its size), a readback of a
+    /// deformed region, to the part inside the window. Returns whether any of it was.
+    pub fn apply(&self, rect: Rect, heights: &Grid<u16>) -> Result<bool, PhysicsError> {
+        if heights.size() != rect.size {
+            return Err(PhysicsError::SizeMismatch {
+                expected: rect.size,
+                actual: heights.size(),
+            });
+        }
+        let Some(part) = self.window.and_then(|w| w.intersect(&rect)) else {
+            return Ok(false);
+        };
+        let piece = heights.copy_rect(Rect::new(part.min - rect.min, part.size))?;
+        self.mirror.apply_next(self.mirror_rect(part), &piece)?;
+        Ok(true)
+    }
+
+    /// Whether world position `pos` (metres) can be answered: its cell lies inside the window
+    /// (a query there reads no texel outside it).
+    pub fn contains(&self, pos: Vec2) -> bool {
+        let Some(w) = self.window else {
+            return false;
+        };
+        if !pos.is_finite() {
+            return false;
+        }
+        let t = pos.as_dvec2() / f64::from(self.texel_size);
+        let (lo, hi) = (w.min.as_dvec2(), (w.max() - IVec2::ONE).as_dvec2());
+        t.x >= lo.x && t.y >= lo.y && t.x < hi.x && t.y < hi.y
+    }
+
+    /// A collider over the current snapshot, taking world metres: valid where
+    /// [`contains`](Self::contains) is true.
+    pub fn collider(&self) -> HeightfieldCollider {
+        self.mirror.collider()
+    }
+
+    /// Ground height at world `pos` (metres), `None` outside the window.
+    pub fn height(&self, pos: Vec2) -> Result<Option<f32>, PhysicsError> {
+        if !self.contains(pos) {
+            return Ok(None);
+        }
+        self.collider().height(pos).map(Some)
+    }
+
+    /// The current snapshot.
+    pub fn snapshot(&self) -> Arc<HeightField> {
+        self.mirror.snapshot()
+    }
+
+    fn fill_rect<E>(
+        &mut self,
+        rect: Rect,
+        fill: &mut impl FnMut(Rect, &mut Grid<u16>) -> Result<(), E>,
+    ) -> Result<(), WindowError<E>> {
+        let mut out = Grid::new(rect.size.x, rect.size.y, 0u16).map_err(PhysicsError::from)?;
+        fill(rect, &mut out).map_err(WindowError::Fill)?;
+        self.mirror.apply_next(self.mirror_rect(rect), &out)?;
+        Ok(())
+    }
+
+    /// `rect` (world texels, inside the window) in the mirror's toroidal frame: the same rect
+    /// moved by whole periods so its corner lies in the mirror.
+    fn mirror_rect(&self, rect: Rect) -> Rect {
+        let s = self.size.as_ivec2();
+        Rect::new(
+            IVec2::new(rect.min.x.rem_euclid(s.x), rect.min.y.rem_euclid(s.y)),
+            rect.size,
+        )
+    }
+}
+
+/// `outer` minus `inner` (which lies inside it) as at most four rects: the rows above and
+/// below `inner`, then the columns left and right of it.
+fn difference(outer: Rect, inner: Rect) -> Vec<Rect> {
+    let mut out = Vec::with_capacity(4);
+    let (o0, o1, i0, i1) = (outer.min, outer.max(), inner.min, inner.max());
+    let mut push = |min: IVec2, max: IVec2| {
+        if max.x > min.x && max.y > min.y {
+            out.push(Rect::new(min, (max - min).as_uvec2()));
+        }
+    };
+    push(o0, IVec2::new(o1.x, i0.y));
+    push(IVec2::new(o0.x, i1.y), o1);
+    push(IVec2::new(o0.x, i0.y), IVec2::new(i0.x, i1.y));
+    push(IVec2::new(i1.x, i0.y), IVec2::new(o1.x, i1.y));
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The world's stored value at texel `(x, y)`.
+    fn truth(x: i32, y: i32) -> u16 {
+        ((x * 37 + y * 101) % 60_000) as u16
+    }
+
+    fn fill_truth(rect: Rect, out: &mut Grid<u16>) -> Result<(), std::convert::Infallible> {
+        for y in 0..rect.size.y {
+            for x in 0..rect.size.x {
+                *out.get_mut(x, y).expect("inside") =
+                    truth(rect.min.x + x as i32, rect.min.y + y as i32);
+            }
+        }
+        Ok(())
+    }
+
+    fn enc() -> HeightEncoding {
+        HeightEncoding::new(0.01, 0.0).expect("encoding")
+    }
+
+    /// Every texel of the window, read through the toroidal mirror, is the world's.
+    fn assert_window_true(w: &CollisionWindow) {
+        let rect = w.window().expect("filled");
+        let snap = w.snapshot();
+        for y in rect.min.y..rect.max().y {
+            for x in rect.min.x..rect.max().x {
+                let s = w.size.as_ivec2();
+                let got = snap
+                    .heights()
+                    .get(x.rem_euclid(s.x) as u32, y.rem_euclid(s.y) as u32)
+                    .expect("inside");
+                assert_eq!(got, truth(x, y), "texel ({x}, {y}) of {rect:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn moving_fills_only_the_strips_that_come_in_and_keeps_the_rest() {
+        let mut w = CollisionWindow::new(64, UVec2::new(1000, 700), enc(), 0.5).expect("window");
+        assert!(!w.contains(Vec2::new(100.0, 100.0)));
+        let filled = w
+            .recenter(Vec2::new(100.0, 100.0), fill_truth)
+            .expect("fill");
+        assert_eq!(filled, 64 * 64);
+        assert_window_true(&w);
+        // A small move stays on the same step grid: nothing to fill.
+        assert_eq!(
+            w.recenter(Vec2::new(101.0, 100.5), fill_truth)
+                .expect("same"),
+            0
+        );
+        // Diagonal move of one step: an L of two strips.
+        let mut calls = Vec::new();
+        let filled = w
+            .recenter(Vec2::new(108.0, 108.0), |r, out| {
+                calls.push(r);
+                fill_truth(r, out)
+            })
+            .expect("move");
+        assert_eq!(filled, 64 * 64 - 48 * 48);
+        assert_eq!(calls.len(), 2, "{calls:?}");
+        assert_window_true(&w);
+        // A jump: the whole window; then to the far corner, clamped inside the world.
+        w.recenter(Vec2::new(300.0, 20.0), fill_truth)
+            .expect("jump");
+        assert_window_true(&w);
+        w.recenter(Vec2::new(1e30, 1e30), fill_truth).expect("far");
+        assert_eq!(w.window().expect("w").max(), IVec2::new(1000, 700));
+        assert_window_true(&w);
+        // Far from the origin too, a query in world metres reads the world's texels.
+        let h = w.height(Vec2::new(495.25, 345.0)).expect("h").expect("inside");
+        let want = 0.01 * (f32::from(truth(990, 690)) + f32::from(truth(991, 690))) / 2.0;
+        assert!((h - want).abs() < 1e-3, "{h} vs {want}");
+        w.recenter(Vec2::new(-1e30, 5.0), fill_truth).expect("far");
+        assert_eq!(w.window().expect("w").min, IVec2::new(0, 0));
+        assert_window_true(&w);
+        // Queries in world metres read the world's heights.
+        let h = w
+            .height(Vec2::new(10.25, 10.0))
+            .expect("h")
+            .expect("inside");
+        let want = 0.01 * (f32::from(truth(20, 20)) + f32::from(truth(21, 20))) / 2.0;
+        assert!((h - want).abs() < 1e-3, "{h} vs {want}");
+        assert_eq!(w.height(Vec2::new(40.0, 10.0)).expect("h"), None);
+        assert!(w.height(Vec2::new(f32::NAN, 0.0)).expect("h").is_none());
+        assert!(w.recenter(Vec2::new(f32::NAN, 0.0), fill_truth).is_err());
+    }
+
+    #[test]
+    fn readbacks_and_refreshes_land_only_inside_the_window() {
+        let mut w = CollisionWindow::new(64, UVec2::new(512, 512), enc(), 1.0).expect("window");
+        w.recenter(Vec2::new(200.0, 200.0), fill_truth)
+            .expect("fill");
+        let win = w.window().expect("w");
+        // Half inside: only that half changes.
+        let rect = Rect::new(win.min - IVec2::new(4, 0), UVec2::new(8, 3));
+        let heights = Grid::new(8, 3, 999u16).expect("grid");
+        assert!(w.apply(rect, &heights).expect("apply"));
+        let snap = w.snapshot();
+        let at = |x: i32, y: i32| {
+            snap.heights()
+                .get(x.rem_euclid(64) as u32, y.rem_euclid(64) as u32)
+                .expect("in")
+        };
+        assert_eq!(at(win.min.x, win.min.y), 999);
+        assert_eq!(at(win.min.x + 3, win.min.y + 2), 999);
+        assert_eq!(
+            at(win.min.x + 4, win.min.y),
+            truth(win.min.x + 4, win.min.y)
+        );
+        assert_eq!(
+            at(win.max().x - 4, win.min.y),
+            truth(win.max().x - 4, win.min.y)
+        );
+        // Off the window: nothing, no error; wrong sizes: an error, nothing changed.
+        let v = w.mirror().version();
+        assert!(
+            !w.apply(Rect::new(IVec2::new(0, 0), UVec2::new(8, 3)), &heights)
+                .expect("off")
+        );
+        assert!(
+            w.apply(Rect::new(win.min, UVec2::new(2, 2)), &heights)
+                .is_err()
+        );
+        assert_eq!(w.mirror().version(), v);
+        // Refresh refills the overlap from the source.
+        let n = w.refresh(rect, fill_truth).expect("refresh");
+        assert_eq!(n, 4 * 3);
+        assert_window_true(&w);
+        // A failing fill is reported and the window keeps what it had.
+        let r: Result<u64, WindowError<&str>> =
+            w.recenter(Vec2::new(400.0, 400.0), |_, _| Err("disk gone"));
+        assert!(matches!(r, Err(WindowError::Fill("disk gone"))));
+        // (The jump shares nothing with the old window, so it holds nothing now.)
+        assert_eq!(w.window(), None);
+        assert!(!w.contains(Vec2::new(200.0, 200.0)));
+        w.recenter(Vec2::new(400.0, 400.0), fill_truth)
+            .expect("again");
+        assert_window_true(&w);
+    }
+
+    #[test]
+    fn absurd_sizes_are_refused_and_a_small_world_is_one_window() {
+        for side in [0, 1, 31, MAX_WINDOW_SIDE + 1, u32::MAX] {
+            assert!(
+                CollisionWindow::new(side, UVec2::splat(1000), enc(), 1.0).is_err(),
+                "{side}"
+            );
+        }
+        assert!(CollisionWindow::new(64, UVec2::new(1, 100), enc(), 1.0).is_err());
+        assert!(CollisionWindow::new(64, UVec2::splat(100), enc(), f32::NAN).is_err());
+        let mut w = CollisionWindow::new(256, UVec2::new(100, 40), enc(), 1.0).expect("small");
+        w.recenter(Vec2::new(50.0, 20.0), fill_truth).expect("fill");
+        assert_eq!(w.window(), Some(Rect::from_size(UVec2::new(100, 40))));
+        assert_window_true(&w);
+        assert_eq!(
+            w.recenter(Vec2::new(-1e9, 1e9), fill_truth).expect("same"),
+            0
+        );
+    }
+}
