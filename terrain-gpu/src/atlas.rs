@@ -95,6 +95,17 @@ impl AtlasConfig {
     }
 }
 
+/// A tile in the atlas, as the passes that work on resident tiles name it: the slot it is in
+/// (from the VRAM pool, e.g. terrain-cache's `VramPool::hold`) and its level, which sets its
+/// texel size (the world's times `2^level`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct TileSlot {
+    /// The slot, below the atlas's slot count.
+    pub slot: u32,
+    /// The tile's level, below the atlas's levels.
+    pub level: u32,
+}
+
 /// Tile slots and the indirection table on the GPU: the [`TileUploadTarget`] the VRAM pool
 /// uploads into and the surface [`crate::ClipmapSurface::Atlas`] draws from.
 ///
@@ -231,9 +242,10 @@ impl GpuTileAtlas {
         Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 
-    /// The tile in `slot`, a tile of level `level`, as the stamp pass and the readback address
+    /// The tile in `tile.slot`, a tile of level `tile.level`, as the stamp pass and the readback address
     /// it: a clamped `tile_size^2` map at the level's texel size.
-    pub(crate) fn slot_view(&self, slot: u32, level: u32) -> Result<MapView<'_>, GpuError> {
+    pub(crate) fn slot_view(&self, tile: TileSlot) -> Result<MapView<'_>, GpuError> {
+        let TileSlot { slot, level } = tile;
         self.check_slot(slot)?;
         let layout = &self.config.world;
         if level >= layout.levels {

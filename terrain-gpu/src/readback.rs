@@ -122,19 +122,18 @@ impl RegionReadback {
         self.request_view(device, encoder, map.view(), rect)
     }
 
-    /// Records the copy of `rect` (tile texels, inside the tile) of the tile in `slot` of
-    /// `atlas`, a tile of level `level`: how a tile deformed on the GPU
+    /// Records the copy of `rect` (tile texels, inside the tile) of the tile in `tile.slot` of
+    /// `atlas`, a tile of level `tile.level`: how a tile deformed on the GPU
     /// ([`crate::StampPass::encode_tile`]) reaches the CPU, its changed rect only.
     pub fn request_tile(
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         atlas: &crate::GpuTileAtlas,
-        slot: u32,
-        level: u32,
+        tile: crate::TileSlot,
         rect: Rect,
     ) -> Result<ReadbackTicket, GpuError> {
-        let view = atlas.slot_view(slot, level)?;
+        let view = atlas.slot_view(tile)?;
         self.request_view(device, encoder, view, rect)
     }
 

@@ -208,8 +208,7 @@ impl StampPass {
         self.encode_view(device, queue, encoder, map.view(), op)
     }
 
-    /// Records one stamp on the tile in `slot` of `atlas` (the tile of level `level` that the
-    /// VRAM pool put there) and returns the tile rects it covers. The placement is in the
+    /// Records one stamp on the tile in `tile.slot` of `atlas` (a tile of level `tile.level`) and returns the tile rects it covers. The placement is in the
     /// tile's own frame: metres from its first texel, at the level's texel size (the world's
     /// times `2^level`); the tile is a clamped map, so a stamp across a tile edge is applied to
     /// each tile it touches with the centre moved into that tile's frame, exactly as
@@ -220,11 +219,10 @@ impl StampPass {
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         atlas: &crate::GpuTileAtlas,
-        slot: u32,
-        level: u32,
+        tile: crate::TileSlot,
         op: &StampOp<'_>,
     ) -> Result<Vec<DirtyRect>, GpuError> {
-        let view = atlas.slot_view(slot, level)?;
+        let view = atlas.slot_view(tile)?;
         self.encode_view(device, queue, encoder, view, op)
     }
 

@@ -561,7 +561,7 @@ fn tile_map(grid: &Grid<u16>, layout: &TileLayout, level: u32) -> terrain_core::
 #[test]
 fn stamps_on_atlas_tiles_match_the_cpu_stamp_on_each_tile_and_read_back_by_rect() {
     use terrain_core::{Blend, GaussianStamp, Rect, StampPlacement, TextureStamp, apply_stamp};
-    use terrain_gpu::{GpuStamp, GpuTextureStamp, RegionReadback, StampOp, StampPass};
+    use terrain_gpu::{GpuStamp, GpuTextureStamp, RegionReadback, StampOp, StampPass, TileSlot};
     let Some(ctx) = context_or_skip("atlas_tile_stamps") else {
         return;
     };
@@ -650,7 +650,14 @@ fn stamps_on_atlas_tiles_match_the_cpu_stamp_on_each_tile_and_read_back_by_rect(
             blend,
         };
         let rects = pass
-            .encode_tile(device, queue, &mut encoder, &atlas, slot, level, &op)
+            .encode_tile(
+                device,
+                queue,
+                &mut encoder,
+                &atlas,
+                TileSlot { slot, level },
+                &op,
+            )
             .unwrap();
         let mut map = tile_map(&expected[i], &layout, level);
         let cpu_rects = if texture {
@@ -663,7 +670,7 @@ fn stamps_on_atlas_tiles_match_the_cpu_stamp_on_each_tile_and_read_back_by_rect(
         expected[i] = map.into_grid();
         for r in rects {
             let ticket = readback
-                .request_tile(device, &mut encoder, &atlas, slot, level, r)
+                .request_tile(device, &mut encoder, &atlas, TileSlot { slot, level }, r)
                 .unwrap();
             tickets.push((ticket, i, r));
         }
@@ -674,7 +681,7 @@ fn stamps_on_atlas_tiles_match_the_cpu_stamp_on_each_tile_and_read_back_by_rect(
         let full = Rect::from_size(UVec2::splat(32));
         whole.push((
             readback
-                .request_tile(device, &mut encoder, &atlas, slot, level, full)
+                .request_tile(device, &mut encoder, &atlas, TileSlot { slot, level }, full)
                 .unwrap(),
             i,
         ));
@@ -707,25 +714,52 @@ fn stamps_on_atlas_tiles_match_the_cpu_stamp_on_each_tile_and_read_back_by_rect(
         blend: Blend::Add,
     };
     assert!(
-        pass.encode_tile(device, queue, &mut encoder, &atlas, 5, 0, &op)
-            .is_err()
+        pass.encode_tile(
+            device,
+            queue,
+            &mut encoder,
+            &atlas,
+            TileSlot { slot: 5, level: 0 },
+            &op
+        )
+        .is_err()
     );
     assert!(
-        pass.encode_tile(device, queue, &mut encoder, &atlas, 0, 3, &op)
-            .is_err()
+        pass.encode_tile(
+            device,
+            queue,
+            &mut encoder,
+            &atlas,
+            TileSlot { slot: 0, level: 3 },
+            &op
+        )
+        .is_err()
     );
     let off = StampOp {
         placement: StampPlacement::new(Vec2::splat(-500.0), Vec2::splat(4.0), 1.0).unwrap(),
         ..op
     };
     assert!(
-        pass.encode_tile(device, queue, &mut encoder, &atlas, 0, 0, &off)
-            .unwrap()
-            .is_empty()
+        pass.encode_tile(
+            device,
+            queue,
+            &mut encoder,
+            &atlas,
+            TileSlot { slot: 0, level: 0 },
+            &off
+        )
+        .unwrap()
+        .is_empty()
     );
     let outside = Rect::new(IVec2::new(20, 20), UVec2::splat(13));
     assert!(matches!(
-        readback.request_tile(device, &mut encoder, &atlas, 0, 0, outside),
+        readback.request_tile(
+            device,
+            &mut encoder,
+            &atlas,
+            TileSlot { slot: 0, level: 0 },
+            outside
+        ),
         Err(GpuError::BadRegion { .. })
     ));
     assert!(
@@ -734,8 +768,7 @@ fn stamps_on_atlas_tiles_match_the_cpu_stamp_on_each_tile_and_read_back_by_rect(
                 device,
                 &mut encoder,
                 &atlas,
-                9,
-                0,
+                TileSlot { slot: 9, level: 0 },
                 Rect::from_size(UVec2::ONE)
             )
             .is_err()

@@ -328,7 +328,10 @@ mod tests {
         assert_eq!(w.window().expect("w").max(), IVec2::new(1000, 700));
         assert_window_true(&w);
         // Far from the origin too, a query in world metres reads the world's texels.
-        let h = w.height(Vec2::new(495.25, 345.0)).expect("h").expect("inside");
+        let h = w
+            .height(Vec2::new(495.25, 345.0))
+            .expect("h")
+            .expect("inside");
         let want = 0.01 * (f32::from(truth(990, 690)) + f32::from(truth(991, 690))) / 2.0;
         assert!((h - want).abs() < 1e-3, "{h} vs {want}");
         w.recenter(Vec2::new(-1e30, 5.0), fill_truth).expect("far");
