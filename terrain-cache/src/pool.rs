@@ -876,6 +876,15 @@ impl RamPool {
         })
     }
 
+    /// Every tile the pool has a record of (queued, loading, loaded, failed), with its state:
+    /// for tools and overlays that show the cache at work. Unordered.
+    pub fn statuses(&self) -> Vec<(TileId, TileStatus)> {
+        self.entries
+            .keys()
+            .filter_map(|&id| Some((id, self.status(id)?)))
+            .collect()
+    }
+
     /// Pins a loaded tile (in use: not evicted until unpinned). Returns false if not loaded.
     pub fn pin(&mut self, id: TileId) -> bool {
         match self.entries.get_mut(&id) {

@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use glam::{UVec2, Vec2};
 use terrain_core::granular::{GranularObject, GranularParams};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
-use terrain_core::{FixedPointMap, Rect};
+use terrain_core::{FixedPointMap, Rect, StampPlacement};
 use terrain_gpu::granular::{GpuGranularNormals, GpuGranularStep, GranularNormalsPass, VolumePass};
 use terrain_gpu::{
     ClipmapRenderer, ClipmapSurface, ClipmapView, GpuContext, GpuDerivativeMap, GpuHeightMap,
@@ -51,10 +51,23 @@ pub struct GpuScene {
     granular: Option<GranularScene>,
     /// A streamed world's tile atlas (the flyover), drawn instead of the coarse-map.
     atlas: Option<GpuTileAtlas>,
+    /// The readback of the rects of atlas tiles deformed on the GPU.
+    tile_readback: Option<RegionReadback>,
 }
 
+/// A rect of a deformed atlas tile on its way back to the CPU: the ticket, and the rect in
+/// the tile's texels.
+pub type TileTicket = (u64, DirtyRect);
+
+/// A rect of a deformed atlas tile that arrived: the ticket it was requested with, the rect
+/// (tile texels) and its heights.
+pub type ArrivedTileRect = (u64, Rect, Grid<u16>);
+
 /// The streamed world's tiles on the GPU: slots, indirection table, coarser fallback.
-pub use terrain_gpu::{AtlasConfig, GpuTileAtlas};
+pub use terrain_gpu::{AtlasConfig, GpuTileAtlas, TileSlot};
+
+/// Readbacks of deformed atlas tiles in flight at most (the ring's staging buffers).
+const TILE_READBACK_RING: usize = 16;
 
 /// The GPU side of the snow scenario: the fixed-point map, the step, the normals and float
 /// heights it is rendered from, the volume sum, and the readback of the areas a step changed.
@@ -126,6 +139,7 @@ impl GpuScene {
             height_range: (lo, hi),
             granular: None,
             atlas: None,
+            tile_readback: None,
             style: TerrainStyle {
                 ramp: (lo, hi),
                 fog_density: 0.008,
@@ -271,7 +285,65 @@ impl GpuScene {
         let enc = config.world.encoding;
         self.height_range = (enc.to_metres(0.0), enc.to_metres(f64::from(u16::MAX)));
         self.atlas = Some(atlas);
+        self.tile_readback = Some(RegionReadback::new(&self.ctx.device, TILE_READBACK_RING)?);
         Ok(())
+    }
+
+    /// Stamps a crater on the resident atlas tile `tile` (placement in the tile's frame) and
+    /// requests the changed rect back, in one submit timed as [`Step::Stamp`]. `None` (and
+    /// nothing done) when the readback ring is full: the caller stamps it in a later frame.
+    pub fn stamp_tile(
+        &mut self,
+        tile: TileSlot,
+        placement: StampPlacement,
+        crater: &terrain_core::GaussianStamp,
+        timings: &mut Timings,
+    ) -> Result<Option<Vec<TileTicket>>> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let (Some(atlas), Some(readback)) = (&self.atlas, self.tile_readback.as_mut()) else {
+            anyhow::bail!("stamp_tile needs the tile atlas (enable_atlas)");
+        };
+        // A clamped tile: the stamp covers at most one rect, so one ring slot is enough.
+        if readback.in_flight() >= readback.ring() {
+            return Ok(None);
+        }
+        let op = StampOp {
+            stamp: GpuStamp::Gaussian(crater),
+            placement,
+            blend: terrain_core::Blend::Add,
+        };
+        let mut tickets = Vec::new();
+        let time = self.timer.time(device, queue, |encoder| {
+            let rects = self
+                .stamps
+                .encode_tile(device, queue, encoder, atlas, tile, &op)?;
+            for r in rects {
+                let t = readback.request_tile(device, encoder, atlas, tile, r)?;
+                tickets.push((t.0, r));
+            }
+            Ok(())
+        })?;
+        self.stamps.recall();
+        timings.add_gpu(Step::Stamp, time.ms, time.timestamp_ms);
+        Ok(Some(tickets))
+    }
+
+    /// The rects of deformed atlas tiles that have arrived, never waiting; with `wait`, waits
+    /// for every one in flight (the end of the run).
+    pub fn tile_readbacks(&mut self, wait: bool) -> Result<Vec<ArrivedTileRect>> {
+        let device = &self.ctx.device;
+        let Some(readback) = self.tile_readback.as_mut() else {
+            return Ok(Vec::new());
+        };
+        let arrived = if wait {
+            readback.wait(device)?
+        } else {
+            readback.poll(device)?
+        };
+        Ok(arrived
+            .into_iter()
+            .map(|r| (r.ticket.0, r.rect, r.to_u16()))
+            .collect())
     }
 
     /// The tile atlas, when a streamed world is drawn.

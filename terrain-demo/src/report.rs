@@ -141,6 +141,18 @@ pub struct CacheStats {
     pub dirty_tiles: usize,
     /// Craters waiting for a tile they touch to be resident.
     pub pending_craters: usize,
-    /// Milliseconds the frame thread spent in cache calls (and applying craters to tiles).
+    /// Level-0 tiles stamped so far on the GPU in their atlas slot (read back into RAM).
+    pub gpu_tile_stamps: u64,
+    /// Level-0 tiles stamped so far on the CPU in RAM (not in the atlas, or no GPU).
+    pub cpu_tile_stamps: u64,
+    /// Rects of GPU-stamped tiles on their way back to RAM.
+    pub tile_readbacks_in_flight: usize,
+    /// The collision window around the camera: level-0 texels `[x, y, width, height]`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub collision_window: Option<[i32; 4]>,
+    /// Level-0 tiles of the collision window filled from coarser data (not loaded yet).
+    pub collision_coarse_tiles: usize,
+    /// Milliseconds the frame thread spent in cache calls, CPU crater stamps on tiles and the
+    /// collision window (GPU stamps are timed as `stamp`).
     pub frame_thread_ms: f64,
 }

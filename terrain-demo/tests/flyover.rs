@@ -137,5 +137,61 @@ fn with_a_gpu_the_vram_pool_streams_the_world_within_its_budgets() {
         }
         assert!(f["triangles"].as_u64() > Some(0));
     }
+    // The craters were stamped on the GPU in the atlas slots and read back: the world they
+    // leave is the one the same run leaves with every crater stamped on the CPU, file for file.
+    let frames = report["frames"].as_array().expect("frames");
+    let last = &frames[frames.len() - 1]["cache"];
+    assert!(
+        last["gpu_tile_stamps"].as_u64() >= Some(3),
+        "tiles stamped on the GPU: {last}"
+    );
+    assert_eq!(last["tile_readbacks_in_flight"].as_u64(), Some(0), "{last}");
+    let cpu = run(&root.join("world_cpu"), &root.join("out_cpu"), 45);
+    let cpu_last = &cpu["frames"][44]["cache"];
+    assert_eq!(cpu_last["gpu_tile_stamps"].as_u64(), Some(0));
+    let gpu_files = tile_files(&root.join("world"));
+    assert!(gpu_files.len() > 20, "{}", gpu_files.len());
+    assert_eq!(
+        gpu_files.keys().collect::<Vec<_>>(),
+        tile_files(&root.join("world_cpu"))
+            .keys()
+            .collect::<Vec<_>>()
+    );
+    let cpu_files = tile_files(&root.join("world_cpu"));
+    let differ: Vec<&String> = gpu_files
+        .iter()
+        .filter(|(k, v)| cpu_files.get(*k) != Some(v))
+        .map(|(k, _)| k)
+        .collect();
+    assert!(differ.is_empty(), "tiles that differ: {differ:?}");
+    // And the craters are in it: the world differs from a freshly built one.
+    run(&root.join("world_fresh"), &root.join("out_fresh"), 1);
+    let fresh = tile_files(&root.join("world_fresh"));
+    assert!(
+        gpu_files.iter().any(|(k, v)| fresh.get(k) != Some(v)),
+        "no tile changed"
+    );
     let _ = std::fs::remove_dir_all(&root);
+}
+
+/// Every height tile file of a world: path under the world -> bytes.
+fn tile_files(world: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![world.join("height")];
+    while let Some(dir) = stack.pop() {
+        for e in std::fs::read_dir(&dir).expect("world folder") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let key = p
+                    .strip_prefix(world)
+                    .expect("under world")
+                    .display()
+                    .to_string();
+                out.insert(key, std::fs::read(&p).expect("tile"));
+            }
+        }
+    }
+    out
 }

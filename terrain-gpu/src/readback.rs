@@ -103,6 +103,11 @@ impl RegionReadback {
         })
     }
 
+    /// Staging buffers in the ring: at most this many requests can be in flight.
+    pub fn ring(&self) -> usize {
+        self.slots.len()
+    }
+
     /// Requests in flight (recorded, not yet handed over by `poll`).
     pub fn in_flight(&self) -> usize {
         self.slots.iter().filter(|s| s.request.is_some()).count()

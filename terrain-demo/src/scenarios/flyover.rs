@@ -1,22 +1,32 @@
 //! The flyover scenario (`--scenario flyover`): a camera flies, then drives, over a streamed
 //! world larger than the cache budgets (built once into `--world`), and stamps craters on its
-//! path. terrain-cache's `RamPool` streams the tiles around the camera on worker threads; the
-//! craters change the resident tiles, which are written back into the world (atomically, off
-//! the frame thread) when evicted and at the end, so a second run starts from the deformed
-//! world.
+//! path. terrain-cache's `RamPool` streams the tiles around the camera on worker threads and,
+//! with a GPU, its `VramPool` keeps the nearest in the atlas the frame is drawn from.
 //!
-//! The overview and the 3D frame show an overview level of the world (the level whose side is
-//! at most [`OVERVIEW_MAX`] texels) kept current with the same craters; the camera's ground is
-//! the finest resident tile under it.
+//! A crater changes every level-0 tile it touches: on the GPU where the tile is in the atlas
+//! (stamped in its slot, the changed rect read back into the RAM tile; the VRAM pool holds the
+//! slot and the RAM pool pins the tile until it arrives), else on the CPU in RAM. Changed
+//! tiles are written back into the world (atomically, off the frame thread) when evicted and
+//! at the end, so a second run starts from the deformed world.
+//!
+//! Collision follows the camera: a `CollisionWindow` of [`COLLISION_WINDOW`] texels filled from
+//! the RAM pool (coarser data where a level-0 tile is not loaded yet, refilled when it is)
+//! and updated by every crater's changed rects; the camera's ground is read from it.
+//!
+//! The overview shows an overview level of the world (the level whose side is at most
+//! [`OVERVIEW_MAX`] texels) kept current with the same craters, with the cache's tile states
+//! and the camera's view over it.
 
 use super::world_files;
 use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
 use crate::cli::Cli;
-use crate::gpu_scene::{AtlasConfig, Camera, GpuScene};
+use crate::gpu_scene::{AtlasConfig, Camera, GpuScene, TileSlot};
+use crate::images::Image;
 use crate::report::{CacheStats, FrameStats};
 use crate::timings::{Step, ms_since};
 use anyhow::{Result, bail};
 use glam::{IVec2, UVec2, Vec2, Vec3};
+use std::collections::{HashMap, HashSet};
 use std::time::{Duration, Instant};
 use terrain_cache::{
     CameraState, Layer, Manifest, PoolConfig, RamPool, SphericalSelection, TileGrid, TileId,
@@ -26,6 +36,7 @@ use terrain_core::{
     Blend, CoarseMap, DerivativeMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement,
     WrapMode, apply_stamp,
 };
+use terrain_physics::CollisionWindow;
 
 /// Longest side of the overview level in texels.
 pub const OVERVIEW_MAX: u32 = 1024;
@@ -39,6 +50,8 @@ const CRATER_EVERY: u32 = 6;
 const CRATER_AHEAD: f32 = 30.0;
 const CRATER_SIZE: f32 = 12.0;
 const CRATER_DEPTH: f32 = -2.0;
+/// Side of the collision window around the camera (level-0 texels).
+pub const COLLISION_WINDOW: u32 = 512;
 /// How long the end of the run may wait for the last write-backs.
 const SHUTDOWN_TIMEOUT: Duration = Duration::from_secs(60);
 
@@ -75,6 +88,19 @@ pub struct FlyoverScenario {
     /// A tile-sized map the craters are applied through.
     scratch: CoarseMap,
     written_back: u64,
+    /// Collision around the camera.
+    window: CollisionWindow,
+    /// Level-0 tiles in the window filled from coarser data (refilled once loaded).
+    window_coarse: HashSet<TileId>,
+    /// Rects of tiles stamped on the GPU on their way back: ticket -> (tile, rect in it).
+    in_flight: HashMap<u64, (TileId, Rect)>,
+    /// Tile stamps done on the GPU and on the CPU so far.
+    gpu_tile_stamps: u64,
+    cpu_tile_stamps: u64,
+    /// The camera of the last frame, for the overview's view lines.
+    last_camera: Option<CameraState>,
+    /// Milliseconds of this frame in GPU stamp submits (not cache work).
+    gpu_stamp_ms: f64,
 }
 
 impl FlyoverScenario {
@@ -123,6 +149,12 @@ impl FlyoverScenario {
             manifest.texel_size,
             WrapMode::Clamp,
         )?;
+        let window = CollisionWindow::new(
+            COLLISION_WINDOW,
+            manifest.world_size,
+            manifest.encoding,
+            manifest.texel_size,
+        )?;
         Ok(Self {
             info: ScenarioInfo {
                 name: "flyover",
@@ -147,6 +179,13 @@ impl FlyoverScenario {
             pending: Vec::new(),
             scratch,
             written_back: 0,
+            window,
+            window_coarse: HashSet::new(),
+            in_flight: HashMap::new(),
+            gpu_tile_stamps: 0,
+            cpu_tile_stamps: 0,
+            last_camera: None,
+            gpu_stamp_ms: 0.0,
         })
     }
 
@@ -156,9 +195,13 @@ impl FlyoverScenario {
             .ok_or_else(|| anyhow::anyhow!("the flyover's pool was shut down"))
     }
 
-    /// Ground height (metres) at `xz`: the finest resident tile under it, else the overview.
+    /// Ground height (metres) at `xz`: the collision window's, else the finest resident tile
+    /// under it, else the overview's.
     fn ground(&self, xz: Vec2) -> f32 {
         let xz = xz.clamp(Vec2::ZERO, self.extent);
+        if let Ok(Some(h)) = self.window.height(xz) {
+            return h;
+        }
         let texel = xz / self.texel_size;
         if let Some(pool) = &self.pool {
             let t = texel.as_uvec2();
@@ -230,9 +273,15 @@ impl FlyoverScenario {
         }
     }
 
-    /// Applies `stamp` to every resident level-0 tile it touches that it has not changed yet;
-    /// returns whether all of them are done.
-    fn apply_to_tiles(&mut self, stamp: &mut PendingStamp) -> Result<bool> {
+    /// Applies `stamp` to every resident level-0 tile it touches that it has not changed yet:
+    /// on the GPU where the tile is in the atlas (and in RAM, to take the readback), else on
+    /// the CPU where it is in RAM. Returns whether all of them are done.
+    fn apply_to_tiles(
+        &mut self,
+        stamp: &mut PendingStamp,
+        mut gpu: Option<&mut GpuScene>,
+        timings: &mut crate::timings::Timings,
+    ) -> Result<bool> {
         let mut all = true;
         // (A crater is at most a tile wide, so it touches at most 4 tiles.)
         for (bit, id) in self
@@ -245,34 +294,144 @@ impl FlyoverScenario {
                 continue;
             }
             let local = self.local_placement(&stamp.placement, id);
-            let (scratch, gauss) = (&mut self.scratch, &mut self.gauss);
-            let pool = self
-                .pool
-                .as_mut()
-                .ok_or_else(|| anyhow::anyhow!("no pool"))?;
+            let Some(pool) = self.pool.as_mut() else {
+                bail!("the flyover's pool was shut down");
+            };
             if pool.tile(id).is_none() {
                 all = false;
                 continue;
             }
-            pool.modify(id, |tile| -> Result<()> {
-                let Some(grid) = tile.as_u16_mut() else {
-                    return Ok(());
+            let slot = self.vram.as_ref().and_then(|v| v.slot_of(id));
+            if let (Some(slot), Some(scene)) = (slot, gpu.as_deref_mut()) {
+                let tile = TileSlot { slot, level: 0 };
+                let t = Instant::now();
+                let stamped = scene.stamp_tile(tile, local, &self.gauss, timings)?;
+                self.gpu_stamp_ms += ms_since(t);
+                let Some(tickets) = stamped else {
+                    // The readback ring is full: next frame.
+                    all = false;
+                    continue;
                 };
-                if grid.size() != scratch.size() {
-                    return Ok(());
+                // The slot is now newer than RAM until each rect arrives.
+                for (ticket, rect) in tickets {
+                    if let Some(v) = self.vram.as_mut() {
+                        v.hold(id);
+                    }
+                    pool.pin(id);
+                    self.in_flight.insert(ticket, (id, rect));
                 }
-                scratch
-                    .grid_mut()
-                    .as_mut_slice()
-                    .copy_from_slice(grid.as_slice());
-                apply_stamp(scratch, gauss, &local, Blend::Add)?;
-                grid.as_mut_slice()
-                    .copy_from_slice(scratch.grid().as_slice());
-                Ok(())
-            })??;
+                self.gpu_tile_stamps += 1;
+            } else {
+                let (scratch, gauss) = (&mut self.scratch, &mut self.gauss);
+                let changed = pool.modify(id, |tile| -> Result<Vec<(Rect, Grid<u16>)>> {
+                    let Some(grid) = tile.as_u16_mut() else {
+                        return Ok(Vec::new());
+                    };
+                    if grid.size() != scratch.size() {
+                        return Ok(Vec::new());
+                    }
+                    scratch
+                        .grid_mut()
+                        .as_mut_slice()
+                        .copy_from_slice(grid.as_slice());
+                    let rects = apply_stamp(scratch, gauss, &local, Blend::Add)?;
+                    grid.as_mut_slice()
+                        .copy_from_slice(scratch.grid().as_slice());
+                    rects
+                        .into_iter()
+                        .map(|r| Ok((r, grid.copy_rect(r)?)))
+                        .collect()
+                })??;
+                for (rect, heights) in changed {
+                    self.window.apply(self.world_rect(id, rect), &heights)?;
+                }
+                self.cpu_tile_stamps += 1;
+            }
             stamp.mark_done(bit);
         }
         Ok(all)
+    }
+
+    /// `rect` of level-0 tile `id` in world texels.
+    fn world_rect(&self, id: TileId, rect: Rect) -> Rect {
+        let origin = UVec2::new(id.x, id.y) * self.tile_size;
+        Rect::new(rect.min + origin.as_ivec2(), rect.size)
+    }
+
+    /// Hands the rects of GPU-stamped tiles that arrived to the RAM pool (the tile becomes
+    /// dirty and is written back) and the collision window, and ends their holds.
+    fn take_tile_readbacks(&mut self, scene: &mut GpuScene, wait: bool) -> Result<()> {
+        for (ticket, rect, heights) in scene.tile_readbacks(wait)? {
+            let Some((id, asked)) = self.in_flight.remove(&ticket) else {
+                bail!("a tile readback nobody asked for (ticket {ticket})");
+            };
+            if asked != rect {
+                bail!("tile {id}: asked for {asked:?}, got {rect:?}");
+            }
+            let Some(pool) = self.pool.as_mut() else {
+                bail!("the flyover's pool was shut down");
+            };
+            // Pinned since the stamp, so still loaded.
+            pool.write_rect(id, rect, &heights)?;
+            let version = pool.generation(id);
+            pool.unpin(id);
+            if let Some(v) = self.vram.as_mut() {
+                v.release(id, version);
+            }
+            self.window.apply(self.world_rect(id, rect), &heights)?;
+        }
+        Ok(())
+    }
+
+    /// Moves the collision window with the camera, filling what comes into it from the RAM
+    /// pool, and refills the parts filled from coarser data whose level-0 tile has loaded.
+    fn update_window(&mut self, xz: Vec2) -> Result<()> {
+        let Some(pool) = self.pool.as_ref() else {
+            return Ok(());
+        };
+        let ts = self.tile_size;
+        let coarse = &mut self.window_coarse;
+        let mut fill = |rect: Rect, out: &mut Grid<u16>| -> Result<(), terrain_cache::CacheError> {
+            pool.read_region(rect, out)?;
+            let (lo, hi) = (rect.min.as_uvec2() / ts, (rect.max().as_uvec2() - 1) / ts);
+            for ty in lo.y..=hi.y {
+                for tx in lo.x..=hi.x {
+                    let id = TileId::new(0, tx, ty);
+                    if pool.tile(id).is_none() {
+                        coarse.insert(id);
+                    }
+                }
+            }
+            Ok(())
+        };
+        self.window.recenter(xz, &mut fill)?;
+        // Tiles that loaded since: refill (the tile may still be missing: it stays listed).
+        let window = self.window.window();
+        let ready: Vec<TileId> = self
+            .window_coarse
+            .iter()
+            .copied()
+            .filter(|&id| pool.tile(id).is_some())
+            .collect();
+        for id in ready {
+            self.window_coarse.remove(&id);
+            let rect = self.world_rect(id, Rect::from_size(UVec2::splat(ts)));
+            let coarse = &mut self.window_coarse;
+            self.window
+                .refresh(rect, |r, out| -> Result<(), terrain_cache::CacheError> {
+                    pool.read_region(r, out)?;
+                    if pool.tile(id).is_none() {
+                        coarse.insert(id);
+                    }
+                    Ok(())
+                })?;
+        }
+        // Forget tiles that left the window.
+        self.window_coarse.retain(|&id| {
+            let r = Rect::new((UVec2::new(id.x, id.y) * ts).as_ivec2(), UVec2::splat(ts));
+            window.is_some_and(|w| w.intersect(&r).is_some())
+        });
+        Ok(())
     }
 }
 
@@ -364,6 +523,7 @@ impl Scenario for FlyoverScenario {
 
     fn advance(&mut self, ctx: &mut FrameContext<'_>) -> Result<FrameOutcome> {
         let t_frame = Instant::now();
+        self.gpu_stamp_ms = 0.0;
         let time = self.frame as f32 / 30.0;
         self.frame += 1;
         // Along a straight path, reflected at the world's edges so it stays inside.
@@ -404,21 +564,13 @@ impl Scenario for FlyoverScenario {
                 tiles: [0; 4],
             });
         }
-        let mut pending = std::mem::take(&mut self.pending);
-        let mut still = Vec::with_capacity(pending.len());
-        for mut stamp in pending.drain(..) {
-            if !self.apply_to_tiles(&mut stamp)? {
-                still.push(stamp);
-            }
-        }
-        self.pending = still;
-
         let state = CameraState {
             position: eye,
             forward: look,
             fov_y: camera.fov_y,
             aspect: 16.0 / 9.0,
         };
+        self.last_camera = Some(state);
         let report = self.pool()?.update(&state)?;
         self.written_back += report.written as u64;
         // The VRAM pool uploads the nearest wanted tiles in RAM, within the per-frame budget.
@@ -431,7 +583,23 @@ impl Scenario for FlyoverScenario {
         {
             vram_report = Some(vram.update(&state, pool, atlas)?);
         }
-        ctx.timings.add(Step::Cache, ms_since(t_frame));
+        // Craters on the tiles, after the uploads: a GPU stamp lands on what the slot holds
+        // this frame.
+        let mut pending = std::mem::take(&mut self.pending);
+        let mut still = Vec::with_capacity(pending.len());
+        for mut stamp in pending.drain(..) {
+            if !self.apply_to_tiles(&mut stamp, ctx.gpu.as_deref_mut(), ctx.timings)? {
+                still.push(stamp);
+            }
+        }
+        self.pending = still;
+        if let Some(scene) = ctx.gpu.as_deref_mut() {
+            self.take_tile_readbacks(scene, false)?;
+        }
+        self.update_window(xz)?;
+        // The GPU stamps are timed as their own step.
+        let cache_ms = (ms_since(t_frame) - self.gpu_stamp_ms).max(0.0);
+        ctx.timings.add(Step::Cache, cache_ms);
         let camera_clearance_m = eye.y - self.ground(xz);
         Ok(FrameOutcome {
             camera,
@@ -453,7 +621,15 @@ impl Scenario for FlyoverScenario {
                     evictions: report.evictions,
                     dirty_tiles: report.dirty,
                     pending_craters: self.pending.len(),
-                    frame_thread_ms: ms_since(t_frame),
+                    gpu_tile_stamps: self.gpu_tile_stamps,
+                    cpu_tile_stamps: self.cpu_tile_stamps,
+                    tile_readbacks_in_flight: self.in_flight.len(),
+                    collision_window: self
+                        .window
+                        .window()
+                        .map(|w| [w.min.x, w.min.y, w.size.x as i32, w.size.y as i32]),
+                    collision_coarse_tiles: self.window_coarse.len(),
+                    frame_thread_ms: cache_ms,
                 }),
                 ..FrameStats::default()
             },
@@ -461,7 +637,17 @@ impl Scenario for FlyoverScenario {
         })
     }
 
-    fn finish(&mut self, _gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
+    fn finish(&mut self, gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
+        // The tiles stamped on the GPU reach RAM before anything is written back.
+        if let Some(scene) = gpu {
+            self.take_tile_readbacks(scene, true)?;
+        }
+        if !self.in_flight.is_empty() {
+            bail!(
+                "{} tile readbacks never arrived: those craters are not saved",
+                self.in_flight.len()
+            );
+        }
         let Some(mut pool) = self.pool.take() else {
             return Ok(FinishStats::default());
         };
