@@ -38,9 +38,11 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
             gpu: gpu.as_mut(),
             timings: &mut timings,
         })?;
-        timings.time(Step::Overview, || {
-            overview.update(scenario.map(), scenario.normals(), &frame.dirty)
+        let overlaid = timings.time(Step::Overview, || {
+            overview.update(scenario.map(), scenario.normals(), &frame.dirty)?;
+            anyhow::Ok(scenario.overlay(overview.image()))
         })?;
+        let overview_image = overlaid.as_ref().unwrap_or(overview.image());
         let report = FrameReport {
             index,
             file: String::new(),
@@ -57,7 +59,7 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
                 let mut rendered = scene.render(&frame.camera, &mut timings)?;
                 let eye = frame.camera.position;
                 let uv = Vec2::new(eye.x, eye.z) / scenario.map().extent_m();
-                images::inset_overview(&mut rendered.image, overview.image(), uv);
+                images::inset_overview(&mut rendered.image, overview_image, uv);
                 let report = FrameReport {
                     triangles: rendered.triangles,
                     gpu_objects: Some(scene.live_objects()),
@@ -66,7 +68,7 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
                 capture.push(&rendered.image, report, timings)?;
             }
             // Without a GPU the overview is the frame.
-            None => capture.push(overview.image(), report, timings)?,
+            None => capture.push(overview_image, report, timings)?,
         }
     }
     let finish = scenario.finish(gpu.as_mut())?;

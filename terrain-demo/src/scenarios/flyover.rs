@@ -17,6 +17,7 @@
 //! [`OVERVIEW_MAX`] texels) kept current with the same craters, with the cache's tile states
 //! and the camera's view over it.
 
+use super::tile_overlay;
 use super::world_files;
 use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
 use crate::cli::Cli;
@@ -519,6 +520,23 @@ impl Scenario for FlyoverScenario {
 
     fn normals(&self) -> &DerivativeMap {
         &self.normals
+    }
+
+    fn overlay(&self, overview: &Image) -> Option<Image> {
+        let pool = self.pool.as_ref()?;
+        let statuses = pool.statuses();
+        let active = |id: TileId| self.vram.as_ref().is_some_and(|v| v.slot_of(id).is_some());
+        Some(tile_overlay::draw(
+            overview,
+            &tile_overlay::OverlayInput {
+                world_size: self.manifest.world_size,
+                tile_size: self.tile_size,
+                texel_size: self.texel_size,
+                statuses: &statuses,
+                active: &active,
+                camera: self.last_camera,
+            },
+        ))
     }
 
     fn advance(&mut self, ctx: &mut FrameContext<'_>) -> Result<FrameOutcome> {

@@ -8,6 +8,7 @@ mod snow;
 mod snow_field;
 mod stamp_script;
 mod stamps;
+pub mod tile_overlay;
 pub mod world_files;
 
 use crate::cli::{Cli, ScenarioKind};
@@ -100,6 +101,12 @@ pub trait Scenario {
         let size = self.map().size();
         let scale = side as f32 / size.max_element() as f32;
         (size.as_vec2() * scale).round().as_uvec2().max(UVec2::ONE)
+    }
+
+    /// The overview with what the scenario draws over it this frame (the flyover's tile
+    /// states and view), `None` to show it as it is.
+    fn overlay(&self, _overview: &crate::images::Image) -> Option<crate::images::Image> {
+        None
     }
 
     /// Ends the run: writes back what the scenario keeps outside the report (the flyover's
