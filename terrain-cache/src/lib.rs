@@ -50,8 +50,11 @@
 //! `TileAtlas`), keeping the target's indirection table current so a renderer falls back to
 //! the coarser resident level where a tile is missing. It reads the RAM pool through
 //! [`RamTiles`]: [`RamPool::tile`], [`RamPool::generation`] (a modified tile is re-uploaded)
-//! and [`RamPool::refreshed`] (coarser tiles rewritten on disk). [`RamPool::write`] takes a
-//! deformed tile read back from the GPU.
+//! and [`RamPool::refreshed`] (coarser tiles rewritten on disk). A tile deformed on the GPU in
+//! its slot is held there ([`VramPool::hold`]) while its changed rect is read back; the rect
+//! goes into RAM with [`RamPool::write_rect`] (or a whole tile with [`RamPool::write`]) and
+//! [`VramPool::release`] ends the hold. [`RamPool::read_region`] copies any level-0 rect out
+//! of the loaded tiles (coarser data where a tile is missing), e.g. to fill a collision window.
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
