@@ -44,6 +44,22 @@ const FREE: u8 = 0;
 const PENDING: u8 = 1;
 const MAPPED: u8 = 2;
 const FAILED: u8 = 3;
+/// The commands that would have mapped the slot were dropped without being submitted.
+const ABANDONED: u8 = 4;
+
+/// Travels with a request's map callback. wgpu drops the callback uncalled when the encoder
+/// (or the command buffer) that carries it is dropped without submit; the guard then marks
+/// the slot abandoned, so it is freed instead of waiting forever.
+struct SubmitGuard(Arc<AtomicU8>);
+
+impl Drop for SubmitGuard {
+    fn drop(&mut self) {
+        // Only a request still pending: after the callback ran, the state is final.
+        let _ = self
+            .0
+            .compare_exchange(PENDING, ABANDONED, Ordering::AcqRel, Ordering::Acquire);
+    }
+}
 
 #[derive(Debug)]
 struct Slot {
@@ -108,9 +124,13 @@ impl RegionReadback {
         self.slots.len()
     }
 
-    /// Requests in flight (recorded, not yet handed over by `poll`).
+    /// Requests in flight (recorded, not yet handed over by `poll`). A request whose
+    /// encoder was dropped without submit is not in flight: its slot is free again.
     pub fn in_flight(&self) -> usize {
-        self.slots.iter().filter(|s| s.request.is_some()).count()
+        self.slots
+            .iter()
+            .filter(|s| s.request.is_some() && s.state.load(Ordering::Acquire) != ABANDONED)
+            .count()
     }
 
     /// Records the copy of `rect` of `map` into `encoder` and arranges for the staging buffer to
@@ -162,6 +182,7 @@ impl RegionReadback {
             });
         }
         let ring = self.slots.len();
+        self.free_abandoned();
         let Some(slot) = self.slots.iter_mut().find(|s| s.request.is_none()) else {
             return Err(GpuError::ReadbackBusy { ring });
         };
@@ -173,9 +194,11 @@ impl RegionReadback {
         let buffer = &slot.buffer;
         copy_rows(encoder, map, rect, buffer);
         slot.state.store(PENDING, Ordering::Release);
-        let state = slot.state.clone();
+        let guard = SubmitGuard(slot.state.clone());
         encoder.map_buffer_on_submit(buffer, wgpu::MapMode::Read, 0..bytes, move |r| {
-            state.store(if r.is_ok() { MAPPED } else { FAILED }, Ordering::Release);
+            guard
+                .0
+                .store(if r.is_ok() { MAPPED } else { FAILED }, Ordering::Release);
         });
         let ticket = ReadbackTicket(self.next_ticket);
         self.next_ticket += 1;
@@ -195,9 +218,21 @@ impl RegionReadback {
         self.collect()
     }
 
+    /// Frees the slots of requests whose commands were dropped without submit (nothing was
+    /// mapped, so the buffer is ready for the next request).
+    fn free_abandoned(&mut self) {
+        for slot in &mut self.slots {
+            if slot.state.load(Ordering::Acquire) == ABANDONED {
+                slot.request = None;
+                slot.state.store(FREE, Ordering::Release);
+            }
+        }
+    }
+
     /// Hands over the regions that arrived. A failed mapping (device loss) is reported after the
     /// others are handed over: on the next call when regions came with it, so none is dropped.
     fn collect(&mut self) -> Result<Vec<RegionData>, GpuError> {
+        self.free_abandoned();
         if let Some(rects) = self.failure.take() {
             return Err(GpuError::ReadbackFailed { rects });
         }

@@ -440,3 +440,51 @@ fn the_context_reports_its_adapter() {
     );
     assert!(!r.name.is_empty() && !r.backend.is_empty());
 }
+
+#[test]
+fn a_request_whose_encoder_is_dropped_frees_its_ring_slot() {
+    let Some(ctx) = context_or_skip("readback_dropped_encoder") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let map = HeightMap::new(
+        hashed::<u16>(32, 32, 0, 65_000),
+        HeightEncoding::new(0.01, 0.0).unwrap(),
+        1.0,
+        WrapMode::Repeat,
+    )
+    .unwrap();
+    let gpu = GpuHeightMap::from_map(device, queue, &map).unwrap();
+    let mut readback = RegionReadback::new(device, 1).unwrap();
+    let rect = Rect::new(IVec2::new(3, 4), UVec2::new(5, 6));
+    // Many requests whose encoders are dropped before submit (an engine's frame abandoned on
+    // an error): none of them may keep the only slot.
+    for _ in 0..5 {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        readback.request(device, &mut encoder, &gpu, rect).unwrap();
+        drop(encoder);
+        assert!(readback.poll(device).unwrap().is_empty());
+        assert_eq!(
+            readback.in_flight(),
+            0,
+            "the dropped request let its slot go"
+        );
+    }
+    // The slot serves a real request afterwards, with the right data.
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let ticket = readback.request(device, &mut encoder, &gpu, rect).unwrap();
+    queue.submit([encoder.finish()]);
+    let arrived = readback.wait(device).unwrap();
+    assert_eq!(arrived.len(), 1);
+    assert_eq!(arrived[0].ticket, ticket);
+    assert_eq!(arrived[0].to_u16(), map.grid().copy_rect(rect).unwrap());
+    // A finished but never submitted command buffer lets its slot go when it is dropped too.
+    let mut encoder = device.create_command_encoder(&Default::default());
+    readback.request(device, &mut encoder, &gpu, rect).unwrap();
+    let commands = encoder.finish();
+    assert_eq!(readback.in_flight(), 1);
+    drop(commands);
+    readback.poll(device).unwrap();
+    assert_eq!(readback.in_flight(), 0);
+    ctx.check().expect("no GPU validation errors");
+}
