@@ -13,6 +13,17 @@ use crate::rect::Rect;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct RequestId(pub u64);
 
+impl RequestId {
+    /// A number never handed out before in this process (a process-wide counter): sources
+    /// take their ids from it, so a source made again (after a device loss, say) never reuses
+    /// the id of a request an older one may still deliver.
+    pub fn fresh() -> u64 {
+        use std::sync::atomic::{AtomicU64, Ordering};
+        static NEXT: AtomicU64 = AtomicU64::new(0);
+        NEXT.fetch_add(1, Ordering::Relaxed)
+    }
+}
+
 /// A region that arrived: the stored u16 heights of `rect`, row-major in the rect's own
 /// (unwrapped) coordinates.
 #[derive(Debug, Clone, PartialEq)]

@@ -72,7 +72,6 @@ struct Slot {
 #[derive(Debug)]
 pub struct RegionReadback {
     slots: Vec<Slot>,
-    next_ticket: u64,
     /// A failure to report on the next poll (regions that arrived with it went out first).
     failure: Option<Vec<Rect>>,
 }
@@ -114,7 +113,6 @@ impl RegionReadback {
             .collect();
         Ok(Self {
             slots,
-            next_ticket: 0,
             failure: None,
         })
     }
@@ -200,8 +198,8 @@ impl RegionReadback {
                 .0
                 .store(if r.is_ok() { MAPPED } else { FAILED }, Ordering::Release);
         });
-        let ticket = ReadbackTicket(self.next_ticket);
-        self.next_ticket += 1;
+        // Process-wide, so a ring made again never repeats a ticket an older one handed out.
+        let ticket = ReadbackTicket(terrain_core::RequestId::fresh());
         slot.request = Some((ticket, rect, map.encoding));
         Ok(ticket)
     }

@@ -142,7 +142,8 @@ impl<'a> BoundedGround<'a> {
         self.pending.iter().chain(self.extra)
     }
 
-    /// The largest pending raise that a height lookup at world `pos` reads (0 if none).
+    /// The pending raise that a height lookup at world `pos` reads: the sum of the bounds of
+    /// every pending deformation there (overlapping deformations add up), 0 if none.
     pub fn raise_at(&self, pos: Vec2) -> Result<f32, PhysicsError> {
         check_finite2("query position", pos)?;
         let field = self.collider.field();
@@ -152,10 +153,11 @@ impl<'a> BoundedGround<'a> {
         Ok(self
             .deformations()
             .filter(|d| d.touches_cell(x0, z0, size))
-            .fold(0.0, |m, d| m.max(d.bound.raise)))
+            .fold(0.0, |m: f32, d| (m + d.bound.raise).min(f32::MAX)))
     }
 
-    /// The largest pending raise over the cells under a sphere (0 if none).
+    /// The pending raise over the cells under a sphere: the sum of the bounds of every pending
+    /// deformation touching them (0 if none).
     pub fn raise_under(&self, center: Vec3, radius: f32) -> Result<f32, PhysicsError> {
         check_finite3("sphere centre", center)?;
         check_finite("sphere radius", radius)?;
@@ -169,11 +171,12 @@ impl<'a> BoundedGround<'a> {
         Ok(self
             .deformations()
             .filter(|d| d.touches_cells(lo.x as i64, hi.x as i64, lo.y as i64, hi.y as i64, size))
-            .fold(0.0, |m, d| m.max(d.bound.raise)))
+            .fold(0.0, |m: f32, d| (m + d.bound.raise).min(f32::MAX)))
     }
 
     /// The interval `(lowest, highest)` the true ground height at world `pos` lies in: the
-    /// mirrored height less the largest pending `lower`, plus the largest pending `raise`.
+    /// mirrored height less the pending `lower` bounds there, plus the pending `raise` bounds
+    /// (each summed: overlapping deformations add up).
     pub fn height_interval(&self, pos: Vec2) -> Result<(f32, f32), PhysicsError> {
         let h = self.collider.height(pos)?;
         let field = self.collider.field();
@@ -182,15 +185,15 @@ impl<'a> BoundedGround<'a> {
         let size = field.size();
         let (mut lower, mut raise) = (0.0_f32, 0.0_f32);
         for d in self.deformations().filter(|d| d.touches_cell(x0, z0, size)) {
-            lower = lower.max(d.bound.lower);
-            raise = raise.max(d.bound.raise);
+            lower = (lower + d.bound.lower).min(f32::MAX);
+            raise = (raise + d.bound.raise).min(f32::MAX);
         }
         Ok((h - lower, h + raise))
     }
 }
 
 impl GroundQuery for BoundedGround<'_> {
-    /// The mirrored height plus the largest pending raise there.
+    /// The mirrored height plus the pending raise there.
     fn ground_height(&self, pos: Vec2) -> Result<f32, PhysicsError> {
         Ok(self.collider.height(pos)? + self.raise_at(pos)?)
     }

@@ -94,7 +94,9 @@ pub use ground::{BoundedGround, DeformationBound, PendingDeformation};
 pub use merge::DirtyRegions;
 pub use mirror::{CollisionMirror, RegionUpdate};
 pub use ray::{Ray, RayHit};
-pub use scheduler::{ReadbackScheduler, SchedulerConfig, UpdateError, UpdateReport};
+pub use scheduler::{
+    MAX_PENDING_DEFORMATIONS, ReadbackScheduler, SchedulerConfig, UpdateError, UpdateReport,
+};
 pub use source::{ArrivedRegion, CpuRegionSource, RegionSource, RequestId, read_region};
 pub use sphere::{CONTACT_TOLERANCE, SOLID_SPHERE_ROLLING_FACTOR, SphereBody};
 pub use window::{CollisionWindow, MAX_WINDOW_SIDE, WINDOW_STEP, WindowError};

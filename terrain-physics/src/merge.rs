@@ -40,6 +40,11 @@ impl DirtyRegions {
         &self.rects
     }
 
+    /// How many rects are kept.
+    pub fn len(&self) -> usize {
+        self.rects.len()
+    }
+
     /// Whether no rect is kept.
     pub fn is_empty(&self) -> bool {
         self.rects.is_empty()

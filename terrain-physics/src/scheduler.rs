@@ -11,6 +11,15 @@
 //!   never overwrites a newer one), retires the bounds a completed batch covered, and, once no
 //!   deformation has been noted for `quiet_gap` (or the oldest dirty rect has waited
 //!   `max_delay`), requests the merged dirty rects as one batch.
+//!
+//! Collision never freezes on a lost readback: a request that has not arrived within
+//! `request_timeout` (device loss, a failed mapping, an encoder dropped before submit, a
+//! source that drops it) is abandoned: its rect is dirty again and re-requested with the next
+//! batch, its deformation bounds stay pending, and the requests behind it no longer wait for
+//! it; if it arrives after all it is ignored (the re-request brings newer heights). Memory
+//! stays bounded whatever the source does: at most `max_in_flight` requests in flight, a
+//! bounded list of abandoned ids, and pending deformation records merged beyond
+//! [`MAX_PENDING_DEFORMATIONS`].
 
 use crate::collider::HeightfieldCollider;
 use crate::error::{PhysicsError, check_region};
@@ -35,6 +44,12 @@ pub struct SchedulerConfig {
     pub merge_distance: u32,
     /// The most rects one batch requests (the closest are merged beyond it). Default 4.
     pub max_requests: usize,
+    /// How long a request may take to arrive before it is abandoned and its rect requested
+    /// again. Not in the seed (its readback never fails); default 1 s, about 30 frames.
+    pub request_timeout: Duration,
+    /// The most requests in flight; a batch waits (its rects stay dirty) while it would go
+    /// over. Default 16.
+    pub max_in_flight: usize,
 }
 
 impl Default for SchedulerConfig {
@@ -44,6 +59,8 @@ impl Default for SchedulerConfig {
             max_delay: Duration::from_millis(250),
             merge_distance: 16,
             max_requests: 4,
+            request_timeout: Duration::from_secs(1),
+            max_in_flight: 16,
         }
     }
 }
@@ -55,7 +72,22 @@ pub struct UpdateReport {
     pub requested: Vec<(RequestId, Rect)>,
     /// Regions applied to the mirror: request id and the mirror version it produced.
     pub applied: Vec<(RequestId, u64)>,
+    /// Requests abandoned this update (not arrived within the timeout, or their id handed out
+    /// again by the source); their rects are dirty again.
+    pub abandoned: Vec<RequestId>,
+    /// Regions of abandoned requests that arrived after all, ignored.
+    pub late: usize,
 }
+
+/// Pending deformation records kept one by one, waiting and in flight each; beyond this many
+/// they are merged into a few records with summed bounds (conservative), so a caller that
+/// notes deformations without ever updating, or a source that never delivers, does not grow
+/// memory without bound: [`ReadbackScheduler::pending_deformations`] yields at most twice
+/// this many (and a few).
+pub const MAX_PENDING_DEFORMATIONS: usize = 1024;
+
+/// Abandoned request ids remembered (to ignore their late arrival).
+const ABANDONED_MEMORY: usize = 256;
 
 /// Why a [`ReadbackScheduler::update`] failed: one of the scheduler's own checks, or the
 /// source's failure in the source's own error type `E` ([`RegionSource::Error`]).
@@ -75,6 +107,7 @@ pub enum UpdateError<E> {
 struct InFlight {
     id: RequestId,
     rect: Rect,
+    requested_at: Instant,
     arrived: Option<Grid<u16>>,
     /// Deformations whose bounds retire when this request is applied (the last request of a
     /// batch carries the batch's deformations; requests apply in order).
@@ -94,6 +127,8 @@ pub struct ReadbackScheduler {
     in_flight: VecDeque<InFlight>,
     /// Bounds of batches in flight, flattened for [`BoundedGround`].
     in_flight_bounds: Vec<PendingDeformation>,
+    /// Ids abandoned lately, oldest first (at most `ABANDONED_MEMORY`).
+    abandoned: VecDeque<RequestId>,
 }
 
 impl ReadbackScheduler {
@@ -112,6 +147,13 @@ impl ReadbackScheduler {
                 expected: "at least 1",
             });
         }
+        if config.max_in_flight < config.max_requests {
+            return Err(PhysicsError::OutOfRange {
+                what: "max requests in flight",
+                value: config.max_in_flight as f64,
+                expected: "at least max_requests (one batch)",
+            });
+        }
         Ok(Self {
             config,
             map_size,
@@ -121,6 +163,7 @@ impl ReadbackScheduler {
             last_dirty: None,
             in_flight: VecDeque::new(),
             in_flight_bounds: Vec::new(),
+            abandoned: VecDeque::new(),
         })
     }
 
@@ -152,6 +195,9 @@ impl ReadbackScheduler {
         let bound = DeformationBound::new(bound.raise, bound.lower)?;
         self.dirty.insert(rect);
         self.waiting.push(PendingDeformation { rect, bound });
+        if self.waiting.len() > MAX_PENDING_DEFORMATIONS {
+            self.waiting = merge_pending(&self.waiting, self.map_size);
+        }
         self.first_dirty.get_or_insert(now);
         self.last_dirty = Some(self.last_dirty.map_or(now, |t| t.max(now)));
         Ok(())
@@ -188,6 +234,10 @@ impl ReadbackScheduler {
                 .iter_mut()
                 .find(|f| f.id == region.id && f.arrived.is_none());
             let result = match slot {
+                None if self.abandoned.contains(&region.id) => {
+                    report.late += 1;
+                    Ok(())
+                }
                 None => Err(PhysicsError::UnknownRequest { id: region.id }),
                 Some(f) if f.rect != region.rect => Err(PhysicsError::WrongRegion {
                     id: f.id,
@@ -211,6 +261,8 @@ impl ReadbackScheduler {
         }
 
         // Apply in request order.
+        self.abandon_overdue(now, &mut report);
+
         while self.in_flight.front().is_some_and(|f| f.arrived.is_some()) {
             let Some(done) = self.in_flight.pop_front() else {
                 break;
@@ -233,7 +285,7 @@ impl ReadbackScheduler {
         }
 
         if self.due(now) {
-            self.request_batch(source, &mut report, &mut first_error);
+            self.request_batch(source, now, &mut report, &mut first_error);
         }
         match first_error {
             Some(e) => Err(e),
@@ -255,20 +307,93 @@ impl ReadbackScheduler {
         quiet || overdue
     }
 
+    /// Abandons the requests that have not arrived within the timeout: their rects are dirty
+    /// again and their bounds pending again; the requests behind them stop waiting for them.
+    fn abandon_overdue(&mut self, now: Instant, report: &mut UpdateReport) {
+        let timeout = self.config.request_timeout;
+        let overdue = |f: &InFlight| {
+            f.arrived.is_none() && now.saturating_duration_since(f.requested_at) >= timeout
+        };
+        let Some(first) = self.in_flight.iter().position(overdue) else {
+            return;
+        };
+        self.keep_bounds_behind(first, &|f: &InFlight| !overdue(f));
+        let (lost, kept): (VecDeque<InFlight>, VecDeque<InFlight>) =
+            std::mem::take(&mut self.in_flight)
+                .into_iter()
+                .partition(|f| overdue(f));
+        self.in_flight = kept;
+        for f in lost {
+            self.abandon(f, now, report);
+        }
+        self.rebuild_in_flight_bounds();
+    }
+
+    /// Moves back to `waiting` the bounds that in-flight requests behind position `i` would
+    /// retire when they apply: once the request at `i` is abandoned they would retire them
+    /// although its rect's new heights are not in the mirror yet (a batch's bounds ride on its
+    /// last request). They retire with the batch that re-requests the rect instead. Only
+    /// requests `stays` keeps count (those abandoned too give their bounds back anyway).
+    fn keep_bounds_behind(&mut self, i: usize, stays: &dyn Fn(&InFlight) -> bool) {
+        let mut behind = Vec::new();
+        for f in self.in_flight.iter_mut().skip(i + 1) {
+            if stays(f) {
+                behind.append(&mut f.retires);
+            }
+        }
+        self.waiting.extend(behind);
+        if self.waiting.len() > MAX_PENDING_DEFORMATIONS {
+            self.waiting = merge_pending(&self.waiting, self.map_size);
+        }
+    }
+
+    fn abandon(&mut self, f: InFlight, now: Instant, report: &mut UpdateReport) {
+        self.dirty.insert(f.rect);
+        self.waiting.extend(f.retires);
+        if self.waiting.len() > MAX_PENDING_DEFORMATIONS {
+            self.waiting = merge_pending(&self.waiting, self.map_size);
+        }
+        self.first_dirty.get_or_insert(now);
+        self.last_dirty.get_or_insert(now);
+        if self.abandoned.len() >= ABANDONED_MEMORY {
+            self.abandoned.pop_front();
+        }
+        self.abandoned.push_back(f.id);
+        report.abandoned.push(f.id);
+    }
+
     fn request_batch<S: RegionSource + ?Sized>(
         &mut self,
         source: &mut S,
+        now: Instant,
         report: &mut UpdateReport,
         first_error: &mut Option<UpdateError<S::Error>>,
     ) {
+        // A full pipeline waits: the rects stay dirty (and merge) until requests come back
+        // or are abandoned.
+        if self.in_flight.len() + self.dirty.len() > self.config.max_in_flight {
+            return;
+        }
         let rects = self.dirty.take();
         let mut issued = 0;
         for (k, &rect) in rects.iter().enumerate() {
             match source.request(rect) {
                 Ok(id) => {
+                    // A source that hands out an id again (made anew, or faulty): the older
+                    // request can no longer be told apart, so it is abandoned, and a late
+                    // arrival under that id is no longer ignored.
+                    if let Some(i) = self.in_flight.iter().position(|f| f.id == id) {
+                        self.keep_bounds_behind(i, &|_| true);
+                        if let Some(old) = self.in_flight.remove(i) {
+                            self.abandon(old, now, report);
+                        }
+                        self.rebuild_in_flight_bounds();
+                    }
+                    self.abandoned.retain(|&a| a != id);
                     self.in_flight.push_back(InFlight {
                         id,
                         rect,
+                        requested_at: now,
                         arrived: None,
                         retires: Vec::new(),
                     });
@@ -285,10 +410,14 @@ impl ReadbackScheduler {
                 }
             }
         }
-        if issued > 0
-            && let Some(last) = self.in_flight.back_mut()
-        {
-            last.retires = std::mem::take(&mut self.waiting);
+        if issued > 0 {
+            // Bounds in flight stay within the limit too.
+            if self.waiting.len() + self.in_flight_bounds.len() > MAX_PENDING_DEFORMATIONS {
+                self.waiting = merge_pending(&self.waiting, self.map_size);
+            }
+            if let Some(last) = self.in_flight.back_mut() {
+                last.retires = std::mem::take(&mut self.waiting);
+            }
         }
         self.first_dirty = None;
         self.last_dirty = None;
@@ -329,6 +458,28 @@ impl ReadbackScheduler {
     pub fn ground<'a>(&'a self, collider: &'a HeightfieldCollider) -> BoundedGround<'a> {
         BoundedGround::new(collider, &self.waiting, &self.in_flight_bounds)
     }
+}
+
+/// `pending` merged into at most 4 records: the merged rects cover every record's rect, and
+/// each carries the sum of all the bounds (a deformation may move the surface anywhere inside
+/// the merged rect by at most every bound together).
+fn merge_pending(pending: &[PendingDeformation], map_size: UVec2) -> Vec<PendingDeformation> {
+    let mut rects = DirtyRegions::new(map_size, u32::MAX, 4);
+    let (mut raise, mut lower) = (0.0f32, 0.0f32);
+    for p in pending {
+        rects.insert(p.rect);
+        raise += p.bound.raise;
+        lower += p.bound.lower;
+    }
+    let bound = DeformationBound {
+        raise: raise.min(f32::MAX),
+        lower: lower.min(f32::MAX),
+    };
+    rects
+        .rects()
+        .iter()
+        .map(|&rect| PendingDeformation { rect, bound })
+        .collect()
 }
 
 #[cfg(test)]

@@ -20,7 +20,6 @@ use terrain_core::{CoarseMap, Grid, Rect};
 pub struct CpuRegionSource {
     map: CoarseMap,
     latency: u32,
-    next_id: u64,
     queue: VecDeque<(u32, ArrivedRegion)>,
     requests: Vec<Rect>,
 }
@@ -31,7 +30,6 @@ impl CpuRegionSource {
         Self {
             map,
             latency: 1,
-            next_id: 0,
             queue: VecDeque::new(),
             requests: Vec::new(),
         }
@@ -96,8 +94,7 @@ impl RegionSource for CpuRegionSource {
 
     fn request(&mut self, rect: Rect) -> Result<RequestId, PhysicsError> {
         let heights = read_region(&self.map, rect)?;
-        let id = RequestId(self.next_id);
-        self.next_id += 1;
+        let id = RequestId(RequestId::fresh());
         self.requests.push(rect);
         self.queue
             .push_back((self.latency, ArrivedRegion { id, rect, heights }));

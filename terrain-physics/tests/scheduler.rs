@@ -226,7 +226,8 @@ fn regions_arriving_out_of_order_apply_in_request_order() {
         inner: r.source.clone(),
         held: Vec::new(),
     };
-    r.scheduler
+    let first = r
+        .scheduler
         .update(ms(t0, 20), &mut src, &r.mirror)
         .expect("update");
     let placement = StampPlacement::new(centre, Vec2::splat(4.0), 1.0).expect("placement");
@@ -248,12 +249,13 @@ fn regions_arriving_out_of_order_apply_in_request_order() {
         .update(ms(t0, 50), &mut src, &r.mirror)
         .expect("update");
     assert_eq!(rep.requested.len(), 1);
+    let second = rep.requested[0].0;
     let rep = r
         .scheduler
         .update(ms(t0, 51), &mut src, &r.mirror)
         .expect("update");
-    let ids: Vec<u64> = rep.applied.iter().map(|(id, _)| id.0).collect();
-    assert_eq!(ids, vec![0, 1]);
+    let ids: Vec<RequestId> = rep.applied.iter().map(|(id, _)| *id).collect();
+    assert_eq!(ids, vec![first.requested[0].0, second]);
     assert_eq!(r.mirror.snapshot().heights(), src.inner.map().grid());
     assert!(r.scheduler.is_idle());
 }
