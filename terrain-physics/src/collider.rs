@@ -81,16 +81,30 @@ impl HeightfieldCollider {
         pos - Vec2::new(self.translation.x, self.translation.z)
     }
 
+    /// `to_local2`, refusing a position whose offset from the collider overflows f32.
+    fn local2(&self, pos: Vec2) -> Result<Vec2, PhysicsError> {
+        check_finite2("query position", pos)?;
+        let local = self.to_local2(pos);
+        check_finite2("query position relative to the collider", local)?;
+        Ok(local)
+    }
+
+    /// A point in the collider's local space, refusing one whose offset overflows f32.
+    fn local3(&self, what: &'static str, p: Vec3) -> Result<Vec3, PhysicsError> {
+        check_finite3(what, p)?;
+        let local = p - self.translation;
+        check_finite3(what, local)?;
+        Ok(local)
+    }
+
     /// Height in metres at world `pos = (X, Z)` (bilinear, wrap addressing, listing 3.2).
     pub fn height(&self, pos: Vec2) -> Result<f32, PhysicsError> {
-        check_finite2("query position", pos)?;
-        Ok(self.field.height_local(self.to_local2(pos)) + self.translation.y)
+        Ok(self.field.height_local(self.local2(pos)?) + self.translation.y)
     }
 
     /// Unit surface normal (Y up) at world `pos = (X, Z)`.
     pub fn normal(&self, pos: Vec2) -> Result<Vec3, PhysicsError> {
-        check_finite2("query position", pos)?;
-        Ok(self.field.normal_local(self.to_local2(pos)))
+        Ok(self.field.normal_local(self.local2(pos)?))
     }
 
     /// The first hit of the ray from world `origin` along `dir` (any non-zero length) within
@@ -104,7 +118,7 @@ impl HeightfieldCollider {
     ) -> Result<Option<RayHit>, PhysicsError> {
         let ray = Ray::new(origin, dir)?;
         check_max_dist(max_dist)?;
-        let local = Ray::new(origin - self.translation, ray.dir())?;
+        let local = Ray::new(self.local3("ray origin", origin)?, ray.dir())?;
         Ok(self
             .field
             .cast_local_ray(&local, max_dist)
@@ -121,11 +135,11 @@ impl HeightfieldCollider {
         center: Vec3,
         radius: f32,
     ) -> Result<Option<Contact>, PhysicsError> {
-        check_finite3("sphere centre", center)?;
         check_radius(radius)?;
+        let local = self.local3("sphere centre", center)?;
         Ok(self
             .field
-            .contact_local_sphere(center - self.translation, radius)
+            .contact_local_sphere(local, radius)
             .map(|c| Contact {
                 point: c.point + self.translation,
                 ..c

@@ -38,7 +38,8 @@ impl HeightField {
     /// ([`HeightfieldCollider::sphere_contact`] checks them); other inputs give `None`.
     ///
     /// Cost: the cells under the sphere (radius / texel size squared), or for a centre below
-    /// ground, the cells within its depth below the surface.
+    /// ground, the cells within its depth below the surface; at most one period of the
+    /// repeating field (its width x height cells), however large the radius or the depth.
     ///
     /// [`HeightfieldCollider::sphere_contact`]: crate::HeightfieldCollider::sphere_contact
     pub fn contact_local_sphere(&self, center: Vec3, radius: f32) -> Option<Contact> {
@@ -81,8 +82,20 @@ impl HeightField {
     /// The closest surface point to `q`, searched within `radius` above ground and within the
     /// depth below ground (the point straight above or below is always a candidate).
     fn closest_point_local(&self, q: Vec3, radius: f64) -> Option<Closest> {
+        // The field repeats: search around the centre moved into the first period, and move
+        // the point found back.
+        let (px, pz) = self.period_m();
+        let q = q.as_dvec3();
+        let (cx, shift_x) = crate::field::reduce(q.x, px);
+        let (cz, shift_z) = crate::field::reduce(q.z, pz);
+        let mut best = self.closest_point_reduced(DVec3::new(cx, q.y, cz), radius)?;
+        best.point += DVec3::new(shift_x, 0.0, shift_z);
+        Some(best)
+    }
+
+    /// [`closest_point_local`](Self::closest_point_local) for a centre in the first period.
+    fn closest_point_reduced(&self, c: DVec3, radius: f64) -> Option<Closest> {
         let ts = f64::from(self.texel_size());
-        let c = q.as_dvec3();
         // The patch under the centre decides above / below, in the same f64 arithmetic as the
         // search.
         let cell = (c.x / ts).floor();
@@ -103,10 +116,22 @@ impl HeightField {
         } else {
             best.distance.min(radius)
         };
-        let x_lo = ((c.x - reach) / ts).floor() as i64;
-        let x_hi = ((c.x + reach) / ts).floor() as i64;
-        let z_lo = ((c.z - reach) / ts).floor() as i64;
-        let z_hi = ((c.z + reach) / ts).floor() as i64;
+        // Each cell of the repeating field counts once, in its copy nearest the centre: a
+        // farther copy has the same heights and a larger horizontal gap. So the search covers
+        // at most one period around the centre, whatever the reach (a sphere far below ground
+        // or a huge radius): bounded by the map, not by the input.
+        let size = self.size();
+        let span = |lo: f64, hi: f64, at: f64, n: u32| -> (i64, i64) {
+            let (lo, hi) = ((lo / ts).floor(), (hi / ts).floor());
+            if hi - lo + 1.0 <= f64::from(n) {
+                (lo as i64, hi as i64)
+            } else {
+                let first = at as i64 - i64::from(n / 2);
+                (first, first + i64::from(n) - 1)
+            }
+        };
+        let (x_lo, x_hi) = span(c.x - reach, c.x + reach, cell, size.x);
+        let (z_lo, z_hi) = span(c.z - reach, c.z + reach, row, size.y);
         let mut best_d2 = best.distance * best.distance;
         let visit = |ix: i64, iz: i64, best: &mut Closest, best_d2: &mut f64| {
             let patch = self.patch(ix, iz);

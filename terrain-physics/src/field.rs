@@ -167,6 +167,18 @@ impl HeightField {
     /// never panics.
     #[inline]
     pub fn height_local(&self, pos: Vec2) -> f32 {
+        // Far away `pos / texel_size` can overflow f32 (or the cell index i64): move such a
+        // position into the first period first (the field repeats). Nearer, nothing changes,
+        // so the result stays bit-identical to terrain_core's sampler.
+        let p = pos / self.texel_size;
+        let pos = if p.is_finite() && p.abs().max_element() < NEAR_TEXELS {
+            pos
+        } else {
+            let (px, pz) = self.period_m();
+            let (x, _) = reduce(f64::from(pos.x), px);
+            let (z, _) = reduce(f64::from(pos.y), pz);
+            Vec2::new(x as f32, z as f32)
+        };
         let p = pos / self.texel_size;
         // The same arithmetic as terrain_core::sample, so results agree to the bit.
         let fx0 = p.x.floor();
@@ -188,7 +200,10 @@ impl HeightField {
     /// Unit surface normal (Y up) at local position `pos = (X, Z)`: the normal of the bilinear
     /// patch of the cell holding `pos` (the cell to the +X / +Z side on a cell edge).
     pub fn normal_local(&self, pos: Vec2) -> Vec3 {
-        let p = pos.as_dvec2() / f64::from(self.texel_size);
+        let (px, pz) = self.period_m();
+        let (x, _) = reduce(f64::from(pos.x), px);
+        let (z, _) = reduce(f64::from(pos.y), pz);
+        let p = glam::DVec2::new(x, z) / f64::from(self.texel_size);
         let (ix, iz) = (p.x.floor(), p.y.floor());
         let patch = self.patch(ix as i64, iz as i64);
         patch
@@ -234,6 +249,15 @@ impl HeightField {
         wrap_pair(i, self.heights.height())
     }
 
+    /// The field's period in metres along X and Z (it repeats).
+    pub(crate) fn period_m(&self) -> (f64, f64) {
+        let ts = f64::from(self.texel_size);
+        (
+            f64::from(self.heights.width()) * ts,
+            f64::from(self.heights.height()) * ts,
+        )
+    }
+
     /// The samples, mutable, for the mirror's writer (which owns this snapshot exclusively).
     pub(crate) fn heights_mut(&mut self) -> &mut Grid<u16> {
         &mut self.heights
@@ -271,8 +295,21 @@ fn wrap_pair(i: i64, n: u32) -> (u32, u32) {
     } else {
         WrapMode::Repeat.resolve(i, n)
     };
+    // From the wrapped index, never `i + 1`: `i` may be i64::MAX (a saturated cast).
     let i1 = if i0 + 1 < n { i0 + 1 } else { 0 };
     (i0, i1)
+}
+
+/// Texel coordinates beyond which f32 has no fraction left: queries farther away are moved
+/// into the first period before sampling.
+const NEAR_TEXELS: f32 = 16_777_216.0;
+
+/// `v` moved by a whole number of periods into `[0, period)`, and the shift taken off
+/// (`v = reduced + shift`). The field repeats, so a query far from the origin is the same
+/// query near it; reducing first keeps cell indices small and walks short.
+pub(crate) fn reduce(v: f64, period: f64) -> (f64, f64) {
+    let r = v.rem_euclid(period);
+    (r, v - r)
 }
 
 /// Smallest and largest value of a slice (`(u16::MAX, 0)` for an empty one).

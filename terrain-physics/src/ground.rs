@@ -85,13 +85,13 @@ impl PendingDeformation {
         // Cells lo..=hi read texels lo..=hi + 1.
         overlaps(
             x_lo,
-            x_hi - x_lo + 2,
+            x_hi.saturating_sub(x_lo).saturating_add(2),
             self.rect.min.x,
             self.rect.size.x,
             map_size.x,
         ) && overlaps(
             z_lo,
-            z_hi - z_lo + 2,
+            z_hi.saturating_sub(z_lo).saturating_add(2),
             self.rect.min.y,
             self.rect.size.y,
             map_size.y,
@@ -101,7 +101,9 @@ impl PendingDeformation {
 
 /// Whether spans `[a, a + a_len)` and `[b, b + b_len)` overlap on a circle of length `n`.
 fn overlaps(a: i64, a_len: i64, b: i32, b_len: u32, n: u32) -> bool {
-    let (b, b_len, n) = (i64::from(b), i64::from(b_len), i64::from(n));
+    // i128: `a` may be a saturated cast (i64::MIN or MAX), and `b - a` must not overflow.
+    let (a, a_len) = (i128::from(a), i128::from(a_len));
+    let (b, b_len, n) = (i128::from(b), i128::from(b_len), i128::from(n));
     if a_len <= 0 || b_len <= 0 {
         return false;
     }

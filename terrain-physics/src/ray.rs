@@ -56,12 +56,6 @@ pub struct RayHit {
     pub normal: Vec3,
 }
 
-/// The horizontal part `(X, Z)` of a point.
-#[inline]
-fn xz(p: Vec3) -> Vec2 {
-    Vec2::new(p.x, p.z)
-}
-
 /// Checks a maximum ray distance: finite and not negative.
 pub(crate) fn check_max_dist(max_dist: f32) -> Result<(), PhysicsError> {
     check_finite("ray maximum distance", max_dist)?;
@@ -83,7 +77,10 @@ impl HeightField {
     /// with the normal there. Otherwise the hit is the first crossing of the bilinear surface,
     /// found exactly cell by cell. Rays cross the map's edges freely (the surface repeats).
     /// `max_dist` must be finite and not negative ([`HeightfieldCollider::raycast`] checks it);
-    /// the walk costs one step per cell crossed within the field's height bounds.
+    /// the walk costs one step per cell crossed within the field's height bounds, at most
+    /// `4 (width + height) + 8` cells (four times around the repeating field): a ray that has
+    /// not met the surface by then returns `None`, so every cast is bounded by the map's size
+    /// whatever the distance and the origin.
     ///
     /// [`HeightfieldCollider::raycast`]: crate::HeightfieldCollider::raycast
     pub fn cast_local_ray(&self, ray: &Ray, max_dist: f32) -> Option<RayHit> {
@@ -91,14 +88,22 @@ impl HeightField {
             return None;
         }
         let ts = f64::from(self.texel_size());
-        let o = ray.origin().as_dvec3();
         let d = ray.dir().as_dvec3();
         let max_dist = f64::from(max_dist);
+        // The field repeats: walk from the origin moved into the first period, and move the
+        // hit back. Cell indices stay small however far the origin is.
+        let (px, pz) = self.period_m();
+        let o_world = ray.origin().as_dvec3();
+        let (ox, shift_x) = crate::field::reduce(o_world.x, px);
+        let (oz, shift_z) = crate::field::reduce(o_world.z, pz);
+        let o = DVec3::new(ox, o_world.y, oz);
+        let shift = DVec3::new(shift_x, 0.0, shift_z);
 
         // At or below the surface at the origin: solid ground, hit at 0.
-        let h0 = f64::from(self.height_local(xz(ray.origin())));
+        let o_xz = Vec2::new(ox as f32, oz as f32);
+        let h0 = f64::from(self.height_local(o_xz));
         if o.y <= h0 {
-            let normal = self.normal_local(xz(ray.origin()));
+            let normal = self.normal_local(o_xz);
             return Some(RayHit {
                 point: ray.origin(),
                 distance: 0.0,
@@ -123,8 +128,20 @@ impl HeightField {
         if t_start > t_end {
             return None;
         }
-        walk(self, o, d, ts, t_start, t_end)
+        walk(self, o, d, ts, t_start, t_end).map(|hit| RayHit {
+            point: (hit.point.as_dvec3() + shift).as_vec3(),
+            ..hit
+        })
     }
+}
+
+/// The most cells one cast walks: four times around the repeating field along each axis.
+/// A ray that crosses this many cells without meeting the surface grazes it forever for all
+/// practical purposes (the surface it sees repeats); stopping there bounds every cast by the
+/// map's size, not by the distance asked for.
+fn max_walk_cells(field: &HeightField) -> u64 {
+    let s = field.size();
+    4 * (u64::from(s.x) + u64::from(s.y)) + 8
 }
 
 /// Walks the cells crossed between `t_start` and `t_end` and returns the first hit.
@@ -170,7 +187,7 @@ fn walk(
     let span = (t_end - t_start).max(0.0);
     let max_steps = (span * (dx.abs() + dz.abs())).ceil() + 4.0;
     let max_steps = if max_steps.is_finite() {
-        max_steps as u64
+        (max_steps as u64).min(max_walk_cells(field))
     } else {
         0
     };
