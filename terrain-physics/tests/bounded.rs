@@ -140,7 +140,7 @@ proptest! {
         let mut camera = CameraBody::new(pos);
         camera.velocity = vel;
         timed("camera step", || camera.step(dt, force, &ground))?.ok();
-        if let Ok(mut sphere) = SphereBody::new(pos, radius.abs().min(1e6).max(1e-3)) {
+        if let Ok(mut sphere) = SphereBody::new(pos, radius.abs().clamp(1e-3, 1e6)) {
             sphere.velocity = vel;
             timed("sphere step", || sphere.step(dt, force, &ground))?.ok();
         }
@@ -168,7 +168,8 @@ fn the_worst_cases_found_answer_within_the_limit() {
     let c = field(0.5);
     let (lo, hi) = c.field().height_bounds();
     let mid = 0.5 * (lo + hi);
-    let cases: Vec<(&str, Box<dyn Fn()>)> = vec![
+    type Case<'a> = (&'static str, Box<dyn Fn() + 'a>);
+    let cases: Vec<Case<'_>> = vec![
         (
             "horizontal ray, f32::MAX distance",
             Box::new(|| {
