@@ -2,9 +2,9 @@
 //! Readers take an immutable snapshot and never wait for a writer's copy; writers apply
 //! region updates, each with a version, off to the side and swap them in.
 //!
-//! Design: the front buffer is an `Arc<HeightField>` behind a `parking_lot::RwLock`. A reader
-//! holds the lock only to clone the `Arc` (an atomic increment); the writer holds it only to
-//! swap the pointer (O(1)). The writer keeps the previous front as its back buffer, together
+//! Design: the front buffer is an `Arc<HeightField>` in an `arc_swap::ArcSwap`. A reader
+//! takes a snapshot wait-free (no lock: a writer can never make it wait); the writer swaps
+//! the pointer in O(1). The writer keeps the previous front as its back buffer, together
 //! with the rects that buffer misses (the last update's pieces). Applying an update copies those
 //! rects from the front into the back (unless the new update covers them), pastes the new
 //! region and swaps: O(region) per update, not O(map). If a reader still holds the old buffer,
@@ -15,8 +15,8 @@ use crate::collider::HeightfieldCollider;
 use crate::error::{PhysicsError, check_region};
 use crate::field::{HeightField, min_max};
 use glam::UVec2;
-use parking_lot::{Mutex, RwLock};
 use std::sync::Arc;
+use sync::{Front, WriterLock};
 use terrain_core::{CoarseMap, Grid, HeightEncoding, Rect};
 
 /// One region of new heights: the stored values of `rect`, row-major in the rect's own
@@ -42,8 +42,8 @@ struct Writer {
 /// that applies readbacks and the threads that query.
 #[derive(Debug)]
 pub struct CollisionMirror {
-    front: RwLock<Arc<HeightField>>,
-    writer: Mutex<Writer>,
+    front: Front,
+    writer: WriterLock<Writer>,
     size: UVec2,
     encoding: HeightEncoding,
     texel_size: f32,
@@ -56,8 +56,8 @@ impl CollisionMirror {
             size: field.size(),
             encoding: field.encoding(),
             texel_size: field.texel_size(),
-            front: RwLock::new(Arc::new(field)),
-            writer: Mutex::new(Writer::default()),
+            front: Front::new(Arc::new(field)),
+            writer: WriterLock::new(Writer::default()),
         }
     }
 
@@ -66,10 +66,10 @@ impl CollisionMirror {
         Ok(Self::new(HeightField::from_map(map)?))
     }
 
-    /// The current snapshot: consistent, immutable, tagged with its version. Never waits for a
-    /// writer's copy (the lock is held for one pointer clone).
+    /// The current snapshot: consistent, immutable, tagged with its version. Wait-free: never
+    /// waits for a writer.
     pub fn snapshot(&self) -> Arc<HeightField> {
-        self.front.read().clone()
+        self.front.load()
     }
 
     /// A collider over the current snapshot, at the origin.
@@ -79,7 +79,7 @@ impl CollisionMirror {
 
     /// The version of the current snapshot.
     pub fn version(&self) -> u64 {
-        self.front.read().version()
+        self.front.load().version()
     }
 
     /// Map size in texels.
@@ -174,11 +174,84 @@ impl CollisionMirror {
             buf.widen_bounds(lo, hi);
         }
         buf.set_version(version);
-        let old = std::mem::replace(&mut *self.front.write(), back);
+        let old = self.front.swap(back);
         drop(front);
         writer.back = Some(old);
         writer.stale = pieces.iter().map(|p| p.map).collect();
         Ok(())
+    }
+}
+
+/// The front pointer and the writers' lock: `arc_swap` and `parking_lot` in a build, and
+/// shuttle's instrumented primitives under the `shuttle` feature, so the randomized
+/// concurrency test explores the interleavings of the mirror's own protocol.
+#[cfg(not(feature = "shuttle"))]
+mod sync {
+    use super::HeightField;
+    use std::sync::Arc;
+
+    /// The published snapshot.
+    #[derive(Debug)]
+    pub struct Front(arc_swap::ArcSwap<HeightField>);
+
+    impl Front {
+        pub fn new(field: Arc<HeightField>) -> Self {
+            Self(arc_swap::ArcSwap::new(field))
+        }
+        /// Wait-free.
+        pub fn load(&self) -> Arc<HeightField> {
+            self.0.load_full()
+        }
+        pub fn swap(&self, new: Arc<HeightField>) -> Arc<HeightField> {
+            self.0.swap(new)
+        }
+    }
+
+    /// Serialises writers.
+    #[derive(Debug)]
+    pub struct WriterLock<T>(parking_lot::Mutex<T>);
+
+    impl<T> WriterLock<T> {
+        pub fn new(v: T) -> Self {
+            Self(parking_lot::Mutex::new(v))
+        }
+        pub fn lock(&self) -> parking_lot::MutexGuard<'_, T> {
+            self.0.lock()
+        }
+    }
+}
+
+#[cfg(feature = "shuttle")]
+mod sync {
+    use super::HeightField;
+    use std::sync::Arc;
+
+    #[derive(Debug)]
+    pub struct Front(shuttle::sync::Mutex<Arc<HeightField>>);
+
+    impl Front {
+        pub fn new(field: Arc<HeightField>) -> Self {
+            Self(shuttle::sync::Mutex::new(field))
+        }
+        pub fn load(&self) -> Arc<HeightField> {
+            self.0.lock().unwrap_or_else(|e| e.into_inner()).clone()
+        }
+        pub fn swap(&self, new: Arc<HeightField>) -> Arc<HeightField> {
+            let mut g = self.0.lock().unwrap_or_else(|e| e.into_inner());
+            std::mem::replace(&mut *g, new)
+        }
+    }
+
+    #[derive(Debug)]
+    pub struct WriterLock<T>(shuttle::sync::Mutex<T>);
+
+    impl<T> WriterLock<T> {
+        pub fn new(v: T) -> Self {
+            Self(shuttle::sync::Mutex::new(v))
+        }
+        pub fn lock(&self) -> shuttle::sync::MutexGuard<'_, T> {
+            self.0.lock().unwrap_or_else(|e| e.into_inner())
+        }
     }
 }
 

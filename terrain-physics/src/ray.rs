@@ -128,8 +128,16 @@ impl HeightField {
         if t_start > t_end {
             return None;
         }
-        walk(self, o, d, ts, t_start, t_end).map(|hit| RayHit {
-            point: (hit.point.as_dvec3() + shift).as_vec3(),
+        // Walk from where the stretch starts, moved into the first period too: a ray from far
+        // above that descends slowly starts its stretch far away.
+        let start = o + d * t_start;
+        let (sx, start_x) = crate::field::reduce(start.x, px);
+        let (sz, start_z) = crate::field::reduce(start.z, pz);
+        let from = DVec3::new(sx, start.y, sz);
+        let back = shift + DVec3::new(start_x, 0.0, start_z);
+        walk(self, from, d, ts, 0.0, t_end - t_start).map(|hit| RayHit {
+            point: (hit.point.as_dvec3() + back).as_vec3(),
+            distance: (f64::from(hit.distance) + t_start) as f32,
             ..hit
         })
     }

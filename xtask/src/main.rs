@@ -113,6 +113,21 @@ fn test() -> Result<()> {
     cargo(
         &["test", "--workspace", "--locked"],
         &[("TERRAIN_REQUIRE_GPU", "1")],
+    )?;
+    // The collision mirror under shuttle's randomized scheduler: its own feature (shuttle's
+    // primitives replace the real ones), so only that test runs with it.
+    cargo(
+        &[
+            "test",
+            "-p",
+            "terrain-physics",
+            "--features",
+            "shuttle",
+            "--test",
+            "shuttle_mirror",
+            "--locked",
+        ],
+        &[],
     )
 }
 
