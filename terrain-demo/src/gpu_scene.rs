@@ -53,7 +53,15 @@ pub struct GpuScene {
     atlas: Option<GpuTileAtlas>,
     /// The readback of the rects of atlas tiles deformed on the GPU.
     tile_readback: Option<RegionReadback>,
+    /// Frames rendered so far.
+    frames: u32,
+    /// Fault injection for the device-loss test: destroy the device before rendering this
+    /// frame (`TERRAIN_DEMO_DESTROY_DEVICE_AT_FRAME`; never set in normal use).
+    destroy_at: Option<u32>,
 }
+
+/// The environment variable of [`GpuScene`]'s device-loss fault injection.
+pub const DESTROY_DEVICE_ENV: &str = "TERRAIN_DEMO_DESTROY_DEVICE_AT_FRAME";
 
 /// A rect of a deformed atlas tile on its way back to the CPU: the ticket, and the rect in
 /// the tile's texels.
@@ -109,6 +117,88 @@ fn record(timings: &mut Timings, step: Step, t: GpuTiming) {
 }
 
 impl GpuScene {
+    /// `e`, or the device's loss when that is what caused it: after a loss wgpu reports only
+    /// secondary failures (a mapping that failed), so the loss is looked for first.
+    fn lost_or(&self, e: anyhow::Error) -> anyhow::Error {
+        let _ = self.ctx.device.poll(wgpu::PollType::Poll);
+        match self.ctx.check() {
+            Err(lost @ terrain_gpu::GpuError::DeviceLost { .. }) => {
+                anyhow::Error::new(lost).context("the GPU frame stopped")
+            }
+            _ => e,
+        }
+    }
+
+    /// One granular step on the GPU with `objects`: the step, the normals of the changed
+    /// areas, the volume sum, and readback requests for the changed areas (they arrive in a
+    /// later frame's [`GranularFrame::arrived`]). Timed as [`Step::Granular`] and
+    /// [`Step::Normals`].
+    pub fn granular_step(
+        &mut self,
+        objects: &[GranularObject<'_>],
+        timings: &mut Timings,
+    ) -> Result<GranularFrame> {
+        self.granular_step_inner(objects, timings)
+            .map_err(|e| self.lost_or(e))
+    }
+
+    /// Stamps a crater on the resident atlas tile `tile` (placement in the tile's frame) and
+    /// requests the changed rect back, in one submit timed as [`Step::Stamp`]. `None` (and
+    /// nothing done) when the readback ring is full: the caller stamps it in a later frame.
+    pub fn stamp_tile(
+        &mut self,
+        tile: TileSlot,
+        placement: StampPlacement,
+        crater: &terrain_core::GaussianStamp,
+        timings: &mut Timings,
+    ) -> Result<Option<Vec<TileTicket>>> {
+        self.stamp_tile_inner(tile, placement, crater, timings)
+            .map_err(|e| self.lost_or(e))
+    }
+
+    /// The rects of deformed atlas tiles that have arrived, never waiting; with `wait`, waits
+    /// for every one in flight (the end of the run).
+    pub fn tile_readbacks(&mut self, wait: bool) -> Result<Vec<ArrivedTileRect>> {
+        self.tile_readbacks_inner(wait).map_err(|e| self.lost_or(e))
+    }
+
+    /// Ends granular deformation on the GPU: requests the changed areas still waiting for a
+    /// ring slot and waits for every readback in flight, so the CPU copy gets the last steps.
+    pub fn drain_granular(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
+        self.drain_granular_inner().map_err(|e| self.lost_or(e))
+    }
+
+    /// Applies `plan` on the GPU and regenerates the normals, timed as [`Step::Stamp`] and
+    /// [`Step::Normals`]; returns the rects covered, each with the index of its deformation.
+    pub fn deform(
+        &mut self,
+        plan: &FramePlan,
+        crater: &terrain_core::GaussianStamp,
+        timings: &mut Timings,
+    ) -> Result<Vec<(usize, DirtyRect)>> {
+        self.deform_inner(plan, crater, timings)
+            .map_err(|e| self.lost_or(e))
+    }
+
+    /// One step of the collision readback: the scheduler requests merged dirty regions of the
+    /// GPU map after the quiet gap and applies those that arrived to `mirror`, never waiting.
+    pub fn update_collision(
+        &mut self,
+        scheduler: &mut ReadbackScheduler,
+        mirror: &CollisionMirror,
+        now: std::time::Instant,
+    ) -> Result<UpdateReport> {
+        self.update_collision_inner(scheduler, mirror, now)
+            .map_err(|e| self.lost_or(e))
+    }
+
+    /// Renders the terrain from `camera` and reads the image back, timed as [`Step::Lod`],
+    /// [`Step::Render`] and [`Step::Capture`].
+    pub fn render(&mut self, camera: &Camera, timings: &mut Timings) -> Result<RenderedFrame> {
+        self.render_inner(camera, timings)
+            .map_err(|e| self.lost_or(e))
+    }
+
     /// Uploads `map` and builds every pass, rendering at `resolution`.
     pub fn new(map: &CoarseMap, resolution: UVec2) -> Result<Self> {
         let ctx = GpuContext::new_headless().context("no GPU adapter for the 3D frames")?;
@@ -140,6 +230,10 @@ impl GpuScene {
             granular: None,
             atlas: None,
             tile_readback: None,
+            frames: 0,
+            destroy_at: std::env::var(DESTROY_DEVICE_ENV)
+                .ok()
+                .and_then(|v| v.parse().ok()),
             style: TerrainStyle {
                 ramp: (lo, hi),
                 fog_density: 0.008,
@@ -200,11 +294,7 @@ impl GpuScene {
         Ok(())
     }
 
-    /// One granular step on the GPU with `objects`: the step, the normals of the changed
-    /// areas, the volume sum, and readback requests for the changed areas (they arrive in a
-    /// later frame's [`GranularFrame::arrived`]). Timed as [`Step::Granular`] and
-    /// [`Step::Normals`].
-    pub fn granular_step(
+    fn granular_step_inner(
         &mut self,
         objects: &[GranularObject<'_>],
         timings: &mut Timings,
@@ -289,10 +379,7 @@ impl GpuScene {
         Ok(())
     }
 
-    /// Stamps a crater on the resident atlas tile `tile` (placement in the tile's frame) and
-    /// requests the changed rect back, in one submit timed as [`Step::Stamp`]. `None` (and
-    /// nothing done) when the readback ring is full: the caller stamps it in a later frame.
-    pub fn stamp_tile(
+    fn stamp_tile_inner(
         &mut self,
         tile: TileSlot,
         placement: StampPlacement,
@@ -328,9 +415,7 @@ impl GpuScene {
         Ok(Some(tickets))
     }
 
-    /// The rects of deformed atlas tiles that have arrived, never waiting; with `wait`, waits
-    /// for every one in flight (the end of the run).
-    pub fn tile_readbacks(&mut self, wait: bool) -> Result<Vec<ArrivedTileRect>> {
+    fn tile_readbacks_inner(&mut self, wait: bool) -> Result<Vec<ArrivedTileRect>> {
         let device = &self.ctx.device;
         let Some(readback) = self.tile_readback.as_mut() else {
             return Ok(Vec::new());
@@ -351,9 +436,7 @@ impl GpuScene {
         self.atlas.as_mut()
     }
 
-    /// Ends granular deformation on the GPU: requests the changed areas still waiting for a
-    /// ring slot and waits for every readback in flight, so the CPU copy gets the last steps.
-    pub fn drain_granular(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
+    fn drain_granular_inner(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let Some(g) = self.granular.as_mut() else {
             return Ok(Vec::new());
@@ -400,9 +483,7 @@ impl GpuScene {
         (r.name.clone(), r.backend.clone())
     }
 
-    /// Applies `plan` on the GPU and regenerates the normals, timed as [`Step::Stamp`] and
-    /// [`Step::Normals`]; returns the rects covered, each with the index of its deformation.
-    pub fn deform(
+    fn deform_inner(
         &mut self,
         plan: &FramePlan,
         crater: &terrain_core::GaussianStamp,
@@ -453,9 +534,7 @@ impl GpuScene {
         Ok(dirty)
     }
 
-    /// One step of the collision readback: the scheduler requests merged dirty regions of the
-    /// GPU map after the quiet gap and applies those that arrived to `mirror`, never waiting.
-    pub fn update_collision(
+    fn update_collision_inner(
         &mut self,
         scheduler: &mut ReadbackScheduler,
         mirror: &CollisionMirror,
@@ -470,9 +549,13 @@ impl GpuScene {
         Ok(scheduler.update(now, &mut source, mirror)?)
     }
 
-    /// Renders the terrain from `camera` and reads the image back, timed as [`Step::Lod`],
-    /// [`Step::Render`] and [`Step::Capture`].
-    pub fn render(&mut self, camera: &Camera, timings: &mut Timings) -> Result<RenderedFrame> {
+    fn render_inner(&mut self, camera: &Camera, timings: &mut Timings) -> Result<RenderedFrame> {
+        if self.destroy_at == Some(self.frames) {
+            self.ctx.device.destroy();
+        }
+        self.frames += 1;
+        // A lost device reports nothing for the work sent to it: stop here with the reason.
+        self.ctx.check().context("rendering a frame")?;
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let size = self.target.size().as_vec2();
         let aspect = size.x / size.y;

@@ -11,13 +11,12 @@ use crate::compute::{PassBindings, StorageBinding, compute_pipeline, shader_modu
 use crate::download::map_and_read;
 use crate::error::GpuError;
 use crate::maps::{MapView, map_buffer};
-use crate::scope::scoped;
+use crate::scope::{buffer_init, scoped};
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2};
 use terrain_core::{
     CoreError, Grid, INVALID_SLOT, MAX_TILE_LEVELS, TileLayout, TileUploadTarget, WrapMode,
 };
-use wgpu::util::DeviceExt;
 
 // The sentinel is declared once per language; they must agree.
 const _: () = assert!(INVALID_SLOT == terrain_shaders::codes::INVALID_SLOT);
@@ -167,21 +166,20 @@ impl GpuTileAtlas {
             // The table fits u32 indices (validated), so every offset does.
             info.level[l as usize] = [t.x, t.y, layout.level_offset(l) as u32, 0];
         }
-        let (info, table) = scoped(device, "GpuTileAtlas", || {
-            let info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("GpuTileAtlas info"),
-                contents: bytemuck::bytes_of(&info),
-                usage: wgpu::BufferUsages::STORAGE,
-            });
-            let table = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("GpuTileAtlas table"),
-                contents: bytemuck::cast_slice(&vec![INVALID_SLOT; layout.table_len() as usize]),
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_DST
-                    | wgpu::BufferUsages::COPY_SRC,
-            });
-            (info, table)
-        })?;
+        let info = buffer_init(
+            device,
+            "GpuTileAtlas info",
+            bytemuck::bytes_of(&info),
+            wgpu::BufferUsages::STORAGE,
+        )?;
+        let table = buffer_init(
+            device,
+            "GpuTileAtlas table",
+            bytemuck::cast_slice(&vec![INVALID_SLOT; layout.table_len() as usize]),
+            wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC,
+        )?;
         Ok(Self {
             config: *config,
             queue: queue.clone(),

@@ -8,7 +8,7 @@ use crate::camera::Camera;
 use crate::compute::shader_module;
 use crate::error::GpuError;
 use crate::maps::{GpuDerivativeMap, GpuHeightMap};
-use crate::scope::scoped;
+use crate::scope::{buffer_init, scoped};
 use crate::target::TargetFormat;
 use bytemuck::{Pod, Zeroable};
 use glam::{UVec2, Vec3, Vec4};
@@ -17,7 +17,6 @@ use terrain_lod::{
     ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapVertex, MAX_DRAWS_PER_LEVEL, MeshPart,
 };
 use terrain_shaders::codes::{WRAP_CLAMP, WRAP_REPEAT};
-use wgpu::util::DeviceExt;
 
 /// The uniform block `Frame` of `clipmap.wgsl`, byte for byte.
 #[repr(C)]
@@ -137,17 +136,19 @@ impl ClipmapRenderer {
                 (wgpu::ShaderStages::VERTEX_FRAGMENT, 3),
             ],
         )?;
+        let vertices = buffer_init(
+            device,
+            "clipmap vertices",
+            bytemuck::cast_slice(&mesh.vertices),
+            wgpu::BufferUsages::VERTEX,
+        )?;
+        let indices = buffer_init(
+            device,
+            "clipmap indices",
+            bytemuck::cast_slice(&mesh.indices),
+            wgpu::BufferUsages::INDEX,
+        )?;
         scoped(device, "ClipmapRenderer", || {
-            let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("clipmap vertices"),
-                contents: bytemuck::cast_slice(&mesh.vertices),
-                usage: wgpu::BufferUsages::VERTEX,
-            });
-            let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("clipmap indices"),
-                contents: bytemuck::cast_slice(&mesh.indices),
-                usage: wgpu::BufferUsages::INDEX,
-            });
             let uniform = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("clipmap frame"),
                 size: std::mem::size_of::<FrameUniform>() as u64,

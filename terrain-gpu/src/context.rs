@@ -39,6 +39,8 @@ pub struct GpuContext {
     report: AdapterReport,
     /// Errors wgpu reported outside any error scope (from recorded commands, at submit).
     errors: Arc<Mutex<Vec<wgpu::Error>>>,
+    /// Set by the device-lost callback: the reason and message.
+    lost: Arc<Mutex<Option<(String, String)>>>,
 }
 
 /// Preference of an adapter: lower is better. Hardware first, then software Vulkan
@@ -148,6 +150,15 @@ impl GpuContext {
                 }
             }
         }));
+        // A lost device reports nothing for the work sent to it afterwards (WebGPU), so the
+        // loss itself is recorded here and `check` turns it into an error.
+        let lost = Arc::new(Mutex::new(None));
+        let flag = lost.clone();
+        device.set_device_lost_callback(move |reason, message| {
+            if let Ok(mut l) = flag.lock() {
+                l.get_or_insert((format!("{reason:?}"), message));
+            }
+        });
         Ok(Self {
             instance,
             adapter,
@@ -155,12 +166,26 @@ impl GpuContext {
             queue,
             report,
             errors,
+            lost,
         })
     }
 
-    /// Returns the errors wgpu reported since the last call outside an error scope (validation
-    /// or out-of-memory errors of submitted work), as one [`GpuError::Submitted`].
+    /// Whether the device has been lost (destroyed, reset by the driver, dropped).
+    pub fn is_lost(&self) -> bool {
+        self.lost.lock().map(|l| l.is_some()).unwrap_or(true)
+    }
+
+    /// Returns [`GpuError::DeviceLost`] once the device is lost, else the errors wgpu reported
+    /// since the last call outside an error scope (validation or out-of-memory errors of
+    /// submitted work), as one [`GpuError::Submitted`].
     pub fn check(&self) -> Result<(), GpuError> {
+        let lost = match self.lost.lock() {
+            Ok(l) => l.clone(),
+            Err(poisoned) => poisoned.into_inner().clone(),
+        };
+        if let Some((reason, message)) = lost {
+            return Err(GpuError::DeviceLost { reason, message });
+        }
         let errors: Vec<wgpu::Error> = match self.errors.lock() {
             Ok(mut list) => list.drain(..).collect(),
             Err(poisoned) => poisoned.into_inner().drain(..).collect(),

@@ -43,6 +43,16 @@ pub enum GpuError {
         /// Every error, in the order wgpu reported them.
         errors: Vec<wgpu::Error>,
     },
+    /// The device was lost (destroyed, a driver reset, dropped): nothing more can run on it.
+    /// wgpu reports no errors for work on a lost device (as WebGPU specifies), so this comes
+    /// from the device-lost callback ([`crate::GpuContext::check`]).
+    #[error("the GPU device was lost ({reason}): {message}")]
+    DeviceLost {
+        /// wgpu's reason, in words.
+        reason: String,
+        /// The driver's or wgpu's message.
+        message: String,
+    },
     /// A map is larger than the device can hold in one storage buffer.
     #[error("a {size} map needs {bytes} bytes, over the device's storage buffer limit of {limit}")]
     MapTooLarge {

@@ -39,3 +39,31 @@ fn ready<F: Future<Output = Option<wgpu::Error>>>(future: F) -> Option<wgpu::Err
         Poll::Pending => None,
     }
 }
+
+/// A buffer made with `contents`, like `wgpu::util::DeviceExt::create_buffer_init`, but a
+/// failed mapping (a lost device) is an error, not the panic of wgpu's helper. The size is
+/// rounded up to a multiple of 4 (at least 4) as wgpu requires of mapped buffers.
+pub(crate) fn buffer_init(
+    device: &wgpu::Device,
+    label: &'static str,
+    contents: &[u8],
+    usage: wgpu::BufferUsages,
+) -> Result<wgpu::Buffer, GpuError> {
+    let size = (contents.len() as u64).max(4).next_multiple_of(4);
+    let buffer = scoped(device, label, || {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage,
+            mapped_at_creation: true,
+        })
+    })?;
+    {
+        let mut padded = contents.to_vec();
+        padded.resize(size as usize, 0);
+        let mut view = buffer.get_mapped_range_mut(..)?;
+        view.copy_from_slice(&padded);
+    }
+    buffer.unmap();
+    Ok(buffer)
+}

@@ -7,11 +7,10 @@ use crate::compute::{
 };
 use crate::error::GpuError;
 use crate::maps::{ExactInF32, GpuHeightMap, MapView};
-use crate::scope::scoped;
+use crate::scope::buffer_init;
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::{Blend, DirtyRect, GaussianStamp, StampPlacement, TextureStamp, stamp_region};
-use wgpu::util::DeviceExt;
 
 /// The uniform block of `stamp.wgsl` (`StampParams`), byte for byte.
 #[repr(C)]
@@ -52,13 +51,12 @@ pub struct GpuTextureStamp {
 impl GpuTextureStamp {
     /// Uploads the values of `stamp`.
     pub fn new(device: &wgpu::Device, stamp: &TextureStamp) -> Result<Self, GpuError> {
-        let values = scoped(device, "texture stamp upload", || {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("GpuTextureStamp"),
-                contents: bytemuck::cast_slice(stamp.values().as_slice()),
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            })
-        })?;
+        let values = buffer_init(
+            device,
+            "GpuTextureStamp",
+            bytemuck::cast_slice(stamp.values().as_slice()),
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        )?;
         Ok(Self {
             values,
             size: stamp.values().size(),
@@ -177,11 +175,12 @@ impl StampPass {
         );
         let module = shader_module(device, "stamp.wgsl", terrain_shaders::STAMP)?;
         let pipeline = compute_pipeline(device, "StampPass", &module, bindings.layout(), "main")?;
-        let empty_values = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("StampPass empty texture"),
-            contents: bytemuck::cast_slice(&[0.0f32; 4]),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
+        let empty_values = buffer_init(
+            device,
+            "StampPass empty texture",
+            bytemuck::cast_slice(&[0.0f32; 4]),
+            wgpu::BufferUsages::STORAGE,
+        )?;
         Ok(Self {
             pipeline,
             bindings,
