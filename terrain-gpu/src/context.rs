@@ -73,29 +73,37 @@ impl GpuContext {
 
     /// The async form of [`GpuContext::new_headless`].
     pub async fn new_headless_async() -> Result<Self, GpuError> {
-        let backends =
-            wgpu::Backends::from_env().unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::GL);
         let name_filter = std::env::var("WGPU_ADAPTER_NAME")
             .ok()
             .filter(|s| !s.is_empty());
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
-            backends,
-            flags: wgpu::InstanceFlags::from_build_config().with_env(),
-            ..wgpu::InstanceDescriptor::new_without_display_handle()
-        });
-        let mut adapters = instance.enumerate_adapters(backends).await;
-        if let Some(filter) = &name_filter {
-            let f = filter.to_lowercase();
-            adapters.retain(|a| a.get_info().name.to_lowercase().contains(&f));
-        }
-        adapters.sort_by_key(|a| rank(&a.get_info()));
-        let Some(adapter) = adapters.into_iter().next() else {
-            return Err(GpuError::NoAdapter {
-                backends,
-                name_filter,
-            });
+        // Vulkan first, GL only when Vulkan has no adapter: probing GL's EGL platforms prints
+        // driver noise (`XDG_RUNTIME_DIR is invalid`) on every run of a headless machine.
+        let tries = match wgpu::Backends::from_env() {
+            Some(forced) => vec![forced],
+            None => vec![wgpu::Backends::VULKAN, wgpu::Backends::GL],
         };
-        Self::from_adapter(instance, adapter).await
+        let mut asked = wgpu::Backends::empty();
+        for backends in tries {
+            asked |= backends;
+            let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+                backends,
+                flags: wgpu::InstanceFlags::from_build_config().with_env(),
+                ..wgpu::InstanceDescriptor::new_without_display_handle()
+            });
+            let mut adapters = instance.enumerate_adapters(backends).await;
+            if let Some(filter) = &name_filter {
+                let f = filter.to_lowercase();
+                adapters.retain(|a| a.get_info().name.to_lowercase().contains(&f));
+            }
+            adapters.sort_by_key(|a| rank(&a.get_info()));
+            if let Some(adapter) = adapters.into_iter().next() {
+                return Self::from_adapter(instance, adapter).await;
+            }
+        }
+        Err(GpuError::NoAdapter {
+            backends: asked,
+            name_filter,
+        })
     }
 
     /// Creates the device on a chosen adapter: the adapter's own limits (so large maps fit)
