@@ -102,7 +102,7 @@ pub fn check(needed: &[(&'static str, u64)], limit: u64) -> Result<()> {
         return Ok(());
     }
     let mut parts = needed.to_vec();
-    parts.sort_by(|a, b| b.1.cmp(&a.1));
+    parts.sort_by_key(|p| std::cmp::Reverse(p.1));
     let largest: Vec<String> = parts
         .iter()
         .take(3)

@@ -81,3 +81,38 @@ fn a_device_is_refused() {
     refused("dev_png", null, &[], "device");
     refused("dev_raw", null, &["--raw-size", "64x64"], "device");
 }
+
+#[test]
+fn a_world_whose_manifest_is_a_named_pipe_is_refused_without_blocking() {
+    let dir = fresh_dir("fifo_manifest");
+    let world = dir.join("world");
+    std::fs::create_dir_all(&world).expect("world folder");
+    let made = std::process::Command::new("mkfifo")
+        .arg(world.join("manifest.json"))
+        .status()
+        .expect("mkfifo runs");
+    assert!(made.success(), "mkfifo failed");
+    for args in [
+        vec!["--verify-world".to_string(), world.display().to_string()],
+        vec![
+            "--scenario".into(),
+            "flyover".into(),
+            "--no-gpu".into(),
+            "--world".into(),
+            world.display().to_string(),
+            "--out".into(),
+            dir.join("out").display().to_string(),
+        ],
+    ] {
+        let mut cmd = demo();
+        cmd.args(&args);
+        let done = run_within(cmd, &dir, LIMIT);
+        assert_eq!(done.status.code(), Some(2), "{args:?}: {}", done.stderr);
+        assert!(
+            done.stderr.contains("not a manifest file"),
+            "{args:?}: {}",
+            done.stderr
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

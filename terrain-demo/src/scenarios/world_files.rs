@@ -202,6 +202,8 @@ pub fn verify(dir: &Path) -> Result<Vec<String>> {
             dir.display()
         )));
     }
+    // The manifest alone first: anything but a regular file (a pipe would block) is refused.
+    existing_manifest(dir)?;
     let store: Arc<dyn TileStore> = Arc::new(FsStore::open(dir).usage()?);
     let world = World::open(store)
         .with_context(|| format!("no valid world in {}", dir.display()))
