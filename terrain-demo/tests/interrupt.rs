@@ -81,3 +81,61 @@ fn ctrl_c_leaves_a_valid_report_of_the_frames_done() {
     assert!(out.join("terrain_final.png").is_file());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn ctrl_c_while_a_world_is_built_cancels_the_build() {
+    let dir = fresh_dir("interrupt_build");
+    let world = dir.join("world");
+    let log = dir.join("stderr.txt");
+    // The default world (16384^2, 5461 tiles) takes far longer to build than this test waits.
+    let mut child = demo()
+        .args(["--no-gpu", "--scenario", "flyover", "--frames", "3"])
+        .arg("--world")
+        .arg(&world)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::from(std::fs::File::create(&log).expect("log")))
+        .spawn()
+        .expect("demo starts");
+    let started = Instant::now();
+    while !std::fs::read_to_string(&log)
+        .unwrap_or_default()
+        .contains("building world")
+    {
+        if started.elapsed() > LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the build never started");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(sent.success());
+    let interrupted = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            break status;
+        }
+        if started.elapsed() > LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the demo did not end after Ctrl-C during the build");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let stderr = std::fs::read_to_string(&log).unwrap_or_default();
+    assert_eq!(status.code(), Some(130), "{stderr}");
+    assert!(
+        interrupted.elapsed() < Duration::from_secs(20),
+        "the build stopped {:?} after Ctrl-C",
+        interrupted.elapsed()
+    );
+    // No manifest: the next run builds the world again rather than opening half of it.
+    assert!(!world.join("manifest.json").exists());
+    assert!(!dir.join("out/report.json").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
