@@ -2,9 +2,11 @@
 //! encoding for frame captures, and atomic file replacement. This is the only module of
 //! terrain-core that touches files.
 //!
-//! Readers never trust a file: the image size is checked against [`ReadLimits`] from the PNG
-//! header (or, for RAW16, from the requested size and the file length) before any pixel buffer
-//! is allocated, and every malformed input is reported as a [`MapIoError`], never a panic.
+//! Readers open only regular files ([`MapIoError::NotRegularFile`] for a directory, a named
+//! pipe or a device: opening a pipe could block for ever). Readers never trust a file: the
+//! image size is checked against [`ReadLimits`] from the PNG header (or, for RAW16, from the
+//! requested size and the file length) before any pixel buffer is allocated, and every
+//! malformed input is reported as a [`MapIoError`], never a panic.
 //!
 //! Formats:
 //! - PNG: single-channel grayscale, 8 or 16 bits per sample, interlaced or not. 16-bit samples
@@ -176,9 +178,78 @@ pub enum MapIoError {
         /// The encoder's reason, in words.
         reason: String,
     },
+    /// The path names a directory, a named pipe, a device or a socket: reading a map from it
+    /// means nothing, and opening a pipe or a terminal could block for ever.
+    #[error(
+        "{} is a {kind}, not a regular file: maps and images are read from regular files",
+        path.display()
+    )]
+    NotRegularFile {
+        /// The path given.
+        path: PathBuf,
+        /// What it is, in words (`directory`, `named pipe (FIFO)`, `character device`, ...).
+        kind: &'static str,
+    },
     /// The decoded samples could not form a grid.
     #[error(transparent)]
     Grid(#[from] CoreError),
+}
+
+// ---------------------------------------------------------------------------------------------
+// Opening files
+
+/// What a file type is, in words.
+fn file_kind(ft: &fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if ft.is_fifo() {
+            return "named pipe (FIFO)";
+        }
+        if ft.is_char_device() {
+            return "character device";
+        }
+        if ft.is_block_device() {
+            return "block device";
+        }
+        if ft.is_socket() {
+            return "socket";
+        }
+    }
+    if ft.is_dir() {
+        "directory"
+    } else if ft.is_file() {
+        "regular file"
+    } else {
+        "special file"
+    }
+}
+
+/// Opens `path` for reading if it is a regular file (after following links).
+///
+/// The type is checked before opening, because opening a named pipe without a writer blocks
+/// until one comes; and again on the open file, in case the path was replaced in between.
+/// (A pipe swapped in exactly between the two could still block the open: the standard library
+/// has no portable non-blocking open.)
+fn open_regular(path: &Path) -> Result<File, MapIoError> {
+    let io_err = |source| MapIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let check = |ft: fs::FileType| {
+        if ft.is_file() {
+            Ok(())
+        } else {
+            Err(MapIoError::NotRegularFile {
+                path: path.to_path_buf(),
+                kind: file_kind(&ft),
+            })
+        }
+    };
+    check(fs::metadata(path).map_err(io_err)?.file_type())?;
+    let file = File::open(path).map_err(io_err)?;
+    check(file.metadata().map_err(io_err)?.file_type())?;
+    Ok(file)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -236,11 +307,13 @@ impl Stage {
     }
 }
 
-/// Where the bytes come from: memory, or a file (whose read errors are I/O errors).
+/// Where the bytes come from: memory, or an open file (whose read errors are I/O errors).
+/// Error paths read the file again through the same handle, never by opening the path again:
+/// the path may name something else by then.
 #[derive(Debug, Clone, Copy)]
 enum Source<'a> {
     Memory(&'a [u8]),
-    File(&'a Path),
+    File { path: &'a Path, file: &'a File },
 }
 
 /// The PNG file signature.
@@ -337,8 +410,9 @@ fn map_decoding_error(
         png::DecodingError::IoError(io) if io.kind() == io::ErrorKind::UnexpectedEof => {
             let detail = match source {
                 Source::Memory(bytes) => describe_truncation(&mut Cursor::new(bytes)),
-                Source::File(path) => {
-                    File::open(path).and_then(|mut f| describe_truncation(&mut f))
+                Source::File { file, .. } => {
+                    let mut f = file;
+                    describe_truncation(&mut f)
                 }
             };
             MapIoError::Truncated {
@@ -349,7 +423,7 @@ fn map_decoding_error(
             }
         }
         png::DecodingError::IoError(io) => match source {
-            Source::File(path) => MapIoError::Io {
+            Source::File { path, .. } => MapIoError::Io {
                 path: path.to_path_buf(),
                 source: io,
             },
@@ -392,10 +466,12 @@ fn peek_ihdr_size(bytes: &[u8]) -> Option<(u32, u32)> {
 fn peek_source_size(source: Source<'_>) -> Option<(u32, u32)> {
     match source {
         Source::Memory(bytes) => peek_ihdr_size(bytes),
-        Source::File(path) => {
+        Source::File { file, .. } => {
             let mut head = [0u8; 24];
-            let n = File::open(path)
-                .and_then(|mut f| read_up_to(&mut f, &mut head))
+            let mut f = file;
+            let n = f
+                .seek(io::SeekFrom::Start(0))
+                .and_then(|_| read_up_to(&mut f, &mut head))
                 .ok()?;
             peek_ihdr_size(&head[..n])
         }
@@ -422,26 +498,29 @@ enum Accept {
     Rgba8,
 }
 
-/// Decodes the pixels of a PNG the caller accepts: `(width, height, bit depth, raw bytes)`.
-fn decode_png_pixels<R: BufRead + Seek>(
-    reader: R,
-    limits: &ReadLimits,
-    accept: Accept,
-    source: Source<'_>,
-) -> Result<(u32, u32, u8, Vec<u8>), MapIoError> {
+/// A PNG decoder with our memory limits, keeping the samples as stored.
+fn png_decoder<R: BufRead + Seek>(reader: R, limits: &ReadLimits) -> png::Decoder<R> {
     let mut decoder = png::Decoder::new_with_limits(reader, png_decoder_limits(limits));
     decoder.set_transformations(png::Transformations::IDENTITY);
     // Text and ICC profiles mean nothing to a heightmap; skipping them keeps their memory out.
     decoder.set_ignore_text_chunk(true);
     decoder.set_ignore_iccp_chunk(true);
+    decoder
+}
 
-    let (width, height, color_type, bits) = match decoder.read_header_info() {
-        Ok(info) => (
+/// Reads the header: `(width, height, colour type, bits per sample)`, unchecked.
+fn read_header<R: BufRead + Seek>(
+    decoder: &mut png::Decoder<R>,
+    limits: &ReadLimits,
+    source: Source<'_>,
+) -> Result<(u32, u32, png::ColorType, u8), MapIoError> {
+    match decoder.read_header_info() {
+        Ok(info) => Ok((
             info.width,
             info.height,
             info.color_type,
             info.bit_depth as u8,
-        ),
+        )),
         Err(e) => {
             // The png crate rejects a zero side as a generic format error; say what it is.
             if let Some((w, h)) = peek_source_size(source)
@@ -452,9 +531,20 @@ fn decode_png_pixels<R: BufRead + Seek>(
                     height: h,
                 });
             }
-            return Err(map_decoding_error(e, Stage::Header, source, None, limits));
+            Err(map_decoding_error(e, Stage::Header, source, None, limits))
         }
-    };
+    }
+}
+
+/// Decodes the pixels of a PNG the caller accepts: `(width, height, bit depth, raw bytes)`.
+fn decode_png_pixels<R: BufRead + Seek>(
+    reader: R,
+    limits: &ReadLimits,
+    accept: Accept,
+    source: Source<'_>,
+) -> Result<(u32, u32, u8, Vec<u8>), MapIoError> {
+    let mut decoder = png_decoder(reader, limits);
+    let (width, height, color_type, bits) = read_header(&mut decoder, limits, source)?;
 
     // Everything below is decided from the header alone, before any pixel buffer exists.
     check_size(width, height, limits)?;
@@ -598,11 +688,13 @@ fn read_png_file(
     limits: &ReadLimits,
     want: Option<u8>,
 ) -> Result<GrayImage, MapIoError> {
-    let file = File::open(path).map_err(|source| MapIoError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    decode_png_from(BufReader::new(file), limits, want, Source::File(path))
+    let file = open_regular(path)?;
+    decode_png_from(
+        BufReader::new(&file),
+        limits,
+        want,
+        Source::File { path, file: &file },
+    )
 }
 
 /// Reads an 8-bit or 16-bit grayscale PNG file. See [`decode_png`] for the checks; a file that
@@ -633,6 +725,19 @@ pub fn read_png8(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<Grid<u8>
     }
 }
 
+/// The size of a PNG file from its header alone, without decoding (nor allocating) its
+/// pixels: to plan memory before reading a map. The side limits are checked as the readers
+/// check them; the colour type and bit depth are not (the full read reports them).
+pub fn read_png_size(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<UVec2, MapIoError> {
+    let path = path.as_ref();
+    let file = open_regular(path)?;
+    let mut decoder = png_decoder(BufReader::new(&file), limits);
+    let (width, height, _, _) =
+        read_header(&mut decoder, limits, Source::File { path, file: &file })?;
+    check_size(width, height, limits)?;
+    Ok(UVec2::new(width, height))
+}
+
 /// Decodes an 8-bit RGBA PNG held in memory (a frame capture): each pixel `[r, g, b, a]`.
 ///
 /// Other colour types are [`MapIoError::NotRgba`], 16-bit RGBA is
@@ -657,15 +762,12 @@ pub fn read_png_rgba8(
     limits: &ReadLimits,
 ) -> Result<Grid<[u8; 4]>, MapIoError> {
     let path = path.as_ref();
-    let file = File::open(path).map_err(|source| MapIoError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let file = open_regular(path)?;
     let (width, height, _, buf) = decode_png_pixels(
-        BufReader::new(file),
+        BufReader::new(&file),
         limits,
         Accept::Rgba8,
-        Source::File(path),
+        Source::File { path, file: &file },
     )?;
     let pixels = buf
         .chunks_exact(4)
@@ -815,7 +917,7 @@ pub fn read_raw16(
         source,
     };
     let expected_bytes = raw16_len(size, limits)?;
-    let file = File::open(path).map_err(io_err)?;
+    let file = open_regular(path)?;
     let actual_bytes = file.metadata().map_err(io_err)?.len();
     if actual_bytes != expected_bytes {
         return Err(MapIoError::RawSizeMismatch {
@@ -858,13 +960,28 @@ pub fn write_raw16(path: impl AsRef<Path>, grid: &Grid<u16>) -> Result<(), MapIo
 /// Distinguishes temp files of concurrent writes from the same process.
 static TEMP_COUNTER: AtomicU32 = AtomicU32::new(0);
 
+/// The most bytes of the target's name a temp file name repeats: with the dot, process id,
+/// counter and `.tmp` around it the temp name stays far below the 255 bytes most file systems
+/// allow, however long the target's name is.
+const TEMP_STEM_MAX: usize = 128;
+
+/// The start of `name`, at most [`TEMP_STEM_MAX`] bytes, cut at a character boundary.
+fn temp_stem(name: &str) -> &str {
+    let mut end = name.len().min(TEMP_STEM_MAX);
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    &name[..end]
+}
+
 /// Creates a new, uniquely named temp file next to the target.
 fn create_temp_file(dir: &Path, file_name: &str) -> io::Result<(PathBuf, File)> {
     let pid = std::process::id();
+    let stem = temp_stem(file_name);
     let mut last_err = None;
     for _ in 0..64 {
         let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
-        let temp = dir.join(format!(".{file_name}.{pid}.{n}.tmp"));
+        let temp = dir.join(format!(".{stem}.{pid}.{n}.tmp"));
         match OpenOptions::new().write(true).create_new(true).open(&temp) {
             Ok(f) => return Ok((temp, f)),
             Err(e) if e.kind() == io::ErrorKind::AlreadyExists => last_err = Some(e),
@@ -874,12 +991,46 @@ fn create_temp_file(dir: &Path, file_name: &str) -> io::Result<(PathBuf, File)> 
     Err(last_err.unwrap_or_else(|| io::Error::other("could not create a unique temp file")))
 }
 
+/// The file-system steps of an atomic write. Tests replace them to make each one fail.
+struct AtomicSteps {
+    write: fn(&mut File, &[u8]) -> io::Result<()>,
+    sync_file: fn(&File) -> io::Result<()>,
+    rename: fn(&Path, &Path) -> io::Result<()>,
+    sync_dir: fn(&Path) -> io::Result<()>,
+}
+
+fn os_write(file: &mut File, bytes: &[u8]) -> io::Result<()> {
+    file.write_all(bytes)
+}
+
+fn os_sync_file(file: &File) -> io::Result<()> {
+    file.sync_all()
+}
+
+fn os_rename(from: &Path, to: &Path) -> io::Result<()> {
+    fs::rename(from, to)
+}
+
+/// The steps as the operating system does them.
+const OS_STEPS: AtomicSteps = AtomicSteps {
+    write: os_write,
+    sync_file: os_sync_file,
+    rename: os_rename,
+    sync_dir,
+};
+
 /// Writes, syncs and renames the temp file over the target.
-fn write_and_replace(temp: &Path, mut file: File, bytes: &[u8], target: &Path) -> io::Result<()> {
-    file.write_all(bytes)?;
-    file.sync_all()?;
+fn write_and_replace(
+    temp: &Path,
+    mut file: File,
+    bytes: &[u8],
+    target: &Path,
+    steps: &AtomicSteps,
+) -> io::Result<()> {
+    (steps.write)(&mut file, bytes)?;
+    (steps.sync_file)(&file)?;
     drop(file);
-    fs::rename(temp, target)
+    (steps.rename)(temp, target)
 }
 
 /// Makes the rename durable by syncing the directory (unix only; elsewhere a no-op).
@@ -906,14 +1057,42 @@ fn sync_dir(dir: &Path) -> io::Result<()> {
     }
 }
 
+/// What a successful atomic write leaves to say.
+#[derive(Debug)]
+pub struct AtomicWrite {
+    /// Why the directory could not be synced after the rename, if it could not: the new
+    /// content is in place and every reader sees it, but after a power loss the old file may
+    /// come back. A warning, not a failure: reporting the write as failed would claim the old
+    /// file is still there, and it is not.
+    pub dir_sync_error: Option<io::Error>,
+}
+
 /// Writes bytes atomically: temp file in the same directory, write, fsync, rename over the
-/// target, fsync the directory (on unix). On any error the temp file is removed and the old
-/// target is untouched.
+/// target, fsync the directory (on unix). On any error before the rename the temp file is
+/// removed and the old target is untouched; once the rename succeeded the write is done
+/// (see [`write_atomic_report`] for a failed directory sync after it).
 ///
 /// Readers of `path` see either the old content or the new one, never a partial file. The
-/// parent directory must exist; it is not created.
+/// parent directory must exist; it is not created. File names up to the file system's limit
+/// (255 bytes on most) work: the temp file's name repeats at most the first 128 bytes.
 pub fn write_atomic(path: impl AsRef<Path>, bytes: &[u8]) -> Result<(), MapIoError> {
-    let path = path.as_ref();
+    write_atomic_with(path.as_ref(), bytes, &OS_STEPS).map(|_| ())
+}
+
+/// [`write_atomic`], also saying whether the directory sync after the rename failed (for
+/// callers that warn about it).
+pub fn write_atomic_report(
+    path: impl AsRef<Path>,
+    bytes: &[u8],
+) -> Result<AtomicWrite, MapIoError> {
+    write_atomic_with(path.as_ref(), bytes, &OS_STEPS)
+}
+
+fn write_atomic_with(
+    path: &Path,
+    bytes: &[u8],
+    steps: &AtomicSteps,
+) -> Result<AtomicWrite, MapIoError> {
     let io_err = |source| MapIoError::Io {
         path: path.to_path_buf(),
         source,
@@ -933,17 +1112,113 @@ pub fn write_atomic(path: impl AsRef<Path>, bytes: &[u8]) -> Result<(), MapIoErr
     };
 
     let (temp, file) = create_temp_file(dir, &file_name).map_err(io_err)?;
-    if let Err(e) = write_and_replace(&temp, file, bytes, path) {
+    if let Err(e) = write_and_replace(&temp, file, bytes, path, steps) {
         // Best effort: the original error is the one worth reporting.
         let _ = fs::remove_file(&temp);
         return Err(io_err(e));
     }
-    sync_dir(dir).map_err(io_err)
+    // The target is the new file from here on, whatever the directory sync says.
+    Ok(AtomicWrite {
+        dir_sync_error: (steps.sync_dir)(dir).err(),
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A fresh folder for the atomic-write tests, removed at the end.
+    struct Scratch(PathBuf);
+
+    impl Scratch {
+        fn new(name: &str) -> Self {
+            let dir = std::env::temp_dir().join(format!(
+                "terrain-core-io-unit-{}-{name}",
+                std::process::id()
+            ));
+            let _ = fs::remove_dir_all(&dir);
+            fs::create_dir_all(&dir).unwrap();
+            Self(dir)
+        }
+
+        fn names(&self) -> Vec<String> {
+            let mut n: Vec<String> = fs::read_dir(&self.0)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            n.sort();
+            n
+        }
+    }
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn fails<T>() -> io::Result<T> {
+        Err(io::Error::other("injected failure"))
+    }
+
+    #[test]
+    fn a_failed_directory_sync_after_the_rename_still_reports_the_write_as_done() {
+        let dir = Scratch::new("dir-sync");
+        let target = dir.0.join("map.png");
+        fs::write(&target, b"old").unwrap();
+        let steps = AtomicSteps {
+            sync_dir: |_| fails(),
+            ..OS_STEPS
+        };
+        let written = write_atomic_with(&target, b"new", &steps)
+            .expect("the rename happened: the write is done");
+        // The new content is in place; only its durability over a power loss is in doubt.
+        assert_eq!(fs::read(&target).unwrap(), b"new");
+        let warning = written.dir_sync_error.expect("the failed sync is reported");
+        assert!(warning.to_string().contains("injected"), "{warning}");
+        assert_eq!(dir.names(), ["map.png"]);
+        let clean = write_atomic_with(&target, b"newer", &OS_STEPS).unwrap();
+        assert!(clean.dir_sync_error.is_none());
+    }
+
+    #[test]
+    fn every_failing_step_before_the_rename_removes_the_temp_file_and_keeps_the_old_file() {
+        let broken = [
+            AtomicSteps {
+                write: |_, _| fails(),
+                ..OS_STEPS
+            },
+            AtomicSteps {
+                // Half the bytes reach the temp file, then the disk is full.
+                write: |f, b| {
+                    f.write_all(&b[..b.len() / 2])?;
+                    fails()
+                },
+                ..OS_STEPS
+            },
+            AtomicSteps {
+                sync_file: |_| fails(),
+                ..OS_STEPS
+            },
+            AtomicSteps {
+                rename: |_, _| fails(),
+                ..OS_STEPS
+            },
+        ];
+        for (i, steps) in broken.iter().enumerate() {
+            let dir = Scratch::new(&format!("steps-{i}"));
+            let target = dir.0.join("map.png");
+            fs::write(&target, b"old").unwrap();
+            let e = write_atomic_with(&target, b"new content", steps)
+                .expect_err("a failed step fails the write");
+            assert!(
+                matches!(&e, MapIoError::Io { path, .. } if *path == target),
+                "{e}"
+            );
+            assert_eq!(fs::read(&target).unwrap(), b"old", "step {i}");
+            assert_eq!(dir.names(), ["map.png"], "step {i}: temp file left");
+        }
+    }
 
     #[test]
     fn check_size_orders_zero_then_large() {
@@ -991,10 +1266,15 @@ mod tests {
         );
 
         let other = png::DecodingError::IoError(io::ErrorKind::PermissionDenied.into());
+        // Any open file serves: a permission error is reported without reading it.
+        let exe = File::open(std::env::current_exe().unwrap()).unwrap();
         let e = map_decoding_error(
             other,
             Stage::Header,
-            Source::File(Path::new("/x/y.png")),
+            Source::File {
+                path: Path::new("/x/y.png"),
+                file: &exe,
+            },
             None,
             &l,
         );
@@ -1024,6 +1304,34 @@ mod tests {
             &l,
         );
         assert!(matches!(e, MapIoError::Corrupt { .. }));
+    }
+
+    #[test]
+    fn a_truncated_file_is_described_through_its_open_handle() {
+        // The error path reads the file it decoded again, to say where the data ends. It
+        // reads through the open handle: here the path is gone by then (removed, or replaced by
+        // something that could block), and the chunk walk still finds the cut.
+        let full =
+            encode_png16(&Grid::from_fn(9, 4, |x, y| (x * 1000 + y) as u16).unwrap()).unwrap();
+        let dir = Scratch::new("handle");
+        let path = dir.0.join("cut.png");
+        fs::write(&path, &full[..50]).unwrap();
+        let file = File::open(&path).unwrap();
+        fs::remove_file(&path).unwrap();
+        let e = decode_png_from(
+            BufReader::new(&file),
+            &ReadLimits::default(),
+            None,
+            Source::File {
+                path: &path,
+                file: &file,
+            },
+        )
+        .unwrap_err();
+        assert!(
+            matches!(&e, MapIoError::Truncated { reason } if reason.contains("byte 33")),
+            "{e}"
+        );
     }
 
     #[test]

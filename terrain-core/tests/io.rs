@@ -8,8 +8,9 @@ use std::path::{Path, PathBuf};
 use terrain_core::Grid;
 use terrain_core::io::{
     DEFAULT_MAX_SIDE, GrayImage, MapIoError, ReadLimits, decode_png, decode_png8, decode_png16,
-    decode_raw16, encode_png_rgba8, encode_png8, encode_png16, encode_raw16, read_png, read_png8,
-    read_png16, read_raw16, write_atomic, write_png_rgba8, write_png8, write_png16, write_raw16,
+    decode_raw16, encode_png_rgba8, encode_png8, encode_png16, encode_raw16, read_png,
+    read_png_size, read_png8, read_png16, read_raw16, write_atomic, write_png_rgba8, write_png8,
+    write_png16, write_raw16,
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -870,6 +871,117 @@ fn failed_rename_removes_the_temp_file_and_keeps_the_target() {
     ));
     assert_eq!(dir.entries(), vec!["occupied".to_owned()]);
     assert_eq!(std::fs::read(target.join("keep.txt")).unwrap(), b"keep");
+}
+
+#[test]
+fn png_size_comes_from_the_header_alone() {
+    let dir = TempDir::new("png-size");
+    let p = dir.path().join("wide.png");
+    write_png16(&p, &grid16(300, 7)).unwrap();
+    assert_eq!(read_png_size(&p, &limits()).unwrap(), UVec2::new(300, 7));
+    // Only the header is read: a file cut right after it still has a size.
+    let bytes = std::fs::read(&p).unwrap();
+    let head = dir.path().join("head.png");
+    std::fs::write(&head, &bytes[..33]).unwrap();
+    assert_eq!(read_png_size(&head, &limits()).unwrap(), UVec2::new(300, 7));
+    let small = ReadLimits { max_side: 100 };
+    assert!(matches!(
+        read_png_size(&p, &small),
+        Err(MapIoError::TooLarge {
+            width: 300,
+            height: 7,
+            max_side: 100
+        })
+    ));
+    std::fs::write(&head, b"not a png").unwrap();
+    assert!(matches!(
+        read_png_size(&head, &limits()),
+        Err(MapIoError::Corrupt { .. } | MapIoError::Truncated { .. })
+    ));
+    assert!(matches!(
+        read_png_size(dir.path().join("missing.png"), &limits()),
+        Err(MapIoError::Io { .. })
+    ));
+}
+
+#[test]
+fn write_atomic_takes_the_longest_file_names() {
+    // 255 bytes is the longest name most file systems take; the temp file beside it must not
+    // need a longer one.
+    let dir = TempDir::new("atomic-long");
+    for len in [200usize, 250, 255] {
+        let name = "n".repeat(len - 4) + ".png";
+        let p = dir.path().join(&name);
+        write_atomic(&p, b"first").unwrap_or_else(|e| panic!("{len}-byte name: {e}"));
+        write_atomic(&p, b"second").unwrap_or_else(|e| panic!("{len}-byte name: {e}"));
+        assert_eq!(std::fs::read(&p).unwrap(), b"second");
+    }
+    // Multi-byte characters are cut at a character boundary, never inside one.
+    let name = "\u{e9}".repeat(126) + ".r";
+    assert_eq!(name.len(), 254);
+    let p = dir.path().join(&name);
+    write_atomic(&p, b"accented").unwrap();
+    assert_eq!(std::fs::read(&p).unwrap(), b"accented");
+    assert_eq!(
+        dir.entries().len(),
+        4,
+        "no temp file left: {:?}",
+        dir.entries()
+    );
+}
+
+/// Runs `read` on another thread and fails (instead of blocking the test) if it has not
+/// returned within a few seconds.
+fn returns_promptly<T: Send + 'static>(what: &str, read: impl FnOnce() -> T + Send + 'static) -> T {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(read());
+    });
+    rx.recv_timeout(std::time::Duration::from_secs(10))
+        .unwrap_or_else(|_| panic!("{what} blocked"))
+}
+
+#[test]
+fn special_files_are_refused_as_not_regular_files() {
+    let dir = TempDir::new("special");
+    let fifo = dir.path().join("pipe.png");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .expect("mkfifo runs");
+    assert!(made.success());
+    let l = limits();
+    let cases: [(&Path, &str); 3] = [
+        (&fifo, "named pipe"),
+        (dir.path(), "directory"),
+        (Path::new("/dev/null"), "device"),
+    ];
+    for (path, kind) in cases {
+        let p = path.to_path_buf();
+        let png = returns_promptly("read_png16", move || read_png16(&p, &l).map(|_| ()));
+        let p = path.to_path_buf();
+        let raw = returns_promptly("read_raw16", move || {
+            read_raw16(&p, UVec2::new(4, 4), &l).map(|_| ())
+        });
+        let p = path.to_path_buf();
+        let any = returns_promptly("read_png", move || read_png(&p, &l).map(|_| ()));
+        let p = path.to_path_buf();
+        let size = returns_promptly("read_png_size", move || read_png_size(&p, &l).map(|_| ()));
+        for r in [png, raw, any, size] {
+            let e = r.expect_err("a special file is not a map");
+            assert!(
+                matches!(&e, MapIoError::NotRegularFile { path: p, .. } if p == path),
+                "{e:?}"
+            );
+            let s = e.to_string();
+            assert!(
+                s.contains(kind) && s.contains("not a regular file"),
+                "{}: {s}",
+                path.display()
+            );
+            assert!(s.contains(&path.display().to_string()), "{s}");
+        }
+    }
 }
 
 #[test]

@@ -65,6 +65,10 @@ pub struct Cli {
     /// Write top-down overview frames only, without the GPU (as when no adapter exists).
     #[arg(long)]
     pub no_gpu: bool,
+    /// Refuse a run whose estimated memory (maps, GPU copies, frames, pools, the process and
+    /// its GPU driver) is above SIZE, as 1536M or 8G; default half the machine's memory.
+    #[arg(long, value_name = "SIZE", value_parser = crate::memory_limit::parse_bytes)]
+    pub max_memory: Option<u64>,
 }
 
 /// Parses a frame size `WIDTHxHEIGHT`, each side 16 to 8192 pixels.
@@ -123,5 +127,9 @@ mod tests {
         assert!(Cli::try_parse_from(["demo", "--resolution", "640x360"]).is_ok());
         assert!(Cli::try_parse_from(["demo", "--scenario", "snow"]).is_ok());
         assert!(Cli::try_parse_from(["demo", "--scenario", "mud"]).is_err());
+        let cli = Cli::try_parse_from(["demo", "--max-memory", "1536M"]).unwrap();
+        assert_eq!(cli.max_memory, Some(1536 << 20));
+        assert!(Cli::try_parse_from(["demo", "--max-memory", "lots"]).is_err());
+        assert!(Cli::try_parse_from(["demo", "--max-memory", "0"]).is_err());
     }
 }

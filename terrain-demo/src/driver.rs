@@ -1,26 +1,35 @@
 //! The run every scenario shares: output folder, GPU scene (or none), overview, the frame loop
 //! (advance the scenario, update the overview, render, capture), and at the end
-//! `terrain_final.png`, `summary.png` and `report.json`.
+//! `terrain_final.png`, `summary.png` and `report.json`. Ctrl-C ends the loop after the frame
+//! in progress; the end is the same, over the frames done.
 
-use crate::capture::Capture;
+use crate::capture::{self, Capture};
 use crate::cli::Cli;
 use crate::gpu_scene::GpuScene;
 use crate::images;
+use crate::interrupt;
+use crate::memory_limit::format_bytes;
 use crate::overview::Overview;
-use crate::report::{FrameReport, Report};
+use crate::report::{FrameReport, MemoryReport, Report};
 use crate::scenarios::{FRAME_DT, FrameContext, Scenario};
 use crate::timings::{Step, Timings};
+use crate::usage_error::UsageExt;
 use anyhow::{Context, Result};
 use glam::Vec2;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 use terrain_core::io;
 
-/// Runs `scenario` for `cli.frames` frames into `cli.out` and returns the report written.
-pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
+/// Runs `scenario` for `cli.frames` frames (fewer after Ctrl-C) into `cli.out` and returns
+/// the report written; `memory` is the limit and the estimate the run was accepted on.
+pub fn run(cli: &Cli, scenario: &mut dyn Scenario, memory: MemoryReport) -> Result<Report> {
     std::fs::create_dir_all(&cli.out)
-        .with_context(|| format!("cannot create output folder {}", cli.out.display()))?;
-    io::write_png16(cli.out.join("terrain.png"), scenario.map().grid())?;
+        .with_context(|| format!("cannot create output folder {}", cli.out.display()))
+        .usage()?;
+    let mut capture = Capture::new(&cli.out, cli.frames)?;
+    let terrain = cli.out.join("terrain.png");
+    capture::write_file(&terrain, &io::encode_png16(scenario.map().grid())?)
+        .with_context(|| format!("writing {}", terrain.display()))?;
 
     let mut gpu = open_gpu(cli, scenario)?;
     let (adapter, backend) = gpu
@@ -28,10 +37,12 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
         .map_or(("none".into(), "none".into()), GpuScene::adapter);
     let overview_px = scenario.overview_size(cli.overview_size);
     let mut overview = Overview::new(scenario.map(), scenario.normals(), overview_px)?;
-    let mut capture = Capture::new(&cli.out, cli.frames);
     // Scenario time: 30 frames per second whatever the render speed.
     let sim_start = Instant::now();
     for index in 0..cli.frames {
+        if interrupt::requested() {
+            break;
+        }
         let mut timings = Timings::default();
         let frame = scenario.advance(&mut FrameContext {
             now: sim_start + Duration::from_secs_f64(f64::from(index) * FRAME_DT),
@@ -72,8 +83,11 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
         }
     }
     let finish = scenario.finish(gpu.as_mut())?;
-    io::write_png16(cli.out.join("terrain_final.png"), scenario.map().grid())?;
+    let terrain_final = cli.out.join("terrain_final.png");
+    capture::write_file(&terrain_final, &io::encode_png16(scenario.map().grid())?)
+        .with_context(|| format!("writing {}", terrain_final.display()))?;
 
+    let done = capture.done();
     let info = scenario.info();
     let map = scenario.map();
     let resolution = if gpu.is_some() {
@@ -93,6 +107,9 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
         load_ms: info.load_ms,
         initial_normals_ms: info.initial_normals_ms,
         written_back_tiles: finish.written_back_tiles,
+        frames_requested: cli.frames,
+        interrupted: done < cli.frames,
+        memory,
         frames: Vec::new(),
         totals_ms: BTreeMap::new(),
     })?;
@@ -105,6 +122,18 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Report> {
         report.adapter,
         report.backend,
     );
+    // The estimate is meant to bound the peak: say so where it did not.
+    let m = &report.memory;
+    if let Some(peak) = m.peak_rss_bytes
+        && peak > m.estimate_bytes
+    {
+        eprintln!(
+            "warning: peak resident memory {} above the estimate of {} (limit {})",
+            format_bytes(peak),
+            format_bytes(m.estimate_bytes),
+            format_bytes(m.limit_bytes)
+        );
+    }
     Ok(report)
 }
 

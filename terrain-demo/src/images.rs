@@ -163,34 +163,70 @@ pub fn timing_plot(series: &[Vec<f64>], size: UVec2) -> Result<Image> {
     Ok(img)
 }
 
-/// A contact sheet: `frames` (all the same size) downscaled into `columns` columns, with the
-/// timing plot below.
-pub fn contact_sheet(
-    frames: &[Image],
-    columns: u32,
-    thumb_width: u32,
-    plot: &Image,
-) -> Result<Image> {
-    let Some(first) = frames.first() else {
-        return Ok(plot.clone());
+/// The size of a thumbnail of an image of `size` pixels: the image's aspect, fitted into a
+/// `side` x `side` square (never enlarged), at least 1 x 1. A long, thin frame makes a thin
+/// thumbnail, not a tall one.
+pub fn fit_within(size: UVec2, side: u32) -> UVec2 {
+    let longest = size.max_element().max(1);
+    if longest <= side {
+        return size.max(UVec2::ONE);
+    }
+    let scaled = |v: u32| {
+        ((u64::from(v) * u64::from(side) + u64::from(longest) / 2) / u64::from(longest)) as u32
     };
-    let tw = thumb_width;
-    let th = (u64::from(first.height()) * u64::from(tw) / u64::from(first.width().max(1))) as u32;
+    UVec2::new(scaled(size.x), scaled(size.y)).max(UVec2::ONE)
+}
+
+/// A contact sheet: `thumbs` (already downscaled, see [`fit_within`]) in `columns` columns,
+/// each in a cell the size of the largest, with the timing plot below.
+pub fn contact_sheet(thumbs: &[Image], columns: u32, plot: &Image) -> Result<Image> {
+    if thumbs.is_empty() {
+        return Ok(plot.clone());
+    }
+    let tw = thumbs.iter().map(Grid::width).max().unwrap_or(1);
+    let th = thumbs.iter().map(Grid::height).max().unwrap_or(1);
     let columns = columns.max(1);
-    let rows = (frames.len() as u32).div_ceil(columns);
+    let rows = (thumbs.len() as u32).div_ceil(columns);
     let gap = 4;
-    let width = columns * (tw + gap) + gap;
+    let width = (columns * (tw + gap) + gap).max(plot.width() + 2 * gap);
     let height = rows * (th + gap) + gap + plot.height() + gap;
     let mut sheet = Grid::new(width, height, [32, 32, 36, 255])?;
-    for (i, f) in frames.iter().enumerate() {
+    for (i, t) in thumbs.iter().enumerate() {
         let (c, r) = (i as u32 % columns, i as u32 / columns);
-        blit(
-            &mut sheet,
-            &downscale(f, UVec2::new(tw, th)),
-            gap + c * (tw + gap),
-            gap + r * (th + gap),
-        );
+        blit(&mut sheet, t, gap + c * (tw + gap), gap + r * (th + gap));
     }
     blit(&mut sheet, plot, gap, gap + rows * (th + gap));
     Ok(sheet)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thumbnails_fit_a_square_whatever_the_aspect() {
+        assert_eq!(fit_within(UVec2::new(1280, 720), 320), UVec2::new(320, 180));
+        assert_eq!(fit_within(UVec2::new(16, 8192), 320), UVec2::new(1, 320));
+        assert_eq!(fit_within(UVec2::new(8192, 16), 320), UVec2::new(320, 1));
+        assert_eq!(fit_within(UVec2::new(100, 50), 320), UVec2::new(100, 50));
+        assert_eq!(fit_within(UVec2::new(1, 65536), 320), UVec2::new(1, 320));
+    }
+
+    #[test]
+    fn a_sheet_of_thin_frames_stays_small() {
+        // Twelve thumbnails of 16 x 8192 frames (the old sheet scaled each to 320 pixels wide:
+        // 163 840 tall).
+        let frame = Grid::new(16, 8192, [200u8, 10, 10, 255]).unwrap();
+        let thumb = downscale(&frame, fit_within(frame.size(), 320));
+        let thumbs = vec![thumb; 12];
+        let plot = Grid::new(1292, 160, [250u8, 250, 250, 255]).unwrap();
+        let sheet = contact_sheet(&thumbs, 4, &plot).unwrap();
+        assert!(
+            sheet.width() <= 1300 && sheet.height() <= 3 * 324 + 168,
+            "{}",
+            sheet.size()
+        );
+        // The thumbnails are on it, in their colour.
+        assert_eq!(sheet.get(4, 4), Some([200, 10, 10, 255]));
+    }
 }

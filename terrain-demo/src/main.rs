@@ -8,14 +8,21 @@ mod cli;
 mod driver;
 mod gpu_scene;
 mod images;
+mod interrupt;
+mod memory_estimate;
+mod memory_limit;
 mod overview;
 mod report;
 mod scenarios;
 mod timings;
+mod usage_error;
 
 use anyhow::Result;
 use clap::Parser;
 use cli::Cli;
+use memory_estimate::RunShape;
+use report::MemoryReport;
+use usage_error::{INTERRUPTED_EXIT, USAGE_EXIT, UsageExt};
 
 fn main() {
     let cli = match Cli::try_parse() {
@@ -29,26 +36,50 @@ fn main() {
             let msg = e.to_string();
             let first = msg.lines().next().unwrap_or("invalid arguments");
             eprintln!("{first} (see --help)");
-            std::process::exit(2);
+            std::process::exit(USAGE_EXIT);
         }
     };
-    if let Err(e) = run(&cli) {
-        // One line: the error and its causes, skipping a cause whose text is already shown
-        // (library errors often include their source in their own message).
-        let mut line = e.to_string();
-        for cause in e.chain().skip(1) {
-            let text = cause.to_string();
-            if !line.contains(&text) {
-                line.push_str(": ");
-                line.push_str(&text);
-            }
+    interrupt::install();
+    match run(&cli) {
+        Ok(Ended::Done) => {}
+        Ok(Ended::Interrupted { frames }) => {
+            eprintln!(
+                "interrupted after {frames} of {} frames: report.json lists them",
+                cli.frames
+            );
+            std::process::exit(INTERRUPTED_EXIT);
         }
-        eprintln!("error: {line}");
-        std::process::exit(2);
+        Err(e) => {
+            // One line: the error and its causes, skipping a cause whose text is already
+            // shown (library errors often include their source in their own message).
+            let mut line = e.to_string();
+            for cause in e.chain().skip(1) {
+                let text = cause.to_string();
+                if !line.contains(&text) {
+                    line.push_str(": ");
+                    line.push_str(&text);
+                }
+            }
+            if interrupt::requested() {
+                // Ctrl-C during setup (a world build cancelled, say): no frame, no report.
+                eprintln!("interrupted: {line}");
+                std::process::exit(INTERRUPTED_EXIT);
+            }
+            eprintln!("error: {line}");
+            std::process::exit(usage_error::exit_status(&e));
+        }
     }
 }
 
-fn run(cli: &Cli) -> Result<()> {
+/// How a run ended without an error.
+enum Ended {
+    /// Every frame asked for.
+    Done,
+    /// Ctrl-C: `frames` frames were done and reported.
+    Interrupted { frames: usize },
+}
+
+fn run(cli: &Cli) -> Result<Ended> {
     if let Some(dir) = &cli.verify_world {
         let bad = scenarios::world_files::verify(dir)?;
         if bad.is_empty() {
@@ -56,15 +87,25 @@ fn run(cli: &Cli) -> Result<()> {
                 "world {}: every tile and the manifest are valid",
                 dir.display()
             );
-            return Ok(());
+            return Ok(Ended::Done);
         }
         for line in &bad {
             println!("{line}");
         }
         eprintln!("world {}: {} bad tile(s)", dir.display(), bad.len());
-        std::process::exit(1);
+        std::process::exit(usage_error::FAILURE_EXIT);
     }
+    // What the run needs, from its flags and input headers, before anything large exists.
+    let limit = cli.max_memory.unwrap_or_else(memory_limit::default_limit);
+    let needed = RunShape::of(cli)?.estimate();
+    memory_limit::check(&needed, limit).usage()?;
     let mut scenario = scenarios::open(cli)?;
-    driver::run(cli, scenario.as_mut())?;
-    Ok(())
+    let report = driver::run(cli, scenario.as_mut(), MemoryReport::new(limit, &needed))?;
+    Ok(if report.interrupted {
+        Ended::Interrupted {
+            frames: report.frames.len(),
+        }
+    } else {
+        Ended::Done
+    })
 }

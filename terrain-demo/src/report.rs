@@ -29,10 +29,42 @@ pub struct Report {
     /// Flyover: tiles written back into the world during and at the end of the run.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub written_back_tiles: Option<u64>,
+    /// Frames asked for (`--frames`).
+    pub frames_requested: u32,
+    /// Whether Ctrl-C ended the run early: `frames` lists the frames done before it.
+    pub interrupted: bool,
+    /// The run's memory: its limit, the estimate it was accepted on, the peak measured.
+    pub memory: MemoryReport,
     /// Per frame.
     pub frames: Vec<FrameReport>,
     /// Sum of each step over all frames, in milliseconds.
     pub totals_ms: BTreeMap<&'static str, f64>,
+}
+
+/// The memory of a run.
+#[derive(Debug, Clone, Serialize)]
+pub struct MemoryReport {
+    /// The limit (`--max-memory`, or the default fraction of the machine's memory).
+    pub limit_bytes: u64,
+    /// What the run was estimated to need from its flags, before anything was allocated.
+    pub estimate_bytes: u64,
+    /// The estimate's parts (they add up to `estimate_bytes`).
+    pub estimate: BTreeMap<&'static str, u64>,
+    /// The peak resident memory of the process (VmHWM: every thread, the GPU driver
+    /// included), read just before report.json is written; absent where it cannot be read.
+    pub peak_rss_bytes: Option<u64>,
+}
+
+impl MemoryReport {
+    /// The report of a run accepted under `limit` on the estimate `parts`.
+    pub fn new(limit_bytes: u64, parts: &[(&'static str, u64)]) -> Self {
+        Self {
+            limit_bytes,
+            estimate_bytes: parts.iter().map(|p| p.1).sum(),
+            estimate: parts.iter().copied().collect(),
+            peak_rss_bytes: None,
+        }
+    }
 }
 
 /// One frame.

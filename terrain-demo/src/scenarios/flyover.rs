@@ -25,6 +25,7 @@ use crate::gpu_scene::{AtlasConfig, Camera, GpuScene, TileSlot};
 use crate::images::Image;
 use crate::report::{CacheStats, FrameStats};
 use crate::timings::{Step, ms_since};
+use crate::usage_error::usage;
 use anyhow::{Result, bail};
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use std::collections::{HashMap, HashSet};
@@ -108,10 +109,10 @@ impl FlyoverScenario {
     /// Opens (or builds) the world and starts the RAM pool.
     pub fn new(cli: &Cli) -> Result<Self> {
         if !(cli.speed.is_finite() && cli.speed > 0.0 && cli.speed <= 1000.0) {
-            bail!(
+            return Err(usage(anyhow::anyhow!(
                 "--speed must be 0 to 1000 metres per second, got {}",
                 cli.speed
-            );
+            )));
         }
         let t = Instant::now();
         let (world, source) = world_files::open_or_build(cli)?;
@@ -122,9 +123,7 @@ impl FlyoverScenario {
                 cli.world.display()
             );
         }
-        let overview_level = (0..manifest.levels)
-            .find(|&l| manifest.level_size(l).max_element() <= OVERVIEW_MAX)
-            .unwrap_or(manifest.levels - 1);
+        let overview_level = overview_level(&manifest);
         let overview = overview_map(&world, overview_level)?;
         let load_ms = ms_since(t);
         let t = Instant::now();
@@ -446,6 +445,13 @@ impl PendingStamp {
     }
 }
 
+/// The level shown in the overview: the finest whose side is at most [`OVERVIEW_MAX`].
+pub fn overview_level(manifest: &Manifest) -> u32 {
+    (0..manifest.levels)
+        .find(|&l| manifest.level_size(l).max_element() <= OVERVIEW_MAX)
+        .unwrap_or(manifest.levels.saturating_sub(1))
+}
+
 /// The level `level` of `world` as one clamped coarse-map.
 fn overview_map(world: &World, level: u32) -> Result<CoarseMap> {
     let m = world.manifest();
@@ -505,10 +511,10 @@ impl Scenario for FlyoverScenario {
         let slot_bytes = u64::from(self.tile_size).pow(2) * 4;
         let slots = u32::try_from(self.vram_budget / slot_bytes).unwrap_or(u32::MAX);
         if slots < 2 {
-            bail!(
+            return Err(usage(anyhow::anyhow!(
                 "--vram-budget holds {slots} tile(s) of {} KiB: at least 2 are needed",
                 slot_bytes >> 10
-            );
+            )));
         }
         scene.enable_atlas(&AtlasConfig {
             slots,

@@ -2,6 +2,7 @@
 //! given with `--heightmap`, with the command line's texel size and height span.
 
 use crate::cli::Cli;
+use crate::usage_error::UsageExt;
 use anyhow::{Context, Result, bail};
 use glam::UVec2;
 use terrain_core::io::{self, ReadLimits};
@@ -10,8 +11,25 @@ use terrain_core::{CoarseMap, HeightEncoding, TerrainParams, generate_coarse_map
 /// Side of the procedural terrain in texels by default (205 m at 0.1 m).
 pub const DEFAULT_SIZE: u32 = 2048;
 
+/// The size of the map `cli` asks for, known before anything is made or read: `--size` (or
+/// the default), `--raw-size`, or the PNG's header. Its errors are usage errors.
+pub fn planned_size(cli: &Cli) -> Result<UVec2> {
+    match (&cli.heightmap, cli.raw_size) {
+        (None, _) => Ok(UVec2::splat(cli.size.unwrap_or(DEFAULT_SIZE))),
+        (Some(_), Some(size)) => Ok(size),
+        (Some(path), None) => io::read_png_size(path, &ReadLimits::default())
+            .with_context(|| format!("cannot use heightmap {}", path.display()))
+            .usage(),
+    }
+}
+
 /// The map `cli` asks for, and where it came from (`procedural` or the heightmap's path).
+/// Every error is the user's to fix (a flag, or the heightmap file): a usage error.
 pub fn load(cli: &Cli) -> Result<(CoarseMap, String)> {
+    make(cli).usage()
+}
+
+fn make(cli: &Cli) -> Result<(CoarseMap, String)> {
     if !(cli.texel_size.is_finite() && cli.texel_size > 0.0) {
         bail!(
             "--texel-size must be a positive number of metres, got {}",

@@ -2,9 +2,9 @@
 //! run shares: output folder, GPU scene, overview, frame loop, rendering, capture, report. A
 //! scenario owns its terrain and bodies, and per frame deforms, steps and places the camera.
 
-mod flyover;
-mod heightmap;
-mod snow;
+pub mod flyover;
+pub mod heightmap;
+pub mod snow;
 mod snow_field;
 mod stamp_script;
 mod stamps;
@@ -32,6 +32,13 @@ pub fn open(cli: &Cli) -> Result<Box<dyn Scenario>> {
         ScenarioKind::Snow => Box::new(snow::SnowScenario::new(cli)?),
         ScenarioKind::Flyover => Box::new(flyover::FlyoverScenario::new(cli)?),
     })
+}
+
+/// The overview's size in pixels for a map of `size` texels: the map's aspect, its longer
+/// side `side` pixels, at least 1 x 1.
+pub fn fit_overview(size: UVec2, side: u32) -> UVec2 {
+    let scale = side as f32 / size.max_element() as f32;
+    (size.as_vec2() * scale).round().as_uvec2().max(UVec2::ONE)
 }
 
 /// What a scenario reports about its setup.
@@ -98,9 +105,7 @@ pub trait Scenario {
     /// The overview's size in pixels for a requested side of `side`: the map's aspect, its
     /// longer side `side` (each pixel shows the nearest texel).
     fn overview_size(&self, side: u32) -> UVec2 {
-        let size = self.map().size();
-        let scale = side as f32 / size.max_element() as f32;
-        (size.as_vec2() * scale).round().as_uvec2().max(UVec2::ONE)
+        fit_overview(self.map().size(), side)
     }
 
     /// The overview with what the scenario draws over it this frame (the flyover's tile

@@ -14,7 +14,8 @@ use crate::cli::Cli;
 use crate::gpu_scene::GpuScene;
 use crate::report::FrameStats;
 use crate::timings::{Step, ms_since};
-use anyhow::{Result, bail};
+use crate::usage_error::{UsageExt, usage};
+use anyhow::Result;
 use glam::{UVec2, Vec2};
 use std::time::Instant;
 use terrain_core::granular::GranularParams;
@@ -22,7 +23,7 @@ use terrain_core::{CoarseMap, DerivativeMap, Rect, bilinear};
 use terrain_physics::CollisionMirror;
 
 /// Side of the snow field in texels by default (25.6 m at 0.05 m).
-const SNOW_SIZE: u32 = 512;
+pub const SNOW_SIZE: u32 = 512;
 
 /// The snow scenario.
 #[derive(Debug)]
@@ -45,11 +46,13 @@ impl SnowScenario {
     /// Generates the snow field of `--size` (512 by default) and places the camera.
     pub fn new(cli: &Cli) -> Result<Self> {
         if cli.heightmap.is_some() {
-            bail!("--heightmap is not used by the snow scenario (it generates its snow field)");
+            return Err(usage(anyhow::anyhow!(
+                "--heightmap is not used by the snow scenario (it generates its snow field)"
+            )));
         }
         let size = cli.size.unwrap_or(SNOW_SIZE);
         let t = Instant::now();
-        let field = SnowField::new(size, cli.seed, GranularParams::snow())?;
+        let field = SnowField::new(size, cli.seed, GranularParams::snow()).usage()?;
         let coarse = field.coarse_map()?;
         let load_ms = ms_since(t);
         let t = Instant::now();

@@ -3,7 +3,9 @@
 //! decodes every tile and checks the manifest.
 
 use crate::cli::Cli;
-use anyhow::{Context, Result, bail};
+use crate::interrupt;
+use crate::usage_error::{UsageExt, usage};
+use anyhow::{Context, Result};
 use glam::UVec2;
 use std::io::Write;
 use std::path::Path;
@@ -24,18 +26,48 @@ pub const WORLD_MAX_HEIGHT: f32 = 200.0;
 /// Tile side in texels (seed 004's 256^2 blocks).
 pub const TILE_SIZE: u32 = 256;
 
+/// The largest manifest read: a real one is a few hundred bytes.
+const MANIFEST_MAX_BYTES: u64 = 1 << 20;
+
+/// The manifest of the world in `dir` if it has one (read alone, without opening the world:
+/// to plan a run's memory), `None` when there is none yet (the world will be built).
+pub fn existing_manifest(dir: &Path) -> Result<Option<Manifest>> {
+    let path = dir.join(terrain_cache::manifest::MANIFEST_KEY);
+    let cannot = || format!("the world in {} cannot be opened", dir.display());
+    let meta = match std::fs::metadata(&path) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(usage(anyhow::Error::new(e).context(cannot()))),
+    };
+    // Anything but a regular file (a pipe would block the read) is not a manifest.
+    if !meta.is_file() || meta.len() > MANIFEST_MAX_BYTES {
+        return Err(usage(anyhow::anyhow!(
+            "{}: {} is not a manifest file",
+            cannot(),
+            path.display()
+        )));
+    }
+    let text = std::fs::read_to_string(&path)
+        .with_context(cannot)
+        .usage()?;
+    let manifest = Manifest::from_json(&text).with_context(cannot).usage()?;
+    Ok(Some(manifest))
+}
+
 /// The world in `cli.world`: opened if it has a manifest, else built there. Returns the world
 /// and where its heights came from.
 pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
     let store: Arc<dyn TileStore> = Arc::new(
         FsStore::open(&cli.world)
-            .with_context(|| format!("cannot use world folder {}", cli.world.display()))?,
+            .with_context(|| format!("cannot use world folder {}", cli.world.display()))
+            .usage()?,
     );
     // A folder with a manifest is a world: opened, or its error reported; never rebuilt over
     // (it may hold deformations of earlier runs).
     if store.exists(terrain_cache::manifest::MANIFEST_KEY)? {
         let world = World::open(store.clone())
-            .with_context(|| format!("the world in {} cannot be opened", cli.world.display()))?;
+            .with_context(|| format!("the world in {} cannot be opened", cli.world.display()))
+            .usage()?;
         eprintln!(
             "world {}: {} texels, {} levels (deformations of earlier runs included)",
             cli.world.display(),
@@ -61,7 +93,9 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
             );
             let _ = std::io::stderr().flush();
         }
-        true
+        // Ctrl-C cancels the build (the manifest is written last, so the next run builds the
+        // world again instead of opening half of it).
+        !interrupt::requested()
     };
     let (world, source) = match &cli.heightmap {
         Some(_) => {
@@ -72,7 +106,8 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
                 map.texel_size(),
                 map.encoding(),
                 WrapMode::Clamp,
-            )?;
+            )
+            .usage()?;
             let (world, _) = build_world(store, manifest, &MapSource { map: &map }, &progress)?;
             (world, source)
         }
@@ -84,16 +119,8 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
                 persistence: 0.45,
                 ..TerrainParams::default()
             };
-            let source = ProceduralSource::new(UVec2::splat(size), &base, 3, 0.02)?;
-            let encoding = HeightEncoding::spanning::<u16>(0.0, WORLD_MAX_HEIGHT)?;
-            let manifest = Manifest::new(
-                UVec2::splat(size),
-                TILE_SIZE,
-                WORLD_TEXEL,
-                encoding,
-                WrapMode::Clamp,
-            )?;
-            let (world, _) = build_world(store, manifest, &source, &progress)?;
+            let source = ProceduralSource::new(UVec2::splat(size), &base, 3, 0.02).usage()?;
+            let (world, _) = build_world(store, procedural_manifest(size)?, &source, &progress)?;
             (world, "procedural world".to_string())
         }
     };
@@ -101,15 +128,86 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
     Ok((world, source))
 }
 
+/// The manifest of the procedural world of `size` x `size` texels.
+fn procedural_manifest(size: u32) -> Result<Manifest> {
+    let encoding = HeightEncoding::spanning::<u16>(0.0, WORLD_MAX_HEIGHT)?;
+    Manifest::new(
+        UVec2::splat(size),
+        TILE_SIZE,
+        WORLD_TEXEL,
+        encoding,
+        WrapMode::Clamp,
+    )
+    .usage()
+}
+
+/// The world a flyover will stream, known before anything large is made or read: the manifest
+/// in `--world`, else the one building it will write (from `--heightmap`'s size, or the
+/// procedural world's). Says whether it must be built, and from a heightmap of which size.
+pub fn planned_world(cli: &Cli) -> Result<PlannedWorld> {
+    if let Some(manifest) = existing_manifest(&cli.world)? {
+        return Ok(PlannedWorld {
+            manifest,
+            build: None,
+        });
+    }
+    match &cli.heightmap {
+        Some(_) => {
+            let size = super::heightmap::planned_size(cli)?;
+            // Only the layout matters here; the build validates spacing and encoding.
+            let manifest = Manifest::new(
+                size,
+                TILE_SIZE,
+                WORLD_TEXEL,
+                HeightEncoding::spanning::<u16>(0.0, WORLD_MAX_HEIGHT)?,
+                WrapMode::Clamp,
+            )
+            .usage()?;
+            Ok(PlannedWorld {
+                manifest,
+                build: Some(WorldBuild::Heightmap(size)),
+            })
+        }
+        None => Ok(PlannedWorld {
+            manifest: procedural_manifest(cli.size.unwrap_or(DEFAULT_WORLD_SIZE))?,
+            build: Some(WorldBuild::Procedural),
+        }),
+    }
+}
+
+/// The world a flyover will stream, and whether it is built first.
+#[derive(Debug, Clone, Copy)]
+pub struct PlannedWorld {
+    /// Its layout.
+    pub manifest: Manifest,
+    /// `None` when it is on disk already.
+    pub build: Option<WorldBuild>,
+}
+
+/// Where a world to build comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WorldBuild {
+    /// The procedural terrain, generated tile by tile.
+    Procedural,
+    /// A heightmap of this size, read whole first.
+    Heightmap(UVec2),
+}
+
 /// Decodes every tile file of the world in `dir` and checks its manifest. Returns the bad
 /// tiles (key and why); an unreadable manifest is an error.
 pub fn verify(dir: &Path) -> Result<Vec<String>> {
     if !dir.is_dir() {
-        bail!("{} is not a world folder", dir.display());
+        return Err(usage(anyhow::anyhow!(
+            "{} is not a world folder",
+            dir.display()
+        )));
     }
-    let store: Arc<dyn TileStore> = Arc::new(FsStore::open(dir)?);
-    let world =
-        World::open(store).with_context(|| format!("no valid world in {}", dir.display()))?;
+    // The manifest alone first: anything but a regular file (a pipe would block) is refused.
+    existing_manifest(dir)?;
+    let store: Arc<dyn TileStore> = Arc::new(FsStore::open(dir).usage()?);
+    let world = World::open(store)
+        .with_context(|| format!("no valid world in {}", dir.display()))
+        .usage()?;
     let manifest = *world.manifest();
     let mut bad = Vec::new();
     for level in 0..manifest.levels {

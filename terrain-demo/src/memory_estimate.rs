@@ -1,0 +1,323 @@
+//! What a run will need in memory, from its flags and the headers of its input (a PNG's size,
+//! a world's manifest) before anything large is allocated: the maps, their derivatives, the
+//! collision mirror, the GPU copies and their upload staging, the frames, the contact sheet,
+//! the flyover's pools and tile atlas, and the process and GPU driver themselves.
+//!
+//! Each part is an upper bound of what the code allocates for it (the constants below say
+//! what they count), and the parts are added as if all were alive at once, so the total bounds
+//! the peak resident memory of the process. `tests/memory_limit.rs` runs the demo and checks
+//! the peak it measures (VmHWM) against this total; the README lists measured pairs.
+
+use crate::capture;
+use crate::cli::{Cli, ScenarioKind};
+use crate::scenarios::{
+    fit_overview, flyover, heightmap, snow,
+    world_files::{self, WorldBuild},
+};
+use anyhow::Result;
+use glam::UVec2;
+
+/// The process without its maps: code, the standard library, rayon's and the cache's threads
+/// (a 64 x 64 run without a GPU peaks at 14 MiB).
+const PROCESS: u64 = 32 << 20;
+/// The GPU driver, device, pipelines and compiled shaders, beyond the buffers counted below:
+/// 156 MiB (default scenario) and 196 MiB (snow: more pipelines) on lavapipe, whose "device
+/// memory" is the process's own; with room for drivers that keep more.
+const GPU_DRIVER: u64 = 320 << 20;
+
+/// Bytes per texel of a CPU map: the u16 heights kept, and 4 more while they are made (the f32
+/// heights of the procedural terrain, or a file's bytes beside the decoded samples).
+const MAP_PER_TEXEL: u64 = 2 + 4;
+/// Bytes per texel of the derivative (normal) map: a `Vec2<f32>`.
+const NORMALS_PER_TEXEL: u64 = 8;
+/// Bytes per texel of the collision mirror: front and back u16 buffers, a third copy while a
+/// reader still holds the back one, and regions (u16) on their way in.
+const COLLISION_PER_TEXEL: u64 = 3 * 2 + 2;
+/// Bytes per texel of writing `terrain.png` / `terrain_final.png`: the samples as bytes, the
+/// compressed file (at worst a little more than the samples) and the encoder's state.
+const TERRAIN_PNG_PER_TEXEL: u64 = 5;
+/// Bytes per texel of a coarse-map on the GPU: u32 heights, `vec2<f32>` normals, and the upload
+/// (a u32 copy and wgpu's staging buffer).
+const GPU_MAP_PER_TEXEL: u64 = 4 + 8 + 4 + 4;
+/// Bytes per texel of the default scenario's collision readback on the GPU: a ring of 4
+/// staging buffers that grow to the largest merged dirty region (at most the map, u32 per
+/// texel), and the arrived region converted to u16.
+const GPU_READBACK_PER_TEXEL: u64 = 4 * 4 + 2;
+/// Bytes per texel of the snow field on the CPU: f32 ground while it is made, the u32 heights
+/// of the simulation and their initial copy.
+const SNOW_FIELD_PER_TEXEL: u64 = 4 + 4 + 4;
+/// Bytes per texel of the snow field on the GPU: u32 heights, its upload staging, and the
+/// normals-and-heights buffer with its blur scratch (16 bytes each).
+const SNOW_GPU_PER_TEXEL: u64 = 4 + 4 + 16 + 16;
+/// The most columns the granular working set covers: active areas follow the objects (a
+/// vehicle and a walker, a few metres at 5 cm per texel), not the map.
+const GRANULAR_AREA_COLUMNS: u64 = 512 * 512;
+/// Bytes per column of an active area: the CPU step's buffers and, with a GPU, its scratch
+/// (depth, penetration, seeds, accumulators, distances) and the readback ring of 8 regions.
+const GRANULAR_PER_COLUMN: u64 = 64 + 96 + 32;
+/// Bytes per pixel of a 3D frame: colour and depth targets, the capture's staging buffer and
+/// its mapped copy, the image, and its PNG (a little more than the pixels at worst).
+const GPU_FRAME_PER_PIXEL: u64 = 4 * 5 + 8;
+/// Bytes per pixel of an overview frame (no GPU): the overlay's copy and the PNG.
+const OVERVIEW_FRAME_PER_PIXEL: u64 = 4 + 8;
+/// Bytes per pixel of the overview: the image, and the flyover's copy with tiles drawn on it.
+const OVERVIEW_PER_PIXEL: u64 = 8;
+/// Bytes per frame of the report: the frame's record in memory and its JSON (about 1 KiB).
+const REPORT_PER_FRAME: u64 = 4 << 10;
+/// The RAM pool beyond its budget: loader threads decoding (a file and its samples each) and
+/// the writer encoding tiles back.
+const RAM_POOL_SLACK: u64 = 16 << 20;
+/// The VRAM pool beyond its atlas: uploads staged for a few frames (2 MiB a frame) and the
+/// ring of 16 tile readbacks.
+const VRAM_POOL_SLACK: u64 = 16 << 20;
+/// Building a world: tiles in flight on each building thread and their pyramid levels.
+const WORLD_BUILD: u64 = 64 << 20;
+
+/// What a run is made of, as far as memory goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RunShape {
+    /// The scenario.
+    pub scenario: ScenarioKind,
+    /// Whether it renders on the GPU (the estimate assumes it does unless `--no-gpu`: without
+    /// an adapter the run falls back to less).
+    pub gpu: bool,
+    /// Texels of the scenario's CPU map (the flyover's: its overview level).
+    pub map: UVec2,
+    /// Frame size with a GPU.
+    pub resolution: UVec2,
+    /// Size of the overview (the frame without a GPU).
+    pub overview: UVec2,
+    /// Frames asked for.
+    pub frames: u32,
+    /// The flyover's world, budgets and atlas.
+    pub flyover: Option<FlyoverShape>,
+}
+
+/// The memory side of a flyover.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FlyoverShape {
+    /// RAM pool budget in bytes.
+    pub ram_budget: u64,
+    /// Bytes of the atlas's tile slots (as many whole tiles as the VRAM budget holds).
+    pub atlas: u64,
+    /// Bytes of the atlas's indirection table.
+    pub atlas_table: u64,
+    /// Whether the world is built first, and from what.
+    pub build: Option<WorldBuild>,
+}
+
+impl RunShape {
+    /// The shape of the run `cli` asks for. Reads only headers (a PNG's, a manifest); its
+    /// errors (an unreadable heightmap or world) are usage errors.
+    pub fn of(cli: &Cli) -> Result<Self> {
+        let gpu = !cli.no_gpu;
+        let (map, flyover) = match cli.scenario {
+            ScenarioKind::Default => (heightmap::planned_size(cli)?, None),
+            ScenarioKind::Snow => (UVec2::splat(cli.size.unwrap_or(snow::SNOW_SIZE)), None),
+            ScenarioKind::Flyover => {
+                let planned = world_files::planned_world(cli)?;
+                let m = planned.manifest;
+                let layout = m.tile_layout();
+                let slot = layout.tile_texels().saturating_mul(4);
+                let slots = cli.vram_budget.saturating_mul(1 << 20) / slot.max(1);
+                let shape = FlyoverShape {
+                    ram_budget: cli.ram_budget.saturating_mul(1 << 20),
+                    atlas: slots.saturating_mul(slot),
+                    atlas_table: layout.table_len().saturating_mul(4),
+                    build: planned.build,
+                };
+                (m.level_size(flyover::overview_level(&m)), Some(shape))
+            }
+        };
+        let overview = match cli.scenario {
+            // As `SnowScenario::overview_size`: no larger than the field.
+            ScenarioKind::Snow => map.min(UVec2::splat(cli.overview_size)),
+            _ => fit_overview(map, cli.overview_size),
+        };
+        Ok(Self {
+            scenario: cli.scenario,
+            gpu,
+            map,
+            resolution: cli.resolution,
+            overview,
+            frames: cli.frames,
+            flyover,
+        })
+    }
+
+    /// The parts of the run's memory, in bytes, named as report.json names them.
+    pub fn estimate(&self) -> Vec<(&'static str, u64)> {
+        let texels = area(self.map);
+        let per_texel = |bytes: u64| texels.saturating_mul(bytes);
+        let mut parts = vec![("process", PROCESS)];
+        if self.gpu {
+            parts.push(("gpu_driver", GPU_DRIVER));
+        }
+        match self.scenario {
+            ScenarioKind::Default => {
+                parts.push(("map", per_texel(MAP_PER_TEXEL)));
+                parts.push(("normals", per_texel(NORMALS_PER_TEXEL)));
+                parts.push(("collision", per_texel(COLLISION_PER_TEXEL)));
+                if self.gpu {
+                    let gpu = GPU_MAP_PER_TEXEL + GPU_READBACK_PER_TEXEL;
+                    parts.push(("gpu_map", per_texel(gpu)));
+                }
+            }
+            ScenarioKind::Snow => {
+                // The coarse-map copy of the field is made from it directly (2 bytes).
+                parts.push(("map", per_texel(2)));
+                parts.push(("normals", per_texel(NORMALS_PER_TEXEL)));
+                parts.push(("collision", per_texel(COLLISION_PER_TEXEL)));
+                let columns = texels.min(GRANULAR_AREA_COLUMNS);
+                let field = per_texel(SNOW_FIELD_PER_TEXEL);
+                parts.push((
+                    "granular",
+                    field.saturating_add(columns * GRANULAR_PER_COLUMN),
+                ));
+                if self.gpu {
+                    let gpu = GPU_MAP_PER_TEXEL + SNOW_GPU_PER_TEXEL;
+                    parts.push(("gpu_map", per_texel(gpu)));
+                }
+            }
+            ScenarioKind::Flyover => {
+                // The overview level: made from tiles, kept with its normals, uploaded once.
+                parts.push(("map", per_texel(MAP_PER_TEXEL)));
+                parts.push(("normals", per_texel(NORMALS_PER_TEXEL)));
+                let window = u64::from(flyover::COLLISION_WINDOW).pow(2);
+                parts.push(("collision", window.saturating_mul(COLLISION_PER_TEXEL)));
+                if self.gpu {
+                    parts.push(("gpu_map", per_texel(GPU_MAP_PER_TEXEL)));
+                }
+                if let Some(f) = self.flyover {
+                    parts.push(("ram_pool", f.ram_budget.saturating_add(RAM_POOL_SLACK)));
+                    if self.gpu {
+                        let vram = f.atlas.saturating_add(f.atlas_table);
+                        parts.push(("vram_pool", vram.saturating_add(VRAM_POOL_SLACK)));
+                    }
+                    match f.build {
+                        None => {}
+                        Some(WorldBuild::Procedural) => parts.push(("world_build", WORLD_BUILD)),
+                        Some(WorldBuild::Heightmap(size)) => {
+                            let map = area(size).saturating_mul(MAP_PER_TEXEL);
+                            parts.push(("world_build", map.saturating_add(WORLD_BUILD)));
+                        }
+                    }
+                }
+            }
+        }
+        parts.push(("terrain_png", per_texel(TERRAIN_PNG_PER_TEXEL)));
+        let frames = if self.gpu {
+            area(self.resolution).saturating_mul(GPU_FRAME_PER_PIXEL)
+        } else {
+            area(self.overview).saturating_mul(OVERVIEW_FRAME_PER_PIXEL)
+        };
+        parts.push(("frames", frames));
+        parts.push((
+            "overview",
+            area(self.overview).saturating_mul(OVERVIEW_PER_PIXEL),
+        ));
+        parts.push(("summary", capture::SUMMARY_BYTES));
+        parts.push((
+            "report",
+            u64::from(self.frames).saturating_mul(REPORT_PER_FRAME),
+        ));
+        parts
+    }
+}
+
+/// `size.x * size.y` without overflow.
+fn area(size: UVec2) -> u64 {
+    u64::from(size.x) * u64::from(size.y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn shape(args: &[&str]) -> RunShape {
+        let cli = Cli::try_parse_from(std::iter::once("demo").chain(args.iter().copied()))
+            .expect("flags parse");
+        RunShape::of(&cli).expect("shape")
+    }
+
+    fn part(parts: &[(&str, u64)], name: &str) -> u64 {
+        parts.iter().find(|(n, _)| *n == name).map_or(0, |p| p.1)
+    }
+
+    #[test]
+    fn the_estimate_grows_with_what_the_flags_ask_for() {
+        let small = shape(&["--size", "256", "--no-gpu"]).estimate();
+        let large = shape(&["--size", "4096", "--no-gpu"]).estimate();
+        // 256 times the texels: the map parts grow 256 times, the fixed parts not at all.
+        assert_eq!(part(&large, "map"), 256 * part(&small, "map"));
+        assert_eq!(part(&large, "normals"), 4096 * 4096 * 8);
+        assert_eq!(part(&large, "process"), part(&small, "process"));
+        assert_eq!(part(&small, "gpu_driver"), 0);
+        let gpu = shape(&["--size", "256", "--resolution", "1920x1080"]).estimate();
+        assert!(part(&gpu, "gpu_driver") > 0 && part(&gpu, "gpu_map") > 0);
+        assert_eq!(part(&gpu, "frames"), 1920 * 1080 * GPU_FRAME_PER_PIXEL);
+        let frames = shape(&["--no-gpu", "--frames", "100000"]).estimate();
+        assert_eq!(part(&frames, "report"), 100_000 * REPORT_PER_FRAME);
+    }
+
+    #[test]
+    fn the_overview_and_frames_follow_the_scenarios_sizes() {
+        // A long, thin heightmap: the overview keeps its aspect, the frame is the overview.
+        let cli = Cli::try_parse_from([
+            "demo",
+            "--no-gpu",
+            "--heightmap",
+            "thin.r16",
+            "--raw-size",
+            "16x4096",
+            "--overview-size",
+            "4096",
+        ])
+        .expect("flags");
+        let s = RunShape::of(&cli).expect("shape");
+        assert_eq!(s.overview, UVec2::new(16, 4096));
+        assert_eq!(part(&s.estimate(), "frames"), 16 * 4096 * 12);
+        let snow = shape(&[
+            "--scenario",
+            "snow",
+            "--size",
+            "128",
+            "--overview-size",
+            "256",
+        ]);
+        assert_eq!(snow.overview, UVec2::splat(128));
+        assert!(part(&snow.estimate(), "granular") > 0);
+    }
+
+    #[test]
+    fn the_flyover_counts_its_budgets_and_atlas() {
+        let world =
+            std::env::temp_dir().join(format!("terrain_estimate_no_world_{}", std::process::id()));
+        let world = world.display().to_string();
+        let s = shape(&[
+            "--scenario",
+            "flyover",
+            "--world",
+            &world,
+            "--ram-budget",
+            "100",
+            "--vram-budget",
+            "10",
+        ]);
+        let f = s.flyover.expect("flyover");
+        assert_eq!(f.build, Some(WorldBuild::Procedural));
+        // 40 whole 256^2 u32 tiles fit 10 MiB.
+        assert_eq!(f.atlas, 40 * 256 * 256 * 4);
+        assert!(f.atlas_table > 0);
+        let parts = s.estimate();
+        assert_eq!(part(&parts, "ram_pool"), (100 << 20) + RAM_POOL_SLACK);
+        assert_eq!(
+            part(&parts, "vram_pool"),
+            f.atlas + f.atlas_table + VRAM_POOL_SLACK
+        );
+        // The default 16384^2 world is shown at its 1024^2 level.
+        assert_eq!(s.map, UVec2::splat(1024));
+        assert_eq!(part(&parts, "world_build"), WORLD_BUILD);
+    }
+}

@@ -1,0 +1,67 @@
+//! Helpers shared by the tests that run the demo as a child process: a fresh output folder,
+//! and a run with a deadline, so a demo that hangs fails its test instead of blocking it.
+
+#![allow(dead_code)] // Each test file uses its own subset.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+/// The demo binary.
+pub fn demo() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_terrain-demo"))
+}
+
+/// A fresh, empty folder under the system temp folder, unique to this process and `name`.
+pub fn fresh_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("terrain_demo_{name}_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp folder");
+    dir
+}
+
+/// What a finished child left.
+#[derive(Debug)]
+pub struct Finished {
+    pub status: ExitStatus,
+    pub stderr: String,
+    pub elapsed: Duration,
+}
+
+/// Runs `cmd` to its end, killing it (and failing) after `limit`. Its stderr goes to a file
+/// beside `dir` (a pipe could fill up and stall a chatty child).
+pub fn run_within(mut cmd: Command, dir: &Path, limit: Duration) -> Finished {
+    let log = dir.join("stderr.txt");
+    let file = std::fs::File::create(&log).expect("stderr file");
+    let started = Instant::now();
+    let mut child = cmd
+        .stdout(Stdio::null())
+        .stderr(Stdio::from(file))
+        .spawn()
+        .expect("demo starts");
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            break status;
+        }
+        if started.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!(
+                "the demo ran longer than {limit:?} (a hang?); stderr: {}",
+                std::fs::read_to_string(&log).unwrap_or_default()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    Finished {
+        status,
+        stderr: std::fs::read_to_string(&log).unwrap_or_default(),
+        elapsed: started.elapsed(),
+    }
+}
+
+/// report.json of the run in `out`.
+pub fn report(out: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
+    serde_json::from_str(&text).expect("report.json parses")
+}
