@@ -24,8 +24,7 @@ use terrain_cache::manifest::{DetailLayout, MANIFEST_KEY, bounds_key, parse_tile
 use terrain_cache::store::check_key;
 use terrain_cache::world::read_manifest;
 use terrain_cache::{
-    CacheError, FsStore, Layer, LevelBounds, Manifest, TileData, TileId, TileRead, TileStore,
-    World,
+    CacheError, FsStore, Layer, LevelBounds, Manifest, TileData, TileId, TileRead, TileStore, World,
 };
 use terrain_core::io::{encode_png8, encode_png16};
 use terrain_core::{Grid, HeightEncoding, WrapMode};
@@ -302,7 +301,11 @@ fn any_tile(world: &World, layer: Layer, rng: &mut Rng) -> TileId {
 }
 
 /// Checks a decode result: `Ok` only with the layer's sample type and the world's tile size.
-fn check_tile(world: &World, layer: Layer, got: &Result<TileData, CacheError>) -> Result<(), String> {
+fn check_tile(
+    world: &World,
+    layer: Layer,
+    got: &Result<TileData, CacheError>,
+) -> Result<(), String> {
     if let Ok(d) = got {
         world
             .check_data(layer, d)
@@ -337,7 +340,9 @@ fn tile_valid(_: &(), case: &mut Case) -> Result<(), String> {
     if back != data {
         return Err(format!("{layer:?} tile {id} decoded to other samples"));
     }
-    world.write_tile(layer, id, &data).map_err(|e| e.to_string())?;
+    world
+        .write_tile(layer, id, &data)
+        .map_err(|e| e.to_string())?;
     match world.read_tile(layer, id) {
         Ok(TileRead::Stored(d)) if d == data => Ok(()),
         Ok(TileRead::Zero) if data.uniform_value() == world.manifest().layer_fill(layer).ok() => {
@@ -564,7 +569,16 @@ fn exercise_manifest(m: &Manifest, rng: &mut Rng) -> Result<(), String> {
     m.validate()
         .map_err(|e| format!("from_json accepted a manifest that does not validate: {e}"))?;
     let _ = (m.max_levels(), m.extent_m());
-    for level in [0, 1, m.levels - 1, m.levels, 31, 32, u32::MAX, rng.next_u32()] {
+    for level in [
+        0,
+        1,
+        m.levels - 1,
+        m.levels,
+        31,
+        32,
+        u32::MAX,
+        rng.next_u32(),
+    ] {
         let _ = (m.level_size(level), m.tiles_at(level));
         for layer in [Layer::Height, Layer::Detail] {
             let _ = (
@@ -577,7 +591,11 @@ fn exercise_manifest(m: &Manifest, rng: &mut Rng) -> Result<(), String> {
         }
     }
     for layer in [Layer::Height, Layer::Detail] {
-        let _ = (m.layer_levels(layer), m.layer_tile_size(layer), m.layer_fill(layer));
+        let _ = (
+            m.layer_levels(layer),
+            m.layer_tile_size(layer),
+            m.layer_fill(layer),
+        );
     }
     let world = World::create(Arc::new(MemStore::default()), *m)
         .map_err(|e| format!("a valid manifest could not create a world: {e}"))?;
@@ -643,13 +661,13 @@ fn manifest_fields(_: &(), case: &mut Case) -> Result<(), String> {
                 obj.insert("unknown_field".into(), edge_json(rng));
             }
             2 if key == "world_size" || key == "tiles" => {
-                obj.insert(
-                    key,
-                    serde_json::json!([rng.u32_edge(), rng.u32_edge()]),
-                );
+                obj.insert(key, serde_json::json!([rng.u32_edge(), rng.u32_edge()]));
             }
             3 if key == "wrap" => {
-                obj.insert(key, serde_json::json!(rng.pick(&["Repeat", "clamp ", "", "mirror"])));
+                obj.insert(
+                    key,
+                    serde_json::json!(rng.pick(&["Repeat", "clamp ", "", "mirror"])),
+                );
             }
             _ => {
                 obj.insert(key, edge_json(rng));
@@ -691,7 +709,9 @@ fn manifest_text(_: &(), case: &mut Case) -> Result<(), String> {
         }
     }
     let store = MemStore::default();
-    store.write(MANIFEST_KEY, &bytes).map_err(|e| e.to_string())?;
+    store
+        .write(MANIFEST_KEY, &bytes)
+        .map_err(|e| e.to_string())?;
     match read_manifest(&store) {
         Ok(m) => exercise_manifest(&m, rng),
         Err(_) => Ok(()),
@@ -705,14 +725,18 @@ fn manifest_random(_: &(), case: &mut Case) -> Result<(), String> {
     match rng.below(4) {
         0 => {
             let n = rng.range_usize(0, 600);
-            store.write(MANIFEST_KEY, &rng.bytes(n)).map_err(|e| e.to_string())?;
+            store
+                .write(MANIFEST_KEY, &rng.bytes(n))
+                .map_err(|e| e.to_string())?;
         }
         1 => {
             let n = rng.range_usize(0, 300);
             let text: String = (0..n)
                 .map(|_| char::from(rng.pick(b"{}[]\",:-.e0123456789 abcdefghijklmnopqrstuvwxyz_")))
                 .collect();
-            store.write(MANIFEST_KEY, text.as_bytes()).map_err(|e| e.to_string())?;
+            store
+                .write(MANIFEST_KEY, text.as_bytes())
+                .map_err(|e| e.to_string())?;
         }
         2 => {
             let mut big = m_json_padded(rng);
@@ -772,7 +796,10 @@ fn keys(_: &(), case: &mut Case) -> Result<(), String> {
     if let Some((l, i)) = parse_tile_key(&text)
         && tile_key(l, i) != text
     {
-        return Err(format!("{text:?} parsed as {l:?} {i}, which is written {}", tile_key(l, i)));
+        return Err(format!(
+            "{text:?} parsed as {l:?} {i}, which is written {}",
+            tile_key(l, i)
+        ));
     }
     let _ = check_key(&text);
     Ok(())
@@ -847,7 +874,10 @@ fn bounds_valid(_: &(), case: &mut Case) -> Result<(), String> {
     let b = random_bounds(&mut case.rng);
     match LevelBounds::from_bytes(&b.to_bytes(), b.tiles) {
         Ok(back) if back == b => Ok(()),
-        other => Err(format!("{} tiles: valid bounds parsed as {other:?}", b.tiles)),
+        other => Err(format!(
+            "{} tiles: valid bounds parsed as {other:?}",
+            b.tiles
+        )),
     }
 }
 
@@ -929,7 +959,9 @@ fn bounds_world(_: &(), case: &mut Case) -> Result<(), String> {
         for mm in &mut b.min_max {
             *mm = [rng.next_u32() as u16, rng.next_u32() as u16];
         }
-        world.write_bounds(write_level, &b).map_err(|e| e.to_string())?;
+        world
+            .write_bounds(write_level, &b)
+            .map_err(|e| e.to_string())?;
         if rng.chance(1, 2) {
             let key = bounds_key(Layer::Height, write_level);
             let mut bytes = b.to_bytes();
@@ -944,7 +976,10 @@ fn bounds_world(_: &(), case: &mut Case) -> Result<(), String> {
             if rng.chance(1, 2) {
                 fix_checksum(&mut bytes);
             }
-            world.store().write(&key, &bytes).map_err(|e| e.to_string())?;
+            world
+                .store()
+                .write(&key, &bytes)
+                .map_err(|e| e.to_string())?;
         }
     }
     match world.bounds(level) {
@@ -973,7 +1008,10 @@ fn bounds_inconsistent(_: &(), case: &mut Case) -> Result<(), String> {
     let tiles = world.manifest().layer_tiles(Layer::Height, level);
     match world.write_bounds(level, &b) {
         Ok(()) if b.tiles != tiles || b.min_max.len() as u64 != u64::from(tiles.x * tiles.y) => {
-            Err(format!("a world of {tiles} tiles at level {level} wrote bounds of {}", b.tiles))
+            Err(format!(
+                "a world of {tiles} tiles at level {level} wrote bounds of {}",
+                b.tiles
+            ))
         }
         _ => Ok(()),
     }
@@ -1009,8 +1047,8 @@ fn fuzz_bounds() {
 #[test]
 fn regression_bounds_file_length_of_huge_tile_counts() {
     let bytes = [
-        84, 67, 66, 78, 1, 0, 0, 0, 253, 255, 255, 255, 255, 255, 255, 255, 113, 108, 26, 169,
-        157, 69, 149, 11, 208, 173, 145, 117, 24, 122, 117, 228, 100, 219, 167, 92,
+        84, 67, 66, 78, 1, 0, 0, 0, 253, 255, 255, 255, 255, 255, 255, 255, 113, 108, 26, 169, 157,
+        69, 149, 11, 208, 173, 145, 117, 24, 122, 117, 228, 100, 219, 167, 92,
     ];
     let tiles = UVec2::new(4_294_967_293, 4_294_967_295);
     assert!(LevelBounds::from_bytes(&bytes, tiles).is_err());

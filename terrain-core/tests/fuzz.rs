@@ -23,9 +23,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 use terrain_core::Grid;
 use terrain_core::io::{
-    DEFAULT_MAX_SIDE, GrayImage, MapIoError, ReadLimits, decode_png, decode_png_rgba8,
-    decode_png8, decode_png16, decode_raw16, encode_png_rgba8, encode_png8, encode_png16,
-    encode_raw16, read_png, read_png8, read_png16, read_raw16,
+    DEFAULT_MAX_SIDE, GrayImage, MapIoError, ReadLimits, decode_png, decode_png_rgba8, decode_png8,
+    decode_png16, decode_raw16, encode_png_rgba8, encode_png8, encode_png16, encode_raw16,
+    read_png, read_png8, read_png16, read_raw16,
 };
 
 /// A decode of small images takes well under a millisecond; 250 ms leaves room for debug
@@ -211,11 +211,7 @@ impl Image {
             (1, 0, 2, 2),
             (0, 1, 1, 2),
         ];
-        let passes: &[(u32, u32, u32, u32)] = if interlaced {
-            &PASSES
-        } else {
-            &[(0, 0, 1, 1)]
-        };
+        let passes: &[(u32, u32, u32, u32)] = if interlaced { &PASSES } else { &[(0, 0, 1, 1)] };
         let bpp = self.filter_bpp();
         let mut out = Vec::new();
         for &(x0, y0, dx, dy) in passes {
@@ -390,11 +386,7 @@ fn decode(k: Kind, bytes: &[u8], limits: &ReadLimits) -> Result<Pixels, MapIoErr
     }
 }
 
-fn read_file(
-    k: Kind,
-    path: &std::path::Path,
-    limits: &ReadLimits,
-) -> Result<Pixels, MapIoError> {
+fn read_file(k: Kind, path: &std::path::Path, limits: &ReadLimits) -> Result<Pixels, MapIoError> {
     match k {
         Kind::Gray8 => read_png8(path, limits).map(Pixels::Gray8),
         Kind::Gray16 => read_png16(path, limits).map(Pixels::Gray16),
@@ -437,9 +429,7 @@ fn check_valid(
     let describe = || format!("{w}x{h} colour type {} depth {}", fmt.0, fmt.1);
     if w > limits.max_side || h > limits.max_side {
         return match got {
-            Err(MapIoError::TooLarge {
-                width, height, ..
-            }) if width == w && height == h => Ok(()),
+            Err(MapIoError::TooLarge { width, height, .. }) if width == w && height == h => Ok(()),
             other => Err(format!(
                 "{}: over max_side {}, expected TooLarge, got {other:?}",
                 describe(),
@@ -453,7 +443,10 @@ fn check_valid(
             if p == want {
                 return Ok(());
             }
-            return Err(format!("{}: decoded pixels differ from the encoded ones", describe()));
+            return Err(format!(
+                "{}: decoded pixels differ from the encoded ones",
+                describe()
+            ));
         }
         (Kind::Gray8 | Kind::Gray16, Err(MapIoError::NotGrayscale { .. })) => fmt.0 != 0,
         (Kind::Gray8 | Kind::Gray16, Err(MapIoError::UnsupportedBitDepth { bits })) => {
@@ -462,9 +455,13 @@ fn check_valid(
         (Kind::Gray8, Err(MapIoError::WrongBitDepth { expected: 8, found })) => {
             fmt == (0, 16) && found == 16
         }
-        (Kind::Gray16, Err(MapIoError::WrongBitDepth { expected: 16, found })) => {
-            fmt == (0, 8) && found == 8
-        }
+        (
+            Kind::Gray16,
+            Err(MapIoError::WrongBitDepth {
+                expected: 16,
+                found,
+            }),
+        ) => fmt == (0, 8) && found == 8,
         (Kind::Rgba8, Err(MapIoError::NotRgba { .. })) => fmt.0 != 6,
         (Kind::Rgba8, Err(MapIoError::WrongBitDepth { expected: 8, found })) => {
             fmt == (6, 16) && found == 16
@@ -487,7 +484,10 @@ fn check_any(k: Kind, bytes: &[u8], limits: &ReadLimits) -> Result<Option<Pixels
     if let Ok(p) = &got {
         let s = p.size();
         if s.x == 0 || s.y == 0 || s.x > limits.max_side || s.y > limits.max_side {
-            return Err(format!("decoded a {}x{} image, limits {limits:?}", s.x, s.y));
+            return Err(format!(
+                "decoded a {}x{} image, limits {limits:?}",
+                s.x, s.y
+            ));
         }
     }
     if k != Kind::Rgba8 {
@@ -538,7 +538,14 @@ fn seed_image(k: Kind, rng: &mut Rng) -> Image {
 fn seed_file(k: Kind, rng: &mut Rng) -> Vec<u8> {
     let img = seed_image(k, rng);
     if rng.chance(1, 3) && img.color_type == 0 && img.bit_depth >= 8 {
-        let e = expected_pixels(if img.bit_depth == 8 { Kind::Gray8 } else { Kind::Gray16 }, &img);
+        let e = expected_pixels(
+            if img.bit_depth == 8 {
+                Kind::Gray8
+            } else {
+                Kind::Gray16
+            },
+            &img,
+        );
         return match e {
             Pixels::Gray8(g) => encode_png8(&g).unwrap(),
             Pixels::Gray16(g) => encode_png16(&g).unwrap(),
@@ -764,10 +771,8 @@ struct Ctx {
 
 impl Ctx {
     fn new(target: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!(
-            "terrain-core-fuzz-{target}-{}",
-            std::process::id()
-        ));
+        let dir =
+            std::env::temp_dir().join(format!("terrain-core-fuzz-{target}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         Self { dir }
@@ -804,7 +809,12 @@ fn png_roundtrip<const K: u8>(_: &Ctx, case: &mut Case) -> Result<(), String> {
         Pixels::Rgba8(g) => encode_png_rgba8(&g),
     }
     .map_err(|e| format!("encoding {w}x{h} failed: {e}"))?;
-    check_valid(k, &img, &ReadLimits::default(), decode(k, &bytes, &ReadLimits::default()))
+    check_valid(
+        k,
+        &img,
+        &ReadLimits::default(),
+        decode(k, &bytes, &ReadLimits::default()),
+    )
 }
 
 /// A valid file cut anywhere before its end must be an error.
@@ -1202,7 +1212,9 @@ fn raw16_size_limits(_: &Ctx, case: &mut Case) -> Result<(), String> {
     let limits = ReadLimits { max_side };
     let pick_side = |rng: &mut Rng| match rng.below(4) {
         0 => rng.u32_edge(),
-        1 => max_side.saturating_add(rng.range_u32(0, 2)).saturating_sub(1),
+        1 => max_side
+            .saturating_add(rng.range_u32(0, 2))
+            .saturating_sub(1),
         2 => 0,
         _ => rng.range_u32(1, 40),
     };

@@ -10,13 +10,13 @@
 //! equal share of the target's time and runs its cases on a worker thread, while the test
 //! thread watches for a case that hangs. A case fails when it panics (caught, with its message
 //! and location), when its check returns an error, when it takes longer than the target's
-//! per-case limit twice in a row (once could be the scheduler; an input that is slow is slow
-//! again), or when it hangs (the worker is abandoned and the next class starts on a new one).
+//! per-case limit three times in a row (once could be the scheduler; an input that is slow is
+//! slow every time), or when it hangs (the worker is abandoned and the next class starts on a new one).
 //!
 //! Output, one line each, read by `cargo xtask fuzz`:
 //!
 //! ```text
-//! fuzz <target>: class <class>: <cases> cases in <s> s: ok
+//! fuzz <target>: class <class>: <cases> cases in <s> s[ (<n> drawn outside the class skipped)]: ok
 //! fuzz <target>: class <class>: <cases> cases in <s> s: FAILED (<why>) ...
 //! fuzz <target>: class <class>: disabled (<reason>)
 //! fuzz <target>: class <class>: <n> notes, first: <note>
@@ -29,7 +29,8 @@
 //!   run prints it.
 //! - `TERRAIN_FUZZ_CLASSES`: comma-separated class names to run; a disabled class runs when it
 //!   is named here.
-//! - `TERRAIN_FUZZ_REPLAY`: `class:case_seed` runs exactly that one case (a failure prints it).
+//! - `TERRAIN_FUZZ_REPLAY`: `class:case_seed` runs exactly that one case (a failure prints it),
+//!   printing what the class shows of its inputs.
 #![allow(dead_code)]
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -232,9 +233,28 @@ pub struct Case {
     pub rng: Rng,
     want_note: bool,
     note: Option<String>,
+    verbose: bool,
+    /// Set by a class for a case drawn outside it (a class cut off from another by a bound
+    /// the generator cannot hit exactly): the case is counted apart, not as a case run. A
+    /// field, not a method, so that a class can set it while it holds `rng` borrowed.
+    pub skipped: bool,
 }
 
 impl Case {
+    /// Prints `what` (the case's inputs, say) when the case is replayed alone
+    /// (`TERRAIN_FUZZ_REPLAY`); otherwise does nothing and never calls `what`.
+    pub fn show(&self, what: impl FnOnce() -> String) {
+        if self.verbose {
+            eprintln!("{}", what());
+        }
+    }
+
+    /// Whether the case is replayed alone (for a class that shows inputs while it holds
+    /// `rng` borrowed).
+    pub fn verbose(&self) -> bool {
+        self.verbose
+    }
+
     /// Records a note; `what` is only called for the first note of a class.
     pub fn note(&mut self, what: impl FnOnce() -> String) {
         if self.note.is_none() {
@@ -260,7 +280,7 @@ pub struct Class<C> {
 pub struct Target<C> {
     /// The target's name, as printed (`fuzz <name>: ...`).
     pub name: &'static str,
-    /// Longest a single case may take (twice in a row) before it fails as too slow.
+    /// Longest a single case may take (three times in a row) before it fails as too slow.
     pub per_case_limit: Duration,
     /// Every class, in the order they run.
     pub classes: Vec<Class<C>>,
@@ -273,7 +293,7 @@ pub struct Target<C> {
 enum Failure {
     Panic(String),
     Check(String),
-    Slow(Duration, Duration),
+    Slow(Vec<Duration>),
     Hang(Duration),
     WorkerLost,
 }
@@ -283,12 +303,17 @@ impl std::fmt::Display for Failure {
         match self {
             Failure::Panic(m) => write!(f, "panic: {m}"),
             Failure::Check(m) => write!(f, "check failed: {m}"),
-            Failure::Slow(a, b) => write!(
-                f,
-                "too slow: {:.1} ms, then {:.1} ms on a re-run",
-                a.as_secs_f64() * 1e3,
-                b.as_secs_f64() * 1e3
-            ),
+            Failure::Slow(times) => {
+                let ms: Vec<String> = times
+                    .iter()
+                    .map(|t| format!("{:.1} ms", t.as_secs_f64() * 1e3))
+                    .collect();
+                write!(
+                    f,
+                    "too slow: {} (every run over the limit)",
+                    ms.join(", then ")
+                )
+            }
             Failure::Hang(d) => write!(f, "hang: still running after {:.1} s", d.as_secs_f64()),
             Failure::WorkerLost => write!(f, "the worker thread died outside a case"),
         }
@@ -299,6 +324,7 @@ impl std::fmt::Display for Failure {
 #[derive(Debug)]
 struct ClassReport {
     cases: u64,
+    skipped: u64,
     notes: u64,
     first_note: Option<String>,
     failure: Option<(u64, u64, Failure)>,
@@ -428,7 +454,10 @@ pub fn run<C: Send + Sync + 'static>(target: Target<C>, ctx: C) {
         }
     }
     if let Some((r, _)) = &replay {
-        assert!(!plan.is_empty(), "fuzz {name}: no class named {r} to replay");
+        assert!(
+            !plan.is_empty(),
+            "fuzz {name}: no class named {r} to replay"
+        );
     }
 
     let total = Duration::from_secs_f64(env_seconds());
@@ -462,9 +491,14 @@ pub fn run<C: Send + Sync + 'static>(target: Target<C>, ctx: C) {
         let report = match worker {
             Err(e) => ClassReport {
                 cases: 0,
+                skipped: 0,
                 notes: 0,
                 first_note: None,
-                failure: Some((0, 0, Failure::Check(format!("could not start a worker: {e}")))),
+                failure: Some((
+                    0,
+                    0,
+                    Failure::Check(format!("could not start a worker: {e}")),
+                )),
             },
             Ok(_) => loop {
                 match rx.recv_timeout(Duration::from_millis(20)) {
@@ -472,6 +506,7 @@ pub fn run<C: Send + Sync + 'static>(target: Target<C>, ctx: C) {
                     Err(RecvTimeoutError::Disconnected) => {
                         break ClassReport {
                             cases: 0,
+                            skipped: 0,
                             notes: 0,
                             first_note: None,
                             failure: Some((0, 0, Failure::WorkerLost)),
@@ -485,6 +520,7 @@ pub fn run<C: Send + Sync + 'static>(target: Target<C>, ctx: C) {
                             // class on a fresh thread.
                             break ClassReport {
                                 cases: p.case,
+                                skipped: 0,
                                 notes: 0,
                                 first_note: None,
                                 failure: Some((p.case, p.case_seed, Failure::Hang(running))),
@@ -496,8 +532,13 @@ pub fn run<C: Send + Sync + 'static>(target: Target<C>, ctx: C) {
         };
         let secs = class_start.elapsed().as_secs_f64();
         all_cases += report.cases;
+        let skipped = if report.skipped > 0 {
+            format!(" ({} drawn outside the class skipped)", report.skipped)
+        } else {
+            String::new()
+        };
         let head = format!(
-            "fuzz {name}: class {}: {} cases in {secs:.1} s",
+            "fuzz {name}: class {}: {} cases in {secs:.1} s{skipped}",
             class.name, report.cases
         );
         match &report.failure {
@@ -549,6 +590,7 @@ fn work<C>(
     let end = Instant::now() + share;
     let mut report = ClassReport {
         cases: 0,
+        skipped: 0,
         notes: 0,
         first_note: None,
         failure: None,
@@ -557,6 +599,8 @@ fn work<C>(
         rng: Rng::new(0),
         want_note: true,
         note: None,
+        verbose: only.is_some(),
+        skipped: false,
     };
     let mut i = 0u64;
     loop {
@@ -571,11 +615,22 @@ fn work<C>(
         let mut outcome = run_case(ctx, class, seed, &mut case);
         let took = t.elapsed();
         if outcome.is_ok() && took > limit {
-            let again = Instant::now();
-            outcome = run_case(ctx, class, seed, &mut case);
-            let retook = again.elapsed();
-            if outcome.is_ok() && retook > limit {
-                outcome = Err(Failure::Slow(took, retook));
+            // Twice more: a loaded machine stalls a case now and then, a slow input is slow
+            // every time.
+            let mut times = vec![took];
+            while outcome.is_ok() && times.len() < 3 && times.iter().all(|t| *t > limit) {
+                let again = Instant::now();
+                outcome = run_case(ctx, class, seed, &mut case);
+                times.push(again.elapsed());
+            }
+            if outcome.is_ok() && times.iter().all(|t| *t > limit) {
+                outcome = Err(Failure::Slow(times));
+            }
+        }
+        if std::mem::take(&mut case.skipped) {
+            report.skipped += 1;
+            if only.is_some() {
+                eprintln!("the replayed case lies outside its class: skipped");
             }
         }
         if let Some(note) = case.note.take() {
@@ -586,12 +641,12 @@ fn work<C>(
         }
         if let Err(f) = outcome {
             report.failure = Some((i, seed, f));
-            report.cases = i + 1;
+            report.cases = i + 1 - report.skipped;
             return report;
         }
         i += 1;
         if only.is_some() || Instant::now() >= end {
-            report.cases = i;
+            report.cases = i - report.skipped;
             return report;
         }
     }
