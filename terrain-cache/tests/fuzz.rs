@@ -652,7 +652,11 @@ fn manifest_fields(_: &(), case: &mut Case) -> Result<(), String> {
             continue;
         };
         let keys: Vec<String> = obj.keys().cloned().collect();
-        let key = keys[rng.index(keys.len())].clone();
+        // An earlier edit may have emptied the object (or replaced the detail object).
+        let Some(key) = keys.get(rng.index(keys.len())).cloned() else {
+            obj.insert("tile_size".into(), edge_json(rng));
+            continue;
+        };
         match rng.below(6) {
             0 => {
                 obj.remove(&key);
