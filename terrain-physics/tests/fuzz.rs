@@ -184,6 +184,13 @@ impl Field {
         (f64::from(if axis == 0 { lx } else { lz }) / self.ts).abs()
     }
 
+    /// Whether the collider's local coordinates of world point `p` (`p - translation` in f32)
+    /// overflow: such a point is out of every query's reach, and refusing it is a right answer
+    /// (answering NaN is noted).
+    fn overflows(&self, p: Vec3) -> bool {
+        !(p - self.translation).is_finite()
+    }
+
     fn is_far(&self, x: f32, z: f32) -> bool {
         !(self.texels(x, z, 0) < FAR_TEXELS && self.texels(x, z, 1) < FAR_TEXELS)
     }
@@ -475,7 +482,7 @@ fn local_overflow_refused<T: std::fmt::Debug, E: std::fmt::Display>(
     r: &Result<T, E>,
     case: &mut Case,
 ) -> bool {
-    if (p - f.translation).is_finite() {
+    if !f.overflows(p) {
         return false;
     }
     if let Err(e) = r {
@@ -519,10 +526,18 @@ fn height_normal(ctx: &Ctx, case: &mut Case) -> Result<(), String> {
     let f = ctx.field(&mut case.rng);
     let p = any_pos(f, &mut case.rng);
     case.show(|| format!("field {}, pos {p:?}", f.label));
-    let h = timed("height", || f.collider.height(p))?
-        .map_err(|e| format!("height at {p}: finite input refused: {e}"))?;
-    let n = timed("normal", || f.collider.normal(p))?
-        .map_err(|e| format!("normal at {p}: finite input refused: {e}"))?;
+    let h = timed("height", || f.collider.height(p))?;
+    let n = timed("normal", || f.collider.normal(p))?;
+    let p3 = Vec3::new(p.x, 0.0, p.y);
+    if f.overflows(p3) {
+        // Out of every query's reach: an error is the right answer, a value (NaN) is noted.
+        if !local_overflow_refused(f, p3, &h, case) {
+            case.note(|| format!("height at {p:?} on field {} is {h:?}", f.label));
+        }
+        return Ok(());
+    }
+    let h = h.map_err(|e| format!("height at {p}: finite input refused: {e}"))?;
+    let n = n.map_err(|e| format!("normal at {p}: finite input refused: {e}"))?;
     if !h.is_finite() && f.lo.abs() < 1e38 && f.hi.abs() < 1e38 {
         case.note(|| format!("height at {p:?} on field {} is {h}", f.label));
     }
@@ -1027,17 +1042,24 @@ fn bounded_ground_far(ctx: &Ctx, case: &mut Case) -> Result<(), String> {
         )
     });
     let g = BoundedGround::new(&f.collider, &pend, &[]);
-    let ok = |what: &str, r: Result<f32, terrain_physics::PhysicsError>| {
-        r.map(|_| ())
-            .map_err(|e| format!("{what}: finite input refused: {e}"))
+    let p3 = Vec3::new(p.x, 0.0, p.y);
+    let overflow = f.overflows(p3) || f.overflows(c);
+    let ok = |what: &str, r: Result<(), terrain_physics::PhysicsError>| match r {
+        Err(e) if !overflow => Err(format!("{what}: finite input refused: {e}")),
+        _ => Ok(()),
     };
-    ok("raise_at", timed("raise_at", || g.raise_at(p))?)?;
-    ok("raise_under", timed("raise_under", || g.raise_under(c, r))?)?;
-    timed("height_interval", || g.height_interval(p))?
-        .map_err(|e| format!("height_interval: finite input refused: {e}"))?;
+    ok("raise_at", timed("raise_at", || g.raise_at(p))?.map(|_| ()))?;
+    ok(
+        "raise_under",
+        timed("raise_under", || g.raise_under(c, r))?.map(|_| ()),
+    )?;
+    ok(
+        "height_interval",
+        timed("height_interval", || g.height_interval(p))?.map(|_| ()),
+    )?;
     ok(
         "ground_height",
-        timed("ground_height", || g.ground_height(p))?,
+        timed("ground_height", || g.ground_height(p))?.map(|_| ()),
     )?;
     Ok(())
 }
@@ -1417,6 +1439,7 @@ fn field_construction(_: &Ctx, case: &mut Case) -> Result<(), String> {
         let got = timed("sphere_contact", || f.collider.sphere_contact(c, r))?;
         if let Err(e) = got
             && c.is_finite()
+            && !f.overflows(c)
         {
             return Err(format!("sphere_contact: finite input refused: {e}"));
         }
