@@ -321,13 +321,22 @@ impl LevelBounds {
             .copied()
     }
 
+    /// Bytes of the file of `tiles` tiles. Saturating: a tile count given to
+    /// [`from_bytes`](Self::from_bytes) may be anything up to `u32::MAX` per side, whose file
+    /// would not fit in a `u64` (the fuzz target `bounds` found the overflow); no slice is that
+    /// long, so a saturated length is simply never matched.
     fn file_len(tiles: UVec2) -> u64 {
-        16 + 4 * u64::from(tiles.x) * u64::from(tiles.y) + 8
+        4u64.saturating_mul(u64::from(tiles.x))
+            .saturating_mul(u64::from(tiles.y))
+            .saturating_add(16 + 8)
     }
 
     /// The file bytes.
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(Self::file_len(self.tiles) as usize);
+        // Sized from the entries actually written, not from `tiles`: the fields are public and
+        // may disagree, and a capacity from a large `tiles` aborted on allocation (found by the
+        // fuzz target `bounds`).
+        let mut out = Vec::with_capacity(24 + 4 * self.min_max.len());
         out.extend_from_slice(Self::MAGIC);
         out.extend_from_slice(&1u32.to_le_bytes());
         out.extend_from_slice(&self.tiles.x.to_le_bytes());

@@ -24,19 +24,25 @@ pub fn morph_alpha(texel: IVec2, camera_texel: Vec2, scale: u32, n: u32, width: 
 /// The next coarser level's surface under a vertex at `texel` of a level with `scale` texels
 /// per grid unit: the vertex's own height where it is a coarser vertex too, else the mean of
 /// its two coarser neighbours (odd on one axis) or of the four around it (odd on both).
+///
+/// Any input is answered, never a panic: as in the shader's i32 arithmetic, neighbour
+/// coordinates wrap at the ends of `i32`, and a scale whose division is undefined (0, or a
+/// scale above `i32::MAX` dividing `i32::MIN`) divides as WGSL's `/` does, giving the texel
+/// coordinate itself. (A scale of 0 divided by zero; found by terrain-lod's fuzz target.)
 pub fn coarse_height(texel: IVec2, scale: u32, height: impl Fn(IVec2) -> f32) -> f32 {
     let s = scale as i32;
-    let odd = IVec2::new(texel.x.div_euclid(s) & 1, texel.y.div_euclid(s) & 1);
+    let grid = |t: i32| t.checked_div_euclid(s).unwrap_or(t);
+    let odd = IVec2::new(grid(texel.x) & 1, grid(texel.y) & 1);
+    // `odd` is 0 or 1 per axis, so the step is 0 or the scale: no overflow.
     let step = odd * s;
+    let (x, z) = (texel.x, texel.y);
+    let at = |x: i32, z: i32| height(IVec2::new(x, z));
+    let (x_lo, x_hi) = (x.wrapping_sub(step.x), x.wrapping_add(step.x));
+    let (z_lo, z_hi) = (z.wrapping_sub(step.y), z.wrapping_add(step.y));
     match (odd.x, odd.y) {
         (0, 0) => height(texel),
-        (1, 1) => {
-            0.25 * (height(texel - step)
-                + height(texel + step)
-                + height(texel + IVec2::new(step.x, -step.y))
-                + height(texel + IVec2::new(-step.x, step.y)))
-        }
-        _ => 0.5 * (height(texel - step) + height(texel + step)),
+        (1, 1) => 0.25 * (at(x_lo, z_lo) + at(x_hi, z_hi) + at(x_hi, z_lo) + at(x_lo, z_hi)),
+        _ => 0.5 * (at(x_lo, z_lo) + at(x_hi, z_hi)),
     }
 }
 
