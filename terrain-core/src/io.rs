@@ -153,6 +153,17 @@ pub enum MapIoError {
         /// The limit in force.
         max_side: u32,
     },
+    /// Decoding needs a buffer larger than the machine can allocate (a header announcing a huge
+    /// image under raised limits): refused instead of aborting the process.
+    #[error("a {width}x{height} image needs {bytes} bytes to decode, more than can be allocated")]
+    OutOfMemory {
+        /// Width announced.
+        width: u32,
+        /// Height announced.
+        height: u32,
+        /// Bytes the decoder asked for.
+        bytes: usize,
+    },
     /// A RAW16 file or buffer does not hold exactly `width * height` little-endian `u16`s.
     #[error(
         "RAW16 data of {actual_bytes} bytes does not match size {width}x{height}, which needs \
@@ -605,6 +616,18 @@ fn decode_png_pixels<R: BufRead + Seek>(
         });
     }
 
+    // A tiny file may announce a huge image (under raised limits): an allocation that cannot
+    // succeed must be an error, not an abort. Probed fallibly first, then made zeroed (the
+    // zeroed allocation keeps untouched pages lazy, which filling a reserved vector would not).
+    let mut probe: Vec<u8> = Vec::new();
+    probe
+        .try_reserve_exact(buffer_len)
+        .map_err(|_| MapIoError::OutOfMemory {
+            width,
+            height,
+            bytes: buffer_len,
+        })?;
+    drop(probe);
     let mut buf = vec![0u8; buffer_len];
     let frame = reader
         .next_frame(&mut buf)

@@ -1077,3 +1077,18 @@ proptest! {
         }
     }
 }
+
+/// Found by the fuzzing (`cargo xtask fuzz`): with raised limits, a 78-byte PNG whose header
+/// announces 2^30 x 2^30 samples made the decoder reserve the whole output up front, and the
+/// failed allocation aborted the process.
+#[test]
+fn raised_limits_never_abort_on_a_huge_header() {
+    let mut png = encode_png16(&Grid::new(2, 2, 7u16).unwrap()).unwrap();
+    png[16..20].copy_from_slice(&(1u32 << 30).to_be_bytes());
+    png[20..24].copy_from_slice(&(1u32 << 30).to_be_bytes());
+    let crc = crc32(&[&png[12..29]]);
+    png[29..33].copy_from_slice(&crc.to_be_bytes());
+    let limits = ReadLimits { max_side: u32::MAX };
+    assert!(decode_png16(&png, &limits).is_err());
+    assert!(decode_png(&png, &limits).is_err());
+}
