@@ -210,6 +210,17 @@ fn read_dir(dir: &Path) -> Result<Vec<(PathBuf, bool, String)>, CacheError> {
     Ok(out)
 }
 
+/// The error for a tile path that is not a regular file.
+fn not_regular(path: &Path) -> CacheError {
+    CacheError::Io {
+        path: path.to_path_buf(),
+        source: io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "not a regular file (a directory, a named pipe or a device is no tile)",
+        ),
+    }
+}
+
 impl TileStore for FsStore {
     fn read(&self, key: &str, max_len: u64) -> Result<Option<Vec<u8>>, CacheError> {
         let path = self.path_of(key)?;
@@ -217,12 +228,25 @@ impl TileStore for FsStore {
             path: path.clone(),
             source,
         };
+        // Only regular files are tiles: opening a named pipe would block the loader until
+        // something writes to it, and a directory or a device is no tile either. Checked
+        // without opening (stat follows links), then again on the open handle.
+        match fs::metadata(&path) {
+            Ok(m) if !m.is_file() => return Err(not_regular(&path)),
+            Ok(_) => {}
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(io_err(e)),
+        }
         let file = match File::open(&path) {
             Ok(f) => f,
             Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
             Err(e) => return Err(io_err(e)),
         };
-        let len = file.metadata().map_err(io_err)?.len();
+        let meta = file.metadata().map_err(io_err)?;
+        if !meta.is_file() {
+            return Err(not_regular(&path));
+        }
+        let len = meta.len();
         if len > max_len {
             return Err(CacheError::TooLarge {
                 key: key.to_owned(),

@@ -188,3 +188,34 @@ fn object_store_backends_and_files_are_bit_identical() {
     std::fs::remove_dir_all(&d1).unwrap();
     std::fs::remove_dir_all(&d2).unwrap();
 }
+
+/// A tile path that is a named pipe or a directory is an error at once (opening the pipe used
+/// to block the loader thread until something wrote to it), and the pool treats it as missing.
+#[test]
+fn special_files_in_place_of_tiles_are_errors_not_hangs() {
+    let dir = temp_dir("special");
+    let store: Arc<dyn TileStore> = Arc::new(FsStore::open(&dir).unwrap());
+    let _world = build(store.clone(), UVec2::splat(64), 32);
+    let pipe_key = tile_key(Layer::Height, TileId::new(0, 1, 0));
+    let dir_key = tile_key(Layer::Height, TileId::new(0, 0, 1));
+    let pipe = dir.join(&pipe_key);
+    std::fs::remove_file(&pipe).unwrap();
+    let made = std::process::Command::new("mkfifo").arg(&pipe).status();
+    assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+    let as_dir = dir.join(&dir_key);
+    std::fs::remove_file(&as_dir).unwrap();
+    std::fs::create_dir(&as_dir).unwrap();
+    // On another thread with a deadline: the old code blocked forever on the pipe.
+    let (tx, rx) = std::sync::mpsc::channel();
+    let s = store.clone();
+    std::thread::spawn(move || {
+        let _ = tx.send((
+            s.read(&pipe_key, 1 << 20).is_err(),
+            s.read(&dir_key, 1 << 20).is_err(),
+        ));
+    });
+    let (pipe_err, dir_err) = rx
+        .recv_timeout(Duration::from_secs(10))
+        .expect("reading a named pipe as a tile must not block");
+    assert!(pipe_err && dir_err);
+}
