@@ -12,8 +12,13 @@
 //! - PNG: single-channel grayscale, 8 or 16 bits per sample, interlaced or not. 16-bit samples
 //!   are big-endian in the file (as the PNG specification requires); decoding keeps their full
 //!   precision.
-//! - RAW16: headerless `u16` samples, little-endian, row-major (row `y = 0` first), as written
-//!   by common terrain tools. The size is not stored in the file and must be given.
+//! - RAW16: headerless `u16` samples, little-endian by default (big-endian on request: see
+//!   [`ByteOrder`]), row-major (row `y = 0` first), as written by common terrain tools. The size
+//!   is not stored in the file and must be given.
+//! - R32: headerless `f32` heights in metres, laid out as RAW16 (the `.r32` of terrain tools).
+//!
+//! GeoTIFF DEMs are read by [`crate::geotiff`], and [`crate::dem`] picks the reader for a DEM
+//! file and turns its heights into a coarse-map; both open files through this module.
 
 use crate::error::CoreError;
 use crate::grid::Grid;
@@ -201,9 +206,78 @@ pub enum MapIoError {
         /// What it is, in words (`directory`, `named pipe (FIFO)`, `character device`, ...).
         kind: &'static str,
     },
+    /// An R32 file or buffer does not hold exactly `width * height` `f32`s.
+    #[error(
+        "R32 data of {actual_bytes} bytes does not match size {width}x{height}, which needs \
+         exactly {expected_bytes} bytes (4 per sample): check the size given for this file"
+    )]
+    R32SizeMismatch {
+        /// Width requested.
+        width: u32,
+        /// Height requested.
+        height: u32,
+        /// Byte count the size needs.
+        expected_bytes: u64,
+        /// Byte count found.
+        actual_bytes: u64,
+    },
+    /// The format of a DEM file could not be told from its name or its first bytes.
+    #[error(
+        "cannot tell the format of {}: name it .png, .r16 / .raw (RAW16), .r32 or \
+         .tif / .tiff (GeoTIFF), or choose the format explicitly",
+        path.display()
+    )]
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A headerless format was chosen without its size.
+    #[error("{format} files do not store their size: give the width and height of this one")]
+    RawSizeRequired {
+        /// The format (`RAW16`, `R32`).
+        format: &'static str,
+    },
+    /// A size was given for a format that stores its own.
+    #[error(
+        "{format} files store their size: a raw size is only used for RAW16 and R32 files"
+    )]
+    RawSizeUnused {
+        /// The format (`PNG`, `GeoTIFF`).
+        format: &'static str,
+    },
+    /// The TIFF is valid but not a DEM this reader takes (several bands, a palette, 1-bit or
+    /// 16-bit float samples, a compression it lacks, ...).
+    #[error(
+        "the TIFF is not a supported DEM: {reason} (a DEM is one band of u8, i8, u16, i16, \
+         u32, i32, f32 or f64 samples, uncompressed, LZW, Deflate or PackBits)"
+    )]
+    UnsupportedTiff {
+        /// What the file has, in words.
+        reason: String,
+    },
+    /// Every sample of the DEM is nodata: there is no height to fill the holes with.
+    #[error(
+        "all {count} samples are nodata ({marker}): the DEM holds no height at all"
+    )]
+    NoValidHeights {
+        /// How many samples.
+        count: u64,
+        /// What marks nodata, in words (`the GDAL nodata value -9999`, `NaN or infinite`).
+        marker: String,
+    },
     /// The decoded samples could not form a grid.
     #[error(transparent)]
     Grid(#[from] CoreError),
+}
+
+/// The byte order of the samples of a headerless file (RAW16, R32).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ByteOrder {
+    /// Least significant byte first (PC tools, the default).
+    #[default]
+    Little,
+    /// Most significant byte first.
+    Big,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -242,7 +316,7 @@ fn file_kind(ft: &fs::FileType) -> &'static str {
 /// until one comes; and again on the open file, in case the path was replaced in between.
 /// (A pipe swapped in exactly between the two could still block the open: the standard library
 /// has no portable non-blocking open.)
-fn open_regular(path: &Path) -> Result<File, MapIoError> {
+pub(crate) fn open_regular(path: &Path) -> Result<File, MapIoError> {
     let io_err = |source| MapIoError::Io {
         path: path.to_path_buf(),
         source,
@@ -267,7 +341,7 @@ fn open_regular(path: &Path) -> Result<File, MapIoError> {
 // Size checks
 
 /// Checks a size against the limits: zero sides first, then the largest side.
-fn check_size(width: u32, height: u32, limits: &ReadLimits) -> Result<(), MapIoError> {
+pub(crate) fn check_size(width: u32, height: u32, limits: &ReadLimits) -> Result<(), MapIoError> {
     if width == 0 || height == 0 {
         return Err(MapIoError::ZeroSize { width, height });
     }
@@ -616,19 +690,8 @@ fn decode_png_pixels<R: BufRead + Seek>(
         });
     }
 
-    // A tiny file may announce a huge image (under raised limits): an allocation that cannot
-    // succeed must be an error, not an abort. Probed fallibly first, then made zeroed (the
-    // zeroed allocation keeps untouched pages lazy, which filling a reserved vector would not).
-    let mut probe: Vec<u8> = Vec::new();
-    probe
-        .try_reserve_exact(buffer_len)
-        .map_err(|_| MapIoError::OutOfMemory {
-            width,
-            height,
-            bytes: buffer_len,
-        })?;
-    drop(probe);
-    let mut buf = vec![0u8; buffer_len];
+    // A tiny file may announce a huge image (under raised limits): see `try_zeroed`.
+    let mut buf = try_zeroed::<u8>(buffer_len, width, height)?;
     let frame = reader
         .next_frame(&mut buf)
         .map_err(|e| map_decoding_error(e, Stage::ImageData, source, size, limits))?;
@@ -882,20 +945,73 @@ pub fn write_png_rgba8(path: impl AsRef<Path>, grid: &Grid<[u8; 4]>) -> Result<(
 }
 
 // ---------------------------------------------------------------------------------------------
-// RAW16
+// RAW16 and R32
 
-/// Checks a RAW16 size and returns the byte count it needs.
-fn raw16_len(size: UVec2, limits: &ReadLimits) -> Result<u64, MapIoError> {
+/// Checks a headerless file's size and returns the byte count it needs at `sample_bytes` per
+/// sample.
+fn raw_len(size: UVec2, sample_bytes: u64, limits: &ReadLimits) -> Result<u64, MapIoError> {
     check_size(size.x, size.y, limits)?;
-    // (2^32 - 1)^2 * 2 can overflow u64 when the limit is raised that far.
+    // (2^32 - 1)^2 * 4 can overflow u64 when the limit is raised that far.
     u64::from(size.x)
         .checked_mul(u64::from(size.y))
-        .and_then(|n| n.checked_mul(2))
+        .and_then(|n| n.checked_mul(sample_bytes))
         .ok_or(MapIoError::TooLarge {
             width: size.x,
             height: size.y,
             max_side: limits.max_side,
         })
+}
+
+/// A zeroed buffer of `len` elements, or [`MapIoError::OutOfMemory`] when it cannot be
+/// allocated (a header or a size announcing a huge image under raised limits must be an error,
+/// not an abort). Probed fallibly first, then made zeroed: the zeroed allocation keeps
+/// untouched pages lazy, which filling a reserved vector would not.
+pub(crate) fn try_zeroed<T: Clone + Default>(
+    len: usize,
+    width: u32,
+    height: u32,
+) -> Result<Vec<T>, MapIoError> {
+    let bytes = len.saturating_mul(std::mem::size_of::<T>());
+    let mut probe: Vec<T> = Vec::new();
+    probe
+        .try_reserve_exact(len)
+        .map_err(|_| MapIoError::OutOfMemory {
+            width,
+            height,
+            bytes,
+        })?;
+    drop(probe);
+    Ok(vec![T::default(); len])
+}
+
+/// The samples of headerless data: `bytes` cut into `N`-byte samples in `order`.
+fn raw_samples<const N: usize, T>(
+    bytes: &[u8],
+    order: ByteOrder,
+    from: fn([u8; N], ByteOrder) -> T,
+) -> Vec<T> {
+    bytes
+        .chunks_exact(N)
+        .map(|c| {
+            let mut b = [0u8; N];
+            b.copy_from_slice(c);
+            from(b, order)
+        })
+        .collect()
+}
+
+fn u16_from(b: [u8; 2], order: ByteOrder) -> u16 {
+    match order {
+        ByteOrder::Little => u16::from_le_bytes(b),
+        ByteOrder::Big => u16::from_be_bytes(b),
+    }
+}
+
+fn f32_from(b: [u8; 4], order: ByteOrder) -> f32 {
+    match order {
+        ByteOrder::Little => f32::from_le_bytes(b),
+        ByteOrder::Big => f32::from_be_bytes(b),
+    }
 }
 
 /// Decodes RAW16 data: `size.x * size.y` little-endian `u16` samples, row-major.
@@ -908,7 +1024,17 @@ pub fn decode_raw16(
     size: UVec2,
     limits: &ReadLimits,
 ) -> Result<Grid<u16>, MapIoError> {
-    let expected_bytes = raw16_len(size, limits)?;
+    decode_raw16_ordered(bytes, size, ByteOrder::Little, limits)
+}
+
+/// Decodes RAW16 data whose samples are in `order` (see [`decode_raw16`]).
+pub fn decode_raw16_ordered(
+    bytes: &[u8],
+    size: UVec2,
+    order: ByteOrder,
+    limits: &ReadLimits,
+) -> Result<Grid<u16>, MapIoError> {
+    let expected_bytes = raw_len(size, 2, limits)?;
     let actual_bytes = bytes.len() as u64;
     if actual_bytes != expected_bytes {
         return Err(MapIoError::RawSizeMismatch {
@@ -918,11 +1044,90 @@ pub fn decode_raw16(
             actual_bytes,
         });
     }
-    let samples = bytes
-        .chunks_exact(2)
-        .map(|b| u16::from_le_bytes([b[0], b[1]]))
-        .collect();
+    let samples = raw_samples(bytes, order, u16_from);
     Ok(Grid::from_vec(size.x, size.y, samples)?)
+}
+
+/// Decodes R32 data: `size.x * size.y` `f32` heights in `order`, row-major. Sizes are checked
+/// as in [`decode_raw16`]; a byte count other than `4 * size.x * size.y` is
+/// [`MapIoError::R32SizeMismatch`]. NaN and infinite samples are kept as they are (the DEM
+/// import treats them as nodata).
+pub fn decode_r32(
+    bytes: &[u8],
+    size: UVec2,
+    order: ByteOrder,
+    limits: &ReadLimits,
+) -> Result<Grid<f32>, MapIoError> {
+    let expected_bytes = raw_len(size, 4, limits)?;
+    let actual_bytes = bytes.len() as u64;
+    if actual_bytes != expected_bytes {
+        return Err(MapIoError::R32SizeMismatch {
+            width: size.x,
+            height: size.y,
+            expected_bytes,
+            actual_bytes,
+        });
+    }
+    let samples = raw_samples(bytes, order, f32_from);
+    Ok(Grid::from_vec(size.x, size.y, samples)?)
+}
+
+/// Reads the whole of a headerless file that must be `expected_bytes` long; `mismatch` makes
+/// the error for another length. The length is checked from the file's metadata before
+/// anything is read, so a wrong size never causes a large read.
+fn read_raw_file(
+    path: &Path,
+    size: UVec2,
+    expected_bytes: u64,
+    limits: &ReadLimits,
+    mismatch: fn(UVec2, u64, u64) -> MapIoError,
+) -> Result<Vec<u8>, MapIoError> {
+    let io_err = |source| MapIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = open_regular(path)?;
+    let actual_bytes = file.metadata().map_err(io_err)?.len();
+    if actual_bytes != expected_bytes {
+        return Err(mismatch(size, expected_bytes, actual_bytes));
+    }
+    let capacity = usize::try_from(expected_bytes).map_err(|_| MapIoError::TooLarge {
+        width: size.x,
+        height: size.y,
+        max_side: limits.max_side,
+    })?;
+    let mut bytes = Vec::new();
+    bytes
+        .try_reserve_exact(capacity.saturating_add(1))
+        .map_err(|_| MapIoError::OutOfMemory {
+            width: size.x,
+            height: size.y,
+            bytes: capacity,
+        })?;
+    // Read at most one byte more than expected, so a file that changed since the metadata
+    // check is still caught without reading it all.
+    file.take(expected_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(io_err)?;
+    Ok(bytes)
+}
+
+fn raw16_mismatch(size: UVec2, expected_bytes: u64, actual_bytes: u64) -> MapIoError {
+    MapIoError::RawSizeMismatch {
+        width: size.x,
+        height: size.y,
+        expected_bytes,
+        actual_bytes,
+    }
+}
+
+fn r32_mismatch(size: UVec2, expected_bytes: u64, actual_bytes: u64) -> MapIoError {
+    MapIoError::R32SizeMismatch {
+        width: size.x,
+        height: size.y,
+        expected_bytes,
+        actual_bytes,
+    }
 }
 
 /// Reads a RAW16 file of the given size (see [`decode_raw16`]).
@@ -934,34 +1139,59 @@ pub fn read_raw16(
     size: UVec2,
     limits: &ReadLimits,
 ) -> Result<Grid<u16>, MapIoError> {
+    read_raw16_ordered(path, size, ByteOrder::Little, limits)
+}
+
+/// Reads a RAW16 file of the given size whose samples are in `order` (see [`read_raw16`]).
+pub fn read_raw16_ordered(
+    path: impl AsRef<Path>,
+    size: UVec2,
+    order: ByteOrder,
+    limits: &ReadLimits,
+) -> Result<Grid<u16>, MapIoError> {
+    let expected = raw_len(size, 2, limits)?;
+    let bytes = read_raw_file(path.as_ref(), size, expected, limits, raw16_mismatch)?;
+    decode_raw16_ordered(&bytes, size, order, limits)
+}
+
+/// Reads an R32 file of the given size (see [`decode_r32`]); the length is checked before
+/// anything is read, as in [`read_raw16`].
+pub fn read_r32(
+    path: impl AsRef<Path>,
+    size: UVec2,
+    order: ByteOrder,
+    limits: &ReadLimits,
+) -> Result<Grid<f32>, MapIoError> {
+    let expected = raw_len(size, 4, limits)?;
+    let bytes = read_raw_file(path.as_ref(), size, expected, limits, r32_mismatch)?;
+    decode_r32(&bytes, size, order, limits)
+}
+
+/// Checks that a headerless file of `bytes_per_sample` (2 for RAW16, 4 for R32) holds exactly
+/// `size`, from its metadata alone: to plan memory before reading it.
+pub fn check_raw_file(
+    path: impl AsRef<Path>,
+    size: UVec2,
+    bytes_per_sample: u8,
+    limits: &ReadLimits,
+) -> Result<(), MapIoError> {
     let path = path.as_ref();
-    let io_err = |source| MapIoError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let expected_bytes = raw16_len(size, limits)?;
+    let expected = raw_len(size, u64::from(bytes_per_sample), limits)?;
     let file = open_regular(path)?;
-    let actual_bytes = file.metadata().map_err(io_err)?.len();
-    if actual_bytes != expected_bytes {
-        return Err(MapIoError::RawSizeMismatch {
-            width: size.x,
-            height: size.y,
-            expected_bytes,
-            actual_bytes,
-        });
+    let actual = file
+        .metadata()
+        .map_err(|source| MapIoError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .len();
+    if actual == expected {
+        Ok(())
+    } else if bytes_per_sample == 4 {
+        Err(r32_mismatch(size, expected, actual))
+    } else {
+        Err(raw16_mismatch(size, expected, actual))
     }
-    // Read at most one byte more than expected, so a file that changed since the metadata
-    // check is still caught without reading it all.
-    let capacity = usize::try_from(expected_bytes).map_err(|_| MapIoError::TooLarge {
-        width: size.x,
-        height: size.y,
-        max_side: limits.max_side,
-    })?;
-    let mut bytes = Vec::with_capacity(capacity);
-    file.take(expected_bytes.saturating_add(1))
-        .read_to_end(&mut bytes)
-        .map_err(io_err)?;
-    decode_raw16(&bytes, size, limits)
 }
 
 /// Encodes a grid as RAW16: little-endian `u16` samples, row-major, no header.

@@ -32,7 +32,9 @@
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
+pub mod dem;
 pub mod error;
+pub mod geotiff;
 pub mod granular;
 pub mod grid;
 pub mod hillshade;
