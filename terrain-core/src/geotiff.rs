@@ -242,14 +242,14 @@ pub fn read_geotiff(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<GeoTi
     let file = open_regular(path)?;
     let len = file_len(&file, path)?;
     let origin = Origin::File(path);
-    check_first_ifd(&mut BufReader::new(&file), len, origin)?;
-    decode_from(BufReader::new(&file), len, limits, origin)
+    check_first_ifd(&mut BufReader::new(&file), len, limits, origin)?;
+    decode_from(rewound(&file, path)?, len, limits, origin)
 }
 
 /// Decodes a GeoTIFF DEM held in memory (see [`read_geotiff`]).
 pub fn decode_geotiff(bytes: &[u8], limits: &ReadLimits) -> Result<GeoTiff, MapIoError> {
     let len = bytes.len() as u64;
-    check_first_ifd(&mut Cursor::new(bytes), len, Origin::Memory)?;
+    check_first_ifd(&mut Cursor::new(bytes), len, limits, Origin::Memory)?;
     decode_from(Cursor::new(bytes), len, limits, Origin::Memory)
 }
 
@@ -260,11 +260,23 @@ pub fn read_geotiff_size(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<
     let file = open_regular(path)?;
     let len = file_len(&file, path)?;
     let origin = Origin::File(path);
-    check_first_ifd(&mut BufReader::new(&file), len, origin)?;
-    let mut decoder = Decoder::new(BufReader::new(&file)).map_err(|e| map_tiff_error(e, origin))?;
+    check_first_ifd(&mut BufReader::new(&file), len, limits, origin)?;
+    let mut decoder =
+        Decoder::new(rewound(&file, path)?).map_err(|e| map_tiff_error(e, origin))?;
     let (w, h) = decoder.dimensions().map_err(|e| map_tiff_error(e, origin))?;
     check_size(w, h, limits)?;
     Ok(UVec2::new(w, h))
+}
+
+/// A buffered reader of `file` from its start (the directory walk moved its position).
+fn rewound<'f>(file: &'f File, path: &Path) -> Result<BufReader<&'f File>, MapIoError> {
+    let mut f = file;
+    f.seek(SeekFrom::Start(0))
+        .map_err(|source| MapIoError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    Ok(BufReader::new(file))
 }
 
 fn file_len(file: &File, path: &Path) -> Result<u64, MapIoError> {
@@ -662,10 +674,12 @@ fn read_at<const N: usize>(
 /// Walks the header and the first image directory: the entry count is bounded, and every
 /// tag's values must lie inside the file and number at most [`MAX_TAG_VALUES`], so the decoder
 /// (which reads the directory with its default limits, up to 256 MiB per tag) allocates no
-/// more than the file could justify.
+/// more than the file could justify. The image size is checked against `limits` here too,
+/// before the decoder works out strips and tiles for it.
 fn check_first_ifd(
     r: &mut (impl Read + Seek),
     len: u64,
+    limits: &ReadLimits,
     origin: Origin<'_>,
 ) -> Result<(), MapIoError> {
     let head: [u8; 4] = read_at(r, 0, "the TIFF header", origin)?;
@@ -709,6 +723,7 @@ fn check_first_ifd(
             ),
         })?;
     let mut pos = first + count_len;
+    let (mut width, mut height) = (None, None);
     while pos < end {
         let (tag, ty, values, offset) = if big {
             let b: [u8; 20] = read_at(r, pos, dir, origin)?;
@@ -726,6 +741,25 @@ fn check_first_ifd(
             (tag, ty, u64::from(n), u64::from(o))
         };
         pos += entry_len;
+        // ImageWidth and ImageLength: one SHORT or LONG, inline at the start of the field
+        // (whose bytes were read in the file's order, so a SHORT sits in the high half of a
+        // big-endian LONG).
+        if (tag == 256 || tag == 257) && values == 1 {
+            let v = match (ty, e.big, big) {
+                (3, true, false) => offset >> 16,
+                (3, true, true) => offset >> 48,
+                (3, false, _) => offset & 0xFFFF,
+                (4, true, true) => offset >> 32,
+                (4, _, _) => offset & 0xFFFF_FFFF,
+                _ => continue,
+            };
+            let v = u32::try_from(v).unwrap_or(u32::MAX);
+            if tag == 256 {
+                width = Some(v);
+            } else {
+                height = Some(v);
+            }
+        }
         if values > MAX_TAG_VALUES {
             return Err(MapIoError::Corrupt {
                 reason: format!(
@@ -744,6 +778,9 @@ fn check_first_ifd(
                 ),
             });
         }
+    }
+    if let (Some(w), Some(h)) = (width, height) {
+        check_size(w, h, limits)?;
     }
     Ok(())
 }

@@ -760,10 +760,11 @@ fn bench_report(quick: bool) -> Result<()> {
 
 /// The fuzz targets: crate, target name (as the target prints it), test function in the crate's
 /// `tests/fuzz.rs`.
-const FUZZ_TARGETS: [(&str, &str, &str); 8] = [
+const FUZZ_TARGETS: [(&str, &str, &str); 9] = [
     ("terrain-core", "png16", "fuzz_png16"),
     ("terrain-core", "png8", "fuzz_png8"),
     ("terrain-core", "raw16", "fuzz_raw16"),
+    ("terrain-core", "geotiff", "fuzz_geotiff"),
     ("terrain-cache", "tile", "fuzz_tile"),
     ("terrain-cache", "manifest", "fuzz_manifest"),
     ("terrain-cache", "bounds", "fuzz_bounds"),
