@@ -23,9 +23,13 @@ use tiff::{ColorType, TiffError, TiffFormatError};
 
 /// The most entries a first image directory may have (real ones have a few dozen).
 const MAX_IFD_ENTRIES: u64 = 4096;
-/// The most values one tag may hold: 2^20 strip or tile offsets cover a 65536^2 image in
-/// 64^2 tiles. The decoder keeps each value in a 32-byte enum, so this bounds a tag to 32 MiB.
-pub const MAX_TAG_VALUES: u64 = 1 << 20;
+/// The most values the tags of the first directory may hold together: 2^20 covers the offsets
+/// and byte counts of a 65536^2 image in 128^2 tiles, or in strips of one row, many times over.
+pub const MAX_DIRECTORY_VALUES: u64 = 1 << 20;
+/// The most memory the decoder's reading of the first directory can take: each value as a
+/// 32-byte enum (`tiff::decoder::ifd::Value`, checked by a test) and again as the u64 chunk
+/// offsets and byte counts it keeps.
+pub const DIRECTORY_BYTES_BOUND: u64 = MAX_DIRECTORY_VALUES * (32 + 16);
 
 /// GeoKey ids (GeoTIFF 1.1, sec. 7.1) and codes (EPSG units).
 const GT_MODEL_TYPE: u16 = 1024;
@@ -672,7 +676,8 @@ fn read_at<const N: usize>(
 }
 
 /// Walks the header and the first image directory: the entry count is bounded, and every
-/// tag's values must lie inside the file and number at most [`MAX_TAG_VALUES`], so the decoder
+/// tag's values must lie inside the file and number at most [`MAX_DIRECTORY_VALUES`] in all,
+/// so the decoder
 /// (which reads the directory with its default limits, up to 256 MiB per tag) allocates no
 /// more than the file could justify. The image size is checked against `limits` here too,
 /// before the decoder works out strips and tiles for it.
@@ -724,6 +729,7 @@ fn check_first_ifd(
         })?;
     let mut pos = first + count_len;
     let (mut width, mut height) = (None, None);
+    let mut total = 0u64;
     while pos < end {
         let (tag, ty, values, offset) = if big {
             let b: [u8; 20] = read_at(r, pos, dir, origin)?;
@@ -760,11 +766,12 @@ fn check_first_ifd(
                 height = Some(v);
             }
         }
-        if values > MAX_TAG_VALUES {
+        total = total.saturating_add(values);
+        if total > MAX_DIRECTORY_VALUES {
             return Err(MapIoError::Corrupt {
                 reason: format!(
-                    "tag {tag} holds {values} values, more than the {MAX_TAG_VALUES} a DEM's \
-                     directory needs"
+                    "tag {tag} holds {values} values, which brings the directory past the \
+                     {MAX_DIRECTORY_VALUES} values a DEM's directory needs"
                 ),
             });
         }
@@ -788,6 +795,11 @@ fn check_first_ifd(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_directory_bound_counts_the_decoders_value_size() {
+        assert!(std::mem::size_of::<tiff::decoder::ifd::Value>() <= 32);
+    }
 
     #[test]
     fn metres_per_degree_matches_known_values() {

@@ -14,7 +14,7 @@ use terrain_core::dem::{
     DemFormat, DemOptions, HeightRange, HeightUnits, dem_size, read_dem, resolve_format,
 };
 use terrain_core::geotiff::{
-    MAX_TAG_VALUES, RasterModel, SampleType, TexelSize, decode_geotiff, read_geotiff,
+    MAX_DIRECTORY_VALUES, RasterModel, SampleType, TexelSize, decode_geotiff, read_geotiff,
 };
 use terrain_core::io::{ByteOrder, MapIoError, ReadLimits, encode_png8, encode_png16};
 use terrain_core::{CoarseMap, Grid};
@@ -594,7 +594,7 @@ fn bad_geotiffs_get_clear_errors() {
     );
     // A tag claiming more values than a DEM needs, or values past the end of the file.
     let many = TiffSpec {
-        extra: vec![(65000, tiff_writer::LONG, MAX_TAG_VALUES + 1, vec![0; 8])],
+        extra: vec![(65000, tiff_writer::LONG, MAX_DIRECTORY_VALUES + 1, vec![0; 8])],
         ..TiffSpec::new(2, 2, Sample::U8, vec![1.0; 4])
     };
     let e = decode_geotiff(&many.write(), &l).unwrap_err();

@@ -42,19 +42,39 @@ pub struct Cli {
     /// Number of frames to capture.
     #[arg(long, default_value_t = 36, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub frames: u32,
-    /// Use this heightmap instead of the procedural terrain: a 16-bit grayscale PNG, or RAW16
-    /// (little-endian) when --raw-size is given.
+    /// Use this DEM / heightmap instead of the procedural terrain: PNG (8 or 16-bit),
+    /// RAW16 (.r16, .raw; with --raw-size), R32 floats (.r32; with --raw-size) or GeoTIFF
+    /// (.tif, .tiff), chosen by --format.
     #[arg(long, conflicts_with = "size")]
     pub heightmap: Option<PathBuf>,
-    /// Size of a RAW16 heightmap, as WIDTHxHEIGHT.
+    /// The heightmap's format: `auto` by its extension (else its first bytes, else RAW16 when
+    /// --raw-size is given).
+    #[arg(long, value_enum, default_value_t = FormatArg::Auto)]
+    pub format: FormatArg,
+    /// Size of a RAW16 or R32 heightmap, as WIDTHxHEIGHT.
     #[arg(long, value_parser = parse_size, requires = "heightmap")]
     pub raw_size: Option<glam::UVec2>,
-    /// Metres per texel (seed 000 uses 0.1 m).
-    #[arg(long, default_value_t = 0.1)]
-    pub texel_size: f32,
-    /// Height in metres of the largest 16-bit value (the lowest is 0 m).
-    #[arg(long, default_value_t = 12.0)]
-    pub max_height: f32,
+    /// Byte order of a RAW16 or R32 heightmap's samples.
+    #[arg(long, value_enum, default_value_t = ByteOrderArg::Little)]
+    pub byte_order: ByteOrderArg,
+    /// Metres per texel: default the GeoTIFF's pixel scale, else 0.1 m (seed 000).
+    #[arg(long)]
+    pub texel_size: Option<f32>,
+    /// Heights in metres the coarse-map spans: `auto` (default) is the heightmap's own range
+    /// (GeoTIFF and R32 metres kept, PNG / RAW16 integers taken as metres), 0:12 for the
+    /// procedural terrain; `MIN:MAX` maps integer heightmaps linearly onto MIN..MAX (0 to MIN,
+    /// full scale to MAX) and clamps metres to it.
+    #[arg(long, value_parser = parse_height_range, conflicts_with = "max_height")]
+    pub height_range: Option<HeightRangeArg>,
+    /// Same as --height-range 0:M.
+    #[arg(long, value_name = "M")]
+    pub max_height: Option<f32>,
+    /// The default scenario's camera: `walker` (follows the walker at eye height),
+    /// `orbit` (circles the map's centre, framing the whole map) or `flyover` (loops over the
+    /// map at a height proportional to its extent). Default: orbit with --heightmap, else
+    /// walker.
+    #[arg(long, value_enum)]
+    pub camera: Option<CameraMode>,
     /// Size of the 3D frames, as WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = parse_resolution)]
     pub resolution: glam::UVec2,
@@ -90,6 +110,83 @@ pub enum ScenarioKind {
     /// A camera flying, then driving, over a streamed world larger than the cache budgets,
     /// stamping craters on its path (they persist in the world's folder).
     Flyover,
+}
+
+/// `--format`: how the heightmap file is read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum FormatArg {
+    /// By the file's extension (.png, .r16 / .raw, .r32, .tif / .tiff).
+    Auto,
+    /// Grayscale PNG, 8 or 16 bits.
+    Png,
+    /// Headerless u16 samples.
+    Raw16,
+    /// Headerless f32 heights in metres.
+    R32,
+    /// GeoTIFF.
+    Geotiff,
+}
+
+/// `--byte-order` of RAW16 and R32 heightmaps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ByteOrderArg {
+    /// Least significant byte first.
+    Little,
+    /// Most significant byte first.
+    Big,
+}
+
+/// `--height-range`: the heightmap's own range, or metres given.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum HeightRangeArg {
+    /// The heightmap's lowest to highest height.
+    Auto,
+    /// Metres of the lowest and the highest stored height.
+    Span(f32, f32),
+}
+
+/// `--camera` of the default scenario.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum CameraMode {
+    /// Walks behind the walker at eye height.
+    Walker,
+    /// Circles the map's centre at a distance and height that frame the whole map.
+    Orbit,
+    /// Loops over the map at a height above ground proportional to its extent.
+    Flyover,
+}
+
+impl CameraMode {
+    /// The mode's name, as the flag and report.json spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            CameraMode::Walker => "walker",
+            CameraMode::Orbit => "orbit",
+            CameraMode::Flyover => "flyover",
+        }
+    }
+}
+
+/// Parses `auto` or `MIN:MAX` (metres, finite, MIN below MAX).
+fn parse_height_range(s: &str) -> Result<HeightRangeArg, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(HeightRangeArg::Auto);
+    }
+    let (lo, hi) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}` is neither `auto` nor MIN:MAX (metres, as -20:850)"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<f32>()
+            .ok()
+            .filter(|m| m.is_finite())
+            .ok_or_else(|| format!("`{v}` in `{s}` is not a finite number of metres"))
+    };
+    let (lo, hi) = (parse(lo)?, parse(hi)?);
+    if hi <= lo {
+        return Err(format!("`{s}`: MAX must be above MIN"));
+    }
+    Ok(HeightRangeArg::Span(lo, hi))
 }
 
 /// Parses `WIDTHxHEIGHT`.
@@ -131,5 +228,24 @@ mod tests {
         assert_eq!(cli.max_memory, Some(1536 << 20));
         assert!(Cli::try_parse_from(["demo", "--max-memory", "lots"]).is_err());
         assert!(Cli::try_parse_from(["demo", "--max-memory", "0"]).is_err());
+        assert!(Cli::try_parse_from(["demo", "--camera", "orbit"]).is_ok());
+        assert!(Cli::try_parse_from(["demo", "--camera", "drone"]).is_err());
+        assert!(Cli::try_parse_from(["demo", "--format", "geotiff"]).is_ok());
+        assert!(Cli::try_parse_from(["demo", "--format", "jpeg"]).is_err());
+        assert!(
+            Cli::try_parse_from(["demo", "--height-range", "0:10", "--max-height", "5"]).is_err()
+        );
+    }
+
+    #[test]
+    fn parses_height_ranges() {
+        assert_eq!(parse_height_range("auto"), Ok(HeightRangeArg::Auto));
+        assert_eq!(
+            parse_height_range("-20.5:850"),
+            Ok(HeightRangeArg::Span(-20.5, 850.0))
+        );
+        for bad in ["", "5", "10:10", "10:5", "a:3", "0:inf", "NaN:4"] {
+            assert!(parse_height_range(bad).is_err(), "{bad}");
+        }
     }
 }

@@ -28,6 +28,18 @@ pub const CLIPMAP_N: u32 = 255;
 /// about twice the default map, so the toroidal repeat stays in the fog.
 pub const CLIPMAP_LEVELS: u32 = 5;
 
+/// Clipmap levels whose coarsest reaches `radius` metres from the camera at `texel_size`: level
+/// `l` spans `(N - 1) * 2^l` texels, so its half side is `(N - 1) / 2 * 2^l` texels. At least
+/// [`CLIPMAP_LEVELS`], at most terrain-lod's [`terrain_lod::clipmap::MAX_LEVELS`].
+pub fn levels_to_reach(radius: f32, texel_size: f32) -> u32 {
+    let half = (CLIPMAP_N - 1) as f32 / 2.0 * texel_size;
+    let mut levels = CLIPMAP_LEVELS;
+    while levels < terrain_lod::clipmap::MAX_LEVELS && half * ((1u32 << (levels - 1)) as f32) < radius {
+        levels += 1;
+    }
+    levels
+}
+
 /// Everything that lives on the GPU for the demo.
 pub struct GpuScene {
     ctx: GpuContext,
@@ -246,6 +258,31 @@ impl GpuScene {
     /// Uploads the footprint texture stamp that [`StampKind::Footprint`] deformations use.
     pub fn set_footprint(&mut self, footprint: &TextureStamp) -> Result<()> {
         self.footprint = Some(GpuTextureStamp::new(&self.ctx.device, footprint)?);
+        Ok(())
+    }
+
+    /// Sets the fog's density per metre (the terrain fades to the fog colour with distance).
+    pub fn set_fog(&mut self, density: f32) {
+        self.style.fog_density = density;
+    }
+
+    /// Draws the map once, as an island in the sky, instead of with its toroidal repeats: for
+    /// cameras that frame the whole map.
+    pub fn hide_outside_map(&mut self, hide: bool) {
+        self.style.hide_outside_map = hide;
+    }
+
+    /// Makes the clipmap reach `radius` metres around the camera (its coarsest level's half
+    /// side): levels are added to the default [`CLIPMAP_LEVELS`], up to terrain-lod's
+    /// maximum, each doubling the reach. For cameras that see a whole map from afar.
+    pub fn reach(&mut self, radius: f32) -> Result<()> {
+        let levels = levels_to_reach(radius, self.map.texel_size());
+        if levels != self.layout.levels() {
+            let layout = ClipmapLayout::new(CLIPMAP_N, levels)?;
+            self.renderer =
+                ClipmapRenderer::new(&self.ctx.device, &self.target.format(), &layout)?;
+            self.layout = layout;
+        }
         Ok(())
     }
 

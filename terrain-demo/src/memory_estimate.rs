@@ -1,5 +1,6 @@
-//! What a run will need in memory, from its flags and the headers of its input (a PNG's size,
-//! a world's manifest) before anything large is allocated: the maps, their derivatives, the
+//! What a run will need in memory, from its flags and the headers of its input (a heightmap's
+//! size and format, a world's manifest) before anything large is allocated: the maps, the
+//! import of a heightmap, their derivatives, the
 //! collision mirror, the GPU copies and their upload staging, the frames, the contact sheet,
 //! the flyover's pools and tile atlas, and the process and GPU driver themselves.
 //!
@@ -11,9 +12,12 @@
 use crate::capture;
 use crate::cli::{Cli, ScenarioKind};
 use crate::scenarios::{
-    fit_overview, flyover, heightmap, snow,
+    fit_overview, flyover,
+    heightmap::{self, PlannedMap},
+    snow,
     world_files::{self, WorldBuild},
 };
+use terrain_core::dem::DemFormat;
 use anyhow::Result;
 use glam::UVec2;
 
@@ -28,6 +32,11 @@ const GPU_DRIVER: u64 = 320 << 20;
 /// Bytes per texel of a CPU map: the u16 heights kept, and 4 more while they are made (the f32
 /// heights of the procedural terrain, or a file's bytes beside the decoded samples).
 const MAP_PER_TEXEL: u64 = 2 + 4;
+/// Bytes per texel of importing a heightmap beyond [`MAP_PER_TEXEL`] (which counts the kept u16
+/// samples and the f32 heights they are made from): the file's samples as decoded beside
+/// those f32 heights, at most 8 bytes (f64 GeoTIFFs; PNG and RAW16 decode to 2 bytes kept as
+/// u16 and as bytes, 4 in all).
+const DEM_IMPORT_PER_TEXEL: u64 = 8;
 /// Bytes per texel of the derivative (normal) map: a `Vec2<f32>`.
 const NORMALS_PER_TEXEL: u64 = 8;
 /// Bytes per texel of the collision mirror: front and back u16 buffers, a third copy while a
@@ -83,6 +92,9 @@ pub struct RunShape {
     pub gpu: bool,
     /// Texels of the scenario's CPU map (the flyover's: its overview level).
     pub map: UVec2,
+    /// The heightmap the default scenario imports (`None` for the procedural terrain; a
+    /// flyover's is in its `build`).
+    pub heightmap: Option<PlannedMap>,
     /// Frame size with a GPU.
     pub resolution: UVec2,
     /// Size of the overview (the frame without a GPU).
@@ -111,8 +123,13 @@ impl RunShape {
     /// errors (an unreadable heightmap or world) are usage errors.
     pub fn of(cli: &Cli) -> Result<Self> {
         let gpu = !cli.no_gpu;
+        let mut heightmap = None;
         let (map, flyover) = match cli.scenario {
-            ScenarioKind::Default => (heightmap::planned_size(cli)?, None),
+            ScenarioKind::Default => {
+                let planned = heightmap::planned(cli)?;
+                heightmap = planned.format.is_some().then_some(planned);
+                (planned.size, None)
+            }
             ScenarioKind::Snow => (UVec2::splat(cli.size.unwrap_or(snow::SNOW_SIZE)), None),
             ScenarioKind::Flyover => {
                 let planned = world_files::planned_world(cli)?;
@@ -138,6 +155,7 @@ impl RunShape {
             scenario: cli.scenario,
             gpu,
             map,
+            heightmap,
             resolution: cli.resolution,
             overview,
             frames: cli.frames,
@@ -152,6 +170,9 @@ impl RunShape {
         let mut parts = vec![("process", PROCESS)];
         if self.gpu {
             parts.push(("gpu_driver", GPU_DRIVER));
+        }
+        if let Some(planned) = self.heightmap {
+            parts.push(("dem_import", import_bytes(planned)));
         }
         match self.scenario {
             ScenarioKind::Default => {
@@ -197,9 +218,10 @@ impl RunShape {
                     match f.build {
                         None => {}
                         Some(WorldBuild::Procedural) => parts.push(("world_build", WORLD_BUILD)),
-                        Some(WorldBuild::Heightmap(size)) => {
-                            let map = area(size).saturating_mul(MAP_PER_TEXEL);
+                        Some(WorldBuild::Heightmap(planned)) => {
+                            let map = area(planned.size).saturating_mul(MAP_PER_TEXEL);
                             parts.push(("world_build", map.saturating_add(WORLD_BUILD)));
+                            parts.push(("dem_import", import_bytes(planned)));
                         }
                     }
                 }
@@ -223,6 +245,18 @@ impl RunShape {
         ));
         parts
     }
+}
+
+/// The import of a heightmap beyond its map: decoded samples, and a GeoTIFF's directory as the
+/// decoder reads it (bounded by terrain-core's walk of it).
+fn import_bytes(planned: PlannedMap) -> u64 {
+    let directory = match planned.format {
+        Some(DemFormat::GeoTiff) => terrain_core::geotiff::DIRECTORY_BYTES_BOUND,
+        _ => 0,
+    };
+    area(planned.size)
+        .saturating_mul(DEM_IMPORT_PER_TEXEL)
+        .saturating_add(directory)
 }
 
 /// `size.x * size.y` without overflow.

@@ -12,6 +12,18 @@ pub struct Report {
     pub size: [u32; 2],
     /// Metres per texel.
     pub texel_size_m: f32,
+    /// How stored heights become metres, and the heights the map holds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub height_encoding: Option<HeightEncodingReport>,
+    /// How `--heightmap` was read.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub heightmap: Option<HeightmapReport>,
+    /// The heightmap's nodata samples and what filled them, when it had any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nodata: Option<NodataReport>,
+    /// The default scenario's camera: `walker`, `orbit` or `flyover`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera: Option<&'static str>,
     /// The scenario: `default` or `snow`.
     pub scenario: String,
     /// Scenario (and terrain) seed.
@@ -39,6 +51,54 @@ pub struct Report {
     pub frames: Vec<FrameReport>,
     /// Sum of each step over all frames, in milliseconds.
     pub totals_ms: BTreeMap<&'static str, f64>,
+}
+
+/// A map's height encoding: `metres = offset + scale * stored` (u16).
+#[derive(Debug, Clone, Serialize)]
+pub struct HeightEncodingReport {
+    /// Metres of stored value 0.
+    pub offset: f32,
+    /// Metres per stored unit.
+    pub scale: f32,
+    /// Metres of the lowest stored value (the span's low end).
+    pub min_m: f32,
+    /// Metres of the highest stored value (the span's high end).
+    pub max_m: f32,
+    /// The lowest height of the terrain itself.
+    pub data_min_m: f32,
+    /// The highest height of the terrain itself.
+    pub data_max_m: f32,
+    /// What chose the span: `data` (`--height-range auto`: the heightmap's own range),
+    /// `height-range`, `max-height`, `procedural` (its default 0..12 m), `world` (a flyover
+    /// world's manifest) or `snow field`.
+    pub source: &'static str,
+}
+
+/// How `--heightmap` was read.
+#[derive(Debug, Clone, Serialize)]
+pub struct HeightmapReport {
+    /// `PNG`, `RAW16`, `R32` or `GeoTIFF`.
+    pub format: &'static str,
+    /// The file's sample type: `u8`, `u16`, `i16`, `f32`, ...
+    pub sample: &'static str,
+    /// Where the texel size came from: `--texel-size`, the GeoTIFF's pixel scale, or the
+    /// default.
+    pub texel_size_source: &'static str,
+    /// Samples outside `--height-range`, clamped to it.
+    pub clamped_samples: u64,
+}
+
+/// A heightmap's nodata samples.
+#[derive(Debug, Clone, Serialize)]
+pub struct NodataReport {
+    /// How many samples were nodata.
+    pub count: u64,
+    /// The file's nodata value (GeoTIFF's GDAL nodata tag; null when only NaN, infinite or
+    /// huge floats were nodata, or the tag is NaN).
+    pub value: Option<f64>,
+    /// The height they were filled with (metres, or integers under `--height-range`): the
+    /// lowest valid height.
+    pub fill_m: f32,
 }
 
 /// The memory of a run.

@@ -38,7 +38,7 @@ struct FrameUniform {
     ramp_high: f32,
     srgb_target: u32,
     wrap: u32,
-    pad: f32,
+    hide_outside: u32,
     light_dir: [f32; 4],
     fog_color: [f32; 4],
 }
@@ -57,6 +57,10 @@ pub struct TerrainStyle {
     pub fog_color: Vec3,
     /// Fog density per metre (0: none).
     pub fog_density: f32,
+    /// Draw the map once, as an island: what lies outside its texels (the repeats of a
+    /// toroidal map, the extended edges of a clamped one) is not drawn, so the sky shows
+    /// there. For views that frame a whole map; off by default.
+    pub hide_outside_map: bool,
 }
 
 impl Default for TerrainStyle {
@@ -66,6 +70,7 @@ impl Default for TerrainStyle {
             ramp: (0.0, 12.0),
             fog_color: Vec3::new(0.74, 0.82, 0.90),
             fog_density: 0.0,
+            hide_outside_map: false,
         }
     }
 }
@@ -246,7 +251,7 @@ impl ClipmapRenderer {
             ramp_high: style.ramp.1,
             srgb_target: self.target.srgb_flag(),
             wrap,
-            pad: 0.0,
+            hide_outside: u32::from(style.hide_outside_map),
             light_dir: style.light_dir.extend(0.0).to_array(),
             fog_color: Vec4::from((style.fog_color, style.fog_density)).to_array(),
         };

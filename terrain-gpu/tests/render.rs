@@ -110,6 +110,44 @@ fn the_crack_detector_finds_a_hole() {
     assert_eq!(holes(&image).0, 1);
 }
 
+#[test]
+fn hiding_outside_the_map_draws_it_once() {
+    let Some(ctx) = context_or_skip("hiding_outside_the_map_draws_it_once") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 31, 6);
+    let magenta = SkyColors {
+        horizon: Vec3::new(1.0, 0.0, 1.0),
+        zenith: Vec3::new(1.0, 0.0, 1.0),
+    };
+    // Straight down over the map's corner (0, 0): a quarter of the view is the map, the rest
+    // its toroidal repeats.
+    let camera = Camera::looking(Vec3::new(0.0, 260.0, 0.0), Vec3::new(0.0, -1.0, 0.0));
+    let size = UVec2::new(160, 160);
+    let sky_share = |image: &terrain_core::Grid<[u8; 4]>| {
+        let sky = image.as_slice().iter().filter(|p| is_sky(**p)).count();
+        sky as f64 / image.as_slice().len() as f64
+    };
+    let (repeated, _) = scene.render(&camera, size, &magenta);
+    assert!(sky_share(&repeated) < 0.01, "repeats fill the view");
+    scene.hide_outside = true;
+    let (island, triangles) = scene.render(&camera, size, &magenta);
+    let share = sky_share(&island);
+    assert!(triangles > 0);
+    assert!(
+        (0.65..0.85).contains(&share),
+        "three quarters of the view are outside the map: {share}"
+    );
+    // The quarter drawn is the map's, as before.
+    let same = island
+        .as_slice()
+        .iter()
+        .zip(repeated.as_slice())
+        .filter(|(a, _)| !is_sky(**a))
+        .all(|(a, b)| a == b);
+    assert!(same, "the map itself is drawn unchanged");
+}
+
 /// Golden comparison tolerance: software rasterisers differ slightly between versions and
 /// backends, so allow a small mean difference and a few outlying pixels.
 const GOLDEN_MEAN_TOLERANCE: f64 = 4.0;

@@ -28,7 +28,9 @@ struct Frame {
     srgb_target: u32,
     // WRAP_REPEAT (toroidal coarse-map) or WRAP_CLAMP (edges extend flat).
     wrap: u32,
-    _pad2: f32,
+    // 1: fragments outside the map's own texels [0, size - 1] are discarded (the map drawn
+    // once, as an island, instead of its repeats or its extended edges); 0: drawn.
+    hide_outside: u32,
     light_dir: vec4<f32>,
     fog_color: vec4<f32>,
 }
@@ -106,6 +108,14 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     // position; adding the camera's fraction makes it relative to the camera's whole texel.
     let p = in.rel_texel;
     let q = p + frame.camera_frac;
+    if frame.hide_outside != 0u {
+        // The fragment's texel position on the unwrapped map plane.
+        let t = vec2<f32>(frame.camera_texel) + q;
+        let last = vec2<f32>(frame.map_size) - vec2<f32>(1.0, 1.0);
+        if any(t < vec2<f32>(0.0, 0.0)) || any(t > last) {
+            discard;
+        }
+    }
     let p0 = floor(q);
     let f = q - p0;
     let t0 = frame.camera_texel + vec2<i32>(p0);

@@ -115,7 +115,7 @@ impl FlyoverScenario {
             )));
         }
         let t = Instant::now();
-        let (world, source) = world_files::open_or_build(cli)?;
+        let (world, source, built_from) = world_files::open_or_build(cli)?;
         let manifest = *world.manifest();
         if manifest.world_size.max_element() < manifest.tile_size {
             bail!(
@@ -161,6 +161,14 @@ impl FlyoverScenario {
                 source,
                 load_ms,
                 initial_normals_ms,
+                heights: Some(built_from.unwrap_or_else(|| {
+                    super::heightmap::HeightsInfo::of_encoding(
+                        overview.encoding(),
+                        super::heightmap::stored_range(&overview),
+                        "world",
+                    )
+                })),
+                camera: None,
             },
             pool: Some(pool),
             vram: None,

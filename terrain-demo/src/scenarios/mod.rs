@@ -27,6 +27,15 @@ pub const FRAME_DT: f64 = 1.0 / 30.0;
 
 /// The scenario `cli` asks for, set up (terrain loaded or generated, bodies placed).
 pub fn open(cli: &Cli) -> Result<Box<dyn Scenario>> {
+    if cli.camera.is_some() && cli.scenario != ScenarioKind::Default {
+        return Err(crate::usage_error::usage(anyhow::anyhow!(
+            "--camera chooses the default scenario's camera; the {} scenario moves its own",
+            match cli.scenario {
+                ScenarioKind::Snow => "snow",
+                _ => "flyover",
+            }
+        )));
+    }
     Ok(match cli.scenario {
         ScenarioKind::Default => Box::new(stamps::StampScenario::new(cli)?),
         ScenarioKind::Snow => Box::new(snow::SnowScenario::new(cli)?),
@@ -52,6 +61,10 @@ pub struct ScenarioInfo {
     pub load_ms: f64,
     /// Milliseconds to compute the first full normal map.
     pub initial_normals_ms: f64,
+    /// The terrain's heights (encoding, heightmap read, nodata), where the scenario knows them.
+    pub heights: Option<heightmap::HeightsInfo>,
+    /// The camera (`walker`, `orbit`, `flyover`), where the scenario lets `--camera` choose.
+    pub camera: Option<&'static str>,
 }
 
 /// What the driver hands a scenario for one frame.

@@ -60,13 +60,19 @@ impl SnowScenario {
         let initial_normals_ms = ms_since(t);
         let mirror = CollisionMirror::from_map(&coarse)?;
         let start = Vec2::new(coarse.extent_m().x * 0.45, 0.5);
-        let rig = CameraRig::new(start, bilinear(&coarse, start)?);
+        let rig = CameraRig::new(start, bilinear(&coarse, start)?, coarse.extent_m().max_element());
         Ok(Self {
             info: ScenarioInfo {
                 name: "snow",
                 source: "procedural snow field".into(),
                 load_ms,
                 initial_normals_ms,
+                heights: Some(super::heightmap::HeightsInfo::of_encoding(
+                    coarse.encoding(),
+                    super::heightmap::stored_range(&coarse),
+                    "snow field",
+                )),
+                camera: None,
             },
             field,
             coarse,

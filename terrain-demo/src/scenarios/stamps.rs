@@ -1,11 +1,13 @@
 //! The default scenario: footprints, craters and a shockwave stamped on the coarse-map (on the
 //! GPU map when there is one, and on the CPU map behind the overview), a collision mirror fed
-//! by readbacks of the dirty regions, and a camera walking on it behind the walker.
+//! by readbacks of the dirty regions, and a camera on it (`--camera`): walking behind the
+//! walker, or orbiting or flying over the whole map (the default with `--heightmap`).
 
 use super::stamp_script::{StampKind, StampScript};
 use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo, heightmap};
+use crate::camera_path::{CameraPath, MapFrame};
 use crate::camera_rig::CameraRig;
-use crate::cli::Cli;
+use crate::cli::{CameraMode, Cli};
 use crate::gpu_scene::GpuScene;
 use crate::report::FrameStats;
 use crate::timings::{Step, ms_since};
@@ -39,7 +41,8 @@ impl StampScenario {
     /// Loads or generates the terrain and places the walker and the camera.
     pub fn new(cli: &Cli) -> Result<Self> {
         let t = Instant::now();
-        let (map, source) = heightmap::load(cli)?;
+        let terrain = heightmap::load(cli)?;
+        let map = terrain.map;
         let load_ms = ms_since(t);
         let t = Instant::now();
         let normals = DerivativeMap::from_map(&map);
@@ -47,14 +50,35 @@ impl StampScenario {
         let script = StampScript::new(map.extent_m(), cli.seed)?;
         let mirror = CollisionMirror::from_map(&map)?;
         let scheduler = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default())?;
-        let start = script.walker_start();
-        let rig = CameraRig::new(start, bilinear(&map, start)?);
+        let mode = camera_mode(cli);
+        let rig = match mode {
+            CameraMode::Walker => {
+                let start = script.walker_start();
+                CameraRig::new(start, bilinear(&map, start)?, map.extent_m().max_element())
+            }
+            CameraMode::Orbit | CameraMode::Flyover => {
+                let (lo, hi) = heightmap::stored_range(&map);
+                let frame = MapFrame {
+                    extent: map.extent_m(),
+                    low: map.encoding().to_metres(lo),
+                    high: map.encoding().to_metres(hi),
+                };
+                let path = if mode == CameraMode::Orbit {
+                    CameraPath::orbit(frame)
+                } else {
+                    CameraPath::flyover(frame)
+                };
+                CameraRig::on_path(path, |p| bilinear(&map, p).unwrap_or(frame.low))
+            }
+        };
         Ok(Self {
             info: ScenarioInfo {
                 name: "default",
-                source,
+                source: terrain.source,
                 load_ms,
                 initial_normals_ms,
+                heights: Some(terrain.heights),
+                camera: Some(mode.name()),
             },
             script,
             cpu: CpuRegionSource::new(map),
@@ -65,6 +89,16 @@ impl StampScenario {
             rig,
         })
     }
+}
+
+/// The camera `cli` asks for: `--camera`, else orbit over a heightmap (a DEM seen from eye
+/// height is a plain) and the walker over the procedural terrain.
+pub fn camera_mode(cli: &Cli) -> CameraMode {
+    cli.camera.unwrap_or(if cli.heightmap.is_some() {
+        CameraMode::Orbit
+    } else {
+        CameraMode::Walker
+    })
 }
 
 impl Scenario for StampScenario {
@@ -81,6 +115,12 @@ impl Scenario for StampScenario {
     }
 
     fn prepare_gpu(&mut self, scene: &mut GpuScene) -> Result<()> {
+        scene.set_fog(self.rig.fog_density());
+        if let Some(radius) = self.rig.view_radius() {
+            // A camera that frames the whole map shows it once, not its toroidal repeats.
+            scene.reach(radius)?;
+            scene.hide_outside_map(true);
+        }
         scene.set_footprint(self.script.footprint())
     }
 

@@ -4,6 +4,7 @@
 
 use crate::cli::Cli;
 use crate::interrupt;
+use crate::scenarios::heightmap::{HeightsInfo, PlannedMap};
 use crate::usage_error::{UsageExt, usage};
 use anyhow::{Context, Result};
 use glam::UVec2;
@@ -54,9 +55,10 @@ pub fn existing_manifest(dir: &Path) -> Result<Option<Manifest>> {
     Ok(Some(manifest))
 }
 
-/// The world in `cli.world`: opened if it has a manifest, else built there. Returns the world
-/// and where its heights came from.
-pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
+/// The world in `cli.world`: opened if it has a manifest, else built there. Returns the world,
+/// where its heights came from, and, when it was built from `--heightmap`, what the import
+/// chose (for report.json).
+pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> {
     let store: Arc<dyn TileStore> = Arc::new(
         FsStore::open(&cli.world)
             .with_context(|| format!("cannot use world folder {}", cli.world.display()))
@@ -74,7 +76,7 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
             world.manifest().world_size,
             world.manifest().levels
         );
-        return Ok((world, format!("world {}", cli.world.display())));
+        return Ok((world, format!("world {}", cli.world.display()), None));
     }
     let started = Instant::now();
     let last = AtomicU64::new(0);
@@ -97,9 +99,10 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
         // world again instead of opening half of it).
         !interrupt::requested()
     };
-    let (world, source) = match &cli.heightmap {
+    let (world, source, heights) = match &cli.heightmap {
         Some(_) => {
-            let (map, source) = super::heightmap::load(cli)?;
+            let terrain = super::heightmap::load(cli)?;
+            let map = terrain.map;
             let manifest = Manifest::new(
                 map.size(),
                 TILE_SIZE,
@@ -109,7 +112,7 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
             )
             .usage()?;
             let (world, _) = build_world(store, manifest, &MapSource { map: &map }, &progress)?;
-            (world, source)
+            (world, terrain.source, Some(terrain.heights))
         }
         None => {
             let size = cli.size.unwrap_or(DEFAULT_WORLD_SIZE);
@@ -121,11 +124,11 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String)> {
             };
             let source = ProceduralSource::new(UVec2::splat(size), &base, 3, 0.02).usage()?;
             let (world, _) = build_world(store, procedural_manifest(size)?, &source, &progress)?;
-            (world, "procedural world".to_string())
+            (world, "procedural world".to_string(), None)
         }
     };
     eprintln!();
-    Ok((world, source))
+    Ok((world, source, heights))
 }
 
 /// The manifest of the procedural world of `size` x `size` texels.
@@ -153,10 +156,10 @@ pub fn planned_world(cli: &Cli) -> Result<PlannedWorld> {
     }
     match &cli.heightmap {
         Some(_) => {
-            let size = super::heightmap::planned_size(cli)?;
+            let planned = super::heightmap::planned(cli)?;
             // Only the layout matters here; the build validates spacing and encoding.
             let manifest = Manifest::new(
-                size,
+                planned.size,
                 TILE_SIZE,
                 WORLD_TEXEL,
                 HeightEncoding::spanning::<u16>(0.0, WORLD_MAX_HEIGHT)?,
@@ -165,7 +168,7 @@ pub fn planned_world(cli: &Cli) -> Result<PlannedWorld> {
             .usage()?;
             Ok(PlannedWorld {
                 manifest,
-                build: Some(WorldBuild::Heightmap(size)),
+                build: Some(WorldBuild::Heightmap(planned)),
             })
         }
         None => Ok(PlannedWorld {
@@ -189,8 +192,8 @@ pub struct PlannedWorld {
 pub enum WorldBuild {
     /// The procedural terrain, generated tile by tile.
     Procedural,
-    /// A heightmap of this size, read whole first.
-    Heightmap(UVec2),
+    /// A heightmap of this size and format, read whole first.
+    Heightmap(PlannedMap),
 }
 
 /// Decodes every tile file of the world in `dir` and checks its manifest. Returns the bad

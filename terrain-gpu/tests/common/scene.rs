@@ -21,6 +21,8 @@ pub struct Scene {
     pub layout: ClipmapLayout,
     pub sky: SkyPass,
     pub renderer: ClipmapRenderer,
+    /// `TerrainStyle::hide_outside_map` of the views rendered.
+    pub hide_outside: bool,
 }
 
 impl Scene {
@@ -52,6 +54,7 @@ impl Scene {
             layout,
             sky,
             renderer,
+            hide_outside: false,
         }
     }
 
@@ -77,6 +80,7 @@ impl Scene {
             .unwrap();
         let style = TerrainStyle {
             ramp: (0.0, HEIGHT),
+            hide_outside_map: self.hide_outside,
             ..TerrainStyle::default()
         };
         self.sky

@@ -1,0 +1,256 @@
+//! The paths of the cameras that show a whole map (`--camera orbit` and `--camera flyover`):
+//! where the eye should be and what it looks at, at a time, sized from the map's extent and
+//! height range so a 200 m procedural map and a 50 km DEM are framed alike. The rig
+//! (`camera_rig`) moves a physics body along them, which keeps the eye above the ground.
+
+use glam::{Vec2, Vec3};
+use std::f32::consts::TAU;
+
+/// Vertical field of view the cameras are framed for (that of `Camera::looking`).
+const FOV_Y: f32 = 60.0 * std::f32::consts::PI / 180.0;
+/// The orbit looks down this far below the horizon.
+const ORBIT_PITCH: f32 = 35.0 * std::f32::consts::PI / 180.0;
+/// The orbit's distance from the centre, as a fraction of the distance at which the map's
+/// bounding sphere just spans the vertical field of view (radius / sin(FOV_Y / 2)): the map, a
+/// flat box inside the sphere, still fills the frame a little closer.
+const ORBIT_FILL: f32 = 1.0;
+/// Seconds per revolution of the orbit and per loop of the flyover.
+const ORBIT_PERIOD_S: f32 = 40.0;
+const FLYOVER_PERIOD_S: f32 = 30.0;
+/// Where the orbit starts: south-east of the centre, so the default sun (from the north-west,
+/// `TerrainStyle::light_dir`) lights the slopes facing the camera from the side.
+const ORBIT_START: f32 = 0.15 * TAU;
+/// The flyover's loop: an ellipse of this fraction of the map around its centre.
+const FLYOVER_RADIUS: f32 = 0.3;
+/// The flyover's height above the ground, as a fraction of the map's longer side.
+const FLYOVER_HEIGHT: f32 = 0.08;
+/// How far ahead the flyover looks, as a fraction of the map's longer side, and how far below
+/// the horizon.
+const FLYOVER_LOOK_AHEAD: f32 = 0.25;
+const FLYOVER_PITCH: f32 = 25.0 * std::f32::consts::PI / 180.0;
+/// Ground samples the flyover takes along its next stretch to clear the highest.
+const FLYOVER_GROUND_SAMPLES: u32 = 6;
+
+/// What a path is sized from: the map's extent (metres, X Z) and the lowest and highest height
+/// on it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapFrame {
+    /// Extent in metres.
+    pub extent: Vec2,
+    /// Lowest height (metres).
+    pub low: f32,
+    /// Highest height (metres).
+    pub high: f32,
+}
+
+impl MapFrame {
+    /// The map's centre at mid height.
+    fn centre(&self) -> Vec3 {
+        Vec3::new(
+            self.extent.x * 0.5,
+            0.5 * (self.low + self.high),
+            self.extent.y * 0.5,
+        )
+    }
+
+    /// The longer side in metres.
+    fn side(&self) -> f32 {
+        self.extent.max_element()
+    }
+
+    /// Radius of the sphere around the map's box.
+    fn radius(&self) -> f32 {
+        let half = Vec3::new(
+            self.extent.x * 0.5,
+            0.5 * (self.high - self.low),
+            self.extent.y * 0.5,
+        );
+        half.length()
+    }
+}
+
+/// Where the eye is and what it looks at.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    /// The eye (metres).
+    pub eye: Vec3,
+    /// The point looked at (metres).
+    pub look_at: Vec3,
+}
+
+/// A camera path over a map.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CameraPath {
+    /// Circles the map's centre at a distance and height that frame the whole map, looking at
+    /// the centre.
+    Orbit {
+        /// The map.
+        frame: MapFrame,
+        /// Distance from the eye to the centre.
+        distance: f32,
+    },
+    /// Loops over the map at a height above the ground proportional to its extent, looking
+    /// ahead and down.
+    Flyover {
+        /// The map.
+        frame: MapFrame,
+    },
+}
+
+impl CameraPath {
+    /// The orbit around `frame`.
+    pub fn orbit(frame: MapFrame) -> Self {
+        CameraPath::Orbit {
+            frame,
+            distance: ORBIT_FILL * frame.radius() / (FOV_Y * 0.5).sin(),
+        }
+    }
+
+    /// The flyover over `frame`.
+    pub fn flyover(frame: MapFrame) -> Self {
+        CameraPath::Flyover { frame }
+    }
+
+    fn frame(&self) -> &MapFrame {
+        match self {
+            CameraPath::Orbit { frame, .. } | CameraPath::Flyover { frame } => frame,
+        }
+    }
+
+    /// The pose at `t` seconds; `ground` gives the terrain's height at a point (X, Z).
+    pub fn pose(&self, t: f32, ground: impl Fn(Vec2) -> f32) -> Pose {
+        match *self {
+            CameraPath::Orbit { frame, distance } => {
+                let a = ORBIT_START + TAU * t / ORBIT_PERIOD_S;
+                let centre = frame.centre();
+                let horizontal = distance * ORBIT_PITCH.cos();
+                let eye = centre
+                    + Vec3::new(
+                        horizontal * a.cos(),
+                        distance * ORBIT_PITCH.sin(),
+                        horizontal * a.sin(),
+                    );
+                Pose {
+                    eye,
+                    look_at: centre,
+                }
+            }
+            CameraPath::Flyover { frame } => {
+                let side = frame.side();
+                let centre = Vec2::new(frame.extent.x, frame.extent.y) * 0.5;
+                let radii = frame.extent * FLYOVER_RADIUS;
+                let at = |t: f32| {
+                    let a = TAU * t / FLYOVER_PERIOD_S;
+                    centre + Vec2::new(a.cos(), a.sin()) * radii
+                };
+                let xz = at(t);
+                // Tangent of the loop, numerically (any ellipse, any period).
+                let ahead = (at(t + 0.05) - xz).normalize_or(Vec2::X);
+                // Clear the highest ground under the next stretch, not only the ground below:
+                // the camera rises before a ridge instead of after it.
+                let reach = side * FLYOVER_LOOK_AHEAD;
+                let highest = (0..=FLYOVER_GROUND_SAMPLES)
+                    .map(|i| {
+                        let f = i as f32 / FLYOVER_GROUND_SAMPLES as f32;
+                        ground(xz + ahead * reach * f)
+                    })
+                    .fold(f32::NEG_INFINITY, f32::max);
+                let eye = Vec3::new(xz.x, highest + side * FLYOVER_HEIGHT, xz.y);
+                let look = Vec3::new(ahead.x, -FLYOVER_PITCH.tan(), ahead.y) * reach;
+                Pose {
+                    eye,
+                    look_at: eye + look,
+                }
+            }
+        }
+    }
+
+    /// The farthest distance (metres, horizontal) from the eye to a point of the map anywhere
+    /// on the path: what the clipmap and the far plane must reach.
+    pub fn view_radius(&self) -> f32 {
+        let frame = self.frame();
+        let half_diagonal = frame.extent.length() * 0.5;
+        match *self {
+            CameraPath::Orbit { distance, .. } => distance * ORBIT_PITCH.cos() + half_diagonal,
+            CameraPath::Flyover { .. } => {
+                FLYOVER_RADIUS * frame.extent.max_element() + half_diagonal
+            }
+        }
+    }
+
+    /// The distance at which the view's subject sits (the orbit's centre, the flyover's look
+    /// ahead): fog and planes are set from it.
+    pub fn subject_distance(&self) -> f32 {
+        match *self {
+            CameraPath::Orbit { distance, .. } => distance,
+            CameraPath::Flyover { frame } => frame.side() * FLYOVER_LOOK_AHEAD,
+        }
+    }
+
+    /// The least height of the eye above the ground (the body's ground clamp): a hundredth of
+    /// the map's longer side, at least 2 m.
+    pub fn clearance(&self) -> f32 {
+        (self.frame().side() * 0.01).max(2.0)
+    }
+
+    /// Fog density per metre: light at the subject, the repeats of the toroidal map beyond
+    /// it fading out.
+    pub fn fog_density(&self) -> f32 {
+        0.25 / self.subject_distance().max(1.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(side: f32) -> MapFrame {
+        MapFrame {
+            extent: Vec2::new(side, side * 0.75),
+            low: 100.0,
+            high: 900.0,
+        }
+    }
+
+    #[test]
+    fn the_orbit_frames_the_whole_map_and_looks_at_its_centre() {
+        for side in [200.0, 2560.0, 50_000.0] {
+            let f = frame(side);
+            let path = CameraPath::orbit(f);
+            for t in [0.0, 7.0, 23.0] {
+                let pose = path.pose(t, |_| 0.0);
+                assert_eq!(pose.look_at, f.centre());
+                let to_centre = pose.eye - pose.look_at;
+                // Far enough that the map's bounding sphere fits the vertical field of view
+                // (within the framing factor), above the highest point.
+                let needed = f.radius() / (FOV_Y * 0.5).sin();
+                assert!(to_centre.length() >= 0.8 * needed, "{side} {t}");
+                assert!(to_centre.length() <= 1.2 * needed, "{side} {t}");
+                assert!(pose.eye.y > f.high, "{side} {t}");
+            }
+            // It moves around the centre.
+            let (a, b) = (path.pose(0.0, |_| 0.0), path.pose(10.0, |_| 0.0));
+            assert!((a.eye - b.eye).length() > 0.1 * side);
+            assert!(path.view_radius() > (a.eye - a.look_at).length() * ORBIT_PITCH.cos());
+        }
+    }
+
+    #[test]
+    fn the_flyover_keeps_its_height_above_the_highest_ground_ahead() {
+        let f = frame(2560.0);
+        let path = CameraPath::flyover(f);
+        // A ridge along x = 1800 m.
+        let ground = |p: Vec2| if (p.x - 1800.0).abs() < 100.0 { 850.0 } else { 150.0 };
+        for i in 0..300 {
+            let t = i as f32 * 0.1;
+            let pose = path.pose(t, ground);
+            let xz = Vec2::new(pose.eye.x, pose.eye.z);
+            assert!(xz.x >= 0.0 && xz.y >= 0.0 && xz.x <= f.extent.x && xz.y <= f.extent.y);
+            assert!(pose.eye.y >= ground(xz) + 2560.0 * FLYOVER_HEIGHT - 1e-3, "{t}");
+            // Looks ahead and down.
+            assert!(pose.look_at.y < pose.eye.y);
+        }
+        assert!(path.clearance() >= 2.0);
+        assert!(path.fog_density() > 0.0 && path.fog_density() < 0.01);
+    }
+}
