@@ -64,7 +64,12 @@ pub struct Cli {
     /// (GeoTIFF and R32 metres kept, PNG / RAW16 integers taken as metres), 0:12 for the
     /// procedural terrain; `MIN:MAX` maps integer heightmaps linearly onto MIN..MAX (0 to MIN,
     /// full scale to MAX) and clamps metres to it.
-    #[arg(long, value_parser = parse_height_range, conflicts_with = "max_height")]
+    #[arg(
+        long,
+        value_parser = parse_height_range,
+        conflicts_with = "max_height",
+        allow_hyphen_values = true
+    )]
     pub height_range: Option<HeightRangeArg>,
     /// Same as --height-range 0:M.
     #[arg(long, value_name = "M")]
@@ -235,6 +240,9 @@ mod tests {
         assert!(
             Cli::try_parse_from(["demo", "--height-range", "0:10", "--max-height", "5"]).is_err()
         );
+        // A negative minimum is a value, not a flag.
+        let cli = Cli::try_parse_from(["demo", "--height-range", "-10:245"]).unwrap();
+        assert_eq!(cli.height_range, Some(HeightRangeArg::Span(-10.0, 245.0)));
     }
 
     #[test]
