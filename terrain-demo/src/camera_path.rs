@@ -236,6 +236,42 @@ mod tests {
     }
 
     #[test]
+    fn every_corner_of_the_map_stays_in_the_orbit_frame() {
+        // Maps square and long, flat and steep, in 16:9 and square frames: each corner of the
+        // map's box projects inside the frame at every point of a revolution.
+        let maps = [
+            (Vec2::splat(2560.0), 100.0, 900.0),
+            (Vec2::new(10_240.0, 2_560.0), 0.0, 300.0),
+            (Vec2::splat(204.8), 0.0, 12.0),
+            (Vec2::splat(1000.0), 0.0, 800.0),
+        ];
+        for (extent, low, high) in maps {
+            let path = CameraPath::orbit(MapFrame { extent, low, high });
+            for aspect in [16.0 / 9.0, 1.0] {
+                for i in 0..72 {
+                    let pose = path.pose(i as f32 / 72.0 * ORBIT_PERIOD_S, |_| 0.0);
+                    let camera = crate::gpu_scene::Camera::looking(
+                        pose.eye,
+                        pose.look_at - pose.eye,
+                    );
+                    let m = camera.view_proj_world(aspect);
+                    for x in [0.0, extent.x] {
+                        for y in [low, high] {
+                            for z in [0.0, extent.y] {
+                                let p = m.project_point3(Vec3::new(x, y, z));
+                                assert!(
+                                    p.x.abs() < 1.0 && p.y.abs() < 1.0,
+                                    "{extent} {aspect}: corner ({x}, {y}, {z}) at {p}"
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn the_flyover_keeps_its_height_above_the_highest_ground_ahead() {
         let f = frame(2560.0);
         let path = CameraPath::flyover(f);

@@ -298,11 +298,16 @@ mod tests {
     #[test]
     fn the_overview_and_frames_follow_the_scenarios_sizes() {
         // A long, thin heightmap: the overview keeps its aspect, the frame is the overview.
+        // (Its length is checked against the size: the file must exist.)
+        let thin =
+            std::env::temp_dir().join(format!("terrain_estimate_thin_{}.r16", std::process::id()));
+        std::fs::write(&thin, vec![0u8; 16 * 4096 * 2]).expect("write");
+        let thin_arg = thin.display().to_string();
         let cli = Cli::try_parse_from([
             "demo",
             "--no-gpu",
             "--heightmap",
-            "thin.r16",
+            &thin_arg,
             "--raw-size",
             "16x4096",
             "--overview-size",
@@ -310,8 +315,11 @@ mod tests {
         ])
         .expect("flags");
         let s = RunShape::of(&cli).expect("shape");
+        let _ = std::fs::remove_file(&thin);
         assert_eq!(s.overview, UVec2::new(16, 4096));
         assert_eq!(part(&s.estimate(), "frames"), 16 * 4096 * 12);
+        // The import is counted beside the map: its decoded samples, no TIFF directory.
+        assert_eq!(part(&s.estimate(), "dem_import"), 16 * 4096 * DEM_IMPORT_PER_TEXEL);
         let snow = shape(&[
             "--scenario",
             "snow",
