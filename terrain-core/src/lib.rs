@@ -1,5 +1,6 @@
-//! CPU reference of the deformable terrain workspace: grids and height encodings, PNG / RAW16
-//! I/O, sampling, partial-derivative normal maps, stamps and a procedural default terrain.
+//! CPU reference of the deformable terrain workspace: grids and height encodings, PNG / RAW16 /
+//! R32 I/O, DEM import (GeoTIFF included), sampling, partial-derivative normal maps, stamps and
+//! a procedural default terrain.
 //!
 //! Conventions (stated once for the whole workspace): world units are metres, Y is up,
 //! right-handed. Heightmap column `x` maps to world X and row `y` to world Z; sample `(x, y)`
