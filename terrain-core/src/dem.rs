@@ -257,9 +257,7 @@ pub fn read_dem(path: impl AsRef<Path>, options: &DemOptions) -> Result<Dem, Map
     match (format, options.raw_size) {
         (DemFormat::Png, _) => Ok(match io::read_png(path, limits)? {
             io::GrayImage::Gray8(g) => stored(g.map(|&v| f32::from(v)), SampleType::U8, 255),
-            io::GrayImage::Gray16(g) => {
-                stored(g.map(|&v| f32::from(v)), SampleType::U16, 65535)
-            }
+            io::GrayImage::Gray16(g) => stored(g.map(|&v| f32::from(v)), SampleType::U16, 65535),
         }),
         (DemFormat::Raw16, Some(size)) => {
             let g = io::read_raw16_ordered(path, size, options.byte_order, limits)?;
@@ -310,7 +308,10 @@ impl Dem {
     /// finite, or whose `max_m` is not above `min_m`, is [`CoreError::OutOfRange`].
     pub fn to_coarse_heights(&self, range: HeightRange) -> Result<CoarseHeights, CoreError> {
         if let HeightRange::Span { min_m, max_m } = range {
-            for (what, v) in [("height range minimum", min_m), ("height range maximum", max_m)] {
+            for (what, v) in [
+                ("height range minimum", min_m),
+                ("height range maximum", max_m),
+            ] {
                 if !v.is_finite() {
                     return Err(CoreError::NonFinite { what, value: v });
                 }
@@ -337,7 +338,7 @@ impl Dem {
                 let full = f64::from(full_scale.max(1));
                 Box::new(move |v| a + (b - a) * f64::from(v) / full)
             }
-            _ => Box::new(|v| f64::from(v)),
+            _ => Box::new(f64::from),
         };
         let (data_min, data_max) = (to_m(lo), to_m(hi));
         let encoding = match range {
@@ -479,7 +480,10 @@ mod tests {
 
     #[test]
     fn a_span_maps_integers_linearly_and_clamps_metres() {
-        let png = dem(vec![0.0, 255.0, 51.0], HeightUnits::Stored { full_scale: 255 });
+        let png = dem(
+            vec![0.0, 255.0, 51.0],
+            HeightUnits::Stored { full_scale: 255 },
+        );
         let q = png
             .to_coarse_heights(HeightRange::Span {
                 min_m: 10.0,

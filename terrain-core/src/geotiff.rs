@@ -183,10 +183,7 @@ impl GeoReference {
             });
         }
         match self.linear_unit.map(unit_metres) {
-            None => Some(TexelSize::Metres {
-                x_m: sx,
-                y_m: sy,
-            }),
+            None => Some(TexelSize::Metres { x_m: sx, y_m: sy }),
             Some(Some(m)) => Some(TexelSize::Metres {
                 x_m: sx * m,
                 y_m: sy * m,
@@ -265,9 +262,10 @@ pub fn read_geotiff_size(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<
     let len = file_len(&file, path)?;
     let origin = Origin::File(path);
     check_first_ifd(&mut BufReader::new(&file), len, limits, origin)?;
-    let mut decoder =
-        Decoder::new(rewound(&file, path)?).map_err(|e| map_tiff_error(e, origin))?;
-    let (w, h) = decoder.dimensions().map_err(|e| map_tiff_error(e, origin))?;
+    let mut decoder = Decoder::new(rewound(&file, path)?).map_err(|e| map_tiff_error(e, origin))?;
+    let (w, h) = decoder
+        .dimensions()
+        .map_err(|e| map_tiff_error(e, origin))?;
     check_size(w, h, limits)?;
     Ok(UVec2::new(w, h))
 }
@@ -378,7 +376,9 @@ fn sample_type<R: Read + Seek>(
         (SampleFormat::IEEEFP, 32) => SampleType::F32,
         (SampleFormat::IEEEFP, 64) => SampleType::F64,
         (format, bits) => {
-            return Err(unsupported(format!("{bits}-bit samples of format {format:?}")));
+            return Err(unsupported(format!(
+                "{bits}-bit samples of format {format:?}"
+            )));
         }
     })
 }
@@ -698,7 +698,10 @@ fn check_first_ifd(
         }
     };
     let (big, first) = match e.u16([head[2], head[3]]) {
-        42 => (false, u64::from(e.u32(read_at(r, 4, "the TIFF header", origin)?))),
+        42 => (
+            false,
+            u64::from(e.u32(read_at(r, 4, "the TIFF header", origin)?)),
+        ),
         43 => (true, e.u64(read_at(r, 8, "the BigTIFF header", origin)?)),
         magic => {
             return Err(MapIoError::Corrupt {

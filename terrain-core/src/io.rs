@@ -238,9 +238,7 @@ pub enum MapIoError {
         format: &'static str,
     },
     /// A size was given for a format that stores its own.
-    #[error(
-        "{format} files store their size: a raw size is only used for RAW16 and R32 files"
-    )]
+    #[error("{format} files store their size: a raw size is only used for RAW16 and R32 files")]
     RawSizeUnused {
         /// The format (`PNG`, `GeoTIFF`).
         format: &'static str,
@@ -256,9 +254,7 @@ pub enum MapIoError {
         reason: String,
     },
     /// Every sample of the DEM is nodata: there is no height to fill the holes with.
-    #[error(
-        "all {count} samples are nodata ({marker}): the DEM holds no height at all"
-    )]
+    #[error("all {count} samples are nodata ({marker}): the DEM holds no height at all")]
     NoValidHeights {
         /// How many samples.
         count: u64,

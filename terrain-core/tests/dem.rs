@@ -121,7 +121,10 @@ fn png16_and_png8_are_integers_mapped_by_the_range() {
     assert_eq!(q.encoding.range::<u16>(), (0.0, 12.0));
     // Auto: one unit per metre, spanning the data.
     let q = dem.to_coarse_heights(HeightRange::Auto).unwrap();
-    assert_eq!((q.data_min_m, q.data_max_m), (0.0, 19.0 * 3000.0 + 16.0 * 7.0));
+    assert_eq!(
+        (q.data_min_m, q.data_max_m),
+        (0.0, 19.0 * 3000.0 + 16.0 * 7.0)
+    );
     let m = CoarseMap::coarse(q.grid, q.encoding, 1.0).unwrap();
     let h = m.height_m(19, 16).unwrap();
     assert!((h - 57_112.0).abs() < 1.0, "{h}");
@@ -138,7 +141,10 @@ fn png16_and_png8_are_integers_mapped_by_the_range() {
         .unwrap();
     // 8-bit full scale maps onto the 16-bit one exactly (times 257).
     assert_eq!(q.grid.get(15, 15), Some(165 * 257));
-    assert_eq!(dem_size(&p8, &opts()).unwrap(), (DemFormat::Png, UVec2::new(16, 16)));
+    assert_eq!(
+        dem_size(&p8, &opts()).unwrap(),
+        (DemFormat::Png, UVec2::new(16, 16))
+    );
 }
 
 #[test]
@@ -158,7 +164,10 @@ fn raw16_reads_either_byte_order() {
     assert_eq!(b.heights.as_slice(), want);
     // The wrong byte order reads other (byte-swapped) values: the option matters.
     let swapped = read_dem(&pbe, &raw_opts(size, ByteOrder::Little)).unwrap();
-    assert_eq!(swapped.heights.as_slice()[1], f32::from(0x0103u16.swap_bytes()));
+    assert_eq!(
+        swapped.heights.as_slice()[1],
+        f32::from(0x0103u16.swap_bytes())
+    );
     assert_ne!(swapped.heights.as_slice(), want);
 
     // A size is required, and must match the file's length.
@@ -168,7 +177,14 @@ fn raw16_reads_either_byte_order() {
     ));
     let e = read_dem(&ple, &raw_opts(UVec2::new(4, 4), ByteOrder::Little)).unwrap_err();
     assert!(
-        matches!(e, MapIoError::RawSizeMismatch { expected_bytes: 32, actual_bytes: 30, .. }),
+        matches!(
+            e,
+            MapIoError::RawSizeMismatch {
+                expected_bytes: 32,
+                actual_bytes: 30,
+                ..
+            }
+        ),
         "{e}"
     );
     assert!(matches!(
@@ -185,7 +201,16 @@ fn raw16_reads_either_byte_order() {
 fn r32_keeps_metres_and_fills_nodata() {
     let dir = Scratch::new("r32");
     let size = UVec2::new(4, 2);
-    let values = [120.5f32, f32::NAN, 99.25, -3.4e38, 300.0, f32::INFINITY, 150.0, 101.0];
+    let values = [
+        120.5f32,
+        f32::NAN,
+        99.25,
+        -3.4e38,
+        300.0,
+        f32::INFINITY,
+        150.0,
+        101.0,
+    ];
     for order in [ByteOrder::Little, ByteOrder::Big] {
         let bytes: Vec<u8> = values
             .iter()
@@ -210,7 +235,14 @@ fn r32_keeps_metres_and_fills_nodata() {
     let p = dir.file("short.r32", &[0u8; 30]);
     let e = read_dem(&p, &raw_opts(size, ByteOrder::Little)).unwrap_err();
     assert!(
-        matches!(e, MapIoError::R32SizeMismatch { expected_bytes: 32, actual_bytes: 30, .. }),
+        matches!(
+            e,
+            MapIoError::R32SizeMismatch {
+                expected_bytes: 32,
+                actual_bytes: 30,
+                ..
+            }
+        ),
         "{e}"
     );
     assert!(e.to_string().contains("4 per sample"), "{e}");
@@ -316,7 +348,10 @@ fn geotiff_heights_are_metres_and_the_range_follows_them() {
         .unwrap();
     assert!(q.clamped > 0);
     assert_eq!(q.grid.get(32, 24), Some(u16::MAX));
-    assert_eq!(dem_size(&p, &opts()).unwrap(), (DemFormat::GeoTiff, UVec2::new(64, 48)));
+    assert_eq!(
+        dem_size(&p, &opts()).unwrap(),
+        (DemFormat::GeoTiff, UVec2::new(64, 48))
+    );
 }
 
 #[test]
@@ -339,7 +374,10 @@ fn geotiff_nodata_is_filled_and_reported() {
         .iter()
         .map(|&v| v as i16 as f32)
         .fold(f32::INFINITY, f32::min);
-    assert_eq!((fill.count, fill.value, fill.fill), (25, Some(-32768.0), lowest));
+    assert_eq!(
+        (fill.count, fill.value, fill.fill),
+        (25, Some(-32768.0), lowest)
+    );
     assert!(dem.heights.as_slice().iter().all(|&h| h >= lowest));
     // Without the tag, -32768 is a height like any other: the tag is what matters.
     let untagged = TiffSpec::new(20, 20, Sample::I16, values);
@@ -376,7 +414,10 @@ fn geotiff_nodata_is_filled_and_reported() {
         decode_geotiff(&spec.write(), &ReadLimits::default()).unwrap(),
     )
     .unwrap_err();
-    assert!(matches!(e, MapIoError::NoValidHeights { count: 16, .. }), "{e}");
+    assert!(
+        matches!(e, MapIoError::NoValidHeights { count: 16, .. }),
+        "{e}"
+    );
     assert!(e.to_string().contains("-9999"), "{e}");
     // A nodata tag that is no number.
     let spec = TiffSpec {
@@ -384,7 +425,10 @@ fn geotiff_nodata_is_filled_and_reported() {
         ..TiffSpec::new(4, 4, Sample::F32, vec![1.0; 16])
     };
     let e = decode_geotiff(&spec.write(), &ReadLimits::default()).unwrap_err();
-    assert!(e.to_string().contains("42113") && e.to_string().contains("none"), "{e}");
+    assert!(
+        e.to_string().contains("42113") && e.to_string().contains("none"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -423,7 +467,11 @@ fn geotiff_georeferencing_gives_the_texel_size() {
     });
     assert!(matches!(
         t.geo.texel_size(),
-        Some(TexelSize::Degrees { guessed: true, latitude: None, .. })
+        Some(TexelSize::Degrees {
+            guessed: true,
+            latitude: None,
+            ..
+        })
     ));
     // Feet: the pixel scale (linear unit) and the heights (vertical unit) become metres.
     let t = decode(TiffSpec {
@@ -457,7 +505,10 @@ fn compressed_geotiffs_from_the_tiff_encoder_read_back() {
     use tiff::encoder::{Compression, DeflateLevel, Predictor, TiffEncoder, colortype};
     use tiff::tags::Tag;
     let (w, h) = (70u32, 45u32);
-    let metres: Vec<f32> = hill(w, h, -5.5, 2_400.25).iter().map(|&v| v as f32).collect();
+    let metres: Vec<f32> = hill(w, h, -5.5, 2_400.25)
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
     let ints: Vec<u16> = metres.iter().map(|&v| (v + 10.0) as u16).collect();
     let compressions = [
         ("LZW", Compression::Lzw),
@@ -476,10 +527,7 @@ fn compressed_geotiffs_from_the_tiff_encoder_read_back() {
                 .encoder()
                 .write_tag(Tag::ModelPixelScaleTag, &[5.0f64, 5.0, 0.0][..])
                 .unwrap();
-            image
-                .encoder()
-                .write_tag(Tag::GdalNodata, "-9999")
-                .unwrap();
+            image.encoder().write_tag(Tag::GdalNodata, "-9999").unwrap();
             image.write_data(&metres).unwrap();
             let t = decode_geotiff(f32_file.get_ref(), &ReadLimits::default())
                 .unwrap_or_else(|e| panic!("{name} {predictor:?}: {e}"));
@@ -527,7 +575,10 @@ fn the_format_follows_the_extension_then_the_signature_then_the_size() {
         ..DemOptions::default()
     };
     let r16 = dir.file("actually_floats.r16", &1.5f32.to_le_bytes().repeat(8));
-    assert_eq!(read_dem(&r16, &forced).unwrap().heights.as_slice(), [1.5; 8]);
+    assert_eq!(
+        read_dem(&r16, &forced).unwrap().heights.as_slice(),
+        [1.5; 8]
+    );
     // A size for a format that stores its own is refused: it would be ignored otherwise.
     let named = dir.file("dem.png", &png);
     assert!(matches!(
@@ -589,12 +640,20 @@ fn bad_geotiffs_get_clear_errors() {
     let raised = ReadLimits { max_side: u32::MAX };
     let e = decode_geotiff(&bytes, &raised).unwrap_err();
     assert!(
-        matches!(e, MapIoError::OutOfMemory { .. } | MapIoError::Corrupt { .. }),
+        matches!(
+            e,
+            MapIoError::OutOfMemory { .. } | MapIoError::Corrupt { .. }
+        ),
         "{e}"
     );
     // A tag claiming more values than a DEM needs, or values past the end of the file.
     let many = TiffSpec {
-        extra: vec![(65000, tiff_writer::LONG, MAX_DIRECTORY_VALUES + 1, vec![0; 8])],
+        extra: vec![(
+            65000,
+            tiff_writer::LONG,
+            MAX_DIRECTORY_VALUES + 1,
+            vec![0; 8],
+        )],
         ..TiffSpec::new(2, 2, Sample::U8, vec![1.0; 4])
     };
     let e = decode_geotiff(&many.write(), &l).unwrap_err();
@@ -665,7 +724,8 @@ fn fix_external_offsets(bytes: &mut [u8], at: usize, by: usize) {
             _ => 1,
         };
         if count * size > 4 {
-            let off = u32::from_le_bytes([bytes[e + 8], bytes[e + 9], bytes[e + 10], bytes[e + 11]]);
+            let off =
+                u32::from_le_bytes([bytes[e + 8], bytes[e + 9], bytes[e + 10], bytes[e + 11]]);
             if off as usize > at + by {
                 bytes[e + 8..e + 12].copy_from_slice(&(off - by as u32).to_le_bytes());
             }
@@ -677,7 +737,10 @@ fn fix_external_offsets(bytes: &mut [u8], at: usize, by: usize) {
 fn special_files_are_refused_by_every_format() {
     let dir = Scratch::new("special");
     let sized = raw_opts(UVec2::new(4, 4), ByteOrder::Little);
-    for (path, kind) in [(dir.0.as_path(), "directory"), (Path::new("/dev/null"), "device")] {
+    for (path, kind) in [
+        (dir.0.as_path(), "directory"),
+        (Path::new("/dev/null"), "device"),
+    ] {
         for o in [opts(), sized] {
             let e = read_dem(path, &o).unwrap_err();
             assert!(

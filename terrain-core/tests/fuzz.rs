@@ -1335,7 +1335,9 @@ fn geotiff_seed(rng: &mut Rng) -> (Vec<u8>, Vec<f32>) {
         big_endian: rng.chance(1, 2),
         bigtiff: rng.chance(1, 4),
         layout,
-        pixel_scale: rng.chance(1, 2).then(|| [rng.uniform(0.0001, 50.0), 5.0, 0.0]),
+        pixel_scale: rng
+            .chance(1, 2)
+            .then(|| [rng.uniform(0.0001, 50.0), 5.0, 0.0]),
         tiepoint: rng
             .chance(1, 3)
             .then(|| [0.0, 0.0, 0.0, 7.0, rng.uniform(-80.0, 80.0), 0.0]),
@@ -1424,7 +1426,10 @@ fn geotiff_directory_fields(_: &Ctx, case: &mut Case) -> Result<(), String> {
         let (at, len) = match rng.below(3) {
             0 => (e + 2, 2),
             1 => (e + 4, if bigtiff { 8 } else { 4 }),
-            _ => (e + if bigtiff { 12 } else { 8 }, if bigtiff { 8 } else { 4 }),
+            _ => (
+                e + if bigtiff { 12 } else { 8 },
+                if bigtiff { 8 } else { 4 },
+            ),
         };
         let v = match rng.below(4) {
             0 => u64::from(rng.u32_edge()),
@@ -1447,11 +1452,7 @@ fn geotiff_random(_: &Ctx, case: &mut Case) -> Result<(), String> {
     let n = rng.range_usize(0, 600);
     let mut bytes = rng.bytes(n);
     if rng.chance(1, 2) && bytes.len() >= 8 {
-        bytes[..4].copy_from_slice(if rng.chance(1, 2) {
-            b"II*\0"
-        } else {
-            b"MM\0*"
-        });
+        bytes[..4].copy_from_slice(if rng.chance(1, 2) { b"II*\0" } else { b"MM\0*" });
         bytes[4..8].copy_from_slice(&[8, 0, 0, 0]);
     }
     let limits = limits_for(rng);
@@ -1470,11 +1471,12 @@ fn geotiff_file_reader(ctx: &Ctx, case: &mut Case) -> Result<(), String> {
     let from_file = read_geotiff(&path, &limits);
     let _ = std::fs::remove_file(&path);
     match (from_file, decode_geotiff(&bytes, &limits)) {
-        (Ok(a), Ok(b)) if a.heights.as_slice().iter().map(|v| v.to_bits()).eq(b
-            .heights
-            .as_slice()
-            .iter()
-            .map(|v| v.to_bits())) =>
+        (Ok(a), Ok(b))
+            if a.heights.as_slice().iter().map(|v| v.to_bits()).eq(b
+                .heights
+                .as_slice()
+                .iter()
+                .map(|v| v.to_bits())) =>
         {
             Ok(())
         }

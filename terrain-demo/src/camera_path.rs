@@ -250,10 +250,8 @@ mod tests {
             for aspect in [16.0 / 9.0, 1.0] {
                 for i in 0..72 {
                     let pose = path.pose(i as f32 / 72.0 * ORBIT_PERIOD_S, |_| 0.0);
-                    let camera = crate::gpu_scene::Camera::looking(
-                        pose.eye,
-                        pose.look_at - pose.eye,
-                    );
+                    let camera =
+                        crate::gpu_scene::Camera::looking(pose.eye, pose.look_at - pose.eye);
                     let m = camera.view_proj_world(aspect);
                     for x in [0.0, extent.x] {
                         for y in [low, high] {
@@ -276,13 +274,22 @@ mod tests {
         let f = frame(2560.0);
         let path = CameraPath::flyover(f);
         // A ridge along x = 1800 m.
-        let ground = |p: Vec2| if (p.x - 1800.0).abs() < 100.0 { 850.0 } else { 150.0 };
+        let ground = |p: Vec2| {
+            if (p.x - 1800.0).abs() < 100.0 {
+                850.0
+            } else {
+                150.0
+            }
+        };
         for i in 0..300 {
             let t = i as f32 * 0.1;
             let pose = path.pose(t, ground);
             let xz = Vec2::new(pose.eye.x, pose.eye.z);
             assert!(xz.x >= 0.0 && xz.y >= 0.0 && xz.x <= f.extent.x && xz.y <= f.extent.y);
-            assert!(pose.eye.y >= ground(xz) + 2560.0 * FLYOVER_HEIGHT - 1e-3, "{t}");
+            assert!(
+                pose.eye.y >= ground(xz) + 2560.0 * FLYOVER_HEIGHT - 1e-3,
+                "{t}"
+            );
             // Looks ahead and down.
             assert!(pose.look_at.y < pose.eye.y);
         }

@@ -34,7 +34,9 @@ pub const CLIPMAP_LEVELS: u32 = 5;
 pub fn levels_to_reach(radius: f32, texel_size: f32) -> u32 {
     let half = (CLIPMAP_N - 1) as f32 / 2.0 * texel_size;
     let mut levels = CLIPMAP_LEVELS;
-    while levels < terrain_lod::clipmap::MAX_LEVELS && half * ((1u32 << (levels - 1)) as f32) < radius {
+    while levels < terrain_lod::clipmap::MAX_LEVELS
+        && half * ((1u32 << (levels - 1)) as f32) < radius
+    {
         levels += 1;
     }
     levels
@@ -279,8 +281,7 @@ impl GpuScene {
         let levels = levels_to_reach(radius, self.map.texel_size());
         if levels != self.layout.levels() {
             let layout = ClipmapLayout::new(CLIPMAP_N, levels)?;
-            self.renderer =
-                ClipmapRenderer::new(&self.ctx.device, &self.target.format(), &layout)?;
+            self.renderer = ClipmapRenderer::new(&self.ctx.device, &self.target.format(), &layout)?;
             self.layout = layout;
         }
         Ok(())

@@ -17,9 +17,9 @@ use crate::scenarios::{
     snow,
     world_files::{self, WorldBuild},
 };
-use terrain_core::dem::DemFormat;
 use anyhow::Result;
 use glam::UVec2;
+use terrain_core::dem::DemFormat;
 
 /// The process without its maps: code, the standard library, rayon's and the cache's threads
 /// (a 64 x 64 run without a GPU peaks at 14 MiB).
@@ -319,7 +319,10 @@ mod tests {
         assert_eq!(s.overview, UVec2::new(16, 4096));
         assert_eq!(part(&s.estimate(), "frames"), 16 * 4096 * 12);
         // The import is counted beside the map: its decoded samples, no TIFF directory.
-        assert_eq!(part(&s.estimate(), "dem_import"), 16 * 4096 * DEM_IMPORT_PER_TEXEL);
+        assert_eq!(
+            part(&s.estimate(), "dem_import"),
+            16 * 4096 * DEM_IMPORT_PER_TEXEL
+        );
         let snow = shape(&[
             "--scenario",
             "snow",

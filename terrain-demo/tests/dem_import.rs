@@ -33,7 +33,9 @@ fn mountain(n: u32, lo: f32, hi: f32) -> Vec<f32> {
     let (a, b) = v
         .iter()
         .fold((f32::MAX, f32::MIN), |(a, b), &h| (a.min(h), b.max(h)));
-    v.iter().map(|h| lo + (hi - lo) * (h - a) / (b - a)).collect()
+    v.iter()
+        .map(|h| lo + (hi - lo) * (h - a) / (b - a))
+        .collect()
 }
 
 /// Writes an f32 GeoTIFF (LZW, as GDAL writes DEMs) with a pixel scale and, when given, a
@@ -128,7 +130,11 @@ fn every_format_is_imported_and_reported() {
         "{stderr}"
     );
     assert_eq!(r["texel_size_m"].as_f64(), Some(10.0));
-    assert_eq!(r["camera"].as_str(), Some("orbit"), "the default with a heightmap");
+    assert_eq!(
+        r["camera"].as_str(),
+        Some("orbit"),
+        "the default with a heightmap"
+    );
     let e = &r["height_encoding"];
     assert_eq!(e["source"].as_str(), Some("data"));
     assert!((f(&e["min_m"]) - 100.0).abs() < 0.01 && (f(&e["max_m"]) - 900.0).abs() < 0.05);
@@ -139,10 +145,20 @@ fn every_format_is_imported_and_reported() {
     // --texel-size overrides the file's pixel scale; --height-range spans what it says.
     let (_, r) = ok(
         &dir,
-        &["--heightmap", &s(&tif), "--texel-size", "2.5", "--height-range", "0:1000"],
+        &[
+            "--heightmap",
+            &s(&tif),
+            "--texel-size",
+            "2.5",
+            "--height-range",
+            "0:1000",
+        ],
     );
     assert_eq!(r["texel_size_m"].as_f64(), Some(2.5));
-    assert_eq!(r["height_encoding"]["source"].as_str(), Some("height-range"));
+    assert_eq!(
+        r["height_encoding"]["source"].as_str(),
+        Some("height-range")
+    );
     assert!((f(&r["height_encoding"]["max_m"]) - 1000.0).abs() < 0.05);
 
     // PNG16 of metres (as GDAL exports a DEM to UInt16): `auto` takes them as metres.
@@ -159,27 +175,59 @@ fn every_format_is_imported_and_reported() {
     assert_eq!(r["texel_size_m"].as_f64(), Some(0.1), "the old default");
 
     // PNG8 mapped onto a range.
-    let g8 = Grid::from_vec(n, n, g16.as_slice().iter().map(|&v| (v / 4) as u8).collect()).unwrap();
+    let g8 = Grid::from_vec(
+        n,
+        n,
+        g16.as_slice().iter().map(|&v| (v / 4) as u8).collect(),
+    )
+    .unwrap();
     let png8 = path("dem8.png");
     terrain_core::io::write_png8(&png8, &g8).unwrap();
-    let (_, r) = ok(&dir, &["--heightmap", &s(&png8), "--height-range", "-10:245"]);
+    let (_, r) = ok(
+        &dir,
+        &["--heightmap", &s(&png8), "--height-range", "-10:245"],
+    );
     assert_eq!(r["heightmap"]["sample"].as_str(), Some("u8"));
     assert!((f(&r["height_encoding"]["min_m"]) + 10.0).abs() < 1e-3);
 
     // RAW16 both byte orders: the same heights either way.
-    let le: Vec<u8> = g16.as_slice().iter().flat_map(|v| v.to_le_bytes()).collect();
-    let be: Vec<u8> = g16.as_slice().iter().flat_map(|v| v.to_be_bytes()).collect();
+    let le: Vec<u8> = g16
+        .as_slice()
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let be: Vec<u8> = g16
+        .as_slice()
+        .iter()
+        .flat_map(|v| v.to_be_bytes())
+        .collect();
     std::fs::write(path("le.r16"), le).unwrap();
     std::fs::write(path("be.raw"), be).unwrap();
     let size = format!("{n}x{n}");
-    let (_, a) = ok(&dir, &["--heightmap", &s(&path("le.r16")), "--raw-size", &size]);
+    let (_, a) = ok(
+        &dir,
+        &["--heightmap", &s(&path("le.r16")), "--raw-size", &size],
+    );
     let (_, b) = ok(
         &dir,
-        &["--heightmap", &s(&path("be.raw")), "--raw-size", &size, "--byte-order", "big"],
+        &[
+            "--heightmap",
+            &s(&path("be.raw")),
+            "--raw-size",
+            &size,
+            "--byte-order",
+            "big",
+        ],
     );
-    assert_eq!(a["height_encoding"]["data_max_m"], b["height_encoding"]["data_max_m"]);
+    assert_eq!(
+        a["height_encoding"]["data_max_m"],
+        b["height_encoding"]["data_max_m"]
+    );
     assert_eq!(a["heightmap"]["format"].as_str(), Some("RAW16"));
-    let (_, wrong) = ok(&dir, &["--heightmap", &s(&path("be.raw")), "--raw-size", &size]);
+    let (_, wrong) = ok(
+        &dir,
+        &["--heightmap", &s(&path("be.raw")), "--raw-size", &size],
+    );
     assert_ne!(
         a["height_encoding"]["data_max_m"], wrong["height_encoding"]["data_max_m"],
         "the byte order matters"
@@ -194,7 +242,14 @@ fn every_format_is_imported_and_reported() {
     std::fs::write(path("dem.r32"), r32).unwrap();
     let (stderr, r) = ok(
         &dir,
-        &["--heightmap", &s(&path("dem.r32")), "--raw-size", &size, "--camera", "walker"],
+        &[
+            "--heightmap",
+            &s(&path("dem.r32")),
+            "--raw-size",
+            &size,
+            "--camera",
+            "walker",
+        ],
     );
     assert_eq!(r["camera"].as_str(), Some("walker"));
     assert_eq!(r["nodata"]["count"].as_u64(), Some(10), "{r}");
@@ -203,7 +258,14 @@ fn every_format_is_imported_and_reported() {
     std::fs::copy(path("dem.r32"), path("heights.bin")).unwrap();
     let (_, r) = ok(
         &dir,
-        &["--heightmap", &s(&path("heights.bin")), "--format", "r32", "--raw-size", &size],
+        &[
+            "--heightmap",
+            &s(&path("heights.bin")),
+            "--format",
+            "r32",
+            "--raw-size",
+            &size,
+        ],
     );
     assert_eq!(r["heightmap"]["format"].as_str(), Some("R32"));
     let _ = std::fs::remove_dir_all(&dir);
@@ -217,21 +279,30 @@ fn geotiff_nodata_and_geographic_rasters_are_explained() {
     for h in metres.iter_mut().take(n as usize) {
         *h = -9999.0;
     }
-    let lowest = metres[n as usize..].iter().copied().fold(f32::MAX, f32::min);
+    let lowest = metres[n as usize..]
+        .iter()
+        .copied()
+        .fold(f32::MAX, f32::min);
     let tif = dir.join("srtm.tif");
     write_geotiff(&tif, n, &metres, 1.0 / 3600.0, Some("-9999"), &GEOGRAPHIC);
     let (stderr, r) = ok(&dir, &["--heightmap", &s(&tif)]);
     let nodata = &r["nodata"];
     assert_eq!(nodata["count"].as_u64(), Some(u64::from(n)), "{r}");
     assert_eq!(nodata["value"].as_f64(), Some(-9999.0));
-    assert!((f(&nodata["fill_m"]) - f64::from(lowest)).abs() < 0.01, "{nodata}");
+    assert!(
+        (f(&nodata["fill_m"]) - f64::from(lowest)).abs() < 0.01,
+        "{nodata}"
+    );
     // Filled with the lowest valid height, the range is the valid heights'.
     assert!((f(&r["height_encoding"]["min_m"]) - f64::from(lowest)).abs() < 0.01);
     // Degrees: the texel size is worked out at the raster's latitude, and a warning says so.
     assert!(stderr.contains("geographic raster"), "{stderr}");
     assert!(stderr.contains("--texel-size"), "{stderr}");
     let texel = f(&r["texel_size_m"]);
-    assert!((texel - 30.87).abs() < 0.1, "1 arc-second north-south at 46.5°: {texel}");
+    assert!(
+        (texel - 30.87).abs() < 0.1,
+        "1 arc-second north-south at 46.5°: {texel}"
+    );
     assert!(
         r["heightmap"]["texel_size_source"]
             .as_str()
@@ -267,30 +338,66 @@ fn bad_dem_files_and_flags_are_one_line_usage_errors() {
     let cases: Vec<(Vec<String>, &str)> = vec![
         (vec!["--heightmap".into(), s(&cut)], "truncated"),
         (vec!["--heightmap".into(), s(&rgb)], "one band"),
-        (vec!["--heightmap".into(), s(&r16)], "do not store their size"),
         (
-            vec!["--heightmap".into(), s(&r16), "--raw-size".into(), "40x40".into()],
+            vec!["--heightmap".into(), s(&r16)],
+            "do not store their size",
+        ),
+        (
+            vec![
+                "--heightmap".into(),
+                s(&r16),
+                "--raw-size".into(),
+                "40x40".into(),
+            ],
             "does not match size 40x40",
         ),
-        (vec!["--heightmap".into(), s(&unknown)], "cannot tell the format"),
         (
-            vec!["--heightmap".into(), s(&tif), "--raw-size".into(), "32x32".into()],
+            vec!["--heightmap".into(), s(&unknown)],
+            "cannot tell the format",
+        ),
+        (
+            vec![
+                "--heightmap".into(),
+                s(&tif),
+                "--raw-size".into(),
+                "32x32".into(),
+            ],
             "store their size",
         ),
         (
-            vec!["--heightmap".into(), s(&nan), "--raw-size".into(), "32x32".into()],
+            vec![
+                "--heightmap".into(),
+                s(&nan),
+                "--raw-size".into(),
+                "32x32".into(),
+            ],
             "nodata",
         ),
         (
-            vec!["--heightmap".into(), s(&tif), "--height-range".into(), "5:5".into()],
+            vec![
+                "--heightmap".into(),
+                s(&tif),
+                "--height-range".into(),
+                "5:5".into(),
+            ],
             "MAX must be above MIN",
         ),
         (
-            vec!["--scenario".into(), "snow".into(), "--camera".into(), "orbit".into()],
+            vec![
+                "--scenario".into(),
+                "snow".into(),
+                "--camera".into(),
+                "orbit".into(),
+            ],
             "--camera",
         ),
         (
-            vec!["--heightmap".into(), s(&tif), "--texel-size".into(), "0".into()],
+            vec![
+                "--heightmap".into(),
+                s(&tif),
+                "--texel-size".into(),
+                "0".into(),
+            ],
             "--texel-size",
         ),
     ];
@@ -318,9 +425,14 @@ fn a_geotiff_run_stays_within_its_memory_estimate() {
         m["estimate_bytes"].as_u64().expect("estimate"),
         m["peak_rss_bytes"].as_u64().expect("peak (Linux)"),
     );
-    let import = m["estimate"]["dem_import"].as_u64().expect("the import is counted");
+    let import = m["estimate"]["dem_import"]
+        .as_u64()
+        .expect("the import is counted");
     assert!(import >= u64::from(n * n) * 8, "{m}");
-    assert!(peak <= estimate, "peak {peak} above the estimate {estimate}");
+    assert!(
+        peak <= estimate,
+        "peak {peak} above the estimate {estimate}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -383,8 +495,15 @@ fn a_10m_dem_with_the_default_camera_is_not_a_flat_plain() {
     let metres = mountain(n, 100.0, 900.0);
     let tif = dir.join("dem.tif");
     write_geotiff(&tif, n, &metres, 10.0, None, &PROJECTED);
-    let frame_args = ["--frames", "2", "--resolution", "160x90", "--overview-size", "16"];
-    let mut args = vec!["--heightmap", &*tif.to_str().unwrap()];
+    let frame_args = [
+        "--frames",
+        "2",
+        "--resolution",
+        "160x90",
+        "--overview-size",
+        "16",
+    ];
+    let mut args = vec!["--heightmap", tif.to_str().unwrap()];
     args.extend(frame_args);
     let (code, stderr, r) = run(&dir, &args);
     assert_eq!(code, Some(0), "{stderr}");
@@ -425,4 +544,3 @@ fn a_10m_dem_with_the_default_camera_is_not_a_flat_plain() {
     eprintln!("DEM {dem:?}; old plain {plain:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
-

@@ -337,7 +337,10 @@ impl TiffSpec {
                 if tail.len() % 2 == 1 {
                     tail.push(0);
                 }
-                external = ifd + count_len + entries.len() as u64 * entry_len + inline as u64
+                external = ifd
+                    + count_len
+                    + entries.len() as u64 * entry_len
+                    + inline as u64
                     + tail.len() as u64;
             }
         }

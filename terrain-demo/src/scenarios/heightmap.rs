@@ -275,7 +275,9 @@ fn from_dem(
         fill_m: n.fill,
     });
     if let Some(n) = &nodata {
-        let value = n.value.map_or("NaN / infinite".to_owned(), |v| v.to_string());
+        let value = n
+            .value
+            .map_or("NaN / infinite".to_owned(), |v| v.to_string());
         line.push_str(&format!(
             "; {} nodata samples ({value}) filled with {:.2} m, the lowest valid height",
             n.count, n.fill_m

@@ -60,7 +60,11 @@ impl SnowScenario {
         let initial_normals_ms = ms_since(t);
         let mirror = CollisionMirror::from_map(&coarse)?;
         let start = Vec2::new(coarse.extent_m().x * 0.45, 0.5);
-        let rig = CameraRig::new(start, bilinear(&coarse, start)?, coarse.extent_m().max_element());
+        let rig = CameraRig::new(
+            start,
+            bilinear(&coarse, start)?,
+            coarse.extent_m().max_element(),
+        );
         Ok(Self {
             info: ScenarioInfo {
                 name: "snow",
