@@ -4,7 +4,7 @@
 //! in progress; the end is the same, over the frames done.
 
 use crate::capture::{self, Capture};
-use crate::cli::Cli;
+use crate::cli::{Cli, ScenarioKind};
 use crate::gpu_scene::GpuScene;
 use crate::images;
 use crate::interrupt;
@@ -150,7 +150,13 @@ fn open_gpu(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Option<GpuScene>> 
     let mut scene = match GpuScene::new(scenario.map(), cli.resolution) {
         Ok(scene) => scene,
         Err(e) => {
-            eprintln!("warning: {e:#}; writing top-down overview frames only");
+            // A DEM larger than one GPU buffer is what the streamed flyover is for.
+            let hint = if cli.heightmap.is_some() && cli.scenario == ScenarioKind::Default {
+                " (a heightmap too large for the GPU's buffers is streamed by --scenario flyover)"
+            } else {
+                ""
+            };
+            eprintln!("warning: {e:#}; writing top-down overview frames only{hint}");
             return Ok(None);
         }
     };
