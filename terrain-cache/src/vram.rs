@@ -354,9 +354,16 @@ impl VramPool {
     /// deformed on the GPU in its slot whose change is on its way back to RAM by readback.
     /// Until then the slot is the newest copy, so re-uploading the RAM copy (or evicting the
     /// slot and uploading it again) would lose the change. Returns the slot, `None` (and
-    /// holds nothing) when `id` is not resident. Holds nest.
+    /// holds nothing) when `id` is not resident or its slot is stale (older than RAM): change
+    /// the RAM tile then. Holds nest.
     pub fn hold(&mut self, id: TileId) -> Option<u32> {
         let e = self.resident.get_mut(&id)?;
+        // A stale slot is older than RAM (its re-upload waits for the budget): a change made
+        // in it and read back would overwrite RAM's newer texels. Only a current slot is held
+        // (nested holds keep the slot current: it is not refreshed while held).
+        if e.stale && e.holds == 0 {
+            return None;
+        }
         e.holds = e.holds.saturating_add(1);
         Some(e.slot)
     }
@@ -1139,6 +1146,34 @@ mod tests {
             pool.slot_of(id).is_none(),
             "released tiles are evicted again"
         );
+    }
+
+    #[test]
+    fn a_stale_slot_is_not_held() {
+        let m = manifest(WrapMode::Clamp);
+        let mut ram = MockRam::all(&m);
+        let mut pool = VramPool::new(VramConfig::new(&m, 200)).unwrap();
+        let mut atlas = TileAtlas::new(m.tile_layout(), 200).unwrap();
+        pool.update(&camera(40.0, 40.0, 0.0), &ram, &mut atlas)
+            .unwrap();
+        let id = TileId::new(0, 2, 2);
+        assert!(pool.slot_of(id).is_some());
+        // RAM changes while the camera looks elsewhere: the slot stays resident but stale.
+        ram.versions.insert(id, 7);
+        let r = pool
+            .update(&camera(230.0, 230.0, 3.0), &ram, &mut atlas)
+            .unwrap();
+        assert!(pool.slot_of(id).is_some() && r.stale >= 1, "{r:?}");
+        assert_eq!(
+            pool.hold(id),
+            None,
+            "a stale slot would overwrite newer RAM texels"
+        );
+        assert_eq!(pool.held(), 0);
+        // Refreshed, it can be held again.
+        pool.update(&camera(40.0, 40.0, 0.0), &ram, &mut atlas)
+            .unwrap();
+        assert!(pool.hold(id).is_some());
     }
 
     #[test]

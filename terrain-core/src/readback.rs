@@ -14,13 +14,13 @@ use crate::rect::Rect;
 pub struct RequestId(pub u64);
 
 impl RequestId {
-    /// A number never handed out before in this process (a process-wide counter): sources
+    /// An id never handed out before in this process (a process-wide counter): sources
     /// take their ids from it, so a source made again (after a device loss, say) never reuses
     /// the id of a request an older one may still deliver.
-    pub fn fresh() -> u64 {
+    pub fn fresh() -> RequestId {
         use std::sync::atomic::{AtomicU64, Ordering};
         static NEXT: AtomicU64 = AtomicU64::new(0);
-        NEXT.fetch_add(1, Ordering::Relaxed)
+        RequestId(NEXT.fetch_add(1, Ordering::Relaxed))
     }
 }
 

@@ -88,6 +88,10 @@ pub type ArrivedTileRect = (u64, Rect, Grid<u16>);
 /// The streamed world's tiles on the GPU: slots, indirection table, coarser fallback.
 pub use terrain_gpu::{AtlasConfig, GpuTileAtlas, TileSlot};
 
+/// Staging buffers of the collision readback's ring (the scheduler keeps no more requests
+/// in flight).
+pub const COLLISION_READBACK_RING: usize = 4;
+
 /// Readbacks of deformed atlas tiles in flight at most (the ring's staging buffers).
 const TILE_READBACK_RING: usize = 16;
 
@@ -135,6 +139,11 @@ impl GpuScene {
     /// secondary failures (a mapping that failed), so the loss is looked for first.
     fn lost_or(&self, e: anyhow::Error) -> anyhow::Error {
         let _ = self.ctx.device.poll(wgpu::PollType::Poll);
+        // `is_lost` first: `check` drains the errors of submitted work, which must stay for
+        // the caller when the device is not lost.
+        if !self.ctx.is_lost() {
+            return e;
+        }
         match self.ctx.check() {
             Err(lost @ terrain_gpu::GpuError::DeviceLost { .. }) => {
                 anyhow::Error::new(lost).context("the GPU frame stopped")
@@ -238,7 +247,7 @@ impl GpuScene {
             target,
             footprint: None,
             shock: None,
-            readback: RegionReadback::new(device, 4)?,
+            readback: RegionReadback::new(device, COLLISION_READBACK_RING)?,
             timer: GpuTimer::new(device, queue),
             height_range: (lo, hi),
             granular: None,
@@ -449,6 +458,11 @@ impl GpuScene {
             Ok(())
         })?;
         self.stamps.recall();
+        // wgpu maps a staging buffer even when the commands before it were invalid: the
+        // tickets would then deliver stale bytes into the world. Refuse the frame instead.
+        self.ctx
+            .check()
+            .context("stamping a tile of the streamed world")?;
         timings.add_gpu(Step::Stamp, time.ms, time.timestamp_ms);
         Ok(Some(tickets))
     }
@@ -584,7 +598,14 @@ impl GpuScene {
             &self.map,
             &mut self.readback,
         );
-        Ok(scheduler.update(now, &mut source, mirror)?)
+        match scheduler.update(now, &mut source, mirror) {
+            // Every staging buffer still waits for a slow mapping: back-pressure, not a
+            // failure. The rects stay dirty and are requested once a buffer is free.
+            Err(terrain_physics::UpdateError::Source(terrain_gpu::GpuError::ReadbackBusy {
+                ..
+            })) => Ok(UpdateReport::default()),
+            r => Ok(r?),
+        }
     }
 
     fn render_inner(&mut self, camera: &Camera, timings: &mut Timings) -> Result<RenderedFrame> {

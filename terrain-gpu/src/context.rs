@@ -180,7 +180,10 @@ impl GpuContext {
 
     /// Whether the device has been lost (destroyed, reset by the driver, dropped).
     pub fn is_lost(&self) -> bool {
-        self.lost.lock().map(|l| l.is_some()).unwrap_or(true)
+        match self.lost.lock() {
+            Ok(l) => l.is_some(),
+            Err(poisoned) => poisoned.into_inner().is_some(),
+        }
     }
 
     /// Returns [`GpuError::DeviceLost`] once the device is lost, else the errors wgpu reported

@@ -49,15 +49,31 @@ const ABANDONED: u8 = 4;
 
 /// Travels with a request's map callback. wgpu drops the callback uncalled when the encoder
 /// (or the command buffer) that carries it is dropped without submit; the guard then marks
-/// the slot abandoned, so it is freed instead of waiting forever.
-struct SubmitGuard(Arc<AtomicU8>);
+/// the slot abandoned, so it is freed instead of waiting forever. Once the callback has run it
+/// never touches the slot again (the slot may already serve a newer request by the time the
+/// closure is dropped, on a thread that polls the device).
+struct SubmitGuard {
+    state: Arc<AtomicU8>,
+    fired: bool,
+}
+
+impl SubmitGuard {
+    fn fire(&mut self, state: u8) {
+        self.fired = true;
+        self.state.store(state, Ordering::Release);
+    }
+}
 
 impl Drop for SubmitGuard {
     fn drop(&mut self) {
-        // Only a request still pending: after the callback ran, the state is final.
-        let _ = self
-            .0
-            .compare_exchange(PENDING, ABANDONED, Ordering::AcqRel, Ordering::Acquire);
+        if !self.fired {
+            let _ = self.state.compare_exchange(
+                PENDING,
+                ABANDONED,
+                Ordering::AcqRel,
+                Ordering::Acquire,
+            );
+        }
     }
 }
 
@@ -192,14 +208,15 @@ impl RegionReadback {
         let buffer = &slot.buffer;
         copy_rows(encoder, map, rect, buffer);
         slot.state.store(PENDING, Ordering::Release);
-        let guard = SubmitGuard(slot.state.clone());
+        let mut guard = SubmitGuard {
+            state: slot.state.clone(),
+            fired: false,
+        };
         encoder.map_buffer_on_submit(buffer, wgpu::MapMode::Read, 0..bytes, move |r| {
-            guard
-                .0
-                .store(if r.is_ok() { MAPPED } else { FAILED }, Ordering::Release);
+            guard.fire(if r.is_ok() { MAPPED } else { FAILED });
         });
         // Process-wide, so a ring made again never repeats a ticket an older one handed out.
-        let ticket = ReadbackTicket(terrain_core::RequestId::fresh());
+        let ticket = ReadbackTicket(terrain_core::RequestId::fresh().0);
         slot.request = Some((ticket, rect, map.encoding));
         Ok(ticket)
     }

@@ -121,7 +121,7 @@ impl HeightfieldCollider {
         let local = Ray::new(self.local3("ray origin", origin)?, ray.dir())?;
         Ok(self
             .field
-            .cast_local_ray(&local, max_dist)
+            .cast_local_ray(&local, max_dist)?
             .map(|hit| RayHit {
                 point: hit.point + self.translation,
                 ..hit

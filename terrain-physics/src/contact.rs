@@ -116,22 +116,17 @@ impl HeightField {
         } else {
             best.distance.min(radius)
         };
-        // Each cell of the repeating field counts once, in its copy nearest the centre: a
-        // farther copy has the same heights and a larger horizontal gap. So the search covers
-        // at most one period around the centre, whatever the reach (a sphere far below ground
-        // or a huge radius): bounded by the map, not by the input.
-        let size = self.size();
-        let span = |lo: f64, hi: f64, at: f64, n: u32| -> (i64, i64) {
-            let (lo, hi) = ((lo / ts).floor(), (hi / ts).floor());
-            if hi - lo + 1.0 <= f64::from(n) {
-                (lo as i64, hi as i64)
-            } else {
-                let first = at as i64 - i64::from(n / 2);
-                (first, first + i64::from(n) - 1)
-            }
-        };
-        let (x_lo, x_hi) = span(c.x - reach, c.x + reach, cell, size.x);
-        let (z_lo, z_hi) = span(c.z - reach, c.z + reach, row, size.y);
+        // The field repeats, and a surface point's nearest copy to the centre lies within half
+        // a period of it on each axis (a farther copy has the same height and a larger gap):
+        // so the reach is clamped to half a period per axis. The search covers at most one
+        // period (and a cell) of cells, whatever the reach (a sphere far below ground or a
+        // huge radius): bounded by the map, not by the input, and exact.
+        let (px, pz) = self.period_m();
+        let (rx, rz) = (reach.min(0.5 * px), reach.min(0.5 * pz));
+        let x_lo = ((c.x - rx) / ts).floor() as i64;
+        let x_hi = ((c.x + rx) / ts).floor() as i64;
+        let z_lo = ((c.z - rz) / ts).floor() as i64;
+        let z_hi = ((c.z + rz) / ts).floor() as i64;
         let mut best_d2 = best.distance * best.distance;
         let visit = |ix: i64, iz: i64, best: &mut Closest, best_d2: &mut f64| {
             let patch = self.patch(ix, iz);

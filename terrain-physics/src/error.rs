@@ -30,6 +30,17 @@ pub enum PhysicsError {
         /// The radius given.
         radius: f32,
     },
+    /// A ray crossed more cells of the repeating field than one cast walks (four times around
+    /// it) without meeting the surface or leaving its height range: whether and where it hits
+    /// is not decided (a nearly horizontal ray over a repeating field). Cast a shorter ray.
+    #[error(
+        "the ray crossed {cells} cells within the terrain's height range without an answer: \
+         cast it with a shorter maximum distance"
+    )]
+    RayTooLong {
+        /// Cells walked.
+        cells: u64,
+    },
     /// A parameter lies outside the range accepted.
     #[error("{what} = {value} is out of range: {expected}")]
     OutOfRange {

@@ -78,14 +78,14 @@ impl HeightField {
     /// found exactly cell by cell. Rays cross the map's edges freely (the surface repeats).
     /// `max_dist` must be finite and not negative ([`HeightfieldCollider::raycast`] checks it);
     /// the walk costs one step per cell crossed within the field's height bounds, at most
-    /// `4 (width + height) + 8` cells (four times around the repeating field): a ray that has
-    /// not met the surface by then returns `None`, so every cast is bounded by the map's size
-    /// whatever the distance and the origin.
+    /// `4 (width + height) + 4096` cells (four times around the repeating field, and a fixed allowance): a ray still
+    /// undecided by then is [`PhysicsError::RayTooLong`], so every cast is bounded by the map's
+    /// size whatever the distance and the origin, and `None` always means no hit.
     ///
     /// [`HeightfieldCollider::raycast`]: crate::HeightfieldCollider::raycast
-    pub fn cast_local_ray(&self, ray: &Ray, max_dist: f32) -> Option<RayHit> {
+    pub fn cast_local_ray(&self, ray: &Ray, max_dist: f32) -> Result<Option<RayHit>, PhysicsError> {
         if !(max_dist >= 0.0 && max_dist.is_finite()) {
-            return None;
+            return Ok(None);
         }
         let ts = f64::from(self.texel_size());
         let d = ray.dir().as_dvec3();
@@ -104,11 +104,11 @@ impl HeightField {
         let h0 = f64::from(self.height_local(o_xz));
         if o.y <= h0 {
             let normal = self.normal_local(o_xz);
-            return Some(RayHit {
+            return Ok(Some(RayHit {
                 point: ray.origin(),
                 distance: 0.0,
                 normal,
-            });
+            }));
         }
 
         // Only the stretch of the ray between the field's height bounds can hit.
@@ -121,12 +121,12 @@ impl HeightField {
             }
             t_end = t_end.min((o.y - lo) / -d.y);
         } else if o.y > hi {
-            return None;
+            return Ok(None);
         } else if d.y > 0.0 {
             t_end = t_end.min((hi - o.y) / d.y);
         }
         if t_start > t_end {
-            return None;
+            return Ok(None);
         }
         // Walk from where the stretch starts, moved into the first period too: a ray from far
         // above that descends slowly starts its stretch far away.
@@ -135,22 +135,28 @@ impl HeightField {
         let (sz, start_z) = crate::field::reduce(start.z, pz);
         let from = DVec3::new(sx, start.y, sz);
         let back = shift + DVec3::new(start_x, 0.0, start_z);
-        walk(self, from, d, ts, 0.0, t_end - t_start).map(|hit| RayHit {
-            point: (hit.point.as_dvec3() + back).as_vec3(),
-            distance: (f64::from(hit.distance) + t_start) as f32,
-            ..hit
-        })
+        Ok(
+            walk(self, from, d, ts, 0.0, t_end - t_start)?.map(|hit| RayHit {
+                point: (hit.point.as_dvec3() + back).as_vec3(),
+                distance: (f64::from(hit.distance) + t_start) as f32,
+                ..hit
+            }),
+        )
     }
 }
 
-/// The most cells one cast walks: four times around the repeating field along each axis.
-/// A ray that crosses this many cells without meeting the surface grazes it forever for all
-/// practical purposes (the surface it sees repeats); stopping there bounds every cast by the
-/// map's size, not by the distance asked for.
+/// The most cells one cast walks: four times around the repeating field along each axis, and
+/// a fixed allowance.
+/// Stopping there bounds every cast by the map's size, not by the distance asked for; a ray
+/// still undecided then is refused with [`PhysicsError::RayTooLong`] (never a false miss).
 fn max_walk_cells(field: &HeightField) -> u64 {
     let s = field.size();
-    4 * (u64::from(s.x) + u64::from(s.y)) + 8
+    // Plus a fixed allowance, so small fields answer ordinary rays too.
+    4 * (u64::from(s.x) + u64::from(s.y)) + MIN_WALK_CELLS
 }
+
+/// The walk's allowance on top of four times around the field.
+const MIN_WALK_CELLS: u64 = 4096;
 
 /// Walks the cells crossed between `t_start` and `t_end` and returns the first hit.
 fn walk(
@@ -160,7 +166,7 @@ fn walk(
     ts: f64,
     t_start: f64,
     t_end: f64,
-) -> Option<RayHit> {
+) -> Result<Option<RayHit>, PhysicsError> {
     // Texel-space position and direction (per metre of ray).
     let (px, pz) = (o.x / ts, o.z / ts);
     let (dx, dz) = (d.x / ts, d.z / ts);
@@ -199,6 +205,7 @@ fn walk(
     } else {
         0
     };
+    let capped = max_steps == max_walk_cells(field);
     for _ in 0..=max_steps {
         let t_out = t_max_x.min(t_max_z).min(t_end);
         if t_out >= t_in {
@@ -209,15 +216,15 @@ fn walk(
                     (p.x / ts - ix as f64).clamp(0.0, 1.0),
                     (p.z / ts - iz as f64).clamp(0.0, 1.0),
                 );
-                return Some(RayHit {
+                return Ok(Some(RayHit {
                     point: p.as_vec3(),
                     distance: t as f32,
                     normal: patch.normal(u, v, ts).as_vec3(),
-                });
+                }));
             }
         }
         if t_out >= t_end {
-            return None;
+            return Ok(None);
         }
         t_in = t_in.max(t_out);
         if t_max_x < t_max_z {
@@ -228,7 +235,10 @@ fn walk(
             t_max_z += delta_z;
         }
     }
-    None
+    if capped {
+        return Err(PhysicsError::RayTooLong { cells: max_steps });
+    }
+    Ok(None)
 }
 
 /// A ray in world units (`o`, `d`) and in texel units over the grid (`px`, `pz` the origin,
@@ -327,27 +337,34 @@ mod tests {
     fn straight_down_onto_flat_ground() {
         let f = flat(500); // 5 m
         let ray = Ray::new(Vec3::new(3.3, 10.0, 2.7), Vec3::NEG_Y).expect("ray");
-        let hit = f.cast_local_ray(&ray, 100.0).expect("hit");
+        let hit = f
+            .cast_local_ray(&ray, 100.0)
+            .expect("bounded")
+            .expect("hit");
         assert!((hit.distance - 5.0).abs() < 1e-5);
         assert!((hit.point - Vec3::new(3.3, 5.0, 2.7)).length() < 1e-5);
         assert!((hit.normal - Vec3::Y).length() < 1e-6);
-        assert!(f.cast_local_ray(&ray, 4.9).is_none());
+        assert!(f.cast_local_ray(&ray, 4.9).expect("bounded").is_none());
     }
 
     #[test]
     fn horizontal_and_upward_rays_above_ground_miss() {
         let f = flat(500);
         let up = Ray::new(Vec3::new(1.0, 6.0, 1.0), Vec3::new(0.3, 1.0, 0.2)).expect("ray");
-        assert!(f.cast_local_ray(&up, 1e6).is_none());
+        assert!(f.cast_local_ray(&up, 1e6).expect("bounded").is_none());
         let flat_ray = Ray::new(Vec3::new(1.0, 6.0, 1.0), Vec3::X).expect("ray");
-        assert!(f.cast_local_ray(&flat_ray, 1000.0).is_none());
+        assert!(
+            f.cast_local_ray(&flat_ray, 1000.0)
+                .expect("bounded")
+                .is_none()
+        );
     }
 
     #[test]
     fn origin_below_ground_hits_at_zero() {
         let f = flat(500);
         let ray = Ray::new(Vec3::new(1.0, 4.0, 1.0), Vec3::Y).expect("ray");
-        let hit = f.cast_local_ray(&ray, 10.0).expect("hit");
+        let hit = f.cast_local_ray(&ray, 10.0).expect("bounded").expect("hit");
         assert_eq!(hit.distance, 0.0);
     }
 
@@ -358,7 +375,7 @@ mod tests {
         let f =
             HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("field");
         let ray = Ray::new(Vec3::new(0.0, 5.0, 5.0), Vec3::X).expect("ray");
-        let hit = f.cast_local_ray(&ray, 15.0).expect("hit");
+        let hit = f.cast_local_ray(&ray, 15.0).expect("bounded").expect("hit");
         // The patch between texel 6 (0 m) and 7 (10 m) on row 5 reaches 5 m at x = 6.5.
         assert!((hit.distance - 6.5).abs() < 1e-5, "{hit:?}");
         assert!((f.height_local(Vec2::new(6.5, 5.0)) - 5.0).abs() < 1e-5);

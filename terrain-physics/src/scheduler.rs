@@ -147,6 +147,13 @@ impl ReadbackScheduler {
                 expected: "at least 1",
             });
         }
+        if config.request_timeout.is_zero() {
+            return Err(PhysicsError::OutOfRange {
+                what: "request timeout (seconds)",
+                value: 0.0,
+                expected: "more than 0",
+            });
+        }
         if config.max_in_flight < config.max_requests {
             return Err(PhysicsError::OutOfRange {
                 what: "max requests in flight",
@@ -271,9 +278,14 @@ impl ReadbackScheduler {
             match mirror.apply_next(done.rect, &heights) {
                 Ok(version) => report.applied.push((done.id, version)),
                 Err(e) => {
-                    // Cannot happen for a validated arrival; keep the area dirty if it does.
+                    // Cannot happen for a validated arrival; keep the area dirty if it does, and
+                    // its bounds, and those the requests behind it would retire, pending.
                     self.dirty.insert(done.rect);
                     self.waiting.extend(done.retires.iter().copied());
+                    for f in self.in_flight.iter_mut() {
+                        self.waiting.append(&mut f.retires);
+                    }
+                    self.rebuild_in_flight_bounds();
                     self.first_dirty.get_or_insert(now);
                     self.last_dirty.get_or_insert(now);
                     first_error.get_or_insert(e.into());
@@ -376,6 +388,7 @@ impl ReadbackScheduler {
         }
         let rects = self.dirty.take();
         let mut issued = 0;
+        let mut set_aside: Vec<PendingDeformation> = Vec::new();
         for (k, &rect) in rects.iter().enumerate() {
             match source.request(rect) {
                 Ok(id) => {
@@ -383,10 +396,16 @@ impl ReadbackScheduler {
                     // request can no longer be told apart, so it is abandoned, and a late
                     // arrival under that id is no longer ignored.
                     if let Some(i) = self.in_flight.iter().position(|f| f.id == id) {
+                        // The old request's rect is dirty again but not in this batch: its
+                        // bounds (and those behind it) must outlive this batch, so they are
+                        // set aside and go back to `waiting` after it takes its own.
+                        let keep = std::mem::take(&mut self.waiting);
                         self.keep_bounds_behind(i, &|_| true);
                         if let Some(old) = self.in_flight.remove(i) {
                             self.abandon(old, now, report);
                         }
+                        set_aside.append(&mut self.waiting);
+                        self.waiting = keep;
                         self.rebuild_in_flight_bounds();
                     }
                     self.abandoned.retain(|&a| a != id);
@@ -419,8 +438,11 @@ impl ReadbackScheduler {
                 last.retires = std::mem::take(&mut self.waiting);
             }
         }
-        self.first_dirty = None;
-        self.last_dirty = None;
+        self.waiting.append(&mut set_aside);
+        if self.dirty.is_empty() {
+            self.first_dirty = None;
+            self.last_dirty = None;
+        }
         self.rebuild_in_flight_bounds();
     }
 
@@ -461,24 +483,38 @@ impl ReadbackScheduler {
 }
 
 /// `pending` merged into at most 4 records: the merged rects cover every record's rect, and
-/// each carries the sum of all the bounds (a deformation may move the surface anywhere inside
-/// the merged rect by at most every bound together).
+/// each carries the sum of the bounds of the records it covers (deformations that overlap
+/// add up; a record may count in two merged rects, which is conservative).
 fn merge_pending(pending: &[PendingDeformation], map_size: UVec2) -> Vec<PendingDeformation> {
-    let mut rects = DirtyRegions::new(map_size, u32::MAX, 4);
-    let (mut raise, mut lower) = (0.0f32, 0.0f32);
+    let mut rects = DirtyRegions::new(map_size, 0, 4);
     for p in pending {
         rects.insert(p.rect);
-        raise += p.bound.raise;
-        lower += p.bound.lower;
     }
-    let bound = DeformationBound {
-        raise: raise.min(f32::MAX),
-        lower: lower.min(f32::MAX),
-    };
     rects
         .rects()
         .iter()
-        .map(|&rect| PendingDeformation { rect, bound })
+        .map(|&rect| {
+            // Only the records this rect covers add to its bound (a record lies inside one
+            // merged rect; the cell test is conservative at the edges).
+            let (mut raise, mut lower) = (0.0f32, 0.0f32);
+            let hi = rect.max() - glam::IVec2::ONE;
+            for p in pending {
+                let cells = (
+                    i64::from(rect.min.x),
+                    i64::from(hi.x),
+                    i64::from(rect.min.y),
+                    i64::from(hi.y),
+                );
+                if p.touches_cells(cells.0, cells.1, cells.2, cells.3, map_size) {
+                    raise = (raise + p.bound.raise).min(f32::MAX);
+                    lower = (lower + p.bound.lower).min(f32::MAX);
+                }
+            }
+            PendingDeformation {
+                rect,
+                bound: DeformationBound { raise, lower },
+            }
+        })
         .collect()
 }
 

@@ -94,7 +94,7 @@ impl RegionSource for CpuRegionSource {
 
     fn request(&mut self, rect: Rect) -> Result<RequestId, PhysicsError> {
         let heights = read_region(&self.map, rect)?;
-        let id = RequestId(RequestId::fresh());
+        let id = RequestId::fresh();
         self.requests.push(rect);
         self.queue
             .push_back((self.latency, ArrivedRegion { id, rect, heights }));

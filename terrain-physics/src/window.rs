@@ -192,9 +192,18 @@ impl CollisionWindow {
         if !pos.is_finite() {
             return false;
         }
-        let t = pos.as_dvec2() / f64::from(self.texel_size);
+        // The cell the lookup will read, found with the lookup's own arithmetic: f32 near the
+        // origin (where the field samples in f32), f64 beyond 2^24 texels (where it reduces
+        // the position in f64 first), so the test and the lookup never pick different cells.
+        let t32 = pos / self.texel_size;
+        let cell = if t32.is_finite() && t32.abs().max_element() < 16_777_216.0 {
+            t32.floor().as_dvec2()
+        } else {
+            (pos.as_dvec2() / f64::from(self.texel_size)).floor()
+        };
+        // Both taps of the bilinear lookup, `cell` and `cell + 1`, inside the window.
         let (lo, hi) = (w.min.as_dvec2(), (w.max() - IVec2::ONE).as_dvec2());
-        t.x >= lo.x && t.y >= lo.y && t.x < hi.x && t.y < hi.y
+        cell.x >= lo.x && cell.y >= lo.y && cell.x < hi.x && cell.y < hi.y
     }
 
     /// A collider over the current snapshot, taking world metres: valid where

@@ -251,3 +251,74 @@ fn the_worst_cases_found_answer_within_the_limit() {
         .expect("touching");
     assert!(deep.depth >= 1e6 - 20.0 && deep.normal.y > 0.9, "{deep:?}");
 }
+
+/// A descending ray that meets the surface only after many laps around the field is either
+/// hit correctly or refused as undecided, never reported as a miss (the walk is capped).
+#[test]
+fn a_capped_walk_never_reports_a_false_miss() {
+    let enc = HeightEncoding::new(0.01, 0.0).expect("enc");
+    let mut g = Grid::new(64, 64, 0u16).expect("grid");
+    *g.get_mut(40, 40).expect("texel") = 10_000; // one 100 m spike off the ray's rows
+    let map = CoarseMap::coarse(g, enc, 1.0).expect("map");
+    let c = HeightfieldCollider::from_map(&map).expect("collider");
+    // 1 m down per km: the ray reaches the ground (0 m) after 50 km, about 780 laps.
+    let r = c.raycast(Vec3::new(0.5, 50.0, 0.5), Vec3::new(1000.0, -1.0, 0.0), 1e6);
+    match r {
+        Ok(Some(hit)) => assert!(hit.point.y.abs() < 1e-2 && hit.distance > 4e4, "{hit:?}"),
+        Ok(None) => panic!("a descending ray that reaches the ground reported a miss"),
+        Err(e) => assert!(
+            matches!(e, terrain_physics::PhysicsError::RayTooLong { .. }),
+            "{e}"
+        ),
+    }
+    // A short cast of the same ray is decided: no hit within 1 km.
+    assert_eq!(
+        c.raycast(
+            Vec3::new(0.5, 50.0, 0.5),
+            Vec3::new(1000.0, -1.0, 0.0),
+            1000.0
+        )
+        .expect("decided"),
+        None
+    );
+}
+
+/// The one-period search of a sphere far below ground is exact: its depth equals the distance
+/// to the nearest surface point found by brute force over several periods, for centres at
+/// every fraction of a cell (the window once missed nearer copies at its edges).
+#[test]
+fn deep_sphere_contacts_are_exact_on_a_tiny_repeating_field() {
+    let enc = HeightEncoding::new(0.01, 0.0).expect("enc");
+    let g = Grid::from_fn(4, 4, |x, y| ((x * 7 + y * 3) % 5 * 40) as u16).expect("grid");
+    let map = CoarseMap::coarse(g, enc, 1.0).expect("map");
+    let c = HeightfieldCollider::from_map(&map).expect("collider");
+    for (fx, fz) in [(0.1, 0.2), (0.9, 0.5), (0.5, 0.95), (0.99, 0.01)] {
+        let centre = Vec3::new(1.0 + fx, -3.0, 2.0 + fz);
+        let contact = c
+            .sphere_contact(centre, 0.25)
+            .expect("ok")
+            .expect("below ground: in contact");
+        // Brute force: the surface sampled finely over three periods each way.
+        let mut best = f32::MAX;
+        let steps = 240;
+        for i in 0..=steps {
+            for j in 0..=steps {
+                let p = Vec2::new(
+                    -4.0 + 12.0 * i as f32 / steps as f32,
+                    -4.0 + 12.0 * j as f32 / steps as f32,
+                );
+                let h = c.height(p).expect("h");
+                best = best.min(Vec3::new(p.x, h, p.y).distance(centre));
+            }
+        }
+        let dist = contact.depth - 0.25;
+        assert!(
+            dist <= best + 1e-3,
+            "centre {centre}: {dist} vs brute force {best}"
+        );
+        assert!(
+            dist >= best - 0.06,
+            "centre {centre}: {dist} vs brute force {best}"
+        );
+    }
+}

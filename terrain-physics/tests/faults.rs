@@ -85,7 +85,7 @@ impl FaultySource {
                 expected: "none",
             });
         }
-        let id = RequestId(RequestId::fresh());
+        let id = RequestId::fresh();
         let region = ArrivedRegion {
             id,
             rect,

@@ -427,6 +427,8 @@ fn check_hit(
             Ok(())
         }
         Ok(None) => Ok(()),
+        // A ray undecided after the bounded walk is refused by design (never a false miss).
+        Err(terrain_physics::PhysicsError::RayTooLong { .. }) => Ok(()),
         Err(e) => Err(format!("{what}: finite input refused: {e}")),
     }
 }

@@ -309,22 +309,36 @@ impl FlyoverScenario {
                 all = false;
                 continue;
             }
-            let slot = self.vram.as_ref().and_then(|v| v.slot_of(id));
-            if let (Some(slot), Some(scene)) = (slot, gpu.as_deref_mut()) {
+            // Held before the stamp: a held slot is current and stays in place until every
+            // rect of the stamp is back in RAM.
+            let held = match (gpu.is_some(), self.vram.as_mut()) {
+                (true, Some(v)) => v.hold(id),
+                _ => None,
+            };
+            if let (Some(slot), Some(scene)) = (held, gpu.as_deref_mut()) {
                 let tile = TileSlot { slot, level: 0 };
                 let t = Instant::now();
                 let stamped = scene.stamp_tile(tile, local, &self.gauss, timings)?;
                 self.gpu_stamp_ms += ms_since(t);
+                let version = pool.generation(id);
                 let Some(tickets) = stamped else {
-                    // The readback ring is full: next frame.
+                    // The readback ring is full: next frame (the slot was not changed).
+                    if let Some(v) = self.vram.as_mut() {
+                        v.release(id, version);
+                    }
                     all = false;
                     continue;
                 };
-                // The slot is now newer than RAM until each rect arrives.
-                for (ticket, rect) in tickets {
-                    if let Some(v) = self.vram.as_mut() {
+                // One hold and one pin per rect on its way back (the first hold is taken).
+                if let Some(v) = self.vram.as_mut() {
+                    if tickets.is_empty() {
+                        v.release(id, version);
+                    }
+                    for _ in 1..tickets.len() {
                         v.hold(id);
                     }
+                }
+                for (ticket, rect) in tickets {
                     pool.pin(id);
                     self.in_flight.insert(ticket, (id, rect));
                 }

@@ -49,7 +49,12 @@ impl StampScenario {
         let initial_normals_ms = ms_since(t);
         let script = StampScript::new(map.extent_m(), cli.seed)?;
         let mirror = CollisionMirror::from_map(&map)?;
-        let scheduler = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default())?;
+        // No more requests in flight than the GPU scene's readback ring has buffers.
+        let config = SchedulerConfig {
+            max_in_flight: crate::gpu_scene::COLLISION_READBACK_RING,
+            ..SchedulerConfig::default()
+        };
+        let scheduler = ReadbackScheduler::for_mirror(&mirror, config)?;
         let mode = camera_mode(cli);
         let rig = match mode {
             CameraMode::Walker => {
@@ -138,6 +143,9 @@ impl Scenario for StampScenario {
         };
         for (id, _) in &report.requested {
             self.requested_at.insert(*id, Instant::now());
+        }
+        for id in &report.abandoned {
+            self.requested_at.remove(id);
         }
         let readback_ms = report
             .applied
