@@ -40,43 +40,9 @@ const PER_CASE_LIMIT: Duration = Duration::from_millis(250);
 // ---------------------------------------------------------------------------------------------
 // An independent PNG encoder
 
-const SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
-
-/// CRC-32 (PNG's polynomial) over the concatenation of `parts`.
-fn crc32(parts: &[&[u8]]) -> u32 {
-    let mut crc = 0xFFFF_FFFFu32;
-    for part in parts {
-        for &b in *part {
-            crc ^= u32::from(b);
-            for _ in 0..8 {
-                crc = if crc & 1 != 0 {
-                    (crc >> 1) ^ 0xEDB8_8320
-                } else {
-                    crc >> 1
-                };
-            }
-        }
-    }
-    !crc
-}
-
-fn adler32(data: &[u8]) -> u32 {
-    let (mut a, mut b) = (1u32, 0u32);
-    for &d in data {
-        a = (a + u32::from(d)) % 65521;
-        b = (b + a) % 65521;
-    }
-    (b << 16) | a
-}
-
-fn chunk(ty: &[u8; 4], data: &[u8]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(data.len() + 12);
-    out.extend_from_slice(&(data.len() as u32).to_be_bytes());
-    out.extend_from_slice(ty);
-    out.extend_from_slice(data);
-    out.extend_from_slice(&crc32(&[ty, data]).to_be_bytes());
-    out
-}
+#[path = "common/png_bytes.rs"]
+mod png_bytes;
+use png_bytes::{SIGNATURE, adler32, chunk, crc32};
 
 /// A zlib stream of stored (uncompressed) deflate blocks of random sizes.
 fn zlib_stored(data: &[u8], rng: &mut Rng) -> Vec<u8> {

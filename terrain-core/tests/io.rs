@@ -42,40 +42,9 @@ fn grid8(w: u32, h: u32) -> Grid<u8> {
     Grid::from_fn(w, h, pattern8).unwrap()
 }
 
-fn crc32(parts: &[&[u8]]) -> u32 {
-    let mut crc = 0xFFFF_FFFFu32;
-    for part in parts {
-        for &b in *part {
-            crc ^= u32::from(b);
-            for _ in 0..8 {
-                crc = if crc & 1 != 0 {
-                    (crc >> 1) ^ 0xEDB8_8320
-                } else {
-                    crc >> 1
-                };
-            }
-        }
-    }
-    !crc
-}
-
-fn adler32(data: &[u8]) -> u32 {
-    let (mut a, mut b) = (1u32, 0u32);
-    for &d in data {
-        a = (a + u32::from(d)) % 65521;
-        b = (b + a) % 65521;
-    }
-    (b << 16) | a
-}
-
-fn chunk(ty: &[u8; 4], data: &[u8]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(data.len() + 12);
-    out.extend_from_slice(&(data.len() as u32).to_be_bytes());
-    out.extend_from_slice(ty);
-    out.extend_from_slice(data);
-    out.extend_from_slice(&crc32(&[ty, data]).to_be_bytes());
-    out
-}
+#[path = "common/png_bytes.rs"]
+mod png_bytes;
+use png_bytes::{SIGNATURE, adler32, chunk, crc32};
 
 /// A zlib stream made of stored (uncompressed) deflate blocks.
 fn zlib_stored(data: &[u8]) -> Vec<u8> {
@@ -95,8 +64,6 @@ fn zlib_stored(data: &[u8]) -> Vec<u8> {
     out.extend_from_slice(&adler32(data).to_be_bytes());
     out
 }
-
-const SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
 
 /// A PNG from already filtered scanlines (each starting with its filter byte), written without
 /// the png crate so that decoding is checked against an independent encoder.
