@@ -83,6 +83,11 @@ impl Default for TerrainStyle {
 /// instance buffer large enough for any frame of its layout. The bind group over a map and its
 /// normals is made on the first frame that draws them. One renderer draws one view per submit
 /// (its uniforms are rewritten by the next `prepare`); use one renderer per view.
+///
+/// On a device with [`wgpu::Features::POLYGON_MODE_LINE`], `new` also builds a wireframe
+/// pipeline per surface kind (same bindings, triangle edges as lines), drawn instead of the
+/// filled one after [`ClipmapRenderer::set_wireframe`]; without the feature nothing extra is
+/// made and wireframe is refused.
 #[derive(Debug)]
 pub struct ClipmapRenderer {
     coarse: SurfacePipeline,
@@ -100,6 +105,8 @@ pub struct ClipmapRenderer {
     bound: Option<(Vec<wgpu::Buffer>, SurfaceKind, wgpu::BindGroup)>,
     /// Draws of the prepared frame: (part index, first instance, instance count).
     runs: Vec<(usize, u32, u32)>,
+    /// Draw the wireframe pipelines (only when they exist).
+    wireframe: bool,
 }
 
 impl ClipmapRenderer {
@@ -180,8 +187,34 @@ impl ClipmapRenderer {
                 levels: layout.levels(),
                 bound: None,
                 runs: Vec::new(),
+                wireframe: false,
             }
         })
+    }
+
+    /// Whether this renderer can draw wireframe: its device has
+    /// [`wgpu::Features::POLYGON_MODE_LINE`].
+    pub fn has_wireframe(&self) -> bool {
+        self.coarse.wireframe.is_some()
+    }
+
+    /// Draws triangle edges as lines (`true`) or filled triangles (`false`, the default) from
+    /// the next [`ClipmapRenderer::draw`]. Turning it on fails without
+    /// [`ClipmapRenderer::has_wireframe`].
+    pub fn set_wireframe(&mut self, on: bool) -> Result<(), GpuError> {
+        if on && !self.has_wireframe() {
+            return Err(GpuError::Unsupported {
+                what: "ClipmapRenderer wireframe",
+                reason: "the device was made without Features::POLYGON_MODE_LINE",
+            });
+        }
+        self.wireframe = on;
+        Ok(())
+    }
+
+    /// Whether wireframe is on.
+    pub fn wireframe(&self) -> bool {
+        self.wireframe
     }
 
     /// The formats this renderer draws into.
@@ -327,7 +360,10 @@ impl ClipmapRenderer {
             return;
         }
         let pipeline = self.pipeline(*kind);
-        pass.set_pipeline(&pipeline.pipeline);
+        match (&pipeline.wireframe, self.wireframe) {
+            (Some(lines), true) => pass.set_pipeline(lines),
+            _ => pass.set_pipeline(&pipeline.pipeline),
+        }
         pass.set_bind_group(0, group, &[]);
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_vertex_buffer(1, self.instances.slice(..));
@@ -473,12 +509,15 @@ impl ClipmapSurface<'_> {
 #[derive(Debug)]
 struct SurfacePipeline {
     pipeline: wgpu::RenderPipeline,
+    /// The same pipeline drawing triangle edges as lines, on devices that can.
+    wireframe: Option<wgpu::RenderPipeline>,
     layout: wgpu::BindGroupLayout,
 }
 
 impl SurfacePipeline {
     /// Builds the pipeline of `source` with the frame uniform at binding 0 and read-only storage
-    /// buffers at the given (stages, binding).
+    /// buffers at the given (stages, binding), and its wireframe twin when the device has
+    /// `POLYGON_MODE_LINE`.
     fn new(
         device: &wgpu::Device,
         target: &TargetFormat,
@@ -521,40 +560,54 @@ impl SurfacePipeline {
             });
             let vertex_attrs = wgpu::vertex_attr_array![0 => Float32x2];
             let instance_attrs = wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
-            let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[
-                        Some(wgpu::VertexBufferLayout {
-                            array_stride: std::mem::size_of::<ClipmapVertex>() as u64,
-                            step_mode: wgpu::VertexStepMode::Vertex,
-                            attributes: &vertex_attrs,
-                        }),
-                        Some(wgpu::VertexBufferLayout {
-                            array_stride: std::mem::size_of::<ClipmapInstance>() as u64,
-                            step_mode: wgpu::VertexStepMode::Instance,
-                            attributes: &instance_attrs,
-                        }),
-                    ],
-                },
-                // No culling: degenerate triangles and both windings of the parts are drawn.
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: Some(target.depth_state(true, wgpu::CompareFunction::Less)),
-                multisample: target.multisample(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(target.color.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
-            Self { pipeline, layout }
+            let build = |polygon_mode| {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some(label),
+                    layout: Some(&pipeline_layout),
+                    vertex: wgpu::VertexState {
+                        module: &module,
+                        entry_point: Some("vs_main"),
+                        compilation_options: Default::default(),
+                        buffers: &[
+                            Some(wgpu::VertexBufferLayout {
+                                array_stride: std::mem::size_of::<ClipmapVertex>() as u64,
+                                step_mode: wgpu::VertexStepMode::Vertex,
+                                attributes: &vertex_attrs,
+                            }),
+                            Some(wgpu::VertexBufferLayout {
+                                array_stride: std::mem::size_of::<ClipmapInstance>() as u64,
+                                step_mode: wgpu::VertexStepMode::Instance,
+                                attributes: &instance_attrs,
+                            }),
+                        ],
+                    },
+                    // No culling: degenerate triangles and both windings of the parts are drawn.
+                    primitive: wgpu::PrimitiveState {
+                        polygon_mode,
+                        ..Default::default()
+                    },
+                    depth_stencil: Some(target.depth_state(true, wgpu::CompareFunction::Less)),
+                    multisample: target.multisample(),
+                    fragment: Some(wgpu::FragmentState {
+                        module: &module,
+                        entry_point: Some("fs_main"),
+                        compilation_options: Default::default(),
+                        targets: &[Some(target.color.into())],
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            };
+            let pipeline = build(wgpu::PolygonMode::Fill);
+            let wireframe = device
+                .features()
+                .contains(wgpu::Features::POLYGON_MODE_LINE)
+                .then(|| build(wgpu::PolygonMode::Line));
+            Self {
+                pipeline,
+                wireframe,
+                layout,
+            }
         })
     }
 }
