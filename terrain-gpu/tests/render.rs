@@ -393,3 +393,106 @@ fn renderers_refuse_targets_they_cannot_draw_into() {
     }
     ctx.check().expect("refused before wgpu saw them");
 }
+
+#[test]
+fn wireframe_draws_edges_where_the_device_can_and_is_refused_where_it_cannot() {
+    let Some(ctx) = context_or_skip("wireframe_draws_edges") else {
+        return;
+    };
+    // The context's device asks for no POLYGON_MODE_LINE: wireframe is refused, not ignored.
+    let layout = terrain_lod::ClipmapLayout::new(31, 4).unwrap();
+    let mut plain = ClipmapRenderer::new(&ctx.device, &TargetFormat::CAPTURE, &layout).unwrap();
+    assert!(!plain.has_wireframe());
+    assert!(matches!(
+        plain.set_wireframe(true),
+        Err(GpuError::Unsupported { .. })
+    ));
+    assert!(plain.set_wireframe(false).is_ok());
+    if !ctx
+        .adapter
+        .features()
+        .contains(wgpu::Features::POLYGON_MODE_LINE)
+    {
+        eprintln!("skipping the wireframe drawing: the adapter lacks POLYGON_MODE_LINE");
+        return;
+    }
+    // A device that asks for it: the same scene, filled and as wireframe.
+    let (device, queue) = pollster::block_on(ctx.adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("wireframe test"),
+        required_features: wgpu::Features::POLYGON_MODE_LINE,
+        required_limits: ctx.adapter.limits(),
+        ..Default::default()
+    }))
+    .unwrap();
+    let enc = terrain_core::HeightEncoding::spanning::<u16>(0.0, 10.0).unwrap();
+    let params = terrain_core::TerrainParams {
+        size: UVec2::splat(128),
+        seed: 3,
+        ..Default::default()
+    };
+    let map = terrain_core::generate_coarse_map(&params, enc, 1.0).unwrap();
+    let gpu_map = terrain_gpu::GpuHeightMap::from_map(&device, &queue, &map).unwrap();
+    let normals = terrain_gpu::GpuDerivativeMap::for_map(&device, &gpu_map).unwrap();
+    let mut normal_pass = terrain_gpu::NormalPass::new(&device).unwrap();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    normal_pass
+        .encode_full(&device, &queue, &mut encoder, &gpu_map, &normals)
+        .unwrap();
+    queue.submit([encoder.finish()]);
+    let mut renderer = ClipmapRenderer::new(&device, &TargetFormat::CAPTURE, &layout).unwrap();
+    assert!(renderer.has_wireframe());
+    let sky = SkyPass::new(&device, &TargetFormat::CAPTURE).unwrap();
+    let size = UVec2::new(160, 100);
+    let xz = Vec2::new(64.0, 64.0);
+    let eye = Vec3::new(xz.x, terrain_core::bilinear(&map, xz).unwrap() + 6.0, xz.y);
+    let camera = Camera::looking(eye, Vec3::new(1.0, -0.6, 0.3));
+    let magenta = SkyColors {
+        horizon: Vec3::new(1.0, 0.0, 1.0),
+        zenith: Vec3::new(1.0, 0.0, 1.0),
+    };
+    let target = terrain_gpu::OffscreenTarget::new(&device, size).unwrap();
+    let style = TerrainStyle {
+        ramp: (0.0, 10.0),
+        ..TerrainStyle::default()
+    };
+    let mut render = |renderer: &mut ClipmapRenderer| {
+        let frame = layout.place(xz, 1.0, (0.0, 10.0), None).unwrap();
+        let aspect = size.x as f32 / size.y as f32;
+        sky.prepare(&queue, camera.view_proj_relative(aspect), &magenta)
+            .unwrap();
+        let view = ClipmapView {
+            surface: ClipmapSurface::Coarse {
+                map: &gpu_map,
+                normals: &normals,
+            },
+            frame: &frame,
+            camera: &camera,
+            style: &style,
+            target_size: size,
+        };
+        renderer.prepare(&device, &queue, &view).unwrap();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
+            sky.draw(&mut pass);
+            renderer.draw(&mut pass);
+        }
+        queue.submit([encoder.finish()]);
+        target.read_rgba8(&device, &queue).unwrap()
+    };
+    let sky_share = |image: &terrain_core::Grid<[u8; 4]>| {
+        image.as_slice().iter().filter(|p| is_sky(**p)).count() as f64
+            / image.as_slice().len() as f64
+    };
+    let filled = render(&mut renderer);
+    renderer.set_wireframe(true).unwrap();
+    assert!(renderer.wireframe());
+    let lines = render(&mut renderer);
+    // Looking down at the ground: filled, no sky shows; as wireframe, the sky shows between
+    // the edges, and the edges are drawn.
+    assert!(sky_share(&filled) < 0.01, "filled: {}", sky_share(&filled));
+    let share = sky_share(&lines);
+    assert!((0.2..0.95).contains(&share), "wireframe sky share {share}");
+    renderer.set_wireframe(false).unwrap();
+    assert_eq!(render(&mut renderer).as_slice(), filled.as_slice());
+}

@@ -25,7 +25,7 @@ mod picking;
 mod present;
 mod terrain;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use clap::Parser;
 use glam::UVec2;
 use std::path::PathBuf;
@@ -78,6 +78,17 @@ fn parse_resolution(s: &str) -> Result<UVec2, String> {
     Ok(size)
 }
 
+/// winit's error without the source location it prefixes (`os error at FILE:LINE: `).
+fn os_message(e: &winit::error::EventLoopError) -> String {
+    let text = e.to_string();
+    match text.split_once(".rs:") {
+        Some((_, rest)) => rest
+            .split_once(": ")
+            .map_or(text.clone(), |(_, msg)| msg.to_string()),
+        None => text,
+    }
+}
+
 fn run(args: Args) -> Result<()> {
     if !(16..=16_384).contains(&args.size) {
         bail!("--size must lie in 16..=16384, got {}", args.size);
@@ -103,7 +114,8 @@ fn run(args: Args) -> Result<()> {
         );
     }
     // The window system first: without a display there is nothing to do.
-    let event_loop = EventLoop::new().context("cannot open a window (is DISPLAY set?)")?;
+    let event_loop =
+        EventLoop::new().map_err(|e| anyhow!("cannot open a window: {}", os_message(&e)))?;
     let terrain = terrain::Terrain::procedural(args.size, args.seed)?;
     let settings = app::Settings {
         resolution: args.resolution,
