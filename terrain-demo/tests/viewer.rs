@@ -254,6 +254,7 @@ fn scripted_run_draws_terrain_and_the_clicked_crater() {
     let edges = |x: u32, y: u32| y > h * 3 / 4 && (x < w / 8 || x > w * 7 / 8);
     let at_centre = mean_diff(&image, &plain, centre);
     let at_edges = mean_diff(&image, &plain, edges);
+    eprintln!("crater difference: {at_centre:.2} at the centre, {at_edges:.2} at the lower edges");
     assert!(
         at_centre > 8.0 && at_centre > 4.0 * at_edges,
         "the crater shows at the centre: mean difference {at_centre:.2} there, \
