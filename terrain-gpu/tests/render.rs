@@ -455,7 +455,7 @@ fn wireframe_draws_edges_where_the_device_can_and_is_refused_where_it_cannot() {
         ramp: (0.0, 10.0),
         ..TerrainStyle::default()
     };
-    let mut render = |renderer: &mut ClipmapRenderer| {
+    let render = |renderer: &mut ClipmapRenderer| {
         let frame = layout.place(xz, 1.0, (0.0, 10.0), None).unwrap();
         let aspect = size.x as f32 / size.y as f32;
         sky.prepare(&queue, camera.view_proj_relative(aspect), &magenta)
