@@ -445,7 +445,7 @@ fn wireframe_draws_edges_where_the_device_can_and_is_refused_where_it_cannot() {
     let size = UVec2::new(160, 100);
     let xz = Vec2::new(64.0, 64.0);
     let eye = Vec3::new(xz.x, terrain_core::bilinear(&map, xz).unwrap() + 6.0, xz.y);
-    let camera = Camera::looking(eye, Vec3::new(1.0, -0.6, 0.3));
+    let camera = Camera::looking(eye, Vec3::new(1.0, -1.2, 0.3));
     let magenta = SkyColors {
         horizon: Vec3::new(1.0, 0.0, 1.0),
         zenith: Vec3::new(1.0, 0.0, 1.0),
