@@ -81,14 +81,15 @@ fn start_xvfb(test: &str) -> Option<Xvfb> {
             .expect("Xvfb starts");
         let started = Instant::now();
         while started.elapsed() < Duration::from_secs(10) {
+            // Exited: another server took the display first (its socket is not ours).
+            if child.try_wait().expect("wait").is_some() {
+                break;
+            }
             if socket.exists() {
                 return Some(Xvfb {
                     child,
                     display: format!(":{n}"),
                 });
-            }
-            if child.try_wait().expect("wait").is_some() {
-                break;
             }
             std::thread::sleep(Duration::from_millis(20));
         }
