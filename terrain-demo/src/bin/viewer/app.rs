@@ -99,7 +99,7 @@ impl App {
         let ground = bilinear(&terrain.map, start)?;
         Ok(Self {
             settings,
-            camera: FlyCamera::new(Vec3::new(start.x, ground + 4.0, start.y), 0.3, -0.3),
+            camera: FlyCamera::new(Vec3::new(start.x, ground + 7.0, start.y), 0.3, -0.3),
             terrain,
             input: InputState::default(),
             commands: Vec::new(),
