@@ -40,13 +40,36 @@ fn skip<T>(test: &str, why: &str) -> Option<T> {
 /// A virtual X server of its own for the test, stopped on drop.
 struct Xvfb {
     child: Child,
+    number: u32,
     display: String,
+}
+
+/// The lock file and the socket of X display `n`.
+fn display_files(n: u32) -> (PathBuf, PathBuf) {
+    (
+        PathBuf::from(format!("/tmp/.X{n}-lock")),
+        PathBuf::from(format!("/tmp/.X11-unix/X{n}")),
+    )
 }
 
 impl Drop for Xvfb {
     fn drop(&mut self) {
+        // SIGTERM, so the server removes its lock and socket; killed only if it lingers.
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status();
+        let started = Instant::now();
+        while started.elapsed() < Duration::from_secs(5) {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
+        let (lock, socket) = display_files(self.number);
+        let _ = std::fs::remove_file(lock);
+        let _ = std::fs::remove_file(socket);
     }
 }
 
@@ -55,17 +78,33 @@ fn on_path(program: &str) -> bool {
         .is_some_and(|paths| std::env::split_paths(&paths).any(|dir| dir.join(program).is_file()))
 }
 
-/// Starts `Xvfb` on the first free display of :90 to :119 (a display whose socket or lock
-/// exists is taken; a server that exits at once lost a race for it, and the next is tried).
+/// Whether display `n` is taken: its lock file names a running process (or cannot be read
+/// yet: a server is starting).
+fn taken(n: u32) -> bool {
+    let (lock, _) = display_files(n);
+    match std::fs::read_to_string(&lock) {
+        Ok(text) => match text.trim().parse::<u32>() {
+            Ok(pid) => Path::new(&format!("/proc/{pid}")).exists(),
+            Err(_) => true,
+        },
+        Err(e) => e.kind() != std::io::ErrorKind::NotFound,
+    }
+}
+
+/// Starts `Xvfb` on the first free display of :90 to :119 (the leftovers of a server that
+/// died without cleaning up are removed first; a server that exits at once lost a race for
+/// its display, and the next is tried).
 fn start_xvfb(test: &str) -> Option<Xvfb> {
     if !on_path("Xvfb") {
         return skip(test, "Xvfb is not installed (Debian: apt-get install xvfb)");
     }
     for n in 90..120 {
-        let socket = PathBuf::from(format!("/tmp/.X11-unix/X{n}"));
-        if socket.exists() || Path::new(&format!("/tmp/.X{n}-lock")).exists() {
+        if taken(n) {
             continue;
         }
+        let (lock, socket) = display_files(n);
+        let _ = std::fs::remove_file(&lock);
+        let _ = std::fs::remove_file(&socket);
         let mut child = Command::new("Xvfb")
             .args([
                 &format!(":{n}"),
@@ -88,6 +127,7 @@ fn start_xvfb(test: &str) -> Option<Xvfb> {
             if socket.exists() {
                 return Some(Xvfb {
                     child,
+                    number: n,
                     display: format!(":{n}"),
                 });
             }
