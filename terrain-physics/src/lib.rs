@@ -79,6 +79,8 @@ pub mod field;
 pub mod ground;
 pub mod merge;
 pub mod mirror;
+#[cfg(feature = "parry")]
+pub mod parry_adapter;
 pub mod ray;
 pub mod scheduler;
 pub mod source;
@@ -93,6 +95,11 @@ pub use field::{HeightField, MAX_FIELD_SIDE};
 pub use ground::{BoundedGround, DeformationBound, PendingDeformation};
 pub use merge::DirtyRegions;
 pub use mirror::{CollisionMirror, RegionUpdate};
+#[cfg(feature = "parry")]
+pub use parry_adapter::{MAX_PARRY_TILE_SIZE, ParryTerrain, ParryTile};
+/// The parry version the `parry` feature builds on (its shapes and poses are parry's types).
+#[cfg(feature = "parry")]
+pub use parry3d;
 pub use ray::{Ray, RayHit};
 pub use scheduler::{
     MAX_PENDING_DEFORMATIONS, ReadbackScheduler, SchedulerConfig, UpdateError, UpdateReport,
