@@ -408,7 +408,7 @@ impl ParryTerrain {
         let ts = f64::from(self.texel_size);
         let cells = (t1 - t0) * (d.x.abs() + d.z.abs()) / ts;
         let cap = 4 * (u64::from(self.size.x) + u64::from(self.size.y)) + 4096;
-        if !(cells <= cap as f64) {
+        if cells.is_nan() || cells > cap as f64 {
             return Err(PhysicsError::RayTooLong {
                 cells: if cells.is_finite() {
                     cells as u64
@@ -467,30 +467,42 @@ impl ParryTerrain {
         let t_start = (t_in - SEAM_SLACK).max(0.0);
         let local = o + d * t_start - shift;
         let ray = PRay::new(to_parry(local.as_vec3()), to_parry(d.as_vec3()));
-        let max = (t_out + SEAM_SLACK - t_start) as f32;
-        let mut best: Option<(f32, PVec3)> = None;
-        for tile in &self.tiles {
-            // In the tile's frame, from where the ray enters its box: parry's heightfield walk
-            // starts in the cell of its own entry point, and when rounding puts that point
-            // just outside the box it starts in a corner cell instead and misses. Clamping the
-            // entry point onto the box (a shift of the rounding error only) avoids that.
-            let aabb = tile.shape.root_aabb();
-            let origin = ray.origin - tile.pose.translation;
-            let Some((enter, _)) = aabb.clip_ray_parameters(&PRay::new(origin, ray.dir)) else {
-                continue;
-            };
-            if enter > max || best.is_some_and(|(t, _)| enter > t) {
-                continue;
+        let max = t_out + SEAM_SLACK - t_start;
+        // Walk the tiles the ray crosses in this copy, in order (a DDA over the tile grid):
+        // a hit lies in its tile's footprint, so the first tile with one holds the nearest.
+        let tile_m = f64::from(self.tile_size) * f64::from(self.texel_size);
+        let n = self.tiles_per_axis.as_ivec2();
+        let index =
+            |p: f64, n: i32| ((p / tile_m).floor() as i64).clamp(0, i64::from(n) - 1) as i32;
+        let (mut ix, mut iz) = (index(local.x, n.x), index(local.z, n.y));
+        let boundary = |p: f64, i: i32, dp: f64| -> (f64, f64) {
+            if dp == 0.0 {
+                (f64::INFINITY, f64::INFINITY)
+            } else {
+                let b = f64::from(if dp > 0.0 { i + 1 } else { i }) * tile_m;
+                (((b - p) / dp).max(0.0), tile_m / dp.abs())
             }
-            let mut q = origin + ray.dir * enter;
-            q.x = q.x.clamp(aabb.mins.x, aabb.maxs.x);
-            q.z = q.z.clamp(aabb.mins.z, aabb.maxs.z);
-            if let Some(hit) =
-                tile.shape
-                    .cast_local_ray_and_get_normal(&PRay::new(q, ray.dir), max - enter, true)
-                && best.is_none_or(|(t, _)| enter + hit.time_of_impact < t)
-            {
-                best = Some((enter + hit.time_of_impact, hit.normal));
+        };
+        let (mut next_x, step_x) = boundary(local.x, ix, d.x);
+        let (mut next_z, step_z) = boundary(local.z, iz, d.z);
+        let mut best = None;
+        while (0..n.x).contains(&ix) && (0..n.y).contains(&iz) {
+            let slot = iz as usize * n.x as usize + ix as usize;
+            if let Some(tile) = self.tiles.get(slot) {
+                best = cast_tile(tile, &ray, max as f32);
+                if best.is_some() {
+                    break;
+                }
+            }
+            if next_x.min(next_z) > max {
+                break;
+            }
+            if next_x < next_z {
+                ix += if d.x > 0.0 { 1 } else { -1 };
+                next_x += step_x;
+            } else {
+                iz += if d.z > 0.0 { 1 } else { -1 };
+                next_z += step_z;
             }
         }
         best.map(|(t, n)| {
@@ -701,6 +713,28 @@ impl ParryTerrain {
         self.bounds = (lo, hi);
         self.max_deviation = dev;
     }
+}
+
+/// The first hit of `ray` (in the world frame of one period copy) on `tile` within `max`:
+/// its distance and parry's normal.
+fn cast_tile(tile: &ParryTile, ray: &PRay, max: f32) -> Option<(f32, PVec3)> {
+    // In the tile's frame, from where the ray enters its box: parry's heightfield walk starts
+    // in the cell of its own entry point, and when rounding puts that point just outside the
+    // box it starts in a corner cell instead and misses (parry3d 0.31). Clamping the entry
+    // point onto the box (a shift of the rounding error only) avoids that.
+    let aabb = tile.shape.root_aabb();
+    let origin = ray.origin - tile.pose.translation;
+    let (enter, _) = aabb.clip_ray_parameters(&PRay::new(origin, ray.dir))?;
+    if enter > max {
+        return None;
+    }
+    let mut q = origin + ray.dir * enter;
+    q.x = q.x.clamp(aabb.mins.x, aabb.maxs.x);
+    q.z = q.z.clamp(aabb.mins.z, aabb.maxs.z);
+    let hit =
+        tile.shape
+            .cast_local_ray_and_get_normal(&PRay::new(q, ray.dir), max - enter, true)?;
+    Some((enter + hit.time_of_impact, hit.normal))
 }
 
 /// glam (the workspace's version) to parry's vector.

@@ -167,7 +167,11 @@ fn vertical_rays_on_cell_edges_agree_exactly() {
 
 #[test]
 fn any_ray_hits_between_the_bilinear_surface_raised_and_lowered_by_the_bound() {
-    for (map, tile) in [(rough(32, 32, 11), 8), (common::hills(48), 13)] {
+    for (map, tile) in [
+        (rough(32, 32, 11), 8),
+        (common::hills(48), 13),
+        (rough(20, 20, 12), 1),
+    ] {
         let f = field(&map);
         let t = ParryTerrain::new(&f, tile).expect("terrain");
         // f32 slack: heights around 10 m, distances up to ~100 m.
