@@ -68,6 +68,11 @@
 //!
 //! Surface model: the bilinear patch of listing 3.2 over every cell; heights, normals,
 //! raycasts and contacts all use it.
+//!
+//! Feature `parry` (off by default): the `parry_adapter` module's `ParryTerrain` holds the
+//! snapshots as tiled `parry3d` heightfields for a parry or rapier world, rebuilt per dirty
+//! rect, with the difference between parry's triangles and the bilinear surface bounded
+//! (`|h00 - h10 - h01 + h11| / 4` per cell) and tested; its module docs have a runnable example.
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
