@@ -62,8 +62,9 @@
 //!
 //! A changed texel is a vertex of up to four cells, which may lie in up to four tiles (on a
 //! tile border). [`ParryTerrain::update`] takes the new snapshot and the rects that changed
-//! since the snapshot the terrain holds (the rects applied to the mirror, or those a stamp
-//! reported), and rebuilds exactly the tiles holding a vertex inside them; the others keep
+//! since the snapshot the terrain holds (the rects applied to the mirror, which
+//! [`UpdateReport::applied_rects`](crate::UpdateReport::applied_rects) lists for the
+//! scheduler's updates, or those a stamp reported), and rebuilds exactly the tiles holding a vertex inside them; the others keep
 //! their shapes. A full rebuild of a 2048 x 2048 map costs what converting 4 M heights costs;
 //! one 64-texel tile, a thousandth of it.
 //!
@@ -238,8 +239,12 @@ impl ParryTerrain {
     }
 
     /// Brings the terrain to `snapshot`, which differs from the snapshot it holds only inside
-    /// `rects` (texels, map coordinates; they may wrap). Rebuilds exactly the tiles holding a
-    /// vertex inside a rect and returns their coordinates, sorted by row then column.
+    /// `rects` (texels, map coordinates; they may wrap): the rects applied to the mirror in
+    /// between, such as those of [`UpdateReport::applied_rects`] of the scheduler's updates.
+    /// Rebuilds exactly the tiles holding a vertex inside a rect and returns their
+    /// coordinates, sorted by row then column.
+    ///
+    /// [`UpdateReport::applied_rects`]: crate::UpdateReport::applied_rects
     ///
     /// Fails, leaving the terrain unchanged, on a rect off the map (as the mirror checks
     /// them), a snapshot of another size, texel size or encoding, or one older than the

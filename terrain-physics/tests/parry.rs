@@ -518,3 +518,64 @@ fn bad_input_is_an_error_never_a_panic() {
         Err(PhysicsError::StaleVersion { .. })
     ));
 }
+
+#[test]
+fn the_scheduler_reports_the_rects_that_bring_the_tiles_up_to_date() {
+    use std::time::{Duration, Instant};
+    use terrain_core::{Blend, GaussianStamp, StampPlacement, apply_stamp};
+    use terrain_physics::{CpuRegionSource, DeformationBound, ReadbackScheduler, SchedulerConfig};
+
+    let map = common::hills(128);
+    let enc = map.encoding();
+    let mirror = CollisionMirror::from_map(&map).expect("mirror");
+    let mut terrain = ParryTerrain::new(&mirror.snapshot(), 32).expect("terrain");
+    let mut source = CpuRegionSource::new(map);
+    let mut scheduler =
+        ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default()).expect("scheduler");
+    let t0 = Instant::now();
+    // Two craters, one across the wrap corner.
+    for at in [Vec2::new(20.0, 20.0), Vec2::new(0.5, 63.5)] {
+        let placement = StampPlacement::new(at, Vec2::splat(6.0), -2.0).expect("placement");
+        let dirty = apply_stamp(
+            source.map_mut(),
+            &mut GaussianStamp::default(),
+            &placement,
+            Blend::Add,
+        )
+        .expect("stamp");
+        for rect in dirty {
+            scheduler
+                .note_deformation(
+                    rect,
+                    DeformationBound::additive(2.0, enc).expect("bound"),
+                    t0,
+                )
+                .expect("note");
+        }
+    }
+    let mut rects = Vec::new();
+    for ms in [25, 40, 60] {
+        let report = scheduler
+            .update(t0 + Duration::from_millis(ms), &mut source, &mirror)
+            .expect("update");
+        assert_eq!(report.applied.len(), report.applied_rects.len());
+        rects.extend(report.applied_rects);
+    }
+    assert!(!rects.is_empty());
+    let snap = mirror.snapshot();
+    let rebuilt = terrain.update(&snap, &rects).expect("update");
+    assert!(!rebuilt.is_empty() && rebuilt.len() < 16, "{rebuilt:?}");
+    // The corner crater reaches the four corner tiles.
+    for corner in [
+        UVec2::new(0, 0),
+        UVec2::new(3, 0),
+        UVec2::new(0, 3),
+        UVec2::new(3, 3),
+    ] {
+        assert!(rebuilt.contains(&corner), "{rebuilt:?}");
+    }
+    let fresh = ParryTerrain::new(&snap, 32).expect("fresh");
+    for (a, b) in terrain.tiles().zip(fresh.tiles()) {
+        assert_eq!(a.shape().heights().data(), b.shape().heights().data());
+    }
+}
