@@ -101,7 +101,7 @@ pub use ground::{BoundedGround, DeformationBound, PendingDeformation};
 pub use merge::DirtyRegions;
 pub use mirror::{CollisionMirror, RegionUpdate};
 #[cfg(feature = "parry")]
-pub use parry_adapter::{MAX_PARRY_TILE_SIZE, ParryTerrain, ParryTile};
+pub use parry_adapter::{MAX_PARRY_TILE_SIZE, MAX_PARRY_TILES, ParryTerrain, ParryTile};
 /// The parry version the `parry` feature builds on (its shapes and poses are parry's types).
 #[cfg(feature = "parry")]
 pub use parry3d;

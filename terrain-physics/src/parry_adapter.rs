@@ -117,6 +117,9 @@ use terrain_core::{HeightEncoding, Rect};
 /// Largest tile side accepted, in cells.
 pub const MAX_PARRY_TILE_SIZE: u32 = 4096;
 
+/// Most tiles one terrain holds (a tiny tile size over a huge map is refused).
+pub const MAX_PARRY_TILES: u64 = 1 << 22;
+
 /// Most period copies of the map one [`ParryTerrain::contact`] query may overlap (a shape
 /// much larger than the map is refused).
 const MAX_CONTACT_COPIES: u64 = 16;
@@ -205,8 +208,9 @@ pub struct ParryTerrain {
 impl ParryTerrain {
     /// Tiles of `tile_size x tile_size` cells over `snapshot`, all built now.
     ///
-    /// Fails unless `1 <= tile_size <=` [`MAX_PARRY_TILE_SIZE`]. A tile size larger than the map
-    /// gives one tile on that axis.
+    /// Fails unless `1 <= tile_size <=` [`MAX_PARRY_TILE_SIZE`], or if that would make more
+    /// than [`MAX_PARRY_TILES`] tiles. A tile size larger than the map gives one tile on that
+    /// axis.
     pub fn new(snapshot: &HeightField, tile_size: u32) -> Result<Self, PhysicsError> {
         if !(1..=MAX_PARRY_TILE_SIZE).contains(&tile_size) {
             return Err(PhysicsError::OutOfRange {
@@ -217,6 +221,14 @@ impl ParryTerrain {
         }
         let size = snapshot.size();
         let tiles_per_axis = UVec2::new(size.x.div_ceil(tile_size), size.y.div_ceil(tile_size));
+        let count = u64::from(tiles_per_axis.x) * u64::from(tiles_per_axis.y);
+        if count > MAX_PARRY_TILES {
+            return Err(PhysicsError::OutOfRange {
+                what: "parry tiles over the map",
+                value: count as f64,
+                expected: "at most 2^22 tiles: use larger tiles",
+            });
+        }
         let mut terrain = Self {
             size,
             texel_size: snapshot.texel_size(),

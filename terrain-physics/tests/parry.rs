@@ -446,6 +446,17 @@ fn bad_input_is_an_error_never_a_panic() {
             Err(PhysicsError::OutOfRange { .. })
         ));
     }
+    // Too many tiles: 4096 x 2048 texels in tiles of 1 cell.
+    let wide = HeightField::new(
+        Grid::new(4096, 2048, 0u16).expect("grid"),
+        f.encoding(),
+        0.5,
+    )
+    .expect("field");
+    assert!(matches!(
+        ParryTerrain::new(&wide, 1),
+        Err(PhysicsError::OutOfRange { .. })
+    ));
     // A tile larger than the map: one tile.
     let big = ParryTerrain::new(&f, MAX_PARRY_TILE_SIZE).expect("terrain");
     assert_eq!(big.tile_count(), UVec2::ONE);
