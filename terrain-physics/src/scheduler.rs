@@ -31,14 +31,25 @@ use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 use terrain_core::{Grid, Rect, RegionSource, RequestId};
 
-/// Scheduler parameters.
+/// Scheduler parameters. With the `serde` feature the durations are written in milliseconds
+/// (`quiet_gap_ms`, `max_delay_ms`, `request_timeout_ms`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct SchedulerConfig {
     /// How long no deformation must be noted before the dirty rects are requested. Seed 000
     /// sec 3.2.1: "the system waits for a gap of approximately 20 milliseconds". Default 20 ms.
+    #[cfg_attr(
+        feature = "serde",
+        serde(rename = "quiet_gap_ms", with = "duration_ms")
+    )]
     pub quiet_gap: Duration,
     /// The longest a dirty rect waits, even while deformations keep coming (so a continuous
     /// stream of deformations cannot starve collision). Not in the seed; default 250 ms.
+    #[cfg_attr(
+        feature = "serde",
+        serde(rename = "max_delay_ms", with = "duration_ms")
+    )]
     pub max_delay: Duration,
     /// Dirty rects closer than this many texels are merged into one request. Default 16.
     pub merge_distance: u32,
@@ -46,10 +57,31 @@ pub struct SchedulerConfig {
     pub max_requests: usize,
     /// How long a request may take to arrive before it is abandoned and its rect requested
     /// again. Not in the seed (its readback never fails); default 1 s, about 30 frames.
+    #[cfg_attr(
+        feature = "serde",
+        serde(rename = "request_timeout_ms", with = "duration_ms")
+    )]
     pub request_timeout: Duration,
     /// The most requests in flight; a batch waits (its rects stay dirty) while it would go
     /// over. Default 16.
     pub max_in_flight: usize,
+}
+
+/// A [`Duration`] as milliseconds (a float) in configuration files.
+#[cfg(feature = "serde")]
+mod duration_ms {
+    use serde::{Deserialize, Deserializer, Serializer, de::Error};
+    use std::time::Duration;
+
+    pub fn serialize<S: Serializer>(d: &Duration, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_f64(d.as_secs_f64() * 1e3)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Duration, D::Error> {
+        let ms = f64::deserialize(d)?;
+        Duration::try_from_secs_f64(ms / 1e3)
+            .map_err(|e| D::Error::custom(format!("{ms} ms is not a duration: {e}")))
+    }
 }
 
 impl Default for SchedulerConfig {

@@ -564,7 +564,7 @@ fn smoke_on(backend: Option<&str>) -> Result<()> {
         let timings = frame["timings_ms"]
             .as_object()
             .with_context(|| format!("frame {i} has no timings_ms"))?;
-        for step in ["stamp", "normals", "render"] {
+        for step in ["stamp_gpu", "normals_gpu", "render"] {
             if !timings
                 .get(step)
                 .and_then(|v| v.as_f64())
