@@ -104,6 +104,9 @@ pub struct UpdateReport {
     pub requested: Vec<(RequestId, Rect)>,
     /// Regions applied to the mirror: request id and the mirror version it produced.
     pub applied: Vec<(RequestId, u64)>,
+    /// The rects of `applied`, in the same order (they may wrap): what changed in the mirror
+    /// in this update, e.g. for `ParryTerrain::update` (feature `parry`).
+    pub applied_rects: Vec<Rect>,
     /// Requests abandoned this update (not arrived within the timeout, or their id handed out
     /// again by the source); their rects are dirty again.
     pub abandoned: Vec<RequestId>,
@@ -308,7 +311,10 @@ impl ReadbackScheduler {
             };
             let Some(heights) = done.arrived else { break };
             match mirror.apply_next(done.rect, &heights) {
-                Ok(version) => report.applied.push((done.id, version)),
+                Ok(version) => {
+                    report.applied.push((done.id, version));
+                    report.applied_rects.push(done.rect);
+                }
                 Err(e) => {
                     // Cannot happen for a validated arrival; keep the area dirty if it does, and
                     // its bounds, and those the requests behind it would retire, pending.
