@@ -354,16 +354,21 @@ pub fn build_world<S: TileSource>(
         world.write_bounds(level, &LevelBounds { tiles: t, min_max })?;
     }
     let world = World::create(store, manifest)?;
-    Ok((
-        world,
-        BuildReport {
-            tiles: total,
-            stored: ctx.stored.load(Ordering::Relaxed),
-            zero: ctx.zero.load(Ordering::Relaxed),
-            bytes_written: ctx.bytes.load(Ordering::Relaxed),
-            elapsed: start.elapsed(),
-        },
-    ))
+    let report = BuildReport {
+        tiles: total,
+        stored: ctx.stored.load(Ordering::Relaxed),
+        zero: ctx.zero.load(Ordering::Relaxed),
+        bytes_written: ctx.bytes.load(Ordering::Relaxed),
+        elapsed: start.elapsed(),
+    };
+    tracing::info!(
+        tiles = report.tiles,
+        stored = report.stored,
+        bytes = report.bytes_written,
+        elapsed_ms = report.elapsed.as_secs_f64() * 1e3,
+        "world built"
+    );
+    Ok((world, report))
 }
 
 /// Builds, stores and returns tile `id` (`None` beyond the level's tiles).

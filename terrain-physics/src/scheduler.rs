@@ -410,6 +410,7 @@ impl ReadbackScheduler {
         }
         self.abandoned.push_back(f.id);
         report.abandoned.push(f.id);
+        tracing::warn!(request = ?f.id, rect = ?f.rect, "collision readback abandoned (late); its rect is requested again");
     }
 
     fn request_batch<S: RegionSource + ?Sized>(
@@ -455,6 +456,7 @@ impl ReadbackScheduler {
                         retires: Vec::new(),
                     });
                     report.requested.push((id, rect));
+                    tracing::debug!(request = ?id, rect = ?rect, "collision readback requested");
                     issued += 1;
                 }
                 Err(e) => {
