@@ -155,6 +155,9 @@ fn reports_of_every_scenario_validate_against_the_schema() {
     }
 }
 
+/// A change to a valid report that must make it invalid.
+type Mutation = fn(&mut serde_json::Value);
+
 #[test]
 fn the_schema_rejects_what_it_should() {
     // A schema that accepted anything would pass the test above.
@@ -165,7 +168,7 @@ fn the_schema_rejects_what_it_should() {
     );
     let good = report(&out);
     assert!(violations(&validator, &good).is_empty());
-    let mutations: [(&str, fn(&mut serde_json::Value)); 5] = [
+    let mutations: [(&str, Mutation); 5] = [
         ("an unknown top-level field", |r| {
             r["surprise"] = 1.into();
         }),
