@@ -23,7 +23,9 @@ use std::time::{Duration, Instant};
 use terrain_core::io;
 
 /// Runs `scenario` for `cli.frames` frames (fewer after Ctrl-C) into `cli.out` and returns
-/// the report written; `memory` is the limit and the estimate the run was accepted on.
+/// the report written; `params` are the run's parameters (the GPU scene takes its style and
+/// readback ring from them), `config_json` the configuration report.json records, `memory`
+/// the limit and the estimate the run was accepted on.
 pub fn run(
     cli: &Cli,
     params: &DemoParams,
