@@ -109,7 +109,8 @@ pub struct Cli {
     /// Print the parameters as TOML (the defaults, or those of --config) and exit.
     #[arg(long)]
     pub print_config: bool,
-    /// No progress on stderr (warnings and errors are still printed).
+    /// Nothing on stderr but warnings and errors: no progress, no line of what was read or
+    /// built, no closing summary.
     #[arg(short, long, conflicts_with = "verbose")]
     pub quiet: bool,
     /// Log what the libraries do on stderr: -v info (adapter, cache, readbacks), -vv debug,
