@@ -295,6 +295,7 @@ struct Node {
 ///
 /// `progress` is called after every tile from the building threads; returning `false` cancels
 /// the build ([`CacheError::Cancelled`]). `source.size()` must equal `manifest.world_size`.
+#[tracing::instrument(level = "info", skip_all, fields(world_size = manifest.world_size.max_element(), levels = manifest.levels))]
 pub fn build_world<S: TileSource>(
     store: Arc<dyn TileStore>,
     manifest: Manifest,

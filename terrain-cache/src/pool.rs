@@ -447,6 +447,7 @@ impl RamPool {
     /// One frame: applies queued requests, takes finished loads and write-backs, selects tiles
     /// for `camera`, cancels, rescues, evicts and issues loads and write-backs. Never blocks;
     /// its work is bounded by the selection's square, the budget and the per-frame limits.
+    #[tracing::instrument(level = "debug", name = "ram_pool_update", skip_all)]
     pub fn update(&mut self, camera: &CameraState) -> Result<FrameReport, CacheError> {
         camera.validate()?;
         let start = Instant::now();

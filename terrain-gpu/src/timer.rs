@@ -98,6 +98,7 @@ impl GpuTimer {
 
     /// Records `work` into a fresh encoder between two timestamps, submits it, waits for it, and
     /// returns the wall time of submit and wait, with the timestamps' span where available.
+    #[tracing::instrument(level = "trace", name = "gpu_timed_submit", skip_all)]
     pub fn time(
         &self,
         device: &wgpu::Device,

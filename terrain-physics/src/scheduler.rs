@@ -254,6 +254,7 @@ impl ReadbackScheduler {
     /// scheduler's, or on a region nobody asked for, or one of the wrong rect or size. Arrivals
     /// that were valid are still kept and applied; a failed request keeps its rects dirty for
     /// the next update. The first error met is returned.
+    #[tracing::instrument(level = "debug", name = "collision_update", skip_all)]
     pub fn update<S: RegionSource + ?Sized>(
         &mut self,
         now: Instant,
