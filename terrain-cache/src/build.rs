@@ -295,6 +295,7 @@ struct Node {
 ///
 /// `progress` is called after every tile from the building threads; returning `false` cancels
 /// the build ([`CacheError::Cancelled`]). `source.size()` must equal `manifest.world_size`.
+#[tracing::instrument(level = "info", skip_all, fields(world_size = manifest.world_size.max_element(), levels = manifest.levels))]
 pub fn build_world<S: TileSource>(
     store: Arc<dyn TileStore>,
     manifest: Manifest,
@@ -354,16 +355,21 @@ pub fn build_world<S: TileSource>(
         world.write_bounds(level, &LevelBounds { tiles: t, min_max })?;
     }
     let world = World::create(store, manifest)?;
-    Ok((
-        world,
-        BuildReport {
-            tiles: total,
-            stored: ctx.stored.load(Ordering::Relaxed),
-            zero: ctx.zero.load(Ordering::Relaxed),
-            bytes_written: ctx.bytes.load(Ordering::Relaxed),
-            elapsed: start.elapsed(),
-        },
-    ))
+    let report = BuildReport {
+        tiles: total,
+        stored: ctx.stored.load(Ordering::Relaxed),
+        zero: ctx.zero.load(Ordering::Relaxed),
+        bytes_written: ctx.bytes.load(Ordering::Relaxed),
+        elapsed: start.elapsed(),
+    };
+    tracing::info!(
+        tiles = report.tiles,
+        stored = report.stored,
+        bytes = report.bytes_written,
+        elapsed_ms = report.elapsed.as_secs_f64() * 1e3,
+        "world built"
+    );
+    Ok((world, report))
 }
 
 /// Builds, stores and returns tile `id` (`None` beyond the level's tiles).

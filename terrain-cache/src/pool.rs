@@ -447,6 +447,7 @@ impl RamPool {
     /// One frame: applies queued requests, takes finished loads and write-backs, selects tiles
     /// for `camera`, cancels, rescues, evicts and issues loads and write-backs. Never blocks;
     /// its work is bounded by the selection's square, the budget and the per-frame limits.
+    #[tracing::instrument(level = "debug", name = "ram_pool_update", skip_all)]
     pub fn update(&mut self, camera: &CameraState) -> Result<FrameReport, CacheError> {
         camera.validate()?;
         let start = Instant::now();
@@ -596,6 +597,18 @@ impl RamPool {
         }
         r.ram_bytes = self.ram_bytes;
         r.update_time = start.elapsed();
+        if r.loaded + r.failed + r.evictions + r.writes + r.written > 0 {
+            tracing::debug!(
+                frame = r.frame,
+                loaded = r.loaded,
+                failed = r.failed,
+                evicted = r.evictions,
+                writes = r.writes,
+                written = r.written,
+                ram_bytes = self.ram_bytes,
+                "RAM pool traffic"
+            );
+        }
         Ok(r)
     }
 
@@ -636,6 +649,7 @@ impl RamPool {
                     }
                     e.slot = Slot::Resident { data, zero };
                     r.loaded += 1;
+                    tracing::trace!(tile = ?id, zero, "tile loaded");
                     self.newly_loaded.push(id);
                 }
                 LoadDone::Loaded {
@@ -643,6 +657,7 @@ impl RamPool {
                 } => {
                     e.slot = Slot::Failed { frame: self.frame };
                     r.failed += 1;
+                    tracing::warn!(tile = ?id, error = %err, "tile failed to load; a coarser tile stands in");
                     self.errors.push((id, err));
                 }
             }
@@ -740,6 +755,7 @@ impl RamPool {
             } else {
                 let had_bytes = self.free(id);
                 r.evictions += 1;
+                tracing::trace!(tile = ?id, "tile evicted");
                 self.evicted.push(id);
                 if !had_bytes {
                     continue;

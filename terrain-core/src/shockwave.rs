@@ -8,6 +8,8 @@ use crate::stamp::TextureStamp;
 
 /// Parameters of a [`Shockwave`].
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct ShockwaveParams {
     /// Samples per side of the wave texture (at least 8).
     pub resolution: u32,

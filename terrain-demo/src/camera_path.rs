@@ -31,6 +31,45 @@ const FLYOVER_PITCH: f32 = 25.0 * std::f32::consts::PI / 180.0;
 /// Ground samples the flyover takes along its next stretch to clear the highest.
 const FLYOVER_GROUND_SAMPLES: u32 = 6;
 
+/// The shape of the paths (`[camera]` of `--config`; the defaults are the constants above).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathParams {
+    /// The orbit looks down this far below the horizon (radians).
+    pub orbit_pitch: f32,
+    /// Seconds per revolution of the orbit.
+    pub orbit_period_s: f32,
+    /// Seconds per loop of the flyover.
+    pub flyover_period_s: f32,
+    /// The flyover's height above the ground, as a fraction of the map's longer side.
+    pub flyover_height: f32,
+    /// The flyover looks down this far below the horizon (radians).
+    pub flyover_pitch: f32,
+}
+
+impl Default for PathParams {
+    fn default() -> Self {
+        Self {
+            orbit_pitch: ORBIT_PITCH,
+            orbit_period_s: ORBIT_PERIOD_S,
+            flyover_period_s: FLYOVER_PERIOD_S,
+            flyover_height: FLYOVER_HEIGHT,
+            flyover_pitch: FLYOVER_PITCH,
+        }
+    }
+}
+
+impl From<&crate::config::CameraParams> for PathParams {
+    fn from(c: &crate::config::CameraParams) -> Self {
+        Self {
+            orbit_pitch: c.orbit_pitch_deg.to_radians(),
+            orbit_period_s: c.orbit_period_s,
+            flyover_period_s: c.flyover_period_s,
+            flyover_height: c.flyover_height,
+            flyover_pitch: c.flyover_pitch_deg.to_radians(),
+        }
+    }
+}
+
 /// What a path is sized from: the map's extent (metres, X Z) and the lowest and highest height
 /// on it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -88,46 +127,55 @@ pub enum CameraPath {
         frame: MapFrame,
         /// Distance from the eye to the centre.
         distance: f32,
+        /// The shape.
+        params: PathParams,
     },
     /// Loops over the map at a height above the ground proportional to its extent, looking
     /// ahead and down.
     Flyover {
         /// The map.
         frame: MapFrame,
+        /// The shape.
+        params: PathParams,
     },
 }
 
 impl CameraPath {
     /// The orbit around `frame`.
-    pub fn orbit(frame: MapFrame) -> Self {
+    pub fn orbit(frame: MapFrame, params: PathParams) -> Self {
         CameraPath::Orbit {
             frame,
             distance: ORBIT_FILL * frame.radius() / (FOV_Y * 0.5).sin(),
+            params,
         }
     }
 
     /// The flyover over `frame`.
-    pub fn flyover(frame: MapFrame) -> Self {
-        CameraPath::Flyover { frame }
+    pub fn flyover(frame: MapFrame, params: PathParams) -> Self {
+        CameraPath::Flyover { frame, params }
     }
 
     fn frame(&self) -> &MapFrame {
         match self {
-            CameraPath::Orbit { frame, .. } | CameraPath::Flyover { frame } => frame,
+            CameraPath::Orbit { frame, .. } | CameraPath::Flyover { frame, .. } => frame,
         }
     }
 
     /// The pose at `t` seconds; `ground` gives the terrain's height at a point (X, Z).
     pub fn pose(&self, t: f32, ground: impl Fn(Vec2) -> f32) -> Pose {
         match *self {
-            CameraPath::Orbit { frame, distance } => {
-                let a = ORBIT_START + TAU * t / ORBIT_PERIOD_S;
+            CameraPath::Orbit {
+                frame,
+                distance,
+                params,
+            } => {
+                let a = ORBIT_START + TAU * t / params.orbit_period_s;
                 let centre = frame.centre();
-                let horizontal = distance * ORBIT_PITCH.cos();
+                let horizontal = distance * params.orbit_pitch.cos();
                 let eye = centre
                     + Vec3::new(
                         horizontal * a.cos(),
-                        distance * ORBIT_PITCH.sin(),
+                        distance * params.orbit_pitch.sin(),
                         horizontal * a.sin(),
                     );
                 Pose {
@@ -135,12 +183,12 @@ impl CameraPath {
                     look_at: centre,
                 }
             }
-            CameraPath::Flyover { frame } => {
+            CameraPath::Flyover { frame, params } => {
                 let side = frame.side();
                 let centre = Vec2::new(frame.extent.x, frame.extent.y) * 0.5;
                 let radii = frame.extent * FLYOVER_RADIUS;
                 let at = |t: f32| {
-                    let a = TAU * t / FLYOVER_PERIOD_S;
+                    let a = TAU * t / params.flyover_period_s;
                     centre + Vec2::new(a.cos(), a.sin()) * radii
                 };
                 let xz = at(t);
@@ -155,8 +203,8 @@ impl CameraPath {
                         ground(xz + ahead * reach * f)
                     })
                     .fold(f32::NEG_INFINITY, f32::max);
-                let eye = Vec3::new(xz.x, highest + side * FLYOVER_HEIGHT, xz.y);
-                let look = Vec3::new(ahead.x, -FLYOVER_PITCH.tan(), ahead.y) * reach;
+                let eye = Vec3::new(xz.x, highest + side * params.flyover_height, xz.y);
+                let look = Vec3::new(ahead.x, -params.flyover_pitch.tan(), ahead.y) * reach;
                 Pose {
                     eye,
                     look_at: eye + look,
@@ -171,7 +219,9 @@ impl CameraPath {
         let frame = self.frame();
         let half_diagonal = frame.extent.length() * 0.5;
         match *self {
-            CameraPath::Orbit { distance, .. } => distance * ORBIT_PITCH.cos() + half_diagonal,
+            CameraPath::Orbit {
+                distance, params, ..
+            } => distance * params.orbit_pitch.cos() + half_diagonal,
             CameraPath::Flyover { .. } => {
                 FLYOVER_RADIUS * frame.extent.max_element() + half_diagonal
             }
@@ -183,7 +233,7 @@ impl CameraPath {
     pub fn subject_distance(&self) -> f32 {
         match *self {
             CameraPath::Orbit { distance, .. } => distance,
-            CameraPath::Flyover { frame } => frame.side() * FLYOVER_LOOK_AHEAD,
+            CameraPath::Flyover { frame, .. } => frame.side() * FLYOVER_LOOK_AHEAD,
         }
     }
 
@@ -216,7 +266,7 @@ mod tests {
     fn the_orbit_frames_the_whole_map_and_looks_at_its_centre() {
         for side in [200.0, 2560.0, 50_000.0] {
             let f = frame(side);
-            let path = CameraPath::orbit(f);
+            let path = CameraPath::orbit(f, PathParams::default());
             for t in [0.0, 7.0, 23.0] {
                 let pose = path.pose(t, |_| 0.0);
                 assert_eq!(pose.look_at, f.centre());
@@ -246,7 +296,7 @@ mod tests {
             (Vec2::splat(1000.0), 0.0, 800.0),
         ];
         for (extent, low, high) in maps {
-            let path = CameraPath::orbit(MapFrame { extent, low, high });
+            let path = CameraPath::orbit(MapFrame { extent, low, high }, PathParams::default());
             for aspect in [16.0 / 9.0, 1.0] {
                 for i in 0..72 {
                     let pose = path.pose(i as f32 / 72.0 * ORBIT_PERIOD_S, |_| 0.0);
@@ -272,7 +322,7 @@ mod tests {
     #[test]
     fn the_flyover_keeps_its_height_above_the_highest_ground_ahead() {
         let f = frame(2560.0);
-        let path = CameraPath::flyover(f);
+        let path = CameraPath::flyover(f, PathParams::default());
         // A ridge along x = 1800 m.
         let ground = |p: Vec2| {
             if (p.x - 1800.0).abs() < 100.0 {

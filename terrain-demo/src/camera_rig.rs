@@ -5,16 +5,12 @@
 //! keeping it at least the path's clearance above the terrain.
 
 use crate::camera_path::{CameraPath, Pose};
+use crate::config::CameraParams;
 use crate::gpu_scene::Camera;
 use anyhow::Result;
 use glam::{Vec2, Vec3};
 use terrain_physics::{CameraBody, GroundQuery};
 
-/// Eye height above the ground in metres (a tall viewpoint over the trail).
-const EYE_HEIGHT: f32 = 3.0;
-/// How far behind the walker the camera walks, and how far ahead of the walker it looks.
-const BEHIND: f32 = 9.0;
-const AHEAD: f32 = 12.0;
 /// Spring stiffness per unit mass on X/Z (1/s^2); friction is set for critical damping.
 const STIFFNESS: f32 = 30.0;
 /// Physics substeps per frame.
@@ -35,14 +31,19 @@ pub struct CameraRig {
     path: Option<(CameraPath, f32)>,
     /// Fog density per metre for the map the rig was made for.
     fog: f32,
+    /// How far behind the walker the camera walks, and how far ahead of the walker it looks
+    /// (metres).
+    behind: f32,
+    ahead: f32,
 }
 
 impl CameraRig {
     /// A walking camera standing at `xz` on ground of height `ground_y`, on a map whose longer
-    /// side is `map_side` metres.
-    pub fn new(xz: Vec2, ground_y: f32, map_side: f32) -> Self {
-        let mut body = CameraBody::new(Vec3::new(xz.x, ground_y + EYE_HEIGHT, xz.y));
-        body.eye_height = EYE_HEIGHT;
+    /// side is `map_side` metres, shaped by `params` (eye height, distances to the walker).
+    pub fn new(xz: Vec2, ground_y: f32, map_side: f32, params: &CameraParams) -> Self {
+        let eye_height = params.walker_eye_height_m;
+        let mut body = CameraBody::new(Vec3::new(xz.x, ground_y + eye_height, xz.y));
+        body.eye_height = eye_height;
         body.mass = 1.0;
         body.friction = 2.0 * STIFFNESS.sqrt();
         body.gravity_enabled = true;
@@ -50,6 +51,8 @@ impl CameraRig {
             body,
             path: None,
             fog: WALKER_FOG * (WALKER_FOG_SIDE / map_side.max(1.0)).min(1.0),
+            behind: params.walker_behind_m,
+            ahead: params.walker_ahead_m,
         }
     }
 
@@ -66,6 +69,8 @@ impl CameraRig {
             body,
             fog: path.fog_density(),
             path: Some((path, 0.0)),
+            behind: 0.0,
+            ahead: 0.0,
         }
     }
 
@@ -108,14 +113,14 @@ impl CameraRig {
             return Ok(camera);
         }
         let (pos, heading) = walker;
-        let target = pos - heading * BEHIND;
+        let target = pos - heading * self.behind;
         let h = dt / SUBSTEPS as f32;
         for _ in 0..SUBSTEPS {
             let xz = Vec2::new(self.body.position.x, self.body.position.z);
             let pull = (target - xz) * STIFFNESS * self.body.mass;
             self.body.step(h, Vec3::new(pull.x, 0.0, pull.y), ground)?;
         }
-        let ahead = pos + heading * AHEAD;
+        let ahead = pos + heading * self.ahead;
         let look = Vec3::new(ahead.x, look_height(ahead), ahead.y);
         let mut camera = Camera::looking(self.body.position, look - self.body.position);
         camera.near = WALKER_NEAR;

@@ -4,10 +4,10 @@
 
 use crate::images::{self, Image};
 use crate::memory_limit;
-use crate::report::{FrameReport, Report};
+use crate::report::{FrameReport, Report, StepStats};
+use crate::summary::{self, Series, Thumb};
 use crate::timings::{Step, Timings};
 use anyhow::{Context, Result};
-use glam::UVec2;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::Write;
@@ -15,38 +15,8 @@ use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use terrain_core::io;
 
-/// Steps shown in the timing plot of `summary.png`, bottom to top.
-const PLOTTED: [Step; 5] = [
-    Step::Stamp,
-    Step::Normals,
-    Step::Render,
-    Step::Capture,
-    Step::Write,
-];
-
-/// The most frames kept as thumbnails for the contact sheet.
-const MAX_THUMBS: u32 = 12;
-/// Columns of the contact sheet.
-const SHEET_COLUMNS: u32 = 4;
-/// Thumbnails fit a square of this side, keeping the frame's aspect.
-const THUMB_SIDE: u32 = 320;
-/// Height of the timing plot under the thumbnails.
-const PLOT_HEIGHT: u32 = 160;
-/// Pixels between thumbnails (as `images::contact_sheet` lays them out).
-const GAP: u32 = 4;
-
-/// The most memory the summary takes, whatever the frames' size: the thumbnails, the sheet
-/// and its PNG (a little more than its pixels at worst), the plot; a quarter more for the
-/// encoder's state.
-pub const SUMMARY_BYTES: u64 = {
-    let thumb = (THUMB_SIDE as u64) * (THUMB_SIDE as u64) * 4;
-    let rows = MAX_THUMBS.div_ceil(SHEET_COLUMNS) as u64;
-    let width = (SHEET_COLUMNS * (THUMB_SIDE + GAP) + GAP) as u64;
-    let height = rows * (THUMB_SIDE + GAP) as u64 + (GAP + PLOT_HEIGHT + GAP) as u64;
-    let sheet = width * height * 4;
-    let plot = width * PLOT_HEIGHT as u64 * 4;
-    (MAX_THUMBS as u64 * thumb + 2 * sheet + plot) * 5 / 4
-};
+/// The memory `summary.png` takes, whatever the frames' size (see [`summary::MAX_BYTES`]).
+pub const SUMMARY_BYTES: u64 = summary::MAX_BYTES;
 
 /// The per-frame lines beside report.json.
 pub const FRAMES_JSONL: &str = "frames.jsonl";
@@ -55,7 +25,9 @@ pub const FRAMES_JSONL: &str = "frames.jsonl";
 pub struct Capture<'a> {
     out: &'a Path,
     frames: Vec<FrameReport>,
-    thumbs: Vec<Image>,
+    thumbs: Vec<Thumb>,
+    /// Leading frames left out of the per-step statistics.
+    warmup: u32,
     thumb_every: u32,
     total: u32,
     /// `frames.jsonl`: one line per frame, written as the frame completes, so a run that ends
@@ -64,22 +36,17 @@ pub struct Capture<'a> {
 }
 
 impl<'a> Capture<'a> {
-    /// A capture of `total` frames into `out` (which exists). A report.json of an earlier run
-    /// there is removed first: it would describe frames this run may not reach.
-    pub fn new(out: &'a Path, total: u32) -> Result<Self> {
-        let old = out.join("report.json");
-        match std::fs::remove_file(&old) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(e).with_context(|| format!("removing {}", old.display())),
-        }
+    /// A capture of `total` frames into `out` (which exists, cleared of an earlier run's
+    /// outputs by [`remove_old_outputs`]), the first `warmup` left out of the statistics.
+    pub fn new(out: &'a Path, total: u32, warmup: u32) -> Result<Self> {
         let path = out.join(FRAMES_JSONL);
         let lines = File::create(&path).with_context(|| format!("creating {}", path.display()))?;
         Ok(Self {
             out,
             frames: Vec::with_capacity(total.min(1 << 16) as usize),
             thumbs: Vec::new(),
-            thumb_every: total.div_ceil(MAX_THUMBS).max(1),
+            thumb_every: total.div_ceil(summary::MAX_THUMBS).max(1),
+            warmup,
             total,
             lines,
         })
@@ -107,8 +74,11 @@ impl<'a> Capture<'a> {
         frame.timings_ms = timings.wall_by_name();
         frame.gpu_timestamps_ms = timings.gpu_by_name();
         if index % self.thumb_every == self.thumb_every - 1 || index + 1 == self.total {
-            let size = images::fit_within(image.size(), THUMB_SIDE);
-            self.thumbs.push(images::downscale(image, size));
+            let size = images::fit_within(image.size(), summary::THUMB_SIDE);
+            self.thumbs.push(Thumb {
+                frame: index,
+                image: images::downscale(image, size),
+            });
         }
         // One write per line: a line is whole unless the process dies inside that call.
         let mut line = serde_json::to_vec(&frame)?;
@@ -128,22 +98,33 @@ impl<'a> Capture<'a> {
     /// Writes `summary.png` and `report.json` (with the frames captured and their totals, and
     /// the peak resident memory measured just before) and returns the report.
     pub fn finish(self, mut report: Report) -> Result<Report> {
-        let series: Vec<Vec<f64>> = PLOTTED
+        // Warm-up frames are marked on the chart and left out of `steps_ms`, but at least the
+        // last frame is always measured.
+        let warmup = self.warmup.min(self.done().saturating_sub(1));
+        // Every step any frame timed, in the plot's order.
+        let series: Vec<Series> = Step::ALL
             .iter()
-            .map(|step| {
+            .filter(|s| {
                 self.frames
                     .iter()
+                    .any(|f| f.timings_ms.contains_key(s.name()))
+            })
+            .map(|&step| Series {
+                step,
+                ms: self
+                    .frames
+                    .iter()
                     .map(|f| f.timings_ms.get(step.name()).copied().unwrap_or(0.0))
-                    .collect()
+                    .collect(),
             })
             .collect();
-        let plot_width = SHEET_COLUMNS * (THUMB_SIDE + GAP) - GAP;
-        let plot = images::timing_plot(&series, UVec2::new(plot_width, PLOT_HEIGHT))?;
-        let sheet = images::contact_sheet(&self.thumbs, SHEET_COLUMNS, &plot)?;
+        let sheet = summary::render(&self.thumbs, &series, self.frames.len(), warmup as usize)?;
         let summary = self.out.join("summary.png");
         write_file(&summary, &io::encode_png_rgba8(&sheet)?)
             .with_context(|| format!("writing {}", summary.display()))?;
         drop(sheet);
+        report.warmup_frames = warmup;
+        report.steps_ms = step_stats(&self.frames[warmup as usize..]);
         let mut totals: BTreeMap<&'static str, f64> = BTreeMap::new();
         for f in &self.frames {
             for (k, v) in &f.timings_ms {
@@ -159,6 +140,54 @@ impl<'a> Capture<'a> {
         write_file(&self.out.join("report.json"), &json)?;
         Ok(report)
     }
+}
+
+/// Removes what an earlier run wrote into `out` and this run may not overwrite: its frames
+/// (`frame_NNNN.png`, any count), `summary.png`, `terrain_final.png`, `report.json`, so a
+/// folder never mixes two runs. Other files are left alone. Returns how many were removed.
+pub fn remove_old_outputs(out: &Path) -> Result<usize> {
+    let is_ours = |name: &str| {
+        let frame = name
+            .strip_prefix("frame_")
+            .and_then(|n| n.strip_suffix(".png"))
+            .is_some_and(|n| n.len() >= 4 && n.bytes().all(|b| b.is_ascii_digit()));
+        frame || ["summary.png", "terrain_final.png", "report.json"].contains(&name)
+    };
+    let entries = std::fs::read_dir(out).with_context(|| format!("listing {}", out.display()))?;
+    let mut removed = 0;
+    for entry in entries {
+        let entry = entry.with_context(|| format!("listing {}", out.display()))?;
+        let name = entry.file_name();
+        let Some(name) = name.to_str() else { continue };
+        // Only files: a folder or anything else with such a name is not ours.
+        let is_file = entry
+            .file_type()
+            .is_ok_and(|t| t.is_file() || t.is_symlink());
+        if is_file && is_ours(name) {
+            let path = entry.path();
+            std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
+/// Mean, median, 95th percentile and maximum of every step over `frames` (the frames after
+/// warm-up), each over the frames that timed it.
+pub fn step_stats(frames: &[FrameReport]) -> BTreeMap<&'static str, StepStats> {
+    let mut by_step: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
+    for f in frames {
+        for (k, v) in &f.timings_ms {
+            by_step.entry(*k).or_default().push(*v);
+        }
+    }
+    by_step
+        .into_iter()
+        .map(|(k, mut v)| {
+            v.sort_by(f64::total_cmp);
+            (k, StepStats::of_sorted(&v))
+        })
+        .collect()
 }
 
 /// Set once a failed folder sync has been reported (it would repeat for every file).

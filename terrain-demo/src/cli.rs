@@ -1,10 +1,13 @@
 //! The command line of the demo.
 
-use clap::Parser;
+use clap::{ArgAction, Parser};
+use serde::{Serialize, Serializer};
 use std::path::PathBuf;
 
 /// Renders offline frame captures of deformable terrain and a timing report.
-#[derive(Debug, Parser)]
+///
+/// report.json lists every flag of a run (`config.flags`), so a run can be repeated.
+#[derive(Debug, Parser, Serialize)]
 #[command(version, about)]
 pub struct Cli {
     /// Folder the captures and report.json are written to.
@@ -94,6 +97,26 @@ pub struct Cli {
     /// its GPU driver) is above SIZE, as 1536M or 8G; default half the machine's memory.
     #[arg(long, value_name = "SIZE", value_parser = crate::memory_limit::parse_bytes)]
     pub max_memory: Option<u64>,
+    /// Leading frames left out of report.json's per-step statistics (`steps_ms`) and shaded
+    /// in summary.png's chart: shader compilation and first uploads. At most all frames but
+    /// the last.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=100_000))]
+    pub warmup: u32,
+    /// The scenario's parameters (stamps, granular material, collision readback scheduler,
+    /// terrain style, cameras) from a TOML file; every key is optional (see --print-config).
+    #[arg(long, value_name = "FILE.toml")]
+    pub config: Option<PathBuf>,
+    /// Print the parameters as TOML (the defaults, or those of --config) and exit.
+    #[arg(long)]
+    pub print_config: bool,
+    /// Nothing on stderr but warnings and errors: no progress, no line of what was read or
+    /// built, no closing summary.
+    #[arg(short, long, conflicts_with = "verbose")]
+    pub quiet: bool,
+    /// Log what the libraries do on stderr: -v info (adapter, cache, readbacks), -vv debug,
+    /// -vvv trace. RUST_LOG (as `terrain_cache=debug`) overrides it.
+    #[arg(short, long, action = ArgAction::Count)]
+    pub verbose: u8,
 }
 
 /// Parses a frame size `WIDTHxHEIGHT`, each side 16 to 8192 pixels.
@@ -106,7 +129,8 @@ fn parse_resolution(s: &str) -> Result<glam::UVec2, String> {
 }
 
 /// The scenarios the demo can run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum ScenarioKind {
     /// Footprints, Gaussian craters and a shockwave across the wrap corner.
     Default,
@@ -118,7 +142,8 @@ pub enum ScenarioKind {
 }
 
 /// `--format`: how the heightmap file is read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum FormatArg {
     /// By the file's extension (.png, .r16 / .raw, .r32, .tif / .tiff).
     Auto,
@@ -133,7 +158,8 @@ pub enum FormatArg {
 }
 
 /// `--byte-order` of RAW16 and R32 heightmaps.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum ByteOrderArg {
     /// Least significant byte first.
     Little,
@@ -150,8 +176,19 @@ pub enum HeightRangeArg {
     Span(f32, f32),
 }
 
+impl Serialize for HeightRangeArg {
+    /// As the flag is written: `auto` or `MIN:MAX`.
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            HeightRangeArg::Auto => s.serialize_str("auto"),
+            HeightRangeArg::Span(lo, hi) => s.serialize_str(&format!("{lo}:{hi}")),
+        }
+    }
+}
+
 /// `--camera` of the default scenario.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum CameraMode {
     /// Walks behind the walker at eye height.
     Walker,

@@ -5,12 +5,14 @@
 
 use crate::capture::{self, Capture};
 use crate::cli::{Cli, ScenarioKind};
+use crate::config::DemoParams;
 use crate::gpu_scene::GpuScene;
 use crate::images;
 use crate::interrupt;
 use crate::memory_limit::format_bytes;
 use crate::overview::Overview;
-use crate::report::{FrameReport, MemoryReport, Report};
+use crate::progress::Progress;
+use crate::report::{FrameReport, MemoryReport, Report, SCHEMA_VERSION, ToolInfo};
 use crate::scenarios::{FRAME_DT, FrameContext, Scenario};
 use crate::timings::{Step, Timings};
 use crate::usage_error::UsageExt;
@@ -21,17 +23,29 @@ use std::time::{Duration, Instant};
 use terrain_core::io;
 
 /// Runs `scenario` for `cli.frames` frames (fewer after Ctrl-C) into `cli.out` and returns
-/// the report written; `memory` is the limit and the estimate the run was accepted on.
-pub fn run(cli: &Cli, scenario: &mut dyn Scenario, memory: MemoryReport) -> Result<Report> {
+/// the report written; `params` are the run's parameters (the GPU scene takes its style and
+/// readback ring from them), `config_json` the configuration report.json records, `memory`
+/// the limit and the estimate the run was accepted on.
+pub fn run(
+    cli: &Cli,
+    params: &DemoParams,
+    config_json: serde_json::Value,
+    scenario: &mut dyn Scenario,
+    memory: MemoryReport,
+) -> Result<Report> {
     std::fs::create_dir_all(&cli.out)
         .with_context(|| format!("cannot create output folder {}", cli.out.display()))
         .usage()?;
-    let mut capture = Capture::new(&cli.out, cli.frames)?;
+    let removed = capture::remove_old_outputs(&cli.out)?;
+    if removed > 0 {
+        tracing::info!(removed, folder = %cli.out.display(), "removed the outputs of an earlier run");
+    }
+    let mut capture = Capture::new(&cli.out, cli.frames, cli.warmup)?;
     let terrain = cli.out.join("terrain.png");
     capture::write_file(&terrain, &io::encode_png16(scenario.map().grid())?)
         .with_context(|| format!("writing {}", terrain.display()))?;
 
-    let mut gpu = open_gpu(cli, scenario)?;
+    let mut gpu = open_gpu(cli, params, scenario)?;
     let (adapter, backend) = gpu
         .as_ref()
         .map_or(("none".into(), "none".into()), GpuScene::adapter);
@@ -39,6 +53,7 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario, memory: MemoryReport) -> Resu
     let mut overview = Overview::new(scenario.map(), scenario.normals(), overview_px)?;
     // Scenario time: 30 frames per second whatever the render speed.
     let sim_start = Instant::now();
+    let mut progress = Progress::new(cli.frames, cli.quiet);
     for index in 0..cli.frames {
         if interrupt::requested() {
             break;
@@ -81,7 +96,9 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario, memory: MemoryReport) -> Resu
             // Without a GPU the overview is the frame.
             None => capture.push(overview_image, report, timings)?,
         }
+        progress.frames_done(index + 1);
     }
+    progress.finish();
     let finish = scenario.finish(gpu.as_mut())?;
     let terrain_final = cli.out.join("terrain_final.png");
     capture::write_file(&terrain_final, &io::encode_png16(scenario.map().grid())?)
@@ -96,6 +113,9 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario, memory: MemoryReport) -> Resu
         overview_px
     };
     let report = capture.finish(Report {
+        schema_version: SCHEMA_VERSION,
+        tool: ToolInfo::current(),
+        config: config_json,
         source: info.source.clone(),
         scenario: info.name.into(),
         size: map.size().to_array(),
@@ -116,16 +136,20 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario, memory: MemoryReport) -> Resu
         memory,
         frames: Vec::new(),
         totals_ms: BTreeMap::new(),
+        warmup_frames: 0,
+        steps_ms: BTreeMap::new(),
     })?;
-    eprintln!(
-        "wrote {} frames of {}x{} to {} on {} ({})",
-        report.frames.len(),
-        report.resolution[0],
-        report.resolution[1],
-        cli.out.display(),
-        report.adapter,
-        report.backend,
-    );
+    if !cli.quiet {
+        eprintln!(
+            "wrote {} frames of {}x{} to {} on {} ({})",
+            report.frames.len(),
+            report.resolution[0],
+            report.resolution[1],
+            cli.out.display(),
+            report.adapter,
+            report.backend,
+        );
+    }
     // The estimate is meant to bound the peak: say so where it did not.
     let m = &report.memory;
     if let Some(peak) = m.peak_rss_bytes
@@ -143,11 +167,16 @@ pub fn run(cli: &Cli, scenario: &mut dyn Scenario, memory: MemoryReport) -> Resu
 
 /// The GPU scene for the scenario's map, prepared by the scenario; `None` (after saying why)
 /// with `--no-gpu` or without an adapter: the run then writes top-down overview frames.
-fn open_gpu(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Option<GpuScene>> {
+fn open_gpu(
+    cli: &Cli,
+    params: &DemoParams,
+    scenario: &mut dyn Scenario,
+) -> Result<Option<GpuScene>> {
     if cli.no_gpu {
         return Ok(None);
     }
-    let mut scene = match GpuScene::new(scenario.map(), cli.resolution) {
+    let ring = params.scheduler.max_in_flight;
+    let mut scene = match GpuScene::new(scenario.map(), cli.resolution, ring) {
         Ok(scene) => scene,
         Err(e) => {
             // A DEM larger than one GPU buffer is what the streamed flyover is for.
@@ -161,5 +190,6 @@ fn open_gpu(cli: &Cli, scenario: &mut dyn Scenario) -> Result<Option<GpuScene>> 
         }
     };
     scenario.prepare_gpu(&mut scene)?;
+    scene.apply_style(&params.style);
     Ok(Some(scene))
 }

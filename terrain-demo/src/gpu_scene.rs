@@ -154,8 +154,8 @@ impl GpuScene {
 
     /// One granular step on the GPU with `objects`: the step, the normals of the changed
     /// areas, the volume sum, and readback requests for the changed areas (they arrive in a
-    /// later frame's [`GranularFrame::arrived`]). Timed as [`Step::Granular`] and
-    /// [`Step::Normals`].
+    /// later frame's [`GranularFrame::arrived`]). Timed as [`Step::GranularGpu`] and
+    /// [`Step::NormalsGpu`].
     pub fn granular_step(
         &mut self,
         objects: &[GranularObject<'_>],
@@ -166,7 +166,7 @@ impl GpuScene {
     }
 
     /// Stamps a crater on the resident atlas tile `tile` (placement in the tile's frame) and
-    /// requests the changed rect back, in one submit timed as [`Step::Stamp`]. `None` (and
+    /// requests the changed rect back, in one submit timed as [`Step::StampGpu`]. `None` (and
     /// nothing done) when the readback ring is full: the caller stamps it in a later frame.
     pub fn stamp_tile(
         &mut self,
@@ -191,8 +191,8 @@ impl GpuScene {
         self.drain_granular_inner().map_err(|e| self.lost_or(e))
     }
 
-    /// Applies `plan` on the GPU and regenerates the normals, timed as [`Step::Stamp`] and
-    /// [`Step::Normals`]; returns the rects covered, each with the index of its deformation.
+    /// Applies `plan` on the GPU and regenerates the normals, timed as [`Step::StampGpu`] and
+    /// [`Step::NormalsGpu`]; returns the rects covered, each with the index of its deformation.
     pub fn deform(
         &mut self,
         plan: &FramePlan,
@@ -222,8 +222,9 @@ impl GpuScene {
             .map_err(|e| self.lost_or(e))
     }
 
-    /// Uploads `map` and builds every pass, rendering at `resolution`.
-    pub fn new(map: &CoarseMap, resolution: UVec2) -> Result<Self> {
+    /// Uploads `map` and builds every pass, rendering at `resolution`, with `readback_ring`
+    /// collision readbacks in flight at most.
+    pub fn new(map: &CoarseMap, resolution: UVec2, readback_ring: usize) -> Result<Self> {
         let ctx = GpuContext::new_headless().context("no GPU adapter for the 3D frames")?;
         let (device, queue) = (&ctx.device, &ctx.queue);
         let gpu_map = GpuHeightMap::from_map(device, queue, map)?;
@@ -247,7 +248,7 @@ impl GpuScene {
             target,
             footprint: None,
             shock: None,
-            readback: RegionReadback::new(device, COLLISION_READBACK_RING)?,
+            readback: RegionReadback::new(device, readback_ring)?,
             timer: GpuTimer::new(device, queue),
             height_range: (lo, hi),
             granular: None,
@@ -270,6 +271,19 @@ impl GpuScene {
     pub fn set_footprint(&mut self, footprint: &TextureStamp) -> Result<()> {
         self.footprint = Some(GpuTextureStamp::new(&self.ctx.device, footprint)?);
         Ok(())
+    }
+
+    /// Applies the configured light and fog colour, and the fog density and colour ramp where
+    /// the configuration sets them (over what the scenario chose).
+    pub fn apply_style(&mut self, style: &crate::config::StyleParams) {
+        self.style.light_dir = style.light_dir;
+        self.style.fog_color = style.fog_color;
+        if let Some(d) = style.fog_density {
+            self.style.fog_density = d;
+        }
+        if let Some(r) = style.ramp_m {
+            self.style.ramp = (r.x, r.y);
+        }
     }
 
     /// Sets the fog's density per metre (the terrain fades to the fog colour with distance).
@@ -405,8 +419,8 @@ impl GpuScene {
         g.normal_pass.recall();
         g.volume.recall();
         let volume = g.volume.read(device)?;
-        record(timings, Step::Granular, step_time);
-        record(timings, Step::Normals, normal_time);
+        record(timings, Step::GranularGpu, step_time);
+        record(timings, Step::NormalsGpu, normal_time);
         Ok(GranularFrame {
             areas,
             removed,
@@ -463,7 +477,7 @@ impl GpuScene {
         self.ctx
             .check()
             .context("stamping a tile of the streamed world")?;
-        timings.add_gpu(Step::Stamp, time.ms, time.timestamp_ms);
+        timings.add_gpu(Step::StampGpu, time.ms, time.timestamp_ms);
         Ok(Some(tickets))
     }
 
@@ -581,8 +595,8 @@ impl GpuScene {
         // Both submits are done: the passes' uniform slots are free again.
         self.stamps.recall();
         self.normal_pass.recall();
-        record(timings, Step::Stamp, stamp_time);
-        record(timings, Step::Normals, normal_time);
+        record(timings, Step::StampGpu, stamp_time);
+        record(timings, Step::NormalsGpu, normal_time);
         Ok(dirty)
     }
 

@@ -6,15 +6,19 @@ mod camera_path;
 mod camera_rig;
 mod capture;
 mod cli;
+mod config;
 mod driver;
 mod gpu_scene;
 mod images;
 mod interrupt;
+mod logging;
 mod memory_estimate;
 mod memory_limit;
 mod overview;
+mod progress;
 mod report;
 mod scenarios;
+mod summary;
 mod timings;
 mod usage_error;
 
@@ -26,6 +30,7 @@ use report::MemoryReport;
 use usage_error::{INTERRUPTED_EXIT, USAGE_EXIT, UsageExt};
 
 fn main() {
+    quiet_vulkan_device_select();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) if !e.use_stderr() => {
@@ -40,6 +45,7 @@ fn main() {
             std::process::exit(USAGE_EXIT);
         }
     };
+    logging::install(cli.verbose);
     interrupt::install();
     match run(&cli) {
         Ok(Ended::Done) => {}
@@ -72,6 +78,23 @@ fn main() {
     }
 }
 
+/// Turns off Mesa's Vulkan device-selection layer (`NODEVICE_SELECT=1`) unless the user
+/// configured it (`MESA_VK_DEVICE_SELECT`) or turned it off already. The layer only reorders
+/// adapters, which terrain-gpu ranks itself, and on a machine without a desktop session it
+/// prints `error: XDG_RUNTIME_DIR is invalid or not set` twice on every run while probing
+/// for a Wayland display nobody asked for.
+#[allow(unsafe_code)]
+fn quiet_vulkan_device_select() {
+    let configured = std::env::var_os("MESA_VK_DEVICE_SELECT").is_some()
+        || std::env::var_os("NODEVICE_SELECT").is_some();
+    if !configured {
+        // SAFETY: `set_var` races with threads reading the environment. This is the first
+        // statement of `main`: no thread of ours, of the GPU driver or of any library exists
+        // yet.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
+    }
+}
+
 /// How a run ended without an error.
 enum Ended {
     /// Every frame asked for.
@@ -96,12 +119,24 @@ fn run(cli: &Cli) -> Result<Ended> {
         eprintln!("world {}: {} bad tile(s)", dir.display(), bad.len());
         std::process::exit(usage_error::FAILURE_EXIT);
     }
+    let params = config::DemoParams::load(cli.config.as_deref()).usage()?;
+    if cli.print_config {
+        print!("{}", params.to_toml()?);
+        return Ok(Ended::Done);
+    }
     // What the run needs, from its flags and input headers, before anything large exists.
     let limit = cli.max_memory.unwrap_or_else(memory_limit::default_limit);
     let needed = RunShape::of(cli)?.estimate();
     memory_limit::check(&needed, limit).usage()?;
-    let mut scenario = scenarios::open(cli)?;
-    let report = driver::run(cli, scenario.as_mut(), MemoryReport::new(limit, &needed))?;
+    let mut scenario = scenarios::open(cli, &params)?;
+    let config = serde_json::json!({ "flags": cli, "params": params });
+    let report = driver::run(
+        cli,
+        &params,
+        config,
+        scenario.as_mut(),
+        MemoryReport::new(limit, &needed),
+    )?;
     Ok(if report.interrupted {
         Ended::Interrupted {
             frames: report.frames.len(),

@@ -3,9 +3,20 @@
 use serde::Serialize;
 use std::collections::BTreeMap;
 
+/// The version of report.json's layout (`docs/report.schema.json`): raised when a field is
+/// renamed, removed or changes meaning (adding one does not).
+pub const SCHEMA_VERSION: u32 = 2;
+
 /// The whole run.
 #[derive(Debug, Serialize)]
 pub struct Report {
+    /// [`SCHEMA_VERSION`].
+    pub schema_version: u32,
+    /// The program that wrote the report.
+    pub tool: ToolInfo,
+    /// The run's whole configuration: every flag (defaults included) and the parameter
+    /// structs (`--config`).
+    pub config: serde_json::Value,
     /// Where the heights came from: `procedural` or the heightmap's path.
     pub source: String,
     /// Map size in texels.
@@ -51,6 +62,93 @@ pub struct Report {
     pub frames: Vec<FrameReport>,
     /// Sum of each step over all frames, in milliseconds.
     pub totals_ms: BTreeMap<&'static str, f64>,
+    /// Leading frames left out of `steps_ms` (shader compilation, first uploads): `--warmup`,
+    /// at most all frames but the last.
+    pub warmup_frames: u32,
+    /// Per step, over the frames after warm-up that timed it: mean, median, 95th percentile
+    /// and maximum in milliseconds.
+    pub steps_ms: BTreeMap<&'static str, StepStats>,
+}
+
+/// The program that wrote a report.
+#[derive(Debug, Clone, Serialize)]
+pub struct ToolInfo {
+    /// `terrain-demo`.
+    pub name: &'static str,
+    /// The crate version.
+    pub version: &'static str,
+    /// The git commit it was built from (12 hex digits), or `unknown` when built outside a
+    /// git checkout.
+    pub git_revision: &'static str,
+}
+
+impl ToolInfo {
+    /// This build.
+    pub fn current() -> Self {
+        Self {
+            name: env!("CARGO_PKG_NAME"),
+            version: env!("CARGO_PKG_VERSION"),
+            git_revision: env!("TERRAIN_DEMO_GIT_REVISION"),
+        }
+    }
+}
+
+/// A step's milliseconds over the measured frames.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct StepStats {
+    /// Frames that timed the step.
+    pub frames: usize,
+    /// Mean.
+    pub mean: f64,
+    /// Median (nearest rank).
+    pub p50: f64,
+    /// 95th percentile (nearest rank).
+    pub p95: f64,
+    /// Maximum.
+    pub max: f64,
+}
+
+impl StepStats {
+    /// The statistics of `sorted` (ascending); all zero when it is empty.
+    pub fn of_sorted(sorted: &[f64]) -> Self {
+        let n = sorted.len();
+        // Nearest rank: the smallest value with at least p % of the values at or below it.
+        let rank = |p: usize| sorted[(n * p).div_ceil(100).clamp(1, n) - 1];
+        if n == 0 {
+            return Self {
+                frames: 0,
+                mean: 0.0,
+                p50: 0.0,
+                p95: 0.0,
+                max: 0.0,
+            };
+        }
+        Self {
+            frames: n,
+            mean: sorted.iter().sum::<f64>() / n as f64,
+            p50: rank(50),
+            p95: rank(95),
+            max: sorted[n - 1],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_are_nearest_rank() {
+        let v: Vec<f64> = (1..=20).map(f64::from).collect();
+        let s = StepStats::of_sorted(&v);
+        assert_eq!((s.frames, s.p50, s.p95, s.max), (20, 10.0, 19.0, 20.0));
+        assert_eq!(s.mean, 10.5);
+        let one = StepStats::of_sorted(&[3.0]);
+        assert_eq!((one.p50, one.p95, one.max, one.mean), (3.0, 3.0, 3.0, 3.0));
+        assert_eq!(StepStats::of_sorted(&[]).frames, 0);
+        let s = StepStats::of_sorted(&[1.0, 2.0, 3.0, 100.0]);
+        assert_eq!((s.p50, s.p95), (2.0, 100.0));
+    }
 }
 
 /// A map's height encoding: `metres = offset + scale * stored` (u16).
@@ -142,11 +240,12 @@ pub struct FrameReport {
     /// Height of the camera's eye above the true surface under it (never negative: the camera
     /// is a body on the collision mirror, kept above pending deformations by their bounds).
     pub camera_clearance_m: f32,
-    /// Milliseconds per step, keyed by [`Step::name`](crate::timings::Step::name): `stamp`,
-    /// `normals` and `render` (sky + terrain) are the wall time of submitting the GPU work and
-    /// waiting for it; `lod` (clipmap placement and culling), `capture` (image readback),
+    /// Milliseconds per step, keyed by [`Step::name`](crate::timings::Step::name):
+    /// `stamp_gpu`, `normals_gpu`, `granular_gpu` and `render` (sky + terrain) are the wall
+    /// time of submitting the GPU work and waiting for it; `stamp_cpu`, `normals_cpu`,
+    /// `granular_cpu` the same work on the CPU (without a GPU); `lod` (clipmap placement and culling), `capture` (image readback),
     /// `cpu_mirror` (the same stamps and normals on the CPU map behind the overview),
-    /// `physics` (collision and camera), `overview` (hillshade), `write` (PNG), `granular`.
+    /// `physics` (collision and camera), `overview` (hillshade), `write` (PNG), `cache` (flyover).
     pub timings_ms: BTreeMap<&'static str, f64>,
     /// GPU timestamp spans of `stamp`, `normals` and `render`, where the adapter has timestamp
     /// queries (on lavapipe they miss deferred compute work: see terrain-gpu's `timer`).

@@ -7,10 +7,14 @@ use std::time::Instant;
 /// One timed step of a frame. [`Step::name`] is its key in `report.json`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Step {
-    /// Stamps: on the GPU map, or on the CPU map without a GPU.
-    Stamp,
-    /// Normal regeneration on the GPU (after stamps, or after uploading a CPU-deformed map).
-    Normals,
+    /// Stamps on the GPU map (submit and wait).
+    StampGpu,
+    /// Stamps on the CPU map, without a GPU.
+    StampCpu,
+    /// Normal regeneration on the GPU (after stamps, or after a granular step).
+    NormalsGpu,
+    /// Normal regeneration on the CPU, without a GPU.
+    NormalsCpu,
     /// Sky and terrain passes.
     Render,
     /// Clipmap placement and culling on the CPU.
@@ -25,19 +29,42 @@ pub enum Step {
     Overview,
     /// Writing the frame's PNG.
     Write,
-    /// One granular deformation step (snow).
-    Granular,
+    /// One granular deformation step (snow) on the GPU.
+    GranularGpu,
+    /// One granular deformation step (snow) on the CPU.
+    GranularCpu,
     /// The frame thread's work with the tile cache (flyover): craters on resident tiles and
     /// the pool's update; the loading happens on worker threads.
     Cache,
 }
 
 impl Step {
-    /// The report key.
+    /// Every step, in the order the plot stacks them (bottom first).
+    pub const ALL: [Step; 14] = [
+        Step::StampGpu,
+        Step::StampCpu,
+        Step::NormalsGpu,
+        Step::NormalsCpu,
+        Step::GranularGpu,
+        Step::GranularCpu,
+        Step::CpuMirror,
+        Step::Cache,
+        Step::Physics,
+        Step::Lod,
+        Step::Render,
+        Step::Capture,
+        Step::Overview,
+        Step::Write,
+    ];
+
+    /// The report key: where a step can run on either side, the key says which
+    /// (`stamp_gpu`, `stamp_cpu`).
     pub const fn name(self) -> &'static str {
         match self {
-            Step::Stamp => "stamp",
-            Step::Normals => "normals",
+            Step::StampGpu => "stamp_gpu",
+            Step::StampCpu => "stamp_cpu",
+            Step::NormalsGpu => "normals_gpu",
+            Step::NormalsCpu => "normals_cpu",
             Step::Render => "render",
             Step::Lod => "lod",
             Step::Capture => "capture",
@@ -45,7 +72,8 @@ impl Step {
             Step::Physics => "physics",
             Step::Overview => "overview",
             Step::Write => "write",
-            Step::Granular => "granular",
+            Step::GranularGpu => "granular_gpu",
+            Step::GranularCpu => "granular_cpu",
             Step::Cache => "cache",
         }
     }
@@ -107,27 +135,13 @@ mod tests {
         let mut t = Timings::default();
         t.add(Step::Physics, 1.0);
         t.add(Step::Physics, 2.0);
-        t.add_gpu(Step::Stamp, 4.0, Some(0.5));
+        t.add_gpu(Step::StampGpu, 4.0, Some(0.5));
         t.add_gpu(Step::Render, 3.0, None);
         let wall = t.wall_by_name();
         assert_eq!(wall.get("physics"), Some(&3.0));
-        assert_eq!(wall.get("stamp"), Some(&4.0));
+        assert_eq!(wall.get("stamp_gpu"), Some(&4.0));
         assert_eq!(t.gpu_by_name().len(), 1);
-        let names: std::collections::BTreeSet<_> = [
-            Step::Stamp,
-            Step::Normals,
-            Step::Render,
-            Step::Lod,
-            Step::Capture,
-            Step::CpuMirror,
-            Step::Physics,
-            Step::Overview,
-            Step::Write,
-            Step::Granular,
-        ]
-        .map(Step::name)
-        .into_iter()
-        .collect();
-        assert_eq!(names.len(), 10, "names are distinct");
+        let names: std::collections::BTreeSet<_> = Step::ALL.map(Step::name).into_iter().collect();
+        assert_eq!(names.len(), Step::ALL.len(), "names are distinct");
     }
 }

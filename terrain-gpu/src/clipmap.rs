@@ -48,6 +48,8 @@ const _: () = assert!(std::mem::size_of::<FrameUniform>() == 176);
 
 /// Lighting and colouring of the terrain.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct TerrainStyle {
     /// Direction towards the sun.
     pub light_dir: Vec3,

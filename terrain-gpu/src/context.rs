@@ -96,7 +96,13 @@ impl GpuContext {
                 adapters.retain(|a| a.get_info().name.to_lowercase().contains(&f));
             }
             adapters.sort_by_key(|a| rank(&a.get_info()));
+            for a in &adapters {
+                let info = a.get_info();
+                tracing::debug!(name = %info.name, backend = ?info.backend, kind = ?info.device_type, "adapter found");
+            }
             if let Some(adapter) = adapters.into_iter().next() {
+                let info = adapter.get_info();
+                tracing::info!(name = %info.name, backend = ?info.backend, kind = ?info.device_type, "GPU adapter chosen");
                 return Self::from_adapter(instance, adapter).await;
             }
         }

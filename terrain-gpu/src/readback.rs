@@ -224,7 +224,11 @@ impl RegionReadback {
     /// Hands over every region that has arrived, without waiting for the others.
     pub fn poll(&mut self, device: &wgpu::Device) -> Result<Vec<RegionData>, GpuError> {
         device.poll(wgpu::PollType::Poll)?;
-        self.collect()
+        let arrived = self.collect()?;
+        if !arrived.is_empty() {
+            tracing::debug!(regions = arrived.len(), "region readbacks arrived");
+        }
+        Ok(arrived)
     }
 
     /// Waits until every request in flight has arrived and hands them over (tests, shutdown).

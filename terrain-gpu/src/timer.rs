@@ -10,6 +10,10 @@ use crate::download::map_and_read;
 use crate::error::GpuError;
 use std::time::Instant;
 
+/// A timed submission longer than this (milliseconds) is logged at info level: a frame at 30
+/// frames per second has 33 ms in all.
+const SLOW_SUBMIT_MS: f64 = 100.0;
+
 /// One measured span.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GpuTiming {
@@ -94,6 +98,7 @@ impl GpuTimer {
 
     /// Records `work` into a fresh encoder between two timestamps, submits it, waits for it, and
     /// returns the wall time of submit and wait, with the timestamps' span where available.
+    #[tracing::instrument(level = "trace", name = "gpu_timed_submit", skip_all)]
     pub fn time(
         &self,
         device: &wgpu::Device,
@@ -120,6 +125,15 @@ impl GpuTimer {
             }
             None => None,
         };
+        if wall_ms > SLOW_SUBMIT_MS {
+            tracing::info!(
+                wall_ms,
+                ?timestamp_ms,
+                "slow GPU submission (submit and wait)"
+            );
+        } else {
+            tracing::trace!(wall_ms, ?timestamp_ms, "GPU submission");
+        }
         Ok(GpuTiming {
             ms: wall_ms,
             timestamp_ms,

@@ -1,7 +1,9 @@
 //! The CPU side of collision streaming (seed 000 table 4.5: a full 4096 x 4096 u16 readback
 //! took 60.5 ms, 51 ms of it the system-memory copy with u16 -> f32 conversion): applying a full
 //! 4096^2 region to the mirror beside converting it to f32 and a plain memcpy; a 256 x 256
-//! dirty-region apply; one million height queries; a thousand raycasts and sphere contacts.
+//! dirty-region apply; one million height queries; a thousand raycasts and sphere contacts;
+//! with `--features parry`, building parry tiles over a 2048^2 map, a one-tile update, and a
+//! thousand parry raycasts.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use glam::{IVec2, UVec2, Vec2, Vec3};
@@ -209,5 +211,54 @@ fn queries(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, streaming, queries);
+/// The `parry` feature: building 64-texel parry tiles over a 2048 x 2048 map from scratch,
+/// against rebuilding the one tile a small deformation touched, and a thousand parry raycasts.
+#[cfg(feature = "parry")]
+fn parry_tiles(c: &mut Criterion) {
+    use terrain_physics::ParryTerrain;
+    const SIDE: u32 = 2048;
+    let map = CoarseMap::coarse(heights(SIDE, 0.0), encoding(), TEXEL).expect("map");
+    let mirror = CollisionMirror::from_map(&map).expect("mirror");
+    let snapshot = mirror.snapshot();
+    let mut g = configure(c, "parry");
+    g.bench_function(BenchmarkId::new("full_build_64", SIDE), |b| {
+        b.iter(|| ParryTerrain::new(black_box(&snapshot), 64).expect("terrain"))
+    });
+    let mut terrain = ParryTerrain::new(&snapshot, 64).expect("terrain");
+    // An 8 x 8 crater strictly inside tile (10, 10).
+    let rect = Rect::new(IVec2::new(650, 650), UVec2::new(8, 8));
+    g.bench_function(BenchmarkId::new("one_tile_update_64", SIDE), |b| {
+        b.iter(|| {
+            let rebuilt = terrain
+                .update(black_box(&snapshot), &[rect])
+                .expect("update");
+            assert_eq!(rebuilt.len(), 1);
+        })
+    });
+    let extent = SIDE as f32 * TEXEL;
+    let mut rng = Lcg(11);
+    let rays: Vec<(Vec3, Vec3)> = (0..1000)
+        .map(|_| {
+            let o = Vec3::new(rng.next_f32() * extent, 120.0, rng.next_f32() * extent);
+            let d = Vec3::new(rng.next_f32() - 0.5, -1.0, rng.next_f32() - 0.5);
+            (o, d)
+        })
+        .collect();
+    g.throughput(Throughput::Elements(rays.len() as u64));
+    g.bench_function(BenchmarkId::new("raycasts", rays.len()), |b| {
+        b.iter(|| {
+            let mut hits = 0;
+            for &(o, d) in black_box(&rays) {
+                hits += usize::from(terrain.cast_ray(o, d, 500.0).expect("cast").is_some());
+            }
+            hits
+        })
+    });
+    g.finish();
+}
+
+#[cfg(not(feature = "parry"))]
+fn parry_tiles(_: &mut Criterion) {}
+
+criterion_group!(benches, streaming, queries, parry_tiles);
 criterion_main!(benches);

@@ -100,6 +100,17 @@ pub enum PhysicsError {
         /// The rect delivered.
         delivered: Rect,
     },
+    /// A snapshot handed to a `ParryTerrain` has another texel size or height encoding than
+    /// the one it was built from (feature `parry`).
+    #[error("snapshot {what} is {actual}, but the terrain was built with {expected}")]
+    SnapshotMismatch {
+        /// Which property.
+        what: &'static str,
+        /// The terrain's value.
+        expected: f64,
+        /// The snapshot's value.
+        actual: f64,
+    },
     /// An error from terrain-core (building a grid or map).
     #[error(transparent)]
     Core(#[from] CoreError),

@@ -68,6 +68,11 @@
 //!
 //! Surface model: the bilinear patch of listing 3.2 over every cell; heights, normals,
 //! raycasts and contacts all use it.
+//!
+//! Feature `parry` (off by default): the `parry_adapter` module's `ParryTerrain` holds the
+//! snapshots as tiled `parry3d` heightfields for a parry or rapier world, rebuilt per dirty
+//! rect, with the difference between parry's triangles and the bilinear surface bounded
+//! (`|h00 - h10 - h01 + h11| / 4` per cell) and tested; its module docs have a runnable example.
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
@@ -79,6 +84,8 @@ pub mod field;
 pub mod ground;
 pub mod merge;
 pub mod mirror;
+#[cfg(feature = "parry")]
+pub mod parry_adapter;
 pub mod ray;
 pub mod scheduler;
 pub mod source;
@@ -93,6 +100,11 @@ pub use field::{HeightField, MAX_FIELD_SIDE};
 pub use ground::{BoundedGround, DeformationBound, PendingDeformation};
 pub use merge::DirtyRegions;
 pub use mirror::{CollisionMirror, RegionUpdate};
+#[cfg(feature = "parry")]
+pub use parry_adapter::{MAX_PARRY_TILE_SIZE, MAX_PARRY_TILES, ParryTerrain, ParryTile};
+/// The parry version the `parry` feature builds on (its shapes and poses are parry's types).
+#[cfg(feature = "parry")]
+pub use parry3d;
 pub use ray::{Ray, RayHit};
 pub use scheduler::{
     MAX_PENDING_DEFORMATIONS, ReadbackScheduler, SchedulerConfig, UpdateError, UpdateReport,

@@ -31,14 +31,25 @@ use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 use terrain_core::{Grid, Rect, RegionSource, RequestId};
 
-/// Scheduler parameters.
+/// Scheduler parameters. With the `serde` feature the durations are written in milliseconds
+/// (`quiet_gap_ms`, `max_delay_ms`, `request_timeout_ms`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct SchedulerConfig {
     /// How long no deformation must be noted before the dirty rects are requested. Seed 000
     /// sec 3.2.1: "the system waits for a gap of approximately 20 milliseconds". Default 20 ms.
+    #[cfg_attr(
+        feature = "serde",
+        serde(rename = "quiet_gap_ms", with = "duration_ms")
+    )]
     pub quiet_gap: Duration,
     /// The longest a dirty rect waits, even while deformations keep coming (so a continuous
     /// stream of deformations cannot starve collision). Not in the seed; default 250 ms.
+    #[cfg_attr(
+        feature = "serde",
+        serde(rename = "max_delay_ms", with = "duration_ms")
+    )]
     pub max_delay: Duration,
     /// Dirty rects closer than this many texels are merged into one request. Default 16.
     pub merge_distance: u32,
@@ -46,10 +57,31 @@ pub struct SchedulerConfig {
     pub max_requests: usize,
     /// How long a request may take to arrive before it is abandoned and its rect requested
     /// again. Not in the seed (its readback never fails); default 1 s, about 30 frames.
+    #[cfg_attr(
+        feature = "serde",
+        serde(rename = "request_timeout_ms", with = "duration_ms")
+    )]
     pub request_timeout: Duration,
     /// The most requests in flight; a batch waits (its rects stay dirty) while it would go
     /// over. Default 16.
     pub max_in_flight: usize,
+}
+
+/// A [`Duration`] as milliseconds (a float) in configuration files.
+#[cfg(feature = "serde")]
+mod duration_ms {
+    use serde::{Deserialize, Deserializer, Serializer, de::Error};
+    use std::time::Duration;
+
+    pub fn serialize<S: Serializer>(d: &Duration, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_f64(d.as_secs_f64() * 1e3)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Duration, D::Error> {
+        let ms = f64::deserialize(d)?;
+        Duration::try_from_secs_f64(ms / 1e3)
+            .map_err(|e| D::Error::custom(format!("{ms} ms is not a duration: {e}")))
+    }
 }
 
 impl Default for SchedulerConfig {
@@ -72,6 +104,9 @@ pub struct UpdateReport {
     pub requested: Vec<(RequestId, Rect)>,
     /// Regions applied to the mirror: request id and the mirror version it produced.
     pub applied: Vec<(RequestId, u64)>,
+    /// The rects of `applied`, in the same order (they may wrap): what changed in the mirror
+    /// in this update, e.g. for `ParryTerrain::update` (feature `parry`).
+    pub applied_rects: Vec<Rect>,
     /// Requests abandoned this update (not arrived within the timeout, or their id handed out
     /// again by the source); their rects are dirty again.
     pub abandoned: Vec<RequestId>,
@@ -219,6 +254,7 @@ impl ReadbackScheduler {
     /// scheduler's, or on a region nobody asked for, or one of the wrong rect or size. Arrivals
     /// that were valid are still kept and applied; a failed request keeps its rects dirty for
     /// the next update. The first error met is returned.
+    #[tracing::instrument(level = "debug", name = "collision_update", skip_all)]
     pub fn update<S: RegionSource + ?Sized>(
         &mut self,
         now: Instant,
@@ -276,7 +312,10 @@ impl ReadbackScheduler {
             };
             let Some(heights) = done.arrived else { break };
             match mirror.apply_next(done.rect, &heights) {
-                Ok(version) => report.applied.push((done.id, version)),
+                Ok(version) => {
+                    report.applied.push((done.id, version));
+                    report.applied_rects.push(done.rect);
+                }
                 Err(e) => {
                     // Cannot happen for a validated arrival; keep the area dirty if it does, and
                     // its bounds, and those the requests behind it would retire, pending.
@@ -372,6 +411,7 @@ impl ReadbackScheduler {
         }
         self.abandoned.push_back(f.id);
         report.abandoned.push(f.id);
+        tracing::warn!(request = ?f.id, rect = ?f.rect, "collision readback abandoned (late); its rect is requested again");
     }
 
     fn request_batch<S: RegionSource + ?Sized>(
@@ -417,6 +457,7 @@ impl ReadbackScheduler {
                         retires: Vec::new(),
                     });
                     report.requested.push((id, rect));
+                    tracing::debug!(request = ?id, rect = ?rect, "collision readback requested");
                     issued += 1;
                 }
                 Err(e) => {

@@ -62,6 +62,12 @@ fn cargo(args: &[&str], env: &[(&str, &str)]) -> Result<()> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut cmd = Command::new(cargo);
     cmd.args(args).current_dir(root());
+    // Mesa's Vulkan device-select layer prints `XDG_RUNTIME_DIR is invalid or not set` for
+    // every GPU test on a machine without a desktop session; it only reorders adapters, which
+    // terrain-gpu ranks itself (the demo turns it off the same way).
+    if std::env::var_os("MESA_VK_DEVICE_SELECT").is_none() {
+        cmd.env("NODEVICE_SELECT", "1");
+    }
     for (k, v) in env {
         cmd.env(k, v);
     }
@@ -120,6 +126,22 @@ fn clippy() -> Result<()> {
             "warnings",
         ],
         &[],
+    )?;
+    // terrain-physics's optional parry adapter (its module, test, bench and example).
+    cargo(
+        &[
+            "clippy",
+            "-p",
+            "terrain-physics",
+            "--features",
+            "parry",
+            "--all-targets",
+            "--locked",
+            "--",
+            "-D",
+            "warnings",
+        ],
+        &[],
     )
 }
 
@@ -143,12 +165,36 @@ fn test() -> Result<()> {
             "--locked",
         ],
         &[],
+    )?;
+    // The optional parry adapter: the crate's tests and doc tests with it compiled in.
+    cargo(
+        &[
+            "test",
+            "-p",
+            "terrain-physics",
+            "--features",
+            "parry",
+            "--locked",
+        ],
+        &[],
     )
 }
 
 fn doc() -> Result<()> {
     cargo(
         &["doc", "--workspace", "--no-deps", "--locked"],
+        &[("RUSTDOCFLAGS", "-D warnings")],
+    )?;
+    cargo(
+        &[
+            "doc",
+            "-p",
+            "terrain-physics",
+            "--features",
+            "parry",
+            "--no-deps",
+            "--locked",
+        ],
         &[("RUSTDOCFLAGS", "-D warnings")],
     )
 }
@@ -275,6 +321,16 @@ const EXAMPLES: [(&str, &str, &[&str]); 7] = [
     ("terrain-cache", "trace_sim", &[]),
 ];
 
+/// Library examples behind a feature of their crate (`required-features`), which the
+/// workspace build of `examples` skips: each is built with its feature, then run like the
+/// others.
+const FEATURE_EXAMPLES: [(&str, &str, &str, &[&str]); 1] = [(
+    "terrain-physics",
+    "parry_drop",
+    "parry",
+    &["--size", "64", "--tile", "16", "--steps", "60"],
+)];
+
 /// Example files that are tools rather than examples, with why `examples` does not run them.
 const NOT_EXAMPLES: [(&str, &str, &str); 1] = [(
     "terrain-gpu",
@@ -307,7 +363,11 @@ fn examples() -> Result<()> {
             {
                 continue;
             }
-            if !EXAMPLES.iter().any(|(k, e, _)| *k == krate && *e == name) {
+            if !EXAMPLES.iter().any(|(k, e, _)| *k == krate && *e == name)
+                && !FEATURE_EXAMPLES
+                    .iter()
+                    .any(|(k, e, _, _)| *k == krate && *e == name)
+            {
                 bail!("{} is not listed in xtask's EXAMPLES", path.display());
             }
         }
@@ -322,10 +382,26 @@ fn examples() -> Result<()> {
     // already), then each binary runs: `cargo run -p` would resolve each crate's features on
     // its own and rebuild the dependencies for it.
     cargo(&["build", "--locked", "--workspace", "--examples"], &[])?;
+    for (krate, example, feature, _) in FEATURE_EXAMPLES {
+        cargo(
+            &[
+                "build",
+                "--locked",
+                "-p",
+                krate,
+                "--features",
+                feature,
+                "--example",
+                example,
+            ],
+            &[],
+        )?;
+    }
     let target = std::env::var_os("CARGO_TARGET_DIR")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|| root().join("target"));
-    for (krate, example, args) in EXAMPLES {
+    let feature_examples = FEATURE_EXAMPLES.map(|(k, e, _, a)| (k, e, a));
+    for (krate, example, args) in EXAMPLES.into_iter().chain(feature_examples) {
         let args: Vec<String> = args.iter().map(|a| a.replace("{out}", &out)).collect();
         let exe = target
             .join("debug")
@@ -494,7 +570,7 @@ fn smoke_on(backend: Option<&str>) -> Result<()> {
         let timings = frame["timings_ms"]
             .as_object()
             .with_context(|| format!("frame {i} has no timings_ms"))?;
-        for step in ["stamp", "normals", "render"] {
+        for step in ["stamp_gpu", "normals_gpu", "render"] {
             if !timings
                 .get(step)
                 .and_then(|v| v.as_f64())

@@ -5,6 +5,8 @@ use super::GranularError;
 
 /// Distance metric of the distance transform (seed 001 sec 2.3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum DistanceMetric {
     /// `dx^2 + dy^2` (compared squared, so exactly in integers).
     #[default]
@@ -84,6 +86,8 @@ pub enum SlopeMethod {
 /// `numIterationsDisplaceMaterialToContour` belongs to the method that uses it
 /// ([`DisplacementMethod::Iterative`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct GranularParams {
     /// `compression` in `[0, 1]` (table 4.4, sec 4.1.4): share of intersected material that is
     /// compressed (removed) instead of displaced; 0 keeps the volume exactly. Default 0.

@@ -286,7 +286,9 @@ fn from_dem(
     if q.clamped > 0 {
         line.push_str(&format!("; {} samples clamped to the range", q.clamped));
     }
-    eprintln!("{line}");
+    if !cli.quiet {
+        eprintln!("{line}");
+    }
     let map = CoarseMap::coarse(q.grid, q.encoding, texel)?;
     Ok(Terrain {
         map,

@@ -12,6 +12,7 @@ pub mod tile_overlay;
 pub mod world_files;
 
 use crate::cli::{Cli, ScenarioKind};
+use crate::config::DemoParams;
 use crate::gpu_scene::{Camera, GpuScene};
 use crate::report::FrameStats;
 use crate::timings::Timings;
@@ -26,7 +27,7 @@ pub use stamp_script::{FramePlan, StampKind};
 pub const FRAME_DT: f64 = 1.0 / 30.0;
 
 /// The scenario `cli` asks for, set up (terrain loaded or generated, bodies placed).
-pub fn open(cli: &Cli) -> Result<Box<dyn Scenario>> {
+pub fn open(cli: &Cli, params: &DemoParams) -> Result<Box<dyn Scenario>> {
     if cli.camera.is_some() && cli.scenario != ScenarioKind::Default {
         return Err(crate::usage_error::usage(anyhow::anyhow!(
             "--camera chooses the default scenario's camera; the {} scenario moves its own",
@@ -37,8 +38,8 @@ pub fn open(cli: &Cli) -> Result<Box<dyn Scenario>> {
         )));
     }
     Ok(match cli.scenario {
-        ScenarioKind::Default => Box::new(stamps::StampScenario::new(cli)?),
-        ScenarioKind::Snow => Box::new(snow::SnowScenario::new(cli)?),
+        ScenarioKind::Default => Box::new(stamps::StampScenario::new(cli, params)?),
+        ScenarioKind::Snow => Box::new(snow::SnowScenario::new(cli, params)?),
         ScenarioKind::Flyover => Box::new(flyover::FlyoverScenario::new(cli)?),
     })
 }

@@ -11,6 +11,7 @@ use super::snow_field::SnowField;
 use super::{FRAME_DT, FinishStats, FrameContext, FrameOutcome, Scenario, ScenarioInfo};
 use crate::camera_rig::CameraRig;
 use crate::cli::Cli;
+use crate::config::DemoParams;
 use crate::gpu_scene::GpuScene;
 use crate::report::FrameStats;
 use crate::timings::{Step, ms_since};
@@ -18,7 +19,6 @@ use crate::usage_error::{UsageExt, usage};
 use anyhow::Result;
 use glam::{UVec2, Vec2};
 use std::time::Instant;
-use terrain_core::granular::GranularParams;
 use terrain_core::{CoarseMap, DerivativeMap, Rect, bilinear};
 use terrain_physics::CollisionMirror;
 
@@ -44,7 +44,7 @@ pub struct SnowScenario {
 
 impl SnowScenario {
     /// Generates the snow field of `--size` (512 by default) and places the camera.
-    pub fn new(cli: &Cli) -> Result<Self> {
+    pub fn new(cli: &Cli, params: &DemoParams) -> Result<Self> {
         if cli.heightmap.is_some() {
             return Err(usage(anyhow::anyhow!(
                 "--heightmap is not used by the snow scenario (it generates its snow field)"
@@ -52,7 +52,7 @@ impl SnowScenario {
         }
         let size = cli.size.unwrap_or(SNOW_SIZE);
         let t = Instant::now();
-        let field = SnowField::new(size, cli.seed, GranularParams::snow()).usage()?;
+        let field = SnowField::new(size, cli.seed, params.granular).usage()?;
         let coarse = field.coarse_map()?;
         let load_ms = ms_since(t);
         let t = Instant::now();
@@ -64,6 +64,7 @@ impl SnowScenario {
             start,
             bilinear(&coarse, start)?,
             coarse.extent_m().max_element(),
+            &params.camera,
         );
         Ok(Self {
             info: ScenarioInfo {
@@ -147,7 +148,7 @@ impl Scenario for SnowScenario {
                 let deformed: u64 = frame.areas.iter().map(Rect::area).sum();
                 (frame.volume, self.gpu_removed, deformed, dirty, "gpu")
             }
-            _ => ctx.timings.time(Step::Granular, || -> Result<_> {
+            _ => ctx.timings.time(Step::GranularCpu, || -> Result<_> {
                 let report = self.field.step(&poses)?;
                 let dirty: Vec<Rect> = report.active_areas.iter().map(|a| a.rect).collect();
                 for rect in &dirty {
@@ -203,7 +204,7 @@ mod tests {
     #[test]
     fn the_coarse_map_follows_the_field_through_its_active_areas() {
         let cli = Cli::try_parse_from(["demo", "--scenario", "snow", "--size", "128"]).unwrap();
-        let mut snow = SnowScenario::new(&cli).unwrap();
+        let mut snow = SnowScenario::new(&cli, &DemoParams::default()).unwrap();
         let mut timings = crate::timings::Timings::default();
         for _ in 0..3 {
             let mut ctx = FrameContext {

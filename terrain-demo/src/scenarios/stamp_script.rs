@@ -7,30 +7,15 @@ use glam::Vec2;
 use terrain_core::HeightEncoding;
 use terrain_core::io::{ReadLimits, decode_png8};
 use terrain_core::{
-    Blend, CoarseMap, DirtyRect, GaussianStamp, Shockwave, ShockwaveParams, Stamp, StampPlacement,
-    TextureStamp, apply_stamp,
+    Blend, CoarseMap, DirtyRect, GaussianStamp, Shockwave, Stamp, StampPlacement, TextureStamp,
+    apply_stamp,
 };
 use terrain_physics::DeformationBound;
 
+use crate::config::StampParams;
+
 /// The footprint image: white where the foot presses hardest (see `TextureStamp`).
 const FOOTPRINT_PNG: &[u8] = include_bytes!("../../assets/footprint.png");
-
-/// Footprint size in metres (length along the walking direction, width).
-const FOOT_SIZE: Vec2 = Vec2::new(1.1, 0.45);
-/// How deep a footprint presses, in metres.
-const FOOT_DEPTH: f32 = 0.12;
-/// Footprints per frame.
-const STEPS_PER_FRAME: u32 = 2;
-/// Walking stride in metres.
-const STRIDE: f32 = 0.9;
-/// A crater lands every this many frames.
-const CRATER_EVERY: u32 = 5;
-/// Shockwave footprint as a fraction of the map's smaller side.
-const SHOCK_SIZE_FRACTION: f32 = 0.45;
-/// Shockwave amplitude in metres.
-const SHOCK_AMPLITUDE: f32 = 2.5;
-/// Wave steps (eq. 3.7) per frame.
-const SHOCK_STEPS_PER_FRAME: u32 = 2;
 
 /// Which pattern a deformation uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -94,11 +79,12 @@ pub struct StampScript {
     crater: GaussianStamp,
     shockwave: Option<Shockwave>,
     frame: u32,
+    params: StampParams,
 }
 
 impl StampScript {
-    /// A script for a map of `extent` metres, seeded.
-    pub fn new(extent: Vec2, seed: u64) -> Result<Self> {
+    /// A script for a map of `extent` metres, seeded, shaped by `params` (`[stamps]`).
+    pub fn new(extent: Vec2, seed: u64, params: StampParams) -> Result<Self> {
         let image = decode_png8(FOOTPRINT_PNG, &ReadLimits::default())
             .context("the embedded footprint image")?;
         Ok(Self {
@@ -108,6 +94,7 @@ impl StampScript {
             crater: GaussianStamp::default(),
             shockwave: None,
             frame: 0,
+            params,
         })
     }
 
@@ -131,15 +118,17 @@ impl StampScript {
         // The walker loops around the map's middle, alternating left and right feet. It starts
         // on the side nearest the (0, 0) corner so it meets the shockwave within the default run.
         let radius = min_side * 0.3;
-        for k in 0..STEPS_PER_FRAME {
-            let s = (frame * STEPS_PER_FRAME + k) as f32 * STRIDE;
+        let p = self.params;
+        for k in 0..p.steps_per_frame {
+            let s = (u64::from(frame) * u64::from(p.steps_per_frame) + u64::from(k)) as f32
+                * p.stride_m;
             let angle = s / radius + std::f32::consts::PI;
             let heading = Vec2::new(-angle.sin(), angle.cos());
             let side = if k % 2 == 0 { 0.2 } else { -0.2 };
             let pos = self.extent * 0.5
                 + Vec2::new(angle.cos(), angle.sin()) * radius
                 + heading.perp() * side;
-            let placement = StampPlacement::new(pos, FOOT_SIZE, -FOOT_DEPTH)?
+            let placement = StampPlacement::new(pos, p.foot_size_m, -p.foot_depth_m)?
                 .with_rotation(heading.y.atan2(heading.x))?;
             plan.deformations.push(Deformation {
                 kind: StampKind::Footprint,
@@ -149,39 +138,39 @@ impl StampScript {
         }
 
         // A crater now and then on the walker's path 25 m ahead (so the camera walks through it),
-        // 6 to 14 m wide, 0.3 times as deep.
-        if frame % CRATER_EVERY == 2 {
+        // 6 to 14 m wide, 0.3 times as deep by default.
+        if p.crater_every > 0 && frame % p.crater_every == 2 % p.crater_every {
             let (walker, heading) = plan.walker;
             let side = (self.rng.next_f32() - 0.5) * 6.0;
             let pos = walker + heading * 25.0 + heading.perp() * side;
-            let size = (6.0 + 8.0 * self.rng.next_f32()).min(min_side * 0.5);
+            let (lo, hi) = (p.crater_size_m.x, p.crater_size_m.y);
+            let size = (lo + (hi - lo) * self.rng.next_f32()).min(min_side * 0.5);
             plan.deformations.push(Deformation {
                 kind: StampKind::Crater,
-                placement: StampPlacement::new(pos, Vec2::splat(size), -0.3 * size)?,
+                placement: StampPlacement::new(
+                    pos,
+                    Vec2::splat(size),
+                    -p.crater_depth_ratio * size,
+                )?,
             });
         }
 
         // The shockwave starts on frame 1 and is stamped as its change every frame.
-        if frame == 1 {
-            self.shockwave = Some(Shockwave::new(ShockwaveParams {
-                resolution: 128,
-                initial_sigma: 3.0,
-                damping: 0.002,
-                ..ShockwaveParams::default()
-            })?);
+        if frame == 1 && p.shock_size_fraction > 0.0 {
+            self.shockwave = Some(Shockwave::new(p.shockwave)?);
         }
         if let Some(wave) = self.shockwave.as_mut() {
-            for _ in 0..SHOCK_STEPS_PER_FRAME {
+            for _ in 0..p.shock_steps_per_frame {
                 wave.step();
             }
-            let size = min_side * SHOCK_SIZE_FRACTION;
+            let size = min_side * p.shock_size_fraction;
             // Centred near the (0, 0) corner: the footprint wraps over both edges.
             plan.deformations.push(Deformation {
                 kind: StampKind::Shockwave,
                 placement: StampPlacement::new(
                     Vec2::splat(size * 0.2),
                     Vec2::splat(size),
-                    SHOCK_AMPLITUDE,
+                    p.shock_amplitude_m,
                 )?,
             });
             plan.shock_delta = Some(wave.take_delta()?);

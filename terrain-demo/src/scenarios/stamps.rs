@@ -8,6 +8,7 @@ use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo, height
 use crate::camera_path::{CameraPath, MapFrame};
 use crate::camera_rig::CameraRig;
 use crate::cli::{CameraMode, Cli};
+use crate::config::DemoParams;
 use crate::gpu_scene::GpuScene;
 use crate::report::FrameStats;
 use crate::timings::{Step, ms_since};
@@ -16,9 +17,7 @@ use glam::Vec2;
 use std::collections::HashMap;
 use std::time::Instant;
 use terrain_core::{CoarseMap, DerivativeMap, bilinear};
-use terrain_physics::{
-    CollisionMirror, CpuRegionSource, ReadbackScheduler, RequestId, SchedulerConfig,
-};
+use terrain_physics::{CollisionMirror, CpuRegionSource, ReadbackScheduler, RequestId};
 
 /// The default scenario.
 #[derive(Debug)]
@@ -39,7 +38,7 @@ pub struct StampScenario {
 
 impl StampScenario {
     /// Loads or generates the terrain and places the walker and the camera.
-    pub fn new(cli: &Cli) -> Result<Self> {
+    pub fn new(cli: &Cli, params: &DemoParams) -> Result<Self> {
         let t = Instant::now();
         let terrain = heightmap::load(cli)?;
         let map = terrain.map;
@@ -47,19 +46,20 @@ impl StampScenario {
         let t = Instant::now();
         let normals = DerivativeMap::from_map(&map);
         let initial_normals_ms = ms_since(t);
-        let script = StampScript::new(map.extent_m(), cli.seed)?;
+        let script = StampScript::new(map.extent_m(), cli.seed, params.stamps)?;
         let mirror = CollisionMirror::from_map(&map)?;
-        // No more requests in flight than the GPU scene's readback ring has buffers.
-        let config = SchedulerConfig {
-            max_in_flight: crate::gpu_scene::COLLISION_READBACK_RING,
-            ..SchedulerConfig::default()
-        };
-        let scheduler = ReadbackScheduler::for_mirror(&mirror, config)?;
+        // The GPU scene's readback ring has `max_in_flight` buffers (see `driver::open_gpu`).
+        let scheduler = ReadbackScheduler::for_mirror(&mirror, params.scheduler)?;
         let mode = camera_mode(cli);
         let rig = match mode {
             CameraMode::Walker => {
                 let start = script.walker_start();
-                CameraRig::new(start, bilinear(&map, start)?, map.extent_m().max_element())
+                CameraRig::new(
+                    start,
+                    bilinear(&map, start)?,
+                    map.extent_m().max_element(),
+                    &params.camera,
+                )
             }
             CameraMode::Orbit | CameraMode::Flyover => {
                 let (lo, hi) = heightmap::stored_range(&map);
@@ -69,9 +69,9 @@ impl StampScenario {
                     high: map.encoding().to_metres(hi),
                 };
                 let path = if mode == CameraMode::Orbit {
-                    CameraPath::orbit(frame)
+                    CameraPath::orbit(frame, (&params.camera).into())
                 } else {
-                    CameraPath::flyover(frame)
+                    CameraPath::flyover(frame, (&params.camera).into())
                 };
                 CameraRig::on_path(path, |p| bilinear(&map, p).unwrap_or(frame.low))
             }
@@ -163,17 +163,21 @@ impl Scenario for StampScenario {
                 self.scheduler.note_deformation(rect, bound, now)?;
             }
         }
-        let cpu_step = if ctx.gpu.is_some() {
-            Step::CpuMirror
+        // Beside a GPU this is the mirror behind the overview (one step); without one it is the
+        // deformation itself, timed as stamps and normals like the GPU's.
+        let (stamp_step, normals_step) = if ctx.gpu.is_some() {
+            (Step::CpuMirror, Step::CpuMirror)
         } else {
-            Step::Stamp
+            (Step::StampCpu, Step::NormalsCpu)
         };
-        let dirty_by_deformation = ctx.timings.time(cpu_step, || -> Result<_> {
-            let dirty = self.script.apply_cpu(self.cpu.map_mut(), &mut plan)?;
-            for rect in dirty.iter().flatten() {
+        let dirty_by_deformation = ctx.timings.time(stamp_step, || {
+            self.script.apply_cpu(self.cpu.map_mut(), &mut plan)
+        })?;
+        ctx.timings.time(normals_step, || -> Result<()> {
+            for rect in dirty_by_deformation.iter().flatten() {
                 self.normals.update_rect(self.cpu.map(), *rect)?;
             }
-            Ok(dirty)
+            Ok(())
         })?;
         if ctx.gpu.is_none() {
             for (d, rects) in plan.deformations.iter().zip(&dirty_by_deformation) {

@@ -8,7 +8,7 @@ use crate::scenarios::heightmap::{HeightsInfo, PlannedMap};
 use crate::usage_error::{UsageExt, usage};
 use anyhow::{Context, Result};
 use glam::UVec2;
-use std::io::Write;
+use std::io::{IsTerminal, Write};
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -70,28 +70,34 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> 
         let world = World::open(store.clone())
             .with_context(|| format!("the world in {} cannot be opened", cli.world.display()))
             .usage()?;
-        eprintln!(
-            "world {}: {} texels, {} levels (deformations of earlier runs included)",
-            cli.world.display(),
-            world.manifest().world_size,
-            world.manifest().levels
-        );
+        if !cli.quiet {
+            eprintln!(
+                "world {}: {} texels, {} levels (deformations of earlier runs included)",
+                cli.world.display(),
+                world.manifest().world_size,
+                world.manifest().levels
+            );
+        }
         return Ok((world, format!("world {}", cli.world.display()), None));
     }
     let started = Instant::now();
     let last = AtomicU64::new(0);
+    // On a terminal one line rewritten in place; in a log a line per 5 %; nothing with -q.
+    let terminal = std::io::stderr().is_terminal();
     let progress = |p: terrain_cache::BuildProgress| {
         // An update every 5 % (tiles finish on several threads; one of them prints).
         let step = (p.total / 20).max(1);
         let bucket = p.done / step;
-        if last.fetch_max(bucket, Ordering::Relaxed) < bucket || p.done == p.total {
+        if !cli.quiet && (last.fetch_max(bucket, Ordering::Relaxed) < bucket || p.done == p.total) {
             eprint!(
-                "\rbuilding world {}: {}/{} tiles ({:.0} %, {:.0} s)",
+                "{}building world {}: {}/{} tiles ({:.0} %, {:.0} s){}",
+                if terminal { "\r" } else { "" },
                 cli.world.display(),
                 p.done,
                 p.total,
                 100.0 * p.done as f64 / p.total.max(1) as f64,
-                started.elapsed().as_secs_f64()
+                started.elapsed().as_secs_f64(),
+                if terminal { "" } else { "\n" },
             );
             let _ = std::io::stderr().flush();
         }
@@ -127,7 +133,9 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> 
             (world, "procedural world".to_string(), None)
         }
     };
-    eprintln!();
+    if terminal && !cli.quiet {
+        eprintln!();
+    }
     Ok((world, source, heights))
 }
 

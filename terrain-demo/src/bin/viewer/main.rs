@@ -14,6 +14,8 @@
 //! Glue over the library crates only: terrain-core makes the map and stamps it on the CPU,
 //! terrain-gpu stamps, lights and draws it, terrain-lod places the clipmap.
 
+#![forbid(unsafe_code)]
+
 mod app;
 mod fly_camera;
 mod gpu;

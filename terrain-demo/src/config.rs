@@ -1,0 +1,394 @@
+//! `--config FILE.toml` and `--print-config`: the scenarios' parameters as one document, so a
+//! scenario can be written down and shared. Every key is optional: a file holds only what it
+//! changes, over the defaults (`--print-config` prints them all). Unknown keys and values out
+//! of range are errors that name the key.
+
+use anyhow::{Context, Result, anyhow, bail};
+use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use terrain_core::ShockwaveParams;
+use terrain_core::granular::GranularParams;
+use terrain_physics::SchedulerConfig;
+
+/// The largest configuration file read (a parameter file is a few kilobytes).
+const MAX_FILE_BYTES: u64 = 1 << 20;
+
+/// Every parameter of the scenarios.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DemoParams {
+    /// The default scenario's script: footprints, craters, the shockwave.
+    pub stamps: StampParams,
+    /// The snow scenario's granular material (terrain-core's `GranularParams`).
+    pub granular: GranularParams,
+    /// The default scenario's collision readback scheduler (terrain-physics'
+    /// `SchedulerConfig`; durations in milliseconds).
+    pub scheduler: SchedulerConfig,
+    /// Lighting and colours of the terrain.
+    pub style: StyleParams,
+    /// The default scenario's cameras.
+    pub camera: CameraParams,
+}
+
+impl Default for DemoParams {
+    fn default() -> Self {
+        Self {
+            stamps: StampParams::default(),
+            granular: GranularParams::snow(),
+            scheduler: SchedulerConfig {
+                max_in_flight: crate::gpu_scene::COLLISION_READBACK_RING,
+                ..SchedulerConfig::default()
+            },
+            style: StyleParams::default(),
+            camera: CameraParams::default(),
+        }
+    }
+}
+
+/// The default scenario's script.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StampParams {
+    /// Footprint size in metres: length along the walking direction, width.
+    pub foot_size_m: Vec2,
+    /// How deep a footprint presses, in metres.
+    pub foot_depth_m: f32,
+    /// Footprints per frame.
+    pub steps_per_frame: u32,
+    /// Walking stride in metres.
+    pub stride_m: f32,
+    /// A crater lands every this many frames (0: none).
+    pub crater_every: u32,
+    /// Crater diameters are drawn between these (metres; at most half the map's side).
+    pub crater_size_m: Vec2,
+    /// A crater is this many times as deep as it is wide.
+    pub crater_depth_ratio: f32,
+    /// The shockwave: its footprint as a fraction of the map's smaller side (0: no
+    /// shockwave).
+    pub shock_size_fraction: f32,
+    /// The shockwave's amplitude in metres.
+    pub shock_amplitude_m: f32,
+    /// Wave steps (seed 000 eq. 3.7) per frame.
+    pub shock_steps_per_frame: u32,
+    /// The wave simulation (terrain-core's `ShockwaveParams`).
+    pub shockwave: ShockwaveParams,
+}
+
+impl Default for StampParams {
+    fn default() -> Self {
+        Self {
+            foot_size_m: Vec2::new(1.1, 0.45),
+            foot_depth_m: 0.12,
+            steps_per_frame: 2,
+            stride_m: 0.9,
+            crater_every: 5,
+            crater_size_m: Vec2::new(6.0, 14.0),
+            crater_depth_ratio: 0.3,
+            shock_size_fraction: 0.45,
+            shock_amplitude_m: 2.5,
+            shock_steps_per_frame: 2,
+            shockwave: ShockwaveParams {
+                resolution: 128,
+                initial_sigma: 3.0,
+                damping: 0.002,
+                ..ShockwaveParams::default()
+            },
+        }
+    }
+}
+
+/// Lighting and colours (what the scenario does not derive from the map).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StyleParams {
+    /// Direction towards the sun (any length but zero).
+    pub light_dir: Vec3,
+    /// Colour the terrain fades to with distance (linear RGB, 0..1).
+    pub fog_color: Vec3,
+    /// Fog density per metre; absent: chosen from the map's size and the camera.
+    pub fog_density: Option<f32>,
+    /// Heights (metres) the colour ramp spans; absent: the map's height range.
+    pub ramp_m: Option<Vec2>,
+}
+
+impl Default for StyleParams {
+    fn default() -> Self {
+        let style = terrain_gpu::TerrainStyle::default();
+        Self {
+            light_dir: style.light_dir,
+            fog_color: style.fog_color,
+            fog_density: None,
+            ramp_m: None,
+        }
+    }
+}
+
+/// The default scenario's cameras.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraParams {
+    /// Eye height of the walker camera above the ground, in metres.
+    pub walker_eye_height_m: f32,
+    /// How far behind the walker the camera walks, in metres.
+    pub walker_behind_m: f32,
+    /// How far ahead of the walker it looks, in metres.
+    pub walker_ahead_m: f32,
+    /// The orbit looks down this many degrees below the horizon.
+    pub orbit_pitch_deg: f32,
+    /// Seconds per revolution of the orbit.
+    pub orbit_period_s: f32,
+    /// Seconds per loop of the flyover.
+    pub flyover_period_s: f32,
+    /// The flyover's height above the ground, as a fraction of the map's longer side.
+    pub flyover_height: f32,
+    /// The flyover looks down this many degrees below the horizon.
+    pub flyover_pitch_deg: f32,
+}
+
+impl Default for CameraParams {
+    fn default() -> Self {
+        Self {
+            walker_eye_height_m: 3.0,
+            walker_behind_m: 9.0,
+            walker_ahead_m: 12.0,
+            orbit_pitch_deg: 35.0,
+            orbit_period_s: 40.0,
+            flyover_period_s: 30.0,
+            flyover_height: 0.08,
+            flyover_pitch_deg: 25.0,
+        }
+    }
+}
+
+impl DemoParams {
+    /// The parameters of `--config FILE` over the defaults, or the defaults without a file.
+    pub fn load(file: Option<&Path>) -> Result<Self> {
+        let Some(path) = file else {
+            return Ok(Self::default());
+        };
+        let meta =
+            std::fs::metadata(path).with_context(|| format!("reading {}", path.display()))?;
+        if !meta.is_file() {
+            bail!("{} is not a regular file", path.display());
+        }
+        if meta.len() > MAX_FILE_BYTES {
+            bail!(
+                "{} is {} bytes: a parameter file is at most {MAX_FILE_BYTES}",
+                path.display(),
+                meta.len()
+            );
+        }
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        Self::from_toml(&text).with_context(|| format!("in {}", path.display()))
+    }
+
+    /// The parameters of a TOML document over the defaults: a key it leaves out keeps its
+    /// default; a key the defaults do not have is an error.
+    pub fn from_toml(text: &str) -> Result<Self> {
+        let given: toml::Table = toml::from_str(text).map_err(|e| anyhow!("{}", e.message()))?;
+        let mut merged = toml::Table::try_from(Self::default())?;
+        merge(&mut merged, given, "")?;
+        // Read back from text, so that an error has a place: the line it names says which key.
+        let text = toml::to_string(&merged)?;
+        let params: Self = toml::from_str(&text).map_err(|e| locate(&text, &e))?;
+        params.validate()?;
+        Ok(params)
+    }
+
+    /// The parameters as TOML, every key written, after a header saying how to use them.
+    pub fn to_toml(&self) -> Result<String> {
+        Ok(format!(
+            "# terrain-demo parameters: `terrain-demo --config FILE.toml` reads a file like this.\n\
+             # Every key is optional (a file holds what it changes). Two more keys exist, unset\n\
+             # by default: style.fog_density (per metre) and style.ramp_m = [LOW, HIGH] (metres),\n\
+             # else chosen from the map and the camera.\n\n{}",
+            toml::to_string_pretty(self)?
+        ))
+    }
+
+    /// Values the scenarios cannot run with: an error naming the key.
+    pub fn validate(&self) -> Result<()> {
+        let s = &self.stamps;
+        let positive = |name: &str, v: f32| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(anyhow!("{name} = {v}: must be a finite number above 0"))
+            }
+        };
+        let at_least_zero = |name: &str, v: f32| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(anyhow!("{name} = {v}: must be a finite number, at least 0"))
+            }
+        };
+        positive("stamps.foot_size_m[0]", s.foot_size_m.x)?;
+        positive("stamps.foot_size_m[1]", s.foot_size_m.y)?;
+        at_least_zero("stamps.foot_depth_m", s.foot_depth_m)?;
+        positive("stamps.stride_m", s.stride_m)?;
+        positive("stamps.crater_size_m[0]", s.crater_size_m.x)?;
+        positive("stamps.crater_size_m[1]", s.crater_size_m.y)?;
+        if s.crater_size_m.y < s.crater_size_m.x {
+            bail!("stamps.crater_size_m: the largest size is below the smallest");
+        }
+        at_least_zero("stamps.crater_depth_ratio", s.crater_depth_ratio)?;
+        at_least_zero("stamps.shock_size_fraction", s.shock_size_fraction)?;
+        if s.shock_size_fraction > 1.0 {
+            bail!(
+                "stamps.shock_size_fraction = {}: at most 1",
+                s.shock_size_fraction
+            );
+        }
+        at_least_zero("stamps.shock_amplitude_m", s.shock_amplitude_m)?;
+        // Per-frame counts bound the work of a frame; the walker needs a step to move.
+        for (name, v, least) in [
+            ("stamps.steps_per_frame", s.steps_per_frame, 1),
+            ("stamps.shock_steps_per_frame", s.shock_steps_per_frame, 0),
+        ] {
+            if !(least..=64).contains(&v) {
+                bail!("{name} = {v}: {least} to 64 per frame");
+            }
+        }
+        terrain_core::Shockwave::new(s.shockwave).context("stamps.shockwave")?;
+        self.granular.validate().context("granular")?;
+        let c = &self.scheduler;
+        if c.max_in_flight == 0 || c.max_in_flight > MAX_READBACK_RING {
+            bail!(
+                "scheduler.max_in_flight = {}: 1 to {MAX_READBACK_RING} (each is a GPU buffer)",
+                c.max_in_flight
+            );
+        }
+        terrain_physics::ReadbackScheduler::new(glam::UVec2::splat(16), *c).context("scheduler")?;
+        let st = &self.style;
+        if !st.light_dir.is_finite() || st.light_dir.length_squared() == 0.0 {
+            bail!("style.light_dir must be a finite, non-zero direction");
+        }
+        if !st.fog_color.is_finite() || st.fog_color.min_element() < 0.0 {
+            bail!("style.fog_color must be finite and non-negative");
+        }
+        if let Some(d) = st.fog_density {
+            at_least_zero("style.fog_density", d)?;
+        }
+        if let Some(r) = st.ramp_m
+            && !(r.is_finite() && r.y > r.x)
+        {
+            bail!("style.ramp_m = [{}, {}]: finite, low below high", r.x, r.y);
+        }
+        let cam = &self.camera;
+        positive("camera.walker_eye_height_m", cam.walker_eye_height_m)?;
+        at_least_zero("camera.walker_behind_m", cam.walker_behind_m)?;
+        positive("camera.walker_ahead_m", cam.walker_ahead_m)?;
+        positive("camera.orbit_period_s", cam.orbit_period_s)?;
+        positive("camera.flyover_period_s", cam.flyover_period_s)?;
+        positive("camera.flyover_height", cam.flyover_height)?;
+        for (name, deg) in [
+            ("camera.orbit_pitch_deg", cam.orbit_pitch_deg),
+            ("camera.flyover_pitch_deg", cam.flyover_pitch_deg),
+        ] {
+            if !(deg.is_finite() && deg > 0.0 && deg < 90.0) {
+                bail!("{name} = {deg}: between 0 and 90 degrees");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The most collision readbacks in flight (the GPU scene's ring of readback buffers).
+pub const MAX_READBACK_RING: usize = 16;
+
+/// The error `e` of reading `text`, with the key it is about: `[section] line: message`.
+fn locate(text: &str, e: &toml::de::Error) -> anyhow::Error {
+    let Some(span) = e.span() else {
+        return anyhow!("{}", e.message());
+    };
+    let start = span.start.min(text.len());
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let line_end = text[start..].find('\n').map_or(text.len(), |i| start + i);
+    let line = text[line_start..line_end].trim();
+    let section = text[..line_start]
+        .lines()
+        .rev()
+        .find(|l| l.trim_start().starts_with('['))
+        .map(str::trim);
+    match section {
+        Some(section) if section != line => anyhow!("{section} {line}: {}", e.message()),
+        _ => anyhow!("{line}: {}", e.message()),
+    }
+}
+
+/// Writes `given` over `base`, table by table; `at` is the key path for errors.
+fn merge(base: &mut toml::Table, given: toml::Table, at: &str) -> Result<()> {
+    for (key, value) in given {
+        let path = if at.is_empty() {
+            key.clone()
+        } else {
+            format!("{at}.{key}")
+        };
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(g)) => merge(b, g, &path)?,
+            (Some(slot), v) => *slot = v,
+            // Absent from the defaults: an optional key left unset (written by nobody), or
+            // a typo; deserialising with deny_unknown_fields tells them apart.
+            (None, v) => {
+                base.insert(key, v);
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_printed_defaults_read_back_as_the_defaults() {
+        let text = DemoParams::default().to_toml().unwrap();
+        assert_eq!(DemoParams::from_toml(&text).unwrap(), DemoParams::default());
+        assert_eq!(DemoParams::from_toml("").unwrap(), DemoParams::default());
+    }
+
+    #[test]
+    fn a_file_changes_only_what_it_names() {
+        let p = DemoParams::from_toml(
+            "[stamps]\nfoot_depth_m = 0.3\n[stamps.shockwave]\ndamping = 0.01\n\
+             [scheduler]\nquiet_gap_ms = 40\n[style]\nfog_density = 0.001\n\
+             [granular]\nmetric = \"manhattan\"\n",
+        )
+        .unwrap();
+        let d = DemoParams::default();
+        assert_eq!(p.stamps.foot_depth_m, 0.3);
+        assert_eq!(p.stamps.shockwave.damping, 0.01);
+        assert_eq!(p.stamps.shockwave.resolution, d.stamps.shockwave.resolution);
+        assert_eq!(p.stamps.stride_m, d.stamps.stride_m);
+        assert_eq!(p.scheduler.quiet_gap, std::time::Duration::from_millis(40));
+        assert_eq!(p.scheduler.max_delay, d.scheduler.max_delay);
+        assert_eq!(p.style.fog_density, Some(0.001));
+        assert_eq!(
+            p.granular.metric,
+            terrain_core::granular::DistanceMetric::Manhattan
+        );
+        assert_eq!(p.camera, d.camera);
+    }
+
+    #[test]
+    fn bad_files_name_the_key() {
+        let err = |text: &str| format!("{:#}", DemoParams::from_toml(text).unwrap_err());
+        assert!(err("[stamps]\nfoot_dept_m = 1").contains("foot_dept_m"));
+        assert!(err("[stampz]\nx = 1").contains("stampz"));
+        assert!(err("[stamps]\nstride_m = -1").contains("stamps.stride_m"));
+        assert!(err("[stamps]\nstride_m = nan").contains("stamps.stride_m"));
+        assert!(err("[stamps]\nstride_m = \"far\"").contains("stride_m"));
+        assert!(err("[stamps]\nsteps_per_frame = 100000").contains("steps_per_frame"));
+        assert!(err("[scheduler]\nmax_in_flight = 0").contains("max_in_flight"));
+        assert!(err("[scheduler]\nquiet_gap_ms = -5").contains("quiet_gap_ms"));
+        assert!(err("[style]\nlight_dir = [0, 0, 0]").contains("light_dir"));
+        assert!(err("[style]\nramp_m = [5, 1]").contains("ramp_m"));
+        assert!(err("[camera]\norbit_pitch_deg = 90").contains("orbit_pitch_deg"));
+        assert!(err("[granular]\nroughness = 7").contains("granular"));
+        assert!(err("not toml [").len() > 5);
+    }
+}
