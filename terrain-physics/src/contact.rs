@@ -226,6 +226,7 @@ fn closest_on_patch(patch: &Patch, q: DVec3, ts: f64) -> (f64, f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec2;
     use terrain_core::{Grid, HeightEncoding};
 
     fn flat(raw: u16) -> HeightField {
@@ -269,6 +270,74 @@ mod tests {
             f.contact_local_sphere(Vec3::new(1.0, 1.0, 1.0), -1.0)
                 .is_none()
         );
+    }
+
+    /// Rough ground: random heights 0..`amp_raw` cm over 64 x 64 texels of `ts` metres.
+    fn rough(ts: f32, amp_raw: u32, salt: u32) -> HeightField {
+        let g = Grid::from_fn(64, 64, |x, z| {
+            let h = (x ^ salt.wrapping_mul(2_654_435_761)).wrapping_mul(374_761_393)
+                ^ z.wrapping_mul(668_265_263);
+            let h = (h ^ (h >> 13)).wrapping_mul(1_274_126_177);
+            ((h ^ (h >> 16)) % amp_raw) as u16
+        })
+        .expect("grid");
+        HeightField::new(g, HeightEncoding::new(0.01, -3.0).expect("enc"), ts).expect("field")
+    }
+
+    /// The closest surface point to `c` by brute force: every cell within `reach` metres (no
+    /// pruning), the field's own per-patch search. Returns the distance.
+    fn brute_force_distance(f: &HeightField, c: DVec3, reach: f64) -> f64 {
+        let ts = f64::from(f.texel_size());
+        let (x_lo, x_hi) = (((c.x - reach) / ts).floor() as i64, ((c.x + reach) / ts).floor() as i64);
+        let (z_lo, z_hi) = (((c.z - reach) / ts).floor() as i64, ((c.z + reach) / ts).floor() as i64);
+        let mut best = f64::INFINITY;
+        for iz in z_lo..=z_hi {
+            for ix in x_lo..=x_hi {
+                let patch = f.patch(ix, iz);
+                let local = DVec3::new(c.x - ix as f64 * ts, c.y, c.z - iz as f64 * ts);
+                best = best.min(closest_on_patch(&patch, local, ts).2);
+            }
+        }
+        best.sqrt()
+    }
+
+    #[test]
+    fn large_spheres_over_rough_ground_match_brute_force() {
+        let mut checked = 0;
+        for (k, (ts, amp)) in [(0.5f32, 400u32), (0.25, 300), (1.0, 900)].into_iter().enumerate() {
+            let f = rough(ts, amp, k as u32);
+            let (lo, hi) = f.height_bounds();
+            for i in 0..12u32 {
+                let t = (i as f32 + 0.37) * 0.61803;
+                let r = 2.0 + 8.0 * (t * 3.1).fract();
+                let x = 8.0 + (t * 7.3).fract() * 12.0 * ts;
+                let z = 8.0 + (t * 5.9).fract() * 12.0 * ts;
+                // Centres from just above the highest ground to well inside the sphere's reach.
+                let y = hi + r * (0.1 + 0.8 * (t * 2.3).fract());
+                let centre = Vec3::new(x, y, z);
+                let want = brute_force_distance(&f, centre.as_dvec3(), f64::from(r) + 1.0);
+                let got = f.contact_local_sphere(centre, r);
+                if want >= f64::from(r) {
+                    assert!(got.is_none(), "{centre} r {r}: {got:?}, want none");
+                    continue;
+                }
+                let c = got.expect("contact");
+                checked += 1;
+                let want_depth = f64::from(r) - want;
+                assert!(
+                    (f64::from(c.depth) - want_depth).abs() < 1e-4,
+                    "ts {ts}, {centre} r {r}: depth {} want {want_depth}",
+                    c.depth
+                );
+                // The point is on the surface, `r - depth` from the centre, along the normal.
+                let p = c.point;
+                assert!((f.height_local(Vec2::new(p.x, p.z)) - p.y).abs() < 1e-3);
+                assert!(((centre - p).length() - (r - c.depth)).abs() < 1e-3);
+                assert!((c.normal - (centre - p).normalize()).length() < 1e-3);
+            }
+            assert!(lo < hi);
+        }
+        assert!(checked > 20, "only {checked} contacts checked");
     }
 
     #[test]
