@@ -491,7 +491,10 @@ fn normals_of(map: &FixedPointMap) -> Grid<Vec3> {
 }
 
 fn assert_close(got: Vec3, want: Vec3, what: &str) {
-    assert!((got - want).length() < 1e-5, "{what}: got {got}, want {want}");
+    assert!(
+        (got - want).length() < 1e-5,
+        "{what}: got {got}, want {want}"
+    );
 }
 
 #[test]
@@ -522,7 +525,11 @@ fn normals_of_ramps_along_z_and_diagonals() {
         let n = normals_of(&map);
         let inner = Vec3::new(-0.01 / texel, 1.0, -0.03 / texel).normalize();
         for (x, y) in [(1, 1), (3, 4), (5, 5)] {
-            assert_close(n.get(x, y).expect("n"), inner, &format!("diagonal ({x},{y})"));
+            assert_close(
+                n.get(x, y).expect("n"),
+                inner,
+                &format!("diagonal ({x},{y})"),
+            );
         }
         let corner = Vec3::new(-0.005 / texel, 1.0, -0.015 / texel).normalize();
         assert_close(n.get(0, 0).expect("n"), corner, "diagonal corner");
@@ -559,9 +566,10 @@ fn normals_of_ramps_along_z_and_diagonals() {
 }
 
 fn bounds(vs: &[Vec3]) -> (Vec3, Vec3) {
-    vs.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &v| {
-        (lo.min(v), hi.max(v))
-    })
+    vs.iter()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        })
 }
 
 #[test]
@@ -600,7 +608,11 @@ fn mesh_shapes_and_sizes() {
     assert_close(hi, Vec3::new(0.15, 0.35, 0.35), "wheel max");
     assert_close(wheel.vertices()[0], Vec3::new(-0.15, -0.35, 0.0), "rim 0");
     assert_close(wheel.vertices()[16], Vec3::new(0.15, -0.35, 0.0), "rim 1");
-    assert_close(wheel.vertices()[4], Vec3::new(-0.15, 0.0, 0.35), "quarter turn");
+    assert_close(
+        wheel.vertices()[4],
+        Vec3::new(-0.15, 0.0, 0.35),
+        "quarter turn",
+    );
     assert_close(wheel.vertices()[32], Vec3::new(-0.15, 0.0, 0.0), "hub 0");
     assert_close(wheel.vertices()[33], Vec3::new(0.15, 0.0, 0.0), "hub 1");
     assert_eq!(wheel.vertices().len(), 34);

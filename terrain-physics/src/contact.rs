@@ -281,7 +281,7 @@ mod tests {
                 ^ z.wrapping_mul(668_265_263);
             let h = (h ^ (h >> 13)).wrapping_mul(1_274_126_177);
             let h = h ^ (h >> 16);
-            let spike = if (h >> 8) % spikes == 0 {
+            let spike = if (h >> 8).is_multiple_of(spikes) {
                 500 + (h >> 4) % 400
             } else {
                 0
@@ -296,8 +296,14 @@ mod tests {
     /// pruning), the field's own per-patch search. Returns the distance.
     fn brute_force_distance(f: &HeightField, c: DVec3, reach: f64) -> f64 {
         let ts = f64::from(f.texel_size());
-        let (x_lo, x_hi) = (((c.x - reach) / ts).floor() as i64, ((c.x + reach) / ts).floor() as i64);
-        let (z_lo, z_hi) = (((c.z - reach) / ts).floor() as i64, ((c.z + reach) / ts).floor() as i64);
+        let (x_lo, x_hi) = (
+            ((c.x - reach) / ts).floor() as i64,
+            ((c.x + reach) / ts).floor() as i64,
+        );
+        let (z_lo, z_hi) = (
+            ((c.z - reach) / ts).floor() as i64,
+            ((c.z + reach) / ts).floor() as i64,
+        );
         let mut best = f64::INFINITY;
         for iz in z_lo..=z_hi {
             for ix in x_lo..=x_hi {
@@ -368,8 +374,8 @@ mod tests {
         // to the ground under it, in a cell far from the centre on both axes.
         let mut g = Grid::new(64, 64, 0u16).expect("grid");
         *g.get_mut(20, 20).expect("texel") = 1000;
-        let f = HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 0.5)
-            .expect("field");
+        let f =
+            HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 0.5).expect("field");
         let mut closer_to_spike = 0;
         for dx in [-4.0f32, -3.1, -2.5, -1.7, 1.7, 2.5, 3.3, 4.2] {
             for dz in [-3.7f32, -2.6, -1.9, 2.2, 2.9, 3.8] {

@@ -85,10 +85,7 @@ fn ray_hits_lie_on_the_surface_with_its_normal() {
         assert!(hits > 50, "texel {texel}: only {hits} hits");
         // Straight down: the distance is exactly the height above the ground.
         for i in 0..20u32 {
-            let xz = Vec2::new(
-                unit(7 * i + 1) * extent.x,
-                unit(7 * i + 2) * extent.y,
-            );
+            let xz = Vec2::new(unit(7 * i + 1) * extent.x, unit(7 * i + 2) * extent.y);
             let origin = Vec3::new(xz.x, hi + 2.0, xz.y);
             let ray = Ray::new(origin, Vec3::NEG_Y).expect("ray");
             let hit = f
@@ -150,7 +147,10 @@ fn sphere_centred_on_a_curved_surface_gets_its_normal() {
             .expect("contact");
         assert!((c.normal - n).length() < 1e-6, "{c:?} vs {n}");
         assert!((c.depth - 0.3).abs() < 1e-6, "{c:?}");
-        assert!((c.point - Vec3::new(xz.x, h, xz.y)).length() < 1e-6, "{c:?}");
+        assert!(
+            (c.point - Vec3::new(xz.x, h, xz.y)).length() < 1e-6,
+            "{c:?}"
+        );
         // Just above it along the normal: the same normal, depth radius - 1 mm.
         let p = Vec3::new(xz.x, h, xz.y) + n * 1e-3;
         let c = f.contact_local_sphere(p, 0.3).expect("contact");

@@ -436,7 +436,10 @@ fn idle_only_when_nothing_is_waiting_or_in_flight() {
         if r.scheduler.is_idle() {
             break;
         }
-        assert!(!r.mirror_equals_source() || r.scheduler.in_flight() > 0, "at {m} ms");
+        assert!(
+            !r.mirror_equals_source() || r.scheduler.in_flight() > 0,
+            "at {m} ms"
+        );
     }
     assert!(r.scheduler.is_idle());
     assert!(r.mirror_equals_source());

@@ -1205,7 +1205,10 @@ fn mutants_table(rows: &[(String, MutantCounts)]) -> String {
         "| crate | caught | missed | timeout | unviable | score |\n|---|---|---|---|---|---|\n",
     );
     let mut total = MutantCounts::default();
-    let pct = |c: &MutantCounts| c.score().map_or("-".into(), |s| format!("{:.1} %", 100.0 * s));
+    let pct = |c: &MutantCounts| {
+        c.score()
+            .map_or("-".into(), |s| format!("{:.1} %", 100.0 * s))
+    };
     for (krate, c) in rows {
         t.push_str(&format!(
             "| {krate} | {} | {} | {} | {} | {} |\n",
@@ -1256,7 +1259,10 @@ fn mutants(args: &[String]) -> Result<()> {
             "--crate" => {
                 let v = value("--crate")?;
                 if !MUTANT_CRATES.contains(&v.as_str()) {
-                    bail!("--crate {v:?}: expected one of {}", MUTANT_CRATES.join(", "));
+                    bail!(
+                        "--crate {v:?}: expected one of {}",
+                        MUTANT_CRATES.join(", ")
+                    );
                 }
                 krate = Some(v);
             }
@@ -1365,10 +1371,17 @@ mod tests {
         assert_eq!(physics.score(), Some(0.5));
         assert_eq!(MutantCounts::default().score(), None);
         let table = mutants_table(&rows);
-        assert!(table.contains("| terrain-core | 2 | 1 | 0 | 0 | 66.7 % |"), "{table}");
-        assert!(table.contains("| **all** | 3 | 1 | 1 | 1 | 60.0 % |"), "{table}");
+        assert!(
+            table.contains("| terrain-core | 2 | 1 | 0 | 0 | 66.7 % |"),
+            "{table}"
+        );
+        assert!(
+            table.contains("| **all** | 3 | 1 | 1 | 1 | 60.0 % |"),
+            "{table}"
+        );
         assert!(parse_mutants_outcomes("{}").is_err());
-        let bad = r#"{"outcomes": [{"scenario": {"Mutant": {"file": "a/b.rs"}}, "summary": "Odd"}]}"#;
+        let bad =
+            r#"{"outcomes": [{"scenario": {"Mutant": {"file": "a/b.rs"}}, "summary": "Odd"}]}"#;
         assert!(parse_mutants_outcomes(bad).is_err());
         // The plain lists give the same counts.
         let lists = [
