@@ -164,3 +164,14 @@ fn sphere_centred_on_a_curved_surface_gets_its_normal() {
     }
     assert!(curved > 20, "only {curved} curved samples");
 }
+
+#[test]
+fn ray_with_a_non_finite_or_negative_maximum_distance_misses() {
+    // `cast_local_ray` answers `None` for a maximum distance the collider would refuse.
+    let f = rough(16, 16, 0.5, 0.0, 3);
+    let ray = Ray::new(Vec3::new(3.1, 30.0, 2.9), Vec3::NEG_Y).expect("ray");
+    assert!(f.cast_local_ray(&ray, 100.0).expect("bounded").is_some());
+    for bad in [f32::INFINITY, f32::NAN, -1.0] {
+        assert_eq!(f.cast_local_ray(&ray, bad).expect("bounded"), None, "{bad}");
+    }
+}
