@@ -226,6 +226,7 @@ fn closest_on_patch(patch: &Patch, q: DVec3, ts: f64) -> (f64, f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec2;
     use terrain_core::{Grid, HeightEncoding};
 
     fn flat(raw: u16) -> HeightField {
@@ -269,6 +270,135 @@ mod tests {
             f.contact_local_sphere(Vec3::new(1.0, 1.0, 1.0), -1.0)
                 .is_none()
         );
+    }
+
+    /// Rough ground over 64 x 64 texels of `ts` metres: random heights 0..`amp_raw` cm, and
+    /// one texel in `spikes` a spike 5..9 m tall (so the closest point is often a spike's flank
+    /// several cells away on both axes).
+    fn rough(ts: f32, amp_raw: u32, spikes: u32, salt: u32) -> HeightField {
+        let g = Grid::from_fn(64, 64, |x, z| {
+            let h = (x ^ salt.wrapping_mul(2_654_435_761)).wrapping_mul(374_761_393)
+                ^ z.wrapping_mul(668_265_263);
+            let h = (h ^ (h >> 13)).wrapping_mul(1_274_126_177);
+            let h = h ^ (h >> 16);
+            let spike = if (h >> 8).is_multiple_of(spikes) {
+                500 + (h >> 4) % 400
+            } else {
+                0
+            };
+            (h % amp_raw + spike) as u16
+        })
+        .expect("grid");
+        HeightField::new(g, HeightEncoding::new(0.01, -3.0).expect("enc"), ts).expect("field")
+    }
+
+    /// The closest surface point to `c` by brute force: every cell within `reach` metres (no
+    /// pruning), the field's own per-patch search. Returns the distance.
+    fn brute_force_distance(f: &HeightField, c: DVec3, reach: f64) -> f64 {
+        let ts = f64::from(f.texel_size());
+        let (x_lo, x_hi) = (
+            ((c.x - reach) / ts).floor() as i64,
+            ((c.x + reach) / ts).floor() as i64,
+        );
+        let (z_lo, z_hi) = (
+            ((c.z - reach) / ts).floor() as i64,
+            ((c.z + reach) / ts).floor() as i64,
+        );
+        let mut best = f64::INFINITY;
+        for iz in z_lo..=z_hi {
+            for ix in x_lo..=x_hi {
+                let patch = f.patch(ix, iz);
+                let local = DVec3::new(c.x - ix as f64 * ts, c.y, c.z - iz as f64 * ts);
+                best = best.min(closest_on_patch(&patch, local, ts).2);
+            }
+        }
+        best.sqrt()
+    }
+
+    #[test]
+    fn large_spheres_over_rough_ground_match_brute_force() {
+        let mut checked = 0;
+        let cases = [
+            (0.5f32, 400u32, 1_000_000u32),
+            (0.5, 50, 60),
+            (0.25, 30, 150),
+            (1.0, 100, 25),
+            (1.0, 900, 1_000_000),
+        ];
+        for (k, (ts, amp, spikes)) in cases.into_iter().enumerate() {
+            let f = rough(ts, amp, spikes, k as u32);
+            let (lo, hi) = f.height_bounds();
+            for i in 0..24u32 {
+                let t = (i as f32 + 0.37) * 0.61803;
+                let r = 2.0 + 8.0 * (t * 3.1).fract();
+                let x = 8.0 + (t * 7.3).fract() * 12.0 * ts;
+                let z = 8.0 + (t * 5.9).fract() * 12.0 * ts;
+                // Centres above the ground under them by a share of the radius (among the
+                // spikes), and every third one above the highest ground.
+                let base = if i % 3 == 0 {
+                    hi
+                } else {
+                    f.height_local(Vec2::new(x, z))
+                };
+                let y = base + r * (0.1 + 0.8 * (t * 2.3).fract());
+                let centre = Vec3::new(x, y, z);
+                let want = brute_force_distance(&f, centre.as_dvec3(), f64::from(r) + 1.0);
+                let got = f.contact_local_sphere(centre, r);
+                if want >= f64::from(r) {
+                    assert!(got.is_none(), "{centre} r {r}: {got:?}, want none");
+                    continue;
+                }
+                let c = got.expect("contact");
+                checked += 1;
+                let want_depth = f64::from(r) - want;
+                assert!(
+                    (f64::from(c.depth) - want_depth).abs() < 1e-4,
+                    "ts {ts}, {centre} r {r}: depth {} want {want_depth}",
+                    c.depth
+                );
+                // The point is on the surface, `r - depth` from the centre, along the normal.
+                let p = c.point;
+                assert!((f.height_local(Vec2::new(p.x, p.z)) - p.y).abs() < 1e-3);
+                assert!(((centre - p).length() - (r - c.depth)).abs() < 1e-3);
+                assert!((c.normal - (centre - p).normalize()).length() < 1e-3);
+            }
+            assert!(lo < hi);
+        }
+        assert!(checked > 20, "only {checked} contacts checked");
+    }
+
+    #[test]
+    fn large_spheres_around_a_spike_match_brute_force() {
+        // Flat ground at 0 with one 10 m spike at texel (20, 20), world (10, 10). A centre a
+        // few metres up and a few metres away diagonally is closer to the spike's flank than
+        // to the ground under it, in a cell far from the centre on both axes.
+        let mut g = Grid::new(64, 64, 0u16).expect("grid");
+        *g.get_mut(20, 20).expect("texel") = 1000;
+        let f =
+            HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 0.5).expect("field");
+        let mut closer_to_spike = 0;
+        for dx in [-4.0f32, -3.1, -2.5, -1.7, 1.7, 2.5, 3.3, 4.2] {
+            for dz in [-3.7f32, -2.6, -1.9, 2.2, 2.9, 3.8] {
+                for (y, r) in [(3.5f32, 5.0f32), (2.5, 4.0), (4.5, 9.0), (3.0, 2.5)] {
+                    let centre = Vec3::new(10.0 + dx, y, 10.0 + dz);
+                    let want = brute_force_distance(&f, centre.as_dvec3(), f64::from(r) + 1.0);
+                    closer_to_spike += usize::from(want < f64::from(y) - 1e-3);
+                    let got = f.contact_local_sphere(centre, r);
+                    if want >= f64::from(r) {
+                        assert!(got.is_none(), "{centre} r {r}: {got:?}");
+                        continue;
+                    }
+                    let c = got.expect("contact");
+                    let want_depth = f64::from(r) - want;
+                    assert!(
+                        (f64::from(c.depth) - want_depth).abs() < 1e-4,
+                        "{centre} r {r}: depth {} want {want_depth}",
+                        c.depth
+                    );
+                }
+            }
+        }
+        assert!(closer_to_spike > 20, "{closer_to_spike}");
     }
 
     #[test]

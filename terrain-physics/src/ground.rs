@@ -258,6 +258,12 @@ mod tests {
             .expect("ok")
             .expect("contact");
         assert!((contact.depth - 1.0).abs() < 1e-4, "{contact:?}");
+        // Its point is on the lifted surface, `radius - depth` from the centre.
+        let p = contact.point;
+        let under = c.height(Vec2::new(p.x, p.z)).expect("ok");
+        assert!((p.y - (under + 2.0)).abs() < 1e-4, "{contact:?}");
+        let centre = Vec3::new(2.5, 3.5, 3.5);
+        assert!(((centre - p).length() - (1.5 - contact.depth)).abs() < 1e-4);
     }
 
     #[test]

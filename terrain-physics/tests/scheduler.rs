@@ -400,3 +400,47 @@ fn the_deformation_bound_keeps_bodies_above_the_raised_ground_until_the_readback
         c.height(spot).expect("h")
     );
 }
+
+/// Idle only when nothing is waiting for the quiet gap, nothing is in flight and nothing is
+/// dirty: checked at every stage of one deformation's life.
+#[test]
+fn idle_only_when_nothing_is_waiting_or_in_flight() {
+    let mut r = rig(common::hills(64), 2);
+    let t0 = Instant::now();
+    assert!(r.scheduler.is_idle());
+    r.stamp(Vec2::new(10.0, 10.0), 3.0, 1.0, t0);
+    // Noted, waiting for the gap.
+    assert!(!r.scheduler.is_idle());
+    assert!(!r.scheduler.dirty_rects().is_empty());
+    assert!(r.update(ms(t0, 5)).requested.is_empty());
+    assert!(!r.scheduler.is_idle());
+    // Requested: nothing dirty or waiting any more, one request in flight.
+    assert_eq!(r.update(ms(t0, 20)).requested.len(), 1);
+    assert!(r.scheduler.dirty_rects().is_empty());
+    assert_eq!(r.scheduler.in_flight(), 1);
+    assert!(!r.scheduler.is_idle());
+    // Still in flight on the next poll (latency 2), applied on the one after.
+    assert!(r.update(ms(t0, 21)).applied.is_empty());
+    assert!(!r.scheduler.is_idle());
+    assert_eq!(r.update(ms(t0, 22)).applied.len(), 1);
+    assert_eq!(r.scheduler.in_flight(), 0);
+    assert!(r.scheduler.is_idle());
+    assert!(r.mirror_equals_source());
+    // A new deformation while one is in flight: not idle until both are applied.
+    r.stamp(Vec2::new(30.0, 10.0), 3.0, 1.0, ms(t0, 30));
+    assert_eq!(r.update(ms(t0, 50)).requested.len(), 1);
+    r.stamp(Vec2::new(20.0, 20.0), 3.0, -1.0, ms(t0, 51));
+    assert!(!r.scheduler.is_idle());
+    for m in 52..200 {
+        r.update(ms(t0, m));
+        if r.scheduler.is_idle() {
+            break;
+        }
+        assert!(
+            !r.mirror_equals_source() || r.scheduler.in_flight() > 0,
+            "at {m} ms"
+        );
+    }
+    assert!(r.scheduler.is_idle());
+    assert!(r.mirror_equals_source());
+}
