@@ -1,6 +1,6 @@
 //! The error type of terrain-lod: bad clipmap sizes, level counts and per-frame placement input.
 
-use glam::Vec2;
+use glam::{UVec2, Vec2};
 
 /// Errors from building a clipmap layout and placing it for a frame.
 ///
@@ -55,4 +55,25 @@ pub enum LodError {
         /// The texel size given, in metres per texel.
         texel_size: f32,
     },
+    /// A density map parameter is out of range.
+    #[error("density map parameter {what} = {value} is out of range: it must be {allowed}")]
+    InvalidDensityParam {
+        /// Which parameter.
+        what: &'static str,
+        /// The value given.
+        value: f64,
+        /// What is accepted.
+        allowed: &'static str,
+    },
+    /// A density map was updated from a heightfield of another size than it was made for.
+    #[error("the heightfield is {actual} texels but the density map was made for {expected}")]
+    DensitySizeMismatch {
+        /// The size the density map was made for.
+        expected: UVec2,
+        /// The size of the heightfield given.
+        actual: UVec2,
+    },
+    /// A terrain-core operation failed (for example a grid too large to allocate).
+    #[error(transparent)]
+    Core(#[from] terrain_core::CoreError),
 }

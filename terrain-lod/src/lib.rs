@@ -42,13 +42,16 @@
 #![warn(clippy::unwrap_used)]
 
 pub mod clipmap;
+pub mod density;
 pub mod error;
 pub mod frustum;
 pub mod morph;
+mod par;
 
 pub use clipmap::{
     ClipmapDraw, ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapMesh, ClipmapVertex,
     LevelPlacement, MAX_DRAWS_PER_LEVEL, MeshPart, PartKind, TrimSide,
 };
+pub use density::{CurvatureFilter, DensityMap, DensityParams};
 pub use error::LodError;
 pub use frustum::Frustum;

@@ -18,7 +18,10 @@ pub fn morph_alpha(texel: IVec2, camera_texel: Vec2, scale: u32, n: u32, width: 
     let rel = (texel.as_vec2() - camera_texel) / scale as f32;
     let d = rel.x.abs().max(rel.y.abs());
     let half = (n as f32 - 1.0) * 0.5;
-    ((d - (half - 1.0 - width)) / width).clamp(0.0, 1.0)
+    // Written as 1 - (edge - d) / width rather than (d - (edge - width)) / width: from the edge
+    // on `edge - d` is <= 0 exactly, so edge vertices get exactly 1 whatever the rounding of
+    // `width` (the other form gave 0.9999998 at n = 63; found by the morph property test).
+    (1.0 - ((half - 1.0) - d) / width).clamp(0.0, 1.0)
 }
 
 /// The next coarser level's surface under a vertex at `texel` of a level with `scale` texels

@@ -143,6 +143,9 @@ fn variant(e: &LodError) -> &'static str {
         LodError::CameraOutOfRange { .. } => "CameraOutOfRange",
         LodError::InvalidClipmapSize { .. } => "InvalidClipmapSize",
         LodError::InvalidLevelCount { .. } => "InvalidLevelCount",
+        LodError::InvalidDensityParam { .. } => "InvalidDensityParam",
+        LodError::DensitySizeMismatch { .. } => "DensitySizeMismatch",
+        LodError::Core(_) => "Core",
     }
 }
 

@@ -78,7 +78,8 @@ fn vs_main(in: VsIn) -> VsOut {
         let rel = (vec2<f32>(texel - frame.camera_texel) - frame.camera_frac) / f32(s);
         let d = max(abs(rel.x), abs(rel.y));
         let half_size = f32(frame.n - 1u) * 0.5;
-        let alpha = clamp((d - (half_size - 1.0 - frame.morph_width)) / frame.morph_width, 0.0, 1.0);
+        // As 1 - (edge - d) / w: exactly 1 from the edge on, whatever the rounding of w.
+        let alpha = clamp(1.0 - ((half_size - 1.0) - d) / frame.morph_width, 0.0, 1.0);
         if alpha > 0.0 {
             let odd = vec2<i32>(texel.x / s, texel.y / s) & vec2<i32>(1, 1);
             let step = odd * s;
