@@ -311,7 +311,7 @@ fn publishable_crates() -> Result<Vec<String>> {
 }
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 7] = [
+const EXAMPLES: [(&str, &str, &[&str]); 8] = [
     (
         "terrain-core",
         "stamp_heightmap",
@@ -329,6 +329,11 @@ const EXAMPLES: [(&str, &str, &[&str]); 7] = [
     ),
     ("terrain-gpu", "own_device", &["{out}/own_device.png"]),
     ("terrain-lod", "clipmap_frame", &["63", "4"]),
+    (
+        "terrain-lod",
+        "density_map",
+        &["--size", "64", "--out", "{out}/density"],
+    ),
     ("terrain-cache", "build_world", &["512", "{out}/world"]),
     ("terrain-cache", "trace_sim", &[]),
 ];
