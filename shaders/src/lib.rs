@@ -74,6 +74,9 @@ pub const PRELUDE: &str = wgsl_prelude!();
 /// `StampPass`: one stamp (Gaussian, texture or user procedural) applied in place.
 pub const STAMP: &str = concat!(wgsl_prelude!(), include_str!("wgsl/stamp.wgsl"));
 
+/// `DensityPass`: curvature density maps and their max pyramid (seed 002 ch. 3).
+pub const DENSITY: &str = concat!(wgsl_prelude!(), include_str!("wgsl/density.wgsl"));
+
 /// `NormalPass`: partial-derivative normals (seed 000 eq. 3.3) over a region.
 pub const NORMALS: &str = concat!(wgsl_prelude!(), include_str!("wgsl/normals.wgsl"));
 
@@ -168,6 +171,7 @@ pub const USER_STAMP_MARKERS: (&str, &str) = ("// USER_STAMP_BEGIN", "// USER_ST
 pub const ALL: &[(&str, &str)] = &[
     ("stamp", STAMP),
     ("normals", NORMALS),
+    ("density", DENSITY),
     ("sky", SKY),
     ("clipmap", CLIPMAP),
     ("clipmap_granular", CLIPMAP_GRANULAR),

@@ -166,4 +166,7 @@ pub enum GpuError {
     /// A parameter error from terrain-core (placement, region, encoding).
     #[error(transparent)]
     Core(#[from] CoreError),
+    /// A level-of-detail parameter error from terrain-lod (density map parameters).
+    #[error(transparent)]
+    Lod(#[from] terrain_lod::LodError),
 }

@@ -53,6 +53,7 @@ pub mod camera;
 pub mod clipmap;
 pub mod compute;
 pub mod context;
+pub mod density;
 pub mod download;
 pub mod error;
 pub mod granular;
@@ -73,6 +74,7 @@ pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeS
 pub use camera::Camera;
 pub use clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};
 pub use context::{AdapterReport, GpuContext};
+pub use density::{DensityPass, GpuDensityMap};
 pub use error::GpuError;
 pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
 pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};

@@ -193,6 +193,7 @@ impl DensityMap {
         out.fill_raw(map, all);
         out.finish(all);
         out.reduce(all);
+        // (The same as `update_rect` over the whole map, without its bookkeeping.)
         Ok(out)
     }
 
@@ -213,47 +214,17 @@ impl DensityMap {
                 actual: map.size(),
             });
         }
-        if dirty.is_empty() {
-            return Ok(());
+        let regions = update_regions(self.map_size, self.wrap, &self.params, dirty);
+        for &rect in &regions.raw {
+            self.fill_raw(map, rect);
         }
-        let size = self.raw.size();
-        let (min, max) = (dirty.min.as_i64vec2(), dirty.max().as_i64vec2());
-        let cols = affected_samples(min.x, max.x, self.map_size.x, size.x, self.wrap);
-        let rows = affected_samples(min.y, max.y, self.map_size.y, size.y, self.wrap);
-        let mut raw_rects = Vec::new();
-        for &(y0, y1) in &rows {
-            for &(x0, x1) in &cols {
-                raw_rects.push(Rect::from_min_max(
-                    IVec2::new(x0 as i32, y0 as i32),
-                    IVec2::new(x1 as i32, y1 as i32),
-                ));
-            }
+        for &rect in &regions.finish {
+            self.finish(rect);
         }
-        for &piece in &raw_rects {
-            self.fill_raw(map, piece);
-        }
-        for raw_rect in raw_rects {
-            self.refinish(raw_rect);
+        for rect in regions.finish {
+            self.reduce(rect);
         }
         Ok(())
-    }
-
-    /// Steps 3 to 5 for what a change of the raw samples in `raw_rect` reaches.
-    fn refinish(&mut self, raw_rect: Rect) {
-        let (_, rb) = self.params.filter_radii();
-        let fin = self.clip(
-            raw_rect.min.as_i64vec2() - i64::from(rb),
-            raw_rect.max().as_i64vec2() + i64::from(rb),
-        );
-        if let Some(fin) = fin {
-            let pieces = self.pieces(fin);
-            for piece in &pieces {
-                self.finish(*piece);
-            }
-            for piece in pieces {
-                self.reduce(piece);
-            }
-        }
     }
 
     /// The parameters the map was made with.
@@ -295,34 +266,6 @@ impl DensityMap {
         let x = WrapMode::Clamp.resolve(p.x, g.width());
         let y = WrapMode::Clamp.resolve(p.y, g.height());
         Some(f32::from(g.as_slice()[g.index(x, y)]) / 255.0)
-    }
-
-    /// Clips (clamped maps) or caps (repeating maps) the density sample range `min .. max` to
-    /// the map; `None` when nothing is left.
-    fn clip(&self, min: glam::I64Vec2, max: glam::I64Vec2) -> Option<Rect> {
-        let size = self.raw.size().as_i64vec2();
-        let (min, max) = match self.wrap {
-            WrapMode::Clamp => (min.max(glam::I64Vec2::ZERO), max.min(size)),
-            // A range wider than the map covers all of it once.
-            WrapMode::Repeat => {
-                let max = max.min(min + size);
-                let shift = min.div_euclid(size) * size;
-                (min - shift, max - shift)
-            }
-        };
-        if (max - min).cmple(glam::I64Vec2::ZERO).any() {
-            return None;
-        }
-        Some(Rect::from_min_max(min.as_ivec2(), max.as_ivec2()))
-    }
-
-    /// The pieces of `rect` (density samples, possibly past the map's end on a repeating map)
-    /// inside the map.
-    fn pieces(&self, rect: Rect) -> Vec<Rect> {
-        rect.split_toroidal(self.raw.size())
-            .into_iter()
-            .map(|p| p.map)
-            .collect()
     }
 
     /// Steps 1 and 2 for the density samples of `rect` (inside the density grid).
@@ -400,21 +343,19 @@ impl DensityMap {
     /// Step 5: the pyramid above the level-0 samples of `rect`.
     fn reduce(&mut self, rect: Rect) {
         let tile = self.params.tile_size;
-        let (mut min, mut max) = (rect.min, rect.max());
+        let mut rect = rect;
         for k in 1..self.levels.len() {
-            // Parents of children min .. max, and the neighbours whose 3 x 3 window reaches them.
-            min = (min - 1).div_euclid(IVec2::splat(2)).max(IVec2::ZERO);
-            max = ((max + 1 + 1).div_euclid(IVec2::splat(2))).min(self.levels[k].size().as_ivec2());
+            let Some(parent_rect) = parent_rect(rect, self.levels[k].size()) else {
+                return;
+            };
+            rect = parent_rect;
             let (lo, hi) = self.levels.split_at_mut(k);
             let child = &lo[k - 1];
             let parent = &mut hi[0];
             let (cw, ch) = (child.width() as i32, child.height() as i32);
             let pw = parent.width() as usize;
-            let (i0, i1) = (min.x as usize, max.x as usize);
-            let (j0, j1) = (min.y as usize, max.y.max(min.y) as usize);
-            if i0 >= i1 {
-                continue;
-            }
+            let (i0, i1) = (rect.min.x as usize, rect.max().x as usize);
+            let (j0, j1) = (rect.min.y as usize, rect.max().y as usize);
             let out = &mut parent.as_mut_slice()[j0 * pw..j1 * pw];
             crate::par::for_each_chunk(out, pw, |r, out_row| {
                 let j = (j0 + r) as i32;
@@ -438,6 +379,90 @@ impl DensityMap {
             });
         }
     }
+}
+
+/// What a density map recomputes after a height change: level-0 rects (inside the density
+/// grid) whose raw samples (steps 1 and 2) change, and the rects whose preprocessed samples
+/// (steps 3 and 4) change, from which the pyramid (step 5) follows by [`parent_rect`]. The
+/// GPU pass records the same rects.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct DensityUpdate {
+    /// Rects of raw samples to recompute.
+    pub raw: Vec<Rect>,
+    /// Rects of level-0 samples to preprocess and quantise again.
+    pub finish: Vec<Rect>,
+}
+
+/// The regions a height change in `dirty` (texels; may wrap on a repeating map, is clipped on
+/// a clamped one) reaches, for a map of `map_size` texels.
+pub fn update_regions(
+    map_size: UVec2,
+    wrap: WrapMode,
+    params: &DensityParams,
+    dirty: Rect,
+) -> DensityUpdate {
+    let mut out = DensityUpdate::default();
+    if dirty.is_empty() {
+        return out;
+    }
+    let size = density_size(map_size);
+    let (min, max) = (dirty.min.as_i64vec2(), dirty.max().as_i64vec2());
+    let cols = affected_samples(min.x, max.x, map_size.x, size.x, wrap);
+    let rows = affected_samples(min.y, max.y, map_size.y, size.y, wrap);
+    let (_, rb) = params.filter_radii();
+    for &(y0, y1) in &rows {
+        for &(x0, x1) in &cols {
+            let raw = Rect::from_min_max(
+                IVec2::new(x0 as i32, y0 as i32),
+                IVec2::new(x1 as i32, y1 as i32),
+            );
+            out.raw.push(raw);
+            // Every sample whose preprocessing window reaches the raw rect.
+            let r = i64::from(rb);
+            let (lo, hi) = (raw.min.as_i64vec2() - r, raw.max().as_i64vec2() + r);
+            if let Some(fin) = clip_samples(size, wrap, lo, hi) {
+                out.finish
+                    .extend(fin.split_toroidal(size).into_iter().map(|p| p.map));
+            }
+        }
+    }
+    out
+}
+
+/// The samples of a pyramid level of `parent_size` whose value reads a sample of `child` (a
+/// rect of the level below): the inner samples' 3 x 3 windows around `2 i` and the border
+/// samples' point samples at `2 i`. `None` when none does.
+pub fn parent_rect(child: Rect, parent_size: UVec2) -> Option<Rect> {
+    if child.is_empty() {
+        return None;
+    }
+    let min = (child.min - 1).div_euclid(IVec2::splat(2)).max(IVec2::ZERO);
+    let max = ((child.max() + 2).div_euclid(IVec2::splat(2))).min(parent_size.as_ivec2());
+    let r = Rect::from_min_max(min, max);
+    (!r.is_empty()).then_some(r)
+}
+
+/// Clips (clamped maps) or caps (repeating maps: a range wider than the map covers it once,
+/// moved to start inside it) the sample range `min .. max` of a density grid of `size`.
+fn clip_samples(
+    size: UVec2,
+    wrap: WrapMode,
+    min: glam::I64Vec2,
+    max: glam::I64Vec2,
+) -> Option<Rect> {
+    let size = size.as_i64vec2();
+    let (min, max) = match wrap {
+        WrapMode::Clamp => (min.max(glam::I64Vec2::ZERO), max.min(size)),
+        WrapMode::Repeat => {
+            let max = max.min(min + size);
+            let shift = min.div_euclid(size) * size;
+            (min - shift, max - shift)
+        }
+    };
+    if (max - min).cmple(glam::I64Vec2::ZERO).any() {
+        return None;
+    }
+    Some(Rect::from_min_max(min.as_ivec2(), max.as_ivec2()))
 }
 
 /// The level-0 sample ranges (half-open, inside `0 .. samples`) along one axis whose values a
