@@ -209,7 +209,7 @@ impl DensityMap {
         dirty: Rect,
     ) -> Result<(), LodError> {
         if map.size() != self.map_size {
-            return Err(LodError::DensitySizeMismatch {
+            return Err(LodError::SizeMismatch {
                 expected: self.map_size,
                 actual: map.size(),
             });

@@ -65,13 +65,26 @@ pub enum LodError {
         /// What is accepted.
         allowed: &'static str,
     },
-    /// A density map was updated from a heightfield of another size than it was made for.
-    #[error("the heightfield is {actual} texels but the density map was made for {expected}")]
-    DensitySizeMismatch {
+    /// A density map or CDLOD tree was updated from a heightfield of another size than it was
+    /// made for.
+    #[error(
+        "the heightfield is {actual} texels but the density map or tree was made for {expected}"
+    )]
+    SizeMismatch {
         /// The size the density map was made for.
         expected: UVec2,
         /// The size of the heightfield given.
         actual: UVec2,
+    },
+    /// A CDLOD parameter is out of range.
+    #[error("CDLOD parameter {what} = {value} is out of range: it must be {allowed}")]
+    InvalidCdlodParam {
+        /// Which parameter.
+        what: &'static str,
+        /// The value given.
+        value: f64,
+        /// What is accepted.
+        allowed: &'static str,
     },
     /// A terrain-core operation failed (for example a grid too large to allocate).
     #[error(transparent)]

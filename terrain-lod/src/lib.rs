@@ -41,6 +41,7 @@
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
+pub mod cdlod;
 pub mod clipmap;
 pub mod density;
 pub mod error;
@@ -48,6 +49,9 @@ pub mod frustum;
 pub mod morph;
 mod par;
 
+pub use cdlod::{
+    CdlodConfig, CdlodFrame, CdlodInstance, CdlodMesh, CdlodTree, CdlodView, LodMetric, LodRanges,
+};
 pub use clipmap::{
     ClipmapDraw, ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapMesh, ClipmapVertex,
     LevelPlacement, MAX_DRAWS_PER_LEVEL, MeshPart, PartKind, TrimSide,

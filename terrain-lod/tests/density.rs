@@ -513,7 +513,7 @@ fn bad_parameters_are_named() {
     let other = bumpy(20, 16, WrapMode::Repeat, 1);
     assert!(matches!(
         dm.update_rect(&other, Rect::new(IVec2::ZERO, UVec2::ONE)),
-        Err(LodError::DensitySizeMismatch { .. })
+        Err(LodError::SizeMismatch { .. })
     ));
     // Rects far off the map (any i32) are fine: wrapped, or clipped to nothing.
     let before = dm.clone();

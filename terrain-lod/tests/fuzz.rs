@@ -144,7 +144,8 @@ fn variant(e: &LodError) -> &'static str {
         LodError::InvalidClipmapSize { .. } => "InvalidClipmapSize",
         LodError::InvalidLevelCount { .. } => "InvalidLevelCount",
         LodError::InvalidDensityParam { .. } => "InvalidDensityParam",
-        LodError::DensitySizeMismatch { .. } => "DensitySizeMismatch",
+        LodError::SizeMismatch { .. } => "SizeMismatch",
+        LodError::InvalidCdlodParam { .. } => "InvalidCdlodParam",
         LodError::Core(_) => "Core",
     }
 }
