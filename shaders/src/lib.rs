@@ -95,6 +95,16 @@ pub const CLIPMAP: &str = concat!(
     include_str!("wgsl/clipmap_surface_coarse.wgsl")
 );
 
+/// `CdlodRenderer`: CDLOD quadrants with the per-vertex morph, lit and coloured as the clipmap
+/// (its frame, coarse-map surface and fragment shader).
+pub const CDLOD: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/clipmap.wgsl"),
+    include_str!("wgsl/clipmap_surface_coarse.wgsl"),
+    include_str!("wgsl/cdlod.wgsl")
+);
+
 /// `ClipmapRenderer` over a granular map: the clipmap drawn from the granular normals pass's
 /// output (unit normal and float height per texel), so nothing is uploaded per frame.
 pub const CLIPMAP_GRANULAR: &str = concat!(
@@ -172,6 +182,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("stamp", STAMP),
     ("normals", NORMALS),
     ("density", DENSITY),
+    ("cdlod", CDLOD),
     ("sky", SKY),
     ("clipmap", CLIPMAP),
     ("clipmap_granular", CLIPMAP_GRANULAR),

@@ -21,7 +21,7 @@ use terrain_shaders::codes::{WRAP_CLAMP, WRAP_REPEAT};
 /// The uniform block `Frame` of `clipmap.wgsl`, byte for byte.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
-struct FrameUniform {
+pub(crate) struct FrameUniform {
     view_proj: [[f32; 4]; 4],
     camera_texel: [i32; 2],
     camera_frac: [f32; 2],
@@ -131,6 +131,7 @@ impl ClipmapRenderer {
                 (wgpu::ShaderStages::VERTEX, 1),
                 (wgpu::ShaderStages::FRAGMENT, 2),
             ],
+            &clipmap_shape(),
         )?;
         let granular = SurfacePipeline::new(
             device,
@@ -138,6 +139,7 @@ impl ClipmapRenderer {
             "clipmap granular",
             terrain_shaders::CLIPMAP_GRANULAR,
             &[(wgpu::ShaderStages::VERTEX_FRAGMENT, 1)],
+            &clipmap_shape(),
         )?;
         let atlas = SurfacePipeline::new(
             device,
@@ -149,6 +151,7 @@ impl ClipmapRenderer {
                 (wgpu::ShaderStages::VERTEX_FRAGMENT, 2),
                 (wgpu::ShaderStages::VERTEX_FRAGMENT, 3),
             ],
+            &clipmap_shape(),
         )?;
         let vertices = buffer_init(
             device,
@@ -240,17 +243,7 @@ impl ClipmapRenderer {
             style,
             target_size,
         } = *view;
-        if !camera.is_valid() {
-            return Err(GpuError::InvalidCamera { camera: *camera });
-        }
-        if target_size.x == 0 || target_size.y == 0 {
-            return Err(terrain_core::CoreError::OutOfRange {
-                what: "clipmap target size (pixels)",
-                value: f64::from(target_size.min_element()),
-                expected: "at least 1 x 1",
-            }
-            .into());
-        }
+        check_view(camera, target_size, "clipmap target size (pixels)")?;
         if frame.levels.len() != self.levels as usize {
             return Err(GpuError::Unsupported {
                 what: "ClipmapRenderer",
@@ -258,38 +251,19 @@ impl ClipmapRenderer {
             });
         }
         let info = surface.check()?;
-        let size = target_size.as_vec2();
-        let ts = info.texel_size;
-        let cam_texel = glam::Vec2::new(camera.position.x, camera.position.z) / ts;
-        let cam_int = cam_texel.floor();
-        let enc = info.encoding;
-        let (wrap, wrap_offset) = match info.wrap {
-            WrapMode::Repeat => (WRAP_REPEAT, wrap_offset_for_frame(frame, info.size)?),
-            WrapMode::Clamp => (WRAP_CLAMP, [0, 0]),
+        let wrap_offset = match info.wrap {
+            WrapMode::Repeat => wrap_offset_for_frame(frame, info.size)?,
+            WrapMode::Clamp => [0, 0],
         };
-        let uniform = FrameUniform {
-            view_proj: camera
-                .view_proj_relative(size.x / size.y)
-                .to_cols_array_2d(),
-            camera_texel: cam_int.as_ivec2().to_array(),
-            camera_frac: (cam_texel - cam_int).to_array(),
-            camera_height: camera.position.y,
-            texel_size: ts,
-            height_scale: enc.scale,
-            height_offset: enc.offset,
-            map_size: info.size.to_array(),
+        let uniform = frame_uniform(
+            &info,
+            camera,
+            style,
+            &self.target,
+            target_size,
+            (self.n, self.levels),
             wrap_offset,
-            n: self.n,
-            levels: self.levels,
-            morph_width: terrain_lod::morph::default_morph_width(self.n),
-            ramp_low: style.ramp.0,
-            ramp_high: style.ramp.1,
-            srgb_target: self.target.srgb_flag(),
-            wrap,
-            hide_outside: u32::from(style.hide_outside_map),
-            light_dir: style.light_dir.extend(0.0).to_array(),
-            fog_color: Vec4::from((style.fog_color, style.fog_density)).to_array(),
-        };
+        );
 
         // Instances grouped by part, so each part is one instanced draw.
         let mut by_part: Vec<Vec<ClipmapInstance>> = vec![Vec::new(); self.parts.len()];
@@ -387,6 +361,72 @@ impl ClipmapRenderer {
     }
 }
 
+/// The frame uniform of a view of `info` by `camera` on a target of `target_size` pixels, with
+/// the clipmap's `(n, levels)` (ignored by other renderers) and the wrap offset of the texels
+/// the frame reads.
+pub(crate) fn frame_uniform(
+    info: &SurfaceInfo,
+    camera: &Camera,
+    style: &TerrainStyle,
+    target: &TargetFormat,
+    target_size: UVec2,
+    (n, levels): (u32, u32),
+    wrap_offset: [i32; 2],
+) -> FrameUniform {
+    let size = target_size.as_vec2();
+    let ts = info.texel_size;
+    let cam_texel = glam::Vec2::new(camera.position.x, camera.position.z) / ts;
+    let cam_int = cam_texel.floor();
+    let enc = info.encoding;
+    let wrap = match info.wrap {
+        WrapMode::Repeat => WRAP_REPEAT,
+        WrapMode::Clamp => WRAP_CLAMP,
+    };
+    FrameUniform {
+        view_proj: camera
+            .view_proj_relative(size.x / size.y)
+            .to_cols_array_2d(),
+        camera_texel: cam_int.as_ivec2().to_array(),
+        camera_frac: (cam_texel - cam_int).to_array(),
+        camera_height: camera.position.y,
+        texel_size: ts,
+        height_scale: enc.scale,
+        height_offset: enc.offset,
+        map_size: info.size.to_array(),
+        wrap_offset,
+        n,
+        levels,
+        morph_width: terrain_lod::morph::default_morph_width(n),
+        ramp_low: style.ramp.0,
+        ramp_high: style.ramp.1,
+        srgb_target: target.srgb_flag(),
+        wrap,
+        hide_outside: u32::from(style.hide_outside_map),
+        light_dir: style.light_dir.extend(0.0).to_array(),
+        fog_color: Vec4::from((style.fog_color, style.fog_density)).to_array(),
+    }
+}
+
+/// Checks a camera and a target size before a renderer uses them.
+pub(crate) fn check_view(
+    camera: &Camera,
+    target_size: UVec2,
+    what: &'static str,
+) -> Result<(), GpuError> {
+    if !camera.is_valid() {
+        return Err(GpuError::InvalidCamera { camera: *camera });
+    }
+    if target_size.x == 0 || target_size.y == 0 {
+        return Err(terrain_core::CoreError::OutOfRange {
+            what,
+            value: f64::from(target_size.min_element()),
+            expected: "at least 1 x 1",
+        }
+        .into());
+    }
+    Ok(())
+}
+
 /// Which pipeline a surface is drawn with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum SurfaceKind {
@@ -440,16 +480,16 @@ pub enum ClipmapSurface<'a> {
 }
 
 /// What the renderer needs to know of a surface.
-struct SurfaceInfo {
-    size: UVec2,
-    encoding: terrain_core::HeightEncoding,
-    texel_size: f32,
-    wrap: WrapMode,
+pub(crate) struct SurfaceInfo {
+    pub(crate) size: UVec2,
+    pub(crate) encoding: terrain_core::HeightEncoding,
+    pub(crate) texel_size: f32,
+    pub(crate) wrap: WrapMode,
 }
 
 impl ClipmapSurface<'_> {
     /// Checks the parts agree and returns the map's description.
-    fn check(&self) -> Result<SurfaceInfo, GpuError> {
+    pub(crate) fn check(&self) -> Result<SurfaceInfo, GpuError> {
         let (size, encoding, texel_size, wrap) = match *self {
             ClipmapSurface::Coarse { map, normals } => {
                 if normals.size() != map.size() {
@@ -484,7 +524,7 @@ impl ClipmapSurface<'_> {
     }
 
     /// The storage buffers the surface binds at 1, 2, ...
-    fn buffers(&self) -> Vec<wgpu::Buffer> {
+    pub(crate) fn buffers(&self) -> Vec<wgpu::Buffer> {
         match *self {
             ClipmapSurface::Coarse { map, normals } => {
                 vec![map.buffer().clone(), normals.buffer().clone()]
@@ -507,25 +547,54 @@ impl ClipmapSurface<'_> {
     }
 }
 
+/// The vertex inputs and entry point of a terrain pipeline: the clipmap's, or another
+/// renderer's drawing with the same frame uniform, surfaces and fragment shader.
+pub(crate) struct VertexShape<'a> {
+    /// The vertex shader's entry point.
+    pub entry: &'static str,
+    /// Bytes per mesh vertex (a `Float32x2` grid position at location 0).
+    pub vertex_stride: u64,
+    /// Bytes per instance and the instance attributes (locations 1 and up).
+    pub instance_stride: u64,
+    /// The instance attributes.
+    pub instance_attrs: &'a [wgpu::VertexAttribute],
+    /// Uniform buffers bound after the surface's storage buffers (vertex stage).
+    pub extra_uniforms: &'a [u32],
+}
+
+/// The clipmap's vertex inputs.
+fn clipmap_shape() -> VertexShape<'static> {
+    const ATTRS: [wgpu::VertexAttribute; 3] =
+        wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
+    VertexShape {
+        entry: "vs_main",
+        vertex_stride: std::mem::size_of::<ClipmapVertex>() as u64,
+        instance_stride: std::mem::size_of::<ClipmapInstance>() as u64,
+        instance_attrs: &ATTRS,
+        extra_uniforms: &[],
+    }
+}
+
 /// The pipeline and bind group layout of one surface kind.
 #[derive(Debug)]
-struct SurfacePipeline {
-    pipeline: wgpu::RenderPipeline,
+pub(crate) struct SurfacePipeline {
+    pub(crate) pipeline: wgpu::RenderPipeline,
     /// The same pipeline drawing triangle edges as lines, on devices that can.
-    wireframe: Option<wgpu::RenderPipeline>,
-    layout: wgpu::BindGroupLayout,
+    pub(crate) wireframe: Option<wgpu::RenderPipeline>,
+    pub(crate) layout: wgpu::BindGroupLayout,
 }
 
 impl SurfacePipeline {
     /// Builds the pipeline of `source` with the frame uniform at binding 0 and read-only storage
     /// buffers at the given (stages, binding), and its wireframe twin when the device has
     /// `POLYGON_MODE_LINE`.
-    fn new(
+    pub(crate) fn new(
         device: &wgpu::Device,
         target: &TargetFormat,
         label: &'static str,
         source: &str,
         storage: &[(wgpu::ShaderStages, u32)],
+        shape: &VertexShape<'_>,
     ) -> Result<Self, GpuError> {
         let module = shader_module(device, label, source)?;
         scoped(device, label, || {
@@ -551,6 +620,18 @@ impl SurfacePipeline {
                     count: None,
                 }
             }));
+            entries.extend(shape.extra_uniforms.iter().map(|&binding| {
+                wgpu::BindGroupLayoutEntry {
+                    binding,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                }
+            }));
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some(label),
                 entries: &entries,
@@ -561,25 +642,24 @@ impl SurfacePipeline {
                 immediate_size: 0,
             });
             let vertex_attrs = wgpu::vertex_attr_array![0 => Float32x2];
-            let instance_attrs = wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
             let build = |polygon_mode| {
                 device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                     label: Some(label),
                     layout: Some(&pipeline_layout),
                     vertex: wgpu::VertexState {
                         module: &module,
-                        entry_point: Some("vs_main"),
+                        entry_point: Some(shape.entry),
                         compilation_options: Default::default(),
                         buffers: &[
                             Some(wgpu::VertexBufferLayout {
-                                array_stride: std::mem::size_of::<ClipmapVertex>() as u64,
+                                array_stride: shape.vertex_stride,
                                 step_mode: wgpu::VertexStepMode::Vertex,
                                 attributes: &vertex_attrs,
                             }),
                             Some(wgpu::VertexBufferLayout {
-                                array_stride: std::mem::size_of::<ClipmapInstance>() as u64,
+                                array_stride: shape.instance_stride,
                                 step_mode: wgpu::VertexStepMode::Instance,
-                                attributes: &instance_attrs,
+                                attributes: shape.instance_attrs,
                             }),
                         ],
                     },

@@ -50,6 +50,7 @@
 
 pub mod atlas;
 pub mod camera;
+pub mod cdlod;
 pub mod clipmap;
 pub mod compute;
 pub mod context;
@@ -72,6 +73,7 @@ pub mod timer;
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
 pub use camera::Camera;
+pub use cdlod::{CdlodDraw, CdlodRenderer};
 pub use clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};
 pub use context::{AdapterReport, GpuContext};
 pub use density::{DensityPass, GpuDensityMap};

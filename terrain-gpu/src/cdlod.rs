@@ -1,0 +1,271 @@
+//! `CdlodRenderer`: draws a CDLOD selection (terrain-lod's `CdlodFrame`) into the caller's render
+//! pass: one shared quadrant mesh, instanced per drawn quadrant, morphed per vertex in the vertex
+//! shader (`cdlod.wgsl`) and shaded exactly as the clipmap (same frame uniform, coarse-map
+//! surface and fragment shader), so the two LOD schemes compare on equal terms.
+
+use crate::camera::Camera;
+use crate::clipmap::{
+    ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, frame_uniform,
+};
+use crate::error::GpuError;
+use crate::maps::{GpuDerivativeMap, GpuHeightMap};
+use crate::scope::{buffer_init, scoped};
+use crate::target::TargetFormat;
+use glam::UVec2;
+use terrain_core::WrapMode;
+use terrain_lod::cdlod::MAX_CDLOD_LODS;
+use terrain_lod::{CdlodFrame, CdlodInstance, CdlodMesh};
+
+/// The `CdlodLods` uniform of `cdlod.wgsl`: per LOD (morph start, morph end, 0, 0) in metres,
+/// end < 0 for no morph.
+type LodsUniform = [[f32; 4]; MAX_CDLOD_LODS as usize];
+
+/// Instances the renderer holds room for at first; a frame with more grows the buffer once.
+const START_INSTANCES: u64 = 4096;
+
+/// Draws CDLOD frames of one quadrant mesh into passes of one [`TargetFormat`]: build it once,
+/// then per frame [`CdlodRenderer::prepare`] and [`CdlodRenderer::draw`] (after
+/// [`crate::SkyPass`], as the clipmap).
+#[derive(Debug)]
+pub struct CdlodRenderer {
+    pipeline: SurfacePipeline,
+    target: TargetFormat,
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+    uniform: wgpu::Buffer,
+    lods: wgpu::Buffer,
+    instances: wgpu::Buffer,
+    instance_count: u32,
+    bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
+    wireframe: bool,
+}
+
+/// Everything one CDLOD frame is drawn from.
+#[derive(Debug, Clone, Copy)]
+pub struct CdlodDraw<'a> {
+    /// The heights.
+    pub map: &'a GpuHeightMap<u16>,
+    /// Their derivative normals.
+    pub normals: &'a GpuDerivativeMap,
+    /// The selection (instances and range table) of this frame.
+    pub frame: &'a CdlodFrame,
+    /// The camera the selection was made for.
+    pub camera: &'a Camera,
+    /// Lighting and colours.
+    pub style: &'a TerrainStyle,
+    /// The render target's size in pixels.
+    pub target_size: UVec2,
+}
+
+impl CdlodRenderer {
+    /// Uploads `mesh` (the quadrant mesh of the tree's grid size) and builds the pipeline.
+    pub fn new(
+        device: &wgpu::Device,
+        target: &TargetFormat,
+        mesh: &CdlodMesh,
+    ) -> Result<Self, GpuError> {
+        target.validate(device)?;
+        const ATTRS: [wgpu::VertexAttribute; 3] =
+            wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
+        let pipeline = SurfacePipeline::new(
+            device,
+            target,
+            "cdlod.wgsl",
+            terrain_shaders::CDLOD,
+            &[
+                (wgpu::ShaderStages::VERTEX, 1),
+                (wgpu::ShaderStages::FRAGMENT, 2),
+            ],
+            &VertexShape {
+                entry: "vs_cdlod",
+                vertex_stride: std::mem::size_of::<[f32; 2]>() as u64,
+                instance_stride: std::mem::size_of::<CdlodInstance>() as u64,
+                instance_attrs: &ATTRS,
+                extra_uniforms: &[3],
+            },
+        )?;
+        let vertices = buffer_init(
+            device,
+            "cdlod vertices",
+            bytemuck::cast_slice(&mesh.vertices),
+            wgpu::BufferUsages::VERTEX,
+        )?;
+        let indices = buffer_init(
+            device,
+            "cdlod indices",
+            bytemuck::cast_slice(&mesh.indices),
+            wgpu::BufferUsages::INDEX,
+        )?;
+        let (uniform, lods, instances) = scoped(device, "CdlodRenderer", || {
+            let buffer = |label, size, usage| {
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size,
+                    usage: usage | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                })
+            };
+            (
+                buffer(
+                    "cdlod frame",
+                    std::mem::size_of::<crate::clipmap::FrameUniform>() as u64,
+                    wgpu::BufferUsages::UNIFORM,
+                ),
+                buffer(
+                    "cdlod lods",
+                    std::mem::size_of::<LodsUniform>() as u64,
+                    wgpu::BufferUsages::UNIFORM,
+                ),
+                instance_buffer(device, START_INSTANCES),
+            )
+        })?;
+        Ok(Self {
+            pipeline,
+            target: *target,
+            vertices,
+            indices,
+            index_count: mesh.indices.len() as u32,
+            uniform,
+            lods,
+            instances,
+            instance_count: 0,
+            bound: None,
+            wireframe: false,
+        })
+    }
+
+    /// Draws triangle edges as lines from the next draw; fails without
+    /// [`wgpu::Features::POLYGON_MODE_LINE`].
+    pub fn set_wireframe(&mut self, on: bool) -> Result<(), GpuError> {
+        if on && self.pipeline.wireframe.is_none() {
+            return Err(GpuError::Unsupported {
+                what: "CdlodRenderer wireframe",
+                reason: "the device was made without Features::POLYGON_MODE_LINE",
+            });
+        }
+        self.wireframe = on;
+        Ok(())
+    }
+
+    /// Writes the uniforms and instances of one frame. Checks everything before wgpu sees it.
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        draw: &CdlodDraw<'_>,
+    ) -> Result<(), GpuError> {
+        check_view(draw.camera, draw.target_size, "cdlod target size (pixels)")?;
+        let surface = ClipmapSurface::Coarse {
+            map: draw.map,
+            normals: draw.normals,
+        };
+        let info = surface.check()?;
+        let frame = draw.frame;
+        if frame.ranges.morph.len() > MAX_CDLOD_LODS as usize {
+            return Err(GpuError::Unsupported {
+                what: "CdlodRenderer",
+                reason: "the frame's range table has more than 16 LODs",
+            });
+        }
+        let wrap_offset = match info.wrap {
+            WrapMode::Repeat => {
+                // Every texel read: instance origins less the bilinear and normal reach.
+                let min = frame
+                    .instances
+                    .iter()
+                    .map(|i| glam::IVec2::from(i.origin) - 2)
+                    .fold(glam::IVec2::ZERO, |a, b| a.min(b));
+                crate::compute::wrap_offset(min, info.size)?
+            }
+            WrapMode::Clamp => [0, 0],
+        };
+        let uniform = frame_uniform(
+            &info,
+            draw.camera,
+            draw.style,
+            &self.target,
+            draw.target_size,
+            (0, 0),
+            wrap_offset,
+        );
+        let mut lods: LodsUniform = [[0.0, -1.0, 0.0, 0.0]; MAX_CDLOD_LODS as usize];
+        for (slot, &(start, end)) in lods.iter_mut().zip(&frame.ranges.morph) {
+            if end.is_finite() && start.is_finite() && end > start {
+                *slot = [start, end, 0.0, 0.0];
+            }
+        }
+        let needed = frame.instances.len() as u64;
+        let capacity = self.instances.size() / std::mem::size_of::<CdlodInstance>() as u64;
+        if needed > capacity {
+            // A one-off growth to the next power of two; steady frames allocate nothing.
+            self.instances = scoped(device, "CdlodRenderer", || {
+                instance_buffer(device, needed.next_power_of_two())
+            })?;
+        }
+        if !frame.instances.is_empty() {
+            queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&frame.instances));
+        }
+        self.instance_count = frame.instances.len() as u32;
+        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
+        queue.write_buffer(&self.lods, 0, bytemuck::cast_slice(&lods));
+        let buffers = surface.buffers();
+        if self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
+            let entries = [
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.uniform.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: buffers[0].as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: buffers[1].as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: self.lods.as_entire_binding(),
+                },
+            ];
+            let group = scoped(device, "CdlodRenderer bind group", || {
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("CdlodRenderer"),
+                    layout: &self.pipeline.layout,
+                    entries: &entries,
+                })
+            })?;
+            self.bound = Some((buffers, group));
+        }
+        Ok(())
+    }
+
+    /// Records the prepared frame into `pass`. Draws nothing before the first prepare.
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
+        let Some((_, group)) = &self.bound else {
+            return;
+        };
+        if self.instance_count == 0 {
+            return;
+        }
+        match (&self.pipeline.wireframe, self.wireframe) {
+            (Some(lines), true) => pass.set_pipeline(lines),
+            _ => pass.set_pipeline(&self.pipeline.pipeline),
+        }
+        pass.set_bind_group(0, group, &[]);
+        pass.set_vertex_buffer(0, self.vertices.slice(..));
+        pass.set_vertex_buffer(1, self.instances.slice(..));
+        pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.draw_indexed(0..self.index_count, 0, 0..self.instance_count);
+    }
+}
+
+fn instance_buffer(device: &wgpu::Device, count: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("cdlod instances"),
+        size: count.max(1) * std::mem::size_of::<CdlodInstance>() as u64,
+        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}

@@ -1,0 +1,187 @@
+//! CDLOD rendering: no cracks from grazing views across LOD edges (the morph of terrain-lod's
+//! selection, in the vertex shader), the caller's pass, and the instance buffer's growth.
+
+#[path = "common/scene.rs"]
+#[allow(dead_code)] // the clipmap parts of the shared scene
+mod scene;
+
+use glam::{UVec2, Vec2, Vec3};
+use scene::Scene;
+use std::collections::HashSet;
+use terrain_gpu::testing::context_or_skip;
+use terrain_gpu::{
+    Camera, CdlodDraw, CdlodRenderer, OffscreenTarget, SkyColors, TargetFormat, TerrainStyle,
+};
+use terrain_lod::{CdlodConfig, CdlodMesh, CdlodTree, CdlodView, Frustum};
+
+fn is_sky(p: [u8; 4]) -> bool {
+    p[0] > 200 && p[1] < 70 && p[2] > 200
+}
+
+/// Sky pixels below the terrain's silhouette per column (a level camera: each column is a
+/// vertical plane through the eye, so such a pixel is a hole in the mesh), and terrain pixels.
+fn holes(image: &terrain_core::Grid<[u8; 4]>) -> (usize, usize) {
+    let (mut holes, mut terrain) = (0, 0);
+    for x in 0..image.width() {
+        let mut seen = false;
+        for y in 0..image.height() {
+            if !is_sky(image.get(x, y).unwrap()) {
+                seen = true;
+                terrain += 1;
+            } else if seen {
+                holes += 1;
+            }
+        }
+    }
+    (holes, terrain)
+}
+
+fn render(
+    scene: &mut Scene,
+    renderer: &mut CdlodRenderer,
+    tree: &CdlodTree,
+    camera: &Camera,
+    size: UVec2,
+) -> (terrain_core::Grid<[u8; 4]>, HashSet<u32>) {
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let aspect = size.x as f32 / size.y as f32;
+    let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
+    let hfov = 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan();
+    let view = CdlodView {
+        camera: camera.position,
+        frustum: Some(&frustum),
+        viewport_width: size.x as f32,
+        hfov,
+    };
+    let frame = tree.select(&view).unwrap();
+    let lods = frame.instances.iter().map(|i| i.lod).collect();
+    let magenta = SkyColors {
+        horizon: Vec3::new(1.0, 0.0, 1.0),
+        zenith: Vec3::new(1.0, 0.0, 1.0),
+    };
+    scene
+        .sky
+        .prepare(queue, camera.view_proj_relative(aspect), &magenta)
+        .unwrap();
+    let style = TerrainStyle {
+        ramp: (0.0, scene::HEIGHT),
+        ..TerrainStyle::default()
+    };
+    renderer
+        .prepare(
+            device,
+            queue,
+            &CdlodDraw {
+                map: &scene.gpu_map,
+                normals: &scene.normals,
+                frame: &frame,
+                camera,
+                style: &style,
+                target_size: size,
+            },
+        )
+        .unwrap();
+    let target = OffscreenTarget::new(device, size).unwrap();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
+        scene.sky.draw(&mut pass);
+        renderer.draw(&mut pass);
+    }
+    queue.submit([encoder.finish()]);
+    let image = target.read_rgba8(device, queue).unwrap();
+    scene.ctx.check().expect("no GPU validation errors");
+    (image, lods)
+}
+
+#[test]
+fn no_cracks_from_grazing_views_across_lod_edges() {
+    let Some(ctx) = context_or_skip("cdlod no_cracks_from_grazing_views") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 31, 5);
+    let config = CdlodConfig {
+        leaf_size: 16,
+        grid_size: 16,
+        lod_count: 5,
+        finest_range: 6.0,
+        ..CdlodConfig::default()
+    };
+    let tree = CdlodTree::from_map(&scene.map, config).unwrap();
+    let mut renderer = CdlodRenderer::new(
+        &scene.ctx.device,
+        &TargetFormat::CAPTURE,
+        &CdlodMesh::new(16),
+    )
+    .unwrap();
+    let size = UVec2::new(320, 200);
+    let positions = [
+        Vec2::new(100.0, 100.0),
+        Vec2::new(101.3, 100.2),
+        Vec2::new(63.9, 130.6),
+        Vec2::new(7.5, 250.5), // near the map's wrap corner
+    ];
+    let mut all_lods = HashSet::new();
+    for (i, xz) in positions.iter().enumerate() {
+        for (j, yaw) in [0.0f32, 0.8, 1.6, 2.4, 3.9, 5.1].iter().enumerate() {
+            let eye = Vec3::new(xz.x, scene.ground(*xz) + 1.5 + i as f32, xz.y);
+            let camera = Camera::looking(eye, Vec3::new(yaw.cos(), 0.0, yaw.sin()));
+            let (image, lods) = render(&mut scene, &mut renderer, &tree, &camera, size);
+            let (holes, terrain) = holes(&image);
+            assert!(
+                terrain > (size.x * size.y / 4) as usize,
+                "view {i}/{j}: terrain must fill the lower half"
+            );
+            if holes > 0 {
+                let path = std::env::temp_dir().join(format!("cdlod_crack_{i}_{j}.png"));
+                let _ = terrain_core::io::write_png_rgba8(&path, &image);
+                panic!(
+                    "view {i}/{j}: {holes} sky pixels inside the terrain (image: {})",
+                    path.display()
+                );
+            }
+            all_lods.extend(lods);
+        }
+    }
+    assert!(
+        all_lods.len() >= 4,
+        "the views cross many LOD edges: {all_lods:?}"
+    );
+}
+
+#[test]
+fn the_instance_buffer_grows_for_a_large_frame() {
+    let Some(ctx) = context_or_skip("cdlod the_instance_buffer_grows") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 31, 5);
+    // Tiny leaves and a long finest range: thousands of quadrants, past the first buffer.
+    let config = CdlodConfig {
+        leaf_size: 4,
+        grid_size: 4,
+        lod_count: 7,
+        finest_range: 120.0,
+        ..CdlodConfig::default()
+    };
+    let tree = CdlodTree::from_map(&scene.map, config).unwrap();
+    let mut renderer = CdlodRenderer::new(
+        &scene.ctx.device,
+        &TargetFormat::CAPTURE,
+        &CdlodMesh::new(4),
+    )
+    .unwrap();
+    let eye = Vec3::new(128.0, scene.ground(Vec2::splat(128.0)) + 60.0, 128.0);
+    let camera = Camera::looking(eye, Vec3::new(0.3, -1.0, 0.2));
+    let (image, _) = render(
+        &mut scene,
+        &mut renderer,
+        &tree,
+        &camera,
+        UVec2::new(96, 64),
+    );
+    let (_, terrain) = holes(&image);
+    assert!(
+        terrain > 96 * 64 / 2,
+        "looking down: terrain fills the view"
+    );
+}
