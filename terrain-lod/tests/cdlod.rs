@@ -447,3 +447,81 @@ fn bad_input_is_an_error_not_a_panic() {
         Err(LodError::SizeMismatch { .. })
     ));
 }
+
+#[test]
+fn the_drawn_surface_is_the_map_where_fully_refined_and_pops_without_the_morph() {
+    let map = hilly(512, 512, WrapMode::Repeat);
+    let h = height_fn(&map);
+    let grid = 16;
+    let jump = |morph: bool| -> f32 {
+        let cfg = CdlodConfig {
+            morph,
+            ..config(16, grid, 6, 6.0)
+        };
+        let tree = CdlodTree::from_map(&map, cfg).unwrap();
+        let mut worst = 0.0f32;
+        let mut prev: Option<(terrain_lod::CdlodFrame, Vec3)> = None;
+        // A camera moving at 0.1 m per frame (3 m/s at 30 fps), looking along its path: the
+        // morph moves vertices in proportion to the camera's motion, a LOD switch all at once.
+        for f in 0..150 {
+            let xz = Vec2::new(60.0 + 0.1 * f as f32, 80.0);
+            // The bilinear ground: a camera height that steps at texel edges would move the
+            // morph in steps too.
+            let ground = terrain_core::bilinear(&map, xz).unwrap();
+            let camera = Vec3::new(xz.x, ground + 4.0, xz.y);
+            let look = Vec3::new(1.0, -0.25, 0.1);
+            let (frustum, hfov) = view(camera, look, 640.0);
+            let v = CdlodView {
+                camera,
+                frustum: Some(&frustum),
+                viewport_width: 640.0,
+                hfov,
+            };
+            let frame = tree.select(&v).unwrap();
+            // Every drawn texel of a LOD-0 quadrant far from its morph is the map itself.
+            if f == 0 {
+                let i = frame.instances.iter().find(|i| i.lod == 0).unwrap();
+                let t = IVec2::from(i.origin) + IVec2::new(3, 5);
+                let s = frame
+                    .surface_height(t.as_vec2(), grid, camera, TEXEL, &h)
+                    .unwrap();
+                let k = frame.ranges.morph_k(
+                    0,
+                    Vec3::new(t.x as f32 * TEXEL, h(t), t.y as f32 * TEXEL).distance(camera),
+                );
+                if k == 0.0 {
+                    assert_eq!(s, h(t));
+                }
+            }
+            let proj = glam::camera::rh::proj::directx::perspective(0.9, 16.0 / 9.0, 0.1, 1e5)
+                * glam::camera::rh::view::look_to_mat4(camera, look.normalize(), Vec3::Y);
+            let probes: Vec<Vec2> = (0..32 * 32)
+                .map(|k| {
+                    (xz + Vec2::new((k % 32) as f32 * 3.0, ((k / 32) as f32 - 16.0) * 3.0)) / TEXEL
+                })
+                .collect();
+            if let Some((pf, pc)) = &prev {
+                let j = frame.max_height_jump(
+                    camera,
+                    (pf, *pc),
+                    &probes,
+                    grid,
+                    TEXEL,
+                    proj,
+                    Vec2::new(640.0, 360.0),
+                    &h,
+                );
+                worst = worst.max(j);
+            }
+            prev = Some((frame, camera));
+        }
+        worst
+    };
+    let (with, without) = (jump(true), jump(false));
+    println!("largest jump: {with:.3} px with the morph, {without:.3} px without");
+    assert!(with < 1.0, "morphing: {with} px");
+    assert!(
+        without > 2.0 * with.max(0.5),
+        "without the morph LOD changes pop: {without} px"
+    );
+}
