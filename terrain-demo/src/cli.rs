@@ -93,6 +93,17 @@ pub struct Cli {
     /// Write top-down overview frames only, without the GPU (as when no adapter exists).
     #[arg(long)]
     pub no_gpu: bool,
+    /// Level of detail of the default scenario's 3D frames: geometry clipmaps, or CDLOD
+    /// (quadtree selection with per-vertex morphing, seed 002 sec. 1.1.4).
+    #[arg(long, value_enum, default_value_t = LodArg::Clipmap)]
+    pub lod: LodArg,
+    /// With `--lod cdlod`: choose the LODs by screen-space error (seed 002 eq. 1.1), at most
+    /// PX pixels, instead of by distance ranges.
+    #[arg(long, value_name = "PX")]
+    pub target_error: Option<f32>,
+    /// With `--lod cdlod`: no per-vertex morph (LOD changes pop; for comparison).
+    #[arg(long)]
+    pub no_morph: bool,
     /// Refuse a run whose estimated memory (maps, GPU copies, frames, pools, the process and
     /// its GPU driver) is above SIZE, as 1536M or 8G; default half the machine's memory.
     #[arg(long, value_name = "SIZE", value_parser = crate::memory_limit::parse_bytes)]
@@ -184,6 +195,16 @@ impl Serialize for HeightRangeArg {
             HeightRangeArg::Span(lo, hi) => s.serialize_str(&format!("{lo}:{hi}")),
         }
     }
+}
+
+/// `--lod`: the level-of-detail scheme.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LodArg {
+    /// Geometry clipmaps (seed 000 sec. 2.3.2).
+    Clipmap,
+    /// CDLOD quadtree with per-vertex morphing (seed 002 sec. 1.1.4).
+    Cdlod,
 }
 
 /// `--camera` of the default scenario.

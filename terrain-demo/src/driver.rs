@@ -4,7 +4,7 @@
 //! in progress; the end is the same, over the frames done.
 
 use crate::capture::{self, Capture};
-use crate::cli::{Cli, ScenarioKind};
+use crate::cli::{Cli, LodArg, ScenarioKind};
 use crate::config::DemoParams;
 use crate::gpu_scene::GpuScene;
 use crate::images;
@@ -21,6 +21,7 @@ use glam::Vec2;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 use terrain_core::io;
+use terrain_lod::{CdlodConfig, LodMetric};
 
 /// Runs `scenario` for `cli.frames` frames (fewer after Ctrl-C) into `cli.out` and returns
 /// the report written; `params` are the run's parameters (the GPU scene takes its style and
@@ -74,6 +75,10 @@ pub fn run(
             file: String::new(),
             stats: frame.stats,
             triangles: 0,
+            lod: None,
+            vertices: None,
+            max_screen_error_px: None,
+            max_vertex_jump_px: None,
             camera_clearance_m: frame.camera_clearance_m,
             timings_ms: BTreeMap::new(),
             gpu_timestamps_ms: BTreeMap::new(),
@@ -82,12 +87,18 @@ pub fn run(
         match gpu.as_mut() {
             // The 3D frame with the overview inset, the camera marked on it.
             Some(scene) => {
+                scene.update_lod(scenario.map(), &frame.dirty, &mut timings)?;
                 let mut rendered = scene.render(&frame.camera, &mut timings)?;
+                let max_vertex_jump_px = scene.lod_jump_px(scenario.map(), &frame.camera);
                 let eye = frame.camera.position;
                 let uv = Vec2::new(eye.x, eye.z) / scenario.map().extent_m();
                 images::inset_overview(&mut rendered.image, overview_image, uv);
                 let report = FrameReport {
                     triangles: rendered.triangles,
+                    lod: Some(rendered.lod.mode),
+                    vertices: Some(rendered.lod.vertices),
+                    max_screen_error_px: rendered.lod.max_screen_error_px,
+                    max_vertex_jump_px,
                     gpu_objects: Some(scene.live_objects()),
                     ..report
                 };
@@ -172,6 +183,33 @@ fn open_gpu(
     params: &DemoParams,
     scenario: &mut dyn Scenario,
 ) -> Result<Option<GpuScene>> {
+    if cli.lod == LodArg::Cdlod && cli.scenario != ScenarioKind::Default {
+        return Err(anyhow::anyhow!(
+            "--lod cdlod draws the coarse-map of the default scenario (and of --heightmap); \
+             the snow and flyover scenarios draw with the clipmap"
+        ))
+        .usage();
+    }
+    if let Some(tau) = cli.target_error {
+        if cli.lod != LodArg::Cdlod {
+            return Err(anyhow::anyhow!(
+                "--target-error chooses CDLOD's LODs: it needs --lod cdlod"
+            ))
+            .usage();
+        }
+        if !(tau.is_finite() && (0.01..=1000.0).contains(&tau)) {
+            return Err(anyhow::anyhow!(
+                "--target-error {tau}: give 0.01 to 1000 pixels"
+            ))
+            .usage();
+        }
+    }
+    if cli.no_morph && cli.lod != LodArg::Cdlod {
+        return Err(anyhow::anyhow!(
+            "--no-morph turns off CDLOD's morph: it needs --lod cdlod"
+        ))
+        .usage();
+    }
     if cli.no_gpu {
         return Ok(None);
     }
@@ -191,5 +229,66 @@ fn open_gpu(
     };
     scenario.prepare_gpu(&mut scene)?;
     scene.apply_style(&params.style);
+    if cli.lod == LodArg::Cdlod {
+        let reach = scene.clipmap_reach_m();
+        scene.enable_cdlod(scenario.map(), cdlod_config(cli, scenario.map(), reach)?)?;
+    }
     Ok(Some(scene))
+}
+
+/// The CDLOD quadtree for `map`: leaves of 32 texels (fewer where a repeating map's sides are
+/// not multiples of 32) drawn with one vertex per texel, the finest range 8 leaves wide, and as
+/// many LODs (up to 8) as reach `reach_m` (the clipmap's reach, so both draw as far), tile a
+/// repeating map, or cover a clamped one.
+fn cdlod_config(cli: &Cli, map: &terrain_core::CoarseMap, reach_m: f32) -> Result<CdlodConfig> {
+    let size = map.size();
+    let pick = |leaf: u32| -> u32 {
+        match map.wrap() {
+            terrain_core::WrapMode::Repeat => (1..=8)
+                .rev()
+                .find(|&n| {
+                    let root = leaf << (n - 1);
+                    size.x.is_multiple_of(root) && size.y.is_multiple_of(root)
+                })
+                .unwrap_or(0),
+            terrain_core::WrapMode::Clamp => {
+                let mut n = 1;
+                while n < 8 && (leaf << (n - 1)) < size.max_element() {
+                    n += 1;
+                }
+                n
+            }
+        }
+    };
+    let Some((leaf, lods)) = [32u32, 16, 8, 4]
+        .into_iter()
+        .map(|leaf| (leaf, pick(leaf)))
+        .find(|&(_, n)| n >= 1)
+    else {
+        anyhow::bail!(
+            "--lod cdlod needs a repeating map whose sides are multiples of 4 texels ({}x{})",
+            size.x,
+            size.y
+        );
+    };
+    let finest_range = 8.0 * leaf as f32 * map.texel_size();
+    // The view distance (the last range) is finest_range * 2^(lods - 1).
+    let mut lods = lods;
+    while lods > 1 && finest_range * (1u32 << (lods - 2)) as f32 >= reach_m {
+        lods -= 1;
+    }
+    let config = CdlodConfig {
+        leaf_size: leaf,
+        grid_size: leaf.min(32),
+        lod_count: lods,
+        finest_range,
+        metric: match cli.target_error {
+            Some(tau_px) => LodMetric::ScreenSpace { tau_px },
+            None => LodMetric::Distance,
+        },
+        morph: !cli.no_morph,
+        ..CdlodConfig::default()
+    };
+    config.validate().context("--target-error").usage()?;
+    Ok(config)
 }

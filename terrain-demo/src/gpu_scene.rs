@@ -9,11 +9,14 @@ use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_core::{FixedPointMap, Rect, StampPlacement};
 use terrain_gpu::granular::{GpuGranularNormals, GpuGranularStep, GranularNormalsPass, VolumePass};
 use terrain_gpu::{
-    ClipmapRenderer, ClipmapSurface, ClipmapView, GpuContext, GpuDerivativeMap, GpuHeightMap,
-    GpuRegionSource, GpuStamp, GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget,
-    RegionReadback, SkyColors, SkyPass, StampOp, StampPass, TerrainStyle,
+    CdlodDraw, CdlodRenderer, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuContext,
+    GpuDerivativeMap, GpuHeightMap, GpuRegionSource, GpuStamp, GpuTextureStamp, GpuTimer,
+    GpuTiming, NormalPass, OffscreenTarget, RegionReadback, SkyColors, SkyPass, StampOp, StampPass,
+    TerrainStyle,
 };
-use terrain_lod::{ClipmapLayout, Frustum};
+use terrain_lod::{
+    CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodView, ClipmapLayout, Frustum,
+};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 
 use crate::report::GpuObjects;
@@ -67,6 +70,10 @@ pub struct GpuScene {
     atlas: Option<GpuTileAtlas>,
     /// The readback of the rects of atlas tiles deformed on the GPU.
     tile_readback: Option<RegionReadback>,
+    /// CDLOD instead of the clipmap (`--lod cdlod`), for the coarse-map.
+    cdlod: Option<CdlodScene>,
+    /// Vertices of each part of the clipmap's shared mesh, by part index.
+    clipmap_part_vertices: Vec<u64>,
     /// Frames rendered so far.
     frames: u32,
     /// Fault injection for the device-loss test: destroy the device before rendering this
@@ -121,12 +128,36 @@ pub struct GranularFrame {
     pub arrived: Vec<(Rect, Grid<u32>)>,
 }
 
+/// CDLOD on the GPU scene: the quadtree (on the CPU, kept current by the deformations), the
+/// renderer, and the selections of the last two frames (for the popping metric).
+struct CdlodScene {
+    tree: CdlodTree,
+    renderer: CdlodRenderer,
+    mesh: CdlodMesh,
+    /// The last frame's selection with its camera, and the one before.
+    last: Option<(CdlodFrame, glam::Vec3)>,
+    previous: Option<(CdlodFrame, glam::Vec3)>,
+}
+
 /// One rendered frame.
 pub struct RenderedFrame {
     /// The captured image.
     pub image: Grid<[u8; 4]>,
     /// Non-degenerate triangles drawn.
     pub triangles: u64,
+    /// The LOD scheme (`clipmap` or `cdlod`) and its figures.
+    pub lod: LodStats,
+}
+
+/// What the LOD scheme drew in a frame.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LodStats {
+    /// `clipmap` or `cdlod`.
+    pub mode: &'static str,
+    /// Vertices drawn (per instance of the shared meshes).
+    pub vertices: u64,
+    /// CDLOD: the largest projected geometric error of the drawn nodes, pixels.
+    pub max_screen_error_px: Option<f32>,
 }
 
 /// Records a GPU timing as `step`.
@@ -244,6 +275,7 @@ impl GpuScene {
             normal_pass,
             sky: SkyPass::new(device, &target.format())?,
             renderer: ClipmapRenderer::new(device, &target.format(), &layout)?,
+            clipmap_part_vertices: part_vertices(&layout),
             layout,
             target,
             footprint: None,
@@ -254,6 +286,7 @@ impl GpuScene {
             granular: None,
             atlas: None,
             tile_readback: None,
+            cdlod: None,
             frames: 0,
             destroy_at: std::env::var(DESTROY_DEVICE_ENV)
                 .ok()
@@ -297,6 +330,93 @@ impl GpuScene {
         self.style.hide_outside_map = hide;
     }
 
+    /// How far the clipmap reaches from the camera, metres: its coarsest level's half side.
+    pub fn clipmap_reach_m(&self) -> f32 {
+        (CLIPMAP_N - 1) as f32 / 2.0
+            * (1u32 << (self.layout.levels() - 1)) as f32
+            * self.map.texel_size()
+    }
+
+    /// Draws the coarse-map with CDLOD instead of the clipmap: the quadtree of `map` with
+    /// `config`, kept current by [`GpuScene::update_lod`].
+    pub fn enable_cdlod(&mut self, map: &CoarseMap, config: CdlodConfig) -> Result<()> {
+        let tree = CdlodTree::from_map(map, config)?;
+        let mesh = CdlodMesh::new(config.grid_size);
+        let renderer = CdlodRenderer::new(&self.ctx.device, &self.target.format(), &mesh)?;
+        self.cdlod = Some(CdlodScene {
+            tree,
+            renderer,
+            mesh,
+            last: None,
+            previous: None,
+        });
+        Ok(())
+    }
+
+    /// Brings the CDLOD quadtree's bounds up to date with `map` after deformations in `dirty`
+    /// (timed as `lod`); nothing without CDLOD.
+    pub fn update_lod(
+        &mut self,
+        map: &CoarseMap,
+        dirty: &[Rect],
+        timings: &mut Timings,
+    ) -> Result<()> {
+        if let Some(c) = &mut self.cdlod {
+            let t = std::time::Instant::now();
+            for r in dirty {
+                c.tree.update_rect(map, *r)?;
+            }
+            timings.add(Step::Lod, crate::timings::ms_since(t));
+        }
+        Ok(())
+    }
+
+    /// The popping metric of the last frame against the one before (`None` on the first
+    /// frame or without CDLOD): the largest screen-space jump of the drawn surface, in pixels,
+    /// at probes ahead of `camera`, both frames evaluated on `map` and projected with
+    /// `camera`, so only a change of the mesh counts.
+    pub fn lod_jump_px(&self, map: &CoarseMap, camera: &Camera) -> Option<f32> {
+        let c = self.cdlod.as_ref()?;
+        let ((now, eye), (then, then_eye)) = (c.last.as_ref()?, c.previous.as_ref()?);
+        let ts = map.texel_size();
+        let size = self.target.size().as_vec2();
+        let forward = Vec2::new(camera.forward.x, camera.forward.z).normalize_or(Vec2::X);
+        let right = forward.perp();
+        // 48 x 48 probes over a square ahead of the camera as deep as the second LOD's range,
+        // so they see the first LOD switches and morphs.
+        let depth = now
+            .ranges
+            .range
+            .get(1)
+            .or(now.ranges.range.first())
+            .copied()
+            .unwrap_or(1.0);
+        let spacing = (depth / 48.0).max(ts * 0.5);
+        let base = Vec2::new(eye.x, eye.z);
+        let probes: Vec<Vec2> = (0..48 * 48)
+            .map(|k| {
+                let (i, j) = ((k / 48) as f32, (k % 48) as f32 - 24.0);
+                (base + forward * (1.0 + i) * spacing + right * j * spacing) / ts
+            })
+            .collect();
+        let height = |t: glam::IVec2| {
+            let (w, h) = (map.size().x, map.size().y);
+            let x = map.wrap().resolve(i64::from(t.x), w);
+            let y = map.wrap().resolve(i64::from(t.y), h);
+            map.height_m(x, y).unwrap_or(0.0)
+        };
+        Some(now.max_height_jump(
+            *eye,
+            (then, *then_eye),
+            &probes,
+            c.tree.config().grid_size,
+            ts,
+            camera.view_proj_world(size.x / size.y),
+            size,
+            height,
+        ))
+    }
+
     /// Makes the clipmap reach `radius` metres around the camera (its coarsest level's half
     /// side): levels are added to the default [`CLIPMAP_LEVELS`], up to terrain-lod's
     /// maximum, each doubling the reach. For cameras that see a whole map from afar.
@@ -305,6 +425,7 @@ impl GpuScene {
         if levels != self.layout.levels() {
             let layout = ClipmapLayout::new(CLIPMAP_N, levels)?;
             self.renderer = ClipmapRenderer::new(&self.ctx.device, &self.target.format(), &layout)?;
+            self.clipmap_part_vertices = part_vertices(&layout);
             self.layout = layout;
         }
         Ok(())
@@ -639,6 +760,22 @@ impl GpuScene {
             Some(atlas) if self.granular.is_none() => atlas.config().world.texel_size,
             _ => self.map.texel_size(),
         };
+        let coarse = self.granular.is_none() && self.atlas.is_none();
+        if let (Some(c), true) = (&mut self.cdlod, coarse) {
+            return render_cdlod(
+                c,
+                &self.ctx,
+                &mut self.target,
+                &mut self.sky,
+                &self.timer,
+                (&self.map, &self.normals),
+                &self.style,
+                camera,
+                frustum,
+                t,
+                timings,
+            );
+        }
         let placement = self.layout.place(
             Vec2::new(camera.position.x, camera.position.z),
             texel_size,
@@ -679,9 +816,108 @@ impl GpuScene {
         self.ctx.check()?;
         timings.add(Step::Capture, crate::timings::ms_since(t));
         record(timings, Step::Render, timing);
+        let vertices = placement
+            .draws
+            .iter()
+            .filter_map(|d| {
+                let part = self
+                    .layout
+                    .mesh()
+                    .parts
+                    .iter()
+                    .position(|p| p.kind == d.part)?;
+                self.clipmap_part_vertices.get(part).copied()
+            })
+            .sum();
         Ok(RenderedFrame {
             image,
             triangles: placement.triangle_count(self.layout.mesh()),
+            lod: LodStats {
+                mode: "clipmap",
+                vertices,
+                max_screen_error_px: None,
+            },
         })
     }
+}
+
+/// The distinct vertices each part of a clipmap layout's mesh draws.
+fn part_vertices(layout: &ClipmapLayout) -> Vec<u64> {
+    let mesh = layout.mesh();
+    mesh.parts
+        .iter()
+        .map(|p| {
+            let used: std::collections::HashSet<u32> = mesh.indices
+                [p.indices.start as usize..p.indices.end as usize]
+                .iter()
+                .copied()
+                .collect();
+            used.len() as u64
+        })
+        .collect()
+}
+
+/// Selects and draws a CDLOD frame (the `lod` step is timed from `lod_start`).
+#[allow(clippy::too_many_arguments)]
+fn render_cdlod(
+    c: &mut CdlodScene,
+    ctx: &GpuContext,
+    target: &mut OffscreenTarget,
+    sky: &mut SkyPass,
+    timer: &GpuTimer,
+    (map, normals): (&GpuHeightMap<u16>, &GpuDerivativeMap),
+    style: &TerrainStyle,
+    camera: &Camera,
+    frustum: Frustum,
+    lod_start: std::time::Instant,
+    timings: &mut Timings,
+) -> Result<RenderedFrame> {
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let size = target.size();
+    let aspect = size.x as f32 / size.y as f32;
+    let view = CdlodView {
+        camera: camera.position,
+        frustum: Some(&frustum),
+        viewport_width: size.x as f32,
+        hfov: 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan(),
+    };
+    let frame = c.tree.select(&view)?;
+    let max_screen_error_px = c.tree.max_screen_error_px(&frame, &view);
+    timings.add(Step::Lod, crate::timings::ms_since(lod_start));
+    let view_proj = camera.view_proj_relative(aspect);
+    let timing = timer.time(device, queue, |encoder| {
+        sky.prepare(queue, view_proj, &SkyColors::default())?;
+        c.renderer.prepare(
+            device,
+            queue,
+            &CdlodDraw {
+                map,
+                normals,
+                frame: &frame,
+                camera,
+                style,
+                target_size: size,
+            },
+        )?;
+        let mut pass = target.begin_pass(encoder, wgpu::Color::BLACK);
+        sky.draw(&mut pass);
+        c.renderer.draw(&mut pass);
+        Ok(())
+    })?;
+    let t = std::time::Instant::now();
+    let image = target.read_rgba8(device, queue)?;
+    ctx.check()?;
+    timings.add(Step::Capture, crate::timings::ms_since(t));
+    record(timings, Step::Render, timing);
+    let stats = RenderedFrame {
+        image,
+        triangles: frame.triangle_count(&c.mesh),
+        lod: LodStats {
+            mode: "cdlod",
+            vertices: frame.vertex_count(&c.mesh),
+            max_screen_error_px: Some(max_screen_error_px),
+        },
+    };
+    c.previous = c.last.replace((frame, camera.position));
+    Ok(stats)
 }

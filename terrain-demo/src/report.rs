@@ -237,6 +237,21 @@ pub struct FrameReport {
     pub stats: FrameStats,
     /// Non-degenerate triangles drawn (0 without the GPU).
     pub triangles: u64,
+    /// The LOD scheme of the 3D frame (`clipmap` or `cdlod`; absent without the GPU).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lod: Option<&'static str>,
+    /// Vertices drawn (shared-mesh vertices per instance).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vertices: Option<u64>,
+    /// CDLOD: the largest projected geometric error of the drawn nodes against the full map,
+    /// pixels (seed 002 eq. 1.1, on the CPU).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_screen_error_px: Option<f32>,
+    /// CDLOD: the largest screen-space jump of the drawn surface since the last frame that the
+    /// camera's motion does not explain (both frames' meshes on today's heights, projected by
+    /// today's camera), pixels: the popping metric.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_vertex_jump_px: Option<f32>,
     /// Height of the camera's eye above the true surface under it (never negative: the camera
     /// is a body on the collision mirror, kept above pending deformations by their bounds).
     pub camera_clearance_m: f32,

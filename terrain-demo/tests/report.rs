@@ -53,10 +53,23 @@ fn reports_of_every_scenario_validate_against_the_schema() {
         std::process::id()
     ));
     let dem_s = dem.to_string_lossy().into_owned();
-    let runs: [(&str, &[&str]); 4] = [
+    let runs: [(&str, &[&str]); 5] = [
         (
             "schema_default",
             &["--size", "96", "--frames", "5", "--resolution", "160x96"],
+        ),
+        (
+            "schema_cdlod",
+            &[
+                "--size",
+                "128",
+                "--frames",
+                "4",
+                "--resolution",
+                "160x96",
+                "--lod",
+                "cdlod",
+            ],
         ),
         (
             "schema_cpu",
@@ -93,6 +106,17 @@ fn reports_of_every_scenario_validate_against_the_schema() {
             std::fs::copy(out.join("terrain.png"), &dem).unwrap();
         }
         let r = report(&out);
+        if name == "schema_cdlod" {
+            // Every frame says how it was drawn; the popping metric needs a frame before it.
+            for (i, f) in r["frames"].as_array().unwrap().iter().enumerate() {
+                assert_eq!(f["lod"], "cdlod", "frame {i}");
+                assert!(f["vertices"].as_u64().unwrap() > 0);
+                assert!(f["max_screen_error_px"].as_f64().is_some());
+                assert_eq!(f["max_vertex_jump_px"].is_null(), i == 0, "frame {i}");
+            }
+        } else if name == "schema_default" {
+            assert_eq!(r["frames"][0]["lod"], "clipmap");
+        }
         let bad = violations(&validator, &r);
         assert!(
             bad.is_empty(),

@@ -287,6 +287,11 @@ pub struct CdlodTree {
     texel_size: f32,
     /// Per LOD: nodes per axis and their bounds, row-major.
     levels: Vec<(UVec2, Vec<NodeBounds>)>,
+    /// Per LOD: cells (one grid step of the node mesh) per axis and the largest error of the
+    /// mesh inside each, row-major; empty where the mesh has a vertex on every texel. A node's
+    /// error is the maximum of its cells', so a deformation recomputes only the cells it
+    /// touches, not whole (root-sized) nodes.
+    cells: Vec<(UVec2, Vec<f32>)>,
 }
 
 impl CdlodTree {
@@ -319,12 +324,23 @@ impl CdlodTree {
             );
             levels.push((n, vec![NodeBounds::default(); n.x as usize * n.y as usize]));
         }
+        let cells = (0..config.lod_count)
+            .map(|l| {
+                let step = Self::step_of(&config, l);
+                if step == 1 {
+                    return (UVec2::ZERO, Vec::new());
+                }
+                let n = levels[l as usize].0 * (config.grid_size);
+                (n, vec![0.0f32; n.x as usize * n.y as usize])
+            })
+            .collect();
         let mut tree = Self {
             config,
             map_size,
             wrap: map.wrap(),
             texel_size: map.texel_size(),
             levels,
+            cells,
         };
         tree.update_rect(map, Rect::from_size(map_size))?;
         Ok(tree)
@@ -391,81 +407,105 @@ impl CdlodTree {
                 .collect(),
         };
         for l in 0..self.config.lod_count {
-            let side = self.node_size(l) as i64;
-            let n = self.levels[l as usize].0;
-            for piece in &pieces {
-                // Nodes whose texels o ..= o + side meet the piece: the node before the first
-                // column too (its far edge is the piece's first texel), wrapped.
-                let lo = (piece.min.as_i64vec2() - 1).div_euclid(glam::I64Vec2::splat(side));
-                let hi = (piece.max().as_i64vec2() - 1).div_euclid(glam::I64Vec2::splat(side));
-                for ny in lo.y..=hi.y {
-                    for nx in lo.x..=hi.x {
-                        let (x, y) = match self.wrap {
-                            WrapMode::Repeat => (
-                                nx.rem_euclid(i64::from(n.x)) as u32,
-                                ny.rem_euclid(i64::from(n.y)) as u32,
-                            ),
-                            WrapMode::Clamp => {
-                                if nx < 0 || ny < 0 || nx >= i64::from(n.x) || ny >= i64::from(n.y)
-                                {
-                                    continue;
-                                }
-                                (nx as u32, ny as u32)
-                            }
-                        };
-                        let b = self.compute_bounds(map, l, UVec2::new(x, y));
-                        self.levels[l as usize].1[y as usize * n.x as usize + x as usize] = b;
-                    }
+            // Cells of this LOD's mesh that the deformation reaches, then its nodes.
+            let step = Self::step_of(&self.config, l);
+            if step > 1 {
+                let n = self.cells[l as usize].0;
+                for c in touched(&pieces, i64::from(step), n, self.wrap) {
+                    let e = self.cell_error(map, step, c);
+                    self.cells[l as usize].1[c.y as usize * n.x as usize + c.x as usize] = e;
                 }
+            }
+            let n = self.levels[l as usize].0;
+            for node in touched(&pieces, self.node_size(l) as i64, n, self.wrap) {
+                let b = self.node_bounds(map, l, node);
+                self.levels[l as usize].1[node.y as usize * n.x as usize + node.x as usize] = b;
             }
         }
         Ok(())
     }
 
-    /// Bounds and error of node `node` of LOD `lod`, from the map's texels.
-    fn compute_bounds<T: HeightSample>(
+    /// Texels per grid step of the mesh of LOD `lod` (at least 1).
+    fn step_of(config: &CdlodConfig, lod: u32) -> u32 {
+        ((config.leaf_size << lod) / config.grid_size).max(1)
+    }
+
+    /// Bounds of node `node` of LOD `lod`: from the texels for a leaf, from its children
+    /// above (their texels, edges included, are the node's), the error from its cells.
+    fn node_bounds<T: HeightSample>(
         &self,
         map: &HeightMap<T>,
         lod: u32,
         node: UVec2,
     ) -> NodeBounds {
-        let side = self.node_size(lod) as i64;
-        let step = (side / i64::from(self.config.grid_size)).max(1);
-        let origin = node.as_i64vec2() * side;
-        let enc = map.encoding();
-        let g = map.grid();
-        let h = |x: i64, y: i64| -> f32 {
-            let v = g.as_slice()[g.index(
-                self.wrap.resolve(x, self.map_size.x),
-                self.wrap.resolve(y, self.map_size.y),
-            )];
-            enc.to_metres(v.to_raw_f64())
-        };
-        let (mut min, mut max, mut error) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f32);
-        for y in 0..=side {
-            for x in 0..=side {
-                let v = h(origin.x + x, origin.y + y);
-                min = min.min(v);
-                max = max.max(v);
-                if step > 1 {
-                    // The node's mesh over this texel: the triangle of its quad (diagonal
-                    // from the quad's first corner to its last) interpolated linearly.
-                    let (qx, qy) = (x / step * step, y / step * step);
-                    let (qx, qy) = (qx.min(side - step), qy.min(side - step));
-                    let (fx, fy) = ((x - qx) as f32 / step as f32, (y - qy) as f32 / step as f32);
-                    let c =
-                        |dx: i64, dy: i64| h(origin.x + qx + dx * step, origin.y + qy + dy * step);
-                    let m = if fx >= fy {
-                        // Triangle (0,0), (1,1), (1,0).
-                        c(0, 0) + fx * (c(1, 0) - c(0, 0)) + fy * (c(1, 1) - c(1, 0))
-                    } else {
-                        c(0, 0) + fy * (c(0, 1) - c(0, 0)) + fx * (c(1, 1) - c(0, 1))
-                    };
-                    error = error.max((v - m).abs());
+        let (mut min, mut max) = (f32::INFINITY, f32::NEG_INFINITY);
+        if lod == 0 {
+            let side = self.node_size(0) as i64;
+            let o = node.as_i64vec2() * side;
+            for y in 0..=side {
+                for x in 0..=side {
+                    let v = self.height(map, o.x + x, o.y + y);
+                    min = min.min(v);
+                    max = max.max(v);
+                }
+            }
+        } else {
+            let (cn, children) = &self.levels[lod as usize - 1];
+            for q in 0..4u32 {
+                let c = node * 2 + UVec2::new(q & 1, q >> 1);
+                // Past the last child row or column of a map that is not a whole number of
+                // nodes, the clamped texels are the last child's.
+                let c = c.min(*cn - 1);
+                let b = children[c.y as usize * cn.x as usize + c.x as usize];
+                min = min.min(b.min);
+                max = max.max(b.max);
+            }
+        }
+        let mut error = 0.0f32;
+        let step = Self::step_of(&self.config, lod);
+        if step > 1 {
+            let (n, cells) = &self.cells[lod as usize];
+            let g = self.config.grid_size;
+            for cy in node.y * g..(node.y + 1) * g {
+                let row = &cells[cy as usize * n.x as usize..][..n.x as usize];
+                for &e in &row[(node.x * g) as usize..((node.x + 1) * g) as usize] {
+                    error = error.max(e);
                 }
             }
         }
         NodeBounds { min, max, error }
+    }
+
+    /// The height (metres) of texel `(x, y)`, wrapped or clamped.
+    fn height<T: HeightSample>(&self, map: &HeightMap<T>, x: i64, y: i64) -> f32 {
+        let g = map.grid();
+        let v = g.as_slice()[g.index(
+            self.wrap.resolve(x, self.map_size.x),
+            self.wrap.resolve(y, self.map_size.y),
+        )];
+        map.encoding().to_metres(v.to_raw_f64())
+    }
+
+    /// The largest vertical distance between the map and a mesh cell of `step` texels (its two
+    /// triangles, the diagonal from the cell's first corner to its last), edges included.
+    fn cell_error<T: HeightSample>(&self, map: &HeightMap<T>, step: u32, cell: UVec2) -> f32 {
+        let s = i64::from(step);
+        let o = cell.as_i64vec2() * s;
+        let h = |x: i64, y: i64| self.height(map, o.x + x, o.y + y);
+        let (c00, c10, c01, c11) = (h(0, 0), h(s, 0), h(0, s), h(s, s));
+        let mut error = 0.0f32;
+        for y in 0..=s {
+            for x in 0..=s {
+                let (fx, fy) = (x as f32 / s as f32, y as f32 / s as f32);
+                let m = if fx >= fy {
+                    c00 + fx * (c10 - c00) + fy * (c11 - c10)
+                } else {
+                    c00 + fy * (c01 - c00) + fx * (c11 - c01)
+                };
+                error = error.max((h(x, y) - m).abs());
+            }
+        }
+        error
     }
 
     /// The range table for `view`, widened where needed so that the morph is crack-free: the
@@ -706,6 +746,35 @@ impl CdlodTree {
             })
             .fold(0.0, f32::max)
     }
+}
+
+/// The items (nodes or cells of `side` texels, `n` per axis) whose texels `o ..= o + side`
+/// meet one of `pieces` (inside the map), each once: the one before a piece's first column
+/// too (its far edge is that column), wrapped on a repeating map.
+fn touched(pieces: &[Rect], side: i64, n: UVec2, wrap: WrapMode) -> Vec<UVec2> {
+    let mut out = std::collections::BTreeSet::new();
+    for piece in pieces {
+        let lo = (piece.min.as_i64vec2() - 1).div_euclid(glam::I64Vec2::splat(side));
+        let hi = (piece.max().as_i64vec2() - 1).div_euclid(glam::I64Vec2::splat(side));
+        for y in lo.y..=hi.y {
+            for x in lo.x..=hi.x {
+                let p = match wrap {
+                    WrapMode::Repeat => UVec2::new(
+                        x.rem_euclid(i64::from(n.x)) as u32,
+                        y.rem_euclid(i64::from(n.y)) as u32,
+                    ),
+                    WrapMode::Clamp => {
+                        if x < 0 || y < 0 || x >= i64::from(n.x) || y >= i64::from(n.y) {
+                            continue;
+                        }
+                        UVec2::new(x as u32, y as u32)
+                    }
+                };
+                out.insert((p.y, p.x));
+            }
+        }
+    }
+    out.into_iter().map(|(y, x)| UVec2::new(x, y)).collect()
 }
 
 /// Whether the sphere around `c` of radius `r` meets the box `min ..= max`.
