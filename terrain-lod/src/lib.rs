@@ -1,5 +1,9 @@
 //! Level of detail for heightfield terrain: geometry clipmaps (GPU Gems 2 ch. 2, seed 000
-//! sec. 2.3.2 and 3.1.3) with CPU frustum culling of their blocks (seed 000 sec. 2.4.3).
+//! sec. 2.3.2 and 3.1.3) with CPU frustum culling of their blocks (seed 000 sec. 2.4.3); CDLOD
+//! (seed 002 sec. 1.1.4: a quadtree with min / max heights, a LOD range table or a screen-space
+//! error, partial selection and per-vertex morphing, [`cdlod`]); curvature density maps (seed
+//! 002 ch. 3: five filters, max-downsampling, preprocessing, borders, a max pyramid,
+//! [`density`]).
 //!
 //! Conventions (those of the whole workspace): world units are metres, Y is up, right-handed.
 //! Heightmap column `x` maps to world X and row `y` to world Z, so texel `(x, y)` stands at
@@ -37,6 +41,42 @@
 //! let drawn = frame.triangle_count(layout.mesh());
 //! assert!(drawn > 0);
 //! # Ok::<(), terrain_lod::LodError>(())
+//! ```
+//!
+//! CDLOD and the density map of a heightfield, kept current after a deformation:
+//!
+//! ```
+//! use glam::{IVec2, UVec2, Vec3};
+//! use terrain_core::{Grid, HeightEncoding, HeightMap, Rect, WrapMode};
+//! use terrain_lod::{CdlodConfig, CdlodMesh, CdlodTree, CdlodView, DensityMap, DensityParams};
+//!
+//! // 256 x 256 texels of 0.5 m, gentle hills.
+//! let grid = Grid::from_fn(256, 256, |x, y| {
+//!     (30_000.0 + 4_000.0 * ((x as f32 * 0.05).sin() + (y as f32 * 0.04).cos())) as u16
+//! })?;
+//! let mut map = HeightMap::new(grid, HeightEncoding::new(0.001, 0.0)?, 0.5, WrapMode::Clamp)?;
+//! let config = CdlodConfig { leaf_size: 16, grid_size: 16, lod_count: 5, ..Default::default() };
+//! let mut tree = CdlodTree::from_map(&map, config)?;
+//! let mut density = DensityMap::from_map(&map, DensityParams::default())?;
+//!
+//! // A crater: the map changes in a rect; the tree and the density follow it there only.
+//! let crater = Rect::new(IVec2::new(100, 100), UVec2::new(12, 12));
+//! for y in 100..112 {
+//!     for x in 100..112 {
+//!         *map.grid_mut().get_mut(x, y).unwrap() -= 3_000;
+//!     }
+//! }
+//! tree.update_rect(&map, crater)?;
+//! density.update_rect(&map, crater)?;
+//! assert!(density.density_at_texel(0, IVec2::new(106, 100)).unwrap() > 0.0);
+//!
+//! // What a renderer draws from above the crater: one shared quadrant mesh per instance.
+//! let view = CdlodView { camera: Vec3::new(53.0, 40.0, 53.0), frustum: None, viewport_width: 1280.0, hfov: 1.2 };
+//! let frame = tree.select(&view)?;
+//! let mesh = CdlodMesh::new(config.grid_size);
+//! assert!(frame.triangle_count(&mesh) > 0);
+//! assert!(frame.instances.iter().any(|i| i.lod == 0), "finest near the camera");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
