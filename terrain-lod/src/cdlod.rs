@@ -26,6 +26,10 @@ use terrain_core::{HeightMap, HeightSample, Rect, WrapMode};
 /// The largest number of LODs.
 pub const MAX_CDLOD_LODS: u32 = 16;
 
+/// The most nodes one selection visits: ranges far larger than the leaves (a finest range of
+/// kilometres over leaves of metres) would otherwise select without bound.
+pub const MAX_VISITED_NODES: usize = 1 << 20;
+
 /// How the LOD range table is chosen.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -236,6 +240,8 @@ pub struct CdlodFrame {
     pub ranges: LodRanges,
     /// Nodes dropped by the frustum.
     pub culled: u32,
+    /// Nodes visited by the selection (bounded by [`MAX_VISITED_NODES`]).
+    pub visited: usize,
 }
 
 /// The shared mesh: one quadrant, `(grid_size / 2)^2` quads, vertices at integer grid
@@ -313,6 +319,20 @@ impl CdlodTree {
                 value: config.lod_count.into(),
                 allowed: "a count whose root node (leaf_size * 2^(lod_count - 1) texels) divides \
                           both sides of a repeating map",
+            });
+        }
+        if map.wrap() == WrapMode::Clamp
+            && config.lod_count >= 2
+            && (u64::from(config.leaf_size) << (config.lod_count - 2))
+                >= u64::from(map_size.max_element())
+        {
+            // Levels whose nodes are larger than the map cost time and memory for nothing
+            // (their texels past the map are the clamped edge).
+            return Err(LodError::InvalidCdlodParam {
+                what: "lod_count",
+                value: config.lod_count.into(),
+                allowed: "at most the LODs it takes for the root to cover the map (the LOD below \
+                          the root must be smaller than the map)",
             });
         }
         let mut levels = Vec::new();
@@ -629,6 +649,11 @@ impl CdlodTree {
             for x in lo.x..=hi.x {
                 self.select_node(view, top, IVec2::new(x, y), &mut frame);
             }
+        }
+        if frame.visited > MAX_VISITED_NODES {
+            return Err(LodError::SelectionTooLarge {
+                limit: MAX_VISITED_NODES,
+            });
         }
         let half = (self.config.grid_size / 2).max(1) as i32;
         frame.instances.reserve(frame.nodes.len() * 4);

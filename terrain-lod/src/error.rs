@@ -86,6 +86,15 @@ pub enum LodError {
         /// What is accepted.
         allowed: &'static str,
     },
+    /// A CDLOD selection would visit more nodes than the bound: the ranges are far larger than
+    /// the leaves.
+    #[error(
+        "the CDLOD selection visits more than {limit} nodes: lower finest_range or the view distance, or use larger leaves"
+    )]
+    SelectionTooLarge {
+        /// The bound ([`crate::cdlod::MAX_VISITED_NODES`]).
+        limit: usize,
+    },
     /// A terrain-core operation failed (for example a grid too large to allocate).
     #[error(transparent)]
     Core(#[from] terrain_core::CoreError),

@@ -15,11 +15,15 @@ use glam::camera::rh::{proj::directx, view::look_to_mat4};
 use glam::{IVec2, Mat4, Vec2, Vec3, Vec4};
 use harness::{Case, Class, Rng, Target};
 use std::time::Duration;
+use terrain_core::{Grid, HeightEncoding, HeightMap, Rect, WrapMode};
 use terrain_lod::clipmap::{MAX_CAMERA_TEXELS, MAX_LEVELS};
 use terrain_lod::morph::{
     MorphLevel, coarse_height, default_morph_width, morph_alpha, morphed_height,
 };
-use terrain_lod::{ClipmapFrame, ClipmapLayout, Frustum, LodError, MAX_DRAWS_PER_LEVEL, PartKind};
+use terrain_lod::{
+    CdlodConfig, CdlodTree, CdlodView, ClipmapFrame, ClipmapLayout, CurvatureFilter, DensityMap,
+    DensityParams, Frustum, LodError, LodMetric, MAX_DRAWS_PER_LEVEL, PartKind,
+};
 
 /// Placing 16 levels and culling their blocks takes microseconds; building a layout of up to
 /// 255 vertices a side a few milliseconds. 250 ms leaves room for debug builds under load.
@@ -146,6 +150,7 @@ fn variant(e: &LodError) -> &'static str {
         LodError::InvalidDensityParam { .. } => "InvalidDensityParam",
         LodError::SizeMismatch { .. } => "SizeMismatch",
         LodError::InvalidCdlodParam { .. } => "InvalidCdlodParam",
+        LodError::SelectionTooLarge { .. } => "SelectionTooLarge",
         LodError::Core(_) => "Core",
     }
 }
@@ -564,6 +569,184 @@ fn morph_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
     Ok(())
 }
 
+/// A small map of random heights (any u16), either wrap mode.
+fn small_map(rng: &mut Rng, max_side: u32) -> HeightMap<u16> {
+    let (w, h) = (rng.range_u32(1, max_side), rng.range_u32(1, max_side));
+    let wrap = if rng.chance(1, 2) {
+        WrapMode::Repeat
+    } else {
+        WrapMode::Clamp
+    };
+    let smooth = rng.chance(1, 2);
+    let grid = Grid::from_fn(w, h, |x, y| {
+        if smooth {
+            (30_000.0 + 8_000.0 * ((x as f32 * 0.3).sin() + (y as f32 * 0.2).cos())) as u16
+        } else {
+            (x.wrapping_mul(40_503) ^ y.wrapping_mul(2_654_435_761)) as u16
+        }
+    })
+    .expect("small grid");
+    let scale = rng.pick(&[1e-6f32, 0.001, 1.0, 1e4]);
+    let ts = rng.pick(&[1e-4f32, 0.1, 1.0, 1e3]);
+    HeightMap::new(
+        grid,
+        HeightEncoding::new(scale, 0.0).expect("encoding"),
+        ts,
+        wrap,
+    )
+    .expect("map")
+}
+
+/// Any rect: corners anywhere in i32, sizes anywhere in u32.
+fn any_rect(rng: &mut Rng) -> Rect {
+    let c = |rng: &mut Rng| {
+        if rng.chance(1, 2) {
+            rng.range_u32(0, 80) as i32 - 40
+        } else {
+            rng.next_u32() as i32
+        }
+    };
+    let s = |rng: &mut Rng| {
+        if rng.chance(1, 2) {
+            rng.range_u32(0, 60)
+        } else {
+            rng.u32_edge()
+        }
+    };
+    Rect::new(IVec2::new(c(rng), c(rng)), glam::UVec2::new(s(rng), s(rng)))
+}
+
+/// Density maps of any small map with any parameters (each field valid or at an edge), then
+/// updates in any rect: `Ok` equal to a rebuild, or a parameter error naming a field.
+fn density_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
+    let rng = &mut case.rng;
+    let map = small_map(rng, 40);
+    let mut p = DensityParams {
+        filter: CurvatureFilter::ALL[rng.index(5)],
+        ..DensityParams::default()
+    };
+    if rng.chance(1, 3) {
+        p.gain = rng.f32_edge();
+    }
+    if rng.chance(1, 3) {
+        p.exponent = rng.f32_edge();
+    }
+    if rng.chance(1, 3) {
+        p.full_density_bend = rng.f32_edge();
+    }
+    if rng.chance(1, 3) {
+        p.filter_size = rng.pick(&[0, 1, 2, 31, 32, u32::MAX]);
+        p.border_lod_skip = rng.pick(&[0, 1, 4, 5, u32::MAX]);
+        p.tile_size = rng.pick(&[0, 1, 2, 3, 4096, 4097, u32::MAX]);
+    }
+    p.preprocess = rng.chance(3, 4);
+    let mut dm = match DensityMap::from_map(&map, p) {
+        Ok(dm) => dm,
+        Err(LodError::InvalidDensityParam { .. }) => {
+            return if p.validate().is_err() {
+                Ok(())
+            } else {
+                Err(format!("{p:?} refused"))
+            };
+        }
+        Err(e) => return Err(format!("{p:?}: {e}")),
+    };
+    let mut changed = map.clone();
+    let rect = any_rect(rng);
+    for piece in rect.split_toroidal(map.size()) {
+        if map.wrap() == WrapMode::Clamp && piece.map != piece.unwrapped {
+            continue;
+        }
+        let r = piece.map;
+        for y in r.min.y..r.max().y.min(r.min.y + 64) {
+            for x in r.min.x..r.max().x.min(r.min.x + 64) {
+                let v = changed
+                    .grid_mut()
+                    .get_mut(x as u32, y as u32)
+                    .expect("inside");
+                *v = v.wrapping_add(977);
+            }
+        }
+    }
+    // Only the rect the texels changed in is a valid dirty rect: give the whole rect (it
+    // covers them).
+    dm.update_rect(&changed, rect).map_err(|e| e.to_string())?;
+    let fresh = DensityMap::from_map(&changed, p).map_err(|e| e.to_string())?;
+    if rect.size.x <= 64 && rect.size.y <= 64 && dm != fresh {
+        return Err(format!("update in {rect:?} differs from a rebuild"));
+    }
+    Ok(())
+}
+
+/// CDLOD trees of any small map and configuration, selections from any camera (finite or
+/// not) and frustum: `Ok` with well-formed instances, or a documented error.
+fn cdlod_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
+    let rng = &mut case.rng;
+    let map = small_map(rng, 70);
+    let mut c = CdlodConfig {
+        leaf_size: rng.pick(&[0, 3, 4, 8, 16, 1024, 2048]),
+        grid_size: rng.pick(&[2, 4, 8, 16, 256, 512]),
+        lod_count: rng.pick(&[0, 1, 2, 4, 8, 16, 17]),
+        finest_range: if rng.chance(1, 2) {
+            rng.f32_edge()
+        } else {
+            rng.uniform(0.1, 50.0) as f32
+        },
+        morph: rng.chance(1, 2),
+        ..CdlodConfig::default()
+    };
+    if rng.chance(1, 4) {
+        c.range_ratio = rng.f32_edge();
+        c.morph_start_ratio = rng.f32_edge();
+    }
+    if rng.chance(1, 2) {
+        c.metric = LodMetric::ScreenSpace {
+            tau_px: if rng.chance(1, 2) {
+                rng.f32_edge()
+            } else {
+                rng.uniform(0.1, 10.0) as f32
+            },
+        };
+    }
+    let tree = match CdlodTree::from_map(&map, c) {
+        Ok(t) => t,
+        Err(LodError::InvalidCdlodParam { .. }) => return Ok(()),
+        Err(e) => return Err(format!("{c:?}: {e}")),
+    };
+    let camera = Vec3::new(any_f32(rng), any_f32(rng), any_f32(rng));
+    let near = Vec3::new(
+        rng.uniform(-50.0, 80.0) as f32,
+        rng.uniform(-10.0, 60.0) as f32,
+        rng.uniform(-50.0, 80.0) as f32,
+    );
+    let camera = if rng.chance(1, 2) { near } else { camera };
+    let m = Mat4::from_cols_array(&std::array::from_fn(|_| any_f32(rng)));
+    let frustum = Frustum::from_view_proj(m);
+    let view = CdlodView {
+        camera,
+        frustum: rng.chance(1, 2).then_some(&frustum),
+        viewport_width: rng.pick(&[1.0f32, 1280.0, 1e9]),
+        hfov: rng.pick(&[0.01f32, 1.2, 3.1]),
+    };
+    match tree.select(&view) {
+        Ok(frame) => {
+            for i in &frame.instances {
+                if i.lod >= c.lod_count || i.step == 0 {
+                    return Err(format!("bad instance {i:?}"));
+                }
+            }
+            let e = tree.max_screen_error_px(&frame, &view);
+            if e.is_nan() || e < 0.0 {
+                return Err(format!("screen error {e}"));
+            }
+            Ok(())
+        }
+        Err(LodError::NonFinite { .. }) if !camera.is_finite() => Ok(()),
+        Err(LodError::CameraOutOfRange { .. } | LodError::SelectionTooLarge { .. }) => Ok(()),
+        Err(e) => Err(format!("{camera} {c:?}: {e}")),
+    }
+}
+
 #[test]
 fn fuzz_lod() {
     fn c(name: &'static str, f: fn(&Ctx, &mut Case) -> Result<(), String>) -> Class<Ctx> {
@@ -580,6 +763,8 @@ fn fuzz_lod() {
                 c("place_culled", place_culled),
                 c("frustum_any_matrix", frustum_any),
                 c("morph_any", morph_any),
+                c("density_any", density_any),
+                c("cdlod_any", cdlod_any),
             ],
             disabled: &[],
         },
