@@ -431,8 +431,9 @@ impl CdlodTree {
             let step = Self::step_of(&self.config, l);
             if step > 1 {
                 let n = self.cells[l as usize].0;
-                for c in touched(&pieces, i64::from(step), n, self.wrap) {
-                    let e = self.cell_error(map, step, c);
+                let cells = touched(&pieces, i64::from(step), n, self.wrap);
+                let errors = crate::par::map_collect(&cells, |&c| self.cell_error(map, step, c));
+                for (c, e) in cells.into_iter().zip(errors) {
                     self.cells[l as usize].1[c.y as usize * n.x as usize + c.x as usize] = e;
                 }
             }
@@ -511,21 +512,38 @@ impl CdlodTree {
     fn cell_error<T: HeightSample>(&self, map: &HeightMap<T>, step: u32, cell: UVec2) -> f32 {
         let s = i64::from(step);
         let o = cell.as_i64vec2() * s;
-        let h = |x: i64, y: i64| self.height(map, o.x + x, o.y + y);
-        let (c00, c10, c01, c11) = (h(0, 0), h(s, 0), h(0, s), h(s, s));
+        let g = map.grid();
+        let (w, h) = (i64::from(self.map_size.x), i64::from(self.map_size.y));
+        // Stored units throughout (the offset cancels); one scale to metres at the end.
+        let inside = o.x >= 0 && o.y >= 0 && o.x + s < w && o.y + s < h;
+        let raw = |x: i64, y: i64| -> f32 {
+            let (x, y) = (o.x + x, o.y + y);
+            let i = if inside {
+                (y * w + x) as usize
+            } else {
+                g.index(
+                    self.wrap.resolve(x, self.map_size.x),
+                    self.wrap.resolve(y, self.map_size.y),
+                )
+            };
+            g.as_slice()[i].to_raw_f64() as f32
+        };
+        let (c00, c10, c01, c11) = (raw(0, 0), raw(s, 0), raw(0, s), raw(s, s));
+        let inv = 1.0 / s as f32;
         let mut error = 0.0f32;
         for y in 0..=s {
+            let fy = y as f32 * inv;
             for x in 0..=s {
-                let (fx, fy) = (x as f32 / s as f32, y as f32 / s as f32);
+                let fx = x as f32 * inv;
                 let m = if fx >= fy {
                     c00 + fx * (c10 - c00) + fy * (c11 - c10)
                 } else {
                     c00 + fy * (c01 - c00) + fx * (c11 - c01)
                 };
-                error = error.max((h(x, y) - m).abs());
+                error = error.max((raw(x, y) - m).abs());
             }
         }
-        error
+        error * map.encoding().scale.abs()
     }
 
     /// The range table for `view`, widened where needed so that the morph is crack-free: the

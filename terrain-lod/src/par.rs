@@ -24,3 +24,19 @@ pub(crate) fn for_each_chunk<T: Send>(
             .for_each(|(i, c)| f(i, c));
     }
 }
+
+/// `f` of every item, in order, in parallel when the `parallel` feature is on.
+pub(crate) fn map_collect<I: Sync, O: Send>(
+    items: &[I],
+    f: impl Fn(&I) -> O + Sync + Send,
+) -> Vec<O> {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        items.par_iter().map(f).collect()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        items.iter().map(f).collect()
+    }
+}
