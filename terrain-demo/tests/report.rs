@@ -278,6 +278,22 @@ fn a_run_says_nothing_but_its_result_and_quiet_says_nothing() {
         "{}",
         done.stderr
     );
+    // With a GPU, -v shows terrain-gpu's adapter choice; RUST_LOG chooses per crate alone.
+    let gpu_args = ["--size", "64", "--frames", "1", "--resolution", "64x64"];
+    let mut cmd = demo();
+    cmd.args(gpu_args).arg("-v").arg("--out").arg(&out);
+    let done = run_within(cmd, &out, LIMIT);
+    assert!(done.status.success(), "{}", done.stderr);
+    assert!(done.stderr.contains("GPU adapter chosen"), "{}", done.stderr);
+    let mut cmd = demo();
+    cmd.args(gpu_args)
+        .arg("--out")
+        .arg(&out)
+        .env("RUST_LOG", "terrain_gpu=info");
+    let done = run_within(cmd, &out, LIMIT);
+    assert!(done.status.success(), "{}", done.stderr);
+    assert!(done.stderr.contains("GPU adapter chosen"), "{}", done.stderr);
+    assert!(!done.stderr.contains("removed the outputs"), "only terrain-gpu: {}", done.stderr);
 }
 
 #[test]
