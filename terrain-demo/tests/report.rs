@@ -284,7 +284,11 @@ fn a_run_says_nothing_but_its_result_and_quiet_says_nothing() {
     cmd.args(gpu_args).arg("-v").arg("--out").arg(&out);
     let done = run_within(cmd, &out, LIMIT);
     assert!(done.status.success(), "{}", done.stderr);
-    assert!(done.stderr.contains("GPU adapter chosen"), "{}", done.stderr);
+    assert!(
+        done.stderr.contains("GPU adapter chosen"),
+        "{}",
+        done.stderr
+    );
     let mut cmd = demo();
     cmd.args(gpu_args)
         .arg("--out")
@@ -292,8 +296,16 @@ fn a_run_says_nothing_but_its_result_and_quiet_says_nothing() {
         .env("RUST_LOG", "terrain_gpu=info");
     let done = run_within(cmd, &out, LIMIT);
     assert!(done.status.success(), "{}", done.stderr);
-    assert!(done.stderr.contains("GPU adapter chosen"), "{}", done.stderr);
-    assert!(!done.stderr.contains("removed the outputs"), "only terrain-gpu: {}", done.stderr);
+    assert!(
+        done.stderr.contains("GPU adapter chosen"),
+        "{}",
+        done.stderr
+    );
+    assert!(
+        !done.stderr.contains("removed the outputs"),
+        "only terrain-gpu: {}",
+        done.stderr
+    );
 }
 
 #[test]
