@@ -315,26 +315,37 @@ impl DensityMap {
         let (i0, i1) = (rect.min.x as usize, rect.max().x as usize);
         let (j0, j1) = (rect.min.y as usize, rect.max().y as usize);
         let out = &mut level0.as_mut_slice()[j0 * w as usize..j1 * w as usize];
-        // The maximum of row `y` over columns `x - rad ..= x + rad`.
-        let row_max = |y: i64, x: i64, rad: u32| -> f32 {
-            let row = raw.row(wrap.resolve(y, hh));
-            let rad = i64::from(rad);
-            let mut m = 0.0f32;
-            for xx in (x - rad)..=(x + rad) {
-                m = m.max(row[wrap.resolve(xx, w) as usize]);
-            }
-            m
+        // Separable: the maxima of each row the windows reach over columns `i - rad ..= i + rad`
+        // (for both radii), once per row, then the maxima of `2 rad + 1` of those per sample:
+        // O(samples * radius), not O(samples * radius^2).
+        let ylo = j0 as i64 - i64::from(rb);
+        let rows: Vec<i64> = (ylo..j1 as i64 + i64::from(rb)).collect();
+        let row_maxima = |rad: u32| {
+            crate::par::map_collect(&rows, |&y| {
+                let row = raw.row(wrap.resolve(y, hh));
+                let rad = i64::from(rad);
+                (i0..i1)
+                    .map(|i| {
+                        let i = i as i64;
+                        (i - rad..=i + rad)
+                            .fold(0.0f32, |m, x| m.max(row[wrap.resolve(x, w) as usize]))
+                    })
+                    .collect::<Vec<f32>>()
+            })
         };
+        let inner = row_maxima(r);
+        let border = if rb == r { None } else { Some(row_maxima(rb)) };
         crate::par::for_each_chunk(out, w as usize, |k, out_row| {
             let j = (j0 + k) as i64;
             for (i, o) in out_row.iter_mut().enumerate().take(i1).skip(i0) {
-                let ii = i as i64;
-                let border = ii % tile == 0 || j % tile == 0;
-                let rad = if border { rb } else { r };
-                let mut m = 0.0f32;
-                for y in (j - i64::from(rad))..=(j + i64::from(rad)) {
-                    m = m.max(row_max(y, ii, rad));
-                }
+                let on_border = i as i64 % tile == 0 || j % tile == 0;
+                let (rad, maxima) = match &border {
+                    Some(b) if on_border => (rb, b),
+                    _ => (if on_border { rb } else { r }, &inner),
+                };
+                let rad = i64::from(rad);
+                let m = (j - rad..=j + rad)
+                    .fold(0.0f32, |m, y| m.max(maxima[(y - ylo) as usize][i - i0]));
                 *o = params.quantize(m);
             }
         });
