@@ -86,10 +86,21 @@ pub enum LodError {
         /// What is accepted.
         allowed: &'static str,
     },
-    /// A CDLOD selection would visit more nodes than the bound: the ranges are far larger than
-    /// the leaves.
+    /// A tessellation parameter is out of range.
+    #[error("tessellation parameter {what} = {value} is out of range: it must be {allowed}")]
+    InvalidTessParam {
+        /// Which parameter.
+        what: &'static str,
+        /// The value given.
+        value: f64,
+        /// What is accepted.
+        allowed: &'static str,
+    },
+    /// A CDLOD selection would visit more nodes, or a tessellation emit more triangles, than
+    /// the bound: the ranges are far larger than the leaves, or the triangle width far too
+    /// small for the view.
     #[error(
-        "the CDLOD selection visits more than {limit} nodes: lower finest_range or the view distance, or use larger leaves"
+        "the LOD selection exceeds its bound of {limit} nodes or triangles: lower finest_range or the view distance, use larger leaves, or a larger triangle width"
     )]
     SelectionTooLarge {
         /// The bound ([`crate::cdlod::MAX_VISITED_NODES`]).

@@ -88,6 +88,7 @@ pub mod error;
 pub mod frustum;
 pub mod morph;
 mod par;
+pub mod tessellation;
 
 pub use cdlod::{
     CdlodConfig, CdlodFrame, CdlodInstance, CdlodMesh, CdlodTree, CdlodView, LodMetric, LodRanges,
@@ -99,3 +100,4 @@ pub use clipmap::{
 pub use density::{CurvatureFilter, DensityMap, DensityParams};
 pub use error::LodError;
 pub use frustum::Frustum;
+pub use tessellation::{TessConfig, TessFrame, TessHierarchy, TessTriangle, TessVertex};

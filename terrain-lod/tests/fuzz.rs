@@ -22,7 +22,8 @@ use terrain_lod::morph::{
 };
 use terrain_lod::{
     CdlodConfig, CdlodTree, CdlodView, ClipmapFrame, ClipmapLayout, CurvatureFilter, DensityMap,
-    DensityParams, Frustum, LodError, LodMetric, MAX_DRAWS_PER_LEVEL, PartKind,
+    DensityParams, Frustum, LodError, LodMetric, MAX_DRAWS_PER_LEVEL, PartKind, TessConfig,
+    TessHierarchy,
 };
 
 /// Placing 16 levels and culling their blocks takes microseconds; building a layout of up to
@@ -150,6 +151,7 @@ fn variant(e: &LodError) -> &'static str {
         LodError::InvalidDensityParam { .. } => "InvalidDensityParam",
         LodError::SizeMismatch { .. } => "SizeMismatch",
         LodError::InvalidCdlodParam { .. } => "InvalidCdlodParam",
+        LodError::InvalidTessParam { .. } => "InvalidTessParam",
         LodError::SelectionTooLarge { .. } => "SelectionTooLarge",
         LodError::Core(_) => "Core",
     }
@@ -747,6 +749,75 @@ fn cdlod_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
     }
 }
 
+fn tessellation_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
+    let rng = &mut case.rng;
+    let map = small_map(rng, 70);
+    let c = TessConfig {
+        patch_size: rng.pick(&[0, 1, 2, 3, 8, 32, 256, 512]),
+        triangle_width_px: if rng.chance(1, 2) {
+            rng.f32_edge()
+        } else {
+            rng.uniform(0.01, 100.0) as f32
+        },
+        min_triangle_m: if rng.chance(1, 4) {
+            rng.f32_edge()
+        } else {
+            0.0
+        },
+        use_density: rng.chance(1, 2),
+        morph: rng.chance(1, 2),
+        morph_range: if rng.chance(1, 4) {
+            rng.f32_edge()
+        } else {
+            1.0
+        },
+        max_triangles: rng.pick(&[0, 1, 100, 1 << 22, usize::MAX]),
+    };
+    let density = if rng.chance(1, 2) {
+        DensityMap::from_map(&map, DensityParams::default()).ok()
+    } else {
+        None
+    };
+    let tess = match TessHierarchy::from_map(&map, density.as_ref(), c) {
+        Ok(t) => t,
+        Err(LodError::InvalidTessParam { .. }) => return Ok(()),
+        Err(e) => return Err(format!("{c:?}: {e}")),
+    };
+    let camera = Vec3::new(any_f32(rng), any_f32(rng), any_f32(rng));
+    let near = Vec3::new(
+        rng.uniform(-50.0, 80.0) as f32,
+        rng.uniform(-10.0, 60.0) as f32,
+        rng.uniform(-50.0, 80.0) as f32,
+    );
+    let camera = if rng.chance(1, 2) { near } else { camera };
+    let m = Mat4::from_cols_array(&std::array::from_fn(|_| any_f32(rng)));
+    let frustum = Frustum::from_view_proj(m);
+    let view = CdlodView {
+        camera,
+        frustum: rng.chance(1, 2).then_some(&frustum),
+        viewport_width: rng.pick(&[1.0f32, 1280.0, 1e9]),
+        hfov: rng.pick(&[0.01f32, 1.2, 3.1]),
+    };
+    match tess.select(&view) {
+        Ok(frame) => {
+            if frame.triangles.len() > c.max_triangles {
+                return Err(format!(
+                    "{} triangles over the bound",
+                    frame.triangles.len()
+                ));
+            }
+            let e = tess.max_screen_error_px(&frame, &view);
+            if e.is_nan() || e < 0.0 {
+                return Err(format!("screen error {e}"));
+            }
+            Ok(())
+        }
+        Err(LodError::NonFinite { .. }) if !camera.is_finite() => Ok(()),
+        Err(LodError::SelectionTooLarge { .. }) => Ok(()),
+        Err(e) => Err(format!("{camera} {c:?}: {e}")),
+    }
+}
+
 #[test]
 fn fuzz_lod() {
     fn c(name: &'static str, f: fn(&Ctx, &mut Case) -> Result<(), String>) -> Class<Ctx> {
@@ -765,6 +836,7 @@ fn fuzz_lod() {
                 c("morph_any", morph_any),
                 c("density_any", density_any),
                 c("cdlod_any", cdlod_any),
+                c("tessellation_any", tessellation_any),
             ],
             disabled: &[],
         },

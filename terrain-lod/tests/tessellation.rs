@@ -1,0 +1,597 @@
+//! Adaptive tessellation by longest-edge bisection: the mesh is conforming (every edge shared
+//! by exactly two triangles, or on the map's border) for every view, the saturated bounds nest,
+//! updates equal rebuilds, the morph keeps popping under a pixel, and the density map trades
+//! triangles for error where the terrain is flat.
+
+use glam::camera::rh::{proj::directx, view::look_at_mat4};
+use glam::{IVec2, UVec2, Vec2, Vec3};
+use proptest::prelude::*;
+use std::collections::HashMap;
+use terrain_core::{Grid, HeightEncoding, HeightMap, Rect, WrapMode};
+use terrain_lod::{
+    CdlodView, DensityMap, DensityParams, Frustum, LodError, TessConfig, TessFrame, TessHierarchy,
+};
+
+const TS: f32 = 0.5;
+
+/// Hills on one half, a plane on the other: `w x h` texels of 0.5 m, heights about 0 to 60 m.
+fn map(w: u32, h: u32, wrap: WrapMode) -> HeightMap<u16> {
+    let grid = Grid::from_fn(w, h, |x, y| {
+        let (fx, fy) = (x as f32, y as f32);
+        let hills = if x < w / 2 {
+            8_000.0 * ((fx * 0.11).sin() * (fy * 0.07).cos() + 0.4 * (fx * 0.31 + fy * 0.23).sin())
+        } else {
+            0.0
+        };
+        (30_000.0 + hills + 10.0 * fy) as u16
+    })
+    .unwrap();
+    HeightMap::new(grid, HeightEncoding::new(0.001, 0.0).unwrap(), TS, wrap).unwrap()
+}
+
+fn view(camera: Vec3) -> CdlodView<'static> {
+    CdlodView {
+        camera,
+        frustum: None,
+        viewport_width: 1280.0,
+        hfov: 1.2,
+    }
+}
+
+/// Every directed edge `(from, to)` with its endpoint heights must meet its reverse in exactly
+/// one other triangle, unless it lies on the border of the `extent` texels drawn (a repeating
+/// map is drawn once: its seam is a border too). Returns the number of border edges.
+fn assert_conforming(frame: &TessFrame, extent: UVec2) -> usize {
+    let key = |v: &terrain_lod::TessVertex| (v.texel[0] as i32, v.texel[1] as i32);
+    let mut edges: HashMap<((i32, i32), (i32, i32)), (u32, [u32; 2])> = HashMap::new();
+    for tri in &frame.triangles {
+        let a = Vec2::from(tri[0].texel);
+        let b = Vec2::from(tri[1].texel);
+        let c = Vec2::from(tri[2].texel);
+        assert!(
+            (b - a).perp_dot(c - a) < 0.0,
+            "wound counter-clockwise seen from above: {tri:?}"
+        );
+        for i in 0..3 {
+            let (p, q) = (&tri[i], &tri[(i + 1) % 3]);
+            let e = edges.entry((key(p), key(q))).or_insert((0, [0, 0]));
+            e.0 += 1;
+            e.1 = [p.height.to_bits(), q.height.to_bits()];
+        }
+    }
+    let mut border = 0;
+    for (&(p, q), &(n, h)) in &edges {
+        assert_eq!(n, 1, "edge {p:?} -> {q:?} drawn {n} times");
+        match edges.get(&(q, p)) {
+            Some(&(_, hr)) => assert_eq!(
+                [h[0], h[1]],
+                [hr[1], hr[0]],
+                "edge {p:?} -> {q:?}: the two sides draw different heights (a crack)"
+            ),
+            None => {
+                let on_border = |a: (i32, i32), b: (i32, i32)| {
+                    (a.0 == b.0 && (a.0 == 0 || a.0 == extent.x as i32))
+                        || (a.1 == b.1 && (a.1 == 0 || a.1 == extent.y as i32))
+                };
+                assert!(
+                    on_border(p, q),
+                    "edge {p:?} -> {q:?} has no neighbour inside the map: a T-junction or a crack"
+                );
+                border += 1;
+            }
+        }
+    }
+    border
+}
+
+fn area(frame: &TessFrame) -> f64 {
+    frame
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| Vec2::from(v.texel));
+            f64::from((b - a).perp_dot(c - a).abs() * 0.5)
+        })
+        .sum()
+}
+
+#[test]
+fn the_mesh_is_conforming_and_covers_the_patches_from_every_view() {
+    for wrap in [WrapMode::Clamp, WrapMode::Repeat] {
+        let m = map(256, 192, wrap);
+        let density = DensityMap::from_map(&m, DensityParams::default()).unwrap();
+        for (use_density, morph) in [(true, true), (false, true), (true, false)] {
+            let config = TessConfig {
+                use_density,
+                morph,
+                triangle_width_px: 6.0,
+                ..TessConfig::default()
+            };
+            let tess = TessHierarchy::from_map(&m, Some(&density), config).unwrap();
+            let extent = tess.patches() * config.patch_size;
+            for camera in [
+                Vec3::new(10.0, 31.0, 10.0),
+                Vec3::new(64.0, 45.0, 48.0),
+                Vec3::new(120.0, 80.0, 90.0),
+                Vec3::new(-50.0, 200.0, 300.0),
+                Vec3::new(127.5, 30.5, 95.5),
+            ] {
+                let frame = tess.select(&view(camera)).unwrap();
+                assert_conforming(&frame, extent);
+                let expected = f64::from(extent.x) * f64::from(extent.y);
+                assert!(
+                    (area(&frame) - expected).abs() < 1e-6 * expected,
+                    "{wrap:?}: the triangles cover {} texels, the patches {expected}",
+                    area(&frame)
+                );
+                assert!(frame.triangle_count() > 2 * u64::from(tess.patches().element_product()));
+            }
+        }
+    }
+}
+
+#[test]
+fn near_the_camera_the_mesh_reaches_the_texels_and_far_away_stays_coarse() {
+    let m = map(256, 256, WrapMode::Clamp);
+    // Edges of 40 px: about 6 m at the far corner, 150 m away.
+    let config = TessConfig {
+        triangle_width_px: 40.0,
+        ..TessConfig::default()
+    };
+    let tess = TessHierarchy::from_map(&m, None, config).unwrap();
+    let frame = tess.select(&view(Vec3::new(20.0, 32.0, 20.0))).unwrap();
+    let hyp =
+        |t: &terrain_lod::TessTriangle| Vec2::from(t[0].texel).distance(Vec2::from(t[1].texel));
+    let near = frame
+        .triangles
+        .iter()
+        .filter(|t| Vec2::from(t[2].texel).distance(Vec2::splat(40.0)) < 4.0)
+        .map(hyp)
+        .fold(f32::INFINITY, f32::min);
+    let far = frame
+        .triangles
+        .iter()
+        .filter(|t| Vec2::from(t[2].texel).distance(Vec2::splat(250.0)) < 8.0)
+        .map(hyp)
+        .fold(0.0, f32::max);
+    assert!(
+        near <= std::f32::consts::SQRT_2 + 1e-4,
+        "near hypotenuse {near} texels"
+    );
+    assert!(far >= 8.0, "far hypotenuse {far} texels");
+}
+
+/// No vertex asks for more than the vertex whose triangles split it in: the split decisions
+/// are nested, which is what makes the mesh conforming.
+#[test]
+fn the_split_ratio_never_grows_from_a_vertex_to_the_vertices_it_splits_in() {
+    for wrap in [WrapMode::Clamp, WrapMode::Repeat] {
+        let m = map(128, 96, wrap);
+        let density = DensityMap::from_map(&m, DensityParams::default()).unwrap();
+        let tess = TessHierarchy::from_map(&m, Some(&density), TessConfig::default()).unwrap();
+        let g = tess.grid_size().as_ivec2();
+        let mut pairs = 0;
+        for camera in [
+            Vec3::new(3.0, 31.0, 40.0),
+            Vec3::new(70.0, 90.0, -20.0),
+            Vec3::new(32.0, 29.0, 24.0),
+        ] {
+            let d = tess.decision(&view(camera)).unwrap();
+            for y in 0..g.y {
+                for x in 0..g.x {
+                    let v = IVec2::new(x, y);
+                    let rv = tess.ratio(&d, v);
+                    for c in tess.children(v) {
+                        let rc = tess.ratio(&d, c);
+                        assert!(
+                            rc <= rv,
+                            "{wrap:?}: {c} asks {rc}, its parent {v} only {rv}"
+                        );
+                        pairs += 1;
+                    }
+                }
+            }
+        }
+        assert!(pairs > 3 * 128 * 96, "{pairs} pairs");
+    }
+}
+
+fn frustum_view(camera: Vec3, target: Vec3) -> (glam::Mat4, Frustum) {
+    let vp =
+        directx::perspective(1.0, 16.0 / 9.0, 0.1, 2000.0) * look_at_mat4(camera, target, Vec3::Y);
+    (vp, Frustum::from_view_proj(vp))
+}
+
+#[test]
+fn culling_drops_what_the_frustum_misses_and_keeps_what_it_sees() {
+    let m = map(256, 256, WrapMode::Clamp);
+    let tess = TessHierarchy::from_map(&m, None, TessConfig::default()).unwrap();
+    let camera = Vec3::new(10.0, 40.0, 10.0);
+    let (_, frustum) = frustum_view(camera, Vec3::new(60.0, 30.0, 10.0));
+    let all = tess.select(&view(camera)).unwrap();
+    let v = CdlodView {
+        frustum: Some(&frustum),
+        ..view(camera)
+    };
+    let seen = tess.select(&v).unwrap();
+    assert!(seen.culled > 0 && seen.triangle_count() < all.triangle_count() / 2);
+    // Every triangle with a corner inside the frustum is still drawn.
+    let inside = |t: &terrain_lod::TessTriangle| {
+        t.iter()
+            .any(|p| frustum.contains_point(Vec3::new(p.texel[0] * TS, p.height, p.texel[1] * TS)))
+    };
+    let kept: std::collections::HashSet<[u32; 6]> = seen.triangles.iter().map(key6).collect();
+    for t in all.triangles.iter().filter(|t| inside(t)) {
+        assert!(kept.contains(&key6(t)), "{t:?} is seen but was culled");
+    }
+}
+
+fn key6(t: &terrain_lod::TessTriangle) -> [u32; 6] {
+    [
+        t[0].texel[0].to_bits(),
+        t[0].texel[1].to_bits(),
+        t[1].texel[0].to_bits(),
+        t[1].texel[1].to_bits(),
+        t[2].texel[0].to_bits(),
+        t[2].texel[1].to_bits(),
+    ]
+}
+
+/// The popping metric on a camera moving at constant speed (0.25 m per frame) low over the
+/// hills: under a pixel with the morph, and far over it without (so the test can fail).
+#[test]
+fn vertices_move_in_instead_of_popping_in() {
+    let m = map(256, 256, WrapMode::Clamp);
+    let density = DensityMap::from_map(&m, DensityParams::default()).unwrap();
+    let mut worst = [0.0f32; 2];
+    for (i, morph) in [true, false].into_iter().enumerate() {
+        let tess = TessHierarchy::from_map(
+            &m,
+            Some(&density),
+            TessConfig {
+                morph,
+                ..TessConfig::default()
+            },
+        )
+        .unwrap();
+        for step in 0..24 {
+            let eye = |s: i32| Vec3::new(8.0 + 0.25 * s as f32, 40.0, 20.0 + 0.1 * s as f32);
+            let (now, then) = (eye(step + 1), eye(step));
+            let (vp, _) = frustum_view(now, now + Vec3::new(1.0, -0.35, 0.2));
+            let frame = tess.select(&view(now)).unwrap();
+            let mut probes: Vec<Vec2> = frame
+                .triangles
+                .iter()
+                .flatten()
+                .map(|v| Vec2::from(v.texel))
+                .step_by(7)
+                .collect();
+            probes.extend(
+                tess.select(&view(then))
+                    .unwrap()
+                    .triangles
+                    .iter()
+                    .flatten()
+                    .map(|v| Vec2::from(v.texel))
+                    .step_by(7),
+            );
+            let jump = tess.max_height_jump(
+                &view(now),
+                &view(then),
+                &probes,
+                vp,
+                Vec2::new(1280.0, 720.0),
+            );
+            worst[i] = worst[i].max(jump);
+        }
+    }
+    eprintln!(
+        "popping: {:.3} px with the morph, {:.3} px without",
+        worst[0], worst[1]
+    );
+    assert!(worst[0] < 1.0, "morph on: {} px", worst[0]);
+    assert!(worst[1] > 2.0, "morph off: {} px", worst[1]);
+}
+
+/// On the plane half the density map asks for almost nothing, so at one triangle width it
+/// draws far fewer triangles there, and the error stays small (the plane is exact).
+#[test]
+fn the_density_map_saves_triangles_where_the_terrain_is_flat() {
+    let m = map(256, 256, WrapMode::Clamp);
+    let density = DensityMap::from_map(&m, DensityParams::default()).unwrap();
+    let camera = Vec3::new(64.0, 60.0, 64.0);
+    let frames: Vec<(TessFrame, f32)> = [false, true]
+        .into_iter()
+        .map(|use_density| {
+            let tess = TessHierarchy::from_map(
+                &m,
+                Some(&density),
+                TessConfig {
+                    use_density,
+                    ..TessConfig::default()
+                },
+            )
+            .unwrap();
+            let f = tess.select(&view(camera)).unwrap();
+            let e = tess.max_screen_error_px(&f, &view(camera));
+            (f, e)
+        })
+        .collect();
+    let flat = |f: &TessFrame| f.triangles.iter().filter(|t| t[2].texel[0] > 140.0).count();
+    assert!(
+        flat(&frames[1].0) * 8 < flat(&frames[0].0),
+        "flat half: {} with the density map, {} without",
+        flat(&frames[1].0),
+        flat(&frames[0].0)
+    );
+    assert!(frames[1].0.vertex_count() < frames[0].0.vertex_count());
+    assert!(frames[0].1 > 0.0 && frames[1].1 > 0.0);
+}
+
+#[test]
+fn the_screen_error_falls_as_the_triangles_shrink() {
+    let m = map(256, 256, WrapMode::Clamp);
+    let camera = Vec3::new(30.0, 45.0, 30.0);
+    let mut last = f32::INFINITY;
+    let mut last_count = 0;
+    for width in [64.0, 16.0, 4.0] {
+        let tess = TessHierarchy::from_map(
+            &m,
+            None,
+            TessConfig {
+                triangle_width_px: width,
+                ..TessConfig::default()
+            },
+        )
+        .unwrap();
+        let f = tess.select(&view(camera)).unwrap();
+        let e = tess.max_screen_error_px(&f, &view(camera));
+        assert!(e < last, "width {width}: error {e} px, before {last}");
+        assert!(f.triangle_count() > last_count);
+        last = e;
+        last_count = f.triangle_count();
+    }
+    // Everything at the texels: the mesh is the map.
+    let full = TessHierarchy::from_map(
+        &m,
+        None,
+        TessConfig {
+            triangle_width_px: 0.01,
+            ..TessConfig::default()
+        },
+    )
+    .unwrap();
+    let f = full.select(&view(camera)).unwrap();
+    assert_eq!(f.triangle_count(), 2 * 256 * 256);
+    assert_eq!(f.vertex_count(), 257 * 257);
+    assert!(full.max_screen_error_px(&f, &view(camera)) < 1e-3);
+}
+
+#[test]
+fn bad_parameters_and_views_are_refused() {
+    let m = map(64, 64, WrapMode::Clamp);
+    for config in [
+        TessConfig {
+            patch_size: 0,
+            ..TessConfig::default()
+        },
+        TessConfig {
+            patch_size: 48,
+            ..TessConfig::default()
+        },
+        TessConfig {
+            patch_size: 512,
+            ..TessConfig::default()
+        },
+        TessConfig {
+            triangle_width_px: f32::NAN,
+            ..TessConfig::default()
+        },
+        TessConfig {
+            triangle_width_px: 0.0,
+            ..TessConfig::default()
+        },
+        TessConfig {
+            min_triangle_m: -1.0,
+            ..TessConfig::default()
+        },
+        TessConfig {
+            min_triangle_m: f32::INFINITY,
+            ..TessConfig::default()
+        },
+        TessConfig {
+            morph_range: 0.0,
+            ..TessConfig::default()
+        },
+        TessConfig {
+            max_triangles: 0,
+            ..TessConfig::default()
+        },
+    ] {
+        assert!(matches!(
+            TessHierarchy::from_map(&m, None, config),
+            Err(LodError::InvalidTessParam { .. })
+        ));
+    }
+    // A repeating map whose sides the patch does not divide.
+    let odd = map(48, 64, WrapMode::Repeat);
+    assert!(TessHierarchy::from_map(&odd, None, TessConfig::default()).is_err());
+    // A density map of another size.
+    let other =
+        DensityMap::from_map(&map(32, 32, WrapMode::Clamp), DensityParams::default()).unwrap();
+    assert!(matches!(
+        TessHierarchy::from_map(&m, Some(&other), TessConfig::default()),
+        Err(LodError::SizeMismatch { .. })
+    ));
+    let tess = TessHierarchy::from_map(&m, None, TessConfig::default()).unwrap();
+    for camera in [Vec3::NAN, Vec3::new(f32::INFINITY, 0.0, 0.0)] {
+        assert!(matches!(
+            tess.select(&view(camera)),
+            Err(LodError::NonFinite { .. })
+        ));
+    }
+    let bad_fov = CdlodView {
+        hfov: 4.0,
+        ..view(Vec3::ONE)
+    };
+    assert!(tess.select(&bad_fov).is_err());
+    // A bound on the triangles: every view answers in bounded memory.
+    let small = TessHierarchy::from_map(
+        &m,
+        None,
+        TessConfig {
+            triangle_width_px: 0.01,
+            max_triangles: 1000,
+            ..TessConfig::default()
+        },
+    )
+    .unwrap();
+    assert!(matches!(
+        small.select(&view(Vec3::new(16.0, 31.0, 16.0))),
+        Err(LodError::SelectionTooLarge { limit: 1000 })
+    ));
+    // Tiny maps still tessellate.
+    for (w, h) in [(1, 1), (2, 1), (1, 7)] {
+        let tiny =
+            TessHierarchy::from_map(&map(w, h, WrapMode::Clamp), None, TessConfig::default())
+                .unwrap();
+        let f = tiny.select(&view(Vec3::new(0.0, 40.0, 0.0))).unwrap();
+        assert!(f.triangle_count() >= 2);
+    }
+    // The minimum size stops the splits.
+    let coarse = TessHierarchy::from_map(
+        &m,
+        None,
+        TessConfig {
+            min_triangle_m: 1e6,
+            ..TessConfig::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(
+        coarse
+            .select(&view(Vec3::new(16.0, 31.0, 16.0)))
+            .unwrap()
+            .triangle_count(),
+        8
+    );
+}
+
+/// After a crater, updating the rect gives the bounds a rebuild gives.
+fn check_update(wrap: WrapMode, at: IVec2, size: UVec2, depth: u16, with_density: bool) {
+    let mut m = map(128, 96, wrap);
+    let params = DensityParams::default();
+    let mut density = DensityMap::from_map(&m, params).unwrap();
+    let d = with_density.then_some(&density);
+    let mut tess = TessHierarchy::from_map(&m, d, TessConfig::default()).unwrap();
+    let rect = Rect::new(at, size);
+    let msize = m.size().as_ivec2();
+    for y in at.y..at.y + size.y as i32 {
+        for x in at.x..at.x + size.x as i32 {
+            let t = match wrap {
+                WrapMode::Repeat => IVec2::new(x, y).rem_euclid(msize),
+                WrapMode::Clamp => {
+                    if x < 0 || y < 0 || x >= msize.x || y >= msize.y {
+                        continue;
+                    }
+                    IVec2::new(x, y)
+                }
+            };
+            let s = m.grid_mut().get_mut(t.x as u32, t.y as u32).unwrap();
+            *s = s.saturating_sub(depth);
+        }
+    }
+    density.update_rect(&m, rect).unwrap();
+    let d = with_density.then_some(&density);
+    tess.update_rect(&m, d, rect).unwrap();
+    let rebuilt = TessHierarchy::from_map(&m, d, TessConfig::default()).unwrap();
+    let g = tess.grid_size().x as usize;
+    let first = |a: &[[f32; 2]], b: &[[f32; 2]]| a.iter().zip(b).position(|(x, y)| x != y);
+    if let Some(i) = tess
+        .heights()
+        .iter()
+        .zip(rebuilt.heights())
+        .position(|(x, y)| x != y)
+    {
+        panic!(
+            "{wrap:?} {rect:?}: height of vertex {} {} differs",
+            i % g,
+            i / g
+        );
+    }
+    if let Some(i) = first(tess.bounds(), rebuilt.bounds()) {
+        panic!(
+            "{wrap:?} {rect:?} density {with_density}: bounds of vertex ({}, {}) are {:?}, rebuilt {:?}",
+            i % g,
+            i / g,
+            tess.bounds()[i],
+            rebuilt.bounds()[i]
+        );
+    }
+    assert!(
+        first(tess.patch_bounds(), rebuilt.patch_bounds()).is_none(),
+        "patch bounds"
+    );
+}
+
+#[test]
+fn updates_at_the_edges_equal_rebuilds() {
+    for wrap in [WrapMode::Clamp, WrapMode::Repeat] {
+        for with_density in [false, true] {
+            check_update(
+                wrap,
+                IVec2::new(120, 90),
+                UVec2::new(12, 10),
+                3000,
+                with_density,
+            );
+            check_update(
+                wrap,
+                IVec2::new(-3, -2),
+                UVec2::new(5, 5),
+                3000,
+                with_density,
+            );
+            check_update(
+                wrap,
+                IVec2::new(31, 31),
+                UVec2::new(2, 2),
+                9000,
+                with_density,
+            );
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    #[test]
+    fn an_update_equals_a_rebuild(
+        x in -20i32..140, y in -20i32..110, w in 1u32..40, h in 1u32..40,
+        depth in 1u16..20_000, repeat in any::<bool>(), with_density in any::<bool>(),
+    ) {
+        let wrap = if repeat { WrapMode::Repeat } else { WrapMode::Clamp };
+        check_update(wrap, IVec2::new(x, y), UVec2::new(w, h), depth, with_density);
+    }
+
+    #[test]
+    fn every_view_gives_a_conforming_mesh(
+        cx in -100.0f32..200.0, cy in 20.0f32..300.0, cz in -100.0f32..200.0,
+        width in 1.0f32..64.0, use_density in any::<bool>(), morph in any::<bool>(),
+        patch in 1u32..7,
+    ) {
+        let m = map(128, 64, WrapMode::Clamp);
+        let density = DensityMap::from_map(&m, DensityParams::default()).unwrap();
+        let config = TessConfig {
+            patch_size: 1 << patch,
+            triangle_width_px: width,
+            use_density,
+            morph,
+            ..TessConfig::default()
+        };
+        let tess = TessHierarchy::from_map(&m, Some(&density), config).unwrap();
+        let frame = tess.select(&view(Vec3::new(cx, cy, cz))).unwrap();
+        assert_conforming(&frame, tess.patches() * config.patch_size);
+    }
+}
