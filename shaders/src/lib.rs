@@ -105,6 +105,20 @@ pub const CDLOD: &str = concat!(
     include_str!("wgsl/cdlod.wgsl")
 );
 
+/// `TessellationPass`: adaptive tessellation by longest-edge bisection (seed 002 sec. 2.3),
+/// writing triangles and indirect draw arguments.
+pub const TESSELLATE: &str = concat!(wgsl_prelude!(), include_str!("wgsl/tessellate.wgsl"));
+
+/// `TessRenderer`: the tessellation pass's triangles, lit and coloured as the clipmap (its
+/// frame, coarse-map surface and fragment shader).
+pub const TESSELLATED: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/clipmap.wgsl"),
+    include_str!("wgsl/clipmap_surface_coarse.wgsl"),
+    include_str!("wgsl/tessellated.wgsl")
+);
+
 /// `ClipmapRenderer` over a granular map: the clipmap drawn from the granular normals pass's
 /// output (unit normal and float height per texel), so nothing is uploaded per frame.
 pub const CLIPMAP_GRANULAR: &str = concat!(
@@ -183,6 +197,8 @@ pub const ALL: &[(&str, &str)] = &[
     ("normals", NORMALS),
     ("density", DENSITY),
     ("cdlod", CDLOD),
+    ("tessellate", TESSELLATE),
+    ("tessellated", TESSELLATED),
     ("sky", SKY),
     ("clipmap", CLIPMAP),
     ("clipmap_granular", CLIPMAP_GRANULAR),

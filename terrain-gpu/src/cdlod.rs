@@ -80,6 +80,7 @@ impl CdlodRenderer {
             &VertexShape {
                 entry: "vs_cdlod",
                 vertex_stride: std::mem::size_of::<[f32; 2]>() as u64,
+                vertex_attrs: &crate::clipmap::GRID_ATTRS,
                 instance_stride: std::mem::size_of::<CdlodInstance>() as u64,
                 instance_attrs: &ATTRS,
                 extra_uniforms: &[3],

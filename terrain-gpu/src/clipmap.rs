@@ -552,15 +552,21 @@ impl ClipmapSurface<'_> {
 pub(crate) struct VertexShape<'a> {
     /// The vertex shader's entry point.
     pub entry: &'static str,
-    /// Bytes per mesh vertex (a `Float32x2` grid position at location 0).
+    /// Bytes per mesh vertex.
     pub vertex_stride: u64,
-    /// Bytes per instance and the instance attributes (locations 1 and up).
+    /// The mesh vertex attributes (a `Float32x2` grid position at location 0 for the
+    /// instanced meshes).
+    pub vertex_attrs: &'a [wgpu::VertexAttribute],
+    /// Bytes per instance (0: no instance buffer).
     pub instance_stride: u64,
-    /// The instance attributes.
+    /// The instance attributes (locations 1 and up).
     pub instance_attrs: &'a [wgpu::VertexAttribute],
     /// Uniform buffers bound after the surface's storage buffers (vertex stage).
     pub extra_uniforms: &'a [u32],
 }
+
+/// The grid position of the instanced meshes' vertices.
+pub(crate) const GRID_ATTRS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x2];
 
 /// The clipmap's vertex inputs.
 fn clipmap_shape() -> VertexShape<'static> {
@@ -569,6 +575,7 @@ fn clipmap_shape() -> VertexShape<'static> {
     VertexShape {
         entry: "vs_main",
         vertex_stride: std::mem::size_of::<ClipmapVertex>() as u64,
+        vertex_attrs: &GRID_ATTRS,
         instance_stride: std::mem::size_of::<ClipmapInstance>() as u64,
         instance_attrs: &ATTRS,
         extra_uniforms: &[],
@@ -641,7 +648,18 @@ impl SurfacePipeline {
                 bind_group_layouts: &[Some(&layout)],
                 immediate_size: 0,
             });
-            let vertex_attrs = wgpu::vertex_attr_array![0 => Float32x2];
+            let mut buffers = vec![Some(wgpu::VertexBufferLayout {
+                array_stride: shape.vertex_stride,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: shape.vertex_attrs,
+            })];
+            if shape.instance_stride > 0 {
+                buffers.push(Some(wgpu::VertexBufferLayout {
+                    array_stride: shape.instance_stride,
+                    step_mode: wgpu::VertexStepMode::Instance,
+                    attributes: shape.instance_attrs,
+                }));
+            }
             let build = |polygon_mode| {
                 device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                     label: Some(label),
@@ -650,18 +668,7 @@ impl SurfacePipeline {
                         module: &module,
                         entry_point: Some(shape.entry),
                         compilation_options: Default::default(),
-                        buffers: &[
-                            Some(wgpu::VertexBufferLayout {
-                                array_stride: shape.vertex_stride,
-                                step_mode: wgpu::VertexStepMode::Vertex,
-                                attributes: &vertex_attrs,
-                            }),
-                            Some(wgpu::VertexBufferLayout {
-                                array_stride: shape.instance_stride,
-                                step_mode: wgpu::VertexStepMode::Instance,
-                                attributes: shape.instance_attrs,
-                            }),
-                        ],
+                        buffers: &buffers,
                     },
                     // No culling: degenerate triangles and both windings of the parts are drawn.
                     primitive: wgpu::PrimitiveState {

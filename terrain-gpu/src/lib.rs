@@ -68,6 +68,7 @@ pub mod scope;
 pub mod sky;
 pub mod stamp;
 pub mod target;
+pub mod tessellation;
 pub mod testing;
 pub mod timer;
 
@@ -87,6 +88,7 @@ pub use region_source::GpuRegionSource;
 pub use sky::{SkyColors, SkyPass};
 pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampOp, StampPass};
 pub use target::TargetFormat;
+pub use tessellation::{GpuTessellation, TessDraw, TessRenderer, TessellationPass};
 pub use timer::{GpuTimer, GpuTiming};
 
 /// The glam of this crate's public API.

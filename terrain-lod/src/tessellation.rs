@@ -331,13 +331,14 @@ impl TessHierarchy {
 
     /// Brings the bounds up to date with `map` (and `density`, already updated) after a height
     /// change inside `dirty` (texels; wrapped on a repeating map). The result equals
-    /// [`TessHierarchy::from_map`] of the changed map.
+    /// [`TessHierarchy::from_map`] of the changed map. Returns the grid rows whose vertices it
+    /// may have changed (one or two ranges; none for an empty rect), for a GPU copy to follow.
     pub fn update_rect<T: HeightSample>(
         &mut self,
         map: &HeightMap<T>,
         density: Option<&DensityMap>,
         dirty: Rect,
-    ) -> Result<(), LodError> {
+    ) -> Result<Vec<std::ops::Range<u32>>, LodError> {
         if map.size() != self.map_size {
             return Err(LodError::SizeMismatch {
                 expected: self.map_size,
@@ -345,7 +346,7 @@ impl TessHierarchy {
             });
         }
         if dirty.is_empty() {
-            return Ok(());
+            return Ok(Vec::new());
         }
         let reach = if density.is_some() {
             self.density_reach
@@ -378,12 +379,23 @@ impl TessHierarchy {
                 )
                 .min(g);
                 if lo.cmpgt(hi).any() {
-                    return Ok(());
+                    return Ok(Vec::new());
                 }
             }
         }
         self.refresh(map, density, lo, hi);
-        Ok(())
+        // The coarsest vertices read `3 P / 2` rows either side (see `refresh`).
+        let reach = 3 * (self.config.patch_size as i32 / 2);
+        let rows = axis(lo.y - reach, hi.y + reach, 1, self.grid.y as i32, self.wrap);
+        let mut ranges: Vec<std::ops::Range<u32>> = Vec::new();
+        for y in rows {
+            let y = y as u32;
+            match ranges.last_mut() {
+                Some(r) if r.end == y => r.end += 1,
+                _ => ranges.push(y..y + 1),
+            }
+        }
+        Ok(ranges)
     }
 
     /// Recomputes heights, bounds and patch bounds of everything the grid vertices `lo ..= hi`
@@ -580,6 +592,16 @@ impl TessHierarchy {
     /// The configuration.
     pub fn config(&self) -> &TessConfig {
         &self.config
+    }
+
+    /// Metres per texel.
+    pub fn texel_size(&self) -> f32 {
+        self.texel_size
+    }
+
+    /// The map's wrap mode.
+    pub fn wrap(&self) -> WrapMode {
+        self.wrap
     }
 
     /// Patches per axis.

@@ -503,7 +503,7 @@ fn check_update(wrap: WrapMode, at: IVec2, size: UVec2, depth: u16, with_density
     }
     density.update_rect(&m, rect).unwrap();
     let d = with_density.then_some(&density);
-    tess.update_rect(&m, d, rect).unwrap();
+    let rows = tess.update_rect(&m, d, rect).unwrap();
     let rebuilt = TessHierarchy::from_map(&m, d, TessConfig::default()).unwrap();
     let g = tess.grid_size().x as usize;
     let first = |a: &[[f32; 2]], b: &[[f32; 2]]| a.iter().zip(b).position(|(x, y)| x != y);

@@ -1,0 +1,479 @@
+//! Adaptive tessellation on the GPU (seed 002 sec. 2.3, algorithm 3.1) as compute work: wgpu
+//! has no tessellation stage, so [`TessellationPass`] refines every patch's two triangles by
+//! longest-edge bisection in a compute shader (`tessellate.wgsl`), appends the triangles it
+//! keeps to a vertex buffer and writes the indirect draw arguments; [`TessRenderer`] draws them
+//! into the caller's pass with `draw_indirect`, shaded exactly as the clipmap. The CPU
+//! reference is [`terrain_lod::TessHierarchy::select`]: same decisions, same f32 operations.
+//!
+//! [`GpuTessellation`] holds the persistent resources: the hierarchy's per-vertex bounds
+//! (height, saturated radius, saturated density), the patch bounds, the output triangles and
+//! the counter with the draw arguments. Nothing is allocated per frame.
+
+use crate::camera::Camera;
+use crate::clipmap::{
+    ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, frame_uniform,
+};
+use crate::compute::{PassBindings, StorageBinding, compute_pipeline, shader_module, wrap_code};
+use crate::download::download_bytes;
+use crate::error::GpuError;
+use crate::maps::{GpuDerivativeMap, GpuHeightMap};
+use crate::scope::scoped;
+use crate::target::TargetFormat;
+use bytemuck::{Pod, Zeroable};
+use glam::UVec2;
+use terrain_core::WrapMode;
+use terrain_lod::{CdlodView, TessHierarchy, TessTriangle, TessVertex};
+
+/// The uniform block of `tessellate.wgsl`, byte for byte.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, Default)]
+struct Params {
+    camera: [f32; 4],
+    planes: [[f32; 4]; 6],
+    texel_size: f32,
+    scale: f32,
+    inv_morph_range: f32,
+    use_density: u32,
+    split_levels: u32,
+    patch_size: u32,
+    capacity: u32,
+    cull: u32,
+    patches: [u32; 2],
+    grid: [u32; 2],
+    wrap: u32,
+    _pad: [u32; 3],
+}
+
+const _: () = assert!(std::mem::size_of::<Params>() == 176);
+
+/// Bytes of the counter block: count, overflow, two pads, then the four `draw_indirect`
+/// arguments.
+const STATE_BYTES: u64 = 32;
+/// Where the draw arguments start in the counter block.
+const ARGS_OFFSET: u64 = 16;
+/// Bytes per triangle in the output (three [`TessVertex`]).
+const TRIANGLE_BYTES: u64 = std::mem::size_of::<TessTriangle>() as u64;
+
+/// A [`TessHierarchy`] on the GPU, with room for `capacity` triangles of output.
+#[derive(Debug)]
+pub struct GpuTessellation {
+    vertices: wgpu::Buffer,
+    patch_bounds: wgpu::Buffer,
+    output: wgpu::Buffer,
+    state: wgpu::Buffer,
+    capacity: u32,
+    grid: UVec2,
+    patches: UVec2,
+}
+
+impl GpuTessellation {
+    /// Uploads `hierarchy` and makes room for `capacity` triangles (at least 1). Fails when
+    /// the buffers exceed the device's limits.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        hierarchy: &TessHierarchy,
+        capacity: u32,
+    ) -> Result<Self, GpuError> {
+        let grid = hierarchy.grid_size();
+        let patches = hierarchy.patches();
+        let capacity = capacity.max(1);
+        let limit = u64::from(device.limits().max_storage_buffer_binding_size);
+        let vertex_bytes = u64::from(grid.x) * u64::from(grid.y) * 12;
+        let output_bytes = u64::from(capacity) * TRIANGLE_BYTES;
+        if vertex_bytes > limit {
+            return Err(GpuError::MapTooLarge {
+                size: grid,
+                bytes: vertex_bytes,
+                limit,
+            });
+        }
+        if output_bytes > limit {
+            return Err(GpuError::Unsupported {
+                what: "GpuTessellation",
+                reason: "the output for this many triangles exceeds the device's storage buffer \
+                         limit (36 bytes per triangle): ask for fewer",
+            });
+        }
+        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let (vertices, patch_bounds, output, state) = scoped(device, "GpuTessellation", || {
+            let buffer = |label, size: u64, usage| {
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: size.max(16),
+                    usage,
+                    mapped_at_creation: false,
+                })
+            };
+            (
+                buffer("tessellation vertices", vertex_bytes, storage),
+                buffer(
+                    "tessellation patch bounds",
+                    u64::from(patches.x) * u64::from(patches.y) * 8,
+                    storage,
+                ),
+                buffer(
+                    "tessellation output",
+                    output_bytes,
+                    wgpu::BufferUsages::STORAGE
+                        | wgpu::BufferUsages::VERTEX
+                        | wgpu::BufferUsages::COPY_SRC,
+                ),
+                buffer(
+                    "tessellation state",
+                    STATE_BYTES,
+                    storage | wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_SRC,
+                ),
+            )
+        })?;
+        let out = Self {
+            vertices,
+            patch_bounds,
+            output,
+            state,
+            capacity,
+            grid,
+            patches,
+        };
+        out.upload_rows(queue, hierarchy, 0..grid.y)?;
+        Ok(out)
+    }
+
+    /// Copies the vertex rows `rows` (as [`TessHierarchy::update_rect`] returns them) and all
+    /// patch bounds of `hierarchy` to the GPU. Fails for a hierarchy of another size.
+    pub fn upload_rows(
+        &self,
+        queue: &wgpu::Queue,
+        hierarchy: &TessHierarchy,
+        rows: std::ops::Range<u32>,
+    ) -> Result<(), GpuError> {
+        if hierarchy.grid_size() != self.grid || hierarchy.patches() != self.patches {
+            return Err(GpuError::SizeMismatch {
+                expected: self.grid,
+                actual: hierarchy.grid_size(),
+            });
+        }
+        let rows = rows.start.min(self.grid.y)..rows.end.min(self.grid.y);
+        if !rows.is_empty() {
+            let w = self.grid.x as usize;
+            let (a, b) = (rows.start as usize * w, rows.end as usize * w);
+            let packed: Vec<[f32; 3]> = hierarchy.heights()[a..b]
+                .iter()
+                .zip(&hierarchy.bounds()[a..b])
+                .map(|(&h, &[r, d])| [h, r, d])
+                .collect();
+            queue.write_buffer(&self.vertices, a as u64 * 12, bytemuck::cast_slice(&packed));
+        }
+        queue.write_buffer(
+            &self.patch_bounds,
+            0,
+            bytemuck::cast_slice(hierarchy.patch_bounds()),
+        );
+        Ok(())
+    }
+
+    /// Triangles the output holds.
+    pub fn capacity(&self) -> u32 {
+        self.capacity
+    }
+
+    /// Reads back what the last [`TessellationPass::encode`] wrote: its triangles (in no
+    /// particular order) and whether more were generated than the output holds. Blocking: for
+    /// tests and tools.
+    pub fn read_triangles(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<(Vec<TessTriangle>, bool), GpuError> {
+        let state = download_bytes(device, queue, &self.state, 0, STATE_BYTES)?;
+        let words: &[u32] = bytemuck::cast_slice(&state);
+        let count = words[0].min(self.capacity);
+        let overflow = words[1] != 0;
+        if count == 0 {
+            return Ok((Vec::new(), overflow));
+        }
+        let bytes = download_bytes(
+            device,
+            queue,
+            &self.output,
+            0,
+            u64::from(count) * TRIANGLE_BYTES,
+        )?;
+        let verts: &[TessVertex] = bytemuck::cast_slice(&bytes);
+        let tris = verts.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        Ok((tris, overflow))
+    }
+}
+
+/// The compute pass that tessellates a [`GpuTessellation`] for a view. Build it once per
+/// device.
+#[derive(Debug)]
+pub struct TessellationPass {
+    bindings: PassBindings<Params>,
+    generate: wgpu::ComputePipeline,
+    finish: wgpu::ComputePipeline,
+}
+
+impl TessellationPass {
+    /// Compiles the shader and builds both pipelines.
+    pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
+        let bindings = PassBindings::new(
+            device,
+            "TessellationPass",
+            wgpu::ShaderStages::COMPUTE,
+            &[
+                StorageBinding::compute(true),
+                StorageBinding::compute(true),
+                StorageBinding::compute(false),
+                StorageBinding::compute(false),
+            ],
+        );
+        let module = shader_module(device, "tessellate.wgsl", terrain_shaders::TESSELLATE)?;
+        let generate = compute_pipeline(
+            device,
+            "tessellate generate",
+            &module,
+            bindings.layout(),
+            "generate",
+        )?;
+        let finish = compute_pipeline(
+            device,
+            "tessellate finish",
+            &module,
+            bindings.layout(),
+            "finish",
+        )?;
+        Ok(Self {
+            bindings,
+            generate,
+            finish,
+        })
+    }
+
+    /// Records the tessellation of `gpu` (uploaded from `hierarchy`) for `view` into
+    /// `encoder`: clears the counter, refines every patch, writes the draw arguments. Checks
+    /// the view as [`TessHierarchy::select`] does.
+    pub fn encode(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        gpu: &GpuTessellation,
+        hierarchy: &TessHierarchy,
+        view: &CdlodView<'_>,
+    ) -> Result<(), GpuError> {
+        if hierarchy.grid_size() != gpu.grid || hierarchy.patches() != gpu.patches {
+            return Err(GpuError::SizeMismatch {
+                expected: gpu.grid,
+                actual: hierarchy.grid_size(),
+            });
+        }
+        let d = hierarchy.decision(view)?;
+        let c = hierarchy.config();
+        let mut planes = [[0.0f32; 4]; 6];
+        if let Some(f) = view.frustum {
+            for (p, q) in planes.iter_mut().zip(f.planes()) {
+                *p = q.to_array();
+            }
+        }
+        let params = Params {
+            camera: d.camera.extend(0.0).to_array(),
+            planes,
+            texel_size: hierarchy.texel_size(),
+            scale: d.scale,
+            inv_morph_range: d.inv_morph_range,
+            use_density: u32::from(d.use_density),
+            split_levels: d.split_levels,
+            patch_size: c.patch_size,
+            capacity: gpu.capacity,
+            cull: u32::from(view.frustum.is_some()),
+            patches: gpu.patches.to_array(),
+            grid: gpu.grid.to_array(),
+            wrap: wrap_code(hierarchy.wrap()),
+            _pad: [0; 3],
+        };
+        let buffers = [&gpu.vertices, &gpu.patch_bounds, &gpu.output, &gpu.state];
+        let (group, offset) = self.bindings.bind(device, queue, &params, &buffers)?;
+        encoder.clear_buffer(&gpu.state, 0, None);
+        let threads = 2 * u64::from(gpu.patches.x) * u64::from(gpu.patches.y);
+        let groups = threads.div_ceil(64);
+        let max = u64::from(device.limits().max_compute_workgroups_per_dimension);
+        if groups > max {
+            return Err(GpuError::Unsupported {
+                what: "TessellationPass",
+                reason: "more patches than one dispatch of the device covers: use larger patches",
+            });
+        }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("TessellationPass"),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, &group, &[offset]);
+        pass.set_pipeline(&self.generate);
+        pass.dispatch_workgroups(groups as u32, 1, 1);
+        pass.set_pipeline(&self.finish);
+        pass.dispatch_workgroups(1, 1, 1);
+        Ok(())
+    }
+
+    /// Frees the uniform ring's slots: call after the submit carrying the encoded work.
+    pub fn recall(&mut self) {
+        self.bindings.recall();
+    }
+}
+
+/// Everything one tessellated frame is drawn from.
+#[derive(Debug, Clone, Copy)]
+pub struct TessDraw<'a> {
+    /// The heights (for the fragment shader's lookups).
+    pub map: &'a GpuHeightMap<u16>,
+    /// Their derivative normals.
+    pub normals: &'a GpuDerivativeMap,
+    /// The camera.
+    pub camera: &'a Camera,
+    /// Lighting and colours.
+    pub style: &'a TerrainStyle,
+    /// The render target's size in pixels.
+    pub target_size: UVec2,
+}
+
+/// Draws the triangles of a [`GpuTessellation`] into passes of one [`TargetFormat`]: build it
+/// once, then per frame [`TessRenderer::prepare`] and [`TessRenderer::draw`] (after the
+/// tessellation pass was encoded, and after [`crate::SkyPass`], as the clipmap).
+#[derive(Debug)]
+pub struct TessRenderer {
+    pipeline: SurfacePipeline,
+    target: TargetFormat,
+    uniform: wgpu::Buffer,
+    bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
+    wireframe: bool,
+}
+
+impl TessRenderer {
+    /// Builds the pipeline.
+    pub fn new(device: &wgpu::Device, target: &TargetFormat) -> Result<Self, GpuError> {
+        target.validate(device)?;
+        const ATTRS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
+        let pipeline = SurfacePipeline::new(
+            device,
+            target,
+            "tessellated.wgsl",
+            terrain_shaders::TESSELLATED,
+            &[
+                (wgpu::ShaderStages::FRAGMENT, 1),
+                (wgpu::ShaderStages::FRAGMENT, 2),
+            ],
+            &VertexShape {
+                entry: "vs_tess",
+                vertex_stride: std::mem::size_of::<TessVertex>() as u64,
+                vertex_attrs: &ATTRS,
+                instance_stride: 0,
+                instance_attrs: &[],
+                extra_uniforms: &[],
+            },
+        )?;
+        let uniform = scoped(device, "TessRenderer", || {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("tessellated frame"),
+                size: std::mem::size_of::<crate::clipmap::FrameUniform>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })?;
+        Ok(Self {
+            pipeline,
+            target: *target,
+            uniform,
+            bound: None,
+            wireframe: false,
+        })
+    }
+
+    /// Draws triangle edges as lines from the next draw; fails without
+    /// [`wgpu::Features::POLYGON_MODE_LINE`].
+    pub fn set_wireframe(&mut self, on: bool) -> Result<(), GpuError> {
+        if on && self.pipeline.wireframe.is_none() {
+            return Err(GpuError::Unsupported {
+                what: "TessRenderer wireframe",
+                reason: "the device was made without Features::POLYGON_MODE_LINE",
+            });
+        }
+        self.wireframe = on;
+        Ok(())
+    }
+
+    /// Writes the frame uniform. Checks everything before wgpu sees it.
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        draw: &TessDraw<'_>,
+    ) -> Result<(), GpuError> {
+        check_view(
+            draw.camera,
+            draw.target_size,
+            "tessellated target size (pixels)",
+        )?;
+        let surface = ClipmapSurface::Coarse {
+            map: draw.map,
+            normals: draw.normals,
+        };
+        let info = surface.check()?;
+        let wrap_offset = match info.wrap {
+            // Vertices lie in 0 ..= the map size; fragments read a texel either side.
+            WrapMode::Repeat => crate::compute::wrap_offset(glam::IVec2::splat(-2), info.size)?,
+            WrapMode::Clamp => [0, 0],
+        };
+        let uniform = frame_uniform(
+            &info,
+            draw.camera,
+            draw.style,
+            &self.target,
+            draw.target_size,
+            (0, 0),
+            wrap_offset,
+        );
+        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
+        let buffers = surface.buffers();
+        if self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
+            let entries = [
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.uniform.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: buffers[0].as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: buffers[1].as_entire_binding(),
+                },
+            ];
+            let group = scoped(device, "TessRenderer bind group", || {
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("TessRenderer"),
+                    layout: &self.pipeline.layout,
+                    entries: &entries,
+                })
+            })?;
+            self.bound = Some((buffers, group));
+        }
+        Ok(())
+    }
+
+    /// Records the draw of `gpu`'s triangles (as many as the last tessellation wrote) into
+    /// `pass`. Draws nothing before the first prepare.
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, gpu: &GpuTessellation) {
+        let Some((_, group)) = &self.bound else {
+            return;
+        };
+        match (&self.pipeline.wireframe, self.wireframe) {
+            (Some(lines), true) => pass.set_pipeline(lines),
+            _ => pass.set_pipeline(&self.pipeline.pipeline),
+        }
+        pass.set_bind_group(0, group, &[]);
+        pass.set_vertex_buffer(0, gpu.output.slice(..));
+        pass.draw_indirect(&gpu.state, ARGS_OFFSET);
+    }
+}

@@ -1,0 +1,276 @@
+//! Adaptive tessellation on the GPU: the compute pass emits the triangles of terrain-lod's CPU
+//! reference (same set, same drawn heights), draws them without cracks from grazing views
+//! across patch edges, and bounds its output.
+
+#[path = "common/scene.rs"]
+#[allow(dead_code)] // the clipmap parts of the shared scene
+mod scene;
+
+use glam::{UVec2, Vec2, Vec3};
+use scene::Scene;
+use std::collections::HashMap;
+use terrain_gpu::testing::context_or_skip;
+use terrain_gpu::{
+    Camera, GpuTessellation, OffscreenTarget, SkyColors, TargetFormat, TerrainStyle, TessDraw,
+    TessRenderer, TessellationPass,
+};
+use terrain_lod::{
+    CdlodView, DensityMap, DensityParams, Frustum, TessConfig, TessHierarchy, TessTriangle,
+};
+
+fn view_of<'a>(camera: &Camera, size: UVec2, frustum: Option<&'a Frustum>) -> CdlodView<'a> {
+    let aspect = size.x as f32 / size.y as f32;
+    CdlodView {
+        camera: camera.position,
+        frustum,
+        viewport_width: size.x as f32,
+        hfov: 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan(),
+    }
+}
+
+/// Triangles by their corners (exact integers), with their drawn heights.
+fn by_corners(tris: &[TessTriangle]) -> HashMap<[i32; 6], [f32; 3]> {
+    tris.iter()
+        .map(|t| {
+            let k = [
+                t[0].texel[0] as i32,
+                t[0].texel[1] as i32,
+                t[1].texel[0] as i32,
+                t[1].texel[1] as i32,
+                t[2].texel[0] as i32,
+                t[2].texel[1] as i32,
+            ];
+            (k, [t[0].height, t[1].height, t[2].height])
+        })
+        .collect()
+}
+
+#[test]
+fn the_gpu_emits_the_cpu_reference_triangles() {
+    let Some(ctx) = context_or_skip("tessellation gpu == cpu") else {
+        return;
+    };
+    let scene = Scene::new(ctx, 31, 5);
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let density = DensityMap::from_map(&scene.map, DensityParams::default()).unwrap();
+    let mut pass = TessellationPass::new(device).unwrap();
+    let size = UVec2::new(640, 360);
+    let mut compared = 0;
+    for (use_density, morph, patch_size) in [(true, true, 32), (false, true, 16), (true, false, 64)]
+    {
+        let config = TessConfig {
+            use_density,
+            morph,
+            patch_size,
+            triangle_width_px: 4.0,
+            ..TessConfig::default()
+        };
+        let tess = TessHierarchy::from_map(&scene.map, Some(&density), config).unwrap();
+        let gpu = GpuTessellation::new(device, queue, &tess, 1 << 20).unwrap();
+        for (eye, dir) in [
+            (Vec3::new(60.0, 45.0, 70.0), Vec3::new(1.0, -0.4, 0.3)),
+            (Vec3::new(200.0, 80.0, 20.0), Vec3::new(-0.5, -0.6, 0.8)),
+            (Vec3::new(128.0, 300.0, 128.0), Vec3::new(0.0, -1.0, 0.01)),
+        ] {
+            let camera = Camera::looking(eye, dir);
+            let frustum =
+                Frustum::from_view_proj(camera.view_proj_world(size.x as f32 / size.y as f32));
+            for culled in [false, true] {
+                let view = view_of(&camera, size, culled.then_some(&frustum));
+                let cpu = tess.select(&view).unwrap();
+                let mut encoder = device.create_command_encoder(&Default::default());
+                pass.encode(device, queue, &mut encoder, &gpu, &tess, &view)
+                    .unwrap();
+                queue.submit([encoder.finish()]);
+                pass.recall();
+                let (tris, overflow) = gpu.read_triangles(device, queue).unwrap();
+                assert!(!overflow);
+                let (a, b) = (by_corners(&cpu.triangles), by_corners(&tris));
+                // The same f32 operations on both sides; a decision exactly at its threshold
+                // may still differ by the rounding of a square root: allow 0.1 %.
+                let missing = a.keys().filter(|k| !b.contains_key(*k)).count();
+                let extra = b.keys().filter(|k| !a.contains_key(*k)).count();
+                assert!(
+                    (missing + extra) * 1000 <= a.len(),
+                    "{config:?} {eye}: {} CPU triangles, {} GPU, {missing} missing, {extra} extra",
+                    a.len(),
+                    b.len()
+                );
+                eprintln!(
+                    "{} CPU triangles: {missing} missing on the GPU, {extra} extra",
+                    a.len()
+                );
+                let mut worst = 0.0f32;
+                for (k, h) in &a {
+                    if let Some(g) = b.get(k) {
+                        for i in 0..3 {
+                            worst = worst.max((h[i] - g[i]).abs());
+                        }
+                    }
+                }
+                assert!(worst <= 1e-4, "drawn heights differ by {worst} m");
+                compared += a.len();
+            }
+        }
+        scene.ctx.check().expect("no GPU validation errors");
+    }
+    assert!(compared > 100_000, "{compared} triangles compared");
+}
+
+#[test]
+fn the_output_is_bounded_and_says_when_it_overflows() {
+    let Some(ctx) = context_or_skip("tessellation output bound") else {
+        return;
+    };
+    let scene = Scene::new(ctx, 31, 5);
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let tess = TessHierarchy::from_map(&scene.map, None, TessConfig::default()).unwrap();
+    let gpu = GpuTessellation::new(device, queue, &tess, 1000).unwrap();
+    let mut pass = TessellationPass::new(device).unwrap();
+    let camera = Camera::looking(Vec3::new(128.0, 50.0, 128.0), Vec3::new(1.0, -0.5, 0.0));
+    let view = view_of(&camera, UVec2::new(640, 360), None);
+    let mut encoder = device.create_command_encoder(&Default::default());
+    pass.encode(device, queue, &mut encoder, &gpu, &tess, &view)
+        .unwrap();
+    queue.submit([encoder.finish()]);
+    let (tris, overflow) = gpu.read_triangles(device, queue).unwrap();
+    assert!(overflow && tris.len() == 1000);
+    // Another hierarchy's size is refused before wgpu sees it.
+    let small = terrain_core::HeightMap::new(
+        terrain_core::Grid::new(64, 64, 0u16).unwrap(),
+        terrain_core::HeightEncoding::new(0.01, 0.0).unwrap(),
+        1.0,
+        terrain_core::WrapMode::Clamp,
+    )
+    .unwrap();
+    let other = TessHierarchy::from_map(&small, None, TessConfig::default()).unwrap();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    assert!(
+        pass.encode(device, queue, &mut encoder, &gpu, &other, &view)
+            .is_err()
+    );
+    assert!(gpu.upload_rows(queue, &other, 0..4).is_err());
+    scene.ctx.check().expect("no GPU validation errors");
+}
+
+fn is_sky(p: [u8; 4]) -> bool {
+    p[0] > 200 && p[1] < 70 && p[2] > 200
+}
+
+/// Sky pixels below the terrain's silhouette per column (a level camera: a hole in the
+/// mesh), and terrain pixels.
+fn holes(image: &terrain_core::Grid<[u8; 4]>) -> (usize, usize) {
+    let (mut holes, mut terrain) = (0, 0);
+    for x in 0..image.width() {
+        let mut seen = false;
+        for y in 0..image.height() {
+            if !is_sky(image.get(x, y).unwrap()) {
+                seen = true;
+                terrain += 1;
+            } else if seen {
+                holes += 1;
+            }
+        }
+    }
+    (holes, terrain)
+}
+
+#[test]
+fn no_cracks_from_grazing_views_across_patch_edges() {
+    let Some(ctx) = context_or_skip("tessellation no_cracks_from_grazing_views") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 31, 5);
+    let density = DensityMap::from_map(&scene.map, DensityParams::default()).unwrap();
+    let config = TessConfig {
+        patch_size: 16,
+        triangle_width_px: 10.0,
+        ..TessConfig::default()
+    };
+    let tess = TessHierarchy::from_map(&scene.map, Some(&density), config).unwrap();
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let gpu = GpuTessellation::new(device, queue, &tess, 1 << 20).unwrap();
+    let mut pass = TessellationPass::new(device).unwrap();
+    let mut renderer = TessRenderer::new(device, &TargetFormat::CAPTURE).unwrap();
+    let size = UVec2::new(320, 200);
+    let magenta = SkyColors {
+        horizon: Vec3::new(1.0, 0.0, 1.0),
+        zenith: Vec3::new(1.0, 0.0, 1.0),
+    };
+    let style = TerrainStyle {
+        ramp: (0.0, scene::HEIGHT),
+        ..TerrainStyle::default()
+    };
+    let mut levels_seen = 0;
+    for (i, xz) in [
+        Vec2::new(100.0, 100.0),
+        Vec2::new(63.9, 130.6),
+        Vec2::new(32.2, 200.5),
+    ]
+    .iter()
+    .enumerate()
+    {
+        for (j, yaw) in [0.0f32, 0.8, 2.4, 3.9, 5.1].iter().enumerate() {
+            let eye = Vec3::new(xz.x, scene.ground(*xz) + 1.5 + i as f32, xz.y);
+            // Looking into the map (the tessellation draws the map once).
+            let camera = Camera::looking(eye, Vec3::new(yaw.cos(), 0.0, yaw.sin()));
+            let aspect = size.x as f32 / size.y as f32;
+            let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
+            let view = view_of(&camera, size, Some(&frustum));
+            let cpu = tess.select(&view).unwrap();
+            let sizes: std::collections::HashSet<u32> = cpu
+                .triangles
+                .iter()
+                .map(|t| Vec2::from(t[0].texel).distance_squared(Vec2::from(t[1].texel)) as u32)
+                .collect();
+            levels_seen = levels_seen.max(sizes.len());
+            scene
+                .sky
+                .prepare(queue, camera.view_proj_relative(aspect), &magenta)
+                .unwrap();
+            renderer
+                .prepare(
+                    device,
+                    queue,
+                    &TessDraw {
+                        map: &scene.gpu_map,
+                        normals: &scene.normals,
+                        camera: &camera,
+                        style: &style,
+                        target_size: size,
+                    },
+                )
+                .unwrap();
+            let target = OffscreenTarget::new(device, size).unwrap();
+            let mut encoder = device.create_command_encoder(&Default::default());
+            pass.encode(device, queue, &mut encoder, &gpu, &tess, &view)
+                .unwrap();
+            {
+                let mut rp = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
+                scene.sky.draw(&mut rp);
+                renderer.draw(&mut rp, &gpu);
+            }
+            queue.submit([encoder.finish()]);
+            pass.recall();
+            let image = target.read_rgba8(device, queue).unwrap();
+            scene.ctx.check().expect("no GPU validation errors");
+            let (holes, terrain) = holes(&image);
+            assert!(
+                terrain > (size.x * size.y / 4) as usize,
+                "view {i}/{j}: terrain must fill the lower half ({terrain} pixels)"
+            );
+            if holes > 0 {
+                let path = std::env::temp_dir().join(format!("tess_crack_{i}_{j}.png"));
+                let _ = terrain_core::io::write_png_rgba8(&path, &image);
+                panic!(
+                    "view {i}/{j}: {holes} sky pixels inside the terrain (image: {})",
+                    path.display()
+                );
+            }
+        }
+    }
+    assert!(
+        levels_seen >= 5,
+        "the views cross many levels: {levels_seen}"
+    );
+}
