@@ -93,17 +93,28 @@ pub struct Cli {
     /// Write top-down overview frames only, without the GPU (as when no adapter exists).
     #[arg(long)]
     pub no_gpu: bool,
-    /// Level of detail of the default scenario's 3D frames: geometry clipmaps, or CDLOD
-    /// (quadtree selection with per-vertex morphing, seed 002 sec. 1.1.4).
+    /// Level of detail of the default scenario's 3D frames: geometry clipmaps, CDLOD
+    /// (quadtree selection with per-vertex morphing, seed 002 sec. 1.1.4), or adaptive
+    /// tessellation (edges split by their projected size and the density map, seed 002 sec.
+    /// 2.3, as a compute pass).
     #[arg(long, value_enum, default_value_t = LodArg::Clipmap)]
     pub lod: LodArg,
     /// With `--lod cdlod`: choose the LODs by screen-space error (seed 002 eq. 1.1), at most
     /// PX pixels, instead of by distance ranges.
     #[arg(long, value_name = "PX")]
     pub target_error: Option<f32>,
-    /// With `--lod cdlod`: no per-vertex morph (LOD changes pop; for comparison).
+    /// With `--lod cdlod` or `tessellated`: no per-vertex morph (LOD changes pop; for
+    /// comparison).
     #[arg(long)]
     pub no_morph: bool,
+    /// With `--lod tessellated`: scale each edge's split by the curvature density map (seed
+    /// 002 ch. 3), or tessellate by projected size alone. Default on.
+    #[arg(long, value_enum, value_name = "on|off")]
+    pub density_map: Option<Switch>,
+    /// With `--lod tessellated`: the target projected edge length in pixels (seed 002's
+    /// "triangle width"; default 8).
+    #[arg(long, value_name = "PX")]
+    pub triangle_width: Option<f32>,
     /// Refuse a run whose estimated memory (maps, GPU copies, frames, pools, the process and
     /// its GPU driver) is above SIZE, as 1536M or 8G; default half the machine's memory.
     #[arg(long, value_name = "SIZE", value_parser = crate::memory_limit::parse_bytes)]
@@ -205,6 +216,18 @@ pub enum LodArg {
     Clipmap,
     /// CDLOD quadtree with per-vertex morphing (seed 002 sec. 1.1.4).
     Cdlod,
+    /// Adaptive tessellation by longest-edge bisection in a compute pass (seed 002 sec. 2.3).
+    Tessellated,
+}
+
+/// An on / off flag value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Switch {
+    /// On.
+    On,
+    /// Off.
+    Off,
 }
 
 /// `--camera` of the default scenario.

@@ -21,7 +21,7 @@ use glam::Vec2;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 use terrain_core::io;
-use terrain_lod::{CdlodConfig, LodMetric};
+use terrain_lod::{CdlodConfig, LodMetric, TessConfig};
 
 /// Runs `scenario` for `cli.frames` frames (fewer after Ctrl-C) into `cli.out` and returns
 /// the report written; `params` are the run's parameters (the GPU scene takes its style and
@@ -183,17 +183,18 @@ fn open_gpu(
     params: &DemoParams,
     scenario: &mut dyn Scenario,
 ) -> Result<Option<GpuScene>> {
-    if cli.lod == LodArg::Cdlod && cli.scenario != ScenarioKind::Default {
+    if cli.lod != LodArg::Clipmap && cli.scenario != ScenarioKind::Default {
         return Err(anyhow::anyhow!(
-            "--lod cdlod draws the coarse-map of the default scenario (and of --heightmap); \
-             the snow and flyover scenarios draw with the clipmap"
+            "--lod cdlod and --lod tessellated draw the coarse-map of the default scenario (and \
+             of --heightmap); the snow and flyover scenarios draw with the clipmap"
         ))
         .usage();
     }
     if let Some(tau) = cli.target_error {
         if cli.lod != LodArg::Cdlod {
             return Err(anyhow::anyhow!(
-                "--target-error chooses CDLOD's LODs: it needs --lod cdlod"
+                "--target-error chooses CDLOD's LODs: it needs --lod cdlod (--lod tessellated \
+                 takes --triangle-width)"
             ))
             .usage();
         }
@@ -204,12 +205,22 @@ fn open_gpu(
             .usage();
         }
     }
-    if cli.no_morph && cli.lod != LodArg::Cdlod {
+    if cli.no_morph && cli.lod == LodArg::Clipmap {
         return Err(anyhow::anyhow!(
-            "--no-morph turns off CDLOD's morph: it needs --lod cdlod"
+            "--no-morph turns off CDLOD's or the tessellation's morph: it needs --lod cdlod or \
+             --lod tessellated"
         ))
         .usage();
     }
+    if (cli.density_map.is_some() || cli.triangle_width.is_some()) && cli.lod != LodArg::Tessellated
+    {
+        return Err(anyhow::anyhow!(
+            "--density-map and --triangle-width steer the adaptive tessellation: they need \
+             --lod tessellated"
+        ))
+        .usage();
+    }
+    let tess_config = tess_config(cli).usage()?;
     if cli.no_gpu {
         return Ok(None);
     }
@@ -229,11 +240,46 @@ fn open_gpu(
     };
     scenario.prepare_gpu(&mut scene)?;
     scene.apply_style(&params.style);
-    if cli.lod == LodArg::Cdlod {
-        let reach = scene.clipmap_reach_m();
-        scene.enable_cdlod(scenario.map(), cdlod_config(cli, scenario.map(), reach)?)?;
+    match cli.lod {
+        LodArg::Cdlod => {
+            let reach = scene.clipmap_reach_m();
+            scene.enable_cdlod(scenario.map(), cdlod_config(cli, scenario.map(), reach)?)?;
+        }
+        LodArg::Tessellated => {
+            let density = cli.density_map != Some(crate::cli::Switch::Off);
+            let size = scenario.map().size();
+            let mut config = tess_config;
+            if scenario.map().wrap() == terrain_core::WrapMode::Repeat {
+                // The patches must tile a repeating map.
+                config.patch_size = [32u32, 16, 8, 4, 2]
+                    .into_iter()
+                    .find(|&p| size.x.is_multiple_of(p) && size.y.is_multiple_of(p))
+                    .ok_or_else(|| {
+                        anyhow::anyhow!(
+                            "--lod tessellated needs a repeating map whose sides are even ({}x{})",
+                            size.x,
+                            size.y
+                        )
+                    })?;
+            }
+            scene.enable_tessellation(scenario.map(), config, density)?;
+        }
+        LodArg::Clipmap => {}
     }
     Ok(Some(scene))
+}
+
+/// The tessellation of `--lod tessellated`: patches of 32 texels (fewer where a repeating
+/// map's sides are not multiples of 32), the triangle width of `--triangle-width`.
+fn tess_config(cli: &Cli) -> Result<TessConfig> {
+    let config = TessConfig {
+        triangle_width_px: cli.triangle_width.unwrap_or(8.0),
+        use_density: cli.density_map != Some(crate::cli::Switch::Off),
+        morph: !cli.no_morph,
+        ..TessConfig::default()
+    };
+    config.validate().context("--triangle-width")?;
+    Ok(config)
 }
 
 /// The CDLOD quadtree for `map`: leaves of 32 texels (fewer where a repeating map's sides are

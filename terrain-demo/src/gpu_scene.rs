@@ -12,10 +12,11 @@ use terrain_gpu::{
     CdlodDraw, CdlodRenderer, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuContext,
     GpuDerivativeMap, GpuHeightMap, GpuRegionSource, GpuStamp, GpuTextureStamp, GpuTimer,
     GpuTiming, NormalPass, OffscreenTarget, RegionReadback, SkyColors, SkyPass, StampOp, StampPass,
-    TerrainStyle,
+    TerrainStyle, TessDraw, TessRenderer, TessellationPass,
 };
 use terrain_lod::{
-    CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodView, ClipmapLayout, Frustum,
+    CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodView, ClipmapLayout, DensityMap,
+    DensityParams, Frustum, TessConfig, TessHierarchy,
 };
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 
@@ -72,6 +73,8 @@ pub struct GpuScene {
     tile_readback: Option<RegionReadback>,
     /// CDLOD instead of the clipmap (`--lod cdlod`), for the coarse-map.
     cdlod: Option<CdlodScene>,
+    /// Adaptive tessellation instead of the clipmap (`--lod tessellated`), for the coarse-map.
+    tess: Option<TessScene>,
     /// Vertices of each part of the clipmap's shared mesh, by part index.
     clipmap_part_vertices: Vec<u64>,
     /// Frames rendered so far.
@@ -138,6 +141,23 @@ struct CdlodScene {
     last: Option<(CdlodFrame, glam::Vec3)>,
     previous: Option<(CdlodFrame, glam::Vec3)>,
 }
+
+/// Adaptive tessellation on the GPU scene: the hierarchy and density map (on the CPU, kept
+/// current by the deformations and copied to the GPU where they change), the compute pass that
+/// tessellates, the renderer, and the cameras of the last two frames (for the popping metric).
+struct TessScene {
+    hierarchy: TessHierarchy,
+    density: Option<DensityMap>,
+    gpu: terrain_gpu::GpuTessellation,
+    pass: TessellationPass,
+    renderer: TessRenderer,
+    /// The last frame's view (camera, viewport width, hfov), and the one before.
+    last: Option<(glam::Vec3, f32, f32)>,
+    previous: Option<(glam::Vec3, f32, f32)>,
+}
+
+/// Triangles the tessellation's output holds (72 MiB of vertices).
+const TESS_CAPACITY: u32 = 1 << 21;
 
 /// One rendered frame.
 pub struct RenderedFrame {
@@ -287,6 +307,7 @@ impl GpuScene {
             atlas: None,
             tile_readback: None,
             cdlod: None,
+            tess: None,
             frames: 0,
             destroy_at: std::env::var(DESTROY_DEVICE_ENV)
                 .ok()
@@ -353,6 +374,33 @@ impl GpuScene {
         Ok(())
     }
 
+    /// Draws the coarse-map with adaptive tessellation instead of the clipmap: the hierarchy of
+    /// `map` with `config` (and its density map when `density`), kept current by
+    /// [`GpuScene::update_lod`].
+    pub fn enable_tessellation(
+        &mut self,
+        map: &CoarseMap,
+        config: TessConfig,
+        density: bool,
+    ) -> Result<()> {
+        let density = density
+            .then(|| DensityMap::from_map(map, DensityParams::default()))
+            .transpose()?;
+        let hierarchy = TessHierarchy::from_map(map, density.as_ref(), config)?;
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let gpu = terrain_gpu::GpuTessellation::new(device, queue, &hierarchy, TESS_CAPACITY)?;
+        self.tess = Some(TessScene {
+            hierarchy,
+            density,
+            gpu,
+            pass: TessellationPass::new(device)?,
+            renderer: TessRenderer::new(device, &self.target.format())?,
+            last: None,
+            previous: None,
+        });
+        Ok(())
+    }
+
     /// Brings the CDLOD quadtree's bounds up to date with `map` after deformations in `dirty`
     /// (timed as `lod`); nothing without CDLOD.
     pub fn update_lod(
@@ -368,6 +416,18 @@ impl GpuScene {
             }
             timings.add(Step::Lod, crate::timings::ms_since(t));
         }
+        if let Some(c) = &mut self.tess {
+            let t = std::time::Instant::now();
+            for r in dirty {
+                if let Some(d) = &mut c.density {
+                    d.update_rect(map, *r)?;
+                }
+                for rows in c.hierarchy.update_rect(map, c.density.as_ref(), *r)? {
+                    c.gpu.upload_rows(&self.ctx.queue, &c.hierarchy, rows)?;
+                }
+            }
+            timings.add(Step::Lod, crate::timings::ms_since(t));
+        }
         Ok(())
     }
 
@@ -376,6 +436,9 @@ impl GpuScene {
     /// at probes ahead of `camera`, both frames evaluated on `map` and projected with
     /// `camera`, so only a change of the mesh counts.
     pub fn lod_jump_px(&self, map: &CoarseMap, camera: &Camera) -> Option<f32> {
+        if let Some(t) = &self.tess {
+            return tess_jump_px(t, camera, self.target.size().as_vec2());
+        }
         let c = self.cdlod.as_ref()?;
         let ((now, eye), (then, then_eye)) = (c.last.as_ref()?, c.previous.as_ref()?);
         let ts = map.texel_size();
@@ -761,6 +824,21 @@ impl GpuScene {
             _ => self.map.texel_size(),
         };
         let coarse = self.granular.is_none() && self.atlas.is_none();
+        if let (Some(c), true) = (&mut self.tess, coarse) {
+            return render_tessellated(
+                c,
+                &self.ctx,
+                &mut self.target,
+                &mut self.sky,
+                &self.timer,
+                (&self.map, &self.normals),
+                &self.style,
+                camera,
+                frustum,
+                t,
+                timings,
+            );
+        }
         if let (Some(c), true) = (&mut self.cdlod, coarse) {
             return render_cdlod(
                 c,
@@ -855,6 +933,113 @@ fn part_vertices(layout: &ClipmapLayout) -> Vec<u64> {
             used.len() as u64
         })
         .collect()
+}
+
+/// Tessellates (a compute pass) and draws a frame; the CPU reference selection gives the
+/// report's figures and is not timed (the `lod` step is the frustum, from `lod_start`).
+#[allow(clippy::too_many_arguments)]
+fn render_tessellated(
+    c: &mut TessScene,
+    ctx: &GpuContext,
+    target: &mut OffscreenTarget,
+    sky: &mut SkyPass,
+    timer: &GpuTimer,
+    (map, normals): (&GpuHeightMap<u16>, &GpuDerivativeMap),
+    style: &TerrainStyle,
+    camera: &Camera,
+    frustum: Frustum,
+    lod_start: std::time::Instant,
+    timings: &mut Timings,
+) -> Result<RenderedFrame> {
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let size = target.size();
+    let aspect = size.x as f32 / size.y as f32;
+    let hfov = 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan();
+    let view = CdlodView {
+        camera: camera.position,
+        frustum: Some(&frustum),
+        viewport_width: size.x as f32,
+        hfov,
+    };
+    timings.add(Step::Lod, crate::timings::ms_since(lod_start));
+    let view_proj = camera.view_proj_relative(aspect);
+    let timing = timer.time(device, queue, |encoder| {
+        sky.prepare(queue, view_proj, &SkyColors::default())?;
+        c.pass
+            .encode(device, queue, encoder, &c.gpu, &c.hierarchy, &view)?;
+        c.renderer.prepare(
+            device,
+            queue,
+            &TessDraw {
+                map,
+                normals,
+                camera,
+                style,
+                target_size: size,
+            },
+        )?;
+        let mut pass = target.begin_pass(encoder, wgpu::Color::BLACK);
+        sky.draw(&mut pass);
+        c.renderer.draw(&mut pass, &c.gpu);
+        Ok(())
+    })?;
+    c.pass.recall();
+    let t = std::time::Instant::now();
+    let image = target.read_rgba8(device, queue)?;
+    ctx.check()?;
+    timings.add(Step::Capture, crate::timings::ms_since(t));
+    record(timings, Step::Render, timing);
+    // The report's figures from the CPU reference (the same triangles as the GPU's).
+    let frame = c.hierarchy.select(&view)?;
+    let max_screen_error_px = c.hierarchy.max_screen_error_px(&frame, &view);
+    let stats = RenderedFrame {
+        image,
+        triangles: frame.triangle_count().min(u64::from(c.gpu.capacity())),
+        lod: LodStats {
+            mode: "tessellated",
+            vertices: frame.vertex_count(),
+            max_screen_error_px: Some(max_screen_error_px),
+        },
+    };
+    c.previous = c.last.replace((camera.position, size.x as f32, hfov));
+    Ok(stats)
+}
+
+/// The popping metric of the tessellation: the surface's largest jump between the last two
+/// frames' decisions, at probes ahead of the camera (as CDLOD's, 48 x 48 over 64 m), both on
+/// today's heights and projected with `camera`.
+fn tess_jump_px(t: &TessScene, camera: &Camera, size: Vec2) -> Option<f32> {
+    let ((eye, width, hfov), (then_eye, then_width, then_hfov)) = (t.last?, t.previous?);
+    let view = CdlodView {
+        camera: eye,
+        frustum: None,
+        viewport_width: width,
+        hfov,
+    };
+    let previous = CdlodView {
+        camera: then_eye,
+        frustum: None,
+        viewport_width: then_width,
+        hfov: then_hfov,
+    };
+    let ts = t.hierarchy.texel_size();
+    let forward = Vec2::new(camera.forward.x, camera.forward.z).normalize_or(Vec2::X);
+    let right = forward.perp();
+    let spacing = (64.0 / 48.0f32).max(ts * 0.5);
+    let base = Vec2::new(eye.x, eye.z);
+    let probes: Vec<Vec2> = (0..48 * 48)
+        .map(|k| {
+            let (i, j) = ((k / 48) as f32, (k % 48) as f32 - 24.0);
+            (base + forward * (1.0 + i) * spacing + right * j * spacing) / ts
+        })
+        .collect();
+    Some(t.hierarchy.max_height_jump(
+        &view,
+        &previous,
+        &probes,
+        camera.view_proj_world(size.x / size.y),
+        size,
+    ))
 }
 
 /// Selects and draws a CDLOD frame (the `lod` step is timed from `lod_start`).

@@ -25,11 +25,14 @@ fn usage_errors_exit_with_2() {
     let garbage = dir.join("garbage.png");
     std::fs::write(&garbage, b"this is not a PNG file at all").expect("write");
     let garbage = garbage.display().to_string();
-    let cases: [&[&str]; 11] = [
+    let cases: [&[&str]; 14] = [
         &["--scenario", "snow", "--lod", "cdlod", "--no-gpu"],
         &["--lod", "cdlod", "--target-error", "0", "--no-gpu"],
         &["--target-error", "2", "--no-gpu"],
         &["--no-morph", "--no-gpu"],
+        &["--density-map", "off", "--no-gpu"],
+        &["--lod", "cdlod", "--triangle-width", "4", "--no-gpu"],
+        &["--lod", "tessellated", "--triangle-width", "0", "--no-gpu"],
         &["--no-such-flag"],
         &["--frames", "0"],
         &["--texel-size", "-1", "--no-gpu"],

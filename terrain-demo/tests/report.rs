@@ -53,7 +53,7 @@ fn reports_of_every_scenario_validate_against_the_schema() {
         std::process::id()
     ));
     let dem_s = dem.to_string_lossy().into_owned();
-    let runs: [(&str, &[&str]); 5] = [
+    let runs: [(&str, &[&str]); 6] = [
         (
             "schema_default",
             &["--size", "96", "--frames", "5", "--resolution", "160x96"],
@@ -69,6 +69,19 @@ fn reports_of_every_scenario_validate_against_the_schema() {
                 "160x96",
                 "--lod",
                 "cdlod",
+            ],
+        ),
+        (
+            "schema_tessellated",
+            &[
+                "--size",
+                "128",
+                "--frames",
+                "3",
+                "--resolution",
+                "160x96",
+                "--lod",
+                "tessellated",
             ],
         ),
         (
@@ -106,10 +119,12 @@ fn reports_of_every_scenario_validate_against_the_schema() {
             std::fs::copy(out.join("terrain.png"), &dem).unwrap();
         }
         let r = report(&out);
-        if name == "schema_cdlod" {
+        if name == "schema_cdlod" || name == "schema_tessellated" {
             // Every frame says how it was drawn; the popping metric needs a frame before it.
+            let mode = name.trim_start_matches("schema_");
             for (i, f) in r["frames"].as_array().unwrap().iter().enumerate() {
-                assert_eq!(f["lod"], "cdlod", "frame {i}");
+                assert_eq!(f["lod"], mode, "frame {i}");
+                assert!(f["triangles"].as_u64().unwrap() > 0);
                 assert!(f["vertices"].as_u64().unwrap() > 0);
                 assert!(f["max_screen_error_px"].as_f64().is_some());
                 assert_eq!(f["max_vertex_jump_px"].is_null(), i == 0, "frame {i}");

@@ -357,17 +357,8 @@ impl TessHierarchy {
         let mut lo = r.min;
         let mut hi = r.max() - 1;
         match self.wrap {
-            WrapMode::Repeat => {
-                let size = self.map_size.as_ivec2();
-                if (hi - lo).cmpge(size - 1).any()
-                    || lo.cmplt(IVec2::ZERO).any()
-                    || hi.cmpge(size).any()
-                {
-                    // Across an edge or wider than the map: every piece, simply.
-                    lo = IVec2::ZERO;
-                    hi = self.grid.as_ivec2() - 1;
-                }
-            }
+            // Unwrapped: `refresh` wraps every coordinate (one period of a wider rect).
+            WrapMode::Repeat => {}
             WrapMode::Clamp => {
                 let last = self.map_size.as_ivec2() - 1;
                 lo = lo.max(IVec2::ZERO);
@@ -399,7 +390,7 @@ impl TessHierarchy {
     }
 
     /// Recomputes heights, bounds and patch bounds of everything the grid vertices `lo ..= hi`
-    /// (inside the grid) reach.
+    /// (unwrapped on a repeating map, clamped to the grid otherwise) reach.
     fn refresh<T: HeightSample>(
         &mut self,
         map: &HeightMap<T>,
@@ -410,8 +401,10 @@ impl TessHierarchy {
         let enc = map.encoding();
         let last = self.map_size.as_ivec2() - 1;
         let gx = self.grid.x as usize;
-        for y in lo.y..=hi.y {
-            for x in lo.x..=hi.x {
+        let g = self.grid.as_ivec2();
+        let cols = axis(lo.x, hi.x, 1, g.x, self.wrap);
+        for y in axis(lo.y, hi.y, 1, g.y, self.wrap) {
+            for &x in &cols {
                 let t = IVec2::new(x, y).min(last);
                 let raw = map
                     .grid()
@@ -430,16 +423,18 @@ impl TessHierarchy {
             let xs = axis(lo.x - 3 * s, hi.x + 3 * s, s, g.x, self.wrap);
             let ys = axis(lo.y - 3 * s, hi.y + 3 * s, s, g.y, self.wrap);
             for odd_both in [false, true] {
-                let mut updates = Vec::new();
-                for &y in &ys {
+                // Rows in parallel: each reads only finer vertices, written before.
+                let updates = crate::par::map_collect(&ys, |&y| {
+                    let mut row = Vec::new();
                     for &x in &xs {
                         let v = IVec2::new(x, y);
                         if self.tz(v) == tz && self.is_square_centre(v, tz) == odd_both {
-                            updates.push((v, self.vertex_bounds(v, tz, density)));
+                            row.push((v, self.vertex_bounds(v, tz, density)));
                         }
                     }
-                }
-                for (v, b) in updates {
+                    row
+                });
+                for (v, b) in updates.into_iter().flatten() {
                     let i = self.index(v);
                     self.bounds[i] = b;
                 }
