@@ -191,10 +191,10 @@ fn open_gpu(
         .usage();
     }
     if let Some(tau) = cli.target_error {
-        if cli.lod != LodArg::Cdlod {
+        if cli.lod == LodArg::Clipmap {
             return Err(anyhow::anyhow!(
-                "--target-error chooses CDLOD's LODs: it needs --lod cdlod (--lod tessellated \
-                 takes --triangle-width)"
+                "--target-error chooses CDLOD's LODs or the tessellation's splits by \
+                 screen-space error: it needs --lod cdlod or --lod tessellated"
             ))
             .usage();
         }
@@ -217,6 +217,13 @@ fn open_gpu(
         return Err(anyhow::anyhow!(
             "--density-map and --triangle-width steer the adaptive tessellation: they need \
              --lod tessellated"
+        ))
+        .usage();
+    }
+    if cli.target_error.is_some() && (cli.density_map.is_some() || cli.triangle_width.is_some()) {
+        return Err(anyhow::anyhow!(
+            "--target-error splits the tessellation by screen-space error, without the density \
+             map or a triangle width: give one or the other"
         ))
         .usage();
     }
@@ -247,38 +254,26 @@ fn open_gpu(
         }
         LodArg::Tessellated => {
             let density = cli.density_map != Some(crate::cli::Switch::Off);
-            let size = scenario.map().size();
-            let mut config = tess_config;
-            if scenario.map().wrap() == terrain_core::WrapMode::Repeat {
-                // The patches must tile a repeating map.
-                config.patch_size = [32u32, 16, 8, 4, 2]
-                    .into_iter()
-                    .find(|&p| size.x.is_multiple_of(p) && size.y.is_multiple_of(p))
-                    .ok_or_else(|| {
-                        anyhow::anyhow!(
-                            "--lod tessellated needs a repeating map whose sides are even ({}x{})",
-                            size.x,
-                            size.y
-                        )
-                    })?;
-            }
-            scene.enable_tessellation(scenario.map(), config, density)?;
+            scene.enable_tessellation(scenario.map(), tess_config, density)?;
         }
         LodArg::Clipmap => {}
     }
     Ok(Some(scene))
 }
 
-/// The tessellation of `--lod tessellated`: patches of 32 texels (fewer where a repeating
-/// map's sides are not multiples of 32), the triangle width of `--triangle-width`.
+/// The tessellation of `--lod tessellated`: patches of 32 texels, split by edge size (`--triangle-width`, scaled by the
+/// density map unless `--density-map off`) or by screen-space error (`--target-error`).
 fn tess_config(cli: &Cli) -> Result<TessConfig> {
     let config = TessConfig {
         triangle_width_px: cli.triangle_width.unwrap_or(8.0),
         use_density: cli.density_map != Some(crate::cli::Switch::Off),
         morph: !cli.no_morph,
+        max_error_px: cli.target_error,
         ..TessConfig::default()
     };
-    config.validate().context("--triangle-width")?;
+    config
+        .validate()
+        .context("--triangle-width or --target-error")?;
     Ok(config)
 }
 

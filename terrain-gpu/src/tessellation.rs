@@ -41,7 +41,8 @@ struct Params {
     patches: [u32; 2],
     grid: [u32; 2],
     wrap: u32,
-    _pad: [u32; 3],
+    error_metric: u32,
+    _pad: [u32; 2],
 }
 
 const _: () = assert!(std::mem::size_of::<Params>() == 176);
@@ -51,6 +52,8 @@ const _: () = assert!(std::mem::size_of::<Params>() == 176);
 const STATE_BYTES: u64 = 32;
 /// Where the draw arguments start in the counter block.
 const ARGS_OFFSET: u64 = 16;
+/// Bytes per grid vertex: height, radius, density, error.
+const VERTEX_BYTES: u64 = 16;
 /// Bytes per triangle in the output (three [`TessVertex`]).
 const TRIANGLE_BYTES: u64 = std::mem::size_of::<TessTriangle>() as u64;
 
@@ -79,7 +82,7 @@ impl GpuTessellation {
         let patches = hierarchy.patches();
         let capacity = capacity.max(1);
         let limit = u64::from(device.limits().max_storage_buffer_binding_size);
-        let vertex_bytes = u64::from(grid.x) * u64::from(grid.y) * 12;
+        let vertex_bytes = u64::from(grid.x) * u64::from(grid.y) * VERTEX_BYTES;
         let output_bytes = u64::from(capacity) * TRIANGLE_BYTES;
         if vertex_bytes > limit {
             return Err(GpuError::MapTooLarge {
@@ -157,12 +160,16 @@ impl GpuTessellation {
         if !rows.is_empty() {
             let w = self.grid.x as usize;
             let (a, b) = (rows.start as usize * w, rows.end as usize * w);
-            let packed: Vec<[f32; 3]> = hierarchy.heights()[a..b]
+            let packed: Vec<[f32; 4]> = hierarchy.heights()[a..b]
                 .iter()
                 .zip(&hierarchy.bounds()[a..b])
-                .map(|(&h, &[r, d])| [h, r, d])
+                .map(|(&h, &[r, d, e])| [h, r, d, e])
                 .collect();
-            queue.write_buffer(&self.vertices, a as u64 * 12, bytemuck::cast_slice(&packed));
+            queue.write_buffer(
+                &self.vertices,
+                a as u64 * VERTEX_BYTES,
+                bytemuck::cast_slice(&packed),
+            );
         }
         queue.write_buffer(
             &self.patch_bounds,
@@ -290,7 +297,8 @@ impl TessellationPass {
             patches: gpu.patches.to_array(),
             grid: gpu.grid.to_array(),
             wrap: wrap_code(hierarchy.wrap()),
-            _pad: [0; 3],
+            error_metric: u32::from(d.error_metric),
+            _pad: [0; 2],
         };
         let buffers = [&gpu.vertices, &gpu.patch_bounds, &gpu.output, &gpu.state];
         let (group, offset) = self.bindings.bind(device, queue, &params, &buffers)?;

@@ -3,7 +3,7 @@
 //! adaptive tessellation of two views, an "action" view near the ground and a "terrain" view
 //! from above the map's edge, at triangle widths from 0.25 to 64 pixels with the density map on
 //! and off (morph off: the mesh's own error), then for each error bound the fewest vertices
-//! that meet it either way.
+//! that meet it either way, and the vertices of the error metric (`max_error_px`) at that bound.
 //!
 //! `cargo run --release -p terrain-lod --example tessellation_ratio -- [--size N]
 //! [--heightmap FILE.png --texel-size M --height-scale M]` (default: the demo's default
@@ -125,16 +125,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             println!("{w:>8.2} | {}", row.join(" | "));
         }
-        println!("error bound px | fewest vertices on | off | ratio");
+        println!(
+            "error bound px | fewest vertices on | off | ratio | error metric: vertices, error px, ratio to off"
+        );
         for bound in [0.5f32, 1.0, 2.0, 4.0] {
+            let config = TessConfig {
+                max_error_px: Some(bound),
+                morph: false,
+                max_triangles: 1 << 24,
+                ..TessConfig::default()
+            };
+            let tess = TessHierarchy::from_map(&map, None, config)?;
+            let frame = tess.select(&view)?;
+            let (ev, ee) = (
+                frame.vertex_count(),
+                tess.max_screen_error_px(&frame, &view),
+            );
             let fewest =
                 |r: &[(u64, f32)]| r.iter().filter(|(_, e)| *e <= bound).map(|(v, _)| *v).min();
             match (fewest(&runs[0]), fewest(&runs[1])) {
                 (Some(on), Some(off)) => println!(
-                    "{bound:>14} | {on:>18} | {off:>9} | {:.3}",
-                    on as f64 / off as f64
+                    "{bound:>14} | {on:>18} | {off:>9} | {:.3} | {ev}, {ee:.3}, {:.3}",
+                    on as f64 / off as f64,
+                    ev as f64 / off as f64
                 ),
-                _ => println!("{bound:>14} | not reached by the widths tried"),
+                _ => println!("{bound:>14} | not reached by the widths tried | {ev}, {ee:.3}"),
             }
         }
     }

@@ -75,6 +75,11 @@ pub struct TessConfig {
     /// The most triangles one selection may emit (default 2^22): memory stays bounded for
     /// every view.
     pub max_triangles: usize,
+    /// Split by projected geometric error instead of edge size: a vertex is split in while
+    /// the saturated error of its triangles (see [`TessHierarchy::bounds`]) projects to more
+    /// than this many pixels; the density map and the triangle width are then unused
+    /// (default `None`: seed 002's edge size).
+    pub max_error_px: Option<f32>,
 }
 
 impl Default for TessConfig {
@@ -87,6 +92,7 @@ impl Default for TessConfig {
             morph: true,
             morph_range: 1.0,
             max_triangles: 1 << 22,
+            max_error_px: None,
         }
     }
 }
@@ -126,6 +132,11 @@ impl TessConfig {
         }
         if !(self.morph_range.is_finite() && (0.01..=100.0).contains(&self.morph_range)) {
             return bad("morph_range", self.morph_range.into(), "0.01 to 100");
+        }
+        if let Some(e) = self.max_error_px
+            && !(e.is_finite() && (0.01..=1000.0).contains(&e))
+        {
+            return bad("max_error_px", e.into(), "0.01 to 1000 pixels");
         }
         if !(1..=(1usize << 28)).contains(&self.max_triangles) {
             return bad(
@@ -234,8 +245,11 @@ impl Tri {
 pub struct TessDecision {
     /// Camera position, metres.
     pub camera: Vec3,
-    /// `K / (FLAT_SPHERE * triangle_width_px)`: the ratio is `scale * R * density / distance`.
+    /// `K / (FLAT_SPHERE * triangle_width_px)`: the ratio is `scale * R * density / distance`;
+    /// with the error metric `K / max_error_px`, and the ratio `scale * E / distance`.
     pub scale: f32,
+    /// Whether the ratio is the projected error rather than the edge size.
+    pub error_metric: bool,
     /// Triangles of this level and finer are not split (`2 log2 P` or the minimum size's).
     pub split_levels: u32,
     /// Whether densities scale the ratio.
@@ -251,6 +265,10 @@ pub struct TessHierarchy {
     config: TessConfig,
     map_size: UVec2,
     wrap: WrapMode,
+    /// How grid coordinates wrap: as the map when the patches tile a repeating map, clamped
+    /// otherwise (a repeating map whose sides the patch does not divide is tessellated over
+    /// whole patches, past its side, with wrapped heights).
+    grid_wrap: WrapMode,
     texel_size: f32,
     /// log2 of the patch size.
     p: u32,
@@ -260,8 +278,9 @@ pub struct TessHierarchy {
     grid: UVec2,
     /// True height of every grid vertex (metres; clamped past a clamped map's edge).
     heights: Vec<f32>,
-    /// Saturated sphere radius (metres) and density (0 to 1) of every grid vertex.
-    bounds: Vec<[f32; 2]>,
+    /// Saturated sphere radius (metres), density (0 to 1) and error (metres) of every grid
+    /// vertex.
+    bounds: Vec<[f32; 3]>,
     /// Lowest and highest height over each patch (its edges included), metres.
     patch_bounds: Vec<[f32; 2]>,
     /// The density map's reach in texels: how far a height change moves densities.
@@ -281,25 +300,23 @@ impl TessHierarchy {
         config.validate()?;
         let size = map.size();
         let ps = config.patch_size;
-        let (patches, grid) = match map.wrap() {
-            WrapMode::Repeat => {
-                if !size.x.is_multiple_of(ps) || !size.y.is_multiple_of(ps) {
-                    return Err(LodError::InvalidTessParam {
-                        what: "patch_size",
-                        value: ps.into(),
-                        allowed: "a size that divides both sides of a repeating map",
-                    });
-                }
-                (size / ps, size)
-            }
-            WrapMode::Clamp => {
-                let cells = (size.max(UVec2::splat(2)) - 1).as_u64vec2();
-                let patches = UVec2::new(
-                    cells.x.div_ceil(u64::from(ps)) as u32,
-                    cells.y.div_ceil(u64::from(ps)) as u32,
-                );
-                (patches, patches * ps + 1)
-            }
+        let tiles = map.wrap() == WrapMode::Repeat
+            && size.x.is_multiple_of(ps)
+            && size.y.is_multiple_of(ps);
+        let (patches, grid, grid_wrap) = if tiles {
+            (size / ps, size, WrapMode::Repeat)
+        } else {
+            // Clamped: the cells between texels; repeating: one period of texels, the vertex
+            // after the last being the first's copy.
+            let cells = match map.wrap() {
+                WrapMode::Repeat => size.as_u64vec2(),
+                WrapMode::Clamp => (size.max(UVec2::splat(2)) - 1).as_u64vec2(),
+            };
+            let patches = UVec2::new(
+                cells.x.div_ceil(u64::from(ps)) as u32,
+                cells.y.div_ceil(u64::from(ps)) as u32,
+            );
+            (patches, patches * ps + 1, WrapMode::Clamp)
         };
         if let Some(d) = density
             && d.map_size() != size
@@ -314,12 +331,13 @@ impl TessHierarchy {
             config,
             map_size: size,
             wrap: map.wrap(),
+            grid_wrap,
             texel_size: map.texel_size(),
             p: ps.trailing_zeros(),
             patches,
             grid,
             heights: vec![0.0; count],
-            bounds: vec![[0.0, 0.0]; count],
+            bounds: vec![[0.0, 0.0, 0.0]; count],
             patch_bounds: vec![[0.0, 0.0]; patches.x as usize * patches.y as usize],
             density_reach: density.map_or(0, |d| {
                 (d.params().filter_radii().1 + 2) * crate::density::DENSITY_DOWNSAMPLE
@@ -354,36 +372,46 @@ impl TessHierarchy {
             0
         };
         let r = dirty.expand(reach);
-        let mut lo = r.min;
-        let mut hi = r.max() - 1;
-        match self.wrap {
-            // Unwrapped: `refresh` wraps every coordinate (one period of a wider rect).
-            WrapMode::Repeat => {}
-            WrapMode::Clamp => {
+        let g = self.grid.as_ivec2() - 1;
+        // The changed vertices as rects of the grid: the rect itself on a grid that wraps as
+        // the map; otherwise clamped to the grid, with each copy of it a repeating map's
+        // period further (a repeating map drawn past its side).
+        let mut pieces = Vec::new();
+        match (self.grid_wrap, self.wrap) {
+            (WrapMode::Repeat, _) => pieces.push((r.min, r.max() - 1)),
+            (WrapMode::Clamp, WrapMode::Clamp) => {
                 let last = self.map_size.as_ivec2() - 1;
-                lo = lo.max(IVec2::ZERO);
+                let (lo, hi) = (r.min.max(IVec2::ZERO), r.max() - 1);
                 // Vertices past the map's last texel repeat it.
-                let g = self.grid.as_ivec2() - 1;
-                hi = IVec2::new(
+                let hi = IVec2::new(
                     if hi.x >= last.x { g.x } else { hi.x },
                     if hi.y >= last.y { g.y } else { hi.y },
                 )
                 .min(g);
-                if lo.cmpgt(hi).any() {
-                    return Ok(Vec::new());
+                pieces.push((lo, hi));
+            }
+            (WrapMode::Clamp, WrapMode::Repeat) => {
+                let n = self.map_size.as_ivec2();
+                for piece in r.split_toroidal(self.map_size) {
+                    let (lo, hi) = (piece.map.min, piece.map.max() - 1);
+                    for k in [IVec2::ZERO, IVec2::new(n.x, 0), IVec2::new(0, n.y), n] {
+                        pieces.push(((lo + k).min(g + 1), (hi + k).min(g)));
+                    }
                 }
             }
         }
-        self.refresh(map, density, lo, hi);
-        // The coarsest vertices read `3 P / 2` rows either side (see `refresh`).
-        let reach = 3 * (self.config.patch_size as i32 / 2);
-        let rows = axis(lo.y - reach, hi.y + reach, 1, self.grid.y as i32, self.wrap);
+        pieces.retain(|(lo, hi)| lo.cmple(*hi).all());
         let mut ranges: Vec<std::ops::Range<u32>> = Vec::new();
-        for y in rows {
-            let y = y as u32;
-            match ranges.last_mut() {
-                Some(r) if r.end == y => r.end += 1,
-                _ => ranges.push(y..y + 1),
+        for (lo, hi) in pieces {
+            self.refresh(map, density, lo, hi);
+            // The coarsest vertices read `3 P / 2` rows either side (see `refresh`).
+            let reach = 3 * (self.config.patch_size as i32 / 2);
+            for y in axis(lo.y - reach, hi.y + reach, 1, g.y + 1, self.grid_wrap) {
+                let y = y as u32;
+                match ranges.iter_mut().find(|r| r.contains(&y) || r.end == y) {
+                    Some(r) => r.end = r.end.max(y + 1),
+                    None => ranges.push(y..y + 1),
+                }
             }
         }
         Ok(ranges)
@@ -399,13 +427,12 @@ impl TessHierarchy {
         hi: IVec2,
     ) {
         let enc = map.encoding();
-        let last = self.map_size.as_ivec2() - 1;
         let gx = self.grid.x as usize;
         let g = self.grid.as_ivec2();
-        let cols = axis(lo.x, hi.x, 1, g.x, self.wrap);
-        for y in axis(lo.y, hi.y, 1, g.y, self.wrap) {
+        let cols = axis(lo.x, hi.x, 1, g.x, self.grid_wrap);
+        for y in axis(lo.y, hi.y, 1, g.y, self.grid_wrap) {
             for &x in &cols {
-                let t = IVec2::new(x, y).min(last);
+                let t = self.texel_of(IVec2::new(x, y));
                 let raw = map
                     .grid()
                     .get(t.x as u32, t.y as u32)
@@ -420,8 +447,8 @@ impl TessHierarchy {
         for tz in 0..self.p {
             let s = 1i32 << tz;
             let g = self.grid.as_ivec2();
-            let xs = axis(lo.x - 3 * s, hi.x + 3 * s, s, g.x, self.wrap);
-            let ys = axis(lo.y - 3 * s, hi.y + 3 * s, s, g.y, self.wrap);
+            let xs = axis(lo.x - 3 * s, hi.x + 3 * s, s, g.x, self.grid_wrap);
+            let ys = axis(lo.y - 3 * s, hi.y + 3 * s, s, g.y, self.grid_wrap);
             for odd_both in [false, true] {
                 // Rows in parallel: each reads only finer vertices, written before.
                 let updates = crate::par::map_collect(&ys, |&y| {
@@ -448,14 +475,14 @@ impl TessHierarchy {
             hi.x.div_euclid(ps),
             1,
             n.x,
-            self.wrap,
+            self.grid_wrap,
         );
         let pys = axis(
             (lo.y - 1).div_euclid(ps),
             hi.y.div_euclid(ps),
             1,
             n.y,
-            self.wrap,
+            self.grid_wrap,
         );
         for &py in &pys {
             for &px in &pxs {
@@ -527,7 +554,7 @@ impl TessHierarchy {
             ]
         };
         let leaf = !self.is_square_centre(v, tz) && tz == 0;
-        let wrap = self.wrap;
+        let wrap = self.grid_wrap;
         let grid = self.grid.as_ivec2();
         offsets.into_iter().filter_map(move |o| {
             if leaf {
@@ -539,14 +566,23 @@ impl TessHierarchy {
         })
     }
 
-    /// The grid index of a vertex (wrapped on a repeating map).
+    /// The grid index of a vertex (wrapped on a repeating grid).
     fn index(&self, v: IVec2) -> usize {
         let g = self.grid.as_ivec2();
-        let w = match self.wrap {
+        let w = match self.grid_wrap {
             WrapMode::Repeat => v.rem_euclid(g),
             WrapMode::Clamp => v.clamp(IVec2::ZERO, g - 1),
         };
         w.y as usize * self.grid.x as usize + w.x as usize
+    }
+
+    /// The map texel whose height grid vertex `v` has: wrapped on a repeating map, clamped to
+    /// the last texel past a clamped one.
+    fn texel_of(&self, v: IVec2) -> IVec2 {
+        match self.wrap {
+            WrapMode::Repeat => v.rem_euclid(self.map_size.as_ivec2()),
+            WrapMode::Clamp => v.clamp(IVec2::ZERO, self.map_size.as_ivec2() - 1),
+        }
     }
 
     /// World position of vertex `v` at its true height.
@@ -559,27 +595,27 @@ impl TessHierarchy {
         )
     }
 
-    fn vertex_bounds(&self, v: IVec2, tz: u32, density: Option<&DensityMap>) -> [f32; 2] {
+    fn vertex_bounds(&self, v: IVec2, tz: u32, density: Option<&DensityMap>) -> [f32; 3] {
         let c = self.world(v);
         let [e0, e1] = self.edge_of(v, tz);
-        let mut r = c.distance(self.world(e0)).max(c.distance(self.world(e1)));
-        let last = self.map_size.as_ivec2() - 1;
+        let (w0, w1) = (self.world(e0), self.world(e1));
+        let mut r = c.distance(w0).max(c.distance(w1));
+        // How far the vertex lies off its edge: what splitting it in changes.
+        let own_error = (c.y - 0.5 * (w0.y + w1.y)).abs();
+        let mut child_error = 0.0f32;
         let mut d = match density {
-            Some(dm) => {
-                let t = match self.wrap {
-                    WrapMode::Repeat => v.rem_euclid(self.map_size.as_ivec2()),
-                    WrapMode::Clamp => v.min(last),
-                };
-                dm.density_at_texel(0, t).unwrap_or(1.0)
-            }
+            Some(dm) => dm.density_at_texel(0, self.texel_of(v)).unwrap_or(1.0),
             None => 1.0,
         };
         for child in self.children_of(v, tz) {
-            let [rc, dc] = self.bounds[self.index(child)];
+            let [rc, dc, ec] = self.bounds[self.index(child)];
             r = r.max(c.distance(self.world(child)) + rc);
             d = d.max(dc);
+            child_error = child_error.max(ec);
         }
-        [r, d]
+        // A triangle split at `v` and left unsplit deviates from the full-resolution mesh by
+        // at most its own vertex's offset plus the most either child triangle deviates.
+        [r, d, own_error + child_error]
     }
 }
 
@@ -609,9 +645,12 @@ impl TessHierarchy {
         self.grid
     }
 
-    /// The saturated (radius m, density) of every grid vertex, row by row: what the GPU pass
-    /// uploads.
-    pub fn bounds(&self) -> &[[f32; 2]] {
+    /// The saturated (radius m, density, error m) of every grid vertex, row by row: what the
+    /// GPU pass uploads. The radius is that of a sphere around the vertex holding the spheres
+    /// of every vertex its triangles split in; the density the largest among them; the error
+    /// bounds how far the triangles split at the vertex, left unsplit, lie from the map
+    /// (`|h - edge mean|` plus the children's error).
+    pub fn bounds(&self) -> &[[f32; 3]] {
         &self.bounds
     }
 
@@ -680,7 +719,11 @@ impl TessHierarchy {
         }
         Ok(TessDecision {
             camera: view.camera,
-            scale: k / (FLAT_SPHERE * c.triangle_width_px),
+            scale: match c.max_error_px {
+                Some(tau) => k / tau,
+                None => k / (FLAT_SPHERE * c.triangle_width_px),
+            },
+            error_metric: c.max_error_px.is_some(),
             split_levels,
             use_density: c.use_density,
             inv_morph_range: if c.morph { 1.0 / c.morph_range } else { 0.0 },
@@ -690,7 +733,7 @@ impl TessHierarchy {
     /// The split ratio `r` of vertex `v` (split in when > 1). Mirrors `tessellate.wgsl`.
     pub fn ratio(&self, d: &TessDecision, v: IVec2) -> f32 {
         let i = self.index(v);
-        let [r, density] = self.bounds[i];
+        let [r, density, error] = self.bounds[i];
         let ts = self.texel_size;
         let c = Vec3::new(
             v.x as f32 * ts - d.camera.x,
@@ -698,6 +741,9 @@ impl TessHierarchy {
             v.y as f32 * ts - d.camera.z,
         );
         let dist = (c.length() - r).max(NEAR_M);
+        if d.error_metric {
+            return d.scale * error / dist;
+        }
         let dens = if d.use_density { density } else { 1.0 };
         d.scale * r * dens / dist
     }

@@ -772,6 +772,11 @@ fn tessellation_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
             1.0
         },
         max_triangles: rng.pick(&[0, 1, 100, 1 << 22, usize::MAX]),
+        max_error_px: match rng.below(3) {
+            0 => None,
+            1 => Some(rng.f32_edge()),
+            _ => Some(rng.uniform(0.01, 50.0) as f32),
+        },
     };
     let density = if rng.chance(1, 2) {
         DensityMap::from_map(&map, DensityParams::default()).ok()

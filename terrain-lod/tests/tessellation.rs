@@ -367,6 +367,42 @@ fn the_screen_error_falls_as_the_triangles_shrink() {
     assert!(full.max_screen_error_px(&f, &view(camera)) < 1e-3);
 }
 
+/// With the error metric (and the morph off) no texel of the drawn mesh projects further than
+/// the bound from the map, for every view: the saturated error bounds the triangles' error.
+#[test]
+fn the_error_metric_keeps_every_texel_within_the_bound() {
+    for wrap in [WrapMode::Clamp, WrapMode::Repeat] {
+        let m = map(256, 192, wrap);
+        for tau in [0.25f32, 1.0, 4.0] {
+            let tess = TessHierarchy::from_map(
+                &m,
+                None,
+                TessConfig {
+                    max_error_px: Some(tau),
+                    morph: false,
+                    ..TessConfig::default()
+                },
+            )
+            .unwrap();
+            let mut drawn = 0;
+            for camera in [
+                Vec3::new(10.0, 31.0, 10.0),
+                Vec3::new(64.0, 45.0, 48.0),
+                Vec3::new(-50.0, 200.0, 300.0),
+                Vec3::new(127.5, 30.5, 95.5),
+            ] {
+                let frame = tess.select(&view(camera)).unwrap();
+                let e = tess.max_screen_error_px(&frame, &view(camera));
+                assert!(e <= tau, "{wrap:?} bound {tau} px from {camera}: {e} px");
+                assert_conforming(&frame, tess.patches() * 32);
+                drawn += frame.triangle_count();
+            }
+            // Not the full map: the bound is met with fewer triangles.
+            assert!(drawn < 4 * 2 * 256 * 192, "{drawn}");
+        }
+    }
+}
+
 #[test]
 fn bad_parameters_and_views_are_refused() {
     let m = map(64, 64, WrapMode::Clamp);
@@ -413,9 +449,13 @@ fn bad_parameters_and_views_are_refused() {
             Err(LodError::InvalidTessParam { .. })
         ));
     }
-    // A repeating map whose sides the patch does not divide.
-    let odd = map(48, 64, WrapMode::Repeat);
-    assert!(TessHierarchy::from_map(&odd, None, TessConfig::default()).is_err());
+    // A repeating map whose sides the patch does not divide is tessellated past its side,
+    // over whole patches, with wrapped heights.
+    let odd = map(48, 70, WrapMode::Repeat);
+    let t = TessHierarchy::from_map(&odd, None, TessConfig::default()).unwrap();
+    assert_eq!(t.patches(), UVec2::new(2, 3));
+    let f = t.select(&view(Vec3::new(10.0, 40.0, 10.0))).unwrap();
+    assert_conforming(&f, UVec2::new(64, 96));
     // A density map of another size.
     let other =
         DensityMap::from_map(&map(32, 32, WrapMode::Clamp), DensityParams::default()).unwrap();
@@ -479,19 +519,35 @@ fn bad_parameters_and_views_are_refused() {
 
 /// After a crater, updating the rect gives the bounds a rebuild gives.
 fn check_update(wrap: WrapMode, at: IVec2, size: UVec2, depth: u16, with_density: bool) {
-    let mut m = map(128, 96, wrap);
+    check_update_on(UVec2::new(128, 96), wrap, at, size, depth, with_density);
+    if wrap == WrapMode::Repeat {
+        // Sides the patch does not divide: the grid goes past the map with wrapped heights.
+        check_update_on(UVec2::new(120, 90), wrap, at, size, depth, with_density);
+    }
+}
+
+fn check_update_on(
+    msize: UVec2,
+    wrap: WrapMode,
+    at: IVec2,
+    size: UVec2,
+    depth: u16,
+    with_density: bool,
+) {
+    let mut m = map(msize.x, msize.y, wrap);
     let params = DensityParams::default();
     let mut density = DensityMap::from_map(&m, params).unwrap();
+    let d0 = with_density.then(|| density.clone());
     let d = with_density.then_some(&density);
     let mut tess = TessHierarchy::from_map(&m, d, TessConfig::default()).unwrap();
     let rect = Rect::new(at, size);
-    let msize = m.size().as_ivec2();
+    let isize = m.size().as_ivec2();
     for y in at.y..at.y + size.y as i32 {
         for x in at.x..at.x + size.x as i32 {
             let t = match wrap {
-                WrapMode::Repeat => IVec2::new(x, y).rem_euclid(msize),
+                WrapMode::Repeat => IVec2::new(x, y).rem_euclid(isize),
                 WrapMode::Clamp => {
-                    if x < 0 || y < 0 || x >= msize.x || y >= msize.y {
+                    if x < 0 || y < 0 || x >= isize.x || y >= isize.y {
                         continue;
                     }
                     IVec2::new(x, y)
@@ -506,7 +562,7 @@ fn check_update(wrap: WrapMode, at: IVec2, size: UVec2, depth: u16, with_density
     let rows = tess.update_rect(&m, d, rect).unwrap();
     let rebuilt = TessHierarchy::from_map(&m, d, TessConfig::default()).unwrap();
     let g = tess.grid_size().x as usize;
-    let first = |a: &[[f32; 2]], b: &[[f32; 2]]| a.iter().zip(b).position(|(x, y)| x != y);
+    let first = |a: &[[f32; 3]], b: &[[f32; 3]]| a.iter().zip(b).position(|(x, y)| x != y);
     if let Some(i) = tess
         .heights()
         .iter()
@@ -529,9 +585,25 @@ fn check_update(wrap: WrapMode, at: IVec2, size: UVec2, depth: u16, with_density
         );
     }
     assert!(
-        first(tess.patch_bounds(), rebuilt.patch_bounds()).is_none(),
+        tess.patch_bounds() == rebuilt.patch_bounds(),
         "patch bounds"
     );
+    // Every vertex that changed lies in the rows reported (what a GPU copy must cover).
+    let before = TessHierarchy::from_map(
+        &map(msize.x, msize.y, wrap),
+        d0.as_ref(),
+        TessConfig::default(),
+    )
+    .unwrap();
+    for (i, (a, b)) in before.bounds().iter().zip(tess.bounds()).enumerate() {
+        let row = (i / g) as u32;
+        if a != b || before.heights()[i] != tess.heights()[i] {
+            assert!(
+                rows.iter().any(|r| r.contains(&row)),
+                "row {row} changed, not in {rows:?}"
+            );
+        }
+    }
 }
 
 #[test]

@@ -24,16 +24,19 @@ struct Params {
     patches: vec2<u32>,
     grid: vec2<u32>,
     wrap: u32,
-    _pad0: u32,
+    // 1: split by projected error (scale = K / max_error_px), 0: by edge size.
+    error_metric: u32,
     _pad1: u32,
     _pad2: u32,
 }
 
-// A grid vertex: true height (m), saturated sphere radius (m), saturated density.
+// A grid vertex: true height (m), saturated sphere radius (m), saturated density, saturated
+// error (m).
 struct Vertex {
     h: f32,
     r: f32,
     d: f32,
+    e: f32,
 }
 
 struct State {
@@ -87,6 +90,9 @@ fn ratio(v: vec2<i32>) -> f32 {
         f32(v.y) * ts - params.camera.z,
     );
     let dist = max(sqrt(c.x * c.x + c.y * c.y + c.z * c.z) - b.r, NEAR_M);
+    if params.error_metric != 0u {
+        return params.scale * b.e / dist;
+    }
     var dens = 1.0;
     if params.use_density != 0u {
         dens = b.d;
