@@ -253,7 +253,9 @@ fn open_gpu(
             scene.enable_cdlod(scenario.map(), cdlod_config(cli, scenario.map(), reach)?)?;
         }
         LodArg::Tessellated => {
-            let density = cli.density_map != Some(crate::cli::Switch::Off);
+            // The error metric reads no density map.
+            let density =
+                cli.density_map != Some(crate::cli::Switch::Off) && cli.target_error.is_none();
             scene.enable_tessellation(scenario.map(), tess_config, density)?;
         }
         LodArg::Clipmap => {}

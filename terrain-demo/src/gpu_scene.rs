@@ -154,7 +154,14 @@ struct TessScene {
     /// The last frame's view (camera, viewport width, hfov), and the one before.
     last: Option<(glam::Vec3, f32, f32)>,
     previous: Option<(glam::Vec3, f32, f32)>,
+    /// Where the popping metric looks: up to [`JUMP_PROBES`] drawn vertices of each of the
+    /// last two frames (texels).
+    probes: Vec<Vec2>,
+    previous_probes: Vec<Vec2>,
 }
+
+/// Drawn vertices per frame the tessellation's popping metric probes.
+const JUMP_PROBES: usize = 4096;
 
 /// Triangles the tessellation's output holds (72 MiB of vertices).
 const TESS_CAPACITY: u32 = 1 << 21;
@@ -397,6 +404,8 @@ impl GpuScene {
             renderer: TessRenderer::new(device, &self.target.format())?,
             last: None,
             previous: None,
+            probes: Vec::new(),
+            previous_probes: Vec::new(),
         });
         Ok(())
     }
@@ -1002,12 +1011,20 @@ fn render_tessellated(
         },
     };
     c.previous = c.last.replace((camera.position, size.x as f32, hfov));
+    let stride = (frame.triangles.len() / JUMP_PROBES).max(1);
+    let probes = frame
+        .triangles
+        .iter()
+        .step_by(stride)
+        .map(|t| Vec2::from(t[2].texel))
+        .collect();
+    c.previous_probes = std::mem::replace(&mut c.probes, probes);
     Ok(stats)
 }
 
 /// The popping metric of the tessellation: the surface's largest jump between the last two
-/// frames' decisions, at probes ahead of the camera (as CDLOD's, 48 x 48 over 64 m), both on
-/// today's heights and projected with `camera`.
+/// frames' decisions, at drawn vertices of both frames (vertices that appeared and that
+/// disappeared), both on today's heights and projected with `camera`.
 fn tess_jump_px(t: &TessScene, camera: &Camera, size: Vec2) -> Option<f32> {
     let ((eye, width, hfov), (then_eye, then_width, then_hfov)) = (t.last?, t.previous?);
     let view = CdlodView {
@@ -1022,17 +1039,7 @@ fn tess_jump_px(t: &TessScene, camera: &Camera, size: Vec2) -> Option<f32> {
         viewport_width: then_width,
         hfov: then_hfov,
     };
-    let ts = t.hierarchy.texel_size();
-    let forward = Vec2::new(camera.forward.x, camera.forward.z).normalize_or(Vec2::X);
-    let right = forward.perp();
-    let spacing = (64.0 / 48.0f32).max(ts * 0.5);
-    let base = Vec2::new(eye.x, eye.z);
-    let probes: Vec<Vec2> = (0..48 * 48)
-        .map(|k| {
-            let (i, j) = ((k / 48) as f32, (k % 48) as f32 - 24.0);
-            (base + forward * (1.0 + i) * spacing + right * j * spacing) / ts
-        })
-        .collect();
+    let probes: Vec<Vec2> = t.probes.iter().chain(&t.previous_probes).copied().collect();
     Some(t.hierarchy.max_height_jump(
         &view,
         &previous,

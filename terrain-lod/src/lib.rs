@@ -3,7 +3,10 @@
 //! (seed 002 sec. 1.1.4: a quadtree with min / max heights, a LOD range table or a screen-space
 //! error, partial selection and per-vertex morphing, [`cdlod`]); curvature density maps (seed
 //! 002 ch. 3: five filters, max-downsampling, preprocessing, borders, a max pyramid,
-//! [`density`]).
+//! [`density`]); adaptive tessellation (seed 002 sec. 2.3, algorithm 3.1: per-edge splits from
+//! the projected size of a sphere around the edge, scaled by the density map, or by a bound on
+//! the projected geometric error; longest-edge bisection, conforming by construction, with a
+//! vertex morph, [`tessellation`]).
 //!
 //! Conventions (those of the whole workspace): world units are metres, Y is up, right-handed.
 //! Heightmap column `x` maps to world X and row `y` to world Z, so texel `(x, y)` stands at
@@ -76,6 +79,33 @@
 //! let mesh = CdlodMesh::new(config.grid_size);
 //! assert!(frame.triangle_count(&mesh) > 0);
 //! assert!(frame.instances.iter().any(|i| i.lod == 0), "finest near the camera");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! Adaptive tessellation of the same kind of map, as the GPU pass of terrain-gpu computes it:
+//!
+//! ```
+//! use glam::Vec3;
+//! use terrain_core::{Grid, HeightEncoding, HeightMap, WrapMode};
+//! use terrain_lod::{CdlodView, DensityMap, DensityParams, TessConfig, TessHierarchy};
+//!
+//! let grid = Grid::from_fn(256, 256, |x, y| {
+//!     (30_000.0 + 4_000.0 * ((x as f32 * 0.05).sin() + (y as f32 * 0.04).cos())) as u16
+//! })?;
+//! let map = HeightMap::new(grid, HeightEncoding::new(0.001, 0.0)?, 0.5, WrapMode::Clamp)?;
+//! let density = DensityMap::from_map(&map, DensityParams::default())?;
+//! let view = CdlodView { camera: Vec3::new(20.0, 40.0, 20.0), frustum: None, viewport_width: 1280.0, hfov: 1.2 };
+//!
+//! // Seed 002: edges of about 8 pixels, fewer where the density map says the terrain is flat.
+//! let tess = TessHierarchy::from_map(&map, Some(&density), TessConfig::default())?;
+//! let frame = tess.select(&view)?;
+//! assert!(frame.triangle_count() > 2 * 64, "split beyond the 64 patches' two triangles");
+//!
+//! // A bound on the error instead: no texel of the drawn mesh is more than 1 pixel off.
+//! let config = TessConfig { max_error_px: Some(1.0), morph: false, ..TessConfig::default() };
+//! let tess = TessHierarchy::from_map(&map, None, config)?;
+//! let frame = tess.select(&view)?;
+//! assert!(tess.max_screen_error_px(&frame, &view) <= 1.0);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 #![warn(missing_docs)]

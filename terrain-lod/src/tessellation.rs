@@ -25,6 +25,12 @@
 //! `FLAT_SPHERE` makes `r` the projected length of the edge over flat ground, so the target
 //! is a triangle width in pixels as in seed 002.
 //!
+//! The error metric (`TessConfig::max_error_px`) replaces the size by the saturated geometric
+//! error `E` of the vertex (how far its unsplit triangles can lie from the full-resolution
+//! map: its own offset from its edge plus its children's `E`): `r = K * E / (max(|c - camera|
+//! - R, NEAR_M) * max_error_px)`. Every texel then projects at most `max_error_px` pixels
+//! from the drawn mesh (morph off; `tests/tessellation.rs` checks it), with no density map.
+//!
 //! No popping: a vertex that is split in starts on its edge (the mean of the edge's two drawn
 //! heights) and moves to its true height as `r` goes from 1 to `1 + morph_range`; both
 //! triangles on the edge compute the same position, so the morph keeps the mesh conforming.
@@ -32,7 +38,9 @@
 //! Grid conventions: vertices are texel positions. A patch of `P = patch_size` texels is split
 //! along a diagonal into two triangles (level 0); a triangle of level `l` has a hypotenuse of
 //! `P * sqrt(2)^(1 - l)` texels and splits into two of level `l + 1` down to level `2 log2 P`
-//! (triangles of one texel's legs). A repeating map is tessellated once over its own extent.
+//! (triangles of one texel's legs). A repeating map is tessellated once: over its own extent
+//! when the patch size divides its sides, otherwise over whole patches past its sides, with
+//! the heights wrapped.
 
 use crate::cdlod::CdlodView;
 use crate::density::DensityMap;

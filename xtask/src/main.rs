@@ -311,7 +311,7 @@ fn publishable_crates() -> Result<Vec<String>> {
 }
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 8] = [
+const EXAMPLES: [(&str, &str, &[&str]); 9] = [
     (
         "terrain-core",
         "stamp_heightmap",
@@ -334,6 +334,7 @@ const EXAMPLES: [(&str, &str, &[&str]); 8] = [
         "density_map",
         &["--size", "64", "--out", "{out}/density"],
     ),
+    ("terrain-lod", "tessellation_ratio", &["--size", "256"]),
     ("terrain-cache", "build_world", &["512", "{out}/world"]),
     ("terrain-cache", "trace_sim", &[]),
 ];
