@@ -575,8 +575,12 @@ impl TessHierarchy {
     }
 
     /// The grid index of a vertex (wrapped on a repeating grid).
+    #[inline]
     fn index(&self, v: IVec2) -> usize {
         let g = self.grid.as_ivec2();
+        if v.cmpge(IVec2::ZERO).all() && v.cmplt(g).all() {
+            return v.y as usize * self.grid.x as usize + v.x as usize;
+        }
         let w = match self.grid_wrap {
             WrapMode::Repeat => v.rem_euclid(g),
             WrapMode::Clamp => v.clamp(IVec2::ZERO, g - 1),
@@ -586,7 +590,11 @@ impl TessHierarchy {
 
     /// The map texel whose height grid vertex `v` has: wrapped on a repeating map, clamped to
     /// the last texel past a clamped one.
+    #[inline]
     fn texel_of(&self, v: IVec2) -> IVec2 {
+        if v.cmpge(IVec2::ZERO).all() && v.cmplt(self.map_size.as_ivec2()).all() {
+            return v;
+        }
         match self.wrap {
             WrapMode::Repeat => v.rem_euclid(self.map_size.as_ivec2()),
             WrapMode::Clamp => v.clamp(IVec2::ZERO, self.map_size.as_ivec2() - 1),
@@ -611,8 +619,14 @@ impl TessHierarchy {
         // How far the vertex lies off its edge: what splitting it in changes.
         let own_error = (c.y - 0.5 * (w0.y + w1.y)).abs();
         let mut child_error = 0.0f32;
-        let mut d = match density {
-            Some(dm) => dm.density_at_texel(0, self.texel_of(v)).unwrap_or(1.0),
+        let mut d = match density.and_then(|dm| dm.level(0)) {
+            Some(level) => {
+                // Level 0's sample over the texel (as `DensityMap::density_at_texel`).
+                let t = self.texel_of(v) / crate::density::DENSITY_DOWNSAMPLE as i32;
+                let t = t.min(level.size().as_ivec2() - 1);
+                f32::from(level.as_slice()[t.y as usize * level.width() as usize + t.x as usize])
+                    / 255.0
+            }
             None => 1.0,
         };
         for child in self.children_of(v, tz) {
