@@ -45,6 +45,13 @@ const COLLISION_PER_TEXEL: u64 = 3 * 2 + 2;
 /// Bytes per texel of writing `terrain.png` / `terrain_final.png`: the samples as bytes, the
 /// compressed file (at worst a little more than the samples) and the encoder's state.
 const TERRAIN_PNG_PER_TEXEL: u64 = 5;
+/// Bytes per texel of `--lod tessellated`: the hierarchy's height, radius, density and error
+/// per grid vertex on the CPU (16) and on the GPU (16), and the density map (a f32 and about
+/// 1.33 u8 per 16 texels, rounded up).
+const TESS_PER_TEXEL: u64 = 16 + 16 + 1;
+/// Bytes of `--lod tessellated` beyond its per-texel part: the GPU's triangle output and the
+/// CPU reference's triangles of a frame (2^21 triangles of 36 bytes each).
+const TESS_FIXED: u64 = 2 * (36 << 21);
 /// Bytes per texel of a coarse-map on the GPU: u32 heights, `vec2<f32>` normals, and the upload
 /// (a u32 copy and wgpu's staging buffer).
 const GPU_MAP_PER_TEXEL: u64 = 4 + 8 + 4 + 4;
@@ -87,6 +94,8 @@ const WORLD_BUILD: u64 = 64 << 20;
 pub struct RunShape {
     /// The scenario.
     pub scenario: ScenarioKind,
+    /// The LOD scheme of its 3D frames.
+    pub lod: crate::cli::LodArg,
     /// Whether it renders on the GPU (the estimate assumes it does unless `--no-gpu`: without
     /// an adapter the run falls back to less).
     pub gpu: bool,
@@ -153,6 +162,7 @@ impl RunShape {
         };
         Ok(Self {
             scenario: cli.scenario,
+            lod: cli.lod,
             gpu,
             map,
             heightmap,
@@ -182,6 +192,10 @@ impl RunShape {
                 if self.gpu {
                     let gpu = GPU_MAP_PER_TEXEL + GPU_READBACK_PER_TEXEL;
                     parts.push(("gpu_map", per_texel(gpu)));
+                    if self.lod == crate::cli::LodArg::Tessellated {
+                        let tess = per_texel(TESS_PER_TEXEL).saturating_add(TESS_FIXED);
+                        parts.push(("tessellation", tess));
+                    }
                 }
             }
             ScenarioKind::Snow => {

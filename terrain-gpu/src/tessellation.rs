@@ -81,7 +81,7 @@ impl GpuTessellation {
         let grid = hierarchy.grid_size();
         let patches = hierarchy.patches();
         let capacity = capacity.max(1);
-        let limit = u64::from(device.limits().max_storage_buffer_binding_size);
+        let limit = device.limits().max_storage_buffer_binding_size;
         let vertex_bytes = u64::from(grid.x) * u64::from(grid.y) * VERTEX_BYTES;
         let output_bytes = u64::from(capacity) * TRIANGLE_BYTES;
         if vertex_bytes > limit {

@@ -180,7 +180,7 @@ fn no_cracks_from_grazing_views_across_patch_edges() {
     let Some(ctx) = context_or_skip("tessellation no_cracks_from_grazing_views") else {
         return;
     };
-    let mut scene = Scene::new(ctx, 31, 5);
+    let scene = Scene::new(ctx, 31, 5);
     let density = DensityMap::from_map(&scene.map, DensityParams::default()).unwrap();
     let config = TessConfig {
         patch_size: 16,

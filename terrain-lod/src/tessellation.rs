@@ -777,7 +777,8 @@ impl TessHierarchy {
         }
         let v = (t.l + t.r) / 2;
         let r = self.ratio(d, v);
-        if !(r > 1.0) {
+        // NaN splits nothing, as on the GPU (`r > 1.0` there).
+        if r.is_nan() || r <= 1.0 {
             return None;
         }
         let h = self.heights[self.index(v)];

@@ -43,7 +43,9 @@ fn view(camera: Vec3) -> CdlodView<'static> {
 /// map is drawn once: its seam is a border too). Returns the number of border edges.
 fn assert_conforming(frame: &TessFrame, extent: UVec2) -> usize {
     let key = |v: &terrain_lod::TessVertex| (v.texel[0] as i32, v.texel[1] as i32);
-    let mut edges: HashMap<((i32, i32), (i32, i32)), (u32, [u32; 2])> = HashMap::new();
+    // Per directed edge: how often it is drawn, and its endpoints' height bits.
+    type Edge = ((i32, i32), (i32, i32));
+    let mut edges: HashMap<Edge, (u32, [u32; 2])> = HashMap::new();
     for tri in &frame.triangles {
         let a = Vec2::from(tri[0].texel);
         let b = Vec2::from(tri[1].texel);
