@@ -393,9 +393,16 @@ impl GpuScene {
         let density = density
             .then(|| DensityMap::from_map(map, DensityParams::default()))
             .transpose()?;
+        // The CPU reference selects before the GPU draws, bounded as the GPU's output: a view
+        // that needs more triangles fails with a clear error instead of drawing holes.
+        let config = TessConfig {
+            max_triangles: config.max_triangles.min(TESS_CAPACITY as usize),
+            ..config
+        };
         let hierarchy = TessHierarchy::from_map(map, density.as_ref(), config)?;
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let gpu = terrain_gpu::GpuTessellation::new(device, queue, &hierarchy, TESS_CAPACITY)?;
+        let capacity = config.max_triangles as u32;
+        let gpu = terrain_gpu::GpuTessellation::new(device, queue, &hierarchy, capacity)?;
         self.tess = Some(TessScene {
             hierarchy,
             density,
@@ -427,13 +434,15 @@ impl GpuScene {
         }
         if let Some(c) = &mut self.tess {
             let t = std::time::Instant::now();
+            let mut rows = Vec::new();
             for r in dirty {
                 if let Some(d) = &mut c.density {
                     d.update_rect(map, *r)?;
                 }
-                for rows in c.hierarchy.update_rect(map, c.density.as_ref(), *r)? {
-                    c.gpu.upload_rows(&self.ctx.queue, &c.hierarchy, rows)?;
-                }
+                rows.extend(c.hierarchy.update_rect(map, c.density.as_ref(), *r)?);
+            }
+            if !rows.is_empty() {
+                c.gpu.upload(&self.ctx.queue, &c.hierarchy, &rows)?;
             }
             timings.add(Step::Lod, crate::timings::ms_since(t));
         }
@@ -944,8 +953,9 @@ fn part_vertices(layout: &ClipmapLayout) -> Vec<u64> {
         .collect()
 }
 
-/// Tessellates (a compute pass) and draws a frame; the CPU reference selection gives the
-/// report's figures and is not timed (the `lod` step is the frustum, from `lod_start`).
+/// Tessellates (a compute pass, timed in `render`) and draws a frame; the CPU reference
+/// selection gives the report's figures and is not timed (the `lod` step is the frustum, from
+/// `lod_start`).
 #[allow(clippy::too_many_arguments)]
 fn render_tessellated(
     c: &mut TessScene,
@@ -971,6 +981,10 @@ fn render_tessellated(
         hfov,
     };
     timings.add(Step::Lod, crate::timings::ms_since(lod_start));
+    // The report's figures from the CPU reference (the same triangles as the GPU's), made
+    // first so that a view beyond the output's capacity fails before anything is drawn.
+    let frame = c.hierarchy.select(&view)?;
+    let max_screen_error_px = c.hierarchy.max_screen_error_px(&frame, &view);
     let view_proj = camera.view_proj_relative(aspect);
     let timing = timer.time(device, queue, |encoder| {
         sky.prepare(queue, view_proj, &SkyColors::default())?;
@@ -998,12 +1012,9 @@ fn render_tessellated(
     ctx.check()?;
     timings.add(Step::Capture, crate::timings::ms_since(t));
     record(timings, Step::Render, timing);
-    // The report's figures from the CPU reference (the same triangles as the GPU's).
-    let frame = c.hierarchy.select(&view)?;
-    let max_screen_error_px = c.hierarchy.max_screen_error_px(&frame, &view);
     let stats = RenderedFrame {
         image,
-        triangles: frame.triangle_count().min(u64::from(c.gpu.capacity())),
+        triangles: frame.triangle_count(),
         lod: LodStats {
             mode: "tessellated",
             vertices: frame.vertex_count(),

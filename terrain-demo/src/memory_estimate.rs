@@ -46,12 +46,13 @@ const COLLISION_PER_TEXEL: u64 = 3 * 2 + 2;
 /// compressed file (at worst a little more than the samples) and the encoder's state.
 const TERRAIN_PNG_PER_TEXEL: u64 = 5;
 /// Bytes per texel of `--lod tessellated`: the hierarchy's height, radius, density and error
-/// per grid vertex on the CPU (16) and on the GPU (16), and the density map (a f32 and about
-/// 1.33 u8 per 16 texels, rounded up).
-const TESS_PER_TEXEL: u64 = 16 + 16 + 1;
-/// Bytes of `--lod tessellated` beyond its per-texel part: the GPU's triangle output and the
-/// CPU reference's triangles of a frame (2^21 triangles of 36 bytes each).
-const TESS_FIXED: u64 = 2 * (36 << 21);
+/// per grid vertex on the CPU (16) and on the GPU (16, and 16 more of wgpu's staging while it
+/// is uploaded), and the density map (a f32 and about 1.33 u8 per 16 texels, rounded up).
+const TESS_PER_TEXEL: u64 = 16 + 16 + 16 + 1;
+/// Bytes of `--lod tessellated` beyond its per-texel part, for 2^21 triangles (the output's
+/// capacity): the GPU's output (36 bytes each), the CPU reference's per-row triangles and
+/// the frame they are joined into (36 + 36), and the vertex count's keys (24).
+const TESS_FIXED: u64 = (36 + 36 + 36 + 24) << 21;
 /// Bytes per texel of a coarse-map on the GPU: u32 heights, `vec2<f32>` normals, and the upload
 /// (a u32 copy and wgpu's staging buffer).
 const GPU_MAP_PER_TEXEL: u64 = 4 + 8 + 4 + 4;

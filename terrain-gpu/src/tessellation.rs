@@ -6,7 +6,7 @@
 //! reference is [`terrain_lod::TessHierarchy::select`]: same decisions, same f32 operations.
 //!
 //! [`GpuTessellation`] holds the persistent resources: the hierarchy's per-vertex bounds
-//! (height, saturated radius, saturated density), the patch bounds, the output triangles and
+//! (height, saturated radius, density and error), the patch bounds, the output triangles and
 //! the counter with the draw arguments. Nothing is allocated per frame.
 
 use crate::camera::Camera;
@@ -138,17 +138,18 @@ impl GpuTessellation {
             grid,
             patches,
         };
-        out.upload_rows(queue, hierarchy, 0..grid.y)?;
+        out.upload(queue, hierarchy, std::slice::from_ref(&(0..grid.y)))?;
         Ok(out)
     }
 
-    /// Copies the vertex rows `rows` (as [`TessHierarchy::update_rect`] returns them) and all
-    /// patch bounds of `hierarchy` to the GPU. Fails for a hierarchy of another size.
-    pub fn upload_rows(
+    /// Copies the vertex rows `rows` (the ranges [`TessHierarchy::update_rect`] returns, of
+    /// one or more updates) and all patch bounds of `hierarchy` to the GPU. Fails for a
+    /// hierarchy of another size.
+    pub fn upload(
         &self,
         queue: &wgpu::Queue,
         hierarchy: &TessHierarchy,
-        rows: std::ops::Range<u32>,
+        rows: &[std::ops::Range<u32>],
     ) -> Result<(), GpuError> {
         if hierarchy.grid_size() != self.grid || hierarchy.patches() != self.patches {
             return Err(GpuError::SizeMismatch {
@@ -156,8 +157,12 @@ impl GpuTessellation {
                 actual: hierarchy.grid_size(),
             });
         }
-        let rows = rows.start.min(self.grid.y)..rows.end.min(self.grid.y);
-        if !rows.is_empty() {
+        // In pieces of at most 256 rows, so the packed copy stays small.
+        let pieces = rows.iter().flat_map(|r| {
+            let r = r.start.min(self.grid.y)..r.end.min(self.grid.y);
+            r.clone().step_by(256).map(move |y| y..(y + 256).min(r.end))
+        });
+        for rows in pieces {
             let w = self.grid.x as usize;
             let (a, b) = (rows.start as usize * w, rows.end as usize * w);
             let packed: Vec<[f32; 4]> = hierarchy.heights()[a..b]
@@ -296,7 +301,7 @@ impl TessellationPass {
             cull: u32::from(view.frustum.is_some()),
             patches: gpu.patches.to_array(),
             grid: gpu.grid.to_array(),
-            wrap: wrap_code(hierarchy.wrap()),
+            wrap: wrap_code(hierarchy.grid_wrap()),
             error_metric: u32::from(d.error_metric),
             _pad: [0; 2],
         };

@@ -56,13 +56,18 @@ fn the_gpu_emits_the_cpu_reference_triangles() {
     let mut pass = TessellationPass::new(device).unwrap();
     let size = UVec2::new(640, 360);
     let mut compared = 0;
-    for (use_density, morph, patch_size) in [(true, true, 32), (false, true, 16), (true, false, 64)]
-    {
+    for (use_density, morph, patch_size, max_error_px) in [
+        (true, true, 32, None),
+        (false, true, 16, None),
+        (true, false, 64, None),
+        (false, true, 32, Some(0.5)),
+    ] {
         let config = TessConfig {
             use_density,
             morph,
             patch_size,
             triangle_width_px: 4.0,
+            max_error_px,
             ..TessConfig::default()
         };
         let tess = TessHierarchy::from_map(&scene.map, Some(&density), config).unwrap();
@@ -117,6 +122,88 @@ fn the_gpu_emits_the_cpu_reference_triangles() {
     assert!(compared > 100_000, "{compared} triangles compared");
 }
 
+/// After deformations (one across the repeating map's corner) the rows `update_rect` reports
+/// are all the GPU needs: its triangles equal the CPU's again, on a map the patches tile and on
+/// one whose sides they do not divide.
+#[test]
+fn uploaded_updates_keep_the_gpu_equal_to_the_cpu() {
+    let Some(ctx) = context_or_skip("tessellation updates") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut pass = TessellationPass::new(device).unwrap();
+    let size = UVec2::new(640, 360);
+    for side in [UVec2::splat(256), UVec2::new(200, 150)] {
+        let grid = terrain_core::Grid::from_fn(side.x, side.y, |x, y| {
+            (20_000.0 + 6_000.0 * ((x as f32 * 0.07).sin() * (y as f32 * 0.05).cos())) as u16
+        })
+        .unwrap();
+        let mut map = terrain_core::HeightMap::new(
+            grid,
+            terrain_core::HeightEncoding::new(0.002, 0.0).unwrap(),
+            0.5,
+            terrain_core::WrapMode::Repeat,
+        )
+        .unwrap();
+        let mut density = DensityMap::from_map(&map, DensityParams::default()).unwrap();
+        let mut tess =
+            TessHierarchy::from_map(&map, Some(&density), TessConfig::default()).unwrap();
+        let gpu = GpuTessellation::new(device, queue, &tess, 1 << 20).unwrap();
+        let mut rows = Vec::new();
+        for (at, r) in [(glam::IVec2::new(40, 50), 9), (side.as_ivec2() - 4, 12)] {
+            let rect = terrain_core::Rect::new(at - r, UVec2::splat(2 * r as u32));
+            for piece in rect.split_toroidal(side) {
+                let p = piece.map;
+                for y in p.min.y..p.max().y {
+                    for x in p.min.x..p.max().x {
+                        let s = map.grid_mut().get_mut(x as u32, y as u32).unwrap();
+                        *s = s.saturating_sub(5_000);
+                    }
+                }
+            }
+            density.update_rect(&map, rect).unwrap();
+            rows.extend(tess.update_rect(&map, Some(&density), rect).unwrap());
+        }
+        gpu.upload(queue, &tess, &rows).unwrap();
+        let camera = Camera::looking(Vec3::new(20.0, 60.0, 25.0), Vec3::new(1.0, -0.6, 0.8));
+        let view = view_of(&camera, size, None);
+        let cpu = tess.select(&view).unwrap();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        pass.encode(device, queue, &mut encoder, &gpu, &tess, &view)
+            .unwrap();
+        queue.submit([encoder.finish()]);
+        pass.recall();
+        let (tris, _) = gpu.read_triangles(device, queue).unwrap();
+        let (a, b) = (by_corners(&cpu.triangles), by_corners(&tris));
+        let differ = a.keys().filter(|k| !b.contains_key(*k)).count()
+            + b.keys().filter(|k| !a.contains_key(*k)).count();
+        assert!(
+            differ * 1000 <= a.len() && a.len() > 1000,
+            "{side}: {} CPU triangles, {} GPU, {differ} differ",
+            a.len(),
+            b.len()
+        );
+        ctx.check().expect("no GPU validation errors");
+    }
+}
+
+/// The constants the shader repeats from terrain-lod.
+#[test]
+fn the_shader_repeats_the_libraries_constants() {
+    use terrain_lod::tessellation::{MAX_LEVELS, NEAR_M, SPLIT_MARGIN};
+    let src = terrain_shaders::TESSELLATE;
+    assert_eq!(NEAR_M, 1e-3);
+    assert_eq!(SPLIT_MARGIN, 1e-4);
+    assert_eq!(MAX_LEVELS, 16);
+    for line in [
+        "const NEAR_M: f32 = 1e-3;",
+        "const SPLIT_MARGIN: f32 = 1e-4;",
+        "const MAX_LEVELS: u32 = 16u;",
+    ] {
+        assert!(src.contains(line), "tessellate.wgsl lacks `{line}`");
+    }
+}
+
 #[test]
 fn the_output_is_bounded_and_says_when_it_overflows() {
     let Some(ctx) = context_or_skip("tessellation output bound") else {
@@ -149,7 +236,10 @@ fn the_output_is_bounded_and_says_when_it_overflows() {
         pass.encode(device, queue, &mut encoder, &gpu, &other, &view)
             .is_err()
     );
-    assert!(gpu.upload_rows(queue, &other, 0..4).is_err());
+    assert!(
+        gpu.upload(queue, &other, std::slice::from_ref(&(0..4)))
+            .is_err()
+    );
     scene.ctx.check().expect("no GPU validation errors");
 }
 

@@ -4,7 +4,9 @@
 //! for a target triangle width in pixels, scaled by the density map and clamped to a minimum
 //! horizontal size. wgpu has no tessellation stage: `terrain-gpu`'s `TessellationPass` runs the
 //! same decisions in a compute pass that writes the triangles and the indirect draw arguments;
-//! [`TessHierarchy::select`] is its CPU reference.
+//! [`TessHierarchy::select`] is its CPU reference (the same f32 operations in the same order:
+//! on lavapipe the two emit the same triangles; a driver that fuses multiply-adds or rounds a
+//! square root differently may flip a decision that lies within rounding of its threshold).
 //!
 //! Why bisection and not the hardware tessellator's fractional-odd pattern: the pattern only
 //! exists as the Direct3D reference tessellator, which cannot be reproduced exactly without
@@ -20,6 +22,9 @@
 //!
 //! `r = K * R * density / (FLAT_SPHERE * max(|c - camera| - R, NEAR_M) * triangle_width_px) > 1`
 //!
+//! (precisely: above [`split_threshold`] of its triangles' level, 1 less a margin that shrinks
+//! by [`SPLIT_MARGIN`] per level, so that f32 rounding cannot un-nest a child and its parent)
+//!
 //! with `K = width / (2 tan(hfov / 2))`, `c` the vertex (true height) and `R` its saturated
 //! radius: the sphere's projected size, so the child's `r` never exceeds the parent's.
 //! `FLAT_SPHERE` makes `r` the projected length of the edge over flat ground, so the target
@@ -27,9 +32,14 @@
 //!
 //! The error metric (`TessConfig::max_error_px`) replaces the size by the saturated geometric
 //! error `E` of the vertex (how far its unsplit triangles can lie from the full-resolution
-//! map: its own offset from its edge plus its children's `E`): `r = K * E / (max(|c - camera|
-//! - R, NEAR_M) * max_error_px)`. Every texel then projects at most `max_error_px` pixels
-//! from the drawn mesh (morph off; `tests/tessellation.rs` checks it), with no density map.
+//! map: its own offset from its edge plus its children's `E`):
+//!
+//! `r = K * E / (max(|c - camera| - R, NEAR_M) * max_error_px)`.
+//!
+//! Every texel then projects at most `max_error_px` pixels
+//! from the drawn mesh, up to f32 rounding, when the morph is off, `min_triangle_m` is 0 and
+//! the selection is not cut short by `max_triangles` (`tests/tessellation.rs` checks it); no
+//! density map is read.
 //!
 //! No popping: a vertex that is split in starts on its edge (the mean of the edge's two drawn
 //! heights) and moves to its true height as `r` goes from 1 to `1 + morph_range`; both
@@ -56,8 +66,26 @@ pub const FLAT_SPHERE: f32 = 1.207_106_8;
 /// inside a sphere asks for the finest level there).
 pub const NEAR_M: f32 = 1e-3;
 
+/// How much the split threshold rises per level: the ratios nest in exact arithmetic, and a
+/// threshold `1 - (MAX_LEVELS - level) * SPLIT_MARGIN` keeps them nested under f32 rounding
+/// (relative errors below `SPLIT_MARGIN`) while staying at most 1 (so the error metric's bound
+/// holds).
+pub const SPLIT_MARGIN: f32 = 1e-4;
+
+/// The most triangle levels: `2 log2 MAX_PATCH_SIZE`.
+pub const MAX_LEVELS: u32 = 16;
+
+/// The ratio a vertex split in by triangles of `level` must exceed.
+#[inline]
+pub fn split_threshold(level: u32) -> f32 {
+    1.0 - (MAX_LEVELS - level.min(MAX_LEVELS)) as f32 * SPLIT_MARGIN
+}
+
 /// The largest patch side in texels.
 pub const MAX_PATCH_SIZE: u32 = 256;
+
+/// The most grid vertices along a side (coordinates, doubled for a neighbour, fit in `i32`).
+pub const MAX_GRID_SIDE: u64 = 1 << 30;
 
 /// Parameters of the tessellation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -298,8 +326,8 @@ pub struct TessHierarchy {
 impl TessHierarchy {
     /// The hierarchy of `map` with the densities of `density` (or 1 everywhere without one).
     ///
-    /// Fails on a bad config, a repeating map whose sides are not multiples of the patch size,
-    /// or a density map made for another size.
+    /// Fails on a bad config, a density map made for another size, or a grid too large to
+    /// address (sides past 2^30 vertices) or to allocate (16 bytes per vertex).
     pub fn from_map<T: HeightSample>(
         map: &HeightMap<T>,
         density: Option<&DensityMap>,
@@ -324,8 +352,22 @@ impl TessHierarchy {
                 cells.x.div_ceil(u64::from(ps)) as u32,
                 cells.y.div_ceil(u64::from(ps)) as u32,
             );
-            (patches, patches * ps + 1, WrapMode::Clamp)
+            let side = |p: u32| u64::from(p) * u64::from(ps) + 1;
+            let (w, h) = (side(patches.x), side(patches.y));
+            if w.max(h) > MAX_GRID_SIDE {
+                return Err(LodError::Core(terrain_core::CoreError::GridTooLarge {
+                    width: w.min(u64::from(u32::MAX)) as u32,
+                    height: h.min(u64::from(u32::MAX)) as u32,
+                }));
+            }
+            (patches, UVec2::new(w as u32, h as u32), WrapMode::Clamp)
         };
+        if u64::from(grid.max_element()) > MAX_GRID_SIDE {
+            return Err(LodError::Core(terrain_core::CoreError::GridTooLarge {
+                width: grid.x,
+                height: grid.y,
+            }));
+        }
         if let Some(d) = density
             && d.map_size() != size
         {
@@ -335,6 +377,18 @@ impl TessHierarchy {
             });
         }
         let count = grid.x as usize * grid.y as usize;
+        let too_large = || {
+            LodError::Core(terrain_core::CoreError::GridTooLarge {
+                width: grid.x,
+                height: grid.y,
+            })
+        };
+        let mut heights = Vec::new();
+        heights.try_reserve_exact(count).map_err(|_| too_large())?;
+        heights.resize(count, 0.0);
+        let mut bounds = Vec::new();
+        bounds.try_reserve_exact(count).map_err(|_| too_large())?;
+        bounds.resize(count, [0.0; 3]);
         let mut out = Self {
             config,
             map_size: size,
@@ -344,8 +398,8 @@ impl TessHierarchy {
             p: ps.trailing_zeros(),
             patches,
             grid,
-            heights: vec![0.0; count],
-            bounds: vec![[0.0, 0.0, 0.0]; count],
+            heights,
+            bounds,
             patch_bounds: vec![[0.0, 0.0]; patches.x as usize * patches.y as usize],
             density_reach: density.map_or(0, |d| {
                 (d.params().filter_radii().1 + 2) * crate::density::DENSITY_DOWNSAMPLE
@@ -358,7 +412,7 @@ impl TessHierarchy {
     /// Brings the bounds up to date with `map` (and `density`, already updated) after a height
     /// change inside `dirty` (texels; wrapped on a repeating map). The result equals
     /// [`TessHierarchy::from_map`] of the changed map. Returns the grid rows whose vertices it
-    /// may have changed (one or two ranges; none for an empty rect), for a GPU copy to follow.
+    /// may have changed (a few ranges; none for an empty rect), for a GPU copy to follow.
     pub fn update_rect<T: HeightSample>(
         &mut self,
         map: &HeightMap<T>,
@@ -385,8 +439,14 @@ impl TessHierarchy {
         // the map; otherwise clamped to the grid, with each copy of it a repeating map's
         // period further (a repeating map drawn past its side).
         let mut pieces = Vec::new();
+        let n = self.map_size.as_ivec2();
         match (self.grid_wrap, self.wrap) {
-            (WrapMode::Repeat, _) => pieces.push((r.min, r.max() - 1)),
+            (WrapMode::Repeat, _) => {
+                // One period at most, starting inside the map (so no margin overflows).
+                let lo = r.min.rem_euclid(n);
+                let size = r.size.min(self.map_size).as_ivec2();
+                pieces.push((lo, lo + size - 1));
+            }
             (WrapMode::Clamp, WrapMode::Clamp) => {
                 let last = self.map_size.as_ivec2() - 1;
                 let (lo, hi) = (r.min.max(IVec2::ZERO), r.max() - 1);
@@ -399,21 +459,39 @@ impl TessHierarchy {
                 pieces.push((lo, hi));
             }
             (WrapMode::Clamp, WrapMode::Repeat) => {
-                let n = self.map_size.as_ivec2();
+                // The grid holds `g / n + 1` copies of the map along each axis.
+                let copies = g / n + 1;
                 for piece in r.split_toroidal(self.map_size) {
                     let (lo, hi) = (piece.map.min, piece.map.max() - 1);
-                    for k in [IVec2::ZERO, IVec2::new(n.x, 0), IVec2::new(0, n.y), n] {
-                        pieces.push(((lo + k).min(g + 1), (hi + k).min(g)));
+                    for ky in 0..copies.y {
+                        for kx in 0..copies.x {
+                            let k = IVec2::new(kx, ky) * n;
+                            pieces.push(((lo + k).min(g + 1), (hi + k).min(g)));
+                        }
                     }
                 }
             }
         }
         pieces.retain(|(lo, hi)| lo.cmple(*hi).all());
+        // Pieces whose windows (reaching `3 P / 2` further) meet are refreshed as one: a small
+        // repeating map's copies would otherwise each refresh most of the grid.
+        let reach = 3 * (self.config.patch_size as i32 / 2);
+        let mut merged: Vec<(IVec2, IVec2)> = Vec::new();
+        for (lo, hi) in pieces {
+            let (mut lo, mut hi) = (lo, hi);
+            while let Some(i) = merged.iter().position(|&(a, b)| {
+                (lo - 2 * reach).cmple(b).all() && (hi + 2 * reach).cmpge(a).all()
+            }) {
+                let (a, b) = merged.swap_remove(i);
+                (lo, hi) = (lo.min(a), hi.max(b));
+            }
+            merged.push((lo, hi));
+        }
+        let pieces = merged;
         let mut ranges: Vec<std::ops::Range<u32>> = Vec::new();
         for (lo, hi) in pieces {
             self.refresh(map, density, lo, hi);
             // The coarsest vertices read `3 P / 2` rows either side (see `refresh`).
-            let reach = 3 * (self.config.patch_size as i32 / 2);
             for y in axis(lo.y - reach, hi.y + reach, 1, g.y + 1, self.grid_wrap) {
                 let y = y as u32;
                 match ranges.iter_mut().find(|r| r.contains(&y) || r.end == y) {
@@ -657,6 +735,12 @@ impl TessHierarchy {
         self.wrap
     }
 
+    /// How grid coordinates wrap: as a repeating map whose sides the patch size divides,
+    /// clamped otherwise (what a GPU pass indexes [`TessHierarchy::bounds`] with).
+    pub fn grid_wrap(&self) -> WrapMode {
+        self.grid_wrap
+    }
+
     /// Patches per axis.
     pub fn patches(&self) -> UVec2 {
         self.patches
@@ -777,13 +861,14 @@ impl TessHierarchy {
         }
         let v = (t.l + t.r) / 2;
         let r = self.ratio(d, v);
-        // NaN splits nothing, as on the GPU (`r > 1.0` there).
-        if r.is_nan() || r <= 1.0 {
+        let threshold = split_threshold(t.level);
+        // NaN splits nothing, as on the GPU (`r > threshold` there).
+        if r.is_nan() || r <= threshold {
             return None;
         }
         let h = self.heights[self.index(v)];
         let k = if d.inv_morph_range > 0.0 {
-            ((r - 1.0) * d.inv_morph_range).min(1.0)
+            ((r - threshold) * d.inv_morph_range).min(1.0)
         } else {
             1.0
         };
@@ -852,6 +937,7 @@ impl TessHierarchy {
             let mut stack = Vec::with_capacity(2 * self.p as usize + 2);
             for px in 0..self.patches.x as i32 {
                 let patch = py as usize * self.patches.x as usize + px as usize;
+                let before = tris.len();
                 for base in self.base(px, py as i32) {
                     stack.push(base);
                     while let Some(t) = stack.pop() {
@@ -867,8 +953,10 @@ impl TessHierarchy {
                             }
                             None => {
                                 tris.push(t.emit());
-                                if tris.len() % 4096 == 0
-                                    && emitted.fetch_add(4096, std::sync::atomic::Ordering::Relaxed)
+                                // A patch alone may hold 2 P^2 triangles: stop early.
+                                let mine = tris.len() - before;
+                                if mine % 1024 == 0
+                                    && emitted.load(std::sync::atomic::Ordering::Relaxed) + mine
                                         > limit
                                 {
                                     return None;
@@ -877,14 +965,27 @@ impl TessHierarchy {
                         }
                     }
                 }
+                // Counted per patch: at most one patch per thread beyond the bound is held.
+                let added = tris.len() - before;
+                let total = emitted.fetch_add(added, std::sync::atomic::Ordering::Relaxed) + added;
+                if total > limit {
+                    return None;
+                }
             }
             Some((tris, culled))
         });
         let mut frame = TessFrame::default();
+        let mut rows = Vec::with_capacity(per_row.len());
         for row in per_row {
-            let Some((tris, culled)) = row else {
+            let Some(row) = row else {
                 return Err(LodError::SelectionTooLarge { limit });
             };
+            rows.push(row);
+        }
+        frame
+            .triangles
+            .reserve_exact(rows.iter().map(|(t, _)| t.len()).sum());
+        for (tris, culled) in rows {
             frame.triangles.extend_from_slice(&tris);
             frame.culled += culled;
         }

@@ -12,7 +12,7 @@
 mod harness;
 
 use glam::camera::rh::{proj::directx, view::look_to_mat4};
-use glam::{IVec2, Mat4, Vec2, Vec3, Vec4};
+use glam::{IVec2, Mat4, UVec2, Vec2, Vec3, Vec4};
 use harness::{Case, Class, Rng, Target};
 use std::time::Duration;
 use terrain_core::{Grid, HeightEncoding, HeightMap, Rect, WrapMode};
@@ -803,6 +803,27 @@ fn tessellation_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
         viewport_width: rng.pick(&[1.0f32, 1280.0, 1e9]),
         hfov: rng.pick(&[0.01f32, 1.2, 3.1]),
     };
+    // An update of any rect (off the map, huge, empty) answers and keeps the bounds finite.
+    let mut tess = tess;
+    let rect = Rect::new(
+        IVec2::new(
+            rng.pick(&[i32::MIN, -70, 0, 33, i32::MAX - 5]),
+            rng.pick(&[-3, 0, 50]),
+        ),
+        UVec2::new(rng.pick(&[0, 1, 20, u32::MAX]), rng.pick(&[0, 7, u32::MAX])),
+    );
+    if let Err(e) = tess.update_rect(&map, density.as_ref(), rect) {
+        return Err(format!("update_rect {rect:?}: {e}"));
+    }
+    if tess.bounds().iter().flatten().any(|v| !v.is_finite()) {
+        return Err("a bound is not finite".into());
+    }
+    let probe = Vec2::new(any_f32(rng), any_f32(rng));
+    if let Some(h) = tess.surface_height(&view, probe)
+        && !h.is_finite()
+    {
+        return Err(format!("surface height {h} at {probe}"));
+    }
     match tess.select(&view) {
         Ok(frame) => {
             if frame.triangles.len() > c.max_triangles {
@@ -812,7 +833,7 @@ fn tessellation_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
                 ));
             }
             let e = tess.max_screen_error_px(&frame, &view);
-            if e.is_nan() || e < 0.0 {
+            if !e.is_finite() || e < 0.0 {
                 return Err(format!("screen error {e}"));
             }
             Ok(())

@@ -296,7 +296,7 @@ fn vertices_move_in_instead_of_popping_in() {
 }
 
 /// On the plane half the density map asks for almost nothing, so at one triangle width it
-/// draws far fewer triangles there, and the error stays small (the plane is exact).
+/// draws far fewer triangles there (the plane is drawn exactly either way).
 #[test]
 fn the_density_map_saves_triangles_where_the_terrain_is_flat() {
     let m = map(256, 256, WrapMode::Clamp);
@@ -543,20 +543,24 @@ fn check_update_on(
     let d = with_density.then_some(&density);
     let mut tess = TessHierarchy::from_map(&m, d, TessConfig::default()).unwrap();
     let rect = Rect::new(at, size);
-    let isize = m.size().as_ivec2();
-    for y in at.y..at.y + size.y as i32 {
-        for x in at.x..at.x + size.x as i32 {
-            let t = match wrap {
-                WrapMode::Repeat => IVec2::new(x, y).rem_euclid(isize),
-                WrapMode::Clamp => {
-                    if x < 0 || y < 0 || x >= isize.x || y >= isize.y {
-                        continue;
-                    }
-                    IVec2::new(x, y)
-                }
-            };
-            let s = m.grid_mut().get_mut(t.x as u32, t.y as u32).unwrap();
-            *s = s.saturating_sub(depth);
+    // The rect's texels: wrapped (each once) on a repeating map, clipped on a clamped one.
+    let pieces: Vec<Rect> = match wrap {
+        WrapMode::Repeat => rect
+            .split_toroidal(m.size())
+            .into_iter()
+            .map(|p| p.map)
+            .collect(),
+        WrapMode::Clamp => rect
+            .intersect(&Rect::from_size(m.size()))
+            .into_iter()
+            .collect(),
+    };
+    for piece in pieces {
+        for y in piece.min.y..piece.max().y {
+            for x in piece.min.x..piece.max().x {
+                let s = m.grid_mut().get_mut(x as u32, y as u32).unwrap();
+                *s = s.saturating_sub(depth);
+            }
         }
     }
     density.update_rect(&m, rect).unwrap();
@@ -604,6 +608,28 @@ fn check_update_on(
                 rows.iter().any(|r| r.contains(&row)),
                 "row {row} changed, not in {rows:?}"
             );
+        }
+    }
+}
+
+/// Repeating maps smaller than a patch (the grid holds several copies of them) and rects
+/// covering everything there is: updates still equal rebuilds, and nothing overflows.
+#[test]
+fn updates_of_small_maps_and_huge_rects_equal_rebuilds() {
+    for (w, h, wrap) in [
+        (12, 12, WrapMode::Repeat),
+        (20, 40, WrapMode::Repeat),
+        (64, 64, WrapMode::Repeat),
+        (30, 50, WrapMode::Clamp),
+    ] {
+        for (at, size) in [
+            (IVec2::new(3, 5), UVec2::new(4, 4)),
+            (IVec2::new(-7, 11), UVec2::new(9, 30)),
+            (IVec2::ZERO, UVec2::MAX),
+            (IVec2::splat(i32::MIN), UVec2::MAX),
+            (IVec2::splat(i32::MAX - 3), UVec2::splat(3)),
+        ] {
+            check_update_on(UVec2::new(w, h), wrap, at, size, 5000, true);
         }
     }
 }

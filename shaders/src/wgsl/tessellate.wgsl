@@ -55,7 +55,10 @@ struct State {
 @group(0) @binding(4) var<storage, read_write> state: State;
 
 const NEAR_M: f32 = 1e-3;
-// Deepest stack a depth-first refinement needs: 2 log2(256) + 2.
+// terrain_lod::tessellation::{SPLIT_MARGIN, MAX_LEVELS}.
+const SPLIT_MARGIN: f32 = 1e-4;
+const MAX_LEVELS: u32 = 16u;
+// A depth-first refinement holds at most 2 log2(256) + 1 = 17 triangles; 20 leaves room.
 const STACK: u32 = 20u;
 
 // Right-angle apex a, hypotenuse l -> r ((l, r, a) counter-clockwise seen from above), drawn
@@ -200,12 +203,14 @@ fn generate(@builtin(global_invocation_id) id: vec3<u32>) {
         if t.level < params.split_levels && top + 2u <= STACK {
             let v = (t.l + t.r) / 2;
             let r = ratio(v);
-            if r > 1.0 {
+            // terrain_lod::tessellation::split_threshold.
+            let threshold = 1.0 - f32(MAX_LEVELS - min(t.level, MAX_LEVELS)) * SPLIT_MARGIN;
+            if r > threshold {
                 split = true;
                 let h = verts[vindex(v)].h;
                 var k = 1.0;
                 if params.inv_morph_range > 0.0 {
-                    k = min((r - 1.0) * params.inv_morph_range, 1.0);
+                    k = min((r - threshold) * params.inv_morph_range, 1.0);
                 }
                 let mid = 0.5 * (t.hl + t.hr);
                 let hv = mid + (h - mid) * k;
