@@ -263,8 +263,9 @@ fn open_gpu(
     Ok(Some(scene))
 }
 
-/// The tessellation of `--lod tessellated`: patches of 32 texels, split by edge size (`--triangle-width`, scaled by the
-/// density map unless `--density-map off`) or by screen-space error (`--target-error`).
+/// The tessellation of `--lod tessellated`: patches of 32 texels, split by edge size
+/// (`--triangle-width`, scaled by the density map unless `--density-map off`) or by
+/// screen-space error (`--target-error`).
 fn tess_config(cli: &Cli) -> Result<TessConfig> {
     let config = TessConfig {
         triangle_width_px: cli.triangle_width.unwrap_or(8.0),
