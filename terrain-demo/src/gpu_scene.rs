@@ -843,34 +843,28 @@ impl GpuScene {
         };
         let coarse = self.granular.is_none() && self.atlas.is_none();
         if let (Some(c), true) = (&mut self.tess, coarse) {
-            return render_tessellated(
-                c,
-                &self.ctx,
-                &mut self.target,
-                &mut self.sky,
-                &self.timer,
-                (&self.map, &self.normals),
-                &self.style,
-                camera,
-                frustum,
-                t,
-                timings,
-            );
+            let gpu = FrameGpu {
+                ctx: &self.ctx,
+                target: &mut self.target,
+                sky: &mut self.sky,
+                timer: &self.timer,
+                map: &self.map,
+                normals: &self.normals,
+                style: &self.style,
+            };
+            return render_tessellated(c, gpu, camera, frustum, t, timings);
         }
         if let (Some(c), true) = (&mut self.cdlod, coarse) {
-            return render_cdlod(
-                c,
-                &self.ctx,
-                &mut self.target,
-                &mut self.sky,
-                &self.timer,
-                (&self.map, &self.normals),
-                &self.style,
-                camera,
-                frustum,
-                t,
-                timings,
-            );
+            let gpu = FrameGpu {
+                ctx: &self.ctx,
+                target: &mut self.target,
+                sky: &mut self.sky,
+                timer: &self.timer,
+                map: &self.map,
+                normals: &self.normals,
+                style: &self.style,
+            };
+            return render_cdlod(c, gpu, camera, frustum, t, timings);
         }
         let placement = self.layout.place(
             Vec2::new(camera.position.x, camera.position.z),
@@ -953,33 +947,69 @@ fn part_vertices(layout: &ClipmapLayout) -> Vec<u64> {
         .collect()
 }
 
+/// The scene's parts a CDLOD or tessellated frame is drawn with.
+struct FrameGpu<'a> {
+    ctx: &'a GpuContext,
+    target: &'a mut OffscreenTarget,
+    sky: &'a mut SkyPass,
+    timer: &'a GpuTimer,
+    map: &'a GpuHeightMap<u16>,
+    normals: &'a GpuDerivativeMap,
+    style: &'a TerrainStyle,
+}
+
+/// What CDLOD's and the tessellation's decisions are made for: the camera, its frustum and the
+/// target's width and horizontal field of view.
+fn lod_view<'a>(camera: &Camera, size: UVec2, frustum: &'a Frustum) -> CdlodView<'a> {
+    let aspect = size.x as f32 / size.y as f32;
+    CdlodView {
+        camera: camera.position,
+        frustum: Some(frustum),
+        viewport_width: size.x as f32,
+        hfov: 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan(),
+    }
+}
+
+/// Reads the rendered frame back (timed as `capture`) and records its GPU `timing` as
+/// `render`.
+fn capture(
+    ctx: &GpuContext,
+    target: &mut OffscreenTarget,
+    timing: GpuTiming,
+    timings: &mut Timings,
+) -> Result<Grid<[u8; 4]>> {
+    let t = std::time::Instant::now();
+    let image = target.read_rgba8(&ctx.device, &ctx.queue)?;
+    ctx.check()?;
+    timings.add(Step::Capture, crate::timings::ms_since(t));
+    record(timings, Step::Render, timing);
+    Ok(image)
+}
+
 /// Tessellates (a compute pass, timed in `render`) and draws a frame; the CPU reference
 /// selection gives the report's figures and is not timed (the `lod` step is the frustum, from
 /// `lod_start`).
-#[allow(clippy::too_many_arguments)]
 fn render_tessellated(
     c: &mut TessScene,
-    ctx: &GpuContext,
-    target: &mut OffscreenTarget,
-    sky: &mut SkyPass,
-    timer: &GpuTimer,
-    (map, normals): (&GpuHeightMap<u16>, &GpuDerivativeMap),
-    style: &TerrainStyle,
+    gpu: FrameGpu<'_>,
     camera: &Camera,
     frustum: Frustum,
     lod_start: std::time::Instant,
     timings: &mut Timings,
 ) -> Result<RenderedFrame> {
+    let FrameGpu {
+        ctx,
+        target,
+        sky,
+        timer,
+        map,
+        normals,
+        style,
+    } = gpu;
     let (device, queue) = (&ctx.device, &ctx.queue);
     let size = target.size();
     let aspect = size.x as f32 / size.y as f32;
-    let hfov = 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan();
-    let view = CdlodView {
-        camera: camera.position,
-        frustum: Some(&frustum),
-        viewport_width: size.x as f32,
-        hfov,
-    };
+    let view = lod_view(camera, size, &frustum);
     timings.add(Step::Lod, crate::timings::ms_since(lod_start));
     // The report's figures from the CPU reference (the same triangles as the GPU's), made
     // first so that a view beyond the output's capacity fails before anything is drawn.
@@ -1007,11 +1037,7 @@ fn render_tessellated(
         Ok(())
     })?;
     c.pass.recall();
-    let t = std::time::Instant::now();
-    let image = target.read_rgba8(device, queue)?;
-    ctx.check()?;
-    timings.add(Step::Capture, crate::timings::ms_since(t));
-    record(timings, Step::Render, timing);
+    let image = capture(ctx, target, timing, timings)?;
     let stats = RenderedFrame {
         image,
         triangles: frame.triangle_count(),
@@ -1021,7 +1047,7 @@ fn render_tessellated(
             max_screen_error_px: Some(max_screen_error_px),
         },
     };
-    c.previous = c.last.replace((camera.position, size.x as f32, hfov));
+    c.previous = c.last.replace((camera.position, size.x as f32, view.hfov));
     let stride = (frame.triangles.len() / JUMP_PROBES).max(1);
     let probes = frame
         .triangles
@@ -1061,29 +1087,27 @@ fn tess_jump_px(t: &TessScene, camera: &Camera, size: Vec2) -> Option<f32> {
 }
 
 /// Selects and draws a CDLOD frame (the `lod` step is timed from `lod_start`).
-#[allow(clippy::too_many_arguments)]
 fn render_cdlod(
     c: &mut CdlodScene,
-    ctx: &GpuContext,
-    target: &mut OffscreenTarget,
-    sky: &mut SkyPass,
-    timer: &GpuTimer,
-    (map, normals): (&GpuHeightMap<u16>, &GpuDerivativeMap),
-    style: &TerrainStyle,
+    gpu: FrameGpu<'_>,
     camera: &Camera,
     frustum: Frustum,
     lod_start: std::time::Instant,
     timings: &mut Timings,
 ) -> Result<RenderedFrame> {
+    let FrameGpu {
+        ctx,
+        target,
+        sky,
+        timer,
+        map,
+        normals,
+        style,
+    } = gpu;
     let (device, queue) = (&ctx.device, &ctx.queue);
     let size = target.size();
     let aspect = size.x as f32 / size.y as f32;
-    let view = CdlodView {
-        camera: camera.position,
-        frustum: Some(&frustum),
-        viewport_width: size.x as f32,
-        hfov: 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan(),
-    };
+    let view = lod_view(camera, size, &frustum);
     let frame = c.tree.select(&view)?;
     let max_screen_error_px = c.tree.max_screen_error_px(&frame, &view);
     timings.add(Step::Lod, crate::timings::ms_since(lod_start));
@@ -1107,11 +1131,7 @@ fn render_cdlod(
         c.renderer.draw(&mut pass);
         Ok(())
     })?;
-    let t = std::time::Instant::now();
-    let image = target.read_rgba8(device, queue)?;
-    ctx.check()?;
-    timings.add(Step::Capture, crate::timings::ms_since(t));
-    record(timings, Step::Render, timing);
+    let image = capture(ctx, target, timing, timings)?;
     let stats = RenderedFrame {
         image,
         triangles: frame.triangle_count(&c.mesh),

@@ -5,7 +5,8 @@
 
 use crate::camera::Camera;
 use crate::clipmap::{
-    ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, frame_uniform,
+    ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, check_wireframe,
+    frame_uniform,
 };
 use crate::error::GpuError;
 use crate::maps::{GpuDerivativeMap, GpuHeightMap};
@@ -139,12 +140,7 @@ impl CdlodRenderer {
     /// Draws triangle edges as lines from the next draw; fails without
     /// [`wgpu::Features::POLYGON_MODE_LINE`].
     pub fn set_wireframe(&mut self, on: bool) -> Result<(), GpuError> {
-        if on && self.pipeline.wireframe.is_none() {
-            return Err(GpuError::Unsupported {
-                what: "CdlodRenderer wireframe",
-                reason: "the device was made without Features::POLYGON_MODE_LINE",
-            });
-        }
+        check_wireframe(&self.pipeline, on, "CdlodRenderer wireframe")?;
         self.wireframe = on;
         Ok(())
     }
@@ -212,31 +208,13 @@ impl CdlodRenderer {
         queue.write_buffer(&self.lods, 0, bytemuck::cast_slice(&lods));
         let buffers = surface.buffers();
         if self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
-            let entries = [
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: self.uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: buffers[0].as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: buffers[1].as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: self.lods.as_entire_binding(),
-                },
-            ];
-            let group = scoped(device, "CdlodRenderer bind group", || {
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("CdlodRenderer"),
-                    layout: &self.pipeline.layout,
-                    entries: &entries,
-                })
-            })?;
+            let group = self.pipeline.bind_group(
+                device,
+                "CdlodRenderer",
+                &self.uniform,
+                &buffers,
+                &[(3, &self.lods)],
+            )?;
             self.bound = Some((buffers, group));
         }
         Ok(())
@@ -250,10 +228,7 @@ impl CdlodRenderer {
         if self.instance_count == 0 {
             return;
         }
-        match (&self.pipeline.wireframe, self.wireframe) {
-            (Some(lines), true) => pass.set_pipeline(lines),
-            _ => pass.set_pipeline(&self.pipeline.pipeline),
-        }
+        pass.set_pipeline(self.pipeline.pick(self.wireframe));
         pass.set_bind_group(0, group, &[]);
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_vertex_buffer(1, self.instances.slice(..));

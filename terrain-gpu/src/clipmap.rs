@@ -207,12 +207,7 @@ impl ClipmapRenderer {
     /// the next [`ClipmapRenderer::draw`]. Turning it on fails without
     /// [`ClipmapRenderer::has_wireframe`].
     pub fn set_wireframe(&mut self, on: bool) -> Result<(), GpuError> {
-        if on && !self.has_wireframe() {
-            return Err(GpuError::Unsupported {
-                what: "ClipmapRenderer wireframe",
-                reason: "the device was made without Features::POLYGON_MODE_LINE",
-            });
-        }
+        check_wireframe(&self.coarse, on, "ClipmapRenderer wireframe")?;
         self.wireframe = on;
         Ok(())
     }
@@ -300,27 +295,13 @@ impl ClipmapRenderer {
             None => true,
         };
         if rebind {
-            let pipeline = self.pipeline(kind);
-            let mut entries = vec![wgpu::BindGroupEntry {
-                binding: 0,
-                resource: self.uniform.as_entire_binding(),
-            }];
-            entries.extend(
-                buffers
-                    .iter()
-                    .enumerate()
-                    .map(|(i, b)| wgpu::BindGroupEntry {
-                        binding: i as u32 + 1,
-                        resource: b.as_entire_binding(),
-                    }),
-            );
-            let group = scoped(device, "ClipmapRenderer bind group", || {
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("ClipmapRenderer"),
-                    layout: &pipeline.layout,
-                    entries: &entries,
-                })
-            })?;
+            let group = self.pipeline(kind).bind_group(
+                device,
+                "ClipmapRenderer",
+                &self.uniform,
+                &buffers,
+                &[],
+            )?;
             self.bound = Some((buffers, kind, group));
         }
         Ok(())
@@ -335,11 +316,7 @@ impl ClipmapRenderer {
         if self.runs.is_empty() {
             return;
         }
-        let pipeline = self.pipeline(*kind);
-        match (&pipeline.wireframe, self.wireframe) {
-            (Some(lines), true) => pass.set_pipeline(lines),
-            _ => pass.set_pipeline(&pipeline.pipeline),
-        }
+        pass.set_pipeline(self.pipeline(*kind).pick(self.wireframe));
         pass.set_bind_group(0, group, &[]);
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_vertex_buffer(1, self.instances.slice(..));
@@ -699,6 +676,67 @@ impl SurfacePipeline {
             }
         })
     }
+}
+
+impl SurfacePipeline {
+    /// The pipeline to draw with: the wireframe twin when asked for and built.
+    pub(crate) fn pick(&self, wireframe: bool) -> &wgpu::RenderPipeline {
+        match (&self.wireframe, wireframe) {
+            (Some(lines), true) => lines,
+            _ => &self.pipeline,
+        }
+    }
+
+    /// A bind group of `uniform` at binding 0, the surface's `buffers` at 1, 2, ... and
+    /// `extra` (binding, buffer) after them, over this pipeline's layout.
+    pub(crate) fn bind_group(
+        &self,
+        device: &wgpu::Device,
+        label: &'static str,
+        uniform: &wgpu::Buffer,
+        buffers: &[wgpu::Buffer],
+        extra: &[(u32, &wgpu::Buffer)],
+    ) -> Result<wgpu::BindGroup, GpuError> {
+        let mut entries = vec![wgpu::BindGroupEntry {
+            binding: 0,
+            resource: uniform.as_entire_binding(),
+        }];
+        entries.extend(
+            buffers
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry {
+                    binding: i as u32 + 1,
+                    resource: b.as_entire_binding(),
+                }),
+        );
+        entries.extend(extra.iter().map(|&(binding, b)| wgpu::BindGroupEntry {
+            binding,
+            resource: b.as_entire_binding(),
+        }));
+        scoped(device, label, || {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(label),
+                layout: &self.layout,
+                entries: &entries,
+            })
+        })
+    }
+}
+
+/// Refuses turning wireframe on for renderer `what` when `pipeline` has no wireframe twin.
+pub(crate) fn check_wireframe(
+    pipeline: &SurfacePipeline,
+    on: bool,
+    what: &'static str,
+) -> Result<(), GpuError> {
+    if on && pipeline.wireframe.is_none() {
+        return Err(GpuError::Unsupported {
+            what,
+            reason: "the device was made without Features::POLYGON_MODE_LINE",
+        });
+    }
+    Ok(())
 }
 
 /// A multiple of the map size that makes every texel the frame can read non-negative (the

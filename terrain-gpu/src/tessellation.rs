@@ -11,7 +11,8 @@
 
 use crate::camera::Camera;
 use crate::clipmap::{
-    ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, frame_uniform,
+    ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, check_wireframe,
+    frame_uniform,
 };
 use crate::compute::{PassBindings, StorageBinding, compute_pipeline, shader_module, wrap_code};
 use crate::download::download_bytes;
@@ -405,12 +406,7 @@ impl TessRenderer {
     /// Draws triangle edges as lines from the next draw; fails without
     /// [`wgpu::Features::POLYGON_MODE_LINE`].
     pub fn set_wireframe(&mut self, on: bool) -> Result<(), GpuError> {
-        if on && self.pipeline.wireframe.is_none() {
-            return Err(GpuError::Unsupported {
-                what: "TessRenderer wireframe",
-                reason: "the device was made without Features::POLYGON_MODE_LINE",
-            });
-        }
+        check_wireframe(&self.pipeline, on, "TessRenderer wireframe")?;
         self.wireframe = on;
         Ok(())
     }
@@ -449,27 +445,9 @@ impl TessRenderer {
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         let buffers = surface.buffers();
         if self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
-            let entries = [
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: self.uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: buffers[0].as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: buffers[1].as_entire_binding(),
-                },
-            ];
-            let group = scoped(device, "TessRenderer bind group", || {
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("TessRenderer"),
-                    layout: &self.pipeline.layout,
-                    entries: &entries,
-                })
-            })?;
+            let group =
+                self.pipeline
+                    .bind_group(device, "TessRenderer", &self.uniform, &buffers, &[])?;
             self.bound = Some((buffers, group));
         }
         Ok(())
@@ -481,10 +459,7 @@ impl TessRenderer {
         let Some((_, group)) = &self.bound else {
             return;
         };
-        match (&self.pipeline.wireframe, self.wireframe) {
-            (Some(lines), true) => pass.set_pipeline(lines),
-            _ => pass.set_pipeline(&self.pipeline.pipeline),
-        }
+        pass.set_pipeline(self.pipeline.pick(self.wireframe));
         pass.set_bind_group(0, group, &[]);
         pass.set_vertex_buffer(0, gpu.output.slice(..));
         pass.draw_indirect(&gpu.state, ARGS_OFFSET);

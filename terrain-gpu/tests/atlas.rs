@@ -5,9 +5,12 @@
 //! instead of panics; stamps on tiles in their slots and the readback of the changed rects
 //! against terrain-core's `apply_stamp` on the same tiles.
 
+#[path = "common/cracks.rs"]
+mod cracks;
 #[path = "common/scene.rs"]
 #[allow(dead_code)] // Scene::render draws the coarse surface only; these tests draw their own.
 mod scene;
+use cracks::holes;
 
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use scene::Scene;
@@ -239,29 +242,6 @@ fn the_atlas_surface_reads_what_the_cpu_reference_reads_for_random_residency() {
     }
     assert!(checked > 3 * 3 * 29_000);
     ctx.check().expect("no GPU validation errors");
-}
-
-/// Magenta: a colour the terrain's shading cannot produce (as in render.rs).
-fn is_sky(p: [u8; 4]) -> bool {
-    p[0] > 200 && p[1] < 70 && p[2] > 200
-}
-
-/// Sky pixels below the terrain's silhouette, and terrain pixels (see render.rs).
-fn holes(image: &Grid<[u8; 4]>) -> (usize, usize) {
-    let mut holes = 0;
-    let mut terrain = 0;
-    for x in 0..image.width() {
-        let mut seen_terrain = false;
-        for y in 0..image.height() {
-            if !is_sky(image.get(x, y).unwrap()) {
-                seen_terrain = true;
-                terrain += 1;
-            } else if seen_terrain {
-                holes += 1;
-            }
-        }
-    }
-    (holes, terrain)
 }
 
 /// Renders `surface` from `camera` with the scene's layout, sky and renderer.

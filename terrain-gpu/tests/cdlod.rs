@@ -1,9 +1,12 @@
 //! CDLOD rendering: no cracks from grazing views across LOD edges (the morph of terrain-lod's
 //! selection, in the vertex shader), the caller's pass, and the instance buffer's growth.
 
+#[path = "common/cracks.rs"]
+mod cracks;
 #[path = "common/scene.rs"]
 #[allow(dead_code)] // the clipmap parts of the shared scene
 mod scene;
+use cracks::holes;
 
 use glam::{UVec2, Vec2, Vec3};
 use scene::Scene;
@@ -13,28 +16,6 @@ use terrain_gpu::{
     Camera, CdlodDraw, CdlodRenderer, OffscreenTarget, SkyColors, TargetFormat, TerrainStyle,
 };
 use terrain_lod::{CdlodConfig, CdlodMesh, CdlodTree, CdlodView, Frustum};
-
-fn is_sky(p: [u8; 4]) -> bool {
-    p[0] > 200 && p[1] < 70 && p[2] > 200
-}
-
-/// Sky pixels below the terrain's silhouette per column (a level camera: each column is a
-/// vertical plane through the eye, so such a pixel is a hole in the mesh), and terrain pixels.
-fn holes(image: &terrain_core::Grid<[u8; 4]>) -> (usize, usize) {
-    let (mut holes, mut terrain) = (0, 0);
-    for x in 0..image.width() {
-        let mut seen = false;
-        for y in 0..image.height() {
-            if !is_sky(image.get(x, y).unwrap()) {
-                seen = true;
-                terrain += 1;
-            } else if seen {
-                holes += 1;
-            }
-        }
-    }
-    (holes, terrain)
-}
 
 fn render(
     scene: &mut Scene,

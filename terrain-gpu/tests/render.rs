@@ -1,8 +1,11 @@
 //! Clipmap rendering: no cracks from grazing views across every level boundary, and a golden
 //! image of a fixed view. Runs on the software adapter in CI.
 
+#[path = "common/cracks.rs"]
+mod cracks;
 #[path = "common/scene.rs"]
 mod scene;
+use cracks::{holes, is_sky};
 
 use glam::{UVec2, Vec2, Vec3};
 use scene::Scene;
@@ -11,33 +14,6 @@ use terrain_gpu::{
     Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuError, SkyColors, SkyPass,
     TargetFormat, TerrainStyle,
 };
-
-/// Magenta: a colour the terrain's shading (greens, browns, greys, white, blue-grey fog)
-/// cannot produce.
-fn is_sky(p: [u8; 4]) -> bool {
-    p[0] > 200 && p[1] < 70 && p[2] > 200
-}
-
-/// Counts sky pixels below the terrain's silhouette in each column. With a level camera (no
-/// pitch, no roll) every image column is a vertical plane through the eye, and every ray below
-/// one that hits a heightfield hits it too: a sky pixel under terrain is a hole in the mesh.
-fn holes(image: &terrain_core::Grid<[u8; 4]>) -> (usize, usize) {
-    let mut holes = 0;
-    let mut terrain = 0;
-    for x in 0..image.width() {
-        let mut seen_terrain = false;
-        for y in 0..image.height() {
-            let sky = is_sky(image.get(x, y).unwrap());
-            if !sky {
-                seen_terrain = true;
-                terrain += 1;
-            } else if seen_terrain {
-                holes += 1;
-            }
-        }
-    }
-    (holes, terrain)
-}
 
 #[test]
 fn no_cracks_from_grazing_views_across_level_boundaries() {

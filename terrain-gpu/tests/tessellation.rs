@@ -2,9 +2,12 @@
 //! reference (same set, same drawn heights), draws them without cracks from grazing views
 //! across patch edges, and bounds its output.
 
+#[path = "common/cracks.rs"]
+mod cracks;
 #[path = "common/scene.rs"]
 #[allow(dead_code)] // the clipmap parts of the shared scene
 mod scene;
+use cracks::holes;
 
 use glam::{UVec2, Vec2, Vec3};
 use scene::Scene;
@@ -45,6 +48,23 @@ fn by_corners(tris: &[TessTriangle]) -> HashMap<[i32; 6], [f32; 3]> {
         .collect()
 }
 
+/// Runs the pass for `view` and reads its triangles back, with whether it overflowed.
+fn tessellate(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    pass: &mut TessellationPass,
+    gpu: &GpuTessellation,
+    tess: &TessHierarchy,
+    view: &CdlodView<'_>,
+) -> (Vec<TessTriangle>, bool) {
+    let mut encoder = device.create_command_encoder(&Default::default());
+    pass.encode(device, queue, &mut encoder, gpu, tess, view)
+        .unwrap();
+    queue.submit([encoder.finish()]);
+    pass.recall();
+    gpu.read_triangles(device, queue).unwrap()
+}
+
 #[test]
 fn the_gpu_emits_the_cpu_reference_triangles() {
     let Some(ctx) = context_or_skip("tessellation gpu == cpu") else {
@@ -83,12 +103,7 @@ fn the_gpu_emits_the_cpu_reference_triangles() {
             for culled in [false, true] {
                 let view = view_of(&camera, size, culled.then_some(&frustum));
                 let cpu = tess.select(&view).unwrap();
-                let mut encoder = device.create_command_encoder(&Default::default());
-                pass.encode(device, queue, &mut encoder, &gpu, &tess, &view)
-                    .unwrap();
-                queue.submit([encoder.finish()]);
-                pass.recall();
-                let (tris, overflow) = gpu.read_triangles(device, queue).unwrap();
+                let (tris, overflow) = tessellate(device, queue, &mut pass, &gpu, &tess, &view);
                 assert!(!overflow);
                 let (a, b) = (by_corners(&cpu.triangles), by_corners(&tris));
                 // The same f32 operations on both sides; a decision exactly at its threshold
@@ -168,12 +183,7 @@ fn uploaded_updates_keep_the_gpu_equal_to_the_cpu() {
         let camera = Camera::looking(Vec3::new(20.0, 60.0, 25.0), Vec3::new(1.0, -0.6, 0.8));
         let view = view_of(&camera, size, None);
         let cpu = tess.select(&view).unwrap();
-        let mut encoder = device.create_command_encoder(&Default::default());
-        pass.encode(device, queue, &mut encoder, &gpu, &tess, &view)
-            .unwrap();
-        queue.submit([encoder.finish()]);
-        pass.recall();
-        let (tris, _) = gpu.read_triangles(device, queue).unwrap();
+        let (tris, _) = tessellate(device, queue, &mut pass, &gpu, &tess, &view);
         let (a, b) = (by_corners(&cpu.triangles), by_corners(&tris));
         let differ = a.keys().filter(|k| !b.contains_key(*k)).count()
             + b.keys().filter(|k| !a.contains_key(*k)).count();
@@ -216,11 +226,7 @@ fn the_output_is_bounded_and_says_when_it_overflows() {
     let mut pass = TessellationPass::new(device).unwrap();
     let camera = Camera::looking(Vec3::new(128.0, 50.0, 128.0), Vec3::new(1.0, -0.5, 0.0));
     let view = view_of(&camera, UVec2::new(640, 360), None);
-    let mut encoder = device.create_command_encoder(&Default::default());
-    pass.encode(device, queue, &mut encoder, &gpu, &tess, &view)
-        .unwrap();
-    queue.submit([encoder.finish()]);
-    let (tris, overflow) = gpu.read_triangles(device, queue).unwrap();
+    let (tris, overflow) = tessellate(device, queue, &mut pass, &gpu, &tess, &view);
     assert!(overflow && tris.len() == 1000);
     // Another hierarchy's size is refused before wgpu sees it.
     let small = terrain_core::HeightMap::new(
@@ -241,28 +247,6 @@ fn the_output_is_bounded_and_says_when_it_overflows() {
             .is_err()
     );
     scene.ctx.check().expect("no GPU validation errors");
-}
-
-fn is_sky(p: [u8; 4]) -> bool {
-    p[0] > 200 && p[1] < 70 && p[2] > 200
-}
-
-/// Sky pixels below the terrain's silhouette per column (a level camera: a hole in the
-/// mesh), and terrain pixels.
-fn holes(image: &terrain_core::Grid<[u8; 4]>) -> (usize, usize) {
-    let (mut holes, mut terrain) = (0, 0);
-    for x in 0..image.width() {
-        let mut seen = false;
-        for y in 0..image.height() {
-            if !is_sky(image.get(x, y).unwrap()) {
-                seen = true;
-                terrain += 1;
-            } else if seen {
-                holes += 1;
-            }
-        }
-    }
-    (holes, terrain)
 }
 
 #[test]

@@ -682,6 +682,30 @@ fn density_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
 
 /// CDLOD trees of any small map and configuration, selections from any camera (finite or
 /// not) and frustum: `Ok` with well-formed instances, or a documented error.
+/// A frustum of any matrix.
+fn any_frustum(rng: &mut Rng) -> Frustum {
+    Frustum::from_view_proj(Mat4::from_cols_array(&std::array::from_fn(|_| {
+        any_f32(rng)
+    })))
+}
+
+/// A LOD view: a camera anywhere (or near a small map), `frustum` or none, extreme viewports
+/// and fields of view.
+fn any_view<'a>(rng: &mut Rng, frustum: &'a Frustum) -> CdlodView<'a> {
+    let camera = Vec3::new(any_f32(rng), any_f32(rng), any_f32(rng));
+    let near = Vec3::new(
+        rng.uniform(-50.0, 80.0) as f32,
+        rng.uniform(-10.0, 60.0) as f32,
+        rng.uniform(-50.0, 80.0) as f32,
+    );
+    CdlodView {
+        camera: if rng.chance(1, 2) { near } else { camera },
+        frustum: rng.chance(1, 2).then_some(frustum),
+        viewport_width: rng.pick(&[1.0f32, 1280.0, 1e9]),
+        hfov: rng.pick(&[0.01f32, 1.2, 3.1]),
+    }
+}
+
 fn cdlod_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
     let rng = &mut case.rng;
     let map = small_map(rng, 70);
@@ -715,21 +739,9 @@ fn cdlod_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
         Err(LodError::InvalidCdlodParam { .. }) => return Ok(()),
         Err(e) => return Err(format!("{c:?}: {e}")),
     };
-    let camera = Vec3::new(any_f32(rng), any_f32(rng), any_f32(rng));
-    let near = Vec3::new(
-        rng.uniform(-50.0, 80.0) as f32,
-        rng.uniform(-10.0, 60.0) as f32,
-        rng.uniform(-50.0, 80.0) as f32,
-    );
-    let camera = if rng.chance(1, 2) { near } else { camera };
-    let m = Mat4::from_cols_array(&std::array::from_fn(|_| any_f32(rng)));
-    let frustum = Frustum::from_view_proj(m);
-    let view = CdlodView {
-        camera,
-        frustum: rng.chance(1, 2).then_some(&frustum),
-        viewport_width: rng.pick(&[1.0f32, 1280.0, 1e9]),
-        hfov: rng.pick(&[0.01f32, 1.2, 3.1]),
-    };
+    let frustum = any_frustum(rng);
+    let view = any_view(rng, &frustum);
+    let camera = view.camera;
     match tree.select(&view) {
         Ok(frame) => {
             for i in &frame.instances {
@@ -788,21 +800,9 @@ fn tessellation_any(_: &Ctx, case: &mut Case) -> Result<(), String> {
         Err(LodError::InvalidTessParam { .. }) => return Ok(()),
         Err(e) => return Err(format!("{c:?}: {e}")),
     };
-    let camera = Vec3::new(any_f32(rng), any_f32(rng), any_f32(rng));
-    let near = Vec3::new(
-        rng.uniform(-50.0, 80.0) as f32,
-        rng.uniform(-10.0, 60.0) as f32,
-        rng.uniform(-50.0, 80.0) as f32,
-    );
-    let camera = if rng.chance(1, 2) { near } else { camera };
-    let m = Mat4::from_cols_array(&std::array::from_fn(|_| any_f32(rng)));
-    let frustum = Frustum::from_view_proj(m);
-    let view = CdlodView {
-        camera,
-        frustum: rng.chance(1, 2).then_some(&frustum),
-        viewport_width: rng.pick(&[1.0f32, 1280.0, 1e9]),
-        hfov: rng.pick(&[0.01f32, 1.2, 3.1]),
-    };
+    let frustum = any_frustum(rng);
+    let view = any_view(rng, &frustum);
+    let camera = view.camera;
     // An update of any rect (off the map, huge, empty) answers and keeps the bounds finite.
     let mut tess = tess;
     let rect = Rect::new(

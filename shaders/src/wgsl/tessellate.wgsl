@@ -214,24 +214,9 @@ fn generate(@builtin(global_invocation_id) id: vec3<u32>) {
                 }
                 let mid = 0.5 * (t.hl + t.hr);
                 let hv = mid + (h - mid) * k;
-                var c0: Tri;
-                c0.a = v;
-                c0.l = t.a;
-                c0.r = t.l;
-                c0.ha = hv;
-                c0.hl = t.ha;
-                c0.hr = t.hl;
-                c0.level = t.level + 1u;
-                var c1: Tri;
-                c1.a = v;
-                c1.l = t.r;
-                c1.r = t.a;
-                c1.ha = hv;
-                c1.hl = t.hr;
-                c1.hr = t.ha;
-                c1.level = t.level + 1u;
-                stack[top] = c1;
-                stack[top + 1u] = c0;
+                // The children: apex v, hypotenuses a -> l and r -> a (as Tri::children).
+                stack[top] = Tri(v, t.r, t.a, hv, t.hr, t.ha, t.level + 1u);
+                stack[top + 1u] = Tri(v, t.a, t.l, hv, t.ha, t.hl, t.level + 1u);
                 top += 2u;
             }
         }
