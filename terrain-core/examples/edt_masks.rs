@@ -10,6 +10,7 @@
 //!   in seed 001 table 5.4).
 //! - `--repeat R`: the transform is timed R times per mask and the best is kept (default 20).
 //! - `--no-jfa`: skip timing jump flooding on the same masks.
+//! - `--mask NAME`: only the mask called NAME (footprint, sparse, footprint_obstacles).
 //! - `--out DIR`: where the files go (default the system's temporary folder). Per mask NAME:
 //!   `NAME.mask.u8` (1 = seed, row-major), `NAME.dist2.u32` (squared Euclidean distance to the
 //!   returned seed, little-endian), and one `edt_timings.json` for all masks.
@@ -30,7 +31,7 @@ type SeedTest = dyn Fn(u32, u32) -> bool;
 
 fn main() -> Result<()> {
     let (mut size, mut repeat, mut out) = (492u32, 20u32, std::env::temp_dir());
-    let mut with_jfa = true;
+    let (mut with_jfa, mut only) = (true, None);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = || args.next().ok_or(format!("{a} needs a value"));
@@ -39,6 +40,7 @@ fn main() -> Result<()> {
             "--repeat" => repeat = value()?.parse::<u32>()?.max(1),
             "--out" => out = PathBuf::from(value()?),
             "--no-jfa" => with_jfa = false,
+            "--mask" => only = Some(value()?),
             _ => return Err(format!("unknown argument {a}").into()),
         }
     }
@@ -79,6 +81,9 @@ fn main() -> Result<()> {
     let mut timings = Vec::new();
     println!("mask                 exact (ms)   jump flooding (ms)");
     for (name, is_seed) in &masks {
+        if only.as_deref().is_some_and(|o| o != *name) {
+            continue;
+        }
         let pen = Grid::from_fn(size, size, |x, y| {
             if is_seed(x, y) {
                 Penetration {

@@ -199,26 +199,38 @@ fn interior_small<T: HeightSample, S: bytemuck::Pod + Into<i32>>(
     if std::any::TypeId::of::<T>() != std::any::TypeId::of::<S>() {
         return false;
     }
-    let Ok(t) = taps
-        .iter()
-        .map(|s| bytemuck::try_cast_slice::<T, S>(s))
-        .collect::<Result<Vec<&[S]>, _>>()
+    let [
+        Some(hl2),
+        Some(hl1),
+        Some(hr1),
+        Some(hr2),
+        Some(u2),
+        Some(u1),
+        Some(d1),
+        Some(d2),
+    ] = taps.map(|s| bytemuck::try_cast_slice::<T, S>(s).ok())
     else {
         return false;
     };
+    interior_loop([hl2, hl1, hr1, hr2, u2, u1, d1, d2], out, k);
+    true
+}
+
+/// Eq. 3.3 over `out.len()` texels from the eight tap rows, compiled for AVX2 too (integer
+/// and IEEE operations only: the same bits on every instruction set).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
+fn interior_loop<S: bytemuck::Pod + Into<i32>>(taps: [&[S]; 8], out: &mut [Vec2], k: f64) {
     let d = |a: S, b: S, c: S, e: S| {
         let (a, b, c, e): (i32, i32, i32, i32) = (a.into(), b.into(), c.into(), e.into());
         f64::from((a - e) + 8 * (c - b))
     };
     let n = out.len();
-    let (hl2, hl1, hr1, hr2) = (&t[0][..n], &t[1][..n], &t[2][..n], &t[3][..n]);
-    let (u2, u1, d1, d2) = (&t[4][..n], &t[5][..n], &t[6][..n], &t[7][..n]);
+    let [hl2, hl1, hr1, hr2, u2, u1, d1, d2] = taps.map(|t| &t[..n]);
     for i in 0..n {
         let dx = d(hl2[i], hl1[i], hr1[i], hr2[i]);
         let dz = d(u2[i], u1[i], d1[i], d2[i]);
         out[i] = Vec2::new((dx * k) as f32, (dz * k) as f32);
     }
-    true
 }
 
 /// The texels whose derivatives change when heights inside `dirty` change, on a map of

@@ -64,3 +64,43 @@ pub(crate) fn map_sum<I: Sync>(items: &[I], f: impl Fn(&I) -> u64 + Sync + Send)
         items.iter().map(f).sum()
     }
 }
+
+/// Like [`for_each_chunk`], with a scratch value made by `init` for each piece of work rayon
+/// splits off (once without the `parallel` feature) and lent to every call of `f` in it:
+/// per-row buffers without an allocation per row. `f` must not let a chunk's result depend on
+/// what an earlier chunk left in the scratch.
+pub(crate) fn for_each_chunk_init<T: Send, S>(
+    data: &mut [T],
+    chunk_len: usize,
+    init: impl Fn() -> S + Sync + Send,
+    f: impl Fn(&mut S, usize, &mut [T]) + Sync + Send,
+) {
+    let chunk_len = chunk_len.max(1);
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        data.par_chunks_mut(chunk_len)
+            .enumerate()
+            .for_each_init(init, |s, (i, c)| f(s, i, c));
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        let mut s = init();
+        data.chunks_mut(chunk_len)
+            .enumerate()
+            .for_each(|(i, c)| f(&mut s, i, c));
+    }
+}
+
+/// Calls `f(index, item)` for every item, in parallel when the `parallel` feature is on.
+pub(crate) fn for_each_item<T: Send>(items: Vec<T>, f: impl Fn(usize, T) + Sync + Send) {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        items.into_par_iter().enumerate().for_each(|(i, t)| f(i, t));
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        items.into_iter().enumerate().for_each(|(i, t)| f(i, t));
+    }
+}

@@ -440,29 +440,17 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
                     let (a, b) = frame.row_span(uy, x0 + offset.x, x1 + offset.x);
                     let row = &mut row[(a - offset.x) as usize..(b - offset.x) as usize];
                     let rg = g.row(uy, op.add_scale.abs());
-                    let mut w = [0.0f32; BLOCK];
-                    for (k, dst) in row.chunks_mut(BLOCK).enumerate() {
-                        let w = &mut w[..dst.len()];
-                        g.eval32(&rg, a + (k * BLOCK) as i32, w);
-                        small.apply(dst, w);
-                    }
+                    gaussian_row_small(g, &rg, &small, row, a);
                 });
             }
-            Kernel::Gaussian(g) => {
+            Kernel::Gaussian(_) | Kernel::Texture(_) => {
                 crate::par::for_each_chunk(rows, width, |j, row| {
                     let uy = (y0 + j) as i32 + offset.y;
-                    let rg = g.row(uy, op.add_scale);
-                    run(j, row, &|_, ux, n, z: &mut [f64]| g.eval(&rg, ux, n, z));
+                    let (a, b) = frame.row_span(uy, x0 + offset.x, x1 + offset.x);
+                    let row = &mut row[(a - offset.x) as usize..(b - offset.x) as usize];
+                    blend_row(&kernel, &frame, &op, uy, a, row);
                 });
             }
-            Kernel::Texture(t) => crate::par::for_each_chunk(rows, width, |j, row| {
-                run(j, row, &|uy, ux, _, z: &mut [f64]| {
-                    for (i, z) in z.iter_mut().enumerate() {
-                        let v = t.value(frame.local(ux + i as i32, uy));
-                        *z = op.z(v);
-                    }
-                })
-            }),
             Kernel::PerTexel => {
                 for (j, row) in rows.chunks_mut(width).enumerate() {
                     run(j, row, &|uy, ux, _, z: &mut [f64]| {
@@ -475,6 +463,53 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
         }
     }
     Ok(pieces.into_iter().map(|(r, _)| r).collect())
+}
+
+/// One row of the u8 / u16 Gaussian path: the row's stamp magnitudes block by block, blended
+/// with integer operations. Compiled for AVX2 too (the same bits on every instruction set).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
+fn gaussian_row_small<T: HeightSample>(
+    g: &GaussianKernel,
+    rg: &GaussianRow,
+    small: &SmallOp,
+    row: &mut [T],
+    first: i32,
+) {
+    let mut w = [0.0f32; BLOCK];
+    for (k, dst) in row.chunks_mut(BLOCK).enumerate() {
+        let w = &mut w[..dst.len()];
+        g.eval32(rg, first + (k * BLOCK) as i32, w);
+        small.apply(dst, w);
+    }
+}
+
+/// One row of the f64 paths (textures, and Gaussians on u32 maps or of huge intensity): the
+/// stamp terms block by block, blended in f64 stored units exactly as the reference does.
+/// Compiled for AVX2 too (the same bits on every instruction set).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
+fn blend_row<T: HeightSample>(
+    kernel: &Kernel<'_>,
+    frame: &Frame,
+    op: &BlendOp,
+    uy: i32,
+    first: i32,
+    row: &mut [T],
+) {
+    let gaussian_row = match kernel {
+        Kernel::Gaussian(g) => Some((g, g.row(uy, op.add_scale))),
+        _ => None,
+    };
+    let mut z = [0.0f64; BLOCK];
+    for (k, dst) in row.chunks_mut(BLOCK).enumerate() {
+        let ux = first + (k * BLOCK) as i32;
+        let z = &mut z[..dst.len()];
+        match (kernel, &gaussian_row) {
+            (_, Some((g, rg))) => g.eval(rg, ux, z.len() as i32, z),
+            (Kernel::Texture(t), _) => t.block(frame, op, ux, uy, z),
+            _ => {}
+        }
+        op.apply(dst, z);
+    }
 }
 
 /// Fills stamp terms for `(uy, ux, n, out)`: row, first unwrapped column, count, terms.
@@ -681,7 +716,7 @@ struct BlendOp {
 impl BlendOp {
     /// The stored-unit term of value `v`, or the value that leaves a texel unchanged when `v`
     /// is NaN or infinite (0 for add, +inf for min, -inf for max).
-    #[inline]
+    #[inline(always)]
     fn z(&self, v: f32) -> f64 {
         if v.is_finite() {
             self.add_scale * f64::from(v)
@@ -692,7 +727,7 @@ impl BlendOp {
 
     /// Blends the terms `z` into `dst`: `round(old + z)`, `round(min(old, base + z))` or
     /// `round(max(old, base + z))`, rounded half up and clamped to the sample's range.
-    #[inline]
+    #[inline(always)]
     fn apply<T: HeightSample>(&self, dst: &mut [T], z: &[f64]) {
         let base = self.base_raw;
         match self.kind {
@@ -747,6 +782,7 @@ impl SmallOp {
         }
     }
 
+    #[inline(always)]
     fn apply<T: HeightSample>(&self, dst: &mut [T], w: &[f32]) {
         use std::any::TypeId;
         let t = TypeId::of::<T>();
@@ -775,6 +811,7 @@ fn floor_small(y: f32) -> i32 {
 
 macro_rules! apply_small {
     ($name:ident, $t:ty) => {
+        #[inline(always)]
         fn $name(op: &SmallOp, dst: &mut [$t], w: &[f32]) {
             const MAX: f32 = <$t>::MAX as f32;
             let (bi, bfh) = (op.base_int, op.base_frac_half);
@@ -911,7 +948,7 @@ impl GaussianKernel {
     }
 
     /// [`GaussianKernel::eval`] in f32 (the row built with `|add_scale|`).
-    #[inline]
+    #[inline(always)]
     fn eval32(&self, row: &GaussianRow, ux: i32, w: &mut [f32]) {
         let i0 = (ux - self.x0) as usize;
         if self.beta_b == 0.0 {
@@ -931,7 +968,7 @@ impl GaussianKernel {
     }
 
     /// Stored-unit terms of `n` texels of a row from unwrapped column `ux`.
-    #[inline]
+    #[inline(always)]
     fn eval(&self, row: &GaussianRow, ux: i32, n: i32, z: &mut [f64]) {
         let i0 = (ux - self.x0) as usize;
         let ex = &self.ex[i0..i0 + n as usize];
@@ -958,10 +995,12 @@ struct TextureKernel<'a> {
 }
 
 impl<'a> TextureKernel<'a> {
-    /// `None` for an image too large for the exact floor below (2^22 pixels a side).
+    /// `None` for an image too large for the exact floor below (2^22 pixels a side) or for
+    /// 32-bit pixel indices (2^31 pixels).
     fn new(values: &'a Grid<f32>) -> Option<Self> {
         let size = values.size();
-        (size.max_element() < 1 << 22 && size.min_element() > 0).then(|| Self {
+        let fits = size.max_element() < 1 << 22 && values.as_slice().len() < 1 << 31;
+        (fits && size.min_element() > 0).then(|| Self {
             values: values.as_slice(),
             w: size.x as i32,
             h: size.y as i32,
@@ -969,28 +1008,44 @@ impl<'a> TextureKernel<'a> {
         })
     }
 
-    /// [`TextureStamp::value`] for `local` inside `[-1, 1]^2` (or NaN): the same f32
-    /// operations, with `floor` as a cast and a correction (exact below 2^23).
+    /// The stored-unit terms `op.z(value(local))` of `z.len()` texels of row `uy` from
+    /// unwrapped column `ux`, every one inside the footprint (or with a NaN local coordinate):
+    /// [`TextureStamp::value`]'s f32 arithmetic in three loops (coordinates, pixel indices,
+    /// lookups, interpolation) that the compiler vectorises. `floor_small` is exact here (`|p| < 2^22`); for
+    /// a NaN coordinate it gives some index, clamped like any other, and the fraction (NaN
+    /// minus anything) makes the value NaN, as in the reference.
     #[inline(always)]
-    fn value(&self, local: Vec2) -> f32 {
-        let p = (local + 1.0) * 0.5 * self.size - 0.5;
-        // NaN casts to 0 and leaves fx NaN, so the value is NaN as the reference's.
-        let fl = |v: f32| {
-            let t = v as i32;
-            if t as f32 > v { t - 1 } else { t }
-        };
-        let (x0, z0) = (fl(p.x), fl(p.y));
-        let (fx, fz) = (p.x - x0 as f32, p.y - z0 as f32);
+    fn block(&self, frame: &Frame, op: &BlendOp, ux: i32, uy: i32, z: &mut [f64]) {
+        let n = z.len().min(BLOCK);
+        let (mut px, mut py) = ([0.0f32; BLOCK], [0.0f32; BLOCK]);
+        for i in 0..n {
+            let l = frame.local(ux + i as i32, uy);
+            px[i] = (l.x + 1.0) * 0.5 * self.size.x - 0.5;
+            py[i] = (l.y + 1.0) * 0.5 * self.size.y - 0.5;
+        }
+        let (mut fx, mut fz) = ([0.0f32; BLOCK], [0.0f32; BLOCK]);
+        let mut idx = [[0u32; 4]; BLOCK];
         let (w, h) = (self.w, self.h);
-        let xa = x0.clamp(0, w - 1) as usize;
-        let xb = (x0 + 1).clamp(0, w - 1) as usize;
-        let ra = z0.clamp(0, h - 1) as usize * w as usize;
-        let rb = (z0 + 1).clamp(0, h - 1) as usize * w as usize;
+        for i in 0..n {
+            let (x0, z0) = (floor_small(px[i]), floor_small(py[i]));
+            fx[i] = px[i] - x0 as f32;
+            fz[i] = py[i] - z0 as f32;
+            let xa = x0.clamp(0, w - 1);
+            let xb = x0.wrapping_add(1).clamp(0, w - 1);
+            let ra = z0.clamp(0, h - 1) * w;
+            let rb = z0.wrapping_add(1).clamp(0, h - 1) * w;
+            idx[i] = [ra + xa, ra + xb, rb + xa, rb + xb].map(|k| k as u32);
+        }
         let v = self.values;
-        let (v0, v1, v2, v3) = (v[ra + xa], v[ra + xb], v[rb + xa], v[rb + xb]);
-        let top = v0 + (v1 - v0) * fx;
-        let bot = v2 + (v3 - v2) * fx;
-        top + (bot - top) * fz
+        let last = v.len() - 1;
+        let at = |k: u32| v[(k as usize).min(last)];
+        for i in 0..n {
+            let [a, b, c, d] = idx[i];
+            let (v0, v1, v2, v3) = (at(a), at(b), at(c), at(d));
+            let top = v0 + (v1 - v0) * fx[i];
+            let bot = v2 + (v3 - v2) * fx[i];
+            z[i] = op.z(top + (bot - top) * fz[i]);
+        }
     }
 }
 

@@ -70,10 +70,11 @@ fn check_exact(
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
-    /// Random masks (sparse to dense, with empty rows and columns, or no seed at all).
+    /// Random masks (sparse to dense, with empty rows and columns, or no seed at all), up to
+    /// three column bands of the first phase wide (64 columns each) with a partial last one.
     #[test]
     fn exact_transform_equals_brute_force(
-        w in 1u32..48, h in 1u32..48, density in 0u32..100, salt in any::<u32>(),
+        w in 1u32..160, h in 1u32..40, density in 0u32..100, salt in any::<u32>(),
         mx in 0i32..50, my in 0i32..50,
     ) {
         let area = Rect::new(IVec2::new(mx, my), UVec2::new(w, h));
@@ -107,20 +108,26 @@ proptest! {
 /// equal brute force; the exact transform for 1 and 4 threads is identical.
 #[test]
 fn ties_and_thread_counts() {
-    let area = Rect::new(IVec2::new(3, 5), UVec2::new(61, 40));
-    let layouts: [&dyn Fn(u32, u32) -> bool; 4] = [
-        &|i, j| i % 10 == 0 && j % 10 == 0,
-        &|i, j| (i == 0 || i == 60) && j == 20,
-        &|i, j| i == 30 && (j == 0 || j == 39),
-        &|i, j| (i + j) % 17 == 0,
-    ];
-    for layout in layouts {
-        let pen = pen_from(area, layout);
-        for metric in METRICS {
-            let one = in_pool(1, || exact_nearest_seed(&pen, area, metric).unwrap());
-            let four = in_pool(4, || exact_nearest_seed(&pen, area, metric).unwrap());
-            assert!(one == four);
-            check_exact(&pen, area, metric, &one);
+    // One band of the first phase, and several (bands are 64 columns) with a partial last one.
+    for area in [
+        Rect::new(IVec2::new(3, 5), UVec2::new(61, 40)),
+        Rect::new(IVec2::new(7, 2), UVec2::new(151, 40)),
+    ] {
+        let r = area.size.x - 1;
+        let layouts: [&dyn Fn(u32, u32) -> bool; 4] = [
+            &|i, j| i % 10 == 0 && j % 10 == 0,
+            &|i, j| (i == 0 || i == r) && j == 20,
+            &|i, j| i == r / 2 && (j == 0 || j == 39),
+            &|i, j| (i + j) % 17 == 0,
+        ];
+        for layout in layouts {
+            let pen = pen_from(area, layout);
+            for metric in METRICS {
+                let one = in_pool(1, || exact_nearest_seed(&pen, area, metric).unwrap());
+                let four = in_pool(4, || exact_nearest_seed(&pen, area, metric).unwrap());
+                assert!(one == four);
+                check_exact(&pen, area, metric, &one);
+            }
         }
     }
 }
@@ -143,6 +150,17 @@ fn bad_inputs_are_errors() {
         exact_nearest_seed(&pen, area, DistanceMetric::Euclidean),
         Err(GranularError::SeedNotAtColumn { .. })
     ));
+    // A wrong seed in a later column band is found and named too.
+    let wide = Rect::new(IVec2::new(4, 1), UVec2::new(150, 6));
+    let mut pen = pen_from(wide, |i, _| i % 3 == 0);
+    pen.get_mut(129, 4).unwrap().seed_y = 2;
+    assert_eq!(
+        exact_nearest_seed(&pen, wide, DistanceMetric::Euclidean),
+        Err(GranularError::SeedNotAtColumn {
+            column: [133, 5],
+            seed: [133, 2],
+        })
+    );
 }
 
 /// The scatter slope pass as it was written before its gather form: sequential, from

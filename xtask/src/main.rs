@@ -25,12 +25,12 @@ fn main() -> Result<()> {
         Some("package") => package(),
         Some("examples") => examples(),
         Some("golden") => golden(),
-        Some("bench-report") => bench_report(args.iter().any(|a| a == "--quick")),
+        Some("bench-report") => bench_report(&args[1..]),
         Some("fuzz") => fuzz(&args[1..]),
         Some("mutants") => mutants(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <ci|smoke|package|examples|golden|bench-report [--quick]|fuzz --seconds N [--target NAME] [--seed S]|mutants [--shard K/N] [--crate NAME]>"
+                "usage: cargo xtask <ci|smoke|package|examples|golden|bench-report [--quick] [--readme]|fuzz --seconds N [--target NAME] [--seed S]|mutants [--shard K/N] [--crate NAME]>"
             );
             eprintln!(
                 "  ci      fmt, clippy, tests, docs, package, examples, demo smoke (what CI runs)"
@@ -40,7 +40,7 @@ fn main() -> Result<()> {
             eprintln!("  package package and verify the publishable crates (`cargo package`)");
             eprintln!("  golden  regenerate the render test's golden image (never done by tests)");
             eprintln!(
-                "  bench-report  run the headline CPU benches briefly; write target/bench-report.{{json,md}}"
+                "  bench-report  run the headline CPU benches (all cores, then one); write target/bench-report.{{json,md}}; --readme also regenerates README's table"
             );
             eprintln!(
                 "  fuzz    run the fuzz targets N seconds each (release), print cases and results per input class"
@@ -630,128 +630,115 @@ fn smoke_on(backend: Option<&str>) -> Result<()> {
 }
 
 /// One headline figure of `bench-report`: a criterion benchmark id (`group/function/param`),
-/// the thesis figure it is compared with (milliseconds, and where it comes from), and the id
-/// of the plain copy of the same bytes measured in the same run.
+/// the thesis figure it is compared with (milliseconds, and where it comes from), and the ids
+/// of the plain copies of the same bytes measured in the same run: contiguous, and (for the
+/// stamp benches) in place in the map's rows.
 struct Headline {
-    id: &'static str,
+    id: String,
     thesis_ms: Option<f64>,
-    thesis: &'static str,
-    copy_id: &'static str,
+    thesis: String,
+    copy_id: String,
+    map_copy_id: Option<String>,
 }
 
 /// The figures `bench-report` reports. Thesis figures: seed 000 table 4.3 (GTX295, deform and
-/// normal generation at 0.1 m per texel: 50 m = 500^2 texels, 200 m = 2000^2), seed 001 tables
-/// 5.4 (iterative approach) and 5.5 (SSBO approach) at heightmapSize 4096 (241 591 columns).
-const HEADLINES: [Headline; 18] = [
-    Headline {
-        id: "stamp_normals/stamp/500",
-        thesis_ms: Some(0.971),
-        thesis: "seed 000 table 4.3, Deform 50 m, GTX295",
-        copy_id: "stamp_normals/memcpy/500",
-    },
-    Headline {
-        id: "stamp_normals/stamp/2000",
-        thesis_ms: Some(1.875),
-        thesis: "seed 000 table 4.3, Deform 200 m, GTX295",
-        copy_id: "stamp_normals/memcpy/2000",
-    },
-    Headline {
-        id: "stamp_normals/stamp_reference/500",
-        thesis_ms: Some(0.971),
-        thesis: "seed 000 table 4.3, Deform 50 m (per-texel reference)",
-        copy_id: "stamp_normals/memcpy/500",
-    },
-    Headline {
-        id: "stamp_normals/stamp_gaussian_rotated/2000",
-        thesis_ms: Some(1.875),
-        thesis: "seed 000 table 4.3, Deform 200 m",
-        copy_id: "stamp_normals/memcpy/2000",
-    },
-    Headline {
-        id: "stamp_normals/stamp_texture_rotated/500",
-        thesis_ms: Some(0.971),
-        thesis: "seed 000 table 4.3, Deform 50 m",
-        copy_id: "stamp_normals/memcpy/500",
-    },
-    Headline {
-        id: "stamp_normals/stamp_texture_rotated/2000",
-        thesis_ms: Some(1.875),
-        thesis: "seed 000 table 4.3, Deform 200 m",
-        copy_id: "stamp_normals/memcpy/2000",
-    },
-    Headline {
-        id: "stamp_normals/stamp_min_max/2000",
-        thesis_ms: Some(1.875),
-        thesis: "seed 000 table 4.3, Deform 200 m",
-        copy_id: "stamp_normals/memcpy/2000",
-    },
-    Headline {
-        id: "stamp_normals/normals/500",
-        thesis_ms: Some(0.828),
-        thesis: "seed 000 table 4.3, Normal Gen 50 m, GTX295",
-        copy_id: "stamp_normals/memcpy/500",
-    },
-    Headline {
-        id: "stamp_normals/normals/2000",
-        thesis_ms: Some(1.329),
-        thesis: "seed 000 table 4.3, Normal Gen 200 m, GTX295",
-        copy_id: "stamp_normals/memcpy/2000",
-    },
-    Headline {
-        id: "granular/jump_flood/4096",
-        thesis_ms: Some(10.692),
-        thesis: "seed 001 table 5.4, Jump flooding, 4096",
-        copy_id: "granular/memcpy_u32/4096",
-    },
-    Headline {
-        id: "granular/jump_flood_reference/4096",
-        thesis_ms: Some(10.692),
-        thesis: "seed 001 table 5.4, Jump flooding (sequential reference)",
-        copy_id: "granular/memcpy_u32/4096",
-    },
-    Headline {
-        id: "granular/exact_nearest_seed/4096",
-        thesis_ms: Some(10.692),
-        thesis: "seed 001 table 5.4, Jump flooding (scipy EDT: 13.4 ms)",
-        copy_id: "granular/memcpy_u32/4096",
-    },
-    Headline {
-        id: "granular/displace_iterative10/4096",
-        thesis_ms: Some(11.864),
-        thesis: "seed 001 table 5.4, Displace material, 4096",
-        copy_id: "granular/memcpy_u32/4096",
-    },
-    Headline {
-        id: "granular/slopes_scatter10/4096",
-        thesis_ms: Some(5.486),
-        thesis: "seed 001 table 5.5, Even out steep slopes, 4096",
-        copy_id: "granular/memcpy_u32/4096",
-    },
-    Headline {
-        id: "granular/step_jfa_iterative10_scatter10/4096",
-        thesis_ms: Some(38.08),
-        thesis: "seed 001 table 5.4, depth + penetration + JFA + displace + slopes",
-        copy_id: "granular/memcpy_u32/4096",
-    },
-    Headline {
-        id: "granular/step_exact_iterative10_scatter10/4096",
-        thesis_ms: Some(38.08),
-        thesis: "seed 001 table 5.4, the same steps",
-        copy_id: "granular/memcpy_u32/4096",
-    },
-    Headline {
-        id: "granular_step/jfa_iterative10_scatter10/4096",
-        thesis_ms: Some(38.08),
-        thesis: "seed 001 table 5.4, the same steps (GranularSim::step, volume included)",
-        copy_id: "granular/memcpy_u32/4096",
-    },
-    Headline {
-        id: "granular_step/exact_iterative10_scatter10/4096",
-        thesis_ms: Some(38.08),
-        thesis: "seed 001 table 5.4, the same steps (GranularSim::step, exact transform)",
-        copy_id: "granular/memcpy_u32/4096",
-    },
-];
+/// normal generation at 0.1 m per texel: 50 m = 500^2 texels, 100 m = 1000^2, 200 m =
+/// 2000^2), seed 001 tables 5.4 (iterative approach) and 5.5 (SSBO approach) at heightmapSize
+/// 4096 (241 591 columns).
+fn headlines() -> Vec<Headline> {
+    let mut out = Vec::new();
+    // (side, GTX295 deform ms, GTX295 normal generation ms, region in metres)
+    let table_4_3 = [
+        (500, 0.971, 0.828, "50 m"),
+        (1000, 1.192, 0.953, "100 m"),
+        (2000, 1.875, 1.329, "200 m"),
+    ];
+    for (side, deform, normals, metres) in table_4_3 {
+        let stamps = [
+            ("stamp", "Gaussian"),
+            ("stamp_reference", "Gaussian, per-texel reference"),
+            ("stamp_gaussian_rotated", "rotated Gaussian"),
+            ("stamp_texture_rotated", "rotated texture"),
+            ("stamp_min_max", "min / max blend"),
+            ("normals", "normals"),
+        ];
+        for (bench, what) in stamps {
+            // The per-texel reference runs at the small sizes only (it is slow).
+            if bench == "stamp_reference" && side > 500 {
+                continue;
+            }
+            let (thesis_ms, figure) = if bench == "normals" {
+                (normals, "Normal Gen")
+            } else {
+                (deform, "Deform")
+            };
+            out.push(Headline {
+                id: format!("stamp_normals/{bench}/{side}"),
+                thesis_ms: Some(thesis_ms),
+                thesis: format!("seed 000 table 4.3, {figure} {metres}, GTX295 ({what})"),
+                copy_id: format!("stamp_normals/memcpy/{side}"),
+                map_copy_id: Some(format!("stamp_normals/memcpy_in_map/{side}")),
+            });
+        }
+    }
+    let granular = [
+        (
+            "granular/jump_flood/4096",
+            10.692,
+            "seed 001 table 5.4, Jump flooding, 4096",
+        ),
+        (
+            "granular/jump_flood_reference/4096",
+            10.692,
+            "seed 001 table 5.4, Jump flooding (sequential reference)",
+        ),
+        (
+            "granular/exact_nearest_seed/4096",
+            10.692,
+            "seed 001 table 5.4, Jump flooding (scipy EDT: 13.4 ms)",
+        ),
+        (
+            "granular/displace_iterative10/4096",
+            11.864,
+            "seed 001 table 5.4, Displace material, 4096",
+        ),
+        (
+            "granular/slopes_scatter10/4096",
+            5.486,
+            "seed 001 table 5.5, Even out steep slopes, 4096",
+        ),
+        (
+            "granular/step_jfa_iterative10_scatter10/4096",
+            38.08,
+            "seed 001 table 5.4, depth + penetration + JFA + displace + slopes",
+        ),
+        (
+            "granular/step_exact_iterative10_scatter10/4096",
+            38.08,
+            "seed 001 table 5.4, the same steps",
+        ),
+        (
+            "granular_step/jfa_iterative10_scatter10/4096",
+            38.08,
+            "seed 001 table 5.4, the same steps (GranularSim::step, volume included)",
+        ),
+        (
+            "granular_step/exact_iterative10_scatter10/4096",
+            38.08,
+            "seed 001 table 5.4, the same steps (GranularSim::step, exact transform)",
+        ),
+    ];
+    for (id, ms, thesis) in granular {
+        out.push(Headline {
+            id: id.into(),
+            thesis_ms: Some(ms),
+            thesis: thesis.into(),
+            copy_id: "granular/memcpy_u32/4096".into(),
+            map_copy_id: None,
+        });
+    }
+    out
+}
 
 /// Reads criterion's median estimate (ns) of `id` from `criterion_dir`.
 fn criterion_median_ns(criterion_dir: &Path, id: &str) -> Result<f64> {
@@ -765,79 +752,140 @@ fn criterion_median_ns(criterion_dir: &Path, id: &str) -> Result<f64> {
         .with_context(|| format!("no median in {}", path.display()))
 }
 
-/// Runs the headline CPU benches briefly (criterion's `--quick` mode with `--quick`), then
-/// writes `target/bench-report.json` and `target/bench-report.md`: each figure, the thesis
-/// figure it is compared with and its ratio to a plain copy of the same bytes measured in the
-/// same run. Timings on a shared 2-core machine are noisy; the report says so.
-fn bench_report(quick: bool) -> Result<()> {
+/// Where README.md's generated "Measured" table starts and ends.
+const README_BEGIN: &str = "<!-- bench-report:begin (cargo xtask bench-report --readme) -->";
+const README_END: &str = "<!-- bench-report:end -->";
+
+/// `readme` with the text between [`README_BEGIN`] and [`README_END`] replaced by `table`;
+/// an error if the markers are missing or out of order.
+fn splice_readme(readme: &str, table: &str) -> Result<String> {
+    let (Some(a), Some(b)) = (readme.find(README_BEGIN), readme.find(README_END)) else {
+        bail!("README.md has no {README_BEGIN} ... {README_END} markers");
+    };
+    if b < a {
+        bail!("README.md's bench-report markers are out of order");
+    }
+    let head = &readme[..a + README_BEGIN.len()];
+    Ok(format!("{head}\n{}\n{}", table.trim_end(), &readme[b..]))
+}
+
+/// Writes `bytes` to `path` through a temporary file beside it (fsynced, then renamed over
+/// `path`), so an interrupted run leaves the old file or the new one, never half of one.
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let tmp = path.with_extension("tmp-bench-report");
+    let mut f =
+        std::fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+    f.write_all(bytes)?;
+    f.sync_all()?;
+    drop(f);
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming over {}", path.display()))
+}
+
+/// Runs the headline CPU benches briefly (criterion's `--quick` mode with `--quick`), on all
+/// cores and then on one (`RAYON_NUM_THREADS=1`, its own criterion folder), and writes
+/// `target/bench-report.json` and `target/bench-report.md`: each figure, the thesis figure it
+/// is compared with, and its ratio to plain copies of the same bytes measured in the same run.
+/// With `--readme` the table also replaces README.md's generated "Measured" table.
+fn bench_report(args: &[String]) -> Result<()> {
+    let quick = args.iter().any(|a| a == "--quick");
+    let readme = args.iter().any(|a| a == "--readme");
+    if let Some(bad) = args
+        .iter()
+        .find(|a| !matches!(a.as_str(), "--quick" | "--readme"))
+    {
+        bail!("bench-report: unknown argument {bad} (expected --quick, --readme)");
+    }
     let target = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root().join("target"));
+    let one_core_dir = target.join("criterion-1-thread");
     let benches: [(&str, &str); 2] = [
         (
             "stamp_normals",
-            "^stamp_normals/(stamp|stamp_reference|stamp_gaussian_rotated|stamp_texture_rotated|stamp_min_max|normals|memcpy)/(500|2000)$",
+            "^stamp_normals/(stamp|stamp_reference|stamp_gaussian_rotated|stamp_texture_rotated|stamp_min_max|normals|memcpy|memcpy_in_map)/(500|1000|2000)$",
         ),
         (
             "granular",
             "^granular/(jump_flood|jump_flood_reference|exact_nearest_seed|displace_iterative10|slopes_scatter10|step_jfa_iterative10_scatter10|step_exact_iterative10_scatter10|memcpy_u32)/4096$|^granular_step/",
         ),
     ];
-    for (bench, filter) in benches {
-        let mut args = vec![
-            "bench",
-            "--locked",
-            "-p",
-            "terrain-core",
-            "--bench",
-            bench,
-            "--",
-        ];
-        if quick {
-            args.push("--quick");
+    let one_core = one_core_dir.to_string_lossy().into_owned();
+    let runs: [&[(&str, &str)]; 2] = [
+        &[],
+        &[("RAYON_NUM_THREADS", "1"), ("CRITERION_HOME", &one_core)],
+    ];
+    for env in runs {
+        for (bench, filter) in benches {
+            let mut args = vec![
+                "bench",
+                "--locked",
+                "-p",
+                "terrain-core",
+                "--bench",
+                bench,
+                "--",
+            ];
+            if quick {
+                args.push("--quick");
+            }
+            args.push(filter);
+            cargo(&args, env)?;
         }
-        args.push(filter);
-        cargo(&args, &[])?;
     }
     let criterion_dir = target.join("criterion");
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut rows = Vec::new();
-    let mut md = String::from(
-        "| benchmark | median (ms) | thesis (ms) | thesis figure | x thesis | x copy of the same bytes |\n|---|---|---|---|---|---|\n",
+    let mut md = format!(
+        "| benchmark | {threads} cores (ms) | 1 core (ms) | thesis (ms) | thesis figure | x thesis | x copy | x copy in the map |\n|---|---|---|---|---|---|---|---|\n",
     );
-    for h in HEADLINES {
-        let ns = criterion_median_ns(&criterion_dir, h.id)?;
-        let copy_ns = criterion_median_ns(&criterion_dir, h.copy_id)?;
+    for h in headlines() {
+        let ns = criterion_median_ns(&criterion_dir, &h.id)?;
+        let one_ns = criterion_median_ns(&one_core_dir, &h.id)?;
+        let copy_ns = criterion_median_ns(&criterion_dir, &h.copy_id)?;
+        let map_copy_ns = match &h.map_copy_id {
+            Some(id) => Some(criterion_median_ns(&criterion_dir, id)?),
+            None => None,
+        };
         let ms = ns / 1e6;
         let vs_thesis = h.thesis_ms.map(|t| ms / t);
-        let vs_copy = ns / copy_ns;
         md.push_str(&format!(
-            "| `{}` | {:.3} | {} | {} | {} | {:.1} (copy {:.1} us) |\n",
+            "| `{}` | {:.3} | {:.3} | {} | {} | {} | {:.1} ({:.1} us) | {} |\n",
             h.id,
             ms,
+            one_ns / 1e6,
             h.thesis_ms.map_or("-".into(), |t| format!("{t:.3}")),
             h.thesis,
             vs_thesis.map_or("-".into(), |r| format!("{r:.2}")),
-            vs_copy,
+            ns / copy_ns,
             copy_ns / 1e3,
+            map_copy_ns.map_or("-".into(), |c| format!("{:.1} ({:.1} us)", ns / c, c / 1e3)),
         ));
         rows.push(serde_json::json!({
             "id": h.id,
             "median_ms": ms,
+            "one_core_median_ms": one_ns / 1e6,
             "thesis_ms": h.thesis_ms,
             "thesis": h.thesis,
             "ratio_to_thesis": vs_thesis,
             "copy_id": h.copy_id,
             "copy_ms": copy_ns / 1e6,
-            "ratio_to_copy": vs_copy,
+            "ratio_to_copy": ns / copy_ns,
+            "map_copy_id": h.map_copy_id,
+            "map_copy_ms": map_copy_ns.map(|c| c / 1e6),
+            "ratio_to_map_copy": map_copy_ns.map(|c| ns / c),
         }));
     }
     md.push_str(&format!(
-        "\nCriterion medians{}, CPU threads: {}. Figures from a shared machine are noisy; compare \
-         ratios measured in the same run.\n",
+        "\nCriterion medians{}, on {threads} CPU threads and on 1 (`RAYON_NUM_THREADS=1`). \
+         \"x copy\": the figure over a plain `copy_from_slice` of the same bytes (the region's \
+         u16 heights, or the area's u32 columns) between two buffers of that size; \"x copy in \
+         the map\": over copying the region's rows in place in the 4096^2 map (the strided, \
+         cache-missing access a stamp makes). Both copies run on one thread, in the same run. \
+         Figures from a shared machine are noisy; compare ratios measured in the same run.\n",
         if quick { " (--quick)" } else { "" },
-        std::thread::available_parallelism().map_or(1, |n| n.get()),
     ));
-    let json = serde_json::json!({ "quick": quick, "figures": rows });
+    let json = serde_json::json!({ "quick": quick, "threads": threads, "figures": rows });
     std::fs::create_dir_all(&target)?;
     let json_path = target.join("bench-report.json");
     let md_path = target.join("bench-report.md");
@@ -846,6 +894,13 @@ fn bench_report(quick: bool) -> Result<()> {
     std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
     println!("{md}");
     eprintln!("wrote {} and {}", json_path.display(), md_path.display());
+    if readme {
+        let path = root().join("README.md");
+        let text = std::fs::read_to_string(&path).context("reading README.md")?;
+        let spliced = splice_readme(&text, &md)?;
+        write_atomically(&path, spliced.as_bytes())?;
+        eprintln!("updated the generated table in {}", path.display());
+    }
     Ok(())
 }
 
@@ -1345,6 +1400,40 @@ fn mutants(args: &[String]) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn splice_readme_replaces_only_the_generated_table() {
+        let readme = format!("# T\n\nbefore\n{README_BEGIN}\nold | table\n{README_END}\nafter\n");
+        let out = splice_readme(&readme, "| new |\n\n").unwrap();
+        assert_eq!(
+            out,
+            format!("# T\n\nbefore\n{README_BEGIN}\n| new |\n{README_END}\nafter\n")
+        );
+        // Idempotent, and the markers are required in order.
+        assert_eq!(splice_readme(&out, "| new |").unwrap(), out);
+        assert!(splice_readme("no markers", "x").is_err());
+        assert!(splice_readme(&format!("{README_END}{README_BEGIN}"), "x").is_err());
+    }
+
+    #[test]
+    fn headlines_name_their_copies_and_thesis_figures() {
+        let h = headlines();
+        assert!(
+            h.iter()
+                .all(|h| h.thesis_ms.is_some() && !h.copy_id.is_empty())
+        );
+        for side in [500, 1000, 2000] {
+            let id = format!("stamp_normals/stamp_texture_rotated/{side}");
+            let t = h.iter().find(|h| h.id == id).unwrap();
+            assert_eq!(t.copy_id, format!("stamp_normals/memcpy/{side}"));
+            assert_eq!(
+                t.map_copy_id.as_deref(),
+                Some(&*format!("stamp_normals/memcpy_in_map/{side}"))
+            );
+        }
+        let ids: std::collections::HashSet<_> = h.iter().map(|h| &h.id).collect();
+        assert_eq!(ids.len(), h.len(), "no figure twice");
+    }
+
     use super::*;
 
     #[test]

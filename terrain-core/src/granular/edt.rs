@@ -41,34 +41,31 @@ pub fn exact_nearest_seed(
     let (w, h) = (area.size.x as usize, area.size.y as usize);
     let (ox, oy) = (area.min.x as u32, area.min.y as u32);
     // The output grid holds `[g, seed row]` after phase 1 (no other buffer of the area's size:
-    // fresh pages cost more than the sweeps), then each row's seeds after phase 2.
+    // fresh pages cost more than the sweeps), then each row's seeds after phase 2. Zeroed, so
+    // it comes from fresh (already zero) pages without a fill; phase 1 writes every cell.
     let cells = pen.as_slice();
     let mut out =
-        Grid::new(area.size.x, area.size.y, [NONE; 2]).map_err(|_| GranularError::TooLarge {
+        Grid::new(area.size.x, area.size.y, [0u32; 2]).map_err(|_| GranularError::TooLarge {
             side: area.size.max_element(),
             limit: super::MAX_SIDE,
         })?;
-    // Phase 1: per column `g` (distance along the column) and the seed row (local), swept down
-    // then up, branch-free (selects instead of data-dependent jumps).
-    let o = out.as_mut_slice();
-    let mut last = vec![NONE; w];
-    let mut any_bad = false;
-    for y in 0..h {
-        let row = &cells[y * w..(y + 1) * w];
-        let orow = &mut o[y * w..(y + 1) * w];
-        for (x, (p, o)) in row.iter().zip(orow.iter_mut()).enumerate() {
-            let is_seed = p.seed_x != NO_SEED;
-            any_bad |= is_seed & ((p.seed_x != ox + x as u32) | (p.seed_y != oy + y as u32));
-            last[x] = if is_seed { y as u32 } else { last[x] };
-            let g = if last[x] == NONE {
-                NONE
-            } else {
-                y as u32 - last[x]
-            };
-            *o = [g, last[x]];
+    // Phase 1: per column `g` (distance along the column) and the seed row (local), in bands
+    // of `BAND` columns swept in parallel: each band gets its piece of every row.
+    let mut bands: Vec<Vec<&mut [[u32; 2]]>> = (0..w.div_ceil(BAND))
+        .map(|_| Vec::with_capacity(h))
+        .collect();
+    for row in out.as_mut_slice().chunks_mut(w) {
+        for (band, piece) in bands.iter_mut().zip(row.chunks_mut(BAND)) {
+            band.push(piece);
         }
     }
-    if any_bad {
+    let any_bad = std::sync::atomic::AtomicBool::new(false);
+    crate::par::for_each_item(bands, |b, mut rows| {
+        if sweep_columns(cells, w, b * BAND, (ox, oy), &mut rows) {
+            any_bad.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    });
+    if any_bad.into_inner() {
         let i = cells
             .iter()
             .enumerate()
@@ -82,36 +79,105 @@ pub fn exact_nearest_seed(
             seed: [cells[i].seed_x, cells[i].seed_y],
         });
     }
-    last.fill(NONE);
-    for y in (0..h).rev() {
-        for (x, o) in o[y * w..(y + 1) * w].iter_mut().enumerate() {
-            let [g, above] = *o;
-            last[x] = if g == 0 { y as u32 } else { last[x] };
-            let below = if last[x] == NONE {
+    // Phase 2: per row (in parallel), the lower envelope of the columns that have a seed, with
+    // per-thread scratch rows (every row overwrites what it reads of them).
+    let o = (ox, oy);
+    crate::par::for_each_chunk_init(
+        out.as_mut_slice(),
+        w,
+        || Scratch::new(w),
+        |sc, _, row| {
+            for (v, (g, s)) in row.iter().zip(sc.g.iter_mut().zip(sc.s.iter_mut())) {
+                (*g, *s) = (v[0], v[1]);
+            }
+            match metric {
+                DistanceMetric::Euclidean => row_transform::<Euclid>(sc, o, row),
+                DistanceMetric::Manhattan => row_transform::<Manhattan>(sc, o, row),
+                DistanceMetric::Chebyshev => row_transform::<Chebyshev>(sc, o, row),
+            }
+        },
+    );
+    Ok(out)
+}
+
+/// Columns a phase-1 band sweeps (its `last` seed rows stay in registers and L1).
+const BAND: usize = 64;
+
+/// Phase 1 over one band of columns starting at area column `x0`, given as its piece of every
+/// row: `[g, seed row]` per cell, swept down then up, branch-free (selects instead of
+/// data-dependent jumps; compiled for AVX2 too). Returns whether a seed names a column other
+/// than its own.
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
+fn sweep_columns(
+    cells: &[Penetration],
+    w: usize,
+    x0: usize,
+    (ox, oy): (u32, u32),
+    rows: &mut [&mut [[u32; 2]]],
+) -> bool {
+    let bw = rows.first().map_or(0, |r| r.len()).min(BAND);
+    let mut last = [NONE; BAND];
+    let last = &mut last[..bw];
+    let mut bad = false;
+    for (y, orow) in rows.iter_mut().enumerate() {
+        let row = &cells[y * w + x0..y * w + x0 + bw];
+        for (x, ((p, o), last)) in row
+            .iter()
+            .zip(orow.iter_mut())
+            .zip(last.iter_mut())
+            .enumerate()
+        {
+            let is_seed = p.seed_x != NO_SEED;
+            bad |= is_seed & ((p.seed_x != ox + (x0 + x) as u32) | (p.seed_y != oy + y as u32));
+            *last = if is_seed { y as u32 } else { *last };
+            let g = if *last == NONE {
                 NONE
             } else {
-                last[x] - y as u32
+                y as u32 - *last
+            };
+            *o = [g, *last];
+        }
+    }
+    last.fill(NONE);
+    for (y, orow) in rows.iter_mut().enumerate().rev() {
+        for (o, last) in orow.iter_mut().zip(last.iter_mut()) {
+            let [g, above] = *o;
+            *last = if g == 0 { y as u32 } else { *last };
+            let below = if *last == NONE {
+                NONE
+            } else {
+                *last - y as u32
             };
             // Ties keep the seed above; either is as near.
             *o = if below < g {
-                [below, last[x]]
+                [below, *last]
             } else {
                 [g, above]
             };
         }
     }
-    // Phase 2: per row (in parallel), the lower envelope of the columns that have a seed.
-    crate::par::for_each_chunk(out.as_mut_slice(), w, |_, row| {
-        let gr: Vec<u32> = row.iter().map(|v| v[0]).collect();
-        let sr: Vec<u32> = row.iter().map(|v| v[1]).collect();
-        let o = (ox, oy);
-        match metric {
-            DistanceMetric::Euclidean => row_transform::<Euclid>(&gr, &sr, w, o, row),
-            DistanceMetric::Manhattan => row_transform::<Manhattan>(&gr, &sr, w, o, row),
-            DistanceMetric::Chebyshev => row_transform::<Chebyshev>(&gr, &sr, w, o, row),
+    bad
+}
+
+/// Per-thread rows of phase 2: a row's `g` and seed rows, and the envelope's stacks.
+struct Scratch {
+    g: Vec<u32>,
+    s: Vec<u32>,
+    env_s: Vec<i64>,
+    env_t: Vec<i64>,
+    env_g: Vec<i64>,
+}
+
+impl Scratch {
+    fn new(w: usize) -> Self {
+        Self {
+            g: vec![0; w],
+            s: vec![0; w],
+            env_s: vec![0; w],
+            env_t: vec![0; w],
+            env_g: vec![0; w],
         }
-    });
-    Ok(out)
+    }
 }
 
 /// A metric of phase 2: `f(x, i)` and Meijster's separator (monomorphised per metric).
@@ -161,17 +227,19 @@ impl Metric for Chebyshev {
 /// a few times the row), each column `x` scans only `[x - g(x), x + g(x)]`: a nearer seed
 /// column `i` needs `f(x, i) <= f(x, x) = g(x)`-ish, which for all three metrics implies
 /// `|x - i| <= g(x)`. Otherwise the linear-time envelope.
-fn row_transform<M: Metric>(gr: &[u32], sr: &[u32], w: usize, o: (u32, u32), row: &mut [[u32; 2]]) {
+fn row_transform<M: Metric>(sc: &mut Scratch, o: (u32, u32), row: &mut [[u32; 2]]) {
+    let w = row.len();
     let mut cost = 0usize;
-    for &g in gr {
+    for &g in &sc.g {
         if g == NONE {
-            return envelope::<M>(gr, sr, w, o, row);
+            return envelope::<M>(sc, o, row);
         }
         cost += 2 * (g as usize).min(w) + 1;
     }
     if cost > 4 * w {
-        return envelope::<M>(gr, sr, w, o, row);
+        return envelope::<M>(sc, o, row);
     }
+    let (gr, sr) = (&sc.g, &sc.s);
     for (x, out) in row.iter_mut().enumerate() {
         let gx = gr[x];
         let mut best_i = x;
@@ -194,16 +262,10 @@ fn row_transform<M: Metric>(gr: &[u32], sr: &[u32], w: usize, o: (u32, u32), row
 
 /// Phase 2 of one row: the lower envelope of the columns with a seed (`gr[i] != NONE`),
 /// scanned left to right, then read back right to left into `row`.
-fn envelope<M: Metric>(
-    gr: &[u32],
-    sr: &[u32],
-    w: usize,
-    (ox, oy): (u32, u32),
-    row: &mut [[u32; 2]],
-) {
-    let mut s = vec![0i64; w];
-    let mut t = vec![0i64; w];
-    let mut gs = vec![0i64; w];
+fn envelope<M: Metric>(sc: &mut Scratch, (ox, oy): (u32, u32), row: &mut [[u32; 2]]) {
+    let w = row.len();
+    let (gr, sr) = (&sc.g, &sc.s);
+    let (s, t, gs) = (&mut sc.env_s, &mut sc.env_t, &mut sc.env_g);
     let mut q: isize = -1;
     let m = w as i64;
     for (u, &g) in gr.iter().enumerate() {
@@ -235,19 +297,28 @@ fn envelope<M: Metric>(
     if q < 0 {
         return;
     }
-    let mut k = q as usize;
-    for x in (0..w).rev() {
+    // Read back right to left a segment at a time: segment `k` runs from `t[k]` to where the
+    // one after it starts; the first (and any whose start is not left of that) to column 0.
+    let (mut k, mut end) = (q as usize, w);
+    loop {
         let c = s[k] as usize;
-        row[x] = [ox + c as u32, oy + sr[c]];
-        if x as i64 == t[k] && k > 0 {
-            k -= 1;
+        let tk = t[k];
+        let start = if k > 0 && tk >= 0 && (tk as usize) < end {
+            tk as usize
+        } else {
+            0
+        };
+        row[start..end].fill([ox + c as u32, oy + sr[c]]);
+        if start == 0 {
+            break;
         }
+        (k, end) = (k - 1, start);
     }
 }
 
 /// `f(x, i)`: the distance from column `x` of the row to the nearest seed of column `i`, whose
 /// distance along its column is `g`.
-#[inline]
+#[inline(always)]
 fn envelope_f(metric: DistanceMetric, x: i64, i: u32, g: i64) -> i64 {
     let dx = (x - i64::from(i)).abs();
     match metric {
@@ -259,7 +330,7 @@ fn envelope_f(metric: DistanceMetric, x: i64, i: u32, g: i64) -> i64 {
 
 /// Meijster's `Sep(i, u)` for `i < u`: the last `x` at which column `i` is at least as near as
 /// column `u` (floor division; `i64::MAX / 4` for "never", `i64::MIN / 4` for "nowhere").
-#[inline]
+#[inline(always)]
 fn separator(metric: DistanceMetric, i: u32, u: u32, gi: i64, gu: i64) -> i64 {
     let (i, u) = (i64::from(i), i64::from(u));
     match metric {
