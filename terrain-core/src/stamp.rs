@@ -409,7 +409,7 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
         _ if !frame.inv_half.is_finite() => Kernel::PerTexel,
         StampKernel::Gaussian { beta } => GaussianKernel::new(&frame, beta, footprint_x, &pieces)
             .map_or(Kernel::PerTexel, Kernel::Gaussian),
-        StampKernel::Texture(values) => match TextureKernel::new(values) {
+        StampKernel::Texture(values) => match TextureKernel::new(values, texels(&pieces)) {
             Some(t) => Kernel::Texture(t),
             None => Kernel::PerTexel,
         },
@@ -510,6 +510,11 @@ fn blend_row<T: HeightSample>(
         }
         op.apply(dst, z);
     }
+}
+
+/// The texels of a stamp's pieces.
+fn texels(pieces: &[(Rect, IVec2)]) -> u64 {
+    pieces.iter().map(|(r, _)| r.area()).sum()
 }
 
 /// Fills stamp terms for `(uy, ux, n, out)`: row, first unwrapped column, count, terms.
@@ -989,6 +994,11 @@ impl GaussianKernel {
 /// A texture stamp sampled inline, with the arithmetic of [`TextureStamp::value`].
 struct TextureKernel<'a> {
     values: &'a [f32],
+    /// For footprints much larger than the image: the four pixels every bilinear cell reads,
+    /// side by side, for cells `(x0, z0)` from `(-1, -1)` to `(w - 1, h - 1)` (row-major over
+    /// `(x0 + 1, z0 + 1)`, clamped at the edges as the lookups are), so a texel costs one
+    /// 16-byte load instead of four scattered ones.
+    quads: Vec<[f32; 4]>,
     w: i32,
     h: i32,
     size: Vec2,
@@ -997,23 +1007,41 @@ struct TextureKernel<'a> {
 impl<'a> TextureKernel<'a> {
     /// `None` for an image too large for the exact floor below (2^22 pixels a side) or for
     /// 32-bit pixel indices (2^31 pixels).
-    fn new(values: &'a Grid<f32>) -> Option<Self> {
+    /// The quad table is built when the footprint has at least four texels per cell.
+    fn new(values: &'a Grid<f32>, texels: u64) -> Option<Self> {
         let size = values.size();
-        let fits = size.max_element() < 1 << 22 && values.as_slice().len() < 1 << 31;
-        (fits && size.min_element() > 0).then(|| Self {
-            values: values.as_slice(),
-            w: size.x as i32,
-            h: size.y as i32,
+        let cells = (u64::from(size.x) + 1) * (u64::from(size.y) + 1);
+        let fits = size.max_element() < 1 << 22 && cells < 1 << 31;
+        if !fits || size.min_element() == 0 {
+            return None;
+        }
+        let (w, h) = (size.x as i32, size.y as i32);
+        let v = values.as_slice();
+        let at = |x: i32, z: i32| v[(z.clamp(0, h - 1) * w + x.clamp(0, w - 1)) as usize];
+        let quads = if texels >= 4 * cells {
+            (-1..h)
+                .flat_map(|z| (-1..w).map(move |x| (x, z)))
+                .map(|(x, z)| [at(x, z), at(x + 1, z), at(x, z + 1), at(x + 1, z + 1)])
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Some(Self {
+            values: v,
+            quads,
+            w,
+            h,
             size: size.as_vec2(),
         })
     }
 
     /// The stored-unit terms `op.z(value(local))` of `z.len()` texels of row `uy` from
     /// unwrapped column `ux`, every one inside the footprint (or with a NaN local coordinate):
-    /// [`TextureStamp::value`]'s f32 arithmetic in three loops (coordinates, pixel indices,
-    /// lookups, interpolation) that the compiler vectorises. `floor_small` is exact here (`|p| < 2^22`); for
-    /// a NaN coordinate it gives some index, clamped like any other, and the fraction (NaN
-    /// minus anything) makes the value NaN, as in the reference.
+    /// [`TextureStamp::value`]'s f32 arithmetic in three loops (image coordinates; pixel
+    /// indices and fractions; lookups and interpolation), the first two of which the compiler
+    /// vectorises. `floor_small` is exact here (`|p| < 2^22`); for a NaN coordinate it gives
+    /// some index, clamped like any other, and the fraction (NaN minus anything) makes the
+    /// value NaN, as in the reference.
     #[inline(always)]
     fn block(&self, frame: &Frame, op: &BlendOp, ux: i32, uy: i32, z: &mut [f64]) {
         let n = z.len().min(BLOCK);
@@ -1024,8 +1052,29 @@ impl<'a> TextureKernel<'a> {
             py[i] = (l.y + 1.0) * 0.5 * self.size.y - 0.5;
         }
         let (mut fx, mut fz) = ([0.0f32; BLOCK], [0.0f32; BLOCK]);
-        let mut idx = [[0u32; 4]; BLOCK];
         let (w, h) = (self.w, self.h);
+        if !self.quads.is_empty() {
+            let mut cell = [0u32; BLOCK];
+            for i in 0..n {
+                let (x0, z0) = (floor_small(px[i]), floor_small(py[i]));
+                fx[i] = px[i] - x0 as f32;
+                fz[i] = py[i] - z0 as f32;
+                let (cx, cz) = (
+                    x0.wrapping_add(1).clamp(0, w),
+                    z0.wrapping_add(1).clamp(0, h),
+                );
+                cell[i] = (cz * (w + 1) + cx) as u32;
+            }
+            let last = self.quads.len() - 1;
+            for i in 0..n {
+                let [v0, v1, v2, v3] = self.quads[(cell[i] as usize).min(last)];
+                let top = v0 + (v1 - v0) * fx[i];
+                let bot = v2 + (v3 - v2) * fx[i];
+                z[i] = op.z(top + (bot - top) * fz[i]);
+            }
+            return;
+        }
+        let mut idx = [[0u32; 4]; BLOCK];
         for i in 0..n {
             let (x0, z0) = (floor_small(px[i]), floor_small(py[i]));
             fx[i] = px[i] - x0 as f32;

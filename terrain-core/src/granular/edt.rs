@@ -41,8 +41,8 @@ pub fn exact_nearest_seed(
     let (w, h) = (area.size.x as usize, area.size.y as usize);
     let (ox, oy) = (area.min.x as u32, area.min.y as u32);
     // The output grid holds `[g, seed row]` after phase 1 (no other buffer of the area's size:
-    // fresh pages cost more than the sweeps), then each row's seeds after phase 2. Zeroed, so
-    // it comes from fresh (already zero) pages without a fill; phase 1 writes every cell.
+    // fresh pages cost more than the sweeps), then each row's seeds after phase 2. Zeroed (the
+    // allocator can hand out fresh zero pages without a fill): phase 1 writes every cell.
     let cells = pen.as_slice();
     let mut out =
         Grid::new(area.size.x, area.size.y, [0u32; 2]).map_err(|_| GranularError::TooLarge {
