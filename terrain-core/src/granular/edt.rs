@@ -80,21 +80,16 @@ pub fn exact_nearest_seed(
         });
     }
     // Phase 2: per row (in parallel), the lower envelope of the columns that have a seed, with
-    // per-thread scratch rows (every row overwrites what it reads of them).
+    // per-thread scratch (every row overwrites what it reads of it).
     let o = (ox, oy);
     crate::par::for_each_chunk_init(
         out.as_mut_slice(),
         w,
         || Scratch::new(w),
-        |sc, _, row| {
-            for (v, (g, s)) in row.iter().zip(sc.g.iter_mut().zip(sc.s.iter_mut())) {
-                (*g, *s) = (v[0], v[1]);
-            }
-            match metric {
-                DistanceMetric::Euclidean => row_transform::<Euclid>(sc, o, row),
-                DistanceMetric::Manhattan => row_transform::<Manhattan>(sc, o, row),
-                DistanceMetric::Chebyshev => row_transform::<Chebyshev>(sc, o, row),
-            }
+        |sc, _, row| match metric {
+            DistanceMetric::Euclidean => row_transform::<Euclid>(sc, o, row),
+            DistanceMetric::Manhattan => row_transform::<Manhattan>(sc, o, row),
+            DistanceMetric::Chebyshev => row_transform::<Chebyshev>(sc, o, row),
         },
     );
     Ok(out)
@@ -166,6 +161,10 @@ struct Scratch {
     env_s: Vec<i64>,
     env_t: Vec<i64>,
     env_g: Vec<i64>,
+    /// The seed row of each stack entry's column.
+    env_r: Vec<u32>,
+    /// Each stack entry's distance at the start of its segment.
+    env_f: Vec<i64>,
 }
 
 impl Scratch {
@@ -176,6 +175,8 @@ impl Scratch {
             env_s: vec![0; w],
             env_t: vec![0; w],
             env_g: vec![0; w],
+            env_r: vec![0; w],
+            env_f: vec![0; w],
         }
     }
 }
@@ -230,7 +231,7 @@ impl Metric for Chebyshev {
 fn row_transform<M: Metric>(sc: &mut Scratch, o: (u32, u32), row: &mut [[u32; 2]]) {
     let w = row.len();
     let mut cost = 0usize;
-    for &g in &sc.g {
+    for &[g, _] in row.iter() {
         if g == NONE {
             return envelope::<M>(sc, o, row);
         }
@@ -239,7 +240,11 @@ fn row_transform<M: Metric>(sc: &mut Scratch, o: (u32, u32), row: &mut [[u32; 2]
     if cost > 4 * w {
         return envelope::<M>(sc, o, row);
     }
-    let (gr, sr) = (&sc.g, &sc.s);
+    // The window scan reads columns it has already written: from a copy of the row.
+    for (v, (g, s)) in row.iter().zip(sc.g.iter_mut().zip(sc.s.iter_mut())) {
+        (*g, *s) = (v[0], v[1]);
+    }
+    let (gr, sr) = (&sc.g[..w], &sc.s[..w]);
     for (x, out) in row.iter_mut().enumerate() {
         let gx = gr[x];
         let mut best_i = x;
@@ -260,39 +265,43 @@ fn row_transform<M: Metric>(sc: &mut Scratch, o: (u32, u32), row: &mut [[u32; 2]
     }
 }
 
-/// Phase 2 of one row: the lower envelope of the columns with a seed (`gr[i] != NONE`),
-/// scanned left to right, then read back right to left into `row`.
+/// Phase 2 of one row: the lower envelope of the columns with a seed (`g != NONE`), scanned
+/// left to right from the row itself (each stack entry keeps its seed row and its distance
+/// where its segment starts), then read back right to left into `row`.
 fn envelope<M: Metric>(sc: &mut Scratch, (ox, oy): (u32, u32), row: &mut [[u32; 2]]) {
     let w = row.len();
-    let (gr, sr) = (&sc.g, &sc.s);
     let (s, t, gs) = (&mut sc.env_s, &mut sc.env_t, &mut sc.env_g);
+    let (sr, fs) = (&mut sc.env_r, &mut sc.env_f);
     let mut q: isize = -1;
     let m = w as i64;
-    for (u, &g) in gr.iter().enumerate() {
+    for (u, &[g, srow]) in row.iter().enumerate() {
         if g == NONE {
             continue;
         }
         let (u, gu) = (u as i64, i64::from(g));
         while q >= 0 {
             let k = q as usize;
-            if M::f(t[k], s[k], gs[k]) > M::f(t[k], u, gu) {
+            if fs[k] > M::f(t[k], u, gu) {
                 q -= 1;
             } else {
                 break;
             }
         }
-        if q < 0 {
+        let k = if q < 0 {
             q = 0;
-            (s[0], t[0], gs[0]) = (u, 0, gu);
+            (s[0], t[0]) = (u, 0);
+            0
         } else {
             let k = q as usize;
             let wsep = 1 + M::sep(s[k], u, gs[k], gu);
-            if wsep < m {
-                q += 1;
-                let k = q as usize;
-                (s[k], t[k], gs[k]) = (u, wsep, gu);
+            if wsep >= m {
+                continue;
             }
-        }
+            q += 1;
+            (s[k + 1], t[k + 1]) = (u, wsep);
+            k + 1
+        };
+        (gs[k], sr[k], fs[k]) = (gu, srow, M::f(t[k], u, gu));
     }
     if q < 0 {
         return;
@@ -301,14 +310,13 @@ fn envelope<M: Metric>(sc: &mut Scratch, (ox, oy): (u32, u32), row: &mut [[u32; 
     // one after it starts; the first (and any whose start is not left of that) to column 0.
     let (mut k, mut end) = (q as usize, w);
     loop {
-        let c = s[k] as usize;
         let tk = t[k];
         let start = if k > 0 && tk >= 0 && (tk as usize) < end {
             tk as usize
         } else {
             0
         };
-        row[start..end].fill([ox + c as u32, oy + sr[c]]);
+        row[start..end].fill([ox + s[k] as u32, oy + sr[k]]);
         if start == 0 {
             break;
         }
