@@ -94,11 +94,13 @@ pub fn jfa_init(pen: &Grid<Penetration>) -> Grid<[u32; 2]> {
 /// One jump flooding pass with step `step` and pass index `pass` over `area` (grids are of
 /// `area.size`, indexed relative to `area.min`).
 ///
-/// Rows run in parallel. Each column first computes all 8 candidates' distances; the hashed
-/// visiting order only decides between distinct seeds tied at the smallest distance, so it is
-/// computed only then. The result is the one the sequential visit in
-/// [`jfa_neighbour_order`] gives (strictly closer replaces, so the first of the tied minima in
-/// that order wins, and only if it beats the column's own entry), bit for bit.
+/// Rows run in parallel, a block of columns at a time over planar copies of the grids (see
+/// [`jump_flood`], which keeps them planar from pass to pass). Each column finds its nearest
+/// candidate among the 8; the hashed visiting order only decides between distinct seeds tied
+/// at the smallest distance, so it is computed only then. The result is the one the
+/// sequential visit in [`jfa_neighbour_order`] gives (strictly closer replaces, so the first
+/// of the tied minima in that order wins, and only if it beats the column's own entry), bit
+/// for bit.
 pub fn jfa_pass(
     prev: &Grid<[u32; 2]>,
     next: &mut Grid<[u32; 2]>,
@@ -115,76 +117,12 @@ pub fn jfa_pass(
             });
         }
     }
-    let (w, h) = (area.size.x as usize, area.size.y as usize);
-    let k = step as usize;
-    let src = prev.as_slice();
-    crate::par::for_each_chunk(next.as_mut_slice(), w, |j, out| {
-        let gy = (i64::from(area.min.y) + j as i64) as u32;
-        let rows: [Option<&[[u32; 2]]>; 3] = [
-            j.checked_sub(k).map(|r| &src[r * w..(r + 1) * w]),
-            Some(&src[j * w..(j + 1) * w]),
-            (j + k < h).then(|| &src[(j + k) * w..(j + k + 1) * w]),
-        ];
-        let full_rows = match rows {
-            [Some(a), Some(b), Some(c)] => Some([a, b, c]),
-            _ => None,
-        };
-        for (i, o) in out.iter_mut().enumerate() {
-            let gx = (i64::from(area.min.x) + i as i64) as u32;
-            let col = [gx, gy];
-            let mut cand = [[NO_SEED; 2]; 8];
-            let own;
-            match full_rows {
-                // Interior: all 8 candidates exist; no bounds tests.
-                Some(r) if i >= k && i + k < w => {
-                    own = r[1][i];
-                    let cs = [i - k, i, i + k];
-                    for (n, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
-                        cand[n] = r[(oy + 1) as usize][cs[(ox + 1) as usize]];
-                    }
-                }
-                _ => {
-                    own = rows[1].map_or([NO_SEED; 2], |r| r[i]);
-                    let cols = [i.checked_sub(k), Some(i), (i + k < w).then_some(i + k)];
-                    for (n, [ox, oy]) in JFA_OFFSETS.iter().enumerate() {
-                        if let (Some(r), Some(c)) =
-                            (rows[(oy + 1) as usize], cols[(ox + 1) as usize])
-                        {
-                            cand[n] = r[c];
-                        }
-                    }
-                }
-            }
-            let own_d = seed_distance(metric, col, own);
-            let mut d = [u32::MAX; 8];
-            for n in 0..8 {
-                d[n] = seed_distance(metric, col, cand[n]);
-            }
-            let m = d.iter().copied().min().unwrap_or(u32::MAX);
-            if m >= own_d {
-                *o = own;
-                continue;
-            }
-            // Branch-free: the first candidate at distance m, and whether another seed ties.
-            let mut first = 7;
-            for n in (0..8).rev() {
-                first = if d[n] == m { n } else { first };
-            }
-            let mut tied = false;
-            for n in 0..8 {
-                tied |= (d[n] == m) & (cand[n] != cand[first]);
-            }
-            let pick = if tied {
-                jfa_neighbour_order(gx, gy, pass)
-                    .into_iter()
-                    .map(usize::from)
-                    .find(|&n| d[n] == m)
-            } else {
-                Some(first)
-            };
-            *o = pick.map_or(own, |n| cand[n]);
-        }
-    });
+    let src = Planar::from_pairs(prev.as_slice().iter().copied());
+    let mut dst = Planar::from_pairs(next.as_slice().iter().copied());
+    planar_pass(&src, &mut dst, area, step, pass, metric);
+    for (o, (&x, &y)) in next.as_mut_slice().iter_mut().zip(dst.x.iter().zip(&dst.y)) {
+        *o = [x, y];
+    }
     Ok(())
 }
 
@@ -245,13 +183,217 @@ pub fn jump_flood(
     extra_pass: bool,
 ) -> Result<Grid<[u32; 2]>, GranularError> {
     check_side(area.size)?;
-    let mut a = jfa_init(pen);
-    let mut b = a.clone();
+    if pen.size() != area.size {
+        return Err(GranularError::SizeMismatch {
+            expected: area.size,
+            actual: pen.size(),
+        });
+    }
+    // Planar x and y seed coordinates (two ping-pong pairs) so a row's candidates are plain
+    // u32 lanes; the same passes as `jfa_pass`, bit for bit.
+    let cells = pen.as_slice();
+    let mut a = Planar::from_pairs(cells.iter().map(|p| [p.seed_x, p.seed_y]));
+    let mut b = Planar {
+        x: vec![0; cells.len()],
+        y: vec![0; cells.len()],
+    };
     for (pass, step) in jfa_steps(area.size, extra_pass).into_iter().enumerate() {
-        jfa_pass(&a, &mut b, area, step, pass as u32, metric)?;
+        planar_pass(&a, &mut b, area, step, pass as u32, metric);
         std::mem::swap(&mut a, &mut b);
     }
-    Ok(a)
+    let seeds = a.x.iter().zip(&a.y).map(|(&x, &y)| [x, y]).collect();
+    Grid::from_vec(area.size.x, area.size.y, seeds).map_err(|_| GranularError::TooLarge {
+        side: area.size.max_element(),
+        limit: super::MAX_SIDE,
+    })
+}
+
+/// A seed grid as two planes, `x` and `y`, row-major over the area.
+struct Planar {
+    x: Vec<u32>,
+    y: Vec<u32>,
+}
+
+impl Planar {
+    fn from_pairs(pairs: impl Iterator<Item = [u32; 2]> + Clone) -> Self {
+        Self {
+            x: pairs.clone().map(|p| p[0]).collect(),
+            y: pairs.map(|p| p[1]).collect(),
+        }
+    }
+}
+
+/// [`seed_distance`] with the metric as a constant (0 Euclidean, 1 Manhattan, 2 Chebyshev),
+/// branch-free, for vectorised loops.
+#[inline(always)]
+fn seed_distance_const<const METRIC: u8>(cx: u32, cy: u32, sx: u32, sy: u32) -> u32 {
+    let (dx, dy) = (cx.abs_diff(sx), cy.abs_diff(sy));
+    let d = match METRIC {
+        0 => dx.wrapping_mul(dx).wrapping_add(dy.wrapping_mul(dy)),
+        1 => dx.wrapping_add(dy),
+        _ => dx.max(dy),
+    };
+    if sx == NO_SEED { u32::MAX } else { d }
+}
+
+/// Columns [`planar_row`] processes at once.
+const JFA_BLOCK: usize = 64;
+
+/// [`jfa_pass`] on planar grids (of `area.size`), rows in parallel.
+fn planar_pass(
+    prev: &Planar,
+    next: &mut Planar,
+    area: Rect,
+    step: u32,
+    pass: u32,
+    metric: DistanceMetric,
+) {
+    match metric {
+        DistanceMetric::Euclidean => planar_pass_for::<0>(prev, next, area, step, pass),
+        DistanceMetric::Manhattan => planar_pass_for::<1>(prev, next, area, step, pass),
+        DistanceMetric::Chebyshev => planar_pass_for::<2>(prev, next, area, step, pass),
+    }
+}
+
+/// [`planar_pass`] for one metric (see [`seed_distance_const`]).
+fn planar_pass_for<const METRIC: u8>(
+    prev: &Planar,
+    next: &mut Planar,
+    area: Rect,
+    step: u32,
+    pass: u32,
+) {
+    let (w, h) = (area.size.x as usize, area.size.y as usize);
+    let k = step as usize;
+    let row_of = |r: usize| (&prev.x[r * w..(r + 1) * w], &prev.y[r * w..(r + 1) * w]);
+    crate::par::for_each_chunk2(&mut next.x, w, &mut next.y, w, |j, ox, oy| {
+        let gy = (i64::from(area.min.y) + j as i64) as u32;
+        let rows = [
+            j.checked_sub(k).map(row_of),
+            Some(row_of(j)),
+            (j + k < h).then(|| row_of(j + k)),
+        ];
+        planar_row::<METRIC>(rows, (ox, oy), area.min.x, gy, k, pass);
+    });
+}
+
+/// One row of [`planar_pass`]: `rows` are the rows `k` above, at and `k` below (`None`
+/// outside the area). A block of columns at a time, each of the 8 offsets in turn over the
+/// block's columns (those whose candidate is inside the area) keeps the minimum, its first
+/// candidate and whether another seed ties with it (reset whenever the minimum drops): what
+/// `jfa_pass` computes per column; a tie is then broken per column in the hashed order.
+/// Compiled for AVX2 too (integer operations only: the same bits).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
+fn planar_row<const METRIC: u8>(
+    rows: [Option<(&[u32], &[u32])>; 3],
+    (out_x, out_y): (&mut [u32], &mut [u32]),
+    min_x: i32,
+    gy: u32,
+    k: usize,
+    pass: u32,
+) {
+    let w = out_x.len();
+    let col_x = |i: usize| (i64::from(min_x) + i as i64) as u32;
+    // The candidate of offset `n` at column `i`, if inside the area.
+    let cand = |n: usize, i: usize| -> Option<(u32, u32)> {
+        let [ox, oy] = JFA_OFFSETS[n];
+        let (rx, ry) = rows[(oy + 1) as usize]?;
+        let c = (i as i64 + i64::from(ox) * k as i64) as usize;
+        (c < w).then(|| (rx[c], ry[c]))
+    };
+    // A column whose minimum is held by several distinct seeds, as `jfa_pass` decides it:
+    // the first of them in the hashed order.
+    let tie = |i: usize| -> (u32, u32) {
+        let (gx, (own_x, own_y)) = (col_x(i), cand_own(rows, i));
+        let own_d = seed_distance_const::<METRIC>(gx, gy, own_x, own_y);
+        let mut cs = [(NO_SEED, NO_SEED); 8];
+        let mut d = [u32::MAX; 8];
+        for n in 0..8 {
+            if let Some((sx, sy)) = cand(n, i) {
+                cs[n] = (sx, sy);
+                d[n] = seed_distance_const::<METRIC>(gx, gy, sx, sy);
+            }
+        }
+        let m = d.iter().copied().min().unwrap_or(u32::MAX);
+        if m >= own_d {
+            return (own_x, own_y);
+        }
+        let first = d.iter().position(|&v| v == m).unwrap_or(0);
+        if !(0..8).any(|n| d[n] == m && cs[n] != cs[first]) {
+            return cs[first];
+        }
+        jfa_neighbour_order(gx, gy, pass)
+            .into_iter()
+            .map(usize::from)
+            .find(|&n| d[n] == m)
+            .map_or((own_x, own_y), |n| cs[n])
+    };
+    let Some(here) = rows[1] else {
+        return;
+    };
+    let mut i0 = 0;
+    while i0 < w {
+        let len = (w - i0).min(JFA_BLOCK);
+        let x0 = col_x(i0);
+        let mut m = [u32::MAX; JFA_BLOCK];
+        let (mut bx, mut by) = ([NO_SEED; JFA_BLOCK], [NO_SEED; JFA_BLOCK]);
+        let mut tied = [0u32; JFA_BLOCK];
+        let cols: [u32; JFA_BLOCK] = std::array::from_fn(|t| x0.wrapping_add(t as u32));
+        for [ox, oy] in JFA_OFFSETS {
+            // A candidate outside the area is never closer, never tied at a minimum that
+            // beats the column's own entry: its lanes are skipped.
+            let Some((px, py)) = rows[(oy + 1) as usize] else {
+                continue;
+            };
+            let shift = i64::from(ox) * k as i64;
+            let lo = (-(i0 as i64) - shift).clamp(0, len as i64) as usize;
+            let hi = (w as i64 - i0 as i64 - shift).clamp(lo as i64, len as i64) as usize;
+            if lo == hi {
+                continue;
+            }
+            let start = (i0 as i64 + lo as i64 + shift) as usize;
+            let n = hi - lo;
+            let lanes = m[lo..hi]
+                .iter_mut()
+                .zip(&mut bx[lo..hi])
+                .zip(&mut by[lo..hi])
+                .zip(&mut tied[lo..hi])
+                .zip(px[start..start + n].iter().zip(&py[start..start + n]))
+                .zip(&cols[lo..hi]);
+            for (((((m, bx), by), tied), (&sx, &sy)), &cx) in lanes {
+                let d = seed_distance_const::<METRIC>(cx, gy, sx, sy);
+                let (less, same) = (d < *m, d == *m);
+                let other = (sx != *bx) | (sy != *by);
+                *tied = if less {
+                    0
+                } else {
+                    *tied | u32::from(same & other)
+                };
+                *m = if less { d } else { *m };
+                *bx = if less { sx } else { *bx };
+                *by = if less { sy } else { *by };
+            }
+        }
+        let (own_x, own_y) = (&here.0[i0..i0 + len], &here.1[i0..i0 + len]);
+        for t in 0..len {
+            let own_d = seed_distance_const::<METRIC>(cols[t], gy, own_x[t], own_y[t]);
+            let (x, y) = if m[t] >= own_d {
+                (own_x[t], own_y[t])
+            } else if tied[t] == 0 {
+                (bx[t], by[t])
+            } else {
+                tie(i0 + t)
+            };
+            (out_x[i0 + t], out_y[i0 + t]) = (x, y);
+        }
+        i0 += len;
+    }
+}
+
+/// A column's own entry in `rows[1]` (the row itself).
+#[inline(always)]
+fn cand_own(rows: [Option<(&[u32], &[u32])>; 3], i: usize) -> (u32, u32) {
+    rows[1].map_or((NO_SEED, NO_SEED), |(x, y)| (x[i], y[i]))
 }
 
 /// [`jump_flood`] with [`jfa_pass_reference`]: the sequential form, for tests and benches.
