@@ -301,11 +301,13 @@ fn planar_row<const METRIC: u8>(
         let c = (i as i64 + i64::from(ox) * k as i64) as usize;
         (c < w).then(|| (rx[c], ry[c]))
     };
-    // A column whose minimum is held by several distinct seeds, as `jfa_pass` decides it:
-    // the first of them in the hashed order.
+    let Some(here) = rows[1] else {
+        return;
+    };
+    // A column whose minimum (below its own entry's distance) is held by several distinct
+    // seeds: the first of them in the hashed order, as `jfa_pass_reference` visits them.
     let tie = |i: usize| -> (u32, u32) {
-        let (gx, (own_x, own_y)) = (col_x(i), cand_own(rows, i));
-        let own_d = seed_distance_const::<METRIC>(gx, gy, own_x, own_y);
+        let gx = col_x(i);
         let mut cs = [(NO_SEED, NO_SEED); 8];
         let mut d = [u32::MAX; 8];
         for n in 0..8 {
@@ -315,21 +317,11 @@ fn planar_row<const METRIC: u8>(
             }
         }
         let m = d.iter().copied().min().unwrap_or(u32::MAX);
-        if m >= own_d {
-            return (own_x, own_y);
-        }
-        let first = d.iter().position(|&v| v == m).unwrap_or(0);
-        if !(0..8).any(|n| d[n] == m && cs[n] != cs[first]) {
-            return cs[first];
-        }
         jfa_neighbour_order(gx, gy, pass)
             .into_iter()
             .map(usize::from)
             .find(|&n| d[n] == m)
-            .map_or((own_x, own_y), |n| cs[n])
-    };
-    let Some(here) = rows[1] else {
-        return;
+            .map_or((here.0[i], here.1[i]), |n| cs[n])
     };
     let mut i0 = 0;
     while i0 < w {
@@ -388,12 +380,6 @@ fn planar_row<const METRIC: u8>(
         }
         i0 += len;
     }
-}
-
-/// A column's own entry in `rows[1]` (the row itself).
-#[inline(always)]
-fn cand_own(rows: [Option<(&[u32], &[u32])>; 3], i: usize) -> (u32, u32) {
-    rows[1].map_or((NO_SEED, NO_SEED), |(x, y)| (x[i], y[i]))
 }
 
 /// [`jump_flood`] with [`jfa_pass_reference`]: the sequential form, for tests and benches.
