@@ -132,6 +132,29 @@ fn ties_and_thread_counts() {
     }
 }
 
+/// Pins of the exact transform's documented choices and of rows its fast paths must not take.
+#[test]
+fn exact_transform_ties_along_a_column_and_seedless_edge_columns() {
+    // Two seeds equally far along a column: the one above wins (the documented tie rule).
+    let column = Rect::new(IVec2::new(2, 3), UVec2::new(1, 5));
+    let pen = pen_from(column, |_, j| j == 0 || j == 4);
+    for metric in METRICS {
+        let seeds = exact_nearest_seed(&pen, column, metric).unwrap();
+        assert_eq!(seeds.get(0, 2), Some([2, 3]), "{metric:?}");
+        assert_eq!(seeds.get(0, 3), Some([2, 7]), "{metric:?}");
+    }
+    // A column without any seed at the left (or right) edge of rows that are otherwise all
+    // seeds: the row has a column with no distance, which only the envelope handles.
+    for edge in [0, 4] {
+        let area = Rect::new(IVec2::new(1, 1), UVec2::new(5, 6));
+        let pen = pen_from(area, |i, _| i != edge);
+        for metric in METRICS {
+            let seeds = exact_nearest_seed(&pen, area, metric).unwrap();
+            check_exact(&pen, area, metric, &seeds);
+        }
+    }
+}
+
 /// A seed texel that names another column is an error, not a wrong answer; sizes are checked.
 #[test]
 fn bad_inputs_are_errors() {
@@ -150,6 +173,17 @@ fn bad_inputs_are_errors() {
         exact_nearest_seed(&pen, area, DistanceMetric::Euclidean),
         Err(GranularError::SeedNotAtColumn { .. })
     ));
+    // Both coordinates wrong is as wrong as one.
+    let mut pen = pen_from(area, |i, _| i == 2);
+    pen.get_mut(2, 3).unwrap().seed_x = 5;
+    pen.get_mut(2, 3).unwrap().seed_y = 7;
+    assert_eq!(
+        exact_nearest_seed(&pen, area, DistanceMetric::Manhattan),
+        Err(GranularError::SeedNotAtColumn {
+            column: [2, 3],
+            seed: [5, 7],
+        })
+    );
     // A wrong seed in a later column band is found and named too.
     let wide = Rect::new(IVec2::new(4, 1), UVec2::new(150, 6));
     let mut pen = pen_from(wide, |i, _| i % 3 == 0);
