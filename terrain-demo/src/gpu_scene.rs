@@ -842,7 +842,7 @@ impl GpuScene {
             _ => self.map.texel_size(),
         };
         let coarse = self.granular.is_none() && self.atlas.is_none();
-        if let (Some(c), true) = (&mut self.tess, coarse) {
+        if coarse && (self.tess.is_some() || self.cdlod.is_some()) {
             let gpu = FrameGpu {
                 ctx: &self.ctx,
                 target: &mut self.target,
@@ -852,19 +852,12 @@ impl GpuScene {
                 normals: &self.normals,
                 style: &self.style,
             };
-            return render_tessellated(c, gpu, camera, frustum, t, timings);
-        }
-        if let (Some(c), true) = (&mut self.cdlod, coarse) {
-            let gpu = FrameGpu {
-                ctx: &self.ctx,
-                target: &mut self.target,
-                sky: &mut self.sky,
-                timer: &self.timer,
-                map: &self.map,
-                normals: &self.normals,
-                style: &self.style,
-            };
-            return render_cdlod(c, gpu, camera, frustum, t, timings);
+            if let Some(c) = &mut self.tess {
+                return render_tessellated(c, gpu, camera, frustum, t, timings);
+            }
+            if let Some(c) = &mut self.cdlod {
+                return render_cdlod(c, gpu, camera, frustum, t, timings);
+            }
         }
         let placement = self.layout.place(
             Vec2::new(camera.position.x, camera.position.z),
