@@ -619,7 +619,22 @@ impl CdlodTree {
     /// box reaches its range is refined where its children reach theirs; quadrants whose
     /// child is out of its range are drawn by the node itself; boxes outside the frustum are
     /// dropped. On a repeating map the roots repeat around the camera up to the view distance.
+    /// A selection that would visit more than [`MAX_VISITED_NODES`] nodes is
+    /// [`LodError::SelectionTooLarge`].
     pub fn select(&self, view: &CdlodView<'_>) -> Result<CdlodFrame, LodError> {
+        self.select_bounded(view, MAX_VISITED_NODES)
+    }
+
+    /// [`Self::select`] with a budget of nodes: a selection that would visit more than
+    /// `max_nodes` nodes (at most [`MAX_VISITED_NODES`]: a larger budget is that) stops there
+    /// and is [`LodError::SelectionTooLarge`], so that an engine can cap the CPU time and
+    /// memory of one frame's selection below the built-in bound.
+    pub fn select_bounded(
+        &self,
+        view: &CdlodView<'_>,
+        max_nodes: usize,
+    ) -> Result<CdlodFrame, LodError> {
+        let limit = max_nodes.min(MAX_VISITED_NODES);
         for (what, v) in [
             ("camera.x", view.camera.x),
             ("camera.y", view.camera.y),
@@ -665,13 +680,11 @@ impl CdlodTree {
         };
         for y in lo.y..=hi.y {
             for x in lo.x..=hi.x {
-                self.select_node(view, top, IVec2::new(x, y), &mut frame);
+                self.select_node(view, top, IVec2::new(x, y), limit, &mut frame);
             }
         }
-        if frame.visited > MAX_VISITED_NODES {
-            return Err(LodError::SelectionTooLarge {
-                limit: MAX_VISITED_NODES,
-            });
+        if frame.visited > limit {
+            return Err(LodError::SelectionTooLarge { limit });
         }
         let half = (self.config.grid_size / 2).max(1) as i32;
         frame.instances.reserve(frame.nodes.len() * 4);
@@ -708,8 +721,16 @@ impl CdlodTree {
         view: &CdlodView<'_>,
         lod: u32,
         node: IVec2,
+        limit: usize,
         frame: &mut CdlodFrame,
     ) -> bool {
+        // The bound is checked here, before any work, so that an oversized selection stops
+        // after `limit` visits instead of running to the end first; `select_bounded` then
+        // reports it (what was selected so far is discarded).
+        frame.visited += 1;
+        if frame.visited > limit {
+            return true;
+        }
         let Some(b) = self.bounds(lod, node) else {
             // Off a clamped map: nothing to draw, nothing for the parent to draw either.
             return true;
@@ -734,7 +755,7 @@ impl CdlodTree {
         } else {
             for q in 0..4 {
                 let child = node * 2 + IVec2::new(q & 1, q >> 1);
-                if !self.select_node(view, lod - 1, child, frame) {
+                if !self.select_node(view, lod - 1, child, limit, frame) {
                     quadrants |= 1 << q;
                 }
             }

@@ -364,6 +364,32 @@ fn morph_factors_are_zero_inside_and_one_past_the_range() {
     assert!(off.ranges(&v).morph.iter().all(|m| m.0.is_infinite()));
 }
 
+/// A selection stops at its node budget and is an error past it: the visits are counted (the
+/// roots, every selected node, and the children that were out of their range), a budget of
+/// exactly that many selects the same frame, and any smaller one refuses.
+#[test]
+fn a_selection_stops_at_its_node_budget() {
+    let map = hilly(256, 256, WrapMode::Repeat);
+    let view = CdlodView {
+        camera: Vec3::new(10.0, 20.0, 10.0),
+        frustum: None,
+        viewport_width: 100.0,
+        hfov: 1.0,
+    };
+    let tree = CdlodTree::from_map(&map, config(16, 16, 4, 20.0)).unwrap();
+    let frame = tree.select(&view).unwrap();
+    let visited = frame.visited;
+    assert!(visited > frame.nodes.len(), "{visited} visited");
+    assert_eq!(tree.select_bounded(&view, visited).unwrap(), frame);
+    assert_eq!(tree.select_bounded(&view, usize::MAX).unwrap(), frame);
+    for budget in [0, 1, visited / 2, visited - 1] {
+        match tree.select_bounded(&view, budget) {
+            Err(LodError::SelectionTooLarge { limit }) => assert_eq!(limit, budget),
+            other => panic!("budget {budget}: {:?}", other.map(|f| f.visited)),
+        }
+    }
+}
+
 #[test]
 fn bad_input_is_an_error_not_a_panic() {
     let map = hilly(64, 64, WrapMode::Repeat);

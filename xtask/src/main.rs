@@ -10,7 +10,9 @@
 //!
 //! `cargo xtask mutants [--shard K/N] [--crate NAME]` runs cargo-mutants over the algorithm
 //! files of [`MUTANT_CRATES`] (listed in `.cargo/mutants.toml`), then prints caught / missed /
-//! timeout / unviable and the mutation score per crate (docs/testing.md). Not part of `ci`.
+//! timeout / unviable and the mutation score per crate (docs/testing.md). A shard is a
+//! round-robin sample; each run keeps its results in `target/mutants/<crate>-<K>of<N>`, and
+//! `cargo xtask mutants --summary` adds up every stored run. Not part of `ci`.
 
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
@@ -30,7 +32,7 @@ fn main() -> Result<()> {
         Some("mutants") => mutants(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <ci|smoke|package|examples|golden|bench-report [--quick] [--readme]|fuzz --seconds N [--target NAME] [--seed S]|mutants [--shard K/N] [--crate NAME]>"
+                "usage: cargo xtask <ci|smoke|package|examples|golden|bench-report [--quick] [--readme]|fuzz --seconds N [--target NAME] [--seed S]|mutants [--shard K/N] [--crate NAME] | --summary>"
             );
             eprintln!(
                 "  ci      fmt, clippy, tests, docs, package, examples, demo smoke (what CI runs)"
@@ -1213,35 +1215,86 @@ fn mutant_crate(package: Option<&str>, file: &str) -> String {
         .unwrap_or_else(|| file.split(['/', '\\']).next().unwrap_or(file).to_owned())
 }
 
-/// Counts per crate from cargo-mutants' `outcomes.json` (the baseline is skipped).
-fn parse_mutants_outcomes(json: &str) -> Result<Vec<(String, MutantCounts)>> {
+/// One mutant's outcome from cargo-mutants' `outcomes.json`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct MutantRecord {
+    /// What identifies the mutant across runs: its file, place and replacement.
+    key: String,
+    krate: String,
+    summary: String,
+}
+
+/// The mutants' outcomes in cargo-mutants' `outcomes.json` (the baseline is skipped).
+fn mutant_records(json: &str) -> Result<Vec<MutantRecord>> {
     let v: serde_json::Value =
         serde_json::from_str(json).context("outcomes.json is not valid JSON")?;
     let outcomes = v
         .get("outcomes")
         .and_then(|o| o.as_array())
         .context("outcomes.json has no `outcomes` array")?;
-    let mut out: Vec<(String, MutantCounts)> = Vec::new();
+    let mut out = Vec::new();
     for o in outcomes {
         let Some(m) = o.get("scenario").and_then(|s| s.get("Mutant")) else {
             continue; // the baseline
         };
         let file = m.get("file").and_then(|f| f.as_str()).unwrap_or("");
-        let krate = mutant_crate(m.get("package").and_then(|p| p.as_str()), file);
-        let summary = o.get("summary").and_then(|s| s.as_str()).unwrap_or("");
-        let i = match out.iter().position(|(k, _)| *k == krate) {
+        out.push(MutantRecord {
+            key: m.to_string(),
+            krate: mutant_crate(m.get("package").and_then(|p| p.as_str()), file),
+            summary: o
+                .get("summary")
+                .and_then(|s| s.as_str())
+                .unwrap_or("")
+                .to_owned(),
+        });
+    }
+    Ok(out)
+}
+
+/// Counts per crate of `records`, sorted by crate.
+fn count_records<'a>(
+    records: impl IntoIterator<Item = &'a MutantRecord>,
+) -> Vec<(String, MutantCounts)> {
+    let mut out: Vec<(String, MutantCounts)> = Vec::new();
+    for r in records {
+        let i = match out.iter().position(|(k, _)| *k == r.krate) {
             Some(i) => i,
             None => {
-                out.push((krate, MutantCounts::default()));
+                out.push((r.krate.clone(), MutantCounts::default()));
                 out.len() - 1
             }
         };
-        if !out[i].1.add(summary) {
-            eprintln!("mutants: outcomes.json: unknown mutant outcome {summary:?} (not counted)");
+        if !out[i].1.add(&r.summary) {
+            eprintln!(
+                "mutants: outcomes.json: unknown mutant outcome {:?} (not counted)",
+                r.summary
+            );
         }
     }
     out.sort_by(|a, b| a.0.cmp(&b.0));
-    Ok(out)
+    out
+}
+
+/// Counts per crate from cargo-mutants' `outcomes.json` (the baseline is skipped).
+fn parse_mutants_outcomes(json: &str) -> Result<Vec<(String, MutantCounts)>> {
+    Ok(count_records(&mutant_records(json)?))
+}
+
+/// The runs' records merged, oldest run first: a mutant tested in several runs (a shard run
+/// again after new tests) counts once, with its latest outcome.
+fn merge_runs(runs: &[Vec<MutantRecord>]) -> Vec<MutantRecord> {
+    let mut merged: Vec<MutantRecord> = Vec::new();
+    let mut index = std::collections::HashMap::new();
+    for r in runs.iter().flatten() {
+        match index.get(&r.key) {
+            Some(&i) => merged[i] = r.clone(),
+            None => {
+                index.insert(r.key.clone(), merged.len());
+                merged.push(r.clone());
+            }
+        }
+    }
+    merged
 }
 
 /// Counts per crate from the `caught.txt`, `missed.txt`, `timeout.txt` and `unviable.txt`
@@ -1301,10 +1354,45 @@ fn mutants_table(rows: &[(String, MutantCounts)]) -> String {
     t
 }
 
-/// `cargo xtask mutants [--shard K/N] [--crate NAME]`: see the module docs.
+/// The folder under `target/mutants` that keeps one run's results: the crate (or `all`) and
+/// the shard (`3of8`, or `all`), so that runs of other shards or crates do not overwrite it.
+fn mutants_run_dir(krate: Option<&str>, shard: Option<&str>) -> String {
+    format!(
+        "{}-{}",
+        krate.unwrap_or("all"),
+        shard.map_or("all".into(), |s| s.replace('/', "of"))
+    )
+}
+
+/// Every run kept under `target/mutants`, oldest first, merged (see [`merge_runs`]).
+fn stored_mutant_runs(dir: &Path) -> Result<Vec<MutantRecord>> {
+    let mut runs = Vec::new();
+    let entries =
+        std::fs::read_dir(dir).with_context(|| format!("no mutants runs in {}", dir.display()))?;
+    for e in entries.flatten() {
+        let path = e.path().join("mutants.out").join("outcomes.json");
+        let Ok(meta) = std::fs::metadata(&path) else {
+            continue;
+        };
+        let json = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let records =
+            mutant_records(&json).with_context(|| format!("parsing {}", path.display()))?;
+        runs.push((meta.modified().ok(), path, records));
+    }
+    runs.sort_by(|a, b| (a.0, &a.1).cmp(&(b.0, &b.1)));
+    for (_, path, records) in &runs {
+        eprintln!("mutants: {} mutants in {}", records.len(), path.display());
+    }
+    let runs: Vec<_> = runs.into_iter().map(|r| r.2).collect();
+    Ok(merge_runs(&runs))
+}
+
+/// `cargo xtask mutants [--shard K/N] [--crate NAME] | --summary`: see the module docs.
 fn mutants(args: &[String]) -> Result<()> {
     let mut shard: Option<String> = None;
     let mut krate: Option<String> = None;
+    let mut summary = false;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         let mut value = |flag: &str| {
@@ -1333,10 +1421,20 @@ fn mutants(args: &[String]) -> Result<()> {
                 }
                 krate = Some(v);
             }
+            "--summary" => summary = true,
             other => bail!(
-                "unknown argument {other:?}: cargo xtask mutants [--shard K/N] [--crate NAME]"
+                "unknown argument {other:?}: cargo xtask mutants [--shard K/N] [--crate NAME] | --summary"
             ),
         }
+    }
+    let runs_dir = root().join("target").join("mutants");
+    if summary {
+        if shard.is_some() || krate.is_some() {
+            bail!("--summary reads the stored runs; it takes no --shard or --crate");
+        }
+        let merged = stored_mutant_runs(&runs_dir)?;
+        println!("\n{}", mutants_table(&count_records(&merged)));
+        return Ok(());
     }
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let installed = Command::new(&cargo)
@@ -1349,13 +1447,17 @@ fn mutants(args: &[String]) -> Result<()> {
         eprintln!("  cargo install --locked cargo-mutants");
         std::process::exit(1);
     }
-    // Results go to target/mutants.out (ignored by git); the file list and exclusions come
+    // Each run keeps its results in its own folder under target/mutants (ignored by git), so
+    // that `--summary` can add up shards run one at a time; the file list and exclusions come
     // from .cargo/mutants.toml.
-    let out_dir = root().join("target");
+    let out_dir = runs_dir.join(mutants_run_dir(krate.as_deref(), shard.as_deref()));
+    std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let out_str = out_dir.to_string_lossy().into_owned();
     let mut cmd_args = vec!["mutants", "--output", out_str.as_str()];
     if let Some(s) = &shard {
-        cmd_args.extend(["--shard", s.as_str()]);
+        // Round-robin: a shard is a sample spread over every examined file, not one slice of
+        // them, so that one shard already estimates the whole crate's score.
+        cmd_args.extend(["--shard", s.as_str(), "--sharding", "round-robin"]);
     }
     if let Some(k) = &krate {
         cmd_args.extend(["--package", k.as_str()]);
@@ -1390,7 +1492,7 @@ fn mutants(args: &[String]) -> Result<()> {
     };
     println!("\n{}", mutants_table(&rows));
     eprintln!(
-        "mutants: {} in {:.0} s; missed mutants are listed in {}",
+        "mutants: {} in {:.0} s; missed mutants are listed in {}; `cargo xtask mutants --summary` adds up every stored run",
         shard.map_or("all shards".into(), |s| format!("shard {s}")),
         started.elapsed().as_secs_f64(),
         dir.join("missed.txt").display()
@@ -1435,6 +1537,42 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn mutant_runs_merge_with_the_latest_outcome_of_each_mutant() {
+        let rec = |key: &str, krate: &str, summary: &str| MutantRecord {
+            key: key.into(),
+            krate: krate.into(),
+            summary: summary.into(),
+        };
+        let first = vec![
+            rec("a", "terrain-core", "MissedMutant"),
+            rec("b", "terrain-core", "CaughtMutant"),
+        ];
+        let rerun = vec![
+            rec("a", "terrain-core", "CaughtMutant"),
+            rec("c", "terrain-lod", "Timeout"),
+        ];
+        let merged = merge_runs(&[first, rerun]);
+        assert_eq!(
+            merged,
+            vec![
+                rec("a", "terrain-core", "CaughtMutant"),
+                rec("b", "terrain-core", "CaughtMutant"),
+                rec("c", "terrain-lod", "Timeout"),
+            ]
+        );
+        let rows = count_records(&merged);
+        assert_eq!(rows[0].0, "terrain-core");
+        assert_eq!(rows[0].1.caught, 2);
+        assert_eq!(rows[1].0, "terrain-lod");
+        assert_eq!(rows[1].1.timeout, 1);
+        assert_eq!(
+            mutants_run_dir(Some("terrain-lod"), Some("3/24")),
+            "terrain-lod-3of24"
+        );
+        assert_eq!(mutants_run_dir(None, None), "all-all");
+    }
 
     #[test]
     fn mutant_outcomes_parse_and_score() {
