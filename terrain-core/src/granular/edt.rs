@@ -6,11 +6,14 @@
 //!
 //! Phase 1 (per map column, swept row by row down then up): `g(x, y)`, the distance to the
 //! nearest seed in the same column, and that seed's row. Phase 2 (per row, rows in parallel):
-//! the lower envelope of `f(x, i) = F(x - i, g(i))` over the columns `i` that have a seed,
-//! with `F` the metric (`dx^2 + g^2`, `|dx| + g`, `max(|dx|, g)`), scanned left to right with
-//! the metric's separator and read back right to left. Integer arithmetic throughout, so the
-//! distances are exact; where several seeds are equally near, the one returned may differ
-//! from the brute force's (it is as near).
+//! for each column `x` the column `i` minimising `f(x, i) = F(x - i, g(i))`, with `F` the metric
+//! (`dx^2 + g^2`, `|dx| + g`, `max(|dx|, g)`). The row is cut at its own seeds (`g = 0`): no
+//! column beyond one is nearer than it, so each stretch between them is solved alone, a short
+//! one by comparing every column with every candidate, a long one by the lower envelope
+//! (scanned left to right with the metric's separator, read back right to left). Integer
+//! arithmetic throughout, so the distances are exact. Where several seeds are equally near,
+//! the one returned follows two rules, both pinned by tests: along a column the seed above
+//! wins, along the row the leftmost column.
 
 use super::{DistanceMetric, GranularError, NO_SEED, Penetration};
 use crate::{Grid, Rect};
@@ -25,7 +28,8 @@ const NONE: u32 = u32::MAX;
 /// Seeds are the texels of `pen` whose `seed_x` is not [`NO_SEED`]; each must name its own
 /// column (as [`super::penetration_texture`] writes them), else
 /// [`GranularError::SeedNotAtColumn`]. Time and memory are linear in the area; rows of phase 2
-/// run in parallel and the result does not depend on the thread count.
+/// run in parallel and the result does not depend on the thread count. Of several equally near
+/// seeds it returns the one in the leftmost column, and of that column's the upper one.
 pub fn exact_nearest_seed(
     pen: &Grid<Penetration>,
     area: Rect,
@@ -154,10 +158,8 @@ fn sweep_columns(
     bad
 }
 
-/// Per-thread rows of phase 2: a row's `g` and seed rows, and the envelope's stacks.
+/// Per-thread stacks of phase 2's envelope.
 struct Scratch {
-    g: Vec<u32>,
-    s: Vec<u32>,
     env_s: Vec<i64>,
     env_t: Vec<i64>,
     env_g: Vec<i64>,
@@ -170,8 +172,6 @@ struct Scratch {
 impl Scratch {
     fn new(w: usize) -> Self {
         Self {
-            g: vec![0; w],
-            s: vec![0; w],
             env_s: vec![0; w],
             env_t: vec![0; w],
             env_g: vec![0; w],
@@ -224,44 +224,92 @@ impl Metric for Chebyshev {
     }
 }
 
-/// Phase 2 of one row. Where the row's seed columns are near (the windows below cost at most
-/// a few times the row), each column `x` scans only `[x - g(x), x + g(x)]`: a nearer seed
-/// column `i` needs `f(x, i) <= f(x, x) = g(x)`-ish, which for all three metrics implies
-/// `|x - i| <= g(x)`. Otherwise the linear-time envelope.
+/// A row seed (a column whose own row holds its seed, `g = 0`): its column in the row and its
+/// seed row.
+type RowSeed = Option<(usize, u32)>;
+
+/// Stretches between row seeds up to this long are solved by comparing every column with
+/// every candidate (at most `SMALL + 2` each); longer ones by the envelope.
+const SMALL: usize = 16;
+
+/// Phase 2 of one row, split at its row seeds: for a column between two of them, any column
+/// beyond either is strictly farther than that one in every metric (`f(x, i) >= |x - i|`), so
+/// each stretch between row seeds is solved alone, from its own columns and its two bounds.
+/// Ties go to the leftmost candidate.
 fn row_transform<M: Metric>(sc: &mut Scratch, o: (u32, u32), row: &mut [[u32; 2]]) {
     let w = row.len();
-    let mut cost = 0usize;
-    for &[g, _] in row.iter() {
-        if g == NONE {
-            return envelope::<M>(sc, o, row);
+    let (mut x, mut left): (usize, RowSeed) = (0, None);
+    while x < w {
+        if row[x][0] == 0 {
+            let r = row[x][1];
+            row[x] = [o.0 + x as u32, o.1 + r];
+            (x, left) = (x + 1, Some((x, r)));
+            continue;
         }
-        cost += 2 * (g as usize).min(w) + 1;
+        let start = x;
+        x = next_row_seed(row, x);
+        let right = (x < w).then(|| (x, row[x][1]));
+        if x - start <= SMALL {
+            stretch_by_comparison::<M>(o, row, start..x, left, right);
+        } else {
+            // The envelope reads its bounds from the row: the left one was already written.
+            let lo = left.map_or(start, |(a, r)| {
+                row[a] = [0, r];
+                a
+            });
+            let hi = right.map_or(x, |(b, _)| b + 1);
+            envelope::<M>(sc, (o.0 + lo as u32, o.1), &mut row[lo..hi]);
+        }
+        // The right bound, a row seed (which the envelope has overwritten with its output).
+        if let Some((b, r)) = right {
+            row[b] = [o.0 + b as u32, o.1 + r];
+            (x, left) = (b + 1, right);
+        }
     }
-    if cost > 4 * w {
-        return envelope::<M>(sc, o, row);
-    }
-    // The window scan reads columns it has already written: from a copy of the row.
-    for (v, (g, s)) in row.iter().zip(sc.g.iter_mut().zip(sc.s.iter_mut())) {
-        (*g, *s) = (v[0], v[1]);
-    }
-    let (gr, sr) = (&sc.g[..w], &sc.s[..w]);
-    for (x, out) in row.iter_mut().enumerate() {
-        let gx = gr[x];
-        let mut best_i = x;
-        if gx > 0 {
-            let xi = x as i64;
-            let mut best = M::f(xi, xi, i64::from(gx));
-            let r = gx as usize;
-            let lo = x.saturating_sub(r);
-            for (i, &gi) in gr.iter().enumerate().take((x + r + 1).min(w)).skip(lo) {
-                let v = M::f(xi, i as i64, i64::from(gi));
-                if v < best {
-                    best = v;
-                    best_i = i;
-                }
+}
+
+/// The first row seed at or after column `from` (the row's length if none).
+fn next_row_seed(row: &[[u32; 2]], from: usize) -> usize {
+    row[from..]
+        .iter()
+        .position(|c| c[0] == 0)
+        .map_or(row.len(), |n| from + n)
+}
+
+/// A short stretch of columns between row seeds (`left` and `right`, either may be missing):
+/// every column compared with the bounds and every column of the stretch with a seed.
+fn stretch_by_comparison<M: Metric>(
+    o: (u32, u32),
+    row: &mut [[u32; 2]],
+    cols: std::ops::Range<usize>,
+    left: RowSeed,
+    right: RowSeed,
+) {
+    // The stretch's input, copied before its output overwrites it.
+    let mut seg = [[NONE; 2]; SMALL];
+    let seg = &mut seg[..cols.len()];
+    seg.copy_from_slice(&row[cols.clone()]);
+    for x in cols.clone() {
+        let xi = x as i64;
+        let mut best = (i64::MAX, [NO_SEED; 2]);
+        let mut consider = |i: usize, g: u32, r: u32| {
+            let v = M::f(xi, i as i64, i64::from(g));
+            if v < best.0 {
+                best = (v, [o.0 + i as u32, o.1 + r]);
+            }
+        };
+        if let Some((a, r)) = left {
+            consider(a, 0, r);
+        }
+        for (i, &[g, r]) in cols.clone().zip(seg.iter()) {
+            if g != NONE {
+                consider(i, g, r);
             }
         }
-        *out = [o.0 + best_i as u32, o.1 + sr[best_i]];
+        if let Some((b, r)) = right {
+            consider(b, 0, r);
+        }
+        row[x] = best.1;
     }
 }
 
