@@ -1300,23 +1300,19 @@ fn merge_runs(runs: &[Vec<MutantRecord>]) -> Vec<MutantRecord> {
 /// Counts per crate from the `caught.txt`, `missed.txt`, `timeout.txt` and `unviable.txt`
 /// lists (one mutant a line, `path:line:col: description`), as `(summary, text)` pairs.
 fn parse_mutants_lists(lists: &[(&str, &str)]) -> Vec<(String, MutantCounts)> {
-    let mut out: Vec<(String, MutantCounts)> = Vec::new();
-    for (summary, text) in lists {
-        for line in text.lines().filter(|l| !l.trim().is_empty()) {
-            let file = line.split(':').next().unwrap_or(line);
-            let krate = mutant_crate(None, file);
-            let i = match out.iter().position(|(k, _)| *k == krate) {
-                Some(i) => i,
-                None => {
-                    out.push((krate, MutantCounts::default()));
-                    out.len() - 1
-                }
-            };
-            out[i].1.add(summary);
-        }
-    }
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    out
+    let records: Vec<MutantRecord> = lists
+        .iter()
+        .flat_map(|&(summary, text)| {
+            text.lines()
+                .filter(|l| !l.trim().is_empty())
+                .map(move |line| MutantRecord {
+                    key: line.to_owned(),
+                    krate: mutant_crate(None, line.split(':').next().unwrap_or(line)),
+                    summary: summary.to_owned(),
+                })
+        })
+        .collect();
+    count_records(&records)
 }
 
 /// The table `cargo xtask mutants` prints.
