@@ -259,11 +259,11 @@ fn row_transform<M: Metric>(sc: &mut Scratch, o: (u32, u32), row: &mut [[u32; 2]
             });
             let hi = right.map_or(x, |(b, _)| b + 1);
             envelope::<M>(sc, (o.0 + lo as u32, o.1), &mut row[lo..hi]);
-        }
-        // The right bound, a row seed (which the envelope has overwritten with its output).
-        if let Some((b, r)) = right {
-            row[b] = [o.0 + b as u32, o.1 + r];
-            (x, left) = (b + 1, right);
+            // It wrote over its right bound too: restored, the loop's top takes it (column
+            // `x`) as the row seed it is.
+            if let Some((b, r)) = right {
+                row[b] = [0, r];
+            }
         }
     }
 }
