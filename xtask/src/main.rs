@@ -1449,7 +1449,14 @@ fn mutants(args: &[String]) -> Result<()> {
     let out_dir = runs_dir.join(mutants_run_dir(krate.as_deref(), shard.as_deref()));
     std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let out_str = out_dir.to_string_lossy().into_owned();
-    let mut cmd_args = vec!["mutants", "--output", out_str.as_str()];
+    // Each mutant builds in a fresh copy of the tree: copying target/ does not help (cargo's
+    // fingerprints hold the path, so the copy rebuilds everything anyway) and costs gigabytes.
+    let mut cmd_args = vec![
+        "mutants",
+        "--output",
+        out_str.as_str(),
+        "--copy-target=false",
+    ];
     if let Some(s) = &shard {
         // Round-robin: a shard is a sample spread over every examined file, not one slice of
         // them, so that one shard already estimates the whole crate's score.
@@ -1462,8 +1469,11 @@ fn mutants(args: &[String]) -> Result<()> {
     let started = Instant::now();
     // cargo-mutants exits non-zero when a mutant is missed (2) or times out (3): the table
     // still comes from its output; other failures (1: bad usage, 4: the baseline failed) stop.
+    // The fuzz tests run for a wall-clock budget (2 s each by default): a quarter second per
+    // mutant keeps their smoke value while the deterministic tests do the pinning.
     let status = Command::new(&cargo)
         .args(&cmd_args)
+        .env("TERRAIN_FUZZ_SECONDS", "0.25")
         .current_dir(root())
         .status()
         .with_context(|| format!("could not start cargo {}", cmd_args.join(" ")))?;
