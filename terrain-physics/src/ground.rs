@@ -277,4 +277,54 @@ mod tests {
         assert!(DeformationBound::new(0.0, f32::NAN).is_err());
         assert!(DeformationBound::additive(f32::INFINITY, e).is_err());
     }
+
+    /// A sphere far from a pending deformation gets none of its raise (the cell range under
+    /// the sphere is its own, not one reaching back to the map's corner); overlapping
+    /// deformations add their lower bounds as well as their raise bounds.
+    #[test]
+    fn raise_under_and_height_interval_sum_only_what_is_under_them() {
+        let c = collider();
+        let d = [
+            PendingDeformation {
+                rect: Rect::new(IVec2::new(0, 0), UVec2::new(3, 3)),
+                bound: DeformationBound::new(1.0, 0.25).expect("bound"),
+            },
+            PendingDeformation {
+                rect: Rect::new(IVec2::new(1, 1), UVec2::new(4, 4)),
+                bound: DeformationBound::new(0.5, 0.5).expect("bound"),
+            },
+        ];
+        let g = BoundedGround::new(&c, &d, &[]);
+        assert_eq!(
+            g.raise_under(Vec3::new(11.5, 3.0, 11.5), 1.0).expect("ok"),
+            0.0
+        );
+        assert_eq!(
+            g.raise_under(Vec3::new(1.5, 3.0, 1.5), 0.2).expect("ok"),
+            1.5
+        );
+        let (lo, hi) = g.height_interval(Vec2::new(1.5, 1.5)).expect("ok");
+        assert!(
+            (lo - (1.0 - 0.75)).abs() < 1e-6 && (hi - (1.0 + 1.5)).abs() < 1e-6,
+            "{lo} {hi}"
+        );
+        let (lo, hi) = g.height_interval(Vec2::new(9.5, 9.5)).expect("ok");
+        assert_eq!((lo, hi), (1.0, 1.0));
+        // Half-metre texels: a sphere over cells 9 and 10 is clear of cells 3 to 5.
+        let m = CoarseMap::coarse(
+            Grid::new(16, 16, 100u16).expect("grid"),
+            HeightEncoding::new(0.01, 0.0).expect("enc"),
+            0.5,
+        )
+        .expect("map");
+        let c = HeightfieldCollider::from_map(&m).expect("collider");
+        let d = [PendingDeformation {
+            rect: Rect::new(IVec2::new(3, 9), UVec2::new(3, 3)),
+            bound: DeformationBound::new(1.0, 0.0).expect("bound"),
+        }];
+        let g = BoundedGround::new(&c, &d, &[]);
+        let raise = |x: f32| g.raise_under(Vec3::new(x, 3.0, 5.0), 0.25).expect("ok");
+        assert_eq!(raise(5.0), 0.0);
+        assert_eq!(raise(2.0), 1.0);
+    }
 }

@@ -281,6 +281,13 @@ fn hit_in_cell(patch: &Patch, ray: &GridRay, t_in: f64, t_out: f64) -> Option<f6
     if qc <= 0.0 {
         return Some(t_in);
     }
+    first_root(qa, qb, qc, t_out - t_in).map(|s| t_in + s)
+}
+
+/// The first `s` in `[0, len]` where `f(s) = qa s^2 + qb s + qc` (with `f(0) = qc > 0`)
+/// reaches 0: the closed-form roots, or bisection where rounding lost the root that
+/// `f(len) <= 0` proves.
+fn first_root(qa: f64, qb: f64, qc: f64, len: f64) -> Option<f64> {
     let f = |s: f64| (qa * s + qb) * s + qc;
     let mut best: Option<f64> = None;
     let mut consider = |s: f64| {
@@ -304,8 +311,8 @@ fn hit_in_cell(patch: &Patch, ray: &GridRay, t_in: f64, t_out: f64) -> Option<f6
             }
         }
     }
-    if let Some(s) = best {
-        return Some(t_in + s);
+    if best.is_some() {
+        return best;
     }
     // Rounding can lose a root that the end value proves: bisect for it.
     if f(len) <= 0.0 {
@@ -318,7 +325,7 @@ fn hit_in_cell(patch: &Patch, ray: &GridRay, t_in: f64, t_out: f64) -> Option<f6
                 b = m;
             }
         }
-        return Some(t_in + b);
+        return Some(b);
     }
     None
 }
@@ -393,5 +400,39 @@ mod tests {
         ));
         assert!(check_max_dist(-1.0).is_err());
         assert!(check_max_dist(f32::INFINITY).is_err());
+    }
+
+    /// Where the ray meets a flat patch the crossing is linear (`-qc / qb`): straight down
+    /// from 2 m onto 0 m meets it 2 m on, also when that distance is a whole multiple of the
+    /// slope.
+    #[test]
+    fn a_linear_crossing_is_found_where_it_is() {
+        let f = flat(0);
+        let patch = f.patch(3, 3);
+        let ray = GridRay {
+            o: DVec3::new(3.5, 2.0, 3.5),
+            d: DVec3::NEG_Y,
+            px: 3.5,
+            pz: 3.5,
+            dx: 0.0,
+            dz: 0.0,
+        };
+        assert_eq!(hit_in_cell(&patch, &ray, 0.0, 5.0), Some(2.0));
+        assert_eq!(hit_in_cell(&patch, &ray, 0.5, 5.0), Some(2.0));
+        assert_eq!(hit_in_cell(&patch, &ray, 0.0, 1.5), None);
+    }
+
+    /// A quadratic term too small for the closed form (treated as linear, whose root lies
+    /// just past the end) still decides the crossing: bisection finds it.
+    #[test]
+    fn bisection_finds_a_root_the_closed_form_misses() {
+        let (qa, qb, qc, len) = (-1e-15, -1e-3, 1.0, 1000.0 - 1e-7);
+        let f = |s: f64| (qa * s + qb) * s + qc;
+        assert!(f(len) <= 0.0 && -qc / qb > len);
+        let s = first_root(qa, qb, qc, len).expect("a root");
+        assert!(s > 999.99 && s <= len, "{s}");
+        assert!(f(s) <= 0.0 && f(s - 1e-9) > 0.0, "{s}: not the crossing");
+        // No crossing when the end stays above.
+        assert_eq!(first_root(qa, qb, qc, 900.0), None);
     }
 }

@@ -430,4 +430,21 @@ mod tests {
             0
         );
     }
+
+    /// A position is answered where both taps of its cell are in the window: the window's last
+    /// column and row of texels start no cell of their own.
+    #[test]
+    fn the_last_texel_column_and_row_are_outside() {
+        let mut w = CollisionWindow::new(64, UVec2::new(1000, 700), enc(), 0.5).expect("window");
+        w.recenter(Vec2::new(100.0, 100.0), fill_truth)
+            .expect("fill");
+        let r = w.window().expect("filled");
+        let at = |x: i32, y: i32| Vec2::new(x as f32 + 0.5, y as f32 + 0.5) * 0.5;
+        let (last_x, last_y) = (r.max().x - 1, r.max().y - 1);
+        assert!(w.contains(at(r.min.x, r.min.y)));
+        assert!(w.contains(at(last_x - 1, last_y - 1)));
+        assert!(!w.contains(at(last_x, r.min.y)));
+        assert!(!w.contains(at(r.min.x, last_y)));
+        assert!(!w.contains(at(r.min.x - 1, r.min.y)));
+    }
 }

@@ -118,6 +118,63 @@ fn field_extent() {
     assert_eq!(f.extent_m(), Vec2::new(12.5, 17.5));
 }
 
+#[test]
+fn mirror_and_collider_getters() {
+    let mirror = terrain_physics::CollisionMirror::new(rough(16, 12, 0.75, 0.0, 2));
+    assert_eq!(mirror.texel_size(), 0.75);
+    let patch = Grid::new(2, 2, 7u16).expect("grid");
+    let rect = terrain_core::Rect::new(glam::IVec2::new(3, 4), glam::UVec2::new(2, 2));
+    let v0 = mirror.version();
+    for k in 1..=3 {
+        assert_eq!(mirror.apply_next(rect, &patch).expect("apply"), v0 + k);
+        assert_eq!(mirror.collider().version(), v0 + k);
+    }
+}
+
+/// Only the stretch of a ray between the field's height bounds is walked: a ray from 1 km up
+/// descending at 1 in 20 (tens of thousands of cells away horizontally, far beyond the walk's
+/// cell limit) hits, and one climbing slowly out of the bounds misses at once, for any
+/// maximum distance.
+#[test]
+fn only_the_stretch_between_the_height_bounds_is_walked() {
+    let f = rough(32, 24, 0.5, 0.0, 3);
+    let (_, hi) = f.height_bounds();
+    let ray = Ray::new(Vec3::new(4.0, hi + 1000.0, 3.0), Vec3::new(1.0, -0.05, 0.3)).expect("ray");
+    let hit = f
+        .cast_local_ray(&ray, 1e6)
+        .expect("walks only near the surface")
+        .expect("hits");
+    let ground = f.height_local(Vec2::new(hit.point.x, hit.point.z));
+    assert!(
+        (hit.point.y - ground).abs() < 1e-2,
+        "{hit:?} vs ground {ground}"
+    );
+    let flat = HeightField::new(
+        Grid::new(16, 16, 500u16).expect("grid"),
+        HeightEncoding::new(0.01, 0.0).expect("enc"),
+        1.0,
+    )
+    .expect("field");
+    let climb = Ray::new(Vec3::new(3.0, 5.000_000_5, 3.0), Vec3::new(1.0, 1e-3, 0.0)).expect("ray");
+    assert_eq!(flat.cast_local_ray(&climb, 1e6).expect("bounded"), None);
+}
+
+/// A sphere whose bottom dips a fraction of a micrometre below the field's highest point
+/// touches it (the early exit for spheres above the field keeps its tolerance above).
+#[test]
+fn a_sphere_just_touching_the_highest_point_is_in_contact() {
+    let mut g = Grid::new(8, 8, 0u16).expect("grid");
+    *g.get_mut(4, 4).expect("texel") = 1; // 1 cm
+    let f = HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("field");
+    let (r, dip) = (0.001f32, 5e-7f32);
+    let c = f
+        .contact_local_sphere(Vec3::new(4.0, 0.01 + r - dip, 4.0), r)
+        .expect("touches");
+    assert!((c.depth - dip).abs() < 1e-7, "{c:?}");
+    let above = Vec3::new(4.0, 0.01 + r + dip, 4.0);
+    assert!(f.contact_local_sphere(above, r).is_none());
+}
+
 /// A curved field whose heights, positions and patch values are exact in binary: scale 0.25,
 /// texel 0.5, raw heights 0..40.
 fn dyadic_field() -> HeightField {

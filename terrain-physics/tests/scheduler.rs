@@ -444,3 +444,162 @@ fn idle_only_when_nothing_is_waiting_or_in_flight() {
     assert!(r.scheduler.is_idle());
     assert!(r.mirror_equals_source());
 }
+
+/// A scheduler over `map` with `config`, its source delivering after `latency` polls.
+fn rig_with(map: CoarseMap, latency: u32, config: SchedulerConfig) -> Rig {
+    let mirror = CollisionMirror::from_map(&map).expect("mirror");
+    let scheduler = ReadbackScheduler::for_mirror(&mirror, config).expect("scheduler");
+    let source = CpuRegionSource::new(map)
+        .with_latency(latency)
+        .expect("latency");
+    Rig {
+        source,
+        mirror,
+        scheduler,
+    }
+}
+
+/// A 2 x 2 texel rect at `(x, y)`.
+fn cell_rect(x: i32, y: i32) -> Rect {
+    Rect::new(IVec2::new(x, y), UVec2::splat(2))
+}
+
+/// Beyond MAX_PENDING_DEFORMATIONS records, the merged ones still bound every deformation:
+/// three that overlap a cell add up there.
+#[test]
+fn merged_pending_bounds_still_cover_every_deformation() {
+    let map = common::hills(256);
+    let collider = terrain_physics::HeightfieldCollider::from_map(&map).expect("collider");
+    let mut s = ReadbackScheduler::new(UVec2::splat(256), SchedulerConfig::default()).expect("s");
+    let t0 = Instant::now();
+    let bound = DeformationBound::new(0.1, 0.05).expect("bound");
+    for _ in 0..3 {
+        s.note_deformation(cell_rect(100, 100), bound, t0)
+            .expect("note");
+    }
+    for k in 0..terrain_physics::MAX_PENDING_DEFORMATIONS as i32 {
+        let (x, y) = (2 * (k % 120), 2 * (k / 120) + 120);
+        s.note_deformation(cell_rect(x, y), bound, t0)
+            .expect("note");
+    }
+    assert!(s.pending_deformations().count() <= 8, "merged");
+    let p = Vec2::new(100.5, 100.5) * 0.5; // texel (100, 100) at 0.5 m per texel
+    let h = collider.height(p).expect("height");
+    let (lo, hi) = s.ground(&collider).height_interval(p).expect("interval");
+    assert!(hi >= h + 0.3 - 1e-5, "{hi} < {h} + 0.3");
+    assert!(lo <= h - 0.15 + 1e-5, "{lo} > {h} - 0.15");
+}
+
+/// Requests that are abandoned give their deformation records back one by one (a few are no
+/// reason to merge them into coarser ones).
+#[test]
+fn abandoned_requests_keep_their_records_exact() {
+    let mut r = rig(common::hills(64), 1_000_000);
+    let t0 = Instant::now();
+    let bound = DeformationBound::new(0.2, 0.0).expect("bound");
+    let rects: Vec<Rect> = (0..6).map(|k| cell_rect(10 * k, 5 * k)).collect();
+    for &rect in &rects {
+        r.scheduler.note_deformation(rect, bound, t0).expect("note");
+    }
+    assert!(!r.update(ms(t0, 30)).requested.is_empty());
+    let report = r.update(ms(t0, 1100));
+    assert!(!report.abandoned.is_empty());
+    let mut kept: Vec<Rect> = r.scheduler.pending_deformations().map(|p| p.rect).collect();
+    kept.sort_by_key(|q| (q.min.x, q.min.y));
+    assert_eq!(kept, rects);
+}
+
+/// A batch that would take the requests in flight past `max_in_flight` waits.
+#[test]
+fn a_batch_waits_while_it_would_overfill_the_pipeline() {
+    let config = SchedulerConfig {
+        merge_distance: 0,
+        max_requests: 2,
+        max_in_flight: 2,
+        request_timeout: Duration::from_secs(60),
+        ..SchedulerConfig::default()
+    };
+    let mut r = rig_with(common::hills(64), 1_000_000, config);
+    let t0 = Instant::now();
+    let bound = DeformationBound::new(0.2, 0.0).expect("bound");
+    // Two dirty and none in flight: exactly a full pipeline, which goes.
+    for rect in [cell_rect(2, 2), cell_rect(40, 40)] {
+        r.scheduler.note_deformation(rect, bound, t0).expect("note");
+    }
+    assert_eq!(r.update(ms(t0, 30)).requested.len(), 2);
+    r.scheduler
+        .note_deformation(cell_rect(20, 20), bound, ms(t0, 40))
+        .expect("note");
+    // Two in flight and one dirty: three would be in flight.
+    assert!(r.update(ms(t0, 100)).requested.is_empty());
+    assert_eq!(r.scheduler.in_flight(), 2);
+    assert_eq!(r.scheduler.dirty_rects().len(), 1);
+}
+
+/// Records are merged only beyond MAX_PENDING_DEFORMATIONS: exactly that many, waiting and in
+/// flight together, or given back by abandoned requests, stay one by one.
+#[test]
+fn exactly_the_record_limit_is_not_merged() {
+    let config = SchedulerConfig {
+        request_timeout: Duration::from_secs(1),
+        max_in_flight: 64,
+        ..SchedulerConfig::default()
+    };
+    let max = terrain_physics::MAX_PENDING_DEFORMATIONS;
+    let bound = DeformationBound::new(0.1, 0.0).expect("bound");
+    let rect = |k: usize| cell_rect(2 * (k % 30) as i32, 2 * (k / 30 % 30) as i32);
+    // Waiting and in flight: `max - 24` requested, then 24 more.
+    let mut r = rig_with(common::hills(64), 1_000_000, config);
+    let t0 = Instant::now();
+    for k in 0..max - 24 {
+        r.scheduler
+            .note_deformation(rect(k), bound, t0)
+            .expect("note");
+    }
+    assert!(!r.update(ms(t0, 30)).requested.is_empty());
+    for k in 0..24 {
+        r.scheduler
+            .note_deformation(rect(k), bound, ms(t0, 40))
+            .expect("note");
+    }
+    assert!(!r.update(ms(t0, 100)).requested.is_empty());
+    assert_eq!(r.scheduler.pending_deformations().count(), max);
+    // Abandoned: the requests of `max` records time out and give them back.
+    let mut r = rig_with(common::hills(64), 1_000_000, config);
+    for k in 0..max {
+        r.scheduler
+            .note_deformation(rect(k), bound, t0)
+            .expect("note");
+    }
+    assert!(!r.update(ms(t0, 30)).requested.is_empty());
+    assert!(!r.update(ms(t0, 1100)).abandoned.is_empty());
+    assert_eq!(r.scheduler.pending_deformations().count(), max);
+}
+
+/// Batch after batch whose requests never arrive: the records in flight stay within the
+/// documented bound (twice MAX_PENDING_DEFORMATIONS and a few), merged as they go.
+#[test]
+fn records_in_flight_stay_bounded_when_nothing_arrives() {
+    let config = SchedulerConfig {
+        max_in_flight: 64,
+        request_timeout: Duration::from_secs(600),
+        ..SchedulerConfig::default()
+    };
+    let mut r = rig_with(common::hills(64), 1_000_000, config);
+    let t0 = Instant::now();
+    let bound = DeformationBound::new(0.1, 0.0).expect("bound");
+    let limit = 2 * terrain_physics::MAX_PENDING_DEFORMATIONS + 16;
+    for b in 0..5u64 {
+        let t = ms(t0, 100 * b);
+        for k in 0..1000 {
+            let rect = cell_rect(2 * (k % 30), 2 * (k / 30 % 30));
+            r.scheduler.note_deformation(rect, bound, t).expect("note");
+        }
+        assert!(
+            !r.update(t + Duration::from_millis(30)).requested.is_empty(),
+            "batch {b}"
+        );
+        let n = r.scheduler.pending_deformations().count();
+        assert!(n <= limit, "batch {b}: {n} records pending");
+    }
+}
