@@ -432,7 +432,8 @@ mod tests {
         let s = first_root(qa, qb, qc, len).expect("a root");
         assert!(s > 999.99 && s <= len, "{s}");
         assert!(f(s) <= 0.0 && f(s - 1e-9) > 0.0, "{s}: not the crossing");
-        // No crossing when the end stays above.
+        // No crossing when the end stays above, nor on a patch the ray rises away from.
         assert_eq!(first_root(qa, qb, qc, 900.0), None);
+        assert_eq!(first_root(0.0, 1.0, 0.5, 2.0), None);
     }
 }
