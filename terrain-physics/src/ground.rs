@@ -326,5 +326,22 @@ mod tests {
         let raise = |x: f32| g.raise_under(Vec3::new(x, 3.0, 5.0), 0.25).expect("ok");
         assert_eq!(raise(5.0), 0.0);
         assert_eq!(raise(2.0), 1.0);
+        // A sphere whose cells (and their second taps) end right before the rect: clear of it;
+        // one more cell and it reads the rect's first texel.
+        let m = CoarseMap::coarse(
+            Grid::new(16, 16, 100u16).expect("grid"),
+            HeightEncoding::new(0.01, 0.0).expect("enc"),
+            1.0,
+        )
+        .expect("map");
+        let c = HeightfieldCollider::from_map(&m).expect("collider");
+        let d = [PendingDeformation {
+            rect: Rect::new(IVec2::new(6, 0), UVec2::new(2, 16)),
+            bound: DeformationBound::new(1.0, 0.0).expect("bound"),
+        }];
+        let g = BoundedGround::new(&c, &d, &[]);
+        let raise = |x: f32| g.raise_under(Vec3::new(x, 3.0, 8.0), 0.5).expect("ok");
+        assert_eq!(raise(4.0), 0.0); // cells 3 and 4 read texels 3 to 5
+        assert_eq!(raise(4.6), 1.0); // cell 5 reads texel 6
     }
 }

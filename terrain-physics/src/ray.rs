@@ -281,7 +281,7 @@ fn hit_in_cell(patch: &Patch, ray: &GridRay, t_in: f64, t_out: f64) -> Option<f6
     if qc <= 0.0 {
         return Some(t_in);
     }
-    first_root(qa, qb, qc, t_out - t_in).map(|s| t_in + s)
+    first_root(qa, qb, qc, len).map(|s| t_in + s)
 }
 
 /// The first `s` in `[0, len]` where `f(s) = qa s^2 + qb s + qc` (with `f(0) = qc > 0`)
@@ -420,6 +420,32 @@ mod tests {
         assert_eq!(hit_in_cell(&patch, &ray, 0.0, 5.0), Some(2.0));
         assert_eq!(hit_in_cell(&patch, &ray, 0.5, 5.0), Some(2.0));
         assert_eq!(hit_in_cell(&patch, &ray, 0.0, 1.5), None);
+    }
+
+    /// A ray over a patch that falls away a little faster than it descends: it stays above
+    /// the patch to the cell's far side (its end height below the patch's highest corner, so
+    /// the quick rejection does not decide) and meets the patch's extension only beyond it:
+    /// no hit in this cell.
+    #[test]
+    fn a_crossing_beyond_the_cell_is_not_this_cells() {
+        let g = Grid::from_fn(8, 8, |x, _| if x <= 3 { 100u16 } else { 0 }).expect("grid");
+        let f =
+            HeightField::new(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("field");
+        let patch = f.patch(3, 3);
+        let d = DVec3::new(1.0, -1.05, 0.0).normalize();
+        let (t_in, t_out) = (0.5, 0.5 + 1.0 / d.x);
+        let o = DVec3::new(3.0, 1.1, 3.5) - d * t_in;
+        let ray = GridRay {
+            o,
+            d,
+            px: o.x,
+            pz: o.z,
+            dx: d.x,
+            dz: d.z,
+        };
+        assert_eq!(hit_in_cell(&patch, &ray, t_in, t_out), None);
+        // The same ray from farther back meets this cell's ground where it continues.
+        assert!(hit_in_cell(&f.patch(4, 3), &ray, t_out, t_out + 1.0 / d.x).is_some());
     }
 
     /// A quadratic term too small for the closed form (treated as linear, whose root lies

@@ -447,4 +447,20 @@ mod tests {
         assert!(!w.contains(at(r.min.x, last_y)));
         assert!(!w.contains(at(r.min.x - 1, r.min.y)));
     }
+
+    /// Beyond 2^24 texels from the origin the cell is found in f64: a window at the far end
+    /// of a long world answers inside it and not outside.
+    #[test]
+    fn far_from_the_origin_the_cell_is_found_in_f64() {
+        let world = UVec2::new(1 << 26, 64);
+        let mut w = CollisionWindow::new(32, world, enc(), 0.5).expect("window");
+        let far = Vec2::new((world.x - 100) as f32 * 0.5, 16.0);
+        w.recenter(far, |_, _| Ok::<(), std::convert::Infallible>(()))
+            .expect("fill");
+        let r = w.window().expect("filled");
+        assert!(r.min.x > 1 << 25, "{r:?}");
+        let centre = (r.min.as_dvec2() + r.size.as_dvec2() * 0.5) * 0.5;
+        assert!(w.contains(centre.as_vec2()));
+        assert!(!w.contains((centre + glam::DVec2::new(64.0, 0.0)).as_vec2()));
+    }
 }

@@ -603,3 +603,71 @@ fn records_in_flight_stay_bounded_when_nothing_arrives() {
         assert!(n <= limit, "batch {b}: {n} records pending");
     }
 }
+
+/// A source that delivers its regions one texel to the right of where they were asked for.
+#[derive(Debug, Default)]
+struct Shifted {
+    next: u64,
+    asked: Vec<(RequestId, Rect)>,
+}
+
+impl RegionSource for Shifted {
+    type Error = Infallible;
+
+    fn request(&mut self, rect: Rect) -> Result<RequestId, Infallible> {
+        self.next += 1;
+        self.asked.push((RequestId(self.next), rect));
+        Ok(RequestId(self.next))
+    }
+    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, Infallible> {
+        Ok(self
+            .asked
+            .drain(..)
+            .map(|(id, rect)| ArrivedRegion {
+                id,
+                rect: Rect::new(rect.min + IVec2::X, rect.size),
+                heights: terrain_core::Grid::new(rect.size.x, rect.size.y, 0).expect("grid"),
+            })
+            .collect())
+    }
+}
+
+/// A region of the right size at the wrong place is an error, and nothing of it is applied.
+#[test]
+fn a_region_delivered_at_the_wrong_place_is_refused() {
+    let map = common::hills(64);
+    let mirror = CollisionMirror::from_map(&map).expect("mirror");
+    let mut s = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default()).expect("s");
+    let t0 = Instant::now();
+    let bound = DeformationBound::new(0.2, 0.0).expect("bound");
+    s.note_deformation(cell_rect(10, 10), bound, t0)
+        .expect("note");
+    let mut source = Shifted::default();
+    let before = mirror.version();
+    assert!(s.update(ms(t0, 30), &mut source, &mirror).is_ok());
+    let err = s
+        .update(ms(t0, 40), &mut source, &mirror)
+        .expect_err("wrong place");
+    assert!(
+        matches!(err, UpdateError::Physics(PhysicsError::WrongRegion { .. })),
+        "{err:?}"
+    );
+    assert_eq!(mirror.version(), before);
+}
+
+/// Deformations close in one axis only are separate requests (merging needs both axes).
+#[test]
+fn rects_far_apart_along_one_axis_are_requested_apart() {
+    let mut r = rig(common::hills(128), 1_000_000);
+    let t0 = Instant::now();
+    let bound = DeformationBound::new(0.2, 0.0).expect("bound");
+    for rect in [cell_rect(5, 5), cell_rect(60, 5), cell_rect(5, 60)] {
+        r.scheduler.note_deformation(rect, bound, t0).expect("note");
+    }
+    let mut got: Vec<Rect> = r.update(ms(t0, 30)).requested.iter().map(|q| q.1).collect();
+    got.sort_by_key(|q| (q.min.x, q.min.y));
+    assert_eq!(
+        got,
+        vec![cell_rect(5, 5), cell_rect(5, 60), cell_rect(60, 5)]
+    );
+}
