@@ -444,7 +444,7 @@ mod tests {
             dz: d.z,
         };
         assert_eq!(hit_in_cell(&patch, &ray, t_in, t_out), None);
-        // The same ray from farther back meets this cell's ground where it continues.
+        // It comes down in the next cell, which is flat at 0 m.
         assert!(hit_in_cell(&f.patch(4, 3), &ray, t_out, t_out + 1.0 / d.x).is_some());
     }
 
