@@ -343,5 +343,7 @@ mod tests {
         let raise = |x: f32| g.raise_under(Vec3::new(x, 3.0, 8.0), 0.5).expect("ok");
         assert_eq!(raise(4.0), 0.0); // cells 3 and 4 read texels 3 to 5
         assert_eq!(raise(4.6), 1.0); // cell 5 reads texel 6
+        // The bounded ground's normal is the mirrored surface's.
+        assert_eq!(g.ground_normal(Vec2::new(6.5, 8.5)).expect("ok"), Vec3::Y);
     }
 }

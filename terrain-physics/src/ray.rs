@@ -135,13 +135,11 @@ impl HeightField {
         let (sz, start_z) = crate::field::reduce(start.z, pz);
         let from = DVec3::new(sx, start.y, sz);
         let back = shift + DVec3::new(start_x, 0.0, start_z);
-        Ok(
-            walk(self, from, d, ts, 0.0, t_end - t_start)?.map(|hit| RayHit {
-                point: (hit.point.as_dvec3() + back).as_vec3(),
-                distance: (f64::from(hit.distance) + t_start) as f32,
-                ..hit
-            }),
-        )
+        Ok(walk(self, from, d, ts, t_end - t_start)?.map(|hit| RayHit {
+            point: (hit.point.as_dvec3() + back).as_vec3(),
+            distance: (f64::from(hit.distance) + t_start) as f32,
+            ..hit
+        }))
     }
 }
 
@@ -158,13 +156,12 @@ fn max_walk_cells(field: &HeightField) -> u64 {
 /// The walk's allowance on top of four times around the field.
 const MIN_WALK_CELLS: u64 = 4096;
 
-/// Walks the cells crossed between `t_start` and `t_end` and returns the first hit.
+/// Walks the cells the ray crosses from its origin to `t_end` and returns the first hit.
 fn walk(
     field: &HeightField,
     o: DVec3,
     d: DVec3,
     ts: f64,
-    t_start: f64,
     t_end: f64,
 ) -> Result<Option<RayHit>, PhysicsError> {
     // Texel-space position and direction (per metre of ray).
@@ -178,10 +175,8 @@ fn walk(
         dx,
         dz,
     };
-    let sx = px + dx * t_start;
-    let sz = pz + dz * t_start;
-    let mut ix = sx.floor() as i64;
-    let mut iz = sz.floor() as i64;
+    let mut ix = px.floor() as i64;
+    let mut iz = pz.floor() as i64;
     let step_x: i64 = if dx > 0.0 { 1 } else { -1 };
     let step_z: i64 = if dz > 0.0 { 1 } else { -1 };
     // Distance along the ray to the next cell boundary on each axis, and between boundaries.
@@ -195,10 +190,9 @@ fn walk(
     };
     let (mut t_max_x, delta_x) = next_boundary(px, ix, dx);
     let (mut t_max_z, delta_z) = next_boundary(pz, iz, dz);
-    // `next_boundary` measured from t = 0; boundaries behind t_start were crossed already.
-    let mut t_in = t_start;
+    let mut t_in = 0.0;
     // Every cell crossed costs one step; bound the loop by the cells the segment can cross.
-    let span = (t_end - t_start).max(0.0);
+    let span = t_end.max(0.0);
     let max_steps = (span * (dx.abs() + dz.abs())).ceil() + 4.0;
     let max_steps = if max_steps.is_finite() {
         (max_steps as u64).min(max_walk_cells(field))
@@ -461,5 +455,8 @@ mod tests {
         // No crossing when the end stays above, nor on a patch the ray rises away from.
         assert_eq!(first_root(qa, qb, qc, 900.0), None);
         assert_eq!(first_root(0.0, 1.0, 0.5, 2.0), None);
+        // Roots 1e-8 and 1e8: the stable pair of roots keeps the small one exact.
+        let s = first_root(1.0, -1e8, 1.0, 1.0).expect("a root");
+        assert!((s - 1e-8).abs() < 1e-15, "{s}");
     }
 }

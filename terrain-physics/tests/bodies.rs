@@ -234,3 +234,25 @@ fn bad_body_input_returns_errors() {
         Err(PhysicsError::NegativeRadius { .. })
     ));
 }
+
+/// In the air a sphere follows `F / m` (mass 2 kg here) and its orientation integrates its
+/// angular velocity: a quarter turn about +Z in half a second at pi rad/s.
+#[test]
+fn sphere_in_the_air_integrates_force_over_mass_and_its_spin() {
+    let ground = flat_ground(0.0);
+    let mut ball = SphereBody::new(Vec3::new(10.0, 20.0, 10.0), 0.5).expect("ball");
+    ball.gravity_enabled = false;
+    ball.mass = 2.0;
+    ball.angular_velocity = Vec3::new(0.0, 0.0, std::f32::consts::PI);
+    for _ in 0..50 {
+        ball.step(0.01, Vec3::new(4.0, 0.0, 0.0), &ground)
+            .expect("step");
+    }
+    assert!(
+        (ball.velocity - Vec3::new(1.0, 0.0, 0.0)).length() < 1e-5,
+        "{}",
+        ball.velocity
+    );
+    let x = ball.orientation * Vec3::X;
+    assert!((x - Vec3::Y).length() < 1e-4, "{x}");
+}

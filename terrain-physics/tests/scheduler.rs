@@ -671,3 +671,24 @@ fn rects_far_apart_along_one_axis_are_requested_apart() {
         vec![cell_rect(5, 5), cell_rect(5, 60), cell_rect(60, 5)]
     );
 }
+
+/// Several abandoned requests whose regions arrive late all count as late, none as unknown
+/// (their ids are remembered, not only the last one's).
+#[test]
+fn late_regions_of_several_abandoned_requests_are_all_recognised() {
+    let config = SchedulerConfig {
+        merge_distance: 0,
+        request_timeout: Duration::from_millis(500),
+        ..SchedulerConfig::default()
+    };
+    let mut r = rig_with(common::hills(64), 3, config);
+    let t0 = Instant::now();
+    let bound = DeformationBound::new(0.2, 0.0).expect("bound");
+    for rect in [cell_rect(2, 2), cell_rect(30, 30)] {
+        r.scheduler.note_deformation(rect, bound, t0).expect("note");
+    }
+    assert_eq!(r.update(ms(t0, 30)).requested.len(), 2);
+    assert_eq!(r.update(ms(t0, 600)).abandoned.len(), 2);
+    let late: usize = (1..=3).map(|k| r.update(ms(t0, 600 + 10 * k)).late).sum();
+    assert_eq!(late, 2);
+}
