@@ -692,3 +692,59 @@ fn late_regions_of_several_abandoned_requests_are_all_recognised() {
     let late: usize = (1..=3).map(|k| r.update(ms(t0, 600 + 10 * k)).late).sum();
     assert_eq!(late, 2);
 }
+
+/// A source that delivers its regions at the right place but one texel too narrow.
+#[derive(Debug, Default)]
+struct Narrow {
+    next: u64,
+    asked: Vec<(RequestId, Rect)>,
+}
+
+impl RegionSource for Narrow {
+    type Error = Infallible;
+
+    fn request(&mut self, rect: Rect) -> Result<RequestId, Infallible> {
+        self.next += 1;
+        self.asked.push((RequestId(self.next), rect));
+        Ok(RequestId(self.next))
+    }
+    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, Infallible> {
+        Ok(self
+            .asked
+            .drain(..)
+            .map(|(id, rect)| ArrivedRegion {
+                id,
+                rect,
+                heights: terrain_core::Grid::new(rect.size.x - 1, rect.size.y, 0).expect("grid"),
+            })
+            .collect())
+    }
+}
+
+/// A region of the wrong size is refused when it arrives, with the sizes named; nothing of
+/// it reaches the mirror and the deformation's bound stays pending.
+#[test]
+fn a_region_of_the_wrong_size_is_refused_on_arrival() {
+    let map = common::hills(64);
+    let mirror = CollisionMirror::from_map(&map).expect("mirror");
+    let mut s = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default()).expect("s");
+    let t0 = Instant::now();
+    let bound = DeformationBound::new(0.2, 0.0).expect("bound");
+    s.note_deformation(cell_rect(10, 10), bound, t0)
+        .expect("note");
+    let mut source = Narrow::default();
+    let before = mirror.version();
+    assert!(s.update(ms(t0, 30), &mut source, &mirror).is_ok());
+    let err = s
+        .update(ms(t0, 40), &mut source, &mirror)
+        .expect_err("wrong size");
+    assert_eq!(
+        err,
+        UpdateError::Physics(PhysicsError::SizeMismatch {
+            expected: UVec2::splat(2),
+            actual: UVec2::new(1, 2),
+        })
+    );
+    assert_eq!(mirror.version(), before);
+    assert!(s.pending_deformations().count() > 0);
+}
