@@ -227,11 +227,24 @@ mod tests {
     use glam::IVec2;
     use terrain_core::{CoarseMap, Grid};
 
-    fn collider() -> HeightfieldCollider {
+    /// Flat ground 1 m high, 16 x 16 texels of `texel` metres.
+    fn collider_at(texel: f32) -> HeightfieldCollider {
         let g = Grid::new(16, 16, 100u16).expect("grid");
         let m =
-            CoarseMap::coarse(g, HeightEncoding::new(0.01, 0.0).expect("enc"), 1.0).expect("map");
+            CoarseMap::coarse(g, HeightEncoding::new(0.01, 0.0).expect("enc"), texel).expect("map");
         HeightfieldCollider::from_map(&m).expect("collider")
+    }
+
+    fn collider() -> HeightfieldCollider {
+        collider_at(1.0)
+    }
+
+    /// One pending deformation over `rect` that can raise the ground by 1 m.
+    fn raising(rect: Rect) -> [PendingDeformation; 1] {
+        [PendingDeformation {
+            rect,
+            bound: DeformationBound::new(1.0, 0.0).expect("bound"),
+        }]
     }
 
     #[test]
@@ -311,34 +324,16 @@ mod tests {
         let (lo, hi) = g.height_interval(Vec2::new(9.5, 9.5)).expect("ok");
         assert_eq!((lo, hi), (1.0, 1.0));
         // Half-metre texels: a sphere over cells 9 and 10 is clear of cells 3 to 5.
-        let m = CoarseMap::coarse(
-            Grid::new(16, 16, 100u16).expect("grid"),
-            HeightEncoding::new(0.01, 0.0).expect("enc"),
-            0.5,
-        )
-        .expect("map");
-        let c = HeightfieldCollider::from_map(&m).expect("collider");
-        let d = [PendingDeformation {
-            rect: Rect::new(IVec2::new(3, 9), UVec2::new(3, 3)),
-            bound: DeformationBound::new(1.0, 0.0).expect("bound"),
-        }];
+        let c = collider_at(0.5);
+        let d = raising(Rect::new(IVec2::new(3, 9), UVec2::new(3, 3)));
         let g = BoundedGround::new(&c, &d, &[]);
         let raise = |x: f32| g.raise_under(Vec3::new(x, 3.0, 5.0), 0.25).expect("ok");
         assert_eq!(raise(5.0), 0.0);
         assert_eq!(raise(2.0), 1.0);
         // A sphere whose cells (and their second taps) end right before the rect: clear of it;
         // one more cell and it reads the rect's first texel.
-        let m = CoarseMap::coarse(
-            Grid::new(16, 16, 100u16).expect("grid"),
-            HeightEncoding::new(0.01, 0.0).expect("enc"),
-            1.0,
-        )
-        .expect("map");
-        let c = HeightfieldCollider::from_map(&m).expect("collider");
-        let d = [PendingDeformation {
-            rect: Rect::new(IVec2::new(6, 0), UVec2::new(2, 16)),
-            bound: DeformationBound::new(1.0, 0.0).expect("bound"),
-        }];
+        let c = collider();
+        let d = raising(Rect::new(IVec2::new(6, 0), UVec2::new(2, 16)));
         let g = BoundedGround::new(&c, &d, &[]);
         let raise = |x: f32| g.raise_under(Vec3::new(x, 3.0, 8.0), 0.5).expect("ok");
         assert_eq!(raise(4.0), 0.0); // cells 3 and 4 read texels 3 to 5

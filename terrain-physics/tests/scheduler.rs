@@ -604,57 +604,6 @@ fn records_in_flight_stay_bounded_when_nothing_arrives() {
     }
 }
 
-/// A source that delivers its regions one texel to the right of where they were asked for.
-#[derive(Debug, Default)]
-struct Shifted {
-    next: u64,
-    asked: Vec<(RequestId, Rect)>,
-}
-
-impl RegionSource for Shifted {
-    type Error = Infallible;
-
-    fn request(&mut self, rect: Rect) -> Result<RequestId, Infallible> {
-        self.next += 1;
-        self.asked.push((RequestId(self.next), rect));
-        Ok(RequestId(self.next))
-    }
-    fn poll(&mut self) -> Result<Vec<ArrivedRegion>, Infallible> {
-        Ok(self
-            .asked
-            .drain(..)
-            .map(|(id, rect)| ArrivedRegion {
-                id,
-                rect: Rect::new(rect.min + IVec2::X, rect.size),
-                heights: terrain_core::Grid::new(rect.size.x, rect.size.y, 0).expect("grid"),
-            })
-            .collect())
-    }
-}
-
-/// A region of the right size at the wrong place is an error, and nothing of it is applied.
-#[test]
-fn a_region_delivered_at_the_wrong_place_is_refused() {
-    let map = common::hills(64);
-    let mirror = CollisionMirror::from_map(&map).expect("mirror");
-    let mut s = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default()).expect("s");
-    let t0 = Instant::now();
-    let bound = DeformationBound::new(0.2, 0.0).expect("bound");
-    s.note_deformation(cell_rect(10, 10), bound, t0)
-        .expect("note");
-    let mut source = Shifted::default();
-    let before = mirror.version();
-    assert!(s.update(ms(t0, 30), &mut source, &mirror).is_ok());
-    let err = s
-        .update(ms(t0, 40), &mut source, &mirror)
-        .expect_err("wrong place");
-    assert!(
-        matches!(err, UpdateError::Physics(PhysicsError::WrongRegion { .. })),
-        "{err:?}"
-    );
-    assert_eq!(mirror.version(), before);
-}
-
 /// Deformations close in one axis only are separate requests (merging needs both axes).
 #[test]
 fn rects_far_apart_along_one_axis_are_requested_apart() {
@@ -693,14 +642,28 @@ fn late_regions_of_several_abandoned_requests_are_all_recognised() {
     assert_eq!(late, 2);
 }
 
-/// A source that delivers its regions at the right place but one texel too narrow.
-#[derive(Debug, Default)]
-struct Narrow {
+/// A source that delivers every region it was asked for, but moved by `shift` and
+/// `narrower` texels too narrow.
+#[derive(Debug)]
+struct Misdelivering {
+    shift: IVec2,
+    narrower: u32,
     next: u64,
     asked: Vec<(RequestId, Rect)>,
 }
 
-impl RegionSource for Narrow {
+impl Misdelivering {
+    fn new(shift: IVec2, narrower: u32) -> Self {
+        Self {
+            shift,
+            narrower,
+            next: 0,
+            asked: Vec::new(),
+        }
+    }
+}
+
+impl RegionSource for Misdelivering {
     type Error = Infallible;
 
     fn request(&mut self, rect: Rect) -> Result<RequestId, Infallible> {
@@ -709,22 +672,23 @@ impl RegionSource for Narrow {
         Ok(RequestId(self.next))
     }
     fn poll(&mut self) -> Result<Vec<ArrivedRegion>, Infallible> {
+        let (shift, narrower) = (self.shift, self.narrower);
         Ok(self
             .asked
             .drain(..)
             .map(|(id, rect)| ArrivedRegion {
                 id,
-                rect,
-                heights: terrain_core::Grid::new(rect.size.x - 1, rect.size.y, 0).expect("grid"),
+                rect: Rect::new(rect.min + shift, rect.size),
+                heights: terrain_core::Grid::new(rect.size.x - narrower, rect.size.y, 0)
+                    .expect("grid"),
             })
             .collect())
     }
 }
 
-/// A region of the wrong size is refused when it arrives, with the sizes named; nothing of
-/// it reaches the mirror and the deformation's bound stays pending.
-#[test]
-fn a_region_of_the_wrong_size_is_refused_on_arrival() {
+/// One 2 x 2 deformation requested from `source` and its region delivered: the error of the
+/// update it arrives in. Nothing of it may reach the mirror, and its bound stays pending.
+fn deliver_one(source: &mut Misdelivering) -> UpdateError<Infallible> {
     let map = common::hills(64);
     let mirror = CollisionMirror::from_map(&map).expect("mirror");
     let mut s = ReadbackScheduler::for_mirror(&mirror, SchedulerConfig::default()).expect("s");
@@ -732,12 +696,30 @@ fn a_region_of_the_wrong_size_is_refused_on_arrival() {
     let bound = DeformationBound::new(0.2, 0.0).expect("bound");
     s.note_deformation(cell_rect(10, 10), bound, t0)
         .expect("note");
-    let mut source = Narrow::default();
     let before = mirror.version();
-    assert!(s.update(ms(t0, 30), &mut source, &mirror).is_ok());
+    assert!(s.update(ms(t0, 30), source, &mirror).is_ok());
     let err = s
-        .update(ms(t0, 40), &mut source, &mirror)
-        .expect_err("wrong size");
+        .update(ms(t0, 40), source, &mirror)
+        .expect_err("a misdelivered region");
+    assert_eq!(mirror.version(), before);
+    assert!(s.pending_deformations().count() > 0);
+    err
+}
+
+/// A region of the right size at the wrong place is refused.
+#[test]
+fn a_region_delivered_at_the_wrong_place_is_refused() {
+    let err = deliver_one(&mut Misdelivering::new(IVec2::X, 0));
+    assert!(
+        matches!(err, UpdateError::Physics(PhysicsError::WrongRegion { .. })),
+        "{err:?}"
+    );
+}
+
+/// A region of the wrong size is refused when it arrives, with the sizes named.
+#[test]
+fn a_region_of_the_wrong_size_is_refused_on_arrival() {
+    let err = deliver_one(&mut Misdelivering::new(IVec2::ZERO, 1));
     assert_eq!(
         err,
         UpdateError::Physics(PhysicsError::SizeMismatch {
@@ -745,6 +727,4 @@ fn a_region_of_the_wrong_size_is_refused_on_arrival() {
             actual: UVec2::new(1, 2),
         })
     );
-    assert_eq!(mirror.version(), before);
-    assert!(s.pending_deformations().count() > 0);
 }
