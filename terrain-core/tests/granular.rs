@@ -97,6 +97,17 @@ fn small_params() -> GranularParams {
     }
 }
 
+/// Frames of the soak test: 5000 (the seed's test), or `TERRAIN_SOAK_FRAMES` where a run
+/// repeats the suite many times (`cargo xtask mutants` runs 300: every method combination
+/// still gets its block of frames, and each mutant costs a second instead of ten).
+fn soak_frames() -> u32 {
+    std::env::var("TERRAIN_SOAK_FRAMES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .filter(|&n| n >= 10)
+        .unwrap_or(5000)
+}
+
 #[test]
 fn volume_constant_over_5000_frames_three_objects() {
     let m = meshes();
@@ -105,8 +116,11 @@ fn volume_constant_over_5000_frames_three_objects() {
     let v0 = sim.map().raw_sum();
     let start = sim.map().clone();
     let mut changed = 0u64;
-    for frame in 0..5000u32 {
-        let (d, s) = COMBOS[(frame / 500) as usize % COMBOS.len()];
+    let frames = soak_frames();
+    // Ten blocks of frames, each with the next method combination.
+    let block = frames / 10;
+    for frame in 0..frames {
+        let (d, s) = COMBOS[(frame / block) as usize % COMBOS.len()];
         sim.displacement = d;
         sim.slope = s;
         let objs = objects_at(&m, frame, 6.4);

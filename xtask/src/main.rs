@@ -1470,10 +1470,12 @@ fn mutants(args: &[String]) -> Result<()> {
     // cargo-mutants exits non-zero when a mutant is missed (2) or times out (3): the table
     // still comes from its output; other failures (1: bad usage, 4: the baseline failed) stop.
     // The fuzz tests run for a wall-clock budget (2 s each by default): a quarter second per
-    // mutant keeps their smoke value while the deterministic tests do the pinning.
+    // mutant keeps their smoke value while the deterministic tests do the pinning. The soak
+    // test of terrain-core's granular step runs 300 frames instead of 5000 for the same reason.
     let status = Command::new(&cargo)
         .args(&cmd_args)
         .env("TERRAIN_FUZZ_SECONDS", "0.25")
+        .env("TERRAIN_SOAK_FRAMES", "300")
         .current_dir(root())
         .status()
         .with_context(|| format!("could not start cargo {}", cmd_args.join(" ")))?;
