@@ -346,6 +346,44 @@ mod tests {
         }
     }
 
+    /// With a texel size that is not a power of two, near positions (negative ones and
+    /// ones beyond the first period included) are still sampled as terrain_core samples
+    /// them, to the bit; far ones (beyond 2^24 texels) equal the position moved into the
+    /// first period in f64.
+    #[test]
+    fn near_and_far_positions_with_an_inexact_texel_size() {
+        let ts = 0.3f32;
+        let g = Grid::from_fn(5, 4, |x, y| (x * 1000 + y * 300 + (x * y) % 7 * 50) as u16)
+            .expect("grid");
+        let m =
+            CoarseMap::coarse(g, HeightEncoding::new(0.01, -3.0).expect("enc"), ts).expect("map");
+        let f = HeightField::from_map(&m).expect("field");
+        for i in -40..80 {
+            for j in -30..60 {
+                let p = Vec2::new(i as f32 * 0.137, j as f32 * 0.171);
+                let core = bilinear(&m, p).expect("finite");
+                assert_eq!(f.height_local(p).to_bits(), core.to_bits(), "at {p}");
+            }
+        }
+        let (px, pz) = f.period_m();
+        let mut differs = 0;
+        for k in 0..200u32 {
+            let far = Vec2::new(6.0e6 + k as f32 * 37.5, -(5.2e6 + k as f32 * 21.0));
+            let moved = Vec2::new(
+                f64::from(far.x).rem_euclid(px) as f32,
+                f64::from(far.y).rem_euclid(pz) as f32,
+            );
+            let want = bilinear(&m, moved).expect("finite");
+            assert_eq!(f.height_local(far).to_bits(), want.to_bits(), "at {far}");
+            let direct = bilinear(&m, far).expect("finite");
+            differs += usize::from(direct.to_bits() != want.to_bits());
+        }
+        assert!(
+            differs > 0,
+            "f32 sampling far away never picked another cell"
+        );
+    }
+
     #[test]
     fn listing_3_2_wraps_the_last_column_onto_the_first() {
         // Texel 4 (last column) at 4 * 0.5 = 2 m; halfway to the wrapped texel 0 at 2.25 m.

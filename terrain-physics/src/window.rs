@@ -448,6 +448,67 @@ mod tests {
         assert!(!w.contains(at(r.min.x - 1, r.min.y)));
     }
 
+    /// The cell the lookup reads, found the lookup's way: f32 division near the origin, f64
+    /// beyond 2^24 texels. With a texel size that is not a power of two the two roundings
+    /// pick different cells for some positions at a cell edge, and `contains` must follow
+    /// the lookup's near the window's edges, near the origin and far from it.
+    #[test]
+    fn the_edge_cell_is_the_lookups_near_and_far() {
+        let ts = 0.3f32;
+        let world = UVec2::new(1 << 26, 64);
+        let lookup_cell = |pos: f32| -> f64 {
+            let t = pos / ts;
+            if t.abs() < 16_777_216.0 {
+                f64::from(t.floor())
+            } else {
+                (f64::from(pos) / f64::from(ts)).floor()
+            }
+        };
+        // Window placements near the origin and at the far end of the world (where f32
+        // positions are 2 m apart, so several placements are needed to put one near an edge).
+        let near: Vec<u32> = (0..8).map(|j| 200 + 16 * j).collect();
+        let far: Vec<u32> = (0..8).map(|j| world.x - 200 - 16 * j).collect();
+        for (name, centres) in [("near", near), ("far", far)] {
+            let mut answers_differ = 0;
+            for centre_texel in centres {
+                let mut w = CollisionWindow::new(32, world, enc(), ts).expect("window");
+                let centre = Vec2::new(centre_texel as f32 * ts, 16.0 * ts);
+                w.recenter(centre, |_, _| Ok::<(), std::convert::Infallible>(()))
+                    .expect("fill");
+                let r = w.window().expect("filled");
+                let inside =
+                    |cell: f64| cell >= f64::from(r.min.x) && cell < f64::from(r.max().x - 1);
+                let mut checked = 0;
+                for edge in [r.min.x, r.max().x - 1] {
+                    // Every f32 position within eight texels of the edge.
+                    let mut pos = (edge - 8) as f32 * ts;
+                    while pos <= (edge + 8) as f32 * ts {
+                        let cell = lookup_cell(pos);
+                        let other = if (pos / ts).abs() < 16_777_216.0 {
+                            (f64::from(pos) / f64::from(ts)).floor()
+                        } else {
+                            f64::from((pos / ts).floor())
+                        };
+                        answers_differ += usize::from(inside(cell) != inside(other));
+                        let p = Vec2::new(pos, 16.0 * ts + 0.1);
+                        assert_eq!(
+                            w.contains(p),
+                            inside(cell),
+                            "x = {pos} (cell {cell}) of {r:?}"
+                        );
+                        checked += 1;
+                        pos = f32::from_bits(pos.to_bits() + 1);
+                    }
+                }
+                assert!(checked > 2, "{checked}");
+            }
+            assert!(
+                answers_differ > 0,
+                "no position {name} the origin where the other rounding changes the answer"
+            );
+        }
+    }
+
     /// Beyond 2^24 texels from the origin the cell is found in f64: a window at the far end
     /// of a long world answers inside it and not outside.
     #[test]
