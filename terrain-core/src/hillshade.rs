@@ -204,11 +204,45 @@ mod tests {
         let east = img.get(44, 32).unwrap();
         let lum = |p: [u8; 4]| u32::from(p[0]) + u32::from(p[1]) + u32::from(p[2]);
         assert!(lum(west) > lum(east) + 30, "west {west:?} east {east:?}");
+        // A ridge along X: the north slope (towards -Z, facing the light) is lit, the south
+        // one not.
+        let g = Grid::from_fn(64, 64, |_, y| (2000 - 60 * (y as i32 - 32).abs()) as u16).unwrap();
+        let m2 = CoarseMap::coarse(g, HeightEncoding::new(0.01, 0.0).unwrap(), 1.0).unwrap();
+        let n2 = DerivativeMap::from_map(&m2);
+        let img = hillshade(&m2, &n2, &HillshadeParams::with_size(UVec2::new(64, 64))).unwrap();
+        let (north, south) = (img.get(32, 20).unwrap(), img.get(32, 44).unwrap());
+        assert!(
+            lum(north) > lum(south) + 30,
+            "north {north:?} south {south:?}"
+        );
         let bad = HillshadeParams {
             light_dir: Vec3::ZERO,
             ..HillshadeParams::with_size(UVec2::new(8, 8))
         };
         assert!(hillshade(&m, &n, &bad).is_err());
+    }
+
+    /// Flat ground (lit by the ambient share plus the light's height) in the ramp's
+    /// colours: the lowest stored value valley green, the middle halfway between grass and
+    /// rock, the highest snow.
+    #[test]
+    fn heights_are_coloured_along_the_ramp() {
+        let g = Grid::from_fn(24, 8, |x, _| [1000u16, 1500, 2000][x as usize / 8]).unwrap();
+        let m = CoarseMap::coarse(g, HeightEncoding::new(0.01, 0.0).unwrap(), 1.0).unwrap();
+        let n = DerivativeMap::from_map(&m);
+        let params = HillshadeParams::with_size(UVec2::new(24, 8));
+        let img = hillshade(&m, &n, &params).unwrap();
+        let light = params.light_dir.normalize();
+        let shade = params.ambient + (1.0 - params.ambient) * light.y;
+        for (x, colour) in [
+            (4, Vec3::from(RAMP[0])),
+            (12, Vec3::from(RAMP[1]).lerp(Vec3::from(RAMP[2]), 0.5)),
+            (20, Vec3::from(RAMP[3])),
+        ] {
+            let c = (colour * shade * 1.25).clamp(Vec3::ZERO, Vec3::ONE) * 255.0;
+            let want = [c.x as u8, c.y as u8, c.z as u8, 255];
+            assert_eq!(img.get(x, 4).unwrap(), want, "column {x}");
+        }
     }
 
     #[test]

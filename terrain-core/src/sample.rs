@@ -110,6 +110,20 @@ mod tests {
     }
 
     #[test]
+    fn float_grids_interpolate_wrap_and_clamp_in_texels() {
+        // 0, 1, 2, 3 along X, 10 more per row.
+        let g = Grid::from_fn(4, 3, |x, y| x as f32 + 10.0 * y as f32).unwrap();
+        let at = |p: Vec2, wrap| bilinear_grid(&g, p, wrap).unwrap();
+        assert_eq!(at(Vec2::new(2.0, 1.0), WrapMode::Repeat), 12.0);
+        assert!((at(Vec2::new(1.25, 0.5), WrapMode::Repeat) - 6.25).abs() < 1e-6);
+        // Past the last column: towards column 0 when wrapping, held at column 3 when clamped.
+        assert!((at(Vec2::new(3.5, 0.0), WrapMode::Repeat) - 1.5).abs() < 1e-6);
+        assert_eq!(at(Vec2::new(3.5, 0.0), WrapMode::Clamp), 3.0);
+        assert_eq!(at(Vec2::new(-2.0, -4.0), WrapMode::Clamp), 0.0);
+        assert!(bilinear_grid(&g, Vec2::new(f32::NAN, 0.0), WrapMode::Repeat).is_err());
+    }
+
+    #[test]
     fn nan_and_absurd_positions() {
         let m = ramp_map();
         assert!(bilinear(&m, Vec2::new(f32::NAN, 0.0)).is_err());

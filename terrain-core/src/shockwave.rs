@@ -172,6 +172,13 @@ mod tests {
             ..Default::default()
         };
         assert!(Shockwave::new(small).is_err());
+        for initial_sigma in [0.0, -1.0, f32::INFINITY, f32::NAN] {
+            let p = ShockwaveParams {
+                initial_sigma,
+                ..Default::default()
+            };
+            assert!(Shockwave::new(p).is_err(), "initial sigma {initial_sigma}");
+        }
     }
 
     #[test]
@@ -181,9 +188,11 @@ mod tests {
             ..Default::default()
         })
         .unwrap();
+        assert_eq!(w.steps(), 0);
         for _ in 0..20 {
             w.step();
         }
+        assert_eq!(w.steps(), 20);
         let u = w.current();
         let centre = u.get(32, 32).unwrap().abs();
         let ring = (0..32)
