@@ -140,9 +140,20 @@ fn gaussian_volume_matches_its_integral_within_half_a_percent() {
         (Vec2::new(1.0, 59.0), Vec2::splat(8.0), 0.8, 0.0), // across the wrap corner
         (Vec2::new(20.0, 25.0), Vec2::splat(3.0), -0.3, 1.2),
     ];
-    for (center, scale, intensity, rot) in cases {
+    // The default epsilon gives beta = ln(|intensity| / epsilon), 4 to 9 here, where the
+    // erf factors are within 1 % of 1; an epsilon of the intensity's order gives the
+    // smallest falloff, beta = 1, where erf(1) = 0.84 counts.
+    let epsilons = [None, None, None, None, Some(0.4), Some(0.1)];
+    let cases = cases.into_iter().chain([
+        (Vec2::new(30.0, 30.0), Vec2::new(16.0, 10.0), 0.6, 0.3),
+        (Vec2::new(30.0, 30.0), Vec2::splat(14.0), -0.6, 0.0),
+    ]);
+    for ((center, scale, intensity, rot), epsilon) in cases.zip(epsilons) {
         let mut after = before.clone();
-        let mut s = GaussianStamp::default();
+        let mut s = match epsilon {
+            None => GaussianStamp::default(),
+            Some(e) => GaussianStamp::new(e).unwrap(),
+        };
         let p = StampPlacement::new(center, scale, intensity)
             .unwrap()
             .with_rotation(rot)

@@ -304,3 +304,25 @@ fn check_gaussian_bound<T: HeightSample + PartialEq + Copy + std::fmt::Debug>(
     );
     Ok(())
 }
+
+/// `gaussian_rounding_bound` is the formula its documentation derives:
+/// `2 eps (beta (12 (1 + k) + 6) + 2) + 4 eps` with `eps = 2^-24` and `k` the footprint's
+/// aspect ratio, either way round.
+#[test]
+fn the_rounding_bound_is_the_documented_formula() {
+    let eps = 2f64.powi(-24);
+    for (scale, beta, k) in [
+        (Vec2::splat(4.0), 1.0f32, 1.0),
+        (Vec2::new(2.0, 6.0), 4.6, 3.0),
+        (Vec2::new(9.0, 3.0), 2.5, 3.0),
+        (Vec2::new(0.5, 8.0), 10.0, 16.0),
+    ] {
+        let p = StampPlacement::new(Vec2::ZERO, scale, 1.0).unwrap();
+        let want = 2.0 * eps * (f64::from(beta) * (12.0 * (1.0 + k) + 6.0) + 2.0) + 4.0 * eps;
+        let got = gaussian_rounding_bound(beta, &p);
+        assert!(
+            (got - want).abs() <= 1e-12 * want,
+            "{scale} beta {beta}: {got} vs {want}"
+        );
+    }
+}
