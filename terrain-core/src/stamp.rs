@@ -1168,6 +1168,67 @@ mod tests {
     use super::*;
     use crate::map::{CoarseMap, HeightEncoding};
 
+    /// `monotone_span` finds the prefix or suffix where a monotone predicate holds, as a scan
+    /// does, and asks the predicate only inside `[lo, hi)` (its contract says nothing of
+    /// the values outside).
+    #[test]
+    fn monotone_span_equals_a_scan_and_stays_inside_the_range() {
+        for lo in [-37, -1, 0, 3, 250] {
+            for len in 0..40 {
+                let hi = lo + len;
+                for t in lo - 2..=hi + 2 {
+                    for prefix in [true, false] {
+                        let asked = std::cell::RefCell::new(Vec::new());
+                        let p = |x: i32| {
+                            let mut a = asked.borrow_mut();
+                            assert!(a.len() < 64, "a bisection that does not end");
+                            a.push(x);
+                            if prefix { x < t } else { x >= t }
+                        };
+                        let got = monotone_span(lo, hi, &p);
+                        let held: Vec<i32> = (lo..hi)
+                            .filter(|&x| if prefix { x < t } else { x >= t })
+                            .collect();
+                        let want = match (held.first(), held.last()) {
+                            (Some(&a), Some(&b)) => (a, b + 1),
+                            _ => (lo, lo),
+                        };
+                        assert_eq!(got, want, "[{lo}, {hi}) t {t} prefix {prefix}");
+                        let asked = asked.borrow();
+                        assert!(
+                            asked.iter().all(|x| (lo..hi).contains(x)),
+                            "[{lo}, {hi}): asked {asked:?}"
+                        );
+                        // Bisection: a logarithmic number of questions.
+                        assert!(asked.len() <= 2 + 7, "{} questions", asked.len());
+                    }
+                }
+            }
+        }
+    }
+
+    /// The Gaussian table has one entry per integer of `lo..hi`, each within the documented
+    /// relative rounding of `exp(-a (x - c)^2)`, centres inside and outside the range.
+    #[test]
+    fn gaussian_table_entries_equal_exp() {
+        for (lo, hi) in [(0, 0), (5, 6), (-20, 180), (-300, -10)] {
+            for c in [-25.3, 0.0, 41.7, 179.5, 400.0] {
+                for a in [0.0, 1e-4, 0.01, 0.3] {
+                    let t = gaussian_table((lo, hi), c, a);
+                    assert_eq!(t.len(), (hi - lo) as usize);
+                    for (i, v) in t.iter().enumerate() {
+                        let x = f64::from(lo) + i as f64;
+                        let want = (-a * (x - c) * (x - c)).exp();
+                        assert!(
+                            (v - want).abs() <= 64.0 * 64.0 * f64::EPSILON * want,
+                            "[{lo}, {hi}) c {c} a {a} x {x}: {v} vs {want}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
     fn flat(size: u32, raw: u16, ts: f32) -> CoarseMap {
         let g = Grid::new(size, size, raw).unwrap();
         CoarseMap::coarse(g, HeightEncoding::new(0.01, 0.0).unwrap(), ts).unwrap()

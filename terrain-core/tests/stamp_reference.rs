@@ -131,6 +131,19 @@ proptest! {
         check_gaussian_bound(map8(WrapMode::Clamp), &p, blend(kind, base - 0.5), eps)?;
     }
 
+    /// u32 maps take the f64 path (the small-sample one is for u8 and u16 only): the stamp
+    /// lands, within the same bound of the reference.
+    #[test]
+    fn separable_gaussian_is_within_the_rounding_bound_on_u32_maps(
+        p in placement(0.25, 96.0, 80.0),
+        kind in 0u8..3, base in 0.0f32..1.0, eps in 1e-4f32..1e-1,
+    ) {
+        let e = HeightEncoding::new(0.01, -100.0).unwrap();
+        let m = HeightMap::new(hashed::<u32>(96, 80, 1_000, 60_000), e, 0.25, WrapMode::Clamp)
+            .unwrap();
+        check_gaussian_bound(m, &p, blend(kind, base * 600.0 - 100.0), eps)?;
+    }
+
     /// Results do not depend on the thread count.
     #[test]
     fn stamps_are_identical_for_1_and_4_threads(
@@ -325,4 +338,22 @@ fn the_rounding_bound_is_the_documented_formula() {
             "{scale} beta {beta}: {got} vs {want}"
         );
     }
+}
+
+/// A Gaussian on a u32 map raises its centre texel by the intensity (the f64 path; the
+/// small-sample path is for u8 and u16 only).
+#[test]
+fn a_gaussian_lands_on_a_u32_map() {
+    let e = HeightEncoding::new(0.01, 0.0).unwrap();
+    let mut m = HeightMap::new(
+        Grid::new(32, 32, 3_000_000_000u32).unwrap(),
+        e,
+        1.0,
+        WrapMode::Clamp,
+    )
+    .unwrap();
+    let p = StampPlacement::new(Vec2::new(16.0, 16.0), Vec2::splat(8.0), 2.0).unwrap();
+    apply_stamp(&mut m, &mut GaussianStamp::default(), &p, Blend::Add).unwrap();
+    assert_eq!(m.grid().get(16, 16), Some(3_000_000_200));
+    assert_eq!(m.grid().get(0, 0), Some(3_000_000_000));
 }
