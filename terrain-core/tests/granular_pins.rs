@@ -820,3 +820,131 @@ fn gaussian_stamp_getters() {
         Err(CoreError::OutOfRange { value, .. }) if value == -1.0
     ));
 }
+
+/// Every primitive mesh is closed and oriented: each directed edge appears once and its
+/// reverse once (no holes, no flipped triangle), and its signed volume is positive, so the
+/// triangles face outwards (counter-clockwise seen from outside). A cuboid's and a wheel's
+/// volumes are their solids' (the wheel a prism over its polygon).
+#[test]
+fn primitive_meshes_are_closed_and_face_outwards() {
+    use std::collections::HashMap;
+    let signed_volume = |m: &TriMesh| -> f64 {
+        let v = m.vertices();
+        m.triangles()
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| v[i as usize].as_dvec3());
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    };
+    let n = 12u32;
+    let (r, hw) = (0.4f64, 0.15f64);
+    let polygon = 0.5 * f64::from(n) * r * r * (std::f64::consts::TAU / f64::from(n)).sin();
+    let cases = [
+        (
+            "cuboid",
+            TriMesh::cuboid(Vec3::new(0.5, 0.2, 0.3)).expect("cuboid"),
+            Some(8.0 * 0.5 * 0.2 * 0.3),
+        ),
+        (
+            "wheel",
+            TriMesh::wheel(r as f32, hw as f32, n).expect("wheel"),
+            Some(polygon * 2.0 * hw),
+        ),
+        ("foot", TriMesh::foot(0.3, 0.12, 0.1).expect("foot"), None),
+    ];
+    for (name, mesh, volume) in cases {
+        let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+        for t in mesh.triangles() {
+            for k in 0..3 {
+                *edges.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
+            }
+        }
+        for (&(a, b), &count) in &edges {
+            assert_eq!(count, 1, "{name}: edge {a}->{b} appears {count} times");
+            assert_eq!(
+                edges.get(&(b, a)),
+                Some(&1),
+                "{name}: edge {a}->{b} has no twin"
+            );
+        }
+        let got = signed_volume(&mesh);
+        assert!(got > 0.0, "{name}: signed volume {got}");
+        if let Some(want) = volume {
+            assert!(
+                (got - want).abs() < 1e-6 * want,
+                "{name}: volume {got}, want {want}"
+            );
+        }
+    }
+}
+
+/// One pass of the 3x3 blur spreads a single tilted normal over its eight neighbours with
+/// the kernel's weights (4 centre, 2 edge, 1 corner, over 16), renormalised; the rest of
+/// the area stays up.
+#[test]
+fn blurring_spreads_one_normal_with_the_kernels_weights() {
+    let tilted = Vec3::new(0.6, 0.8, 0.0);
+    let mut g = Grid::new(9, 7, Vec3::Y).expect("grid");
+    *g.get_mut(4, 3).expect("inside") = tilted;
+    let area = Rect::new(IVec2::new(1, 1), UVec2::new(7, 5));
+    blur_normals(&mut g, area, 1).expect("blur");
+    for y in 0..7i32 {
+        for x in 0..9i32 {
+            let (dx, dy) = (x - 4, y - 3);
+            let inside = area.contains(IVec2::new(x, y));
+            let want = if inside && dx.abs() <= 1 && dy.abs() <= 1 {
+                let w = ((2 - dx.abs()) * (2 - dy.abs())) as f32;
+                ((16.0 - w) * Vec3::Y + w * tilted).normalize()
+            } else {
+                Vec3::Y
+            };
+            let got = g.get(x as u32, y as u32).expect("inside");
+            assert!((got - want).length() < 1e-6, "({x}, {y}): {got} vs {want}");
+        }
+    }
+}
+
+/// Both slope methods refuse a penetration grid of another size than the area and an
+/// area off the map, naming the sizes, and leave the map as it was.
+#[test]
+fn slope_evening_refuses_a_wrong_size_or_an_area_off_the_map() {
+    let map = flat_map(16, 16, 5 * UNITS, 0.1);
+    let area = Rect::new(IVec2::new(2, 2), UVec2::new(8, 8));
+    let wrong = Grid::new(7, 8, seed_at(0, 0)).expect("grid");
+    let off = Rect::new(IVec2::new(12, 2), UVec2::new(8, 8));
+    let pen = Grid::new(8, 8, seed_at(0, 0)).expect("grid");
+    type Method = fn(
+        &mut FixedPointMap,
+        &Grid<Penetration>,
+        Rect,
+        [u32; 2],
+        u32,
+        u32,
+    ) -> Result<(), GranularError>;
+    let methods: [(&str, Method); 2] = [
+        ("interleaved", even_out_slopes_interleaved),
+        ("scatter", even_out_slopes_scatter),
+    ];
+    for (name, method) in methods {
+        let mut m = map.clone();
+        match method(&mut m, &wrong, area, [100, 100], 0, 2) {
+            Err(GranularError::SizeMismatch { expected, actual }) => {
+                assert_eq!(
+                    (expected, actual),
+                    (UVec2::new(8, 8), UVec2::new(7, 8)),
+                    "{name}"
+                );
+            }
+            other => panic!("{name}: {other:?}"),
+        }
+        match method(&mut m, &pen, off, [100, 100], 0, 2) {
+            Err(GranularError::RegionOutsideMap { rect, map_size }) => {
+                assert_eq!((rect, map_size), (off, UVec2::new(16, 16)), "{name}");
+            }
+            other => panic!("{name}: {other:?}"),
+        }
+        assert_eq!(m, map, "{name}: the map changed");
+    }
+}

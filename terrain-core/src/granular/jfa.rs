@@ -323,8 +323,7 @@ fn planar_row<const METRIC: u8>(
             .find(|&n| d[n] == m)
             .map_or((here.0[i], here.1[i]), |n| cs[n])
     };
-    let mut i0 = 0;
-    while i0 < w {
+    for i0 in (0..w).step_by(JFA_BLOCK) {
         let len = (w - i0).min(JFA_BLOCK);
         let x0 = col_x(i0);
         let mut m = [u32::MAX; JFA_BLOCK];
@@ -378,7 +377,6 @@ fn planar_row<const METRIC: u8>(
             };
             (out_x[i0 + t], out_y[i0 + t]) = (x, y);
         }
-        i0 += len;
     }
 }
 

@@ -10,8 +10,11 @@ pub const MAX_MESH_ELEMENTS: usize = 1 << 22;
 /// Largest distance of a vertex from the origin, in metres (in the mesh and in the world).
 pub const MAX_COORDINATE_M: f32 = 1.0e6;
 
-/// A triangle mesh in object space (metres). Winding does not matter: the depth from below
-/// takes the lowest surface over each column whatever the face orientation.
+/// A triangle mesh in object space (metres). Winding does not matter to the granular passes:
+/// the depth from below takes the lowest surface over each column whatever the face
+/// orientation. The primitives ([`cuboid`](Self::cuboid), [`wheel`](Self::wheel),
+/// [`foot`](Self::foot)) are closed and face outwards (counter-clockwise seen from outside),
+/// so a renderer may cull their back faces.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TriMesh {
     vertices: Vec<Vec3>,
@@ -72,13 +75,15 @@ impl TriMesh {
                 )
             })
             .collect();
+        // Each face counter-clockwise seen from outside (vertex bit 0 is +X, bit 1 +Y,
+        // bit 2 +Z): the -Z, +Z, -Y, +Y, -X and +X faces.
         let faces: [[u32; 4]; 6] = [
-            [0, 1, 3, 2],
-            [4, 6, 7, 5],
-            [0, 4, 5, 1],
-            [2, 3, 7, 6],
-            [0, 2, 6, 4],
-            [1, 5, 7, 3],
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
         ];
         let triangles = faces
             .iter()
@@ -119,10 +124,11 @@ impl TriMesh {
         let mut triangles = Vec::with_capacity(4 * n as usize);
         for i in 0..n {
             let j = (i + 1) % n;
-            triangles.push([i, j, n + j]);
-            triangles.push([i, n + j, n + i]);
-            triangles.push([2 * n, j, i]);
-            triangles.push([2 * n + 1, n + i, n + j]);
+            // Counter-clockwise seen from outside: the tread, then the caps at -X and +X.
+            triangles.push([i, n + j, j]);
+            triangles.push([i, n + i, n + j]);
+            triangles.push([2 * n, i, j]);
+            triangles.push([2 * n + 1, n + j, n + i]);
         }
         Self::new(vertices, triangles)
     }
@@ -135,7 +141,8 @@ impl TriMesh {
             length.min(width).min(height),
             length.max(width).max(height),
         )?;
-        // Outline as (x, z) fractions of (width / 2, length / 2), convex, counter-clockwise.
+        // Outline as (x, z) fractions of (width / 2, length / 2), convex, counter-clockwise in
+        // the (x, z) plane.
         const OUTLINE: [(f32, f32); 10] = [
             (0.0, -1.0),
             (0.55, -0.9),
@@ -162,10 +169,12 @@ impl TriMesh {
             triangles.push([0, i, i + 1]);
             triangles.push([n, n + i + 1, n + i]);
         }
+        // The outline runs counter-clockwise seen from below: the sole as it is, the top
+        // reversed, the sides from the bottom edge up, all facing outwards.
         for i in 0..n {
             let j = (i + 1) % n;
-            triangles.push([i, j, n + j]);
-            triangles.push([i, n + j, n + i]);
+            triangles.push([i, n + j, j]);
+            triangles.push([i, n + i, n + j]);
         }
         Self::new(vertices, triangles)
     }
