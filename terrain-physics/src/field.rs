@@ -333,17 +333,23 @@ mod tests {
         CoarseMap::coarse(g, e, 0.5).expect("map")
     }
 
+    /// Heights at positions around the map (negative and beyond the first period too) are
+    /// terrain_core's bilinear ones, to the bit.
+    fn assert_near_heights_are_cores(m: &CoarseMap, f: &HeightField) {
+        for i in -40..80 {
+            for j in -30..60 {
+                let p = Vec2::new(i as f32 * 0.137, j as f32 * 0.171);
+                let core = bilinear(m, p).expect("finite");
+                assert_eq!(f.height_local(p).to_bits(), core.to_bits(), "at {p}");
+            }
+        }
+    }
+
     #[test]
     fn height_is_bit_identical_to_core_bilinear_including_wrap() {
         let m = map();
         let f = HeightField::from_map(&m).expect("field");
-        for i in -40..80 {
-            for j in -30..60 {
-                let p = Vec2::new(i as f32 * 0.137, j as f32 * 0.171);
-                let core = bilinear(&m, p).expect("finite");
-                assert_eq!(f.height_local(p).to_bits(), core.to_bits(), "at {p}");
-            }
-        }
+        assert_near_heights_are_cores(&m, &f);
     }
 
     /// With a texel size that is not a power of two, near positions (negative ones and
@@ -358,13 +364,7 @@ mod tests {
         let m =
             CoarseMap::coarse(g, HeightEncoding::new(0.01, -3.0).expect("enc"), ts).expect("map");
         let f = HeightField::from_map(&m).expect("field");
-        for i in -40..80 {
-            for j in -30..60 {
-                let p = Vec2::new(i as f32 * 0.137, j as f32 * 0.171);
-                let core = bilinear(&m, p).expect("finite");
-                assert_eq!(f.height_local(p).to_bits(), core.to_bits(), "at {p}");
-            }
-        }
+        assert_near_heights_are_cores(&m, &f);
         let (px, pz) = f.period_m();
         let mut differs = 0;
         for k in 0..200u32 {
