@@ -625,6 +625,18 @@ mod tests {
             assert_eq!((block.min, block.max), (IVec2::ZERO, IVec2::splat(m - 1)));
             let trim = mesh.part(PartKind::Trim(TrimSide::MaxXMinZ)).unwrap();
             assert_eq!((trim.min, trim.max), (IVec2::ZERO, IVec2::splat(2 * m)));
+            // Each fix-up kind covers its own two regions: a band 3 vertices deep across the
+            // level, along X for `FixupX` and along Z for `FixupZ`.
+            let fx = mesh.part(PartKind::FixupX).unwrap();
+            assert_eq!(
+                (fx.min, fx.max),
+                (IVec2::new(0, 2 * m - 2), IVec2::new(n - 1, 2 * m))
+            );
+            let fz = mesh.part(PartKind::FixupZ).unwrap();
+            assert_eq!(
+                (fz.min, fz.max),
+                (IVec2::new(2 * m - 2, 0), IVec2::new(2 * m, n - 1))
+            );
         }
     }
 

@@ -551,3 +551,194 @@ fn the_drawn_surface_is_the_map_where_fully_refined_and_pops_without_the_morph()
         "without the morph LOD changes pop: {without} px"
     );
 }
+
+/// The range table by its definition: each LOD's range is the range it wants (distance: the
+/// finest range times the ratio per LOD; screen space: where LOD `l + 1`'s largest error
+/// projects to tau, never below the previous range nor past the view distance, which the
+/// last LOD takes) or the morph's floor where that is larger,
+/// `range_l >= range_{l-1} + diag_l / morph_start_ratio` with `diag_l` the 3D diagonal of a
+/// node of LOD `l` over the map's whole height span; never more than the larger of the two.
+#[test]
+fn ranges_are_the_wanted_range_or_the_morph_floor() {
+    let map = hilly(512, 512, WrapMode::Clamp);
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for y in 0..512 {
+        for x in 0..512 {
+            let h = map.height_m(x, y).unwrap();
+            lo = lo.min(h);
+            hi = hi.max(h);
+        }
+    }
+    let span = hi - lo;
+    let v = CdlodView {
+        camera: Vec3::new(128.0, 35.0, 128.0),
+        frustum: None,
+        viewport_width: 1280.0,
+        hfov: 1.2,
+    };
+    let mut floors_bound = 0;
+    for metric in [LodMetric::Distance, LodMetric::ScreenSpace { tau_px: 4.0 }] {
+        for (ratio, finest) in [(2.0f32, 20.0f32), (1.5, 2.0)] {
+            let cfg = CdlodConfig {
+                metric,
+                range_ratio: ratio,
+                ..config(16, 16, 6, finest)
+            };
+            let tree = CdlodTree::from_map(&map, cfg).unwrap();
+            let r = tree.ranges(&v).range;
+            assert_eq!(r.len(), 6);
+            let view_distance = finest * ratio.powi(5);
+            for l in 0..6 {
+                let prev = if l == 0 { 0.0 } else { r[l - 1] };
+                let wanted = match metric {
+                    LodMetric::Distance => finest * ratio.powi(l as i32),
+                    LodMetric::ScreenSpace { .. } if l == 5 => view_distance,
+                    LodMetric::ScreenSpace { tau_px } => (tree.max_error(l as u32 + 1) * v.k()
+                        / tau_px)
+                        .max(prev)
+                        .min(view_distance),
+                };
+                let floor = if l == 0 {
+                    0.0
+                } else {
+                    let side = tree.node_size(l as u32) as f32 * TEXEL;
+                    prev + (2.0 * side * side + span * span).sqrt() / cfg.morph_start_ratio
+                };
+                let what = format!(
+                    "{metric:?} ratio {ratio} LOD {l}: {r:?}, wanted {wanted}, floor {floor}"
+                );
+                assert!(r[l] >= wanted * (1.0 - 1e-6), "{what}");
+                assert!(r[l] >= floor * (1.0 - 1e-6), "{what}");
+                assert!(
+                    r[l] <= wanted.max(floor * 1.0011).max(1e-3) * (1.0 + 1e-6),
+                    "{what}"
+                );
+                if floor > wanted {
+                    floors_bound += 1;
+                }
+            }
+        }
+    }
+    assert!(
+        floors_bound > 0,
+        "no morph floor bound: the test means little"
+    );
+}
+
+/// A LOD's largest error is the largest of its nodes' errors (0 past the roots).
+#[test]
+fn max_error_is_the_largest_node_error() {
+    let map = hilly(256, 256, WrapMode::Clamp);
+    let tree = CdlodTree::from_map(&map, config(16, 16, 4, 20.0)).unwrap();
+    for lod in 0..4 {
+        let n = (256 / tree.node_size(lod)) as i32;
+        let mut max = 0.0f32;
+        for y in 0..n {
+            for x in 0..n {
+                max = max.max(tree.bounds(lod, IVec2::new(x, y)).unwrap().error);
+            }
+        }
+        assert_eq!(tree.max_error(lod), max, "LOD {lod}");
+        assert!(
+            lod == 0 || max > 0.0,
+            "LOD {lod} of a hilly map has no error"
+        );
+    }
+    assert_eq!(tree.max_error(4), 0.0);
+    assert_eq!(tree.max_error(u32::MAX), 0.0);
+}
+
+/// A repeating map's roots repeat around the camera for at most 64 root sizes a side (a view
+/// distance of 32 roots): exactly 64 is answered, 65 is refused.
+#[test]
+fn a_repeating_map_repeats_its_roots_64_times_a_side_at_most() {
+    let map = hilly(64, 64, WrapMode::Repeat);
+    // Roots of 8 texels (4 m); a view distance of 128 m (32 roots) or 129 m.
+    let tree = |finest: f32| CdlodTree::from_map(&map, config(4, 4, 2, finest)).unwrap();
+    let at = |x: f32| CdlodView {
+        camera: Vec3::new(x, 40.0, 1.0),
+        frustum: None,
+        viewport_width: 100.0,
+        hfov: 1.0,
+    };
+    let exact = tree(64.0);
+    assert_eq!(exact.ranges(&at(0.0)).range[1], 128.0);
+    for x in [0.0, 1.0, 2.0, 3.5, -7.0] {
+        // floor((x + 128) / 4) - floor((x - 128) / 4) = 64 for every x.
+        assert!(exact.select(&at(x)).is_ok(), "x {x}");
+    }
+    let wider = tree(64.5);
+    assert_eq!(wider.ranges(&at(0.0)).range[1], 129.0);
+    // x = 0: floor(32.25) - floor(-32.25) = 65 copies; x = 2: floor(32.75) - floor(-31.75) = 64.
+    assert!(matches!(
+        wider.select(&at(0.0)),
+        Err(LodError::CameraOutOfRange { .. })
+    ));
+    assert!(wider.select(&at(2.0)).is_ok());
+}
+
+/// A budget of exactly the visits a selection makes selects the same frame when the last
+/// node visited is drawn (a clamped map seen from over its far corner).
+#[test]
+fn a_budget_of_exactly_the_visits_keeps_the_last_node() {
+    let map = hilly(256, 256, WrapMode::Clamp);
+    let tree = CdlodTree::from_map(&map, config(16, 16, 4, 20.0)).unwrap();
+    for camera in [Vec3::new(127.0, 30.0, 127.0), Vec3::new(100.0, 25.0, 120.0)] {
+        let view = CdlodView {
+            camera,
+            frustum: None,
+            viewport_width: 100.0,
+            hfov: 1.0,
+        };
+        let frame = tree.select(&view).unwrap();
+        assert_eq!(tree.select_bounded(&view, frame.visited).unwrap(), frame);
+    }
+}
+
+/// The frame's screen error by its definition: per drawn quadrant its node's error over the
+/// nearest distance from the camera to the quadrant's box (its child node's height bounds),
+/// times K.
+#[test]
+fn the_screen_error_is_the_worst_quadrant_error_over_its_distance() {
+    let map = hilly(512, 512, WrapMode::Clamp);
+    let tree = CdlodTree::from_map(&map, config(16, 16, 5, 15.0)).unwrap();
+    for camera in [
+        Vec3::new(60.0, 32.0, 70.0),
+        Vec3::new(200.0, 60.0, 10.0),
+        Vec3::new(3.0, 28.0, 250.0),
+    ] {
+        let v = CdlodView {
+            camera,
+            frustum: None,
+            viewport_width: 1280.0,
+            hfov: 1.2,
+        };
+        let frame = tree.select(&v).unwrap();
+        let mut want = 0.0f32;
+        for i in &frame.instances {
+            let o = IVec2::from(i.origin);
+            let side = 8 * i.step as i32;
+            let node = o.div_euclid(IVec2::splat(tree.node_size(i.lod) as i32));
+            let error = tree.bounds(i.lod, node).unwrap().error;
+            let child = if i.lod == 0 {
+                tree.bounds(0, node)
+            } else {
+                tree.bounds(i.lod - 1, o.div_euclid(IVec2::splat(side)))
+            }
+            .unwrap();
+            // The nearest point of the box, per axis.
+            let near = |c: f32, a: f32, b: f32| c.clamp(a, b);
+            let (x0, z0) = (o.x as f32 * TEXEL, o.y as f32 * TEXEL);
+            let (x1, z1) = (x0 + side as f32 * TEXEL, z0 + side as f32 * TEXEL);
+            let p = Vec3::new(
+                near(camera.x, x0, x1),
+                near(camera.y, child.min, child.max),
+                near(camera.z, z0, z1),
+            );
+            want = want.max(error * v.k() / p.distance(camera).max(1e-3));
+        }
+        let got = tree.max_screen_error_px(&frame, &v);
+        assert!(want > 0.0);
+        assert!((got - want).abs() <= 1e-5 * want, "{got} vs {want}");
+    }
+}

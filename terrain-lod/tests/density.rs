@@ -160,6 +160,26 @@ fn bumpy(w: u32, h: u32, wrap: WrapMode, seed: u32) -> HeightMap<u16> {
     })
 }
 
+/// A full-density bend that leaves `bumpy` maps' samples spread over the u8 range (at the
+/// default 0.5 nearly every sample of such a rough map is 255, and a test comparing two
+/// all-255 grids cannot tell which window or which sample a level used).
+const SPREAD_BEND: f32 = 4.0;
+
+/// Asserts that a level's samples take many values, so comparing it tells windows apart.
+fn assert_spread(level: &Grid<u8>, what: &str) {
+    let mut seen = [false; 256];
+    for &v in level.as_slice() {
+        seen[usize::from(v)] = true;
+    }
+    let distinct = seen.iter().filter(|&&s| s).count();
+    let saturated = level.as_slice().iter().filter(|&&v| v == 255).count();
+    assert!(
+        distinct >= 16 && saturated * 4 < level.as_slice().len(),
+        "{what}: {distinct} distinct values, {saturated} of {} saturated",
+        level.as_slice().len()
+    );
+}
+
 /// The density map's level 0 by its definition, sample by sample, with no shared work.
 fn brute_force_raw(map: &HeightMap<u16>, filter: CurvatureFilter) -> Grid<f32> {
     let size = density_size(map.size());
@@ -250,10 +270,11 @@ fn preprocessing_widens_the_window_on_tile_borders() {
             border_lod_skip: skip,
             preprocess,
             tile_size: 8,
-            full_density_bend: 0.02,
+            full_density_bend: SPREAD_BEND,
             ..Default::default()
         };
         let dm = DensityMap::from_map(&map, params).unwrap();
+        assert_spread(dm.level(0).unwrap(), "level 0");
         assert_eq!(
             dm.level(0).unwrap(),
             &brute_force_level0(&dm, WrapMode::Repeat),
@@ -274,11 +295,14 @@ fn coarser_levels_are_maxima_inside_and_point_samples_on_borders() {
     let map = bumpy(256, 192, WrapMode::Repeat, 5);
     let params = DensityParams {
         tile_size: 4,
-        full_density_bend: 0.02,
+        full_density_bend: SPREAD_BEND,
         ..Default::default()
     };
     let dm = DensityMap::from_map(&map, params).unwrap();
     assert_eq!(dm.level_count(), 7); // 64x48, 32x24, 16x12, 8x6, 4x3, 2x2, 1x1
+    for k in 0..3 {
+        assert_spread(dm.level(k).unwrap(), &format!("level {k}"));
+    }
     for k in 1..dm.level_count() {
         let (child, parent) = (dm.level(k - 1).unwrap(), dm.level(k).unwrap());
         assert_eq!(
@@ -356,7 +380,7 @@ proptest! {
         let params = DensityParams {
             filter: CurvatureFilter::ALL[filter],
             tile_size: tile,
-            full_density_bend: 0.02,
+            full_density_bend: SPREAD_BEND,
             ..Default::default()
         };
         let mut dm = DensityMap::from_map(&map, params).unwrap();
@@ -541,6 +565,31 @@ fn a_tiny_map_has_a_one_sample_pyramid() {
     let dm = DensityMap::from_map(&map, DensityParams::default()).unwrap();
     assert_eq!(dm.level_count(), 1);
     assert_eq!(dm.level(0).unwrap().size(), UVec2::ONE);
+}
+
+/// Repeating maps smaller than a sample's window (sides 1 to 9): every window reads several
+/// copies of a changed texel, and an update of any one texel still equals a rebuild.
+#[test]
+fn updates_of_maps_smaller_than_a_window_equal_a_rebuild() {
+    for n in 1..=9u32 {
+        for t in 0..n as i32 {
+            let mut map = bumpy(n, 5, WrapMode::Repeat, n);
+            let params = DensityParams {
+                full_density_bend: SPREAD_BEND,
+                tile_size: 2,
+                ..Default::default()
+            };
+            let mut dm = DensityMap::from_map(&map, params).unwrap();
+            let rect = Rect::new(IVec2::new(t, 1), UVec2::ONE);
+            *map.grid_mut().get_mut(t as u32, 1).unwrap() += 700;
+            dm.update_rect(&map, rect).unwrap();
+            assert_eq!(
+                dm,
+                DensityMap::from_map(&map, params).unwrap(),
+                "side {n}, texel {t}"
+            );
+        }
+    }
 }
 
 #[test]

@@ -98,3 +98,13 @@ fn coarse_height_interpolates_the_coarser_grid() {
         h(t)
     );
 }
+
+/// The transition region is a tenth of the level's side (GPU Gems 2), at least one grid unit.
+#[test]
+fn the_default_morph_width_is_a_tenth_of_n_and_at_least_one() {
+    assert_eq!(default_morph_width(255), 25.5);
+    assert_eq!(default_morph_width(63), 6.3);
+    assert_eq!(default_morph_width(15), 1.5);
+    assert_eq!(default_morph_width(7), 1.0);
+    assert_eq!(default_morph_width(0), 1.0);
+}

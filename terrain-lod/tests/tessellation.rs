@@ -594,6 +594,19 @@ fn check_update_on(
         tess.patch_bounds() == rebuilt.patch_bounds(),
         "patch bounds"
     );
+    // The rows reported are grid rows, each reported once (disjoint ranges).
+    let grid_rows = tess.grid_size().y;
+    let mut seen = vec![false; grid_rows as usize];
+    for r in &rows {
+        assert!(
+            r.start < r.end && r.end <= grid_rows,
+            "{r:?} of {grid_rows} rows"
+        );
+        for y in r.clone() {
+            assert!(!seen[y as usize], "row {y} reported twice in {rows:?}");
+            seen[y as usize] = true;
+        }
+    }
     // Every vertex that changed lies in the rows reported (what a GPU copy must cover).
     let before = TessHierarchy::from_map(
         &map(msize.x, msize.y, wrap),
@@ -663,6 +676,146 @@ fn updates_at_the_edges_equal_rebuilds() {
     }
 }
 
+/// Rects whose last texel is the map's last (the vertices past it repeat it), rects one
+/// texel wide at the first column and at a patch boundary (the patches either side hold the
+/// vertex on their shared edge), with and without the density map.
+#[test]
+fn updates_ending_at_the_last_texel_or_on_a_patch_edge_equal_rebuilds() {
+    for wrap in [WrapMode::Clamp, WrapMode::Repeat] {
+        for with_density in [false, true] {
+            for (at, size) in [
+                (IVec2::new(120, 90), UVec2::new(8, 6)),
+                (IVec2::new(127, 95), UVec2::ONE),
+                (IVec2::new(0, 40), UVec2::new(1, 3)),
+                (IVec2::new(40, 0), UVec2::new(3, 1)),
+                (IVec2::new(32, 40), UVec2::ONE),
+                (IVec2::new(40, 32), UVec2::ONE),
+                (IVec2::new(64, 64), UVec2::ONE),
+            ] {
+                check_update(wrap, at, size, 7000, with_density);
+            }
+        }
+    }
+}
+
+/// The grid's shape: a repeating map whose sides the patch divides is its own grid (wrapping);
+/// any other map gets the cells between its texels, rounded up to whole patches, clamped.
+#[test]
+fn the_grid_wraps_only_for_repeating_maps_the_patch_tiles() {
+    for (w, h, wrap, grid, grid_wrap, patches) in [
+        (
+            128,
+            96,
+            WrapMode::Repeat,
+            (128, 96),
+            WrapMode::Repeat,
+            (4, 3),
+        ),
+        (128, 96, WrapMode::Clamp, (129, 97), WrapMode::Clamp, (4, 3)),
+        (
+            120,
+            90,
+            WrapMode::Repeat,
+            (129, 97),
+            WrapMode::Clamp,
+            (4, 3),
+        ),
+        (33, 20, WrapMode::Clamp, (33, 33), WrapMode::Clamp, (1, 1)),
+    ] {
+        let m = map(w, h, wrap);
+        let tess = TessHierarchy::from_map(&m, None, TessConfig::default()).unwrap();
+        assert_eq!(
+            tess.grid_size(),
+            UVec2::new(grid.0, grid.1),
+            "{w}x{h} {wrap:?}"
+        );
+        assert_eq!(tess.grid_wrap(), grid_wrap, "{w}x{h} {wrap:?}");
+        assert_eq!(
+            tess.patches(),
+            UVec2::new(patches.0, patches.1),
+            "{w}x{h} {wrap:?}"
+        );
+        assert_eq!(tess.wrap(), wrap);
+        assert_eq!(tess.texel_size(), TS);
+        // One (lowest, highest) per patch, holding the heights of its closed square.
+        let pb = tess.patch_bounds();
+        assert_eq!(pb.len() as u32, patches.0 * patches.1);
+        let g = tess.grid_size();
+        for (k, &[lo, hi]) in pb.iter().enumerate() {
+            let (px, py) = (k as u32 % patches.0 * 32, k as u32 / patches.0 * 32);
+            for y in py..=(py + 32).min(g.y - 1) {
+                for x in px..=(px + 32).min(g.x - 1) {
+                    let v = tess.heights()[(y * g.x + x) as usize];
+                    assert!(lo <= v && v <= hi, "patch {k}: {v} outside {lo} ..= {hi}");
+                }
+            }
+        }
+        // 2 log2 P + 1 levels; no children off the grid on either axis.
+        assert_eq!(tess.level_count(), 11);
+        for v in [
+            IVec2::new(-16, 16),
+            IVec2::new(16, -16),
+            IVec2::new(g.x as i32 + 15, 16),
+            IVec2::new(16, g.y as i32 + 15),
+        ] {
+            assert!(tess.children(v).is_empty(), "{v}");
+        }
+        assert!(!tess.children(IVec2::new(16, 16)).is_empty());
+    }
+}
+
+/// The minimum triangle size stops the splitting where the children's hypotenuse
+/// (`P sqrt(2)^-l` texels at level `l + 1`) would fall below it: 32 texels of 0.5 m are 16 m,
+/// and `16 / sqrt(2)^8 = 1 m`, so a minimum just under 1 m splits 9 levels of the 10 (1 m itself
+/// sits on the rounding of `sqrt(2)^-8`).
+#[test]
+fn the_minimum_triangle_size_caps_the_split_levels() {
+    let m = map(64, 64, WrapMode::Clamp);
+    for (min_m, levels) in [
+        (0.0, 10),
+        (0.9, 9),
+        (0.99, 9),
+        (1.1, 8),
+        (16.0, 1),
+        (17.0, 0),
+    ] {
+        let config = TessConfig {
+            min_triangle_m: min_m,
+            ..TessConfig::default()
+        };
+        let tess = TessHierarchy::from_map(&m, None, config).unwrap();
+        let d = tess.decision(&view(Vec3::new(10.0, 30.0, 10.0))).unwrap();
+        assert_eq!(d.split_levels, levels, "minimum {min_m} m");
+    }
+}
+
+/// A vertex's split ratio falls as the camera rises straight above it, and rises as it comes
+/// down towards it (the distance is measured from the vertex's true height).
+#[test]
+fn the_split_ratio_falls_with_the_height_above_the_vertex() {
+    let m = map(64, 64, WrapMode::Clamp);
+    let config = TessConfig {
+        use_density: false,
+        ..TessConfig::default()
+    };
+    let tess = TessHierarchy::from_map(&m, None, config).unwrap();
+    let v = IVec2::new(4, 4);
+    let g = tess.grid_size();
+    let h = tess.heights()[(v.y as u32 * g.x + v.x as u32) as usize];
+    let above = |dy: f32| {
+        let camera = Vec3::new(v.x as f32 * TS, h + dy, v.y as f32 * TS);
+        let d = tess.decision(&view(camera)).unwrap();
+        tess.ratio(&d, v)
+    };
+    let ratios: Vec<f32> = [10.0, 20.0, 40.0, 80.0, 160.0].map(above).to_vec();
+    assert!(ratios.windows(2).all(|w| w[1] < w[0] * 0.75), "{ratios:?}");
+    // Below the vertex as far as above it: the same distance, the same ratio.
+    assert!(
+        (above(-20.0) - above(20.0)).abs() <= 1e-6 * above(20.0),
+        "{ratios:?}"
+    );
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
 
@@ -694,4 +847,99 @@ proptest! {
         let frame = tess.select(&view(Vec3::new(cx, cy, cz))).unwrap();
         assert_conforming(&frame, tess.patches() * config.patch_size);
     }
+}
+
+/// The popping metric by its definition: the largest distance in pixels between the two
+/// surface heights at a probe, each projected with `view_proj` (glam's own projection here).
+#[test]
+fn the_height_jump_is_the_pixel_distance_of_the_two_projections() {
+    let m = map(256, 256, WrapMode::Clamp);
+    let tess = TessHierarchy::from_map(&m, None, TessConfig::default()).unwrap();
+    let (now, then) = (Vec3::new(20.0, 45.0, 30.0), Vec3::new(60.0, 70.0, 30.0));
+    let (vp, _) = frustum_view(now, Vec3::new(50.0, 25.0, 40.0));
+    let target = Vec2::new(1280.0, 720.0);
+    let probes: Vec<Vec2> = (0..40)
+        .map(|i| Vec2::new(60.0 + 3.3 * i as f32, 50.0 + 2.1 * (i % 13) as f32))
+        .collect();
+    let mut want = 0.0f32;
+    let mut counted = 0;
+    for &p in &probes {
+        let (a, b) = (
+            tess.surface_height(&view(now), p).unwrap(),
+            tess.surface_height(&view(then), p).unwrap(),
+        );
+        let pixel = |h: f32| {
+            let ndc = vp.project_point3(Vec3::new(p.x * TS, h, p.y * TS));
+            (ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 && ndc.z >= 0.0)
+                .then(|| (Vec2::new(ndc.x, -ndc.y) * 0.5 + 0.5) * target)
+        };
+        if let (Some(pa), Some(pb)) = (pixel(a), pixel(b)) {
+            want = want.max(pa.distance(pb));
+            counted += 1;
+        }
+    }
+    assert!(
+        counted > 20 && want > 0.5,
+        "{counted} probes on screen, {want} px"
+    );
+    let got = tess.max_height_jump(&view(now), &view(then), &probes, vp, target);
+    assert!((got - want).abs() <= 1e-3 * want, "{got} px vs {want} px");
+}
+
+/// Seen from afar nothing splits: each patch is its two base triangles, whose shared
+/// hypotenuse alternates between the patch's diagonals like a checkerboard (so the diamonds
+/// across patch edges pair up).
+#[test]
+fn base_triangles_alternate_their_diagonal_like_a_checkerboard() {
+    let m = map(128, 128, WrapMode::Clamp);
+    let config = TessConfig {
+        triangle_width_px: 10_000.0,
+        ..TessConfig::default()
+    };
+    let tess = TessHierarchy::from_map(&m, None, config).unwrap();
+    let frame = tess.select(&view(Vec3::new(32.0, 500.0, 32.0))).unwrap();
+    let n = tess.patches();
+    assert_eq!(frame.triangle_count(), 2 * u64::from(n.x * n.y));
+    for t in &frame.triangles {
+        let c: Vec<Vec2> = t.iter().map(|v| Vec2::from(v.texel)).collect();
+        let (px, py) = {
+            let lo = c.iter().fold(Vec2::splat(f32::MAX), |a, &b| a.min(b));
+            ((lo.x / 32.0) as i32, (lo.y / 32.0) as i32)
+        };
+        // The longest edge is the hypotenuse.
+        let edges = [(c[0], c[1]), (c[1], c[2]), (c[2], c[0])];
+        let (a, b) = edges
+            .into_iter()
+            .max_by(|x, y| x.0.distance(x.1).total_cmp(&y.0.distance(y.1)))
+            .unwrap();
+        let o = Vec2::new(px as f32, py as f32) * 32.0;
+        let main = [o, o + 32.0];
+        let anti = [o + Vec2::new(32.0, 0.0), o + Vec2::new(0.0, 32.0)];
+        let want = if (px + py) % 2 == 0 { main } else { anti };
+        assert!(
+            (a == want[0] && b == want[1]) || (a == want[1] && b == want[0]),
+            "patch ({px}, {py}): hypotenuse {a} - {b}"
+        );
+    }
+}
+
+/// A triangle budget of exactly what a view draws is enough: one patch of 32 texels seen from
+/// just above, split down to the texels, is 2 * 32^2 = 2048 triangles; 2047 refuses.
+#[test]
+fn a_budget_of_exactly_the_drawn_triangles_is_enough() {
+    let m = map(33, 33, WrapMode::Clamp);
+    let budget = |max_triangles: usize| TessConfig {
+        triangle_width_px: 0.01,
+        use_density: false,
+        morph: false,
+        max_triangles,
+        ..TessConfig::default()
+    };
+    let camera = Vec3::new(8.0, 40.0, 8.0);
+    let full = TessHierarchy::from_map(&m, None, budget(1 << 22)).unwrap();
+    assert_eq!(full.select(&view(camera)).unwrap().triangle_count(), 2048);
+    let exact = TessHierarchy::from_map(&m, None, budget(2048)).unwrap();
+    assert_eq!(exact.select(&view(camera)).unwrap().triangle_count(), 2048);
+    let short = TessHierarchy::from_map(&m, None, budget(2047)).unwrap();
+    assert!(short.select(&view(camera)).is_err());
 }

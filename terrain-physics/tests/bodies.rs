@@ -161,7 +161,9 @@ fn sphere_rolls_down_a_slope_at_five_sevenths_of_g_sin_theta() {
         assert!((above - r).abs() < 2e-3, "left the surface: {above}");
     }
     let t = steps as f32 * dt;
-    let a = SOLID_SPHERE_ROLLING_FACTOR * 9.81 * theta.sin();
+    // 5/7 written out (not the constant): a solid ball's `1 / (1 + I / (m r^2))`, I = 2/5 m r^2.
+    assert!((SOLID_SPHERE_ROLLING_FACTOR - 5.0 / 7.0).abs() < 1e-7);
+    let a = 5.0 / 7.0 * 9.81 * theta.sin();
     let speed = ball.velocity.length();
     assert!(
         (speed - a * t).abs() < 0.02 * a * t,

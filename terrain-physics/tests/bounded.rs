@@ -283,6 +283,24 @@ fn a_capped_walk_never_reports_a_false_miss() {
     );
 }
 
+/// The walk's cap is four times around the field plus a fixed allowance: on a 64 x 64 field
+/// (4 * 128 + 4096 = 4608 cells) a ray that meets the flat ground after 4400 cells, more than
+/// once around plus the allowance, is answered, not refused.
+#[test]
+fn a_walk_of_four_laps_and_the_allowance_is_answered() {
+    let enc = HeightEncoding::new(0.01, 0.0).expect("enc");
+    let map = CoarseMap::coarse(Grid::new(64, 64, 0u16).expect("grid"), enc, 1.0).expect("map");
+    let c = HeightfieldCollider::from_map(&map).expect("collider");
+    let hit = c
+        .raycast(Vec3::new(0.5, 44.0, 0.5), Vec3::new(1.0, -0.01, 0.0), 1e4)
+        .expect("within the cap")
+        .expect("reaches the ground");
+    assert!(
+        (hit.point.x - 4400.5).abs() < 0.05 && hit.point.y.abs() < 1e-3,
+        "{hit:?}"
+    );
+}
+
 /// The one-period search of a sphere far below ground is exact: its depth equals the distance
 /// to the nearest surface point found by brute force over several periods, for centres at
 /// every fraction of a cell (the window once missed nearer copies at its edges).
