@@ -285,11 +285,14 @@ fn a_capped_walk_never_reports_a_false_miss() {
 
 /// The walk's cap is four times around the field plus a fixed allowance: on a 64 x 64 field
 /// (4 * 128 + 4096 = 4608 cells) a ray that meets the flat ground after 4400 cells, more than
-/// once around plus the allowance, is answered, not refused.
+/// once around plus the allowance, is answered, not refused. A 50 m spike away from the ray's
+/// row keeps the field's top above the ray, so the walk starts at its origin.
 #[test]
 fn a_walk_of_four_laps_and_the_allowance_is_answered() {
     let enc = HeightEncoding::new(0.01, 0.0).expect("enc");
-    let map = CoarseMap::coarse(Grid::new(64, 64, 0u16).expect("grid"), enc, 1.0).expect("map");
+    let grid = Grid::from_fn(64, 64, |x, y| if (x, y) == (32, 32) { 5000u16 } else { 0 })
+        .expect("grid");
+    let map = CoarseMap::coarse(grid, enc, 1.0).expect("map");
     let c = HeightfieldCollider::from_map(&map).expect("collider");
     let hit = c
         .raycast(Vec3::new(0.5, 44.0, 0.5), Vec3::new(1.0, -0.01, 0.0), 1e4)
