@@ -768,6 +768,10 @@ impl BlendOp {
 /// into u8 or u16 samples with integer SIMD-friendly operations: `old +/- floor(w + 1/2)`
 /// saturating, or `min` / `max` with `floor(base + z + 1/2)` computed as the integer part of
 /// the base plus `floor(frac(base) + 1/2 + z)` in f32.
+///
+/// Magnitudes are clamped to `TERM_LIMIT` and bases are at most `BASE_LIMIT` from 0 (else the
+/// f64 path runs), so a clamped magnitude leaves `base + z` outside the sample range on the
+/// same side as the exact one: clamping changes no result.
 #[derive(Debug, Clone, Copy)]
 struct SmallOp {
     kind: u8,
@@ -776,13 +780,22 @@ struct SmallOp {
     base_frac_half: f32,
 }
 
+/// The largest stored-unit magnitude a min / max blend of the u8 / u16 path takes (2^21;
+/// `floor_small` needs `|y| < 2^22`).
+const TERM_LIMIT: f32 = 2_097_152.0;
+/// The farthest a min / max base may lie from 0 on the u8 / u16 path, in stored units (2^20):
+/// `TERM_LIMIT - BASE_LIMIT` is far above any sample's range.
+const BASE_LIMIT: f64 = 1_048_576.0;
+
 impl SmallOp {
-    /// Whether this path applies: u8 or u16 samples and `|add_scale| <= 1e9` (so every
-    /// product stays far inside f32's range).
+    /// Whether this path applies: u8 or u16 samples, `|add_scale| <= 1e9` (so every product
+    /// stays far inside f32's range) and, for min and max, a base within `BASE_LIMIT`.
     fn fits<T: HeightSample>(op: &BlendOp) -> bool {
         use std::any::TypeId;
         let t = TypeId::of::<T>();
-        (t == TypeId::of::<u16>() || t == TypeId::of::<u8>()) && op.add_scale.abs() <= 1e9
+        (t == TypeId::of::<u16>() || t == TypeId::of::<u8>())
+            && op.add_scale.abs() <= 1e9
+            && (op.kind == 0 || op.base_raw.abs() <= BASE_LIMIT)
     }
 
     fn new(op: &BlendOp) -> Self {
@@ -790,8 +803,8 @@ impl SmallOp {
         Self {
             kind: op.kind,
             negative: op.add_scale < 0.0,
-            // Bases far outside the sample range behave like one just outside it.
-            base_int: b.clamp(-1e6, 1e6) as i32,
+            // `fits` keeps min / max bases within the limit; an add ignores the base.
+            base_int: b.clamp(-BASE_LIMIT, BASE_LIMIT) as i32,
             base_frac_half: (op.base_raw - b + 0.5) as f32,
         }
     }
@@ -843,7 +856,7 @@ macro_rules! apply_small {
                 (kind, negative) => {
                     let sign = if negative { -1.0f32 } else { 1.0 };
                     for (d, &w) in dst.iter_mut().zip(w) {
-                        let y = bfh + sign * w.min(131_072.0);
+                        let y = bfh + sign * w.min(TERM_LIMIT);
                         let t = floor_small(y);
                         let level = (bi + t).clamp(0, <$t>::MAX as i32) as $t;
                         *d = if kind == 1 {

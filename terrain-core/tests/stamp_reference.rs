@@ -161,6 +161,59 @@ proptest! {
     }
 }
 
+/// Min and max blends with a base far above or below the map and an intensity that brings
+/// the surface back into it (or nearly): the small-sample path once clamped such terms and
+/// left the centre untouched; every texel must stay within one unit of the reference.
+#[test]
+fn far_bases_with_huge_intensities_stay_within_one_unit() {
+    let e = HeightEncoding::new(0.01, 0.0).unwrap();
+    for (base_m, intensity) in [
+        (9_000.0f32, -9_000.0f32),
+        (9_000.0, -8_700.0),
+        (-9_000.0, 9_300.0),
+        (20_000.0, -19_800.0),
+        (1e9, -1e9),
+        (-1e9, 1e9),
+    ] {
+        for min in [true, false] {
+            let b = if min {
+                Blend::Min { base_m }
+            } else {
+                Blend::Max { base_m }
+            };
+            let p =
+                StampPlacement::new(Vec2::new(12.0, 10.0), Vec2::splat(18.0), intensity).unwrap();
+            let before = HeightMap::new(
+                hashed::<u16>(96, 80, 1_000, 60_000),
+                e,
+                0.25,
+                WrapMode::Clamp,
+            )
+            .unwrap();
+            let mut fast = before.clone();
+            let mut reference = before.clone();
+            apply_stamp(&mut fast, &mut GaussianStamp::default(), &p, b).unwrap();
+            apply_stamp_reference(&mut reference, &mut GaussianStamp::default(), &p, b).unwrap();
+            let max = fast
+                .grid()
+                .as_slice()
+                .iter()
+                .zip(reference.grid().as_slice())
+                .map(|(a, b)| a.abs_diff(*b))
+                .max()
+                .unwrap();
+            assert!(
+                max <= 1,
+                "base {base_m} m, intensity {intensity} m, min {min}: {max} units"
+            );
+            assert!(
+                reference != before || !min,
+                "base {base_m} intensity {intensity}: nothing moved"
+            );
+        }
+    }
+}
+
 /// Full-range intensities on u16 and absurd ones: still within one unit, never a panic.
 #[test]
 fn extreme_gaussians_stay_within_one_unit() {

@@ -290,8 +290,8 @@ fn a_capped_walk_never_reports_a_false_miss() {
 #[test]
 fn a_walk_of_four_laps_and_the_allowance_is_answered() {
     let enc = HeightEncoding::new(0.01, 0.0).expect("enc");
-    let grid = Grid::from_fn(64, 64, |x, y| if (x, y) == (32, 32) { 5000u16 } else { 0 })
-        .expect("grid");
+    let grid =
+        Grid::from_fn(64, 64, |x, y| if (x, y) == (32, 32) { 5000u16 } else { 0 }).expect("grid");
     let map = CoarseMap::coarse(grid, enc, 1.0).expect("map");
     let c = HeightfieldCollider::from_map(&map).expect("collider");
     let hit = c
