@@ -34,6 +34,7 @@
 #![warn(clippy::unwrap_used)]
 
 pub mod dem;
+pub mod detail;
 pub mod error;
 pub mod geotiff;
 pub mod granular;
@@ -70,8 +71,8 @@ pub use sample::bilinear;
 pub use shockwave::{MAX_SHOCKWAVE_GAMMA, Shockwave, ShockwaveParams};
 pub use stamp::{
     Blend, DEFAULT_GAUSSIAN_EPSILON_M, GaussianStamp, Stamp, StampKernel, StampPlacement,
-    StampRegion, TextureStamp, apply_stamp, apply_stamp_reference, gaussian_rounding_bound,
-    stamp_region,
+    StampRegion, TextureStamp, apply_stamp, apply_stamp_reference, apply_stamp_window,
+    gaussian_rounding_bound, stamp_region,
 };
 pub use terrain_gen::{TerrainParams, generate_coarse_map, generate_heights};
 pub use tile_atlas::TileAtlas;

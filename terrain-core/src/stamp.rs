@@ -394,7 +394,42 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
     placement: &StampPlacement,
     blend: Blend,
 ) -> Result<Vec<DirtyRect>, CoreError> {
-    let Some((pieces, frame, op)) = prepare_stamp(map, stamp, placement, blend)? else {
+    let prepared = prepare_stamp(map, stamp, placement, blend, None)?;
+    apply_prepared(map, stamp, prepared)
+}
+
+/// Applies `stamp` to `map` as the window of a larger, clamped map whose texel `origin` is the
+/// window's texel `(0, 0)`: texel `(x, y)` of `map` gets exactly what texel
+/// `origin + (x, y)` of the larger map would get from [`apply_stamp`] with the same
+/// `placement` (in the larger map's metres), whenever the window holds the stamp's whole
+/// footprint (then the evaluation is the same one, texel for texel). A window cut through a
+/// footprint gets the same values within the stamp's rounding bound. `map`'s own wrap mode
+/// is ignored. Returns the covered rect in `map`'s coordinates, if any.
+///
+/// This is how a stamp lands on tiles of a larger grid (the detail layer gathers the
+/// footprint into one window, stamps it, and scatters it back).
+pub fn apply_stamp_window<T: HeightSample, S: Stamp + ?Sized>(
+    map: &mut HeightMap<T>,
+    origin: IVec2,
+    stamp: &mut S,
+    placement: &StampPlacement,
+    blend: Blend,
+) -> Result<Option<DirtyRect>, CoreError> {
+    let prepared = prepare_stamp(map, stamp, placement, blend, Some(origin))?;
+    Ok(apply_prepared(map, stamp, prepared)?.into_iter().next())
+}
+
+/// A placement ready to apply: the pieces (map rect, offset to unwrapped coordinates), the
+/// local frame and the blend.
+type Prepared = (Vec<(Rect, IVec2)>, Frame, BlendOp);
+
+/// The shared body of [`apply_stamp`] and [`apply_stamp_window`].
+fn apply_prepared<T: HeightSample, S: Stamp + ?Sized>(
+    map: &mut HeightMap<T>,
+    stamp: &mut S,
+    prepared: Option<Prepared>,
+) -> Result<Vec<DirtyRect>, CoreError> {
+    let Some((pieces, frame, op)) = prepared else {
         return Ok(Vec::new());
     };
     let footprint_x = pieces
@@ -554,14 +589,15 @@ pub fn gaussian_rounding_bound(beta: f32, placement: &StampPlacement) -> f64 {
 }
 
 /// Per-placement state shared by every path of [`apply_stamp`] and [`apply_stamp_reference`]:
-/// validates, cuts the footprint into pieces and prepares the stamp.
-#[allow(clippy::type_complexity)]
+/// validates, cuts the footprint into pieces and prepares the stamp. With `window`, the map is
+/// the window at that origin of a larger clamped map: one piece, the footprint clipped to it.
 fn prepare_stamp<T: HeightSample, S: Stamp + ?Sized>(
     map: &HeightMap<T>,
     stamp: &mut S,
     placement: &StampPlacement,
     blend: Blend,
-) -> Result<Option<(Vec<(Rect, IVec2)>, Frame, BlendOp)>, CoreError> {
+    window: Option<IVec2>,
+) -> Result<Option<Prepared>, CoreError> {
     let ts = map.texel_size();
     if let Blend::Min { base_m } | Blend::Max { base_m } = blend
         && !base_m.is_finite()
@@ -571,15 +607,26 @@ fn prepare_stamp<T: HeightSample, S: Stamp + ?Sized>(
             value: base_m,
         });
     }
-    let Some(region) = stamp_region(map.size(), map.wrap(), ts, placement)? else {
-        return Ok(None);
-    };
     // (map rect, offset from map to unwrapped coordinates) for every piece.
-    let pieces: Vec<(Rect, IVec2)> = region
-        .pieces
-        .iter()
-        .map(|p| (p.map, p.unwrapped.min - p.map.min))
-        .collect();
+    let pieces: Vec<(Rect, IVec2)> = match window {
+        Some(origin) => {
+            let footprint = placement.footprint(ts)?;
+            let Some(inside) = footprint.intersect(&Rect::new(origin, map.size())) else {
+                return Ok(None);
+            };
+            vec![(Rect::new(inside.min - origin, inside.size), origin)]
+        }
+        None => {
+            let Some(region) = stamp_region(map.size(), map.wrap(), ts, placement)? else {
+                return Ok(None);
+            };
+            region
+                .pieces
+                .iter()
+                .map(|p| (p.map, p.unwrapped.min - p.map.min))
+                .collect()
+        }
+    };
     stamp.prepare(placement)?;
     let enc = map.encoding();
     // Local coordinates in texel units: the same arithmetic for a texel whatever piece it is
@@ -625,7 +672,7 @@ pub fn apply_stamp_reference<T: HeightSample, S: Stamp + ?Sized>(
     placement: &StampPlacement,
     blend: Blend,
 ) -> Result<Vec<DirtyRect>, CoreError> {
-    let Some((pieces, frame, op)) = prepare_stamp(map, stamp, placement, blend)? else {
+    let Some((pieces, frame, op)) = prepare_stamp(map, stamp, placement, blend, None)? else {
         return Ok(Vec::new());
     };
     let grid = map.grid_mut();

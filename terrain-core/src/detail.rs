@@ -1,0 +1,437 @@
+//! The detail layer of seed 000 (sec. 2.3.1, eq. 2.1): a grid of 8-bit detail tiles laid over
+//! the coarse-map at `refine` detail texels per coarse texel, each spanning 1 m of height
+//! around the coarse surface, addressed through a tile-ID matrix in which a never-touched
+//! tile is the shared zero tile.
+//!
+//! Stamps land on the layer as on one large map: [`DetailLayer::apply_stamp`] gathers the
+//! footprint from every tile it touches (across tile edges and corners, and across the
+//! coarse-map's wrap), stamps it in one window with [`apply_stamp_window`], and scatters it
+//! back, so a stamp over a 4-tile corner gives the texels the same stamp gives on one large
+//! tile (seed 000 leaves tile boundaries unhandled). Tiles are materialised on first write.
+//!
+//! A detail value is clamped to its tile's 1 m range, as seed 000's 8-bit detail-maps are:
+//! large deformations belong to the coarse-map (a spill of the excess into it is not built
+//! yet).
+//!
+//! ```
+//! use glam::{UVec2, Vec2};
+//! use terrain_core::detail::{DetailLayer, DetailLayout};
+//! use terrain_core::{Blend, GaussianStamp, StampPlacement};
+//!
+//! // Seed 000's numbers: a 4096^2 coarse-map at 0.1 m, refined x3, 2048^2 detail tiles.
+//! let layout = DetailLayout::new(UVec2::splat(4096), 0.1, 3, 2048).unwrap();
+//! assert_eq!(layout.tiles(), UVec2::splat(6)); // eq. 2.1
+//!
+//! // A small layer: a footprint 5 cm deep pressed over the corner of four tiles.
+//! let mut layer = DetailLayer::new(DetailLayout::new(UVec2::splat(64), 0.1, 3, 32).unwrap()).unwrap();
+//! let p = StampPlacement::new(Vec2::splat(3.2), Vec2::splat(0.5), -0.05).unwrap();
+//! let change = layer.apply_stamp(&mut GaussianStamp::default(), &p, Blend::Add).unwrap();
+//! assert_eq!(change.tiles.len(), 4);
+//! assert!(layer.height_m(Vec2::splat(3.2)) < -0.04);
+//! assert_eq!(layer.resident_tiles(), 4);
+//! ```
+
+use crate::error::CoreError;
+use crate::grid::{Grid, WrapMode};
+use crate::map::{HeightEncoding, HeightMap};
+use crate::rect::Rect;
+use crate::stamp::{Blend, Stamp, StampPlacement, apply_stamp_window};
+use glam::{IVec2, UVec2, Vec2};
+
+/// The stored value of 0 m in a detail tile: raw 128 of [`detail_encoding`].
+pub const DETAIL_ZERO_RAW: u8 = 128;
+
+/// The most detail texels per coarse texel a layout accepts (seed 000 uses 3).
+pub const MAX_REFINE: u32 = 16;
+
+/// The most tiles a layout accepts along each axis (the tile-ID matrix stays small).
+pub const MAX_TILES_PER_SIDE: u32 = 4096;
+
+/// The encoding of every detail tile: 1/255 m per unit, raw 128 at 0 m, so a tile spans
+/// `[-128/255, 127/255]` m (1 m in all, seed 000 sec. 3.1.1's 4 mm steps) around the coarse
+/// surface.
+pub fn detail_encoding() -> HeightEncoding {
+    HeightEncoding {
+        scale: 1.0 / 255.0,
+        offset: -f32::from(DETAIL_ZERO_RAW) / 255.0,
+    }
+}
+
+/// Where the detail tiles lie over a coarse-map (seed 000 eq. 2.1).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DetailLayout {
+    coarse_size: UVec2,
+    coarse_texel_m: f32,
+    refine: u32,
+    tile_size: u32,
+}
+
+impl DetailLayout {
+    /// A layout over a coarse-map of `coarse_size` texels `coarse_texel_m` apart, refined by
+    /// `refine` (the thesis's `1 / gamma`: detail texels per coarse texel along each axis),
+    /// with square tiles of `tile_size` detail texels.
+    ///
+    /// Fails on an empty map, a texel size that is not positive and finite, `refine` outside
+    /// `1 ..= MAX_REFINE`, a tile size of 0 or above 16 384, or more than
+    /// [`MAX_TILES_PER_SIDE`] tiles along an axis.
+    pub fn new(
+        coarse_size: UVec2,
+        coarse_texel_m: f32,
+        refine: u32,
+        tile_size: u32,
+    ) -> Result<Self, CoreError> {
+        if coarse_size.min_element() == 0 {
+            return Err(CoreError::EmptyGrid {
+                width: coarse_size.x,
+                height: coarse_size.y,
+            });
+        }
+        crate::map::check_texel_size(coarse_texel_m)?;
+        if !(1..=MAX_REFINE).contains(&refine) {
+            return Err(CoreError::OutOfRange {
+                what: "detail refinement (detail texels per coarse texel)",
+                value: f64::from(refine),
+                expected: "1 to 16",
+            });
+        }
+        if !(1..=16_384).contains(&tile_size) {
+            return Err(CoreError::OutOfRange {
+                what: "detail tile size (texels)",
+                value: f64::from(tile_size),
+                expected: "1 to 16 384",
+            });
+        }
+        let layout = Self {
+            coarse_size,
+            coarse_texel_m,
+            refine,
+            tile_size,
+        };
+        let tiles = layout.tiles_u64();
+        if tiles.0.max(tiles.1) > u64::from(MAX_TILES_PER_SIDE) {
+            return Err(CoreError::OutOfRange {
+                what: "detail tiles per side",
+                value: tiles.0.max(tiles.1) as f64,
+                expected: "at most 4096 (a larger tile size or a smaller refinement)",
+            });
+        }
+        Ok(layout)
+    }
+
+    fn tiles_u64(&self) -> (u64, u64) {
+        let d = self.detail_size_u64();
+        let t = u64::from(self.tile_size);
+        (d.0.div_ceil(t), d.1.div_ceil(t))
+    }
+
+    fn detail_size_u64(&self) -> (u64, u64) {
+        let r = u64::from(self.refine);
+        (
+            u64::from(self.coarse_size.x) * r,
+            u64::from(self.coarse_size.y) * r,
+        )
+    }
+
+    /// Tiles along each axis, eq. 2.1: `n = N_C / (gamma N_D)`, rounded up (the last tile
+    /// of a row may reach past the map; its extra texels are never addressed).
+    pub fn tiles(&self) -> UVec2 {
+        let (x, y) = self.tiles_u64();
+        UVec2::new(x as u32, y as u32)
+    }
+
+    /// Detail texels over the whole coarse-map (`refine` times its size). The layer repeats
+    /// with this period, as the coarse-map does.
+    pub fn detail_size(&self) -> UVec2 {
+        let (x, y) = self.detail_size_u64();
+        UVec2::new(
+            x.min(u64::from(u32::MAX)) as u32,
+            y.min(u64::from(u32::MAX)) as u32,
+        )
+    }
+
+    /// Metres between detail texels: `gamma delta_C`.
+    pub fn detail_texel_m(&self) -> f32 {
+        self.coarse_texel_m / self.refine as f32
+    }
+
+    /// The coarse texel spacing.
+    pub fn coarse_texel_m(&self) -> f32 {
+        self.coarse_texel_m
+    }
+
+    /// Detail texels per coarse texel.
+    pub fn refine(&self) -> u32 {
+        self.refine
+    }
+
+    /// Detail texels along a tile's side.
+    pub fn tile_size(&self) -> u32 {
+        self.tile_size
+    }
+
+    /// The detail texels of `tile` that lie on the map, in detail texel coordinates.
+    pub fn tile_rect(&self, tile: UVec2) -> Option<Rect> {
+        if tile.cmpge(self.tiles()).any() {
+            return None;
+        }
+        let min = tile * self.tile_size;
+        let max = (min + UVec2::splat(self.tile_size)).min(self.detail_size());
+        Some(Rect::from_min_max(min.as_ivec2(), max.as_ivec2()))
+    }
+
+    /// The coarse texels `tile` lies over (eq. 2.1's mapping): every coarse texel one of its
+    /// detail texels falls in.
+    pub fn coarse_texels_of_tile(&self, tile: UVec2) -> Option<Rect> {
+        let r = self.tile_rect(tile)?;
+        let k = self.refine as i32;
+        let min = r.min / k;
+        let max = (r.max() + (k - 1)) / k;
+        Some(Rect::from_min_max(min, max))
+    }
+
+    /// The tile holding detail texel `p` (any integer coordinates: wrapped onto the map) and
+    /// the texel's coordinates inside it.
+    pub fn locate(&self, p: IVec2) -> (UVec2, UVec2) {
+        let d = self.detail_size();
+        let q = UVec2::new(
+            WrapMode::Repeat.resolve(i64::from(p.x), d.x),
+            WrapMode::Repeat.resolve(i64::from(p.y), d.y),
+        );
+        (q / self.tile_size, q % self.tile_size)
+    }
+}
+
+/// What one stamp changed on the layer.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct DetailChange {
+    /// The tiles written, each with the rect of its texels the stamp covered (tile
+    /// coordinates), in row-major tile order. These are the cache's dirty tiles.
+    pub tiles: Vec<(UVec2, Rect)>,
+    /// Texels whose value actually changed.
+    pub changed_texels: u64,
+}
+
+/// The detail tiles over one coarse-map: the tile-ID matrix and the tiles in use.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DetailLayer {
+    layout: DetailLayout,
+    /// Tile-ID matrix (seed 000 sec. 2.3.1): 0 is the shared zero tile, `k > 0` is
+    /// `tiles[k - 1]`.
+    ids: Grid<u32>,
+    tiles: Vec<Grid<u8>>,
+}
+
+impl DetailLayer {
+    /// A layer whose every tile is the shared zero tile (0 m of detail everywhere). Fails only
+    /// where the tile-ID matrix cannot be allocated.
+    pub fn new(layout: DetailLayout) -> Result<Self, CoreError> {
+        let n = layout.tiles();
+        Ok(Self {
+            layout,
+            ids: Grid::new(n.x, n.y, 0u32)?,
+            tiles: Vec::new(),
+        })
+    }
+
+    /// The layout.
+    pub fn layout(&self) -> &DetailLayout {
+        &self.layout
+    }
+
+    /// The tile-ID matrix: 0 for the shared zero tile, `k > 0` for the `k`-th materialised
+    /// tile.
+    pub fn tile_ids(&self) -> &Grid<u32> {
+        &self.ids
+    }
+
+    /// Tiles that hold their own texels (not the shared zero tile).
+    pub fn resident_tiles(&self) -> usize {
+        self.tiles.len()
+    }
+
+    /// A tile's texels (`tile_size` a side), or `None` for the shared zero tile or a tile
+    /// off the grid.
+    pub fn tile(&self, tile: UVec2) -> Option<&Grid<u8>> {
+        let id = self.ids.get(tile.x, tile.y)?;
+        (id > 0).then(|| &self.tiles[id as usize - 1])
+    }
+
+    /// A tile as a detail height map (clamped, [`detail_encoding`], the layout's detail
+    /// texel size): the zero tile materialised for a never-touched one. `None` off the grid.
+    pub fn tile_map(&self, tile: UVec2) -> Option<HeightMap<u8>> {
+        self.layout.tile_rect(tile)?;
+        let t = self.layout.tile_size;
+        let grid = match self.tile(tile) {
+            Some(g) => g.clone(),
+            None => Grid::new(t, t, DETAIL_ZERO_RAW).ok()?,
+        };
+        HeightMap::detail(grid, detail_encoding(), self.layout.detail_texel_m()).ok()
+    }
+
+    /// Replaces a tile's texels (a tile loaded from the cache). Fails on a tile off the grid
+    /// or texels of the wrong size.
+    pub fn set_tile(&mut self, tile: UVec2, texels: Grid<u8>) -> Result<(), CoreError> {
+        let t = self.layout.tile_size;
+        if texels.size() != UVec2::splat(t) {
+            return Err(CoreError::SizeMismatch {
+                expected: UVec2::splat(t),
+                actual: texels.size(),
+            });
+        }
+        let slot = self.slot(tile)?;
+        *slot = texels;
+        Ok(())
+    }
+
+    /// Returns a tile to the shared zero tile (an unloaded or reset tile), freeing its texels.
+    pub fn clear_tile(&mut self, tile: UVec2) {
+        let Some(id) = self.ids.get(tile.x, tile.y).filter(|&id| id > 0) else {
+            return;
+        };
+        let last = self.tiles.len() as u32;
+        self.tiles.swap_remove(id as usize - 1);
+        // The tile that moved into the freed slot keeps its new index.
+        if id != last
+            && let Some(moved) = self.ids.as_mut_slice().iter_mut().find(|v| **v == last)
+        {
+            *moved = id;
+        }
+        if let Some(v) = self.ids.get_mut(tile.x, tile.y) {
+            *v = 0;
+        }
+    }
+
+    /// The detail texel at detail coordinates `p` (wrapped onto the map), raw.
+    pub fn raw(&self, p: IVec2) -> u8 {
+        let (tile, local) = self.layout.locate(p);
+        match self.tile(tile) {
+            Some(g) => g.get(local.x, local.y).unwrap_or(DETAIL_ZERO_RAW),
+            None => DETAIL_ZERO_RAW,
+        }
+    }
+
+    /// The detail height in metres at `pos` (metres on the coarse-map's plane): bilinear
+    /// between the four nearest detail texels, across tile edges and the map's wrap.
+    pub fn height_m(&self, pos: Vec2) -> f32 {
+        let ts = self.layout.detail_texel_m();
+        let p = pos / ts;
+        if !p.is_finite() {
+            return 0.0;
+        }
+        let f = p.floor();
+        let (fx, fz) = (p.x - f.x, p.y - f.y);
+        let wrap = |v: f32, n: u32| (f64::from(v).rem_euclid(f64::from(n))) as i64 as i32;
+        let d = self.layout.detail_size();
+        let (x0, z0) = (wrap(f.x, d.x), wrap(f.y, d.y));
+        let enc = detail_encoding();
+        let h = |dx: i32, dz: i32| enc.to_metres(f64::from(self.raw(IVec2::new(x0 + dx, z0 + dz))));
+        let top = h(0, 0) + (h(1, 0) - h(0, 0)) * fx;
+        let bot = h(0, 1) + (h(1, 1) - h(0, 1)) * fx;
+        top + (bot - top) * fz
+    }
+
+    /// The tile's texels, materialised from the zero tile on first use.
+    fn slot(&mut self, tile: UVec2) -> Result<&mut Grid<u8>, CoreError> {
+        let id = self
+            .ids
+            .get(tile.x, tile.y)
+            .ok_or(CoreError::RegionOutOfBounds {
+                rect: Rect::new(tile.as_ivec2(), UVec2::ONE),
+                map_size: self.layout.tiles(),
+            })?;
+        let id = if id == 0 {
+            let t = self.layout.tile_size;
+            self.tiles.push(Grid::new(t, t, DETAIL_ZERO_RAW)?);
+            let id = self.tiles.len() as u32;
+            if let Some(v) = self.ids.get_mut(tile.x, tile.y) {
+                *v = id;
+            }
+            id
+        } else {
+            id
+        };
+        Ok(&mut self.tiles[id as usize - 1])
+    }
+
+    /// Applies a stamp to the detail layer at `placement` (metres on the coarse-map's plane,
+    /// as for the coarse-map), across every tile it touches and the map's wrap, exactly as
+    /// the same stamp on one detail map as large as its footprint. Tiles it writes are
+    /// materialised; a tile the stamp leaves unchanged stays the shared zero tile.
+    ///
+    /// Fails on an invalid placement or blend, on a footprint larger than the layer (it would
+    /// overlap itself), or on one above 16 M texels (a detail stamp is a fine mark; large
+    /// deformations belong to the coarse-map). Nothing is written on failure.
+    pub fn apply_stamp<S: Stamp + ?Sized>(
+        &mut self,
+        stamp: &mut S,
+        placement: &StampPlacement,
+        blend: Blend,
+    ) -> Result<DetailChange, CoreError> {
+        let ts = self.layout.detail_texel_m();
+        let footprint = placement.footprint(ts)?;
+        let d = self.layout.detail_size();
+        if footprint.size.cmpgt(d).any() || footprint.area() > MAX_STAMP_TEXELS {
+            return Err(CoreError::OutOfRange {
+                what: "detail stamp footprint (texels)",
+                value: footprint.area() as f64,
+                expected: "within the layer and at most 16 M texels (4096^2)",
+            });
+        }
+        // Gather the footprint into one window, in unwrapped coordinates.
+        let size = footprint.size;
+        let mut window = Grid::new(size.x, size.y, DETAIL_ZERO_RAW)?;
+        for y in 0..size.y {
+            let row = window.row_mut(y);
+            let gy = footprint.min.y + y as i32;
+            for (x, v) in row.iter_mut().enumerate() {
+                *v = self.raw(IVec2::new(footprint.min.x + x as i32, gy));
+            }
+        }
+        let before = window.clone();
+        let mut map = HeightMap::new(window, detail_encoding(), ts, WrapMode::Clamp)?;
+        let Some(covered) = apply_stamp_window(&mut map, footprint.min, stamp, placement, blend)?
+        else {
+            return Ok(DetailChange::default());
+        };
+        // Scatter the covered texels back, tile by tile.
+        let after = map.grid();
+        let mut touched: Vec<(UVec2, IVec2, IVec2)> = Vec::new();
+        let mut changed = 0u64;
+        for y in covered.min.y..covered.max().y {
+            for x in covered.min.x..covered.max().x {
+                let g = footprint.min + IVec2::new(x, y);
+                let (tile, local) = self.layout.locate(g);
+                let l = local.as_ivec2();
+                match touched.iter_mut().find(|t| t.0 == tile) {
+                    Some(t) => {
+                        t.1 = t.1.min(l);
+                        t.2 = t.2.max(l + 1);
+                    }
+                    None => touched.push((tile, l, l + 1)),
+                }
+                let (nv, ov) = (
+                    after.get(x as u32, y as u32).unwrap_or(DETAIL_ZERO_RAW),
+                    before.get(x as u32, y as u32).unwrap_or(DETAIL_ZERO_RAW),
+                );
+                if nv != ov {
+                    changed += 1;
+                    let slot = self.slot(tile)?;
+                    if let Some(v) = slot.get_mut(local.x, local.y) {
+                        *v = nv;
+                    }
+                }
+            }
+        }
+        touched.sort_by_key(|t| (t.0.y, t.0.x));
+        Ok(DetailChange {
+            tiles: touched
+                .into_iter()
+                .map(|(t, lo, hi)| (t, Rect::from_min_max(lo, hi)))
+                .collect(),
+            changed_texels: changed,
+        })
+    }
+}
+
+/// The largest footprint a detail stamp may cover.
+const MAX_STAMP_TEXELS: u64 = 1 << 24;
