@@ -402,13 +402,16 @@ impl DetailLayer {
                 let g = footprint.min + IVec2::new(x, y);
                 let (tile, local) = self.layout.locate(g);
                 let l = local.as_ivec2();
-                match touched.iter_mut().find(|t| t.0 == tile) {
-                    Some(t) => {
-                        t.1 = t.1.min(l);
-                        t.2 = t.2.max(l + 1);
+                let i = match touched.iter().position(|t| t.0 == tile) {
+                    Some(i) => i,
+                    None => {
+                        touched.push((tile, l, l));
+                        touched.len() - 1
                     }
-                    None => touched.push((tile, l, l + 1)),
-                }
+                };
+                let t = &mut touched[i];
+                t.1 = t.1.min(l);
+                t.2 = t.2.max(l + 1);
                 let (nv, ov) = (
                     after.get(x as u32, y as u32).unwrap_or(DETAIL_ZERO_RAW),
                     before.get(x as u32, y as u32).unwrap_or(DETAIL_ZERO_RAW),

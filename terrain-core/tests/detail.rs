@@ -38,6 +38,10 @@ fn assert_same(layer: &DetailLayer, map: &HeightMap<u8>, what: &str) {
 fn eq_2_1_gives_seed_000s_six_tiles_a_side() {
     let l = DetailLayout::new(UVec2::splat(4096), 0.1, 3, 2048).unwrap();
     assert_eq!(l.tiles(), UVec2::splat(6));
+    assert_eq!(
+        (l.coarse_texel_m(), l.refine(), l.tile_size()),
+        (0.1, 3, 2048)
+    );
     assert_eq!(l.detail_size(), UVec2::splat(12_288));
     assert!((l.detail_texel_m() - 0.1 / 3.0).abs() < 1e-7);
     // Tile (1, 0) holds detail texels 2048 .. 4096 along X, over coarse texels 682 .. 1366.
@@ -133,6 +137,17 @@ fn stamps_over_tile_corners_equal_the_same_stamps_on_one_large_map() {
             let change = layer.apply_stamp(mk().as_mut(), &p, blend).unwrap();
             apply_stamp(&mut map, mk().as_mut(), &p, blend).unwrap();
             assert!(change.changed_texels > 0, "case {k}");
+            // Each tile's rect is the part of the footprint it holds, in tile coordinates.
+            let fp = p.footprint(ts).unwrap();
+            for (t, r) in &change.tiles {
+                let tr = l.tile_rect(*t).unwrap();
+                let want = fp.intersect(&tr).unwrap();
+                assert_eq!(
+                    *r,
+                    Rect::new(want.min - tr.min, want.size),
+                    "case {k} tile {t}"
+                );
+            }
             assert_same(&layer, &map, &format!("case {k}, gaussian {gaussian}"));
             if k == 0 {
                 let tiles: Vec<UVec2> = change.tiles.iter().map(|t| t.0).collect();
@@ -223,6 +238,9 @@ fn heights_are_bilinear_across_tile_edges_and_the_wrap() {
     assert!(h.abs() < 1e-6, "{h}");
     let h = layer.height_m(Vec2::new(31.25 * ts, 4.0 * ts));
     assert!((h - 0.1).abs() < 1e-5, "{h}");
+    // Between rows 3 and 4: a quarter of the way down to +0.2 m is +0.05 m.
+    let h = layer.height_m(Vec2::new(31.0 * ts, 3.25 * ts));
+    assert!((h - 0.05).abs() < 1e-5, "{h}");
     layer.set_tile(UVec2::new(5, 0), a).unwrap();
     // Texel 191 (+0.2 m) is texel 31 of tile 5, next to texel 0 of tile 0 (0 m) across the
     // wrap: x = -1 is texel 191, x = -0.5 halfway to texel 0.
