@@ -23,6 +23,15 @@ fn texture() -> TextureStamp {
     TextureStamp::from_gray8(&Grid::from_fn(9, 5, |x, y| (x * 29 + y * 41) as u8).unwrap())
 }
 
+/// A default Gaussian or the test texture.
+fn stamp(gaussian: bool) -> Box<dyn Stamp> {
+    if gaussian {
+        Box::new(GaussianStamp::default())
+    } else {
+        Box::new(texture())
+    }
+}
+
 fn assert_same(layer: &DetailLayer, map: &HeightMap<u8>, what: &str) {
     let d = layer.layout().detail_size();
     for y in 0..d.y {
@@ -127,13 +136,7 @@ fn stamps_over_tile_corners_equal_the_same_stamps_on_one_large_map() {
             .with_rotation(rot)
             .unwrap();
         for gaussian in [true, false] {
-            let mk = || -> Box<dyn Stamp> {
-                if gaussian {
-                    Box::new(GaussianStamp::default())
-                } else {
-                    Box::new(texture())
-                }
-            };
+            let mk = || stamp(gaussian);
             let change = layer.apply_stamp(mk().as_mut(), &p, blend).unwrap();
             apply_stamp(&mut map, mk().as_mut(), &p, blend).unwrap();
             assert!(change.changed_texels > 0, "case {k}");
@@ -187,13 +190,7 @@ fn stamps_across_the_maps_wrap_equal_the_same_stamps_on_a_repeating_map() {
     ] {
         let p = StampPlacement::new(c, Vec2::new(1.3, 0.9), intensity).unwrap();
         for gaussian in [true, false] {
-            let mk = || -> Box<dyn Stamp> {
-                if gaussian {
-                    Box::new(GaussianStamp::default())
-                } else {
-                    Box::new(texture())
-                }
-            };
+            let mk = || stamp(gaussian);
             let change = layer.apply_stamp(mk().as_mut(), &p, Blend::Add).unwrap();
             apply_stamp(&mut map, mk().as_mut(), &p, Blend::Add).unwrap();
             assert!(change.tiles.len() >= 2, "{change:?}");
