@@ -204,8 +204,9 @@ impl DetailLayout {
 /// What one stamp changed on the layer.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct DetailChange {
-    /// The tiles written, each with the rect of its texels the stamp covered (tile
-    /// coordinates), in row-major tile order. These are the cache's dirty tiles.
+    /// The tiles the footprint covers, each with the rect of its texels it covers (tile
+    /// coordinates), in row-major tile order; a shared zero tile the stamp left unchanged is
+    /// listed but stays shared. These are the cache's dirty tiles.
     pub tiles: Vec<(UVec2, Rect)>,
     /// Texels whose value actually changed.
     pub changed_texels: u64,
@@ -369,6 +370,11 @@ impl DetailLayer {
     ) -> Result<DetailChange, CoreError> {
         let ts = self.layout.detail_texel_m();
         let footprint = placement.footprint(ts)?;
+        if footprint.is_empty() {
+            // A mark smaller than a texel, or one clamped away by an absurd centre.
+            crate::stamp::check_blend(blend)?;
+            return Ok(DetailChange::default());
+        }
         let d = self.layout.detail_size();
         if footprint.size.cmpgt(d).any() || footprint.area() > MAX_STAMP_TEXELS {
             return Err(CoreError::OutOfRange {

@@ -403,8 +403,8 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
 /// `origin + (x, y)` of the larger map would get from [`apply_stamp`] with the same
 /// `placement` (in the larger map's metres), whenever the window holds the stamp's whole
 /// footprint (then the evaluation is the same one, texel for texel). A window cut through a
-/// footprint gets the same values within the stamp's rounding bound. `map`'s own wrap mode
-/// is ignored. Returns the covered rect in `map`'s coordinates, if any.
+/// footprint is evaluated on its own part, within one stored unit of
+/// [`apply_stamp_reference`] as [`apply_stamp`] is. `map`'s own wrap mode is ignored. Returns the covered rect in `map`'s coordinates, if any.
 ///
 /// This is how a stamp lands on tiles of a larger grid (the detail layer gathers the
 /// footprint into one window, stamps it, and scatters it back).
@@ -588,6 +588,19 @@ pub fn gaussian_rounding_bound(beta: f32, placement: &StampPlacement) -> f64 {
     2.0 * eps * (f64::from(beta.abs()) * (12.0 * (1.0 + k) + 6.0) + 2.0) + 4.0 * eps
 }
 
+/// Refuses a min / max blend whose base is not finite.
+pub(crate) fn check_blend(blend: Blend) -> Result<(), CoreError> {
+    match blend {
+        Blend::Min { base_m } | Blend::Max { base_m } if !base_m.is_finite() => {
+            Err(CoreError::NonFinite {
+                what: "blend base height",
+                value: base_m,
+            })
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Per-placement state shared by every path of [`apply_stamp`] and [`apply_stamp_reference`]:
 /// validates, cuts the footprint into pieces and prepares the stamp. With `window`, the map is
 /// the window at that origin of a larger clamped map: one piece, the footprint clipped to it.
@@ -599,14 +612,7 @@ fn prepare_stamp<T: HeightSample, S: Stamp + ?Sized>(
     window: Option<IVec2>,
 ) -> Result<Option<Prepared>, CoreError> {
     let ts = map.texel_size();
-    if let Blend::Min { base_m } | Blend::Max { base_m } = blend
-        && !base_m.is_finite()
-    {
-        return Err(CoreError::NonFinite {
-            what: "blend base height",
-            value: base_m,
-        });
-    }
+    check_blend(blend)?;
     // (map rect, offset from map to unwrapped coordinates) for every piece.
     let pieces: Vec<(Rect, IVec2)> = match window {
         Some(origin) => {

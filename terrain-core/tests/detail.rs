@@ -343,4 +343,22 @@ fn bad_layouts_tiles_and_stamps_are_refused_and_change_nothing() {
     );
     assert_eq!(layer, before);
     assert!(layer.tile_map(UVec2::new(0, 6)).is_none());
+    // A mark narrower than a texel between texel centres, and absurd centres: nothing lands,
+    // nothing fails, but a NaN base is still refused.
+    let ts = layer.layout().detail_texel_m();
+    for c in [
+        Vec2::splat(10.5 * ts),
+        Vec2::splat(1e30),
+        Vec2::new(-1e30, 3.0),
+    ] {
+        let p = StampPlacement::new(c, Vec2::splat(0.2 * ts), -0.1).unwrap();
+        let change = layer.apply_stamp(&mut GaussianStamp::default(), &p, Blend::Add);
+        assert_eq!(change.unwrap(), Default::default(), "at {c}");
+        assert!(
+            layer
+                .apply_stamp(&mut GaussianStamp::default(), &p, nan_base)
+                .is_err()
+        );
+    }
+    assert_eq!(layer, before);
 }
