@@ -199,6 +199,71 @@ impl DetailLayout {
         );
         (q / self.tile_size, q % self.tile_size)
     }
+
+    /// A stamp footprint (detail texels, unwrapped) cut into one piece per tile it covers and
+    /// per side of the map's wrap, in row-major tile order within each wrapped part. This is
+    /// how a stamp reaches every tile it touches, on the CPU and on the GPU alike.
+    ///
+    /// Fails on a footprint larger than the layer (it would overlap itself) or above 16 M
+    /// texels (a detail stamp is a fine mark; large deformations belong to the coarse-map).
+    pub fn footprint_pieces(&self, footprint: Rect) -> Result<Vec<DetailPiece>, CoreError> {
+        let d = self.detail_size();
+        if footprint.size.cmpgt(d).any() || footprint.area() > MAX_STAMP_TEXELS {
+            return Err(CoreError::OutOfRange {
+                what: "detail stamp footprint (texels)",
+                value: footprint.area() as f64,
+                expected: "within the layer and at most 16 M texels (4096^2)",
+            });
+        }
+        let t = self.tile_size as i32;
+        let mut pieces = Vec::new();
+        for wrapped in footprint.split_toroidal(d) {
+            let m = wrapped.map;
+            let to_unwrapped = wrapped.unwrapped.min - m.min;
+            let (first, last) = (m.min / t, (m.max() - 1) / t);
+            for ty in first.y..=last.y {
+                for tx in first.x..=last.x {
+                    let tile = UVec2::new(tx as u32, ty as u32);
+                    let Some(inside) = self.tile_rect(tile).and_then(|r| r.intersect(&m)) else {
+                        continue;
+                    };
+                    let origin = tile.as_ivec2() * t;
+                    pieces.push(DetailPiece {
+                        tile,
+                        local: Rect::new(inside.min - origin, inside.size),
+                        unwrapped: inside.min + to_unwrapped,
+                    });
+                }
+            }
+        }
+        Ok(pieces)
+    }
+}
+
+/// The part of a stamp footprint inside one detail tile ([`DetailLayout::footprint_pieces`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DetailPiece {
+    /// The tile.
+    pub tile: UVec2,
+    /// The texels it covers, in the tile's coordinates.
+    pub local: Rect,
+    /// Layer coordinates of `local.min` in the footprint's own, unwrapped frame (where the
+    /// stamp's local coordinates are computed, so every piece gets the same arithmetic).
+    pub unwrapped: IVec2,
+}
+
+/// The tiles `pieces` cover, each with the bounding rect of its pieces (tile coordinates), in
+/// row-major tile order: what a stamp reports as its dirty tiles.
+pub fn tiles_of_pieces(pieces: &[DetailPiece]) -> Vec<(UVec2, Rect)> {
+    let mut tiles: Vec<(UVec2, Rect)> = Vec::new();
+    for p in pieces {
+        match tiles.iter_mut().find(|t| t.0 == p.tile) {
+            Some(t) => t.1 = t.1.union(&p.local),
+            None => tiles.push((p.tile, p.local)),
+        }
+    }
+    tiles.sort_by_key(|t| (t.0.y, t.0.x));
+    tiles
 }
 
 /// What one stamp changed on the layer.
@@ -375,14 +440,7 @@ impl DetailLayer {
             crate::stamp::check_blend(blend)?;
             return Ok(DetailChange::default());
         }
-        let d = self.layout.detail_size();
-        if footprint.size.cmpgt(d).any() || footprint.area() > MAX_STAMP_TEXELS {
-            return Err(CoreError::OutOfRange {
-                what: "detail stamp footprint (texels)",
-                value: footprint.area() as f64,
-                expected: "within the layer and at most 16 M texels (4096^2)",
-            });
-        }
+        let pieces = self.layout.footprint_pieces(footprint)?;
         // Gather the footprint into one window, in unwrapped coordinates.
         let size = footprint.size;
         let mut window = Grid::new(size.x, size.y, DETAIL_ZERO_RAW)?;
@@ -395,48 +453,31 @@ impl DetailLayer {
         }
         let before = window.clone();
         let mut map = HeightMap::new(window, detail_encoding(), ts, WrapMode::Clamp)?;
-        let Some(covered) = apply_stamp_window(&mut map, footprint.min, stamp, placement, blend)?
-        else {
+        if apply_stamp_window(&mut map, footprint.min, stamp, placement, blend)?.is_none() {
             return Ok(DetailChange::default());
-        };
-        // Scatter the covered texels back, tile by tile.
+        }
+        // Scatter the changed texels back, piece by piece.
         let after = map.grid();
-        let mut touched: Vec<(UVec2, IVec2, IVec2)> = Vec::new();
         let mut changed = 0u64;
-        for y in covered.min.y..covered.max().y {
-            for x in covered.min.x..covered.max().x {
-                let g = footprint.min + IVec2::new(x, y);
-                let (tile, local) = self.layout.locate(g);
-                let l = local.as_ivec2();
-                let i = match touched.iter().position(|t| t.0 == tile) {
-                    Some(i) => i,
-                    None => {
-                        touched.push((tile, l, l));
-                        touched.len() - 1
+        for piece in &pieces {
+            let w = (piece.unwrapped - footprint.min).as_uvec2();
+            for y in 0..piece.local.size.y {
+                for x in 0..piece.local.size.x {
+                    let (nv, ov) = (after.get(w.x + x, w.y + y), before.get(w.x + x, w.y + y));
+                    if nv == ov {
+                        continue;
                     }
-                };
-                let t = &mut touched[i];
-                t.1 = t.1.min(l);
-                t.2 = t.2.max(l + 1);
-                let (nv, ov) = (
-                    after.get(x as u32, y as u32).unwrap_or(DETAIL_ZERO_RAW),
-                    before.get(x as u32, y as u32).unwrap_or(DETAIL_ZERO_RAW),
-                );
-                if nv != ov {
                     changed += 1;
-                    let slot = self.slot(tile)?;
-                    if let Some(v) = slot.get_mut(local.x, local.y) {
+                    let local = piece.local.min.as_uvec2() + UVec2::new(x, y);
+                    let slot = self.slot(piece.tile)?;
+                    if let (Some(v), Some(nv)) = (slot.get_mut(local.x, local.y), nv) {
                         *v = nv;
                     }
                 }
             }
         }
-        touched.sort_by_key(|t| (t.0.y, t.0.x));
         Ok(DetailChange {
-            tiles: touched
-                .into_iter()
-                .map(|(t, lo, hi)| (t, Rect::from_min_max(lo, hi)))
-                .collect(),
+            tiles: tiles_of_pieces(&pieces),
             changed_texels: changed,
         })
     }

@@ -163,6 +163,23 @@ pub enum GpuError {
         /// Why not.
         reason: &'static str,
     },
+    /// A detail tile a stamp or read needs is not loaded (its texels are in the cache or on
+    /// disk): load it first.
+    #[error("detail tile {tile} is not loaded: load it before stamping over or reading it")]
+    DetailTileNotLoaded {
+        /// The tile.
+        tile: glam::UVec2,
+    },
+    /// A stamp needs more detail tile slots than are free.
+    #[error(
+        "a stamp needs {needed} new detail tile slots, {free} are free: unload tiles or make more slots"
+    )]
+    DetailSlotsFull {
+        /// Slots the stamp needs.
+        needed: usize,
+        /// Slots free.
+        free: usize,
+    },
     /// A parameter error from terrain-core (placement, region, encoding).
     #[error(transparent)]
     Core(#[from] CoreError),

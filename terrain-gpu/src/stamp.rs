@@ -5,12 +5,17 @@ use crate::compute::{
     PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
     wrap_code, wrap_offset,
 };
+use crate::detail::GpuDetailTiles;
 use crate::error::GpuError;
 use crate::maps::{ExactInF32, GpuHeightMap, MapView};
 use crate::scope::buffer_init;
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
-use terrain_core::{Blend, DirtyRect, GaussianStamp, StampPlacement, TextureStamp, stamp_region};
+use terrain_core::detail::{detail_encoding, tiles_of_pieces};
+use terrain_core::{
+    Blend, DirtyRect, GaussianStamp, HeightEncoding, Rect, StampPlacement, TextureStamp, WrapMode,
+    stamp_region,
+};
 
 /// The uniform block of `stamp.wgsl` (`StampParams`), byte for byte.
 #[repr(C)]
@@ -32,10 +37,12 @@ struct StampParams {
     base: u32,
     tex_size: [u32; 2],
     wrap_offset: [i32; 2],
+    texel_offset: [i32; 2],
+    pad: [u32; 2],
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<StampParams>() == 96);
+const _: () = assert!(std::mem::size_of::<StampParams>() == 112);
 
 use terrain_shaders::codes::{
     BLEND_ADD, BLEND_MAX, BLEND_MIN, STAMP_GAUSSIAN, STAMP_TEXTURE, STAMP_USER,
@@ -225,6 +232,76 @@ impl StampPass {
         self.encode_view(device, queue, encoder, view, op)
     }
 
+    /// Records one stamp on a detail layer's tiles ([`GpuDetailTiles`]): one dispatch per tile
+    /// piece of the footprint ([`terrain_core::detail::DetailLayout::footprint_pieces`]), each
+    /// in the layer's unwrapped frame, so a stamp across tile edges, corners and the map's wrap
+    /// gives every texel the arithmetic the same stamp has on one large map (bit for bit). The
+    /// placement is in metres on the coarse-map's plane, as for
+    /// [`terrain_core::detail::DetailLayer::apply_stamp`], its CPU reference. A shared zero
+    /// tile under the footprint gets a slot of its own first. Returns the tiles covered, each
+    /// with the rect of its texels covered (tile coordinates), row-major: the dirty tiles.
+    ///
+    /// Fails, with nothing recorded or uploaded, on an invalid placement or blend, a footprint
+    /// the CPU layer refuses, a tile under it that is not loaded, or too few free slots.
+    pub fn encode_detail(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        tiles: &mut GpuDetailTiles,
+        op: &StampOp<'_>,
+    ) -> Result<Vec<(UVec2, Rect)>, GpuError> {
+        let layout = *tiles.layout();
+        let ts = layout.detail_texel_m();
+        let footprint = op.placement.footprint(ts)?;
+        let prepared = prepare(
+            &self.pipeline,
+            &self.empty_values,
+            op,
+            ts,
+            detail_encoding(),
+            255,
+        )?;
+        if footprint.is_empty() {
+            return Ok(Vec::new());
+        }
+        let pieces = layout.footprint_pieces(footprint)?;
+        if pieces.len() > MAX_DETAIL_PIECES {
+            return Err(GpuError::Unsupported {
+                what: "detail stamp",
+                reason: "the footprint covers more than 4096 tile pieces (one dispatch each): use larger tiles, or stamp the coarse-map",
+            });
+        }
+        let covered = tiles_of_pieces(&pieces);
+        tiles.make_resident(queue, covered.iter().map(|t| t.0))?;
+        let side = layout.tile_size();
+        for piece in &pieces {
+            let Some(slot) = tiles.slot_of(piece.tile) else {
+                unreachable!("make_resident gave every covered tile a slot");
+            };
+            let params = StampParams {
+                region_min: piece.unwrapped.to_array(),
+                region_size: piece.local.size.to_array(),
+                map_size: [side; 2],
+                wrap: wrap_code(WrapMode::Clamp),
+                // Below 2^32 texels in all: `GpuDetailTiles::new` checked slots x tile texels.
+                base: slot * side * side,
+                wrap_offset: [0; 2],
+                texel_offset: (piece.local.min - piece.unwrapped).to_array(),
+                ..prepared.params
+            };
+            record(
+                &mut self.bindings,
+                device,
+                queue,
+                encoder,
+                tiles.heights_buffer(),
+                &Prepared { params, ..prepared },
+            )?;
+        }
+        Ok(covered)
+    }
+
     fn encode_view(
         &mut self,
         device: &wgpu::Device,
@@ -233,65 +310,138 @@ impl StampPass {
         map: MapView<'_>,
         op: &StampOp<'_>,
     ) -> Result<Vec<DirtyRect>, GpuError> {
-        let StampOp {
-            stamp,
-            ref placement,
-            blend,
-        } = *op;
         let ts = map.texel_size;
-        let Some(region) = stamp_region(map.size, map.wrap, ts, placement)? else {
+        let prepared = prepare(
+            &self.pipeline,
+            &self.empty_values,
+            op,
+            ts,
+            map.encoding,
+            map.max_raw,
+        )?;
+        let Some(region) = stamp_region(map.size, map.wrap, ts, &op.placement)? else {
             return Ok(Vec::new());
-        };
-        let (center, inv_half, sin, cos) = placement.local_frame(ts);
-        let enc = map.encoding;
-        let (blend_code, base_m) = match blend {
-            Blend::Add => (BLEND_ADD, 0.0),
-            Blend::Min { base_m } => (BLEND_MIN, base_m),
-            Blend::Max { base_m } => (BLEND_MAX, base_m),
-        };
-        if !base_m.is_finite() {
-            return Err(terrain_core::CoreError::NonFinite {
-                what: "blend base height",
-                value: base_m,
-            }
-            .into());
-        }
-        let (kind, beta, values, tex_size, pipeline) = match stamp {
-            GpuStamp::Gaussian(g) => (
-                STAMP_GAUSSIAN,
-                g.beta_for(placement.intensity),
-                &self.empty_values,
-                UVec2::ONE,
-                &self.pipeline,
-            ),
-            GpuStamp::Texture(t) => (STAMP_TEXTURE, 0.0, &t.values, t.size, &self.pipeline),
-            GpuStamp::Procedural(p) => {
-                (STAMP_USER, 0.0, &self.empty_values, UVec2::ONE, &p.pipeline)
-            }
         };
         let params = StampParams {
             region_min: region.footprint.min.to_array(),
             region_size: region.footprint.size.to_array(),
             map_size: map.size.to_array(),
             wrap: wrap_code(map.wrap),
-            kind,
-            center: center.to_array(),
-            inv_half: inv_half.to_array(),
-            cos_sin: [cos, sin],
-            blend: blend_code,
-            raw_per_value: placement.intensity / enc.scale,
-            base_raw: enc.to_raw(base_m) as f32,
-            max_raw: map.max_raw as f32,
-            beta,
             base: map.base,
-            tex_size: tex_size.to_array(),
             wrap_offset: wrap_offset(region.footprint.min, map.size)?,
+            texel_offset: [0; 2],
+            ..prepared.params
         };
-        let groups = dispatch_size(device, region.footprint.size)?;
-        let (group, offset) = self
-            .bindings
-            .bind(device, queue, &params, &[map.buffer, values])?;
-        dispatch(encoder, "StampPass", groups, &[(pipeline, &group, offset)]);
+        record(
+            &mut self.bindings,
+            device,
+            queue,
+            encoder,
+            map.buffer,
+            &Prepared { params, ..prepared },
+        )?;
         Ok(region.pieces.iter().map(|p| p.map).collect())
     }
+}
+
+/// The most tile pieces (dispatches) one detail stamp records: a fine mark covers a few tiles.
+const MAX_DETAIL_PIECES: usize = 4096;
+
+/// Binds `prepared` and records one dispatch over its region.
+fn record(
+    bindings: &mut PassBindings<StampParams>,
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    encoder: &mut wgpu::CommandEncoder,
+    heights: &wgpu::Buffer,
+    prepared: &Prepared<'_>,
+) -> Result<(), GpuError> {
+    let size = UVec2::from_array(prepared.params.region_size);
+    let groups = dispatch_size(device, size)?;
+    let (group, offset) =
+        bindings.bind(device, queue, &prepared.params, &[heights, prepared.values])?;
+    dispatch(
+        encoder,
+        "StampPass",
+        groups,
+        &[(prepared.pipeline, &group, offset)],
+    );
+    Ok(())
+}
+
+/// A stamp's parameters (its map and region filled in per dispatch), with the buffers and
+/// pipeline it needs.
+#[derive(Clone, Copy)]
+struct Prepared<'a> {
+    params: StampParams,
+    values: &'a wgpu::Buffer,
+    pipeline: &'a wgpu::ComputePipeline,
+}
+
+/// Checks the blend and fills in the stamp, its local frame and blend for a map of texel size
+/// `ts`, `enc` and largest stored value `max_raw`.
+fn prepare<'a>(
+    pipeline: &'a wgpu::ComputePipeline,
+    empty_values: &'a wgpu::Buffer,
+    op: &StampOp<'a>,
+    ts: f32,
+    enc: HeightEncoding,
+    max_raw: u32,
+) -> Result<Prepared<'a>, GpuError> {
+    let StampOp {
+        stamp,
+        ref placement,
+        blend,
+    } = *op;
+    // Checks the placement and texel size (the region functions check them again).
+    placement.footprint(ts)?;
+    let (center, inv_half, sin, cos) = placement.local_frame(ts);
+    let (blend_code, base_m) = match blend {
+        Blend::Add => (BLEND_ADD, 0.0),
+        Blend::Min { base_m } => (BLEND_MIN, base_m),
+        Blend::Max { base_m } => (BLEND_MAX, base_m),
+    };
+    if !base_m.is_finite() {
+        return Err(terrain_core::CoreError::NonFinite {
+            what: "blend base height",
+            value: base_m,
+        }
+        .into());
+    }
+    let (kind, beta, values, tex_size, pipeline) = match stamp {
+        GpuStamp::Gaussian(g) => (
+            STAMP_GAUSSIAN,
+            g.beta_for(placement.intensity),
+            empty_values,
+            UVec2::ONE,
+            pipeline,
+        ),
+        GpuStamp::Texture(t) => (STAMP_TEXTURE, 0.0, &t.values, t.size, pipeline),
+        GpuStamp::Procedural(p) => (STAMP_USER, 0.0, empty_values, UVec2::ONE, &p.pipeline),
+    };
+    let params = StampParams {
+        region_min: [0; 2],
+        region_size: [0; 2],
+        map_size: [0; 2],
+        wrap: 0,
+        kind,
+        center: center.to_array(),
+        inv_half: inv_half.to_array(),
+        cos_sin: [cos, sin],
+        blend: blend_code,
+        raw_per_value: placement.intensity / enc.scale,
+        base_raw: enc.to_raw(base_m) as f32,
+        max_raw: max_raw as f32,
+        beta,
+        base: 0,
+        tex_size: tex_size.to_array(),
+        wrap_offset: [0; 2],
+        texel_offset: [0; 2],
+        pad: [0; 2],
+    };
+    Ok(Prepared {
+        params,
+        values,
+        pipeline,
+    })
 }

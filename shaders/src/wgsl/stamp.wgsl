@@ -32,6 +32,10 @@ struct StampParams {
     // A multiple of the map size that makes every unwrapped coordinate of the region
     // non-negative: `%` of negative integers is undefined in GLSL, so wrap only non-negatives.
     wrap_offset: vec2<i32>,
+    // Added to an unwrapped coordinate of a clamped map to give the texel it writes: 0 for a
+    // whole map, minus the tile's origin for a detail tile stamped in its layer's frame.
+    texel_offset: vec2<i32>,
+    pad: vec2<u32>,
 }
 
 @group(0) @binding(0) var<uniform> p: StampParams;
@@ -86,8 +90,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if !(abs(v) <= 3.0e38) {
         return;
     }
-    var x = u32(u.x);
-    var y = u32(u.y);
+    var x = u32(u.x + p.texel_offset.x);
+    var y = u32(u.y + p.texel_offset.y);
     if p.wrap == WRAP_REPEAT {
         x = u32(u.x + p.wrap_offset.x) % p.map_size.x;
         y = u32(u.y + p.wrap_offset.y) % p.map_size.y;

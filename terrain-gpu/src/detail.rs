@@ -1,0 +1,285 @@
+//! `GpuDetailTiles`: the VRAM side of terrain-core's detail layer (seed 000 sec. 2.3.1): a fixed
+//! number of tile slots in one storage buffer (a u32 per detail texel, as every map of the
+//! crate) and the slot of each tile of the layout. [`crate::StampPass::encode_detail`] stamps
+//! them; the CPU reference is [`terrain_core::detail::DetailLayer`].
+//!
+//! A tile is in one of three states:
+//! - the shared zero tile (every tile of a new layer): no slot, 0 m of detail everywhere; a
+//!   stamp over it gives it a slot filled with zeros first;
+//! - resident: in a slot, uploaded with [`GpuDetailTiles::load`] or materialised by a stamp;
+//! - not loaded: [`GpuDetailTiles::unload`] freed its slot (its texels live in the cache or on
+//!   disk). A stamp over a tile that is not loaded is refused, so a streamed-out tile is never
+//!   overwritten by a fresh zero tile.
+//!
+//! Which tiles to hold is not decided here (the cache's band regions do).
+
+use crate::download::download_bytes;
+use crate::error::GpuError;
+use crate::maps::map_buffer;
+use glam::UVec2;
+use terrain_core::detail::{DETAIL_ZERO_RAW, DetailLayout};
+use terrain_core::{CoreError, Grid, Rect};
+
+/// What a tile of the layout is on the GPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DetailTileState {
+    /// The shared zero tile: no slot, 0 m of detail.
+    Zero,
+    /// In this slot.
+    Resident(u32),
+    /// Unloaded: its texels are elsewhere, and stamps over it are refused until it is loaded.
+    NotLoaded,
+}
+
+/// A slot value of the state matrix: the two states without a slot take the top values.
+const ZERO: u32 = u32::MAX;
+const NOT_LOADED: u32 = u32::MAX - 1;
+
+/// Detail tiles in GPU slots, for the stamp pass (and later the renderer) to address.
+#[derive(Debug)]
+pub struct GpuDetailTiles {
+    layout: DetailLayout,
+    slots: u32,
+    heights: wgpu::Buffer,
+    /// Per tile: a slot, [`ZERO`] or [`NOT_LOADED`].
+    state: Grid<u32>,
+    /// Free slots, the lowest last (handed out first).
+    free: Vec<u32>,
+    /// A tile's texels widened to u32, made once.
+    staging: Vec<u32>,
+}
+
+impl GpuDetailTiles {
+    /// `slots` tile slots for the tiles of `layout`, every tile the shared zero tile.
+    ///
+    /// Fails on 0 slots, on slots x tile texels at or above 2^32 (the shaders index with u32)
+    /// or above the device's storage buffer limits.
+    pub fn new(device: &wgpu::Device, layout: DetailLayout, slots: u32) -> Result<Self, GpuError> {
+        let side = layout.tile_size();
+        let tile_texels = u64::from(side) * u64::from(side);
+        let texels = u64::from(slots) * tile_texels;
+        if slots == 0 || slots >= NOT_LOADED || texels >= 1 << 32 {
+            return Err(CoreError::OutOfRange {
+                what: "detail tile slots",
+                value: f64::from(slots),
+                expected: "at least 1, with slots x tile texels below 2^32",
+            }
+            .into());
+        }
+        let heights = map_buffer(
+            device,
+            "GpuDetailTiles slots",
+            UVec2::new(side, side.saturating_mul(slots)),
+            texels * 4,
+        )?;
+        let tiles = layout.tiles();
+        Ok(Self {
+            layout,
+            slots,
+            heights,
+            state: Grid::new(tiles.x, tiles.y, ZERO)?,
+            free: (0..slots).rev().collect(),
+            staging: vec![0; tile_texels as usize],
+        })
+    }
+
+    /// The layout.
+    pub fn layout(&self) -> &DetailLayout {
+        &self.layout
+    }
+
+    /// Slots in all.
+    pub fn slot_count(&self) -> u32 {
+        self.slots
+    }
+
+    /// Tiles in a slot.
+    pub fn resident(&self) -> u32 {
+        self.slots - self.free.len() as u32
+    }
+
+    /// The slots' storage buffer: slot `s` holds `tile_size^2` u32 raw detail values from
+    /// element `s * tile_size^2`, row-major.
+    pub fn heights_buffer(&self) -> &wgpu::Buffer {
+        &self.heights
+    }
+
+    /// What `tile` is now, or `None` off the tile grid.
+    pub fn state(&self, tile: UVec2) -> Option<DetailTileState> {
+        Some(match self.state.get(tile.x, tile.y)? {
+            ZERO => DetailTileState::Zero,
+            NOT_LOADED => DetailTileState::NotLoaded,
+            slot => DetailTileState::Resident(slot),
+        })
+    }
+
+    /// The slot `tile` is in, if resident.
+    pub fn slot_of(&self, tile: UVec2) -> Option<u32> {
+        match self.state(tile)? {
+            DetailTileState::Resident(slot) => Some(slot),
+            _ => None,
+        }
+    }
+
+    /// Loads `tile`: `Some(texels)` uploads them into its slot (one is taken if it has none),
+    /// `None` makes it the shared zero tile (its slot, if any, is freed). The upload lands
+    /// before the next submit.
+    ///
+    /// Fails, changing nothing, on a tile off the grid, texels of the wrong size, or no free
+    /// slot.
+    pub fn load(
+        &mut self,
+        queue: &wgpu::Queue,
+        tile: UVec2,
+        texels: Option<&Grid<u8>>,
+    ) -> Result<(), GpuError> {
+        let state = self.check_tile(tile)?;
+        let Some(texels) = texels else {
+            self.release(tile, ZERO);
+            return Ok(());
+        };
+        let side = self.layout.tile_size();
+        if texels.size() != UVec2::splat(side) {
+            return Err(CoreError::SizeMismatch {
+                expected: UVec2::splat(side),
+                actual: texels.size(),
+            }
+            .into());
+        }
+        let slot = match state {
+            DetailTileState::Resident(slot) => slot,
+            _ => self.take_slot(tile)?,
+        };
+        for (d, &v) in self.staging.iter_mut().zip(texels.as_slice()) {
+            *d = u32::from(v);
+        }
+        self.write_slot(queue, slot);
+        Ok(())
+    }
+
+    /// Frees `tile`'s slot: the tile is not loaded until [`Self::load`] (read it back first
+    /// if it was deformed, and after the submit of every stamp recorded on it). Returns
+    /// whether it held a slot. A tile off the grid is left alone.
+    pub fn unload(&mut self, tile: UVec2) -> bool {
+        let had = self.slot_of(tile).is_some();
+        if self.state.get(tile.x, tile.y).is_some() {
+            self.release(tile, NOT_LOADED);
+        }
+        had
+    }
+
+    /// Downloads the texels of `rect` (tile coordinates) of a resident tile, raw (waits for
+    /// the GPU; a collision heightfield or the cache's write-back takes the dirty rects).
+    /// The zero tile reads as [`DETAIL_ZERO_RAW`].
+    ///
+    /// Fails on a tile off the grid or not loaded, or a rect off the tile.
+    pub fn read(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        tile: UVec2,
+        rect: Rect,
+    ) -> Result<Grid<u8>, GpuError> {
+        let side = self.layout.tile_size();
+        if rect.is_empty() || !Rect::from_size(UVec2::splat(side)).contains_rect(&rect) {
+            return Err(CoreError::RegionOutOfBounds {
+                rect,
+                map_size: UVec2::splat(side),
+            }
+            .into());
+        }
+        let slot = match self.check_tile(tile)? {
+            DetailTileState::Zero => {
+                return Ok(Grid::new(rect.size.x, rect.size.y, DETAIL_ZERO_RAW)?);
+            }
+            DetailTileState::NotLoaded => return Err(not_loaded(tile)),
+            DetailTileState::Resident(slot) => slot,
+        };
+        // The rows of the rect, first to last, in one download (whole rows: one copy).
+        let tile_start = u64::from(slot) * u64::from(side) * u64::from(side);
+        let first = tile_start + rect.min.y as u64 * u64::from(side);
+        let bytes = download_bytes(
+            device,
+            queue,
+            &self.heights,
+            first * 4,
+            u64::from(rect.size.y) * u64::from(side) * 4,
+        )?;
+        let values: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
+        let (x0, w) = (rect.min.x as usize, side as usize);
+        Ok(Grid::from_fn(rect.size.x, rect.size.y, |x, y| {
+            values[y as usize * w + x0 + x as usize].min(255) as u8
+        })?)
+    }
+
+    /// Gives every tile of `tiles` a slot: a zero tile gets one filled with zeros. Fails,
+    /// changing nothing, on a tile that is not loaded or too few free slots.
+    pub(crate) fn make_resident(
+        &mut self,
+        queue: &wgpu::Queue,
+        tiles: impl Iterator<Item = UVec2> + Clone,
+    ) -> Result<(), GpuError> {
+        let mut needed = 0usize;
+        for tile in tiles.clone() {
+            match self.check_tile(tile)? {
+                DetailTileState::NotLoaded => return Err(not_loaded(tile)),
+                DetailTileState::Zero => needed += 1,
+                DetailTileState::Resident(_) => {}
+            }
+        }
+        if needed > self.free.len() {
+            return Err(GpuError::DetailSlotsFull {
+                needed,
+                free: self.free.len(),
+            });
+        }
+        self.staging.fill(u32::from(DETAIL_ZERO_RAW));
+        for tile in tiles {
+            if self.state(tile) == Some(DetailTileState::Zero) {
+                let slot = self.take_slot(tile)?;
+                self.write_slot(queue, slot);
+            }
+        }
+        Ok(())
+    }
+
+    fn check_tile(&self, tile: UVec2) -> Result<DetailTileState, GpuError> {
+        self.state(tile).ok_or_else(|| {
+            CoreError::RegionOutOfBounds {
+                rect: Rect::new(tile.as_ivec2(), UVec2::ONE),
+                map_size: self.layout.tiles(),
+            }
+            .into()
+        })
+    }
+
+    fn take_slot(&mut self, tile: UVec2) -> Result<u32, GpuError> {
+        let slot = self
+            .free
+            .pop()
+            .ok_or(GpuError::DetailSlotsFull { needed: 1, free: 0 })?;
+        if let Some(s) = self.state.get_mut(tile.x, tile.y) {
+            *s = slot;
+        }
+        Ok(slot)
+    }
+
+    /// Sets `tile` to `to` (zero or not loaded), freeing its slot if it had one.
+    fn release(&mut self, tile: UVec2, to: u32) {
+        if let Some(slot) = self.slot_of(tile) {
+            self.free.push(slot);
+        }
+        if let Some(s) = self.state.get_mut(tile.x, tile.y) {
+            *s = to;
+        }
+    }
+
+    fn write_slot(&self, queue: &wgpu::Queue, slot: u32) {
+        let offset = u64::from(slot) * self.staging.len() as u64 * 4;
+        queue.write_buffer(&self.heights, offset, bytemuck::cast_slice(&self.staging));
+    }
+}
+
+fn not_loaded(tile: UVec2) -> GpuError {
+    GpuError::DetailTileNotLoaded { tile }
+}
