@@ -66,6 +66,8 @@ shared_codes! {
     NO_OBJECT: u32 = 0xffffffff "u";
     /// An indirection table entry of a tile that is not resident (`terrain_core::INVALID_SLOT`).
     INVALID_SLOT: u32 = 0xffffffff "u";
+    /// The raw detail value of 0 m (`terrain_core::detail::DETAIL_ZERO_RAW`).
+    DETAIL_ZERO_RAW: u32 = 128 "u";
 }
 
 /// The WGSL `const` declarations of [`codes`], as every shader here starts with them.
@@ -91,6 +93,8 @@ pub const SKY: &str = concat!(
 pub const CLIPMAP: &str = concat!(
     wgsl_prelude!(),
     include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/detail_sample.wgsl"),
+    include_str!("wgsl/clipmap_no_detail.wgsl"),
     include_str!("wgsl/clipmap.wgsl"),
     include_str!("wgsl/clipmap_surface_coarse.wgsl")
 );
@@ -100,6 +104,8 @@ pub const CLIPMAP: &str = concat!(
 pub const CDLOD: &str = concat!(
     wgsl_prelude!(),
     include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/detail_sample.wgsl"),
+    include_str!("wgsl/clipmap_no_detail.wgsl"),
     include_str!("wgsl/clipmap.wgsl"),
     include_str!("wgsl/clipmap_surface_coarse.wgsl"),
     include_str!("wgsl/cdlod.wgsl")
@@ -114,6 +120,8 @@ pub const TESSELLATE: &str = concat!(wgsl_prelude!(), include_str!("wgsl/tessell
 pub const TESSELLATED: &str = concat!(
     wgsl_prelude!(),
     include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/detail_sample.wgsl"),
+    include_str!("wgsl/clipmap_no_detail.wgsl"),
     include_str!("wgsl/clipmap.wgsl"),
     include_str!("wgsl/clipmap_surface_coarse.wgsl"),
     include_str!("wgsl/tessellated.wgsl")
@@ -124,6 +132,8 @@ pub const TESSELLATED: &str = concat!(
 pub const CLIPMAP_GRANULAR: &str = concat!(
     wgsl_prelude!(),
     include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/detail_sample.wgsl"),
+    include_str!("wgsl/clipmap_no_detail.wgsl"),
     include_str!("wgsl/clipmap.wgsl"),
     include_str!("wgsl/clipmap_surface_granular.wgsl")
 );
@@ -133,9 +143,33 @@ pub const CLIPMAP_GRANULAR: &str = concat!(
 pub const CLIPMAP_ATLAS: &str = concat!(
     wgsl_prelude!(),
     include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/detail_sample.wgsl"),
+    include_str!("wgsl/clipmap_no_detail.wgsl"),
     include_str!("wgsl/clipmap.wgsl"),
     include_str!("wgsl/tile_atlas.wgsl"),
     include_str!("wgsl/clipmap_surface_atlas.wgsl")
+);
+
+/// `ClipmapRenderer` over a coarse-map with a detail layer (`GpuDetailTiles`, seed 000 sec.
+/// 2.3): the coarse surface, shaded with the composite normal of eq. 3.4 at the point a
+/// parallax march through the detail heights finds, the detail faded out with distance.
+pub const CLIPMAP_DETAIL: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/detail_sample.wgsl"),
+    include_str!("wgsl/detail_tiles.wgsl"),
+    include_str!("wgsl/clipmap_detail_parallax.wgsl"),
+    include_str!("wgsl/clipmap.wgsl"),
+    include_str!("wgsl/clipmap_surface_coarse.wgsl")
+);
+
+/// `DetailProbe`: the detail layer's height, gradient and composite normal at a list of points
+/// (the same functions the detail clipmap shades with).
+pub const DETAIL_PROBE: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/detail_sample.wgsl"),
+    include_str!("wgsl/detail_tiles.wgsl"),
+    include_str!("wgsl/detail_probe.wgsl")
 );
 
 /// `AtlasProbe`: the atlas surface's stored height, height and gradient at a list of texels
@@ -203,7 +237,9 @@ pub const ALL: &[(&str, &str)] = &[
     ("clipmap", CLIPMAP),
     ("clipmap_granular", CLIPMAP_GRANULAR),
     ("clipmap_atlas", CLIPMAP_ATLAS),
+    ("clipmap_detail", CLIPMAP_DETAIL),
     ("atlas_probe", ATLAS_PROBE),
+    ("detail_probe", DETAIL_PROBE),
     ("granular_penetration", GRANULAR_PENETRATION),
     ("granular_jfa", GRANULAR_JFA),
     ("granular_displace", GRANULAR_DISPLACE),

@@ -132,6 +132,11 @@ impl DetailLayout {
         )
     }
 
+    /// The coarse-map's size in texels.
+    pub fn coarse_size(&self) -> UVec2 {
+        self.coarse_size
+    }
+
     /// Tiles along each axis, eq. 2.1: `n = N_C / (gamma N_D)`, rounded up (the last tile
     /// of a row may reach past the map; its extra texels are never addressed).
     pub fn tiles(&self) -> UVec2 {
@@ -393,6 +398,36 @@ impl DetailLayer {
         let h = |dx: i32, dz: i32| enc.to_metres(f64::from(self.raw(IVec2::new(x0 + dx, z0 + dz))));
         let top = h(0, 0) + (h(1, 0) - h(0, 0)) * fx;
         let bot = h(0, 1) + (h(1, 1) - h(0, 1)) * fx;
+        top + (bot - top) * fz
+    }
+
+    /// The detail gradient in metres per metre at `pos` (metres on the coarse-map's plane):
+    /// eq. 3.3 (five-point differences, as the coarse-map's derivative normals) at the four
+    /// nearest detail texels, bilinear between them, across tile edges and the map's wrap.
+    /// What the renderer adds to the coarse gradient for the composite normal of eq. 3.4
+    /// ([`crate::composite_normal`]).
+    pub fn gradient_m(&self, pos: Vec2) -> Vec2 {
+        let ts = self.layout.detail_texel_m();
+        let p = pos / ts;
+        if !p.is_finite() {
+            return Vec2::ZERO;
+        }
+        let f = p.floor();
+        let (fx, fz) = (p.x - f.x, p.y - f.y);
+        let wrap = |v: f32, n: u32| (f64::from(v).rem_euclid(f64::from(n))) as i64 as i32;
+        let d = self.layout.detail_size();
+        let base = IVec2::new(wrap(f.x, d.x), wrap(f.y, d.y));
+        let k = f64::from(detail_encoding().scale) / (12.0 * f64::from(ts));
+        let raw = |q: IVec2| f64::from(self.raw(q));
+        let grad = |q: IVec2| {
+            let (x, z) = (IVec2::X, IVec2::Y);
+            let dx = (raw(q - 2 * x) - raw(q + 2 * x)) + 8.0 * (raw(q + x) - raw(q - x));
+            let dz = (raw(q - 2 * z) - raw(q + 2 * z)) + 8.0 * (raw(q + z) - raw(q - z));
+            Vec2::new((dx * k) as f32, (dz * k) as f32)
+        };
+        let g = |dx: i32, dz: i32| grad(base + IVec2::new(dx, dz));
+        let top = g(0, 0) + (g(1, 0) - g(0, 0)) * fx;
+        let bot = g(0, 1) + (g(1, 1) - g(0, 1)) * fx;
         top + (bot - top) * fz
     }
 

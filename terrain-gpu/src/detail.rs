@@ -12,12 +12,18 @@
 //!   overwritten by a fresh zero tile.
 //!
 //! Which tiles to hold is not decided here (the cache's band regions do).
+//!
+//! The renderer reads the tiles through a table of one u32 per tile (its slot, or a value at or
+//! above the slot count for the zero tile and a tile not loaded, both drawn as 0 m), kept in
+//! step with every state change: [`crate::ClipmapSurface::Detail`] shades with them and
+//! [`crate::DetailProbe`] reads what it shades with.
 
 use crate::download::download_bytes;
 use crate::error::GpuError;
 use crate::maps::map_buffer;
-use glam::UVec2;
-use terrain_core::detail::{DETAIL_ZERO_RAW, DetailLayout};
+use bytemuck::{Pod, Zeroable};
+use glam::{IVec2, UVec2};
+use terrain_core::detail::{DETAIL_ZERO_RAW, DetailLayout, detail_encoding};
 use terrain_core::{CoreError, Grid, Rect};
 
 /// What a tile of the layout is on the GPU.
@@ -41,6 +47,8 @@ pub struct GpuDetailTiles {
     layout: DetailLayout,
     slots: u32,
     heights: wgpu::Buffer,
+    /// The GPU copy of `state`, for the shaders.
+    table: wgpu::Buffer,
     /// Per tile: a slot, [`ZERO`] or [`NOT_LOADED`].
     state: Grid<u32>,
     /// Free slots, the lowest last (handed out first).
@@ -73,11 +81,19 @@ impl GpuDetailTiles {
             texels * 4,
         )?;
         let tiles = layout.tiles();
+        let state = Grid::new(tiles.x, tiles.y, ZERO)?;
+        let table = crate::scope::buffer_init(
+            device,
+            "GpuDetailTiles table",
+            bytemuck::cast_slice(state.as_slice()),
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        )?;
         Ok(Self {
             layout,
             slots,
             heights,
-            state: Grid::new(tiles.x, tiles.y, ZERO)?,
+            table,
+            state,
             free: (0..slots).rev().collect(),
             staging: vec![0; tile_texels as usize],
         })
@@ -102,6 +118,12 @@ impl GpuDetailTiles {
     /// element `s * tile_size^2`, row-major.
     pub fn heights_buffer(&self) -> &wgpu::Buffer {
         &self.heights
+    }
+
+    /// The tile table's storage buffer: per tile (row-major over the layout's tiles) its slot,
+    /// or a value at or above [`Self::slot_count`] for a tile without one.
+    pub fn table_buffer(&self) -> &wgpu::Buffer {
+        &self.table
     }
 
     /// What `tile` is now, or `None` off the tile grid.
@@ -135,7 +157,7 @@ impl GpuDetailTiles {
     ) -> Result<(), GpuError> {
         let state = self.check_tile(tile)?;
         let Some(texels) = texels else {
-            self.release(tile, ZERO);
+            self.release(queue, tile, ZERO);
             return Ok(());
         };
         let side = self.layout.tile_size();
@@ -148,7 +170,7 @@ impl GpuDetailTiles {
         }
         let slot = match state {
             DetailTileState::Resident(slot) => slot,
-            _ => self.take_slot(tile)?,
+            _ => self.take_slot(queue, tile)?,
         };
         for (d, &v) in self.staging.iter_mut().zip(texels.as_slice()) {
             *d = u32::from(v);
@@ -160,10 +182,10 @@ impl GpuDetailTiles {
     /// Frees `tile`'s slot: the tile is not loaded until [`Self::load`] (read it back first
     /// if it was deformed, and after the submit of every stamp recorded on it). Returns
     /// whether it held a slot. A tile off the grid is left alone.
-    pub fn unload(&mut self, tile: UVec2) -> bool {
+    pub fn unload(&mut self, queue: &wgpu::Queue, tile: UVec2) -> bool {
         let had = self.slot_of(tile).is_some();
         if self.state.get(tile.x, tile.y).is_some() {
-            self.release(tile, NOT_LOADED);
+            self.release(queue, tile, NOT_LOADED);
         }
         had
     }
@@ -236,7 +258,7 @@ impl GpuDetailTiles {
         self.staging.fill(u32::from(DETAIL_ZERO_RAW));
         for tile in tiles {
             if self.state(tile) == Some(DetailTileState::Zero) {
-                let slot = self.take_slot(tile)?;
+                let slot = self.take_slot(queue, tile)?;
                 self.write_slot(queue, slot);
             }
         }
@@ -253,25 +275,69 @@ impl GpuDetailTiles {
         })
     }
 
-    fn take_slot(&mut self, tile: UVec2) -> Result<u32, GpuError> {
+    fn take_slot(&mut self, queue: &wgpu::Queue, tile: UVec2) -> Result<u32, GpuError> {
         let slot = self
             .free
             .pop()
             .ok_or(GpuError::DetailSlotsFull { needed: 1, free: 0 })?;
-        if let Some(s) = self.state.get_mut(tile.x, tile.y) {
-            *s = slot;
-        }
+        self.set_state(queue, tile, slot);
         Ok(slot)
     }
 
     /// Sets `tile` to `to` (zero or not loaded), freeing its slot if it had one.
-    fn release(&mut self, tile: UVec2, to: u32) {
+    fn release(&mut self, queue: &wgpu::Queue, tile: UVec2, to: u32) {
         if let Some(slot) = self.slot_of(tile) {
             self.free.push(slot);
         }
+        self.set_state(queue, tile, to);
+    }
+
+    /// Sets the state of `tile` here and in the GPU table (written before the next submit).
+    fn set_state(&mut self, queue: &wgpu::Queue, tile: UVec2, value: u32) {
         if let Some(s) = self.state.get_mut(tile.x, tile.y) {
-            *s = to;
+            *s = value;
+            let index = u64::from(tile.y) * u64::from(self.state.width()) + u64::from(tile.x);
+            queue.write_buffer(&self.table, index * 4, bytemuck::bytes_of(&value));
         }
+    }
+
+    /// The uniform the detail shaders read: this layer seen from a camera at coarse texel
+    /// `camera_texel` (whole texels), shaded as `shading` says, reading at most `reach` coarse
+    /// texels from the camera (fade distance, parallax reach and differences included).
+    pub(crate) fn info(
+        &self,
+        camera_texel: IVec2,
+        shading: &DetailShading,
+        reach: u32,
+    ) -> Result<DetailInfo, GpuError> {
+        let size = self.layout.detail_size();
+        let coarse = self.layout.coarse_size();
+        let k = self.layout.refine() as i32;
+        let wrap = |v: i32, n: u32| i64::from(v).rem_euclid(i64::from(n)) as i32;
+        // Small: the layer is at most 2^26 detail texels a side.
+        let camera_detail = IVec2::new(wrap(camera_texel.x, coarse.x), wrap(camera_texel.y, coarse.y)) * k;
+        let lowest = i64::from(camera_detail.min_element()) - (i64::from(reach) + 1) * i64::from(k) - 2;
+        let lowest = i32::try_from(lowest).map_err(|_| too_far(reach))?;
+        let wrap_offset = crate::compute::wrap_offset(IVec2::splat(lowest), size)?;
+        let enc = detail_encoding();
+        Ok(DetailInfo {
+            size: size.to_array(),
+            wrap_offset,
+            camera_detail: camera_detail.to_array(),
+            tiles_x: self.layout.tiles().x,
+            tile_size: self.layout.tile_size(),
+            slots: self.slots,
+            refine: self.layout.refine(),
+            scale: enc.scale,
+            offset: enc.offset,
+            gradient_k: (f64::from(enc.scale) / (12.0 * f64::from(self.layout.detail_texel_m())))
+                as f32,
+            fade_start: shading.fade_start_m,
+            fade_end: shading.fade_end_m,
+            parallax_steps: shading.parallax_steps,
+            max_reach: shading.max_reach_texels,
+            pad: [0; 3],
+        })
     }
 
     fn write_slot(&self, queue: &wgpu::Queue, slot: u32) {
@@ -282,4 +348,117 @@ impl GpuDetailTiles {
 
 fn not_loaded(tile: UVec2) -> GpuError {
     GpuError::DetailTileNotLoaded { tile }
+}
+
+fn too_far(reach: u32) -> GpuError {
+    CoreError::OutOfRange {
+        what: "detail reach from the camera (coarse texels)",
+        value: f64::from(reach),
+        expected: "small enough for i32 detail texel coordinates",
+    }
+    .into()
+}
+
+/// How the renderer draws a detail layer: where it fades out, and its parallax march.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DetailShading {
+    /// The detail is drawn fully up to this distance from the camera (metres)...
+    pub fade_start_m: f32,
+    /// ... and not at all from this one, smoothly in between (no edge where it ends).
+    pub fade_end_m: f32,
+    /// Linear search steps of the parallax occlusion march over the detail's 1 m range (0:
+    /// composite normals only, no parallax).
+    pub parallax_steps: u32,
+    /// The farthest a grazing view's parallax moves a fragment, in coarse texels.
+    pub max_reach_texels: f32,
+}
+
+impl Default for DetailShading {
+    /// 32 steps (3 cm of height each, refined by interpolation), faded from 30 m to 60 m, at
+    /// most 8 coarse texels of parallax.
+    fn default() -> Self {
+        Self {
+            fade_start_m: 30.0,
+            fade_end_m: 60.0,
+            parallax_steps: 32,
+            max_reach_texels: 8.0,
+        }
+    }
+}
+
+/// The most parallax steps a [`DetailShading`] accepts (fragment cost is linear in them).
+pub const MAX_PARALLAX_STEPS: u32 = 256;
+/// The farthest parallax reach a [`DetailShading`] accepts, in coarse texels.
+pub const MAX_PARALLAX_REACH: f32 = 256.0;
+
+impl DetailShading {
+    /// Checks the fields: `0 <= fade_start_m < fade_end_m`, finite; at most
+    /// [`MAX_PARALLAX_STEPS`] steps; a reach in `[0, MAX_PARALLAX_REACH]`. Returns the coarse
+    /// texels from the camera the shaders may read at `texel_m` metres per coarse texel.
+    pub fn check(&self, texel_m: f32) -> Result<u32, GpuError> {
+        let bad = |what, value: f32, expected| {
+            Err(CoreError::OutOfRange {
+                what,
+                value: f64::from(value),
+                expected,
+            }
+            .into())
+        };
+        if !(self.fade_start_m.is_finite() && self.fade_start_m >= 0.0) {
+            return bad("detail fade start (m)", self.fade_start_m, "finite, at least 0");
+        }
+        if !(self.fade_end_m.is_finite() && self.fade_end_m > self.fade_start_m) {
+            return bad(
+                "detail fade end (m)",
+                self.fade_end_m,
+                "finite, beyond the fade start",
+            );
+        }
+        if self.parallax_steps > MAX_PARALLAX_STEPS {
+            return bad(
+                "detail parallax steps",
+                self.parallax_steps as f32,
+                "at most 256",
+            );
+        }
+        if !(0.0..=MAX_PARALLAX_REACH).contains(&self.max_reach_texels) {
+            return bad(
+                "detail parallax reach (coarse texels)",
+                self.max_reach_texels,
+                "0 to 256",
+            );
+        }
+        let texels = (f64::from(self.fade_end_m) / f64::from(texel_m)).ceil()
+            + f64::from(self.max_reach_texels).ceil()
+            + 2.0;
+        if texels > f64::from(1u32 << 24) {
+            return bad(
+                "detail fade end (m)",
+                self.fade_end_m,
+                "at most 2^24 coarse texels from the camera",
+            );
+        }
+        Ok(texels as u32)
+    }
+}
+
+/// The `DetailInfo` uniform of detail_tiles.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+pub(crate) struct DetailInfo {
+    pub size: [u32; 2],
+    pub wrap_offset: [i32; 2],
+    pub camera_detail: [i32; 2],
+    pub tiles_x: u32,
+    pub tile_size: u32,
+    pub slots: u32,
+    pub refine: u32,
+    pub scale: f32,
+    pub offset: f32,
+    pub gradient_k: f32,
+    pub fade_start: f32,
+    pub fade_end: f32,
+    pub parallax_steps: u32,
+    pub max_reach: f32,
+    pub pad: [u32; 3],
 }

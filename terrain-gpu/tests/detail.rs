@@ -262,12 +262,12 @@ fn detail_stamps_over_unloaded_tiles_or_without_slots_change_nothing() {
     let data = hashed(32, 3);
     tiles.load(queue, UVec2::new(1, 1), Some(&data)).unwrap();
     tiles.load(queue, UVec2::new(2, 1), Some(&data)).unwrap();
-    assert!(tiles.unload(UVec2::new(2, 1)));
+    assert!(tiles.unload(queue, UVec2::new(2, 1)));
     assert_eq!(
         tiles.state(UVec2::new(2, 1)),
         Some(DetailTileState::NotLoaded)
     );
-    assert!(!tiles.unload(UVec2::new(9, 9)), "off the grid: left alone");
+    assert!(!tiles.unload(queue, UVec2::new(9, 9)), "off the grid: left alone");
     let ts = layout().detail_texel_m();
     let gauss = GaussianStamp::default();
     let at = |c: Vec2, blend| StampOp {

@@ -1,6 +1,7 @@
 // ClipmapRenderer: geometry clipmap blocks displaced by the coarse-map (GPU Gems 2 ch. 2,
 // seed 000 sec 3.1.3), lit with the partial-derivative normals (diffuse + Phong specular) and
-// coloured by height and slope.
+// coloured by height and slope. A surface with a detail layer adds its height and gradient in
+// the fragment shader (`fragment_detail`; the normal is eq. 3.4's composite).
 
 struct Frame {
     view_proj: mat4x4<f32>,
@@ -117,17 +118,23 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
             discard;
         }
     }
-    let p0 = floor(q);
-    let f = q - p0;
+    // The fragment relative to the camera, in metres.
+    let world = vec3<f32>(p.x * frame.texel_size, in.height - frame.camera_height, p.y * frame.texel_size);
+    // The surface's detail (none for most surfaces): what it adds, and where to shade.
+    let fd = fragment_detail(q, world, in.view_dist);
+    let qs = fd.q;
+    let p0 = floor(qs);
+    let f = qs - p0;
     let t0 = frame.camera_texel + vec2<i32>(p0);
     let d00 = derivative_at(t0);
     let d10 = derivative_at(t0 + vec2<i32>(1, 0));
     let d01 = derivative_at(t0 + vec2<i32>(0, 1));
     let d11 = derivative_at(t0 + vec2<i32>(1, 1));
     let d = mix(mix(d00, d10, f.x), mix(d01, d11, f.x), f.y);
-    let n = normalize(vec3<f32>(-d.x, 1.0, -d.y));
+    let n = composite_normal(d, fd.sample.gradient);
+    let height = in.height + fd.sample.height;
 
-    let t = clamp((in.height - frame.ramp_low) / max(frame.ramp_high - frame.ramp_low, 1e-3), 0.0, 1.0);
+    let t = clamp((height - frame.ramp_low) / max(frame.ramp_high - frame.ramp_low, 1e-3), 0.0, 1.0);
     let grass = mix(vec3<f32>(0.20, 0.36, 0.16), vec3<f32>(0.45, 0.55, 0.25), smoothstep(0.0, 0.45, t));
     let high = mix(vec3<f32>(0.55, 0.46, 0.36), vec3<f32>(0.93, 0.93, 0.96), smoothstep(0.55, 0.9, t));
     var albedo = mix(grass, high, smoothstep(0.35, 0.65, t));
@@ -138,7 +145,6 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     let l = normalize(frame.light_dir.xyz);
     let diffuse = max(dot(n, l), 0.0);
     // Phong specular towards the camera (at the origin of the camera-relative frame).
-    let world = vec3<f32>(p.x * frame.texel_size, in.height - frame.camera_height, p.y * frame.texel_size);
     let v = normalize(-world);
     let r = reflect(-l, n);
     let specular = 0.15 * pow(max(dot(r, v), 0.0), 24.0);
