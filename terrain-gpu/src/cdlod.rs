@@ -78,6 +78,7 @@ impl CdlodRenderer {
                 (wgpu::ShaderStages::VERTEX, 1),
                 (wgpu::ShaderStages::FRAGMENT, 2),
             ],
+            &[],
             &VertexShape {
                 entry: "vs_cdlod",
                 vertex_stride: std::mem::size_of::<[f32; 2]>() as u64,

@@ -6,6 +6,7 @@
 use crate::atlas::GpuTileAtlas;
 use crate::camera::Camera;
 use crate::compute::shader_module;
+use crate::detail::{DetailInfo, DetailShading, GpuDetailTiles};
 use crate::error::GpuError;
 use crate::maps::{GpuDerivativeMap, GpuHeightMap};
 use crate::scope::{buffer_init, scoped};
@@ -95,10 +96,13 @@ pub struct ClipmapRenderer {
     coarse: SurfacePipeline,
     granular: SurfacePipeline,
     atlas: SurfacePipeline,
+    detail: SurfacePipeline,
     target: TargetFormat,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
     uniform: wgpu::Buffer,
+    /// The detail surface's `DetailInfo` (binding 3 of its pipeline).
+    detail_uniform: wgpu::Buffer,
     instances: wgpu::Buffer,
     parts: Vec<MeshPart>,
     n: u32,
@@ -131,6 +135,7 @@ impl ClipmapRenderer {
                 (wgpu::ShaderStages::VERTEX, 1),
                 (wgpu::ShaderStages::FRAGMENT, 2),
             ],
+            &[],
             &clipmap_shape(),
         )?;
         let granular = SurfacePipeline::new(
@@ -139,6 +144,7 @@ impl ClipmapRenderer {
             "clipmap granular",
             terrain_shaders::CLIPMAP_GRANULAR,
             &[(wgpu::ShaderStages::VERTEX_FRAGMENT, 1)],
+            &[],
             &clipmap_shape(),
         )?;
         let atlas = SurfacePipeline::new(
@@ -151,6 +157,21 @@ impl ClipmapRenderer {
                 (wgpu::ShaderStages::VERTEX_FRAGMENT, 2),
                 (wgpu::ShaderStages::VERTEX_FRAGMENT, 3),
             ],
+            &[],
+            &clipmap_shape(),
+        )?;
+        let detail = SurfacePipeline::new(
+            device,
+            target,
+            "clipmap detail",
+            terrain_shaders::CLIPMAP_DETAIL,
+            &[
+                (wgpu::ShaderStages::VERTEX, 1),
+                (wgpu::ShaderStages::FRAGMENT, 2),
+                (wgpu::ShaderStages::FRAGMENT, 4),
+                (wgpu::ShaderStages::FRAGMENT, 5),
+            ],
+            &[(wgpu::ShaderStages::FRAGMENT, 3)],
             &clipmap_shape(),
         )?;
         let vertices = buffer_init(
@@ -172,6 +193,12 @@ impl ClipmapRenderer {
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
+            let detail_uniform = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("clipmap detail"),
+                size: std::mem::size_of::<DetailInfo>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
             let instances = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("clipmap instances"),
                 size: max_instances * std::mem::size_of::<ClipmapInstance>() as u64,
@@ -182,10 +209,12 @@ impl ClipmapRenderer {
                 coarse,
                 granular,
                 atlas,
+                detail,
                 target: *target,
                 vertices,
                 indices,
                 uniform,
+                detail_uniform,
                 instances,
                 parts: mesh.parts.clone(),
                 n: layout.n(),
@@ -288,7 +317,18 @@ impl ClipmapRenderer {
         }
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
 
-        let buffers = surface.buffers();
+        let mut buffers = surface.buffers();
+        if let ClipmapSurface::Detail {
+            detail, shading, ..
+        } = surface
+        {
+            let reach = shading.check(info.texel_size)?;
+            let camera_texel = glam::IVec2::from(uniform.camera_texel);
+            let detail_info = detail.info(camera_texel, shading, reach)?;
+            queue.write_buffer(&self.detail_uniform, 0, bytemuck::bytes_of(&detail_info));
+            // Bindings 3 (this renderer's uniform), 4 and 5 after the coarse surface's.
+            buffers.insert(2, self.detail_uniform.clone());
+        }
         let kind = surface.kind();
         let rebind = match &self.bound {
             Some((bound, k, _)) => *k != kind || bound.as_slice() != buffers.as_slice(),
@@ -334,6 +374,7 @@ impl ClipmapRenderer {
             SurfaceKind::Coarse => &self.coarse,
             SurfaceKind::Granular => &self.granular,
             SurfaceKind::Atlas => &self.atlas,
+            SurfaceKind::Detail => &self.detail,
         }
     }
 }
@@ -410,6 +451,7 @@ enum SurfaceKind {
     Coarse,
     Granular,
     Atlas,
+    Detail,
 }
 
 /// Everything one clipmap frame is drawn from.
@@ -454,6 +496,20 @@ pub enum ClipmapSurface<'a> {
         /// The tile slots and indirection table.
         atlas: &'a GpuTileAtlas,
     },
+    /// A coarse-map with a detail layer (seed 000 sec. 2.3): the coarse grid displaced by the
+    /// coarse heights, each fragment shaded at the point a parallax march through the detail
+    /// heights finds, with the composite normal of eq. 3.4 (coarse and detail gradients
+    /// added) and the detail's height in the colour ramp, the detail faded out with distance.
+    Detail {
+        /// The heights.
+        map: &'a GpuHeightMap<u16>,
+        /// Their derivative normals (same size).
+        normals: &'a GpuDerivativeMap,
+        /// The detail tiles over `map` (their layout's coarse size and spacing are the map's).
+        detail: &'a GpuDetailTiles,
+        /// Fade distances and parallax march.
+        shading: &'a DetailShading,
+    },
 }
 
 /// What the renderer needs to know of a surface.
@@ -475,6 +531,29 @@ impl ClipmapSurface<'_> {
                         actual: normals.size(),
                     });
                 }
+                (map.size(), map.encoding(), map.texel_size(), map.wrap())
+            }
+            ClipmapSurface::Detail {
+                map,
+                normals,
+                detail,
+                shading,
+            } => {
+                ClipmapSurface::Coarse { map, normals }.check()?;
+                let layout = detail.layout();
+                if layout.coarse_size() != map.size() {
+                    return Err(GpuError::SizeMismatch {
+                        expected: map.size(),
+                        actual: layout.coarse_size(),
+                    });
+                }
+                if layout.coarse_texel_m() != map.texel_size() {
+                    return Err(GpuError::Unsupported {
+                        what: "ClipmapRenderer",
+                        reason: "the detail layout's coarse texel spacing is not the map's",
+                    });
+                }
+                shading.check(map.texel_size())?;
                 (map.size(), map.encoding(), map.texel_size(), map.wrap())
             }
             ClipmapSurface::Granular { map, surface } => {
@@ -500,12 +579,25 @@ impl ClipmapSurface<'_> {
         })
     }
 
-    /// The storage buffers the surface binds at 1, 2, ...
+    /// The storage buffers the surface binds at 1, 2, ... (a detail surface's tiles at 4 and 5,
+    /// after the renderer's own uniform at 3).
     pub(crate) fn buffers(&self) -> Vec<wgpu::Buffer> {
         match *self {
             ClipmapSurface::Coarse { map, normals } => {
                 vec![map.buffer().clone(), normals.buffer().clone()]
             }
+            // The renderer's detail uniform goes between the normals and the tiles.
+            ClipmapSurface::Detail {
+                map,
+                normals,
+                detail,
+                ..
+            } => vec![
+                map.buffer().clone(),
+                normals.buffer().clone(),
+                detail.table_buffer().clone(),
+                detail.heights_buffer().clone(),
+            ],
             ClipmapSurface::Granular { surface, .. } => vec![surface.clone()],
             ClipmapSurface::Atlas { atlas } => vec![
                 atlas.info_buffer().clone(),
@@ -520,6 +612,7 @@ impl ClipmapSurface<'_> {
             ClipmapSurface::Coarse { .. } => SurfaceKind::Coarse,
             ClipmapSurface::Granular { .. } => SurfaceKind::Granular,
             ClipmapSurface::Atlas { .. } => SurfaceKind::Atlas,
+            ClipmapSurface::Detail { .. } => SurfaceKind::Detail,
         }
     }
 }
@@ -569,15 +662,16 @@ pub(crate) struct SurfacePipeline {
 }
 
 impl SurfacePipeline {
-    /// Builds the pipeline of `source` with the frame uniform at binding 0 and read-only storage
-    /// buffers at the given (stages, binding), and its wireframe twin when the device has
-    /// `POLYGON_MODE_LINE`.
+    /// Builds the pipeline of `source` with the frame uniform at binding 0, read-only storage
+    /// buffers and uniforms of the surface at the given (stages, binding), and its wireframe
+    /// twin when the device has `POLYGON_MODE_LINE`.
     pub(crate) fn new(
         device: &wgpu::Device,
         target: &TargetFormat,
         label: &'static str,
         source: &str,
         storage: &[(wgpu::ShaderStages, u32)],
+        uniforms: &[(wgpu::ShaderStages, u32)],
         shape: &VertexShape<'_>,
     ) -> Result<Self, GpuError> {
         let module = shader_module(device, label, source)?;
@@ -598,6 +692,18 @@ impl SurfacePipeline {
                     visibility,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                }
+            }));
+            entries.extend(uniforms.iter().map(|&(visibility, binding)| {
+                wgpu::BindGroupLayoutEntry {
+                    binding,
+                    visibility,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
                         has_dynamic_offset: false,
                         min_binding_size: None,
                     },

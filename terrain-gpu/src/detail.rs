@@ -315,8 +315,12 @@ impl GpuDetailTiles {
         let k = self.layout.refine() as i32;
         let wrap = |v: i32, n: u32| i64::from(v).rem_euclid(i64::from(n)) as i32;
         // Small: the layer is at most 2^26 detail texels a side.
-        let camera_detail = IVec2::new(wrap(camera_texel.x, coarse.x), wrap(camera_texel.y, coarse.y)) * k;
-        let lowest = i64::from(camera_detail.min_element()) - (i64::from(reach) + 1) * i64::from(k) - 2;
+        let camera_detail = IVec2::new(
+            wrap(camera_texel.x, coarse.x),
+            wrap(camera_texel.y, coarse.y),
+        ) * k;
+        let lowest =
+            i64::from(camera_detail.min_element()) - (i64::from(reach) + 1) * i64::from(k) - 2;
         let lowest = i32::try_from(lowest).map_err(|_| too_far(reach))?;
         let wrap_offset = crate::compute::wrap_offset(IVec2::splat(lowest), size)?;
         let enc = detail_encoding();
@@ -405,7 +409,11 @@ impl DetailShading {
             .into())
         };
         if !(self.fade_start_m.is_finite() && self.fade_start_m >= 0.0) {
-            return bad("detail fade start (m)", self.fade_start_m, "finite, at least 0");
+            return bad(
+                "detail fade start (m)",
+                self.fade_start_m,
+                "finite, at least 0",
+            );
         }
         if !(self.fade_end_m.is_finite() && self.fade_end_m > self.fade_start_m) {
             return bad(

@@ -377,6 +377,7 @@ impl TessRenderer {
                 (wgpu::ShaderStages::FRAGMENT, 1),
                 (wgpu::ShaderStages::FRAGMENT, 2),
             ],
+            &[],
             &VertexShape {
                 entry: "vs_tess",
                 vertex_stride: std::mem::size_of::<TessVertex>() as u64,

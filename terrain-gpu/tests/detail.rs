@@ -267,7 +267,10 @@ fn detail_stamps_over_unloaded_tiles_or_without_slots_change_nothing() {
         tiles.state(UVec2::new(2, 1)),
         Some(DetailTileState::NotLoaded)
     );
-    assert!(!tiles.unload(queue, UVec2::new(9, 9)), "off the grid: left alone");
+    assert!(
+        !tiles.unload(queue, UVec2::new(9, 9)),
+        "off the grid: left alone"
+    );
     let ts = layout().detail_texel_m();
     let gauss = GaussianStamp::default();
     let at = |c: Vec2, blend| StampOp {

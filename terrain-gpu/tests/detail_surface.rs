@@ -4,11 +4,19 @@
 //! adapter the machine has (lavapipe in CI); without one they skip, or fail under
 //! `TERRAIN_REQUIRE_GPU=1`.
 
-use glam::{IVec2, UVec2, Vec2};
+#[path = "common/scene.rs"]
+#[allow(dead_code)] // the golden view's parts of the shared scene
+mod scene;
+
+use glam::{IVec2, UVec2, Vec2, Vec3};
+use scene::Scene;
 use terrain_core::detail::{DetailLayer, DetailLayout};
-use terrain_core::{Grid, composite_normal};
+use terrain_core::{Blend, GaussianStamp, Grid, StampPlacement, composite_normal};
 use terrain_gpu::testing::context_or_skip;
-use terrain_gpu::{DetailProbe, DetailProbePoint, GpuDetailTiles};
+use terrain_gpu::{
+    Camera, ClipmapSurface, ClipmapView, DetailProbe, DetailProbePoint, DetailShading,
+    GpuDetailTiles, GpuError, SkyColors, TerrainStyle,
+};
 
 /// A 24 x 20 coarse-map at 0.75 m refined x3 (0.25 m detail texels: every probe position below
 /// is exact in f32 on both sides), 72 x 60 detail texels in 5 x 4 tiles of 16 (the last column
@@ -104,11 +112,211 @@ fn the_shaders_detail_height_gradient_and_composite_normal_equal_the_cpu_referen
         q: Vec2::new(5000.0, 0.0),
         coarse_gradient: Vec2::ZERO,
     };
-    assert!(probe.read(device, queue, &tiles, IVec2::ZERO, &[far]).is_err());
+    assert!(
+        probe
+            .read(device, queue, &tiles, IVec2::ZERO, &[far])
+            .is_err()
+    );
     let nan = DetailProbePoint {
         q: Vec2::new(f32::NAN, 0.0),
         coarse_gradient: Vec2::ZERO,
     };
-    assert!(probe.read(device, queue, &tiles, IVec2::ZERO, &[nan]).is_err());
+    assert!(
+        probe
+            .read(device, queue, &tiles, IVec2::ZERO, &[nan])
+            .is_err()
+    );
     ctx.check().expect("no GPU validation errors");
+}
+
+/// The largest channel difference of two frames and the pixels differing by more than 8.
+fn frame_diff(a: &Grid<[u8; 4]>, b: &Grid<[u8; 4]>) -> (u8, usize) {
+    let mut max = 0;
+    let mut strong = 0;
+    for (p, q) in a.as_slice().iter().zip(b.as_slice()) {
+        let d = p
+            .iter()
+            .zip(q)
+            .map(|(x, y)| x.abs_diff(*y))
+            .max()
+            .unwrap_or(0);
+        max = max.max(d);
+        strong += usize::from(d > 8);
+    }
+    (max, strong)
+}
+
+/// The shared scene's 256 m map with a detail layer refined x8 (12.5 cm texels) in 128-texel
+/// tiles, footprints pressed 30 cm deep along a walk in front of `camera()`, every touched tile on the GPU.
+fn scene_with_footprints(ctx: terrain_gpu::GpuContext) -> (Scene, DetailLayer) {
+    let scene = Scene::new(ctx, 31, 5);
+    let layout = DetailLayout::new(scene.map.size(), 1.0, 8, 128).unwrap();
+    let mut layer = DetailLayer::new(layout).unwrap();
+    let mut foot = GaussianStamp::default();
+    let mut touched = Vec::new();
+    for i in 0..10 {
+        let side = if i % 2 == 0 { -0.4 } else { 0.4 };
+        let c = Vec2::new(120.0 + side, 128.0 + 1.2 * i as f32);
+        let p = StampPlacement::new(c, Vec2::new(0.8, 1.2), -0.3).unwrap();
+        let change = layer
+            .apply_stamp(&mut foot, &p, Blend::Min { base_m: 0.0 })
+            .unwrap();
+        touched.extend(change.tiles.iter().map(|(t, _)| *t));
+    }
+    assert!(!touched.is_empty());
+    let mut tiles = GpuDetailTiles::new(&scene.ctx.device, layout, 16).unwrap();
+    for t in touched {
+        tiles.load(&scene.ctx.queue, t, layer.tile(t)).unwrap();
+    }
+    let mut scene = scene;
+    scene.detail = Some((tiles, DetailShading::default()));
+    (scene, layer)
+}
+
+/// Standing 3 m above the footprints' start, looking along the walk and down.
+fn camera(scene: &Scene) -> Camera {
+    let xz = Vec2::new(120.0, 124.0);
+    let eye = Vec3::new(xz.x, scene.ground(xz) + 3.0, xz.y);
+    Camera::looking(eye, Vec3::new(0.0, -0.6, 1.0))
+}
+
+const SIZE: UVec2 = UVec2::new(256, 160);
+
+#[test]
+fn detail_footprints_show_in_the_frame_and_fade_out_with_distance() {
+    let Some(ctx) = context_or_skip("detail_render") else {
+        return;
+    };
+    let (mut scene, _) = scene_with_footprints(ctx);
+    let sky = SkyColors::default();
+    let cam = camera(&scene);
+    let (with_detail, _) = scene.render(&cam, SIZE, &sky);
+    let detail = scene.detail.take();
+    let (coarse, _) = scene.render(&cam, SIZE, &sky);
+    let (max, strong) = frame_diff(&with_detail, &coarse);
+    if !(max > 40 && strong > 250) {
+        let dir = std::env::temp_dir();
+        let _ = terrain_core::io::write_png_rgba8(dir.join("detail_footprints.png"), &with_detail);
+        let _ = terrain_core::io::write_png_rgba8(dir.join("detail_coarse.png"), &coarse);
+        panic!(
+            "the footprints hardly change the frame: max {max}, {strong} pixels (frames in the temp dir)"
+        );
+    }
+    // Faded out before the nearest fragment (the camera is 3 m up): the coarse frame.
+    let (tiles, _) = detail.unwrap();
+    let faded = DetailShading {
+        fade_start_m: 0.5,
+        fade_end_m: 1.0,
+        ..DetailShading::default()
+    };
+    scene.detail = Some((tiles, faded));
+    let (far, _) = scene.render(&cam, SIZE, &sky);
+    let (max, _) = frame_diff(&far, &coarse);
+    assert!(
+        max <= 1,
+        "a faded-out detail layer draws the coarse frame (max {max})"
+    );
+}
+
+#[test]
+fn a_detail_layer_of_zero_tiles_draws_the_coarse_frame() {
+    let Some(ctx) = context_or_skip("detail_render_zero") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 31, 5);
+    let sky = SkyColors::default();
+    let cam = camera(&scene);
+    let (coarse, _) = scene.render(&cam, SIZE, &sky);
+    let layout = DetailLayout::new(scene.map.size(), 1.0, 3, 64).unwrap();
+    let tiles = GpuDetailTiles::new(&scene.ctx.device, layout, 1).unwrap();
+    scene.detail = Some((tiles, DetailShading::default()));
+    let (zero, _) = scene.render(&cam, SIZE, &sky);
+    let (max, _) = frame_diff(&zero, &coarse);
+    assert!(max <= 1, "zero detail changes nothing (max {max})");
+}
+
+#[test]
+fn detail_surfaces_that_do_not_fit_the_map_or_bad_shading_are_refused() {
+    let Some(ctx) = context_or_skip("detail_render_refused") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 31, 5);
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let cam = camera(&scene);
+    let frame = scene
+        .layout
+        .place(
+            Vec2::new(cam.position.x, cam.position.z),
+            1.0,
+            (0.0, 40.0),
+            None,
+        )
+        .unwrap();
+    let style = TerrainStyle::default();
+    let other = DetailLayout::new(UVec2::new(128, 256), 1.0, 3, 64).unwrap();
+    let spacing = DetailLayout::new(scene.map.size(), 0.5, 3, 64).unwrap();
+    let fits = DetailLayout::new(scene.map.size(), 1.0, 3, 64).unwrap();
+    let bad_shadings = [
+        DetailShading {
+            fade_end_m: 10.0,
+            fade_start_m: 20.0,
+            ..DetailShading::default()
+        },
+        DetailShading {
+            fade_start_m: f32::NAN,
+            ..DetailShading::default()
+        },
+        DetailShading {
+            fade_end_m: f32::INFINITY,
+            ..DetailShading::default()
+        },
+        DetailShading {
+            parallax_steps: 100_000,
+            ..DetailShading::default()
+        },
+        DetailShading {
+            max_reach_texels: -1.0,
+            ..DetailShading::default()
+        },
+        DetailShading {
+            fade_end_m: 1e30,
+            ..DetailShading::default()
+        },
+    ];
+    let mut cases: Vec<(GpuDetailTiles, DetailShading)> = vec![
+        (
+            GpuDetailTiles::new(device, other, 1).unwrap(),
+            DetailShading::default(),
+        ),
+        (
+            GpuDetailTiles::new(device, spacing, 1).unwrap(),
+            DetailShading::default(),
+        ),
+    ];
+    for s in bad_shadings {
+        cases.push((GpuDetailTiles::new(device, fits, 1).unwrap(), s));
+    }
+    for (tiles, shading) in &cases {
+        let view = ClipmapView {
+            surface: ClipmapSurface::Detail {
+                map: &scene.gpu_map,
+                normals: &scene.normals,
+                detail: tiles,
+                shading,
+            },
+            frame: &frame,
+            camera: &cam,
+            style: &style,
+            target_size: SIZE,
+        };
+        let err = scene.renderer.prepare(device, queue, &view).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                GpuError::SizeMismatch { .. } | GpuError::Unsupported { .. } | GpuError::Core(_)
+            ),
+            "{err}"
+        );
+    }
+    scene.ctx.check().expect("no GPU validation errors");
 }

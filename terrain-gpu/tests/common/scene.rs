@@ -3,8 +3,9 @@
 use glam::{UVec2, Vec2, Vec3};
 use terrain_core::{CoarseMap, Grid, HeightEncoding, TerrainParams, generate_coarse_map};
 use terrain_gpu::{
-    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuContext, GpuDerivativeMap,
-    GpuHeightMap, NormalPass, OffscreenTarget, SkyColors, SkyPass, TargetFormat, TerrainStyle,
+    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DetailShading, GpuContext,
+    GpuDerivativeMap, GpuDetailTiles, GpuHeightMap, NormalPass, OffscreenTarget, SkyColors,
+    SkyPass, TargetFormat, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -23,6 +24,8 @@ pub struct Scene {
     pub renderer: ClipmapRenderer,
     /// `TerrainStyle::hide_outside_map` of the views rendered.
     pub hide_outside: bool,
+    /// A detail layer to draw the map with (`ClipmapSurface::Detail`), if any.
+    pub detail: Option<(GpuDetailTiles, DetailShading)>,
 }
 
 impl Scene {
@@ -55,6 +58,7 @@ impl Scene {
             sky,
             renderer,
             hide_outside: false,
+            detail: None,
         }
     }
 
@@ -86,11 +90,20 @@ impl Scene {
         self.sky
             .prepare(queue, camera.view_proj_relative(aspect), sky)
             .unwrap();
-        let view = ClipmapView {
-            surface: ClipmapSurface::Coarse {
+        let surface = match &self.detail {
+            Some((detail, shading)) => ClipmapSurface::Detail {
+                map: &self.gpu_map,
+                normals: &self.normals,
+                detail,
+                shading,
+            },
+            None => ClipmapSurface::Coarse {
                 map: &self.gpu_map,
                 normals: &self.normals,
             },
+        };
+        let view = ClipmapView {
+            surface,
             frame: &frame,
             camera,
             style: &style,
