@@ -245,6 +245,56 @@ impl DetailLayout {
     }
 }
 
+impl DetailLayout {
+    /// The tiles within `radius_m` of `center_m` (metres on the coarse-map's plane) along each
+    /// axis, across the layer's wrap, each once, in row-major order: the band of tiles a
+    /// renderer near `center_m` reads (every tile when the square covers the layer).
+    ///
+    /// Fails on a centre or radius that is not finite, or a negative radius.
+    pub fn tiles_within(&self, center_m: Vec2, radius_m: f32) -> Result<Vec<UVec2>, CoreError> {
+        if !center_m.is_finite() || !(radius_m.is_finite() && radius_m >= 0.0) {
+            return Err(CoreError::OutOfRange {
+                what: "detail tile band (centre, radius in metres)",
+                value: f64::from(radius_m),
+                expected: "a finite centre and a finite radius of at least 0",
+            });
+        }
+        let ts = f64::from(self.detail_texel_m());
+        let side = u64::from(self.tile_size);
+        // One axis at a time: the detail texels of the band, wrapped onto the layer's period
+        // (at most two ranges), and the tiles holding them, each once.
+        let axis = |c: f32, period: u32| -> Vec<u32> {
+            let period = u64::from(period);
+            let lo = ((f64::from(c) - f64::from(radius_m)) / ts).floor();
+            let hi = ((f64::from(c) + f64::from(radius_m)) / ts).floor();
+            let all = || (0..period.div_ceil(side) as u32).collect();
+            if !(hi - lo + 1.0 < period as f64) {
+                return all();
+            }
+            let len = (hi - lo) as u64 + 1;
+            let a = lo.rem_euclid(period as f64) as u64;
+            let mut ranges = vec![(a, (a + len).min(period))];
+            if a + len > period {
+                ranges.push((0, a + len - period));
+            }
+            let mut out: Vec<u32> = ranges
+                .iter()
+                .flat_map(|&(s, e)| (s / side) as u32..=((e - 1) / side) as u32)
+                .collect();
+            out.sort_unstable();
+            out.dedup();
+            out
+        };
+        let d = self.detail_size();
+        let xs = axis(center_m.x, d.x);
+        let ys = axis(center_m.y, d.y);
+        Ok(ys
+            .iter()
+            .flat_map(|&y| xs.iter().map(move |&x| UVec2::new(x, y)))
+            .collect())
+    }
+}
+
 /// The part of a stamp footprint inside one detail tile ([`DetailLayout::footprint_pieces`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DetailPiece {

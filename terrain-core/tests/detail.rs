@@ -362,3 +362,50 @@ fn bad_layouts_tiles_and_stamps_are_refused_and_change_nothing() {
     }
     assert_eq!(layer, before);
 }
+
+/// The band of tiles around a point against a brute force over every detail texel: a tile is
+/// in it when one of its texels lies within the radius along both axes (on the wrapped plane).
+#[test]
+fn the_tiles_within_a_band_are_those_holding_its_texels() {
+    // 0.25 m detail texels (exact), 50 x 36 of them in tiles of 8: a partial last tile on
+    // both axes.
+    let l = DetailLayout::new(UVec2::new(25, 18), 0.5, 2, 8).unwrap();
+    let d = l.detail_size().as_ivec2();
+    let ts = l.detail_texel_m();
+    for (c, r) in [
+        (Vec2::new(3.1, 2.2), 0.9),
+        (Vec2::new(0.1, 0.1), 1.3),
+        (Vec2::new(-30.0, 100.7), 2.0),
+        (Vec2::new(12.4, 8.9), 0.0),
+        (Vec2::new(6.0, 4.0), 5.9),
+        (Vec2::new(6.0, 4.0), 1e9),
+    ] {
+        let got = l.tiles_within(c, r).unwrap();
+        // In f64, as the layer computes the band's ends (the f32 sum may round up onto an edge).
+        let ends = |c: f32| {
+            let (c, r, ts) = (f64::from(c), f64::from(r), f64::from(ts));
+            (((c - r) / ts).floor(), ((c + r) / ts).floor())
+        };
+        let mut want = std::collections::BTreeSet::new();
+        let span = |(a, b): (f64, f64), n: i32| -> Vec<i32> {
+            if b - a + 1.0 >= f64::from(n) {
+                (0..n).collect()
+            } else {
+                (a as i64..=b as i64)
+                    .map(|v| v.rem_euclid(i64::from(n)) as i32)
+                    .collect()
+            }
+        };
+        for y in span(ends(c.y), d.y) {
+            for x in span(ends(c.x), d.x) {
+                let (tile, _) = l.locate(IVec2::new(x, y));
+                want.insert((tile.y, tile.x));
+            }
+        }
+        let want: Vec<UVec2> = want.into_iter().map(|(y, x)| UVec2::new(x, y)).collect();
+        assert_eq!(got, want, "centre {c} radius {r}");
+    }
+    assert!(l.tiles_within(Vec2::new(f32::NAN, 0.0), 1.0).is_err());
+    assert!(l.tiles_within(Vec2::ZERO, -1.0).is_err());
+    assert!(l.tiles_within(Vec2::ZERO, f32::INFINITY).is_err());
+}

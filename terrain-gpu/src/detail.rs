@@ -23,7 +23,7 @@ use crate::error::GpuError;
 use crate::maps::map_buffer;
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2};
-use terrain_core::detail::{DETAIL_ZERO_RAW, DetailLayout, detail_encoding};
+use terrain_core::detail::{DETAIL_ZERO_RAW, DetailLayer, DetailLayout, detail_encoding};
 use terrain_core::{CoreError, Grid, Rect};
 
 /// What a tile of the layout is on the GPU.
@@ -232,6 +232,72 @@ impl GpuDetailTiles {
         Ok(Grid::from_fn(rect.size.x, rect.size.y, |x, y| {
             values[y as usize * w + x0 + x as usize].min(255) as u8
         })?)
+    }
+
+    /// Makes the resident set follow `wanted` when the CPU `layer` holds every tile's truth
+    /// (each stamp applied to both, as a CPU mirror does): tiles not wanted lose their slot
+    /// (not loaded), wanted tiles that are not loaded, or that the layer holds while the GPU
+    /// has the zero tile, are uploaded from the layer. Returns (tiles uploaded, tiles
+    /// unloaded).
+    ///
+    /// Fails, changing nothing, on a layer of another layout, a wanted tile off the grid, or
+    /// more wanted tiles needing a slot than there are slots.
+    pub fn stream_from(
+        &mut self,
+        queue: &wgpu::Queue,
+        layer: &DetailLayer,
+        wanted: &[UVec2],
+    ) -> Result<(usize, usize), GpuError> {
+        if layer.layout() != &self.layout {
+            return Err(GpuError::Unsupported {
+                what: "GpuDetailTiles::stream_from",
+                reason: "the layer has another layout",
+            });
+        }
+        let n = self.layout.tiles();
+        let mut want = Grid::new(n.x, n.y, false)?;
+        for &t in wanted {
+            self.check_tile(t)?;
+            if let Some(w) = want.get_mut(t.x, t.y) {
+                *w = true;
+            }
+        }
+        let slotted = (0..n.y)
+            .flat_map(|y| (0..n.x).map(move |x| UVec2::new(x, y)))
+            .filter(|t| {
+                want.get(t.x, t.y) == Some(true)
+                    && (layer.tile(*t).is_some() || self.slot_of(*t).is_some())
+            })
+            .count();
+        if slotted > self.slots as usize {
+            return Err(GpuError::DetailSlotsFull {
+                needed: slotted,
+                free: self.slots as usize,
+            });
+        }
+        let mut unloaded = 0;
+        for y in 0..n.y {
+            for x in 0..n.x {
+                let t = UVec2::new(x, y);
+                if want.get(x, y) == Some(false) && self.slot_of(t).is_some() {
+                    self.release(queue, t, NOT_LOADED);
+                    unloaded += 1;
+                }
+            }
+        }
+        let mut uploaded = 0;
+        for &t in wanted {
+            let stale = match self.state(t) {
+                Some(DetailTileState::NotLoaded) => true,
+                Some(DetailTileState::Zero) => layer.tile(t).is_some(),
+                _ => false,
+            };
+            if stale {
+                self.load(queue, t, layer.tile(t))?;
+                uploaded += 1;
+            }
+        }
+        Ok((uploaded, unloaded))
     }
 
     /// Gives every tile of `tiles` a slot: a zero tile gets one filled with zeros. Fails,

@@ -383,3 +383,61 @@ fn detail_stamps_over_unloaded_tiles_or_without_slots_change_nothing() {
     assert!(GpuDetailTiles::new(device, layout(), 0).is_err());
     assert!(GpuDetailTiles::new(device, layout(), u32::MAX).is_err());
 }
+
+/// Streaming from a CPU layer: the wanted tiles are on the GPU as the layer holds them, the
+/// others lose their slots, and too many wanted tiles are refused without a change.
+#[test]
+fn streaming_from_the_cpu_layer_keeps_the_wanted_tiles_resident() {
+    let Some(ctx) = context_or_skip("detail_stream_from") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut layer = DetailLayer::new(layout()).unwrap();
+    for (x, y, seed) in [(0, 0, 1), (1, 0, 2), (4, 3, 3), (2, 2, 4)] {
+        layer.set_tile(UVec2::new(x, y), hashed(32, seed)).unwrap();
+    }
+    let mut tiles = GpuDetailTiles::new(device, layout(), 3).unwrap();
+    let t = |x, y| UVec2::new(x, y);
+    // Wanted: two marked tiles and a zero one (which needs no slot).
+    let (up, down) = tiles
+        .stream_from(queue, &layer, &[t(0, 0), t(1, 0), t(3, 3)])
+        .unwrap();
+    assert_eq!((up, down), (2, 0));
+    assert_eq!(tiles.resident(), 2);
+    assert_eq!(tiles.state(t(3, 3)), Some(DetailTileState::Zero));
+    let all = Rect::from_size(UVec2::splat(32));
+    for w in [t(0, 0), t(1, 0)] {
+        assert_eq!(
+            &tiles.read(device, queue, w, all).unwrap(),
+            layer.tile(w).unwrap()
+        );
+    }
+    // Moving on: (0, 0) is dropped, (4, 3) and (2, 2) come in.
+    let (up, down) = tiles
+        .stream_from(queue, &layer, &[t(1, 0), t(4, 3), t(2, 2)])
+        .unwrap();
+    assert_eq!((up, down), (2, 1));
+    assert_eq!(tiles.state(t(0, 0)), Some(DetailTileState::NotLoaded));
+    for w in [t(1, 0), t(4, 3), t(2, 2)] {
+        assert_eq!(
+            &tiles.read(device, queue, w, all).unwrap(),
+            layer.tile(w).unwrap()
+        );
+    }
+    // Four tiles with texels for three slots: refused, nothing changed.
+    let err = tiles
+        .stream_from(queue, &layer, &[t(0, 0), t(1, 0), t(4, 3), t(2, 2)])
+        .unwrap_err();
+    assert!(
+        matches!(err, GpuError::DetailSlotsFull { needed: 4, .. }),
+        "{err}"
+    );
+    assert_eq!(tiles.state(t(0, 0)), Some(DetailTileState::NotLoaded));
+    assert_eq!(tiles.resident(), 3);
+    // Off the grid, or another layout's layer: refused.
+    assert!(tiles.stream_from(queue, &layer, &[t(9, 0)]).is_err());
+    let other =
+        DetailLayer::new(DetailLayout::new(UVec2::new(48, 40), 0.1, 3, 16).unwrap()).unwrap();
+    assert!(tiles.stream_from(queue, &other, &[]).is_err());
+    ctx.check().expect("no GPU validation errors");
+}
