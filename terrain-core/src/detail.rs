@@ -252,7 +252,7 @@ impl DetailLayout {
     ///
     /// Fails on a centre or radius that is not finite, or a negative radius.
     pub fn tiles_within(&self, center_m: Vec2, radius_m: f32) -> Result<Vec<UVec2>, CoreError> {
-        if !center_m.is_finite() || !(radius_m.is_finite() && radius_m >= 0.0) {
+        if !(center_m.is_finite() && radius_m.is_finite() && radius_m >= 0.0) {
             return Err(CoreError::OutOfRange {
                 what: "detail tile band (centre, radius in metres)",
                 value: f64::from(radius_m),
@@ -268,7 +268,7 @@ impl DetailLayout {
             let lo = ((f64::from(c) - f64::from(radius_m)) / ts).floor();
             let hi = ((f64::from(c) + f64::from(radius_m)) / ts).floor();
             let all = || (0..period.div_ceil(side) as u32).collect();
-            if !(hi - lo + 1.0 < period as f64) {
+            if hi - lo + 1.0 >= period as f64 {
                 return all();
             }
             let len = (hi - lo) as u64 + 1;

@@ -99,6 +99,12 @@ pub struct Cli {
     /// 2.3, as a compute pass).
     #[arg(long, value_enum, default_value_t = LodArg::Clipmap)]
     pub lod: LodArg,
+    /// The default scenario's detail layer (seed 000 sec. 2.3): `none` stamps footprints into
+    /// the coarse-map; `parallax` stamps them into 8-bit detail tiles refined x3 (streamed
+    /// around the camera) and shades the clipmap through them: parallax occlusion mapping, the
+    /// composite normal of eq. 3.4, faded out with distance.
+    #[arg(long, value_enum, default_value_t = DetailArg::None)]
+    pub detail: DetailArg,
     /// With `--lod cdlod`: choose the LODs by screen-space error (seed 002 eq. 1.1), at most
     /// PX pixels, instead of by distance ranges.
     #[arg(long, value_name = "PX")]
@@ -218,6 +224,16 @@ pub enum LodArg {
     Cdlod,
     /// Adaptive tessellation by longest-edge bisection in a compute pass (seed 002 sec. 2.3).
     Tessellated,
+}
+
+/// `--detail`: where footprints go and how the finest geometry is shaded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DetailArg {
+    /// Coarse-map only.
+    None,
+    /// Detail tiles, drawn by parallax occlusion mapping on the unrefined clipmap.
+    Parallax,
 }
 
 /// An on / off flag value.

@@ -190,6 +190,13 @@ fn open_gpu(
         ))
         .usage();
     }
+    if cli.detail != crate::cli::DetailArg::None && cli.lod != LodArg::Clipmap {
+        return Err(anyhow::anyhow!(
+            "--detail parallax shades the clipmap through the detail tiles: it needs --lod \
+             clipmap"
+        ))
+        .usage();
+    }
     if let Some(tau) = cli.target_error {
         if cli.lod == LodArg::Clipmap {
             return Err(anyhow::anyhow!(

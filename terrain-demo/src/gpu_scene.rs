@@ -4,15 +4,16 @@
 
 use anyhow::{Context, Result};
 use glam::{UVec2, Vec2};
+use terrain_core::detail::{DetailLayer, DetailLayout, tiles_of_pieces};
 use terrain_core::granular::{GranularObject, GranularParams};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_core::{FixedPointMap, Rect, StampPlacement};
 use terrain_gpu::granular::{GpuGranularNormals, GpuGranularStep, GranularNormalsPass, VolumePass};
 use terrain_gpu::{
-    CdlodDraw, CdlodRenderer, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuContext,
-    GpuDerivativeMap, GpuHeightMap, GpuRegionSource, GpuStamp, GpuTextureStamp, GpuTimer,
-    GpuTiming, NormalPass, OffscreenTarget, RegionReadback, SkyColors, SkyPass, StampOp, StampPass,
-    TerrainStyle, TessDraw, TessRenderer, TessellationPass,
+    CdlodDraw, CdlodRenderer, ClipmapRenderer, ClipmapSurface, ClipmapView, DetailShading,
+    GpuContext, GpuDerivativeMap, GpuDetailTiles, GpuHeightMap, GpuRegionSource, GpuStamp,
+    GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget, RegionReadback, SkyColors,
+    SkyPass, StampOp, StampPass, TerrainStyle, TessDraw, TessRenderer, TessellationPass,
 };
 use terrain_lod::{
     CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodView, ClipmapLayout, DensityMap,
@@ -75,6 +76,8 @@ pub struct GpuScene {
     cdlod: Option<CdlodScene>,
     /// Adaptive tessellation instead of the clipmap (`--lod tessellated`), for the coarse-map.
     tess: Option<TessScene>,
+    /// The detail layer's tiles (`--detail parallax`), drawn with the coarse-map.
+    detail: Option<DetailScene>,
     /// Vertices of each part of the clipmap's shared mesh, by part index.
     clipmap_part_vertices: Vec<u64>,
     /// Frames rendered so far.
@@ -104,6 +107,31 @@ pub const COLLISION_READBACK_RING: usize = 4;
 
 /// Readbacks of deformed atlas tiles in flight at most (the ring's staging buffers).
 const TILE_READBACK_RING: usize = 16;
+
+/// Detail tile slots on the GPU (256 KiB each at 256^2 u32 texels: 8 MiB). The default walk
+/// keeps at most about 20 tiles with footprints within the fade distance; the nearest are kept
+/// when more are. Few slots matter on software adapters: lavapipe's submits cost time in
+/// proportion to the bytes of the storage buffers they bind (55 ms for 96 slots, 3 ms for 8).
+pub const DETAIL_SLOTS: u32 = 32;
+
+/// The detail layer on the GPU: tile slots streamed from the scenario's CPU layer (which holds
+/// every tile's truth: each footprint is stamped on both) and how the renderer shades them.
+struct DetailScene {
+    tiles: GpuDetailTiles,
+    shading: DetailShading,
+    /// Detail texels inside the rects the last deformation stamped.
+    dirty_texels: u64,
+}
+
+/// The demo's detail shading: footprints seen from eye height, drawn fully to 15 m and faded
+/// out by 30 m.
+fn detail_shading() -> DetailShading {
+    DetailShading {
+        fade_start_m: 15.0,
+        fade_end_m: 30.0,
+        ..DetailShading::default()
+    }
+}
 
 /// The GPU side of the snow scenario: the fixed-point map, the step, the normals and float
 /// heights it is rendered from, the volume sum, and the readback of the areas a step changed.
@@ -315,6 +343,7 @@ impl GpuScene {
             tile_readback: None,
             cdlod: None,
             tess: None,
+            detail: None,
             frames: 0,
             destroy_at: std::env::var(DESTROY_DEVICE_ENV)
                 .ok()
@@ -326,6 +355,83 @@ impl GpuScene {
             },
             ctx,
         })
+    }
+
+    /// Draws the coarse-map through a detail layer of `layout` from now on, and stamps the
+    /// footprints into its tiles ([`GpuScene::stream_detail`] keeps them resident).
+    pub fn enable_detail(&mut self, layout: DetailLayout) -> Result<()> {
+        let tiles = GpuDetailTiles::new(&self.ctx.device, layout, DETAIL_SLOTS)?;
+        self.detail = Some(DetailScene {
+            tiles,
+            shading: detail_shading(),
+            dirty_texels: 0,
+        });
+        Ok(())
+    }
+
+    /// With a detail layer: tiles in a GPU slot, and the detail texels the last deformation
+    /// stamped.
+    pub fn detail_stats(&self) -> Option<(u32, u64)> {
+        self.detail
+            .as_ref()
+            .map(|d| (d.tiles.resident(), d.dirty_texels))
+    }
+
+    /// Streams detail tiles from `layer` (the CPU layer the footprints are also stamped on):
+    /// those this frame's footprints touch, then those within the fade distance of
+    /// `camera_xz`, nearest first, as many as the slots hold; the others give their slots up.
+    /// Timed as [`Step::Detail`]. Nothing without a detail layer.
+    pub fn stream_detail(
+        &mut self,
+        layer: &DetailLayer,
+        camera_xz: Vec2,
+        plan: &FramePlan,
+        timings: &mut Timings,
+    ) -> Result<()> {
+        let Some(detail) = self.detail.as_mut() else {
+            return Ok(());
+        };
+        let t = std::time::Instant::now();
+        let layout = *layer.layout();
+        let mut wanted = Vec::new();
+        for d in plan
+            .deformations
+            .iter()
+            .filter(|d| d.kind == StampKind::Footprint)
+        {
+            let footprint = d.placement.footprint(layout.detail_texel_m())?;
+            if !footprint.is_empty() {
+                let pieces = layout.footprint_pieces(footprint)?;
+                wanted.extend(tiles_of_pieces(&pieces).into_iter().map(|(t, _)| t));
+            }
+        }
+        wanted.sort_unstable_by_key(|t| (t.y, t.x));
+        wanted.dedup();
+        let tile_m = layout.detail_texel_m() * layout.tile_size() as f32;
+        let mut band = layout.tiles_within(camera_xz, detail.shading.fade_end_m + tile_m)?;
+        // Nearest first, on the wrapped plane.
+        let extent = layout.coarse_size().as_vec2() * layout.coarse_texel_m();
+        let distance = |t: glam::UVec2| {
+            let d = ((t.as_vec2() + 0.5) * tile_m - camera_xz).abs() % extent;
+            d.min(extent - d).length()
+        };
+        band.sort_by(|a, b| distance(*a).total_cmp(&distance(*b)));
+        let mut slotted = wanted.len();
+        for t in band {
+            if slotted >= DETAIL_SLOTS as usize {
+                break;
+            }
+            if wanted.contains(&t) {
+                continue;
+            }
+            if layer.tile(t).is_some() {
+                slotted += 1;
+            }
+            wanted.push(t);
+        }
+        detail.tiles.stream_from(&self.ctx.queue, layer, &wanted)?;
+        timings.add(Step::Detail, crate::timings::ms_since(t));
+        Ok(())
     }
 
     /// Uploads the footprint texture stamp that [`StampKind::Footprint`] deformations use.
@@ -766,8 +872,12 @@ impl GpuScene {
         }
         let shock = plan.shock_delta.as_ref().and(self.shock.as_ref());
         let mut dirty = Vec::new();
+        let in_detail = self.detail.is_some();
         let stamp_time = self.timer.time(device, queue, |encoder| {
             for (i, d) in plan.deformations.iter().enumerate() {
+                if in_detail && d.kind == StampKind::Footprint {
+                    continue;
+                }
                 let stamp = match (d.kind, &shock) {
                     (StampKind::Footprint, _) => match &self.footprint {
                         Some(f) => GpuStamp::Texture(f),
@@ -794,7 +904,35 @@ impl GpuScene {
             }
             Ok(())
         })?;
-        // Both submits are done: the passes' uniform slots are free again.
+        // Footprints into the detail tiles, as one more submit.
+        if let (Some(detail), Some(foot)) = (self.detail.as_mut(), self.footprint.as_ref()) {
+            let mut texels = 0;
+            let time = self.timer.time(device, queue, |encoder| {
+                for d in plan
+                    .deformations
+                    .iter()
+                    .filter(|d| d.kind == StampKind::Footprint)
+                {
+                    let op = StampOp {
+                        stamp: GpuStamp::Texture(foot),
+                        placement: d.placement,
+                        blend: terrain_core::Blend::Add,
+                    };
+                    let rects = self.stamps.encode_detail(
+                        device,
+                        queue,
+                        encoder,
+                        &mut detail.tiles,
+                        &op,
+                    )?;
+                    texels += rects.iter().map(|(_, r)| r.area()).sum::<u64>();
+                }
+                Ok(())
+            })?;
+            detail.dirty_texels = texels;
+            record(timings, Step::Detail, time);
+        }
+        // Every submit is done: the passes' uniform slots are free again.
         self.stamps.recall();
         self.normal_pass.recall();
         record(timings, Step::StampGpu, stamp_time);
@@ -874,9 +1012,17 @@ impl GpuScene {
                 surface: g.normals.buffer(),
             },
             (None, Some(atlas)) => ClipmapSurface::Atlas { atlas },
-            (None, None) => ClipmapSurface::Coarse {
-                map: &self.map,
-                normals: &self.normals,
+            (None, None) => match &self.detail {
+                Some(d) => ClipmapSurface::Detail {
+                    map: &self.map,
+                    normals: &self.normals,
+                    detail: &d.tiles,
+                    shading: &d.shading,
+                },
+                None => ClipmapSurface::Coarse {
+                    map: &self.map,
+                    normals: &self.normals,
+                },
             },
         };
         let view = ClipmapView {

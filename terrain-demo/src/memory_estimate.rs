@@ -97,6 +97,8 @@ pub struct RunShape {
     pub scenario: ScenarioKind,
     /// The LOD scheme of its 3D frames.
     pub lod: crate::cli::LodArg,
+    /// Whether the default scenario has a detail layer (`--detail parallax`).
+    pub detail: bool,
     /// Whether it renders on the GPU (the estimate assumes it does unless `--no-gpu`: without
     /// an adapter the run falls back to less).
     pub gpu: bool,
@@ -164,6 +166,7 @@ impl RunShape {
         Ok(Self {
             scenario: cli.scenario,
             lod: cli.lod,
+            detail: cli.detail != crate::cli::DetailArg::None,
             gpu,
             map,
             heightmap,
@@ -190,6 +193,18 @@ impl RunShape {
                 parts.push(("map", per_texel(MAP_PER_TEXEL)));
                 parts.push(("normals", per_texel(NORMALS_PER_TEXEL)));
                 parts.push(("collision", per_texel(COLLISION_PER_TEXEL)));
+                if self.detail {
+                    // The CPU layer if every tile were stamped (one byte per detail texel),
+                    // and the GPU's tile slots.
+                    let refine = u64::from(crate::scenarios::DETAIL_REFINE);
+                    let mut bytes = per_texel(refine * refine);
+                    if self.gpu {
+                        let tile = u64::from(crate::scenarios::DETAIL_TILE);
+                        let slots = u64::from(crate::gpu_scene::DETAIL_SLOTS);
+                        bytes = bytes.saturating_add(slots * tile * tile * 4);
+                    }
+                    parts.push(("detail", bytes));
+                }
                 if self.gpu {
                     let gpu = GPU_MAP_PER_TEXEL + GPU_READBACK_PER_TEXEL;
                     parts.push(("gpu_map", per_texel(gpu)));

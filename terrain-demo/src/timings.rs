@@ -36,11 +36,14 @@ pub enum Step {
     /// The frame thread's work with the tile cache (flyover): craters on resident tiles and
     /// the pool's update; the loading happens on worker threads.
     Cache,
+    /// The detail layer (`--detail`): its tiles streamed to the GPU around the camera and the
+    /// footprints stamped into them there.
+    Detail,
 }
 
 impl Step {
     /// Every step, in the order the plot stacks them (bottom first).
-    pub const ALL: [Step; 14] = [
+    pub const ALL: [Step; 15] = [
         Step::StampGpu,
         Step::StampCpu,
         Step::NormalsGpu,
@@ -48,6 +51,7 @@ impl Step {
         Step::GranularGpu,
         Step::GranularCpu,
         Step::CpuMirror,
+        Step::Detail,
         Step::Cache,
         Step::Physics,
         Step::Lod,
@@ -75,6 +79,7 @@ impl Step {
             Step::GranularGpu => "granular_gpu",
             Step::GranularCpu => "granular_cpu",
             Step::Cache => "cache",
+            Step::Detail => "detail",
         }
     }
 }

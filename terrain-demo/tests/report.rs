@@ -53,10 +53,29 @@ fn reports_of_every_scenario_validate_against_the_schema() {
         std::process::id()
     ));
     let dem_s = dem.to_string_lossy().into_owned();
-    let runs: [(&str, &[&str]); 6] = [
+    let runs: [(&str, &[&str]); 8] = [
         (
             "schema_default",
             &["--size", "96", "--frames", "5", "--resolution", "160x96"],
+        ),
+        (
+            "schema_detail",
+            &[
+                "--size",
+                "96",
+                "--frames",
+                "4",
+                "--resolution",
+                "160x96",
+                "--detail",
+                "parallax",
+            ],
+        ),
+        (
+            "schema_detail_cpu",
+            &[
+                "--size", "96", "--frames", "3", "--no-gpu", "--detail", "parallax",
+            ],
         ),
         (
             "schema_cdlod",
@@ -131,6 +150,21 @@ fn reports_of_every_scenario_validate_against_the_schema() {
             }
         } else if name == "schema_default" {
             assert_eq!(r["frames"][0]["lod"], "clipmap");
+            assert!(r["frames"][0]["detail_tiles_resident"].is_null());
+        } else if name.starts_with("schema_detail") {
+            // Footprints every frame, into the detail tiles: never in the coarse-map's dirty
+            // texels on a frame without craters or shockwave (frame 0).
+            for (i, f) in r["frames"].as_array().unwrap().iter().enumerate() {
+                assert!(
+                    f["detail_tiles_resident"].as_u64().unwrap() >= 1,
+                    "frame {i}"
+                );
+                assert!(f["detail_dirty_texels"].as_u64().unwrap() > 0, "frame {i}");
+                if r["backend"] != "none" && !args.contains(&"--no-gpu") {
+                    assert!(f["timings_ms"]["detail"].as_f64().is_some(), "frame {i}");
+                }
+            }
+            assert_eq!(r["frames"][0]["dirty_texels"], 0);
         }
         let bad = violations(&validator, &r);
         assert!(

@@ -22,6 +22,7 @@ use std::time::Instant;
 use terrain_core::{CoarseMap, DerivativeMap, DirtyRect};
 
 pub use stamp_script::{FramePlan, StampKind};
+pub use stamps::{DETAIL_REFINE, DETAIL_TILE};
 
 /// Seconds of scenario time per frame (30 frames per second), whatever the render speed.
 pub const FRAME_DT: f64 = 1.0 / 30.0;
@@ -35,6 +36,12 @@ pub fn open(cli: &Cli, params: &DemoParams) -> Result<Box<dyn Scenario>> {
                 ScenarioKind::Snow => "snow",
                 _ => "flyover",
             }
+        )));
+    }
+    if cli.detail != crate::cli::DetailArg::None && cli.scenario != ScenarioKind::Default {
+        return Err(crate::usage_error::usage(anyhow::anyhow!(
+            "--detail puts the default scenario's footprints into detail tiles; the snow and \
+             flyover scenarios have no detail layer"
         )));
     }
     Ok(match cli.scenario {

@@ -5,6 +5,7 @@
 use anyhow::{Context, Result};
 use glam::Vec2;
 use terrain_core::HeightEncoding;
+use terrain_core::detail::DetailLayer;
 use terrain_core::io::{ReadLimits, decode_png8};
 use terrain_core::{
     Blend, CoarseMap, DirtyRect, GaussianStamp, Shockwave, Stamp, StampPlacement, TextureStamp,
@@ -197,15 +198,25 @@ impl StampScript {
         self.extent * 0.5 - Vec2::new(radius, 0.0)
     }
 
-    /// Applies `plan` to a CPU map with terrain-core's reference stamps; returns the rects of
-    /// each deformation, in plan order.
+    /// Applies `plan` to a CPU map with terrain-core's reference stamps, the footprints to
+    /// `detail` instead when there is a detail layer; returns the rects of each deformation on
+    /// the map, in plan order (none for a footprint in the detail layer), and the detail texels
+    /// inside the rects the footprints stamped.
     pub fn apply_cpu(
         &mut self,
         map: &mut CoarseMap,
         plan: &mut FramePlan,
-    ) -> Result<Vec<Vec<DirtyRect>>> {
+        mut detail: Option<&mut DetailLayer>,
+    ) -> Result<(Vec<Vec<DirtyRect>>, u64)> {
         let mut dirty = Vec::new();
+        let mut detail_texels = 0;
         for d in &plan.deformations {
+            if let (StampKind::Footprint, Some(layer)) = (d.kind, detail.as_deref_mut()) {
+                let change = layer.apply_stamp(&mut self.footprint, &d.placement, Blend::Add)?;
+                detail_texels += change.tiles.iter().map(|(_, r)| r.area()).sum::<u64>();
+                dirty.push(Vec::new());
+                continue;
+            }
             let stamp: &mut dyn Stamp = match d.kind {
                 StampKind::Footprint => &mut self.footprint,
                 StampKind::Crater => &mut self.crater,
@@ -219,6 +230,6 @@ impl StampScript {
             };
             dirty.push(apply_stamp(map, stamp, &d.placement, Blend::Add)?);
         }
-        Ok(dirty)
+        Ok((dirty, detail_texels))
     }
 }

@@ -2,6 +2,10 @@
 //! GPU map when there is one, and on the CPU map behind the overview), a collision mirror fed
 //! by readbacks of the dirty regions, and a camera on it (`--camera`): walking behind the
 //! walker, or orbiting or flying over the whole map (the default with `--heightmap`).
+//!
+//! With `--detail parallax` the footprints go into a detail layer instead (seed 000 sec. 2.3:
+//! 8-bit tiles refined x3 over the coarse-map), stamped on the GPU's tiles and on the CPU
+//! layer that holds every tile's truth and feeds the GPU's streaming.
 
 use super::stamp_script::{StampKind, StampScript};
 use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo, heightmap};
@@ -16,6 +20,7 @@ use anyhow::Result;
 use glam::Vec2;
 use std::collections::HashMap;
 use std::time::Instant;
+use terrain_core::detail::{DetailLayer, DetailLayout};
 use terrain_core::{CoarseMap, DerivativeMap, bilinear};
 use terrain_physics::{CollisionMirror, CpuRegionSource, ReadbackScheduler, RequestId};
 
@@ -34,7 +39,14 @@ pub struct StampScenario {
     /// When each collision readback in flight was requested.
     requested_at: HashMap<RequestId, Instant>,
     rig: CameraRig,
+    /// `--detail parallax`: the detail layer the footprints go into.
+    detail: Option<DetailLayer>,
 }
+
+/// Detail texels per coarse texel (seed 000's 1/gamma = 3).
+pub const DETAIL_REFINE: u32 = 3;
+/// Detail tile side in detail texels (256 KiB a GPU slot).
+pub const DETAIL_TILE: u32 = 256;
 
 impl StampScenario {
     /// Loads or generates the terrain and places the walker and the camera.
@@ -47,6 +59,15 @@ impl StampScenario {
         let normals = DerivativeMap::from_map(&map);
         let initial_normals_ms = ms_since(t);
         let script = StampScript::new(map.extent_m(), cli.seed, params.stamps)?;
+        let detail = match cli.detail {
+            crate::cli::DetailArg::None => None,
+            crate::cli::DetailArg::Parallax => {
+                let layout =
+                    DetailLayout::new(map.size(), map.texel_size(), DETAIL_REFINE, DETAIL_TILE)
+                        .map_err(|e| crate::usage_error::usage(anyhow::anyhow!("--detail: {e}")))?;
+                Some(DetailLayer::new(layout)?)
+            }
+        };
         let mirror = CollisionMirror::from_map(&map)?;
         // The GPU scene's readback ring has `max_in_flight` buffers (see `driver::open_gpu`).
         let scheduler = ReadbackScheduler::for_mirror(&mirror, params.scheduler)?;
@@ -92,6 +113,7 @@ impl StampScenario {
             scheduler,
             requested_at: HashMap::new(),
             rig,
+            detail,
         })
     }
 }
@@ -126,6 +148,9 @@ impl Scenario for StampScenario {
             scene.reach(radius)?;
             scene.hide_outside_map(true);
         }
+        if let Some(layer) = &self.detail {
+            scene.enable_detail(*layer.layout())?;
+        }
         scene.set_footprint(self.script.footprint())
     }
 
@@ -158,6 +183,10 @@ impl Scenario for StampScenario {
         // The stamps: on the GPU map (rendered, read back for collision) and on the CPU map
         // (the overview; and without a GPU, the source of the collision readbacks).
         if let Some(scene) = ctx.gpu.as_deref_mut() {
+            if let Some(layer) = &self.detail {
+                let eye = self.rig.eye();
+                scene.stream_detail(layer, Vec2::new(eye.x, eye.z), &plan, ctx.timings)?;
+            }
             for (i, rect) in scene.deform(&plan, self.script.crater(), ctx.timings)? {
                 let bound = StampScript::bound(&plan.deformations[i], encoding)?;
                 self.scheduler.note_deformation(rect, bound, now)?;
@@ -170,8 +199,9 @@ impl Scenario for StampScenario {
         } else {
             (Step::StampCpu, Step::NormalsCpu)
         };
-        let dirty_by_deformation = ctx.timings.time(stamp_step, || {
-            self.script.apply_cpu(self.cpu.map_mut(), &mut plan)
+        let (dirty_by_deformation, cpu_detail_texels) = ctx.timings.time(stamp_step, || {
+            self.script
+                .apply_cpu(self.cpu.map_mut(), &mut plan, self.detail.as_mut())
         })?;
         ctx.timings.time(normals_step, || -> Result<()> {
             for rect in dirty_by_deformation.iter().flatten() {
@@ -201,6 +231,13 @@ impl Scenario for StampScenario {
         ctx.timings.add(Step::Physics, ms_since(t));
 
         let dirty: Vec<_> = dirty_by_deformation.into_iter().flatten().collect();
+        // The GPU's figures where it holds the tiles, else the CPU layer's.
+        let detail = self.detail.as_ref().map(|layer| {
+            match ctx.gpu.as_deref().and_then(|scene| scene.detail_stats()) {
+                Some(stats) => stats,
+                None => (layer.resident_tiles() as u32, cpu_detail_texels),
+            }
+        });
         Ok(FrameOutcome {
             camera,
             camera_clearance_m,
@@ -210,6 +247,8 @@ impl Scenario for StampScenario {
                 shockwaves: plan.count(StampKind::Shockwave),
                 dirty_texels: dirty.iter().map(|r| r.area()).sum(),
                 readback_ms,
+                detail_tiles_resident: detail.map(|d| d.0),
+                detail_dirty_texels: detail.map(|d| d.1),
                 ..FrameStats::default()
             },
             dirty,
