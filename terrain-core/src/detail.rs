@@ -13,6 +13,11 @@
 //! large deformations belong to the coarse-map (a spill of the excess into it is not built
 //! yet).
 //!
+//! The renderer reads the layer as [`DetailLayer::height_m`] (bilinear) and
+//! [`DetailLayer::gradient_m`] (eq. 3.3 per texel, bilinear) define, across tile edges and the
+//! wrap; [`DetailLayout::tiles_within`] is the band of tiles a camera reads. terrain-gpu's
+//! `GpuDetailTiles` holds tiles in GPU slots, and its `DetailProbe` is tested against these.
+//!
 //! ```
 //! use glam::{UVec2, Vec2};
 //! use terrain_core::detail::{DetailLayer, DetailLayout};

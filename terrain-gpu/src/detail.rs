@@ -13,6 +13,34 @@
 //!
 //! Which tiles to hold is not decided here (the cache's band regions do).
 //!
+//! ```no_run
+//! use glam::{UVec2, Vec2};
+//! use terrain_core::detail::DetailLayout;
+//! use terrain_core::{Blend, GaussianStamp, StampPlacement};
+//! use terrain_gpu::{GpuContext, GpuDetailTiles, GpuStamp, StampOp, StampPass};
+//!
+//! let ctx = GpuContext::new_headless()?;
+//! let (device, queue) = (&ctx.device, &ctx.queue);
+//! // 256^2 coarse texels at 0.1 m refined x3, 128-texel tiles, 16 slots.
+//! let layout = DetailLayout::new(UVec2::splat(256), 0.1, 3, 128)?;
+//! let mut tiles = GpuDetailTiles::new(device, layout, 16)?;
+//! let mut stamps = StampPass::new(device)?;
+//! let gauss = GaussianStamp::default();
+//! // A mark 4 cm deep over the corner of four tiles (128 detail texels = 4.27 m).
+//! let op = StampOp {
+//!     stamp: GpuStamp::Gaussian(&gauss),
+//!     placement: StampPlacement::new(Vec2::splat(4.27), Vec2::splat(0.6), -0.04)?,
+//!     blend: Blend::Add,
+//! };
+//! let mut encoder = device.create_command_encoder(&Default::default());
+//! let touched = stamps.encode_detail(device, queue, &mut encoder, &mut tiles, &op)?;
+//! queue.submit([encoder.finish()]);
+//! stamps.recall();
+//! assert_eq!(touched.len(), 4);
+//! assert_eq!(tiles.resident(), 4);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
 //! The renderer reads the tiles through a table of one u32 per tile (its slot, or a value at or
 //! above the slot count for the zero tile and a tile not loaded, both drawn as 0 m), kept in
 //! step with every state change: [`crate::ClipmapSurface::Detail`] shades with them and

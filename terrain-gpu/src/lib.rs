@@ -1,7 +1,9 @@
 //! wgpu passes for deformable terrain: the headless context, GPU height and derivative maps,
 //! `StampPass`, `NormalPass`, asynchronous `RegionReadback`, and rendering: `SkyPass`,
 //! `ClipmapRenderer` and `OffscreenTarget` captures; `GpuTileAtlas`, the tile slots and
-//! indirection table of a streamed world that the clipmap can draw from.
+//! indirection table of a streamed world that the clipmap can draw from; `GpuDetailTiles`, the
+//! detail layer's tiles (stamped by `StampPass::encode_detail`, drawn through
+//! `ClipmapSurface::Detail`).
 //!
 //! Every pass is a struct that makes everything long-lived in `new(&wgpu::Device, ..)`
 //! (pipelines, one shader module per WGSL module, layouts, a uniform ring, scratch buffers) and
