@@ -434,7 +434,11 @@ impl GpuDetailTiles {
             fade_end: shading.fade_end_m,
             parallax_steps: shading.parallax_steps,
             max_reach: shading.max_reach_texels,
-            pad: [0; 3],
+            even_tiles: u32::from(
+                size.x.is_multiple_of(self.layout.tile_size())
+                    && size.y.is_multiple_of(self.layout.tile_size()),
+            ),
+            pad: [0; 2],
         })
     }
 
@@ -562,5 +566,6 @@ pub(crate) struct DetailInfo {
     pub fade_end: f32,
     pub parallax_steps: u32,
     pub max_reach: f32,
-    pub pad: [u32; 3],
+    pub even_tiles: u32,
+    pub pad: [u32; 2],
 }

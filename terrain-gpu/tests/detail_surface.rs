@@ -146,17 +146,19 @@ fn frame_diff(a: &Grid<[u8; 4]>, b: &Grid<[u8; 4]>) -> (u8, usize) {
     (max, strong)
 }
 
-/// The shared scene's 256 m map with a detail layer refined x8 (12.5 cm texels) in 128-texel
-/// tiles, footprints pressed 30 cm deep along a walk in front of `camera()`, every touched tile on the GPU.
-fn scene_with_footprints(ctx: terrain_gpu::GpuContext) -> (Scene, DetailLayer) {
+/// The shared scene's 256 m map with a detail layer refined x8 (12.5 cm texels) in tiles of
+/// `tile` texels, footprints pressed 30 cm deep along a walk in front of `camera()` (starting at
+/// the edge between tile rows 7 and 8 of 128-texel tiles), every touched tile on the GPU.
+fn scene_with_footprints(ctx: terrain_gpu::GpuContext, tile: u32) -> (Scene, DetailLayer) {
     let scene = Scene::new(ctx, 31, 5);
-    let layout = DetailLayout::new(scene.map.size(), 1.0, 8, 128).unwrap();
+    let layout = DetailLayout::new(scene.map.size(), 1.0, 8, tile).unwrap();
     let mut layer = DetailLayer::new(layout).unwrap();
     let mut foot = GaussianStamp::default();
     let mut touched = Vec::new();
     for i in 0..10 {
         let side = if i % 2 == 0 { -0.4 } else { 0.4 };
-        let c = Vec2::new(120.0 + side, 128.0 + 1.2 * i as f32);
+        // From z = 128 m on: in tile row 8 of 128-texel tiles (16 m), next to row 7's zeros.
+        let c = Vec2::new(120.0 + side, 128.6 + 1.2 * i as f32);
         let p = StampPlacement::new(c, Vec2::new(0.8, 1.2), -0.3).unwrap();
         let change = layer
             .apply_stamp(&mut foot, &p, Blend::Min { base_m: 0.0 })
@@ -187,7 +189,7 @@ fn detail_footprints_show_in_the_frame_and_fade_out_with_distance() {
     let Some(ctx) = context_or_skip("detail_render") else {
         return;
     };
-    let (mut scene, _) = scene_with_footprints(ctx);
+    let (mut scene, _) = scene_with_footprints(ctx, 128);
     let sky = SkyColors::default();
     let cam = camera(&scene);
     let (with_detail, _) = scene.render(&cam, SIZE, &sky);
@@ -216,6 +218,27 @@ fn detail_footprints_show_in_the_frame_and_fade_out_with_distance() {
         max <= 1,
         "a faded-out detail layer draws the coarse frame (max {max})"
     );
+}
+
+/// The parallax hook skips fragments whose reads all fall in tiles without a slot, on layers
+/// of whole tiles: the same marks in 128-texel tiles (16 a side: skipped) and in 120-texel
+/// tiles (not whole: never skipped) draw the same frame.
+#[test]
+fn skipping_zero_tiles_changes_no_pixel() {
+    let Some(ctx) = context_or_skip("detail_render_skip") else {
+        return;
+    };
+    let (mut even, _) = scene_with_footprints(ctx, 128);
+    let sky = SkyColors::default();
+    let cam = camera(&even);
+    let (a, _) = even.render(&cam, SIZE, &sky);
+    let Some(ctx) = context_or_skip("detail_render_skip") else {
+        return;
+    };
+    let (mut uneven, _) = scene_with_footprints(ctx, 120);
+    let (b, _) = uneven.render(&cam, SIZE, &sky);
+    let (max, _) = frame_diff(&a, &b);
+    assert!(max <= 1, "the skip changes pixels by up to {max}");
 }
 
 #[test]

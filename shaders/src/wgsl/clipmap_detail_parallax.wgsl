@@ -18,6 +18,23 @@ fn detail_height_q(q: vec2<f32>) -> f32 {
     return detail_height(pt.b, pt.f);
 }
 
+// Whether every detail texel the march and sample between `a` and `b` (coarse texels from the
+// camera's whole texel) can read lies in a tile without a slot: then the detail is 0 m there
+// and nothing needs reading. The box of the reads (3 texels of margin for the differences and
+// the bilinear) is narrower than a tile, so its corners' tiles are all the tiles it touches
+// when the layer is a whole number of tiles; otherwise it answers false.
+fn detail_box_is_zero(a: vec2<f32>, b: vec2<f32>) -> bool {
+    let k = f32(detail.refine);
+    let lo = detail.camera_detail + vec2<i32>(floor(min(a, b) * k)) - vec2<i32>(3, 3);
+    let hi = detail.camera_detail + vec2<i32>(floor(max(a, b) * k)) + vec2<i32>(3, 3);
+    let side = i32(detail.tile_size);
+    if detail.even_tiles == 0u || hi.x - lo.x >= side || hi.y - lo.y >= side {
+        return false;
+    }
+    return detail_tile_is_zero(lo) && detail_tile_is_zero(hi)
+        && detail_tile_is_zero(vec2<i32>(lo.x, hi.y)) && detail_tile_is_zero(vec2<i32>(hi.x, lo.y));
+}
+
 // `q`: the fragment in texels relative to the camera's whole texel; `world`: the fragment
 // relative to the camera, in metres; `view_dist`: its length.
 fn fragment_detail(q: vec2<f32>, world: vec3<f32>, view_dist: f32) -> FragmentDetail {
@@ -37,6 +54,10 @@ fn fragment_detail(q: vec2<f32>, world: vec3<f32>, view_dist: f32) -> FragmentDe
         let reach = length(per_m) * (top - bottom);
         if reach > detail.max_reach {
             per_m = per_m * (detail.max_reach / reach);
+        }
+        // Most of the ground has no detail: no march over zero tiles.
+        if detail_box_is_zero(q + per_m * top, q + per_m * bottom) {
+            return FragmentDetail(DetailSample(0.0, vec2<f32>(0.0, 0.0)), q);
         }
         // Linear search from the top of the detail range down, then the crossing of the last
         // step interpolated linearly (seed 000 sec. 3.2.4's parallax, as a march).

@@ -29,7 +29,9 @@ struct DetailInfo {
     parallax_steps: u32,
     // The farthest (coarse texels) the parallax march moves a fragment.
     max_reach: f32,
-    _pad0: u32,
+    // 1 when the layer's size is a whole number of tiles on both axes (the zero-tile test of
+    // the parallax hook needs it), else 0.
+    even_tiles: u32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -48,6 +50,13 @@ fn detail_raw(p: vec2<i32>) -> f32 {
     }
     let local = q % detail.tile_size;
     return f32(detail_heights[(slot * detail.tile_size + local.y) * detail.tile_size + local.x]);
+}
+
+// Whether the tile of detail texel `p` has no slot (the zero tile, or not loaded: 0 m).
+fn detail_tile_is_zero(p: vec2<i32>) -> bool {
+    let q = vec2<u32>(p + detail.wrap_offset) % detail.size;
+    let tile = q / detail.tile_size;
+    return detail_table[tile.y * detail.tiles_x + tile.x] >= detail.slots;
 }
 
 // Eq. 3.3 at detail texel `p`, in metres per metre.
