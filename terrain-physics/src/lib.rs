@@ -79,6 +79,7 @@
 pub mod camera;
 pub mod collider;
 pub mod contact;
+pub mod detail_ground;
 pub mod error;
 pub mod field;
 pub mod ground;
@@ -95,6 +96,7 @@ pub mod window;
 pub use camera::{CameraBody, GroundClamp, STANDARD_GRAVITY};
 pub use collider::{GroundQuery, HeightfieldCollider};
 pub use contact::Contact;
+pub use detail_ground::DetailGround;
 pub use error::PhysicsError;
 pub use field::{HeightField, MAX_FIELD_SIDE};
 pub use ground::{BoundedGround, DeformationBound, PendingDeformation};

@@ -22,7 +22,9 @@ use std::collections::HashMap;
 use std::time::Instant;
 use terrain_core::detail::{DetailLayer, DetailLayout};
 use terrain_core::{CoarseMap, DerivativeMap, bilinear};
-use terrain_physics::{CollisionMirror, CpuRegionSource, ReadbackScheduler, RequestId};
+use terrain_physics::{
+    CollisionMirror, CpuRegionSource, DetailGround, ReadbackScheduler, RequestId,
+};
 
 /// The default scenario.
 #[derive(Debug)]
@@ -223,9 +225,15 @@ impl Scenario for StampScenario {
         let collider = self.mirror.collider();
         let ground = self.scheduler.ground(&collider);
         let map = self.cpu.map();
-        let camera = self.rig.step(plan.walker, FRAME_DT as f32, &ground, |p| {
-            bilinear(map, p).unwrap_or(0.0)
-        })?;
+        let look = |p| bilinear(map, p).unwrap_or(0.0);
+        // With a detail layer the body walks on coarse + detail (it steps into the footprints).
+        let camera = match &self.detail {
+            Some(layer) => {
+                let ground = DetailGround::new(&ground, layer);
+                self.rig.step(plan.walker, FRAME_DT as f32, &ground, look)?
+            }
+            None => self.rig.step(plan.walker, FRAME_DT as f32, &ground, look)?,
+        };
         let eye = self.rig.eye();
         let camera_clearance_m = eye.y - bilinear(map, Vec2::new(eye.x, eye.z))?;
         ctx.timings.add(Step::Physics, ms_since(t));
