@@ -226,6 +226,17 @@ impl DetailLayout {
             });
         }
         let t = self.tile_size as i32;
+        // At most 2 tiles more than the footprint spans per axis (the wrap splits it once):
+        // a bound on the pieces before any is made.
+        let span = |n: u32| u64::from(n).div_ceil(u64::from(self.tile_size)) + 2;
+        let most = span(footprint.size.x) * span(footprint.size.y);
+        if most > MAX_FOOTPRINT_PIECES {
+            return Err(CoreError::OutOfRange {
+                what: "detail stamp footprint (tiles it may cover)",
+                value: most as f64,
+                expected: "at most 65 536 tile pieces (use larger tiles for larger marks)",
+            });
+        }
         let mut pieces = Vec::new();
         for wrapped in footprint.split_toroidal(d) {
             let m = wrapped.map;
@@ -315,14 +326,16 @@ pub struct DetailPiece {
 /// The tiles `pieces` cover, each with the bounding rect of its pieces (tile coordinates), in
 /// row-major tile order: what a stamp reports as its dirty tiles.
 pub fn tiles_of_pieces(pieces: &[DetailPiece]) -> Vec<(UVec2, Rect)> {
-    let mut tiles: Vec<(UVec2, Rect)> = Vec::new();
-    for p in pieces {
-        match tiles.iter_mut().find(|t| t.0 == p.tile) {
-            Some(t) => t.1 = t.1.union(&p.local),
-            None => tiles.push((p.tile, p.local)),
+    // Sorted by tile, then each run of one tile merged: n log n for any number of pieces.
+    let mut sorted: Vec<(UVec2, Rect)> = pieces.iter().map(|p| (p.tile, p.local)).collect();
+    sorted.sort_by_key(|t| (t.0.y, t.0.x));
+    let mut tiles: Vec<(UVec2, Rect)> = Vec::with_capacity(sorted.len());
+    for (tile, rect) in sorted {
+        match tiles.last_mut() {
+            Some(last) if last.0 == tile => last.1 = last.1.union(&rect),
+            _ => tiles.push((tile, rect)),
         }
     }
-    tiles.sort_by_key(|t| (t.0.y, t.0.x));
     tiles
 }
 
@@ -575,3 +588,6 @@ impl DetailLayer {
 
 /// The largest footprint a detail stamp may cover.
 const MAX_STAMP_TEXELS: u64 = 1 << 24;
+/// The most tile pieces a detail stamp's footprint may be cut into (tiny tiles under a large
+/// mark would otherwise make millions).
+const MAX_FOOTPRINT_PIECES: u64 = 1 << 16;

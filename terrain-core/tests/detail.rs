@@ -409,3 +409,23 @@ fn the_tiles_within_a_band_are_those_holding_its_texels() {
     assert!(l.tiles_within(Vec2::ZERO, -1.0).is_err());
     assert!(l.tiles_within(Vec2::ZERO, f32::INFINITY).is_err());
 }
+
+/// A large mark over tiny tiles would be cut into millions of pieces: refused up front, the
+/// layer untouched; the same mark over larger tiles is taken.
+#[test]
+fn a_footprint_over_too_many_tiles_is_refused_before_any_work() {
+    let tiny = DetailLayout::new(UVec2::splat(4096), 0.1, 1, 1).unwrap();
+    let mut layer = DetailLayer::new(tiny).unwrap();
+    let p = StampPlacement::new(Vec2::splat(100.0), Vec2::splat(51.2), -0.1).unwrap();
+    let err = layer
+        .apply_stamp(&mut GaussianStamp::default(), &p, Blend::Add)
+        .unwrap_err();
+    assert!(matches!(err, CoreError::OutOfRange { .. }), "{err}");
+    assert_eq!(layer.resident_tiles(), 0);
+    let larger = DetailLayout::new(UVec2::splat(4096), 0.1, 1, 64).unwrap();
+    let mut layer = DetailLayer::new(larger).unwrap();
+    let change = layer
+        .apply_stamp(&mut GaussianStamp::default(), &p, Blend::Add)
+        .unwrap();
+    assert!(change.tiles.len() >= 64, "{}", change.tiles.len());
+}

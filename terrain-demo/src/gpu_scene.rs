@@ -424,7 +424,9 @@ impl GpuScene {
             if wanted.contains(&t) {
                 continue;
             }
-            if layer.tile(t).is_some() {
+            // A tile needs a slot when the layer holds it, or when the GPU keeps one for it
+            // (a stamp's covered tiles get slots even where it changed nothing).
+            if layer.tile(t).is_some() || detail.tiles.slot_of(t).is_some() {
                 slotted += 1;
             }
             wanted.push(t);

@@ -275,8 +275,13 @@ impl ClipmapRenderer {
             });
         }
         let info = surface.check()?;
+        // A detail surface's parallax moves the texels a fragment reads by up to its reach.
+        let reach = match surface {
+            ClipmapSurface::Detail { shading, .. } => shading.max_reach_texels.ceil() as i32 + 1,
+            _ => 0,
+        };
         let wrap_offset = match info.wrap {
-            WrapMode::Repeat => wrap_offset_for_frame(frame, info.size)?,
+            WrapMode::Repeat => wrap_offset_for_frame(frame, info.size, reach)?,
             WrapMode::Clamp => [0, 0],
         };
         let uniform = frame_uniform(
@@ -846,12 +851,16 @@ pub(crate) fn check_wireframe(
 }
 
 /// A multiple of the map size that makes every texel the frame can read non-negative (the
-/// coarsest level's origin, less the morph's one-texel reach).
-fn wrap_offset_for_frame(frame: &ClipmapFrame, map_size: UVec2) -> Result<[i32; 2], GpuError> {
+/// coarsest level's origin, less the morph's one-texel reach and `extra` texels more).
+fn wrap_offset_for_frame(
+    frame: &ClipmapFrame,
+    map_size: UVec2,
+    extra: i32,
+) -> Result<[i32; 2], GpuError> {
     let min = frame
         .levels
         .iter()
-        .map(|l| l.origin - glam::IVec2::splat(l.scale as i32 + 1))
+        .map(|l| l.origin - glam::IVec2::splat(l.scale as i32 + 1 + extra))
         .fold(glam::IVec2::ZERO, |a, b| a.min(b));
     crate::compute::wrap_offset(min, map_size)
 }

@@ -79,7 +79,7 @@ pub struct GpuDetailTiles {
     table: wgpu::Buffer,
     /// Per tile: a slot, [`ZERO`] or [`NOT_LOADED`].
     state: Grid<u32>,
-    /// Free slots, the lowest last (handed out first).
+    /// Free slots; the last is handed out first (the lowest, until slots are freed).
     free: Vec<u32>,
     /// A tile's texels widened to u32, made once.
     staging: Vec<u32>,
@@ -266,7 +266,8 @@ impl GpuDetailTiles {
     /// (each stamp applied to both, as a CPU mirror does): tiles not wanted lose their slot
     /// (not loaded), wanted tiles that are not loaded, or that the layer holds while the GPU
     /// has the zero tile, are uploaded from the layer. Returns (tiles uploaded, tiles
-    /// unloaded).
+    /// unloaded). A tile that was not loaded and that the layer does not hold counts as
+    /// uploaded: it becomes the zero tile, without a slot.
     ///
     /// Fails, changing nothing, on a layer of another layout, a wanted tile off the grid, or
     /// more wanted tiles needing a slot than there are slots.
@@ -547,6 +548,10 @@ impl DetailShading {
         Ok(texels as u32)
     }
 }
+
+/// The `DetailInfo` uniform of detail_tiles.wgsl (80 bytes, as the WGSL struct).
+pub(crate) const DETAIL_INFO_BYTES: u64 = 80;
+const _: () = assert!(std::mem::size_of::<DetailInfo>() == DETAIL_INFO_BYTES as usize);
 
 /// The `DetailInfo` uniform of detail_tiles.wgsl.
 #[repr(C)]

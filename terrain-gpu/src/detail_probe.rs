@@ -5,7 +5,7 @@
 //! [`terrain_core::composite_normal`].
 
 use crate::compute::{buffer_entry, compute_pipeline, shader_module};
-use crate::detail::{DetailShading, GpuDetailTiles};
+use crate::detail::{DETAIL_INFO_BYTES, DetailShading, GpuDetailTiles};
 use crate::download::map_and_read;
 use crate::error::GpuError;
 use crate::maps::map_buffer;
@@ -122,7 +122,7 @@ impl DetailProbe {
             pipeline,
             layout,
             probe: buffer("DetailProbe info", 16, uniform_usage)?,
-            info: buffer("DetailProbe detail", 80, uniform_usage)?,
+            info: buffer("DetailProbe detail", DETAIL_INFO_BYTES, uniform_usage)?,
             points,
             out,
             staging: buffer(

@@ -242,7 +242,9 @@ impl StampPass {
     /// with the rect of its texels covered (tile coordinates), row-major: the dirty tiles.
     ///
     /// Fails, with nothing recorded or uploaded, on an invalid placement or blend, a footprint
-    /// the CPU layer refuses, a tile under it that is not loaded, or too few free slots.
+    /// the CPU layer refuses, a tile under it that is not loaded, or too few free slots. A pass
+    /// never recalled fails with [`GpuError::UniformRingFull`] once its ring is full; the zero
+    /// tiles given slots for the stamp keep them then (they still read as 0 m).
     pub fn encode_detail(
         &mut self,
         device: &wgpu::Device,
