@@ -452,21 +452,8 @@ impl DetailLayer {
     /// The detail height in metres at `pos` (metres on the coarse-map's plane): bilinear
     /// between the four nearest detail texels, across tile edges and the map's wrap.
     pub fn height_m(&self, pos: Vec2) -> f32 {
-        let ts = self.layout.detail_texel_m();
-        let p = pos / ts;
-        if !p.is_finite() {
-            return 0.0;
-        }
-        let f = p.floor();
-        let (fx, fz) = (p.x - f.x, p.y - f.y);
-        let wrap = |v: f32, n: u32| (f64::from(v).rem_euclid(f64::from(n))) as i64 as i32;
-        let d = self.layout.detail_size();
-        let (x0, z0) = (wrap(f.x, d.x), wrap(f.y, d.y));
         let enc = detail_encoding();
-        let h = |dx: i32, dz: i32| enc.to_metres(f64::from(self.raw(IVec2::new(x0 + dx, z0 + dz))));
-        let top = h(0, 0) + (h(1, 0) - h(0, 0)) * fx;
-        let bot = h(0, 1) + (h(1, 1) - h(0, 1)) * fx;
-        top + (bot - top) * fz
+        self.bilinear(pos, 0.0, |q| enc.to_metres(f64::from(self.raw(q))))
     }
 
     /// The detail gradient in metres per metre at `pos` (metres on the coarse-map's plane):
@@ -476,26 +463,37 @@ impl DetailLayer {
     /// ([`crate::composite_normal`]).
     pub fn gradient_m(&self, pos: Vec2) -> Vec2 {
         let ts = self.layout.detail_texel_m();
-        let p = pos / ts;
+        let k = f64::from(detail_encoding().scale) / (12.0 * f64::from(ts));
+        let raw = |q: IVec2| f64::from(self.raw(q));
+        self.bilinear(pos, Vec2::ZERO, |q| {
+            let (x, z) = (IVec2::X, IVec2::Y);
+            let dx = (raw(q - 2 * x) - raw(q + 2 * x)) + 8.0 * (raw(q + x) - raw(q - x));
+            let dz = (raw(q - 2 * z) - raw(q + 2 * z)) + 8.0 * (raw(q + z) - raw(q - z));
+            Vec2::new((dx * k) as f32, (dz * k) as f32)
+        })
+    }
+
+    /// `at` (a value per detail texel, given wrapped coordinates) bilinear between the four
+    /// detail texels around `pos` (metres); `none` for a position that is not finite.
+    fn bilinear<T>(&self, pos: Vec2, none: T, at: impl Fn(IVec2) -> T) -> T
+    where
+        T: Copy
+            + std::ops::Add<Output = T>
+            + std::ops::Sub<Output = T>
+            + std::ops::Mul<f32, Output = T>,
+    {
+        let p = pos / self.layout.detail_texel_m();
         if !p.is_finite() {
-            return Vec2::ZERO;
+            return none;
         }
         let f = p.floor();
         let (fx, fz) = (p.x - f.x, p.y - f.y);
         let wrap = |v: f32, n: u32| (f64::from(v).rem_euclid(f64::from(n))) as i64 as i32;
         let d = self.layout.detail_size();
         let base = IVec2::new(wrap(f.x, d.x), wrap(f.y, d.y));
-        let k = f64::from(detail_encoding().scale) / (12.0 * f64::from(ts));
-        let raw = |q: IVec2| f64::from(self.raw(q));
-        let grad = |q: IVec2| {
-            let (x, z) = (IVec2::X, IVec2::Y);
-            let dx = (raw(q - 2 * x) - raw(q + 2 * x)) + 8.0 * (raw(q + x) - raw(q - x));
-            let dz = (raw(q - 2 * z) - raw(q + 2 * z)) + 8.0 * (raw(q + z) - raw(q - z));
-            Vec2::new((dx * k) as f32, (dz * k) as f32)
-        };
-        let g = |dx: i32, dz: i32| grad(base + IVec2::new(dx, dz));
-        let top = g(0, 0) + (g(1, 0) - g(0, 0)) * fx;
-        let bot = g(0, 1) + (g(1, 1) - g(0, 1)) * fx;
+        let v = |dx: i32, dz: i32| at(base + IVec2::new(dx, dz));
+        let top = v(0, 0) + (v(1, 0) - v(0, 0)) * fx;
+        let bot = v(0, 1) + (v(1, 1) - v(0, 1)) * fx;
         top + (bot - top) * fz
     }
 
