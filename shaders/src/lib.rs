@@ -163,6 +163,21 @@ pub const CLIPMAP_DETAIL: &str = concat!(
     include_str!("wgsl/clipmap_surface_coarse.wgsl")
 );
 
+/// `RefinePass` and `RefineRenderer`: the coarse cells around the camera split by the
+/// refinement patterns of seed 000 sec. 2.4.3 into triangles displaced by coarse + detail height
+/// (a compute pass with indirect draw arguments), drawn with the clipmap's frame, surface and
+/// fragment shader, shaded with eq. 3.4's composite normal.
+pub const REFINE: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/detail_sample.wgsl"),
+    include_str!("wgsl/detail_tiles.wgsl"),
+    include_str!("wgsl/clipmap_detail_refined.wgsl"),
+    include_str!("wgsl/clipmap.wgsl"),
+    include_str!("wgsl/clipmap_surface_coarse.wgsl"),
+    include_str!("wgsl/refine.wgsl")
+);
+
 /// `DetailProbe`: the detail layer's height, gradient and composite normal at a list of points
 /// (the same functions the detail clipmap shades with).
 pub const DETAIL_PROBE: &str = concat!(
@@ -238,6 +253,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("clipmap_granular", CLIPMAP_GRANULAR),
     ("clipmap_atlas", CLIPMAP_ATLAS),
     ("clipmap_detail", CLIPMAP_DETAIL),
+    ("refine", REFINE),
     ("atlas_probe", ATLAS_PROBE),
     ("detail_probe", DETAIL_PROBE),
     ("granular_penetration", GRANULAR_PENETRATION),

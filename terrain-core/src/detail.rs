@@ -210,6 +210,26 @@ impl DetailLayout {
         (q / self.tile_size, q % self.tile_size)
     }
 
+    /// Whether the detail texels `lo ..= hi` (unwrapped) may touch a tile `has_tile` accepts.
+    /// On a layer of whole tiles, a box narrower than a tile touches only its corners' tiles,
+    /// so the answer is exact there; otherwise it is `true` (nothing is skipped). The detail
+    /// shaders make the same test to skip the zero tiles (`detail_box_is_zero`).
+    pub fn box_may_touch(&self, lo: IVec2, hi: IVec2, has_tile: impl Fn(UVec2) -> bool) -> bool {
+        let d = self.detail_size();
+        let side = i64::from(self.tile_size);
+        let even = d.x.is_multiple_of(self.tile_size) && d.y.is_multiple_of(self.tile_size);
+        let (w, h) = (
+            i64::from(hi.x) - i64::from(lo.x),
+            i64::from(hi.y) - i64::from(lo.y),
+        );
+        if !even || w >= side || h >= side {
+            return true;
+        }
+        [lo, hi, IVec2::new(lo.x, hi.y), IVec2::new(hi.x, lo.y)]
+            .into_iter()
+            .any(|p| has_tile(self.locate(p).0))
+    }
+
     /// A stamp footprint (detail texels, unwrapped) cut into one piece per tile it covers and
     /// per side of the map's wrap, in row-major tile order within each wrapped part. This is
     /// how a stamp reaches every tile it touches, on the CPU and on the GPU alike.

@@ -429,3 +429,29 @@ fn a_footprint_over_too_many_tiles_is_refused_before_any_work() {
         .unwrap();
     assert!(change.tiles.len() >= 64, "{}", change.tiles.len());
 }
+
+#[test]
+fn box_may_touch_is_exact_for_narrow_boxes_on_whole_tiles_and_never_misses() {
+    // 24 x 20 coarse texels x3 = 72 x 60 detail texels: 12-texel tiles are whole, 16 are not.
+    for (tile, whole) in [(12, true), (16, false)] {
+        let l = DetailLayout::new(UVec2::new(24, 20), 0.5, 3, tile).unwrap();
+        let has = |t: UVec2| (t.x * 7 + t.y * 3).is_multiple_of(5);
+        for i in 0..400i32 {
+            let lo = IVec2::new(i * 37 % 300 - 150, i * 53 % 260 - 130);
+            let size = IVec2::new(i % 17, (i / 3) % 19);
+            let hi = lo + size;
+            let brute =
+                (lo.y..=hi.y).any(|y| (lo.x..=hi.x).any(|x| has(l.locate(IVec2::new(x, y)).0)));
+            let got = l.box_may_touch(lo, hi, has);
+            assert!(
+                got || !brute,
+                "tile {tile} box {lo} {hi}: a touched tile missed"
+            );
+            if whole && size.max_element() < tile as i32 {
+                assert_eq!(got, brute, "tile {tile} box {lo} {hi}");
+            } else if !whole {
+                assert!(got, "layers of partial tiles never skip");
+            }
+        }
+    }
+}

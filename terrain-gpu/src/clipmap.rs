@@ -12,7 +12,7 @@ use crate::maps::{GpuDerivativeMap, GpuHeightMap};
 use crate::scope::{buffer_init, scoped};
 use crate::target::TargetFormat;
 use bytemuck::{Pod, Zeroable};
-use glam::{UVec2, Vec3, Vec4};
+use glam::{IVec2, UVec2, Vec2, Vec3, Vec4};
 use terrain_core::WrapMode;
 use terrain_lod::{
     ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapVertex, MAX_DRAWS_PER_LEVEL, MeshPart,
@@ -24,14 +24,14 @@ use terrain_shaders::codes::{WRAP_CLAMP, WRAP_REPEAT};
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub(crate) struct FrameUniform {
     view_proj: [[f32; 4]; 4],
-    camera_texel: [i32; 2],
-    camera_frac: [f32; 2],
+    pub(crate) camera_texel: [i32; 2],
+    pub(crate) camera_frac: [f32; 2],
     camera_height: f32,
     texel_size: f32,
     height_scale: f32,
     height_offset: f32,
     map_size: [u32; 2],
-    wrap_offset: [i32; 2],
+    pub(crate) wrap_offset: [i32; 2],
     n: u32,
     levels: u32,
     morph_width: f32,
@@ -42,10 +42,17 @@ pub(crate) struct FrameUniform {
     hide_outside: u32,
     light_dir: [f32; 4],
     fog_color: [f32; 4],
+    /// Texels (min x, min z, max x, max z, relative to the camera's whole texel) whose
+    /// fragments are discarded: another renderer draws them. Empty ([`NOTHING_EXCLUDED`])
+    /// unless set.
+    pub(crate) excluded: [f32; 4],
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<FrameUniform>() == 176);
+const _: () = assert!(std::mem::size_of::<FrameUniform>() == 192);
+
+/// An exclusion rect with min above max: nothing is discarded.
+pub(crate) const NOTHING_EXCLUDED: [f32; 4] = [1.0, 1.0, -1.0, -1.0];
 
 /// Lighting and colouring of the terrain.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -113,6 +120,8 @@ pub struct ClipmapRenderer {
     runs: Vec<(usize, u32, u32)>,
     /// Draw the wireframe pipelines (only when they exist).
     wireframe: bool,
+    /// Texels another renderer draws (see [`ClipmapRenderer::exclude`]).
+    excluded: Option<(IVec2, IVec2)>,
 }
 
 impl ClipmapRenderer {
@@ -222,6 +231,7 @@ impl ClipmapRenderer {
                 bound: None,
                 runs: Vec::new(),
                 wireframe: false,
+                excluded: None,
             }
         })
     }
@@ -244,6 +254,16 @@ impl ClipmapRenderer {
     /// Whether wireframe is on.
     pub fn wireframe(&self) -> bool {
         self.wireframe
+    }
+
+    /// Leaves the texels `region` (first and one-past-last vertex, relative to the camera's
+    /// whole texel, as [`crate::RefinePass::region`] gives them) to another renderer from the
+    /// next [`ClipmapRenderer::prepare`] on: their fragments are discarded. `None` draws
+    /// everything again. The region must lie where the finest level does not morph (so its
+    /// edge vertices are the stored heights the refined mesh meets); prepare refuses it
+    /// otherwise.
+    pub fn exclude(&mut self, region: Option<(IVec2, IVec2)>) {
+        self.excluded = region;
     }
 
     /// The formats this renderer draws into.
@@ -284,7 +304,7 @@ impl ClipmapRenderer {
             WrapMode::Repeat => wrap_offset_for_frame(frame, info.size, reach)?,
             WrapMode::Clamp => [0, 0],
         };
-        let uniform = frame_uniform(
+        let mut uniform = frame_uniform(
             &info,
             camera,
             style,
@@ -293,6 +313,9 @@ impl ClipmapRenderer {
             (self.n, self.levels),
             wrap_offset,
         );
+        if let Some(region) = self.excluded {
+            uniform.excluded = self.exclusion(region, Vec2::from(uniform.camera_frac))?;
+        }
 
         // Instances grouped by part, so each part is one instanced draw.
         let mut by_part: Vec<Vec<ClipmapInstance>> = vec![Vec::new(); self.parts.len()];
@@ -328,7 +351,7 @@ impl ClipmapRenderer {
         } = surface
         {
             let reach = shading.check(info.texel_size)?;
-            let camera_texel = glam::IVec2::from(uniform.camera_texel);
+            let camera_texel = IVec2::from(uniform.camera_texel);
             let detail_info = detail.info(camera_texel, shading, reach)?;
             queue.write_buffer(&self.detail_uniform, 0, bytemuck::bytes_of(&detail_info));
             // Bindings 3 (this renderer's uniform), 4 and 5 after the coarse surface's.
@@ -374,6 +397,32 @@ impl ClipmapRenderer {
 }
 
 impl ClipmapRenderer {
+    /// The exclusion rect of `(lo, hi)` for a camera `frac` into its whole texel, shrunk by a
+    /// thousandth of a texel: fragments on the region's edge stay drawn by both renderers
+    /// (the same surface there) rather than by neither.
+    fn exclusion(&self, (lo, hi): (IVec2, IVec2), frac: Vec2) -> Result<[f32; 4], GpuError> {
+        let half = (self.n - 1) as f32 * 0.5;
+        let unmorphed = half - 1.0 - terrain_lod::morph::default_morph_width(self.n);
+        let reach = (lo.as_vec2() - frac)
+            .abs()
+            .max((hi.as_vec2() - frac).abs())
+            .max_element();
+        if lo.cmpge(hi).any() || reach + 1.0 > unmorphed {
+            return Err(GpuError::Unsupported {
+                what: "ClipmapRenderer::exclude",
+                reason: "the excluded region is empty or reaches where the finest level morphs: \
+                         refine a smaller radius or use a larger clipmap",
+            });
+        }
+        const EDGE: f32 = 1e-3;
+        Ok([
+            lo.x as f32 + EDGE,
+            lo.y as f32 + EDGE,
+            hi.x as f32 - EDGE,
+            hi.y as f32 - EDGE,
+        ])
+    }
+
     fn pipeline(&self, kind: SurfaceKind) -> &SurfacePipeline {
         match kind {
             SurfaceKind::Coarse => &self.coarse,
@@ -427,6 +476,7 @@ pub(crate) fn frame_uniform(
         hide_outside: u32::from(style.hide_outside_map),
         light_dir: style.light_dir.extend(0.0).to_array(),
         fog_color: Vec4::from((style.fog_color, style.fog_density)).to_array(),
+        excluded: NOTHING_EXCLUDED,
     }
 }
 
@@ -835,6 +885,20 @@ impl SurfacePipeline {
     }
 }
 
+impl SurfacePipeline {
+    /// A bind group of `uniform` at binding 0 and `entries` (binding, buffer) over this
+    /// pipeline's layout, for pipelines that bind only some of the surface's buffers.
+    pub(crate) fn bind_group_at(
+        &self,
+        device: &wgpu::Device,
+        label: &'static str,
+        uniform: &wgpu::Buffer,
+        entries: &[(u32, &wgpu::Buffer)],
+    ) -> Result<wgpu::BindGroup, GpuError> {
+        self.bind_group(device, label, uniform, &[], entries)
+    }
+}
+
 /// Refuses turning wireframe on for renderer `what` when `pipeline` has no wireframe twin.
 pub(crate) fn check_wireframe(
     pipeline: &SurfacePipeline,
@@ -860,7 +924,7 @@ fn wrap_offset_for_frame(
     let min = frame
         .levels
         .iter()
-        .map(|l| l.origin - glam::IVec2::splat(l.scale as i32 + 1 + extra))
-        .fold(glam::IVec2::ZERO, |a, b| a.min(b));
+        .map(|l| l.origin - IVec2::splat(l.scale as i32 + 1 + extra))
+        .fold(IVec2::ZERO, |a, b| a.min(b));
     crate::compute::wrap_offset(min, map_size)
 }

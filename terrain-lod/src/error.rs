@@ -43,6 +43,20 @@ pub enum LodError {
         /// Upper bound given, in metres.
         max: f32,
     },
+    /// A refinement radius is not above zero or spans more texels than a refined region
+    /// holds.
+    #[error(
+        "refine radius {radius_m} m at {texel_size} m per texel must be above 0 and at most \
+         {max_texels} texels"
+    )]
+    InvalidRefineRadius {
+        /// The radius given, in metres.
+        radius_m: f32,
+        /// The texel size given, in metres per texel.
+        texel_size: f32,
+        /// The most texels a radius may span.
+        max_texels: u32,
+    },
     /// The camera is so far from the origin (in texels) that the clipmap's texel coordinates
     /// would not fit in `i32`.
     #[error(

@@ -118,6 +118,7 @@ pub mod error;
 pub mod frustum;
 pub mod morph;
 mod par;
+pub mod refine;
 pub mod tessellation;
 
 pub use cdlod::{
@@ -130,4 +131,5 @@ pub use clipmap::{
 pub use density::{CurvatureFilter, DensityMap, DensityParams};
 pub use error::LodError;
 pub use frustum::Frustum;
+pub use refine::RefineView;
 pub use tessellation::{TessConfig, TessFrame, TessHierarchy, TessTriangle, TessVertex};

@@ -153,6 +153,7 @@ fn variant(e: &LodError) -> &'static str {
         LodError::InvalidCdlodParam { .. } => "InvalidCdlodParam",
         LodError::InvalidTessParam { .. } => "InvalidTessParam",
         LodError::SelectionTooLarge { .. } => "SelectionTooLarge",
+        LodError::InvalidRefineRadius { .. } => "InvalidRefineRadius",
         LodError::Core(_) => "Core",
     }
 }

@@ -34,6 +34,9 @@ struct Frame {
     hide_outside: u32,
     light_dir: vec4<f32>,
     fog_color: vec4<f32>,
+    // Texels (relative to the camera's whole texel) another renderer draws: fragments inside
+    // (min.xy, max.zw) are discarded (RefineRenderer's region). Empty when min > max.
+    excluded: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -117,6 +120,9 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
         if any(t < vec2<f32>(0.0, 0.0)) || any(t > last) {
             discard;
         }
+    }
+    if all(q > frame.excluded.xy) && all(q < frame.excluded.zw) {
+        discard;
     }
     // The fragment relative to the camera, in metres.
     let world = vec3<f32>(p.x * frame.texel_size, in.height - frame.camera_height, p.y * frame.texel_size);

@@ -102,3 +102,25 @@ fn detail_point(q: vec2<f32>) -> DetailPoint {
     let whole = floor(d);
     return DetailPoint(detail.camera_detail + vec2<i32>(whole), d - whole);
 }
+
+// 1 up to fade_start metres from the camera, 0 from fade_end, smooth in between.
+fn detail_fade(view_dist: f32) -> f32 {
+    return 1.0 - smoothstep(detail.fade_start, detail.fade_end, view_dist);
+}
+
+// Whether every detail texel the march and sample between `a` and `b` (coarse texels from the
+// camera's whole texel) can read lies in a tile without a slot: then the detail is 0 m there
+// and nothing needs reading. The box of the reads (3 texels of margin for the differences and
+// the bilinear) is narrower than a tile, so its corners' tiles are all the tiles it touches
+// when the layer is a whole number of tiles; otherwise it answers false.
+fn detail_box_is_zero(a: vec2<f32>, b: vec2<f32>) -> bool {
+    let k = f32(detail.refine);
+    let lo = detail.camera_detail + vec2<i32>(floor(min(a, b) * k)) - vec2<i32>(3, 3);
+    let hi = detail.camera_detail + vec2<i32>(floor(max(a, b) * k)) + vec2<i32>(3, 3);
+    let side = i32(detail.tile_size);
+    if detail.even_tiles == 0u || hi.x - lo.x >= side || hi.y - lo.y >= side {
+        return false;
+    }
+    return detail_tile_is_zero(lo) && detail_tile_is_zero(hi)
+        && detail_tile_is_zero(vec2<i32>(lo.x, hi.y)) && detail_tile_is_zero(vec2<i32>(hi.x, lo.y));
+}

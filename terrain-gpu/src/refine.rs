@@ -1,0 +1,518 @@
+//! Refined geometry for a detail layer (seed 000 sec. 2.4.3, `--detail refine`): the coarse
+//! cells around the camera split by the refinement patterns of eq. 2.2 (fig. 2.7) and displaced
+//! by coarse + detail height. wgpu has no geometry or tessellation stage, so [`RefinePass`]
+//! does the geometry shader's work in a compute shader (`refine.wgsl`): one thread per base
+//! triangle picks `rho = t0 + 2 t1 + 4 t2` from its vertices' flags, appends its sub-triangles
+//! to a vertex buffer and counts them into the indirect draw arguments. [`RefineRenderer`]
+//! draws them with `draw_indirect`, shaded as the clipmap with eq. 3.4's composite normal.
+//!
+//! The CPU reference is [`terrain_lod::refine`]: same region, flags and patterns. A side is
+//! split only when both its vertices are flagged, and the region's edge lies beyond the
+//! refinement radius, so the refined mesh meets itself and the clipmap around it without cracks
+//! by construction; the clipmap leaves the region to it ([`ClipmapRenderer::exclude`]).
+//!
+//! [`ClipmapRenderer::exclude`]: crate::ClipmapRenderer::exclude
+
+use crate::camera::Camera;
+use crate::clipmap::{
+    ClipmapSurface, FrameUniform, SurfaceInfo, SurfacePipeline, TerrainStyle, VertexShape,
+    check_view, check_wireframe, frame_uniform,
+};
+use crate::compute::{buffer_entry, compute_pipeline, shader_module};
+use crate::detail::{DetailInfo, DetailShading, GpuDetailTiles};
+use crate::download::download_bytes;
+use crate::error::GpuError;
+use crate::maps::{GpuDerivativeMap, GpuHeightMap};
+use crate::scope::scoped;
+use crate::target::TargetFormat;
+use bytemuck::{Pod, Zeroable};
+use glam::{IVec2, UVec2, Vec2, Vec3};
+use terrain_core::WrapMode;
+use terrain_lod::refine::{MAX_REFINE_HALF_CELLS, RefineView};
+
+/// The uniform block of `refine.wgsl`, byte for byte.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, Default)]
+struct Params {
+    half_cells: u32,
+    capacity: u32,
+    radius_m: f32,
+    _pad: u32,
+}
+
+/// Bytes of the counter block: count, overflow, two pads, then the four `draw_indirect`
+/// arguments.
+const STATE_BYTES: u64 = 32;
+/// Where the draw arguments start in the counter block.
+const ARGS_OFFSET: u64 = 16;
+/// Bytes per refined vertex: x, z (texels from the camera's whole texel), height (m).
+const VERTEX_BYTES: u64 = 12;
+/// Bytes per refined triangle.
+const TRIANGLE_BYTES: u64 = 3 * VERTEX_BYTES;
+/// The most sub-triangles one base triangle splits into (`rho = 7`).
+const MOST_PER_TRIANGLE: u64 = 9;
+
+/// Everything one refined frame is made and drawn from.
+#[derive(Debug, Clone, Copy)]
+pub struct RefineDraw<'a> {
+    /// The coarse heights.
+    pub map: &'a GpuHeightMap<u16>,
+    /// Their derivative normals.
+    pub normals: &'a GpuDerivativeMap,
+    /// The detail layer's tiles (tiles without a slot are 0 m and are not refined).
+    pub detail: &'a GpuDetailTiles,
+    /// Where the detail fades out: vertices within `fade_end_m` (horizontally) of the camera
+    /// may be refined, and the detail height is faded as the parallax surface fades it.
+    pub shading: &'a DetailShading,
+    /// The camera.
+    pub camera: &'a Camera,
+    /// Lighting and colours.
+    pub style: &'a TerrainStyle,
+    /// The render target's size in pixels.
+    pub target_size: UVec2,
+}
+
+impl RefineDraw<'_> {
+    /// Checks the parts agree (as the detail clipmap surface does) and returns the map's
+    /// description, the refinement view and the texels the shaders may read from the camera.
+    fn check(&self) -> Result<(SurfaceInfo, RefineView, u32), GpuError> {
+        check_view(self.camera, self.target_size, "refine target size (pixels)")?;
+        let info = ClipmapSurface::Detail {
+            map: self.map,
+            normals: self.normals,
+            detail: self.detail,
+            shading: self.shading,
+        }
+        .check()?;
+        let xz = Vec2::new(self.camera.position.x, self.camera.position.z);
+        let view = RefineView::new(xz, info.texel_size, self.shading.fade_end_m)?;
+        // Vertices reach one texel past the region, the fragments' differences two more.
+        let reach = view.half_cells() + 3;
+        Ok((info, view, reach))
+    }
+
+    /// The frame uniform of this draw for `target`, its wrap offset covering the region.
+    fn frame(
+        &self,
+        info: &SurfaceInfo,
+        target: &TargetFormat,
+        reach: u32,
+    ) -> Result<FrameUniform, GpuError> {
+        let mut uniform = frame_uniform(
+            info,
+            self.camera,
+            self.style,
+            target,
+            self.target_size,
+            (0, 0),
+            [0, 0],
+        );
+        if info.wrap == WrapMode::Repeat {
+            let lowest = IVec2::from(uniform.camera_texel) - IVec2::splat(reach as i32);
+            uniform.wrap_offset = crate::compute::wrap_offset(lowest, info.size)?;
+        }
+        Ok(uniform)
+    }
+
+    fn detail_info(&self, uniform: &FrameUniform, reach: u32) -> Result<DetailInfo, GpuError> {
+        // No parallax on displaced geometry: the hook reads the gradient where it shades.
+        let shading = DetailShading {
+            parallax_steps: 0,
+            max_reach_texels: 0.0,
+            ..*self.shading
+        };
+        self.detail
+            .info(IVec2::from(uniform.camera_texel), &shading, reach)
+    }
+}
+
+/// The compute pass that refines the cells around the camera into a vertex buffer, with the
+/// draw arguments of what it wrote. Build it once per device for the largest region it must
+/// hold; one [`RefinePass::encode`] per submit (its uniforms are written at encode time).
+#[derive(Debug)]
+pub struct RefinePass {
+    layout: wgpu::BindGroupLayout,
+    triangles: wgpu::ComputePipeline,
+    finish: wgpu::ComputePipeline,
+    frame: wgpu::Buffer,
+    detail_info: wgpu::Buffer,
+    params: wgpu::Buffer,
+    output: wgpu::Buffer,
+    state: wgpu::Buffer,
+    capacity: u32,
+    max_half_cells: u32,
+    /// The buffers the bind group binds (map, tile table, tile heights) and the group.
+    bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
+    /// The view of the last encode.
+    view: Option<RefineView>,
+}
+
+impl RefinePass {
+    /// Compiles the shader and makes room for regions of up to `max_half_cells` cells from the
+    /// camera (the worst case: every base triangle split in nine). Fails for 0 or more than
+    /// [`MAX_REFINE_HALF_CELLS`], or when the output exceeds the device's storage limit.
+    pub fn new(device: &wgpu::Device, max_half_cells: u32) -> Result<Self, GpuError> {
+        if !(1..=MAX_REFINE_HALF_CELLS).contains(&max_half_cells) {
+            return Err(terrain_core::CoreError::OutOfRange {
+                what: "refined region half side (cells)",
+                value: f64::from(max_half_cells),
+                expected: "1 to 256",
+            }
+            .into());
+        }
+        let side = 2 * u64::from(max_half_cells);
+        let capacity = 2 * side * side * MOST_PER_TRIANGLE;
+        let bytes = capacity * TRIANGLE_BYTES;
+        let limits = device.limits();
+        if bytes > limits.max_storage_buffer_binding_size || bytes > limits.max_buffer_size {
+            return Err(GpuError::Unsupported {
+                what: "RefinePass",
+                reason: "the refined region's worst case (36 bytes per triangle, 9 per base \
+                         triangle) exceeds the device's storage buffer limit: refine a smaller \
+                         radius",
+            });
+        }
+        let module = shader_module(device, "refine.wgsl", terrain_shaders::REFINE)?;
+        let uniform = wgpu::BufferBindingType::Uniform;
+        let read = wgpu::BufferBindingType::Storage { read_only: true };
+        let write = wgpu::BufferBindingType::Storage { read_only: false };
+        let layout = scoped(device, "RefinePass", || {
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("RefinePass"),
+                entries: &[
+                    buffer_entry(0, uniform),
+                    buffer_entry(1, read),
+                    buffer_entry(3, uniform),
+                    buffer_entry(4, read),
+                    buffer_entry(5, read),
+                    buffer_entry(6, uniform),
+                    buffer_entry(7, write),
+                    buffer_entry(8, write),
+                ],
+            })
+        })?;
+        let triangles = compute_pipeline(
+            device,
+            "refine triangles",
+            &module,
+            &layout,
+            "refine_triangles",
+        )?;
+        let finish = compute_pipeline(device, "refine finish", &module, &layout, "refine_finish")?;
+        let (frame, detail_info, params, output, state) = scoped(device, "RefinePass", || {
+            let buffer = |label, size: u64, usage| {
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size,
+                    usage,
+                    mapped_at_creation: false,
+                })
+            };
+            let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
+            (
+                buffer(
+                    "refine frame",
+                    std::mem::size_of::<FrameUniform>() as u64,
+                    uniform,
+                ),
+                buffer(
+                    "refine detail",
+                    std::mem::size_of::<DetailInfo>() as u64,
+                    uniform,
+                ),
+                buffer(
+                    "refine params",
+                    std::mem::size_of::<Params>() as u64,
+                    uniform,
+                ),
+                buffer(
+                    "refine output",
+                    bytes,
+                    wgpu::BufferUsages::STORAGE
+                        | wgpu::BufferUsages::VERTEX
+                        | wgpu::BufferUsages::COPY_SRC,
+                ),
+                buffer(
+                    "refine state",
+                    STATE_BYTES,
+                    wgpu::BufferUsages::STORAGE
+                        | wgpu::BufferUsages::INDIRECT
+                        | wgpu::BufferUsages::COPY_SRC
+                        | wgpu::BufferUsages::COPY_DST,
+                ),
+            )
+        })?;
+        Ok(Self {
+            layout,
+            triangles,
+            finish,
+            frame,
+            detail_info,
+            params,
+            output,
+            state,
+            capacity: capacity as u32,
+            max_half_cells,
+            bound: None,
+            view: None,
+        })
+    }
+
+    /// Triangles the output holds.
+    pub fn capacity(&self) -> u32 {
+        self.capacity
+    }
+
+    /// The view of the last [`RefinePass::encode`]: its region and camera.
+    pub fn view(&self) -> Option<&RefineView> {
+        self.view.as_ref()
+    }
+
+    /// The texels (relative to the camera's whole texel, first and one-past-last vertex) the
+    /// last encode refined: what the clipmap must leave out ([`crate::ClipmapRenderer::exclude`]).
+    pub fn region(&self) -> Option<(IVec2, IVec2)> {
+        self.view.map(|v| v.region())
+    }
+
+    /// Records the refinement of the region around `draw.camera` into `encoder`: clears the
+    /// counter, splits every base triangle, writes the draw arguments. Checks everything
+    /// before wgpu sees it; fails when the region is wider than this pass was built for.
+    pub fn encode(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        draw: &RefineDraw<'_>,
+    ) -> Result<RefineView, GpuError> {
+        let (info, view, reach) = draw.check()?;
+        if view.half_cells() > self.max_half_cells {
+            return Err(GpuError::Unsupported {
+                what: "RefinePass",
+                reason: "the fade end spans more cells than this pass was built for: build it \
+                         with more half cells or fade out sooner",
+            });
+        }
+        // The compute pass reads the frame's camera, encoding and wrap, not its target.
+        let frame = draw.frame(&info, &TargetFormat::CAPTURE, reach)?;
+        let detail = draw.detail_info(&frame, reach)?;
+        let params = Params {
+            half_cells: view.half_cells(),
+            capacity: self.capacity,
+            radius_m: view.radius_m,
+            _pad: 0,
+        };
+        queue.write_buffer(&self.frame, 0, bytemuck::bytes_of(&frame));
+        queue.write_buffer(&self.detail_info, 0, bytemuck::bytes_of(&detail));
+        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        let buffers = vec![
+            draw.map.buffer().clone(),
+            draw.detail.table_buffer().clone(),
+            draw.detail.heights_buffer().clone(),
+        ];
+        let group = match &self.bound {
+            Some((b, group)) if *b == buffers => group.clone(),
+            _ => {
+                let entries = [
+                    (0, &self.frame),
+                    (1, &buffers[0]),
+                    (3, &self.detail_info),
+                    (4, &buffers[1]),
+                    (5, &buffers[2]),
+                    (6, &self.params),
+                    (7, &self.output),
+                    (8, &self.state),
+                ]
+                .map(|(binding, b)| wgpu::BindGroupEntry {
+                    binding,
+                    resource: b.as_entire_binding(),
+                });
+                let group = scoped(device, "RefinePass", || {
+                    device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("RefinePass"),
+                        layout: &self.layout,
+                        entries: &entries,
+                    })
+                })?;
+                self.bound = Some((buffers, group.clone()));
+                group
+            }
+        };
+        encoder.clear_buffer(&self.state, 0, None);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("RefinePass"),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, &group, &[]);
+        pass.set_pipeline(&self.triangles);
+        // At most 2 * 512^2 / 64 = 8192 groups: within every device's dispatch limit.
+        pass.dispatch_workgroups(view.base_triangles().div_ceil(64), 1, 1);
+        pass.set_pipeline(&self.finish);
+        pass.dispatch_workgroups(1, 1, 1);
+        drop(pass);
+        self.view = Some(view);
+        Ok(view)
+    }
+
+    /// Reads back what the last encode wrote: its triangles (in no particular order; each
+    /// vertex x, z in texels from the camera's whole texel and the drawn height in metres)
+    /// and whether more were generated than the output holds. Blocking: for tests and tools.
+    pub fn read_triangles(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<(Vec<[Vec3; 3]>, bool), GpuError> {
+        let state = download_bytes(device, queue, &self.state, 0, STATE_BYTES)?;
+        let words: &[u32] = bytemuck::cast_slice(&state);
+        let count = words[0].min(self.capacity);
+        let overflow = words[1] != 0;
+        if count == 0 {
+            return Ok((Vec::new(), overflow));
+        }
+        let bytes = download_bytes(
+            device,
+            queue,
+            &self.output,
+            0,
+            u64::from(count) * TRIANGLE_BYTES,
+        )?;
+        let floats: &[f32] = bytemuck::cast_slice(&bytes);
+        let tris = floats
+            .chunks_exact(9)
+            .map(|c| {
+                [
+                    Vec3::new(c[0], c[1], c[2]),
+                    Vec3::new(c[3], c[4], c[5]),
+                    Vec3::new(c[6], c[7], c[8]),
+                ]
+            })
+            .collect();
+        Ok((tris, overflow))
+    }
+}
+
+/// Draws the triangles of a [`RefinePass`] into passes of one [`TargetFormat`]: build it once,
+/// then per frame [`RefineRenderer::prepare`] and [`RefineRenderer::draw`] after the pass was
+/// encoded for the same draw (with the clipmap, which leaves the region out).
+#[derive(Debug)]
+pub struct RefineRenderer {
+    pipeline: SurfacePipeline,
+    target: TargetFormat,
+    uniform: wgpu::Buffer,
+    detail_uniform: wgpu::Buffer,
+    bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
+    wireframe: bool,
+}
+
+impl RefineRenderer {
+    /// Builds the pipeline.
+    pub fn new(device: &wgpu::Device, target: &TargetFormat) -> Result<Self, GpuError> {
+        target.validate(device)?;
+        const ATTRS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
+        let pipeline = SurfacePipeline::new(
+            device,
+            target,
+            "refine.wgsl",
+            terrain_shaders::REFINE,
+            &[
+                (wgpu::ShaderStages::FRAGMENT, 2),
+                (wgpu::ShaderStages::FRAGMENT, 4),
+                (wgpu::ShaderStages::FRAGMENT, 5),
+            ],
+            &[(wgpu::ShaderStages::FRAGMENT, 3)],
+            &VertexShape {
+                entry: "vs_refined",
+                vertex_stride: VERTEX_BYTES,
+                vertex_attrs: &ATTRS,
+                instance_stride: 0,
+                instance_attrs: &[],
+                extra_uniforms: &[],
+            },
+        )?;
+        let (uniform, detail_uniform) = scoped(device, "RefineRenderer", || {
+            let buffer = |label, size| {
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size,
+                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                })
+            };
+            (
+                buffer("refined frame", std::mem::size_of::<FrameUniform>() as u64),
+                buffer("refined detail", std::mem::size_of::<DetailInfo>() as u64),
+            )
+        })?;
+        Ok(Self {
+            pipeline,
+            target: *target,
+            uniform,
+            detail_uniform,
+            bound: None,
+            wireframe: false,
+        })
+    }
+
+    /// Draws triangle edges as lines from the next draw; fails without
+    /// [`wgpu::Features::POLYGON_MODE_LINE`].
+    pub fn set_wireframe(&mut self, on: bool) -> Result<(), GpuError> {
+        check_wireframe(&self.pipeline, on, "RefineRenderer wireframe")?;
+        self.wireframe = on;
+        Ok(())
+    }
+
+    /// Writes the uniforms of `draw`, which `refine` was last encoded for (the refined
+    /// vertices are relative to that camera's whole texel: another camera is refused).
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        draw: &RefineDraw<'_>,
+        refine: &RefinePass,
+    ) -> Result<(), GpuError> {
+        let (info, view, reach) = draw.check()?;
+        if refine.view() != Some(&view) {
+            return Err(GpuError::Unsupported {
+                what: "RefineRenderer",
+                reason: "the refine pass was last encoded for another camera or radius",
+            });
+        }
+        let frame = draw.frame(&info, &self.target, reach)?;
+        let detail = draw.detail_info(&frame, reach)?;
+        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&frame));
+        queue.write_buffer(&self.detail_uniform, 0, bytemuck::bytes_of(&detail));
+        let buffers = vec![
+            draw.map.buffer().clone(),
+            draw.normals.buffer().clone(),
+            draw.detail.table_buffer().clone(),
+            draw.detail.heights_buffer().clone(),
+        ];
+        if self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
+            // Binding 1 (the heights) is not read: the vertices carry them.
+            let group = self.pipeline.bind_group_at(
+                device,
+                "RefineRenderer",
+                &self.uniform,
+                &[
+                    (2, &buffers[1]),
+                    (3, &self.detail_uniform),
+                    (4, &buffers[2]),
+                    (5, &buffers[3]),
+                ],
+            )?;
+            self.bound = Some((buffers, group));
+        }
+        Ok(())
+    }
+
+    /// Records the draw of `refine`'s triangles (as many as its last encode wrote) into `pass`.
+    /// Draws nothing before the first prepare.
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, refine: &RefinePass) {
+        let Some((_, group)) = &self.bound else {
+            return;
+        };
+        pass.set_pipeline(self.pipeline.pick(self.wireframe));
+        pass.set_bind_group(0, group, &[]);
+        pass.set_vertex_buffer(0, refine.output.slice(..));
+        pass.draw_indirect(&refine.state, ARGS_OFFSET);
+    }
+}
