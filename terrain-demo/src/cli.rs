@@ -102,7 +102,9 @@ pub struct Cli {
     /// The default scenario's detail layer (seed 000 sec. 2.3): `none` stamps footprints into
     /// the coarse-map; `parallax` stamps them into 8-bit detail tiles refined x3 (streamed
     /// around the camera) and shades the clipmap through them: parallax occlusion mapping, the
-    /// composite normal of eq. 3.4, faded out with distance.
+    /// composite normal of eq. 3.4, faded out with distance; `refine` draws the same tiles as
+    /// geometry within 9 m of the camera (each coarse triangle split in up to nine by the
+    /// refinement patterns of sec. 2.4.3) and by their normals beyond.
     #[arg(long, value_enum, default_value_t = DetailArg::None)]
     pub detail: DetailArg,
     /// With `--lod cdlod`: choose the LODs by screen-space error (seed 002 eq. 1.1), at most
@@ -234,6 +236,9 @@ pub enum DetailArg {
     None,
     /// Detail tiles, drawn by parallax occlusion mapping on the unrefined clipmap.
     Parallax,
+    /// Detail tiles, drawn as refined geometry near the camera (seed 000 sec. 2.4.3's
+    /// refinement patterns, a compute pass drawn indirectly) and by their normals beyond.
+    Refine,
 }
 
 /// An on / off flag value.

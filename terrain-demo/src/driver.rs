@@ -192,8 +192,8 @@ fn open_gpu(
     }
     if cli.detail != crate::cli::DetailArg::None && cli.lod != LodArg::Clipmap {
         return Err(anyhow::anyhow!(
-            "--detail parallax shades the clipmap through the detail tiles: it needs --lod \
-             clipmap"
+            "--detail parallax and --detail refine draw the detail tiles with the clipmap: they \
+             need --lod clipmap"
         ))
         .usage();
     }

@@ -12,8 +12,9 @@ use terrain_gpu::granular::{GpuGranularNormals, GpuGranularStep, GranularNormals
 use terrain_gpu::{
     CdlodDraw, CdlodRenderer, ClipmapRenderer, ClipmapSurface, ClipmapView, DetailShading,
     GpuContext, GpuDerivativeMap, GpuDetailTiles, GpuHeightMap, GpuRegionSource, GpuStamp,
-    GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget, RegionReadback, SkyColors,
-    SkyPass, StampOp, StampPass, TerrainStyle, TessDraw, TessRenderer, TessellationPass,
+    GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget, RefineDraw, RefinePass,
+    RefineRenderer, RegionReadback, SkyColors, SkyPass, StampOp, StampPass, TerrainStyle, TessDraw,
+    TessRenderer, TessellationPass,
 };
 use terrain_lod::{
     CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodView, ClipmapLayout, DensityMap,
@@ -76,8 +77,11 @@ pub struct GpuScene {
     cdlod: Option<CdlodScene>,
     /// Adaptive tessellation instead of the clipmap (`--lod tessellated`), for the coarse-map.
     tess: Option<TessScene>,
-    /// The detail layer's tiles (`--detail parallax`), drawn with the coarse-map.
+    /// The detail layer's tiles (`--detail parallax|refine`), drawn with the coarse-map.
     detail: Option<DetailScene>,
+    /// `--detail refine`: the refined geometry near the camera (the clipmap shades the rest
+    /// with the detail normals, no parallax).
+    refined: Option<RefinedGeometry>,
     /// Vertices of each part of the clipmap's shared mesh, by part index.
     clipmap_part_vertices: Vec<u64>,
     /// Frames rendered so far.
@@ -122,6 +126,23 @@ struct DetailScene {
     /// Detail texels inside the rects the last deformation stamped.
     dirty_texels: u64,
 }
+
+/// The refinement pass and its renderer, with the radius they refine.
+struct RefinedGeometry {
+    pass: RefinePass,
+    renderer: RefineRenderer,
+    radius_m: f32,
+}
+
+/// The refined radius of `--detail refine`: 9 m, or 90 texels where texels are coarser than
+/// 0.1 m... or finer: the region must stay where the finest clipmap level (N = 255) does not
+/// morph, about 100 texels from the camera.
+fn refine_radius(texel_size: f32) -> f32 {
+    (REFINE_TEXELS * texel_size).min(9.0)
+}
+
+/// The most texels the refined radius spans (see [`refine_radius`]).
+const REFINE_TEXELS: f32 = 90.0;
 
 /// The demo's detail shading: footprints seen from eye height, drawn fully to 15 m and faded
 /// out by 30 m.
@@ -344,6 +365,7 @@ impl GpuScene {
             cdlod: None,
             tess: None,
             detail: None,
+            refined: None,
             frames: 0,
             destroy_at: std::env::var(DESTROY_DEVICE_ENV)
                 .ok()
@@ -358,14 +380,32 @@ impl GpuScene {
     }
 
     /// Draws the coarse-map through a detail layer of `layout` from now on, and stamps the
-    /// footprints into its tiles ([`GpuScene::stream_detail`] keeps them resident).
-    pub fn enable_detail(&mut self, layout: DetailLayout) -> Result<()> {
-        let tiles = GpuDetailTiles::new(&self.ctx.device, layout, DETAIL_SLOTS)?;
+    /// footprints into its tiles ([`GpuScene::stream_detail`] keeps them resident). With
+    /// `refine`, the cells near the camera are refined geometry (seed 000 sec. 2.4.3) and the
+    /// clipmap shades the rest with the detail normals; else the clipmap draws the detail by
+    /// parallax occlusion mapping.
+    pub fn enable_detail(&mut self, layout: DetailLayout, refine: bool) -> Result<()> {
+        let device = &self.ctx.device;
+        let tiles = GpuDetailTiles::new(device, layout, DETAIL_SLOTS)?;
+        let mut shading = detail_shading();
+        let refine = if refine {
+            let radius_m = refine_radius(self.map.texel_size());
+            let view = terrain_lod::RefineView::new(Vec2::ZERO, self.map.texel_size(), radius_m)?;
+            shading.parallax_steps = 0;
+            Some(RefinedGeometry {
+                pass: RefinePass::new(device, view.half_cells())?,
+                renderer: RefineRenderer::new(device, self.renderer.target())?,
+                radius_m,
+            })
+        } else {
+            None
+        };
         self.detail = Some(DetailScene {
             tiles,
-            shading: detail_shading(),
+            shading,
             dirty_texels: 0,
         });
+        self.refined = refine;
         Ok(())
     }
 
@@ -1036,10 +1076,34 @@ impl GpuScene {
         };
         let timing = self.timer.time(device, queue, |encoder| {
             self.sky.prepare(queue, view_proj, &sky_colors)?;
+            // `--detail refine`: the cells near the camera refined first, the clipmap leaving
+            // them out.
+            let refined = match (self.refined.as_mut(), self.detail.as_ref()) {
+                (Some(r), Some(d)) => {
+                    let draw = RefineDraw {
+                        map: &self.map,
+                        normals: &self.normals,
+                        detail: &d.tiles,
+                        radius_m: r.radius_m,
+                        shading: &d.shading,
+                        camera,
+                        style: &self.style,
+                        target_size: self.target.size(),
+                    };
+                    let v = r.pass.encode(device, queue, encoder, &draw)?;
+                    r.renderer.prepare(device, queue, &draw, &r.pass)?;
+                    self.renderer.exclude(Some(v.region()));
+                    Some(&*r)
+                }
+                _ => None,
+            };
             self.renderer.prepare(device, queue, &view)?;
             let mut pass = self.target.begin_pass(encoder, wgpu::Color::BLACK);
             self.sky.draw(&mut pass);
             self.renderer.draw(&mut pass);
+            if let Some(r) = refined {
+                r.renderer.draw(&mut pass, &r.pass);
+            }
             Ok(())
         })?;
         let t = std::time::Instant::now();
@@ -1060,9 +1124,14 @@ impl GpuScene {
                 self.clipmap_part_vertices.get(part).copied()
             })
             .sum();
+        // The refined cells are drawn instead of the clipmap's (which still counts them).
+        let refined = match &self.refined {
+            Some(r) => u64::from(r.pass.read_count(device, queue)?.0),
+            None => 0,
+        };
         Ok(RenderedFrame {
             image,
-            triangles: placement.triangle_count(self.layout.mesh()),
+            triangles: placement.triangle_count(self.layout.mesh()) + refined,
             lod: LodStats {
                 mode: "clipmap",
                 vertices,

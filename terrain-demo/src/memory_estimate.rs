@@ -97,7 +97,7 @@ pub struct RunShape {
     pub scenario: ScenarioKind,
     /// The LOD scheme of its 3D frames.
     pub lod: crate::cli::LodArg,
-    /// Whether the default scenario has a detail layer (`--detail parallax`).
+    /// Whether the default scenario has a detail layer (`--detail parallax` or `refine`).
     pub detail: bool,
     /// Whether it renders on the GPU (the estimate assumes it does unless `--no-gpu`: without
     /// an adapter the run falls back to less).

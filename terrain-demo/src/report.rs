@@ -316,11 +316,11 @@ pub struct FrameStats {
     /// Snow scenario: material removed by compression so far, in height units.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub granular_removed: Option<u64>,
-    /// `--detail parallax`: detail tiles in a GPU slot after the frame (without a GPU: tiles
+    /// `--detail parallax` or `refine`: detail tiles in a GPU slot after the frame (without a GPU: tiles
     /// the CPU layer holds).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub detail_tiles_resident: Option<u32>,
-    /// `--detail parallax`: detail texels inside the rects the frame's footprints stamped.
+    /// `--detail parallax` or `refine`: detail texels inside the rects the frame's footprints stamped.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub detail_dirty_texels: Option<u64>,
 }

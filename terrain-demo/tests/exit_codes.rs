@@ -25,10 +25,11 @@ fn usage_errors_exit_with_2() {
     let garbage = dir.join("garbage.png");
     std::fs::write(&garbage, b"this is not a PNG file at all").expect("write");
     let garbage = garbage.display().to_string();
-    let cases: [&[&str]; 16] = [
+    let cases: [&[&str]; 17] = [
         &["--scenario", "snow", "--lod", "cdlod", "--no-gpu"],
         &["--scenario", "snow", "--detail", "parallax", "--no-gpu"],
         &["--lod", "cdlod", "--detail", "parallax", "--no-gpu"],
+        &["--lod", "tessellated", "--detail", "refine", "--no-gpu"],
         &["--lod", "cdlod", "--target-error", "0", "--no-gpu"],
         &["--target-error", "2", "--no-gpu"],
         &["--no-morph", "--no-gpu"],

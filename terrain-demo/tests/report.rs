@@ -68,7 +68,7 @@ fn reports_of_every_scenario_validate_against_the_schema() {
                 "--resolution",
                 "160x96",
                 "--detail",
-                "parallax",
+                "refine",
             ],
         ),
         (

@@ -2,7 +2,8 @@
 //! its slot (upload, submit and wait; the thesis's 2048^2 tile load took 47.1 ms) and reading
 //! one back (the write-back before an unload; its unload took 160.7 ms), at 256^2 and 2048^2;
 //! and the frame cost of the same view drawn without detail, with the detail's composite
-//! normals only, and with parallax occlusion mapping (the thesis: tessellated 9.82 ms,
+//! normals only, with parallax occlusion mapping, and with refined geometry (`RefinePass`, sec.
+//! 2.4.3; the thesis: tessellated 9.82 ms,
 //! parallax 2.33 ms), at 1024 x 768 over a 2048 x 2048 coarse-map at 0.1 m with footprints in
 //! front of the camera. Timestamp queries where the adapter has them, else wall time.
 
@@ -15,7 +16,7 @@ use terrain_core::{TerrainParams, generate_coarse_map};
 use terrain_gpu::{
     Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DetailShading, GpuContext,
     GpuDerivativeMap, GpuDetailTiles, GpuHeightMap, GpuTimer, NormalPass, OffscreenTarget,
-    SkyColors, SkyPass, TerrainStyle,
+    RefineDraw, RefinePass, RefineRenderer, SkyColors, SkyPass, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -168,6 +169,51 @@ fn render(c: &mut Criterion, ctx: &GpuContext) {
             })
         });
     }
+    // Refined geometry within 9 m (the demo's `--detail refine`): the refine pass, the clipmap
+    // shading the rest with the composite normals, the refined triangles drawn indirectly.
+    let mut refine = RefinePass::new(device, 91).expect("refine pass");
+    let mut refined = RefineRenderer::new(device, &target.format()).expect("refine renderer");
+    let draw = RefineDraw {
+        map: &gpu_map,
+        normals: &normals,
+        detail: &detail,
+        radius_m: 9.0,
+        shading: &normals_only,
+        camera: &camera,
+        style: &style,
+        target_size: size,
+    };
+    let view = ClipmapView {
+        surface: with(&normals_only),
+        frame: &frame,
+        camera: &camera,
+        style: &style,
+        target_size: size,
+    };
+    group.bench_function(BenchmarkId::new("1024x768", "refine"), |b| {
+        b.iter_custom(|iters| {
+            (0..iters)
+                .map(|_| {
+                    let t = timer
+                        .time(device, queue, |encoder| {
+                            let v = refine.encode(device, queue, encoder, &draw)?;
+                            refined.prepare(device, queue, &draw, &refine)?;
+                            renderer.exclude(Some(v.region()));
+                            renderer.prepare(device, queue, &view)?;
+                            let mut pass = target.begin_pass(encoder, wgpu::Color::BLACK);
+                            sky.draw(&mut pass);
+                            renderer.draw(&mut pass);
+                            refined.draw(&mut pass, &refine);
+                            Ok(())
+                        })
+                        .expect("render");
+                    Duration::from_secs_f64(t.ms / 1e3)
+                })
+                .sum()
+        })
+    });
+    let (count, _) = refine.read_count(device, queue).expect("count");
+    eprintln!("refined triangles: {count}");
     group.finish();
 }
 

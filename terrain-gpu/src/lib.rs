@@ -3,7 +3,8 @@
 //! `ClipmapRenderer` and `OffscreenTarget` captures; `GpuTileAtlas`, the tile slots and
 //! indirection table of a streamed world that the clipmap can draw from; `GpuDetailTiles`, the
 //! detail layer's tiles (stamped by `StampPass::encode_detail`, drawn through
-//! `ClipmapSurface::Detail`).
+//! `ClipmapSurface::Detail`, or as refined geometry near the camera by `RefinePass` and
+//! `RefineRenderer`: one output buffer, so one refine encode per submit).
 //!
 //! Every pass is a struct that makes everything long-lived in `new(&wgpu::Device, ..)`
 //! (pipelines, one shader module per WGSL module, layouts, a uniform ring, scratch buffers) and

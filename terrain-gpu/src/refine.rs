@@ -37,7 +37,7 @@ struct Params {
     half_cells: u32,
     capacity: u32,
     radius_m: f32,
-    _pad: u32,
+    fade_start_m: f32,
 }
 
 /// Bytes of the counter block: count, overflow, two pads, then the four `draw_indirect`
@@ -61,8 +61,13 @@ pub struct RefineDraw<'a> {
     pub normals: &'a GpuDerivativeMap,
     /// The detail layer's tiles (tiles without a slot are 0 m and are not refined).
     pub detail: &'a GpuDetailTiles,
-    /// Where the detail fades out: vertices within `fade_end_m` (horizontally) of the camera
-    /// may be refined, and the detail height is faded as the parallax surface fades it.
+    /// Vertices closer than this (metres, horizontally) to the camera may be refined. The
+    /// detail displaces them fully up to half this distance from the eye and not at all from
+    /// it on, smoothly in between, so the region's edge is the coarse surface.
+    pub radius_m: f32,
+    /// How fragments shade with the detail's gradient (its fade; no parallax on displaced
+    /// geometry). With the clipmap outside the region drawn through the same shading and no
+    /// parallax steps, the normals fade alike on both sides of the region's edge.
     pub shading: &'a DetailShading,
     /// The camera.
     pub camera: &'a Camera,
@@ -85,7 +90,7 @@ impl RefineDraw<'_> {
         }
         .check()?;
         let xz = Vec2::new(self.camera.position.x, self.camera.position.z);
-        let view = RefineView::new(xz, info.texel_size, self.shading.fade_end_m)?;
+        let view = RefineView::new(xz, info.texel_size, self.radius_m)?;
         // Vertices reach one texel past the region, the fragments' differences two more.
         let reach = view.half_cells() + 3;
         Ok((info, view, reach))
@@ -288,8 +293,8 @@ impl RefinePass {
         if view.half_cells() > self.max_half_cells {
             return Err(GpuError::Unsupported {
                 what: "RefinePass",
-                reason: "the fade end spans more cells than this pass was built for: build it \
-                         with more half cells or fade out sooner",
+                reason: "the radius spans more cells than this pass was built for: build it \
+                         with more half cells or refine a smaller radius",
             });
         }
         // The compute pass reads the frame's camera, encoding and wrap, not its target.
@@ -299,7 +304,7 @@ impl RefinePass {
             half_cells: view.half_cells(),
             capacity: self.capacity,
             radius_m: view.radius_m,
-            _pad: 0,
+            fade_start_m: 0.5 * view.radius_m,
         };
         queue.write_buffer(&self.frame, 0, bytemuck::bytes_of(&frame));
         queue.write_buffer(&self.detail_info, 0, bytemuck::bytes_of(&detail));
@@ -353,6 +358,18 @@ impl RefinePass {
         Ok(view)
     }
 
+    /// Reads back how many triangles the last encode wrote (at most [`RefinePass::capacity`])
+    /// and whether more were generated than the output holds. Blocking (a 32-byte download).
+    pub fn read_count(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<(u32, bool), GpuError> {
+        let state = download_bytes(device, queue, &self.state, 0, STATE_BYTES)?;
+        let words: &[u32] = bytemuck::cast_slice(&state);
+        Ok((words[0].min(self.capacity), words[1] != 0))
+    }
+
     /// Reads back what the last encode wrote: its triangles (in no particular order; each
     /// vertex x, z in texels from the camera's whole texel and the drawn height in metres)
     /// and whether more were generated than the output holds. Blocking: for tests and tools.
@@ -361,10 +378,7 @@ impl RefinePass {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<(Vec<[Vec3; 3]>, bool), GpuError> {
-        let state = download_bytes(device, queue, &self.state, 0, STATE_BYTES)?;
-        let words: &[u32] = bytemuck::cast_slice(&state);
-        let count = words[0].min(self.capacity);
-        let overflow = words[1] != 0;
+        let (count, overflow) = self.read_count(device, queue)?;
         if count == 0 {
             return Ok((Vec::new(), overflow));
         }

@@ -66,10 +66,15 @@ fn style() -> TerrainStyle {
     }
 }
 
+/// The refined radius: the detail displaces vertices fully to 8 m, not at all from 16 m.
+const RADIUS: f32 = 16.0;
+
+/// The fragments' detail normals: faded out from 20 m to 30 m.
 fn shading() -> DetailShading {
     DetailShading {
-        fade_start_m: 8.0,
-        fade_end_m: 16.0,
+        fade_start_m: 20.0,
+        fade_end_m: 30.0,
+        parallax_steps: 0,
         ..DetailShading::default()
     }
 }
@@ -79,7 +84,7 @@ fn shading() -> DetailShading {
 fn cpu_triangles(scene: &Scene, tiles: &GpuDetailTiles, camera: &Camera) -> Vec<[IVec2; 3]> {
     let layout = *tiles.layout();
     let xz = Vec2::new(camera.position.x, camera.position.z);
-    let view = RefineView::new(xz, 1.0, shading().fade_end_m).unwrap();
+    let view = RefineView::new(xz, 1.0, RADIUS).unwrap();
     let size = scene.map.size().as_ivec2();
     let wrapped = IVec2::new(
         view.camera_texel.x.rem_euclid(size.x),
@@ -126,6 +131,7 @@ fn refined_triangles_equal_the_cpu_reference() {
             map: &scene.gpu_map,
             normals: &scene.normals,
             detail: &tiles,
+            radius_m: RADIUS,
             shading: &shading,
             camera: &camera,
             style: &style,
@@ -167,7 +173,7 @@ fn refined_triangles_equal_the_cpu_reference() {
             view.camera_texel.y.rem_euclid(size.y),
         )
         .as_vec2();
-        let (s, e) = (shading.fade_start_m, shading.fade_end_m);
+        let (s, e) = (0.5 * RADIUS, RADIUS);
         let mut deep = 0;
         for v in gpu.iter().flatten() {
             let q = Vec2::new(v.x, v.y);
@@ -213,6 +219,7 @@ fn render_refined(
         map: &scene.gpu_map,
         normals: &scene.normals,
         detail: tiles,
+        radius_m: RADIUS,
         shading: &shading,
         camera,
         style: &style,
@@ -363,46 +370,48 @@ fn refinement_that_does_not_fit_is_refused() {
     let style = style();
     let xz = Vec2::new(93.3, 94.6);
     let camera = Camera::looking(Vec3::new(xz.x, scene.ground(xz) + 2.0, xz.y), Vec3::X);
-    let wide = shading(); // 17 half cells: more than 8
-    let narrow = DetailShading {
-        fade_start_m: 2.0,
-        fade_end_m: 6.0,
-        ..DetailShading::default()
-    };
-    let draw = |shading| RefineDraw {
+    let shading = shading();
+    let draw = |radius_m| RefineDraw {
         map: &scene.gpu_map,
         normals: &scene.normals,
         detail: &tiles,
-        shading,
+        radius_m,
+        shading: &shading,
         camera: &camera,
         style: &style,
         target_size: UVec2::new(64, 64),
     };
     let mut encoder = device.create_command_encoder(&Default::default());
+    // 17 half cells: more than 8.
     let err = pass
-        .encode(&device, &queue, &mut encoder, &draw(&wide))
+        .encode(&device, &queue, &mut encoder, &draw(RADIUS))
         .unwrap_err();
     assert!(matches!(err, GpuError::Unsupported { .. }), "{err}");
     // Drawing before the pass was encoded for this camera is refused.
     let err = renderer
-        .prepare(&device, &queue, &draw(&narrow), &pass)
+        .prepare(&device, &queue, &draw(6.0), &pass)
         .unwrap_err();
     assert!(matches!(err, GpuError::Unsupported { .. }), "{err}");
-    let bad = DetailShading {
-        fade_end_m: f32::NAN,
-        ..narrow
-    };
-    assert!(
-        pass.encode(&device, &queue, &mut encoder, &draw(&bad))
-            .is_err()
-    );
+    for bad in [f32::NAN, 0.0, -1.0, f32::INFINITY, 1e9] {
+        assert!(
+            pass.encode(&device, &queue, &mut encoder, &draw(bad))
+                .is_err()
+        );
+    }
     let view = pass
-        .encode(&device, &queue, &mut encoder, &draw(&narrow))
+        .encode(&device, &queue, &mut encoder, &draw(6.0))
         .unwrap();
     queue.submit([encoder.finish()]);
     renderer
-        .prepare(&device, &queue, &draw(&narrow), &pass)
+        .prepare(&device, &queue, &draw(6.0), &pass)
         .unwrap();
+    // Another camera than the pass's is refused.
+    let moved = Camera::looking(camera.position + Vec3::new(3.0, 0.0, 0.0), Vec3::X);
+    let other = RefineDraw {
+        camera: &moved,
+        ..draw(6.0)
+    };
+    assert!(renderer.prepare(&device, &queue, &other, &pass).is_err());
     // The clipmap of N = 31 morphs from 10 texels on: a region of 7 cells fits, 12 does not.
     scene.renderer.exclude(Some(view.region()));
     scene.prepare(&camera, UVec2::new(64, 64), &SkyColors::default());

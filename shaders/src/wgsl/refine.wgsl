@@ -10,9 +10,10 @@ struct RefineParams {
     half_cells: u32,
     // Triangles the output holds.
     capacity: u32,
-    // Vertices closer than this (metres, horizontally) may be refined.
+    // Vertices closer than this (metres, horizontally) may be refined; the detail displaces
+    // them fully up to fade_start_m from the eye, not at all from radius_m on.
     radius_m: f32,
-    _pad: u32,
+    fade_start_m: f32,
 }
 
 struct RefineState {
@@ -77,7 +78,7 @@ fn floor_div3(v: vec2<i32>) -> vec2<i32> {
 
 // The drawn vertex at `p3` (thirds of a texel from the camera's whole texel): the bilinear
 // coarse height (the stored height itself on whole texels, as the clipmap draws it) plus the
-// faded detail height. A function of `p3` alone, so both triangles of a side agree bit for bit.
+// detail height, faded out by the region's edge (vertices there are the coarse surface). A function of `p3` alone, so both triangles of a side agree bit for bit.
 fn refined_vertex(p3: vec2<i32>) -> vec3<f32> {
     let b = floor_div3(p3);
     let f = vec2<f32>(p3 - 3 * b) / 3.0;
@@ -92,7 +93,7 @@ fn refined_vertex(p3: vec2<i32>) -> vec3<f32> {
     let q = vec2<f32>(p3) / 3.0;
     let rel = q - frame.camera_frac;
     let world = vec3<f32>(rel.x * frame.texel_size, coarse - frame.camera_height, rel.y * frame.texel_size);
-    let w = detail_fade(length(world));
+    let w = 1.0 - smoothstep(refine.fade_start_m, refine.radius_m, length(world));
     var h = coarse;
     if w > 0.0 {
         let d = p3 * i32(detail.refine);

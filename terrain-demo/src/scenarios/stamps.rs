@@ -3,7 +3,7 @@
 //! by readbacks of the dirty regions, and a camera on it (`--camera`): walking behind the
 //! walker, or orbiting or flying over the whole map (the default with `--heightmap`).
 //!
-//! With `--detail parallax` the footprints go into a detail layer instead (seed 000 sec. 2.3:
+//! With `--detail parallax` or `refine` the footprints go into a detail layer instead (seed 000 sec. 2.3:
 //! 8-bit tiles refined x3 over the coarse-map), stamped on the GPU's tiles and on the CPU
 //! layer that holds every tile's truth and feeds the GPU's streaming.
 
@@ -41,8 +41,10 @@ pub struct StampScenario {
     /// When each collision readback in flight was requested.
     requested_at: HashMap<RequestId, Instant>,
     rig: CameraRig,
-    /// `--detail parallax`: the detail layer the footprints go into.
+    /// `--detail parallax|refine`: the detail layer the footprints go into.
     detail: Option<DetailLayer>,
+    /// How the GPU draws it (`--detail`).
+    detail_mode: crate::cli::DetailArg,
 }
 
 /// Detail texels per coarse texel (seed 000's 1/gamma = 3).
@@ -63,7 +65,7 @@ impl StampScenario {
         let script = StampScript::new(map.extent_m(), cli.seed, params.stamps)?;
         let detail = match cli.detail {
             crate::cli::DetailArg::None => None,
-            crate::cli::DetailArg::Parallax => {
+            crate::cli::DetailArg::Parallax | crate::cli::DetailArg::Refine => {
                 let layout =
                     DetailLayout::new(map.size(), map.texel_size(), DETAIL_REFINE, DETAIL_TILE)
                         .map_err(|e| crate::usage_error::usage(anyhow::anyhow!("--detail: {e}")))?;
@@ -116,6 +118,7 @@ impl StampScenario {
             requested_at: HashMap::new(),
             rig,
             detail,
+            detail_mode: cli.detail,
         })
     }
 }
@@ -151,7 +154,8 @@ impl Scenario for StampScenario {
             scene.hide_outside_map(true);
         }
         if let Some(layer) = &self.detail {
-            scene.enable_detail(*layer.layout())?;
+            let refine = self.detail_mode == crate::cli::DetailArg::Refine;
+            scene.enable_detail(*layer.layout(), refine)?;
         }
         scene.set_footprint(self.script.footprint())
     }
