@@ -58,6 +58,7 @@
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
+pub mod detail;
 pub mod error;
 pub mod manifest;
 #[cfg(feature = "object-store")]

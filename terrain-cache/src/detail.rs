@@ -1,0 +1,456 @@
+//! Detail tiles as cache tiles (seed 000 sec. 2.4.2 and 3.2.3, fig. 2.4): a
+//! [`terrain_core::detail::DetailLayer`] whose tiles live in a [`World`]'s detail layer on disk,
+//! a working set on the GPU chosen by the nine band regions of the camera's tile, and dirty
+//! tiles written back atomically.
+//!
+//! A tile is *loaded* when it holds a GPU slot and *active* when it is drawn. The camera's
+//! tile is split into nine regions by a horizontal and a vertical band across its centre
+//! ([`BandSelection::band_width`]): in a band both neighbours across it are loaded but not
+//! active (they are about to be needed), outside it only the neighbour on the camera's side,
+//! loaded and active; the centre region loads all nine tiles and activates one
+//! ([`band_tiles`]). Entering and leaving a region never unloads a tile just loaded.
+//!
+//! [`DetailCache::update`] turns the camera's band into a plan: tiles to upload (active ones
+//! first, within a per-frame upload budget; tiles a GPU stamp needs this frame whatever the
+//! budget) and tiles to release. A released tile that was deformed is written back at once
+//! (seed 000: "when a tile gets unloaded ... immediately written to the hard-disk"), through
+//! [`World::write_tile`]: a temporary file, fsync, rename; a tile back at zero loses its file and
+//! reads as the shared zero tile again. Only released or deformed tiles stay in RAM, so memory
+//! follows the working set, not the world.
+//!
+//! The detail's normals are the partial derivatives of eq. 3.3, which the shaders take from the
+//! heights as they draw: a loaded tile needs no normal map rebuilt.
+//!
+//! ```
+//! use std::sync::Arc;
+//! use glam::{UVec2, Vec2};
+//! use terrain_cache::detail::{DetailCache, detail_manifest_layout};
+//! use terrain_cache::{BandSelection, Manifest, ObjectTileStore, TileStore, World};
+//! use terrain_core::detail::DetailLayout;
+//! use terrain_core::{Blend, GaussianStamp, HeightEncoding, StampPlacement, WrapMode};
+//!
+//! // A 256 x 256 coarse-map at 0.5 m, its detail refined x4 in 64-texel tiles (8 m a side).
+//! let layout = DetailLayout::new(UVec2::splat(256), 0.5, 4, 64)?;
+//! let mut manifest = Manifest::new(UVec2::splat(256), 64, 0.5,
+//!     HeightEncoding::spanning::<u16>(0.0, 50.0)?, WrapMode::Repeat)?;
+//! manifest.detail = Some(detail_manifest_layout(&layout)?);
+//! let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory()?);
+//! let world = World::create(store.clone(), manifest)?;
+//!
+//! let mut cache = DetailCache::open(world, layout, BandSelection::default(), 1 << 20)?;
+//! let camera = Vec2::new(20.0, 20.0); // the middle of tile (2, 2): all nine tiles loaded
+//! let frame = cache.update(camera, &[])?;
+//! assert_eq!(frame.load.len(), 9);
+//! assert_eq!(cache.active_tiles().len(), 1);
+//!
+//! // A footprint: the tile becomes dirty, and is written back when it leaves the band.
+//! let p = StampPlacement::new(Vec2::new(21.0, 19.0), Vec2::new(0.6, 0.9), -0.1)?;
+//! cache.apply_stamp(&mut GaussianStamp::default(), &p, Blend::Add)?;
+//! assert_eq!(cache.dirty_tiles().len(), 1);
+//! let frame = cache.update(Vec2::new(100.0, 100.0), &[])?;
+//! assert_eq!(frame.written, 1);
+//! assert!(store.read("detail/00/0002/0002.png", 1 << 20)?.is_some());
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use crate::manifest;
+use crate::policy::BandSelection;
+use crate::{CacheError, Layer, TileData, TileId, TileRead, World};
+use glam::{DVec2, UVec2, Vec2};
+use std::collections::{HashMap, HashSet};
+use terrain_core::detail::{
+    DETAIL_ZERO_RAW, DetailChange, DetailLayer, DetailLayout, detail_encoding,
+};
+use terrain_core::{Blend, Grid, Stamp, StampPlacement};
+
+/// The manifest's detail section for a terrain-core detail layout: its tiles, texel spacing,
+/// the detail encoding and the zero raw value. Fails for a tile side that is not a power of
+/// two (the store's tiles are).
+pub fn detail_manifest_layout(layout: &DetailLayout) -> Result<manifest::DetailLayout, CacheError> {
+    let side = layout.tile_size();
+    if !side.is_power_of_two() {
+        return Err(CacheError::OutOfRange {
+            what: "detail tile side",
+            value: f64::from(side),
+            expected: "a power of two",
+        });
+    }
+    Ok(manifest::DetailLayout {
+        tile_size: side,
+        tiles: layout.tiles(),
+        texel_size: layout.detail_texel_m(),
+        encoding: detail_encoding(),
+        fill: DETAIL_ZERO_RAW,
+    })
+}
+
+/// A tile of the camera's band: loaded, and active or not.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BandTile {
+    /// The tile.
+    pub tile: UVec2,
+    /// Drawn now (else loaded ahead of need).
+    pub active: bool,
+}
+
+/// The tiles seed 000's fig. 2.4 loads for a camera at `camera_xz` (metres on the coarse-map's
+/// plane, any finite value: the layer repeats), active ones first: per axis, the camera's tile
+/// and, in the band, both neighbours (loaded, inactive), outside it the neighbour on the
+/// camera's side (loaded, active). 4, 6 or 9 tiles; fewer on a layer of fewer tiles.
+pub fn band_tiles(
+    layout: &DetailLayout,
+    band: &BandSelection,
+    camera_xz: Vec2,
+) -> Result<Vec<BandTile>, CacheError> {
+    if !camera_xz.is_finite() {
+        return Err(CacheError::OutOfRange {
+            what: "detail camera position (m)",
+            value: f64::from(if camera_xz.x.is_finite() {
+                camera_xz.y
+            } else {
+                camera_xz.x
+            }),
+            expected: "finite",
+        });
+    }
+    let tile_m = f64::from(layout.tile_size()) * f64::from(layout.detail_texel_m());
+    let tiles = layout.tiles().as_dvec2();
+    // The layer's period is the coarse-map's extent (its last tiles may reach past it).
+    let period = layout.coarse_size().as_dvec2() * f64::from(layout.coarse_texel_m());
+    let p = DVec2::new(
+        f64::from(camera_xz.x).rem_euclid(period.x),
+        f64::from(camera_xz.y).rem_euclid(period.y),
+    ) / tile_m;
+    let cell = p.floor().min(tiles - 1.0);
+    let frac = p - cell;
+    let axis = |f: f64| {
+        let offsets = band.axis_offsets(f);
+        // In a band (three offsets) only the camera's own tile is active on this axis.
+        let active_all = offsets.len() < 3;
+        offsets.iter().map(move |&o| (o, active_all || o == 0))
+    };
+    let mut out: Vec<BandTile> = Vec::with_capacity(9);
+    for (dy, ay) in axis(frac.y) {
+        for (dx, ax) in axis(frac.x) {
+            let t = DVec2::new(
+                (cell.x + f64::from(dx)).rem_euclid(tiles.x),
+                (cell.y + f64::from(dy)).rem_euclid(tiles.y),
+            )
+            .as_uvec2();
+            let active = ax && ay;
+            match out.iter_mut().find(|b| b.tile == t) {
+                // A layer of one or two tiles a side: the same tile through two offsets.
+                Some(b) => b.active |= active,
+                None => out.push(BandTile { tile: t, active }),
+            }
+        }
+    }
+    out.sort_by_key(|b| !b.active);
+    Ok(out)
+}
+
+/// What one [`DetailCache::update`] decided.
+#[derive(Debug, Default)]
+pub struct DetailFrame {
+    /// Tiles to upload to the GPU now (their texels: [`DetailCache::tile`]), active first.
+    pub load: Vec<UVec2>,
+    /// Tiles that left the working set: release their GPU slots.
+    pub unload: Vec<UVec2>,
+    /// Tiles of the band the upload budget left for a later frame.
+    pub deferred: usize,
+    /// Dirty tiles written back to the world this frame.
+    pub written: usize,
+    /// Bytes of u8 samples this frame uploads.
+    pub upload_bytes: u64,
+    /// Tiles that could not be read (a corrupt file: not loaded, tried again next update) or
+    /// written back (kept dirty in RAM, tried again), with why.
+    pub failed: Vec<(UVec2, CacheError)>,
+}
+
+/// Detail tiles over one coarse-map, stored in a [`World`]'s detail layer, with the working set
+/// of the camera's band regions on the GPU (see the [module docs](self)).
+#[derive(Debug)]
+pub struct DetailCache {
+    world: World,
+    band: BandSelection,
+    upload_budget_bytes: u64,
+    /// The tiles in RAM: the loaded ones, and deformed ones not yet written back.
+    layer: DetailLayer,
+    /// Tiles whose stored texels are in `layer` (read from the world, or written since).
+    read: HashSet<UVec2>,
+    /// Tiles deformed since they were last written back.
+    dirty: HashSet<UVec2>,
+    /// The working set: loaded tiles and whether each is active.
+    loaded: HashMap<UVec2, bool>,
+}
+
+impl DetailCache {
+    /// A cache of `layout`'s tiles stored in `world` (whose manifest must describe the same
+    /// detail layer: [`detail_manifest_layout`]), choosing its working set by `band` and
+    /// uploading at most `upload_budget_bytes` of samples a frame (at least one tile's). Nothing
+    /// is read until the first update.
+    pub fn open(
+        world: World,
+        layout: DetailLayout,
+        band: BandSelection,
+        upload_budget_bytes: u64,
+    ) -> Result<Self, CacheError> {
+        let expected = detail_manifest_layout(&layout)?;
+        match &world.manifest().detail {
+            Some(d) if *d == expected => {}
+            Some(_) => {
+                return Err(CacheError::Manifest {
+                    key: crate::manifest::MANIFEST_KEY.into(),
+                    reason: "its detail layer differs from the layout given (tiles, tile side, \
+                             texel size or encoding)"
+                        .into(),
+                });
+            }
+            None => {
+                return Err(CacheError::NoSuchLayer {
+                    layer: Layer::Detail,
+                });
+            }
+        }
+        if !(0.0..=1.0).contains(&band.band_width) || band.level != 0 {
+            return Err(CacheError::OutOfRange {
+                what: "detail band width (fraction of a tile)",
+                value: band.band_width,
+                expected: "0 to 1, on level 0",
+            });
+        }
+        let tile_bytes = u64::from(layout.tile_size()).pow(2);
+        if upload_budget_bytes < tile_bytes {
+            return Err(CacheError::OutOfRange {
+                what: "detail upload budget (bytes per frame)",
+                value: upload_budget_bytes as f64,
+                expected: "at least one tile's samples",
+            });
+        }
+        Ok(Self {
+            world,
+            band,
+            upload_budget_bytes,
+            layer: DetailLayer::new(layout)?,
+            read: HashSet::new(),
+            dirty: HashSet::new(),
+            loaded: HashMap::new(),
+        })
+    }
+
+    /// The layout.
+    pub fn layout(&self) -> &DetailLayout {
+        self.layer.layout()
+    }
+
+    /// The tiles in RAM, as a layer (the shared zero tile elsewhere): what collision and the
+    /// GPU read.
+    pub fn layer(&self) -> &DetailLayer {
+        &self.layer
+    }
+
+    /// A loaded tile's texels (`None`: the shared zero tile, or not in RAM).
+    pub fn tile(&self, tile: UVec2) -> Option<&Grid<u8>> {
+        self.layer.tile(tile)
+    }
+
+    /// The working set: loaded tiles, and whether each is active, in row-major order.
+    pub fn loaded_tiles(&self) -> Vec<(UVec2, bool)> {
+        row_major(self.loaded.keys().copied())
+            .into_iter()
+            .map(|t| (t, self.loaded[&t]))
+            .collect()
+    }
+
+    /// The active tiles (drawn now), in row-major order.
+    pub fn active_tiles(&self) -> Vec<UVec2> {
+        row_major(self.loaded.iter().filter(|(_, a)| **a).map(|(&t, _)| t))
+    }
+
+    /// Tiles deformed since their last write-back, in row-major order.
+    pub fn dirty_tiles(&self) -> Vec<UVec2> {
+        row_major(self.dirty.iter().copied())
+    }
+
+    /// Moves the working set to the band of a camera at `camera_xz` (metres), with `needed`
+    /// tiles loaded too (those a GPU stamp writes this frame: loaded whatever the budget, as
+    /// tiles a refused stamp would lose). Tiles that leave it are written back if dirty and
+    /// dropped from RAM; new ones are read from the world (a missing file is the zero tile),
+    /// nearest-need first within the upload budget. A tile that cannot be read or written is
+    /// reported in [`DetailFrame::failed`] and tried again at the next update (nothing is
+    /// lost: an unwritten tile stays dirty in RAM). Fails only on a non-finite camera or a
+    /// needed tile off the grid, before changing anything.
+    pub fn update(&mut self, camera_xz: Vec2, needed: &[UVec2]) -> Result<DetailFrame, CacheError> {
+        let tiles = self.layout().tiles();
+        if let Some(t) = needed.iter().find(|t| t.x >= tiles.x || t.y >= tiles.y) {
+            return Err(off_grid(*t, tiles));
+        }
+        let band = band_tiles(self.layout(), &self.band, camera_xz)?;
+        let mut wanted: HashMap<UVec2, bool> = needed.iter().map(|&t| (t, false)).collect();
+        for b in &band {
+            let e = wanted.entry(b.tile).or_insert(false);
+            *e |= b.active;
+        }
+        let mut frame = DetailFrame::default();
+        let leaving = row_major(
+            self.loaded
+                .keys()
+                .filter(|t| !wanted.contains_key(t))
+                .copied(),
+        );
+        for t in leaving {
+            self.loaded.remove(&t);
+            frame.unload.push(t);
+        }
+        // Deformed tiles outside the working set (released now, or stamped while away).
+        let away = row_major(
+            self.dirty
+                .iter()
+                .filter(|t| !wanted.contains_key(t))
+                .copied(),
+        );
+        for t in away {
+            match self.write_back(t) {
+                Ok(()) => frame.written += 1,
+                Err(e) => frame.failed.push((t, e)),
+            }
+        }
+        let drop: Vec<UVec2> = self
+            .read
+            .iter()
+            .filter(|t| !wanted.contains_key(t) && !self.dirty.contains(t))
+            .copied()
+            .collect();
+        for t in drop {
+            self.layer.clear_tile(t);
+            self.read.remove(&t);
+        }
+        // Needed tiles first, then the band's active tiles, then the rest of the band.
+        let tile_bytes = u64::from(self.layout().tile_size()).pow(2);
+        let order = needed
+            .iter()
+            .map(|&t| (t, true))
+            .chain(band.iter().map(|b| (b.tile, false)));
+        for (t, must) in order {
+            if self.loaded.contains_key(&t) {
+                continue;
+            }
+            if !must && frame.upload_bytes + tile_bytes > self.upload_budget_bytes {
+                frame.deferred += 1;
+                continue;
+            }
+            if let Err(e) = self.ensure_read(t) {
+                frame.failed.push((t, e));
+                continue;
+            }
+            self.loaded.insert(t, false);
+            frame.load.push(t);
+            frame.upload_bytes += tile_bytes;
+        }
+        for (t, active) in self.loaded.iter_mut() {
+            *active = wanted.get(t).copied().unwrap_or(false);
+        }
+        Ok(frame)
+    }
+
+    /// Applies a stamp to the detail layer (as [`DetailLayer::apply_stamp`]), reading the tiles
+    /// it covers from the world first; they become dirty. Tiles outside the working set are
+    /// written back at the next update. Fails as the layer's stamp does, or on a corrupt tile
+    /// file; nothing is written then.
+    pub fn apply_stamp<S: Stamp + ?Sized>(
+        &mut self,
+        stamp: &mut S,
+        placement: &StampPlacement,
+        blend: Blend,
+    ) -> Result<DetailChange, CacheError> {
+        let layout = *self.layout();
+        let footprint = placement.footprint(layout.detail_texel_m())?;
+        if !footprint.is_empty() {
+            let pieces = layout.footprint_pieces(footprint)?;
+            for (t, _) in terrain_core::detail::tiles_of_pieces(&pieces) {
+                self.ensure_read(t)?;
+            }
+        }
+        let change = self.layer.apply_stamp(stamp, placement, blend)?;
+        for (t, _) in &change.tiles {
+            if self.layer.tile(*t).is_some() {
+                self.dirty.insert(*t);
+            }
+        }
+        Ok(change)
+    }
+
+    /// Replaces a tile's texels (one read back from the GPU after a stamp there): it becomes
+    /// dirty. Fails on a tile off the grid or texels of the wrong size.
+    pub fn write_tile(&mut self, tile: UVec2, texels: Grid<u8>) -> Result<(), CacheError> {
+        self.layer.set_tile(tile, texels)?;
+        self.read.insert(tile);
+        self.dirty.insert(tile);
+        Ok(())
+    }
+
+    /// Writes every dirty tile back (the end of a session). Returns how many were written.
+    pub fn flush(&mut self) -> Result<usize, CacheError> {
+        let dirty = self.dirty_tiles();
+        for &t in &dirty {
+            self.write_back(t)?;
+        }
+        Ok(dirty.len())
+    }
+
+    /// Reads tile `t`'s stored texels into the layer once.
+    fn ensure_read(&mut self, t: UVec2) -> Result<(), CacheError> {
+        if self.read.contains(&t) {
+            return Ok(());
+        }
+        let id = TileId::new(0, t.x, t.y);
+        match self.world.read_tile(Layer::Detail, id)? {
+            TileRead::Stored(TileData::U8(grid)) => self.layer.set_tile(t, grid)?,
+            TileRead::Stored(other) => {
+                return Err(CacheError::TileDataMismatch {
+                    layer: Layer::Detail,
+                    expected_bits: 8,
+                    size: self.layout().tile_size(),
+                    found_bits: other.bits(),
+                    found_w: other.size().x,
+                    found_h: other.size().y,
+                });
+            }
+            TileRead::Zero => self.layer.clear_tile(t),
+        }
+        self.read.insert(t);
+        Ok(())
+    }
+
+    /// Writes tile `t` to the world (the zero tile: its file removed) and marks it clean.
+    fn write_back(&mut self, t: UVec2) -> Result<(), CacheError> {
+        let side = self.layout().tile_size();
+        let texels = match self.layer.tile(t) {
+            Some(g) => g.clone(),
+            None => Grid::new(side, side, DETAIL_ZERO_RAW)?,
+        };
+        self.world.write_tile(
+            Layer::Detail,
+            TileId::new(0, t.x, t.y),
+            &TileData::U8(texels),
+        )?;
+        self.dirty.remove(&t);
+        Ok(())
+    }
+}
+
+/// Tiles sorted row by row.
+fn row_major(tiles: impl Iterator<Item = UVec2>) -> Vec<UVec2> {
+    let mut v: Vec<UVec2> = tiles.collect();
+    v.sort_unstable_by_key(|t| (t.y, t.x));
+    v
+}
+
+fn off_grid(t: UVec2, tiles: UVec2) -> CacheError {
+    CacheError::TileOutOfRange {
+        id: TileId::new(0, t.x, t.y),
+        levels: 1,
+        tiles_x: tiles.x,
+        tiles_y: tiles.y,
+    }
+}
