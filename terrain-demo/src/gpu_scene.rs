@@ -4,7 +4,8 @@
 
 use anyhow::{Context, Result};
 use glam::{UVec2, Vec2};
-use terrain_core::detail::{DetailLayer, DetailLayout, tiles_of_pieces};
+use terrain_cache::detail::{DetailCache, DetailFrame};
+use terrain_core::detail::DetailLayout;
 use terrain_core::granular::{GranularObject, GranularParams};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_core::{FixedPointMap, Rect, StampPlacement};
@@ -112,14 +113,14 @@ pub const COLLISION_READBACK_RING: usize = 4;
 /// Readbacks of deformed atlas tiles in flight at most (the ring's staging buffers).
 const TILE_READBACK_RING: usize = 16;
 
-/// Detail tile slots on the GPU (256 KiB each at 256^2 u32 texels: 8 MiB). The default walk
-/// keeps at most about 20 tiles with footprints within the fade distance; the nearest are kept
-/// when more are. Few slots matter on software adapters: lavapipe's submits cost time in
-/// proportion to the bytes of the storage buffers they bind (55 ms for 96 slots, 3 ms for 8).
-pub const DETAIL_SLOTS: u32 = 32;
+/// Detail tile slots on the GPU (4 MiB each at 1024^2 u32 texels): the nine of a band and the
+/// tiles beyond it under the walker and this frame's footprints (within 2 m of the walker: at
+/// most four). Only tiles with detail take a slot; the zero tile is shared.
+pub const DETAIL_SLOTS: u32 = 13;
 
-/// The detail layer on the GPU: tile slots streamed from the scenario's CPU layer (which holds
-/// every tile's truth: each footprint is stamped on both) and how the renderer shades them.
+/// The detail layer on the GPU: tile slots following the scenario's detail cache (each
+/// footprint is stamped on both; the cache's copy is the one written back) and how the
+/// renderer shades them.
 struct DetailScene {
     tiles: GpuDetailTiles,
     shading: DetailShading,
@@ -134,9 +135,8 @@ struct RefinedGeometry {
     radius_m: f32,
 }
 
-/// The refined radius of `--detail refine`: 9 m, or 90 texels where texels are coarser than
-/// 0.1 m... or finer: the region must stay where the finest clipmap level (N = 255) does not
-/// morph, about 100 texels from the camera.
+/// The refined radius of `--detail refine`: 9 m, at most 90 texels (the region must stay where
+/// the finest clipmap level, N = 255, does not morph: about 100 texels from the camera).
 fn refine_radius(texel_size: f32) -> f32 {
     (REFINE_TEXELS * texel_size).min(9.0)
 }
@@ -144,12 +144,13 @@ fn refine_radius(texel_size: f32) -> f32 {
 /// The most texels the refined radius spans (see [`refine_radius`]).
 const REFINE_TEXELS: f32 = 90.0;
 
-/// The demo's detail shading: footprints seen from eye height, drawn fully to 15 m and faded
-/// out by 30 m.
+/// The demo's detail shading: footprints drawn fully to 6 m and faded out by 11 m, within the
+/// two thirds of a tile the band regions hold around the camera in every direction (so no
+/// tile ever appears or leaves where the detail shows).
 fn detail_shading() -> DetailShading {
     DetailShading {
-        fade_start_m: 15.0,
-        fade_end_m: 30.0,
+        fade_start_m: 12.0,
+        fade_end_m: 22.0,
         ..DetailShading::default()
     }
 }
@@ -417,61 +418,25 @@ impl GpuScene {
             .map(|d| (d.tiles.resident(), d.dirty_texels))
     }
 
-    /// Streams detail tiles from `layer` (the CPU layer the footprints are also stamped on):
-    /// those this frame's footprints touch, then those within the fade distance of
-    /// `camera_xz`, nearest first, as many as the slots hold; the others give their slots up.
-    /// Timed as [`Step::Detail`]. Nothing without a detail layer.
+    /// Makes the GPU's detail slots follow `frame` of `cache` (the detail cache the footprints
+    /// are also stamped on, on the CPU): releases the tiles that left its working set and
+    /// uploads those that joined it. Timed as [`Step::Detail`]. Nothing without a detail layer.
     pub fn stream_detail(
         &mut self,
-        layer: &DetailLayer,
-        camera_xz: Vec2,
-        plan: &FramePlan,
+        cache: &DetailCache,
+        frame: &DetailFrame,
         timings: &mut Timings,
     ) -> Result<()> {
         let Some(detail) = self.detail.as_mut() else {
             return Ok(());
         };
         let t = std::time::Instant::now();
-        let layout = *layer.layout();
-        let mut wanted = Vec::new();
-        for d in plan
-            .deformations
-            .iter()
-            .filter(|d| d.kind == StampKind::Footprint)
-        {
-            let footprint = d.placement.footprint(layout.detail_texel_m())?;
-            if !footprint.is_empty() {
-                let pieces = layout.footprint_pieces(footprint)?;
-                wanted.extend(tiles_of_pieces(&pieces).into_iter().map(|(t, _)| t));
-            }
+        for &tile in &frame.unload {
+            detail.tiles.unload(&self.ctx.queue, tile);
         }
-        wanted.sort_unstable_by_key(|t| (t.y, t.x));
-        wanted.dedup();
-        let tile_m = layout.detail_texel_m() * layout.tile_size() as f32;
-        let mut band = layout.tiles_within(camera_xz, detail.shading.fade_end_m + tile_m)?;
-        // Nearest first, on the wrapped plane.
-        let extent = layout.coarse_size().as_vec2() * layout.coarse_texel_m();
-        let distance = |t: glam::UVec2| {
-            let d = ((t.as_vec2() + 0.5) * tile_m - camera_xz).abs() % extent;
-            d.min(extent - d).length()
-        };
-        band.sort_by(|a, b| distance(*a).total_cmp(&distance(*b)));
-        let mut slotted = wanted.len();
-        for t in band {
-            if slotted >= DETAIL_SLOTS as usize {
-                break;
-            }
-            if wanted.contains(&t) {
-                continue;
-            }
-            // A tile needs a slot when the layer holds it, or when the GPU keeps one for it
-            // (a stamp's covered tiles get slots even where it changed nothing).
-            if layer.tile(t).is_some() || detail.tiles.slot_of(t).is_some() {
-                slotted += 1;
-            }
-            wanted.push(t);
+        for &tile in &frame.load {
+            detail.tiles.load(&self.ctx.queue, tile, cache.tile(tile))?;
         }
-        detail.tiles.stream_from(&self.ctx.queue, layer, &wanted)?;
         timings.add(Step::Detail, crate::timings::ms_since(t));
         Ok(())
     }

@@ -5,7 +5,6 @@
 use anyhow::{Context, Result};
 use glam::Vec2;
 use terrain_core::HeightEncoding;
-use terrain_core::detail::DetailLayer;
 use terrain_core::io::{ReadLimits, decode_png8};
 use terrain_core::{
     Blend, CoarseMap, DirtyRect, GaussianStamp, Shockwave, Stamp, StampPlacement, TextureStamp,
@@ -206,13 +205,13 @@ impl StampScript {
         &mut self,
         map: &mut CoarseMap,
         plan: &mut FramePlan,
-        mut detail: Option<&mut DetailLayer>,
+        mut detail: Option<&mut terrain_cache::detail::DetailCache>,
     ) -> Result<(Vec<Vec<DirtyRect>>, u64)> {
         let mut dirty = Vec::new();
         let mut detail_texels = 0;
         for d in &plan.deformations {
-            if let (StampKind::Footprint, Some(layer)) = (d.kind, detail.as_deref_mut()) {
-                let change = layer.apply_stamp(&mut self.footprint, &d.placement, Blend::Add)?;
+            if let (StampKind::Footprint, Some(cache)) = (d.kind, detail.as_deref_mut()) {
+                let change = cache.apply_stamp(&mut self.footprint, &d.placement, Blend::Add)?;
                 detail_texels += change.tiles.iter().map(|(_, r)| r.area()).sum::<u64>();
                 dirty.push(Vec::new());
                 continue;

@@ -9,6 +9,7 @@
 
 use super::stamp_script::{StampKind, StampScript};
 use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo, heightmap};
+use super::{FinishStats, FramePlan};
 use crate::camera_path::{CameraPath, MapFrame};
 use crate::camera_rig::CameraRig;
 use crate::cli::{CameraMode, Cli};
@@ -16,11 +17,14 @@ use crate::config::DemoParams;
 use crate::gpu_scene::GpuScene;
 use crate::report::FrameStats;
 use crate::timings::{Step, ms_since};
+use anyhow::Context as _;
 use anyhow::Result;
 use glam::Vec2;
 use std::collections::HashMap;
 use std::time::Instant;
-use terrain_core::detail::{DetailLayer, DetailLayout};
+use terrain_cache::detail::{DetailCache, detail_manifest_layout};
+use terrain_cache::{BandSelection, FsStore, Manifest, TileStore, World};
+use terrain_core::detail::{DetailLayout, tiles_of_pieces};
 use terrain_core::{CoarseMap, DerivativeMap, bilinear};
 use terrain_physics::{
     CollisionMirror, CpuRegionSource, DetailGround, ReadbackScheduler, RequestId,
@@ -41,16 +45,22 @@ pub struct StampScenario {
     /// When each collision readback in flight was requested.
     requested_at: HashMap<RequestId, Instant>,
     rig: CameraRig,
-    /// `--detail parallax|refine`: the detail layer the footprints go into.
-    detail: Option<DetailLayer>,
+    /// `--detail parallax|refine`: the detail tiles the footprints go into, cached in a world
+    /// under the output folder (`detail_world`).
+    detail: Option<DetailCache>,
     /// How the GPU draws it (`--detail`).
     detail_mode: crate::cli::DetailArg,
 }
 
 /// Detail texels per coarse texel (seed 000's 1/gamma = 3).
 pub const DETAIL_REFINE: u32 = 3;
-/// Detail tile side in detail texels (256 KiB a GPU slot).
-pub const DETAIL_TILE: u32 = 256;
+/// Detail tile side in detail texels (34 m at 3.3 cm; 4 MiB a GPU slot). The band regions hold
+/// the camera's tile and its neighbours on the camera's side, so the detail reaches at least
+/// two thirds of a tile (22 m) in every direction: the demo fades it out by then.
+pub const DETAIL_TILE: u32 = 1024;
+
+/// Samples the detail cache uploads per frame at most: the nine tiles of a band.
+const DETAIL_UPLOAD_BUDGET: u64 = 9 * (DETAIL_TILE as u64) * (DETAIL_TILE as u64);
 
 impl StampScenario {
     /// Loads or generates the terrain and places the walker and the camera.
@@ -69,7 +79,7 @@ impl StampScenario {
                 let layout =
                     DetailLayout::new(map.size(), map.texel_size(), DETAIL_REFINE, DETAIL_TILE)
                         .map_err(|e| crate::usage_error::usage(anyhow::anyhow!("--detail: {e}")))?;
-                Some(DetailLayer::new(layout)?)
+                Some(detail_cache(&cli.out, &map, layout)?)
             }
         };
         let mirror = CollisionMirror::from_map(&map)?;
@@ -133,9 +143,71 @@ pub fn camera_mode(cli: &Cli) -> CameraMode {
     })
 }
 
+/// The detail cache of `--detail`: a world of `map`'s size with only a detail layer, in
+/// `out/detail_world` (a previous run's is replaced: every run starts from untouched detail).
+fn detail_cache(
+    out: &std::path::Path,
+    map: &CoarseMap,
+    layout: DetailLayout,
+) -> Result<DetailCache> {
+    let dir = out.join("detail_world");
+    if dir.join(terrain_cache::manifest::MANIFEST_KEY).exists() {
+        std::fs::remove_dir_all(&dir)
+            .with_context(|| format!("clearing the previous {}", dir.display()))?;
+    }
+    let store: std::sync::Arc<dyn TileStore> = std::sync::Arc::new(FsStore::open(&dir)?);
+    let mut manifest = Manifest::new(
+        map.size(),
+        256,
+        map.texel_size(),
+        map.encoding(),
+        map.wrap(),
+    )?;
+    manifest.detail = Some(detail_manifest_layout(&layout)?);
+    let world = World::create(store, manifest)?;
+    Ok(DetailCache::open(
+        world,
+        layout,
+        BandSelection::default(),
+        DETAIL_UPLOAD_BUDGET,
+    )?)
+}
+
+/// The detail tiles a frame needs beyond the camera's band: those its footprints stamp (the
+/// GPU refuses stamps over tiles it does not hold) and those under the walker (collision).
+fn needed_detail_tiles(layout: &DetailLayout, plan: &FramePlan) -> Result<Vec<glam::UVec2>> {
+    let mut needed = layout.tiles_within(plan.walker.0, 2.0)?;
+    for d in plan
+        .deformations
+        .iter()
+        .filter(|d| d.kind == StampKind::Footprint)
+    {
+        let footprint = d.placement.footprint(layout.detail_texel_m())?;
+        if !footprint.is_empty() {
+            let pieces = layout.footprint_pieces(footprint)?;
+            needed.extend(tiles_of_pieces(&pieces).into_iter().map(|(t, _)| t));
+        }
+    }
+    needed.sort_unstable_by_key(|t| (t.y, t.x));
+    needed.dedup();
+    Ok(needed)
+}
+
 impl Scenario for StampScenario {
     fn info(&self) -> &ScenarioInfo {
         &self.info
+    }
+
+    fn finish(&mut self, _gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
+        // The detail tiles still in RAM and deformed are written back: every footprint is on
+        // disk when the run ends.
+        let written = match self.detail.as_mut() {
+            Some(cache) => Some(cache.flush()? as u64),
+            None => None,
+        };
+        Ok(FinishStats {
+            written_back_tiles: written,
+        })
     }
 
     fn map(&self) -> &CoarseMap {
@@ -153,9 +225,9 @@ impl Scenario for StampScenario {
             scene.reach(radius)?;
             scene.hide_outside_map(true);
         }
-        if let Some(layer) = &self.detail {
+        if let Some(cache) = &self.detail {
             let refine = self.detail_mode == crate::cli::DetailArg::Refine;
-            scene.enable_detail(*layer.layout(), refine)?;
+            scene.enable_detail(*cache.layout(), refine)?;
         }
         scene.set_footprint(self.script.footprint())
     }
@@ -188,11 +260,22 @@ impl Scenario for StampScenario {
 
         // The stamps: on the GPU map (rendered, read back for collision) and on the CPU map
         // (the overview; and without a GPU, the source of the collision readbacks).
-        if let Some(scene) = ctx.gpu.as_deref_mut() {
-            if let Some(layer) = &self.detail {
-                let eye = self.rig.eye();
-                scene.stream_detail(layer, Vec2::new(eye.x, eye.z), &plan, ctx.timings)?;
+        // The detail tiles: the camera's band, the tiles this frame's footprints stamp and the
+        // walker's (it stands on them), then the GPU's slots follow.
+        if let Some(cache) = self.detail.as_mut() {
+            let t = Instant::now();
+            let eye = self.rig.eye();
+            let needed = needed_detail_tiles(cache.layout(), &plan)?;
+            let frame = cache.update(Vec2::new(eye.x, eye.z), &needed)?;
+            if let Some((tile, e)) = frame.failed.first() {
+                return Err(anyhow::anyhow!("detail tile {tile}: {e}"));
             }
+            ctx.timings.add(Step::Detail, ms_since(t));
+            if let Some(scene) = ctx.gpu.as_deref_mut() {
+                scene.stream_detail(cache, &frame, ctx.timings)?;
+            }
+        }
+        if let Some(scene) = ctx.gpu.as_deref_mut() {
             for (i, rect) in scene.deform(&plan, self.script.crater(), ctx.timings)? {
                 let bound = StampScript::bound(&plan.deformations[i], encoding)?;
                 self.scheduler.note_deformation(rect, bound, now)?;
@@ -232,8 +315,8 @@ impl Scenario for StampScenario {
         let look = |p| bilinear(map, p).unwrap_or(0.0);
         // With a detail layer the body walks on coarse + detail (it steps into the footprints).
         let camera = match &self.detail {
-            Some(layer) => {
-                let ground = DetailGround::new(&ground, layer);
+            Some(cache) => {
+                let ground = DetailGround::new(&ground, cache.layer());
                 self.rig.step(plan.walker, FRAME_DT as f32, &ground, look)?
             }
             None => self.rig.step(plan.walker, FRAME_DT as f32, &ground, look)?,
@@ -244,10 +327,10 @@ impl Scenario for StampScenario {
 
         let dirty: Vec<_> = dirty_by_deformation.into_iter().flatten().collect();
         // The GPU's figures where it holds the tiles, else the CPU layer's.
-        let detail = self.detail.as_ref().map(|layer| {
+        let detail = self.detail.as_ref().map(|cache| {
             match ctx.gpu.as_deref().and_then(|scene| scene.detail_stats()) {
                 Some(stats) => stats,
-                None => (layer.resident_tiles() as u32, cpu_detail_texels),
+                None => (cache.loaded_tiles().len() as u32, cpu_detail_texels),
             }
         });
         Ok(FrameOutcome {
