@@ -61,7 +61,7 @@ use std::collections::{HashMap, HashSet};
 use terrain_core::detail::{
     DETAIL_ZERO_RAW, DetailChange, DetailLayer, DetailLayout, detail_encoding,
 };
-use terrain_core::{Blend, Grid, Stamp, StampPlacement};
+use terrain_core::{Blend, Grid, Rect, Stamp, StampPlacement};
 
 /// The manifest's detail section for a terrain-core detail layout: its tiles, texel spacing,
 /// the detail encoding and the zero raw value. Fails for a tile side that is not a power of
@@ -385,6 +385,51 @@ impl DetailCache {
     pub fn write_tile(&mut self, tile: UVec2, texels: Grid<u8>) -> Result<(), CacheError> {
         self.layer.set_tile(tile, texels)?;
         self.read.insert(tile);
+        self.dirty.insert(tile);
+        Ok(())
+    }
+
+    /// Replaces the texels of `rect` (tile coordinates) of `tile` with `texels`: the dirty rect
+    /// of a stamp on the GPU, read back so the cache (collision, write-back) holds the GPU's
+    /// result. The tile is read from the world first if it is not in RAM; it becomes dirty.
+    /// Fails, changing nothing, on a tile off the grid, a rect off the tile, texels of another
+    /// size than the rect, or a corrupt tile file.
+    pub fn write_rect(
+        &mut self,
+        tile: UVec2,
+        rect: Rect,
+        texels: &Grid<u8>,
+    ) -> Result<(), CacheError> {
+        let tiles = self.layout().tiles();
+        if tile.x >= tiles.x || tile.y >= tiles.y {
+            return Err(off_grid(tile, tiles));
+        }
+        let side = self.layout().tile_size();
+        if !Rect::from_size(UVec2::splat(side)).contains_rect(&rect) {
+            return Err(terrain_core::CoreError::RegionOutOfBounds {
+                rect,
+                map_size: UVec2::splat(side),
+            }
+            .into());
+        }
+        if texels.size() != rect.size {
+            return Err(terrain_core::CoreError::SizeMismatch {
+                expected: rect.size,
+                actual: texels.size(),
+            }
+            .into());
+        }
+        self.ensure_read(tile)?;
+        let mut grid = match self.layer.tile(tile) {
+            Some(g) => g.clone(),
+            None => Grid::new(side, side, DETAIL_ZERO_RAW)?,
+        };
+        let (x0, w) = (rect.min.x as usize, rect.size.x as usize);
+        for (y, row) in texels.as_slice().chunks_exact(w.max(1)).enumerate() {
+            let start = (rect.min.y as usize + y) * side as usize + x0;
+            grid.as_mut_slice()[start..start + w].copy_from_slice(row);
+        }
+        self.layer.set_tile(tile, grid)?;
         self.dirty.insert(tile);
         Ok(())
     }

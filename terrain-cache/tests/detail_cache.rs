@@ -318,3 +318,56 @@ fn caches_that_do_not_fit_are_refused() {
     let odd = DetailLayout::new(UVec2::splat(256), 0.5, 3, 48).unwrap();
     assert!(detail_manifest_layout(&odd).is_err());
 }
+
+#[test]
+fn rects_read_back_from_the_gpu_merge_into_the_stored_tile() {
+    use terrain_core::Rect;
+    let s = store();
+    let mut cache =
+        DetailCache::open(world(&s), layout(), BandSelection::default(), 1 << 20).unwrap();
+    cache.update(Vec2::new(44.0, 60.0), &[]).unwrap();
+    footprint(&mut cache, Vec2::new(44.0, 60.0), -0.2);
+    assert_eq!(cache.flush().unwrap(), 1);
+    let t = UVec2::new(5, 7);
+    let stored = cache.tile(t).unwrap().clone();
+    // Far away: the tile leaves RAM. A rect written now is merged into what the world holds.
+    cache.update(Vec2::new(100.0, 20.0), &[]).unwrap();
+    assert!(cache.tile(t).is_none());
+    let rect = Rect::new(glam::IVec2::new(10, 20), UVec2::new(5, 3));
+    let texels = Grid::from_fn(5, 3, |x, y| (x * 10 + y) as u8).unwrap();
+    cache.write_rect(t, rect, &texels).unwrap();
+    assert_eq!(cache.dirty_tiles(), vec![t]);
+    let merged = cache.tile(t).unwrap().clone();
+    for y in 0..64 {
+        for x in 0..64 {
+            let inside = (10..15).contains(&x) && (20..23).contains(&y);
+            let expected = if inside {
+                ((x - 10) * 10 + (y - 20)) as u8
+            } else {
+                stored.get(x, y).unwrap()
+            };
+            assert_eq!(merged.get(x, y).unwrap(), expected, "({x}, {y})");
+        }
+    }
+    // Refused, changing nothing: wrong size, off the tile, off the grid.
+    assert!(
+        cache
+            .write_rect(
+                t,
+                Rect::new(glam::IVec2::new(10, 20), UVec2::new(4, 3)),
+                &texels
+            )
+            .is_err()
+    );
+    assert!(
+        cache
+            .write_rect(
+                t,
+                Rect::new(glam::IVec2::new(62, 20), UVec2::new(5, 3)),
+                &texels
+            )
+            .is_err()
+    );
+    assert!(cache.write_rect(UVec2::new(16, 0), rect, &texels).is_err());
+    assert_eq!(cache.tile(t).unwrap(), &merged);
+}

@@ -126,6 +126,8 @@ struct DetailScene {
     shading: DetailShading,
     /// Detail texels inside the rects the last deformation stamped.
     dirty_texels: u64,
+    /// The rects (tile, texels of the tile) the last deformation stamped, to read back.
+    dirty: Vec<(glam::UVec2, terrain_core::Rect)>,
 }
 
 /// The refinement pass and its renderer, with the radius they refine.
@@ -405,6 +407,7 @@ impl GpuScene {
             tiles,
             shading,
             dirty_texels: 0,
+            dirty: Vec::new(),
         });
         self.refined = refine;
         Ok(())
@@ -436,6 +439,27 @@ impl GpuScene {
         }
         for &tile in &frame.load {
             detail.tiles.load(&self.ctx.queue, tile, cache.tile(tile))?;
+        }
+        timings.add(Step::Detail, crate::timings::ms_since(t));
+        Ok(())
+    }
+
+    /// Reads the detail rects the last deformation stamped back from the GPU into `cache`
+    /// (collision walks on it, and it writes the tiles back): the GPU's stamps are the detail's
+    /// truth. Waits for the GPU. Timed as [`Step::Detail`]. Nothing without a detail layer.
+    pub fn read_back_detail(
+        &mut self,
+        cache: &mut DetailCache,
+        timings: &mut Timings,
+    ) -> Result<()> {
+        let Some(detail) = self.detail.as_mut() else {
+            return Ok(());
+        };
+        let t = std::time::Instant::now();
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        for &(tile, rect) in &detail.dirty {
+            let texels = detail.tiles.read(device, queue, tile, rect)?;
+            cache.write_rect(tile, rect, &texels)?;
         }
         timings.add(Step::Detail, crate::timings::ms_since(t));
         Ok(())
@@ -914,6 +938,7 @@ impl GpuScene {
         // Footprints into the detail tiles, as one more submit.
         if let (Some(detail), Some(foot)) = (self.detail.as_mut(), self.footprint.as_ref()) {
             let mut texels = 0;
+            detail.dirty.clear();
             let time = self.timer.time(device, queue, |encoder| {
                 for d in plan
                     .deformations
@@ -933,6 +958,7 @@ impl GpuScene {
                         &op,
                     )?;
                     texels += rects.iter().map(|(_, r)| r.area()).sum::<u64>();
+                    detail.dirty.extend(rects);
                 }
                 Ok(())
             })?;

@@ -94,6 +94,33 @@ fn cargo(args: &[&str], env: &[(&str, &str)]) -> Result<()> {
     Ok(())
 }
 
+/// Runs the demo binary as the test step built it: `cargo test --workspace` builds it with the
+/// workspace's unified features, and a `cargo run -p terrain-demo` would resolve the demo's own
+/// and rebuild wgpu and its dependencies (minutes on two cores). `cargo test --no-run` makes it
+/// current first (nothing to do right after the test step).
+fn demo(args: &[&str], env: &[(&str, &str)]) -> Result<()> {
+    cargo(&["test", "--workspace", "--locked", "--no-run"], &[])?;
+    let exe = root()
+        .join("target")
+        .join("debug")
+        .join(format!("terrain-demo{}", std::env::consts::EXE_SUFFIX));
+    let mut cmd = Command::new(&exe);
+    cmd.args(args).current_dir(root());
+    if std::env::var_os("MESA_VK_DEVICE_SELECT").is_none() {
+        cmd.env("NODEVICE_SELECT", "1");
+    }
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let status = cmd
+        .status()
+        .with_context(|| format!("could not start {}", exe.display()))?;
+    if !status.success() {
+        bail!("`terrain-demo {}` exited with {status}", args.join(" "));
+    }
+    Ok(())
+}
+
 /// One named check of `ci`.
 type Step = (&'static str, fn() -> Result<()>);
 
@@ -489,11 +516,6 @@ fn snow_run(backend: &str, extra: &[&str]) -> Result<u64> {
     }
     let out_s = out.to_string_lossy().into_owned();
     let mut args = vec![
-        "run",
-        "--locked",
-        "-p",
-        "terrain-demo",
-        "--",
         "--scenario",
         "snow",
         "--size",
@@ -506,7 +528,7 @@ fn snow_run(backend: &str, extra: &[&str]) -> Result<u64> {
         &out_s,
     ];
     args.extend_from_slice(extra);
-    cargo(&args, &[])?;
+    demo(&args, &[])?;
     let text = std::fs::read_to_string(out.join("report.json")).context("no snow report")?;
     let report: serde_json::Value = serde_json::from_str(&text).context("invalid report.json")?;
     let frames = report["frames"].as_array().cloned().unwrap_or_default();
@@ -543,13 +565,8 @@ fn smoke_on(backend: Option<&str>) -> Result<()> {
     let out_s = out.to_string_lossy().into_owned();
     let frames = 4;
     let env: Vec<(&str, &str)> = backend.map(|b| ("WGPU_BACKEND", b)).into_iter().collect();
-    cargo(
+    demo(
         &[
-            "run",
-            "--locked",
-            "-p",
-            "terrain-demo",
-            "--",
             "--size",
             "96",
             "--frames",

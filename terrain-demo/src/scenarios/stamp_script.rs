@@ -198,23 +198,33 @@ impl StampScript {
     }
 
     /// Applies `plan` to a CPU map with terrain-core's reference stamps, the footprints to
-    /// `detail` instead when there is a detail layer; returns the rects of each deformation on
-    /// the map, in plan order (none for a footprint in the detail layer), and the detail texels
-    /// inside the rects the footprints stamped.
+    /// the detail layer instead when there is one (stamped here, or read back from the GPU's);
+    /// returns the rects of each deformation on the map, in plan order (none for a footprint
+    /// in the detail layer), and the detail texels inside the rects the footprints stamped here.
     pub fn apply_cpu(
         &mut self,
         map: &mut CoarseMap,
         plan: &mut FramePlan,
-        mut detail: Option<&mut terrain_cache::detail::DetailCache>,
+        mut detail: DetailTarget<'_>,
     ) -> Result<(Vec<Vec<DirtyRect>>, u64)> {
         let mut dirty = Vec::new();
         let mut detail_texels = 0;
         for d in &plan.deformations {
-            if let (StampKind::Footprint, Some(cache)) = (d.kind, detail.as_deref_mut()) {
-                let change = cache.apply_stamp(&mut self.footprint, &d.placement, Blend::Add)?;
-                detail_texels += change.tiles.iter().map(|(_, r)| r.area()).sum::<u64>();
-                dirty.push(Vec::new());
-                continue;
+            if d.kind == StampKind::Footprint {
+                match &mut detail {
+                    DetailTarget::None => {}
+                    DetailTarget::Cpu(cache) => {
+                        let p = &d.placement;
+                        let change = cache.apply_stamp(&mut self.footprint, p, Blend::Add)?;
+                        detail_texels += change.tiles.iter().map(|(_, r)| r.area()).sum::<u64>();
+                        dirty.push(Vec::new());
+                        continue;
+                    }
+                    DetailTarget::Gpu => {
+                        dirty.push(Vec::new());
+                        continue;
+                    }
+                }
             }
             let stamp: &mut dyn Stamp = match d.kind {
                 StampKind::Footprint => &mut self.footprint,
@@ -231,4 +241,15 @@ impl StampScript {
         }
         Ok((dirty, detail_texels))
     }
+}
+
+/// Where [`StampScript::apply_cpu`] puts the footprints.
+#[derive(Debug)]
+pub enum DetailTarget<'a> {
+    /// No detail layer: into the coarse-map.
+    None,
+    /// Stamped into this detail cache on the CPU.
+    Cpu(&'a mut terrain_cache::detail::DetailCache),
+    /// Stamped on the GPU's detail tiles and read back from there: not here.
+    Gpu,
 }

@@ -3,11 +3,13 @@
 //! by readbacks of the dirty regions, and a camera on it (`--camera`): walking behind the
 //! walker, or orbiting or flying over the whole map (the default with `--heightmap`).
 //!
-//! With `--detail parallax` or `refine` the footprints go into a detail layer instead (seed 000 sec. 2.3:
-//! 8-bit tiles refined x3 over the coarse-map), stamped on the GPU's tiles and on the CPU
-//! layer that holds every tile's truth and feeds the GPU's streaming.
+//! With `--detail parallax` or `refine` the footprints go into a detail layer instead (seed 000
+//! sec. 2.3: 8-bit tiles refined x3 over the coarse-map), held by a detail cache (the band
+//! regions around the camera, dirty tiles written back to `<out>/detail_world`). With a GPU they
+//! are stamped on its tiles and the stamped rects read back into the cache (collision and the
+//! write-back take the GPU's texels); without one they are stamped on the cache.
 
-use super::stamp_script::{StampKind, StampScript};
+use super::stamp_script::{DetailTarget, StampKind, StampScript};
 use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo, heightmap};
 use super::{FinishStats, FramePlan};
 use crate::camera_path::{CameraPath, MapFrame};
@@ -280,6 +282,10 @@ impl Scenario for StampScenario {
                 let bound = StampScript::bound(&plan.deformations[i], encoding)?;
                 self.scheduler.note_deformation(rect, bound, now)?;
             }
+            // The GPU's detail stamps are the truth: their rects come back into the cache.
+            if let Some(cache) = self.detail.as_mut() {
+                scene.read_back_detail(cache, ctx.timings)?;
+            }
         }
         // Beside a GPU this is the mirror behind the overview (one step); without one it is the
         // deformation itself, timed as stamps and normals like the GPU's.
@@ -288,9 +294,13 @@ impl Scenario for StampScenario {
         } else {
             (Step::StampCpu, Step::NormalsCpu)
         };
+        let target = match (self.detail.as_mut(), ctx.gpu.is_some()) {
+            (None, _) => DetailTarget::None,
+            (Some(_), true) => DetailTarget::Gpu,
+            (Some(cache), false) => DetailTarget::Cpu(cache),
+        };
         let (dirty_by_deformation, cpu_detail_texels) = ctx.timings.time(stamp_step, || {
-            self.script
-                .apply_cpu(self.cpu.map_mut(), &mut plan, self.detail.as_mut())
+            self.script.apply_cpu(self.cpu.map_mut(), &mut plan, target)
         })?;
         ctx.timings.time(normals_step, || -> Result<()> {
             for rect in dirty_by_deformation.iter().flatten() {
