@@ -885,20 +885,6 @@ impl SurfacePipeline {
     }
 }
 
-impl SurfacePipeline {
-    /// A bind group of `uniform` at binding 0 and `entries` (binding, buffer) over this
-    /// pipeline's layout, for pipelines that bind only some of the surface's buffers.
-    pub(crate) fn bind_group_at(
-        &self,
-        device: &wgpu::Device,
-        label: &'static str,
-        uniform: &wgpu::Buffer,
-        entries: &[(u32, &wgpu::Buffer)],
-    ) -> Result<wgpu::BindGroup, GpuError> {
-        self.bind_group(device, label, uniform, &[], entries)
-    }
-}
-
 /// Refuses turning wireframe on for renderer `what` when `pipeline` has no wireframe twin.
 pub(crate) fn check_wireframe(
     pipeline: &SurfacePipeline,

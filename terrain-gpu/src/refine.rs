@@ -502,10 +502,11 @@ impl RefineRenderer {
         ];
         if self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
             // Binding 1 (the heights) is not read: the vertices carry them.
-            let group = self.pipeline.bind_group_at(
+            let group = self.pipeline.bind_group(
                 device,
                 "RefineRenderer",
                 &self.uniform,
+                &[],
                 &[
                     (2, &buffers[1]),
                     (3, &self.detail_uniform),
