@@ -236,6 +236,10 @@ pub const GRANULAR_DEPTH: &str = concat!(wgsl_prelude!(), include_str!("wgsl/gra
 pub const GRANULAR_VOLUME: &str =
     concat!(wgsl_prelude!(), include_str!("wgsl/granular_volume.wgsl"));
 
+/// `SpillPass`: the excess of a detail stamp moved into the coarse-map (terrain-core's
+/// `detail_spill` rule).
+pub const SPILL: &str = concat!(wgsl_prelude!(), include_str!("wgsl/spill.wgsl"));
+
 /// The markers around the default user procedural stamp function in [`STAMP`]; a user stamp
 /// replaces the text between them with its own `fn user_stamp_value(local: vec2<f32>) -> f32`.
 pub const USER_STAMP_MARKERS: (&str, &str) = ("// USER_STAMP_BEGIN", "// USER_STAMP_END");
@@ -243,6 +247,7 @@ pub const USER_STAMP_MARKERS: (&str, &str) = ("// USER_STAMP_BEGIN", "// USER_ST
 /// Every shader with its name, for validation and tooling.
 pub const ALL: &[(&str, &str)] = &[
     ("stamp", STAMP),
+    ("spill", SPILL),
     ("normals", NORMALS),
     ("density", DENSITY),
     ("cdlod", CDLOD),

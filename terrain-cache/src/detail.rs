@@ -61,7 +61,7 @@ use std::collections::{HashMap, HashSet};
 use terrain_core::detail::{
     DETAIL_ZERO_RAW, DetailChange, DetailLayer, DetailLayout, detail_encoding,
 };
-use terrain_core::{Blend, Grid, Rect, Stamp, StampPlacement};
+use terrain_core::{Blend, DirtyRect, Grid, HeightMap, HeightSample, Rect, Stamp, StampPlacement};
 
 /// The manifest's detail section for a terrain-core detail layout: its tiles, texel spacing,
 /// the detail encoding and the zero raw value. Fails for a tile side that is not a power of
@@ -363,6 +363,33 @@ impl DetailCache {
         placement: &StampPlacement,
         blend: Blend,
     ) -> Result<DetailChange, CacheError> {
+        self.read_footprint(placement)?;
+        let change = self.layer.apply_stamp(stamp, placement, blend)?;
+        self.mark_dirty(&change);
+        Ok(change)
+    }
+
+    /// Applies a stamp as [`DetailCache::apply_stamp`] does, spilling what leaves the tiles'
+    /// range into `coarse` (as [`DetailLayer::apply_stamp_spilling`]); returns the detail change
+    /// and the coarse rects the spill changed. Fails as the layer's spilling stamp does, or on
+    /// a corrupt tile file; nothing is written then.
+    pub fn apply_stamp_spilling<T: HeightSample, S: Stamp + ?Sized>(
+        &mut self,
+        coarse: &mut HeightMap<T>,
+        stamp: &mut S,
+        placement: &StampPlacement,
+        blend: Blend,
+    ) -> Result<(DetailChange, Vec<DirtyRect>), CacheError> {
+        self.read_footprint(placement)?;
+        let (change, rects) = self
+            .layer
+            .apply_stamp_spilling(coarse, stamp, placement, blend)?;
+        self.mark_dirty(&change);
+        Ok((change, rects))
+    }
+
+    /// Reads every tile a stamp at `placement` covers from the world, if not in RAM yet.
+    fn read_footprint(&mut self, placement: &StampPlacement) -> Result<(), CacheError> {
         let layout = *self.layout();
         let footprint = placement.footprint(layout.detail_texel_m())?;
         if !footprint.is_empty() {
@@ -371,13 +398,16 @@ impl DetailCache {
                 self.ensure_read(t)?;
             }
         }
-        let change = self.layer.apply_stamp(stamp, placement, blend)?;
+        Ok(())
+    }
+
+    /// The tiles a stamp wrote become dirty (a shared zero tile it left unchanged does not).
+    fn mark_dirty(&mut self, change: &DetailChange) {
         for (t, _) in &change.tiles {
             if self.layer.tile(*t).is_some() {
                 self.dirty.insert(*t);
             }
         }
-        Ok(change)
     }
 
     /// Replaces a tile's texels (one read back from the GPU after a stamp there): it becomes

@@ -9,9 +9,10 @@
 //! back, so a stamp over a 4-tile corner gives the texels the same stamp gives on one large
 //! tile (seed 000 leaves tile boundaries unhandled). Tiles are materialised on first write.
 //!
-//! A detail value is clamped to its tile's 1 m range, as seed 000's 8-bit detail-maps are:
-//! large deformations belong to the coarse-map (a spill of the excess into it is not built
-//! yet).
+//! A detail value is clamped to its tile's 1 m range, as seed 000's 8-bit detail-maps are,
+//! by [`DetailLayer::apply_stamp`]; [`DetailLayer::apply_stamp_spilling`] moves what a stamp
+//! pushes beyond the range into the coarse-map instead (the rule is in
+//! [`crate::detail_spill`]), so a mark deeper than the tile's range is not clipped.
 //!
 //! The renderer reads the layer as [`DetailLayer::height_m`] (bilinear) and
 //! [`DetailLayer::gradient_m`] (eq. 3.3 per texel, bilinear) define, across tile edges and the
@@ -36,10 +37,13 @@
 //! assert_eq!(layer.resident_tiles(), 4);
 //! ```
 
+use crate::detail_spill::{
+    WIDE_SHIFT, check_spill_fits, spill_into_coarse, spill_rect, split_wide, wide_encoding,
+};
 use crate::error::CoreError;
 use crate::grid::{Grid, WrapMode};
-use crate::map::{HeightEncoding, HeightMap};
-use crate::rect::Rect;
+use crate::map::{HeightEncoding, HeightMap, HeightSample};
+use crate::rect::{DirtyRect, Rect};
 use crate::stamp::{Blend, Stamp, StampPlacement, apply_stamp_window};
 use glam::{IVec2, UVec2, Vec2};
 
@@ -577,11 +581,25 @@ impl DetailLayer {
         if apply_stamp_window(&mut map, footprint.min, stamp, placement, blend)?.is_none() {
             return Ok(DetailChange::default());
         }
-        // Scatter the changed texels back, piece by piece.
-        let after = map.grid();
+        let changed = self.scatter(&pieces, footprint.min, &before, map.grid())?;
+        Ok(DetailChange {
+            tiles: tiles_of_pieces(&pieces),
+            changed_texels: changed,
+        })
+    }
+
+    /// Writes the texels of `after` that differ from `before` (windows of the footprint whose
+    /// texel `(0, 0)` is detail texel `origin`) into the tiles of `pieces`; returns how many.
+    fn scatter(
+        &mut self,
+        pieces: &[DetailPiece],
+        origin: IVec2,
+        before: &Grid<u8>,
+        after: &Grid<u8>,
+    ) -> Result<u64, CoreError> {
         let mut changed = 0u64;
-        for piece in &pieces {
-            let w = (piece.unwrapped - footprint.min).as_uvec2();
+        for piece in pieces {
+            let w = (piece.unwrapped - origin).as_uvec2();
             for y in 0..piece.local.size.y {
                 for x in 0..piece.local.size.x {
                     let (nv, ov) = (after.get(w.x + x, w.y + y), before.get(w.x + x, w.y + y));
@@ -597,10 +615,72 @@ impl DetailLayer {
                 }
             }
         }
-        Ok(DetailChange {
-            tiles: tiles_of_pieces(&pieces),
-            changed_texels: changed,
-        })
+        Ok(changed)
+    }
+
+    /// Applies a stamp as [`DetailLayer::apply_stamp`] does, but what it pushes beyond a
+    /// tile's 1 m range spills into `coarse` (the coarse-map under this layer) instead of being
+    /// clipped: the rule of [`crate::detail_spill`]. The stamp is evaluated on a window of
+    /// ±128 m in the tiles' units, so the texels it keeps within the range are within one unit
+    /// of [`DetailLayer::apply_stamp`]'s. Returns the detail change and the coarse rects the
+    /// excess changed (empty when nothing left the range).
+    ///
+    /// Fails, changing nothing, where [`DetailLayer::apply_stamp`] fails, on a coarse-map of
+    /// another size or texel size than the layout's, or on a mark whose spill would reach
+    /// around a repeating coarse-map.
+    pub fn apply_stamp_spilling<T: HeightSample, S: Stamp + ?Sized>(
+        &mut self,
+        coarse: &mut HeightMap<T>,
+        stamp: &mut S,
+        placement: &StampPlacement,
+        blend: Blend,
+    ) -> Result<(DetailChange, Vec<DirtyRect>), CoreError> {
+        if coarse.size() != self.layout.coarse_size {
+            return Err(CoreError::SizeMismatch {
+                expected: self.layout.coarse_size,
+                actual: coarse.size(),
+            });
+        }
+        if coarse.texel_size() != self.layout.coarse_texel_m {
+            return Err(CoreError::OutOfRange {
+                what: "coarse-map texel size under a detail layer (metres)",
+                value: f64::from(coarse.texel_size()),
+                expected: "the detail layout's coarse texel size",
+            });
+        }
+        let ts = self.layout.detail_texel_m();
+        let footprint = placement.footprint(ts)?;
+        if footprint.is_empty() {
+            crate::stamp::check_blend(blend)?;
+            return Ok((DetailChange::default(), Vec::new()));
+        }
+        let pieces = self.layout.footprint_pieces(footprint)?;
+        let spill = spill_rect(footprint, self.layout.refine);
+        check_spill_fits(spill, coarse.size(), coarse.wrap())?;
+        let size = footprint.size;
+        let mut before = Grid::new(size.x, size.y, DETAIL_ZERO_RAW)?;
+        for y in 0..size.y {
+            let gy = footprint.min.y + y as i32;
+            for (x, v) in before.row_mut(y).iter_mut().enumerate() {
+                *v = self.raw(IVec2::new(footprint.min.x + x as i32, gy));
+            }
+        }
+        let wide = before.map(|&v| (i32::from(v) + WIDE_SHIFT) as u16);
+        let mut map = HeightMap::new(wide, wide_encoding(), ts, WrapMode::Clamp)?;
+        if apply_stamp_window(&mut map, footprint.min, stamp, placement, blend)?.is_none() {
+            return Ok((DetailChange::default(), Vec::new()));
+        }
+        let excess = map.grid().map(|&w| split_wide(w).0);
+        let after = map.grid().map(|&w| split_wide(w).1);
+        let changed = self.scatter(&pieces, footprint.min, &before, &after)?;
+        let rects = spill_into_coarse(coarse, &excess, footprint.min, self.layout.refine)?;
+        Ok((
+            DetailChange {
+                tiles: tiles_of_pieces(&pieces),
+                changed_texels: changed,
+            },
+            rects,
+        ))
     }
 }
 

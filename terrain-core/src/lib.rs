@@ -35,6 +35,7 @@
 
 pub mod dem;
 pub mod detail;
+pub mod detail_spill;
 pub mod error;
 pub mod geotiff;
 pub mod granular;

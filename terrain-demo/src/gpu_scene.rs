@@ -14,8 +14,8 @@ use terrain_gpu::{
     CdlodDraw, CdlodRenderer, ClipmapRenderer, ClipmapSurface, ClipmapView, DetailShading,
     GpuContext, GpuDerivativeMap, GpuDetailTiles, GpuHeightMap, GpuRegionSource, GpuStamp,
     GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget, RefineDraw, RefinePass,
-    RefineRenderer, RegionReadback, SkyColors, SkyPass, StampOp, StampPass, TerrainStyle, TessDraw,
-    TessRenderer, TessellationPass,
+    RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp, StampPass,
+    TerrainStyle, TessDraw, TessRenderer, TessellationPass,
 };
 use terrain_lod::{
     CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodView, ClipmapLayout, DensityMap,
@@ -123,6 +123,9 @@ pub const DETAIL_SLOTS: u32 = 13;
 /// renderer shades them.
 struct DetailScene {
     tiles: GpuDetailTiles,
+    /// Footprints are stamped through it: what leaves the tiles' range spills into the
+    /// coarse-map.
+    spill: SpillPass,
     shading: DetailShading,
     /// Detail texels inside the rects the last deformation stamped.
     dirty_texels: u64,
@@ -146,7 +149,11 @@ fn refine_radius(texel_size: f32) -> f32 {
 /// The most texels the refined radius spans (see [`refine_radius`]).
 const REFINE_TEXELS: f32 = 90.0;
 
-/// The demo's detail shading: footprints drawn fully to 6 m and faded out by 11 m, within the
+/// The largest footprint a spilling detail stamp covers (256 KiB of excess window): the
+/// default footprints cover about 10 x 20 detail texels.
+pub const SPILL_WINDOW_TEXELS: u32 = 256 * 256;
+
+/// The demo's detail shading: footprints drawn fully to 12 m and faded out by 22 m, within the
 /// two thirds of a tile the band regions hold around the camera in every direction (so no
 /// tile ever appears or leaves where the detail shows).
 fn detail_shading() -> DetailShading {
@@ -405,6 +412,7 @@ impl GpuScene {
         };
         self.detail = Some(DetailScene {
             tiles,
+            spill: SpillPass::new(device, SPILL_WINDOW_TEXELS)?,
             shading,
             dirty_texels: 0,
             dirty: Vec::new(),
@@ -940,28 +948,45 @@ impl GpuScene {
             let mut texels = 0;
             detail.dirty.clear();
             let time = self.timer.time(device, queue, |encoder| {
-                for d in plan
+                for (i, d) in plan
                     .deformations
                     .iter()
-                    .filter(|d| d.kind == StampKind::Footprint)
+                    .enumerate()
+                    .filter(|(_, d)| d.kind == StampKind::Footprint)
                 {
                     let op = StampOp {
                         stamp: GpuStamp::Texture(foot),
                         placement: d.placement,
                         blend: terrain_core::Blend::Add,
                     };
-                    let rects = self.stamps.encode_detail(
+                    // What leaves the tiles' range spills into the coarse-map, whose
+                    // normals follow it; its rects go to collision with the others.
+                    let out = detail.spill.encode(
                         device,
                         queue,
                         encoder,
+                        &mut self.stamps,
                         &mut detail.tiles,
+                        &self.map,
                         &op,
                     )?;
-                    texels += rects.iter().map(|(_, r)| r.area()).sum::<u64>();
-                    detail.dirty.extend(rects);
+                    texels += out.detail.iter().map(|(_, r)| r.area()).sum::<u64>();
+                    detail.dirty.extend(out.detail);
+                    for r in out.coarse {
+                        self.normal_pass.encode(
+                            device,
+                            queue,
+                            encoder,
+                            &self.map,
+                            &self.normals,
+                            r,
+                        )?;
+                        dirty.push((i, r));
+                    }
                 }
                 Ok(())
             })?;
+            detail.spill.recall();
             detail.dirty_texels = texels;
             record(timings, Step::Detail, time);
         }

@@ -195,13 +195,14 @@ impl RunShape {
                 parts.push(("collision", per_texel(COLLISION_PER_TEXEL)));
                 if self.detail {
                     // The CPU layer if every tile were stamped (one byte per detail texel),
-                    // and the GPU's tile slots.
+                    // and the GPU's tile slots and spill window.
                     let refine = u64::from(crate::scenarios::DETAIL_REFINE);
                     let mut bytes = per_texel(refine * refine);
                     if self.gpu {
                         let tile = u64::from(crate::scenarios::DETAIL_TILE);
                         let slots = u64::from(crate::gpu_scene::DETAIL_SLOTS);
-                        bytes = bytes.saturating_add(slots * tile * tile * 4);
+                        let spill = u64::from(crate::gpu_scene::SPILL_WINDOW_TEXELS) * 4;
+                        bytes = bytes.saturating_add(slots * tile * tile * 4 + spill);
                     }
                     parts.push(("detail", bytes));
                 }

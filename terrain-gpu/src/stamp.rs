@@ -38,11 +38,14 @@ struct StampParams {
     tex_size: [u32; 2],
     wrap_offset: [i32; 2],
     texel_offset: [i32; 2],
-    pad: [u32; 2],
+    spill_min: [i32; 2],
+    spill_width: u32,
+    pad0: u32,
+    pad1: [u32; 2],
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<StampParams>() == 112);
+const _: () = assert!(std::mem::size_of::<StampParams>() == 128);
 
 use terrain_shaders::codes::{
     BLEND_ADD, BLEND_MAX, BLEND_MIN, STAMP_GAUSSIAN, STAMP_TEXTURE, STAMP_USER,
@@ -166,6 +169,17 @@ pub struct StampPass {
     pipeline: wgpu::ComputePipeline,
     bindings: PassBindings<StampParams>,
     empty_values: wgpu::Buffer,
+    /// Bound as the excess window of stamps that do not spill (never written).
+    no_excess: wgpu::Buffer,
+}
+
+/// Where a spilling detail stamp writes its excess: a window of the footprint's texels
+/// (unwrapped detail coordinates of its texel `(0, 0)`, its width) in `buffer` (i32 each).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ExcessWindow<'a> {
+    pub buffer: &'a wgpu::Buffer,
+    pub origin: glam::IVec2,
+    pub width: u32,
 }
 
 impl StampPass {
@@ -178,6 +192,7 @@ impl StampPass {
             &[
                 StorageBinding::compute(false),
                 StorageBinding::compute(true),
+                StorageBinding::compute(false),
             ],
         );
         let module = shader_module(device, "stamp.wgsl", terrain_shaders::STAMP)?;
@@ -188,10 +203,17 @@ impl StampPass {
             bytemuck::cast_slice(&[0.0f32; 4]),
             wgpu::BufferUsages::STORAGE,
         )?;
+        let no_excess = buffer_init(
+            device,
+            "StampPass no excess window",
+            bytemuck::cast_slice(&[0i32; 4]),
+            wgpu::BufferUsages::STORAGE,
+        )?;
         Ok(Self {
             pipeline,
             bindings,
             empty_values,
+            no_excess,
         })
     }
 
@@ -253,6 +275,20 @@ impl StampPass {
         tiles: &mut GpuDetailTiles,
         op: &StampOp<'_>,
     ) -> Result<Vec<(UVec2, Rect)>, GpuError> {
+        self.encode_detail_window(device, queue, encoder, tiles, op, None)
+    }
+
+    /// [`StampPass::encode_detail`], writing each texel's excess beyond the tiles' range into
+    /// `spill` when given (a `SpillPass` moves it into the coarse-map).
+    pub(crate) fn encode_detail_window(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        tiles: &mut GpuDetailTiles,
+        op: &StampOp<'_>,
+        spill: Option<ExcessWindow<'_>>,
+    ) -> Result<Vec<(UVec2, Rect)>, GpuError> {
         let layout = *tiles.layout();
         let ts = layout.detail_texel_m();
         let footprint = op.placement.footprint(ts)?;
@@ -290,14 +326,17 @@ impl StampPass {
                 base: slot * side * side,
                 wrap_offset: [0; 2],
                 texel_offset: (piece.local.min - piece.unwrapped).to_array(),
+                spill_min: spill.map_or([0; 2], |w| w.origin.to_array()),
+                spill_width: spill.map_or(0, |w| w.width),
                 ..prepared.params
             };
+            let excess = spill.map_or(&self.no_excess, |w| w.buffer);
             record(
                 &mut self.bindings,
                 device,
                 queue,
                 encoder,
-                tiles.heights_buffer(),
+                [tiles.heights_buffer(), excess],
                 &Prepared { params, ..prepared },
             )?;
         }
@@ -339,7 +378,7 @@ impl StampPass {
             device,
             queue,
             encoder,
-            map.buffer,
+            [map.buffer, &self.no_excess],
             &Prepared { params, ..prepared },
         )?;
         Ok(region.pieces.iter().map(|p| p.map).collect())
@@ -349,19 +388,23 @@ impl StampPass {
 /// The most tile pieces (dispatches) one detail stamp records: a fine mark covers a few tiles.
 const MAX_DETAIL_PIECES: usize = 4096;
 
-/// Binds `prepared` and records one dispatch over its region.
+/// Binds `prepared` over `[heights, excess window]` and records one dispatch over its region.
 fn record(
     bindings: &mut PassBindings<StampParams>,
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     encoder: &mut wgpu::CommandEncoder,
-    heights: &wgpu::Buffer,
+    [heights, excess]: [&wgpu::Buffer; 2],
     prepared: &Prepared<'_>,
 ) -> Result<(), GpuError> {
     let size = UVec2::from_array(prepared.params.region_size);
     let groups = dispatch_size(device, size)?;
-    let (group, offset) =
-        bindings.bind(device, queue, &prepared.params, &[heights, prepared.values])?;
+    let (group, offset) = bindings.bind(
+        device,
+        queue,
+        &prepared.params,
+        &[heights, prepared.values, excess],
+    )?;
     dispatch(
         encoder,
         "StampPass",
@@ -439,7 +482,10 @@ fn prepare<'a>(
         tex_size: tex_size.to_array(),
         wrap_offset: [0; 2],
         texel_offset: [0; 2],
-        pad: [0; 2],
+        spill_min: [0; 2],
+        spill_width: 0,
+        pad0: 0,
+        pad1: [0; 2],
     };
     Ok(Prepared {
         params,

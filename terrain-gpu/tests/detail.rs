@@ -441,3 +441,206 @@ fn streaming_from_the_cpu_layer_keeps_the_wanted_tiles_resident() {
     assert!(tiles.stream_from(queue, &other, &[]).is_err());
     ctx.check().expect("no GPU validation errors");
 }
+
+/// A coarse-map under `layout()`: 1 mm units around 30 m, uneven (so the spill lands on
+/// different values), repeating.
+fn spill_coarse() -> HeightMap<u16> {
+    let enc = terrain_core::HeightEncoding::new(0.001, -30.0).unwrap();
+    let g = Grid::from_fn(48, 40, |x, y| (30_000 + (x * 37 + y * 53) % 400) as u16).unwrap();
+    HeightMap::new(g, enc, 0.1, WrapMode::Repeat).unwrap()
+}
+
+#[test]
+fn spilled_detail_stamps_match_the_cpu_spill_rule() {
+    let Some(ctx) = context_or_skip("spilled_detail_stamps_match_the_cpu_spill_rule") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut pass = StampPass::new(device).unwrap();
+    let mut spill = terrain_gpu::SpillPass::new(device, 64 * 64).unwrap();
+    let mut layer = DetailLayer::new(layout()).unwrap();
+    let mut tiles = GpuDetailTiles::new(device, layout(), 20).unwrap();
+    let mut cpu_coarse = spill_coarse();
+    let gpu_coarse = GpuHeightMap::from_map(device, queue, &cpu_coarse).unwrap();
+    let ts = layout().detail_texel_m();
+    let corner = |tx: f32, ty: f32| Vec2::new(tx, ty) * 32.0 * ts;
+    let image = Grid::from_fn(13, 7, |x, y| (x * 19 + y * 31) as u8).unwrap();
+    let tex = TextureStamp::from_gray8(&image);
+    let gpu_tex = GpuTextureStamp::new(device, &tex).unwrap();
+    let gauss = GaussianStamp::default();
+    let mut stamps: Vec<(Box<dyn Stamp>, GpuStamp<'_>, StampPlacement, Blend)> = vec![
+        // 1.5 m deep over the corner of four tiles: a metre spills down.
+        (
+            Box::new(GaussianStamp::default()),
+            GpuStamp::Gaussian(&gauss),
+            place(corner(2.0, 1.0), Vec2::new(0.9, 0.5), -1.5, 0.6),
+            Blend::Add,
+        ),
+        // Raised 1.2 m across the map's wrap corner: spills up, onto the coarse-map's corners.
+        (
+            Box::new(tex.clone()),
+            GpuStamp::Texture(&gpu_tex),
+            place(Vec2::splat(0.05), Vec2::new(0.6, 0.4), 1.2, 0.7),
+            Blend::Add,
+        ),
+        // A mould pressed 2 to 3 m down.
+        (
+            Box::new(GaussianStamp::default()),
+            GpuStamp::Gaussian(&gauss),
+            place(corner(1.0, 3.0), Vec2::splat(0.5), 1.0, 0.0),
+            Blend::Min { base_m: -3.0 },
+        ),
+        // Within the range: spills nothing.
+        (
+            Box::new(tex),
+            GpuStamp::Texture(&gpu_tex),
+            place(corner(3.0, 2.0), Vec2::splat(0.5), -0.2, -0.3),
+            Blend::Add,
+        ),
+    ];
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let mut spilled_rects = 0;
+    for (i, (cpu, gpu, placement, blend)) in stamps.iter_mut().enumerate() {
+        let (change, rects) = layer
+            .apply_stamp_spilling(&mut cpu_coarse, cpu.as_mut(), placement, *blend)
+            .unwrap();
+        let op = StampOp {
+            stamp: *gpu,
+            placement: *placement,
+            blend: *blend,
+        };
+        let out = spill
+            .encode(
+                device,
+                queue,
+                &mut encoder,
+                &mut pass,
+                &mut tiles,
+                &gpu_coarse,
+                &op,
+            )
+            .unwrap();
+        assert_eq!(out.detail, change.tiles, "stamp {i}");
+        for r in &rects {
+            assert!(
+                out.coarse.contains(r),
+                "stamp {i}: CPU rect {r:?} in {:?}",
+                out.coarse
+            );
+        }
+        assert_eq!(rects.is_empty(), i == 3, "stamp {i} spills: {rects:?}");
+        spilled_rects += rects.len();
+    }
+    queue.submit([encoder.finish()]);
+    pass.recall();
+    spill.recall();
+    assert!(
+        spilled_rects >= 3,
+        "{spilled_rects} coarse rects spilled onto"
+    );
+    let (max, differ) = compare(&ctx, &tiles, &layer);
+    assert!(max <= STAMP_BOUND_LSB, "detail: max difference {max} LSB");
+    assert!(differ < 40, "detail: {differ} texels differ");
+    // One unit of one texel's excess moves a coarse texel by at most r^2 k = 1/255 m / 1 mm
+    // (3.9 units), and a stamp differs from the CPU's by one unit where a value rounds.
+    let gpu = gpu_coarse.read(device, queue).unwrap();
+    let start = spill_coarse();
+    let (mut max_c, mut differ_c, mut moved) = (0, 0, 0);
+    for ((a, b), s) in cpu_coarse
+        .grid()
+        .as_slice()
+        .iter()
+        .zip(gpu.grid().as_slice())
+        .zip(start.grid().as_slice())
+    {
+        let d = (i32::from(*a) - i32::from(*b)).abs();
+        max_c = max_c.max(d);
+        differ_c += usize::from(d != 0);
+        moved = moved.max((i32::from(*a) - i32::from(*s)).abs());
+    }
+    ctx.check().expect("no GPU validation errors");
+    eprintln!(
+        "spill on {}: detail max {max} LSB ({differ} texels), coarse max {max_c} units ({differ_c} texels), largest coarse change {moved} units",
+        ctx.report().name
+    );
+    assert!(
+        moved > 500,
+        "the spill moved the coarse-map by {moved} units"
+    );
+    assert!(max_c <= 5, "coarse: max difference {max_c} units");
+    assert!(differ_c < 20, "coarse: {differ_c} texels differ");
+}
+
+#[test]
+fn a_spill_the_pass_cannot_hold_is_refused_before_anything_is_stamped() {
+    let Some(ctx) = context_or_skip("a_spill_the_pass_cannot_hold_is_refused") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut pass = StampPass::new(device).unwrap();
+    let mut spill = terrain_gpu::SpillPass::new(device, 100).unwrap();
+    let mut tiles = GpuDetailTiles::new(device, layout(), 20).unwrap();
+    let coarse = GpuHeightMap::from_map(device, queue, &spill_coarse()).unwrap();
+    let enc = terrain_core::HeightEncoding::new(0.001, -30.0).unwrap();
+    let other =
+        HeightMap::new(Grid::new(40, 40, 0u16).unwrap(), enc, 0.1, WrapMode::Repeat).unwrap();
+    let other = GpuHeightMap::from_map(device, queue, &other).unwrap();
+    let gauss = GaussianStamp::default();
+    let op = |s: f32| StampOp {
+        stamp: GpuStamp::Gaussian(&gauss),
+        placement: place(Vec2::splat(1.0), Vec2::splat(s), -2.0, 0.0),
+        blend: Blend::Add,
+    };
+    let mut encoder = device.create_command_encoder(&Default::default());
+    // 0.5 m is 15 x 15 detail texels: more than the window's 100.
+    let big = spill.encode(
+        device,
+        queue,
+        &mut encoder,
+        &mut pass,
+        &mut tiles,
+        &coarse,
+        &op(0.5),
+    );
+    assert!(matches!(big, Err(GpuError::Core(_))), "{big:?}");
+    let wrong = spill.encode(
+        device,
+        queue,
+        &mut encoder,
+        &mut pass,
+        &mut tiles,
+        &other,
+        &op(0.2),
+    );
+    assert!(
+        matches!(wrong, Err(GpuError::SizeMismatch { .. })),
+        "{wrong:?}"
+    );
+    assert!(terrain_gpu::SpillPass::new(device, 0).is_err());
+    assert!(terrain_gpu::SpillPass::new(device, (1 << 24) + 1).is_err());
+    queue.submit([encoder.finish()]);
+    let grid = layout().tiles();
+    for y in 0..grid.y {
+        for x in 0..grid.x {
+            assert_eq!(tiles.state(UVec2::new(x, y)), Some(DetailTileState::Zero));
+        }
+    }
+    assert_eq!(coarse.read(device, queue).unwrap(), spill_coarse());
+    // A small mark fits and spills.
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let out = spill
+        .encode(
+            device,
+            queue,
+            &mut encoder,
+            &mut pass,
+            &mut tiles,
+            &coarse,
+            &op(0.2),
+        )
+        .unwrap();
+    queue.submit([encoder.finish()]);
+    assert!(!out.coarse.is_empty());
+    assert_ne!(coarse.read(device, queue).unwrap(), spill_coarse());
+    ctx.check().expect("no GPU validation errors");
+}

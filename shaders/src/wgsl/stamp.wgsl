@@ -35,12 +35,24 @@ struct StampParams {
     // Added to an unwrapped coordinate of a clamped map to give the texel it writes: 0 for a
     // whole map, minus the tile's origin for a detail tile stamped in its layer's frame.
     texel_offset: vec2<i32>,
-    pad: vec2<u32>,
+    // The spill window (a detail stamp whose excess spills into the coarse-map): unwrapped
+    // coordinates of its texel (0, 0) and its width; width 0 writes no excess.
+    spill_min: vec2<i32>,
+    spill_width: u32,
+    pad0: u32,
+    pad1: vec2<u32>,
 }
 
 @group(0) @binding(0) var<uniform> p: StampParams;
 @group(0) @binding(1) var<storage, read_write> heights: array<u32>;
 @group(0) @binding(2) var<storage, read> tex: array<f32>;
+// The excess beyond the clamped range per texel of the spill window, in stored units
+// (terrain-core's `detail_spill`): read by SpillPass. A 1-element dummy when not spilling.
+@group(0) @binding(3) var<storage, read_write> excess: array<i32>;
+
+// The wide window of terrain-core's spill rule keeps WIDE_SHIFT units below a detail tile's
+// range and as many above it (raw 0 of the tile is raw 32 640 of the window's u16).
+const WIDE_SHIFT: f32 = 32640.0;
 
 // USER_STAMP_BEGIN
 fn user_stamp_value(local: vec2<f32>) -> f32 {
@@ -105,5 +117,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         case BLEND_MIN: { new_raw = floor(min(old, p.base_raw + p.raw_per_value * v) + 0.5); }
         default: { new_raw = floor(max(old, p.base_raw + p.raw_per_value * v) + 0.5); }
     }
-    heights[i] = u32(clamp(new_raw, 0.0, p.max_raw));
+    let kept = clamp(new_raw, 0.0, p.max_raw);
+    heights[i] = u32(kept);
+    if p.spill_width != 0u {
+        let w = vec2<u32>(u - p.spill_min);
+        let wide = clamp(new_raw, -WIDE_SHIFT, p.max_raw + WIDE_SHIFT);
+        excess[w.y * p.spill_width + w.x] = i32(wide - kept);
+    }
 }

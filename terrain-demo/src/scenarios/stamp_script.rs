@@ -214,10 +214,13 @@ impl StampScript {
                 match &mut detail {
                     DetailTarget::None => {}
                     DetailTarget::Cpu(cache) => {
+                        // A footprint deeper than the tiles' range spills into the coarse-map
+                        // (its rects are then dirty there: normals, collision).
                         let p = &d.placement;
-                        let change = cache.apply_stamp(&mut self.footprint, p, Blend::Add)?;
+                        let (change, spilled) =
+                            cache.apply_stamp_spilling(map, &mut self.footprint, p, Blend::Add)?;
                         detail_texels += change.tiles.iter().map(|(_, r)| r.area()).sum::<u64>();
-                        dirty.push(Vec::new());
+                        dirty.push(spilled);
                         continue;
                     }
                     DetailTarget::Gpu => {
