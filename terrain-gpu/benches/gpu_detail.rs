@@ -5,7 +5,8 @@
 //! normals only, with parallax occlusion mapping, and with refined geometry (`RefinePass`, sec.
 //! 2.4.3; the thesis: tessellated 9.82 ms,
 //! parallax 2.33 ms), at 1024 x 768 over a 2048 x 2048 coarse-map at 0.1 m with footprints in
-//! front of the camera. Timestamp queries where the adapter has them, else wall time.
+//! front of the camera. Timestamp queries where the adapter has them, else wall time. Also one
+//! footprint stamped on the detail tiles, clipped and spilled into the coarse-map.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use glam::{UVec2, Vec2, Vec3};
@@ -15,8 +16,9 @@ use terrain_core::{Blend, GaussianStamp, Grid, HeightEncoding, Rect, StampPlacem
 use terrain_core::{TerrainParams, generate_coarse_map};
 use terrain_gpu::{
     Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DetailShading, GpuContext,
-    GpuDerivativeMap, GpuDetailTiles, GpuHeightMap, GpuTimer, NormalPass, OffscreenTarget,
-    RefineDraw, RefinePass, RefineRenderer, SkyColors, SkyPass, TerrainStyle,
+    GpuDerivativeMap, GpuDetailTiles, GpuHeightMap, GpuStamp, GpuTimer, NormalPass,
+    OffscreenTarget, RefineDraw, RefinePass, RefineRenderer, SkyColors, SkyPass, SpillPass,
+    StampOp, StampPass, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -217,11 +219,72 @@ fn render(c: &mut Criterion, ctx: &GpuContext) {
     group.finish();
 }
 
+/// One footprint-sized detail stamp (0.6 x 0.3 m over a 4-tile corner, 1.5 m deep) on the
+/// demo's layout, clipped (`StampPass::encode_detail`) and spilled into the coarse-map
+/// (`SpillPass::encode`): record, submit and wait.
+fn stamp(c: &mut Criterion, ctx: &GpuContext) {
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut group = c.benchmark_group("gpu_detail_stamp");
+    group.sample_size(10);
+    group.warm_up_time(Duration::from_millis(200));
+    group.measurement_time(Duration::from_secs(2));
+    let layout = DetailLayout::new(UVec2::splat(2048), 0.1, 3, 1024).expect("layout");
+    let mut tiles = GpuDetailTiles::new(device, layout, 4).expect("slots");
+    let enc = HeightEncoding::new(0.001, -30.0).expect("encoding");
+    let coarse = terrain_core::HeightMap::new(
+        Grid::new(2048, 2048, 30_000u16).expect("grid"),
+        enc,
+        0.1,
+        terrain_core::WrapMode::Repeat,
+    )
+    .expect("map");
+    let coarse = GpuHeightMap::from_map(device, queue, &coarse).expect("upload");
+    let mut stamps = StampPass::new(device).expect("stamp pass");
+    let mut spill = SpillPass::new(device, 256 * 256).expect("spill pass");
+    let gauss = GaussianStamp::default();
+    let corner = Vec2::splat(1024.0 * layout.detail_texel_m());
+    let op = StampOp {
+        stamp: GpuStamp::Gaussian(&gauss),
+        placement: StampPlacement::new(corner, Vec2::new(0.6, 0.3), -1.5).expect("placement"),
+        blend: Blend::Add,
+    };
+    let mut run = |spilling: bool| {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        if spilling {
+            spill
+                .encode(
+                    device,
+                    queue,
+                    &mut encoder,
+                    &mut stamps,
+                    &mut tiles,
+                    &coarse,
+                    &op,
+                )
+                .expect("spill");
+        } else {
+            stamps
+                .encode_detail(device, queue, &mut encoder, &mut tiles, &op)
+                .expect("stamp");
+        }
+        queue.submit([encoder.finish()]);
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .expect("poll");
+        stamps.recall();
+        spill.recall();
+    };
+    group.bench_function("clip", |b| b.iter(|| run(false)));
+    group.bench_function("spill", |b| b.iter(|| run(true)));
+    group.finish();
+}
+
 fn bench(c: &mut Criterion) {
     let ctx = GpuContext::new_headless().expect("a GPU adapter (lavapipe: mesa-vulkan-drivers)");
     let r = ctx.report();
     eprintln!("adapter: {} ({}, {})", r.name, r.backend, r.device_type);
     tiles(c, &ctx);
+    stamp(c, &ctx);
     render(c, &ctx);
 }
 
