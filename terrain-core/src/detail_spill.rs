@@ -22,8 +22,30 @@
 //! (its share is lost); on a repeating one the rect wraps. Excess beyond ±128 m of the tile's
 //! range is clamped (a detail stamp is a fine mark).
 //!
+//! A coarse texel at the end of the coarse encoding's range clamps, as under any stamp.
+//!
 //! [`spill_into_coarse`] is the CPU reference of terrain-gpu's `SpillPass`;
 //! [`crate::detail::DetailLayer::apply_stamp_spilling`] applies a stamp with this rule.
+//!
+//! ```
+//! use glam::{IVec2, UVec2, Vec2};
+//! use terrain_core::detail::{DetailLayer, DetailLayout};
+//! use terrain_core::{Blend, GaussianStamp, Grid, HeightEncoding, HeightMap, StampPlacement, WrapMode};
+//!
+//! // A 64^2 coarse-map at 0.1 m (1 mm units) under detail tiles refined x3.
+//! let enc = HeightEncoding::new(0.001, -30.0)?;
+//! let mut coarse = HeightMap::new(Grid::new(64, 64, 30_000u16)?, enc, 0.1, WrapMode::Repeat)?;
+//! let mut layer = DetailLayer::new(DetailLayout::new(UVec2::splat(64), 0.1, 3, 32)?)?;
+//!
+//! // A mark 1.5 m deep: the tile keeps -0.5 m (the bottom of its range), the coarse-map the rest.
+//! let p = StampPlacement::new(Vec2::splat(3.2), Vec2::splat(0.6), -1.5)?;
+//! let (_, spilled) =
+//!     layer.apply_stamp_spilling(&mut coarse, &mut GaussianStamp::default(), &p, Blend::Add)?;
+//! assert_eq!(layer.raw(IVec2::splat(96)), 0);
+//! assert!(!spilled.is_empty());
+//! assert!(coarse.grid().get(32, 32).unwrap() < 30_000 - 300);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use crate::error::CoreError;
 use crate::grid::{Grid, WrapMode};
