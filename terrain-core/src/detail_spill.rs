@@ -77,12 +77,15 @@ pub fn split_wide(wide: u16) -> (i32, u8) {
 }
 
 /// The coarse texels (unwrapped) the excess of a detail footprint `footprint` (detail texels,
-/// unwrapped) can reach at refinement `refine`: every coarse texel whose tent covers one of
-/// its detail texels with a non-zero weight, and a few more at most (one per side).
+/// unwrapped, not empty) can reach at refinement `refine`: exactly the coarse texels `C`
+/// whose tent covers one of its detail texels `q` with a non-zero weight (`|q - r C| < r` on
+/// both axes), from `floor(min / r)` to `ceil((max - 1) / r)`.
 pub fn spill_rect(footprint: Rect, refine: u32) -> Rect {
-    let r = refine.max(1) as i32;
-    let lo = footprint.min.div_euclid(IVec2::splat(r));
-    let hi = (footprint.max() - IVec2::ONE).div_euclid(IVec2::splat(r)) + IVec2::splat(2);
+    let r = IVec2::splat(refine.max(1) as i32);
+    let lo = footprint.min.div_euclid(r);
+    let last = footprint.max() - IVec2::ONE;
+    // ceil(last / r), rounding towards +infinity for negative values too.
+    let hi = -((-last).div_euclid(r)) + IVec2::ONE;
     Rect::from_min_max(lo, hi)
 }
 
@@ -238,25 +241,24 @@ mod tests {
     }
 
     #[test]
-    fn spill_rect_covers_every_tent_that_weighs_a_texel() {
+    fn spill_rect_is_exactly_the_tents_that_weigh_a_texel() {
         for r in 1..=5u32 {
-            for min in -7..7 {
-                for len in 1..9u32 {
-                    let fp = Rect::new(IVec2::new(min, min), UVec2::splat(len));
+            let ri = r as i32;
+            for min in -13..13 {
+                for len in 1..12u32 {
+                    let fp = Rect::new(IVec2::new(min, 2 - min), UVec2::new(len, len + 1));
                     let rect = spill_rect(fp, r);
-                    let ri = r as i32;
-                    for q in fp.min.x..fp.max().x {
-                        for c in -10..10 {
-                            let d = (q - c * ri).abs();
-                            if d < ri {
-                                assert!(
-                                    (rect.min.x..rect.max().x).contains(&c),
-                                    "r {r} q {q} c {c} rect {rect:?}"
-                                );
-                            }
-                        }
-                    }
-                    assert!(rect.size.x <= len.div_ceil(r) + 2, "r {r} len {len}");
+                    // Brute force, per axis: the coarse texels with a detail texel in reach.
+                    let reach = |lo: i32, n: u32| -> Vec<i32> {
+                        (-40..40)
+                            .filter(|c| (lo..lo + n as i32).any(|q| (q - c * ri).abs() < ri))
+                            .collect()
+                    };
+                    let (xs, ys) = (reach(fp.min.x, fp.size.x), reach(fp.min.y, fp.size.y));
+                    let got_x: Vec<i32> = (rect.min.x..rect.max().x).collect();
+                    let got_y: Vec<i32> = (rect.min.y..rect.max().y).collect();
+                    assert_eq!(got_x, xs, "r {r} min {min} len {len}");
+                    assert_eq!(got_y, ys, "r {r} min {min} len {len}");
                 }
             }
         }
@@ -296,7 +298,7 @@ mod tests {
         excess.as_mut_slice()[0] = 90; // 90 / 255 m on one detail texel of a 3x3 cell
         let mut map = coarse(8, WrapMode::Repeat);
         let rects = spill_into_coarse(&mut map, &excess, IVec2::new(6, 9), 3).unwrap();
-        assert_eq!(rects, vec![Rect::new(IVec2::new(2, 3), UVec2::new(2, 2))]);
+        assert_eq!(rects, vec![Rect::new(IVec2::new(2, 3), UVec2::new(1, 1))]);
         // 90 units * 9 / 9 / 255 m = 0.3529 m over a coarse texel's area / 9: 39.2 mm.
         let want = (90.0f64 / 255.0 / 9.0 / 0.001 + 0.5).floor() as u16;
         assert_eq!(map.grid().get(2, 3), Some(30_000 + want));
