@@ -21,22 +21,28 @@ struct AtlasInfo {
 @group(0) @binding(2) var<storage, read> atlas_heights: array<u32>;
 @group(0) @binding(3) var<storage, read> atlas_table: array<u32>;
 
-// The stored height at level-0 texel `t`, which lies inside the world.
+// The stored height at level-0 texel `t`, which lies inside the world. Every invocation walks
+// every level (`found` keeps the finest resident one) rather than returning from inside the
+// loop: llvmpipe's GL driver gave the fill value to some invocations whose neighbours had left
+// such a loop early in an earlier call (the atlas tests failed on WGPU_BACKEND=gl).
 fn atlas_stored(t: vec2<u32>) -> u32 {
     let shift = atlas.tile_shift;
     let mask = (1u << shift) - 1u;
+    var stored = atlas.fill;
+    var found = false;
     for (var l = 0u; l < atlas.levels; l = l + 1u) {
         let c = t >> vec2<u32>(l, l);
         let tile = c >> vec2<u32>(shift, shift);
         let info = atlas.level[l];
-        if tile.x < info.x && tile.y < info.y {
+        if !found && tile.x < info.x && tile.y < info.y {
             let slot = atlas_table[info.z + tile.y * info.x + tile.x];
             // INVALID_SLOT (and anything else out of range) is not resident.
             if slot < atlas.slot_count {
                 let w = c & vec2<u32>(mask, mask);
-                return atlas_heights[(slot << (2u * shift)) + (w.y << shift) + w.x];
+                stored = atlas_heights[(slot << (2u * shift)) + (w.y << shift) + w.x];
+                found = true;
             }
         }
     }
-    return atlas.fill;
+    return stored;
 }
