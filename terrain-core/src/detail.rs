@@ -566,16 +566,7 @@ impl DetailLayer {
             return Ok(DetailChange::default());
         }
         let pieces = self.layout.footprint_pieces(footprint)?;
-        // Gather the footprint into one window, in unwrapped coordinates.
-        let size = footprint.size;
-        let mut window = Grid::new(size.x, size.y, DETAIL_ZERO_RAW)?;
-        for y in 0..size.y {
-            let row = window.row_mut(y);
-            let gy = footprint.min.y + y as i32;
-            for (x, v) in row.iter_mut().enumerate() {
-                *v = self.raw(IVec2::new(footprint.min.x + x as i32, gy));
-            }
-        }
+        let window = self.gather(footprint)?;
         let before = window.clone();
         let mut map = HeightMap::new(window, detail_encoding(), ts, WrapMode::Clamp)?;
         if apply_stamp_window(&mut map, footprint.min, stamp, placement, blend)?.is_none() {
@@ -586,6 +577,20 @@ impl DetailLayer {
             tiles: tiles_of_pieces(&pieces),
             changed_texels: changed,
         })
+    }
+
+    /// The detail texels of `footprint` (unwrapped coordinates, wrapped onto the layer) as one
+    /// window.
+    fn gather(&self, footprint: Rect) -> Result<Grid<u8>, CoreError> {
+        let size = footprint.size;
+        let mut window = Grid::new(size.x, size.y, DETAIL_ZERO_RAW)?;
+        for y in 0..size.y {
+            let gy = footprint.min.y + y as i32;
+            for (x, v) in window.row_mut(y).iter_mut().enumerate() {
+                *v = self.raw(IVec2::new(footprint.min.x + x as i32, gy));
+            }
+        }
+        Ok(window)
     }
 
     /// Writes the texels of `after` that differ from `before` (windows of the footprint whose
@@ -657,14 +662,7 @@ impl DetailLayer {
         let pieces = self.layout.footprint_pieces(footprint)?;
         let spill = spill_rect(footprint, self.layout.refine);
         check_spill_fits(spill, coarse.size(), coarse.wrap())?;
-        let size = footprint.size;
-        let mut before = Grid::new(size.x, size.y, DETAIL_ZERO_RAW)?;
-        for y in 0..size.y {
-            let gy = footprint.min.y + y as i32;
-            for (x, v) in before.row_mut(y).iter_mut().enumerate() {
-                *v = self.raw(IVec2::new(footprint.min.x + x as i32, gy));
-            }
-        }
+        let before = self.gather(footprint)?;
         let wide = before.map(|&v| (i32::from(v) + WIDE_SHIFT) as u16);
         let mut map = HeightMap::new(wide, wide_encoding(), ts, WrapMode::Clamp)?;
         if apply_stamp_window(&mut map, footprint.min, stamp, placement, blend)?.is_none() {
