@@ -255,4 +255,14 @@ fn a_mismatched_coarse_map_or_an_oversized_spill_is_refused_and_changes_nothing(
         .unwrap();
     assert!(!change.tiles.is_empty() && change.tiles.len() <= 4);
     assert!(!rects.is_empty());
+    // The ends of the f32 range: bounded work and an answer (or an error), never a panic.
+    for (c, s, i) in [
+        (1e30, 0.2, -1e30),
+        (-3e38, 0.3, 3e38),
+        (5.0, 1e30, -1.0),
+        (5.0, 1e-30, -1.0),
+    ] {
+        let p = StampPlacement::new(Vec2::splat(c), Vec2::splat(s), i).unwrap();
+        let _ = layer.apply_stamp_spilling(&mut map, g, &p, Blend::Add);
+    }
 }

@@ -642,5 +642,24 @@ fn a_spill_the_pass_cannot_hold_is_refused_before_anything_is_stamped() {
     queue.submit([encoder.finish()]);
     assert!(!out.coarse.is_empty());
     assert_ne!(coarse.read(device, queue).unwrap(), spill_coarse());
+    // The ends of the f32 range: an answer or an error, never a panic or a validation error.
+    let mut encoder = device.create_command_encoder(&Default::default());
+    for c in [1e30f32, -3e38] {
+        let far = StampOp {
+            stamp: GpuStamp::Gaussian(&gauss),
+            placement: place(Vec2::splat(c), Vec2::splat(0.2), -1e30, 0.0),
+            blend: Blend::Add,
+        };
+        let _ = spill.encode(
+            device,
+            queue,
+            &mut encoder,
+            &mut pass,
+            &mut tiles,
+            &coarse,
+            &far,
+        );
+    }
+    queue.submit([encoder.finish()]);
     ctx.check().expect("no GPU validation errors");
 }
