@@ -53,7 +53,14 @@ fn reports_of_every_scenario_validate_against_the_schema() {
         std::process::id()
     ));
     let dem_s = dem.to_string_lossy().into_owned();
-    let runs: [(&str, &[&str]); 8] = [
+    // Footprints 0.9 m deep: more than a detail tile's range, so they spill into the coarse-map.
+    let deep = std::env::temp_dir().join(format!(
+        "terrain_demo_schema_deep_{}.toml",
+        std::process::id()
+    ));
+    std::fs::write(&deep, "[stamps]\nfoot_depth_m = 0.9\n").unwrap();
+    let deep_s = deep.to_string_lossy().into_owned();
+    let runs: [(&str, &[&str]); 9] = [
         (
             "schema_default",
             &["--size", "96", "--frames", "5", "--resolution", "160x96"],
@@ -69,6 +76,21 @@ fn reports_of_every_scenario_validate_against_the_schema() {
                 "160x96",
                 "--detail",
                 "refine",
+            ],
+        ),
+        (
+            "schema_detail_deep",
+            &[
+                "--size",
+                "96",
+                "--frames",
+                "2",
+                "--resolution",
+                "160x96",
+                "--detail",
+                "refine",
+                "--config",
+                &deep_s,
             ],
         ),
         (
@@ -151,6 +173,9 @@ fn reports_of_every_scenario_validate_against_the_schema() {
         } else if name == "schema_default" {
             assert_eq!(r["frames"][0]["lod"], "clipmap");
             assert!(r["frames"][0]["detail_tiles_resident"].is_null());
+        } else if name == "schema_detail_deep" {
+            // The first frame has footprints only: its coarse dirty texels are their spill.
+            assert!(r["frames"][0]["dirty_texels"].as_u64().unwrap() > 0);
         } else if name.starts_with("schema_detail") {
             // Footprints every frame, into the detail tiles: never in the coarse-map's dirty
             // texels on a frame without craters or shockwave (frame 0).

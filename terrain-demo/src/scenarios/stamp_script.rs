@@ -223,10 +223,6 @@ impl StampScript {
                         dirty.push(spilled);
                         continue;
                     }
-                    DetailTarget::Gpu => {
-                        dirty.push(Vec::new());
-                        continue;
-                    }
                 }
             }
             let stamp: &mut dyn Stamp = match d.kind {
@@ -251,8 +247,7 @@ impl StampScript {
 pub enum DetailTarget<'a> {
     /// No detail layer: into the coarse-map.
     None,
-    /// Stamped into this detail cache on the CPU.
+    /// Stamped into this detail cache on the CPU (beside a GPU too: the GPU's tiles are read
+    /// back over it afterwards), spilling into the map.
     Cpu(&'a mut terrain_cache::detail::DetailCache),
-    /// Stamped on the GPU's detail tiles and read back from there: not here.
-    Gpu,
 }

@@ -282,22 +282,19 @@ impl Scenario for StampScenario {
                 let bound = StampScript::bound(&plan.deformations[i], encoding)?;
                 self.scheduler.note_deformation(rect, bound, now)?;
             }
-            // The GPU's detail stamps are the truth: their rects come back into the cache.
-            if let Some(cache) = self.detail.as_mut() {
-                scene.read_back_detail(cache, ctx.timings)?;
-            }
         }
-        // Beside a GPU this is the mirror behind the overview (one step); without one it is the
-        // deformation itself, timed as stamps and normals like the GPU's.
+        // Beside a GPU this is the mirror behind the overview and `terrain_final.png` (one
+        // step); without one it is the deformation itself, timed as stamps and normals like the
+        // GPU's. Footprints go into the detail cache either way, so that what they spill into
+        // the coarse-map reaches this map too.
         let (stamp_step, normals_step) = if ctx.gpu.is_some() {
             (Step::CpuMirror, Step::CpuMirror)
         } else {
             (Step::StampCpu, Step::NormalsCpu)
         };
-        let target = match (self.detail.as_mut(), ctx.gpu.is_some()) {
-            (None, _) => DetailTarget::None,
-            (Some(_), true) => DetailTarget::Gpu,
-            (Some(cache), false) => DetailTarget::Cpu(cache),
+        let target = match self.detail.as_mut() {
+            None => DetailTarget::None,
+            Some(cache) => DetailTarget::Cpu(cache),
         };
         let (dirty_by_deformation, cpu_detail_texels) = ctx.timings.time(stamp_step, || {
             self.script.apply_cpu(self.cpu.map_mut(), &mut plan, target)
@@ -308,6 +305,11 @@ impl Scenario for StampScenario {
             }
             Ok(())
         })?;
+        // The GPU's detail stamps are the truth: their rects come back into the cache over the
+        // CPU's (which differ by a unit at most).
+        if let (Some(scene), Some(cache)) = (ctx.gpu.as_deref_mut(), self.detail.as_mut()) {
+            scene.read_back_detail(cache, ctx.timings)?;
+        }
         if ctx.gpu.is_none() {
             for (d, rects) in plan.deformations.iter().zip(&dirty_by_deformation) {
                 let bound = StampScript::bound(d, encoding)?;
