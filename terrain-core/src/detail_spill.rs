@@ -81,12 +81,24 @@ pub fn split_wide(wide: u16) -> (i32, u8) {
 /// whose tent covers one of its detail texels `q` with a non-zero weight (`|q - r C| < r` on
 /// both axes), from `floor(min / r)` to `ceil((max - 1) / r)`.
 pub fn spill_rect(footprint: Rect, refine: u32) -> Rect {
-    let r = IVec2::splat(refine.max(1) as i32);
-    let lo = footprint.min.div_euclid(r);
-    let last = footprint.max() - IVec2::ONE;
-    // ceil(last / r), rounding towards +infinity for negative values too.
-    let hi = -((-last).div_euclid(r)) + IVec2::ONE;
-    Rect::from_min_max(lo, hi)
+    // In i64: `last` and `ceil(last / r) + 1` may leave i32 at the ends of its range.
+    let r = i64::from(refine.max(1));
+    let axis = |min: i32, size: u32| {
+        let lo = i64::from(min).div_euclid(r);
+        let last = i64::from(min) + i64::from(size.max(1)) - 1;
+        // ceil(last / r), rounding towards +infinity for negative values too.
+        let hi = -(-last).div_euclid(r) + 1;
+        (lo, hi)
+    };
+    let ((x0, x1), (y0, y1)) = (
+        axis(footprint.min.x, footprint.size.x),
+        axis(footprint.min.y, footprint.size.y),
+    );
+    let size = |a: i64, b: i64| (b - a).clamp(0, i64::from(u32::MAX)) as u32;
+    Rect::new(
+        IVec2::new(x0 as i32, y0 as i32),
+        UVec2::new(size(x0, x1), size(y0, y1)),
+    )
 }
 
 /// The factor that turns a sum of excess weighted by integer tents `w` (detail units) into
@@ -340,8 +352,18 @@ mod tests {
         ones = Grid::new(30, 30, 1i32).unwrap();
         assert!(spill_into_coarse(&mut map, &ones, IVec2::ZERO, 3).is_err());
         assert_eq!(map, before);
-        // Extreme origins stay bounded (the rect is computed in i32 without overflow).
+        // Extreme origins stay bounded (the rect is computed without overflow).
         let far = Grid::new(2, 2, 1i32).unwrap();
         spill_into_coarse(&mut map, &far, IVec2::new(i32::MAX - 8, i32::MIN), 3).unwrap();
+        let one = Grid::new(1, 1, 300i32).unwrap();
+        for (o, r) in [
+            (IVec2::new(i32::MIN, i32::MAX), 1),
+            (IVec2::new(i32::MAX, i32::MIN), 1),
+            (IVec2::splat(i32::MIN), 16),
+        ] {
+            spill_into_coarse(&mut map, &one, o, r).unwrap();
+            let rect = spill_rect(Rect::new(o, UVec2::ONE), r);
+            assert_eq!(rect.size, UVec2::ONE, "{o} r {r}");
+        }
     }
 }
