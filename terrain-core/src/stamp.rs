@@ -1168,9 +1168,9 @@ impl<'a> TextureKernel<'a> {
 
     /// The stored-unit terms `op.z(value(local))` of `z.len()` texels of row `uy` from
     /// unwrapped column `ux`, every one inside the footprint (or with a NaN local coordinate):
-    /// [`TextureStamp::value`]'s f32 arithmetic in three loops (image coordinates; pixel
-    /// indices and fractions; lookups and interpolation), the first two of which the compiler
-    /// vectorises. `floor_small` is exact here (`|p| < 2^22`); for a NaN coordinate it gives
+    /// [`TextureStamp::value`]'s f32 arithmetic in loops over the block (image coordinates;
+    /// pixel indices and fractions; lookups; interpolation and terms), all but the lookups
+    /// vectorised by the compiler. `floor_small` is exact here (`|p| < 2^22`); for a NaN coordinate it gives
     /// some index, clamped like any other, and the fraction (NaN minus anything) makes the
     /// value NaN, as in the reference.
     #[inline(always)]
@@ -1182,7 +1182,11 @@ impl<'a> TextureKernel<'a> {
             px[i] = (l.x + 1.0) * 0.5 * self.size.x - 0.5;
             py[i] = (l.y + 1.0) * 0.5 * self.size.y - 0.5;
         }
+        // The lookups alone (a load and a store per texel) fill `q`; the interpolation and
+        // the stored-unit terms then run over the whole block, which the compiler vectorises
+        // (interleaved with the lookups, neither did).
         let (mut fx, mut fz) = ([0.0f32; BLOCK], [0.0f32; BLOCK]);
+        let mut q = [[0.0f32; 4]; BLOCK];
         let (w, h) = (self.w, self.h);
         if !self.quads.is_empty() {
             let mut cell = [0u32; BLOCK];
@@ -1198,33 +1202,38 @@ impl<'a> TextureKernel<'a> {
             }
             let last = self.quads.len() - 1;
             for i in 0..n {
-                let [v0, v1, v2, v3] = self.quads[(cell[i] as usize).min(last)];
-                let top = v0 + (v1 - v0) * fx[i];
-                let bot = v2 + (v3 - v2) * fx[i];
-                z[i] = op.z(top + (bot - top) * fz[i]);
+                q[i] = self.quads[(cell[i] as usize).min(last)];
             }
-            return;
+        } else {
+            let mut idx = [[0u32; 4]; BLOCK];
+            for i in 0..n {
+                let (x0, z0) = (floor_small(px[i]), floor_small(py[i]));
+                fx[i] = px[i] - x0 as f32;
+                fz[i] = py[i] - z0 as f32;
+                let xa = x0.clamp(0, w - 1);
+                let xb = x0.wrapping_add(1).clamp(0, w - 1);
+                let ra = z0.clamp(0, h - 1) * w;
+                let rb = z0.wrapping_add(1).clamp(0, h - 1) * w;
+                idx[i] = [ra + xa, ra + xb, rb + xa, rb + xb].map(|k| k as u32);
+            }
+            let v = self.values;
+            let last = v.len() - 1;
+            for i in 0..n {
+                q[i] = idx[i].map(|k| v[(k as usize).min(last)]);
+            }
         }
-        let mut idx = [[0u32; 4]; BLOCK];
+        let mut v = [0.0f32; BLOCK];
         for i in 0..n {
-            let (x0, z0) = (floor_small(px[i]), floor_small(py[i]));
-            fx[i] = px[i] - x0 as f32;
-            fz[i] = py[i] - z0 as f32;
-            let xa = x0.clamp(0, w - 1);
-            let xb = x0.wrapping_add(1).clamp(0, w - 1);
-            let ra = z0.clamp(0, h - 1) * w;
-            let rb = z0.wrapping_add(1).clamp(0, h - 1) * w;
-            idx[i] = [ra + xa, ra + xb, rb + xa, rb + xb].map(|k| k as u32);
-        }
-        let v = self.values;
-        let last = v.len() - 1;
-        let at = |k: u32| v[(k as usize).min(last)];
-        for i in 0..n {
-            let [a, b, c, d] = idx[i];
-            let (v0, v1, v2, v3) = (at(a), at(b), at(c), at(d));
+            let [v0, v1, v2, v3] = q[i];
             let top = v0 + (v1 - v0) * fx[i];
             let bot = v2 + (v3 - v2) * fx[i];
-            z[i] = op.z(top + (bot - top) * fz[i]);
+            v[i] = top + (bot - top) * fz[i];
+        }
+        // `op.z` with its non-finite case as a select.
+        let (scale, neutral) = (op.add_scale, op.z(f32::NAN));
+        for i in 0..n {
+            let t = scale * f64::from(v[i]);
+            z[i] = if v[i].is_finite() { t } else { neutral };
         }
     }
 }
