@@ -1168,20 +1168,21 @@ impl<'a> TextureKernel<'a> {
 
     /// The stored-unit terms `op.z(value(local))` of `z.len()` texels of row `uy` from
     /// unwrapped column `ux`, every one inside the footprint (or with a NaN local coordinate):
-    /// [`TextureStamp::value`]'s f32 arithmetic in loops over the block (image coordinates;
-    /// pixel indices and fractions; lookups; interpolation and terms), all but the lookups
+    /// [`TextureStamp::value`]'s f32 arithmetic in loops over the block (pixel coordinates,
+    /// indices and fractions; lookups; interpolation and terms), all but the lookups
     /// vectorised by the compiler. `floor_small` is exact here (`|p| < 2^22`); for a NaN coordinate it gives
     /// some index, clamped like any other, and the fraction (NaN minus anything) makes the
     /// value NaN, as in the reference.
     #[inline(always)]
     fn block(&self, frame: &Frame, op: &BlendOp, ux: i32, uy: i32, z: &mut [f64]) {
         let n = z.len().min(BLOCK);
-        let (mut px, mut py) = ([0.0f32; BLOCK], [0.0f32; BLOCK]);
-        for i in 0..n {
+        let pixel = |i: usize| {
             let l = frame.local(ux + i as i32, uy);
-            px[i] = (l.x + 1.0) * 0.5 * self.size.x - 0.5;
-            py[i] = (l.y + 1.0) * 0.5 * self.size.y - 0.5;
-        }
+            (
+                (l.x + 1.0) * 0.5 * self.size.x - 0.5,
+                (l.y + 1.0) * 0.5 * self.size.y - 0.5,
+            )
+        };
         // The lookups alone (a load and a store per texel) fill `q`; the interpolation and
         // the stored-unit terms then run over the whole block, which the compiler vectorises
         // (interleaved with the lookups, neither did).
@@ -1191,9 +1192,10 @@ impl<'a> TextureKernel<'a> {
         if !self.quads.is_empty() {
             let mut cell = [0u32; BLOCK];
             for i in 0..n {
-                let (x0, z0) = (floor_small(px[i]), floor_small(py[i]));
-                fx[i] = px[i] - x0 as f32;
-                fz[i] = py[i] - z0 as f32;
+                let (px, py) = pixel(i);
+                let (x0, z0) = (floor_small(px), floor_small(py));
+                fx[i] = px - x0 as f32;
+                fz[i] = py - z0 as f32;
                 let (cx, cz) = (
                     x0.wrapping_add(1).clamp(0, w),
                     z0.wrapping_add(1).clamp(0, h),
@@ -1207,9 +1209,10 @@ impl<'a> TextureKernel<'a> {
         } else {
             let mut idx = [[0u32; 4]; BLOCK];
             for i in 0..n {
-                let (x0, z0) = (floor_small(px[i]), floor_small(py[i]));
-                fx[i] = px[i] - x0 as f32;
-                fz[i] = py[i] - z0 as f32;
+                let (px, py) = pixel(i);
+                let (x0, z0) = (floor_small(px), floor_small(py));
+                fx[i] = px - x0 as f32;
+                fz[i] = py - z0 as f32;
                 let xa = x0.clamp(0, w - 1);
                 let xb = x0.wrapping_add(1).clamp(0, w - 1);
                 let ra = z0.clamp(0, h - 1) * w;
