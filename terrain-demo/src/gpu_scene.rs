@@ -833,15 +833,17 @@ impl GpuScene {
         let Some(readback) = self.tile_readback.as_mut() else {
             return Ok(Vec::new());
         };
+        // u16 rows straight from the staging buffers (no u32 copy in between).
+        let to_u16 = |r: terrain_gpu::RegionView<'_>| Ok((r.ticket.0, r.rect, r.to_u16()?));
         let arrived = if wait {
-            readback.wait(device)?
+            readback.wait_with(device, to_u16)?
         } else {
-            readback.poll(device)?
+            readback.poll_with(device, to_u16)?
         };
-        Ok(arrived
+        arrived
             .into_iter()
-            .map(|r| (r.ticket.0, r.rect, r.to_u16()))
-            .collect())
+            .collect::<Result<_, terrain_gpu::GpuError>>()
+            .map_err(Into::into)
     }
 
     /// The tile atlas, when a streamed world is drawn.

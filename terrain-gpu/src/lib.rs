@@ -92,7 +92,7 @@ pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
 pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
 pub use normals::NormalPass;
 pub use offscreen::OffscreenTarget;
-pub use readback::{ReadbackTicket, RegionData, RegionReadback};
+pub use readback::{ReadbackTicket, RegionData, RegionReadback, RegionView};
 pub use refine::{RefineDraw, RefinePass, RefineRenderer};
 pub use region_source::GpuRegionSource;
 pub use sky::{SkyColors, SkyPass};

@@ -38,6 +38,51 @@ impl RegionData {
         let e = self.encoding;
         self.raw.map(|&v| e.to_metres(f64::from(v)))
     }
+
+    /// An owned copy of a region seen in the staging buffer.
+    fn from_view(view: RegionView<'_>) -> Result<Self, GpuError> {
+        Ok(Self {
+            ticket: view.ticket,
+            rect: view.rect,
+            raw: view.to_grid(|&v| v)?,
+            encoding: view.encoding,
+        })
+    }
+}
+
+/// A region that arrived, seen in its mapped staging buffer for the length of a
+/// [`RegionReadback::poll_with`] conversion: the stored values of `rect`, row-major in the
+/// rect's own (unwrapped) coordinates.
+#[derive(Debug, Clone, Copy)]
+pub struct RegionView<'a> {
+    /// The request it answers.
+    pub ticket: ReadbackTicket,
+    /// The rect asked for.
+    pub rect: Rect,
+    /// Stored values, `rect.area()` of them.
+    pub values: &'a [u32],
+    /// The map's encoding, to turn values into metres.
+    pub encoding: HeightEncoding,
+}
+
+impl RegionView<'_> {
+    /// The region as a grid of `f(value)`, built in one pass over the mapped values; an error
+    /// only for a view whose values do not fill its rect (a view made by hand).
+    pub fn to_grid<U: Copy>(&self, f: impl FnMut(&u32) -> U) -> Result<Grid<U>, GpuError> {
+        let values = self.values.iter().map(f).collect();
+        Ok(Grid::from_vec(self.rect.size.x, self.rect.size.y, values)?)
+    }
+
+    /// The rows as u16 (the coarse-map's own encoding), as [`RegionData::to_u16`].
+    pub fn to_u16(&self) -> Result<Grid<u16>, GpuError> {
+        self.to_grid(|&v| v.min(u32::from(u16::MAX)) as u16)
+    }
+
+    /// The rows as heights in metres, as [`RegionData::to_metres`].
+    pub fn to_metres(&self) -> Result<Grid<f32>, GpuError> {
+        let e = self.encoding;
+        self.to_grid(|&v| e.to_metres(f64::from(v)))
+    }
 }
 
 const FREE: u8 = 0;
@@ -223,18 +268,45 @@ impl RegionReadback {
 
     /// Hands over every region that has arrived, without waiting for the others.
     pub fn poll(&mut self, device: &wgpu::Device) -> Result<Vec<RegionData>, GpuError> {
+        self.poll_with(device, RegionData::from_view)?
+            .into_iter()
+            .collect()
+    }
+
+    /// Waits until every request in flight has arrived and hands them over (tests, shutdown).
+    pub fn wait(&mut self, device: &wgpu::Device) -> Result<Vec<RegionData>, GpuError> {
+        self.wait_with(device, RegionData::from_view)?
+            .into_iter()
+            .collect()
+    }
+
+    /// [`Self::poll`], handing each region's stored values to `convert` straight from the
+    /// mapped staging buffer: a caller that keeps u16 rows or metres builds them in one pass,
+    /// with no u32 copy of the region in between (for a full 4096^2 map that copy is 64 MiB,
+    /// and allocating and filling it cost more than the transfer). `convert` sees each region
+    /// as a [`RegionView`]; the results come in ticket order. A conversion that can fail
+    /// returns a `Result` for the caller to gather, as [`Self::poll`] does.
+    pub fn poll_with<R>(
+        &mut self,
+        device: &wgpu::Device,
+        convert: impl FnMut(RegionView<'_>) -> R,
+    ) -> Result<Vec<R>, GpuError> {
         device.poll(wgpu::PollType::Poll)?;
-        let arrived = self.collect()?;
+        let arrived = self.collect(convert)?;
         if !arrived.is_empty() {
             tracing::debug!(regions = arrived.len(), "region readbacks arrived");
         }
         Ok(arrived)
     }
 
-    /// Waits until every request in flight has arrived and hands them over (tests, shutdown).
-    pub fn wait(&mut self, device: &wgpu::Device) -> Result<Vec<RegionData>, GpuError> {
+    /// [`Self::wait`] with [`Self::poll_with`]'s conversion.
+    pub fn wait_with<R>(
+        &mut self,
+        device: &wgpu::Device,
+        convert: impl FnMut(RegionView<'_>) -> R,
+    ) -> Result<Vec<R>, GpuError> {
         device.poll(crate::download::wait_bounded())?;
-        self.collect()
+        self.collect(convert)
     }
 
     /// Frees the slots of requests whose commands were dropped without submit (nothing was
@@ -248,14 +320,18 @@ impl RegionReadback {
         }
     }
 
-    /// Hands over the regions that arrived. A failed mapping (device loss) is reported after the
-    /// others are handed over: on the next call when regions came with it, so none is dropped.
-    fn collect(&mut self) -> Result<Vec<RegionData>, GpuError> {
+    /// Hands over the regions that arrived, each through `convert`, in ticket order. A failed
+    /// mapping (device loss) is reported after the others are handed over: on the next call
+    /// when regions came with it, so none is dropped.
+    fn collect<R>(
+        &mut self,
+        mut convert: impl FnMut(RegionView<'_>) -> R,
+    ) -> Result<Vec<R>, GpuError> {
         self.free_abandoned();
         if let Some(rects) = self.failure.take() {
             return Err(GpuError::ReadbackFailed { rects });
         }
-        let mut out = Vec::new();
+        let mut arrived: Vec<(ReadbackTicket, R)> = Vec::new();
         let mut failures = Vec::new();
         for slot in &mut self.slots {
             let state = slot.state.load(Ordering::Acquire);
@@ -275,29 +351,29 @@ impl RegionReadback {
             // A region that cannot be viewed counts as failed, like a failed mapping: the
             // regions already collected are still handed over.
             let bytes = rect.area() * 4;
-            let values: Option<Vec<u32>> = buffer
-                .get_mapped_range(0..bytes)
-                .ok()
-                .map(|view| bytemuck::cast_slice(&view).to_vec());
-            buffer.unmap();
-            match values.and_then(|v| Grid::from_vec(rect.size.x, rect.size.y, v).ok()) {
-                Some(raw) => out.push(RegionData {
+            let converted = buffer.get_mapped_range(0..bytes).ok().and_then(|view| {
+                let values: &[u32] = bytemuck::try_cast_slice(&view).ok()?;
+                Some(convert(RegionView {
                     ticket,
                     rect,
-                    raw,
+                    values,
                     encoding,
-                }),
+                }))
+            });
+            buffer.unmap();
+            match converted {
+                Some(r) => arrived.push((ticket, r)),
                 None => failures.push(rect),
             }
         }
-        out.sort_by_key(|r| r.ticket);
+        arrived.sort_by_key(|(ticket, _)| *ticket);
         if !failures.is_empty() {
-            if out.is_empty() {
+            if arrived.is_empty() {
                 return Err(GpuError::ReadbackFailed { rects: failures });
             }
             self.failure = Some(failures);
         }
-        Ok(out)
+        Ok(arrived.into_iter().map(|(_, r)| r).collect())
     }
 }
 
@@ -313,7 +389,17 @@ fn copy_rows(encoder: &mut wgpu::CommandEncoder, map: MapView<'_>, rect: Rect, d
     };
     let base = u64::from(map.base);
     for piece in pieces {
-        for row in 0..piece.map.size.y {
+        let rows = piece.map.size.y;
+        if piece.map.size.x == size.x && rect.size.x == size.x {
+            // Whole rows of the map, whole rows of the region: contiguous on both sides, so one
+            // copy instead of one a row (4096 commands for a full 4096^2 readback).
+            let src = (base + piece.map.min.y as u64 * u64::from(size.x)) * 4;
+            let uy = (piece.unwrapped.min.y - rect.min.y) as u64;
+            let bytes = u64::from(rows) * u64::from(size.x) * 4;
+            encoder.copy_buffer_to_buffer(map.buffer, src, dst, uy * u64::from(size.x) * 4, bytes);
+            continue;
+        }
+        for row in 0..rows {
             let my = piece.map.min.y as u64 + u64::from(row);
             let src = (base + my * u64::from(size.x) + piece.map.min.x as u64) * 4;
             let uy = (piece.unwrapped.min.y - rect.min.y) as u64 + u64::from(row);

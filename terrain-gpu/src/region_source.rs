@@ -48,15 +48,17 @@ impl RegionSource for GpuRegionSource<'_> {
         Ok(RequestId(ticket.0))
     }
 
+    /// The arrived regions as u16 rows, converted straight from the staging buffers.
     fn poll(&mut self) -> Result<Vec<ArrivedRegion>, GpuError> {
-        let arrived = self.readback.poll(self.device)?;
-        Ok(arrived
+        self.readback
+            .poll_with(self.device, |r| {
+                Ok(ArrivedRegion {
+                    id: RequestId(r.ticket.0),
+                    rect: r.rect,
+                    heights: r.to_u16()?,
+                })
+            })?
             .into_iter()
-            .map(|r| ArrivedRegion {
-                id: RequestId(r.ticket.0),
-                rect: r.rect,
-                heights: r.to_u16(),
-            })
-            .collect())
+            .collect()
     }
 }

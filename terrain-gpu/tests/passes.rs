@@ -407,6 +407,60 @@ fn readback_delivers_regions_without_waiting_and_equals_the_map() {
     ctx.check().expect("no GPU validation errors");
 }
 
+/// Full-width rects (one copy for all their rows), a band across the map's wrap (two pieces
+/// of whole rows) and the whole map, read with `wait_with` straight into u16 rows and
+/// metres: equal to the map, and to what `wait` hands over.
+#[test]
+fn whole_rows_and_direct_conversion_equal_the_map() {
+    let Some(ctx) = context_or_skip("whole_rows_and_direct_conversion") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let map = HeightMap::new(
+        hashed::<u16>(70, 50, 0, 65_000),
+        HeightEncoding::new(0.01, 1.0).unwrap(),
+        1.0,
+        WrapMode::Repeat,
+    )
+    .unwrap();
+    let gpu = GpuHeightMap::from_map(device, queue, &map).unwrap();
+    let mut readback = RegionReadback::new(device, 3).unwrap();
+    let rects = [
+        Rect::new(IVec2::new(0, 12), UVec2::new(70, 9)),
+        Rect::new(IVec2::new(0, 44), UVec2::new(70, 13)), // rows 44..50 and 0..7
+        Rect::from_size(UVec2::new(70, 50)),
+    ];
+    let request = |readback: &mut RegionReadback| {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        for r in rects {
+            readback.request(device, &mut encoder, &gpu, r).unwrap();
+        }
+        queue.submit([encoder.finish()]);
+    };
+    request(&mut readback);
+    let direct = readback
+        .wait_with(device, |r| {
+            (r.rect, r.to_u16().unwrap(), r.to_metres().unwrap())
+        })
+        .unwrap();
+    request(&mut readback);
+    let owned = readback.wait(device).unwrap();
+    assert_eq!(direct.len(), 3);
+    for ((rect, rows, metres), (data, want_rect)) in direct.iter().zip(owned.iter().zip(rects)) {
+        assert_eq!(*rect, want_rect);
+        assert_eq!(*rows, data.to_u16());
+        assert_eq!(*metres, data.to_metres());
+        for y in 0..rect.size.y {
+            for x in 0..rect.size.x {
+                let p = rect.min + IVec2::new(x as i32, y as i32);
+                let want = map.grid().get_wrapped(p, WrapMode::Repeat);
+                assert_eq!(rows.get(x, y), Some(want), "texel {p} of {rect:?}");
+            }
+        }
+    }
+    ctx.check().expect("no GPU validation errors");
+}
+
 #[test]
 fn errors_of_submitted_work_become_results_not_panics() {
     let Some(ctx) = context_or_skip("errors_of_submitted_work_become_results") else {
