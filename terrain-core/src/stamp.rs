@@ -1170,9 +1170,9 @@ impl<'a> TextureKernel<'a> {
     /// unwrapped column `ux`, every one inside the footprint (or with a NaN local coordinate):
     /// [`TextureStamp::value`]'s f32 arithmetic in loops over the block (pixel coordinates,
     /// indices and fractions; lookups; interpolation and terms), all but the lookups
-    /// vectorised by the compiler. `floor_small` is exact here (`|p| < 2^22`); for a NaN coordinate it gives
-    /// some index, clamped like any other, and the fraction (NaN minus anything) makes the
-    /// value NaN, as in the reference.
+    /// vectorised by the compiler. `floor_small` is exact here (`|p| < 2^22`); for a NaN
+    /// coordinate it gives some index, clamped like any other, and the fraction (NaN minus
+    /// anything) makes the value NaN, as in the reference.
     #[inline(always)]
     fn block(&self, frame: &Frame, op: &BlendOp, ux: i32, uy: i32, z: &mut [f64]) {
         let n = z.len().min(BLOCK);
