@@ -324,19 +324,24 @@ fn normals_match_the_cpu_reference_full_and_in_dirty_rects() {
     }
 }
 
+/// The repeating 70 x 50 map the readback tests read from.
+fn readback_map() -> HeightMap<u16> {
+    HeightMap::new(
+        hashed::<u16>(70, 50, 0, 65_000),
+        HeightEncoding::new(0.01, 1.0).unwrap(),
+        1.0,
+        WrapMode::Repeat,
+    )
+    .unwrap()
+}
+
 #[test]
 fn readback_delivers_regions_without_waiting_and_equals_the_map() {
     let Some(ctx) = context_or_skip("readback_delivers_regions") else {
         return;
     };
     let (device, queue) = (&ctx.device, &ctx.queue);
-    let map = HeightMap::new(
-        hashed::<u16>(70, 50, 0, 65_000),
-        HeightEncoding::new(0.01, 1.0).unwrap(),
-        1.0,
-        WrapMode::Repeat,
-    )
-    .unwrap();
+    let map = readback_map();
     let gpu = GpuHeightMap::from_map(device, queue, &map).unwrap();
     let mut readback = RegionReadback::new(device, 2).unwrap();
     let rects = [
@@ -416,13 +421,7 @@ fn whole_rows_and_direct_conversion_equal_the_map() {
         return;
     };
     let (device, queue) = (&ctx.device, &ctx.queue);
-    let map = HeightMap::new(
-        hashed::<u16>(70, 50, 0, 65_000),
-        HeightEncoding::new(0.01, 1.0).unwrap(),
-        1.0,
-        WrapMode::Repeat,
-    )
-    .unwrap();
+    let map = readback_map();
     let gpu = GpuHeightMap::from_map(device, queue, &map).unwrap();
     let mut readback = RegionReadback::new(device, 3).unwrap();
     let rects = [
