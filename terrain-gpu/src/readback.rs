@@ -30,13 +30,12 @@ pub struct RegionData {
 impl RegionData {
     /// The rows as u16 (the coarse-map's own encoding).
     pub fn to_u16(&self) -> Grid<u16> {
-        self.raw.map(|&v| v.min(u32::from(u16::MAX)) as u16)
+        self.raw.map(|&v| stored_u16(v))
     }
 
     /// The rows as heights in metres.
     pub fn to_metres(&self) -> Grid<f32> {
-        let e = self.encoding;
-        self.raw.map(|&v| e.to_metres(f64::from(v)))
+        self.raw.map(|&v| stored_metres(self.encoding, v))
     }
 
     /// An owned copy of a region seen in the staging buffer.
@@ -75,14 +74,23 @@ impl RegionView<'_> {
 
     /// The rows as u16 (the coarse-map's own encoding), as [`RegionData::to_u16`].
     pub fn to_u16(&self) -> Result<Grid<u16>, GpuError> {
-        self.to_grid(|&v| v.min(u32::from(u16::MAX)) as u16)
+        self.to_grid(|&v| stored_u16(v))
     }
 
     /// The rows as heights in metres, as [`RegionData::to_metres`].
     pub fn to_metres(&self) -> Result<Grid<f32>, GpuError> {
-        let e = self.encoding;
-        self.to_grid(|&v| e.to_metres(f64::from(v)))
+        self.to_grid(|&v| stored_metres(self.encoding, v))
     }
+}
+
+/// A stored value as the coarse-map's u16 (u16 maps never store more; saturates otherwise).
+fn stored_u16(v: u32) -> u16 {
+    v.min(u32::from(u16::MAX)) as u16
+}
+
+/// A stored value as a height in metres.
+fn stored_metres(encoding: HeightEncoding, v: u32) -> f32 {
+    encoding.to_metres(f64::from(v))
 }
 
 const FREE: u8 = 0;
