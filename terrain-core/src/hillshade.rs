@@ -4,7 +4,7 @@
 use crate::error::CoreError;
 use crate::grid::Grid;
 use crate::map::{HeightMap, HeightSample};
-use crate::normals::{DerivativeMap, derivative_region};
+use crate::normals::{DerivativeMap, derivative_at, derivative_region, normal_from_derivatives};
 use crate::rect::Rect;
 use glam::{UVec2, Vec3};
 
@@ -53,7 +53,20 @@ pub fn hillshade<T: HeightSample>(
     params: &HillshadeParams,
 ) -> Result<Grid<[u8; 4]>, CoreError> {
     let range = hillshade_range(map);
-    let shader = Shader::new(map, normals, params, range)?;
+    let shader = Shader::new(map, Some(normals), params, range)?;
+    Grid::from_fn(params.size.x, params.size.y, |px, py| shader.pixel(px, py))
+}
+
+/// [`hillshade`] without a derivative map: each pixel's normal comes from the heights around
+/// its texel by the same eq. 3.3 ([`derivative_at`]), so the image is the same, and its cost
+/// follows the pixels, not the map (a 256-pixel overview of a 4096^2 map reads 1/256 of it).
+/// What a caller uses whose normals live on the GPU.
+pub fn hillshade_from_heights<T: HeightSample>(
+    map: &HeightMap<T>,
+    params: &HillshadeParams,
+) -> Result<Grid<[u8; 4]>, CoreError> {
+    let range = hillshade_range(map);
+    let shader = Shader::new(map, None, params, range)?;
     Grid::from_fn(params.size.x, params.size.y, |px, py| shader.pixel(px, py))
 }
 
@@ -88,13 +101,36 @@ pub fn update_hillshade<T: HeightSample>(
     range: (f64, f64),
     dirty: Rect,
 ) -> Result<(), CoreError> {
-    if image.size() != params.size {
+    let shader = Shader::new(map, Some(normals), params, range)?;
+    redraw(image, &shader, dirty)
+}
+
+/// [`update_hillshade`] without a derivative map, as [`hillshade_from_heights`] draws: the
+/// same pixels redrawn, their normals from the heights around them.
+pub fn update_hillshade_from_heights<T: HeightSample>(
+    image: &mut Grid<[u8; 4]>,
+    map: &HeightMap<T>,
+    params: &HillshadeParams,
+    range: (f64, f64),
+    dirty: Rect,
+) -> Result<(), CoreError> {
+    let shader = Shader::new(map, None, params, range)?;
+    redraw(image, &shader, dirty)
+}
+
+/// Redraws the pixels of `image` that heights changed inside `dirty` can affect.
+fn redraw<T: HeightSample>(
+    image: &mut Grid<[u8; 4]>,
+    shader: &Shader<'_, T>,
+    dirty: Rect,
+) -> Result<(), CoreError> {
+    let (map, params) = (shader.map, shader.out);
+    if image.size() != params {
         return Err(CoreError::SizeMismatch {
-            expected: params.size,
+            expected: params,
             actual: image.size(),
         });
     }
-    let shader = Shader::new(map, normals, params, range)?;
     let Some(region) = derivative_region(map.size(), map.wrap(), dirty)? else {
         return Ok(());
     };
@@ -107,9 +143,9 @@ pub fn update_hillshade<T: HeightSample>(
     };
     for piece in region.split_toroidal(size) {
         let (lo, hi) = (piece.map.min, piece.map.max());
-        for py in pixels(lo.y, hi.y, params.size.y, size.y) {
+        for py in pixels(lo.y, hi.y, params.y, size.y) {
             let row = image.row_mut(py);
-            for px in pixels(lo.x, hi.x, params.size.x, size.x) {
+            for px in pixels(lo.x, hi.x, params.x, size.x) {
                 row[px as usize] = shader.pixel(px, py);
             }
         }
@@ -120,7 +156,8 @@ pub fn update_hillshade<T: HeightSample>(
 /// One hillshade's checked inputs: shades pixel by pixel.
 struct Shader<'a, T> {
     map: &'a HeightMap<T>,
-    normals: &'a DerivativeMap,
+    /// `None`: each pixel's normal from the heights around its texel.
+    normals: Option<&'a DerivativeMap>,
     light: Vec3,
     ambient: f32,
     out: UVec2,
@@ -131,11 +168,13 @@ struct Shader<'a, T> {
 impl<'a, T: HeightSample> Shader<'a, T> {
     fn new(
         map: &'a HeightMap<T>,
-        normals: &'a DerivativeMap,
+        normals: Option<&'a DerivativeMap>,
         params: &HillshadeParams,
         range: (f64, f64),
     ) -> Result<Self, CoreError> {
-        if normals.grid().size() != map.size() {
+        if let Some(normals) = normals
+            && normals.grid().size() != map.size()
+        {
             return Err(CoreError::SizeMismatch {
                 expected: map.size(),
                 actual: normals.grid().size(),
@@ -181,7 +220,11 @@ impl<'a, T: HeightSample> Shader<'a, T> {
         let y = ((u64::from(py) * u64::from(size.y)) / u64::from(self.out.y)) as u32;
         let raw = self.map.grid().as_slice()[self.map.grid().index(x, y)].to_raw_f64();
         let t = ((raw - self.lo) / self.span) as f32;
-        let n = self.normals.normal(x, y).unwrap_or(Vec3::Y);
+        let d = match self.normals {
+            Some(normals) => normals.derivative(x, y),
+            None => derivative_at(self.map, x, y),
+        };
+        let n = d.map_or(Vec3::Y, normal_from_derivatives);
         let shade = self.ambient + (1.0 - self.ambient) * n.dot(self.light).max(0.0);
         let c = (ramp(t) * shade * 1.25).clamp(Vec3::ZERO, Vec3::ONE) * 255.0;
         [c.x as u8, c.y as u8, c.z as u8, 255]
@@ -270,7 +313,7 @@ mod tests {
             // The image before the change, coloured with the final range.
             let before = CoarseMap::coarse(g.clone(), enc, 1.0).unwrap();
             let before_n = DerivativeMap::from_map(&before);
-            let shader = Shader::new(&before, &before_n, &params, range).unwrap();
+            let shader = Shader::new(&before, Some(&before_n), &params, range).unwrap();
             let mut img = Grid::from_fn(out.x, out.y, |x, y| shader.pixel(x, y)).unwrap();
             for r in &dirty {
                 n.update_rect(&m, *r).unwrap();
@@ -287,5 +330,52 @@ mod tests {
         assert!(update_hillshade(&mut img, &m, &n, &params, (f64::NAN, 1.0), r).is_err());
         let small = HillshadeParams::with_size(UVec2::new(4, 8));
         assert!(update_hillshade(&mut img, &m, &n, &small, (0.0, 1.0), r).is_err());
+    }
+
+    /// Without a derivative map the image is the same, bit for bit, on repeating and clamped
+    /// maps of u16 and u8 samples (the edges read wrapped or clamped taps), and so are the
+    /// redrawn pixels after a change.
+    #[test]
+    fn shading_from_the_heights_equals_shading_from_the_derivative_map() {
+        use crate::{Blend, GaussianStamp, StampPlacement, apply_stamp};
+        use crate::{DetailTile, WrapMode};
+        let enc = HeightEncoding::new(0.01, 0.0).unwrap();
+        let g = Grid::from_fn(37, 29, |x, y| {
+            (20_000 + (x * x * 31 + y * 977 + x * y * 13) % 9_000) as u16
+        })
+        .unwrap();
+        for wrap in [WrapMode::Repeat, WrapMode::Clamp] {
+            let mut m = HeightMap::new(g.clone(), enc, 0.7, wrap).unwrap();
+            for out in [UVec2::new(37, 29), UVec2::new(16, 40)] {
+                let params = HillshadeParams::with_size(out);
+                let n = DerivativeMap::from_map(&m);
+                let want = hillshade(&m, &n, &params).unwrap();
+                assert_eq!(
+                    hillshade_from_heights(&m, &params).unwrap(),
+                    want,
+                    "{wrap:?}"
+                );
+            }
+            // A change, redrawn both ways.
+            let params = HillshadeParams::with_size(UVec2::new(30, 30));
+            let range = hillshade_range(&m);
+            let mut img = hillshade_from_heights(&m, &params).unwrap();
+            let p = StampPlacement::new(glam::Vec2::new(12.0, 9.0), glam::Vec2::splat(6.0), 2.0)
+                .unwrap();
+            let mut crater = GaussianStamp::default();
+            let dirty = apply_stamp(&mut m, &mut crater, &p, Blend::Add).unwrap();
+            for r in &dirty {
+                update_hillshade_from_heights(&mut img, &m, &params, range, *r).unwrap();
+            }
+            let n = DerivativeMap::from_map(&m);
+            let shader = Shader::new(&m, Some(&n), &params, range).unwrap();
+            let want = Grid::from_fn(30, 30, |x, y| shader.pixel(x, y)).unwrap();
+            assert_eq!(img, want, "{wrap:?}");
+        }
+        let g8 = Grid::from_fn(20, 11, |x, y| ((x * 37 + y * 11) % 256) as u8).unwrap();
+        let d = DetailTile::detail(g8, HeightEncoding::new(0.003, 0.0).unwrap(), 0.05).unwrap();
+        let params = HillshadeParams::with_size(UVec2::new(20, 11));
+        let want = hillshade(&d, &DerivativeMap::from_map(&d), &params).unwrap();
+        assert_eq!(hillshade_from_heights(&d, &params).unwrap(), want);
     }
 }

@@ -56,15 +56,18 @@ pub mod tile_upload;
 
 pub use error::CoreError;
 pub use grid::{Grid, WrapMode};
-pub use hillshade::{HillshadeParams, hillshade, hillshade_range, update_hillshade};
+pub use hillshade::{
+    HillshadeParams, hillshade, hillshade_from_heights, hillshade_range, update_hillshade,
+    update_hillshade_from_heights,
+};
 pub use io::MapIoError;
 pub use map::{
     CoarseMap, DEFAULT_FIXED_POINT_UNITS_PER_M, DETAIL_MAX_RANGE_M, DetailTile, FixedPointMap,
     HeightEncoding, HeightMap, HeightSample,
 };
 pub use normals::{
-    DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal, derivative_region,
-    normal_from_derivatives,
+    DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal, derivative_at,
+    derivative_region, normal_from_derivatives,
 };
 pub use readback::{ArrivedRegion, RegionSource, RequestId};
 pub use rect::{DirtyRect, Rect, WrappedPiece};

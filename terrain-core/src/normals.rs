@@ -188,6 +188,26 @@ impl DerivativeMap {
     }
 }
 
+/// The gradient of one texel `(x, y)` of `map` by eq. 3.3, with the map's wrap mode: the same
+/// bits as [`DerivativeMap::from_map`] gives there, for callers that need a few texels' slopes
+/// (an overview's pixels) without a whole derivative map. `None` outside the map.
+pub fn derivative_at<T: HeightSample>(map: &HeightMap<T>, x: u32, y: u32) -> Option<Vec2> {
+    let h = map.grid();
+    if x >= h.width() || y >= h.height() {
+        return None;
+    }
+    let wrap = map.wrap();
+    let k = f64::from(map.encoding().scale) / (12.0 * f64::from(map.texel_size()));
+    let at = |dx: i64, dy: i64| {
+        let col = wrap.resolve(i64::from(x) + dx, h.width());
+        h.row(wrap.resolve(i64::from(y) + dy, h.height()))[col as usize].to_raw_f64()
+    };
+    let diff = |a: f64, b: f64, c: f64, d: f64| (a - d) + 8.0 * (c - b);
+    let dx = diff(at(-2, 0), at(-1, 0), at(1, 0), at(2, 0));
+    let dz = diff(at(0, -2), at(0, -1), at(0, 1), at(0, 2));
+    Some(Vec2::new((dx * k) as f32, (dz * k) as f32))
+}
+
 /// The interior loop of [`DerivativeMap::fill`] for u8 / u16 samples (when `T` is `S`): eq. 3.3
 /// in i32 (exact: |sum| < 18 * 65 536), then the same f64 product and f32 rounding as the
 /// generic loop, so the same bits. Returns false (and does nothing) for other sample types.

@@ -51,7 +51,7 @@ pub fn run(
         .as_ref()
         .map_or(("none".into(), "none".into()), GpuScene::adapter);
     let overview_px = scenario.overview_size(cli.overview_size);
-    let mut overview = Overview::new(scenario.map(), scenario.normals(), overview_px)?;
+    let mut overview = Overview::new(scenario.map(), overview_px)?;
     // Scenario time: 30 frames per second whatever the render speed.
     let sim_start = Instant::now();
     let mut progress = Progress::new(cli.frames, cli.quiet);
@@ -66,7 +66,7 @@ pub fn run(
             timings: &mut timings,
         })?;
         let overlaid = timings.time(Step::Overview, || {
-            overview.update(scenario.map(), scenario.normals(), &frame.dirty)?;
+            overview.update(scenario.map(), &frame.dirty)?;
             anyhow::Ok(scenario.overlay(overview.image()))
         })?;
         let overview_image = overlaid.as_ref().unwrap_or(overview.image());
@@ -287,58 +287,19 @@ fn tess_config(cli: &Cli) -> Result<TessConfig> {
     Ok(config)
 }
 
-/// The CDLOD quadtree for `map`: leaves of 32 texels (fewer where a repeating map's sides are
-/// not multiples of 32) drawn with one vertex per texel, the finest range 8 leaves wide, and as
-/// many LODs (up to 8) as reach `reach_m` (the clipmap's reach, so both draw as far), tile a
-/// repeating map, or cover a clamped one.
+/// The CDLOD quadtree for `map` that draws as far as `reach_m` (the clipmap's reach, so both
+/// draw as far: terrain-lod's `CdlodConfig::for_map`), with the metric and morph of the flags.
 fn cdlod_config(cli: &Cli, map: &terrain_core::CoarseMap, reach_m: f32) -> Result<CdlodConfig> {
-    let size = map.size();
-    let pick = |leaf: u32| -> u32 {
-        match map.wrap() {
-            terrain_core::WrapMode::Repeat => (1..=8)
-                .rev()
-                .find(|&n| {
-                    let root = leaf << (n - 1);
-                    size.x.is_multiple_of(root) && size.y.is_multiple_of(root)
-                })
-                .unwrap_or(0),
-            terrain_core::WrapMode::Clamp => {
-                let mut n = 1;
-                while n < 8 && (leaf << (n - 1)) < size.max_element() {
-                    n += 1;
-                }
-                n
-            }
-        }
-    };
-    let Some((leaf, lods)) = [32u32, 16, 8, 4]
-        .into_iter()
-        .map(|leaf| (leaf, pick(leaf)))
-        .find(|&(_, n)| n >= 1)
-    else {
-        anyhow::bail!(
-            "--lod cdlod needs a repeating map whose sides are multiples of 4 texels ({}x{})",
-            size.x,
-            size.y
-        );
-    };
-    let finest_range = 8.0 * leaf as f32 * map.texel_size();
-    // The view distance (the last range) is finest_range * 2^(lods - 1).
-    let mut lods = lods;
-    while lods > 1 && finest_range * (1u32 << (lods - 2)) as f32 >= reach_m {
-        lods -= 1;
-    }
+    let config = CdlodConfig::for_map(map.size(), map.wrap(), map.texel_size(), reach_m)
+        .context("--lod cdlod")
+        .usage()?;
     let config = CdlodConfig {
-        leaf_size: leaf,
-        grid_size: leaf.min(32),
-        lod_count: lods,
-        finest_range,
         metric: match cli.target_error {
             Some(tau_px) => LodMetric::ScreenSpace { tau_px },
             None => LodMetric::Distance,
         },
         morph: !cli.no_morph,
-        ..CdlodConfig::default()
+        ..config
     };
     config.validate().context("--target-error").usage()?;
     Ok(config)

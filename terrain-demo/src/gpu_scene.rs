@@ -35,20 +35,6 @@ pub const CLIPMAP_N: u32 = 255;
 /// about twice the default map, so the toroidal repeat stays in the fog.
 pub const CLIPMAP_LEVELS: u32 = 5;
 
-/// Clipmap levels whose coarsest reaches `radius` metres from the camera at `texel_size`: level
-/// `l` spans `(N - 1) * 2^l` texels, so its half side is `(N - 1) / 2 * 2^l` texels. At least
-/// [`CLIPMAP_LEVELS`], at most terrain-lod's [`terrain_lod::clipmap::MAX_LEVELS`].
-pub fn levels_to_reach(radius: f32, texel_size: f32) -> u32 {
-    let half = (CLIPMAP_N - 1) as f32 / 2.0 * texel_size;
-    let mut levels = CLIPMAP_LEVELS;
-    while levels < terrain_lod::clipmap::MAX_LEVELS
-        && half * ((1u32 << (levels - 1)) as f32) < radius
-    {
-        levels += 1;
-    }
-    levels
-}
-
 /// Everything that lives on the GPU for the demo.
 pub struct GpuScene {
     ctx: GpuContext,
@@ -329,6 +315,27 @@ impl GpuScene {
         now: std::time::Instant,
     ) -> Result<UpdateReport> {
         self.update_collision_inner(scheduler, mirror, now)
+            .map_err(|e| self.lost_or(e))
+    }
+
+    /// Reads back every region `scheduler` still has dirty or in flight, quiet gap or not,
+    /// and waits until `mirror` holds them: the end of a run, so that the CPU's copy of the
+    /// map is the GPU's. Bounded by `timeout`.
+    pub fn flush_collision(
+        &mut self,
+        scheduler: &mut ReadbackScheduler,
+        mirror: &CollisionMirror,
+        timeout: std::time::Duration,
+    ) -> Result<UpdateReport> {
+        let mut source = GpuRegionSource::new(
+            &self.ctx.device,
+            &self.ctx.queue,
+            &self.map,
+            &mut self.readback,
+        );
+        scheduler
+            .flush(&mut source, mirror, timeout)
+            .context("reading the GPU map's last deformations back")
             .map_err(|e| self.lost_or(e))
     }
 
@@ -647,7 +654,12 @@ impl GpuScene {
     /// side): levels are added to the default [`CLIPMAP_LEVELS`], up to terrain-lod's
     /// maximum, each doubling the reach. For cameras that see a whole map from afar.
     pub fn reach(&mut self, radius: f32) -> Result<()> {
-        let levels = levels_to_reach(radius, self.map.texel_size());
+        let levels = terrain_lod::clipmap_levels_to_reach(
+            CLIPMAP_N,
+            radius,
+            self.map.texel_size(),
+            CLIPMAP_LEVELS,
+        );
         if levels != self.layout.levels() {
             let layout = ClipmapLayout::new(CLIPMAP_N, levels)?;
             self.renderer = ClipmapRenderer::new(&self.ctx.device, &self.target.format(), &layout)?;
@@ -878,6 +890,13 @@ impl GpuScene {
             );
         }
         Ok(arrived)
+    }
+
+    /// The GPU's coarse-map, downloaded (waits for the GPU): for tests that compare the CPU's
+    /// copy with the truth.
+    #[cfg(test)]
+    pub fn read_map(&self) -> Result<CoarseMap> {
+        Ok(self.map.read(&self.ctx.device, &self.ctx.queue)?)
     }
 
     /// The GPU objects alive on the device now.

@@ -1,13 +1,15 @@
 //! The top-down hillshade overview: the whole frame without a GPU, an inset with one. Drawn
 //! once, then each frame only the pixels over the rects that changed are redrawn
-//! (terrain-core's `update_hillshade`), so its cost follows the deformations, not the map.
+//! (terrain-core's `update_hillshade_from_heights`), so its cost follows the deformations, not
+//! the map. Each pixel's normal comes from the heights around its texel: the overview needs no
+//! derivative map on the CPU (with a GPU the normals live there).
 
 use crate::images::Image;
 use anyhow::Result;
 use glam::UVec2;
 use terrain_core::{
-    CoarseMap, DerivativeMap, DirtyRect, HillshadeParams, Rect, hillshade, hillshade_range,
-    update_hillshade,
+    CoarseMap, DirtyRect, HillshadeParams, Rect, hillshade_from_heights, hillshade_range,
+    update_hillshade_from_heights,
 };
 
 /// The overview image and the height range its colours span.
@@ -22,10 +24,10 @@ pub struct Overview {
 
 impl Overview {
     /// The overview of `map` at `size` pixels.
-    pub fn new(map: &CoarseMap, normals: &DerivativeMap, size: UVec2) -> Result<Self> {
+    pub fn new(map: &CoarseMap, size: UVec2) -> Result<Self> {
         let params = HillshadeParams::with_size(size);
         Ok(Self {
-            image: hillshade(map, normals, &params)?,
+            image: hillshade_from_heights(map, &params)?,
             params,
             range: hillshade_range(map),
         })
@@ -36,15 +38,10 @@ impl Overview {
         &self.image
     }
 
-    /// Redraws what heights changed inside `dirty` (map coordinates) can change; `normals`
-    /// must already be current there. If a new height lies outside the colour range, the range
-    /// widens and the whole image (its pixels, not the map) is redrawn.
-    pub fn update(
-        &mut self,
-        map: &CoarseMap,
-        normals: &DerivativeMap,
-        dirty: &[DirtyRect],
-    ) -> Result<()> {
+    /// Redraws what heights changed inside `dirty` (map coordinates) can change. If a new
+    /// height lies outside the colour range, the range widens and the whole image (its pixels,
+    /// not the map) is redrawn.
+    pub fn update(&mut self, map: &CoarseMap, dirty: &[DirtyRect]) -> Result<()> {
         let (mut lo, mut hi) = self.range;
         for rect in dirty {
             for piece in rect.split_toroidal(map.size()) {
@@ -60,18 +57,11 @@ impl Overview {
         if (lo, hi) != self.range {
             self.range = (lo, hi);
             let all = Rect::from_size(map.size());
-            update_hillshade(&mut self.image, map, normals, &self.params, self.range, all)?;
+            update_hillshade_from_heights(&mut self.image, map, &self.params, self.range, all)?;
             return Ok(());
         }
         for rect in dirty {
-            update_hillshade(
-                &mut self.image,
-                map,
-                normals,
-                &self.params,
-                self.range,
-                *rect,
-            )?;
+            update_hillshade_from_heights(&mut self.image, map, &self.params, self.range, *rect)?;
         }
         Ok(())
     }

@@ -259,8 +259,8 @@ pub struct FrameReport {
     /// `stamp_gpu`, `normals_gpu`, `granular_gpu` and `render` (sky + terrain) are the wall
     /// time of submitting the GPU work and waiting for it; `stamp_cpu`, `normals_cpu`,
     /// `granular_cpu` the same work on the CPU (without a GPU); `lod` (clipmap placement and culling), `capture` (image readback),
-    /// `cpu_mirror` (the same stamps and normals on the CPU map behind the overview),
-    /// `physics` (collision and camera), `overview` (hillshade), `write` (PNG), `cache` (flyover).
+    /// `physics` (collision, the camera, and with a GPU the regions read back copied into the
+    /// CPU's map), `overview` (hillshade), `write` (PNG), `cache` (flyover).
     pub timings_ms: BTreeMap<&'static str, f64>,
     /// GPU timestamp spans of `stamp`, `normals` and `render`, where the adapter has timestamp
     /// queries (on lavapipe they miss deferred compute work: see terrain-gpu's `timer`).

@@ -21,11 +21,9 @@ pub enum Step {
     Lod,
     /// Copying the rendered image back.
     Capture,
-    /// The same stamps and normals on the CPU map behind the overview, beside the GPU.
-    CpuMirror,
     /// Collision readback scheduling and the camera body.
     Physics,
-    /// The hillshade overview (and, for the snow field, its normals).
+    /// The hillshade overview.
     Overview,
     /// Writing the frame's PNG.
     Write,
@@ -43,14 +41,13 @@ pub enum Step {
 
 impl Step {
     /// Every step, in the order the plot stacks them (bottom first).
-    pub const ALL: [Step; 15] = [
+    pub const ALL: [Step; 14] = [
         Step::StampGpu,
         Step::StampCpu,
         Step::NormalsGpu,
         Step::NormalsCpu,
         Step::GranularGpu,
         Step::GranularCpu,
-        Step::CpuMirror,
         Step::Detail,
         Step::Cache,
         Step::Physics,
@@ -72,7 +69,6 @@ impl Step {
             Step::Render => "render",
             Step::Lod => "lod",
             Step::Capture => "capture",
-            Step::CpuMirror => "cpu_mirror",
             Step::Physics => "physics",
             Step::Overview => "overview",
             Step::Write => "write",

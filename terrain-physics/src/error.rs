@@ -41,6 +41,20 @@ pub enum PhysicsError {
         /// Cells walked.
         cells: u64,
     },
+    /// [`crate::ReadbackScheduler::flush`] waited its whole timeout for regions that did not
+    /// arrive (a source that stopped delivering: a lost device, say).
+    #[error(
+        "the readback flush timed out after {timeout:?}: {in_flight} request(s) in flight and \
+         {dirty} dirty rect(s) not yet requested"
+    )]
+    FlushTimedOut {
+        /// The timeout given.
+        timeout: std::time::Duration,
+        /// Requests still in flight.
+        in_flight: usize,
+        /// Merged dirty rects not yet requested.
+        dirty: usize,
+    },
     /// A parameter lies outside the range accepted.
     #[error("{what} = {value} is out of range: {expected}")]
     OutOfRange {

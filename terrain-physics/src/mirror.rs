@@ -123,6 +123,35 @@ impl CollisionMirror {
         Ok(version)
     }
 
+    /// Copies the mirror's heights of `rect` (it may wrap) into `map`, a map of the mirror's
+    /// size and encoding: how a CPU copy of the terrain (an overview, a save) follows the
+    /// regions read back into the mirror, region by region, without deforming anything of its
+    /// own. Pass the rects of [`crate::UpdateReport::applied_rects`].
+    ///
+    /// Fails on a `map` of another size or encoding and on a rect off the map; `map` is then
+    /// unchanged.
+    pub fn copy_into(&self, rect: Rect, map: &mut CoarseMap) -> Result<(), PhysicsError> {
+        if map.size() != self.size {
+            return Err(PhysicsError::SizeMismatch {
+                expected: self.size,
+                actual: map.size(),
+            });
+        }
+        if map.encoding() != self.encoding {
+            return Err(PhysicsError::OutOfRange {
+                what: "map height scale (its encoding differs from the mirror's)",
+                value: f64::from(map.encoding().scale),
+                expected: "the mirror's encoding",
+            });
+        }
+        check_region(rect, self.size)?;
+        let front = self.snapshot();
+        for piece in rect.split_toroidal(self.size) {
+            copy_rect(front.heights(), map.grid_mut(), piece.map);
+        }
+        Ok(())
+    }
+
     fn apply_locked(
         &self,
         writer: &mut Writer,
@@ -288,6 +317,36 @@ mod tests {
             }
         }
         g
+    }
+
+    /// A CPU map follows the mirror through the applied rects only (one wraps a corner);
+    /// a map of another size or encoding, or a rect off the map, is refused and left as it was.
+    #[test]
+    fn a_cpu_map_follows_the_mirror_through_copied_rects() {
+        let m = mirror();
+        let enc = HeightEncoding::new(0.01, 0.0).expect("enc");
+        let start = Grid::from_fn(16, 12, |x, y| (x + 100 * y) as u16).expect("grid");
+        let mut map = CoarseMap::coarse(start.clone(), enc, 1.0).expect("map");
+        let rects = [
+            Rect::new(IVec2::new(14, 10), UVec2::new(5, 4)),
+            Rect::new(IVec2::new(3, 2), UVec2::new(2, 6)),
+        ];
+        for (i, &r) in rects.iter().enumerate() {
+            let data = Grid::new(r.size.x, r.size.y, 7000 + i as u16).expect("grid");
+            m.apply_next(r, &data).expect("apply");
+            m.copy_into(r, &mut map).expect("copy");
+        }
+        assert_eq!(map.grid(), m.snapshot().heights());
+        let before = map.clone();
+        let off = Rect::new(IVec2::new(40, 0), UVec2::new(2, 2));
+        assert!(m.copy_into(off, &mut map).is_err());
+        let other = HeightEncoding::new(0.02, 0.0).expect("enc");
+        let mut wrong = CoarseMap::coarse(start.clone(), other, 1.0).expect("map");
+        assert!(m.copy_into(rects[1], &mut wrong).is_err());
+        let mut small = CoarseMap::coarse(Grid::new(8, 8, 0).expect("g"), enc, 1.0).expect("m");
+        assert!(m.copy_into(rects[1], &mut small).is_err());
+        assert_eq!(map, before);
+        assert_eq!(wrong.grid(), &start);
     }
 
     #[test]

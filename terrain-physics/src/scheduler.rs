@@ -261,6 +261,55 @@ impl ReadbackScheduler {
         source: &mut S,
         mirror: &CollisionMirror,
     ) -> Result<UpdateReport, UpdateError<S::Error>> {
+        self.step(now, source, mirror, false)
+    }
+
+    /// Brings `mirror` level with the source: requests every dirty rect now, quiet gap or not,
+    /// and polls `source` every millisecond until every request has arrived and applied. For
+    /// the end of a run or a save, never inside a frame: it waits. The one report covers
+    /// every poll.
+    ///
+    /// Fails as [`ReadbackScheduler::update`] does, and with [`PhysicsError::FlushTimedOut`]
+    /// when the source has not delivered within `timeout` (what arrived is applied; the rest
+    /// stays dirty or in flight, as after an update).
+    pub fn flush<S: RegionSource + ?Sized>(
+        &mut self,
+        source: &mut S,
+        mirror: &CollisionMirror,
+        timeout: Duration,
+    ) -> Result<UpdateReport, UpdateError<S::Error>> {
+        let start = Instant::now();
+        let mut all = UpdateReport::default();
+        loop {
+            let r = self.step(Instant::now(), source, mirror, true)?;
+            all.requested.extend(r.requested);
+            all.applied.extend(r.applied);
+            all.applied_rects.extend(r.applied_rects);
+            all.abandoned.extend(r.abandoned);
+            all.late += r.late;
+            if self.is_idle() {
+                return Ok(all);
+            }
+            if start.elapsed() >= timeout {
+                return Err(PhysicsError::FlushTimedOut {
+                    timeout,
+                    in_flight: self.in_flight.len(),
+                    dirty: self.dirty.rects().len(),
+                }
+                .into());
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// One update; `force` requests the dirty rects whether or not they are due.
+    fn step<S: RegionSource + ?Sized>(
+        &mut self,
+        now: Instant,
+        source: &mut S,
+        mirror: &CollisionMirror,
+        force: bool,
+    ) -> Result<UpdateReport, UpdateError<S::Error>> {
         if mirror.size() != self.map_size {
             return Err(PhysicsError::SizeMismatch {
                 expected: self.map_size,
@@ -335,7 +384,7 @@ impl ReadbackScheduler {
             }
         }
 
-        if self.due(now) {
+        if (force && !self.dirty.is_empty()) || self.due(now) {
             self.request_batch(source, now, &mut report, &mut first_error);
         }
         match first_error {

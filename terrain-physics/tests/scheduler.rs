@@ -169,6 +169,64 @@ fn update_returns_while_a_readback_never_arrives() {
     assert_eq!(scheduler.pending_deformations().count(), 1);
 }
 
+/// A flush requests at once, quiet gap or not, waits for the arrivals (three polls late here)
+/// and leaves the mirror equal to the source with nothing pending.
+#[test]
+fn a_flush_brings_the_mirror_level_with_the_source_before_the_quiet_gap() {
+    let mut r = rig(common::hills(64), 3);
+    let t0 = Instant::now();
+    let dirty = r.stamp(Vec2::new(20.0, 12.0), 4.0, 1.5, t0);
+    r.stamp(Vec2::new(1.0, 62.0), 3.0, -0.5, t0);
+    assert!(r.update(t0).requested.is_empty(), "the gap has not passed");
+    let rep = r
+        .scheduler
+        .flush(&mut r.source, &r.mirror, Duration::from_secs(5))
+        .expect("flush");
+    assert!(!rep.requested.is_empty());
+    assert_eq!(rep.applied.len(), rep.requested.len());
+    assert!(rep.applied_rects.iter().any(|a| a.contains_rect(&dirty[0])));
+    assert!(r.mirror_equals_source());
+    assert!(r.scheduler.is_idle());
+    assert_eq!(r.scheduler.pending_deformations().count(), 0);
+    // Nothing pending: a flush returns at once with nothing done.
+    let rep = r
+        .scheduler
+        .flush(&mut r.source, &r.mirror, Duration::from_secs(5))
+        .expect("flush");
+    assert_eq!(rep, terrain_physics::UpdateReport::default());
+}
+
+/// A source that never delivers: the flush gives up after its timeout with an error that says
+/// what is left, and the bound stays pending.
+#[test]
+fn a_flush_times_out_when_the_source_never_delivers() {
+    let r = rig(common::hills(32), 1);
+    let (mirror, mut scheduler) = (r.mirror, r.scheduler);
+    let rect = Rect::new(IVec2::new(3, 3), UVec2::new(4, 4));
+    let bound = DeformationBound::new(0.5, 0.0).expect("bound");
+    scheduler
+        .note_deformation(rect, bound, Instant::now())
+        .expect("note");
+    let t = Instant::now();
+    let err = scheduler
+        .flush(&mut Never::default(), &mirror, Duration::from_millis(30))
+        .expect_err("never arrives");
+    assert!(t.elapsed() < Duration::from_secs(5));
+    assert!(
+        matches!(
+            err,
+            UpdateError::Physics(PhysicsError::FlushTimedOut {
+                in_flight: 1,
+                dirty: 0,
+                ..
+            })
+        ),
+        "{err}"
+    );
+    assert_eq!(scheduler.pending_deformations().count(), 1);
+    assert_eq!(mirror.version(), 0);
+}
+
 #[test]
 fn a_deformation_across_the_corner_is_one_request_that_wraps() {
     let mut r = rig(common::hills(64), 1);

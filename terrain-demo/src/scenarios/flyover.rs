@@ -35,8 +35,7 @@ use terrain_cache::{
     VramConfig, VramPool, World,
 };
 use terrain_core::{
-    Blend, CoarseMap, DerivativeMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement,
-    WrapMode, apply_stamp,
+    Blend, CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, WrapMode, apply_stamp,
 };
 use terrain_physics::CollisionWindow;
 
@@ -78,7 +77,6 @@ pub struct FlyoverScenario {
     /// The world's extent in metres.
     extent: Vec2,
     overview: CoarseMap,
-    normals: DerivativeMap,
     /// Path: start, unit heading, speed (m/s).
     start: Vec2,
     heading: Vec2,
@@ -126,9 +124,6 @@ impl FlyoverScenario {
         let overview_level = overview_level(&manifest);
         let overview = overview_map(&world, overview_level)?;
         let load_ms = ms_since(t);
-        let t = Instant::now();
-        let normals = DerivativeMap::from_map(&overview);
-        let initial_normals_ms = ms_since(t);
         let budget = cli.ram_budget.saturating_mul(1 << 20);
         // The RAM selection reaches further than the VRAM pool's (3 tiles ahead per level), so
         // what the GPU wants next is already in RAM (seed 004 sec 4.3).
@@ -160,7 +155,8 @@ impl FlyoverScenario {
                 name: "flyover",
                 source,
                 load_ms,
-                initial_normals_ms,
+                // The overview shades from the heights: no normal map on the CPU.
+                initial_normals_ms: 0.0,
                 heights: Some(built_from.unwrap_or_else(|| {
                     super::heightmap::HeightsInfo::of_encoding(
                         overview.encoding(),
@@ -178,7 +174,6 @@ impl FlyoverScenario {
             texel_size: manifest.texel_size,
             extent,
             overview,
-            normals,
             start: extent * 0.3,
             heading: Vec2::new(1.0, 0.6).normalize(),
             speed: cli.speed,
@@ -546,10 +541,6 @@ impl Scenario for FlyoverScenario {
         Ok(())
     }
 
-    fn normals(&self) -> &DerivativeMap {
-        &self.normals
-    }
-
     fn overlay(&self, overview: &Image) -> Option<Image> {
         let pool = self.pool.as_ref()?;
         let statuses = pool.statuses();
@@ -602,9 +593,6 @@ impl Scenario for FlyoverScenario {
                 &placement,
                 Blend::Add,
             )?);
-            for r in &dirty {
-                self.normals.update_rect(&self.overview, *r)?;
-            }
             self.pending.push(PendingStamp {
                 placement,
                 tiles: [0; 4],

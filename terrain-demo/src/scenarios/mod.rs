@@ -19,7 +19,7 @@ use crate::timings::Timings;
 use anyhow::Result;
 use glam::UVec2;
 use std::time::Instant;
-use terrain_core::{CoarseMap, DerivativeMap, DirtyRect};
+use terrain_core::{CoarseMap, DirtyRect};
 
 pub use stamp_script::{FramePlan, StampKind};
 pub use stamps::{DETAIL_REFINE, DETAIL_TILE};
@@ -67,7 +67,8 @@ pub struct ScenarioInfo {
     pub source: String,
     /// Milliseconds to generate or load the terrain.
     pub load_ms: f64,
-    /// Milliseconds to compute the first full normal map.
+    /// Milliseconds to compute the first full normal map on the CPU (0 where the scenario keeps
+    /// none: its normals live on the GPU, and the overview shades from the heights).
     pub initial_normals_ms: f64,
     /// The terrain's heights (encoding, heightmap read, nodata), where the scenario knows them.
     pub heights: Option<heightmap::HeightsInfo>,
@@ -113,9 +114,6 @@ pub trait Scenario {
     /// The terrain as the CPU holds it, current after every [`Scenario::advance`]: written as
     /// `terrain.png` / `terrain_final.png`, shown in the overview, uploaded to the GPU scene.
     fn map(&self) -> &CoarseMap;
-
-    /// The normals of [`Scenario::map`], current wherever a frame's `dirty` rects changed it.
-    fn normals(&self) -> &DerivativeMap;
 
     /// Uploads what the scenario needs on the GPU beyond the map (stamps, colours, a granular
     /// map to deform there); once, when the run has a GPU.

@@ -19,7 +19,7 @@ use crate::usage_error::{UsageExt, usage};
 use anyhow::Result;
 use glam::{UVec2, Vec2};
 use std::time::Instant;
-use terrain_core::{CoarseMap, DerivativeMap, Rect, bilinear};
+use terrain_core::{CoarseMap, Rect, bilinear};
 use terrain_physics::CollisionMirror;
 
 /// Side of the snow field in texels by default (25.6 m at 0.05 m).
@@ -32,7 +32,6 @@ pub struct SnowScenario {
     field: SnowField,
     /// The field's heights as a coarse-map, kept equal to the simulation's over the active areas.
     coarse: CoarseMap,
-    normals: DerivativeMap,
     /// Collision reads the field directly (it is deformed on the CPU: no readback needed).
     mirror: CollisionMirror,
     rig: CameraRig,
@@ -55,9 +54,6 @@ impl SnowScenario {
         let field = SnowField::new(size, cli.seed, params.granular).usage()?;
         let coarse = field.coarse_map()?;
         let load_ms = ms_since(t);
-        let t = Instant::now();
-        let normals = DerivativeMap::from_map(&coarse);
-        let initial_normals_ms = ms_since(t);
         let mirror = CollisionMirror::from_map(&coarse)?;
         let start = Vec2::new(coarse.extent_m().x * 0.45, 0.5);
         let rig = CameraRig::new(
@@ -71,7 +67,8 @@ impl SnowScenario {
                 name: "snow",
                 source: "procedural snow field".into(),
                 load_ms,
-                initial_normals_ms,
+                // The overview shades from the heights: no normal map on the CPU.
+                initial_normals_ms: 0.0,
                 heights: Some(super::heightmap::HeightsInfo::of_encoding(
                     coarse.encoding(),
                     super::heightmap::stored_range(&coarse),
@@ -81,7 +78,6 @@ impl SnowScenario {
             },
             field,
             coarse,
-            normals,
             mirror,
             rig,
             gpu_removed: 0,
@@ -97,10 +93,6 @@ impl Scenario for SnowScenario {
 
     fn map(&self) -> &CoarseMap {
         &self.coarse
-    }
-
-    fn normals(&self) -> &DerivativeMap {
-        &self.normals
     }
 
     fn prepare_gpu(&mut self, scene: &mut GpuScene) -> Result<()> {
@@ -124,7 +116,6 @@ impl Scenario for SnowScenario {
             for (rect, heights) in scene.drain_granular()? {
                 self.field.write_region(rect, &heights)?;
                 self.field.copy_to_coarse(&mut self.coarse, rect)?;
-                self.normals.update_rect(&self.coarse, rect)?;
             }
         }
         Ok(FinishStats::default())
@@ -174,13 +165,6 @@ impl Scenario for SnowScenario {
         let eye = self.rig.eye();
         let camera_clearance_m = eye.y - bilinear(&self.coarse, Vec2::new(eye.x, eye.z))?;
         ctx.timings.add(Step::Physics, ms_since(t));
-
-        ctx.timings.time(Step::Overview, || -> Result<()> {
-            for rect in &dirty {
-                self.normals.update_rect(&self.coarse, *rect)?;
-            }
-            Ok(())
-        })?;
         Ok(FrameOutcome {
             camera,
             camera_clearance_m,
@@ -218,7 +202,5 @@ mod tests {
         let full = snow.field.coarse_map().unwrap();
         assert_eq!(snow.coarse.grid(), full.grid());
         assert_eq!(snow.mirror.snapshot().heights(), full.grid());
-        let normals = DerivativeMap::from_map(&full);
-        assert_eq!(snow.normals.grid(), normals.grid());
     }
 }

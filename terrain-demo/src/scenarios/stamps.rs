@@ -41,6 +41,8 @@ pub struct StampScenario {
     /// regions straight from it (with a GPU they come from the GPU map, and this map only
     /// follows the stamps for the overview).
     cpu: CpuRegionSource,
+    /// The CPU map's normals, regenerated where it is deformed: without a GPU only (the CPU
+    /// path does the GPU's work once; with a GPU the normals live there).
     normals: DerivativeMap,
     mirror: CollisionMirror,
     scheduler: ReadbackScheduler,
@@ -60,6 +62,9 @@ pub const DETAIL_REFINE: u32 = 3;
 /// the camera's tile and its neighbours on the camera's side, so the detail reaches at least
 /// two thirds of a tile (22 m) in every direction: the demo fades it out by then.
 pub const DETAIL_TILE: u32 = 1024;
+
+/// How long the end of a run waits for the GPU's last regions to come back.
+const FLUSH_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(60);
 
 /// Samples the detail cache uploads per frame at most: the nine tiles of a band.
 const DETAIL_UPLOAD_BUDGET: u64 = 9 * (DETAIL_TILE as u64) * (DETAIL_TILE as u64);
@@ -200,7 +205,15 @@ impl Scenario for StampScenario {
         &self.info
     }
 
-    fn finish(&mut self, _gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
+    fn finish(&mut self, gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
+        // The GPU's last deformations come back (quiet gap or not) into the mirror and the
+        // CPU's map, so `terrain_final.png` is the GPU's map.
+        if let Some(scene) = gpu {
+            let report = scene.flush_collision(&mut self.scheduler, &self.mirror, FLUSH_TIMEOUT)?;
+            for rect in &report.applied_rects {
+                self.mirror.copy_into(*rect, self.cpu.map_mut())?;
+            }
+        }
         // The detail tiles still in RAM and deformed are written back: every footprint is on
         // disk when the run ends.
         let written = match self.detail.as_mut() {
@@ -214,10 +227,6 @@ impl Scenario for StampScenario {
 
     fn map(&self) -> &CoarseMap {
         self.cpu.map()
-    }
-
-    fn normals(&self) -> &DerivativeMap {
-        &self.normals
     }
 
     fn prepare_gpu(&mut self, scene: &mut GpuScene) -> Result<()> {
@@ -258,10 +267,15 @@ impl Scenario for StampScenario {
             .filter_map(|(id, _)| self.requested_at.remove(id))
             .map(ms_since)
             .reduce(f64::max);
+        // With a GPU the CPU's map is the GPU's as read back: the regions that arrived in the
+        // mirror are copied into it (the overview, `terrain_final.png`). It is never stamped.
+        if ctx.gpu.is_some() {
+            for rect in &report.applied_rects {
+                self.mirror.copy_into(*rect, self.cpu.map_mut())?;
+            }
+        }
         ctx.timings.add(Step::Physics, ms_since(t));
 
-        // The stamps: on the GPU map (rendered, read back for collision) and on the CPU map
-        // (the overview; and without a GPU, the source of the collision readbacks).
         // The detail tiles: the camera's band, the tiles this frame's footprints stamp and the
         // walker's (it stands on them), then the GPU's slots follow.
         if let Some(cache) = self.detail.as_mut() {
@@ -277,47 +291,46 @@ impl Scenario for StampScenario {
                 scene.stream_detail(cache, &frame, ctx.timings)?;
             }
         }
-        if let Some(scene) = ctx.gpu.as_deref_mut() {
-            for (i, rect) in scene.deform(&plan, self.script.crater(), ctx.timings)? {
-                let bound = StampScript::bound(&plan.deformations[i], encoding)?;
-                self.scheduler.note_deformation(rect, bound, now)?;
-            }
-        }
-        // Beside a GPU this is the mirror behind the overview and `terrain_final.png` (one
-        // step); without one it is the deformation itself, timed as stamps and normals like the
-        // GPU's. Footprints go into the detail cache either way, so that what they spill into
-        // the coarse-map reaches this map too.
-        let (stamp_step, normals_step) = if ctx.gpu.is_some() {
-            (Step::CpuMirror, Step::CpuMirror)
-        } else {
-            (Step::StampCpu, Step::NormalsCpu)
-        };
-        let target = match self.detail.as_mut() {
-            None => DetailTarget::None,
-            Some(cache) => DetailTarget::Cpu(cache),
-        };
-        let (dirty_by_deformation, cpu_detail_texels) = ctx.timings.time(stamp_step, || {
-            self.script.apply_cpu(self.cpu.map_mut(), &mut plan, target)
-        })?;
-        ctx.timings.time(normals_step, || -> Result<()> {
-            for rect in dirty_by_deformation.iter().flatten() {
-                self.normals.update_rect(self.cpu.map(), *rect)?;
-            }
-            Ok(())
-        })?;
-        // The GPU's detail stamps are the truth: their rects come back into the cache over the
-        // CPU's (which differ by a unit at most).
-        if let (Some(scene), Some(cache)) = (ctx.gpu.as_deref_mut(), self.detail.as_mut()) {
-            scene.read_back_detail(cache, ctx.timings)?;
-        }
-        if ctx.gpu.is_none() {
-            for (d, rects) in plan.deformations.iter().zip(&dirty_by_deformation) {
-                let bound = StampScript::bound(d, encoding)?;
-                for rect in rects {
+        // The deformations, applied once: on the GPU when there is one (its stamped detail
+        // rects read back into the cache, its coarse rects reaching the CPU's map through the
+        // collision readback), else on the CPU map and the cache.
+        let (deformed, dirty, cpu_detail_texels) = match ctx.gpu.as_deref_mut() {
+            Some(scene) => {
+                let rects = scene.deform(&plan, self.script.crater(), ctx.timings)?;
+                for (i, rect) in &rects {
+                    let bound = StampScript::bound(&plan.deformations[*i], encoding)?;
                     self.scheduler.note_deformation(*rect, bound, now)?;
                 }
+                if let Some(cache) = self.detail.as_mut() {
+                    scene.read_back_detail(cache, ctx.timings)?;
+                }
+                let deformed: Vec<_> = rects.into_iter().map(|(_, r)| r).collect();
+                (deformed, report.applied_rects, 0)
             }
-        }
+            None => {
+                let target = match self.detail.as_mut() {
+                    None => DetailTarget::None,
+                    Some(cache) => DetailTarget::Cpu(cache),
+                };
+                let (by_deformation, detail_texels) = ctx.timings.time(Step::StampCpu, || {
+                    self.script.apply_cpu(self.cpu.map_mut(), &mut plan, target)
+                })?;
+                ctx.timings.time(Step::NormalsCpu, || -> Result<()> {
+                    for rect in by_deformation.iter().flatten() {
+                        self.normals.update_rect(self.cpu.map(), *rect)?;
+                    }
+                    Ok(())
+                })?;
+                for (d, rects) in plan.deformations.iter().zip(&by_deformation) {
+                    let bound = StampScript::bound(d, encoding)?;
+                    for rect in rects {
+                        self.scheduler.note_deformation(*rect, bound, now)?;
+                    }
+                }
+                let deformed: Vec<_> = by_deformation.into_iter().flatten().collect();
+                (deformed.clone(), deformed, detail_texels)
+            }
+        };
 
         // The camera: a body on the mirror, kept above pending deformations by their bounds.
         let t = Instant::now();
@@ -337,7 +350,6 @@ impl Scenario for StampScenario {
         let camera_clearance_m = eye.y - bilinear(map, Vec2::new(eye.x, eye.z))?;
         ctx.timings.add(Step::Physics, ms_since(t));
 
-        let dirty: Vec<_> = dirty_by_deformation.into_iter().flatten().collect();
         // The GPU's figures where it holds the tiles, else the CPU layer's.
         let detail = self.detail.as_ref().map(|cache| {
             match ctx.gpu.as_deref().and_then(|scene| scene.detail_stats()) {
@@ -352,7 +364,7 @@ impl Scenario for StampScenario {
                 footprints: plan.count(StampKind::Footprint),
                 craters: plan.count(StampKind::Crater),
                 shockwaves: plan.count(StampKind::Shockwave),
-                dirty_texels: dirty.iter().map(|r| r.area()).sum(),
+                dirty_texels: deformed.iter().map(|r| r.area()).sum(),
                 readback_ms,
                 detail_tiles_resident: detail.map(|d| d.0),
                 detail_dirty_texels: detail.map(|d| d.1),
@@ -360,5 +372,103 @@ impl Scenario for StampScenario {
             },
             dirty,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenarios::FrameContext;
+    use crate::timings::Timings;
+    use clap::Parser;
+
+    /// The GPU scene for `scenario` as the driver opens it, or `None` (skipped) without an
+    /// adapter unless `TERRAIN_REQUIRE_GPU=1`, where its absence fails the test.
+    fn gpu_scene(scenario: &mut StampScenario, test: &str) -> Option<GpuScene> {
+        match GpuScene::new(scenario.map(), glam::UVec2::new(64, 48), 16) {
+            Ok(mut scene) => {
+                scenario.prepare_gpu(&mut scene).expect("prepare");
+                Some(scene)
+            }
+            Err(e) if std::env::var("TERRAIN_REQUIRE_GPU").is_ok_and(|v| v == "1") => {
+                panic!("{test}: TERRAIN_REQUIRE_GPU=1 but no GPU: {e:#}")
+            }
+            Err(e) => {
+                eprintln!("skipping {test}: {e:#}");
+                None
+            }
+        }
+    }
+
+    /// With a GPU the deformations are applied there only: the CPU's map changes only when a
+    /// readback arrives, never on the frame that deforms (a stamp applied to it would change
+    /// it at once), and after the run's flush it is the GPU's map, bit for bit. With
+    /// `--detail`, the footprints' detail texels come back from the GPU as well.
+    #[test]
+    fn with_a_gpu_the_cpu_map_is_never_deformed_only_read_back() {
+        for detail in ["none", "refine"] {
+            let cli =
+                Cli::try_parse_from(["demo", "--size", "128", "--seed", "3", "--detail", detail])
+                    .expect("flags");
+            let params = DemoParams::default();
+            let mut scenario = StampScenario::new(&cli, &params).expect("scenario");
+            let Some(mut scene) = gpu_scene(&mut scenario, "cpu_map_is_only_read_back") else {
+                return;
+            };
+            let start = scenario.map().clone();
+            let t0 = Instant::now();
+            let mut timings = Timings::default();
+            let mut deformed = 0;
+            let mut frame = 0;
+            // Frames until something was deformed on the GPU; until a readback arrives (the
+            // quiet gap passes one frame later) the CPU's map must not have moved.
+            while deformed == 0 {
+                let out = scenario
+                    .advance(&mut FrameContext {
+                        now: t0 + std::time::Duration::from_secs_f64(frame as f64 * FRAME_DT),
+                        gpu: Some(&mut scene),
+                        timings: &mut timings,
+                    })
+                    .expect("frame");
+                deformed = out.stats.dirty_texels + out.stats.detail_dirty_texels.unwrap_or(0);
+                assert!(out.dirty.is_empty(), "{detail}: nothing read back yet");
+                assert_eq!(
+                    scenario.map(),
+                    &start,
+                    "{detail}: frame {frame} stamped the CPU map"
+                );
+                frame += 1;
+                assert!(frame < 30, "{detail}: no deformation in 30 frames");
+            }
+            for _ in 0..20 {
+                let now = t0 + std::time::Duration::from_secs_f64(frame as f64 * FRAME_DT);
+                scenario
+                    .advance(&mut FrameContext {
+                        now,
+                        gpu: Some(&mut scene),
+                        timings: &mut timings,
+                    })
+                    .expect("frame");
+                frame += 1;
+            }
+            scenario.finish(Some(&mut scene)).expect("finish");
+            let gpu_map = scene.read_map().expect("download");
+            assert_ne!(
+                gpu_map.grid(),
+                start.grid(),
+                "{detail}: the GPU map was deformed"
+            );
+            assert_eq!(
+                scenario.map().grid(),
+                gpu_map.grid(),
+                "{detail}: CPU map != GPU map"
+            );
+            for step in ["stamp_cpu", "normals_cpu"] {
+                assert!(
+                    !timings.wall_by_name().contains_key(step),
+                    "{detail}: {step} ran beside the GPU"
+                );
+            }
+        }
     }
 }
