@@ -461,6 +461,40 @@ fn pad_clamped(grid: &mut Grid<u16>, valid: UVec2) {
     }
 }
 
+/// The rounded mean of a 2x2 block: how each level's sample comes from the four below it.
+fn mean4(a: u16, b: u16, c: u16, d: u16) -> u16 {
+    let s = u32::from(a) + u32::from(b) + u32::from(c) + u32::from(d);
+    ((s + 2) / 4) as u16
+}
+
+/// `grid` (level-0 heights of a block aligned to `2^levels` texels, sides multiples of it)
+/// reduced `levels` times by the 2x2 rounded mean the pyramid is built with: the samples that
+/// block has at level `levels` of the world, bit for bit. How an overview of a coarser level
+/// follows a level-0 change without reloading tiles.
+///
+/// Fails on `levels` above 15 or sides that are not multiples of `2^levels`.
+pub fn reduce_levels(grid: &Grid<u16>, levels: u32) -> Result<Grid<u16>, CacheError> {
+    let fits = |s: u32| grid.width().is_multiple_of(s) && grid.height().is_multiple_of(s);
+    if !(levels <= 15 && fits(1 << levels)) {
+        return Err(CacheError::Core(terrain_core::CoreError::OutOfRange {
+            what: "levels a block is reduced by",
+            value: f64::from(levels),
+            expected: "at most 15, with the block's sides multiples of 2^levels",
+        }));
+    }
+    let mut cur = grid.clone();
+    for _ in 0..levels {
+        let (w, h) = (cur.width() / 2, cur.height() / 2);
+        let next = Grid::from_fn(w, h, |x, y| {
+            let (r0, r1) = (cur.row(2 * y), cur.row(2 * y + 1));
+            let (i, j) = (2 * x as usize, 2 * x as usize + 1);
+            mean4(r0[i], r0[j], r1[i], r1[j])
+        })?;
+        cur = next;
+    }
+    Ok(cur)
+}
+
 /// The parent tile from its (up to four) children: 2x2 mean into each quadrant, then clamped
 /// padding beyond the parent level's size.
 fn reduce_children(m: &Manifest, id: TileId, children: &[Option<Node>; 4]) -> Node {
@@ -478,11 +512,7 @@ fn reduce_children(m: &Manifest, id: TileId, children: &[Option<Node>; 4]) -> No
             let r1 = c.grid.row(2 * j + 1);
             let dst = &mut out[((qy + j) * ts + qx) as usize..][..half as usize];
             for (i, d) in dst.iter_mut().enumerate() {
-                let s = u32::from(r0[2 * i])
-                    + u32::from(r0[2 * i + 1])
-                    + u32::from(r1[2 * i])
-                    + u32::from(r1[2 * i + 1]);
-                *d = ((s + 2) / 4) as u16;
+                *d = mean4(r0[2 * i], r0[2 * i + 1], r1[2 * i], r1[2 * i + 1]);
             }
         }
     }

@@ -65,6 +65,7 @@ pub mod manifest;
 pub mod object;
 pub mod store;
 pub mod tile;
+pub mod tile_stamps;
 pub mod world;
 
 pub use error::CacheError;
@@ -73,11 +74,12 @@ pub use manifest::{DetailLayout, Manifest, tile_key};
 pub use object::ObjectTileStore;
 pub use store::{FsStore, TileStore};
 pub use tile::{Layer, TileData, TileId};
+pub use tile_stamps::{TileDeformer, TileStampError, TileStampReport, TileStamps};
 pub use world::{LevelBounds, TileRead, World};
 pub mod build;
 pub use build::{
     BuildProgress, BuildReport, MapSource, ProceduralSource, Raw16Source, TileSource, build_world,
-    rebuild_ancestors,
+    rebuild_ancestors, reduce_levels,
 };
 pub mod policy;
 pub mod pool;

@@ -296,7 +296,9 @@ pub struct FrameStats {
     pub craters: u32,
     /// Shockwave stamps this frame.
     pub shockwaves: u32,
-    /// Texels inside the rects the frame deformed (stamps, or granular active areas).
+    /// Texels inside the rects the frame deformed (stamps, or granular active areas). With a
+    /// GPU, a spilling footprint's rects count whether or not its spill moved a texel (the GPU
+    /// does not say; they are read back and their normals rebuilt either way).
     pub dirty_texels: u64,
     /// On frames where a collision readback landed: milliseconds from its request to its
     /// application (the longest, if several landed).

@@ -189,7 +189,11 @@ fn reports_of_every_scenario_validate_against_the_schema() {
                     assert!(f["timings_ms"]["detail"].as_f64().is_some(), "frame {i}");
                 }
             }
-            assert_eq!(r["frames"][0]["dirty_texels"], 0);
+            // On the CPU the spill knows it moved nothing; the GPU reports the rects its spill
+            // may have changed (it does not count texels), so only the CPU run is exact here.
+            if args.contains(&"--no-gpu") {
+                assert_eq!(r["frames"][0]["dirty_texels"], 0);
+            }
         }
         let bad = violations(&validator, &r);
         assert!(

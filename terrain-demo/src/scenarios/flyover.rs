@@ -3,19 +3,21 @@
 //! path. terrain-cache's `RamPool` streams the tiles around the camera on worker threads and,
 //! with a GPU, its `VramPool` keeps the nearest in the atlas the frame is drawn from.
 //!
-//! A crater changes every level-0 tile it touches: on the GPU where the tile is in the atlas
-//! (stamped in its slot, the changed rect read back into the RAM tile; the VRAM pool holds the
-//! slot and the RAM pool pins the tile until it arrives), else on the CPU in RAM. Changed
-//! tiles are written back into the world (atomically, off the frame thread) when evicted and
-//! at the end, so a second run starts from the deformed world.
+//! A crater changes every level-0 tile it touches, through terrain-cache's `TileStamps`: on the
+//! GPU where the tile is in the atlas (stamped in its slot, the changed rect read back into the
+//! RAM tile; the VRAM pool holds the slot and the RAM pool pins the tile until it arrives),
+//! else on the CPU in RAM. Changed tiles are written back into the world (atomically, off the
+//! frame thread) when evicted and at the end, so a second run starts from the deformed world.
 //!
 //! Collision follows the camera: a `CollisionWindow` of [`COLLISION_WINDOW`] texels filled from
 //! the RAM pool (coarser data where a level-0 tile is not loaded yet, refilled when it is)
 //! and updated by every crater's changed rects; the camera's ground is read from it.
 //!
 //! The overview shows an overview level of the world (the level whose side is at most
-//! [`OVERVIEW_MAX`] texels) kept current with the same craters, with the cache's tile states
-//! and the camera's view over it.
+//! [`OVERVIEW_MAX`] texels), with the cache's tile states and the camera's view over it. It is
+//! never stamped: each level-0 rect that changed in RAM (stamped there, or read back from the
+//! GPU) is reduced to the overview level as the pyramid is built (`reduce_levels`), and at the
+//! end it is reloaded from the world.
 
 use super::tile_overlay;
 use super::world_files;
@@ -28,11 +30,11 @@ use crate::timings::{Step, ms_since};
 use crate::usage_error::usage;
 use anyhow::{Result, bail};
 use glam::{IVec2, UVec2, Vec2, Vec3};
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
 use std::time::{Duration, Instant};
 use terrain_cache::{
-    CameraState, Layer, Manifest, PoolConfig, RamPool, SphericalSelection, TileGrid, TileId,
-    VramConfig, VramPool, World,
+    CameraState, Layer, Manifest, PoolConfig, RamPool, SphericalSelection, TileDeformer, TileGrid,
+    TileId, TileStamps, VramConfig, VramPool, World, reduce_levels,
 };
 use terrain_core::{
     Blend, CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, WrapMode, apply_stamp,
@@ -56,13 +58,6 @@ pub const COLLISION_WINDOW: u32 = 512;
 /// How long the end of the run may wait for the last write-backs.
 const SHUTDOWN_TIMEOUT: Duration = Duration::from_secs(60);
 
-/// A crater waiting for the level-0 tiles it touches to be resident.
-#[derive(Debug, Clone, Copy)]
-struct PendingStamp {
-    placement: StampPlacement,
-    tiles: [u32; 4],
-}
-
 /// The flyover scenario.
 #[derive(Debug)]
 pub struct FlyoverScenario {
@@ -77,23 +72,21 @@ pub struct FlyoverScenario {
     /// The world's extent in metres.
     extent: Vec2,
     overview: CoarseMap,
+    /// The world level the overview shows.
+    overview_level: u32,
     /// Path: start, unit heading, speed (m/s).
     start: Vec2,
     heading: Vec2,
     speed: f32,
     frame: u32,
     gauss: GaussianStamp,
-    /// Craters not yet applied to every tile they touch.
-    pending: Vec<PendingStamp>,
-    /// A tile-sized map the craters are applied through.
-    scratch: CoarseMap,
+    /// Craters on their way into every level-0 tile they touch.
+    stamps: TileStamps<()>,
     written_back: u64,
     /// Collision around the camera.
     window: CollisionWindow,
     /// Level-0 tiles in the window filled from coarser data (refilled once loaded).
     window_coarse: HashSet<TileId>,
-    /// Rects of tiles stamped on the GPU on their way back: ticket -> (tile, rect in it).
-    in_flight: HashMap<u64, (TileId, Rect)>,
     /// Tile stamps done on the GPU and on the CPU so far.
     gpu_tile_stamps: u64,
     cpu_tile_stamps: u64,
@@ -138,12 +131,6 @@ impl FlyoverScenario {
         )?;
         let extent = manifest.world_size.as_vec2() * manifest.texel_size;
         let tile = manifest.tile_size;
-        let scratch = CoarseMap::new(
-            Grid::new(tile, tile, 0u16)?,
-            manifest.encoding,
-            manifest.texel_size,
-            WrapMode::Clamp,
-        )?;
         let window = CollisionWindow::new(
             COLLISION_WINDOW,
             manifest.world_size,
@@ -174,17 +161,16 @@ impl FlyoverScenario {
             texel_size: manifest.texel_size,
             extent,
             overview,
+            overview_level,
             start: extent * 0.3,
             heading: Vec2::new(1.0, 0.6).normalize(),
             speed: cli.speed,
             frame: 0,
             gauss: GaussianStamp::default(),
-            pending: Vec::new(),
-            scratch,
+            stamps: TileStamps::new(&manifest)?,
             written_back: 0,
             window,
             window_coarse: HashSet::new(),
-            in_flight: HashMap::new(),
             gpu_tile_stamps: 0,
             cpu_tile_stamps: 0,
             last_camera: None,
@@ -250,154 +236,57 @@ impl FlyoverScenario {
         missing
     }
 
-    /// The level-0 tiles a crater's footprint touches.
-    fn tiles_of(&self, placement: &StampPlacement) -> Result<Vec<TileId>> {
-        let footprint = placement.footprint(self.texel_size)?;
-        let Some(rect) = footprint.intersect(&Rect::from_size(self.manifest.world_size)) else {
+    /// Hands the rects of GPU-stamped tiles that arrived to the RAM pool through the tile
+    /// stamps (the tile becomes dirty and is written back; its hold and pin end) and to the
+    /// collision window; returns them in world texels.
+    fn take_tile_readbacks(&mut self, scene: &mut GpuScene, wait: bool) -> Result<Vec<Rect>> {
+        let mut arrived = Vec::new();
+        for (ticket, rect, heights) in scene.tile_readbacks(wait)? {
+            let Some(pool) = self.pool.as_mut() else {
+                bail!("the flyover's pool was shut down");
+            };
+            let (_, world) = self.stamps.receive::<anyhow::Error>(
+                pool,
+                self.vram.as_mut(),
+                ticket,
+                rect,
+                &heights,
+            )?;
+            self.window.apply(world, &heights)?;
+            arrived.push(world);
+        }
+        Ok(arrived)
+    }
+
+    /// Brings the overview level with the level-0 rects `changed` (world texels) in RAM: each
+    /// rect grown to whole overview texels is reduced from the RAM pool's level 0, as the
+    /// pyramid is built. Returns the overview rects redrawn. (A block reaching a tile not in
+    /// RAM reads its coarser stand-in there; the overview is reloaded from the world at the
+    /// end.)
+    fn update_overview(&mut self, changed: &[Rect]) -> Result<Vec<DirtyRect>> {
+        let Some(pool) = self.pool.as_ref() else {
             return Ok(Vec::new());
         };
-        let ts = self.tile_size as i32;
-        let (lo, hi) = (rect.min / ts, (rect.max() - IVec2::ONE) / ts);
-        let mut ids = Vec::new();
-        for ty in lo.y..=hi.y {
-            for tx in lo.x..=hi.x {
-                ids.push(TileId::new(0, tx as u32, ty as u32));
-            }
-        }
-        Ok(ids)
-    }
-
-    /// A crater's placement in the frame of level-0 tile `id`.
-    fn local_placement(&self, placement: &StampPlacement, id: TileId) -> StampPlacement {
-        let origin = Vec2::new(id.x as f32, id.y as f32) * self.tile_size as f32 * self.texel_size;
-        StampPlacement {
-            center: placement.center - origin,
-            ..*placement
-        }
-    }
-
-    /// Applies `stamp` to every resident level-0 tile it touches that it has not changed yet:
-    /// on the GPU where the tile is in the atlas (and in RAM, to take the readback), else on
-    /// the CPU where it is in RAM. Returns whether all of them are done.
-    fn apply_to_tiles(
-        &mut self,
-        stamp: &mut PendingStamp,
-        mut gpu: Option<&mut GpuScene>,
-        timings: &mut crate::timings::Timings,
-    ) -> Result<bool> {
-        let mut all = true;
-        // (A crater is at most a tile wide, so it touches at most 4 tiles.)
-        for (bit, id) in self
-            .tiles_of(&stamp.placement)?
-            .into_iter()
-            .enumerate()
-            .take(128)
-        {
-            if stamp.is_done(bit) {
+        let step = 1i32 << self.overview_level;
+        // Whole overview texels inside the world only (a last partial one is left as loaded).
+        let full = (self.manifest.world_size.as_ivec2() / step) * step;
+        let mut redrawn = Vec::new();
+        for r in changed {
+            let lo = r.min.div_euclid(IVec2::splat(step)) * step;
+            let hi = ((r.max() + IVec2::splat(step - 1)).div_euclid(IVec2::splat(step)) * step)
+                .min(full);
+            if hi.cmple(lo).any() {
                 continue;
             }
-            let local = self.local_placement(&stamp.placement, id);
-            let Some(pool) = self.pool.as_mut() else {
-                bail!("the flyover's pool was shut down");
-            };
-            if pool.tile(id).is_none() {
-                all = false;
-                continue;
-            }
-            // Held before the stamp: a held slot is current and stays in place until every
-            // rect of the stamp is back in RAM.
-            let held = match (gpu.is_some(), self.vram.as_mut()) {
-                (true, Some(v)) => v.hold(id),
-                _ => None,
-            };
-            if let (Some(slot), Some(scene)) = (held, gpu.as_deref_mut()) {
-                let tile = TileSlot { slot, level: 0 };
-                let t = Instant::now();
-                let stamped = scene.stamp_tile(tile, local, &self.gauss, timings)?;
-                self.gpu_stamp_ms += ms_since(t);
-                let version = pool.generation(id);
-                let Some(tickets) = stamped else {
-                    // The readback ring is full: next frame (the slot was not changed).
-                    if let Some(v) = self.vram.as_mut() {
-                        v.release(id, version);
-                    }
-                    all = false;
-                    continue;
-                };
-                // One hold and one pin per rect on its way back (the first hold is taken).
-                if let Some(v) = self.vram.as_mut() {
-                    if tickets.is_empty() {
-                        v.release(id, version);
-                    }
-                    for _ in 1..tickets.len() {
-                        v.hold(id);
-                    }
-                }
-                for (ticket, rect) in tickets {
-                    pool.pin(id);
-                    self.in_flight.insert(ticket, (id, rect));
-                }
-                self.gpu_tile_stamps += 1;
-            } else {
-                let (scratch, gauss) = (&mut self.scratch, &mut self.gauss);
-                let changed = pool.modify(id, |tile| -> Result<Vec<(Rect, Grid<u16>)>> {
-                    let Some(grid) = tile.as_u16_mut() else {
-                        return Ok(Vec::new());
-                    };
-                    if grid.size() != scratch.size() {
-                        return Ok(Vec::new());
-                    }
-                    scratch
-                        .grid_mut()
-                        .as_mut_slice()
-                        .copy_from_slice(grid.as_slice());
-                    let rects = apply_stamp(scratch, gauss, &local, Blend::Add)?;
-                    grid.as_mut_slice()
-                        .copy_from_slice(scratch.grid().as_slice());
-                    rects
-                        .into_iter()
-                        .map(|r| Ok((r, grid.copy_rect(r)?)))
-                        .collect()
-                })??;
-                for (rect, heights) in changed {
-                    self.window.apply(self.world_rect(id, rect), &heights)?;
-                }
-                self.cpu_tile_stamps += 1;
-            }
-            stamp.mark_done(bit);
+            let block = Rect::from_min_max(lo.max(IVec2::ZERO), hi);
+            let mut level0 = Grid::new(block.size.x, block.size.y, 0u16)?;
+            pool.read_region(block, &mut level0)?;
+            let reduced = reduce_levels(&level0, self.overview_level)?;
+            let at = block.min / step;
+            self.overview.grid_mut().paste(&reduced, at)?;
+            redrawn.push(Rect::new(at, reduced.size()));
         }
-        Ok(all)
-    }
-
-    /// `rect` of level-0 tile `id` in world texels.
-    fn world_rect(&self, id: TileId, rect: Rect) -> Rect {
-        let origin = UVec2::new(id.x, id.y) * self.tile_size;
-        Rect::new(rect.min + origin.as_ivec2(), rect.size)
-    }
-
-    /// Hands the rects of GPU-stamped tiles that arrived to the RAM pool (the tile becomes
-    /// dirty and is written back) and the collision window, and ends their holds.
-    fn take_tile_readbacks(&mut self, scene: &mut GpuScene, wait: bool) -> Result<()> {
-        for (ticket, rect, heights) in scene.tile_readbacks(wait)? {
-            let Some((id, asked)) = self.in_flight.remove(&ticket) else {
-                bail!("a tile readback nobody asked for (ticket {ticket})");
-            };
-            if asked != rect {
-                bail!("tile {id}: asked for {asked:?}, got {rect:?}");
-            }
-            let Some(pool) = self.pool.as_mut() else {
-                bail!("the flyover's pool was shut down");
-            };
-            // Pinned since the stamp, so still loaded.
-            pool.write_rect(id, rect, &heights)?;
-            let version = pool.generation(id);
-            pool.unpin(id);
-            if let Some(v) = self.vram.as_mut() {
-                v.release(id, version);
-            }
-            self.window.apply(self.world_rect(id, rect), &heights)?;
-        }
-        Ok(())
+        Ok(redrawn)
     }
 
     /// Moves the collision window with the camera, filling what comes into it from the RAM
@@ -432,7 +321,9 @@ impl FlyoverScenario {
             .collect();
         for id in ready {
             self.window_coarse.remove(&id);
-            let rect = self.world_rect(id, Rect::from_size(UVec2::splat(ts)));
+            let rect = self
+                .stamps
+                .world_rect(id, Rect::from_size(UVec2::splat(ts)));
             let coarse = &mut self.window_coarse;
             self.window
                 .refresh(rect, |r, out| -> Result<(), terrain_cache::CacheError> {
@@ -452,13 +343,42 @@ impl FlyoverScenario {
     }
 }
 
-impl PendingStamp {
-    fn is_done(&self, bit: usize) -> bool {
-        self.tiles[bit / 32] & (1 << (bit % 32)) != 0
+/// The flyover's craters on one level-0 tile: in its atlas slot on the GPU (the scene reads
+/// the changed rects back), or in RAM on the CPU.
+struct Craters<'a> {
+    gauss: &'a mut GaussianStamp,
+    scene: Option<&'a mut GpuScene>,
+    timings: &'a mut crate::timings::Timings,
+    /// Milliseconds spent in GPU stamp submits (timed as their own step, not cache work).
+    gpu_ms: f64,
+}
+
+impl TileDeformer<()> for Craters<'_> {
+    type Error = anyhow::Error;
+
+    fn stamp_slot(
+        &mut self,
+        slot: u32,
+        _: &(),
+        placement: &StampPlacement,
+    ) -> Result<Option<Vec<(u64, Rect)>>> {
+        let Some(scene) = self.scene.as_deref_mut() else {
+            return Ok(None);
+        };
+        let t = Instant::now();
+        let tile = TileSlot { slot, level: 0 };
+        let stamped = scene.stamp_tile(tile, *placement, self.gauss, self.timings);
+        self.gpu_ms += ms_since(t);
+        stamped
     }
 
-    fn mark_done(&mut self, bit: usize) {
-        self.tiles[bit / 32] |= 1 << (bit % 32);
+    fn stamp_ram(
+        &mut self,
+        _: &(),
+        tile: &mut CoarseMap,
+        placement: &StampPlacement,
+    ) -> Result<Vec<Rect>> {
+        Ok(apply_stamp(tile, self.gauss, placement, Blend::Add)?)
     }
 }
 
@@ -578,25 +498,16 @@ impl Scenario for FlyoverScenario {
         let look = Vec3::new(forward2.x, -0.18, forward2.y);
         let camera = Camera::looking(eye, look);
 
-        // Craters on the path ahead: on the resident tiles (persisted by write-back) and on
-        // the overview level.
-        let mut dirty: Vec<DirtyRect> = Vec::new();
+        // Craters on the path ahead, into the level-0 tiles as they are resident (persisted
+        // by write-back).
+        let mut crater = false;
         if self.frame.is_multiple_of(CRATER_EVERY) {
             let center = reflect_into(travelled + self.heading * CRATER_AHEAD, self.extent);
             // Between 8 texels and one tile wide: a crater touches at most 4 tiles.
             let ts = self.texel_size;
             let size = CRATER_SIZE.clamp(8.0 * ts, self.tile_size as f32 * ts);
             let placement = StampPlacement::new(center, Vec2::splat(size), CRATER_DEPTH)?;
-            dirty.extend(apply_stamp(
-                &mut self.overview,
-                &mut self.gauss,
-                &placement,
-                Blend::Add,
-            )?);
-            self.pending.push(PendingStamp {
-                placement,
-                tiles: [0; 4],
-            });
+            crater = self.stamps.push((), placement)? > 0;
         }
         let state = CameraState {
             position: eye,
@@ -619,17 +530,32 @@ impl Scenario for FlyoverScenario {
         }
         // Craters on the tiles, after the uploads: a GPU stamp lands on what the slot holds
         // this frame.
-        let mut pending = std::mem::take(&mut self.pending);
-        let mut still = Vec::with_capacity(pending.len());
-        for mut stamp in pending.drain(..) {
-            if !self.apply_to_tiles(&mut stamp, ctx.gpu.as_deref_mut(), ctx.timings)? {
-                still.push(stamp);
+        let mut changed = Vec::new();
+        {
+            let mut craters = Craters {
+                gauss: &mut self.gauss,
+                scene: ctx.gpu.as_deref_mut(),
+                timings: ctx.timings,
+                gpu_ms: 0.0,
+            };
+            // Slots are stamped only where there is a GPU to stamp them.
+            let vram = self.vram.as_mut().filter(|_| craters.scene.is_some());
+            let Some(pool) = self.pool.as_mut() else {
+                bail!("the flyover's pool was shut down");
+            };
+            let report = self.stamps.apply(pool, vram, &mut craters)?;
+            self.gpu_stamp_ms += craters.gpu_ms;
+            self.gpu_tile_stamps += u64::from(report.gpu_tiles);
+            self.cpu_tile_stamps += u64::from(report.cpu_tiles);
+            for (rect, heights) in &report.changed {
+                self.window.apply(*rect, heights)?;
+                changed.push(*rect);
             }
         }
-        self.pending = still;
         if let Some(scene) = ctx.gpu.as_deref_mut() {
-            self.take_tile_readbacks(scene, false)?;
+            changed.extend(self.take_tile_readbacks(scene, false)?);
         }
+        let dirty = self.update_overview(&changed)?;
         self.update_window(xz)?;
         // The GPU stamps are timed as their own step.
         let cache_ms = (ms_since(t_frame) - self.gpu_stamp_ms).max(0.0);
@@ -639,8 +565,8 @@ impl Scenario for FlyoverScenario {
             camera,
             camera_clearance_m,
             stats: FrameStats {
-                craters: u32::from(!dirty.is_empty()),
-                dirty_texels: dirty.iter().map(Rect::area).sum(),
+                craters: u32::from(crater),
+                dirty_texels: changed.iter().map(Rect::area).sum(),
                 cache: Some(CacheStats {
                     // With a GPU: wanted tiles drawn from a coarser level; without one, the
                     // tiles under and around the camera not in RAM.
@@ -654,10 +580,10 @@ impl Scenario for FlyoverScenario {
                     loads: report.loads,
                     evictions: report.evictions,
                     dirty_tiles: report.dirty,
-                    pending_craters: self.pending.len(),
+                    pending_craters: self.stamps.pending(),
                     gpu_tile_stamps: self.gpu_tile_stamps,
                     cpu_tile_stamps: self.cpu_tile_stamps,
-                    tile_readbacks_in_flight: self.in_flight.len(),
+                    tile_readbacks_in_flight: self.stamps.in_flight(),
                     collision_window: self
                         .window
                         .window()
@@ -676,10 +602,10 @@ impl Scenario for FlyoverScenario {
         if let Some(scene) = gpu {
             self.take_tile_readbacks(scene, true)?;
         }
-        if !self.in_flight.is_empty() {
+        if self.stamps.in_flight() > 0 {
             bail!(
                 "{} tile readbacks never arrived: those craters are not saved",
-                self.in_flight.len()
+                self.stamps.in_flight()
             );
         }
         let Some(mut pool) = self.pool.take() else {
@@ -691,38 +617,20 @@ impl Scenario for FlyoverScenario {
         pool.shutdown(SHUTDOWN_TIMEOUT)?;
         let mut written = self.written_back + issued as u64;
         // Craters whose tiles never became resident go straight into the world's files.
-        let mut changed = Vec::new();
-        for stamp in std::mem::take(&mut self.pending) {
-            for (bit, id) in self
-                .tiles_of(&stamp.placement)?
-                .into_iter()
-                .enumerate()
-                .take(128)
-            {
-                if stamp.is_done(bit) {
-                    continue;
-                }
-                let mut data = (*world.load_tile(Layer::Height, id)?).clone();
-                if let Some(grid) = data.as_u16_mut()
-                    && grid.size() == self.scratch.size()
-                {
-                    let local = self.local_placement(&stamp.placement, id);
-                    self.scratch
-                        .grid_mut()
-                        .as_mut_slice()
-                        .copy_from_slice(grid.as_slice());
-                    apply_stamp(&mut self.scratch, &mut self.gauss, &local, Blend::Add)?;
-                    grid.as_mut_slice()
-                        .copy_from_slice(self.scratch.grid().as_slice());
-                    world.write_tile(Layer::Height, id, &data)?;
-                    changed.push(id);
-                }
-            }
-        }
+        let mut timings = crate::timings::Timings::default();
+        let mut craters = Craters {
+            gauss: &mut self.gauss,
+            scene: None,
+            timings: &mut timings,
+            gpu_ms: 0.0,
+        };
+        let changed = self.stamps.finish_into_world(&world, &mut craters)?;
         if !changed.is_empty() {
             written += changed.len() as u64;
             terrain_cache::rebuild_ancestors(&world, &changed)?;
         }
+        // The overview as the world now holds it (`terrain_final.png`).
+        self.overview = overview_map(&world, self.overview_level)?;
         Ok(FinishStats {
             written_back_tiles: Some(written),
         })
