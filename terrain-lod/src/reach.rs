@@ -16,7 +16,9 @@ use terrain_core::WrapMode;
 pub fn clipmap_levels_to_reach(n: u32, radius_m: f32, texel_size: f32, min_levels: u32) -> u32 {
     let half = n.saturating_sub(1) as f32 / 2.0 * texel_size;
     let mut levels = min_levels.clamp(1, MAX_LEVELS);
-    while levels < MAX_LEVELS && !(half * ((1u32 << (levels - 1)) as f32) >= radius_m) {
+    while levels < MAX_LEVELS
+        && (radius_m.is_nan() || half * ((1u32 << (levels - 1)) as f32) < radius_m)
+    {
         levels += 1;
     }
     levels

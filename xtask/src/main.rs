@@ -346,7 +346,7 @@ fn publishable_crates() -> Result<Vec<String>> {
 }
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 9] = [
+const EXAMPLES: [(&str, &str, &[&str]); 10] = [
     (
         "terrain-core",
         "stamp_heightmap",
@@ -372,6 +372,12 @@ const EXAMPLES: [(&str, &str, &[&str]); 9] = [
     ("terrain-lod", "tessellation_ratio", &["--size", "256"]),
     ("terrain-cache", "build_world", &["512", "{out}/world"]),
     ("terrain-cache", "trace_sim", &[]),
+    // The whole frame an engine runs: it joins every library crate, so it lives in the demo.
+    (
+        "terrain-demo",
+        "engine_frame",
+        &["{out}/engine_frame", "24"],
+    ),
 ];
 
 /// Library examples behind a feature of their crate (`required-features`), which the
@@ -400,6 +406,7 @@ fn examples() -> Result<()> {
         "terrain-gpu",
         "terrain-lod",
         "terrain-cache",
+        "terrain-demo",
     ] {
         let dir = root().join(krate).join("examples");
         let Ok(entries) = std::fs::read_dir(&dir) else {
