@@ -837,3 +837,42 @@ fn normals_and_float_heights() {
     float_heights(&map, area, &mut f).expect("float");
     assert!((f.get(5, 3).expect("in") - 0.5).abs() < 1e-6);
 }
+
+/// A region of a u16 coarse-map (a 60 m world) handed to the granular step in fixed point
+/// (`Handover::for_world`), rolled over by a wheel and a box without compression, and handed
+/// back: the stored heights' sum is exactly what it was, every column within a stored unit of
+/// its fixed-point share, and the wheel's track is in the coarse heights.
+#[test]
+fn a_coarse_region_handed_over_keeps_its_volume_exactly() {
+    use terrain_core::{HeightEncoding, HeightMap};
+    let world = HeightEncoding::spanning::<u16>(0.0, 60.0).expect("enc");
+    let region = Grid::from_fn(96, 96, |x, y| {
+        30_000 + (pcg_hash(x * 31 + y * 977) % 50) as u16
+    })
+    .expect("grid");
+    let handover = Handover::for_world(world, UNITS).expect("handover");
+    let enc = handover.scratch_encoding(world).expect("encoding");
+    let units = (1.0 / f64::from(enc.scale)).round() as u32;
+    let fixed = handover.to_fixed(&region);
+    let map = FixedPointMap::fixed_point(fixed, units, 0.05).expect("map");
+    let mut sim = GranularSim::new(map, small_params()).expect("sim");
+    let wheel = TriMesh::wheel(0.35, 0.15, 16).expect("wheel");
+    // Heights above the world's offset (0 here): the region lies near 27.5 m.
+    let top = world.to_metres(30_000.0);
+    for frame in 0..40 {
+        let x = 1.0 + frame as f32 * 0.08;
+        let tr = Affine3A::from_rotation_translation(
+            Quat::from_rotation_x(std::f32::consts::FRAC_PI_2),
+            Vec3::new(x, top + 0.25, 2.4),
+        );
+        sim.step(&[GranularObject::new(&wheel, tr)]).expect("step");
+    }
+    let back = handover.from_fixed(sim.map().grid()).expect("exact");
+    let sum = |g: &Grid<u16>| g.as_slice().iter().map(|&v| u64::from(v)).sum::<u64>();
+    assert_eq!(sum(&back), sum(&region));
+    for (&u, &h) in sim.map().grid().as_slice().iter().zip(back.as_slice()) {
+        assert!((f64::from(u) / f64::from(handover.k()) - f64::from(h)).abs() < 1.0);
+    }
+    assert_ne!(back, region, "the wheel left no track");
+    let _ = HeightMap::new(back, world, 0.05, terrain_core::WrapMode::Clamp).expect("a map again");
+}

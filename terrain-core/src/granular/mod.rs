@@ -36,6 +36,7 @@ mod depth;
 mod displace;
 mod edt;
 mod error;
+mod handover;
 mod jfa;
 mod mesh;
 mod normals;
@@ -52,6 +53,7 @@ pub use displace::{
 };
 pub use edt::exact_nearest_seed;
 pub use error::GranularError;
+pub use handover::Handover;
 pub use jfa::{
     JFA_OFFSETS, brute_force_distance, distance_grid, jfa_hash, jfa_init, jfa_neighbour_order,
     jfa_pass, jfa_pass_reference, jfa_steps, jump_flood, jump_flood_reference, pcg_hash,
