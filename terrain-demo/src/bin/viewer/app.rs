@@ -16,6 +16,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use terrain_core::bilinear;
 use terrain_gpu::{GpuStamp, StampOp};
+use terrain_physics::{CollisionMirror, DeformationBound, ReadbackScheduler, SchedulerConfig};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
@@ -69,7 +70,11 @@ impl Sums {
 /// The viewer.
 pub struct App {
     settings: Settings,
+    /// The CPU's copy of the map (picking, the camera's ground): never stamped, it follows the
+    /// GPU map through `scheduler`'s readbacks into `mirror`.
     terrain: Terrain,
+    mirror: CollisionMirror,
+    scheduler: ReadbackScheduler,
     camera: FlyCamera,
     input: InputState,
     commands: Vec<Command>,
@@ -97,7 +102,15 @@ impl App {
         let extent = terrain.map.extent_m();
         let start = Vec2::new(extent.x * 0.3, extent.y * 0.5);
         let ground = bilinear(&terrain.map, start)?;
+        let mirror = CollisionMirror::from_map(&terrain.map)?;
+        let config = SchedulerConfig {
+            max_in_flight: crate::gpu::READBACK_RING,
+            ..SchedulerConfig::default()
+        };
+        let scheduler = ReadbackScheduler::for_mirror(&mirror, config)?;
         Ok(Self {
+            mirror,
+            scheduler,
             settings,
             camera: FlyCamera::new(Vec3::new(start.x, ground + 7.0, start.y), 0.3, -0.3),
             terrain,
@@ -186,8 +199,14 @@ impl App {
                     placement,
                     blend: terrain_core::Blend::Add,
                 };
-                let (stamp_ms, normals_ms) = gpu.stamp(&op, kind == StampKind::Footprint)?;
-                self.terrain.apply(kind, &placement)?;
+                let (stamp_ms, normals_ms, dirty) = gpu.stamp(&op, kind == StampKind::Footprint)?;
+                // The CPU's map learns the new heights through the readback only.
+                let bound =
+                    DeformationBound::additive(placement.intensity, self.terrain.map.encoding())?;
+                for rect in dirty {
+                    self.scheduler
+                        .note_deformation(rect, bound, Instant::now())?;
+                }
                 self.last_stamp = Some((kind, stamp_ms, normals_ms));
                 println!(
                     "viewer: {} at ({:.1}, {:.1}) m: stamp {stamp_ms:.2} ms, normals {normals_ms:.2} ms",
@@ -245,6 +264,12 @@ impl App {
         }
         for command in std::mem::take(&mut self.commands) {
             self.run_command(command, event_loop)?;
+        }
+        if let Some(gpu) = self.gpu.as_mut() {
+            let report = gpu.read_back(&mut self.scheduler, &self.mirror, now)?;
+            for rect in &report.applied_rects {
+                self.mirror.copy_into(*rect, &mut self.terrain.map)?;
+            }
         }
         self.camera.look(self.input.take_look());
         self.camera.scroll(self.input.take_scroll());

@@ -10,15 +10,20 @@ use anyhow::{Context, Result, anyhow, bail};
 use glam::{UVec2, Vec2};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
+use terrain_core::DirtyRect;
 use terrain_core::{CoarseMap, Grid, TextureStamp};
 use terrain_gpu::{
     Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuDerivativeMap, GpuHeightMap,
-    GpuTextureStamp, GpuTimer, MapUse, NormalPass, SkyColors, SkyPass, StampOp, StampPass,
-    TargetFormat, TerrainStyle,
+    GpuRegionSource, GpuTextureStamp, GpuTimer, MapUse, NormalPass, RegionReadback, SkyColors,
+    SkyPass, StampOp, StampPass, TargetFormat, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
+use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 use winit::event_loop::ActiveEventLoop;
 use winit::window::Window;
+
+/// Staging buffers of the map's readback ring (the scheduler's `max_in_flight`).
+pub const READBACK_RING: usize = 16;
 
 /// Clipmap vertices per level side (as the capture demo).
 pub const CLIPMAP_N: u32 = 255;
@@ -118,6 +123,8 @@ pub struct Gpu {
     style: TerrainStyle,
     height_range: (f32, f32),
     timer: GpuTimer,
+    /// The ring the CPU's copy of the map is read back through (never waiting).
+    readback: RegionReadback,
 }
 
 impl Gpu {
@@ -268,6 +275,7 @@ impl Gpu {
             sky: SkyPass::new(&device, &target)?,
             renderer: ClipmapRenderer::new(&device, &target, &layout)?,
             timer: GpuTimer::new(&device, &queue),
+            readback: RegionReadback::new(&device, READBACK_RING)?,
             layout,
             map: gpu_map,
             normals,
@@ -373,8 +381,12 @@ impl Gpu {
 
     /// Applies a stamp to the GPU map (the footprint texture when `footprint`, else `op`'s
     /// own stamp) and regenerates the normals of the texels it changed; returns the
-    /// milliseconds of each (submit until done).
-    pub fn stamp(&mut self, op: &StampOp<'_>, footprint: bool) -> Result<(f64, f64)> {
+    /// milliseconds of each (submit until done) and the rects it changed.
+    pub fn stamp(
+        &mut self,
+        op: &StampOp<'_>,
+        footprint: bool,
+    ) -> Result<(f64, f64, Vec<DirtyRect>)> {
         let (device, queue) = (&self.device, &self.queue);
         let op = if footprint {
             StampOp {
@@ -399,7 +411,26 @@ impl Gpu {
         self.stamps.recall();
         self.normal_pass.recall();
         self.check()?;
-        Ok((stamp.ms, normals.ms))
+        Ok((stamp.ms, normals.ms, dirty))
+    }
+
+    /// Reads the GPU map's deformed regions back for `scheduler` into `mirror` (never waits):
+    /// the CPU's copy of the map follows the GPU through this only.
+    pub fn read_back(
+        &mut self,
+        scheduler: &mut ReadbackScheduler,
+        mirror: &CollisionMirror,
+        now: Instant,
+    ) -> Result<UpdateReport> {
+        let mut source =
+            GpuRegionSource::new(&self.device, &self.queue, &self.map, &mut self.readback);
+        match scheduler.update(now, &mut source, mirror) {
+            // Every staging buffer still waits for a mapping: the rects stay dirty.
+            Err(terrain_physics::UpdateError::Source(terrain_gpu::GpuError::ReadbackBusy {
+                ..
+            })) => Ok(UpdateReport::default()),
+            r => Ok(r?),
+        }
     }
 
     /// Draws the frame seen by `camera` and presents it; `None` when the window has no

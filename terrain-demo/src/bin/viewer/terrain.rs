@@ -1,14 +1,14 @@
 //! The terrain on the CPU: the procedural coarse-map the viewer starts from (the capture
 //! demo's default terrain: terrain-core's generator, 0.1 m texels, heights 0 to 12 m), the
-//! crater and footprint stamps, and the stamps applied to this map so picking and the camera
-//! follow what the GPU map shows.
+//! crater and footprint stamps. The map is never stamped: it follows the GPU's through the
+//! readback (`app.rs`), so picking and the camera meet what the GPU map shows.
 
 use anyhow::{Context, Result};
 use glam::{UVec2, Vec2};
 use terrain_core::io::{ReadLimits, decode_png8};
 use terrain_core::{
-    Blend, CoarseMap, GaussianStamp, HeightEncoding, StampPlacement, TerrainParams, TextureStamp,
-    apply_stamp, generate_coarse_map,
+    CoarseMap, GaussianStamp, HeightEncoding, StampPlacement, TerrainParams, TextureStamp,
+    generate_coarse_map,
 };
 
 /// Metres per texel (seed 000's 0.1 m, as the demo).
@@ -84,19 +84,5 @@ impl Terrain {
                 StampPlacement::new(at, FOOT_SIZE, -FOOT_DEPTH)?.with_rotation(heading)?
             }
         })
-    }
-
-    /// Applies a stamp to the CPU map with terrain-core's reference stamps (what the GPU pass
-    /// is tested against), so the next ray and the camera meet the deformed ground.
-    pub fn apply(&mut self, kind: StampKind, placement: &StampPlacement) -> Result<()> {
-        match kind {
-            StampKind::Crater => {
-                apply_stamp(&mut self.map, &mut self.crater, placement, Blend::Add)?
-            }
-            StampKind::Footprint => {
-                apply_stamp(&mut self.map, &mut self.footprint, placement, Blend::Add)?
-            }
-        };
-        Ok(())
     }
 }
