@@ -31,13 +31,17 @@ pub struct DemoParams {
     pub camera: CameraParams,
 }
 
+/// Staging buffers of the collision readback's ring by default (the scheduler keeps no more
+/// requests in flight; the GPU scene makes its ring this size).
+pub const COLLISION_READBACK_RING: usize = 4;
+
 impl Default for DemoParams {
     fn default() -> Self {
         Self {
             stamps: StampParams::default(),
             granular: GranularParams::snow(),
             scheduler: SchedulerConfig {
-                max_in_flight: crate::gpu_scene::COLLISION_READBACK_RING,
+                max_in_flight: COLLISION_READBACK_RING,
                 ..SchedulerConfig::default()
             },
             style: StyleParams::default(),

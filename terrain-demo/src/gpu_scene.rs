@@ -23,8 +23,8 @@ use terrain_lod::{
 };
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 
+use crate::frame_plan::{FramePlan, StampKind};
 use crate::report::GpuObjects;
-use crate::scenarios::{FramePlan, StampKind};
 use crate::timings::{Step, Timings};
 
 pub use terrain_gpu::Camera;
@@ -91,10 +91,6 @@ pub type ArrivedTileRect = (u64, Rect, Grid<u16>);
 
 /// The streamed world's tiles on the GPU: slots, indirection table, coarser fallback.
 pub use terrain_gpu::{AtlasConfig, GpuTileAtlas, TileSlot};
-
-/// Staging buffers of the collision readback's ring (the scheduler keeps no more requests
-/// in flight).
-pub const COLLISION_READBACK_RING: usize = 4;
 
 /// Readbacks of deformed atlas tiles in flight at most (the ring's staging buffers).
 const TILE_READBACK_RING: usize = 16;

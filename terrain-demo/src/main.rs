@@ -8,6 +8,7 @@ mod capture;
 mod cli;
 mod config;
 mod driver;
+mod frame_plan;
 mod gpu_scene;
 mod images;
 mod interrupt;

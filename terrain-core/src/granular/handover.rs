@@ -96,7 +96,7 @@ impl Handover {
             total += u64::from(u);
             count[(u % k) as usize] += 1;
         }
-        if total % u64::from(k) != 0 {
+        if !total.is_multiple_of(u64::from(k)) {
             return Err(GranularError::ParamOutOfRange {
                 name: "fixed-point area volume (units)",
                 value: total as f64,

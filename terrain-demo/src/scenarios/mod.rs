@@ -21,7 +21,6 @@ use glam::UVec2;
 use std::time::Instant;
 use terrain_core::{CoarseMap, DirtyRect};
 
-pub use stamp_script::{FramePlan, StampKind};
 pub use stamps::{DETAIL_REFINE, DETAIL_TILE};
 
 /// Seconds of scenario time per frame (30 frames per second), whatever the render speed.

@@ -13,47 +13,10 @@ use terrain_core::{
 use terrain_physics::DeformationBound;
 
 use crate::config::StampParams;
+use crate::frame_plan::{Deformation, FramePlan, StampKind};
 
 /// The footprint image: white where the foot presses hardest (see `TextureStamp`).
 const FOOTPRINT_PNG: &[u8] = include_bytes!("../../assets/footprint.png");
-
-/// Which pattern a deformation uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum StampKind {
-    /// The footprint texture stamp.
-    Footprint,
-    /// The Gaussian crater.
-    Crater,
-    /// The shockwave's change since the last frame (a dynamic texture stamp).
-    Shockwave,
-}
-
-/// One stamp to apply this frame (always an additive blend).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Deformation {
-    /// The pattern.
-    pub kind: StampKind,
-    /// Where.
-    pub placement: StampPlacement,
-}
-
-/// Everything one frame deforms.
-#[derive(Debug, Default)]
-pub struct FramePlan {
-    /// Stamps in order.
-    pub deformations: Vec<Deformation>,
-    /// The shockwave's change this frame, used by [`StampKind::Shockwave`].
-    pub shock_delta: Option<TextureStamp>,
-    /// The walker's position (metres, X Z) and unit heading after this frame's steps.
-    pub walker: (Vec2, Vec2),
-}
-
-impl FramePlan {
-    /// Number of stamps of `kind`.
-    pub fn count(&self, kind: StampKind) -> u32 {
-        self.deformations.iter().filter(|d| d.kind == kind).count() as u32
-    }
-}
 
 /// Deterministic choices for the scenario (splitmix64).
 #[derive(Debug)]

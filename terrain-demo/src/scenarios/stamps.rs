@@ -9,13 +9,14 @@
 //! are stamped on its tiles and the stamped rects read back into the cache (collision and the
 //! write-back take the GPU's texels); without one they are stamped on the cache.
 
-use super::stamp_script::{DetailTarget, StampKind, StampScript};
+use super::FinishStats;
+use super::stamp_script::{DetailTarget, StampScript};
 use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo, heightmap};
-use super::{FinishStats, FramePlan};
 use crate::camera_path::{CameraPath, MapFrame};
 use crate::camera_rig::CameraRig;
 use crate::cli::{CameraMode, Cli};
 use crate::config::DemoParams;
+use crate::frame_plan::{FramePlan, StampKind};
 use crate::gpu_scene::GpuScene;
 use crate::report::FrameStats;
 use crate::timings::{Step, ms_since};
