@@ -323,12 +323,7 @@ impl GpuScene {
         mirror: &CollisionMirror,
         timeout: std::time::Duration,
     ) -> Result<UpdateReport> {
-        let mut source = GpuRegionSource::new(
-            &self.ctx.device,
-            &self.ctx.queue,
-            &self.map,
-            &mut self.readback,
-        );
+        let mut source = self.map_source();
         scheduler
             .flush(&mut source, mirror, timeout)
             .context("reading the GPU map's last deformations back")
@@ -1015,18 +1010,23 @@ impl GpuScene {
         Ok(dirty)
     }
 
+    /// The coarse-map as a region source through the collision readback's ring.
+    fn map_source(&mut self) -> GpuRegionSource<'_> {
+        GpuRegionSource::new(
+            &self.ctx.device,
+            &self.ctx.queue,
+            &self.map,
+            &mut self.readback,
+        )
+    }
+
     fn update_collision_inner(
         &mut self,
         scheduler: &mut ReadbackScheduler,
         mirror: &CollisionMirror,
         now: std::time::Instant,
     ) -> Result<UpdateReport> {
-        let mut source = GpuRegionSource::new(
-            &self.ctx.device,
-            &self.ctx.queue,
-            &self.map,
-            &mut self.readback,
-        );
+        let mut source = self.map_source();
         match scheduler.update(now, &mut source, mirror) {
             // Every staging buffer still waits for a slow mapping: back-pressure, not a
             // failure. The rects stay dirty and are requested once a buffer is free.
