@@ -111,8 +111,38 @@ struct DetailScene {
     shading: DetailShading,
     /// Detail texels inside the rects the last deformation stamped.
     dirty_texels: u64,
-    /// The rects (tile, texels of the tile) the last deformation stamped, to read back.
-    dirty: Vec<(glam::UVec2, terrain_core::Rect)>,
+    /// The rects (tile, texels of the tile) stamped and not yet requested back (the ring was
+    /// full): requested first in the next deformation's submit, before its stamps.
+    pending: Vec<(glam::UVec2, terrain_core::Rect)>,
+    /// The ring the stamped rects come back through, never waiting, and what each ticket is.
+    readback: RegionReadback,
+    in_flight: std::collections::HashMap<u64, (glam::UVec2, terrain_core::Rect)>,
+}
+
+/// Detail rects in flight at most (the ring's limit; a frame's footprints stamp about four).
+const DETAIL_READBACK_RING: usize = 16;
+
+impl DetailScene {
+    /// Requests `rects` back in `encoder` (after what it stamped), in order; those the ring
+    /// has no room for wait in `pending`.
+    fn request(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        rects: impl IntoIterator<Item = (glam::UVec2, terrain_core::Rect)>,
+    ) -> Result<(), terrain_gpu::GpuError> {
+        for (tile, rect) in rects {
+            if !self.pending.is_empty() || self.readback.in_flight() >= self.readback.ring() {
+                self.pending.push((tile, rect));
+                continue;
+            }
+            let ticket = self
+                .readback
+                .request_detail(device, encoder, &self.tiles, tile, rect)?;
+            self.in_flight.insert(ticket.0, (tile, rect));
+        }
+        Ok(())
+    }
 }
 
 /// The refinement pass and its renderer, with the radius they refine.
@@ -413,7 +443,9 @@ impl GpuScene {
             spill: SpillPass::new(device, SPILL_WINDOW_TEXELS)?,
             shading,
             dirty_texels: 0,
-            dirty: Vec::new(),
+            pending: Vec::new(),
+            readback: RegionReadback::new(device, DETAIL_READBACK_RING)?,
+            in_flight: std::collections::HashMap::new(),
         });
         self.refined = refine;
         Ok(())
@@ -450,12 +482,14 @@ impl GpuScene {
         Ok(())
     }
 
-    /// Reads the detail rects the last deformation stamped back from the GPU into `cache`
-    /// (collision walks on it, and it writes the tiles back): the GPU's stamps are the detail's
-    /// truth. Waits for the GPU. Timed as [`Step::Detail`]. Nothing without a detail layer.
-    pub fn read_back_detail(
+    /// The detail rects stamped on the GPU that have arrived go into `cache` (collision walks
+    /// on it, and it writes the tiles back): the GPU's stamps are the detail's truth. Never
+    /// waits; with `wait`, requests what is pending and waits until nothing is in flight (the
+    /// end of a run). Timed as [`Step::Detail`]. Nothing without a detail layer.
+    pub fn take_detail_readbacks(
         &mut self,
         cache: &mut DetailCache,
+        wait: bool,
         timings: &mut Timings,
     ) -> Result<()> {
         let Some(detail) = self.detail.as_mut() else {
@@ -463,12 +497,50 @@ impl GpuScene {
         };
         let t = std::time::Instant::now();
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        for &(tile, rect) in &detail.dirty {
-            let texels = detail.tiles.read(device, queue, tile, rect)?;
-            cache.write_rect(tile, rect, &texels)?;
+        let to_u8 = |r: terrain_gpu::RegionView<'_>| (r.ticket.0, r.rect, r.to_u8());
+        loop {
+            if wait && !detail.pending.is_empty() {
+                let mut encoder = device.create_command_encoder(&Default::default());
+                let pending = std::mem::take(&mut detail.pending);
+                detail.request(device, &mut encoder, pending)?;
+                queue.submit([encoder.finish()]);
+            }
+            let mut arrived = if wait {
+                detail.readback.wait_with(device, to_u8)?
+            } else {
+                detail.readback.poll_with(device, to_u8)?
+            };
+            // In request order: a later copy of the same texels is the newer one.
+            arrived.sort_by_key(|(ticket, _, _)| *ticket);
+            for (ticket, rect, texels) in arrived {
+                let Some((tile, asked)) = detail.in_flight.remove(&ticket) else {
+                    anyhow::bail!("a detail readback nobody asked for (ticket {ticket})");
+                };
+                anyhow::ensure!(
+                    asked == rect,
+                    "detail tile {tile}: asked {asked:?}, got {rect:?}"
+                );
+                cache.write_rect(tile, rect, &texels?)?;
+            }
+            let done = detail.in_flight.is_empty() && detail.pending.is_empty();
+            if !wait || done {
+                break;
+            }
         }
         timings.add(Step::Detail, crate::timings::ms_since(t));
         Ok(())
+    }
+
+    /// The detail tiles with stamped rects not yet back on the CPU: the detail cache must keep
+    /// them until they arrive.
+    pub fn detail_tiles_in_flight(&self) -> Vec<glam::UVec2> {
+        self.detail.as_ref().map_or_else(Vec::new, |d| {
+            d.in_flight
+                .values()
+                .chain(&d.pending)
+                .map(|(t, _)| *t)
+                .collect()
+        })
     }
 
     /// Uploads the footprint texture stamp that [`StampKind::Footprint`] deformations use.
@@ -890,6 +962,26 @@ impl GpuScene {
         Ok(self.map.read(&self.ctx.device, &self.ctx.queue)?)
     }
 
+    /// A resident detail tile's texels on the GPU (waits for the GPU), `None` for a tile
+    /// without a slot: for tests that compare the detail cache with the truth.
+    #[cfg(test)]
+    pub fn read_detail(&self, tile: glam::UVec2) -> Result<Option<Grid<u8>>> {
+        let Some(detail) = self.detail.as_ref() else {
+            return Ok(None);
+        };
+        if detail.tiles.slot_of(tile).is_none() {
+            return Ok(None);
+        }
+        let side = detail.tiles.layout().tile_size();
+        let all = Rect::from_size(UVec2::splat(side));
+        Ok(Some(detail.tiles.read(
+            &self.ctx.device,
+            &self.ctx.queue,
+            tile,
+            all,
+        )?))
+    }
+
     /// The GPU objects alive on the device now.
     pub fn live_objects(&self) -> GpuObjects {
         let hal = self.ctx.device.get_internal_counters().hal;
@@ -958,8 +1050,10 @@ impl GpuScene {
         // Footprints into the detail tiles, as one more submit.
         if let (Some(detail), Some(foot)) = (self.detail.as_mut(), self.footprint.as_ref()) {
             let mut texels = 0;
-            detail.dirty.clear();
             let time = self.timer.time(device, queue, |encoder| {
+                // Rects stamped earlier that the ring had no room for, before the new stamps.
+                let pending = std::mem::take(&mut detail.pending);
+                detail.request(device, encoder, pending)?;
                 for (i, d) in plan
                     .deformations
                     .iter()
@@ -983,7 +1077,8 @@ impl GpuScene {
                         &op,
                     )?;
                     texels += out.detail.iter().map(|(_, r)| r.area()).sum::<u64>();
-                    detail.dirty.extend(out.detail);
+                    // Back to the CPU through the ring, recorded after the stamp.
+                    detail.request(device, encoder, out.detail)?;
                     for r in out.coarse {
                         self.normal_pass.encode(
                             device,

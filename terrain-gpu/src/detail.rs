@@ -262,6 +262,26 @@ impl GpuDetailTiles {
         })?)
     }
 
+    /// Resident `tile` as the readback addresses it: a clamped `tile_size^2` map of u8 values
+    /// in its slot. Fails for a tile off the grid or without a slot (the zero tile, or not
+    /// loaded: nothing the GPU stamped can be there).
+    pub(crate) fn slot_view(&self, tile: UVec2) -> Result<crate::maps::MapView<'_>, GpuError> {
+        let DetailTileState::Resident(slot) = self.check_tile(tile)? else {
+            return Err(not_loaded(tile));
+        };
+        let side = self.layout.tile_size();
+        Ok(crate::maps::MapView {
+            buffer: &self.heights,
+            // Below 2^32 texels in all: `new` checked slots x tile texels.
+            base: slot * side * side,
+            size: UVec2::splat(side),
+            wrap: terrain_core::WrapMode::Clamp,
+            encoding: detail_encoding(),
+            texel_size: self.layout.detail_texel_m(),
+            max_raw: 255,
+        })
+    }
+
     /// Makes the resident set follow `wanted` when the CPU `layer` holds every tile's truth
     /// (each stamp applied to both, as a CPU mirror does): tiles not wanted lose their slot
     /// (not loaded), wanted tiles that are not loaded, or that the layer holds while the GPU

@@ -81,6 +81,12 @@ impl RegionView<'_> {
     pub fn to_metres(&self) -> Result<Grid<f32>, GpuError> {
         self.to_grid(|&v| stored_metres(self.encoding, v))
     }
+
+    /// The rows as u8, a detail tile's own values ([`RegionReadback::request_detail`] regions;
+    /// saturating, as detail tiles never store more).
+    pub fn to_u8(&self) -> Result<Grid<u8>, GpuError> {
+        self.to_grid(|&v| v.min(255) as u8)
+    }
 }
 
 /// A stored value as the coarse-map's u16 (u16 maps never store more; saturates otherwise).
@@ -226,6 +232,21 @@ impl RegionReadback {
         rect: Rect,
     ) -> Result<ReadbackTicket, GpuError> {
         let view = atlas.slot_view(tile)?;
+        self.request_view(device, encoder, view, rect)
+    }
+
+    /// Records the copy of `rect` (tile texels, inside the tile) of the resident detail tile
+    /// `tile` of `tiles`: how a detail stamp's changed rect reaches the CPU without a wait
+    /// (its values arrive through [`RegionView::to_u8`]). Fails for a tile without a slot.
+    pub fn request_detail(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        tiles: &crate::GpuDetailTiles,
+        tile: glam::UVec2,
+        rect: Rect,
+    ) -> Result<ReadbackTicket, GpuError> {
+        let view = tiles.slot_view(tile)?;
         self.request_view(device, encoder, view, rect)
     }
 

@@ -4,7 +4,7 @@
 //! `TERRAIN_REQUIRE_GPU=1`.
 
 use glam::{UVec2, Vec2};
-use terrain_core::detail::{DetailLayer, DetailLayout, detail_encoding};
+use terrain_core::detail::{DETAIL_ZERO_RAW, DetailLayer, DetailLayout, detail_encoding};
 use terrain_core::{
     Blend, GaussianStamp, Grid, HeightMap, Rect, Stamp, StampPlacement, TextureStamp, WrapMode,
 };
@@ -661,5 +661,75 @@ fn a_spill_the_pass_cannot_hold_is_refused_before_anything_is_stamped() {
         );
     }
     queue.submit([encoder.finish()]);
+    ctx.check().expect("no GPU validation errors");
+}
+
+/// The rects a detail stamp changed come back through the readback ring, never waiting, equal
+/// to a blocking download of the same texels; a tile without a slot is refused.
+#[test]
+fn stamped_detail_rects_come_back_through_the_readback_ring() {
+    let Some(ctx) = context_or_skip("stamped_detail_rects_come_back_through_the_ring") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut pass = StampPass::new(device).unwrap();
+    let mut tiles = GpuDetailTiles::new(device, layout(), 8).unwrap();
+    let mut readback = terrain_gpu::RegionReadback::new(device, 8).unwrap();
+    let gauss = GaussianStamp::default();
+    let ts = layout().detail_texel_m();
+    // Over the corner of four tiles: four rects.
+    let op = StampOp {
+        stamp: GpuStamp::Gaussian(&gauss),
+        placement: place(Vec2::new(64.0, 32.0) * ts, Vec2::new(0.9, 0.5), -0.3, 0.6),
+        blend: Blend::Add,
+    };
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let covered = pass
+        .encode_detail(device, queue, &mut encoder, &mut tiles, &op)
+        .unwrap();
+    assert_eq!(covered.len(), 4);
+    let mut asked = std::collections::HashMap::new();
+    for &(tile, rect) in &covered {
+        let ticket = readback
+            .request_detail(device, &mut encoder, &tiles, tile, rect)
+            .unwrap();
+        asked.insert(ticket, (tile, rect));
+    }
+    queue.submit([encoder.finish()]);
+    pass.recall();
+    let mut arrived = Vec::new();
+    let start = std::time::Instant::now();
+    while arrived.len() < covered.len() {
+        assert!(start.elapsed().as_secs() < 30, "the rects never arrived");
+        arrived.extend(
+            readback
+                .poll_with(device, |r| (r.ticket, r.rect, r.to_u8()))
+                .unwrap(),
+        );
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    for (ticket, rect, texels) in arrived {
+        let (tile, asked_rect) = asked[&ticket];
+        assert_eq!(rect, asked_rect);
+        let want = tiles.read(device, queue, tile, rect).unwrap();
+        assert_eq!(texels.unwrap(), want, "tile {tile}");
+        assert!(
+            want.as_slice().iter().any(|&v| v != DETAIL_ZERO_RAW),
+            "the stamp reached tile {tile}"
+        );
+    }
+    // The zero tile and a tile off the grid have nothing to read back.
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let all = Rect::from_size(UVec2::splat(32));
+    assert!(
+        readback
+            .request_detail(device, &mut encoder, &tiles, UVec2::new(4, 3), all)
+            .is_err()
+    );
+    assert!(
+        readback
+            .request_detail(device, &mut encoder, &tiles, UVec2::new(9, 9), all)
+            .is_err()
+    );
     ctx.check().expect("no GPU validation errors");
 }

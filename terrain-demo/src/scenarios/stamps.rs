@@ -210,6 +210,10 @@ impl Scenario for StampScenario {
         // The GPU's last deformations come back (quiet gap or not) into the mirror and the
         // CPU's map, so `terrain_final.png` is the GPU's map.
         if let Some(scene) = gpu {
+            if let Some(cache) = self.detail.as_mut() {
+                let mut timings = crate::timings::Timings::default();
+                scene.take_detail_readbacks(cache, true, &mut timings)?;
+            }
             let report = scene.flush_collision(&mut self.scheduler, &self.mirror, FLUSH_TIMEOUT)?;
             for rect in &report.applied_rects {
                 self.mirror.copy_into(*rect, self.cpu.map_mut())?;
@@ -282,7 +286,13 @@ impl Scenario for StampScenario {
         if let Some(cache) = self.detail.as_mut() {
             let t = Instant::now();
             let eye = self.rig.eye();
-            let needed = needed_detail_tiles(cache.layout(), &plan)?;
+            let mut needed = needed_detail_tiles(cache.layout(), &plan)?;
+            // Tiles whose stamped rects are still on their way back stay in RAM for them.
+            if let Some(scene) = ctx.gpu.as_deref() {
+                needed.extend(scene.detail_tiles_in_flight());
+                needed.sort_unstable_by_key(|t| (t.y, t.x));
+                needed.dedup();
+            }
             let frame = cache.update(Vec2::new(eye.x, eye.z), &needed)?;
             if let Some((tile, e)) = frame.failed.first() {
                 return Err(anyhow::anyhow!("detail tile {tile}: {e}"));
@@ -303,7 +313,7 @@ impl Scenario for StampScenario {
                     self.scheduler.note_deformation(*rect, bound, now)?;
                 }
                 if let Some(cache) = self.detail.as_mut() {
-                    scene.read_back_detail(cache, ctx.timings)?;
+                    scene.take_detail_readbacks(cache, false, ctx.timings)?;
                 }
                 let deformed: Vec<_> = rects.into_iter().map(|(_, r)| r).collect();
                 (deformed, report.applied_rects, 0)
@@ -451,6 +461,20 @@ mod tests {
                     })
                     .expect("frame");
                 frame += 1;
+            }
+            // The detail cache holds the GPU's detail tiles once the last rects are back.
+            if let Some(cache) = scenario.detail.as_mut() {
+                scene
+                    .take_detail_readbacks(cache, true, &mut timings)
+                    .expect("detail readbacks");
+                let mut compared = 0;
+                for (tile, _) in cache.loaded_tiles() {
+                    if let Some(gpu) = scene.read_detail(tile).expect("download") {
+                        assert_eq!(cache.tile(tile), Some(&gpu), "detail tile {tile}");
+                        compared += 1;
+                    }
+                }
+                assert!(compared > 0, "no stamped detail tile to compare");
             }
             scenario.finish(Some(&mut scene)).expect("finish");
             let gpu_map = scene.read_map().expect("download");
