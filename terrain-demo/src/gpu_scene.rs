@@ -498,6 +498,7 @@ impl GpuScene {
         let t = std::time::Instant::now();
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let to_u8 = |r: terrain_gpu::RegionView<'_>| (r.ticket.0, r.rect, r.to_u8());
+        let deadline = t + std::time::Duration::from_secs(60);
         loop {
             if wait && !detail.pending.is_empty() {
                 let mut encoder = device.create_command_encoder(&Default::default());
@@ -526,6 +527,11 @@ impl GpuScene {
             if !wait || done {
                 break;
             }
+            anyhow::ensure!(
+                std::time::Instant::now() < deadline,
+                "{} detail readbacks never arrived",
+                detail.in_flight.len() + detail.pending.len()
+            );
         }
         timings.add(Step::Detail, crate::timings::ms_since(t));
         Ok(())

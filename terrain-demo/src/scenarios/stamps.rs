@@ -1,13 +1,15 @@
-//! The default scenario: footprints, craters and a shockwave stamped on the coarse-map (on the
-//! GPU map when there is one, and on the CPU map behind the overview), a collision mirror fed
-//! by readbacks of the dirty regions, and a camera on it (`--camera`): walking behind the
-//! walker, or orbiting or flying over the whole map (the default with `--heightmap`).
+//! The default scenario: footprints, craters and a shockwave stamped on the coarse-map, once:
+//! on the GPU map when there is one (the CPU's map then follows it through the collision
+//! readback only), else on the CPU map; a collision mirror fed by readbacks of the dirty
+//! regions, and a camera on it (`--camera`): walking behind the walker, or orbiting or flying
+//! over the whole map (the default with `--heightmap`).
 //!
 //! With `--detail parallax` or `refine` the footprints go into a detail layer instead (seed 000
 //! sec. 2.3: 8-bit tiles refined x3 over the coarse-map), held by a detail cache (the band
 //! regions around the camera, dirty tiles written back to `<out>/detail_world`). With a GPU they
-//! are stamped on its tiles and the stamped rects read back into the cache (collision and the
-//! write-back take the GPU's texels); without one they are stamped on the cache.
+//! are stamped on its tiles and the stamped rects read back into the cache as they arrive
+//! (collision and the write-back take the GPU's texels); without one they are stamped on the
+//! cache.
 
 use super::FinishStats;
 use super::stamp_script::{DetailTarget, StampScript};
@@ -38,9 +40,9 @@ use terrain_physics::{
 pub struct StampScenario {
     info: ScenarioInfo,
     script: StampScript,
-    /// The CPU map, held by a region source: without a GPU the scheduler reads collision
-    /// regions straight from it (with a GPU they come from the GPU map, and this map only
-    /// follows the stamps for the overview).
+    /// The CPU map, held by a region source: without a GPU it is the map deformed and the
+    /// scheduler reads collision regions from it; with a GPU the regions come from the GPU map
+    /// and this map receives them from the mirror (the overview, `terrain_final.png`).
     cpu: CpuRegionSource,
     /// The CPU map's normals, regenerated where it is deformed: without a GPU only (the CPU
     /// path does the GPU's work once; with a GPU the normals live there).
