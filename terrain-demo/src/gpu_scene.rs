@@ -680,43 +680,16 @@ impl GpuScene {
         }
         let c = self.cdlod.as_ref()?;
         let ((now, eye), (then, then_eye)) = (c.last.as_ref()?, c.previous.as_ref()?);
-        let ts = map.texel_size();
         let size = self.target.size().as_vec2();
-        let forward = Vec2::new(camera.forward.x, camera.forward.z).normalize_or(Vec2::X);
-        let right = forward.perp();
-        // 48 x 48 probes over a square ahead of the camera as deep as the second LOD's range,
-        // so they see the first LOD switches and morphs.
-        let depth = now
-            .ranges
-            .range
-            .get(1)
-            .or(now.ranges.range.first())
-            .copied()
-            .unwrap_or(1.0);
-        let spacing = (depth / 48.0).max(ts * 0.5);
-        let base = Vec2::new(eye.x, eye.z);
-        let probes: Vec<Vec2> = (0..48 * 48)
-            .map(|k| {
-                let (i, j) = ((k / 48) as f32, (k % 48) as f32 - 24.0);
-                (base + forward * (1.0 + i) * spacing + right * j * spacing) / ts
-            })
-            .collect();
-        let height = |t: glam::IVec2| {
-            let (w, h) = (map.size().x, map.size().y);
-            let x = map.wrap().resolve(i64::from(t.x), w);
-            let y = map.wrap().resolve(i64::from(t.y), h);
-            map.height_m(x, y).unwrap_or(0.0)
+        let view = terrain_lod::PoppingView {
+            forward: camera.forward,
+            view_proj: camera.view_proj_world(size.x / size.y),
+            target: size,
         };
-        Some(now.max_height_jump(
-            *eye,
-            (then, *then_eye),
-            &probes,
-            c.tree.config().grid_size,
-            ts,
-            camera.view_proj_world(size.x / size.y),
-            size,
-            height,
-        ))
+        Some(
+            c.tree
+                .popping_px(map, (now, *eye), (then, *then_eye), &view),
+        )
     }
 
     /// Makes the clipmap reach `radius` metres around the camera (its coarsest level's half

@@ -118,6 +118,7 @@ pub mod error;
 pub mod frustum;
 pub mod morph;
 mod par;
+pub mod popping;
 pub mod reach;
 pub mod refine;
 pub mod tessellation;
@@ -132,6 +133,7 @@ pub use clipmap::{
 pub use density::{CurvatureFilter, DensityMap, DensityParams};
 pub use error::LodError;
 pub use frustum::Frustum;
+pub use popping::{POPPING_PROBES_PER_SIDE, PoppingView};
 pub use reach::clipmap_levels_to_reach;
 pub use refine::RefineView;
 pub use tessellation::{TessConfig, TessFrame, TessHierarchy, TessTriangle, TessVertex};
