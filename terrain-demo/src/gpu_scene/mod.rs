@@ -1,6 +1,7 @@
 //! The GPU side of a demo frame: stamps and normals on the GPU map, clipmap placement, sky and
-//! terrain rendering, capture. Glue only: every step is a library call. This is the one file of
-//! the demo that calls terrain-gpu; the rest sees [`GpuScene`] and [`Camera`].
+//! terrain rendering, capture. Glue only: every step is a library call. This is the one module
+//! of the demo that calls terrain-gpu (the detail layer in `detail`, CDLOD and tessellation in
+//! `lod`); the rest sees [`GpuScene`] and [`Camera`].
 
 use anyhow::{Context, Result};
 use glam::{UVec2, Vec2};
@@ -26,6 +27,13 @@ use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 use crate::frame_plan::{FramePlan, StampKind};
 use crate::report::GpuObjects;
 use crate::timings::{Step, Timings};
+
+mod detail;
+mod lod;
+
+pub use detail::{DETAIL_SLOTS, SPILL_WINDOW_TEXELS};
+use detail::{DetailScene, RefinedGeometry};
+use lod::{CdlodScene, TessScene, render_cdlod, render_tessellated};
 
 pub use terrain_gpu::Camera;
 
@@ -95,87 +103,6 @@ pub use terrain_gpu::{AtlasConfig, GpuTileAtlas, TileSlot};
 /// Readbacks of deformed atlas tiles in flight at most (the ring's staging buffers).
 const TILE_READBACK_RING: usize = 16;
 
-/// Detail tile slots on the GPU (4 MiB each at 1024^2 u32 texels): the nine of a band and the
-/// tiles beyond it under the walker and this frame's footprints (within 2 m of the walker: at
-/// most four). Only tiles with detail take a slot; the zero tile is shared.
-pub const DETAIL_SLOTS: u32 = 13;
-
-/// The detail layer on the GPU: tile slots following the scenario's detail cache (each
-/// footprint is stamped on both; the cache's copy is the one written back) and how the
-/// renderer shades them.
-struct DetailScene {
-    tiles: GpuDetailTiles,
-    /// Footprints are stamped through it: what leaves the tiles' range spills into the
-    /// coarse-map.
-    spill: SpillPass,
-    shading: DetailShading,
-    /// Detail texels inside the rects the last deformation stamped.
-    dirty_texels: u64,
-    /// The rects (tile, texels of the tile) stamped and not yet requested back (the ring was
-    /// full): requested first in the next deformation's submit, before its stamps.
-    pending: Vec<(glam::UVec2, terrain_core::Rect)>,
-    /// The ring the stamped rects come back through, never waiting, and what each ticket is.
-    readback: RegionReadback,
-    in_flight: std::collections::HashMap<u64, (glam::UVec2, terrain_core::Rect)>,
-}
-
-/// Detail rects in flight at most (the ring's limit; a frame's footprints stamp about four).
-const DETAIL_READBACK_RING: usize = 16;
-
-impl DetailScene {
-    /// Requests `rects` back in `encoder` (after what it stamped), in order; those the ring
-    /// has no room for wait in `pending`.
-    fn request(
-        &mut self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        rects: impl IntoIterator<Item = (glam::UVec2, terrain_core::Rect)>,
-    ) -> Result<(), terrain_gpu::GpuError> {
-        for (tile, rect) in rects {
-            if !self.pending.is_empty() || self.readback.in_flight() >= self.readback.ring() {
-                self.pending.push((tile, rect));
-                continue;
-            }
-            let ticket = self
-                .readback
-                .request_detail(device, encoder, &self.tiles, tile, rect)?;
-            self.in_flight.insert(ticket.0, (tile, rect));
-        }
-        Ok(())
-    }
-}
-
-/// The refinement pass and its renderer, with the radius they refine.
-struct RefinedGeometry {
-    pass: RefinePass,
-    renderer: RefineRenderer,
-    radius_m: f32,
-}
-
-/// The refined radius of `--detail refine`: 9 m, at most 90 texels (the region must stay where
-/// the finest clipmap level, N = 255, does not morph: about 100 texels from the camera).
-fn refine_radius(texel_size: f32) -> f32 {
-    (REFINE_TEXELS * texel_size).min(9.0)
-}
-
-/// The most texels the refined radius spans (see [`refine_radius`]).
-const REFINE_TEXELS: f32 = 90.0;
-
-/// The largest footprint a spilling detail stamp covers (256 KiB of excess window): the
-/// default footprints cover about 10 x 20 detail texels.
-pub const SPILL_WINDOW_TEXELS: u32 = 256 * 256;
-
-/// The demo's detail shading: footprints drawn fully to 12 m and faded out by 22 m, within the
-/// two thirds of a tile the band regions hold around the camera in every direction (so no
-/// tile ever appears or leaves where the detail shows).
-fn detail_shading() -> DetailShading {
-    DetailShading {
-        fade_start_m: 12.0,
-        fade_end_m: 22.0,
-        ..DetailShading::default()
-    }
-}
-
 /// The GPU side of the snow scenario: the fixed-point map, the step, the normals and float
 /// heights it is rendered from, the volume sum, and the readback of the areas a step changed.
 struct GranularScene {
@@ -201,41 +128,6 @@ pub struct GranularFrame {
     /// Regions of earlier steps that arrived on the CPU: (rect, fixed-point heights).
     pub arrived: Vec<(Rect, Grid<u32>)>,
 }
-
-/// CDLOD on the GPU scene: the quadtree (on the CPU, kept current by the deformations), the
-/// renderer, and the selections of the last two frames (for the popping metric).
-struct CdlodScene {
-    tree: CdlodTree,
-    renderer: CdlodRenderer,
-    mesh: CdlodMesh,
-    /// The last frame's selection with its camera, and the one before.
-    last: Option<(CdlodFrame, glam::Vec3)>,
-    previous: Option<(CdlodFrame, glam::Vec3)>,
-}
-
-/// Adaptive tessellation on the GPU scene: the hierarchy and density map (on the CPU, kept
-/// current by the deformations and copied to the GPU where they change), the compute pass that
-/// tessellates, the renderer, and the cameras of the last two frames (for the popping metric).
-struct TessScene {
-    hierarchy: TessHierarchy,
-    density: Option<DensityMap>,
-    gpu: terrain_gpu::GpuTessellation,
-    pass: TessellationPass,
-    renderer: TessRenderer,
-    /// The last frame's view (camera, viewport width, hfov), and the one before.
-    last: Option<(glam::Vec3, f32, f32)>,
-    previous: Option<(glam::Vec3, f32, f32)>,
-    /// Where the popping metric looks: up to [`JUMP_PROBES`] drawn vertices of each of the
-    /// last two frames (texels).
-    probes: Vec<Vec2>,
-    previous_probes: Vec<Vec2>,
-}
-
-/// Drawn vertices per frame the tessellation's popping metric probes.
-const JUMP_PROBES: usize = 4096;
-
-/// Triangles the tessellation's output holds (72 MiB of vertices).
-const TESS_CAPACITY: u32 = 1 << 21;
 
 /// One rendered frame.
 pub struct RenderedFrame {
@@ -417,138 +309,6 @@ impl GpuScene {
         })
     }
 
-    /// Draws the coarse-map through a detail layer of `layout` from now on, and stamps the
-    /// footprints into its tiles ([`GpuScene::stream_detail`] keeps them resident). With
-    /// `refine`, the cells near the camera are refined geometry (seed 000 sec. 2.4.3) and the
-    /// clipmap shades the rest with the detail normals; else the clipmap draws the detail by
-    /// parallax occlusion mapping.
-    pub fn enable_detail(&mut self, layout: DetailLayout, refine: bool) -> Result<()> {
-        let device = &self.ctx.device;
-        let tiles = GpuDetailTiles::new(device, layout, DETAIL_SLOTS)?;
-        let mut shading = detail_shading();
-        let refine = if refine {
-            let radius_m = refine_radius(self.map.texel_size());
-            let view = terrain_lod::RefineView::new(Vec2::ZERO, self.map.texel_size(), radius_m)?;
-            shading.parallax_steps = 0;
-            Some(RefinedGeometry {
-                pass: RefinePass::new(device, view.half_cells())?,
-                renderer: RefineRenderer::new(device, self.renderer.target())?,
-                radius_m,
-            })
-        } else {
-            None
-        };
-        self.detail = Some(DetailScene {
-            tiles,
-            spill: SpillPass::new(device, SPILL_WINDOW_TEXELS)?,
-            shading,
-            dirty_texels: 0,
-            pending: Vec::new(),
-            readback: RegionReadback::new(device, DETAIL_READBACK_RING)?,
-            in_flight: std::collections::HashMap::new(),
-        });
-        self.refined = refine;
-        Ok(())
-    }
-
-    /// With a detail layer: tiles in a GPU slot, and the detail texels the last deformation
-    /// stamped.
-    pub fn detail_stats(&self) -> Option<(u32, u64)> {
-        self.detail
-            .as_ref()
-            .map(|d| (d.tiles.resident(), d.dirty_texels))
-    }
-
-    /// Makes the GPU's detail slots follow `frame` of `cache` (the detail cache the footprints
-    /// are also stamped on, on the CPU): releases the tiles that left its working set and
-    /// uploads those that joined it. Timed as [`Step::Detail`]. Nothing without a detail layer.
-    pub fn stream_detail(
-        &mut self,
-        cache: &DetailCache,
-        frame: &DetailFrame,
-        timings: &mut Timings,
-    ) -> Result<()> {
-        let Some(detail) = self.detail.as_mut() else {
-            return Ok(());
-        };
-        let t = std::time::Instant::now();
-        for &tile in &frame.unload {
-            detail.tiles.unload(&self.ctx.queue, tile);
-        }
-        for &tile in &frame.load {
-            detail.tiles.load(&self.ctx.queue, tile, cache.tile(tile))?;
-        }
-        timings.add(Step::Detail, crate::timings::ms_since(t));
-        Ok(())
-    }
-
-    /// The detail rects stamped on the GPU that have arrived go into `cache` (collision walks
-    /// on it, and it writes the tiles back): the GPU's stamps are the detail's truth. Never
-    /// waits; with `wait`, requests what is pending and waits until nothing is in flight (the
-    /// end of a run). Timed as [`Step::Detail`]. Nothing without a detail layer.
-    pub fn take_detail_readbacks(
-        &mut self,
-        cache: &mut DetailCache,
-        wait: bool,
-        timings: &mut Timings,
-    ) -> Result<()> {
-        let Some(detail) = self.detail.as_mut() else {
-            return Ok(());
-        };
-        let t = std::time::Instant::now();
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let to_u8 = |r: terrain_gpu::RegionView<'_>| (r.ticket.0, r.rect, r.to_u8());
-        let deadline = t + std::time::Duration::from_secs(60);
-        loop {
-            if wait && !detail.pending.is_empty() {
-                let mut encoder = device.create_command_encoder(&Default::default());
-                let pending = std::mem::take(&mut detail.pending);
-                detail.request(device, &mut encoder, pending)?;
-                queue.submit([encoder.finish()]);
-            }
-            let mut arrived = if wait {
-                detail.readback.wait_with(device, to_u8)?
-            } else {
-                detail.readback.poll_with(device, to_u8)?
-            };
-            // In request order: a later copy of the same texels is the newer one.
-            arrived.sort_by_key(|(ticket, _, _)| *ticket);
-            for (ticket, rect, texels) in arrived {
-                let Some((tile, asked)) = detail.in_flight.remove(&ticket) else {
-                    anyhow::bail!("a detail readback nobody asked for (ticket {ticket})");
-                };
-                anyhow::ensure!(
-                    asked == rect,
-                    "detail tile {tile}: asked {asked:?}, got {rect:?}"
-                );
-                cache.write_rect(tile, rect, &texels?)?;
-            }
-            let done = detail.in_flight.is_empty() && detail.pending.is_empty();
-            if !wait || done {
-                break;
-            }
-            anyhow::ensure!(
-                std::time::Instant::now() < deadline,
-                "{} detail readbacks never arrived",
-                detail.in_flight.len() + detail.pending.len()
-            );
-        }
-        timings.add(Step::Detail, crate::timings::ms_since(t));
-        Ok(())
-    }
-
-    /// The detail tiles with stamped rects not yet back on the CPU: the detail cache must keep
-    /// them until they arrive.
-    pub fn detail_tiles_in_flight(&self) -> Vec<glam::UVec2> {
-        self.detail.as_ref().map_or_else(Vec::new, |d| {
-            d.in_flight
-                .values()
-                .chain(&d.pending)
-                .map(|(t, _)| *t)
-                .collect()
-        })
-    }
-
     /// Uploads the footprint texture stamp that [`StampKind::Footprint`] deformations use.
     pub fn set_footprint(&mut self, footprint: &TextureStamp) -> Result<()> {
         self.footprint = Some(GpuTextureStamp::new(&self.ctx.device, footprint)?);
@@ -584,112 +344,6 @@ impl GpuScene {
         (CLIPMAP_N - 1) as f32 / 2.0
             * (1u32 << (self.layout.levels() - 1)) as f32
             * self.map.texel_size()
-    }
-
-    /// Draws the coarse-map with CDLOD instead of the clipmap: the quadtree of `map` with
-    /// `config`, kept current by [`GpuScene::update_lod`].
-    pub fn enable_cdlod(&mut self, map: &CoarseMap, config: CdlodConfig) -> Result<()> {
-        let tree = CdlodTree::from_map(map, config)?;
-        let mesh = CdlodMesh::new(config.grid_size);
-        let renderer = CdlodRenderer::new(&self.ctx.device, &self.target.format(), &mesh)?;
-        self.cdlod = Some(CdlodScene {
-            tree,
-            renderer,
-            mesh,
-            last: None,
-            previous: None,
-        });
-        Ok(())
-    }
-
-    /// Draws the coarse-map with adaptive tessellation instead of the clipmap: the hierarchy of
-    /// `map` with `config` (and its density map when `density`), kept current by
-    /// [`GpuScene::update_lod`].
-    pub fn enable_tessellation(
-        &mut self,
-        map: &CoarseMap,
-        config: TessConfig,
-        density: bool,
-    ) -> Result<()> {
-        let density = density
-            .then(|| DensityMap::from_map(map, DensityParams::default()))
-            .transpose()?;
-        // The CPU reference selects before the GPU draws, bounded as the GPU's output: a view
-        // that needs more triangles fails with a clear error instead of drawing holes.
-        let config = TessConfig {
-            max_triangles: config.max_triangles.min(TESS_CAPACITY as usize),
-            ..config
-        };
-        let hierarchy = TessHierarchy::from_map(map, density.as_ref(), config)?;
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let capacity = config.max_triangles as u32;
-        let gpu = terrain_gpu::GpuTessellation::new(device, queue, &hierarchy, capacity)?;
-        self.tess = Some(TessScene {
-            hierarchy,
-            density,
-            gpu,
-            pass: TessellationPass::new(device)?,
-            renderer: TessRenderer::new(device, &self.target.format())?,
-            last: None,
-            previous: None,
-            probes: Vec::new(),
-            previous_probes: Vec::new(),
-        });
-        Ok(())
-    }
-
-    /// Brings the CDLOD quadtree's bounds up to date with `map` after deformations in `dirty`
-    /// (timed as `lod`); nothing without CDLOD.
-    pub fn update_lod(
-        &mut self,
-        map: &CoarseMap,
-        dirty: &[Rect],
-        timings: &mut Timings,
-    ) -> Result<()> {
-        if let Some(c) = &mut self.cdlod {
-            let t = std::time::Instant::now();
-            for r in dirty {
-                c.tree.update_rect(map, *r)?;
-            }
-            timings.add(Step::Lod, crate::timings::ms_since(t));
-        }
-        if let Some(c) = &mut self.tess {
-            let t = std::time::Instant::now();
-            let mut rows = Vec::new();
-            for r in dirty {
-                if let Some(d) = &mut c.density {
-                    d.update_rect(map, *r)?;
-                }
-                rows.extend(c.hierarchy.update_rect(map, c.density.as_ref(), *r)?);
-            }
-            if !rows.is_empty() {
-                c.gpu.upload(&self.ctx.queue, &c.hierarchy, &rows)?;
-            }
-            timings.add(Step::Lod, crate::timings::ms_since(t));
-        }
-        Ok(())
-    }
-
-    /// The popping metric of the last frame against the one before (`None` on the first
-    /// frame or without CDLOD): the largest screen-space jump of the drawn surface, in pixels,
-    /// at probes ahead of `camera`, both frames evaluated on `map` and projected with
-    /// `camera`, so only a change of the mesh counts.
-    pub fn lod_jump_px(&self, map: &CoarseMap, camera: &Camera) -> Option<f32> {
-        if let Some(t) = &self.tess {
-            return tess_jump_px(t, camera, self.target.size().as_vec2());
-        }
-        let c = self.cdlod.as_ref()?;
-        let ((now, eye), (then, then_eye)) = (c.last.as_ref()?, c.previous.as_ref()?);
-        let size = self.target.size().as_vec2();
-        let view = terrain_lod::PoppingView {
-            forward: camera.forward,
-            view_proj: camera.view_proj_world(size.x / size.y),
-            target: size,
-        };
-        Some(
-            c.tree
-                .popping_px(map, (now, *eye), (then, *then_eye), &view),
-        )
     }
 
     /// Makes the clipmap reach `radius` metres around the camera (its coarsest level's half
@@ -939,26 +593,6 @@ impl GpuScene {
     #[cfg(test)]
     pub fn read_map(&self) -> Result<CoarseMap> {
         Ok(self.map.read(&self.ctx.device, &self.ctx.queue)?)
-    }
-
-    /// A resident detail tile's texels on the GPU (waits for the GPU), `None` for a tile
-    /// without a slot: for tests that compare the detail cache with the truth.
-    #[cfg(test)]
-    pub fn read_detail(&self, tile: glam::UVec2) -> Result<Option<Grid<u8>>> {
-        let Some(detail) = self.detail.as_ref() else {
-            return Ok(None);
-        };
-        if detail.tiles.slot_of(tile).is_none() {
-            return Ok(None);
-        }
-        let side = detail.tiles.layout().tile_size();
-        let all = Rect::from_size(UVec2::splat(side));
-        Ok(Some(detail.tiles.read(
-            &self.ctx.device,
-            &self.ctx.queue,
-            tile,
-            all,
-        )?))
     }
 
     /// The GPU objects alive on the device now.
@@ -1275,18 +909,6 @@ struct FrameGpu<'a> {
     style: &'a TerrainStyle,
 }
 
-/// What CDLOD's and the tessellation's decisions are made for: the camera, its frustum and the
-/// target's width and horizontal field of view.
-fn lod_view<'a>(camera: &Camera, size: UVec2, frustum: &'a Frustum) -> CdlodView<'a> {
-    let aspect = size.x as f32 / size.y as f32;
-    CdlodView {
-        camera: camera.position,
-        frustum: Some(frustum),
-        viewport_width: size.x as f32,
-        hfov: 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan(),
-    }
-}
-
 /// Reads the rendered frame back (timed as `capture`) and records its GPU `timing` as
 /// `render`.
 fn capture(
@@ -1301,163 +923,4 @@ fn capture(
     timings.add(Step::Capture, crate::timings::ms_since(t));
     record(timings, Step::Render, timing);
     Ok(image)
-}
-
-/// Tessellates (a compute pass, timed in `render`) and draws a frame; the CPU reference
-/// selection gives the report's figures and is not timed (the `lod` step is the frustum, from
-/// `lod_start`).
-fn render_tessellated(
-    c: &mut TessScene,
-    gpu: FrameGpu<'_>,
-    camera: &Camera,
-    frustum: Frustum,
-    lod_start: std::time::Instant,
-    timings: &mut Timings,
-) -> Result<RenderedFrame> {
-    let FrameGpu {
-        ctx,
-        target,
-        sky,
-        timer,
-        map,
-        normals,
-        style,
-    } = gpu;
-    let (device, queue) = (&ctx.device, &ctx.queue);
-    let size = target.size();
-    let aspect = size.x as f32 / size.y as f32;
-    let view = lod_view(camera, size, &frustum);
-    timings.add(Step::Lod, crate::timings::ms_since(lod_start));
-    // The report's figures from the CPU reference (the same triangles as the GPU's), made
-    // first so that a view beyond the output's capacity fails before anything is drawn.
-    let frame = c.hierarchy.select(&view)?;
-    let max_screen_error_px = c.hierarchy.max_screen_error_px(&frame, &view);
-    let view_proj = camera.view_proj_relative(aspect);
-    let timing = timer.time(device, queue, |encoder| {
-        sky.prepare(queue, view_proj, &SkyColors::default())?;
-        c.pass
-            .encode(device, queue, encoder, &c.gpu, &c.hierarchy, &view)?;
-        c.renderer.prepare(
-            device,
-            queue,
-            &TessDraw {
-                map,
-                normals,
-                camera,
-                style,
-                target_size: size,
-            },
-        )?;
-        let mut pass = target.begin_pass(encoder, wgpu::Color::BLACK);
-        sky.draw(&mut pass);
-        c.renderer.draw(&mut pass, &c.gpu);
-        Ok(())
-    })?;
-    c.pass.recall();
-    let image = capture(ctx, target, timing, timings)?;
-    let stats = RenderedFrame {
-        image,
-        triangles: frame.triangle_count(),
-        lod: LodStats {
-            mode: "tessellated",
-            vertices: frame.vertex_count(),
-            max_screen_error_px: Some(max_screen_error_px),
-        },
-    };
-    c.previous = c.last.replace((camera.position, size.x as f32, view.hfov));
-    let stride = (frame.triangles.len() / JUMP_PROBES).max(1);
-    let probes = frame
-        .triangles
-        .iter()
-        .step_by(stride)
-        .map(|t| Vec2::from(t[2].texel))
-        .collect();
-    c.previous_probes = std::mem::replace(&mut c.probes, probes);
-    Ok(stats)
-}
-
-/// The popping metric of the tessellation: the surface's largest jump between the last two
-/// frames' decisions, at drawn vertices of both frames (vertices that appeared and that
-/// disappeared), both on today's heights and projected with `camera`.
-fn tess_jump_px(t: &TessScene, camera: &Camera, size: Vec2) -> Option<f32> {
-    let ((eye, width, hfov), (then_eye, then_width, then_hfov)) = (t.last?, t.previous?);
-    let view = CdlodView {
-        camera: eye,
-        frustum: None,
-        viewport_width: width,
-        hfov,
-    };
-    let previous = CdlodView {
-        camera: then_eye,
-        frustum: None,
-        viewport_width: then_width,
-        hfov: then_hfov,
-    };
-    let probes: Vec<Vec2> = t.probes.iter().chain(&t.previous_probes).copied().collect();
-    Some(t.hierarchy.max_height_jump(
-        &view,
-        &previous,
-        &probes,
-        camera.view_proj_world(size.x / size.y),
-        size,
-    ))
-}
-
-/// Selects and draws a CDLOD frame (the `lod` step is timed from `lod_start`).
-fn render_cdlod(
-    c: &mut CdlodScene,
-    gpu: FrameGpu<'_>,
-    camera: &Camera,
-    frustum: Frustum,
-    lod_start: std::time::Instant,
-    timings: &mut Timings,
-) -> Result<RenderedFrame> {
-    let FrameGpu {
-        ctx,
-        target,
-        sky,
-        timer,
-        map,
-        normals,
-        style,
-    } = gpu;
-    let (device, queue) = (&ctx.device, &ctx.queue);
-    let size = target.size();
-    let aspect = size.x as f32 / size.y as f32;
-    let view = lod_view(camera, size, &frustum);
-    let frame = c.tree.select(&view)?;
-    let max_screen_error_px = c.tree.max_screen_error_px(&frame, &view);
-    timings.add(Step::Lod, crate::timings::ms_since(lod_start));
-    let view_proj = camera.view_proj_relative(aspect);
-    let timing = timer.time(device, queue, |encoder| {
-        sky.prepare(queue, view_proj, &SkyColors::default())?;
-        c.renderer.prepare(
-            device,
-            queue,
-            &CdlodDraw {
-                map,
-                normals,
-                frame: &frame,
-                camera,
-                style,
-                target_size: size,
-            },
-        )?;
-        let mut pass = target.begin_pass(encoder, wgpu::Color::BLACK);
-        sky.draw(&mut pass);
-        c.renderer.draw(&mut pass);
-        Ok(())
-    })?;
-    let image = capture(ctx, target, timing, timings)?;
-    let stats = RenderedFrame {
-        image,
-        triangles: frame.triangle_count(&c.mesh),
-        lod: LodStats {
-            mode: "cdlod",
-            vertices: frame.vertex_count(&c.mesh),
-            max_screen_error_px: Some(max_screen_error_px),
-        },
-    };
-    c.previous = c.last.replace((frame, camera.position));
-    Ok(stats)
 }

@@ -1,0 +1,241 @@
+//! The detail layer on the GPU scene (Flower 2010 sec. 2.3): the tile slots following the
+//! scenario's detail cache, the spill pass footprints go through, the refined geometry of
+//! `--detail refine`, and the readback that brings stamped detail rects to the cache without
+//! a wait.
+
+use super::*;
+
+/// Detail tile slots on the GPU (4 MiB each at 1024^2 u32 texels): the nine of a band and the
+/// tiles beyond it under the walker and this frame's footprints (within 2 m of the walker: at
+/// most four). Only tiles with detail take a slot; the zero tile is shared.
+pub const DETAIL_SLOTS: u32 = 13;
+
+/// The detail layer on the GPU: tile slots following the scenario's detail cache (footprints
+/// are stamped here and their rects read back into the cache, whose copy is the one written
+/// back) and how the renderer shades them.
+pub(super) struct DetailScene {
+    pub(super) tiles: GpuDetailTiles,
+    /// Footprints are stamped through it: what leaves the tiles' range spills into the
+    /// coarse-map.
+    pub(super) spill: SpillPass,
+    pub(super) shading: DetailShading,
+    /// Detail texels inside the rects the last deformation stamped.
+    pub(super) dirty_texels: u64,
+    /// The rects (tile, texels of the tile) stamped and not yet requested back (the ring was
+    /// full): requested first in the next deformation's submit, before its stamps.
+    pub(super) pending: Vec<(glam::UVec2, terrain_core::Rect)>,
+    /// The ring the stamped rects come back through, never waiting, and what each ticket is.
+    pub(super) readback: RegionReadback,
+    pub(super) in_flight: std::collections::HashMap<u64, (glam::UVec2, terrain_core::Rect)>,
+}
+
+/// Detail rects in flight at most (the ring's limit; a frame's footprints stamp about four).
+pub(super) const DETAIL_READBACK_RING: usize = 16;
+
+impl DetailScene {
+    /// Requests `rects` back in `encoder` (after what it stamped), in order; those the ring
+    /// has no room for wait in `pending`.
+    pub(super) fn request(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        rects: impl IntoIterator<Item = (glam::UVec2, terrain_core::Rect)>,
+    ) -> Result<(), terrain_gpu::GpuError> {
+        for (tile, rect) in rects {
+            if !self.pending.is_empty() || self.readback.in_flight() >= self.readback.ring() {
+                self.pending.push((tile, rect));
+                continue;
+            }
+            let ticket = self
+                .readback
+                .request_detail(device, encoder, &self.tiles, tile, rect)?;
+            self.in_flight.insert(ticket.0, (tile, rect));
+        }
+        Ok(())
+    }
+}
+
+/// The refinement pass and its renderer, with the radius they refine.
+pub(super) struct RefinedGeometry {
+    pub(super) pass: RefinePass,
+    pub(super) renderer: RefineRenderer,
+    pub(super) radius_m: f32,
+}
+
+/// The refined radius of `--detail refine`: 9 m, at most 90 texels (the region must stay where
+/// the finest clipmap level, N = 255, does not morph: about 100 texels from the camera).
+pub(super) fn refine_radius(texel_size: f32) -> f32 {
+    (REFINE_TEXELS * texel_size).min(9.0)
+}
+
+/// The most texels the refined radius spans (see [`refine_radius`]).
+pub(super) const REFINE_TEXELS: f32 = 90.0;
+
+/// The largest footprint a spilling detail stamp covers (256 KiB of excess window): the
+/// default footprints cover about 10 x 20 detail texels.
+pub const SPILL_WINDOW_TEXELS: u32 = 256 * 256;
+
+/// The demo's detail shading: footprints drawn fully to 12 m and faded out by 22 m, within the
+/// two thirds of a tile the band regions hold around the camera in every direction (so no
+/// tile ever appears or leaves where the detail shows).
+pub(super) fn detail_shading() -> DetailShading {
+    DetailShading {
+        fade_start_m: 12.0,
+        fade_end_m: 22.0,
+        ..DetailShading::default()
+    }
+}
+
+impl GpuScene {
+    /// Draws the coarse-map through a detail layer of `layout` from now on, and stamps the
+    /// footprints into its tiles ([`GpuScene::stream_detail`] keeps them resident). With
+    /// `refine`, the cells near the camera are refined geometry (seed 000 sec. 2.4.3) and the
+    /// clipmap shades the rest with the detail normals; else the clipmap draws the detail by
+    /// parallax occlusion mapping.
+    pub fn enable_detail(&mut self, layout: DetailLayout, refine: bool) -> Result<()> {
+        let device = &self.ctx.device;
+        let tiles = GpuDetailTiles::new(device, layout, DETAIL_SLOTS)?;
+        let mut shading = detail_shading();
+        let refine = if refine {
+            let radius_m = refine_radius(self.map.texel_size());
+            let view = terrain_lod::RefineView::new(Vec2::ZERO, self.map.texel_size(), radius_m)?;
+            shading.parallax_steps = 0;
+            Some(RefinedGeometry {
+                pass: RefinePass::new(device, view.half_cells())?,
+                renderer: RefineRenderer::new(device, self.renderer.target())?,
+                radius_m,
+            })
+        } else {
+            None
+        };
+        self.detail = Some(DetailScene {
+            tiles,
+            spill: SpillPass::new(device, SPILL_WINDOW_TEXELS)?,
+            shading,
+            dirty_texels: 0,
+            pending: Vec::new(),
+            readback: RegionReadback::new(device, DETAIL_READBACK_RING)?,
+            in_flight: std::collections::HashMap::new(),
+        });
+        self.refined = refine;
+        Ok(())
+    }
+
+    /// With a detail layer: tiles in a GPU slot, and the detail texels the last deformation
+    /// stamped.
+    pub fn detail_stats(&self) -> Option<(u32, u64)> {
+        self.detail
+            .as_ref()
+            .map(|d| (d.tiles.resident(), d.dirty_texels))
+    }
+
+    /// Makes the GPU's detail slots follow `frame` of `cache` (the detail cache the footprints
+    /// are also stamped on, on the CPU): releases the tiles that left its working set and
+    /// uploads those that joined it. Timed as [`Step::Detail`]. Nothing without a detail layer.
+    pub fn stream_detail(
+        &mut self,
+        cache: &DetailCache,
+        frame: &DetailFrame,
+        timings: &mut Timings,
+    ) -> Result<()> {
+        let Some(detail) = self.detail.as_mut() else {
+            return Ok(());
+        };
+        let t = std::time::Instant::now();
+        for &tile in &frame.unload {
+            detail.tiles.unload(&self.ctx.queue, tile);
+        }
+        for &tile in &frame.load {
+            detail.tiles.load(&self.ctx.queue, tile, cache.tile(tile))?;
+        }
+        timings.add(Step::Detail, crate::timings::ms_since(t));
+        Ok(())
+    }
+
+    /// The detail rects stamped on the GPU that have arrived go into `cache` (collision walks
+    /// on it, and it writes the tiles back): the GPU's stamps are the detail's truth. Never
+    /// waits; with `wait`, requests what is pending and waits until nothing is in flight (the
+    /// end of a run). Timed as [`Step::Detail`]. Nothing without a detail layer.
+    pub fn take_detail_readbacks(
+        &mut self,
+        cache: &mut DetailCache,
+        wait: bool,
+        timings: &mut Timings,
+    ) -> Result<()> {
+        let Some(detail) = self.detail.as_mut() else {
+            return Ok(());
+        };
+        let t = std::time::Instant::now();
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let to_u8 = |r: terrain_gpu::RegionView<'_>| (r.ticket.0, r.rect, r.to_u8());
+        let deadline = t + std::time::Duration::from_secs(60);
+        loop {
+            if wait && !detail.pending.is_empty() {
+                let mut encoder = device.create_command_encoder(&Default::default());
+                let pending = std::mem::take(&mut detail.pending);
+                detail.request(device, &mut encoder, pending)?;
+                queue.submit([encoder.finish()]);
+            }
+            let mut arrived = if wait {
+                detail.readback.wait_with(device, to_u8)?
+            } else {
+                detail.readback.poll_with(device, to_u8)?
+            };
+            // In request order: a later copy of the same texels is the newer one.
+            arrived.sort_by_key(|(ticket, _, _)| *ticket);
+            for (ticket, rect, texels) in arrived {
+                let Some((tile, asked)) = detail.in_flight.remove(&ticket) else {
+                    anyhow::bail!("a detail readback nobody asked for (ticket {ticket})");
+                };
+                anyhow::ensure!(
+                    asked == rect,
+                    "detail tile {tile}: asked {asked:?}, got {rect:?}"
+                );
+                cache.write_rect(tile, rect, &texels?)?;
+            }
+            let done = detail.in_flight.is_empty() && detail.pending.is_empty();
+            if !wait || done {
+                break;
+            }
+            anyhow::ensure!(
+                std::time::Instant::now() < deadline,
+                "{} detail readbacks never arrived",
+                detail.in_flight.len() + detail.pending.len()
+            );
+        }
+        timings.add(Step::Detail, crate::timings::ms_since(t));
+        Ok(())
+    }
+
+    /// The detail tiles with stamped rects not yet back on the CPU: the detail cache must keep
+    /// them until they arrive.
+    pub fn detail_tiles_in_flight(&self) -> Vec<glam::UVec2> {
+        self.detail.as_ref().map_or_else(Vec::new, |d| {
+            d.in_flight
+                .values()
+                .chain(&d.pending)
+                .map(|(t, _)| *t)
+                .collect()
+        })
+    }
+
+    /// A resident detail tile's texels on the GPU (waits for the GPU), `None` for a tile
+    /// without a slot: for tests that compare the detail cache with the truth.
+    #[cfg(test)]
+    pub fn read_detail(&self, tile: glam::UVec2) -> Result<Option<Grid<u8>>> {
+        let Some(detail) = self.detail.as_ref() else {
+            return Ok(None);
+        };
+        if detail.tiles.slot_of(tile).is_none() {
+            return Ok(None);
+        }
+        let side = detail.tiles.layout().tile_size();
+        let all = Rect::from_size(UVec2::splat(side));
+        Ok(Some(detail.tiles.read(
+            &self.ctx.device,
+            &self.ctx.queue,
+            tile,
+            all,
+        )?))
+    }
+}
