@@ -237,4 +237,7 @@ pub enum CacheError {
     /// A grid operation of terrain-core failed.
     #[error(transparent)]
     Core(#[from] CoreError),
+    /// A granular hand-over of terrain-core refused its input.
+    #[error(transparent)]
+    Granular(#[from] terrain_core::granular::GranularError),
 }

@@ -60,6 +60,7 @@
 
 pub mod detail;
 pub mod error;
+mod granular_window;
 pub mod manifest;
 #[cfg(feature = "object-store")]
 pub mod object;
@@ -69,6 +70,7 @@ pub mod tile_stamps;
 pub mod world;
 
 pub use error::CacheError;
+pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
 pub use manifest::{DetailLayout, Manifest, tile_key};
 #[cfg(feature = "object-store")]
 pub use object::ObjectTileStore;
