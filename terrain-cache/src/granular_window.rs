@@ -214,9 +214,11 @@ impl GranularWindow {
     }
 
     /// Releases the window: unpins its tiles and checks that they hold exactly the units taken
-    /// (every area the steps changed handed back, nothing else written there). Returns the
-    /// units; [`CacheError::OutOfRange`] when they differ (the window is released anyway).
-    pub fn release(&mut self, pool: &mut RamPool) -> Result<u64, CacheError> {
+    /// less `removed` (what compression removed while the window lived; 0 for the
+    /// volume-preserving default): every area the steps changed handed back, nothing else
+    /// written there. Returns the units; [`CacheError::OutOfRange`] when they differ (the
+    /// window is released anyway).
+    pub fn release(&mut self, pool: &mut RamPool, removed: u64) -> Result<u64, CacheError> {
         let Some(t) = self.taken.take() else {
             return Ok(0);
         };
@@ -227,11 +229,11 @@ impl GranularWindow {
         }
         read?;
         let now: u64 = heights.as_slice().iter().map(|&h| u64::from(h)).sum();
-        if now != t.volume {
+        if Some(now) != t.volume.checked_sub(removed) {
             return Err(CacheError::OutOfRange {
                 what: "stored units in the released granular window",
                 value: now as f64,
-                expected: "the units taken: only handed-back areas may change the window",
+                expected: "the units taken less those removed: only handed-back areas may change the window",
             });
         }
         Ok(now)

@@ -109,7 +109,7 @@ fn trails_reach_the_tiles_with_the_volume_exact_after_every_step() {
         world_heights(&world, rect).as_slice(),
         "nothing moved"
     );
-    assert_eq!(window.release(&mut pool).unwrap(), taken);
+    assert_eq!(window.release(&mut pool, 0).unwrap(), taken);
     assert_eq!(window.rect(), None);
 }
 
@@ -135,7 +135,7 @@ fn a_foreign_write_into_the_window_is_caught_on_release() {
     )
     .unwrap();
     assert!(matches!(
-        window.release(&mut pool),
+        window.release(&mut pool, 0),
         Err(CacheError::OutOfRange { .. })
     ));
     // Released anyway: a new window can be taken.
@@ -181,7 +181,7 @@ fn take_waits_for_tiles_and_refuses_what_it_cannot_do() {
             .is_err()
     );
     assert_eq!(units(&pool, rect), before);
-    assert_eq!(window.release(&mut pool).unwrap(), before);
+    assert_eq!(window.release(&mut pool, 0).unwrap(), before);
 
     // Sides out of range; placements for any centre stay inside the world.
     assert!(GranularWindow::new(world.manifest(), 8).is_err());

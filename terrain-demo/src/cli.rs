@@ -169,6 +169,10 @@ pub enum ScenarioKind {
     /// A camera flying, then driving, over a streamed world larger than the cache budgets,
     /// stamping craters on its path (they persist in the world's folder).
     Flyover,
+    /// The streamed world of the flyover with everything on it: a vehicle driving and leaving
+    /// volume-preserving granular trails, craters beside its path (all persisted in
+    /// `--world`), collision following the camera.
+    World,
 }
 
 /// `--format`: how the heightmap file is read.

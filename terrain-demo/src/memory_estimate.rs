@@ -143,7 +143,7 @@ impl RunShape {
                 (planned.size, None)
             }
             ScenarioKind::Snow => (UVec2::splat(cli.size.unwrap_or(snow::SNOW_SIZE)), None),
-            ScenarioKind::Flyover => {
+            ScenarioKind::Flyover | ScenarioKind::World => {
                 let planned = world_files::planned_world(cli)?;
                 let m = planned.manifest;
                 let layout = m.tile_layout();
@@ -231,7 +231,13 @@ impl RunShape {
                     parts.push(("gpu_map", per_texel(gpu)));
                 }
             }
-            ScenarioKind::Flyover => {
+            ScenarioKind::Flyover | ScenarioKind::World => {
+                if self.scenario == ScenarioKind::World {
+                    // The granular window: scratch map, its initial copy and the step's
+                    // per-column buffers (or the GPU's).
+                    let side = u64::from(crate::scenarios::trails::WINDOW_SIDE);
+                    parts.push(("granular", side * side * GRANULAR_PER_COLUMN));
+                }
                 // The overview level: made from tiles, kept with its normals, uploaded once.
                 parts.push(("map", per_texel(MAP_PER_TEXEL)));
                 parts.push(("normals", per_texel(NORMALS_PER_TEXEL)));

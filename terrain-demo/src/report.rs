@@ -308,6 +308,10 @@ pub struct FrameStats {
     /// compression 0: the volume is preserved).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub granular_volume: Option<u64>,
+    /// World scenario: the units the granular window held when it was taken, less those
+    /// compression removed: equal to `granular_volume` at every frame (the hand-over is exact).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub granular_volume_taken: Option<u64>,
     /// Flyover: the tile cache this frame.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cache: Option<CacheStats>,

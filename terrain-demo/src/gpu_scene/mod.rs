@@ -212,6 +212,14 @@ impl GpuScene {
         self.drain_granular_inner().map_err(|e| self.lost_or(e))
     }
 
+    /// Drains granular deformation ([`drain_granular`](Self::drain_granular)) and frees its
+    /// GPU map: a streamed world's granular window that moves on.
+    pub fn disable_granular(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
+        let arrived = self.drain_granular()?;
+        self.granular = None;
+        Ok(arrived)
+    }
+
     /// Applies `plan` on the GPU and regenerates the normals, timed as [`Step::StampGpu`] and
     /// [`Step::NormalsGpu`]; returns the rects covered, each with the index of its deformation.
     pub fn deform(
@@ -393,10 +401,13 @@ impl GpuScene {
             .as_slice()
             .iter()
             .fold((u32::MAX, 0), |(lo, hi), &h| (lo.min(h), hi.max(h)));
-        self.height_range = (
-            enc.to_metres(f64::from(lo)) - 1.0,
-            enc.to_metres(f64::from(hi)) + 2.0,
-        );
+        // A streamed world's granular window is drawn through the atlas: its range stands.
+        if self.atlas.is_none() {
+            self.height_range = (
+                enc.to_metres(f64::from(lo)) - 1.0,
+                enc.to_metres(f64::from(hi)) + 2.0,
+            );
+        }
         self.granular = Some(GranularScene {
             step: GpuGranularStep::new(device, params)?,
             map: gpu_map,
@@ -759,8 +770,8 @@ impl GpuScene {
         let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
         // The texel size of the surface drawn (a streamed world's finest level).
         let texel_size = match &self.atlas {
-            Some(atlas) if self.granular.is_none() => atlas.config().world.texel_size,
-            _ => self.map.texel_size(),
+            Some(atlas) => atlas.config().world.texel_size,
+            None => self.map.texel_size(),
         };
         let coarse = self.granular.is_none() && self.atlas.is_none();
         if coarse && (self.tess.is_some() || self.cdlod.is_some()) {
@@ -789,12 +800,14 @@ impl GpuScene {
         timings.add(Step::Lod, crate::timings::ms_since(t));
         let view_proj = camera.view_proj_relative(aspect);
         let sky_colors = SkyColors::default();
+        // A streamed world is drawn from its atlas even while a granular window steps on the
+        // GPU: the window's areas reach the atlas through the tiles they are handed back to.
         let surface = match (&self.granular, &self.atlas) {
-            (Some(g), _) => ClipmapSurface::Granular {
+            (_, Some(atlas)) => ClipmapSurface::Atlas { atlas },
+            (Some(g), None) => ClipmapSurface::Granular {
                 map: &g.map,
                 surface: g.normals.buffer(),
             },
-            (None, Some(atlas)) => ClipmapSurface::Atlas { atlas },
             (None, None) => match &self.detail {
                 Some(d) => ClipmapSurface::Detail {
                     map: &self.map,

@@ -20,6 +20,7 @@
 //! end it is reloaded from the world.
 
 use super::tile_overlay;
+use super::trails::Trails;
 use super::world_files;
 use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
 use crate::cli::Cli;
@@ -58,10 +59,22 @@ pub const COLLISION_WINDOW: u32 = 512;
 /// How long the end of the run may wait for the last write-backs.
 const SHUTDOWN_TIMEOUT: Duration = Duration::from_secs(60);
 
+/// How far ahead of the camera the world scenario's vehicle drives (metres).
+const VEHICLE_AHEAD: f32 = 14.0;
+/// The world scenario's eye height above ground (metres): high enough to see the tracks.
+const WORLD_EYE_HEIGHT: f32 = 5.0;
+/// The world scenario's craters land this far to the side of the path (metres), clear of the
+/// granular window around the vehicle.
+const CRATER_ASIDE: f32 = 48.0;
+
 /// The flyover scenario.
 #[derive(Debug)]
 pub struct FlyoverScenario {
     info: ScenarioInfo,
+    /// The world scenario's granular trails (`--scenario world`), `None` for the flyover.
+    trails: Option<Trails>,
+    /// Craters not stamped because they would land in the granular window.
+    craters_skipped: u32,
     pool: Option<RamPool>,
     /// The VRAM pool, with a GPU: which tiles sit in the atlas's slots.
     vram: Option<VramPool>,
@@ -98,7 +111,7 @@ pub struct FlyoverScenario {
 
 impl FlyoverScenario {
     /// Opens (or builds) the world and starts the RAM pool.
-    pub fn new(cli: &Cli) -> Result<Self> {
+    pub fn new(cli: &Cli, params: &crate::config::DemoParams) -> Result<Self> {
         if !(cli.speed.is_finite() && cli.speed > 0.0 && cli.speed <= 1000.0) {
             return Err(usage(anyhow::anyhow!(
                 "--speed must be 0 to 1000 metres per second, got {}",
@@ -137,9 +150,19 @@ impl FlyoverScenario {
             manifest.encoding,
             manifest.texel_size,
         )?;
+        let trails = match cli.scenario {
+            crate::cli::ScenarioKind::World => Some(Trails::new(&manifest, params.granular)?),
+            _ => None,
+        };
         Ok(Self {
+            trails,
+            craters_skipped: 0,
             info: ScenarioInfo {
-                name: "flyover",
+                name: if cli.scenario == crate::cli::ScenarioKind::World {
+                    "world"
+                } else {
+                    "flyover"
+                },
                 source,
                 load_ms,
                 // The overview shades from the heights: no normal map on the CPU.
@@ -489,10 +512,10 @@ impl Scenario for FlyoverScenario {
         let ahead = reflect_into(travelled + self.heading * 5.0, self.extent);
         let forward2 = (ahead - xz).normalize_or(self.heading);
         let ground = self.ground(xz);
-        let height = if time < FLY_SECONDS {
-            FLY_HEIGHT
-        } else {
-            DRIVE_HEIGHT
+        let height = match self.trails {
+            Some(_) => WORLD_EYE_HEIGHT,
+            None if time < FLY_SECONDS => FLY_HEIGHT,
+            None => DRIVE_HEIGHT,
         };
         let eye = Vec3::new(xz.x, ground + height, xz.y);
         let look = Vec3::new(forward2.x, -0.18, forward2.y);
@@ -502,12 +525,31 @@ impl Scenario for FlyoverScenario {
         // by write-back).
         let mut crater = false;
         if self.frame.is_multiple_of(CRATER_EVERY) {
-            let center = reflect_into(travelled + self.heading * CRATER_AHEAD, self.extent);
+            // The world scenario's craters go beside the path, clear of the vehicle's trails.
+            let aside = match self.trails {
+                Some(_) => self.heading.perp() * CRATER_ASIDE,
+                None => Vec2::ZERO,
+            };
+            let center = reflect_into(travelled + self.heading * CRATER_AHEAD + aside, self.extent);
             // Between 8 texels and one tile wide: a crater touches at most 4 tiles.
             let ts = self.texel_size;
             let size = CRATER_SIZE.clamp(8.0 * ts, self.tile_size as f32 * ts);
             let placement = StampPlacement::new(center, Vec2::splat(size), CRATER_DEPTH)?;
-            crater = self.stamps.push((), placement)? > 0;
+            // A granular window's tiles take no other writes while it lives.
+            let reach = Rect::new(
+                ((center - size) / ts).floor().as_ivec2(),
+                (Vec2::splat(2.0 * size) / ts).ceil().as_uvec2() + UVec2::ONE,
+            );
+            let in_window = self
+                .trails
+                .as_ref()
+                .and_then(Trails::window)
+                .is_some_and(|w| w.intersect(&reach).is_some());
+            if in_window {
+                self.craters_skipped += 1;
+            } else {
+                crater = self.stamps.push((), placement)? > 0;
+            }
         }
         let state = CameraState {
             position: eye,
@@ -555,9 +597,39 @@ impl Scenario for FlyoverScenario {
         if let Some(scene) = ctx.gpu.as_deref_mut() {
             changed.extend(self.take_tile_readbacks(scene, false)?);
         }
+        // The vehicle's trails, once no crater's readback is on its way (a new window's tiles
+        // must hold every write made to them).
+        let mut trail = None;
+        if self.trails.is_some() {
+            let vehicle = reflect_into(travelled + self.heading * VEHICLE_AHEAD, self.extent);
+            let next = reflect_into(
+                travelled + self.heading * (VEHICLE_AHEAD + 1.0),
+                self.extent,
+            );
+            let vehicle = (vehicle, (next - vehicle).normalize_or(self.heading));
+            // A window that moves takes its tiles with every crater in them: those on their
+            // way back from the GPU land first.
+            if let Some(scene) = ctx.gpu.as_deref_mut()
+                && self.stamps.in_flight() > 0
+                && self.trails.as_ref().is_some_and(|t| t.will_move(vehicle))
+            {
+                changed.extend(self.take_tile_readbacks(scene, true)?);
+            }
+            let (Some(trails), Some(pool)) = (self.trails.as_mut(), self.pool.as_mut()) else {
+                bail!("the world's pool was shut down");
+            };
+            let frame =
+                trails.advance(pool, ctx.gpu.as_deref_mut(), vehicle, &state, ctx.timings)?;
+            for (rect, heights) in &frame.changed {
+                self.window.apply(*rect, heights)?;
+                changed.push(*rect);
+            }
+            self.gpu_stamp_ms += frame.step_ms;
+            trail = Some(frame);
+        }
         let dirty = self.update_overview(&changed)?;
         self.update_window(xz)?;
-        // The GPU stamps are timed as their own step.
+        // The GPU stamps and granular steps are timed as their own steps.
         let cache_ms = (ms_since(t_frame) - self.gpu_stamp_ms).max(0.0);
         ctx.timings.add(Step::Cache, cache_ms);
         let camera_clearance_m = eye.y - self.ground(xz);
@@ -567,6 +639,9 @@ impl Scenario for FlyoverScenario {
             stats: FrameStats {
                 craters: u32::from(crater),
                 dirty_texels: changed.iter().map(Rect::area).sum(),
+                granular_volume: trail.as_ref().and_then(|t| t.volume),
+                granular_volume_taken: trail.as_ref().and_then(|t| t.volume_taken),
+                granular_backend: trail.as_ref().and_then(|t| t.backend),
                 cache: Some(CacheStats {
                     // With a GPU: wanted tiles drawn from a coarser level; without one, the
                     // tiles under and around the camera not in RAM.
@@ -599,8 +674,13 @@ impl Scenario for FlyoverScenario {
 
     fn finish(&mut self, gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
         // The tiles stamped on the GPU reach RAM before anything is written back.
-        if let Some(scene) = gpu {
+        let mut gpu = gpu;
+        if let Some(scene) = gpu.as_deref_mut() {
             self.take_tile_readbacks(scene, true)?;
+        }
+        // The trails' last areas reach the tiles, and the window's volume is checked.
+        if let (Some(trails), Some(pool)) = (self.trails.as_mut(), self.pool.as_mut()) {
+            trails.release(pool, gpu.as_deref_mut())?;
         }
         if self.stamps.in_flight() > 0 {
             bail!(

@@ -9,6 +9,7 @@ mod snow_field;
 mod stamp_script;
 mod stamps;
 pub mod tile_overlay;
+pub mod trails;
 pub mod world_files;
 
 use crate::cli::{Cli, ScenarioKind};
@@ -33,20 +34,23 @@ pub fn open(cli: &Cli, params: &DemoParams) -> Result<Box<dyn Scenario>> {
             "--camera chooses the default scenario's camera; the {} scenario moves its own",
             match cli.scenario {
                 ScenarioKind::Snow => "snow",
+                ScenarioKind::World => "world",
                 _ => "flyover",
             }
         )));
     }
     if cli.detail != crate::cli::DetailArg::None && cli.scenario != ScenarioKind::Default {
         return Err(crate::usage_error::usage(anyhow::anyhow!(
-            "--detail puts the default scenario's footprints into detail tiles; the snow and \
-             flyover scenarios have no detail layer"
+            "--detail puts the default scenario's footprints into detail tiles; the snow, \
+             flyover and world scenarios have no detail layer yet"
         )));
     }
     Ok(match cli.scenario {
         ScenarioKind::Default => Box::new(stamps::StampScenario::new(cli, params)?),
         ScenarioKind::Snow => Box::new(snow::SnowScenario::new(cli, params)?),
-        ScenarioKind::Flyover => Box::new(flyover::FlyoverScenario::new(cli)?),
+        ScenarioKind::Flyover | ScenarioKind::World => {
+            Box::new(flyover::FlyoverScenario::new(cli, params)?)
+        }
     })
 }
 
