@@ -3,6 +3,9 @@
 //! every wanted tile after the first second, the craters are written back and the next run
 //! starts from them, and `--verify-world` tells a valid world from one with a corrupt tile.
 
+mod common;
+
+use common::tile_files;
 use std::path::Path;
 use std::process::Command;
 
@@ -172,26 +175,4 @@ fn with_a_gpu_the_vram_pool_streams_the_world_within_its_budgets() {
         "no tile changed"
     );
     let _ = std::fs::remove_dir_all(&root);
-}
-
-/// Every height tile file of a world: path under the world -> bytes.
-fn tile_files(world: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
-    let mut out = std::collections::BTreeMap::new();
-    let mut stack = vec![world.join("height")];
-    while let Some(dir) = stack.pop() {
-        for e in std::fs::read_dir(&dir).expect("world folder") {
-            let p = e.expect("entry").path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                let key = p
-                    .strip_prefix(world)
-                    .expect("under world")
-                    .display()
-                    .to_string();
-                out.insert(key, std::fs::read(&p).expect("tile"));
-            }
-        }
-    }
-    out
 }

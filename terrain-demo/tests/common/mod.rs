@@ -65,3 +65,25 @@ pub fn report(out: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
     serde_json::from_str(&text).expect("report.json parses")
 }
+
+/// Every height tile file of a world: path under the world -> bytes.
+pub fn tile_files(world: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![world.join("height")];
+    while let Some(dir) = stack.pop() {
+        for e in std::fs::read_dir(&dir).expect("world folder") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let key = p
+                    .strip_prefix(world)
+                    .expect("under world")
+                    .display()
+                    .to_string();
+                out.insert(key, std::fs::read(&p).expect("tile"));
+            }
+        }
+    }
+    out
+}

@@ -1,0 +1,115 @@
+//! The world scenario as a user runs it: a vehicle leaves granular trails on the streamed
+//! world (through a granular window that moves with it), craters land beside its path; the
+//! granular volume is exact at every frame, collision keeps the camera above ground, every
+//! wanted tile is resident after the first second, and the world left by a GPU run (granular
+//! steps and craters on the GPU) is the one a `--no-gpu` run leaves, file for file.
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+fn run(world: &Path, out: &Path, frames: u32, extra: &[&str]) -> serde_json::Value {
+    let status = Command::new(env!("CARGO_BIN_EXE_terrain-demo"))
+        .args(["--scenario", "world", "--size", "1024", "--speed", "40"])
+        .args(extra)
+        .args(["--ram-budget", "8", "--overview-size", "64", "-q"])
+        .args(["--frames", &frames.to_string()])
+        .arg("--world")
+        .arg(world)
+        .arg("--out")
+        .arg(out)
+        .status()
+        .expect("demo runs");
+    assert!(status.success(), "world scenario failed: {status}");
+    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
+    serde_json::from_str(&text).expect("valid report")
+}
+
+/// Checks every frame of `report` and returns the granular backend it ran on.
+fn check_frames(report: &serde_json::Value) -> &str {
+    let frames = report["frames"].as_array().expect("frames");
+    let mut backend = None;
+    let mut volumes = std::collections::BTreeSet::new();
+    for f in frames {
+        let i = f["index"].as_u64().expect("index");
+        let volume = f["granular_volume"].as_u64();
+        assert!(volume.is_some(), "frame {i}: no granular step: {f}");
+        assert_eq!(volume, f["granular_volume_taken"].as_u64(), "frame {i}");
+        volumes.insert(f["granular_volume_taken"].as_u64());
+        let b = f["granular_backend"].as_str().expect("backend");
+        assert!(backend.is_none_or(|x| x == b), "frame {i}: backend changed");
+        backend = Some(b);
+        assert!(f["camera_clearance_m"].as_f64() >= Some(0.0), "frame {i}");
+        if i >= 30 {
+            assert_eq!(f["cache"]["tiles_missing"].as_u64(), Some(0), "frame {i}");
+        }
+    }
+    // The vehicle drove out of its first window: at least two windows, each exact.
+    assert!(volumes.len() >= 2, "the granular window never moved");
+    assert_eq!(report["scenario"], "world");
+    backend.expect("frames")
+}
+
+#[test]
+fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu() {
+    let gpu = terrain_gpu::testing::context_or_skip("world_scenario").is_some();
+    let root = std::env::temp_dir().join(format!("terrain_world_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let cpu = run(
+        &root.join("world_cpu"),
+        &root.join("out_cpu"),
+        45,
+        &["--no-gpu"],
+    );
+    assert_eq!(check_frames(&cpu), "cpu");
+    let craters: u64 = cpu["frames"]
+        .as_array()
+        .expect("frames")
+        .iter()
+        .filter_map(|f| f["craters"].as_u64())
+        .sum();
+    assert!(craters >= 3, "craters: {craters}");
+    let cpu_files = common::tile_files(&root.join("world_cpu"));
+    // Trails and craters are in the world's files.
+    run(
+        &root.join("world_fresh"),
+        &root.join("out_fresh"),
+        1,
+        &["--no-gpu"],
+    );
+    let fresh = common::tile_files(&root.join("world_fresh"));
+    let changed = cpu_files
+        .iter()
+        .filter(|(k, v)| fresh.get(*k) != Some(v))
+        .count();
+    assert!(changed >= 2, "tiles changed: {changed}");
+    if gpu {
+        let report = run(
+            &root.join("world_gpu"),
+            &root.join("out_gpu"),
+            45,
+            &["--resolution", "96x64", "--vram-budget", "8"],
+        );
+        assert_eq!(check_frames(&report), "gpu");
+        for f in report["frames"].as_array().expect("frames") {
+            let steps = f["timings_ms"].as_object().expect("timings");
+            assert!(
+                !steps.contains_key("granular_cpu") && !steps.contains_key("stamp_cpu"),
+                "a deformation ran on the CPU with a GPU: {f}"
+            );
+        }
+        let gpu_files = common::tile_files(&root.join("world_gpu"));
+        assert_eq!(
+            gpu_files.keys().collect::<Vec<_>>(),
+            cpu_files.keys().collect::<Vec<_>>()
+        );
+        let differ: Vec<&String> = gpu_files
+            .iter()
+            .filter(|(k, v)| cpu_files.get(*k) != Some(v))
+            .map(|(k, _)| k)
+            .collect();
+        assert!(differ.is_empty(), "tiles that differ: {differ:?}");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
