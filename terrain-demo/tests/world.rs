@@ -1,5 +1,6 @@
 //! The world scenario as a user runs it: a vehicle leaves granular trails on the streamed
-//! world (through a granular window that moves with it), craters land beside its path; the
+//! world (through a granular window that moves with it), craters and a shockwave land beside
+//! its path; the
 //! granular volume is exact at every frame, collision keeps the camera above ground, every
 //! wanted tile is resident after the first second, and the world left by a GPU run (granular
 //! steps and craters on the GPU) is the one a `--no-gpu` run leaves, file for file.
@@ -70,6 +71,13 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
         .filter_map(|f| f["craters"].as_u64())
         .sum();
     assert!(craters >= 3, "craters: {craters}");
+    let shocks: u64 = cpu["frames"]
+        .as_array()
+        .expect("frames")
+        .iter()
+        .filter_map(|f| f["shockwaves"].as_u64())
+        .sum();
+    assert!(shocks >= 30, "shockwave stamps: {shocks}");
     let cpu_files = common::tile_files(&root.join("world_cpu"));
     // Trails and craters are in the world's files.
     run(

@@ -68,6 +68,8 @@ pub struct GpuScene {
     atlas: Option<GpuTileAtlas>,
     /// The readback of the rects of atlas tiles deformed on the GPU.
     tile_readback: Option<RegionReadback>,
+    /// The texture of the last texture stamp on an atlas tile, rewritten in place.
+    tile_texture: Option<GpuTextureStamp>,
     /// CDLOD instead of the clipmap (`--lod cdlod`), for the coarse-map.
     cdlod: Option<CdlodScene>,
     /// Adaptive tessellation instead of the clipmap (`--lod tessellated`), for the coarse-map.
@@ -88,6 +90,15 @@ pub struct GpuScene {
 
 /// The environment variable of [`GpuScene`]'s device-loss fault injection.
 pub const DESTROY_DEVICE_ENV: &str = "TERRAIN_DEMO_DESTROY_DEVICE_AT_FRAME";
+
+/// What [`GpuScene::stamp_tile`] adds to an atlas tile.
+#[derive(Debug, Clone, Copy)]
+pub enum TileStamp<'a> {
+    /// A Gaussian (a crater, with a negative intensity).
+    Gaussian(&'a terrain_core::GaussianStamp),
+    /// A texture stamp (a shockwave's change since it was last applied).
+    Texture(&'a terrain_core::TextureStamp),
+}
 
 /// A rect of a deformed atlas tile on its way back to the CPU: the ticket, and the rect in
 /// the tile's texels.
@@ -186,17 +197,18 @@ impl GpuScene {
             .map_err(|e| self.lost_or(e))
     }
 
-    /// Stamps a crater on the resident atlas tile `tile` (placement in the tile's frame) and
-    /// requests the changed rect back, in one submit timed as [`Step::StampGpu`]. `None` (and
-    /// nothing done) when the readback ring is full: the caller stamps it in a later frame.
+    /// Stamps a crater or a texture (a shockwave's change) on the resident atlas tile `tile`
+    /// (placement in the tile's frame, added to the heights) and requests the changed rect
+    /// back, in one submit timed as [`Step::StampGpu`]. `None` (and nothing done) when the
+    /// readback ring is full: the caller stamps it in a later frame.
     pub fn stamp_tile(
         &mut self,
         tile: TileSlot,
         placement: StampPlacement,
-        crater: &terrain_core::GaussianStamp,
+        stamp: TileStamp<'_>,
         timings: &mut Timings,
     ) -> Result<Option<Vec<TileTicket>>> {
-        self.stamp_tile_inner(tile, placement, crater, timings)
+        self.stamp_tile_inner(tile, placement, stamp, timings)
             .map_err(|e| self.lost_or(e))
     }
 
@@ -300,6 +312,7 @@ impl GpuScene {
             granular: None,
             atlas: None,
             tile_readback: None,
+            tile_texture: None,
             cdlod: None,
             tess: None,
             detail: None,
@@ -510,10 +523,18 @@ impl GpuScene {
         &mut self,
         tile: TileSlot,
         placement: StampPlacement,
-        crater: &terrain_core::GaussianStamp,
+        stamp: TileStamp<'_>,
         timings: &mut Timings,
     ) -> Result<Option<Vec<TileTicket>>> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        // A texture goes into the scene's texture stamp, rewritten in place (the queue orders
+        // the write before this stamp's submit and after the last one's).
+        if let TileStamp::Texture(texture) = stamp {
+            match &mut self.tile_texture {
+                Some(t) => t.update(device, queue, texture)?,
+                None => self.tile_texture = Some(GpuTextureStamp::new(device, texture)?),
+            }
+        }
         let (Some(atlas), Some(readback)) = (&self.atlas, self.tile_readback.as_mut()) else {
             anyhow::bail!("stamp_tile needs the tile atlas (enable_atlas)");
         };
@@ -521,8 +542,13 @@ impl GpuScene {
         if readback.in_flight() >= readback.ring() {
             return Ok(None);
         }
+        let gpu_stamp = match (stamp, &self.tile_texture) {
+            (TileStamp::Gaussian(g), _) => GpuStamp::Gaussian(g),
+            (TileStamp::Texture(_), Some(t)) => GpuStamp::Texture(t),
+            (TileStamp::Texture(_), None) => anyhow::bail!("no texture stamp was uploaded"),
+        };
         let op = StampOp {
-            stamp: GpuStamp::Gaussian(crater),
+            stamp: gpu_stamp,
             placement,
             blend: terrain_core::Blend::Add,
         };

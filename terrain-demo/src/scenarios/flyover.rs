@@ -22,9 +22,10 @@
 use super::tile_overlay;
 use super::trails::Trails;
 use super::world_files;
+use super::world_stamps::{WorldDeformer, WorldShock, WorldStamp, reach};
 use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
 use crate::cli::Cli;
-use crate::gpu_scene::{AtlasConfig, Camera, GpuScene, TileSlot};
+use crate::gpu_scene::{AtlasConfig, Camera, GpuScene};
 use crate::images::Image;
 use crate::report::{CacheStats, FrameStats};
 use crate::timings::{Step, ms_since};
@@ -34,12 +35,10 @@ use glam::{IVec2, UVec2, Vec2, Vec3};
 use std::collections::HashSet;
 use std::time::{Duration, Instant};
 use terrain_cache::{
-    CameraState, Layer, Manifest, PoolConfig, RamPool, SphericalSelection, TileDeformer, TileGrid,
-    TileId, TileStamps, VramConfig, VramPool, World, reduce_levels,
+    CameraState, Layer, Manifest, PoolConfig, RamPool, SphericalSelection, TileGrid, TileId,
+    TileStamps, VramConfig, VramPool, World, reduce_levels,
 };
-use terrain_core::{
-    Blend, CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, WrapMode, apply_stamp,
-};
+use terrain_core::{CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, WrapMode};
 use terrain_physics::CollisionWindow;
 
 /// Longest side of the overview level in texels.
@@ -75,6 +74,8 @@ pub struct FlyoverScenario {
     trails: Option<Trails>,
     /// Craters not stamped because they would land in the granular window.
     craters_skipped: u32,
+    /// The world scenario's shockwave, `None` for the flyover.
+    shock: Option<WorldShock>,
     pool: Option<RamPool>,
     /// The VRAM pool, with a GPU: which tiles sit in the atlas's slots.
     vram: Option<VramPool>,
@@ -94,7 +95,7 @@ pub struct FlyoverScenario {
     frame: u32,
     gauss: GaussianStamp,
     /// Craters on their way into every level-0 tile they touch.
-    stamps: TileStamps<()>,
+    stamps: TileStamps<WorldStamp>,
     written_back: u64,
     /// Collision around the camera.
     window: CollisionWindow,
@@ -154,8 +155,10 @@ impl FlyoverScenario {
             crate::cli::ScenarioKind::World => Some(Trails::new(&manifest, params.granular)?),
             _ => None,
         };
+        let shock = trails.as_ref().map(|_| WorldShock::new(params));
         Ok(Self {
             trails,
+            shock,
             craters_skipped: 0,
             info: ScenarioInfo {
                 name: if cli.scenario == crate::cli::ScenarioKind::World {
@@ -366,45 +369,6 @@ impl FlyoverScenario {
     }
 }
 
-/// The flyover's craters on one level-0 tile: in its atlas slot on the GPU (the scene reads
-/// the changed rects back), or in RAM on the CPU.
-struct Craters<'a> {
-    gauss: &'a mut GaussianStamp,
-    scene: Option<&'a mut GpuScene>,
-    timings: &'a mut crate::timings::Timings,
-    /// Milliseconds spent in GPU stamp submits (timed as their own step, not cache work).
-    gpu_ms: f64,
-}
-
-impl TileDeformer<()> for Craters<'_> {
-    type Error = anyhow::Error;
-
-    fn stamp_slot(
-        &mut self,
-        slot: u32,
-        _: &(),
-        placement: &StampPlacement,
-    ) -> Result<Option<Vec<(u64, Rect)>>> {
-        let Some(scene) = self.scene.as_deref_mut() else {
-            return Ok(None);
-        };
-        let t = Instant::now();
-        let tile = TileSlot { slot, level: 0 };
-        let stamped = scene.stamp_tile(tile, *placement, self.gauss, self.timings);
-        self.gpu_ms += ms_since(t);
-        stamped
-    }
-
-    fn stamp_ram(
-        &mut self,
-        _: &(),
-        tile: &mut CoarseMap,
-        placement: &StampPlacement,
-    ) -> Result<Vec<Rect>> {
-        Ok(apply_stamp(tile, self.gauss, placement, Blend::Add)?)
-    }
-}
-
 /// The level shown in the overview: the finest whose side is at most [`OVERVIEW_MAX`].
 pub fn overview_level(manifest: &Manifest) -> u32 {
     (0..manifest.levels)
@@ -536,19 +500,22 @@ impl Scenario for FlyoverScenario {
             let size = CRATER_SIZE.clamp(8.0 * ts, self.tile_size as f32 * ts);
             let placement = StampPlacement::new(center, Vec2::splat(size), CRATER_DEPTH)?;
             // A granular window's tiles take no other writes while it lives.
-            let reach = Rect::new(
-                ((center - size) / ts).floor().as_ivec2(),
-                (Vec2::splat(2.0 * size) / ts).ceil().as_uvec2() + UVec2::ONE,
-            );
-            let in_window = self
-                .trails
-                .as_ref()
-                .and_then(Trails::window)
-                .is_some_and(|w| w.intersect(&reach).is_some());
-            if in_window {
+            let keep_out = self.trails.as_ref().and_then(Trails::window);
+            if keep_out.is_some_and(|w| w.intersect(&reach(&placement, ts)).is_some()) {
                 self.craters_skipped += 1;
             } else {
-                crater = self.stamps.push((), placement)? > 0;
+                crater = self.stamps.push(WorldStamp::Crater, placement)? > 0;
+            }
+        }
+        // The world scenario's shockwave beside the path.
+        let mut shock = false;
+        if let Some(wave) = self.shock.as_mut() {
+            let keep_out = self.trails.as_ref().and_then(Trails::window);
+            let path = (xz, forward2);
+            if let Some((stamp, placement)) =
+                wave.next(self.frame, path, self.texel_size, keep_out)?
+            {
+                shock = self.stamps.push(stamp, placement)? > 0;
             }
         }
         let state = CameraState {
@@ -574,7 +541,7 @@ impl Scenario for FlyoverScenario {
         // this frame.
         let mut changed = Vec::new();
         {
-            let mut craters = Craters {
+            let mut craters = WorldDeformer {
                 gauss: &mut self.gauss,
                 scene: ctx.gpu.as_deref_mut(),
                 timings: ctx.timings,
@@ -638,6 +605,7 @@ impl Scenario for FlyoverScenario {
             camera_clearance_m,
             stats: FrameStats {
                 craters: u32::from(crater),
+                shockwaves: u32::from(shock),
                 dirty_texels: changed.iter().map(Rect::area).sum(),
                 granular_volume: trail.as_ref().and_then(|t| t.volume),
                 granular_volume_taken: trail.as_ref().and_then(|t| t.volume_taken),
@@ -698,7 +666,7 @@ impl Scenario for FlyoverScenario {
         let mut written = self.written_back + issued as u64;
         // Craters whose tiles never became resident go straight into the world's files.
         let mut timings = crate::timings::Timings::default();
-        let mut craters = Craters {
+        let mut craters = WorldDeformer {
             gauss: &mut self.gauss,
             scene: None,
             timings: &mut timings,
