@@ -64,6 +64,7 @@ mod granular_window;
 pub mod manifest;
 #[cfg(feature = "object-store")]
 pub mod object;
+mod region_bounds;
 pub mod store;
 pub mod tile;
 pub mod tile_stamps;
@@ -74,6 +75,7 @@ pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
 pub use manifest::{DetailLayout, Manifest, tile_key};
 #[cfg(feature = "object-store")]
 pub use object::ObjectTileStore;
+pub use region_bounds::RegionBounds;
 pub use store::{FsStore, TileStore};
 pub use tile::{Layer, TileData, TileId};
 pub use tile_stamps::{TileDeformer, TileStampError, TileStampReport, TileStamps};
