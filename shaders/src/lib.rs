@@ -111,6 +111,19 @@ pub const CDLOD: &str = concat!(
     include_str!("wgsl/cdlod.wgsl")
 );
 
+/// `CdlodRenderer` over a tile atlas (`GpuTileAtlas`): the CDLOD vertex shader on the atlas
+/// surface of [`CLIPMAP_ATLAS`], so a streamed world is drawn by CDLOD as by the clipmap.
+pub const CDLOD_ATLAS: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/target_color.wgsl"),
+    include_str!("wgsl/detail_sample.wgsl"),
+    include_str!("wgsl/clipmap_no_detail.wgsl"),
+    include_str!("wgsl/clipmap.wgsl"),
+    include_str!("wgsl/tile_atlas.wgsl"),
+    include_str!("wgsl/clipmap_surface_atlas.wgsl"),
+    include_str!("wgsl/cdlod.wgsl")
+);
+
 /// `TessellationPass`: adaptive tessellation by longest-edge bisection (seed 002 sec. 2.3),
 /// writing triangles and indirect draw arguments.
 pub const TESSELLATE: &str = concat!(wgsl_prelude!(), include_str!("wgsl/tessellate.wgsl"));
@@ -251,6 +264,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("normals", NORMALS),
     ("density", DENSITY),
     ("cdlod", CDLOD),
+    ("cdlod_atlas", CDLOD_ATLAS),
     ("tessellate", TESSELLATE),
     ("tessellated", TESSELLATED),
     ("sky", SKY),

@@ -1,7 +1,8 @@
 //! `CdlodRenderer`: draws a CDLOD selection (terrain-lod's `CdlodFrame`) into the caller's render
 //! pass: one shared quadrant mesh, instanced per drawn quadrant, morphed per vertex in the vertex
-//! shader (`cdlod.wgsl`) and shaded exactly as the clipmap (same frame uniform, coarse-map
-//! surface and fragment shader), so the two LOD schemes compare on equal terms.
+//! shader (`cdlod.wgsl`) and shaded exactly as the clipmap (same frame uniform, surface and
+//! fragment shader), so the two LOD schemes compare on equal terms. The surface is a
+//! coarse-map or a streamed world's tile atlas, as for the clipmap.
 
 use crate::camera::Camera;
 use crate::clipmap::{
@@ -9,7 +10,6 @@ use crate::clipmap::{
     frame_uniform,
 };
 use crate::error::GpuError;
-use crate::maps::{GpuDerivativeMap, GpuHeightMap};
 use crate::scope::{buffer_init, scoped};
 use crate::target::TargetFormat;
 use glam::UVec2;
@@ -30,6 +30,10 @@ const START_INSTANCES: u64 = 4096;
 #[derive(Debug)]
 pub struct CdlodRenderer {
     pipeline: SurfacePipeline,
+    /// The atlas surface's pipeline, built on its first frame.
+    atlas: Option<SurfacePipeline>,
+    /// Whether the bound group is the atlas pipeline's.
+    on_atlas: bool,
     target: TargetFormat,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
@@ -45,10 +49,9 @@ pub struct CdlodRenderer {
 /// Everything one CDLOD frame is drawn from.
 #[derive(Debug, Clone, Copy)]
 pub struct CdlodDraw<'a> {
-    /// The heights.
-    pub map: &'a GpuHeightMap<u16>,
-    /// Their derivative normals.
-    pub normals: &'a GpuDerivativeMap,
+    /// The surface: [`ClipmapSurface::Coarse`] or [`ClipmapSurface::Atlas`] (a granular or
+    /// detail surface is [`GpuError::Unsupported`]).
+    pub surface: ClipmapSurface<'a>,
     /// The selection (instances and range table) of this frame.
     pub frame: &'a CdlodFrame,
     /// The camera the selection was made for.
@@ -67,27 +70,7 @@ impl CdlodRenderer {
         mesh: &CdlodMesh,
     ) -> Result<Self, GpuError> {
         target.validate(device)?;
-        const ATTRS: [wgpu::VertexAttribute; 3] =
-            wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
-        let pipeline = SurfacePipeline::new(
-            device,
-            target,
-            "cdlod.wgsl",
-            terrain_shaders::CDLOD,
-            &[
-                (wgpu::ShaderStages::VERTEX, 1),
-                (wgpu::ShaderStages::FRAGMENT, 2),
-            ],
-            &[],
-            &VertexShape {
-                entry: "vs_cdlod",
-                vertex_stride: std::mem::size_of::<[f32; 2]>() as u64,
-                vertex_attrs: &crate::clipmap::GRID_ATTRS,
-                instance_stride: std::mem::size_of::<CdlodInstance>() as u64,
-                instance_attrs: &ATTRS,
-                extra_uniforms: &[3],
-            },
-        )?;
+        let pipeline = surface_pipeline(device, target, false)?;
         let vertices = buffer_init(
             device,
             "cdlod vertices",
@@ -125,6 +108,8 @@ impl CdlodRenderer {
         })?;
         Ok(Self {
             pipeline,
+            atlas: None,
+            on_atlas: false,
             target: *target,
             vertices,
             indices,
@@ -142,6 +127,9 @@ impl CdlodRenderer {
     /// [`wgpu::Features::POLYGON_MODE_LINE`].
     pub fn set_wireframe(&mut self, on: bool) -> Result<(), GpuError> {
         check_wireframe(&self.pipeline, on, "CdlodRenderer wireframe")?;
+        if let Some(atlas) = &self.atlas {
+            check_wireframe(atlas, on, "CdlodRenderer wireframe")?;
+        }
         self.wireframe = on;
         Ok(())
     }
@@ -154,11 +142,21 @@ impl CdlodRenderer {
         draw: &CdlodDraw<'_>,
     ) -> Result<(), GpuError> {
         check_view(draw.camera, draw.target_size, "cdlod target size (pixels)")?;
-        let surface = ClipmapSurface::Coarse {
-            map: draw.map,
-            normals: draw.normals,
+        let surface = draw.surface;
+        let on_atlas = match surface {
+            ClipmapSurface::Coarse { .. } => false,
+            ClipmapSurface::Atlas { .. } => true,
+            _ => {
+                return Err(GpuError::Unsupported {
+                    what: "CdlodRenderer",
+                    reason: "the surface must be a coarse-map or a tile atlas",
+                });
+            }
         };
         let info = surface.check()?;
+        if on_atlas && self.atlas.is_none() {
+            self.atlas = Some(surface_pipeline(device, &self.target, true)?);
+        }
         let frame = draw.frame;
         if frame.ranges.morph.len() > MAX_CDLOD_LODS as usize {
             return Err(GpuError::Unsupported {
@@ -208,15 +206,20 @@ impl CdlodRenderer {
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         queue.write_buffer(&self.lods, 0, bytemuck::cast_slice(&lods));
         let buffers = surface.buffers();
-        if self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
-            let group = self.pipeline.bind_group(
+        if self.on_atlas != on_atlas || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
+            let pipeline = match (&self.atlas, on_atlas) {
+                (Some(atlas), true) => atlas,
+                _ => &self.pipeline,
+            };
+            let group = pipeline.bind_group(
                 device,
                 "CdlodRenderer",
                 &self.uniform,
                 &buffers,
-                &[(3, &self.lods)],
+                &[(LODS_BINDING, &self.lods)],
             )?;
             self.bound = Some((buffers, group));
+            self.on_atlas = on_atlas;
         }
         Ok(())
     }
@@ -229,13 +232,63 @@ impl CdlodRenderer {
         if self.instance_count == 0 {
             return;
         }
-        pass.set_pipeline(self.pipeline.pick(self.wireframe));
+        let pipeline = match (&self.atlas, self.on_atlas) {
+            (Some(atlas), true) => atlas,
+            _ => &self.pipeline,
+        };
+        pass.set_pipeline(pipeline.pick(self.wireframe));
         pass.set_bind_group(0, group, &[]);
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_vertex_buffer(1, self.instances.slice(..));
         pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
         pass.draw_indexed(0..self.index_count, 0, 0..self.instance_count);
     }
+}
+
+/// The binding of the LOD uniform (`cdlod.wgsl`), after every surface's storage buffers.
+const LODS_BINDING: u32 = 4;
+
+/// The CDLOD pipeline over a coarse-map, or over a tile atlas (`atlas`).
+fn surface_pipeline(
+    device: &wgpu::Device,
+    target: &TargetFormat,
+    atlas: bool,
+) -> Result<SurfacePipeline, GpuError> {
+    const ATTRS: [wgpu::VertexAttribute; 3] =
+        wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
+    let both = wgpu::ShaderStages::VERTEX_FRAGMENT;
+    let (label, source, storage) = if atlas {
+        (
+            "cdlod atlas",
+            terrain_shaders::CDLOD_ATLAS,
+            vec![(both, 1), (both, 2), (both, 3)],
+        )
+    } else {
+        (
+            "cdlod.wgsl",
+            terrain_shaders::CDLOD,
+            vec![
+                (wgpu::ShaderStages::VERTEX, 1),
+                (wgpu::ShaderStages::FRAGMENT, 2),
+            ],
+        )
+    };
+    SurfacePipeline::new(
+        device,
+        target,
+        label,
+        source,
+        &storage,
+        &[],
+        &VertexShape {
+            entry: "vs_cdlod",
+            vertex_stride: std::mem::size_of::<[f32; 2]>() as u64,
+            vertex_attrs: &crate::clipmap::GRID_ATTRS,
+            instance_stride: std::mem::size_of::<CdlodInstance>() as u64,
+            instance_attrs: &ATTRS,
+            extra_uniforms: &[LODS_BINDING],
+        },
+    )
 }
 
 fn instance_buffer(device: &wgpu::Device, count: u64) -> wgpu::Buffer {

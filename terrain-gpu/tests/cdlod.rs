@@ -11,9 +11,11 @@ use cracks::holes;
 use glam::{UVec2, Vec2, Vec3};
 use scene::Scene;
 use std::collections::HashSet;
+use terrain_core::TileUploadTarget;
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    Camera, CdlodDraw, CdlodRenderer, OffscreenTarget, SkyColors, TargetFormat, TerrainStyle,
+    AtlasConfig, Camera, CdlodDraw, CdlodRenderer, ClipmapSurface, GpuTileAtlas, OffscreenTarget,
+    SkyColors, TargetFormat, TerrainStyle,
 };
 use terrain_lod::{CdlodConfig, CdlodMesh, CdlodTree, CdlodView, Frustum};
 
@@ -23,6 +25,18 @@ fn render(
     tree: &CdlodTree,
     camera: &Camera,
     size: UVec2,
+) -> (terrain_core::Grid<[u8; 4]>, HashSet<u32>) {
+    render_on(scene, renderer, tree, camera, size, None)
+}
+
+/// [`render`] over `atlas` instead of the scene's coarse-map, when given.
+fn render_on(
+    scene: &mut Scene,
+    renderer: &mut CdlodRenderer,
+    tree: &CdlodTree,
+    camera: &Camera,
+    size: UVec2,
+    atlas: Option<&GpuTileAtlas>,
 ) -> (terrain_core::Grid<[u8; 4]>, HashSet<u32>) {
     let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
     let aspect = size.x as f32 / size.y as f32;
@@ -53,8 +67,13 @@ fn render(
             device,
             queue,
             &CdlodDraw {
-                map: &scene.gpu_map,
-                normals: &scene.normals,
+                surface: match atlas {
+                    Some(atlas) => ClipmapSurface::Atlas { atlas },
+                    None => ClipmapSurface::Coarse {
+                        map: &scene.gpu_map,
+                        normals: &scene.normals,
+                    },
+                },
                 frame: &frame,
                 camera,
                 style: &style,
@@ -165,4 +184,123 @@ fn the_instance_buffer_grows_for_a_large_frame() {
         terrain > 96 * 64 / 2,
         "looking down: terrain fills the view"
     );
+}
+
+/// A fully resident atlas of the scene's map (level 0 only, 32-texel tiles, the map's wrap).
+fn full_atlas(scene: &Scene) -> GpuTileAtlas {
+    let size = scene.map.size();
+    let tiles = size / 32;
+    let layout = terrain_core::TileLayout {
+        world_size: size,
+        tile_size: 32,
+        levels: 1,
+        texel_size: scene.map.texel_size(),
+        encoding: scene.map.encoding(),
+        wrap: scene.map.wrap(),
+        fill: 0,
+    };
+    let config = AtlasConfig {
+        slots: tiles.x * tiles.y,
+        world: layout,
+    };
+    let mut atlas = GpuTileAtlas::new(&scene.ctx.device, &scene.ctx.queue, &config).unwrap();
+    for y in 0..tiles.y {
+        for x in 0..tiles.x {
+            let t = UVec2::new(x, y);
+            let rect = terrain_core::Rect::new((t * 32).as_ivec2(), UVec2::splat(32));
+            let tile = scene.map.grid().copy_rect(rect).unwrap();
+            let slot = y * tiles.x + x;
+            atlas.upload(slot, 0, t, &tile).unwrap();
+            atlas.map(0, t, Some(slot)).unwrap();
+        }
+    }
+    atlas
+}
+
+/// CDLOD over a streamed world's atlas against CDLOD over the same heights as a coarse-map.
+/// Geometry: both read the same u16 heights into the same vertex shader code, so the outline
+/// against the sky matches; a few pixels are allowed where a driver contracts the two shader
+/// modules' arithmetic differently (an FMA moves a vertex by an ulp, a pixel centre on an edge
+/// flips): 0 on lavapipe.
+const OUTLINE_TOLERANCE_PX: usize = 24;
+/// Shading: the atlas is lit by central differences, the coarse-map by its 4th-order
+/// derivative map, so colours differ where the slope changes fast; near-ground views magnify
+/// it. A mean of 6 levels of 255 (lavapipe: 3.3; the clipmap's golden view 1.7).
+const SHADING_TOLERANCE: f64 = 6.0;
+
+#[test]
+fn cdlod_over_a_tile_atlas_draws_like_cdlod_over_the_coarse_map_without_cracks() {
+    let Some(ctx) = context_or_skip("cdlod over an atlas") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 31, 5);
+    let config = CdlodConfig {
+        leaf_size: 16,
+        grid_size: 16,
+        lod_count: 5,
+        finest_range: 6.0,
+        ..CdlodConfig::default()
+    };
+    let tree = CdlodTree::from_map(&scene.map, config).unwrap();
+    let mut renderer = CdlodRenderer::new(
+        &scene.ctx.device,
+        &TargetFormat::CAPTURE,
+        &CdlodMesh::new(16),
+    )
+    .unwrap();
+    let atlas = full_atlas(&scene);
+    let size = UVec2::new(240, 160);
+    let (mut worst, mut worst_outline) = (0.0f64, 0usize);
+    for (i, xz) in [Vec2::new(100.0, 100.0), Vec2::new(63.9, 130.6)]
+        .iter()
+        .enumerate()
+    {
+        for (j, yaw) in [0.0f32, 1.6, 3.9].iter().enumerate() {
+            let eye = Vec3::new(xz.x, scene.ground(*xz) + 1.5 + i as f32, xz.y);
+            let camera = Camera::looking(eye, Vec3::new(yaw.cos(), -0.05, yaw.sin()));
+            let (coarse, _) = render_on(&mut scene, &mut renderer, &tree, &camera, size, None);
+            let (on_atlas, lods) = render_on(
+                &mut scene,
+                &mut renderer,
+                &tree,
+                &camera,
+                size,
+                Some(&atlas),
+            );
+            let (cracks, terrain) = holes(&on_atlas);
+            assert_eq!(cracks, 0, "view {i}/{j}: sky through the atlas surface");
+            assert!(terrain > (size.x * size.y / 4) as usize, "view {i}/{j}");
+            assert!(lods.len() >= 2, "view {i}/{j}: one LOD only");
+            // Geometry: the sky shows through the same pixels.
+            let sky = |p: &[u8; 4]| p[0] > 250 && p[1] < 5 && p[2] > 250;
+            let outline = coarse
+                .as_slice()
+                .iter()
+                .zip(on_atlas.as_slice())
+                .filter(|(a, b)| sky(a) != sky(b))
+                .count();
+            worst_outline = worst_outline.max(outline);
+            // Shading: the mean colour difference.
+            let sum: f64 = coarse
+                .as_slice()
+                .iter()
+                .zip(on_atlas.as_slice())
+                .map(|(a, b)| {
+                    let d = (0..3).map(|c| (i32::from(a[c]) - i32::from(b[c])).unsigned_abs());
+                    f64::from(d.max().unwrap_or(0))
+                })
+                .sum();
+            worst = worst.max(sum / coarse.as_slice().len() as f64);
+        }
+    }
+    eprintln!(
+        "cdlod atlas vs coarse: worst mean colour difference {worst:.2}, \
+         worst outline difference {worst_outline} px"
+    );
+    assert!(
+        worst_outline <= OUTLINE_TOLERANCE_PX,
+        "outline differs by {worst_outline} px"
+    );
+    assert!(worst <= SHADING_TOLERANCE, "mean difference {worst:.2}");
+    scene.ctx.check().expect("no GPU validation errors");
 }

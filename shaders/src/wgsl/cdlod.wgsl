@@ -7,7 +7,8 @@ struct CdlodLods {
     morph: array<vec4<f32>, 16>,
 }
 
-@group(0) @binding(3) var<uniform> lods: CdlodLods;
+// Binding 4: after every surface's storage buffers (a tile atlas has three).
+@group(0) @binding(4) var<uniform> lods: CdlodLods;
 
 struct CdlodIn {
     @location(0) grid: vec2<f32>,

@@ -291,8 +291,7 @@ pub(super) fn render_cdlod(
             device,
             queue,
             &CdlodDraw {
-                map,
-                normals,
+                surface: ClipmapSurface::Coarse { map, normals },
                 frame: &frame,
                 camera,
                 style,

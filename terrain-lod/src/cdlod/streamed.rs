@@ -10,7 +10,7 @@
 
 use super::{CdlodConfig, CdlodTree, NodeBounds, touched};
 use crate::error::LodError;
-use glam::{IVec2, UVec2};
+use glam::UVec2;
 use terrain_core::{Rect, WrapMode};
 
 /// The most nodes of all LODs a tree built from leaf bounds may have (a 16384^2 world of
@@ -151,6 +151,9 @@ impl CdlodTree {
 
 /// The leaf rects (texels, edges included) of a tree of `config` over `map_size`: for tests
 /// and callers that precompute bounds.
+#[cfg(test)]
+use glam::IVec2;
+
 #[cfg(test)]
 fn leaf_rects(config: &CdlodConfig, map_size: UVec2) -> Vec<Rect> {
     let side = config.leaf_size;
