@@ -183,10 +183,12 @@ fn open_gpu(
     params: &DemoParams,
     scenario: &mut dyn Scenario,
 ) -> Result<Option<GpuScene>> {
-    if cli.lod != LodArg::Clipmap && cli.scenario != ScenarioKind::Default {
+    let cdlod_world = cli.lod == LodArg::Cdlod && cli.scenario == ScenarioKind::World;
+    if cli.lod != LodArg::Clipmap && cli.scenario != ScenarioKind::Default && !cdlod_world {
         return Err(anyhow::anyhow!(
             "--lod cdlod and --lod tessellated draw the coarse-map of the default scenario (and \
-             of --heightmap); the snow and flyover scenarios draw with the clipmap"
+             of --heightmap), --lod cdlod the world scenario's streamed world too; the snow and \
+             flyover scenarios draw with the clipmap"
         ))
         .usage();
     }
@@ -257,7 +259,8 @@ fn open_gpu(
     match cli.lod {
         LodArg::Cdlod => {
             let reach = scene.clipmap_reach_m();
-            scene.enable_cdlod(scenario.map(), cdlod_config(cli, scenario.map(), reach)?)?;
+            let config = cdlod_config(cli, scenario.cdlod_extent(), reach)?;
+            scenario.enable_cdlod(&mut scene, config)?;
         }
         LodArg::Tessellated => {
             // The error metric reads no density map.
@@ -287,10 +290,14 @@ fn tess_config(cli: &Cli) -> Result<TessConfig> {
     Ok(config)
 }
 
-/// The CDLOD quadtree for `map` that draws as far as `reach_m` (the clipmap's reach, so both
+/// The CDLOD quadtree for a heightfield of `size` texels that draws as far as `reach_m` (the clipmap's reach, so both
 /// draw as far: terrain-lod's `CdlodConfig::for_map`), with the metric and morph of the flags.
-fn cdlod_config(cli: &Cli, map: &terrain_core::CoarseMap, reach_m: f32) -> Result<CdlodConfig> {
-    let config = CdlodConfig::for_map(map.size(), map.wrap(), map.texel_size(), reach_m)
+fn cdlod_config(
+    cli: &Cli,
+    (size, wrap, texel_size): (glam::UVec2, terrain_core::WrapMode, f32),
+    reach_m: f32,
+) -> Result<CdlodConfig> {
+    let config = CdlodConfig::for_map(size, wrap, texel_size, reach_m)
         .context("--lod cdlod")
         .usage()?;
     let config = CdlodConfig {

@@ -3,7 +3,8 @@
 //! its path; the
 //! granular volume is exact at every frame, collision keeps the camera above ground, every
 //! wanted tile is resident after the first second, and the world left by a GPU run (granular
-//! steps and craters on the GPU) is the one a `--no-gpu` run leaves, file for file.
+//! steps and craters on the GPU, drawn by CDLOD from the tile atlas) is the one a `--no-gpu`
+//! run leaves, file for file.
 
 mod common;
 
@@ -97,10 +98,20 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
             &root.join("world_gpu"),
             &root.join("out_gpu"),
             45,
-            &["--resolution", "96x64", "--vram-budget", "8"],
+            &[
+                "--resolution",
+                "96x64",
+                "--vram-budget",
+                "8",
+                "--lod",
+                "cdlod",
+            ],
         );
         assert_eq!(check_frames(&report), "gpu");
         for f in report["frames"].as_array().expect("frames") {
+            // CDLOD draws the streamed world from its atlas.
+            assert_eq!(f["lod"], "cdlod", "{f}");
+            assert!(f["triangles"].as_u64() > Some(0), "{f}");
             let steps = f["timings_ms"].as_object().expect("timings");
             assert!(
                 !steps.contains_key("granular_cpu") && !steps.contains_key("stamp_cpu"),

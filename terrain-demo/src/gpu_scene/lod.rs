@@ -56,6 +56,27 @@ impl GpuScene {
         Ok(())
     }
 
+    /// Draws a streamed world's atlas with CDLOD instead of the clipmap: `tree` is the world's
+    /// quadtree (terrain-lod's `CdlodTree::from_leaf_bounds`), kept current by the caller
+    /// through [`GpuScene::cdlod_tree_mut`].
+    pub fn enable_cdlod_tree(&mut self, tree: CdlodTree) -> Result<()> {
+        let mesh = CdlodMesh::new(tree.config().grid_size);
+        let renderer = CdlodRenderer::new(&self.ctx.device, &self.target.format(), &mesh)?;
+        self.cdlod = Some(CdlodScene {
+            tree,
+            renderer,
+            mesh,
+            last: None,
+            previous: None,
+        });
+        Ok(())
+    }
+
+    /// The CDLOD quadtree, when CDLOD draws.
+    pub fn cdlod_tree_mut(&mut self) -> Option<&mut CdlodTree> {
+        self.cdlod.as_mut().map(|c| &mut c.tree)
+    }
+
     /// Draws the coarse-map with adaptive tessellation instead of the clipmap: the hierarchy of
     /// `map` with `config` (and its density map when `density`), kept current by
     /// [`GpuScene::update_lod`].
@@ -100,7 +121,8 @@ impl GpuScene {
         dirty: &[Rect],
         timings: &mut Timings,
     ) -> Result<()> {
-        if let Some(c) = &mut self.cdlod {
+        // A streamed world's quadtree is kept current by its scenario (from leaf bounds).
+        if let Some(c) = self.cdlod.as_mut().filter(|_| self.atlas.is_none()) {
             let t = std::time::Instant::now();
             for r in dirty {
                 c.tree.update_rect(map, *r)?;
@@ -178,6 +200,7 @@ pub(super) fn render_tessellated(
         map,
         normals,
         style,
+        ..
     } = gpu;
     let (device, queue) = (&ctx.device, &ctx.queue);
     let size = target.size();
@@ -275,14 +298,23 @@ pub(super) fn render_cdlod(
         timer,
         map,
         normals,
+        atlas,
         style,
     } = gpu;
+    let surface = match atlas {
+        Some(atlas) => ClipmapSurface::Atlas { atlas },
+        None => ClipmapSurface::Coarse { map, normals },
+    };
     let (device, queue) = (&ctx.device, &ctx.queue);
     let size = target.size();
     let aspect = size.x as f32 / size.y as f32;
     let view = lod_view(camera, size, &frustum);
     let frame = c.tree.select(&view)?;
-    let max_screen_error_px = c.tree.max_screen_error_px(&frame, &view);
+    // A streamed world's tree knows its errors only as height spans: no measured error.
+    let max_screen_error_px = match surface {
+        ClipmapSurface::Atlas { .. } => None,
+        _ => Some(c.tree.max_screen_error_px(&frame, &view)),
+    };
     timings.add(Step::Lod, crate::timings::ms_since(lod_start));
     let view_proj = camera.view_proj_relative(aspect);
     let timing = timer.time(device, queue, |encoder| {
@@ -291,7 +323,7 @@ pub(super) fn render_cdlod(
             device,
             queue,
             &CdlodDraw {
-                surface: ClipmapSurface::Coarse { map, normals },
+                surface,
                 frame: &frame,
                 camera,
                 style,
@@ -310,7 +342,7 @@ pub(super) fn render_cdlod(
         lod: LodStats {
             mode: "cdlod",
             vertices: frame.vertex_count(&c.mesh),
-            max_screen_error_px: Some(max_screen_error_px),
+            max_screen_error_px,
         },
     };
     c.previous = c.last.replace((frame, camera.position));

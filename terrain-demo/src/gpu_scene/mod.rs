@@ -800,7 +800,9 @@ impl GpuScene {
             None => self.map.texel_size(),
         };
         let coarse = self.granular.is_none() && self.atlas.is_none();
-        if coarse && (self.tess.is_some() || self.cdlod.is_some()) {
+        // CDLOD draws the coarse-map or a streamed world's atlas; tessellation the coarse-map.
+        let cdlod_surface = coarse || self.atlas.is_some();
+        if (coarse && self.tess.is_some()) || (cdlod_surface && self.cdlod.is_some()) {
             let gpu = FrameGpu {
                 ctx: &self.ctx,
                 target: &mut self.target,
@@ -808,6 +810,7 @@ impl GpuScene {
                 timer: &self.timer,
                 map: &self.map,
                 normals: &self.normals,
+                atlas: self.atlas.as_ref(),
                 style: &self.style,
             };
             if let Some(c) = &mut self.tess {
@@ -945,6 +948,8 @@ struct FrameGpu<'a> {
     timer: &'a GpuTimer,
     map: &'a GpuHeightMap<u16>,
     normals: &'a GpuDerivativeMap,
+    /// A streamed world's atlas, drawn instead of `map` where the renderer can.
+    atlas: Option<&'a GpuTileAtlas>,
     style: &'a TerrainStyle,
 }
 

@@ -35,10 +35,11 @@ use glam::{IVec2, UVec2, Vec2, Vec3};
 use std::collections::HashSet;
 use std::time::{Duration, Instant};
 use terrain_cache::{
-    CameraState, Layer, Manifest, PoolConfig, RamPool, SphericalSelection, TileGrid, TileId,
-    TileStamps, VramConfig, VramPool, World, reduce_levels,
+    CameraState, Layer, Manifest, PoolConfig, RamPool, RegionBounds, SphericalSelection, TileGrid,
+    TileId, TileStamps, VramConfig, VramPool, World, reduce_levels,
 };
 use terrain_core::{CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, WrapMode};
+use terrain_lod::{CdlodConfig, CdlodTree};
 use terrain_physics::CollisionWindow;
 
 /// Longest side of the overview level in texels.
@@ -76,6 +77,8 @@ pub struct FlyoverScenario {
     craters_skipped: u32,
     /// The world scenario's shockwave, `None` for the flyover.
     shock: Option<WorldShock>,
+    /// With `--lod cdlod`: the level-0 bounds the GPU scene's quadtree is kept current from.
+    bounds: Option<RegionBounds>,
     pool: Option<RamPool>,
     /// The VRAM pool, with a GPU: which tiles sit in the atlas's slots.
     vram: Option<VramPool>,
@@ -106,7 +109,8 @@ pub struct FlyoverScenario {
     cpu_tile_stamps: u64,
     /// The camera of the last frame, for the overview's view lines.
     last_camera: Option<CameraState>,
-    /// Milliseconds of this frame in GPU stamp submits (not cache work).
+    /// Milliseconds of this frame timed as their own steps (GPU stamps and granular steps,
+    /// CDLOD updates), not cache work.
     gpu_stamp_ms: f64,
 }
 
@@ -159,6 +163,7 @@ impl FlyoverScenario {
         Ok(Self {
             trails,
             shock,
+            bounds: None,
             craters_skipped: 0,
             info: ScenarioInfo {
                 name: if cli.scenario == crate::cli::ScenarioKind::World {
@@ -369,6 +374,20 @@ impl FlyoverScenario {
     }
 }
 
+/// The lowest and highest height (metres) under `rect`, for the CDLOD quadtree.
+fn leaf_metres(
+    bounds: &RegionBounds,
+    pool: &RamPool,
+    rect: Rect,
+    enc: terrain_core::HeightEncoding,
+) -> (f32, f32) {
+    let [lo, hi] = bounds.of(pool, rect).unwrap_or([0, u16::MAX]);
+    (
+        enc.to_metres(f64::from(lo)) as f32,
+        enc.to_metres(f64::from(hi)) as f32,
+    )
+}
+
 /// The level shown in the overview: the finest whose side is at most [`OVERVIEW_MAX`].
 pub fn overview_level(manifest: &Manifest) -> u32 {
     (0..manifest.levels)
@@ -445,6 +464,36 @@ impl Scenario for FlyoverScenario {
             world: self.manifest.tile_layout(),
         })?;
         self.vram = Some(VramPool::new(VramConfig::new(&self.manifest, slots))?);
+        Ok(())
+    }
+
+    /// CDLOD draws the world's level 0 from the atlas.
+    fn cdlod_extent(&self) -> (UVec2, WrapMode, f32) {
+        let m = &self.manifest;
+        (m.world_size, m.wrap, m.texel_size)
+    }
+
+    /// The world's quadtree from its level-0 bounds (exact where tiles are in RAM, the
+    /// pyramid's `bounds.bin` elsewhere), kept current in `advance`.
+    fn enable_cdlod(&mut self, scene: &mut GpuScene, config: CdlodConfig) -> Result<()> {
+        if self.manifest.wrap != WrapMode::Clamp {
+            return Err(usage(anyhow::anyhow!(
+                "--lod cdlod draws a streamed world clamped at its edges; this one repeats"
+            )));
+        }
+        let Some(pool) = self.pool.as_ref() else {
+            bail!("the world's pool was shut down");
+        };
+        let bounds = RegionBounds::open(pool.world())?;
+        let enc = self.manifest.encoding;
+        let tree = CdlodTree::from_leaf_bounds(
+            config,
+            self.manifest.world_size,
+            self.manifest.texel_size,
+            |r| leaf_metres(&bounds, pool, r, enc),
+        )?;
+        scene.enable_cdlod_tree(tree)?;
+        self.bounds = Some(bounds);
         Ok(())
     }
 
@@ -596,6 +645,22 @@ impl Scenario for FlyoverScenario {
         }
         let dirty = self.update_overview(&changed)?;
         self.update_window(xz)?;
+        // CDLOD's quadtree follows the changes (timed as `lod`).
+        if let (Some(bounds), Some(pool), Some(tree)) = (
+            self.bounds.as_mut(),
+            self.pool.as_ref(),
+            ctx.gpu.as_deref_mut().and_then(GpuScene::cdlod_tree_mut),
+        ) {
+            let t = Instant::now();
+            let enc = self.manifest.encoding;
+            for rect in &changed {
+                bounds.update(pool, *rect);
+                tree.update_leaf_bounds(*rect, |r| leaf_metres(bounds, pool, r, enc))?;
+            }
+            let ms = ms_since(t);
+            ctx.timings.add(Step::Lod, ms);
+            self.gpu_stamp_ms += ms;
+        }
         // The GPU stamps and granular steps are timed as their own steps.
         let cache_ms = (ms_since(t_frame) - self.gpu_stamp_ms).max(0.0);
         ctx.timings.add(Step::Cache, cache_ms);

@@ -137,6 +137,23 @@ pub trait Scenario {
         None
     }
 
+    /// The heightfield CDLOD draws (`--lod cdlod`): its size in texels, wrap and metres per
+    /// texel. By default [`Scenario::map`]'s.
+    fn cdlod_extent(&self) -> (UVec2, terrain_core::WrapMode, f32) {
+        let m = self.map();
+        (m.size(), m.wrap(), m.texel_size())
+    }
+
+    /// Makes `scene` draw with CDLOD of `config` (for [`Scenario::cdlod_extent`]): by default
+    /// the quadtree of [`Scenario::map`].
+    fn enable_cdlod(
+        &mut self,
+        scene: &mut GpuScene,
+        config: terrain_lod::CdlodConfig,
+    ) -> Result<()> {
+        scene.enable_cdlod(self.map(), config)
+    }
+
     /// Ends the run: writes back what the scenario keeps outside the report (the flyover's
     /// dirty tiles) and says what it did.
     fn finish(&mut self, _gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
