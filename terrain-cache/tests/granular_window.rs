@@ -77,7 +77,7 @@ fn trails_reach_the_tiles_with_the_volume_exact_after_every_step() {
     for step in 0..6 {
         // A wheel rolling across the window, its bottom 3 m under the local surface.
         let xz = Vec2::new(30.0 + 6.0 * step as f32, 50.0);
-        let ground = enc.to_metres(60_000.0) as f32;
+        let ground = enc.to_metres(60_000.0);
         let at = Affine3A::from_translation(Vec3::new(xz.x, ground - 3.0 + 2.0, xz.y));
         let report = sim
             .step(&[GranularObject::new(&wheel, window.to_local(at))])

@@ -382,10 +382,7 @@ fn leaf_metres(
     enc: terrain_core::HeightEncoding,
 ) -> (f32, f32) {
     let [lo, hi] = bounds.of(pool, rect).unwrap_or([0, u16::MAX]);
-    (
-        enc.to_metres(f64::from(lo)) as f32,
-        enc.to_metres(f64::from(hi)) as f32,
-    )
+    (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
 }
 
 /// The level shown in the overview: the finest whose side is at most [`OVERVIEW_MAX`].
@@ -713,7 +710,7 @@ impl Scenario for FlyoverScenario {
         }
         // The trails' last areas reach the tiles, and the window's volume is checked.
         if let (Some(trails), Some(pool)) = (self.trails.as_mut(), self.pool.as_mut()) {
-            trails.release(pool, gpu.as_deref_mut())?;
+            trails.release(pool, gpu)?;
         }
         if self.stamps.in_flight() > 0 {
             bail!(

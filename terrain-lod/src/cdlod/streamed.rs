@@ -199,10 +199,7 @@ mod tests {
             let lo = *g.as_slice().iter().min().unwrap();
             let hi = *g.as_slice().iter().max().unwrap();
             let enc = map.encoding();
-            (
-                enc.to_metres(f64::from(lo)) as f32,
-                enc.to_metres(f64::from(hi)) as f32,
-            )
+            (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
         }
     }
 
@@ -267,7 +264,7 @@ mod tests {
         let fresh = CdlodTree::from_leaf_bounds(config(), map.size(), 0.5, exact(&map)).unwrap();
         assert_eq!(tree, fresh);
         let top = tree.bounds(3, IVec2::ZERO).unwrap();
-        assert_eq!(top.max, map.encoding().to_metres(9_000.0) as f32);
+        assert_eq!(top.max, map.encoding().to_metres(9_000.0));
         // Off the map: nothing to do; a map-built tree refuses leaf updates, and the other way.
         tree.update_leaf_bounds(Rect::new(IVec2::splat(-50), UVec2::splat(10)), exact(&map))
             .unwrap();
