@@ -43,17 +43,7 @@ impl GpuScene {
     /// Draws the coarse-map with CDLOD instead of the clipmap: the quadtree of `map` with
     /// `config`, kept current by [`GpuScene::update_lod`].
     pub fn enable_cdlod(&mut self, map: &CoarseMap, config: CdlodConfig) -> Result<()> {
-        let tree = CdlodTree::from_map(map, config)?;
-        let mesh = CdlodMesh::new(config.grid_size);
-        let renderer = CdlodRenderer::new(&self.ctx.device, &self.target.format(), &mesh)?;
-        self.cdlod = Some(CdlodScene {
-            tree,
-            renderer,
-            mesh,
-            last: None,
-            previous: None,
-        });
-        Ok(())
+        self.enable_cdlod_tree(CdlodTree::from_map(map, config)?)
     }
 
     /// Draws a streamed world's atlas with CDLOD instead of the clipmap: `tree` is the world's
