@@ -1,0 +1,111 @@
+//! What the two headerless formats (RAW16 and R32) share: a file's length follows from the
+//! requested size, so it is checked from the metadata before anything is read.
+
+use super::r32::r32_mismatch;
+use super::raw16::raw16_mismatch;
+use super::{ByteOrder, MapIoError, ReadLimits, check_size, open_regular};
+use glam::UVec2;
+use std::io::Read;
+use std::path::Path;
+
+/// Checks a headerless file's size and returns the byte count it needs at `sample_bytes` per
+/// sample.
+pub(super) fn raw_len(
+    size: UVec2,
+    sample_bytes: u64,
+    limits: &ReadLimits,
+) -> Result<u64, MapIoError> {
+    check_size(size.x, size.y, limits)?;
+    // (2^32 - 1)^2 * 4 can overflow u64 when the limit is raised that far.
+    u64::from(size.x)
+        .checked_mul(u64::from(size.y))
+        .and_then(|n| n.checked_mul(sample_bytes))
+        .ok_or(MapIoError::TooLarge {
+            width: size.x,
+            height: size.y,
+            max_side: limits.max_side,
+        })
+}
+
+/// The samples of headerless data: `bytes` cut into `N`-byte samples in `order`.
+pub(super) fn raw_samples<const N: usize, T>(
+    bytes: &[u8],
+    order: ByteOrder,
+    from: fn([u8; N], ByteOrder) -> T,
+) -> Vec<T> {
+    bytes
+        .chunks_exact(N)
+        .map(|c| {
+            let mut b = [0u8; N];
+            b.copy_from_slice(c);
+            from(b, order)
+        })
+        .collect()
+}
+
+/// Reads the whole of a headerless file that must be `expected_bytes` long; `mismatch` makes
+/// the error for another length. The length is checked from the file's metadata before
+/// anything is read, so a wrong size never causes a large read.
+pub(super) fn read_raw_file(
+    path: &Path,
+    size: UVec2,
+    expected_bytes: u64,
+    limits: &ReadLimits,
+    mismatch: fn(UVec2, u64, u64) -> MapIoError,
+) -> Result<Vec<u8>, MapIoError> {
+    let io_err = |source| MapIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = open_regular(path)?;
+    let actual_bytes = file.metadata().map_err(io_err)?.len();
+    if actual_bytes != expected_bytes {
+        return Err(mismatch(size, expected_bytes, actual_bytes));
+    }
+    let capacity = usize::try_from(expected_bytes).map_err(|_| MapIoError::TooLarge {
+        width: size.x,
+        height: size.y,
+        max_side: limits.max_side,
+    })?;
+    let mut bytes = Vec::new();
+    bytes
+        .try_reserve_exact(capacity.saturating_add(1))
+        .map_err(|_| MapIoError::OutOfMemory {
+            width: size.x,
+            height: size.y,
+            bytes: capacity,
+        })?;
+    // Read at most one byte more than expected, so a file that changed since the metadata
+    // check is still caught without reading it all.
+    file.take(expected_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(io_err)?;
+    Ok(bytes)
+}
+
+/// Checks that a headerless file of `bytes_per_sample` (2 for RAW16, 4 for R32) holds exactly
+/// `size`, from its metadata alone: to plan memory before reading it.
+pub fn check_raw_file(
+    path: impl AsRef<Path>,
+    size: UVec2,
+    bytes_per_sample: u8,
+    limits: &ReadLimits,
+) -> Result<(), MapIoError> {
+    let path = path.as_ref();
+    let expected = raw_len(size, u64::from(bytes_per_sample), limits)?;
+    let file = open_regular(path)?;
+    let actual = file
+        .metadata()
+        .map_err(|source| MapIoError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .len();
+    if actual == expected {
+        Ok(())
+    } else if bytes_per_sample == 4 {
+        Err(r32_mismatch(size, expected, actual))
+    } else {
+        Err(raw16_mismatch(size, expected, actual))
+    }
+}
