@@ -21,7 +21,7 @@ use glam::Vec2;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 use terrain_core::io;
-use terrain_lod::{CdlodConfig, LodMetric, TessConfig};
+use terrain_lod::{CdlodConfig, LodMetric};
 
 /// Runs `scenario` for `cli.frames` frames (fewer after Ctrl-C) into `cli.out` and returns
 /// the report written; `params` are the run's parameters (the GPU scene takes its style and
@@ -183,60 +183,8 @@ fn open_gpu(
     params: &DemoParams,
     scenario: &mut dyn Scenario,
 ) -> Result<Option<GpuScene>> {
-    let cdlod_world = cli.lod == LodArg::Cdlod && cli.scenario == ScenarioKind::World;
-    if cli.lod != LodArg::Clipmap && cli.scenario != ScenarioKind::Default && !cdlod_world {
-        return Err(anyhow::anyhow!(
-            "--lod cdlod and --lod tessellated draw the coarse-map of the default scenario (and \
-             of --heightmap), --lod cdlod the world scenario's streamed world too; the snow and \
-             flyover scenarios draw with the clipmap"
-        ))
-        .usage();
-    }
-    if cli.detail != crate::cli::DetailArg::None && cli.lod != LodArg::Clipmap {
-        return Err(anyhow::anyhow!(
-            "--detail parallax and --detail refine draw the detail tiles with the clipmap: they \
-             need --lod clipmap"
-        ))
-        .usage();
-    }
-    if let Some(tau) = cli.target_error {
-        if cli.lod == LodArg::Clipmap {
-            return Err(anyhow::anyhow!(
-                "--target-error chooses CDLOD's LODs or the tessellation's splits by \
-                 screen-space error: it needs --lod cdlod or --lod tessellated"
-            ))
-            .usage();
-        }
-        if !(tau.is_finite() && (0.01..=1000.0).contains(&tau)) {
-            return Err(anyhow::anyhow!(
-                "--target-error {tau}: give 0.01 to 1000 pixels"
-            ))
-            .usage();
-        }
-    }
-    if cli.no_morph && cli.lod == LodArg::Clipmap {
-        return Err(anyhow::anyhow!(
-            "--no-morph turns off CDLOD's or the tessellation's morph: it needs --lod cdlod or \
-             --lod tessellated"
-        ))
-        .usage();
-    }
-    if (cli.density_map.is_some() || cli.triangle_width.is_some()) && cli.lod != LodArg::Tessellated
-    {
-        return Err(anyhow::anyhow!(
-            "--density-map and --triangle-width steer the adaptive tessellation: they need \
-             --lod tessellated"
-        ))
-        .usage();
-    }
-    if cli.target_error.is_some() && (cli.density_map.is_some() || cli.triangle_width.is_some()) {
-        return Err(anyhow::anyhow!(
-            "--target-error splits the tessellation by screen-space error, without the density \
-             map or a triangle width: give one or the other"
-        ))
-        .usage();
-    }
-    let tess_config = tess_config(cli).usage()?;
+    // The flags were checked together before the run (`validate::flags`).
+    let tess_config = crate::validate::tess_config(cli).usage()?;
     if cli.no_gpu {
         return Ok(None);
     }
@@ -271,23 +219,6 @@ fn open_gpu(
         LodArg::Clipmap => {}
     }
     Ok(Some(scene))
-}
-
-/// The tessellation of `--lod tessellated`: patches of 32 texels, split by edge size
-/// (`--triangle-width`, scaled by the density map unless `--density-map off`) or by
-/// screen-space error (`--target-error`).
-fn tess_config(cli: &Cli) -> Result<TessConfig> {
-    let config = TessConfig {
-        triangle_width_px: cli.triangle_width.unwrap_or(8.0),
-        use_density: cli.density_map != Some(crate::cli::Switch::Off),
-        morph: !cli.no_morph,
-        max_error_px: cli.target_error,
-        ..TessConfig::default()
-    };
-    config
-        .validate()
-        .context("--triangle-width or --target-error")?;
-    Ok(config)
 }
 
 /// The CDLOD quadtree for a heightfield of `size` texels that draws as far as `reach_m` (the clipmap's reach, so both

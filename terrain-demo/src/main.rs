@@ -22,6 +22,7 @@ mod scenarios;
 mod summary;
 mod timings;
 mod usage_error;
+mod validate;
 
 use anyhow::Result;
 use clap::Parser;
@@ -120,6 +121,7 @@ fn run(cli: &Cli) -> Result<Ended> {
         eprintln!("world {}: {} bad tile(s)", dir.display(), bad.len());
         std::process::exit(usage_error::FAILURE_EXIT);
     }
+    validate::flags(cli)?;
     let params = config::DemoParams::load(cli.config.as_deref()).usage()?;
     if cli.print_config {
         print!("{}", params.to_toml()?);

@@ -127,28 +127,19 @@ fn height_range(cli: &Cli) -> Result<(HeightRange, &'static str)> {
         (Some(HeightRangeArg::Span(min_m, max_m)), _) => {
             (HeightRange::Span { min_m, max_m }, "height-range")
         }
-        (_, Some(max)) => {
-            if !(max.is_finite() && max > 0.0) {
-                bail!("--max-height must be a positive number of metres, got {max}");
-            }
-            (
-                HeightRange::Span {
-                    min_m: 0.0,
-                    max_m: max,
-                },
-                "max-height",
-            )
-        }
+        // `validate::flags` checked it is a positive number of metres.
+        (_, Some(max)) => (
+            HeightRange::Span {
+                min_m: 0.0,
+                max_m: max,
+            },
+            "max-height",
+        ),
         (Some(HeightRangeArg::Auto) | None, None) => (HeightRange::Auto, "data"),
     })
 }
 
 fn make(cli: &Cli) -> Result<Terrain> {
-    if let Some(t) = cli.texel_size
-        && !(t.is_finite() && t > 0.0)
-    {
-        bail!("--texel-size must be a positive number of metres, got {t}");
-    }
     let (range, range_source) = height_range(cli)?;
     match &cli.heightmap {
         None => procedural(cli, range),

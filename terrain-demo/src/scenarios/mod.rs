@@ -30,22 +30,6 @@ pub const FRAME_DT: f64 = 1.0 / 30.0;
 
 /// The scenario `cli` asks for, set up (terrain loaded or generated, bodies placed).
 pub fn open(cli: &Cli, params: &DemoParams) -> Result<Box<dyn Scenario>> {
-    if cli.camera.is_some() && cli.scenario != ScenarioKind::Default {
-        return Err(crate::usage_error::usage(anyhow::anyhow!(
-            "--camera chooses the default scenario's camera; the {} scenario moves its own",
-            match cli.scenario {
-                ScenarioKind::Snow => "snow",
-                ScenarioKind::World => "world",
-                _ => "flyover",
-            }
-        )));
-    }
-    if cli.detail != crate::cli::DetailArg::None && cli.scenario != ScenarioKind::Default {
-        return Err(crate::usage_error::usage(anyhow::anyhow!(
-            "--detail puts the default scenario's footprints into detail tiles; the snow, \
-             flyover and world scenarios have no detail layer yet"
-        )));
-    }
     Ok(match cli.scenario {
         ScenarioKind::Default => Box::new(stamps::StampScenario::new(cli, params)?),
         ScenarioKind::Snow => Box::new(snow::SnowScenario::new(cli, params)?),

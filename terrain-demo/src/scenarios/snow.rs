@@ -15,7 +15,7 @@ use crate::config::DemoParams;
 use crate::gpu_scene::GpuScene;
 use crate::report::FrameStats;
 use crate::timings::{Step, ms_since};
-use crate::usage_error::{UsageExt, usage};
+use crate::usage_error::UsageExt;
 use anyhow::Result;
 use glam::{UVec2, Vec2};
 use std::time::Instant;
@@ -44,11 +44,6 @@ pub struct SnowScenario {
 impl SnowScenario {
     /// Generates the snow field of `--size` (512 by default) and places the camera.
     pub fn new(cli: &Cli, params: &DemoParams) -> Result<Self> {
-        if cli.heightmap.is_some() {
-            return Err(usage(anyhow::anyhow!(
-                "--heightmap is not used by the snow scenario (it generates its snow field)"
-            )));
-        }
         let size = cli.size.unwrap_or(SNOW_SIZE);
         let t = Instant::now();
         let field = SnowField::new(size, cli.seed, params.granular).usage()?;

@@ -1,0 +1,240 @@
+//! Every check of the flags against each other and against their ranges, in one place, run
+//! before anything is read or allocated. What clap cannot say (a flag that only one scenario
+//! or LOD mode reads, a number out of range) is a usage error here (exit status 2), so a
+//! run never starts and fails later on a flag. Checks that need an input's contents (a
+//! heightmap's size, a world's manifest) stay where that input is read.
+
+use crate::cli::{Cli, DetailArg, LodArg, ScenarioKind, Switch};
+use crate::usage_error::usage;
+use anyhow::{Result, anyhow};
+use terrain_lod::TessConfig;
+
+/// Checks `cli`'s flags; the first problem found, as a usage error that names the flag.
+pub fn flags(cli: &Cli) -> Result<()> {
+    scenario_flags(cli).map_err(usage)?;
+    numbers(cli).map_err(usage)?;
+    lod_flags(cli).map_err(usage)?;
+    tess_config(cli).map_err(usage)?;
+    Ok(())
+}
+
+/// The tessellation of `--lod tessellated`: patches of 32 texels, split by edge size
+/// (`--triangle-width`, scaled by the density map unless `--density-map off`) or by
+/// screen-space error (`--target-error`).
+pub fn tess_config(cli: &Cli) -> Result<TessConfig> {
+    let config = TessConfig {
+        triangle_width_px: cli.triangle_width.unwrap_or(8.0),
+        use_density: cli.density_map != Some(Switch::Off),
+        morph: !cli.no_morph,
+        max_error_px: cli.target_error,
+        ..TessConfig::default()
+    };
+    config
+        .validate()
+        .map_err(|e| anyhow!("--triangle-width or --target-error: {e}"))?;
+    Ok(config)
+}
+
+fn scenario_name(kind: ScenarioKind) -> &'static str {
+    match kind {
+        ScenarioKind::Default => "default",
+        ScenarioKind::Snow => "snow",
+        ScenarioKind::Flyover => "flyover",
+        ScenarioKind::World => "world",
+    }
+}
+
+/// Flags that only some scenarios read.
+fn scenario_flags(cli: &Cli) -> Result<()> {
+    let name = scenario_name(cli.scenario);
+    if cli.camera.is_some() && cli.scenario != ScenarioKind::Default {
+        return Err(anyhow!(
+            "--camera chooses the default scenario's camera; the {name} scenario moves its own"
+        ));
+    }
+    if cli.detail != DetailArg::None && cli.scenario != ScenarioKind::Default {
+        return Err(anyhow!(
+            "--detail puts the default scenario's footprints into detail tiles; the snow, \
+             flyover and world scenarios have no detail layer yet"
+        ));
+    }
+    if cli.heightmap.is_some() && cli.scenario == ScenarioKind::Snow {
+        return Err(anyhow!(
+            "--heightmap is not used by the snow scenario (it generates its snow field)"
+        ));
+    }
+    Ok(())
+}
+
+/// Numbers clap parses but does not bound.
+fn numbers(cli: &Cli) -> Result<()> {
+    if !(cli.speed.is_finite() && cli.speed > 0.0 && cli.speed <= 1000.0) {
+        return Err(anyhow!(
+            "--speed must be 0 to 1000 metres per second, got {}",
+            cli.speed
+        ));
+    }
+    if let Some(max) = cli.max_height
+        && !(max.is_finite() && max > 0.0)
+    {
+        return Err(anyhow!(
+            "--max-height must be a positive number of metres, got {max}"
+        ));
+    }
+    if let Some(t) = cli.texel_size
+        && !(t.is_finite() && t > 0.0)
+    {
+        return Err(anyhow!(
+            "--texel-size must be a positive number of metres, got {t}"
+        ));
+    }
+    if let Some(tau) = cli.target_error
+        && !(tau.is_finite() && (0.01..=1000.0).contains(&tau))
+    {
+        return Err(anyhow!("--target-error {tau}: give 0.01 to 1000 pixels"));
+    }
+    Ok(())
+}
+
+/// The LOD mode and the flags that steer one mode only.
+fn lod_flags(cli: &Cli) -> Result<()> {
+    let cdlod_world = cli.lod == LodArg::Cdlod && cli.scenario == ScenarioKind::World;
+    if cli.lod != LodArg::Clipmap && cli.scenario != ScenarioKind::Default && !cdlod_world {
+        return Err(anyhow!(
+            "--lod cdlod and --lod tessellated draw the coarse-map of the default scenario (and \
+             of --heightmap), --lod cdlod the world scenario's streamed world too; the snow and \
+             flyover scenarios draw with the clipmap"
+        ));
+    }
+    if cli.detail != DetailArg::None && cli.lod != LodArg::Clipmap {
+        return Err(anyhow!(
+            "--detail parallax and --detail refine draw the detail tiles with the clipmap: they \
+             need --lod clipmap"
+        ));
+    }
+    if cli.target_error.is_some() && cli.lod == LodArg::Clipmap {
+        return Err(anyhow!(
+            "--target-error chooses CDLOD's LODs or the tessellation's splits by screen-space \
+             error: it needs --lod cdlod or --lod tessellated"
+        ));
+    }
+    if cli.no_morph && cli.lod == LodArg::Clipmap {
+        return Err(anyhow!(
+            "--no-morph turns off CDLOD's or the tessellation's morph: it needs --lod cdlod or \
+             --lod tessellated"
+        ));
+    }
+    if (cli.density_map.is_some() || cli.triangle_width.is_some()) && cli.lod != LodArg::Tessellated
+    {
+        return Err(anyhow!(
+            "--density-map and --triangle-width steer the adaptive tessellation: they need \
+             --lod tessellated"
+        ));
+    }
+    if cli.target_error.is_some() && (cli.density_map.is_some() || cli.triangle_width.is_some()) {
+        return Err(anyhow!(
+            "--target-error splits the tessellation by screen-space error, without the density \
+             map or a triangle width: give one or the other"
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn check(args: &[&str]) -> Result<()> {
+        let cli = Cli::try_parse_from(std::iter::once("demo").chain(args.iter().copied()))
+            .expect("clap parses");
+        flags(&cli)
+    }
+
+    #[test]
+    fn the_defaults_and_each_modes_own_flags_pass() {
+        for args in [
+            &[][..],
+            &["--lod", "cdlod", "--target-error", "1"],
+            &[
+                "--lod",
+                "tessellated",
+                "--triangle-width",
+                "4",
+                "--density-map",
+                "off",
+            ],
+            &[
+                "--lod",
+                "tessellated",
+                "--target-error",
+                "0.5",
+                "--no-morph",
+            ],
+            &["--scenario", "world", "--lod", "cdlod"],
+            &["--detail", "refine"],
+            &[
+                "--camera",
+                "orbit",
+                "--max-height",
+                "40",
+                "--texel-size",
+                "0.5",
+            ],
+        ] {
+            check(args).unwrap_or_else(|e| panic!("{args:?}: {e:#}"));
+        }
+    }
+
+    #[test]
+    fn each_flag_out_of_place_or_range_is_a_usage_error_naming_it() {
+        for (args, flag) in [
+            (&["--scenario", "snow", "--camera", "orbit"][..], "--camera"),
+            (&["--scenario", "world", "--detail", "refine"], "--detail"),
+            (
+                &["--scenario", "snow", "--heightmap", "x.png"],
+                "--heightmap",
+            ),
+            (&["--speed", "0"], "--speed"),
+            (&["--speed", "1e30"], "--speed"),
+            (&["--max-height=-1"], "--max-height"),
+            (&["--texel-size", "0"], "--texel-size"),
+            (
+                &["--lod", "cdlod", "--target-error", "1e9"],
+                "--target-error",
+            ),
+            (&["--scenario", "flyover", "--lod", "cdlod"], "--lod"),
+            (&["--scenario", "world", "--lod", "tessellated"], "--lod"),
+            (&["--lod", "cdlod", "--detail", "parallax"], "--detail"),
+            (&["--target-error", "1"], "--target-error"),
+            (&["--no-morph"], "--no-morph"),
+            (
+                &["--lod", "cdlod", "--triangle-width", "4"],
+                "--triangle-width",
+            ),
+            (
+                &[
+                    "--lod",
+                    "tessellated",
+                    "--target-error",
+                    "1",
+                    "--density-map",
+                    "on",
+                ],
+                "--target-error",
+            ),
+            (
+                &["--lod", "tessellated", "--triangle-width", "0"],
+                "--triangle-width",
+            ),
+        ] {
+            let e = check(args).expect_err(&format!("{args:?} is refused"));
+            assert_eq!(
+                crate::usage_error::exit_status(&e),
+                crate::usage_error::USAGE_EXIT,
+                "{args:?}"
+            );
+            assert!(format!("{e:#}").contains(flag), "{args:?}: {e:#}");
+        }
+    }
+}
