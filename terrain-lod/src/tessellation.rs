@@ -8,49 +8,11 @@
 //! on lavapipe the two emit the same triangles; a driver that fuses multiply-adds or rounds a
 //! square root differently may flip a decision that lies within rounding of its threshold).
 //!
-//! Why bisection and not the hardware tessellator's fractional-odd pattern: the pattern only
-//! exists as the Direct3D reference tessellator, which cannot be reproduced exactly without
-//! it, and a patch-local pattern needs stitching between patches. In longest-edge bisection
-//! every vertex is the midpoint of exactly one edge (the hypotenuse of a "diamond" of one or
-//! two triangles), so both triangles on an edge read the same decision and the mesh is
-//! conforming: no T-junctions, no cracks, by construction.
-//!
-//! Conformity needs the decisions to be nested: a vertex may only be split in when the vertex
-//! whose triangle it splits is. The bounds per vertex are therefore saturated (Lindstrom and
-//! Pascucci 2001): the sphere of a vertex contains the spheres of all its descendants, and its
-//! density is the maximum over them. A vertex is split in when
-//!
-//! `r = K * R * density / (FLAT_SPHERE * max(|c - camera| - R, NEAR_M) * triangle_width_px) > 1`
-//!
-//! (precisely: above [`split_threshold`] of its triangles' level, 1 less a margin that shrinks
-//! by [`SPLIT_MARGIN`] per level, so that f32 rounding cannot un-nest a child and its parent)
-//!
-//! with `K = width / (2 tan(hfov / 2))`, `c` the vertex (true height) and `R` its saturated
-//! radius: the sphere's projected size, so the child's `r` never exceeds the parent's.
-//! `FLAT_SPHERE` makes `r` the projected length of the edge over flat ground, so the target
-//! is a triangle width in pixels as in seed 002.
-//!
-//! The error metric (`TessConfig::max_error_px`) replaces the size by the saturated geometric
-//! error `E` of the vertex (how far its unsplit triangles can lie from the full-resolution
-//! map: its own offset from its edge plus its children's `E`):
-//!
-//! `r = K * E / (max(|c - camera| - R, NEAR_M) * max_error_px)`.
-//!
-//! Every texel then projects at most `max_error_px` pixels
-//! from the drawn mesh, up to f32 rounding, when the morph is off, `min_triangle_m` is 0 and
-//! the selection is not cut short by `max_triangles` (`tests/tessellation.rs` checks it); no
-//! density map is read.
-//!
-//! No popping: a vertex that is split in starts on its edge (the mean of the edge's two drawn
-//! heights) and moves to its true height as `r` goes from 1 to `1 + morph_range`; both
-//! triangles on the edge compute the same position, so the morph keeps the mesh conforming.
-//!
-//! Grid conventions: vertices are texel positions. A patch of `P = patch_size` texels is split
-//! along a diagonal into two triangles (level 0); a triangle of level `l` has a hypotenuse of
-//! `P * sqrt(2)^(1 - l)` texels and splits into two of level `l + 1` down to level `2 log2 P`
-//! (triangles of one texel's legs). A repeating map is tessellated once: over its own extent
-//! when the patch size divides its sides, otherwise over whole patches past its sides, with
-//! the heights wrapped.
+//! Why bisection, how the split decisions stay nested (conforming), the split criterion of
+//! the size and error metrics and the morph are derived in the repository's
+//! `docs/derivations.md` ("Adaptive tessellation"). In short: a vertex is split in when its
+//! saturated sphere projects above one, so every edge is decided once for both its triangles
+//! and the mesh has no T-junctions by construction.
 
 use crate::cdlod::CdlodView;
 use crate::density::DensityMap;

@@ -27,36 +27,13 @@
 //!
 //! # Bilinear surface vs parry's triangles
 //!
-//! The crate's surface is the bilinear patch `h(u, v) = h00 + (h10 - h00) u + (h01 - h00) v +
-//! d u v` over each cell (`u` along X, `v` along Z, `hXZ` the corner heights), with the twist
-//! `d = h00 - h10 - h01 + h11`. Parry splits each cell into two triangles along the diagonal
-//! from corner `(u, v) = (0, 1)` to `(1, 0)` (its default, non-zigzag subdivision). Over the
-//! triangle `u + v <= 1` the plane through its three corners is the patch without the `d u v`
-//! term, so the two differ by `d u v`; over the triangle `u + v >= 1` they differ by `d (1 -
-//! u) (1 - v)`. Both are largest at the cell centre `u = v = 1/2`, so
-//!
-//! > **bound**: at every horizontal position, parry's surface and the bilinear surface differ
-//! > in height by at most `|h00 - h10 - h01 + h11| / 4` of the cell there (0 on every cell
-//! > edge and in every planar cell).
-//!
-//! (The other diagonal, parry's zigzag subdivision, has the same bound.) Call `delta` the
-//! largest such value over a set of cells: [`ParryTile::max_deviation`] for a tile,
-//! [`ParryTerrain::max_deviation`] for the whole map (both rounded up by the f32 conversion
-//! of the heights). What it means for queries:
-//!
-//! - A vertical ray from above hits the two surfaces at heights at most `delta` of its cell
-//!   apart.
-//! - Any ray from above both surfaces, in any direction, hits parry's surface no earlier than
-//!   the bilinear surface raised by `delta` and no later than the bilinear surface lowered by
-//!   `delta` (parry's surface lies between the two), and misses parry's surface only if it
-//!   misses the lowered one, within the same maximum distance.
-//! - Where a ray descends more steeply than the ground slopes, `k = -dir.y - g (|dir.x| +
-//!   |dir.z|) > 0` for a unit `dir` and `g` the largest height step between neighbouring
-//!   texels divided by the texel size, the two hit distances differ by at most `delta / k`.
-//!
-//! The crate's own ray treats the ground as solid (an origin below the surface hits at
-//! distance 0); parry's triangles have no inside, so [`ParryTerrain::cast_ray`] only reports
-//! crossings of the surface.
+//! Parry splits each cell into two triangles; the crate's surface is the bilinear patch. At
+//! every horizontal position they differ by at most `|h00 - h10 - h01 + h11| / 4` of the cell
+//! ([`ParryTile::max_deviation`], [`ParryTerrain::max_deviation`]), and rays hit the two
+//! within that bound (derived, with what it means for rays and contacts, in the repository's
+//! `docs/derivations.md`, "Parry's triangles against the bilinear surface"). Parry's
+//! triangles have no inside, so [`ParryTerrain::cast_ray`] only reports crossings of the
+//! surface.
 //!
 //! # Updates
 //!
