@@ -257,8 +257,10 @@ fn stamp(c: &mut Criterion, ctx: &GpuContext) {
                     queue,
                     &mut encoder,
                     &mut stamps,
-                    &mut tiles,
-                    &coarse,
+                    terrain_gpu::SpillTargets {
+                        tiles: &mut tiles,
+                        coarse: &coarse,
+                    },
                     &op,
                 )
                 .expect("spill");

@@ -136,7 +136,7 @@ pub enum GpuError {
     )]
     InvalidCamera {
         /// The camera given.
-        camera: crate::camera::Camera,
+        camera: crate::render::camera::Camera,
     },
     /// An input the operation does not handle.
     #[error("{what}: {reason}")]
@@ -159,7 +159,7 @@ pub enum GpuError {
     #[error("cannot render into {format:?}: {reason}")]
     UnsupportedTarget {
         /// The formats asked for.
-        format: crate::target::TargetFormat,
+        format: crate::render::target::TargetFormat,
         /// Why not.
         reason: &'static str,
     },

@@ -51,33 +51,19 @@
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
-pub mod atlas;
-pub mod camera;
-pub mod cdlod;
-pub mod clipmap;
-pub mod compute;
-pub mod context;
-pub mod density;
-pub mod detail;
-pub mod detail_probe;
-pub mod download;
+mod device;
 pub mod error;
 pub mod granular;
-pub mod limits;
-pub mod maps;
-pub mod normals;
-pub mod offscreen;
-pub mod readback;
-pub mod refine;
-pub mod region_source;
-pub mod scope;
-pub mod sky;
-pub mod spill;
-pub mod stamp;
-pub mod target;
-pub mod tessellation;
+mod passes;
+mod render;
+mod resources;
 pub mod testing;
-pub mod timer;
+
+// The modules sit in folders by role; their public paths stay `terrain_gpu::<module>`.
+pub use device::{compute, context, download, limits, readback, region_source, scope, timer};
+pub use passes::{density, detail_probe, normals, spill, stamp};
+pub use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, tessellation};
+pub use resources::{atlas, detail, maps};
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
 pub use camera::Camera;
@@ -96,7 +82,7 @@ pub use readback::{ReadbackTicket, RegionData, RegionReadback, RegionView};
 pub use refine::{RefineDraw, RefinePass, RefineRenderer};
 pub use region_source::GpuRegionSource;
 pub use sky::{SkyColors, SkyPass};
-pub use spill::{SpillPass, SpilledStamp};
+pub use spill::{SpillPass, SpillTargets, SpilledStamp};
 pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampOp, StampPass};
 pub use target::TargetFormat;
 pub use tessellation::{GpuTessellation, TessDraw, TessRenderer, TessellationPass};

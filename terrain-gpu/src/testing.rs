@@ -1,7 +1,7 @@
 //! Helpers for GPU tests: a context, or a skip with a printed reason, or a failure when
 //! `TERRAIN_REQUIRE_GPU=1` (set by `cargo xtask ci`) and no adapter exists.
 
-use crate::context::GpuContext;
+use crate::device::context::GpuContext;
 
 /// Environment variable that turns a missing adapter into a test failure.
 pub const REQUIRE_GPU_ENV: &str = "TERRAIN_REQUIRE_GPU";

@@ -515,8 +515,10 @@ fn spilled_detail_stamps_match_the_cpu_spill_rule() {
                 queue,
                 &mut encoder,
                 &mut pass,
-                &mut tiles,
-                &gpu_coarse,
+                terrain_gpu::SpillTargets {
+                    tiles: &mut tiles,
+                    coarse: &gpu_coarse,
+                },
                 &op,
             )
             .unwrap();
@@ -598,8 +600,10 @@ fn a_spill_the_pass_cannot_hold_is_refused_before_anything_is_stamped() {
         queue,
         &mut encoder,
         &mut pass,
-        &mut tiles,
-        &coarse,
+        terrain_gpu::SpillTargets {
+            tiles: &mut tiles,
+            coarse: &coarse,
+        },
         &op(0.5),
     );
     assert!(matches!(big, Err(GpuError::Core(_))), "{big:?}");
@@ -608,8 +612,10 @@ fn a_spill_the_pass_cannot_hold_is_refused_before_anything_is_stamped() {
         queue,
         &mut encoder,
         &mut pass,
-        &mut tiles,
-        &other,
+        terrain_gpu::SpillTargets {
+            tiles: &mut tiles,
+            coarse: &other,
+        },
         &op(0.2),
     );
     assert!(
@@ -634,8 +640,10 @@ fn a_spill_the_pass_cannot_hold_is_refused_before_anything_is_stamped() {
             queue,
             &mut encoder,
             &mut pass,
-            &mut tiles,
-            &coarse,
+            terrain_gpu::SpillTargets {
+                tiles: &mut tiles,
+                coarse: &coarse,
+            },
             &op(0.2),
         )
         .unwrap();
@@ -655,8 +663,10 @@ fn a_spill_the_pass_cannot_hold_is_refused_before_anything_is_stamped() {
             queue,
             &mut encoder,
             &mut pass,
-            &mut tiles,
-            &coarse,
+            terrain_gpu::SpillTargets {
+                tiles: &mut tiles,
+                coarse: &coarse,
+            },
             &far,
         );
     }

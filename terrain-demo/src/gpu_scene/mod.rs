@@ -722,8 +722,10 @@ impl GpuScene {
                         queue,
                         encoder,
                         &mut self.stamps,
-                        &mut detail.tiles,
-                        &self.map,
+                        terrain_gpu::SpillTargets {
+                            tiles: &mut detail.tiles,
+                            coarse: &self.map,
+                        },
                         &op,
                     )?;
                     texels += out.detail.iter().map(|(_, r)| r.area()).sum::<u64>();

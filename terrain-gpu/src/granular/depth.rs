@@ -56,11 +56,11 @@ use terrain_core::granular::{GranularObject, NO_OBJECT};
 use terrain_core::{CoreError, Grid, HeightEncoding, HeightSample, Rect};
 
 use super::upload::UploadRing;
-use crate::compute::{PassBindings, StorageBinding, shader_module};
-use crate::download::download_bytes;
+use crate::device::compute::{PassBindings, StorageBinding, shader_module};
+use crate::device::download::download_bytes;
+use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::maps::{GpuHeightMap, map_buffer};
-use crate::scope::scoped;
+use crate::resources::maps::{GpuHeightMap, map_buffer};
 
 /// Largest tile side rendered in one render pass (further limited by the device's
 /// `max_texture_dimension_2d`).

@@ -2,12 +2,12 @@
 //! Gaussian blur passes, as `terrain_core::granular::{symmetric_normals, blur_normals}` within a
 //! float tolerance, into a `GpuGranularNormals`.
 
-use crate::compute::{
+use crate::device::compute::{
     PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
 };
-use crate::download::download_bytes;
+use crate::device::download::download_bytes;
 use crate::error::GpuError;
-use crate::maps::{GpuHeightMap, map_buffer};
+use crate::resources::maps::{GpuHeightMap, map_buffer};
 use bytemuck::{Pod, Zeroable};
 use glam::{UVec2, Vec4};
 use terrain_core::granular::{GranularError, MAX_ITERATIONS};

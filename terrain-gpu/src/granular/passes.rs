@@ -10,7 +10,9 @@
 
 use super::scratch::{GranularArea, GranularUniform};
 use super::upload::UploadRing;
-use crate::compute::{PassBindings, StorageBinding, compute_pipeline, dispatch, shader_module};
+use crate::device::compute::{
+    PassBindings, StorageBinding, compute_pipeline, dispatch, shader_module,
+};
 use crate::error::GpuError;
 use terrain_core::Grid;
 use terrain_core::granular::{

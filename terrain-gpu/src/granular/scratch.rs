@@ -3,11 +3,11 @@
 //! counter); `GranularArea`, the inputs every pass over one active area shares; and the uniform
 //! block the integer passes share.
 
-use crate::compute::dispatch_size;
-use crate::download::{download_bytes, map_and_read};
+use crate::device::compute::dispatch_size;
+use crate::device::download::{download_bytes, map_and_read};
+use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::maps::GpuHeightMap;
-use crate::scope::scoped;
+use crate::resources::maps::GpuHeightMap;
 use bytemuck::{Pod, Zeroable};
 use terrain_core::Rect;
 use terrain_core::granular::{GranularError, MAX_SIDE, Penetration};

@@ -5,7 +5,7 @@ use super::depth::{DepthArea, DepthFromBelowPass};
 use super::passes::{DisplacePass, JumpFloodPass, PenetrationPass, SlopePass, SlopeSettings};
 use super::scratch::{GranularArea, GranularScratch};
 use crate::error::GpuError;
-use crate::maps::GpuHeightMap;
+use crate::resources::maps::GpuHeightMap;
 use terrain_core::Grid;
 use terrain_core::granular::{
     ActiveArea, AreaMode, DisplacementMethod, GranularObject, GranularParams, NO_OBJECT,

@@ -1,8 +1,8 @@
 //! `UploadRing`: per-frame data (depth grids, object triangles) uploaded into one persistent
 //! buffer at increasing offsets, freed by `recall` after the submit that carried it.
 
+use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::scope::scoped;
 
 /// Bytes an upload ring starts with, and the most it grows to before it asks for a `recall`.
 const START_BYTES: u64 = 64 * 1024;

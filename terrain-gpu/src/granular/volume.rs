@@ -1,11 +1,13 @@
 //! `VolumePass`: the exact u64 sum of a GPU height map's stored values (the volume a granular
 //! step conserves), reduced on the GPU and read back as 8 bytes.
 
-use crate::compute::{PassBindings, StorageBinding, compute_pipeline, dispatch, shader_module};
-use crate::download::map_and_read;
+use crate::device::compute::{
+    PassBindings, StorageBinding, compute_pipeline, dispatch, shader_module,
+};
+use crate::device::download::map_and_read;
+use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::maps::GpuHeightMap;
-use crate::scope::scoped;
+use crate::resources::maps::GpuHeightMap;
 use bytemuck::{Pod, Zeroable};
 use terrain_core::HeightSample;
 

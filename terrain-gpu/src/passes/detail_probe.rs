@@ -4,12 +4,12 @@
 //! reference is [`terrain_core::detail::DetailLayer::height_m`] and `gradient_m` with
 //! [`terrain_core::composite_normal`].
 
-use crate::compute::{buffer_entry, compute_pipeline, shader_module};
-use crate::detail::{DETAIL_INFO_BYTES, DetailShading, GpuDetailTiles};
-use crate::download::map_and_read;
+use crate::device::compute::{buffer_entry, compute_pipeline, shader_module};
+use crate::device::download::map_and_read;
+use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::maps::map_buffer;
-use crate::scope::scoped;
+use crate::resources::detail::{DETAIL_INFO_BYTES, DetailShading, GpuDetailTiles};
+use crate::resources::maps::map_buffer;
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use terrain_core::CoreError;

@@ -3,14 +3,14 @@
 //! into the caller's render pass. The surface may also be a granular map or a tile atlas
 //! ([`ClipmapSurface`]).
 
-use crate::atlas::GpuTileAtlas;
-use crate::camera::Camera;
-use crate::compute::shader_module;
-use crate::detail::{DetailInfo, DetailShading, GpuDetailTiles};
+use crate::device::compute::shader_module;
+use crate::device::scope::{buffer_init, scoped};
 use crate::error::GpuError;
-use crate::maps::{GpuDerivativeMap, GpuHeightMap};
-use crate::scope::{buffer_init, scoped};
-use crate::target::TargetFormat;
+use crate::render::camera::Camera;
+use crate::render::target::TargetFormat;
+use crate::resources::atlas::GpuTileAtlas;
+use crate::resources::detail::{DetailInfo, DetailShading, GpuDetailTiles};
+use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2, Vec3, Vec4};
 use terrain_core::WrapMode;
@@ -912,5 +912,5 @@ fn wrap_offset_for_frame(
         .iter()
         .map(|l| l.origin - IVec2::splat(l.scale as i32 + 1 + extra))
         .fold(IVec2::ZERO, |a, b| a.min(b));
-    crate::compute::wrap_offset(min, map_size)
+    crate::device::compute::wrap_offset(min, map_size)
 }

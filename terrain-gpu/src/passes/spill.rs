@@ -7,14 +7,14 @@
 //! texel under the footprint's tents its tent-weighted share. Both are recorded into the
 //! caller's encoder, so the coarse change lands with the detail change.
 
-use crate::compute::{
+use crate::device::compute::{
     PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
     wrap_code, wrap_offset,
 };
-use crate::detail::GpuDetailTiles;
 use crate::error::GpuError;
-use crate::maps::{ExactInF32, GpuHeightMap};
-use crate::stamp::{ExcessWindow, StampOp, StampPass};
+use crate::passes::stamp::{ExcessWindow, StampOp, StampPass};
+use crate::resources::detail::GpuDetailTiles;
+use crate::resources::maps::{ExactInF32, GpuHeightMap};
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::detail_spill::{check_spill_fits, coarse_pieces, spill_factor, spill_rect};
@@ -48,6 +48,16 @@ pub struct SpilledStamp {
     /// coarse-map or cut at a clamped one's edges): the GPU does not say whether any texel
     /// left the range, so these are dirty whenever the stamp was recorded.
     pub coarse: Vec<DirtyRect>,
+}
+
+/// What a spilling detail stamp writes: the detail layer's tiles and the coarse-map under the
+/// layer, which takes the excess beyond the tiles' range.
+#[derive(Debug)]
+pub struct SpillTargets<'a, T: ExactInF32> {
+    /// The detail tiles the stamp is applied to.
+    pub tiles: &'a mut GpuDetailTiles,
+    /// The coarse-map under the layer (its layout's coarse size and texel size).
+    pub coarse: &'a GpuHeightMap<T>,
 }
 
 /// Detail stamps that spill their excess into the coarse-map: the excess window (built once,
@@ -87,7 +97,7 @@ impl SpillPass {
         let module = shader_module(device, "spill.wgsl", terrain_shaders::SPILL)?;
         let pipeline = compute_pipeline(device, "SpillPass", &module, bindings.layout(), "main")?;
         let capacity = u64::from(max_texels);
-        let excess = crate::scope::scoped(device, "SpillPass excess window", || {
+        let excess = crate::device::scope::scoped(device, "SpillPass excess window", || {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("SpillPass excess window"),
                 size: capacity * 4,
@@ -113,25 +123,25 @@ impl SpillPass {
         self.bindings.recall();
     }
 
-    /// Records `op` on the detail tiles, as [`StampPass::encode_detail`] does, and the spill
-    /// of what it pushes beyond the tiles' range into `coarse`, the coarse-map under the layer
-    /// (terrain-core's `detail_spill` rule). Returns the dirty detail tiles and coarse rects.
+    /// Records `op` on `targets.tiles`, as [`StampPass::encode_detail`] does, and the spill of
+    /// what it pushes beyond the tiles' range into `targets.coarse`, the coarse-map under the
+    /// layer (terrain-core's `detail_spill` rule). Returns the dirty detail tiles and coarse
+    /// rects.
     ///
     /// Fails, with no stamp recorded, where [`StampPass::encode_detail`] fails, on a coarse-map
     /// of another size or texel size than the layer's layout, on a footprint larger than this
     /// pass's window, or on a mark whose spill would reach around a repeating coarse-map (a
     /// clear of this pass's own window may have been recorded then; it changes nothing else).
-    #[allow(clippy::too_many_arguments)]
     pub fn encode<T: ExactInF32>(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         stamps: &mut StampPass,
-        tiles: &mut GpuDetailTiles,
-        coarse: &GpuHeightMap<T>,
+        targets: SpillTargets<'_, T>,
         op: &StampOp<'_>,
     ) -> Result<SpilledStamp, GpuError> {
+        let SpillTargets { tiles, coarse } = targets;
         let layout = *tiles.layout();
         if coarse.size() != layout.coarse_size() {
             return Err(GpuError::SizeMismatch {

@@ -6,7 +6,7 @@
 //! blocking wait), so the wall time of submit-and-wait is the figure reported; it is an upper
 //! bound of the GPU time that includes one submission's overhead (about 0.1 ms).
 
-use crate::download::map_and_read;
+use crate::device::download::map_and_read;
 use crate::error::GpuError;
 use std::time::Instant;
 
@@ -115,7 +115,7 @@ impl GpuTimer {
         }
         let start = Instant::now();
         queue.submit([encoder.finish()]);
-        device.poll(crate::download::wait_bounded())?;
+        device.poll(crate::device::download::wait_bounded())?;
         let wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let timestamp_ms = match &self.queries {
             Some((_, _, staging)) => {

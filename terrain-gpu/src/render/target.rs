@@ -19,8 +19,8 @@ pub struct TargetFormat {
 impl TargetFormat {
     /// The formats of [`crate::OffscreenTarget`] captures: `Rgba8Unorm`, `Depth32Float`, 1 sample.
     pub const CAPTURE: Self = Self {
-        color: crate::offscreen::COLOR_FORMAT,
-        depth: crate::offscreen::DEPTH_FORMAT,
+        color: crate::render::offscreen::COLOR_FORMAT,
+        depth: crate::render::offscreen::DEPTH_FORMAT,
         sample_count: 1,
     };
 

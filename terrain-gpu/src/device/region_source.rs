@@ -2,9 +2,9 @@
 //! [`GpuHeightMap`], through a [`RegionReadback`] ring, so a collision mirror (terrain-physics'
 //! scheduler) follows the GPU map without stalls.
 
+use crate::device::readback::RegionReadback;
 use crate::error::GpuError;
-use crate::maps::GpuHeightMap;
-use crate::readback::RegionReadback;
+use crate::resources::maps::GpuHeightMap;
 use terrain_core::{ArrivedRegion, Rect, RegionSource, RequestId};
 
 /// Borrows what a readback needs for one scheduler update: create one per frame and pass it

@@ -7,9 +7,9 @@
 //! copy for in-place stamping. One u32 per texel keeps every invocation's writes to its own
 //! element.
 
-use crate::download::download_bytes;
+use crate::device::download::download_bytes;
+use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::scope::scoped;
 use glam::{UVec2, Vec2};
 use std::marker::PhantomData;
 use terrain_core::{DerivativeMap, Grid, HeightEncoding, HeightMap, HeightSample, WrapMode};

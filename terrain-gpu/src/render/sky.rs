@@ -1,9 +1,9 @@
 //! `SkyPass`: a sky gradient by view-ray elevation, drawn first into the caller's render pass.
 
-use crate::compute::shader_module;
+use crate::device::compute::shader_module;
+use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::scope::scoped;
-use crate::target::TargetFormat;
+use crate::render::target::TargetFormat;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
 

@@ -13,18 +13,18 @@
 //!
 //! [`ClipmapRenderer::exclude`]: crate::ClipmapRenderer::exclude
 
-use crate::camera::Camera;
-use crate::clipmap::{
+use crate::device::compute::{buffer_entry, compute_pipeline, shader_module};
+use crate::device::download::download_bytes;
+use crate::device::scope::scoped;
+use crate::error::GpuError;
+use crate::render::camera::Camera;
+use crate::render::clipmap::{
     ClipmapSurface, FrameUniform, SurfaceInfo, SurfacePipeline, TerrainStyle, VertexShape,
     check_view, check_wireframe, frame_uniform,
 };
-use crate::compute::{buffer_entry, compute_pipeline, shader_module};
-use crate::detail::{DetailInfo, DetailShading, GpuDetailTiles};
-use crate::download::download_bytes;
-use crate::error::GpuError;
-use crate::maps::{GpuDerivativeMap, GpuHeightMap};
-use crate::scope::scoped;
-use crate::target::TargetFormat;
+use crate::render::target::TargetFormat;
+use crate::resources::detail::{DetailInfo, DetailShading, GpuDetailTiles};
+use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use terrain_core::WrapMode;
@@ -114,7 +114,7 @@ impl RefineDraw<'_> {
         );
         if info.wrap == WrapMode::Repeat {
             let lowest = IVec2::from(uniform.camera_texel) - IVec2::splat(reach as i32);
-            uniform.wrap_offset = crate::compute::wrap_offset(lowest, info.size)?;
+            uniform.wrap_offset = crate::device::compute::wrap_offset(lowest, info.size)?;
         }
         Ok(uniform)
     }

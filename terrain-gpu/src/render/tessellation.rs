@@ -9,17 +9,19 @@
 //! (height, saturated radius, density and error), the patch bounds, the output triangles and
 //! the counter with the draw arguments. Nothing is allocated per frame.
 
-use crate::camera::Camera;
-use crate::clipmap::{
+use crate::device::compute::{
+    PassBindings, StorageBinding, compute_pipeline, shader_module, wrap_code,
+};
+use crate::device::download::download_bytes;
+use crate::device::scope::scoped;
+use crate::error::GpuError;
+use crate::render::camera::Camera;
+use crate::render::clipmap::{
     ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, check_wireframe,
     frame_uniform,
 };
-use crate::compute::{PassBindings, StorageBinding, compute_pipeline, shader_module, wrap_code};
-use crate::download::download_bytes;
-use crate::error::GpuError;
-use crate::maps::{GpuDerivativeMap, GpuHeightMap};
-use crate::scope::scoped;
-use crate::target::TargetFormat;
+use crate::render::target::TargetFormat;
+use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::WrapMode;
@@ -390,7 +392,7 @@ impl TessRenderer {
         let uniform = scoped(device, "TessRenderer", || {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("tessellated frame"),
-                size: std::mem::size_of::<crate::clipmap::FrameUniform>() as u64,
+                size: std::mem::size_of::<crate::render::clipmap::FrameUniform>() as u64,
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             })
@@ -431,7 +433,9 @@ impl TessRenderer {
         let info = surface.check()?;
         let wrap_offset = match info.wrap {
             // Vertices lie in 0 ..= the map size; fragments read a texel either side.
-            WrapMode::Repeat => crate::compute::wrap_offset(glam::IVec2::splat(-2), info.size)?,
+            WrapMode::Repeat => {
+                crate::device::compute::wrap_offset(glam::IVec2::splat(-2), info.size)?
+            }
             WrapMode::Clamp => [0, 0],
         };
         let uniform = frame_uniform(

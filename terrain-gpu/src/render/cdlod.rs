@@ -4,14 +4,14 @@
 //! fragment shader), so the two LOD schemes compare on equal terms. The surface is a
 //! coarse-map or a streamed world's tile atlas, as for the clipmap.
 
-use crate::camera::Camera;
-use crate::clipmap::{
+use crate::device::scope::{buffer_init, scoped};
+use crate::error::GpuError;
+use crate::render::camera::Camera;
+use crate::render::clipmap::{
     ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, check_wireframe,
     frame_uniform,
 };
-use crate::error::GpuError;
-use crate::scope::{buffer_init, scoped};
-use crate::target::TargetFormat;
+use crate::render::target::TargetFormat;
 use glam::UVec2;
 use terrain_core::WrapMode;
 use terrain_lod::cdlod::MAX_CDLOD_LODS;
@@ -95,7 +95,7 @@ impl CdlodRenderer {
             (
                 buffer(
                     "cdlod frame",
-                    std::mem::size_of::<crate::clipmap::FrameUniform>() as u64,
+                    std::mem::size_of::<crate::render::clipmap::FrameUniform>() as u64,
                     wgpu::BufferUsages::UNIFORM,
                 ),
                 buffer(
@@ -172,7 +172,7 @@ impl CdlodRenderer {
                     .iter()
                     .map(|i| glam::IVec2::from(i.origin) - 2)
                     .fold(glam::IVec2::ZERO, |a, b| a.min(b));
-                crate::compute::wrap_offset(min, info.size)?
+                crate::device::compute::wrap_offset(min, info.size)?
             }
             WrapMode::Clamp => [0, 0],
         };
@@ -283,7 +283,7 @@ fn surface_pipeline(
         &VertexShape {
             entry: "vs_cdlod",
             vertex_stride: std::mem::size_of::<[f32; 2]>() as u64,
-            vertex_attrs: &crate::clipmap::GRID_ATTRS,
+            vertex_attrs: &crate::render::clipmap::GRID_ATTRS,
             instance_stride: std::mem::size_of::<CdlodInstance>() as u64,
             instance_attrs: &ATTRS,
             extra_uniforms: &[LODS_BINDING],

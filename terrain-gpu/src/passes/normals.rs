@@ -1,12 +1,12 @@
 //! `NormalPass`: regenerates partial-derivative normals (seed 000 eq. 3.3) in a dirty rect plus
 //! its 2-texel apron, on the GPU.
 
-use crate::compute::{
+use crate::device::compute::{
     PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
     wrap_code, wrap_offset,
 };
 use crate::error::GpuError;
-use crate::maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
+use crate::resources::maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
 use bytemuck::{Pod, Zeroable};
 use terrain_core::{Rect, derivative_region};
 

@@ -3,7 +3,7 @@
 //! waiting, so the frame is never stalled.
 
 use crate::error::GpuError;
-use crate::maps::{GpuHeightMap, MapView};
+use crate::resources::maps::{GpuHeightMap, MapView};
 use glam::UVec2;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
@@ -334,7 +334,7 @@ impl RegionReadback {
         device: &wgpu::Device,
         convert: impl FnMut(RegionView<'_>) -> R,
     ) -> Result<Vec<R>, GpuError> {
-        device.poll(crate::download::wait_bounded())?;
+        device.poll(crate::device::download::wait_bounded())?;
         self.collect(convert)
     }
 

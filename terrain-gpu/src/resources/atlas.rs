@@ -7,11 +7,13 @@
 //! Which tiles to hold is not decided here (terrain-cache's `VramPool` does, through the
 //! trait); the atlas stores what it is given, with `queue.write_buffer` into buffers made once.
 
-use crate::compute::{PassBindings, StorageBinding, compute_pipeline, shader_module, wrap_offset};
-use crate::download::map_and_read;
+use crate::device::compute::{
+    PassBindings, StorageBinding, compute_pipeline, shader_module, wrap_offset,
+};
+use crate::device::download::map_and_read;
+use crate::device::scope::{buffer_init, scoped};
 use crate::error::GpuError;
-use crate::maps::{MapView, map_buffer};
-use crate::scope::{buffer_init, scoped};
+use crate::resources::maps::{MapView, map_buffer};
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2};
 use terrain_core::{
@@ -235,8 +237,13 @@ impl GpuTileAtlas {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<Vec<u32>, GpuError> {
-        let bytes =
-            crate::download::download_bytes(device, queue, &self.table, 0, self.table.size())?;
+        let bytes = crate::device::download::download_bytes(
+            device,
+            queue,
+            &self.table,
+            0,
+            self.table.size(),
+        )?;
         Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 
@@ -488,7 +495,7 @@ impl AtlasProbe {
                 WrapMode::Repeat => wrap_offset(lo - 1, layout.world_size)?,
                 WrapMode::Clamp => [0, 0],
             },
-            wrap: crate::compute::wrap_code(layout.wrap),
+            wrap: crate::device::compute::wrap_code(layout.wrap),
             count: texels.len() as u32,
             height_scale: layout.encoding.scale,
             height_offset: layout.encoding.offset,

@@ -8,7 +8,7 @@
 //! granular normals (`vec4<f32>`) 1 GiB. A map side also bounds the dispatch size:
 //! `max_compute_workgroups_per_dimension` of 65 535 covers sides up to 524 280 texels.
 
-use crate::compute::WORKGROUP;
+use crate::device::compute::WORKGROUP;
 use crate::error::GpuError;
 use glam::UVec2;
 

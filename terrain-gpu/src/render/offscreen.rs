@@ -2,10 +2,10 @@
 //! for frame captures (renderers draw into any caller's pass; writing the capture as PNG is
 //! terrain-core's `io::write_png_rgba8`).
 
-use crate::download::map_and_read;
+use crate::device::download::map_and_read;
+use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::scope::scoped;
-use crate::target::TargetFormat;
+use crate::render::target::TargetFormat;
 use glam::UVec2;
 use terrain_core::Grid;
 

@@ -46,9 +46,9 @@
 //! step with every state change: [`crate::ClipmapSurface::Detail`] shades with them and
 //! [`crate::DetailProbe`] reads what it shades with.
 
-use crate::download::download_bytes;
+use crate::device::download::download_bytes;
 use crate::error::GpuError;
-use crate::maps::map_buffer;
+use crate::resources::maps::map_buffer;
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2};
 use terrain_core::detail::{DETAIL_ZERO_RAW, DetailLayer, DetailLayout, detail_encoding};
@@ -110,7 +110,7 @@ impl GpuDetailTiles {
         )?;
         let tiles = layout.tiles();
         let state = Grid::new(tiles.x, tiles.y, ZERO)?;
-        let table = crate::scope::buffer_init(
+        let table = crate::device::scope::buffer_init(
             device,
             "GpuDetailTiles table",
             bytemuck::cast_slice(state.as_slice()),
@@ -265,12 +265,15 @@ impl GpuDetailTiles {
     /// Resident `tile` as the readback addresses it: a clamped `tile_size^2` map of u8 values
     /// in its slot. Fails for a tile off the grid or without a slot (the zero tile, or not
     /// loaded: nothing the GPU stamped can be there).
-    pub(crate) fn slot_view(&self, tile: UVec2) -> Result<crate::maps::MapView<'_>, GpuError> {
+    pub(crate) fn slot_view(
+        &self,
+        tile: UVec2,
+    ) -> Result<crate::resources::maps::MapView<'_>, GpuError> {
         let DetailTileState::Resident(slot) = self.check_tile(tile)? else {
             return Err(not_loaded(tile));
         };
         let side = self.layout.tile_size();
-        Ok(crate::maps::MapView {
+        Ok(crate::resources::maps::MapView {
             buffer: &self.heights,
             // Below 2^32 texels in all: `new` checked slots x tile texels.
             base: slot * side * side,
@@ -437,7 +440,7 @@ impl GpuDetailTiles {
         let lowest =
             i64::from(camera_detail.min_element()) - (i64::from(reach) + 1) * i64::from(k) - 2;
         let lowest = i32::try_from(lowest).map_err(|_| too_far(reach))?;
-        let wrap_offset = crate::compute::wrap_offset(IVec2::splat(lowest), size)?;
+        let wrap_offset = crate::device::compute::wrap_offset(IVec2::splat(lowest), size)?;
         let enc = detail_encoding();
         Ok(DetailInfo {
             size: size.to_array(),

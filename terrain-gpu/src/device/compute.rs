@@ -1,8 +1,8 @@
 //! Shared plumbing of the passes: shader modules and pipelines, the per-pass bindings (a
 //! uniform ring with dynamic offsets and bind groups cached by buffer), and dispatch sizes.
 
+use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::scope::scoped;
 use bytemuck::Pod;
 use std::collections::HashMap;
 use std::marker::PhantomData;

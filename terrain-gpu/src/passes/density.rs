@@ -3,13 +3,13 @@
 //! reference is [`terrain_lod::DensityMap`]; both recompute the same regions after a deformation
 //! ([`terrain_lod::density::update_regions`]).
 
-use crate::compute::{
+use crate::device::compute::{
     PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
     wrap_code, wrap_offset,
 };
-use crate::download::download_bytes;
+use crate::device::download::download_bytes;
 use crate::error::GpuError;
-use crate::maps::{ExactInF32, GpuHeightMap, map_buffer};
+use crate::resources::maps::{ExactInF32, GpuHeightMap, map_buffer};
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2};
 use terrain_core::{Grid, Rect, WrapMode};
@@ -251,30 +251,18 @@ impl DensityPass {
             src_offset: wrap_offset(IVec2::splat(-(border_radius as i32)), size0)?,
             ..Params::default()
         };
-        let buffers = [map.buffer(), &out.raw, &out.levels];
+        let mut recording = Recording {
+            bindings: &mut self.bindings,
+            device,
+            queue,
+            encoder,
+            buffers: [map.buffer(), &out.raw, &out.levels],
+        };
         for rect in &regions.raw {
-            record(
-                &mut self.bindings,
-                device,
-                queue,
-                encoder,
-                &self.raw,
-                base,
-                *rect,
-                &buffers,
-            )?;
+            recording.record(&self.raw, base, *rect)?;
         }
         for rect in &regions.finish {
-            record(
-                &mut self.bindings,
-                device,
-                queue,
-                encoder,
-                &self.finish,
-                base,
-                *rect,
-                &buffers,
-            )?;
+            recording.record(&self.finish, base, *rect)?;
         }
         for rect in regions.finish {
             let mut rect = rect;
@@ -292,16 +280,7 @@ impl DensityPass {
                     dst_base: parent_base,
                     ..base
                 };
-                record(
-                    &mut self.bindings,
-                    device,
-                    queue,
-                    encoder,
-                    &self.reduce,
-                    params,
-                    rect,
-                    &buffers,
-                )?;
+                recording.record(&self.reduce, params, rect)?;
             }
         }
         Ok(())
@@ -327,33 +306,43 @@ impl DensityPass {
     }
 }
 
-/// Records one dispatch of `pipeline` over `rect`.
-#[allow(clippy::too_many_arguments)]
-fn record(
-    bindings: &mut PassBindings<Params>,
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    encoder: &mut wgpu::CommandEncoder,
-    pipeline: &wgpu::ComputePipeline,
-    params: Params,
-    rect: Rect,
-    buffers: &[&wgpu::Buffer],
-) -> Result<(), GpuError> {
-    if rect.is_empty() {
-        return Ok(());
+/// Where one [`DensityPass::encode`] records its dispatches: the pass's uniform ring, the
+/// caller's device, queue and encoder, and the buffers every dispatch binds (the height map,
+/// the raw level 0 and the pyramid levels).
+struct Recording<'a> {
+    bindings: &'a mut PassBindings<Params>,
+    device: &'a wgpu::Device,
+    queue: &'a wgpu::Queue,
+    encoder: &'a mut wgpu::CommandEncoder,
+    buffers: [&'a wgpu::Buffer; 3],
+}
+
+impl Recording<'_> {
+    /// Records one dispatch of `pipeline` over `rect`.
+    fn record(
+        &mut self,
+        pipeline: &wgpu::ComputePipeline,
+        params: Params,
+        rect: Rect,
+    ) -> Result<(), GpuError> {
+        if rect.is_empty() {
+            return Ok(());
+        }
+        let params = Params {
+            rect_min: rect.min.to_array(),
+            rect_size: rect.size.to_array(),
+            ..params
+        };
+        let groups = dispatch_size(self.device, rect.size)?;
+        let (group, offset) =
+            self.bindings
+                .bind(self.device, self.queue, &params, &self.buffers)?;
+        dispatch(
+            self.encoder,
+            "DensityPass",
+            groups,
+            &[(pipeline, &group, offset)],
+        );
+        Ok(())
     }
-    let params = Params {
-        rect_min: rect.min.to_array(),
-        rect_size: rect.size.to_array(),
-        ..params
-    };
-    let groups = dispatch_size(device, rect.size)?;
-    let (group, offset) = bindings.bind(device, queue, &params, buffers)?;
-    dispatch(
-        encoder,
-        "DensityPass",
-        groups,
-        &[(pipeline, &group, offset)],
-    );
-    Ok(())
 }

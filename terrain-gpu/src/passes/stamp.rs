@@ -1,14 +1,14 @@
 //! `StampPass`: every stamp kind of terrain-core (Gaussian, texture, shockwave as a texture,
 //! user procedural WGSL) applied on the GPU to the stamp's region only, in place.
 
-use crate::compute::{
+use crate::device::compute::{
     PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
     wrap_code, wrap_offset,
 };
-use crate::detail::GpuDetailTiles;
+use crate::device::scope::buffer_init;
 use crate::error::GpuError;
-use crate::maps::{ExactInF32, GpuHeightMap, MapView};
-use crate::scope::buffer_init;
+use crate::resources::detail::GpuDetailTiles;
+use crate::resources::maps::{ExactInF32, GpuHeightMap, MapView};
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::detail::{detail_encoding, tiles_of_pieces};

@@ -1,0 +1,11 @@
+//! Plumbing between the device and everything else: the context and the limits asked for,
+//! error scopes, shared pipeline helpers, timing, and getting data back to the CPU.
+
+pub mod compute;
+pub mod context;
+pub mod download;
+pub mod limits;
+pub mod readback;
+pub mod region_source;
+pub mod scope;
+pub mod timer;
