@@ -1,5 +1,6 @@
 //! Every WGSL shader of the deformable terrain workspace, as `&'static str` constants, one file
-//! per pass (the file sits in `src/wgsl/` under the pass's name).
+//! per pass (the file sits under the pass's name in `src/wgsl/`, in the folder of terrain-gpu's
+//! group: `passes/`, `render/`, `resources/` for the shared lookups of GPU data, `granular/`).
 //!
 //! ```
 //! // Shaders are plain WGSL text, ready for `wgpu::ShaderSource::Wgsl`.
@@ -74,93 +75,93 @@ shared_codes! {
 pub const PRELUDE: &str = wgsl_prelude!();
 
 /// `StampPass`: one stamp (Gaussian, texture or user procedural) applied in place.
-pub const STAMP: &str = concat!(wgsl_prelude!(), include_str!("wgsl/stamp.wgsl"));
+pub const STAMP: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/stamp.wgsl"));
 
 /// `DensityPass`: curvature density maps and their max pyramid (seed 002 ch. 3).
-pub const DENSITY: &str = concat!(wgsl_prelude!(), include_str!("wgsl/density.wgsl"));
+pub const DENSITY: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/density.wgsl"));
 
 /// `NormalPass`: partial-derivative normals (seed 000 eq. 3.3) over a region.
-pub const NORMALS: &str = concat!(wgsl_prelude!(), include_str!("wgsl/normals.wgsl"));
+pub const NORMALS: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/normals.wgsl"));
 
 /// `SkyPass`: a full-screen gradient by view-ray elevation.
 pub const SKY: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/target_color.wgsl"),
-    include_str!("wgsl/sky.wgsl")
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/render/sky.wgsl")
 );
 
 /// `ClipmapRenderer`: displaced, morphed, lit clipmap blocks.
 pub const CLIPMAP: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/target_color.wgsl"),
-    include_str!("wgsl/detail_sample.wgsl"),
-    include_str!("wgsl/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/clipmap.wgsl"),
-    include_str!("wgsl/clipmap_surface_coarse.wgsl")
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_coarse.wgsl")
 );
 
 /// `CdlodRenderer`: CDLOD quadrants with the per-vertex morph, lit and coloured as the clipmap
 /// (its frame, coarse-map surface and fragment shader).
 pub const CDLOD: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/target_color.wgsl"),
-    include_str!("wgsl/detail_sample.wgsl"),
-    include_str!("wgsl/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/clipmap.wgsl"),
-    include_str!("wgsl/clipmap_surface_coarse.wgsl"),
-    include_str!("wgsl/cdlod.wgsl")
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
+    include_str!("wgsl/render/cdlod.wgsl")
 );
 
 /// `CdlodRenderer` over a tile atlas (`GpuTileAtlas`): the CDLOD vertex shader on the atlas
 /// surface of [`CLIPMAP_ATLAS`], so a streamed world is drawn by CDLOD as by the clipmap.
 pub const CDLOD_ATLAS: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/target_color.wgsl"),
-    include_str!("wgsl/detail_sample.wgsl"),
-    include_str!("wgsl/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/clipmap.wgsl"),
-    include_str!("wgsl/tile_atlas.wgsl"),
-    include_str!("wgsl/clipmap_surface_atlas.wgsl"),
-    include_str!("wgsl/cdlod.wgsl")
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/resources/tile_atlas.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_atlas.wgsl"),
+    include_str!("wgsl/render/cdlod.wgsl")
 );
 
 /// `TessellationPass`: adaptive tessellation by longest-edge bisection (seed 002 sec. 2.3),
 /// writing triangles and indirect draw arguments.
-pub const TESSELLATE: &str = concat!(wgsl_prelude!(), include_str!("wgsl/tessellate.wgsl"));
+pub const TESSELLATE: &str = concat!(wgsl_prelude!(), include_str!("wgsl/render/tessellate.wgsl"));
 
 /// `TessRenderer`: the tessellation pass's triangles, lit and coloured as the clipmap (its
 /// frame, coarse-map surface and fragment shader).
 pub const TESSELLATED: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/target_color.wgsl"),
-    include_str!("wgsl/detail_sample.wgsl"),
-    include_str!("wgsl/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/clipmap.wgsl"),
-    include_str!("wgsl/clipmap_surface_coarse.wgsl"),
-    include_str!("wgsl/tessellated.wgsl")
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
+    include_str!("wgsl/render/tessellated.wgsl")
 );
 
 /// `ClipmapRenderer` over a granular map: the clipmap drawn from the granular normals pass's
 /// output (unit normal and float height per texel), so nothing is uploaded per frame.
 pub const CLIPMAP_GRANULAR: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/target_color.wgsl"),
-    include_str!("wgsl/detail_sample.wgsl"),
-    include_str!("wgsl/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/clipmap.wgsl"),
-    include_str!("wgsl/clipmap_surface_granular.wgsl")
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_granular.wgsl")
 );
 
 /// `ClipmapRenderer` over a tile atlas (`GpuTileAtlas`): heights from the finest resident level
 /// of the tile pyramid through the indirection table, normals by central differences.
 pub const CLIPMAP_ATLAS: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/target_color.wgsl"),
-    include_str!("wgsl/detail_sample.wgsl"),
-    include_str!("wgsl/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/clipmap.wgsl"),
-    include_str!("wgsl/tile_atlas.wgsl"),
-    include_str!("wgsl/clipmap_surface_atlas.wgsl")
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/resources/tile_atlas.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_atlas.wgsl")
 );
 
 /// `ClipmapRenderer` over a coarse-map with a detail layer (`GpuDetailTiles`, seed 000 sec.
@@ -168,12 +169,12 @@ pub const CLIPMAP_ATLAS: &str = concat!(
 /// parallax march through the detail heights finds, the detail faded out with distance.
 pub const CLIPMAP_DETAIL: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/target_color.wgsl"),
-    include_str!("wgsl/detail_sample.wgsl"),
-    include_str!("wgsl/detail_tiles.wgsl"),
-    include_str!("wgsl/clipmap_detail_parallax.wgsl"),
-    include_str!("wgsl/clipmap.wgsl"),
-    include_str!("wgsl/clipmap_surface_coarse.wgsl")
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/resources/detail_tiles.wgsl"),
+    include_str!("wgsl/render/clipmap_detail_parallax.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_coarse.wgsl")
 );
 
 /// `RefinePass` and `RefineRenderer`: the coarse cells around the camera split by the
@@ -182,76 +183,85 @@ pub const CLIPMAP_DETAIL: &str = concat!(
 /// fragment shader, shaded with eq. 3.4's composite normal.
 pub const REFINE: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/target_color.wgsl"),
-    include_str!("wgsl/detail_sample.wgsl"),
-    include_str!("wgsl/detail_tiles.wgsl"),
-    include_str!("wgsl/clipmap_detail_refined.wgsl"),
-    include_str!("wgsl/clipmap.wgsl"),
-    include_str!("wgsl/clipmap_surface_coarse.wgsl"),
-    include_str!("wgsl/refine.wgsl")
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/resources/detail_tiles.wgsl"),
+    include_str!("wgsl/render/clipmap_detail_refined.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
+    include_str!("wgsl/render/refine.wgsl")
 );
 
 /// `DetailProbe`: the detail layer's height, gradient and composite normal at a list of points
 /// (the same functions the detail clipmap shades with).
 pub const DETAIL_PROBE: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/detail_sample.wgsl"),
-    include_str!("wgsl/detail_tiles.wgsl"),
-    include_str!("wgsl/detail_probe.wgsl")
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/resources/detail_tiles.wgsl"),
+    include_str!("wgsl/passes/detail_probe.wgsl")
 );
 
 /// `AtlasProbe`: the atlas surface's stored height, height and gradient at a list of texels
 /// (the same functions the clipmap draws with).
 pub const ATLAS_PROBE: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/tile_atlas.wgsl"),
-    include_str!("wgsl/clipmap_surface_atlas.wgsl"),
-    include_str!("wgsl/atlas_probe.wgsl")
+    include_str!("wgsl/resources/tile_atlas.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_atlas.wgsl"),
+    include_str!("wgsl/resources/atlas_probe.wgsl")
 );
 
 /// The declarations every granular pass shares (uniform block, penetration texel, column
 /// kinds); already joined in front of [`GRANULAR_PENETRATION`], [`GRANULAR_JFA`],
 /// [`GRANULAR_DISPLACE`] and [`GRANULAR_SLOPE`].
-pub const GRANULAR_COMMON: &str =
-    concat!(wgsl_prelude!(), include_str!("wgsl/granular_common.wgsl"));
+pub const GRANULAR_COMMON: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/granular/granular_common.wgsl")
+);
 
 /// Granular deformation (seed 001 ch. 4): penetration texture from depth and heights.
 pub const GRANULAR_PENETRATION: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/granular_common.wgsl"),
-    include_str!("wgsl/granular_penetration.wgsl")
+    include_str!("wgsl/granular/granular_common.wgsl"),
+    include_str!("wgsl/granular/granular_penetration.wgsl")
 );
 /// Granular deformation: jump flooding passes (closest seed per column).
 pub const GRANULAR_JFA: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/granular_common.wgsl"),
-    include_str!("wgsl/granular_jfa.wgsl")
+    include_str!("wgsl/granular/granular_common.wgsl"),
+    include_str!("wgsl/granular/granular_jfa.wgsl")
 );
 /// Granular deformation: displacement of intersected material (the three methods).
 pub const GRANULAR_DISPLACE: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/granular_common.wgsl"),
-    include_str!("wgsl/granular_displace.wgsl")
+    include_str!("wgsl/granular/granular_common.wgsl"),
+    include_str!("wgsl/granular/granular_displace.wgsl")
 );
 /// Granular deformation: evening out slopes (interleaved and scatter).
 pub const GRANULAR_SLOPE: &str = concat!(
     wgsl_prelude!(),
-    include_str!("wgsl/granular_common.wgsl"),
-    include_str!("wgsl/granular_slope.wgsl")
+    include_str!("wgsl/granular/granular_common.wgsl"),
+    include_str!("wgsl/granular/granular_slope.wgsl")
 );
 /// Granular deformation: symmetric-difference normals and their blur, float heights.
-pub const GRANULAR_NORMALS: &str =
-    concat!(wgsl_prelude!(), include_str!("wgsl/granular_normals.wgsl"));
+pub const GRANULAR_NORMALS: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/granular/granular_normals.wgsl")
+);
 /// Granular deformation: depth of objects seen from below (render pipeline).
-pub const GRANULAR_DEPTH: &str = concat!(wgsl_prelude!(), include_str!("wgsl/granular_depth.wgsl"));
+pub const GRANULAR_DEPTH: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/granular/granular_depth.wgsl")
+);
 /// Granular deformation: the exact u64 sum of a height map (the conserved volume), reduced on
 /// the GPU.
-pub const GRANULAR_VOLUME: &str =
-    concat!(wgsl_prelude!(), include_str!("wgsl/granular_volume.wgsl"));
+pub const GRANULAR_VOLUME: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/granular/granular_volume.wgsl")
+);
 
 /// `SpillPass`: the excess of a detail stamp moved into the coarse-map (terrain-core's
 /// `detail_spill` rule).
-pub const SPILL: &str = concat!(wgsl_prelude!(), include_str!("wgsl/spill.wgsl"));
+pub const SPILL: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/spill.wgsl"));
 
 /// The markers around the default user procedural stamp function in [`STAMP`]; a user stamp
 /// replaces the text between them with its own `fn user_stamp_value(local: vec2<f32>) -> f32`.
