@@ -1,0 +1,354 @@
+//! `cargo xtask tidy` (and ci's first step): rules about the repository's tracked files that
+//! neither the compiler nor clippy checks, each a cheap text scan. It keeps clippy's
+//! argument-count lint unsilenced, the fuzz harness in one shared crate instead of copies, the
+//! repository standing alone (crates are top-level folders, nothing outside it is named), and
+//! source files small enough to read. Every problem is reported as `file:line: why`.
+
+use crate::util::root;
+use anyhow::{Context, Result, bail};
+use std::collections::HashMap;
+use std::fmt;
+use std::process::Command;
+
+/// This file: its rules' own patterns (and the fixtures of its tests) would match them.
+const SELF: &str = "xtask/src/tidy.rs";
+
+/// The text files tidy reads, by extension.
+const TEXT_EXTENSIONS: [&str; 7] = ["rs", "md", "toml", "wgsl", "sh", "json", "yml"];
+
+/// The most lines a `.rs` file may have.
+const MAX_RS_LINES: usize = 1000;
+
+/// Two `.rs` files this long or longer with the same content are a copy.
+const MIN_COPY_LINES: usize = 40;
+
+/// The clippy lint that must never be silenced.
+const ARGUMENT_LINT: &str = "too_many_arguments";
+
+/// One tracked text file: its path from the repository root (with `/`) and its content.
+pub struct TrackedFile {
+    pub path: String,
+    pub text: String,
+}
+
+/// One broken rule, at a file and line (1-based).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    pub path: String,
+    pub line: usize,
+    pub message: String,
+}
+
+impl fmt::Display for Problem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:{}: {}", self.path, self.line, self.message)
+    }
+}
+
+/// Checks every tracked text file; fails naming each problem.
+pub fn tidy() -> Result<()> {
+    let files = tracked_text_files()?;
+    let problems = check(&files);
+    for p in &problems {
+        eprintln!("{p}");
+    }
+    if !problems.is_empty() {
+        bail!(
+            "tidy: {} problem(s) in the tracked files (listed above)",
+            problems.len()
+        );
+    }
+    eprintln!("tidy: {} tracked text files ok", files.len());
+    Ok(())
+}
+
+/// The tracked files (`git ls-files`) with a [`TEXT_EXTENSIONS`] extension, outside target/.
+/// A file deleted in the work tree but still tracked, or one that is not UTF-8, is skipped.
+fn tracked_text_files() -> Result<Vec<TrackedFile>> {
+    let output = Command::new("git")
+        .args(["ls-files", "-z"])
+        .current_dir(root())
+        .output()
+        .context("could not start git ls-files")?;
+    if !output.status.success() {
+        bail!(
+            "`git ls-files` exited with {}: {}",
+            output.status,
+            String::from_utf8_lossy(&output.stderr).trim()
+        );
+    }
+    let listing = String::from_utf8(output.stdout).context("git ls-files printed non-UTF-8")?;
+    let mut files = Vec::new();
+    for path in listing.split('\0').filter(|p| is_checked_path(p)) {
+        match std::fs::read_to_string(root().join(path)) {
+            Ok(text) => files.push(TrackedFile {
+                path: path.to_owned(),
+                text,
+            }),
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::NotFound | std::io::ErrorKind::InvalidData
+                ) => {}
+            Err(e) => return Err(e).with_context(|| format!("reading {path}")),
+        }
+    }
+    Ok(files)
+}
+
+/// Whether tidy reads the file at `path`: a text extension, and not under target/.
+fn is_checked_path(path: &str) -> bool {
+    !path.starts_with("target/")
+        && path
+            .rsplit_once('.')
+            .is_some_and(|(_, ext)| TEXT_EXTENSIONS.contains(&ext))
+}
+
+/// Every rule over `files`, sorted by file and line.
+pub fn check(files: &[TrackedFile]) -> Vec<Problem> {
+    let others: Vec<&TrackedFile> = files.iter().filter(|f| f.path != SELF).collect();
+    let mut problems = Vec::new();
+    for f in &others {
+        if f.path.ends_with(".rs") {
+            problems.extend(argument_lint_allowances(&f.path, &f.text));
+        }
+        problems.extend(outside_paths(&f.path, &f.text));
+    }
+    problems.extend(harness_copies(&others));
+    for f in files {
+        problems.extend(long_file(&f.path, &f.text));
+    }
+    problems.sort_by(|a, b| (&a.path, a.line).cmp(&(&b.path, b.line)));
+    problems
+}
+
+/// The 1-based line of byte `offset` in `text`.
+fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset].matches('\n').count() + 1
+}
+
+/// Rule (a): `too_many_arguments` inside an `allow(` or `expect(` attribute of a `.rs` file.
+/// A function with that many arguments wants a struct of them instead.
+fn argument_lint_allowances(path: &str, text: &str) -> Vec<Problem> {
+    text.match_indices(ARGUMENT_LINT)
+        .filter(|&(i, _)| {
+            let before = &text[..i];
+            // The attribute the lint name is in: the last `#[` / `#![` before it, not closed.
+            let Some(start) = before.rfind("#[").max(before.rfind("#![")) else {
+                return false;
+            };
+            let attr = &before[start..];
+            !attr.contains(']') && (attr.contains("allow(") || attr.contains("expect("))
+        })
+        .map(|(i, _)| Problem {
+            path: path.to_owned(),
+            line: line_of(text, i),
+            message: format!(
+                "clippy::{ARGUMENT_LINT} is silenced: pass a struct of the arguments instead"
+            ),
+        })
+        .collect()
+}
+
+/// Rule (b): a copied fuzz harness. A `harness.rs` under a crate's `tests/` folder (the
+/// harness lives in one shared crate), or two `.rs` files of [`MIN_COPY_LINES`] lines or more
+/// with the same content (reported at the second, naming the first).
+fn harness_copies(files: &[&TrackedFile]) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    let mut first_of: HashMap<&str, &str> = HashMap::new();
+    for f in files.iter().filter(|f| f.path.ends_with(".rs")) {
+        let mut parts = f.path.split('/');
+        let name = parts.next_back().unwrap_or_default();
+        if name == "harness.rs" && parts.any(|dir| dir == "tests") {
+            problems.push(Problem {
+                path: f.path.clone(),
+                line: 1,
+                message: "a copy of the fuzz harness: use the shared one \
+                          (terrain-test-support, xtask/test-support) instead"
+                    .into(),
+            });
+        }
+        let lines = f.text.lines().count();
+        if lines < MIN_COPY_LINES {
+            continue;
+        }
+        match first_of.get(f.text.as_str()) {
+            Some(first) => problems.push(Problem {
+                path: f.path.clone(),
+                line: 1,
+                message: format!("the same {lines} lines as {first}: keep one copy and share it"),
+            }),
+            None => {
+                first_of.insert(&f.text, &f.path);
+            }
+        }
+    }
+    problems
+}
+
+/// Rule (c): a mention of `../shared` or of a path starting with `crates/`. The repository
+/// stands alone and its crates are top-level folders.
+fn outside_paths(path: &str, text: &str) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    for (i, _) in text.match_indices("../shared") {
+        problems.push(Problem {
+            path: path.to_owned(),
+            line: line_of(text, i),
+            message: "names `../shared`, outside the repository: the repository stands alone"
+                .into(),
+        });
+    }
+    for (i, _) in text.match_indices("crates/") {
+        // Only where a path starts: not `foo-crates/`, `registry/crates/` or `.crates/`.
+        let starts_path = text[..i]
+            .chars()
+            .next_back()
+            .is_none_or(|c| !(c.is_alphanumeric() || "_-./".contains(c)));
+        if starts_path {
+            problems.push(Problem {
+                path: path.to_owned(),
+                line: line_of(text, i),
+                message: "names a path under `crates/`: the crates are top-level folders".into(),
+            });
+        }
+    }
+    problems
+}
+
+/// Rule (d): a `.rs` file over [`MAX_RS_LINES`] lines (a generated one, marked `@generated`
+/// in its first lines, is exempt). Split it into modules of one purpose each.
+fn long_file(path: &str, text: &str) -> Option<Problem> {
+    let lines = text.lines().count();
+    let generated = text.lines().take(5).any(|l| l.contains("@generated"));
+    (path.ends_with(".rs") && lines > MAX_RS_LINES && !generated).then(|| Problem {
+        path: path.to_owned(),
+        line: MAX_RS_LINES + 1,
+        message: format!(
+            "{lines} lines, over {MAX_RS_LINES}: split it into modules of one purpose each"
+        ),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn file(path: &str, text: &str) -> TrackedFile {
+        TrackedFile {
+            path: path.into(),
+            text: text.into(),
+        }
+    }
+
+    /// `n` distinct lines.
+    fn lines(n: usize) -> String {
+        (0..n).map(|i| format!("let x{i} = {i};\n")).collect()
+    }
+
+    #[test]
+    fn silenced_argument_lint_is_found_at_its_line() {
+        let text = "fn a() {}\n#[allow(clippy::too_many_arguments)]\nfn b() {}\n\
+                    #[cfg_attr(test, expect(\n    clippy::too_many_arguments,\n))]\nfn c() {}\n\
+                    #![allow(dead_code, clippy::too_many_arguments)]\n";
+        let found = argument_lint_allowances("a/src/lib.rs", text);
+        let at: Vec<usize> = found.iter().map(|p| p.line).collect();
+        assert_eq!(at, [2, 5, 8]);
+        assert_eq!(
+            found[0].to_string(),
+            "a/src/lib.rs:2: clippy::too_many_arguments is silenced: pass a struct of the \
+             arguments instead"
+        );
+    }
+
+    #[test]
+    fn argument_lint_named_outside_an_allowance_is_fine() {
+        let text = "// clippy's too_many_arguments: we pass structs\n\
+                    #[derive(Debug)]\nstruct S; // too_many_arguments\n\
+                    #[warn(clippy::too_many_arguments)]\nfn f() {}\n";
+        assert_eq!(argument_lint_allowances("a/src/lib.rs", text), []);
+        // Only `.rs` files are read for it.
+        let toml = file("a/Cargo.toml", "#[allow(clippy::too_many_arguments)]\n");
+        assert_eq!(check(&[toml]), []);
+    }
+
+    #[test]
+    fn copied_harness_is_found_by_name() {
+        let files = [
+            file("terrain-core/tests/fuzz/harness.rs", "pub fn run() {}\n"),
+            file("terrain-core/tests/fuzz.rs", "mod fuzz;\n"),
+            file("xtask/test-support/src/harness.rs", "pub fn run() {}\n"),
+        ];
+        let found = check(&files);
+        assert_eq!(found.len(), 1, "{found:?}");
+        assert_eq!(found[0].path, "terrain-core/tests/fuzz/harness.rs");
+        assert_eq!(found[0].line, 1);
+    }
+
+    #[test]
+    fn identical_long_files_are_copies_and_short_or_different_ones_are_not() {
+        let long = lines(MIN_COPY_LINES);
+        let files = [
+            file("a/src/x.rs", &long),
+            file("b/src/x.rs", &long),
+            file("c/src/short.rs", "mod a;\n"),
+            file("d/src/short.rs", "mod a;\n"),
+            file("e/src/other.rs", &lines(MIN_COPY_LINES + 1)),
+            file("f/notes.md", &long),
+        ];
+        let found = check(&files);
+        assert_eq!(found.len(), 1, "{found:?}");
+        assert_eq!(found[0].path, "b/src/x.rs");
+        assert!(found[0].message.contains("a/src/x.rs"), "{}", found[0]);
+    }
+
+    #[test]
+    fn paths_outside_the_repository_are_found() {
+        let text = "see ../shared/lib\n\nthe crate `crates/terrain-core/src`\n";
+        let found = outside_paths("docs/x.md", text);
+        let at: Vec<usize> = found.iter().map(|p| p.line).collect();
+        assert_eq!(at, [1, 3]);
+        assert!(found[1].message.contains("top-level"), "{}", found[1]);
+        let yml = file(".github/ci.yml", "run: cd crates/lod\n");
+        assert_eq!(check(&[yml]).len(), 1);
+    }
+
+    #[test]
+    fn crates_not_starting_a_path_is_fine() {
+        let text = "publish to crates.io; ~/.cargo/registry/crates/x; my-crates/ and sub.crates/\n\
+                    the crates are top-level folders\n";
+        assert_eq!(outside_paths("README.md", text), []);
+        // This file's own patterns and fixtures are not checked against it.
+        let me = file(
+            SELF,
+            "../shared crates/x #[allow(clippy::too_many_arguments)]\n",
+        );
+        assert_eq!(check(&[me]), []);
+    }
+
+    #[test]
+    fn long_rs_files_are_found_and_others_are_not() {
+        let long = lines(MAX_RS_LINES + 1);
+        let found = check(&[file("a/src/big.rs", &long)]);
+        assert_eq!(found.len(), 1);
+        assert_eq!(
+            found[0].to_string(),
+            "a/src/big.rs:1001: 1001 lines, over 1000: split it into modules of one purpose each"
+        );
+        let generated = format!("// @generated by a tool\n{long}");
+        assert_eq!(long_file("a/src/gen.rs", &generated), None);
+        assert_eq!(long_file("a/src/ok.rs", &lines(MAX_RS_LINES)), None);
+        assert_eq!(long_file("docs/long.md", &long), None);
+        // The rule holds for this file too.
+        assert!(long_file(SELF, &long).is_some());
+    }
+
+    #[test]
+    fn checked_paths_are_text_files_outside_target() {
+        assert!(is_checked_path("terrain-core/src/lib.rs"));
+        assert!(is_checked_path("shaders/clipmap.wgsl"));
+        assert!(is_checked_path(".github/workflows/ci.yml"));
+        assert!(!is_checked_path("target/debug/build/x.rs"));
+        assert!(!is_checked_path("docs/frame.png"));
+        assert!(!is_checked_path(".ci/run"));
+    }
+}
