@@ -319,6 +319,11 @@ fn main() -> Result<()> {
                 color.create_view(&Default::default()),
                 depth.create_view(&Default::default()),
             );
+            // The engine's own pass: colour kept for the capture, depth for this frame only.
+            let depth_ops = wgpu::Operations {
+                load: wgpu::LoadOp::Clear(1.0),
+                store: wgpu::StoreOp::Discard,
+            };
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("engine main pass"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -332,15 +337,10 @@ fn main() -> Result<()> {
                 })],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &depth_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
+                    depth_ops: Some(depth_ops),
                     stencil_ops: None,
                 }),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
+                ..Default::default()
             });
             sky.draw(&mut pass);
             renderer.draw(&mut pass);

@@ -267,28 +267,29 @@ fn renderers_draw_into_the_callers_msaa_srgb_pass_like_the_capture() {
     renderer.prepare(device, queue, &view).unwrap();
     let mut encoder = device.create_command_encoder(&Default::default());
     {
+        // As the example's engine does: MSAA colour resolved, depth for this pass only.
+        let msaa = wgpu::RenderPassColorAttachment {
+            view: &msaa_view,
+            depth_slice: None,
+            resolve_target: Some(&resolved_view),
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                store: wgpu::StoreOp::Discard,
+            },
+        };
+        let depth = wgpu::RenderPassDepthStencilAttachment {
+            view: &depth_view,
+            depth_ops: Some(wgpu::Operations {
+                load: wgpu::LoadOp::Clear(1.0),
+                store: wgpu::StoreOp::Discard,
+            }),
+            stencil_ops: None,
+        };
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("engine pass"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &msaa_view,
-                depth_slice: None,
-                resolve_target: Some(&resolved_view),
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Discard,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &depth_view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
+            color_attachments: &[Some(msaa)],
+            depth_stencil_attachment: Some(depth),
+            ..Default::default()
         });
         sky.draw(&mut pass);
         renderer.draw(&mut pass);

@@ -182,16 +182,7 @@ pub(super) fn render_tessellated(
     lod_start: std::time::Instant,
     timings: &mut Timings,
 ) -> Result<RenderedFrame> {
-    let FrameGpu {
-        ctx,
-        target,
-        sky,
-        timer,
-        map,
-        normals,
-        style,
-        ..
-    } = gpu;
+    let (ctx, target, sky) = (gpu.ctx, gpu.target, gpu.sky);
     let (device, queue) = (&ctx.device, &ctx.queue);
     let size = target.size();
     let aspect = size.x as f32 / size.y as f32;
@@ -202,21 +193,18 @@ pub(super) fn render_tessellated(
     let frame = c.hierarchy.select(&view)?;
     let max_screen_error_px = c.hierarchy.max_screen_error_px(&frame, &view);
     let view_proj = camera.view_proj_relative(aspect);
-    let timing = timer.time(device, queue, |encoder| {
+    let timing = gpu.timer.time(device, queue, |encoder| {
         sky.prepare(queue, view_proj, &SkyColors::default())?;
         c.pass
             .encode(device, queue, encoder, &c.gpu, &c.hierarchy, &view)?;
-        c.renderer.prepare(
-            device,
-            queue,
-            &TessDraw {
-                map,
-                normals,
-                camera,
-                style,
-                target_size: size,
-            },
-        )?;
+        let draw = TessDraw {
+            map: gpu.map,
+            normals: gpu.normals,
+            camera,
+            style: gpu.style,
+            target_size: size,
+        };
+        c.renderer.prepare(device, queue, &draw)?;
         let mut pass = target.begin_pass(encoder, wgpu::Color::BLACK);
         sky.draw(&mut pass);
         c.renderer.draw(&mut pass, &c.gpu);
