@@ -94,26 +94,36 @@ fn render_on(
     (image, lods)
 }
 
+/// The quadtree over the scene's map (leaves of `leaf` texels drawn by a `grid`-cell mesh,
+/// `lods` LODs, the finest reaching `finest_range` metres) and a renderer for its mesh.
+fn tree_and_renderer(
+    scene: &Scene,
+    leaf: u32,
+    grid: u32,
+    lods: u32,
+    finest_range: f32,
+) -> (CdlodTree, CdlodRenderer) {
+    let config = CdlodConfig {
+        leaf_size: leaf,
+        grid_size: grid,
+        lod_count: lods,
+        finest_range,
+        ..CdlodConfig::default()
+    };
+    let tree = CdlodTree::from_map(&scene.map, config).unwrap();
+    let device = &scene.ctx.device;
+    let renderer =
+        CdlodRenderer::new(device, &TargetFormat::CAPTURE, &CdlodMesh::new(grid)).unwrap();
+    (tree, renderer)
+}
+
 #[test]
 fn no_cracks_from_grazing_views_across_lod_edges() {
     let Some(ctx) = context_or_skip("cdlod no_cracks_from_grazing_views") else {
         return;
     };
     let mut scene = Scene::new(ctx, 31, 5);
-    let config = CdlodConfig {
-        leaf_size: 16,
-        grid_size: 16,
-        lod_count: 5,
-        finest_range: 6.0,
-        ..CdlodConfig::default()
-    };
-    let tree = CdlodTree::from_map(&scene.map, config).unwrap();
-    let mut renderer = CdlodRenderer::new(
-        &scene.ctx.device,
-        &TargetFormat::CAPTURE,
-        &CdlodMesh::new(16),
-    )
-    .unwrap();
+    let (tree, mut renderer) = tree_and_renderer(&scene, 16, 16, 5, 6.0);
     let size = UVec2::new(320, 200);
     let positions = [
         Vec2::new(100.0, 100.0),
@@ -156,20 +166,7 @@ fn the_instance_buffer_grows_for_a_large_frame() {
     };
     let mut scene = Scene::new(ctx, 31, 5);
     // Tiny leaves and a long finest range: thousands of quadrants, past the first buffer.
-    let config = CdlodConfig {
-        leaf_size: 4,
-        grid_size: 4,
-        lod_count: 7,
-        finest_range: 120.0,
-        ..CdlodConfig::default()
-    };
-    let tree = CdlodTree::from_map(&scene.map, config).unwrap();
-    let mut renderer = CdlodRenderer::new(
-        &scene.ctx.device,
-        &TargetFormat::CAPTURE,
-        &CdlodMesh::new(4),
-    )
-    .unwrap();
+    let (tree, mut renderer) = tree_and_renderer(&scene, 4, 4, 7, 120.0);
     let eye = Vec3::new(128.0, scene.ground(Vec2::splat(128.0)) + 60.0, 128.0);
     let camera = Camera::looking(eye, Vec3::new(0.3, -1.0, 0.2));
     let (image, _) = render(
@@ -234,20 +231,7 @@ fn cdlod_over_a_tile_atlas_draws_like_cdlod_over_the_coarse_map_without_cracks()
         return;
     };
     let mut scene = Scene::new(ctx, 31, 5);
-    let config = CdlodConfig {
-        leaf_size: 16,
-        grid_size: 16,
-        lod_count: 5,
-        finest_range: 6.0,
-        ..CdlodConfig::default()
-    };
-    let tree = CdlodTree::from_map(&scene.map, config).unwrap();
-    let mut renderer = CdlodRenderer::new(
-        &scene.ctx.device,
-        &TargetFormat::CAPTURE,
-        &CdlodMesh::new(16),
-    )
-    .unwrap();
+    let (tree, mut renderer) = tree_and_renderer(&scene, 16, 16, 5, 6.0);
     let atlas = full_atlas(&scene);
     let size = UVec2::new(240, 160);
     let (mut worst, mut worst_outline) = (0.0f64, 0usize);

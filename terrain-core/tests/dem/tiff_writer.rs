@@ -130,51 +130,32 @@ impl TiffSpec {
         }
     }
 
+    /// A value's bytes in the file's byte order.
+    fn ordered<const N: usize>(&self, big: [u8; N], little: [u8; N]) -> [u8; N] {
+        if self.big_endian { big } else { little }
+    }
+
     fn u16s(&self, v: &[u16]) -> Vec<u8> {
         v.iter()
-            .flat_map(|x| {
-                if self.big_endian {
-                    x.to_be_bytes()
-                } else {
-                    x.to_le_bytes()
-                }
-            })
+            .flat_map(|x| self.ordered(x.to_be_bytes(), x.to_le_bytes()))
             .collect()
     }
 
     fn u32s(&self, v: &[u32]) -> Vec<u8> {
         v.iter()
-            .flat_map(|x| {
-                if self.big_endian {
-                    x.to_be_bytes()
-                } else {
-                    x.to_le_bytes()
-                }
-            })
+            .flat_map(|x| self.ordered(x.to_be_bytes(), x.to_le_bytes()))
             .collect()
     }
 
     fn u64s(&self, v: &[u64]) -> Vec<u8> {
         v.iter()
-            .flat_map(|x| {
-                if self.big_endian {
-                    x.to_be_bytes()
-                } else {
-                    x.to_le_bytes()
-                }
-            })
+            .flat_map(|x| self.ordered(x.to_be_bytes(), x.to_le_bytes()))
             .collect()
     }
 
     fn f64s(&self, v: &[f64]) -> Vec<u8> {
         v.iter()
-            .flat_map(|x| {
-                if self.big_endian {
-                    x.to_be_bytes()
-                } else {
-                    x.to_le_bytes()
-                }
-            })
+            .flat_map(|x| self.ordered(x.to_be_bytes(), x.to_le_bytes()))
             .collect()
     }
 
