@@ -1,0 +1,129 @@
+//! The pool's threads: loaders decode tiles from the world, the writer stores dirty tiles
+//! atomically (and refreshes their coarser ancestors); the frame thread talks to them through
+//! channels and one atomic state per load job, which it swaps to cancel or rescue a job.
+
+use crate::CacheError;
+use crate::build::rebuild_ancestors;
+use crate::tile::{Layer, TileData, TileId};
+use crate::world::World;
+use crossbeam_channel::{Receiver, Sender};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
+
+// The states of a load job's cell: the frame thread swaps QUEUED and CANCELLED, a loader
+// takes QUEUED to LOADING or CANCELLED to SKIPPED.
+pub(super) const QUEUED: u8 = 0;
+pub(super) const LOADING: u8 = 1;
+pub(super) const CANCELLED: u8 = 2;
+pub(super) const SKIPPED: u8 = 3;
+
+#[derive(Debug)]
+pub(super) struct JobCell {
+    pub(super) state: AtomicU8,
+}
+
+pub(super) struct LoadJob {
+    pub(super) id: TileId,
+    pub(super) ticket: u64,
+    pub(super) cell: Arc<JobCell>,
+}
+
+pub(super) enum LoadDone {
+    Loaded {
+        id: TileId,
+        ticket: u64,
+        result: Result<Arc<TileData>, CacheError>,
+    },
+    Skipped {
+        id: TileId,
+        ticket: u64,
+    },
+}
+
+pub(super) struct WriteJob {
+    pub(super) id: TileId,
+    pub(super) generation: u64,
+    pub(super) data: Arc<TileData>,
+}
+
+pub(super) struct WriteDone {
+    pub(super) id: TileId,
+    pub(super) generation: u64,
+    pub(super) result: Result<Vec<TileId>, CacheError>,
+}
+
+pub(super) fn loader(world: World, layer: Layer, rx: Receiver<LoadJob>, tx: Sender<LoadDone>) {
+    while let Ok(job) = rx.recv() {
+        // Take the job (QUEUED -> LOADING) or make its cancellation final (CANCELLED ->
+        // SKIPPED); retry if the frame thread swapped the state in between.
+        let take = loop {
+            match job.cell.state.load(Ordering::Acquire) {
+                QUEUED => {
+                    if job
+                        .cell
+                        .state
+                        .compare_exchange(QUEUED, LOADING, Ordering::AcqRel, Ordering::Acquire)
+                        .is_ok()
+                    {
+                        break true;
+                    }
+                }
+                CANCELLED => {
+                    if job
+                        .cell
+                        .state
+                        .compare_exchange(CANCELLED, SKIPPED, Ordering::AcqRel, Ordering::Acquire)
+                        .is_ok()
+                    {
+                        break false;
+                    }
+                }
+                _ => break false,
+            }
+        };
+        let msg = if take {
+            LoadDone::Loaded {
+                id: job.id,
+                ticket: job.ticket,
+                result: world.load_tile(layer, job.id),
+            }
+        } else {
+            LoadDone::Skipped {
+                id: job.id,
+                ticket: job.ticket,
+            }
+        };
+        if tx.send(msg).is_err() {
+            return;
+        }
+    }
+}
+
+pub(super) fn writer(
+    world: World,
+    layer: Layer,
+    propagate: bool,
+    rx: Receiver<WriteJob>,
+    tx: Sender<WriteDone>,
+) {
+    while let Ok(job) = rx.recv() {
+        let result = world.write_tile(layer, job.id, &job.data).and_then(|_| {
+            if propagate {
+                rebuild_ancestors(&world, &[job.id])
+            } else {
+                Ok(Vec::new())
+            }
+        });
+        drop(job.data);
+        if tx
+            .send(WriteDone {
+                id: job.id,
+                generation: job.generation,
+                result,
+            })
+            .is_err()
+        {
+            return;
+        }
+    }
+}
