@@ -97,5 +97,8 @@ pub use vram::{
     DEFAULT_UPLOAD_BUDGET_BYTES, RamTiles, VramConfig, VramError, VramPool, VramReport,
     VramSelection,
 };
-pub mod sim;
-pub use sim::{CameraPath, SimConfig, SimPolicy, SimResult, comparison_table, simulate};
+pub mod trace_sim;
+/// The trace simulator's former module path, kept for existing code: [`trace_sim`].
+#[doc(hidden)]
+pub use trace_sim as sim;
+pub use trace_sim::{CameraPath, SimConfig, SimPolicy, SimResult, comparison_table, simulate};
