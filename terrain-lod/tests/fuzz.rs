@@ -6,14 +6,11 @@
 //! well-formed (level count, scales, origins on the coarser grid, the camera inside level 0,
 //! every draw accounted for, texel coordinates inside `i32`). The target is time-bounded
 //! (`TERRAIN_FUZZ_SECONDS`, default 2 s; `cargo xtask fuzz --seconds N` runs it longer, in
-//! release mode); see `fuzz/harness.rs` for the seed, replay and class selection variables.
-
-#[path = "fuzz/harness.rs"]
-mod harness;
+//! release mode); see `terrain_test_support::fuzz` for the seed, replay and class selection
+//! variables.
 
 use glam::camera::rh::{proj::directx, view::look_to_mat4};
 use glam::{IVec2, Mat4, UVec2, Vec2, Vec3, Vec4};
-use harness::{Case, Class, Rng, Target};
 use std::time::Duration;
 use terrain_core::{Grid, HeightEncoding, HeightMap, Rect, WrapMode};
 use terrain_lod::clipmap::{MAX_CAMERA_TEXELS, MAX_LEVELS};
@@ -25,6 +22,7 @@ use terrain_lod::{
     DensityParams, Frustum, LodError, LodMetric, MAX_DRAWS_PER_LEVEL, PartKind, TessConfig,
     TessHierarchy,
 };
+use terrain_test_support::fuzz::{self, Case, Class, Rng, Target, finite_f32};
 
 /// Placing 16 levels and culling their blocks takes microseconds; building a layout of up to
 /// 255 vertices a side a few milliseconds. 250 ms leaves room for debug builds under load.
@@ -57,21 +55,9 @@ impl Ctx {
     }
 }
 
-/// A finite f32 nearest to `v` (infinities and overflow clamp to `+-f32::MAX`).
-fn finite_f32(v: f64) -> f32 {
-    if v.is_nan() {
-        return 0.0;
-    }
-    v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
-}
-
-/// Any finite f32: random bits, edge values, or modest numbers.
+/// Any finite f32: random bits, edge values, or modest numbers (within 1e4).
 fn any_f32(rng: &mut Rng) -> f32 {
-    match rng.below(3) {
-        0 => rng.f32_bits(),
-        1 => rng.f32_edge(),
-        _ => rng.uniform(-1e4, 1e4) as f32,
-    }
+    rng.f32_any(1e4)
 }
 
 /// Any f32, non-finite ones included now and then.
@@ -850,7 +836,7 @@ fn fuzz_lod() {
     fn c(name: &'static str, f: fn(&Ctx, &mut Case) -> Result<(), String>) -> Class<Ctx> {
         Class { name, run: f }
     }
-    harness::run(
+    fuzz::run(
         Target {
             name: "lod",
             per_case_limit: PER_CASE_LIMIT,

@@ -1,8 +1,6 @@
-//! The time-bounded fuzz harness of the workspace's `tests/fuzz.rs` targets.
-//!
-//! The same file is copied into every crate with a fuzz target (terrain-core, terrain-cache,
-//! terrain-physics, terrain-lod) so that each crate's tests stay self-contained; xtask's tests
-//! fail when the copies differ.
+//! The time-bounded fuzz harness of the workspace's `tests/fuzz.rs` targets (terrain-core,
+//! terrain-cache, terrain-physics, terrain-lod): one copy, so every target runs, selects,
+//! replays and reports its classes the same way.
 //!
 //! A target is a list of input classes. A class is a function that makes one case from a
 //! deterministic RNG (seeded from the run's seed, the class name and the case index), feeds it
@@ -31,7 +29,6 @@
 //!   is named here.
 //! - `TERRAIN_FUZZ_REPLAY`: `class:case_seed` runs exactly that one case (a failure prints it),
 //!   printing what the class shows of its inputs.
-#![allow(dead_code)]
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::mpsc::{self, RecvTimeoutError};
@@ -142,6 +139,27 @@ impl Rng {
         lo + (hi - lo) * self.unit()
     }
 
+    /// Any finite f32: random bits, an edge value, or one uniform in `[-modest, modest)`, a
+    /// third of the time each.
+    pub fn f32_any(&mut self, modest: f64) -> f32 {
+        match self.below(3) {
+            0 => self.f32_bits(),
+            1 => self.f32_edge(),
+            _ => self.uniform(-modest, modest) as f32,
+        }
+    }
+
+    /// Flips 1 to 16 random bits of `bytes` (none when it is empty).
+    pub fn flip_bits(&mut self, bytes: &mut [u8]) {
+        if bytes.is_empty() {
+            return;
+        }
+        for _ in 0..self.range_u32(1, 16) {
+            let i = self.index(bytes.len());
+            bytes[i] ^= 1 << self.below(8);
+        }
+    }
+
     /// A finite f32 from random bits: every exponent equally likely, so the whole finite range
     /// (subnormals, 1e-30, 1e30, +-f32::MAX) is reached, not just values near 1.
     pub fn f32_bits(&mut self) -> f32 {
@@ -210,6 +228,14 @@ impl Rng {
     }
 }
 
+/// The finite f32 nearest to `v`: NaN gives 0, infinities and overflow clamp to `+-f32::MAX`.
+pub fn finite_f32(v: f64) -> f32 {
+    if v.is_nan() {
+        return 0.0;
+    }
+    v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
+}
+
 fn next_up(v: f32) -> f32 {
     if !v.is_finite() || v == f32::MAX {
         return v;
@@ -276,6 +302,12 @@ pub struct Class<C> {
     pub run: fn(&C, &mut Case) -> Result<(), String>,
 }
 
+impl<C> std::fmt::Debug for Class<C> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Class").field("name", &self.name).finish()
+    }
+}
+
 /// A fuzz target: its classes, the ones disabled (with why) and the time one case may take.
 pub struct Target<C> {
     /// The target's name, as printed (`fuzz <name>: ...`).
@@ -286,6 +318,17 @@ pub struct Target<C> {
     pub classes: Vec<Class<C>>,
     /// Classes not run by default, each with the reason (`TERRAIN_FUZZ_CLASSES` runs them).
     pub disabled: &'static [(&'static str, &'static str)],
+}
+
+impl<C> std::fmt::Debug for Target<C> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Target")
+            .field("name", &self.name)
+            .field("per_case_limit", &self.per_case_limit)
+            .field("classes", &self.classes)
+            .field("disabled", &self.disabled)
+            .finish()
+    }
 }
 
 /// How a case failed.

@@ -1,0 +1,187 @@
+//! Classes of the `raw16` target: round trips, lengths that do not match the size, size limits,
+//! random bytes and the file reader.
+
+use crate::Ctx;
+use crate::png_mutations::{limits_for, side};
+use glam::UVec2;
+use terrain_core::Grid;
+use terrain_core::io::{
+    DEFAULT_MAX_SIDE, MapIoError, ReadLimits, decode_raw16, encode_raw16, read_raw16,
+};
+use terrain_test_support::fuzz::{Case, Class, Rng};
+
+/// The error `decode_raw16` must give for `len` bytes at `size` under `limits`, if any.
+fn raw16_expected(len: usize, size: UVec2, limits: &ReadLimits) -> Option<&'static str> {
+    if size.x == 0 || size.y == 0 {
+        return Some("ZeroSize");
+    }
+    if size.x > limits.max_side || size.y > limits.max_side {
+        return Some("TooLarge");
+    }
+    let need = u128::from(size.x) * u128::from(size.y) * 2;
+    if need > u128::from(u64::MAX) {
+        return Some("TooLarge");
+    }
+    (len as u128 != need).then_some("RawSizeMismatch")
+}
+
+fn raw16_variant(e: &MapIoError) -> &'static str {
+    match e {
+        MapIoError::ZeroSize { .. } => "ZeroSize",
+        MapIoError::TooLarge { .. } => "TooLarge",
+        MapIoError::RawSizeMismatch { .. } => "RawSizeMismatch",
+        _ => "other",
+    }
+}
+
+fn check_raw16(
+    bytes: &[u8],
+    size: UVec2,
+    limits: &ReadLimits,
+    got: Result<Grid<u16>, MapIoError>,
+) -> Result<(), String> {
+    let want = raw16_expected(bytes.len(), size, limits);
+    match (want, got) {
+        (None, Ok(g)) => {
+            let same = g.size() == size
+                && g.as_slice()
+                    .iter()
+                    .zip(bytes.chunks_exact(2))
+                    .all(|(v, b)| *v == u16::from_le_bytes([b[0], b[1]]));
+            if same {
+                Ok(())
+            } else {
+                Err(format!("{size} from {} bytes: wrong samples", bytes.len()))
+            }
+        }
+        (Some(v), Err(e)) if raw16_variant(&e) == v => Ok(()),
+        (want, got) => Err(format!(
+            "{size} from {} bytes, limits {limits:?}: expected {}, got {:?}",
+            bytes.len(),
+            want.unwrap_or("Ok"),
+            got.map(|g| g.size())
+        )),
+    }
+}
+
+/// Round trips through `encode_raw16`.
+fn raw16_roundtrip(_: &Ctx, case: &mut Case) -> Result<(), String> {
+    let rng = &mut case.rng;
+    let (w, h) = (side(rng), side(rng));
+    let samples = (0..w * h).map(|_| rng.next_u32() as u16).collect();
+    let g = Grid::from_vec(w, h, samples).unwrap();
+    let bytes = encode_raw16(&g);
+    match decode_raw16(&bytes, g.size(), &ReadLimits::default()) {
+        Ok(d) if d == g => Ok(()),
+        other => Err(format!("{w}x{h}: round trip gave {other:?}")),
+    }
+}
+
+/// Byte counts beside the right one (short, long, odd) for the size given.
+fn raw16_length_mismatch(_: &Ctx, case: &mut Case) -> Result<(), String> {
+    let rng = &mut case.rng;
+    let size = UVec2::new(side(rng), side(rng));
+    let right = (size.x * size.y * 2) as usize;
+    let len = match rng.below(4) {
+        0 => right + rng.range_usize(1, 3),
+        1 => right.saturating_sub(rng.range_usize(1, 3)),
+        2 => rng.index(2 * right + 2),
+        _ => right,
+    };
+    let bytes = rng.bytes(len);
+    let limits = limits_for(rng);
+    check_raw16(&bytes, size, &limits, decode_raw16(&bytes, size, &limits))
+}
+
+/// Sizes at and past the limits: zero sides, `max_side` and its neighbours, sizes whose byte
+/// count overflows, limits raised to `u32::MAX`.
+fn raw16_size_limits(_: &Ctx, case: &mut Case) -> Result<(), String> {
+    let rng = &mut case.rng;
+    let max_side = match rng.below(3) {
+        0 => rng.range_u32(1, 64),
+        1 => DEFAULT_MAX_SIDE,
+        _ => u32::MAX,
+    };
+    let limits = ReadLimits { max_side };
+    let pick_side = |rng: &mut Rng| match rng.below(4) {
+        0 => rng.u32_edge(),
+        1 => max_side
+            .saturating_add(rng.range_u32(0, 2))
+            .saturating_sub(1),
+        2 => 0,
+        _ => rng.range_u32(1, 40),
+    };
+    let size = UVec2::new(pick_side(rng), pick_side(rng));
+    // Only the right byte count for sizes small enough to hold; otherwise a few bytes.
+    let need = u128::from(size.x) * u128::from(size.y) * 2;
+    let len = if need <= 8192 && rng.chance(1, 2) {
+        need as usize
+    } else {
+        rng.index(64)
+    };
+    let bytes = rng.bytes(len);
+    check_raw16(&bytes, size, &limits, decode_raw16(&bytes, size, &limits))
+}
+
+/// Random bytes at random small sizes.
+fn raw16_random(_: &Ctx, case: &mut Case) -> Result<(), String> {
+    let rng = &mut case.rng;
+    let size = UVec2::new(rng.range_u32(0, 40), rng.range_u32(0, 40));
+    let n = rng.range_usize(0, 4000);
+    let bytes = rng.bytes(n);
+    let limits = limits_for(rng);
+    check_raw16(&bytes, size, &limits, decode_raw16(&bytes, size, &limits))
+}
+
+/// `read_raw16` (length checked from the file's metadata) against `decode_raw16`; a missing
+/// file is an I/O error.
+fn raw16_file_reader(ctx: &Ctx, case: &mut Case) -> Result<(), String> {
+    let rng = &mut case.rng;
+    let size = UVec2::new(rng.range_u32(0, 40), rng.range_u32(0, 40));
+    let right = (size.x * size.y * 2) as usize;
+    let len = if rng.chance(1, 2) {
+        right
+    } else {
+        rng.index(right + 8)
+    };
+    let bytes = rng.bytes(len);
+    let limits = limits_for(rng);
+    let path = ctx.dir.join(format!("{:016x}.r16", rng.next_u64()));
+    if rng.chance(1, 10) {
+        return match read_raw16(&path, size, &limits) {
+            Err(MapIoError::Io { .. }) | Err(MapIoError::ZeroSize { .. }) => Ok(()),
+            Err(MapIoError::TooLarge { .. }) => Ok(()),
+            other => Err(format!("a missing file gave {:?}", other.map(|g| g.size()))),
+        };
+    }
+    std::fs::write(&path, &bytes).map_err(|e| format!("writing {}: {e}", path.display()))?;
+    let got = read_raw16(&path, size, &limits);
+    let _ = std::fs::remove_file(&path);
+    check_raw16(&bytes, size, &limits, got)
+}
+
+/// The target's classes, in the order they run.
+pub(crate) fn classes() -> Vec<Class<Ctx>> {
+    vec![
+        Class {
+            name: "roundtrip",
+            run: raw16_roundtrip,
+        },
+        Class {
+            name: "length_mismatch",
+            run: raw16_length_mismatch,
+        },
+        Class {
+            name: "size_limits",
+            run: raw16_size_limits,
+        },
+        Class {
+            name: "random_bytes",
+            run: raw16_random,
+        },
+        Class {
+            name: "file_reader",
+            run: raw16_file_reader,
+        },
+    ]
+}
