@@ -43,7 +43,7 @@ shared_codes! {
     BLEND_MIN: u32 = 1 "u";
     /// `Blend::Max`: the higher of map and base + stamp.
     BLEND_MAX: u32 = 2 "u";
-    /// Stamp kind: the Gaussian of seed 000 eq. 3.5.
+    /// Stamp kind: the Gaussian of Flower 2010, eq. 3.5.
     STAMP_GAUSSIAN: u32 = 0 "u";
     /// Stamp kind: a texture stamp (also the shockwave).
     STAMP_TEXTURE: u32 = 1 "u";
@@ -55,7 +55,7 @@ shared_codes! {
     METRIC_MANHATTAN: u32 = 1 "u";
     /// `DistanceMetric::Chebyshev`.
     METRIC_CHEBYSHEV: u32 = 2 "u";
-    /// Column kind (seed 001 table 4.1): material that may receive displaced material.
+    /// Column kind (Persson 2019, table 4.1): material that may receive displaced material.
     SEED: i32 = -3 "i";
     /// Column kind: an object rests on or near it; it receives nothing.
     OBSTACLE: i32 = -2 "i";
@@ -77,10 +77,10 @@ pub const PRELUDE: &str = wgsl_prelude!();
 /// `StampPass`: one stamp (Gaussian, texture or user procedural) applied in place.
 pub const STAMP: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/stamp.wgsl"));
 
-/// `DensityPass`: curvature density maps and their max pyramid (seed 002 ch. 3).
+/// `DensityPass`: curvature density maps and their max pyramid (Cervin 2012, ch. 3).
 pub const DENSITY: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/density.wgsl"));
 
-/// `NormalPass`: partial-derivative normals (seed 000 eq. 3.3) over a region.
+/// `NormalPass`: partial-derivative normals (Flower 2010, eq. 3.3) over a region.
 pub const NORMALS: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/normals.wgsl"));
 
 /// `SkyPass`: a full-screen gradient by view-ray elevation.
@@ -125,7 +125,7 @@ pub const CDLOD_ATLAS: &str = concat!(
     include_str!("wgsl/render/cdlod.wgsl")
 );
 
-/// `TessellationPass`: adaptive tessellation by longest-edge bisection (seed 002 sec. 2.3),
+/// `TessellationPass`: adaptive tessellation by longest-edge bisection (Cervin 2012, sec. 2.3),
 /// writing triangles and indirect draw arguments.
 pub const TESSELLATE: &str = concat!(wgsl_prelude!(), include_str!("wgsl/render/tessellate.wgsl"));
 
@@ -164,7 +164,7 @@ pub const CLIPMAP_ATLAS: &str = concat!(
     include_str!("wgsl/render/clipmap_surface_atlas.wgsl")
 );
 
-/// `ClipmapRenderer` over a coarse-map with a detail layer (`GpuDetailTiles`, seed 000 sec.
+/// `ClipmapRenderer` over a coarse-map with a detail layer (`GpuDetailTiles`, Flower 2010, sec.
 /// 2.3): the coarse surface, shaded with the composite normal of eq. 3.4 at the point a
 /// parallax march through the detail heights finds, the detail faded out with distance.
 pub const CLIPMAP_DETAIL: &str = concat!(
@@ -178,7 +178,7 @@ pub const CLIPMAP_DETAIL: &str = concat!(
 );
 
 /// `RefinePass` and `RefineRenderer`: the coarse cells around the camera split by the
-/// refinement patterns of seed 000 sec. 2.4.3 into triangles displaced by coarse + detail height
+/// refinement patterns of Flower 2010, sec. 2.4.3 into triangles displaced by coarse + detail height
 /// (a compute pass with indirect draw arguments), drawn with the clipmap's frame, surface and
 /// fragment shader, shaded with eq. 3.4's composite normal.
 pub const REFINE: &str = concat!(
@@ -218,7 +218,7 @@ pub const GRANULAR_COMMON: &str = concat!(
     include_str!("wgsl/granular/granular_common.wgsl")
 );
 
-/// Granular deformation (seed 001 ch. 4): penetration texture from depth and heights.
+/// Granular deformation (Persson 2019, ch. 4): penetration texture from depth and heights.
 pub const GRANULAR_PENETRATION: &str = concat!(
     wgsl_prelude!(),
     include_str!("wgsl/granular/granular_common.wgsl"),
@@ -293,3 +293,8 @@ pub const ALL: &[(&str, &str)] = &[
     ("granular_depth", GRANULAR_DEPTH),
     ("granular_volume", GRANULAR_VOLUME),
 ];
+
+/// The README's code blocks, compiled and run as doc tests so that they cannot go stale.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

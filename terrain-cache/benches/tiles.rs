@@ -1,7 +1,7 @@
 //! Tile decode, encode, load-to-RAM (store read + decode) and write-back (encode + atomic write
 //! with fsync) of 256^2 and 2048^2 height tiles, each beside a plain copy of the same bytes
-//! (memcpy, and a plain file read / write without fsync). Compare with seed 004 graph 6.2
-//! (1.6 ms per 256^2 block from SSD) and seed 000 tables 4.6 / 4.7 (160.7 ms to page a 2048^2
+//! (memcpy, and a plain file read / write without fsync). Compare with Fikkan 2013, graph 6.2
+//! (1.6 ms per 256^2 block from SSD) and Flower 2010, tables 4.6 / 4.7 (160.7 ms to page a 2048^2
 //! detail tile out, 47.1 ms projected to load one).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};

@@ -1,4 +1,4 @@
-//! Detail tiles as cache tiles (seed 000 sec. 2.4.2 and 3.2.3, fig. 2.4): a
+//! Detail tiles as cache tiles (Flower 2010, sec. 2.4.2 and 3.2.3, fig. 2.4): a
 //! [`terrain_core::detail::DetailLayer`] whose tiles live in a [`World`]'s detail layer on disk,
 //! a working set on the GPU chosen by the nine band regions of the camera's tile, and dirty
 //! tiles written back atomically.
@@ -13,7 +13,7 @@
 //! [`DetailCache::update`] turns the camera's band into a plan: tiles to upload (active ones
 //! first, within a per-frame upload budget; tiles a GPU stamp needs this frame whatever the
 //! budget) and tiles to release. A released tile that was deformed is written back at once
-//! (seed 000: "when a tile gets unloaded ... immediately written to the hard-disk"), through
+//! (Flower 2010: "when a tile gets unloaded ... immediately written to the hard-disk"), through
 //! [`World::write_tile`]: a temporary file, fsync, rename; a tile back at zero loses its file and
 //! reads as the shared zero tile again. Only released or deformed tiles stay in RAM, so memory
 //! follows the working set, not the world.
@@ -93,7 +93,7 @@ pub struct BandTile {
     pub active: bool,
 }
 
-/// The tiles seed 000's fig. 2.4 loads for a camera at `camera_xz` (metres on the coarse-map's
+/// The tiles Flower 2010's fig. 2.4 loads for a camera at `camera_xz` (metres on the coarse-map's
 /// plane, any finite value: the layer repeats), active ones first: per axis, the camera's tile
 /// and, in the band, both neighbours (loaded, inactive), outside it the neighbour on the
 /// camera's side (loaded, active). 4, 6 or 9 tiles; fewer on a layer of fewer tiles.

@@ -1,4 +1,4 @@
-//! The three-pool streamed tile cache (seed 004 ch. 4-6, seed 000 sec
+//! The three-pool streamed tile cache (Fikkan 2013, ch. 4-6, Flower 2010, sec.
 //! 2.4.2 and 3.2.3): a world is a pyramid of square tiles behind a [`TileStore`] (local files
 //! named by hex level / row / column, or the `object_store` crate for buckets), built from any
 //! [`TileSource`] without holding the whole map; a [`RamPool`] fed by worker threads over
@@ -102,3 +102,8 @@ pub mod trace_sim;
 #[doc(hidden)]
 pub use trace_sim as sim;
 pub use trace_sim::{CameraPath, SimConfig, SimPolicy, SimResult, comparison_table, simulate};
+
+/// The README's code blocks, compiled and run as doc tests so that they cannot go stale.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

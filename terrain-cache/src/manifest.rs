@@ -15,17 +15,17 @@ pub const FORMAT_VERSION: u32 = 1;
 pub const MANIFEST_KEY: &str = "manifest.json";
 /// Largest manifest file accepted, in bytes (it is a few hundred bytes when valid).
 pub const MAX_MANIFEST_BYTES: u64 = 64 * 1024;
-/// Default tile side in texels (seed 004 sec 5.1: 256 x 256 blocks).
+/// Default tile side in texels (Fikkan 2013, sec. 5.1: 256 x 256 blocks).
 pub const DEFAULT_TILE_SIZE: u32 = 256;
-/// Most tiles along one side of a level: four hex digits in a file name (seed 004 sec 5.1:
+/// Most tiles along one side of a level: four hex digits in a file name (Fikkan 2013, sec. 5.1:
 /// "the current limit of blocks are 65536").
 pub const MAX_TILES_PER_SIDE: u32 = 65536;
 /// Smallest accepted tile side.
 pub const MIN_TILE_SIZE: u32 = 16;
-/// Largest accepted tile side (seed 000's 2048 detail tiles fit).
+/// Largest accepted tile side (Flower 2010's 2048 detail tiles fit).
 pub const MAX_TILE_SIZE: u32 = 4096;
 
-/// The optional detail layer (seed 000 sec 2.4.2): one level of u8 tiles over the world, all
+/// The optional detail layer (Flower 2010, sec. 2.4.2): one level of u8 tiles over the world, all
 /// sharing the zero tile until first written.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DetailLayout {
@@ -317,7 +317,7 @@ impl Manifest {
 }
 
 /// The store key of a tile: `{layer}/{level:02x}/{y:04x}/{x:04x}.png` (one folder per level,
-/// one per row, hex names: seed 004 fig. 5.1).
+/// one per row, hex names: Fikkan 2013, fig. 5.1).
 pub fn tile_key(layer: Layer, id: TileId) -> String {
     format!(
         "{}/{:02x}/{:04x}/{:04x}.png",

@@ -1,7 +1,7 @@
 //! Which tiles to hold: the camera ([`CameraState`]), the tile layout a policy sees
-//! ([`TileGrid`]) and the selection policies: [`SphericalSelection`] (seed 004 sec 5.4.1, the
-//! RAM pool's default), [`FrustumSelection`] with a motion-dependent field of view (seed 004 sec
-//! 5.4.2) and [`BandSelection`] (seed 000 sec 2.4.2, fig. 2.4).
+//! ([`TileGrid`]) and the selection policies: [`SphericalSelection`] (Fikkan 2013, sec. 5.4.1, the
+//! RAM pool's default), [`FrustumSelection`] with a motion-dependent field of view (Fikkan 2013, sec.
+//! 5.4.2) and [`BandSelection`] (Flower 2010, sec. 2.4.2, fig. 2.4).
 //!
 //! Every policy first limits itself to a square of tiles around the camera, clamped to the
 //! world, so its time is bounded by the world's tiles whatever the camera's coordinates.
@@ -264,7 +264,7 @@ pub trait SelectionPolicy: Send + fmt::Debug {
     fn select(&mut self, camera: &CameraState, grid: &TileGrid, out: &mut Vec<Want>);
 }
 
-/// Seed 004 sec 5.4.1: a square of side `2 * view_distance` around the camera, then per level a
+/// Fikkan 2013, sec. 5.4.1: a square of side `2 * view_distance` around the camera, then per level a
 /// spherical distance threshold: level `l` is wanted within `lod0_range * lod_ratio^l` metres
 /// (3D distance to the tile's box). Finer levels nest inside coarser ones, so every wanted fine
 /// tile has its coarser fallbacks wanted too.
@@ -326,7 +326,7 @@ fn push_unique(out: &mut Vec<Want>, id: TileId, priority: f32) {
     }
 }
 
-/// Seed 004 sec 5.4.2: tiles of one level inside the view frustum (horizontal cone test on the
+/// Fikkan 2013, sec. 5.4.2: tiles of one level inside the view frustum (horizontal cone test on the
 /// tile's bounding circle), widened by a margin that grows with the camera's turn rate, plus
 /// every tile within `near` metres.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -339,7 +339,7 @@ pub struct FrustumSelection {
     pub near: f64,
     /// Extra half-angle in radians added to the camera's horizontal half field of view.
     pub fov_margin: f64,
-    /// Radians of extra half-angle per radian per frame of turning (seed 004 fig. 5.5: a
+    /// Radians of extra half-angle per radian per frame of turning (Fikkan 2013, fig. 5.5: a
     /// turning camera needs a wider view).
     pub turn_gain: f64,
     /// Forward direction of the previous frame (state for the turn rate).
@@ -405,7 +405,7 @@ impl SelectionPolicy for FrustumSelection {
     }
 }
 
-/// Seed 000 sec 2.4.2 (fig. 2.4): the camera's tile is split into nine regions by a horizontal
+/// Flower 2010, sec. 2.4.2 (fig. 2.4): the camera's tile is split into nine regions by a horizontal
 /// and a vertical band of `band_width` (fraction of the tile) across its centre. In a band both
 /// neighbours across it are held; outside, only the neighbour on the camera's side; the
 /// centre region holds all nine tiles.

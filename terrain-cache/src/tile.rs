@@ -62,7 +62,7 @@ impl fmt::Display for TileId {
 pub enum Layer {
     /// The u16 coarse-map pyramid (PNG16 files).
     Height,
-    /// The u8 detail-map tiles (PNG8 files, one level), seed 000 sec 2.4.2.
+    /// The u8 detail-map tiles (PNG8 files, one level), Flower 2010, sec. 2.4.2.
     Detail,
 }
 

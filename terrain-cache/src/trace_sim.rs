@@ -5,7 +5,7 @@
 //! Model. One level of `tiles` tiles of `tile_m` metres, wrapping. Each frame the renderer
 //! *demands* the tiles within `demand_radius` metres (3D) that the camera's exact frustum
 //! touches, plus the camera's own tile. A cache of `capacity` tiles is filled by loads that
-//! take `latency_frames` to arrive, at most `loads_per_frame` issued per frame (seed 004 sec 5.3's
+//! take `latency_frames` to arrive, at most `loads_per_frame` issued per frame (Fikkan 2013, sec. 5.3's
 //! per-frame transfer budget), each slot reserved when its load is issued. Every online policy
 //! requests the demanded tiles it misses first (demand fetch), then its own selection in its
 //! priority order (prefetch); victims are resident tiles neither demanded nor selected, the
@@ -171,9 +171,9 @@ pub struct SimConfig {
     pub demand_radius: f64,
     /// Cache capacity in tiles.
     pub capacity: usize,
-    /// Frames from issuing a load to its arrival (seed 000 table 4.7: ~47 ms, 3 frames).
+    /// Frames from issuing a load to its arrival (Flower 2010, table 4.7: ~47 ms, 3 frames).
     pub latency_frames: u32,
-    /// Loads issued per frame at most (seed 004 sec 5.3).
+    /// Loads issued per frame at most (Fikkan 2013, sec. 5.3).
     pub loads_per_frame: usize,
     /// Bytes per tile (a 256^2 u16 tile: 128 KiB).
     pub tile_bytes: u64,

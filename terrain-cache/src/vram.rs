@@ -1,4 +1,4 @@
-//! The VRAM pool (seed 004 sec 4.2, 5.3, 5.4.2, 5.6): which tiles of the RAM pool to hold in a
+//! The VRAM pool (Fikkan 2013, sec. 4.2, 5.3, 5.4.2, 5.6): which tiles of the RAM pool to hold in a
 //! fixed number of GPU slots, and when to upload them. Policy only: the slots and the
 //! indirection table live behind terrain-core's [`TileUploadTarget`] (terrain-gpu's
 //! `GpuTileAtlas`, or terrain-core's CPU `TileAtlas`), which this crate never names.
@@ -9,12 +9,12 @@
 //!    since the upload ([`RamTiles::version`]) are marked stale; they stay drawn until
 //!    re-uploaded.
 //! 2. **Selection.** Per level, tiles in the view frustum widened by a margin that grows with
-//!    the camera's turn rate ([`FrustumSelection`], seed 004 sec 5.4.2 and fig. 5.5) or the band
-//!    regions of the camera's tile ([`BandSelection`], seed 000 fig. 2.4), each level out to the
+//!    the camera's turn rate ([`FrustumSelection`], Fikkan 2013, sec. 5.4.2 and fig. 5.5) or the band
+//!    regions of the camera's tile ([`BandSelection`], Flower 2010, fig. 2.4), each level out to the
 //!    same number of its own tiles; plus the whole coarsest level when it fits, the fallback of
 //!    every texel. Wanted tiles are ranked nearest first (3D distance to the tile's box), the
 //!    coarsest level ahead of all, coarser ahead of finer at equal distance.
-//! 3. **Uploads within the budget** (seed 004 sec 5.3): in rank order, tiles that are loaded in
+//! 3. **Uploads within the budget** (Fikkan 2013, sec. 5.3): in rank order, tiles that are loaded in
 //!    RAM and not resident (or stale) are uploaded until the next would pass the frame's byte
 //!    budget; the rest wait for the next frame. A slot comes from the free list, else from the
 //!    resident tile wanted least recently (farthest first among equals): unwanted tiles stay
@@ -36,7 +36,7 @@ use glam::{DVec2, DVec3, UVec2};
 use std::collections::HashMap;
 use terrain_core::{Grid, TileLayout, TileUploadTarget, WrapMode};
 
-/// Default per-frame upload budget: 2 MiB, eight 256^2 tiles of u32 heights. Seed 004 sec 5.3
+/// Default per-frame upload budget: 2 MiB, eight 256^2 tiles of u32 heights. Fikkan 2013, sec. 5.3
 /// limits transfers to a fixed share of the frame (2 ms of 16.7 ms); the bytes that take depend
 /// on the hardware, so the budget is a plain number to tune (see the atlas upload bench).
 pub const DEFAULT_UPLOAD_BUDGET_BYTES: u64 = 2 << 20;
@@ -44,7 +44,7 @@ pub const DEFAULT_UPLOAD_BUDGET_BYTES: u64 = 2 << 20;
 /// How the VRAM pool selects tiles on each level.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum VramSelection {
-    /// Seed 004 sec 5.4.2: per level, tiles in the horizontal view cone widened by `fov_margin`
+    /// Fikkan 2013, sec. 5.4.2: per level, tiles in the horizontal view cone widened by `fov_margin`
     /// plus `turn_gain` times the turn of the last frame, out to `far_tiles` tiles of that
     /// level, and every tile within `near_tiles` tiles of the camera (behind it too).
     Frustum {
@@ -57,7 +57,7 @@ pub enum VramSelection {
         /// Extra half-angle per radian turned in the last frame.
         turn_gain: f64,
     },
-    /// Seed 000 sec 2.4.2, fig. 2.4: per level, the camera's tile and the neighbours its band
+    /// Flower 2010, sec. 2.4.2, fig. 2.4: per level, the camera's tile and the neighbours its band
     /// region asks for (4, 6 or 9 tiles).
     Band {
         /// Band width as a fraction of the tile side (1/3: nine equal regions).

@@ -1,4 +1,4 @@
-//! Detail tiles as cache tiles: the band regions of seed 000 fig. 2.4 (loaded / active), the
+//! Detail tiles as cache tiles: the band regions of Flower 2010, fig. 2.4 (loaded / active), the
 //! working set within an upload budget, dirty-only atomic write-back and reading back what
 //! was written, refusals.
 
@@ -103,7 +103,7 @@ fn band_regions_load_four_six_or_nine_tiles_and_activate_four_two_or_one() {
 
 #[test]
 fn crossing_one_region_edge_only_loads_or_only_unloads() {
-    // Seed 000: entering or leaving a region never unloads and reloads in one move, so a
+    // Flower 2010: entering or leaving a region never unloads and reloads in one move, so a
     // tile is loaded well before it is needed.
     let l = layout();
     let band = BandSelection::default();

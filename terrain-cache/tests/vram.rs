@@ -52,7 +52,7 @@ fn streams_from_the_ram_pool_within_budget_and_slots_and_stays_exact() {
     let world = build(store, UVec2::splat(512), 32);
     let manifest = *world.manifest();
     let tile_ram = 32 * 32 * 2;
-    // Seed 004 sec 4.3: the RAM selection is coarser and wider than the GPU's, so what the GPU
+    // Fikkan 2013, sec. 4.3: the RAM selection is coarser and wider than the GPU's, so what the GPU
     // wants is in RAM: spherical, 4 tiles of each level against the frustum's 3.
     let spherical = SphericalSelection {
         view_distance: 1e4,

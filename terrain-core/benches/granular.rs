@@ -1,5 +1,5 @@
 //! Granular deformation CPU reference: each step over one active area at map sizes 512 to
-//! 4096 (seed 001 table 5.4 setting: 3 774, 15 100, 60 398 and 241 591 columns, here squares
+//! 4096 (Persson 2019, table 5.4 setting: 3 774, 15 100, 60 398 and 241 591 columns, here squares
 //! of 61, 123, 246 and 492 texels a side), and whole steps with 1 to 8 vehicles, active areas
 //! versus the full 2048 map (table 5.7).
 

@@ -1,4 +1,4 @@
-//! Stamp + normal regeneration over square regions of 100 to 2000 texels a side (seed 000
+//! Stamp + normal regeneration over square regions of 100 to 2000 texels a side (Flower 2010
 //! table 4.3 deforms 10 to 200 m at 0.1 m per texel), beside plain copies of the region's bytes
 //! (contiguous, and in place in the map's rows).
 
@@ -126,7 +126,7 @@ fn bench(c: &mut Criterion) {
 
 /// One footprint-sized detail stamp (0.6 x 0.3 m over a 4-tile corner, 1.5 m deep) on a
 /// detail layer refined x3 over the 4096^2 map, clipped at the tiles' range and spilled into
-/// the coarse-map (seed 000's detail layer; `terrain_core::detail_spill`).
+/// the coarse-map (Flower 2010's detail layer; `terrain_core::detail_spill`).
 fn detail(c: &mut Criterion) {
     use terrain_core::detail::{DetailLayer, DetailLayout};
     let mut map = map();

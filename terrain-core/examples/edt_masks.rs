@@ -7,7 +7,7 @@
 //! ```
 //!
 //! - `--size N`: masks are N x N (default 492, the 242 064-column active area of the 4096 map
-//!   in seed 001 table 5.4).
+//!   in Persson 2019, table 5.4).
 //! - `--repeat R`: the transform is timed R times per mask and the best is kept (default 20).
 //! - `--no-jfa`: skip timing jump flooding on the same masks.
 //! - `--mask NAME`: only the mask called NAME (footprint, sparse, footprint_obstacles).

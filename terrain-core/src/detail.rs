@@ -1,4 +1,4 @@
-//! The detail layer of seed 000 (sec. 2.3.1, eq. 2.1): a grid of 8-bit detail tiles laid over
+//! The detail layer of Flower 2010 (sec. 2.3.1, eq. 2.1): a grid of 8-bit detail tiles laid over
 //! the coarse-map at `refine` detail texels per coarse texel, each spanning 1 m of height
 //! around the coarse surface, addressed through a tile-ID matrix in which a never-touched
 //! tile is the shared zero tile.
@@ -7,9 +7,9 @@
 //! footprint from every tile it touches (across tile edges and corners, and across the
 //! coarse-map's wrap), stamps it in one window with [`apply_stamp_window`], and scatters it
 //! back, so a stamp over a 4-tile corner gives the texels the same stamp gives on one large
-//! tile (seed 000 leaves tile boundaries unhandled). Tiles are materialised on first write.
+//! tile (Flower 2010 leaves tile boundaries unhandled). Tiles are materialised on first write.
 //!
-//! A detail value is clamped to its tile's 1 m range, as seed 000's 8-bit detail-maps are,
+//! A detail value is clamped to its tile's 1 m range, as Flower 2010's 8-bit detail-maps are,
 //! by [`DetailLayer::apply_stamp`]; [`DetailLayer::apply_stamp_spilling`] moves what a stamp
 //! pushes beyond the range into the coarse-map instead (the rule is in
 //! [`crate::detail_spill`]), so a mark deeper than the tile's range is not clipped.
@@ -24,7 +24,7 @@
 //! use terrain_core::detail::{DetailLayer, DetailLayout};
 //! use terrain_core::{Blend, GaussianStamp, StampPlacement};
 //!
-//! // Seed 000's numbers: a 4096^2 coarse-map at 0.1 m, refined x3, 2048^2 detail tiles.
+//! // Flower 2010's numbers: a 4096^2 coarse-map at 0.1 m, refined x3, 2048^2 detail tiles.
 //! let layout = DetailLayout::new(UVec2::splat(4096), 0.1, 3, 2048).unwrap();
 //! assert_eq!(layout.tiles(), UVec2::splat(6)); // eq. 2.1
 //!
@@ -50,14 +50,14 @@ use glam::{IVec2, UVec2, Vec2};
 /// The stored value of 0 m in a detail tile: raw 128 of [`detail_encoding`].
 pub const DETAIL_ZERO_RAW: u8 = 128;
 
-/// The most detail texels per coarse texel a layout accepts (seed 000 uses 3).
+/// The most detail texels per coarse texel a layout accepts (Flower 2010 uses 3).
 pub const MAX_REFINE: u32 = 16;
 
 /// The most tiles a layout accepts along each axis (the tile-ID matrix stays small).
 pub const MAX_TILES_PER_SIDE: u32 = 4096;
 
 /// The encoding of every detail tile: 1/255 m per unit, raw 128 at 0 m, so a tile spans
-/// `[-128/255, 127/255]` m (1 m in all, seed 000 sec. 3.1.1's 4 mm steps) around the coarse
+/// `[-128/255, 127/255]` m (1 m in all, Flower 2010, sec. 3.1.1's 4 mm steps) around the coarse
 /// surface.
 pub fn detail_encoding() -> HeightEncoding {
     HeightEncoding {
@@ -66,7 +66,7 @@ pub fn detail_encoding() -> HeightEncoding {
     }
 }
 
-/// Where the detail tiles lie over a coarse-map (seed 000 eq. 2.1).
+/// Where the detail tiles lie over a coarse-map (Flower 2010, eq. 2.1).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DetailLayout {
     coarse_size: UVec2,
@@ -378,7 +378,7 @@ pub struct DetailChange {
 #[derive(Debug, Clone, PartialEq)]
 pub struct DetailLayer {
     layout: DetailLayout,
-    /// Tile-ID matrix (seed 000 sec. 2.3.1): 0 is the shared zero tile, `k > 0` is
+    /// Tile-ID matrix (Flower 2010, sec. 2.3.1): 0 is the shared zero tile, `k > 0` is
     /// `tiles[k - 1]`.
     ids: Grid<u32>,
     tiles: Vec<Grid<u8>>,

@@ -7,7 +7,7 @@ use glam::{IVec2, UVec2};
 /// How a map is addressed outside `0..size`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum WrapMode {
-    /// Toroidal addressing: the coarse-map repeats in both directions (seed 000 sec 3.1.1).
+    /// Toroidal addressing: the coarse-map repeats in both directions (Flower 2010, sec. 3.1.1).
     #[default]
     Repeat,
     /// Clamp to the edge texel: detail-map tiles end at their borders.

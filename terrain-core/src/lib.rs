@@ -81,3 +81,8 @@ pub use stamp::{
 pub use terrain_gen::{TerrainParams, generate_coarse_map, generate_heights};
 pub use tile_atlas::TileAtlas;
 pub use tile_upload::{INVALID_SLOT, MAX_TILE_LEVELS, TileLayout, TileUploadTarget};
+
+/// The README's code blocks, compiled and run as doc tests so that they cannot go stale.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

@@ -65,7 +65,7 @@ pub struct HeightEncoding {
 /// The largest height range of a detail-map, in metres (the "range at most 1 m").
 pub const DETAIL_MAX_RANGE_M: f32 = 1.0;
 
-/// Fixed-point units per metre of granular heights by default (seed 001 sec 4.3: x 10 000).
+/// Fixed-point units per metre of granular heights by default (Persson 2019, sec. 4.3: x 10 000).
 pub const DEFAULT_FIXED_POINT_UNITS_PER_M: u32 = 10_000;
 
 impl HeightEncoding {
@@ -99,7 +99,7 @@ impl HeightEncoding {
     }
 
     /// Fixed-point heights for granular deformation: `units_per_metre` stored units per metre,
-    /// zero at 0 m (seed 001 sec 4.3).
+    /// zero at 0 m (Persson 2019, sec. 4.3).
     pub fn fixed_point(units_per_metre: u32) -> Result<Self, CoreError> {
         if units_per_metre == 0 {
             return Err(CoreError::OutOfRange {
@@ -140,11 +140,11 @@ pub struct HeightMap<T> {
     wrap: WrapMode,
 }
 
-/// The 16-bit, toroidally addressed map of the macro geometry (seed 000 sec 3.1.1).
+/// The 16-bit, toroidally addressed map of the macro geometry (Flower 2010, sec. 3.1.1).
 pub type CoarseMap = HeightMap<u16>;
 /// An 8-bit detail-map tile, clamped at its edges, spanning at most 1 m of height.
 pub type DetailTile = HeightMap<u8>;
-/// Heights in u32 fixed point for volume-preserving granular deformation (seed 001 sec 4.3).
+/// Heights in u32 fixed point for volume-preserving granular deformation (Persson 2019, sec. 4.3).
 pub type FixedPointMap = HeightMap<u32>;
 
 impl<T: HeightSample> HeightMap<T> {

@@ -1,9 +1,9 @@
-//! Partial-derivative normal maps (seed 000 sec 3.1.2, 3.2.2): the 4th-order difference of
+//! Partial-derivative normal maps (Flower 2010, sec. 3.1.2, 3.2.2): the 4th-order difference of
 //! eq. 3.3, packing to two signed 8-bit components, normal reconstruction, composite normals
 //! (eq. 3.4) and regeneration limited to a dirty rect plus its 2-texel apron.
 //!
 //! A derivative map stores the height gradient `(dh/dX, dh/dZ)` in metres per metre. The unit
-//! normal is `normalize(-dh/dX, 1, -dh/dZ)` (Y up): the `N = t x b` of seed 000 eq. 3.2.
+//! normal is `normalize(-dh/dX, 1, -dh/dZ)` (Y up): the `N = t x b` of Flower 2010, eq. 3.2.
 
 use crate::error::CoreError;
 use crate::grid::{Grid, WrapMode};
@@ -16,7 +16,7 @@ use glam::{UVec2, Vec2, Vec3};
 /// derivatives up to this far away, so regeneration covers the dirty rect plus this apron.
 pub const DERIVATIVE_APRON: u32 = 2;
 
-/// Slope stored at ±127 by [`DerivativeMap::to_snorm8`] by default. Seed 000 packs derivatives
+/// Slope stored at ±127 by [`DerivativeMap::to_snorm8`] by default. Flower 2010 packs derivatives
 /// into two 8-bit channels and reconstructs with `N_y = 1`, limiting normals to a 45° cone:
 /// a slope of 1 is the steepest it represents.
 pub const DEFAULT_SNORM_MAX_SLOPE: f32 = 1.0;
@@ -311,7 +311,7 @@ pub fn normal_from_derivatives(d: Vec2) -> Vec3 {
     Vec3::new(-d.x, 1.0, -d.y).normalize()
 }
 
-/// The composite normal of a coarse and a detail gradient at the same point (seed 000 eq. 3.4):
+/// The composite normal of a coarse and a detail gradient at the same point (Flower 2010, eq. 3.4):
 /// derivatives add, so no tangent space is needed.
 pub fn composite_normal(coarse: Vec2, detail: Vec2) -> Vec3 {
     normal_from_derivatives(coarse + detail)

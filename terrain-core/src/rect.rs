@@ -106,7 +106,7 @@ impl Rect {
 
     /// Cuts a rect on a toroidally addressed map of `map_size` texels into the (up to 4) pieces
     /// that lie inside it: one if it is inside, two across an edge, four across a corner
-    /// (seed 000 sec 3.2.1). A rect wider than the map is first limited to one period, so every
+    /// (Flower 2010, sec. 3.2.1). A rect wider than the map is first limited to one period, so every
     /// map texel appears at most once.
     pub fn split_toroidal(&self, map_size: UVec2) -> Vec<WrappedPiece> {
         if self.is_empty() || map_size.x == 0 || map_size.y == 0 {

@@ -1,4 +1,4 @@
-//! Bilinear height lookup with the semantics of seed 000 listing 3.2, with wrap or clamp.
+//! Bilinear height lookup with the semantics of Flower 2010, listing 3.2, with wrap or clamp.
 
 use crate::error::CoreError;
 use crate::grid::{Grid, WrapMode};
@@ -6,7 +6,7 @@ use crate::map::{HeightMap, HeightSample};
 use glam::{IVec2, Vec2};
 
 /// Height in metres at world position `pos = (X, Z)` in metres, interpolated bilinearly
-/// between the four surrounding texels (seed 000 listing 3.2: `x0 = floor(p.x)`,
+/// between the four surrounding texels (Flower 2010, listing 3.2: `x0 = floor(p.x)`,
 /// `fx = p.x - x0`, and `x1 = x0 + 1` wrapped on a repeating map or clamped on a clamped one).
 ///
 /// Fails only for a NaN or infinite position.

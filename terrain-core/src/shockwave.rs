@@ -1,4 +1,4 @@
-//! The shockwave dynamic stamp (seed 000 sec 3.4.3): a wave texture stepped with the discrete
+//! The shockwave dynamic stamp (Flower 2010, sec. 3.4.3): a wave texture stepped with the discrete
 //! wave equation (eq. 3.6-3.7) and stamped onto the map as the change since it was last applied,
 //! so the terrain shows `base + u_t` while the wave travels.
 
@@ -14,7 +14,7 @@ pub struct ShockwaveParams {
     /// Samples per side of the wave texture (at least 8).
     pub resolution: u32,
     /// Wave speed x time step / spacing, squared (eq. 3.7's gamma). Stable for `gamma <= 0.5`;
-    /// seed 000 uses 0.5 for the fastest travel.
+    /// Flower 2010 uses 0.5 for the fastest travel.
     pub gamma: f32,
     /// Standard deviation of the initial narrow Gaussian, in wave-texture samples.
     pub initial_sigma: f32,
@@ -34,7 +34,7 @@ impl Default for ShockwaveParams {
     }
 }
 
-/// Largest stable `gamma` of the 2D five-point scheme (seed 000 sec 3.4.3).
+/// Largest stable `gamma` of the 2D five-point scheme (Flower 2010, sec. 3.4.3).
 pub const MAX_SHOCKWAVE_GAMMA: f32 = 0.5;
 
 impl ShockwaveParams {

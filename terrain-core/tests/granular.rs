@@ -4,35 +4,14 @@
 use glam::{Affine3A, IVec2, Quat, UVec2, Vec3};
 use terrain_core::granular::*;
 use terrain_core::{FixedPointMap, Grid, Rect};
-
-const UNITS: u32 = 10_000;
+use terrain_test_support::granular::{
+    UNITS, bumpy_map, empty_pen, meshes, objects_at, small_params,
+};
 
 fn flat_map(size: u32, metres: f32, texel: f32) -> FixedPointMap {
     let raw = (metres * UNITS as f32) as u32;
     FixedPointMap::fixed_point(Grid::new(size, size, raw).expect("grid"), UNITS, texel)
         .expect("map")
-}
-
-fn bumpy_map(size: u32, texel: f32) -> FixedPointMap {
-    let grid = Grid::from_fn(size, size, |x, y| {
-        10_000 + pcg_hash(x * 7919 + y * 104_729) % 400
-    })
-    .expect("grid");
-    FixedPointMap::fixed_point(grid, UNITS, texel).expect("map")
-}
-
-fn empty_pen(size: UVec2) -> Grid<Penetration> {
-    Grid::new(
-        size.x,
-        size.y,
-        Penetration {
-            seed_x: 0,
-            seed_y: 0,
-            kind: 0,
-            penetration: 0,
-        },
-    )
-    .expect("grid")
 }
 
 /// The iterative method with the 4 passes these tests use.
@@ -49,53 +28,6 @@ const COMBOS: [(DisplacementMethod, SlopeMethod); 6] = [
     ),
     (DisplacementMethod::MultipleTargets, SlopeMethod::Scatter),
 ];
-
-struct Meshes {
-    cube: TriMesh,
-    wheel: TriMesh,
-    foot: TriMesh,
-}
-
-fn meshes() -> Meshes {
-    Meshes {
-        cube: TriMesh::cuboid(Vec3::new(0.4, 0.3, 0.25)).expect("box"),
-        wheel: TriMesh::wheel(0.35, 0.15, 16).expect("wheel"),
-        foot: TriMesh::foot(0.3, 0.12, 0.1).expect("foot"),
-    }
-}
-
-/// Three objects on pseudo-random smooth paths over a map of `extent` metres, sinking up to
-/// 0.2 m into 1 m of material.
-fn objects_at<'a>(m: &'a Meshes, frame: u32, extent: f32) -> Vec<GranularObject<'a>> {
-    let mut out = Vec::new();
-    for (k, mesh) in [&m.cube, &m.wheel, &m.foot].into_iter().enumerate() {
-        let k = k as u32;
-        let t = frame as f32 * 0.01 + k as f32 * 2.1;
-        let wob = (pcg_hash(frame / 50 + k * 1000) % 1000) as f32 / 1000.0;
-        let x = extent * (0.5 + 0.38 * (t * (0.7 + 0.1 * k as f32)).sin());
-        let z = extent * (0.5 + 0.38 * (t * 1.3 + wob * 0.2).cos());
-        let bottom = 0.8 + 0.1 * (t * 3.0).sin();
-        let lowest = mesh
-            .vertices()
-            .iter()
-            .map(|v| v.y)
-            .fold(f32::INFINITY, f32::min);
-        let tr = Affine3A::from_rotation_translation(
-            Quat::from_rotation_y(t),
-            Vec3::new(x, bottom - lowest, z),
-        );
-        out.push(GranularObject::new(mesh, tr));
-    }
-    out
-}
-
-fn small_params() -> GranularParams {
-    GranularParams {
-        num_iterations_even_out_slopes: 2,
-        active_area_margin: 6,
-        ..GranularParams::snow()
-    }
-}
 
 /// Frames of the soak test: 5000 (the seed's test), or `TERRAIN_SOAK_FRAMES` where a run
 /// repeats the suite many times (`cargo xtask mutants` runs 300: every method combination

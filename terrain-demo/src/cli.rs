@@ -60,7 +60,7 @@ pub struct Cli {
     /// Byte order of a RAW16 or R32 heightmap's samples.
     #[arg(long, value_enum, default_value_t = ByteOrderArg::Little)]
     pub byte_order: ByteOrderArg,
-    /// Metres per texel: default the GeoTIFF's pixel scale, else 0.1 m (seed 000).
+    /// Metres per texel: default the GeoTIFF's pixel scale, else 0.1 m (Flower 2010).
     #[arg(long)]
     pub texel_size: Option<f32>,
     /// Heights in metres the coarse-map spans: `auto` (default) is the heightmap's own range
@@ -94,12 +94,12 @@ pub struct Cli {
     #[arg(long)]
     pub no_gpu: bool,
     /// Level of detail of the default scenario's 3D frames: geometry clipmaps, CDLOD
-    /// (quadtree selection with per-vertex morphing, seed 002 sec. 1.1.4), or adaptive
-    /// tessellation (edges split by their projected size and the density map, seed 002 sec.
+    /// (quadtree selection with per-vertex morphing, Cervin 2012, sec. 1.1.4), or adaptive
+    /// tessellation (edges split by their projected size and the density map, Cervin 2012, sec.
     /// 2.3, as a compute pass).
     #[arg(long, value_enum, default_value_t = LodArg::Clipmap)]
     pub lod: LodArg,
-    /// The default scenario's detail layer (seed 000 sec. 2.3): `none` stamps footprints into
+    /// The default scenario's detail layer (Flower 2010, sec. 2.3): `none` stamps footprints into
     /// the coarse-map; `parallax` stamps them into 8-bit detail tiles refined x3 (streamed
     /// around the camera) and shades the clipmap through them: parallax occlusion mapping, the
     /// composite normal of eq. 3.4, faded out with distance; `refine` draws the same tiles as
@@ -107,7 +107,7 @@ pub struct Cli {
     /// refinement patterns of sec. 2.4.3) and by their normals beyond.
     #[arg(long, value_enum, default_value_t = DetailArg::None)]
     pub detail: DetailArg,
-    /// With `--lod cdlod`: choose the LODs by screen-space error (seed 002 eq. 1.1), at most
+    /// With `--lod cdlod`: choose the LODs by screen-space error (Cervin 2012, eq. 1.1), at most
     /// PX pixels, instead of by distance ranges.
     #[arg(long, value_name = "PX")]
     pub target_error: Option<f32>,
@@ -119,7 +119,7 @@ pub struct Cli {
     /// 002 ch. 3), or tessellate by projected size alone. Default on.
     #[arg(long, value_enum, value_name = "on|off")]
     pub density_map: Option<Switch>,
-    /// With `--lod tessellated`: the target projected edge length in pixels (seed 002's
+    /// With `--lod tessellated`: the target projected edge length in pixels (Cervin 2012's
     /// "triangle width"; default 8).
     #[arg(long, value_name = "PX")]
     pub triangle_width: Option<f32>,
@@ -224,11 +224,11 @@ impl Serialize for HeightRangeArg {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LodArg {
-    /// Geometry clipmaps (seed 000 sec. 2.3.2).
+    /// Geometry clipmaps (Flower 2010, sec. 2.3.2).
     Clipmap,
-    /// CDLOD quadtree with per-vertex morphing (seed 002 sec. 1.1.4).
+    /// CDLOD quadtree with per-vertex morphing (Cervin 2012, sec. 1.1.4).
     Cdlod,
-    /// Adaptive tessellation by longest-edge bisection in a compute pass (seed 002 sec. 2.3).
+    /// Adaptive tessellation by longest-edge bisection in a compute pass (Cervin 2012, sec. 2.3).
     Tessellated,
 }
 
@@ -240,7 +240,7 @@ pub enum DetailArg {
     None,
     /// Detail tiles, drawn by parallax occlusion mapping on the unrefined clipmap.
     Parallax,
-    /// Detail tiles, drawn as refined geometry near the camera (seed 000 sec. 2.4.3's
+    /// Detail tiles, drawn as refined geometry near the camera (Flower 2010, sec. 2.4.3's
     /// refinement patterns, a compute pass drawn indirectly) and by their normals beyond.
     Refine,
 }

@@ -73,7 +73,7 @@ pub struct StampParams {
     pub shock_size_fraction: f32,
     /// The shockwave's amplitude in metres.
     pub shock_amplitude_m: f32,
-    /// Wave steps (seed 000 eq. 3.7) per frame.
+    /// Wave steps (Flower 2010, eq. 3.7) per frame.
     pub shock_steps_per_frame: u32,
     /// The wave simulation (terrain-core's `ShockwaveParams`).
     pub shockwave: ShockwaveParams,

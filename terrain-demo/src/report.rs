@@ -244,7 +244,7 @@ pub struct FrameReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub vertices: Option<u64>,
     /// CDLOD: the largest projected geometric error of the drawn nodes against the full map,
-    /// pixels (seed 002 eq. 1.1, on the CPU).
+    /// pixels (Cervin 2012, eq. 1.1, on the CPU).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_screen_error_px: Option<f32>,
     /// CDLOD: the largest screen-space jump of the drawn surface since the last frame that the

@@ -1,4 +1,4 @@
-//! Tile atlas uploads (seed 004 sec 5.3 budgets transfers per frame): one 256^2 tile of u16
+//! Tile atlas uploads (Fikkan 2013, sec. 5.3 budgets transfers per frame): one 256^2 tile of u16
 //! heights into a `GpuTileAtlas` slot (widened to u32, `queue.write_buffer`, submitted and
 //! waited for), beside a plain `queue.write_buffer` of the same 256 KiB already widened, and a
 //! plain CPU copy of those bytes.

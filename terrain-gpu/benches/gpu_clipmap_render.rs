@@ -1,5 +1,5 @@
 //! GPU time of rendering the geometry clipmap (sky + terrain) at 1024 x 768 for 3, 5, 7, 9 and
-//! 11 levels of N = 255 (seed 000 table 4.4), over a 4096 x 4096 coarse-map at 0.1 m per texel,
+//! 11 levels of N = 255 (Flower 2010, table 4.4), over a 4096 x 4096 coarse-map at 0.1 m per texel,
 //! with frustum culling. Timestamp queries where the adapter has them, else wall time.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};

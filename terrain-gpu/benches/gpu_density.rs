@@ -1,4 +1,4 @@
-//! GPU density maps of 1M to 8M height samples with each curvature filter, beside seed 002
+//! GPU density maps of 1M to 8M height samples with each curvature filter, beside Cervin 2012
 //! table 4.1 (Xeon X5650 CPU: 0.14 s to 11.04 s) and terrain-lod's CPU `density` bench. Wall
 //! time of submit + wait (timestamps where the adapter has them). Prints the adapter first.
 

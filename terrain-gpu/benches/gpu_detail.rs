@@ -1,4 +1,4 @@
-//! The detail layer on the GPU, beside seed 000's tables 4.6-4.9: loading a detail tile into
+//! The detail layer on the GPU, beside Flower 2010's tables 4.6-4.9: loading a detail tile into
 //! its slot (upload, submit and wait; the thesis's 2048^2 tile load took 47.1 ms) and reading
 //! one back (the write-back before an unload; its unload took 160.7 ms), at 256^2 and 2048^2;
 //! and the frame cost of the same view drawn without detail, with the detail's composite

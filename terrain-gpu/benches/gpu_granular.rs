@@ -1,6 +1,6 @@
 //! GPU time of each granular step (penetration, jump flooding, closest-seed displacement,
 //! 10 scatter slope iterations) and of the whole step over one active area of about 3 774, 15 100, 60 398 and
-//! 241 591 columns on maps of 512 to 4096 a side (the setting of seed 001 table 5.4), as the
+//! 241 591 columns on maps of 512 to 4096 a side (the setting of Persson 2019, table 5.4), as the
 //! wall time of submit + wait measured by `GpuTimer`; then whole steps with 1 to 8 vehicles,
 //! active areas versus the full map (table 5.7). Prints the adapter first.
 
@@ -187,7 +187,7 @@ fn bench(c: &mut Criterion) {
     ctx.check().expect("validation");
 }
 
-/// Seed 001 table 5.7 setting, as terrain-core's CPU bench: a 2048 map over 300 m, box cars
+/// Persson 2019, table 5.7 setting, as terrain-core's CPU bench: a 2048 map over 300 m, box cars
 /// sinking 0.1 m into 1 m of snow, closest seed + scatter, one slope iteration; whole steps
 /// (depth rasterised on the CPU and uploaded) over the merged active areas, and over the full
 /// map for 1 and 8 cars.

@@ -1,4 +1,4 @@
-//! Readback for collision (seed 000 table 4.5: a full 4096 x 4096 u16 readback took 60.5 ms,
+//! Readback for collision (Flower 2010, table 4.5: a full 4096 x 4096 u16 readback took 60.5 ms,
 //! 51 ms of it the system copy with u16 -> f32 conversion): the full map and a 256 x 256 dirty
 //! region through `RegionReadback`, each as u16 rows (what the collision mirror keeps) and
 //! converted to f32 metres, from request to rows in hand.

@@ -1,5 +1,5 @@
 //! GPU time of stamp + normal regeneration over square regions of 100 to 2000 texels a side on a
-//! 4096 x 4096 coarse-map (seed 000 table 4.3), from timestamp queries where the adapter has
+//! 4096 x 4096 coarse-map (Flower 2010, table 4.3), from timestamp queries where the adapter has
 //! them, else wall time with a blocking poll. Prints the adapter first.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};

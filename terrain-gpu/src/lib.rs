@@ -92,3 +92,8 @@ pub use timer::{GpuTimer, GpuTiming};
 pub use glam;
 /// The wgpu this crate is built against: use it to make devices and passes of the same version.
 pub use wgpu;
+
+/// The README's code blocks, compiled and run as doc tests so that they cannot go stale.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

@@ -1,5 +1,5 @@
 //! `DepthFromBelowPass` against the CPU rasterizer `terrain_core::granular::depth_from_below_into`
-//! (seed 001 sec 4.1.2) on whatever adapter the machine has (lavapipe in CI).
+//! (Persson 2019, sec. 4.1.2) on whatever adapter the machine has (lavapipe in CI).
 
 use glam::{Affine3A, IVec2, Quat, UVec2, Vec3};
 use terrain_core::granular::{GranularObject, NO_OBJECT, TriMesh, depth_from_below_into};

@@ -11,6 +11,7 @@ use terrain_gpu::granular::{
 };
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{GpuContext, GpuError, GpuHeightMap};
+use terrain_test_support::granular::empty_pen;
 
 const UNITS: u32 = 10_000;
 
@@ -33,20 +34,6 @@ fn bumpy_map(w: u32, h: u32, amp: u32) -> FixedPointMap {
     let grid =
         Grid::from_fn(w, h, |x, y| 10_000 + pcg_hash(x * 7919 + y * 104_729) % amp).expect("grid");
     FixedPointMap::fixed_point(grid, UNITS, 0.05).expect("map")
-}
-
-fn empty_pen(size: UVec2) -> Grid<Penetration> {
-    Grid::new(
-        size.x,
-        size.y,
-        Penetration {
-            seed_x: 0,
-            seed_y: 0,
-            kind: 0,
-            penetration: 0,
-        },
-    )
-    .expect("grid")
 }
 
 /// A depth grid of `area`: a sunken disc (penetrating), a ring just above the terrain

@@ -2,69 +2,11 @@
 //! objects (checked every frame by the GPU sum), equality with the CPU `GranularSim` step by
 //! step, and no GPU objects made per frame once the step has run.
 
-use glam::{Affine3A, Quat, Vec3};
 use terrain_core::granular::*;
-use terrain_core::{FixedPointMap, Grid};
 use terrain_gpu::GpuHeightMap;
 use terrain_gpu::granular::{DepthSource, GpuGranularStep, VolumePass};
 use terrain_gpu::testing::context_or_skip;
-
-const UNITS: u32 = 10_000;
-
-fn bumpy_map(size: u32, texel: f32) -> FixedPointMap {
-    let grid = Grid::from_fn(size, size, |x, y| {
-        10_000 + pcg_hash(x * 7919 + y * 104_729) % 400
-    })
-    .expect("grid");
-    FixedPointMap::fixed_point(grid, UNITS, texel).expect("map")
-}
-
-struct Meshes {
-    cube: TriMesh,
-    wheel: TriMesh,
-    foot: TriMesh,
-}
-
-fn meshes() -> Meshes {
-    Meshes {
-        cube: TriMesh::cuboid(Vec3::new(0.4, 0.3, 0.25)).expect("box"),
-        wheel: TriMesh::wheel(0.35, 0.15, 16).expect("wheel"),
-        foot: TriMesh::foot(0.3, 0.12, 0.1).expect("foot"),
-    }
-}
-
-/// Three objects on smooth paths over a map of `extent` metres, sinking up to 0.2 m into 1 m
-/// of material (as terrain-core's tests/granular.rs).
-fn objects_at(m: &Meshes, frame: u32, extent: f32) -> Vec<GranularObject<'_>> {
-    let mut out = Vec::new();
-    for (k, mesh) in [&m.cube, &m.wheel, &m.foot].into_iter().enumerate() {
-        let k = k as u32;
-        let t = frame as f32 * 0.01 + k as f32 * 2.1;
-        let wob = (pcg_hash(frame / 50 + k * 1000) % 1000) as f32 / 1000.0;
-        let x = extent * (0.5 + 0.38 * (t * (0.7 + 0.1 * k as f32)).sin());
-        let z = extent * (0.5 + 0.38 * (t * 1.3 + wob * 0.2).cos());
-        let bottom = 0.8 + 0.1 * (t * 3.0).sin();
-        let lowest = mesh
-            .vertices()
-            .iter()
-            .map(|v| v.y)
-            .fold(f32::INFINITY, f32::min);
-        let tr = Affine3A::from_rotation_translation(
-            Quat::from_rotation_y(t),
-            Vec3::new(x, bottom - lowest, z),
-        );
-        out.push(GranularObject::new(mesh, tr));
-    }
-    out
-}
-
-fn params() -> GranularParams {
-    GranularParams {
-        num_iterations_even_out_slopes: 2,
-        active_area_margin: 6,
-        ..GranularParams::snow()
-    }
-}
+use terrain_test_support::granular::{bumpy_map, meshes, objects_at, small_params};
 
 const METHODS: [(DisplacementMethod, SlopeMethod); 6] = [
     (DisplacementMethod::ClosestSeed, SlopeMethod::Scatter),
@@ -93,7 +35,7 @@ fn gpu_volume_constant_over_500_frames_three_objects() {
     let map = bumpy_map(96, 0.05);
     let v0 = map.raw_sum();
     let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
-    let mut step = GpuGranularStep::new(device, params()).expect("step");
+    let mut step = GpuGranularStep::new(device, small_params()).expect("step");
     let mut volume = VolumePass::new(device).expect("volume");
     assert_eq!(volume.sum(device, queue, &gmap).expect("sum"), v0);
     let t0 = std::time::Instant::now();
@@ -127,7 +69,7 @@ fn gpu_step_matches_cpu_sim_bit_for_bit() {
     let map = bumpy_map(96, 0.05);
     let p = GranularParams {
         compression: 0.3,
-        ..params()
+        ..small_params()
     };
     let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
     let mut step = GpuGranularStep::new(device, p).expect("step");
@@ -204,7 +146,7 @@ fn steady_state_steps_make_no_gpu_objects() {
     let m = meshes();
     let map = bumpy_map(96, 0.05);
     let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
-    let mut step = GpuGranularStep::new(device, params()).expect("step");
+    let mut step = GpuGranularStep::new(device, small_params()).expect("step");
     let mut volume = VolumePass::new(device).expect("volume");
     // Objects apart, so each frame has several areas; the same placements every frame.
     let objs = objects_at(&m, 140, 96.0 * 0.05);

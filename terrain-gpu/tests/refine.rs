@@ -1,4 +1,4 @@
-//! Refined geometry (`--detail refine`, seed 000 sec. 2.4.3): `RefinePass`'s triangles against
+//! Refined geometry (`--detail refine`, Flower 2010, sec. 2.4.3): `RefinePass`'s triangles against
 //! the CPU reference `terrain_lod::refine` (same patterns, same positions, heights of coarse +
 //! faded detail), no cracks from grazing views where the refined region meets the clipmap, and
 //! a refined region without detail drawing the coarse frame. On whatever adapter the machine

@@ -1,4 +1,4 @@
-//! Density maps of 1M to 8M height samples with each curvature filter, beside seed 002 table
+//! Density maps of 1M to 8M height samples with each curvature filter, beside Cervin 2012, table
 //! 4.1 (Xeon X5650: 0.14 s to 11.04 s per 1M to 8M samples), and the dirty-rect update after a
 //! crater.
 

@@ -1,5 +1,5 @@
 //! One frame of geometry-clipmap level of detail, as a renderer would use it: the shared mesh
-//! of a layout (seed 000 eq. 3.1), the levels placed around a camera and the parts culled
+//! of a layout (Flower 2010, eq. 3.1), the levels placed around a camera and the parts culled
 //! against its view frustum, and the level morph near each level's outer edge.
 //!
 //! `cargo run -p terrain-lod --example clipmap_frame -- [N] [LEVELS]` (default 255 and 5).

@@ -1,4 +1,4 @@
-//! The density map of seed 002 ch. 3 for the workspace's procedural terrain, with each curvature
+//! The density map of Cervin 2012, ch. 3 for the workspace's procedural terrain, with each curvature
 //! filter: the time it takes, how its values spread, and (with `--out DIR`) level 0 as an 8-bit
 //! PNG per filter.
 //!

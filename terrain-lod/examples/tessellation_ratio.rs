@@ -1,4 +1,4 @@
-//! How many vertices the density map saves at equal screen-space error (seed 002 table 4.2:
+//! How many vertices the density map saves at equal screen-space error (Cervin 2012, table 4.2:
 //! 249 222 / 667 060 = 0.37 and 209 485 / 511 723 = 0.41 at equal triangle width): the
 //! adaptive tessellation of two views, an "action" view near the ground and a "terrain" view
 //! from above the map's edge, at triangle widths from 0.25 to 64 pixels with the density map on

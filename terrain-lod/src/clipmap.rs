@@ -1,4 +1,4 @@
-//! Geometry clipmap (GPU Gems 2 ch. 2, seed 000 sec. 2.3.2, 2.4.3 and 3.1.3): the shared mesh of
+//! Geometry clipmap (GPU Gems 2 ch. 2, Flower 2010, sec. 2.3.2, 2.4.3 and 3.1.3): the shared mesh of
 //! part patterns, and the per-frame placement of the nested levels around the camera.
 //!
 //! # Levels
@@ -38,7 +38,7 @@
 //!   level, level 0 included): zero-area triangles whose middle vertex is the T-junction an
 //!   odd vertex of this level makes on an edge of the next coarser level.
 //!
-//! # Shared mesh and vertex count (seed 000 eq. 3.1)
+//! # Shared mesh and vertex count (Flower 2010, eq. 3.1)
 //!
 //! [`ClipmapMesh`] stores every pattern once, in five vertex ranges in the order of the terms
 //! of eq. 3.1, `V = M^2 + 12M + N^2 + 6N - 1` (71 418 for `N = 255`, for any number of levels):
@@ -152,7 +152,7 @@ impl TrimSide {
 pub enum PartKind {
     /// The full `N x N` grid of level 0.
     InnerGrid,
-    /// An `M x M` block (seed 000's "footprint"), drawn 12 times per ring.
+    /// An `M x M` block (Flower 2010's "footprint"), drawn 12 times per ring.
     Block,
     /// The two `M x 3` fix-ups whose `M` vertices run along X (min-X and max-X sides).
     FixupX,
@@ -179,7 +179,7 @@ impl PartKind {
     ];
 
     /// Whether [`ClipmapLayout::place`] frustum-culls parts of this kind (blocks and fix-ups,
-    /// seed 000 sec. 2.4.3; trims, degenerates and the finest level are always drawn).
+    /// Flower 2010, sec. 2.4.3; trims, degenerates and the finest level are always drawn).
     pub fn is_cullable(self) -> bool {
         matches!(self, PartKind::Block | PartKind::FixupX | PartKind::FixupZ)
     }
@@ -215,7 +215,7 @@ pub struct MeshPart {
 /// range of every part (see the [module docs](self) for the layout).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClipmapMesh {
-    /// All vertices, seed 000 eq. 3.1 of them.
+    /// All vertices, Flower 2010, eq. 3.1 of them.
     pub vertices: Vec<ClipmapVertex>,
     /// Triangle-list indices of all parts, each relative to its part's `base_vertex`.
     pub indices: Vec<u32>,
@@ -366,7 +366,7 @@ impl ClipmapLayout {
         self.levels
     }
 
-    /// Vertices of the shared mesh, seed 000 eq. 3.1: `M^2 + 12M + N^2 + 6N - 1`, whatever the
+    /// Vertices of the shared mesh, Flower 2010, eq. 3.1: `M^2 + 12M + N^2 + 6N - 1`, whatever the
     /// number of levels (71 418 for `N = 255`).
     pub fn vertex_count(&self) -> u32 {
         build::eq_3_1(self.n, self.m)
@@ -392,7 +392,7 @@ impl ClipmapLayout {
     /// blocks and fix-ups whose world box (x / z from the placement, y from `height_range` in
     /// metres) lies outside the frustum are dropped and counted in
     /// [`ClipmapFrame::culled`]; trims, degenerates and the finest level are always drawn
-    /// (seed 000 sec. 2.4.3). A fix-up part is the pair of fix-ups on opposite sides of a
+    /// (Flower 2010, sec. 2.4.3). A fix-up part is the pair of fix-ups on opposite sides of a
     /// ring, so it is tested with the box around both.
     ///
     /// Errors: non-finite inputs, `texel_size <= 0`, a reversed height range, or a camera more

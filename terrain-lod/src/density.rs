@@ -1,4 +1,4 @@
-//! Density maps (seed 002 ch. 3): how finely the terrain mesh must be tessellated where, from
+//! Density maps (Cervin 2012, ch. 3): how finely the terrain mesh must be tessellated where, from
 //! the heightfield's curvature, at a quarter of its resolution, with a max pyramid for coarser
 //! levels of detail.
 //!
@@ -28,7 +28,7 @@ use crate::error::LodError;
 use glam::{IVec2, UVec2};
 use terrain_core::{Grid, HeightMap, HeightSample, Rect, WrapMode};
 
-/// Height texels per density sample along each axis (seed 002 sec. 3.1.1: 128 / 4 = 32).
+/// Height texels per density sample along each axis (Cervin 2012, sec. 3.1.1: 128 / 4 = 32).
 pub const DENSITY_DOWNSAMPLE: u32 = 4;
 
 /// The largest preprocessing filter size accepted.
@@ -36,7 +36,7 @@ pub const MAX_FILTER_SIZE: u32 = 31;
 /// The largest border LOD skip accepted (eq. 3.8's `l_skip`).
 pub const MAX_BORDER_LOD_SKIP: u32 = 4;
 
-/// Parameters of the density map (seed 002 sec. 3.3.4), with the document's defaults where it
+/// Parameters of the density map (Cervin 2012, sec. 3.3.4), with the document's defaults where it
 /// gives them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -65,7 +65,7 @@ pub struct DensityParams {
     /// [`MAX_BORDER_LOD_SKIP`]).
     pub border_lod_skip: u32,
     /// Density samples per tile side: samples whose column or row is a multiple of it are tile
-    /// borders (default 32, seed 002 sec. 3.1.1). At least 2.
+    /// borders (default 32, Cervin 2012, sec. 3.1.1). At least 2.
     pub tile_size: u32,
 }
 
@@ -152,7 +152,7 @@ impl DensityParams {
 /// each coarser level half the previous, down to one sample.
 ///
 /// Values are u8: 255 is full density (a tessellation factor kept as computed), 0 the least
-/// (seed 002 sec. 3.4: the density scales edge factors, which never fall below 1).
+/// (Cervin 2012, sec. 3.4: the density scales edge factors, which never fall below 1).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DensityMap {
     params: DensityParams,

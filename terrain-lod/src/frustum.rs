@@ -1,5 +1,5 @@
 //! View frustum as six planes, extracted from a view-projection matrix, with point and
-//! axis-aligned box tests for CPU culling (seed 000 sec. 2.4.3).
+//! axis-aligned box tests for CPU culling (Flower 2010, sec. 2.4.3).
 
 use glam::{Mat4, Vec3, Vec4, Vec4Swizzles};
 

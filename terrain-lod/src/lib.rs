@@ -1,9 +1,9 @@
-//! Level of detail for heightfield terrain: geometry clipmaps (GPU Gems 2 ch. 2, seed 000
-//! sec. 2.3.2 and 3.1.3) with CPU frustum culling of their blocks (seed 000 sec. 2.4.3); CDLOD
-//! (seed 002 sec. 1.1.4: a quadtree with min / max heights, a LOD range table or a screen-space
+//! Level of detail for heightfield terrain: geometry clipmaps (GPU Gems 2 ch. 2, Flower 2010
+//! sec. 2.3.2 and 3.1.3) with CPU frustum culling of their blocks (Flower 2010, sec. 2.4.3); CDLOD
+//! (Cervin 2012, sec. 1.1.4: a quadtree with min / max heights, a LOD range table or a screen-space
 //! error, partial selection and per-vertex morphing, [`cdlod`]); curvature density maps (seed
 //! 002 ch. 3: five filters, max-downsampling, preprocessing, borders, a max pyramid,
-//! [`density`]); adaptive tessellation (seed 002 sec. 2.3, algorithm 3.1: per-edge splits from
+//! [`density`]); adaptive tessellation (Cervin 2012, sec. 2.3, algorithm 3.1: per-edge splits from
 //! the projected size of a sphere around the edge, scaled by the density map, or by a bound on
 //! the projected geometric error; longest-edge bisection, conforming by construction, with a
 //! vertex morph, [`tessellation`]).
@@ -19,7 +19,7 @@
 //! use glam::{Vec2, Vec3};
 //! use terrain_lod::{ClipmapLayout, Frustum};
 //!
-//! // 5 levels of 255 x 255 vertices share one mesh of 71 418 vertices (seed 000 eq. 3.1).
+//! // 5 levels of 255 x 255 vertices share one mesh of 71 418 vertices (Flower 2010, eq. 3.1).
 //! let layout = ClipmapLayout::new(255, 5)?;
 //! assert_eq!(layout.vertex_count(), 71_418);
 //! assert_eq!(layout.mesh().vertices.len(), 71_418);
@@ -96,7 +96,7 @@
 //! let density = DensityMap::from_map(&map, DensityParams::default())?;
 //! let view = CdlodView { camera: Vec3::new(20.0, 40.0, 20.0), frustum: None, viewport_width: 1280.0, hfov: 1.2 };
 //!
-//! // Seed 002: edges of about 8 pixels, fewer where the density map says the terrain is flat.
+//! // Cervin 2012: edges of about 8 pixels, fewer where the density map says the terrain is flat.
 //! let tess = TessHierarchy::from_map(&map, Some(&density), TessConfig::default())?;
 //! let frame = tess.select(&view)?;
 //! assert!(frame.triangle_count() > 2 * 64, "split beyond the 64 patches' two triangles");
@@ -137,3 +137,8 @@ pub use popping::{POPPING_PROBES_PER_SIDE, PoppingView};
 pub use reach::clipmap_levels_to_reach;
 pub use refine::RefineView;
 pub use tessellation::{TessConfig, TessFrame, TessHierarchy, TessTriangle, TessVertex};
+
+/// The README's code blocks, compiled and run as doc tests so that they cannot go stale.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

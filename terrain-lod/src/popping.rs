@@ -4,7 +4,7 @@
 //! evaluated on the same heights and projected with the same camera, so only a change of the
 //! mesh counts. What a renderer reports as its popping metric.
 
-use crate::cdlod::{CdlodFrame, CdlodTree};
+use crate::cdlod::{CdlodFrame, CdlodTree, JumpProbes};
 use glam::{IVec2, Mat4, Vec2, Vec3};
 use terrain_core::{HeightMap, HeightSample};
 
@@ -63,16 +63,12 @@ impl CdlodTree {
             let y = map.wrap().resolve(i64::from(t.y), h);
             map.height_m(x, y).unwrap_or(0.0)
         };
-        frame.max_height_jump(
-            eye,
-            then,
-            &probes,
-            self.config().grid_size,
-            ts,
-            view.view_proj,
-            view.target,
-            height,
-        )
+        let probes = JumpProbes {
+            probes: &probes,
+            view_proj: view.view_proj,
+            target: view.target,
+        };
+        frame.max_height_jump(eye, then, &probes, self.config().grid_size, ts, height)
     }
 }
 

@@ -1,4 +1,4 @@
-//! Refinement patterns of seed 000 sec. 2.4.3 (eq. 2.2, fig. 2.7): the finest triangles near
+//! Refinement patterns of Flower 2010, sec. 2.4.3 (eq. 2.2, fig. 2.7): the finest triangles near
 //! the camera are split so detail heights can displace them. Every vertex of the coarse grid
 //! carries a flag `t` (refine or not); a triangle's pattern is `rho = t0 + 2 t1 + 4 t2`:
 //!

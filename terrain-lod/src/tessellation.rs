@@ -1,4 +1,4 @@
-//! Adaptive tessellation (seed 002 sec. 2.3 and algorithm 3.1) as an implicit subdivision:
+//! Adaptive tessellation (Cervin 2012, sec. 2.3 and algorithm 3.1) as an implicit subdivision:
 //! longest-edge bisection of right triangles over square patches (a 4-8 mesh), where every
 //! edge decides for itself whether it is split, from the clip-space size of a sphere around it
 //! for a target triangle width in pixels, scaled by the density map and clamped to a minimum
@@ -57,11 +57,11 @@ pub struct TessConfig {
     /// Texels per side of a patch (two triangles at level 0): a power of two, 2 to 256
     /// (default 32).
     pub patch_size: u32,
-    /// The target projected length of a triangle edge, pixels (seed 002: "desired triangle
+    /// The target projected length of a triangle edge, pixels (Cervin 2012: "desired triangle
     /// width", 6 the lowest practical; default 8).
     pub triangle_width_px: f32,
     /// Triangles are not split below this horizontal hypotenuse length, metres (the "minimum
-    /// horizontal size" of seed 002 sec. 2.3; default 0: down to the texels).
+    /// horizontal size" of Cervin 2012, sec. 2.3; default 0: down to the texels).
     pub min_triangle_m: f32,
     /// Scale the edges' factors by the density map (default on).
     pub use_density: bool,
@@ -76,7 +76,7 @@ pub struct TessConfig {
     /// Split by projected geometric error instead of edge size: a vertex is split in while
     /// the saturated error of its triangles (see [`TessHierarchy::bounds`]) projects to more
     /// than this many pixels; the density map and the triangle width are then unused
-    /// (default `None`: seed 002's edge size).
+    /// (default `None`: Cervin 2012's edge size).
     pub max_error_px: Option<f32>,
 }
 

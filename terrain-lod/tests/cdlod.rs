@@ -6,7 +6,7 @@ use glam::{IVec2, Mat4, UVec2, Vec2, Vec3};
 use proptest::prelude::*;
 use std::collections::HashSet;
 use terrain_core::{Grid, HeightEncoding, HeightMap, Rect, WrapMode};
-use terrain_lod::cdlod::{NodeBounds, morphed_vertex};
+use terrain_lod::cdlod::{JumpProbes, NodeBounds, morphed_vertex};
 use terrain_lod::{
     CdlodConfig, CdlodInstance, CdlodMesh, CdlodTree, CdlodView, Frustum, LodError, LodMetric,
 };
@@ -527,16 +527,12 @@ fn the_drawn_surface_is_the_map_where_fully_refined_and_pops_without_the_morph()
                 })
                 .collect();
             if let Some((pf, pc)) = &prev {
-                let j = frame.max_height_jump(
-                    camera,
-                    (pf, *pc),
-                    &probes,
-                    grid,
-                    TEXEL,
-                    proj,
-                    Vec2::new(640.0, 360.0),
-                    &h,
-                );
+                let probes = JumpProbes {
+                    probes: &probes,
+                    view_proj: proj,
+                    target: Vec2::new(640.0, 360.0),
+                };
+                let j = frame.max_height_jump(camera, (pf, *pc), &probes, grid, TEXEL, &h);
                 worst = worst.max(j);
             }
             prev = Some((frame, camera));

@@ -1,4 +1,4 @@
-//! The CPU side of collision streaming (seed 000 table 4.5: a full 4096 x 4096 u16 readback
+//! The CPU side of collision streaming (Flower 2010, table 4.5: a full 4096 x 4096 u16 readback
 //! took 60.5 ms, 51 ms of it the system-memory copy with u16 -> f32 conversion): applying a full
 //! 4096^2 region to the mirror beside converting it to f32 and a plain memcpy; a 256 x 256
 //! dirty-region apply; one million height queries; a thousand raycasts and sphere contacts;
@@ -13,7 +13,7 @@ use terrain_core::{CoarseMap, Grid, HeightEncoding, Rect};
 use terrain_physics::CollisionMirror;
 
 const MAP: u32 = 4096;
-const TEXEL: f32 = 0.1; // seed 000 sec 3.3: 4096 texels span 409.6 m
+const TEXEL: f32 = 0.1; // Flower 2010, sec. 3.3: 4096 texels span 409.6 m
 
 fn encoding() -> HeightEncoding {
     HeightEncoding::spanning::<u16>(0.0, 100.0).expect("valid encoding")
@@ -101,7 +101,7 @@ fn streaming(c: &mut Criterion) {
     });
     g.finish();
 
-    // For comparison: what seed 000 did on every update (u16 -> f32 metres), and a plain copy.
+    // For comparison: what Flower 2010 did on every update (u16 -> f32 metres), and a plain copy.
     let src = other.as_slice();
     let mut metres = vec![0.0f32; src.len()];
     let mut g = configure(c, "convert_u16_to_f32");

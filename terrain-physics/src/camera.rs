@@ -1,4 +1,4 @@
-//! `CameraBody`: the camera as a Newtonian point (seed 000 sec 3.2.5): user forces, switchable
+//! `CameraBody`: the camera as a Newtonian point (Flower 2010, sec. 3.2.5): user forces, switchable
 //! gravity, friction proportional to velocity, Euler integration, and a ground clamp at eye
 //! height.
 
@@ -12,7 +12,7 @@ pub const STANDARD_GRAVITY: f32 = 9.81;
 /// What the ground clamp does when the body is below eye height over the ground.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum GroundClamp {
-    /// Seed 000 sec 3.2.5 as written: the position is offset up to the ground and "this
+    /// Flower 2010, sec. 3.2.5 as written: the position is offset up to the ground and "this
     /// collision response method does not alter velocity in any way". A resting camera then
     /// keeps the downward velocity gravity gives it (up to the terminal `m g / friction`), and
     /// drops at that speed when it walks off an edge.
@@ -25,7 +25,7 @@ pub enum GroundClamp {
 
 /// The camera: a point at eye height over the ground, moved by forces.
 ///
-/// Each [`CameraBody::step`] (seed 000 sec 3.2.5): the force is the user force, plus gravity
+/// Each [`CameraBody::step`] (Flower 2010, sec. 3.2.5): the force is the user force, plus gravity
 /// `-mass * gravity * Y` if enabled, plus friction `-friction * velocity`; it is integrated into
 /// the velocity (`v += F / m * dt`), and the new velocity into the position (`p += v * dt`:
 /// forces, then velocity, then position, as the seed describes it, which is the semi-implicit

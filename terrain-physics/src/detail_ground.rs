@@ -1,4 +1,4 @@
-//! [`DetailGround`]: the collision surface of seed 000's two layers, coarse + detail. Any
+//! [`DetailGround`]: the collision surface of Flower 2010's two layers, coarse + detail. Any
 //! [`GroundQuery`] (a collider over the mirrored coarse-map, or the [`crate::BoundedGround`]
 //! over it) plus a CPU detail layer ([`terrain_core::detail::DetailLayer`]), so a body steps
 //! into a footprint that only the detail tiles hold.

@@ -3,7 +3,7 @@
 //!
 //! The surface model of the whole crate is defined here: over each cell `[x, x+1] x [z, z+1]`
 //! (texel units) the surface is the bilinear patch through the cell's four texels, exactly the
-//! interpolation of seed 000 listing 3.2 (`x0 = floor(p.x)`, `x1 = x0 + 1` wrapped). Heights,
+//! interpolation of Flower 2010, listing 3.2 (`x0 = floor(p.x)`, `x1 = x0 + 1` wrapped). Heights,
 //! normals, raycasts and sphere contacts all use that one surface.
 
 use crate::error::PhysicsError;
@@ -20,7 +20,7 @@ pub const MAX_FIELD_SIDE: u32 = 1 << 28;
 /// Addressing is toroidal (the coarse-map repeats in both directions). Local space: texel
 /// `(x, y)` stands at `(x * texel_size, offset + scale * stored, y * texel_size)` metres, X and
 /// Z horizontal, Y up. Heights stay in the map's own u16 encoding and are scaled at query time
-/// (seed 000 table 4.5 lost 51 of 60.5 ms converting u16 to f32 on every update).
+/// (Flower 2010, table 4.5 lost 51 of 60.5 ms converting u16 to f32 on every update).
 #[derive(Debug, Clone, PartialEq)]
 pub struct HeightField {
     heights: Grid<u16>,

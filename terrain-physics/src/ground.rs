@@ -2,7 +2,7 @@
 //! can move the surface, known from the deformation itself) and [`BoundedGround`], which raises
 //! the mirrored surface by the bounds still pending so no body is ever below ground.
 //!
-//! Seed 000 sec 3.2.1: until the streamed heights arrive "the player will momentarily be
+//! Flower 2010, sec. 3.2.1: until the streamed heights arrive "the player will momentarily be
 //! underground. The CPU can account for this using collision heuristics that have prior
 //! knowledge regarding the geometry of the deformation". The heuristic here: a deformation
 //! reports the rect it changed and the most it can raise (or lower) the surface there; until a

@@ -1,5 +1,5 @@
 //! Heightfield collision over a double-buffered CPU mirror of the coarse-map, kept current by
-//! asynchronous readback of dirty regions (seed 000 sec 3.2.1 and 3.2.5).
+//! asynchronous readback of dirty regions (Flower 2010, sec. 3.2.1 and 3.2.5).
 //!
 //! Conventions (the workspace's): metres, Y up, right-handed. Heightmap column `x` maps to
 //! world X and row `y` to world Z; texel `(x, y)` stands at `(x * texel_size, height,
@@ -114,3 +114,8 @@ pub use scheduler::{
 pub use source::{ArrivedRegion, CpuRegionSource, RegionSource, RequestId, read_region};
 pub use sphere::{CONTACT_TOLERANCE, SOLID_SPHERE_ROLLING_FACTOR, SphereBody};
 pub use window::{CollisionWindow, MAX_WINDOW_SIDE, WINDOW_STEP, WindowError};
+
+/// The README's code blocks, compiled and run as doc tests so that they cannot go stale.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

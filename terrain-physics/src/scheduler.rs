@@ -1,6 +1,6 @@
 //! `ReadbackScheduler`: collects the dirty rects of deformations, waits for a quiet gap, asks a
 //! [`RegionSource`] for their merged union, and applies what arrives to the
-//! [`CollisionMirror`], never blocking the caller (seed 000 sec 3.2.1).
+//! [`CollisionMirror`], never blocking the caller (Flower 2010, sec. 3.2.1).
 //!
 //! Time is passed in: every call takes `now: Instant`, so tests run on synthetic instants.
 //!
@@ -37,8 +37,8 @@ use terrain_core::{Grid, Rect, RegionSource, RequestId};
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct SchedulerConfig {
-    /// How long no deformation must be noted before the dirty rects are requested. Seed 000
-    /// sec 3.2.1: "the system waits for a gap of approximately 20 milliseconds". Default 20 ms.
+    /// How long no deformation must be noted before the dirty rects are requested. Flower 2010
+    /// sec. 3.2.1: "the system waits for a gap of approximately 20 milliseconds". Default 20 ms.
     #[cfg_attr(
         feature = "serde",
         serde(rename = "quiet_gap_ms", with = "duration_ms")

@@ -1,4 +1,4 @@
-//! Bodies: the camera of seed 000 sec 3.2.5 (exact Euler steps, gravity switch, friction decay,
+//! Bodies: the camera of Flower 2010, sec. 3.2.5 (exact Euler steps, gravity switch, friction decay,
 //! ground clamp) and the sphere that rests on flat ground and rolls down a slope.
 
 mod common;
@@ -85,7 +85,7 @@ fn camera_ground_clamp_offsets_to_eye_height() {
     let ground = HeightfieldCollider::from_map(&map).expect("collider");
     let at = Vec2::new(7.3, 11.1);
     let h = ground.height(at).expect("h");
-    // OffsetOnly: position up to ground + eye, velocity untouched (sec 3.2.5).
+    // OffsetOnly: position up to ground + eye, velocity untouched (sec. 3.2.5).
     let mut cam = CameraBody::new(Vec3::new(at.x, h - 3.0, at.y));
     cam.gravity_enabled = false;
     cam.friction = 0.0;

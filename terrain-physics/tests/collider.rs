@@ -8,7 +8,7 @@ use proptest::prelude::*;
 use terrain_core::{CoarseMap, bilinear};
 use terrain_physics::{HeightfieldCollider, PhysicsError};
 
-/// Seed 000 listing 3.2, literally (positions in texel units, inside the map).
+/// Flower 2010, listing 3.2, literally (positions in texel units, inside the map).
 fn listing_3_2(map: &CoarseMap, p_texels: Vec2) -> f32 {
     let n = map.size().x as i32;
     let h = |x: i32, z: i32| map.height_m(x as u32, z as u32).expect("inside the map") as f64;

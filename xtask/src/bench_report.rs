@@ -19,9 +19,9 @@ struct Headline {
     map_copy_id: Option<String>,
 }
 
-/// The figures `bench-report` reports. Thesis figures: seed 000 table 4.3 (GTX295, deform and
+/// The figures `bench-report` reports. Thesis figures: Flower 2010, table 4.3 (GTX295, deform and
 /// normal generation at 0.1 m per texel: 50 m = 500^2 texels, 100 m = 1000^2, 200 m =
-/// 2000^2), seed 001 tables 5.4 (iterative approach) and 5.5 (SSBO approach) at heightmapSize
+/// 2000^2), Persson 2019, tables 5.4 (iterative approach) and 5.5 (SSBO approach) at heightmapSize
 /// 4096 (241 591 columns).
 fn headlines() -> Vec<Headline> {
     let mut out = Vec::new();
@@ -53,7 +53,7 @@ fn headlines() -> Vec<Headline> {
             out.push(Headline {
                 id: format!("stamp_normals/{bench}/{side}"),
                 thesis_ms: Some(thesis_ms),
-                thesis: format!("seed 000 table 4.3, {figure} {metres}, GTX295 ({what})"),
+                thesis: format!("Flower 2010, table 4.3, {figure} {metres}, GTX295 ({what})"),
                 copy_id: format!("stamp_normals/memcpy/{side}"),
                 map_copy_id: Some(format!("stamp_normals/memcpy_in_map/{side}")),
             });
@@ -63,47 +63,47 @@ fn headlines() -> Vec<Headline> {
         (
             "granular/jump_flood/4096",
             10.692,
-            "seed 001 table 5.4, Jump flooding, 4096",
+            "Persson 2019, table 5.4, Jump flooding, 4096",
         ),
         (
             "granular/jump_flood_reference/4096",
             10.692,
-            "seed 001 table 5.4, Jump flooding (sequential reference)",
+            "Persson 2019, table 5.4, Jump flooding (sequential reference)",
         ),
         (
             "granular/exact_nearest_seed/4096",
             10.692,
-            "seed 001 table 5.4, Jump flooding (scipy EDT: 13.4 ms)",
+            "Persson 2019, table 5.4, Jump flooding (scipy EDT: 13.4 ms)",
         ),
         (
             "granular/displace_iterative10/4096",
             11.864,
-            "seed 001 table 5.4, Displace material, 4096",
+            "Persson 2019, table 5.4, Displace material, 4096",
         ),
         (
             "granular/slopes_scatter10/4096",
             5.486,
-            "seed 001 table 5.5, Even out steep slopes, 4096",
+            "Persson 2019, table 5.5, Even out steep slopes, 4096",
         ),
         (
             "granular/step_jfa_iterative10_scatter10/4096",
             38.08,
-            "seed 001 table 5.4, depth + penetration + JFA + displace + slopes",
+            "Persson 2019, table 5.4, depth + penetration + JFA + displace + slopes",
         ),
         (
             "granular/step_exact_iterative10_scatter10/4096",
             38.08,
-            "seed 001 table 5.4, the same steps",
+            "Persson 2019, table 5.4, the same steps",
         ),
         (
             "granular_step/jfa_iterative10_scatter10/4096",
             38.08,
-            "seed 001 table 5.4, the same steps (GranularSim::step, volume included)",
+            "Persson 2019, table 5.4, the same steps (GranularSim::step, volume included)",
         ),
         (
             "granular_step/exact_iterative10_scatter10/4096",
             38.08,
-            "seed 001 table 5.4, the same steps (GranularSim::step, exact transform)",
+            "Persson 2019, table 5.4, the same steps (GranularSim::step, exact transform)",
         ),
     ];
     for (id, ms, thesis) in granular {

@@ -1,4 +1,4 @@
-//! The RAM pool (seed 004 sec 4.2, 5.2-5.4.1): decoded tiles held within a memory budget, loaded
+//! The RAM pool (Fikkan 2013, sec. 4.2, 5.2-5.4.1): decoded tiles held within a memory budget, loaded
 //! by worker threads and written back by a writer thread; the frame thread talks to them only
 //! through lock-free queues (crossbeam channels and one atomic state per job) and never waits
 //! on I/O.
@@ -8,7 +8,7 @@
 //! A tile is *queued* (a load job is in the queue), *loading* (a worker took the job), *loaded*,
 //! *in use* (loaded and pinned by a consumer, e.g. the VRAM pool, so it is not evicted),
 //! *marked for deletion* (loaded but no longer wanted: dropped when memory is needed, rescued
-//! without I/O if wanted again first, seed 004 sec 5.3) or *failed* (its file is corrupt:
+//! without I/O if wanted again first, Fikkan 2013, sec. 5.3) or *failed* (its file is corrupt:
 //! reported once, treated as missing). Orthogonally a loaded tile may be *dirty* (modified since
 //! loaded); dirty tiles are written back atomically by the writer thread, and a dirty tile's
 //! memory is freed only after its write-back succeeded. A queued job that is no longer wanted

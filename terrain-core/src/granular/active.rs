@@ -1,4 +1,4 @@
-//! Active areas (seed 001 sec 4.5): the rects a granular step runs over, one per object plus a
+//! Active areas (Persson 2019, sec. 4.5): the rects a granular step runs over, one per object plus a
 //! margin, with overlapping or nearby rects merged to cut dispatches.
 
 use glam::UVec2;

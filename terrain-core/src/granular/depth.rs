@@ -1,4 +1,4 @@
-//! Depth from below (seed 001 sec 4.1.2): an exact CPU rasterizer of the lowest surface of the
+//! Depth from below (Persson 2019, sec. 4.1.2): an exact CPU rasterizer of the lowest surface of the
 //! objects above each column of an active area, in the map's fixed-point height units.
 //!
 //! Rasterization rule: the orthographic frustum looks up along +Y and covers the active area.

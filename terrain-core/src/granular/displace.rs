@@ -1,4 +1,4 @@
-//! Displacing intersected material to the contour (seed 001 sec 4.1.4): the iterative method
+//! Displacing intersected material to the contour (Persson 2019, sec. 4.1.4): the iterative method
 //! (listing 4.2), the closest-seed scatter (listing 4.4) and multiple targets (listing 4.5).
 //!
 //! Common rules. Inputs are the penetration texture and the seed grid of an area (grids of

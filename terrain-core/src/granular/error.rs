@@ -13,7 +13,7 @@ pub enum GranularError {
     /// A parameter is NaN, infinite or outside the range the algorithm accepts.
     #[error("parameter `{name}` = {value} is outside {range}")]
     ParamOutOfRange {
-        /// The parameter's name (as in seed 001 table 4.4 where it comes from there).
+        /// The parameter's name (as in Persson 2019, table 4.4 where it comes from there).
         name: &'static str,
         /// The value given.
         value: f64,

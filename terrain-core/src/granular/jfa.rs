@@ -1,4 +1,4 @@
-//! Jump flooding distance transform (seed 001 sec 2.3.1, 4.1.4): the closest seed of every
+//! Jump flooding distance transform (Persson 2019, sec. 2.3.1, 4.1.4): the closest seed of every
 //! column of an active area, with a hashed neighbour order, and a brute-force reference.
 //!
 //! Data: a grid of `[seed_x, seed_y]` in map coordinates ([`NO_SEED`] when none is known),

@@ -1,16 +1,16 @@
-//! Volume-preserving granular deformation (seed 001 chapter 4): the CPU reference of every
+//! Volume-preserving granular deformation (Persson 2019 chapter 4): the CPU reference of every
 //! pass, in integer, deterministic, order-independent form that a compute shader reproduces
 //! bit for bit.
 //!
-//! Heights are a [`crate::FixedPointMap`] (u32, `x 10 000` by default, sec 4.3). One step, per
-//! [`ActiveArea`] (sec 4.5), runs:
-//! 1. [`depth_from_below`] (sec 4.1.2): lowest object surface over each column, in height units.
-//! 2. [`penetration_texture`] (sec 4.1.3, table 4.1): [`ColumnKind`] and penetration per column.
-//! 3. [`jump_flood`] (sec 2.3.1, 4.1.4): closest seed per column, hashed neighbour order (or,
+//! Heights are a [`crate::FixedPointMap`] (u32, `x 10 000` by default, sec. 4.3). One step, per
+//! [`ActiveArea`] (sec. 4.5), runs:
+//! 1. [`depth_from_below`] (sec. 4.1.2): lowest object surface over each column, in height units.
+//! 2. [`penetration_texture`] (sec. 4.1.3, table 4.1): [`ColumnKind`] and penetration per column.
+//! 3. [`jump_flood`] (sec. 2.3.1, 4.1.4): closest seed per column, hashed neighbour order (or,
 //!    on the CPU, the exact [`exact_nearest_seed`]; see [`DistanceTransform`]).
-//! 4. displacement (sec 4.1.4): [`displace_iterative`], [`displace_closest_seed`] or
+//! 4. displacement (sec. 4.1.4): [`displace_iterative`], [`displace_closest_seed`] or
 //!    [`displace_multiple_targets`].
-//! 5. slope evening (sec 4.1.5): [`even_out_slopes_interleaved`] or [`even_out_slopes_scatter`].
+//! 5. slope evening (sec. 4.1.5): [`even_out_slopes_interleaved`] or [`even_out_slopes_scatter`].
 //!
 //! Then [`symmetric_normals`] / [`blur_normals`] and [`float_heights`] for rendering.
 //! [`GranularSim`] chains the steps.

@@ -1,4 +1,4 @@
-//! Normals of the granular map by the symmetric difference (seed 001 eq. 4.3) with optional
+//! Normals of the granular map by the symmetric difference (Persson 2019, eq. 4.3) with optional
 //! 3x3 Gaussian blur passes (eq. 2.1), and the float copy of the heights for filtered rendering.
 
 use glam::{IVec2, Vec3};
@@ -8,7 +8,7 @@ use crate::Rect;
 use crate::{FixedPointMap, Grid, WrapMode};
 
 /// Heights in metres (f32) of `area` written into `out` (a grid of the map's size): the float
-/// copy used for hardware-filtered rendering (sec 4.1.6).
+/// copy used for hardware-filtered rendering (sec. 4.1.6).
 pub fn float_heights(
     map: &FixedPointMap,
     area: Rect,

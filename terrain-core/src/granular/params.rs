@@ -1,9 +1,9 @@
-//! User parameters of granular deformation (seed 001 table 4.4), method choices and presets
-//! (seed 001 figure captions 5.11-5.15).
+//! User parameters of granular deformation (Persson 2019, table 4.4), method choices and presets
+//! (Persson 2019 figure captions 5.11-5.15).
 
 use super::GranularError;
 
-/// Distance metric of the distance transform (seed 001 sec 2.3).
+/// Distance metric of the distance transform (Persson 2019, sec. 2.3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
@@ -17,7 +17,7 @@ pub enum DistanceMetric {
     Chebyshev,
 }
 
-/// How a step finds each column's nearest seed (seed 001 sec 4.1.4).
+/// How a step finds each column's nearest seed (Persson 2019, sec. 4.1.4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum DistanceTransform {
     /// Jump flooding with the hashed neighbour order ([`super::jump_flood`]): what the GPU
@@ -30,7 +30,7 @@ pub enum DistanceTransform {
     Exact,
 }
 
-/// How intersected material reaches the contour (seed 001 sec 4.1.4). A method carries the
+/// How intersected material reaches the contour (Persson 2019, sec. 4.1.4). A method carries the
 /// settings only it uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum DisplacementMethod {
@@ -49,7 +49,7 @@ pub enum DisplacementMethod {
 }
 
 impl DisplacementMethod {
-    /// The iterative method with the 10 passes of seed 001 table 5.3.
+    /// The iterative method with the 10 passes of Persson 2019, table 5.3.
     pub const fn iterative() -> Self {
         Self::Iterative { iterations: 10 }
     }
@@ -69,7 +69,7 @@ impl DisplacementMethod {
     }
 }
 
-/// How steep slopes are evened out (seed 001 sec 4.1.5).
+/// How steep slopes are evened out (Persson 2019, sec. 4.1.5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum SlopeMethod {
     /// Method 1: an amounts pass then an apply (gather) pass, senders alternating by
@@ -80,7 +80,7 @@ pub enum SlopeMethod {
     Scatter,
 }
 
-/// Parameters of granular deformation. Names follow seed 001 table 4.4 (sec 4.2);
+/// Parameters of granular deformation. Names follow Persson 2019, table 4.4 (sec. 4.2);
 /// `terrainSize`, `numVerticesPerRow` and `heightmapSize` belong to the map
 /// ([`crate::FixedPointMap`] size and texel size) and the renderer, not here;
 /// `numIterationsDisplaceMaterialToContour` belongs to the method that uses it
@@ -89,10 +89,10 @@ pub enum SlopeMethod {
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct GranularParams {
-    /// `compression` in `[0, 1]` (table 4.4, sec 4.1.4): share of intersected material that is
+    /// `compression` in `[0, 1]` (table 4.4, sec. 4.1.4): share of intersected material that is
     /// compressed (removed) instead of displaced; 0 keeps the volume exactly. Default 0.
     pub compression: f32,
-    /// `roughness` in `[0, 1]` (table 4.4, sec 4.1.5): scales the material moved when evening
+    /// `roughness` in `[0, 1]` (table 4.4, sec. 4.1.5): scales the material moved when evening
     /// out slopes; lower is smoother. Default 0.6 (figure 5.11).
     pub roughness: f32,
     /// `slopeThreshold` `>= 0` (table 4.4, eq. 4.1): columns even out with neighbours whose slope
@@ -106,14 +106,14 @@ pub struct GranularParams {
     /// `numIterations-BlurNormals` (table 4.4; default 1 from table 5.3).
     pub num_iterations_blur_normals: u32,
     /// Columns whose object bottom is at most this many metres above the terrain are
-    /// obstacles (sec 4.1.3, "just above the terrain"). Default 0.5 m.
+    /// obstacles (sec. 4.1.3, "just above the terrain"). Default 0.5 m.
     pub obstacle_margin_m: f32,
-    /// Texels added on every side of an object's footprint to form its active area (sec 4.5).
+    /// Texels added on every side of an object's footprint to form its active area (sec. 4.5).
     /// Default 8.
     pub active_area_margin: u32,
-    /// Active areas whose gap is at most this many texels are merged (sec 4.5). Default 4.
+    /// Active areas whose gap is at most this many texels are merged (sec. 4.5). Default 4.
     pub merge_distance: u32,
-    /// Distance metric of the jump flooding (sec 2.3, 4.1.4). Default Euclidean.
+    /// Distance metric of the jump flooding (sec. 2.3, 4.1.4). Default Euclidean.
     pub metric: DistanceMetric,
     /// Run one extra jump flooding pass with step 1 after the `log2 n` passes. Default true.
     pub jfa_extra_pass: bool,

@@ -1,4 +1,4 @@
-//! The penetration texture (seed 001 sec 4.1.3, table 4.1): which columns are seeds, obstacles
+//! The penetration texture (Persson 2019, sec. 4.1.3, table 4.1): which columns are seeds, obstacles
 //! or penetrated, and how deep.
 
 use super::{GranularError, NO_OBJECT, check_area};

@@ -10,7 +10,7 @@ use super::{
 };
 use crate::{FixedPointMap, Grid};
 
-/// Which columns a step simulates (sec 4.5).
+/// Which columns a step simulates (sec. 4.5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum AreaMode {
     /// One active area per object (footprint plus margin), nearby ones merged.

@@ -1,4 +1,4 @@
-//! Evening out steep slopes (seed 001 sec 4.1.5, eq. 4.1-4.2, after Sumner et al.): material
+//! Evening out steep slopes (Persson 2019, sec. 4.1.5, eq. 4.1-4.2, after Sumner et al.): material
 //! moves from a column down to neighbours it is too steep above, never into non-seed columns.
 //!
 //! Outflow of a column `c` with height `h_c` (the same in both methods): its receivers are the
@@ -73,22 +73,34 @@ fn outflow_of(hc: u32, mask: u8, hq: [u32; 8], roughness_q15: u32) -> (u32, u8) 
     if a == 0 { (0, 0) } else { (a, mask) }
 }
 
-/// [`column_outflow`] for every column of row `y` into `(amount, mask)` rows, with the seed
-/// test precomputed (`seed[q]` is 1 for seed columns); `only_parity` limits senders to map
-/// parity `(x + y) & 1` (others get `(0, 0)`). Interior columns take a branch-free path.
-#[allow(clippy::too_many_arguments)]
-fn outflow_row(
-    heights: &[u32],
-    seed: &[u8],
+/// What the outflow of every column of an area reads: its heights and seed flags (row-major,
+/// `size.0` wide; `seed[q]` is 1 for seed columns), and the step's thresholds and roughness.
+#[derive(Debug, Clone, Copy)]
+struct OutflowInput<'a> {
+    heights: &'a [u32],
+    seed: &'a [u8],
     size: (usize, usize),
-    y: usize,
     thresholds: [u32; 2],
     roughness_q15: u32,
+}
+
+/// [`column_outflow`] for every column of row `y` into `(amount, mask)` rows, with the seed
+/// test precomputed; `only_parity` limits senders to map parity `(x + y) & 1` (others get
+/// `(0, 0)`). Interior columns take a branch-free path.
+fn outflow_row(
+    input: &OutflowInput<'_>,
+    y: usize,
     only_parity: Option<(u32, i64)>,
     amount: &mut [u32],
     masks: &mut [u8],
 ) {
-    let (w, h) = size;
+    let OutflowInput {
+        heights,
+        seed,
+        size: (w, h),
+        thresholds,
+        roughness_q15,
+    } = *input;
     let t: [u32; 8] = JFA_OFFSETS.map(|[ox, oy]| thresholds[usize::from(ox != 0 && oy != 0)]);
     let rows = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
     let here = &heights[y * w..(y + 1) * w];
@@ -256,18 +268,15 @@ pub fn slope_amounts_pass(
     let base = i64::from(area.min.x) + i64::from(area.min.y);
     let mut amount = vec![0u32; w * h];
     let mut masks = vec![0u8; w * h];
+    let input = OutflowInput {
+        heights,
+        seed: &seed,
+        size: (w, h),
+        thresholds,
+        roughness_q15,
+    };
     crate::par::for_each_chunk2(&mut amount, w, &mut masks, w, |y, a, m| {
-        outflow_row(
-            heights,
-            &seed,
-            (w, h),
-            y,
-            thresholds,
-            roughness_q15,
-            Some((parity, base)),
-            a,
-            m,
-        )
+        outflow_row(&input, y, Some((parity, base)), a, m)
     });
     for (o, (a, m)) in out.iter_mut().zip(amount.into_iter().zip(masks)) {
         *o = (a, m);
@@ -352,18 +361,15 @@ fn scatter_pass_with(
     acc: &mut [u32],
 ) {
     let (w, h) = (area.size.x as usize, area.size.y as usize);
+    let input = OutflowInput {
+        heights,
+        seed,
+        size: (w, h),
+        thresholds,
+        roughness_q15,
+    };
     crate::par::for_each_chunk2(amount, w, masks, w, |y, a, m| {
-        outflow_row(
-            heights,
-            seed,
-            (w, h),
-            y,
-            thresholds,
-            roughness_q15,
-            None,
-            a,
-            m,
-        )
+        outflow_row(&input, y, None, a, m)
     });
     let (amount, masks) = (&*amount, &*masks);
     crate::par::for_each_chunk(acc, w, |y, row| {

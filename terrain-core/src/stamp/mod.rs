@@ -1,4 +1,4 @@
-//! Stamps (seed 000 sec 2.4.1, 3.2.1, 3.4): a pattern placed on a map by centre, rotation,
+//! Stamps (Flower 2010, sec. 2.4.1, 3.2.1, 3.4): a pattern placed on a map by centre, rotation,
 //! scale and intensity, blended into the region it covers. Texture stamps come from grayscale
 //! images, the Gaussian is procedural, the shockwave ([`crate::shockwave`]) is a dynamic
 //! texture, and users add their own procedural stamps by implementing [`Stamp`].
@@ -28,7 +28,7 @@ use kernels::apply_prepared;
 pub struct StampPlacement {
     /// Centre in world metres `(X, Z)`.
     pub center: Vec2,
-    /// Footprint size in metres along the stamp's own axes (seed 000's "scale"); positive.
+    /// Footprint size in metres along the stamp's own axes (Flower 2010's "scale"); positive.
     pub scale: Vec2,
     /// Rotation in radians: the stamp's local +X axis turns towards +Z.
     pub rotation: f32,
@@ -118,7 +118,7 @@ impl StampPlacement {
 /// How a stamp's heights combine with the map's.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum Blend {
-    /// Clamped additive blend (seed 000 sec 3.2.1): `h + intensity * value`, clamped to what
+    /// Clamped additive blend (Flower 2010, sec. 3.2.1): `h + intensity * value`, clamped to what
     /// the encoding can store.
     #[default]
     Add,
@@ -142,7 +142,7 @@ pub enum Blend {
 /// its result is multiplied by the placement's intensity. A NaN or infinite value leaves that
 /// texel unchanged.
 pub trait Stamp {
-    /// Per-placement setup before sampling (seed 000 sec 3.4.2's "pre-deform callback"), e.g.
+    /// Per-placement setup before sampling (Flower 2010, sec. 3.4.2's "pre-deform callback"), e.g.
     /// the Gaussian's falloff from the footprint size and intensity.
     fn prepare(&mut self, placement: &StampPlacement) -> Result<(), CoreError> {
         let _ = placement;
@@ -177,7 +177,7 @@ pub enum StampKernel<'a> {
     PerTexel,
 }
 
-/// A stamp from a grayscale image (seed 000 sec 3.4.1), sampled bilinearly.
+/// A stamp from a grayscale image (Flower 2010, sec. 3.4.1), sampled bilinearly.
 ///
 /// Which end is an impression: values run from 0 (black) to 1 (white) and are multiplied by
 /// the intensity, so white is the full effect and black none. A footprint image is white where
@@ -238,7 +238,7 @@ impl Stamp for TextureStamp {
     }
 }
 
-/// The Gaussian procedural stamp of seed 000 eq. 3.5, `alpha exp(-beta r^2)`, with `r = 1` at
+/// The Gaussian procedural stamp of Flower 2010, eq. 3.5, `alpha exp(-beta r^2)`, with `r = 1` at
 /// the middle of each footprint edge and `alpha` the placement's intensity.
 ///
 /// The falloff is chosen per placement so the value at the edge is `epsilon_m` metres (the

@@ -89,7 +89,7 @@ pub(super) fn detail_shading() -> DetailShading {
 impl GpuScene {
     /// Draws the coarse-map through a detail layer of `layout` from now on, and stamps the
     /// footprints into its tiles ([`GpuScene::stream_detail`] keeps them resident). With
-    /// `refine`, the cells near the camera are refined geometry (seed 000 sec. 2.4.3) and the
+    /// `refine`, the cells near the camera are refined geometry (Flower 2010, sec. 2.4.3) and the
     /// clipmap shades the rest with the detail normals; else the clipmap draws the detail by
     /// parallax occlusion mapping.
     pub fn enable_detail(&mut self, layout: DetailLayout, refine: bool) -> Result<()> {

@@ -37,7 +37,7 @@ use lod::{CdlodScene, TessScene, render_cdlod, render_tessellated};
 
 pub use terrain_gpu::Camera;
 
-/// Clipmap vertices per level side (seed 000 sec 3.3 uses 255).
+/// Clipmap vertices per level side (Flower 2010, sec. 3.3 uses 255).
 pub const CLIPMAP_N: u32 = 255;
 /// Clipmap levels, the inner grid included: 5 levels of N = 255 span 406 m at 0.1 m per texel,
 /// about twice the default map, so the toroidal repeat stays in the fog.

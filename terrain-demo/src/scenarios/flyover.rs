@@ -131,7 +131,7 @@ impl FlyoverScenario {
         let load_ms = ms_since(t);
         let budget = cli.ram_budget.saturating_mul(1 << 20);
         // The RAM selection reaches further than the VRAM pool's (3 tiles ahead per level), so
-        // what the GPU wants next is already in RAM (seed 004 sec 4.3).
+        // what the GPU wants next is already in RAM (Fikkan 2013, sec. 4.3).
         let grid = TileGrid::from_manifest(&manifest, Layer::Height);
         let mut spherical = SphericalSelection::for_grid(&grid);
         spherical.lod0_range *= 3.0;

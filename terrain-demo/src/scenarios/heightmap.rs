@@ -19,7 +19,7 @@ use terrain_core::{CoarseMap, HeightEncoding, TerrainParams, generate_coarse_map
 
 /// Side of the procedural terrain in texels by default (205 m at 0.1 m).
 pub const DEFAULT_SIZE: u32 = 2048;
-/// Metres per texel without `--texel-size` or a GeoTIFF pixel scale (seed 000's 0.1 m).
+/// Metres per texel without `--texel-size` or a GeoTIFF pixel scale (Flower 2010's 0.1 m).
 pub const DEFAULT_TEXEL_SIZE: f32 = 0.1;
 /// Heights of the procedural terrain without `--height-range` (metres).
 pub const PROCEDURAL_RANGE: (f32, f32) = (0.0, 12.0);

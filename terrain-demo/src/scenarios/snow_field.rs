@@ -1,5 +1,5 @@
 //! The snow field of the snow scenario: a four-wheeled vehicle and a walker cross it, deformed
-//! by volume-preserving granular deformation (seed 001): trails with raised rims.
+//! by volume-preserving granular deformation (Persson 2019): trails with raised rims.
 
 use anyhow::{Result, bail};
 use glam::{Affine3A, Quat, UVec2, Vec2, Vec3};
@@ -8,7 +8,7 @@ use terrain_core::{CoarseMap, FixedPointMap, Grid, HeightEncoding, Rect, Terrain
 
 /// Metres per texel of the snow field.
 pub const SNOW_TEXEL: f32 = 0.05;
-/// Fixed-point units per metre (seed 001 sec 4.3).
+/// Fixed-point units per metre (Persson 2019, sec. 4.3).
 const UNITS_PER_M: u32 = 10_000;
 /// Depth of the snow layer in metres, and the height of the gentle ground undulation under it.
 const SNOW_DEPTH: f32 = 0.5;

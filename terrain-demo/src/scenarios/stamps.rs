@@ -4,7 +4,7 @@
 //! regions, and a camera on it (`--camera`): walking behind the walker, or orbiting or flying
 //! over the whole map (the default with `--heightmap`).
 //!
-//! With `--detail parallax` or `refine` the footprints go into a detail layer instead (seed 000
+//! With `--detail parallax` or `refine` the footprints go into a detail layer instead (Flower 2010
 //! sec. 2.3: 8-bit tiles refined x3 over the coarse-map), held by a detail cache (the band
 //! regions around the camera, dirty tiles written back to `<out>/detail_world`). With a GPU they
 //! are stamped on its tiles and the stamped rects read back into the cache as they arrive
@@ -59,7 +59,7 @@ pub struct StampScenario {
     detail_mode: crate::cli::DetailArg,
 }
 
-/// Detail texels per coarse texel (seed 000's 1/gamma = 3).
+/// Detail texels per coarse texel (Flower 2010's 1/gamma = 3).
 pub const DETAIL_REFINE: u32 = 3;
 /// Detail tile side in detail texels (34 m at 3.3 cm; 4 MiB a GPU slot). The band regions hold
 /// the camera's tile and its neighbours on the camera's side, so the detail reaches at least

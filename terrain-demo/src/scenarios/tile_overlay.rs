@@ -1,5 +1,5 @@
 //! The flyover's overview overlay: the tile cache's states per level over the hillshade and
-//! the camera's view (seed 000 fig. 3.3 shows the same for its detail tiles). Level-0 tiles are
+//! the camera's view (Flower 2010, fig. 3.3 shows the same for its detail tiles). Level-0 tiles are
 //! tinted by state; the tiles of coarser levels the cache holds are outlined, so every level
 //! is visible at once; two lines from the camera show the horizontal field of view.
 //!

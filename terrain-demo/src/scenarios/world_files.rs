@@ -24,7 +24,7 @@ pub const DEFAULT_WORLD_SIZE: u32 = 16_384;
 pub const WORLD_TEXEL: f32 = 0.5;
 /// Height in metres of the largest stored value of the procedural world.
 pub const WORLD_MAX_HEIGHT: f32 = 200.0;
-/// Tile side in texels (seed 004's 256^2 blocks).
+/// Tile side in texels (Fikkan 2013's 256^2 blocks).
 pub const TILE_SIZE: u32 = 256;
 
 /// The largest manifest read: a real one is a few hundred bytes.

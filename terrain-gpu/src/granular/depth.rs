@@ -1,4 +1,4 @@
-//! `DepthFromBelowPass` (seed 001 sec 4.1.2): the objects rendered with an orthographic camera
+//! `DepthFromBelowPass` (Persson 2019, sec. 4.1.2): the objects rendered with an orthographic camera
 //! looking up from below the terrain over an active area, leaving per column the lowest object
 //! surface above it in fixed-point height units; the GPU side of
 //! [`terrain_core::granular::depth_from_below_into`].
@@ -142,7 +142,7 @@ impl DepthArea {
 }
 
 /// Renders [`GranularObject`]s from below over an active area into a `u32` per column
-/// (seed 001 sec 4.1.2); see the module docs for the method, its precision and its resources.
+/// (Persson 2019, sec. 4.1.2); see the module docs for the method, its precision and its resources.
 #[derive(Debug)]
 pub struct DepthFromBelowPass {
     pipeline: wgpu::RenderPipeline,

@@ -1,4 +1,4 @@
-//! GPU passes of volume-preserving granular deformation (seed 001 chapter 4), each the GPU side
+//! GPU passes of volume-preserving granular deformation (Persson 2019 chapter 4), each the GPU side
 //! of a step of `terrain_core::granular`.
 //!
 //! The integer passes ([`PenetrationPass`], [`JumpFloodPass`], [`DisplacePass`],

@@ -28,7 +28,7 @@ const _: () = assert!(std::mem::size_of::<NormalParams>() == 32);
 
 /// The normals of a granular map on the GPU: one `vec4<f32>` per map texel, row-major (unit
 /// normal xyz, height in metres in w: the float copy of the heights for filtered rendering,
-/// seed 001 sec 4.3), and the blur's scratch of the same size. Pairs with the grids of
+/// Persson 2019, sec. 4.3), and the blur's scratch of the same size. Pairs with the grids of
 /// [`terrain_core::granular::symmetric_normals`] and [`terrain_core::granular::float_heights`].
 #[derive(Debug)]
 pub struct GpuGranularNormals {

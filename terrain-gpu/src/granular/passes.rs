@@ -35,7 +35,7 @@ fn granular_bindings(
     PassBindings::new(device, label, wgpu::ShaderStages::COMPUTE, &storage)
 }
 
-/// Computes the penetration texture of an area (seed 001 table 4.1) from the map and the
+/// Computes the penetration texture of an area (Persson 2019, table 4.1) from the map and the
 /// area's depth from below in the scratch, as [`terrain_core::granular::penetration_texture`].
 #[derive(Debug)]
 pub struct PenetrationPass {
@@ -176,7 +176,7 @@ impl<'a> FloodedArea<'a> {
     }
 }
 
-/// Jump flooding of the closest seed over an area (seed 001 sec 2.3.1) with the hashed
+/// Jump flooding of the closest seed over an area (Persson 2019, sec. 2.3.1) with the hashed
 /// neighbour order, as [`terrain_core::granular::jump_flood`].
 #[derive(Debug)]
 pub struct JumpFloodPass {
@@ -260,7 +260,7 @@ impl JumpFloodPass {
     }
 }
 
-/// Displacement of intersected material to the contour (seed 001 sec 4.1.4), one method per
+/// Displacement of intersected material to the contour (Persson 2019, sec. 4.1.4), one method per
 /// [`DisplacementMethod`] variant: [`DisplacementMethod::ClosestSeed`] as
 /// [`terrain_core::granular::displace_closest_seed`] and
 /// [`DisplacementMethod::MultipleTargets`] as
@@ -400,7 +400,7 @@ impl DisplacePass {
 }
 
 /// The settings of slope evening over an area, in the integer form the passes and their CPU
-/// references take (seed 001 sec 4.1.5, eq. 4.1).
+/// references take (Persson 2019, sec. 4.1.5, eq. 4.1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SlopeSettings {
     /// `(orthogonal, diagonal)` height differences, in height units, above which material
@@ -424,7 +424,7 @@ impl SlopeSettings {
     }
 }
 
-/// Evening out steep slopes (seed 001 sec 4.1.5): [`SlopeMethod::Scatter`] as
+/// Evening out steep slopes (Persson 2019, sec. 4.1.5): [`SlopeMethod::Scatter`] as
 /// [`terrain_core::granular::even_out_slopes_scatter`] (one atomic scatter per iteration) and
 /// [`SlopeMethod::Interleaved`] as [`terrain_core::granular::even_out_slopes_interleaved`]
 /// (amounts then gather per parity).

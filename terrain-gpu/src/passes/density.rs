@@ -1,4 +1,4 @@
-//! `DensityPass`: curvature density maps (seed 002 ch. 3) on the GPU, into a `GpuDensityMap`
+//! `DensityPass`: curvature density maps (Cervin 2012, ch. 3) on the GPU, into a `GpuDensityMap`
 //! (level 0 before preprocessing as f32, and every pyramid level as one u32 per sample). The CPU
 //! reference is [`terrain_lod::DensityMap`]; both recompute the same regions after a deformation
 //! ([`terrain_lod::density::update_regions`]).

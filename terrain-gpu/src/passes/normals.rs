@@ -1,4 +1,4 @@
-//! `NormalPass`: regenerates partial-derivative normals (seed 000 eq. 3.3) in a dirty rect plus
+//! `NormalPass`: regenerates partial-derivative normals (Flower 2010, eq. 3.3) in a dirty rect plus
 //! its 2-texel apron, on the GPU.
 
 use crate::device::compute::{

@@ -142,7 +142,7 @@ impl GpuProceduralStamp {
 /// The stamp to apply.
 #[derive(Debug, Clone, Copy)]
 pub enum GpuStamp<'a> {
-    /// The Gaussian of seed 000 eq. 3.5 with its edge epsilon.
+    /// The Gaussian of Flower 2010, eq. 3.5 with its edge epsilon.
     Gaussian(&'a GaussianStamp),
     /// An uploaded texture stamp.
     Texture(&'a GpuTextureStamp),

@@ -543,7 +543,7 @@ pub enum ClipmapSurface<'a> {
         /// The normal-and-height buffer of the map.
         surface: &'a wgpu::Buffer,
     },
-    /// The resident tiles of a streamed world (seed 004 sec 5.6): each texel from the finest
+    /// The resident tiles of a streamed world (Fikkan 2013, sec. 5.6): each texel from the finest
     /// level resident in the atlas (a missing tile shows as its coarser ancestor, never as a
     /// hole), the world clamped at its edges (or wrapped, as its layout says), normals by
     /// central differences of those heights.
@@ -551,7 +551,7 @@ pub enum ClipmapSurface<'a> {
         /// The tile slots and indirection table.
         atlas: &'a GpuTileAtlas,
     },
-    /// A coarse-map with a detail layer (seed 000 sec. 2.3): the coarse grid displaced by the
+    /// A coarse-map with a detail layer (Flower 2010, sec. 2.3): the coarse grid displaced by the
     /// coarse heights, each fragment shaded at the point a parallax march through the detail
     /// heights finds, with the composite normal of eq. 3.4 (coarse and detail gradients
     /// added) and the detail's height in the colour ramp, the detail faded out with distance.

@@ -1,4 +1,4 @@
-//! Refined geometry for a detail layer (seed 000 sec. 2.4.3, `--detail refine`): the coarse
+//! Refined geometry for a detail layer (Flower 2010, sec. 2.4.3, `--detail refine`): the coarse
 //! cells around the camera split by the refinement patterns of eq. 2.2 (fig. 2.7) and displaced
 //! by coarse + detail height. wgpu has no geometry or tessellation stage, so [`RefinePass`]
 //! does the geometry shader's work in a compute shader (`refine.wgsl`): one thread per base

@@ -1,4 +1,4 @@
-//! Adaptive tessellation on the GPU (seed 002 sec. 2.3, algorithm 3.1) as compute work: wgpu
+//! Adaptive tessellation on the GPU (Cervin 2012, sec. 2.3, algorithm 3.1) as compute work: wgpu
 //! has no tessellation stage, so [`TessellationPass`] refines every patch's two triangles by
 //! longest-edge bisection in a compute shader (`tessellate.wgsl`), appends the triangles it
 //! keeps to a vertex buffer and writes the indirect draw arguments; [`TessRenderer`] draws them

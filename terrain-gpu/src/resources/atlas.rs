@@ -1,4 +1,4 @@
-//! `GpuTileAtlas`: the VRAM side of the tile cache (seed 004 sec 4.2, 5.6) — a fixed number of
+//! `GpuTileAtlas`: the VRAM side of the tile cache (Fikkan 2013, sec. 4.2, 5.6) — a fixed number of
 //! tile slots in one storage buffer of u32 heights and an indirection table over every tile of
 //! every level of the world, implementing terrain-core's [`TileUploadTarget`] — and
 //! `AtlasProbe`, which reads back what the atlas surface of the clipmap renderer sees at given

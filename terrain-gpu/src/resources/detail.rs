@@ -1,4 +1,4 @@
-//! `GpuDetailTiles`: the VRAM side of terrain-core's detail layer (seed 000 sec. 2.3.1): a fixed
+//! `GpuDetailTiles`: the VRAM side of terrain-core's detail layer (Flower 2010, sec. 2.3.1): a fixed
 //! number of tile slots in one storage buffer (a u32 per detail texel, as every map of the
 //! crate) and the slot of each tile of the layout. [`crate::StampPass::encode_detail`] stamps
 //! them; the CPU reference is [`terrain_core::detail::DetailLayer`].

@@ -1,4 +1,4 @@
-//! CDLOD (seed 002 sec. 1.1.4, after Strugar 2010): a quadtree over the heightfield with the
+//! CDLOD (Cervin 2012, sec. 1.1.4, after Strugar 2010): a quadtree over the heightfield with the
 //! min / max heights and the geometric error of every node, a LOD range table, selection with
 //! frustum culling and partial selection of children, one shared grid mesh drawn instanced per
 //! selected quadrant, and the per-vertex morph that makes LOD changes continuous.
@@ -26,7 +26,7 @@ use terrain_core::{HeightMap, HeightSample, Rect, WrapMode};
 mod morph_reference;
 mod streamed;
 
-pub use morph_reference::morphed_vertex;
+pub use morph_reference::{JumpProbes, morphed_vertex};
 
 /// The largest number of LODs.
 pub const MAX_CDLOD_LODS: u32 = 16;
@@ -41,9 +41,9 @@ pub const MAX_VISITED_NODES: usize = 1 << 20;
 #[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum LodMetric {
     /// Distance ranges: LOD `l` is used up to `finest_range * range_ratio^l` metres (each range
-    /// twice the previous by default; seed 002 fig. 1.1).
+    /// twice the previous by default; Cervin 2012, fig. 1.1).
     Distance,
-    /// Chunked LOD's screen-space error (seed 002 eq. 1.1-1.2): `rho = delta / D * K` with
+    /// Chunked LOD's screen-space error (Cervin 2012, eq. 1.1-1.2): `rho = delta / D * K` with
     /// `K = width / (2 tan(hfov / 2))`; LOD `l` is used from the distance where its largest
     /// geometric error `delta_l` projects to `tau` pixels, `D = delta_l K / tau`, up to the
     /// view distance of the distance table (`finest_range * range_ratio^(lod_count - 1)`).
@@ -53,7 +53,7 @@ pub enum LodMetric {
     },
 }
 
-/// Parameters of the quadtree and its range table (seed 002 sec. 1.1.4).
+/// Parameters of the quadtree and its range table (Cervin 2012, sec. 1.1.4).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(default, deny_unknown_fields))]
@@ -177,7 +177,7 @@ pub struct CdlodView<'a> {
 }
 
 impl CdlodView<'_> {
-    /// `K = width / (2 tan(hfov / 2))` of seed 002 eq. 1.2.
+    /// `K = width / (2 tan(hfov / 2))` of Cervin 2012, eq. 1.2.
     pub fn k(&self) -> f32 {
         self.viewport_width / (2.0 * (self.hfov * 0.5).tan())
     }
@@ -631,7 +631,7 @@ impl CdlodTree {
             .unwrap_or(0.0)
     }
 
-    /// Selects the nodes to draw for `view` (seed 002 fig. 1.2): from the roots, a node whose
+    /// Selects the nodes to draw for `view` (Cervin 2012, fig. 1.2): from the roots, a node whose
     /// box reaches its range is refined where its children reach theirs; quadrants whose
     /// child is out of its range are drawn by the node itself; boxes outside the frustum are
     /// dropped. On a repeating map the roots repeat around the camera up to the view distance.
@@ -792,7 +792,7 @@ impl CdlodTree {
 impl CdlodTree {
     /// The largest projected geometric error of what `frame` draws, in pixels: per drawn
     /// quadrant its node's error over the quadrant's nearest distance to the camera, times `K`
-    /// (seed 002 eq. 1.1). A bound of the error of the drawn (unmorphed) mesh against the
+    /// (Cervin 2012, eq. 1.1). A bound of the error of the drawn (unmorphed) mesh against the
     /// full-resolution map, computed on the CPU.
     pub fn max_screen_error_px(&self, frame: &CdlodFrame, view: &CdlodView<'_>) -> f32 {
         let k = view.k();

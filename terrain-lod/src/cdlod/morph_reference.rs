@@ -3,7 +3,7 @@
 //! surface between two frames' selections.
 
 use super::{CdlodFrame, CdlodInstance, LodRanges};
-use glam::{IVec2, Vec2, Vec3};
+use glam::{IVec2, Mat4, Vec2, Vec3};
 
 /// Where the vertex at grid position `grid` of `instance` is drawn: its texel position
 /// (fractional once morphed) and height, with the camera at `camera` (metres) and heights from
@@ -41,6 +41,19 @@ pub fn morphed_vertex(
         a + (b - a) * f.y
     };
     (t, morphed)
+}
+
+/// Where [`CdlodFrame::max_height_jump`] measures and how it projects: the probes (texel
+/// positions, unwrapped as the instances), and today's camera, `view_proj` from world metres
+/// to clip space onto a render target of `target` pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JumpProbes<'a> {
+    /// Texel positions where the surface is compared.
+    pub probes: &'a [Vec2],
+    /// World metres to clip space (wgpu's, y up).
+    pub view_proj: Mat4,
+    /// The render target's size in pixels.
+    pub target: Vec2,
 }
 
 impl CdlodFrame {
@@ -97,22 +110,23 @@ impl CdlodFrame {
     }
 
     /// The popping metric: the largest screen-space jump, in pixels, of the surface between
-    /// `previous` (its frame, camera) and this frame at `probes` (texel positions), both
-    /// evaluated on today's heights and projected with today's `view_proj` (world metres) onto
-    /// a target `width` x `height` pixels, so neither the camera's motion nor a deformation
-    /// counts: only a change of the mesh does.
-    #[allow(clippy::too_many_arguments)]
+    /// `previous` (its frame, camera) and this frame at the `probes`, both evaluated on today's
+    /// heights and projected with today's camera (see [`JumpProbes`]), so neither the camera's
+    /// motion nor a deformation counts: only a change of the mesh does.
     pub fn max_height_jump(
         &self,
         camera: Vec3,
         previous: (&CdlodFrame, Vec3),
-        probes: &[Vec2],
+        probes: &JumpProbes<'_>,
         grid_size: u32,
         texel_size: f32,
-        view_proj: glam::Mat4,
-        target: Vec2,
         height: impl Fn(IVec2) -> f32,
     ) -> f32 {
+        let JumpProbes {
+            probes,
+            view_proj,
+            target,
+        } = *probes;
         let project = |p: Vec3| {
             let c = view_proj * p.extend(1.0);
             (c.w > 1e-6).then(|| (Vec2::new(c.x, -c.y) / c.w * 0.5 + 0.5) * target)

@@ -1,10 +1,10 @@
-//! Builds the shared clipmap mesh: one vertex range per pattern of seed 000 eq. 3.1, and the
+//! Builds the shared clipmap mesh: one vertex range per pattern of Flower 2010, eq. 3.1, and the
 //! index ranges of every part.
 
 use super::{ClipmapMesh, ClipmapVertex, MeshPart, PartKind, TrimSide};
 use glam::{I64Vec2, IVec2};
 
-/// Number of vertices of the shared mesh, seed 000 eq. 3.1: `M^2 + 12M + N^2 + 6N - 1`.
+/// Number of vertices of the shared mesh, Flower 2010, eq. 3.1: `M^2 + 12M + N^2 + 6N - 1`.
 pub(super) fn eq_3_1(n: u32, m: u32) -> u32 {
     m * m + 12 * m + n * n + 6 * n - 1
 }

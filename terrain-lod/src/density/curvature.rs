@@ -1,4 +1,4 @@
-//! The five curvature filters of seed 002 sec. 3.3.1 on one texel of a heightfield, from the
+//! The five curvature filters of Cervin 2012, sec. 3.3.1 on one texel of a heightfield, from the
 //! height differences of its 3 x 3 neighbourhood (eq. 2.19, 2.26, 2.27, 2.30-2.32).
 //!
 //! Every filter returns a curvature magnitude in 1 / metre: the Laplacian `|h_xx + h_yy|`
@@ -8,7 +8,7 @@
 //! one-ring of the grid's triangulation, divided by the barycentric (triangle) area or by the
 //! Voronoi area of eq. 2.32.
 
-/// A curvature filter of seed 002 sec. 3.3.1, in the order of its table 4.1.
+/// A curvature filter of Cervin 2012, sec. 3.3.1, in the order of its table 4.1.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
@@ -30,7 +30,7 @@ pub enum CurvatureFilter {
 }
 
 impl CurvatureFilter {
-    /// Every filter, in the order of seed 002 table 4.1.
+    /// Every filter, in the order of Cervin 2012, table 4.1.
     pub const ALL: [CurvatureFilter; 5] = [
         CurvatureFilter::Laplace,
         CurvatureFilter::Gaussian,
@@ -104,7 +104,7 @@ pub fn curvature(filter: CurvatureFilter, d: &Neighbourhood, spacing: f32) -> f3
     if v.is_finite() { v } else { 0.0 }
 }
 
-/// Central differences: `(h_x, h_y, h_xx, h_yy, h_xy)` (seed 002 eq. 3.1-3.5).
+/// Central differences: `(h_x, h_y, h_xx, h_yy, h_xy)` (Cervin 2012, eq. 3.1-3.5).
 fn derivatives(d: &Neighbourhood, spacing: f32) -> (f32, f32, f32, f32, f32) {
     let inv = 1.0 / spacing;
     let inv2 = inv * inv;

@@ -1,4 +1,4 @@
-// Granular deformation (seed 001 sec 4.1.2): depth of objects seen from below.
+// Granular deformation (Persson 2019, sec. 4.1.2): depth of objects seen from below.
 //
 // An orthographic view looking up (+Y) over the active area. The CPU uploads every triangle in
 // area-relative texel units (u, v) = (X / texel_size - area.min.x, Z / texel_size - area.min.y),

@@ -1,4 +1,4 @@
-// Displacement of intersected material to the contour (seed 001 sec 4.1.4), bit for bit as
+// Displacement of intersected material to the contour (Persson 2019, sec. 4.1.4), bit for bit as
 // terrain_core::granular::{displace_closest_seed, displace_multiple_targets,
 // displace_iterative}: every column adds its contributions to `acc` with atomic adds (wrapping
 // u32, so the order does not matter), then `writeback` moves `acc` into the map's heights and

@@ -1,4 +1,4 @@
-// JumpFloodPass: jump flooding of the closest seed over an active area (seed 001 sec 2.3.1,
+// JumpFloodPass: jump flooding of the closest seed over an active area (Persson 2019, sec. 2.3.1,
 // 4.1.4) with the hashed neighbour order of terrain_core::granular::jfa_neighbour_order,
 // bit for bit as terrain_core::granular::jfa_pass. `init` copies the seeds of the penetration
 // texture (jfa_init); `main` is one pass reading `src` and writing `dst` (ping-pong).

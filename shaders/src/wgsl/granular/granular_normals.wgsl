@@ -1,8 +1,8 @@
-// GranularNormalsPass: normals of the granular map by the symmetric difference (seed 001
+// GranularNormalsPass: normals of the granular map by the symmetric difference (Persson 2019
 // eq. 4.3, edges clamped) and 3x3 Gaussian blur passes, as
 // terrain_core::granular::{symmetric_normals, blur_normals} within a float tolerance.
 // Output per map texel, row-major: vec4<f32>(unit normal xyz, height in metres): the float
-// copy of the heights for filtered rendering (seed 001 sec 4.3).
+// copy of the heights for filtered rendering (Persson 2019, sec. 4.3).
 
 struct NormalParams {
     area_min: vec2<u32>,

@@ -1,4 +1,4 @@
-// PenetrationPass: the penetration texture of an active area (seed 001 sec 4.1.3, table 4.1),
+// PenetrationPass: the penetration texture of an active area (Persson 2019, sec. 4.1.3, table 4.1),
 // bit for bit as terrain_core::granular::penetration_texture.
 
 // The uniform block shared by the granular integer passes (GranularUniform in Rust).

@@ -1,4 +1,4 @@
-// Evening out steep slopes (seed 001 sec 4.1.5), bit for bit as
+// Evening out steep slopes (Persson 2019, sec. 4.1.5), bit for bit as
 // terrain_core::granular::{slope_scatter_pass, slope_amounts_pass, slope_apply_pass}.
 // Scatter: `scatter` adds every column's remainder and outflow to `acc` with atomic adds, then
 // `writeback` moves `acc` into the heights (leaving it zeroed). Interleaved: `amounts` writes

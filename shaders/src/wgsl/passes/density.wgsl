@@ -1,4 +1,4 @@
-// DensityPass: the density map of seed 002 ch. 3 (CPU reference: terrain_lod::density).
+// DensityPass: the density map of Cervin 2012, ch. 3 (CPU reference: terrain_lod::density).
 // `raw`: a curvature filter at every texel of a sample's 6 x 6 window (the max-downsampling by
 // 4 with the one-sample overlap), normalised by the spacing. `finish`: the preprocessing max
 // filter (a wider window on tile borders, eq. 3.8), gain and exponent, quantised to u8.

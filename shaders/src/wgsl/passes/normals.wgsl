@@ -1,4 +1,4 @@
-// NormalPass: partial-derivative normals by the 4th-order difference of seed 000 eq. 3.3,
+// NormalPass: partial-derivative normals by the 4th-order difference of Flower 2010, eq. 3.3,
 // h'(x) = (h(x-2) - 8 h(x-1) + 8 h(x+1) - h(x+2)) / (12 xi), over a region only.
 
 struct NormalParams {

@@ -1,6 +1,6 @@
 // StampPass: applies one stamp to a height buffer (one u32 per texel), in place.
 // Each invocation reads and writes only its own texel, so no backup copy of the map is needed
-// (seed 000 measured its backup copy as the deformation bottleneck).
+// (Flower 2010 measured its backup copy as the deformation bottleneck).
 
 struct StampParams {
     // Footprint in unwrapped texel coordinates: invocation (i, j) handles region_min + (i, j).

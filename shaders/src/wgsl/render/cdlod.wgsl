@@ -1,4 +1,4 @@
-// CdlodRenderer: CDLOD quadrants (seed 002 sec. 1.1.4) drawn with clipmap.wgsl's frame, surface
+// CdlodRenderer: CDLOD quadrants (Cervin 2012, sec. 1.1.4) drawn with clipmap.wgsl's frame, surface
 // and fragment shader; this file adds the vertex shader with Strugar's per-vertex morph. CPU
 // reference: terrain_lod::cdlod::morphed_vertex.
 

@@ -1,5 +1,5 @@
 // ClipmapRenderer: geometry clipmap blocks displaced by the coarse-map (GPU Gems 2 ch. 2,
-// seed 000 sec 3.1.3), lit with the partial-derivative normals (diffuse + Phong specular) and
+// Flower 2010, sec. 3.1.3), lit with the partial-derivative normals (diffuse + Phong specular) and
 // coloured by height and slope. A surface with a detail layer adds its height and gradient in
 // the fragment shader (`fragment_detail`; the normal is eq. 3.4's composite).
 

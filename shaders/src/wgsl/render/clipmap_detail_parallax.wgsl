@@ -38,7 +38,7 @@ fn fragment_detail(q: vec2<f32>, world: vec3<f32>, view_dist: f32) -> FragmentDe
             return FragmentDetail(DetailSample(0.0, vec2<f32>(0.0, 0.0)), q);
         }
         // Linear search from the top of the detail range down, then the crossing of the last
-        // step interpolated linearly (seed 000 sec. 3.2.4's parallax, as a march).
+        // step interpolated linearly (Flower 2010, sec. 3.2.4's parallax, as a march).
         let steps = detail.parallax_steps;
         let dr = (top - bottom) / f32(steps);
         var r_prev = top;

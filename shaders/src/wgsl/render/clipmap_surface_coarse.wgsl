@@ -1,5 +1,5 @@
 // Clipmap surface of a coarse-map: stored heights (u32 per texel, metres = offset + scale *
-// stored) and partial-derivative normals (vec2<f32> gradients, seed 000 eq. 3.3).
+// stored) and partial-derivative normals (vec2<f32> gradients, Flower 2010, eq. 3.3).
 
 @group(0) @binding(1) var<storage, read> heights: array<u32>;
 @group(0) @binding(2) var<storage, read> derivatives: array<vec2<f32>>;

@@ -1,4 +1,4 @@
-// Clipmap surface of a granular map, straight from GranularNormalsPass's output (seed 001 sec
+// Clipmap surface of a granular map, straight from GranularNormalsPass's output (Persson 2019, sec.
 // 4.1.6 and 4.3): per texel vec4(unit normal xyz, height in metres): the float copy of the
 // fixed-point heights, so the renderer filters floats and never reads the integers.
 

@@ -1,4 +1,4 @@
-// RefinePass and RefineRenderer (seed 000 sec. 2.4.3, eq. 2.2, fig. 2.7): the coarse cells
+// RefinePass and RefineRenderer (Flower 2010, sec. 2.4.3, eq. 2.2, fig. 2.7): the coarse cells
 // around the camera as two triangles each, every triangle split by the refinement pattern of
 // its vertices' flags into sub-triangles displaced by coarse + detail height, appended to a
 // vertex buffer with the indirect draw arguments; then drawn with clipmap.wgsl's frame,

@@ -1,4 +1,4 @@
-// TessellationPass: adaptive tessellation by longest-edge bisection (seed 002 sec. 2.3,
+// TessellationPass: adaptive tessellation by longest-edge bisection (Cervin 2012, sec. 2.3,
 // algorithm 3.1), as compute: one invocation per level-0 triangle (two per patch) refines it
 // depth first and appends the triangles it keeps to a vertex buffer, then `finish` writes the
 // indirect draw arguments. CPU reference: terrain_lod::TessHierarchy::select (same decisions,

@@ -5,7 +5,7 @@ struct DetailSample {
     gradient: vec2<f32>,
 }
 
-// The composite normal of seed 000 eq. 3.4: coarse and detail derivatives add, so no tangent
+// The composite normal of Flower 2010, eq. 3.4: coarse and detail derivatives add, so no tangent
 // space is needed. CPU reference: terrain_core::composite_normal.
 fn composite_normal(coarse: vec2<f32>, detail: vec2<f32>) -> vec3<f32> {
     let d = coarse + detail;

@@ -1,4 +1,4 @@
-// GpuDetailTiles as shaders read them (seed 000 sec. 2.3.1): the tile-slot table and the slots
+// GpuDetailTiles as shaders read them (Flower 2010, sec. 2.3.1): the tile-slot table and the slots
 // of raw u8 detail values (one u32 each), with bilinear heights and eq. 3.3 gradients across
 // tile edges and the layer's wrap. CPU reference: terrain_core::detail::DetailLayer's
 // height_m and gradient_m.

@@ -1,4 +1,4 @@
-// Tile atlas lookup (seed 004 sec 4.2, 5.6): tile slots of u32 heights and an indirection
+// Tile atlas lookup (Fikkan 2013, sec. 4.2, 5.6): tile slots of u32 heights and an indirection
 // table over every tile of every level of the world (a slot, or INVALID_SLOT). A level-0 texel
 // t reads the finest level l whose tile covering t >> l is resident, so a missing tile shows as
 // a coarser one, never as a hole. CPU reference: terrain_core::TileAtlas::stored_at.

@@ -11,7 +11,7 @@ use terrain_core::{
     generate_coarse_map,
 };
 
-/// Metres per texel (seed 000's 0.1 m, as the demo).
+/// Metres per texel (Flower 2010's 0.1 m, as the demo).
 pub const TEXEL_SIZE: f32 = 0.1;
 /// Heights the procedural terrain spans (metres).
 pub const HEIGHT_RANGE: (f32, f32) = (0.0, 12.0);
