@@ -1,8 +1,8 @@
 //! `cargo xtask tidy` (and ci's first step): rules about the repository's tracked files that
 //! neither the compiler nor clippy checks, each a cheap text scan. It keeps clippy's
 //! argument-count lint unsilenced, the fuzz harness in one shared crate instead of copies, the
-//! repository standing alone (crates are top-level folders, nothing outside it is named), and
-//! source files small enough to read. Every problem is reported as `file:line: why`.
+//! repository standing alone (crates are top-level folders, nothing outside it is named),
+//! source files small enough to read, and the theses cited by author and year. Every problem is reported as `file:line: why`.
 
 use crate::util::root;
 use anyhow::{Context, Result, bail};
@@ -113,6 +113,7 @@ pub fn check(files: &[TrackedFile]) -> Vec<Problem> {
             problems.extend(argument_lint_allowances(&f.path, &f.text));
         }
         problems.extend(outside_paths(&f.path, &f.text));
+        problems.extend(theses_by_number(&f.path, &f.text));
     }
     problems.extend(harness_copies(&others));
     for f in files {
@@ -209,6 +210,31 @@ fn outside_paths(path: &str, text: &str) -> Vec<Problem> {
                 path: path.to_owned(),
                 line: line_of(text, i),
                 message: "names a path under `crates/`: the crates are top-level folders".into(),
+            });
+        }
+    }
+    problems
+}
+
+/// Rule (e): a thesis cited by its number in the project's seed list ("seed 000") instead
+/// of by author and year ("Flower 2010, sec. 3.2"): the number means nothing to a reader
+/// without docs/REFERENCES.md at hand.
+fn theses_by_number(path: &str, text: &str) -> Vec<Problem> {
+    let lower = text.to_ascii_lowercase();
+    let mut problems = Vec::new();
+    for (i, _) in lower.match_indices("seed") {
+        let rest = &lower.as_bytes()[i + 4..];
+        let numbered = rest.len() >= 4
+            && matches!(rest[0], b' ' | b'-')
+            && rest[1..4].iter().all(u8::is_ascii_digit)
+            && rest.get(4).is_none_or(|c| !c.is_ascii_digit());
+        if numbered {
+            problems.push(Problem {
+                path: path.to_owned(),
+                line: line_of(text, i),
+                message: "cites a thesis by number: cite it by author and year with the section \
+                          (e.g. `Flower 2010, sec. 3.2.1`; docs/REFERENCES.md)"
+                    .into(),
             });
         }
     }
@@ -323,6 +349,18 @@ mod tests {
             "../shared crates/x #[allow(clippy::too_many_arguments)]\n",
         );
         assert_eq!(check(&[me]), []);
+    }
+
+    #[test]
+    fn theses_cited_by_number_are_found_and_rng_seeds_are_not() {
+        let text =
+            "// as in Seed 001 sec. 4\nlet seed = 42; // --seed 7, seed 12345\n// seed-002\n";
+        let lines: Vec<usize> = theses_by_number("a.rs", text)
+            .iter()
+            .map(|p| p.line)
+            .collect();
+        assert_eq!(lines, vec![1, 3]);
+        assert!(theses_by_number("b.md", "Flower 2010, sec. 3.2.1; seed 7").is_empty());
     }
 
     #[test]
