@@ -1,26 +1,11 @@
 //! The spill rule of the detail layer: what a detail stamp pushes beyond a tile's 1 m range
 //! moves into the coarse-map instead of being clipped.
 //!
-//! **The rule.** A detail stamp is evaluated on a wide window (the same 1/255 m units, but
-//! ±128 m of range), so every detail texel `q` gets its unclamped value. The part beyond the
-//! tile's range is its *excess* `e_q = v_q - clamp(v_q, 0, 255)` (detail units); the tile keeps
-//! the clamped value. The excess goes to the coarse-map by the transpose of the bilinear
-//! interpolation that carries coarse heights onto the detail grid (full-weighting restriction):
-//! coarse texel `C` is raised by
-//!
-//! ```text
-//! delta_C = sum_q (w(q - r C) / r^2) e_q / r^2      w(d) = (r - |d.x|)(r - |d.y|) for |d| < r
-//! ```
-//!
-//! detail units, `r` the refinement (detail texels per coarse texel), converted to the
-//! coarse-map's units and rounded half up. The tents `w / r^2` of the coarse texels add up to 1
-//! at every detail texel, and a coarse texel covers `r^2` detail texels' area (the second
-//! `/ r^2`), so the volume moved into the coarse-map is the excess's volume to
-//! the coarse encoding's rounding (half a unit per coarse texel): nothing is clipped, and the
-//! coarse-map holds the excess smoothed to its own resolution, while the tile keeps the mark's
-//! sharp shape up to its range. A coarse texel beyond a clamped coarse-map's edge gets nothing
-//! (its share is lost); on a repeating one the rect wraps. Excess beyond ±128 m of the tile's
-//! range is clamped (a detail stamp is a fine mark).
+//! A detail stamp is evaluated unclamped; the tile keeps what its range holds and the excess
+//! goes to the coarse-map by the transpose of the bilinear interpolation that carries coarse
+//! heights onto the detail grid, so the volume is kept to the coarse encoding's rounding (half
+//! a unit per coarse texel) and nothing is clipped. The rule and why it keeps the volume are
+//! derived in the repository's `docs/derivations.md` ("The detail layer's spill").
 //!
 //! A coarse texel at the end of the coarse encoding's range clamps, as under any stamp.
 //!

@@ -3,43 +3,12 @@
 //! surface above it in fixed-point height units; the GPU side of
 //! [`terrain_core::granular::depth_from_below_into`].
 //!
-//! # Why a storage buffer and not a depth attachment
-//!
-//! Each fragment computes its height in the map's u32 units and keeps the lowest with
-//! `atomicMin` into a `u32` storage buffer, one element per column of the area (row-major),
-//! cleared to [`NO_OBJECT`] first. A `Depth32Float` attachment would have to map the objects'
-//! whole vertical span to `0..1` with 24 bits of mantissa (under 1 unit only for spans below
-//! about 1.6 km at the default 10 000 units per metre) and be copied and converted afterwards;
-//! `R32Float` colour targets are not renderable on GL. The buffer is exact to the unit, needs no
-//! depth range, and is already in the layout the next pass (penetration) reads. It needs
-//! fragment-stage storage writes ([`wgpu::DownlevelFlags::FRAGMENT_WRITABLE_STORAGE`]), which
-//! Vulkan (lavapipe included) and GL 4.3 / GLES 3.1 (llvmpipe included) have; ask
-//! [`DepthFromBelowPass::is_supported`] first, as [`DepthFromBelowPass::new`] can only report
-//! their absence as an error. The render pass still needs one attachment (wgpu
-//! refuses attachment-less passes): a small `R8Unorm` colour target per tile, never read.
-//!
-//! # Pixel centres
-//!
-//! The CPU reference samples column `(x, y)` at world `(x * texel_size, y * texel_size)` in X
-//! and Z. Vertices are uploaded in area-relative texel units
-//! `(u, v) = (X / texel_size - area.min.x, Z / texel_size - area.min.y)` (computed in f64), and
-//! the vertex shader maps `(u, v)` to framebuffer `(u + 0.5, v + 0.5)` (minus the tile origin):
-//! the centre of pixel `(i, j)` is exactly the sample point of column `area.min + (i, j)`.
-//! Framebuffer y grows with world Z, so the rasterizer's top-left rule (Vulkan, D3D, Metal)
-//! resolves samples on shared edges as the CPU reference does. Culling is off: the lowest
-//! surface counts whatever its winding. Hardware snaps vertices to sub-pixel precision (8 bits
-//! on lavapipe), so columns within a fraction of a texel of a triangle edge may differ in
-//! coverage from the exact CPU rasterizer; columns inside agree within one unit.
-//!
-//! # Heights
-//!
-//! Per triangle, `base` = `floor` of its lowest vertex in units (`(y - offset) / scale`, f64,
-//! clamped to `0 ..= NO_OBJECT - 1`) travels as a flat `u32`, and each vertex's units minus
-//! `base` as an interpolated f32, so precision follows the triangle's own height span rather
-//! than its absolute height. The fragment floors, saturates and adds, as the CPU reference's
-//! `floor((y - offset) / scale)` clamped to `0 ..= NO_OBJECT - 1`.
-//!
-//! Areas larger than the device's largest texture (or 4096 texels) are rendered in tiles.
+//! Each fragment keeps the lowest height per column with `atomicMin` into a `u32` storage
+//! buffer, exact to the unit (fragment-stage storage writes: ask
+//! [`DepthFromBelowPass::is_supported`]); pixel centres are the CPU reference's sample points,
+//! and heights travel relative to each triangle's lowest vertex. Why a buffer and not a depth
+//! attachment, and how pixel centres and heights match the CPU reference, is derived in the
+//! repository's `docs/derivations.md` ("Depth from below on the GPU").
 //!
 //! # Resources
 //!
