@@ -91,24 +91,19 @@ fn bench(c: &mut Criterion) {
             style: &style,
             target_size: size,
         };
+        let mut frame_time = || {
+            let t = timer.time(device, queue, |encoder| {
+                // Per frame: write the uniforms and instances, record the draws.
+                renderer.prepare(device, queue, &view)?;
+                let mut pass = target.begin_pass(encoder, wgpu::Color::BLACK);
+                sky.draw(&mut pass);
+                renderer.draw(&mut pass);
+                Ok(())
+            });
+            Duration::from_secs_f64(t.expect("render").ms / 1e3)
+        };
         group.bench_function(BenchmarkId::new("1024x768_levels", levels), |b| {
-            b.iter_custom(|iters| {
-                (0..iters)
-                    .map(|_| {
-                        let t = timer
-                            .time(device, queue, |encoder| {
-                                // Per frame: write the uniforms and instances, record the draws.
-                                renderer.prepare(device, queue, &view)?;
-                                let mut pass = target.begin_pass(encoder, wgpu::Color::BLACK);
-                                sky.draw(&mut pass);
-                                renderer.draw(&mut pass);
-                                Ok(())
-                            })
-                            .expect("render");
-                        Duration::from_secs_f64(t.ms / 1e3)
-                    })
-                    .sum()
-            })
+            b.iter_custom(|iters| (0..iters).map(|_| frame_time()).sum())
         });
     }
     group.finish();

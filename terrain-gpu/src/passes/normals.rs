@@ -113,13 +113,7 @@ impl NormalPass {
         map: &GpuHeightMap<T>,
         out: &GpuDerivativeMap,
     ) -> Result<(), GpuError> {
-        self.encode(
-            device,
-            queue,
-            encoder,
-            map,
-            out,
-            Rect::from_size(map.size()),
-        )
+        let whole = Rect::from_size(map.size());
+        self.encode(device, queue, encoder, map, out, whole)
     }
 }
