@@ -44,7 +44,8 @@ pub mod hillshade;
 pub mod io;
 pub mod map;
 pub mod normals;
-mod par;
+#[doc(hidden)]
+pub mod par;
 pub mod readback;
 pub mod rect;
 pub mod sample;

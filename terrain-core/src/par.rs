@@ -2,6 +2,10 @@
 //! the calling thread when the pool has one thread: handing work to a single worker only adds
 //! its wake-up). Every caller gives each row (or chunk) to exactly one closure call that reads
 //! shared inputs and writes only its own output, so results do not depend on the thread count.
+//!
+//! Plumbing shared by the workspace's crates (terrain-lod runs its rows here too, so that both
+//! crates split work the same way), not API: hidden from the docs and free to change in any
+//! release.
 
 /// Whether to hand work to rayon: the pool has more than one thread.
 #[cfg(feature = "parallel")]
@@ -12,7 +16,7 @@ fn parallel() -> bool {
 
 /// Calls `f(index, chunk)` for every `chunk_len`-long chunk of `data` (the last may be
 /// shorter), in parallel when the `parallel` feature is on and the pool has several threads.
-pub(crate) fn for_each_chunk<T: Send>(
+pub fn for_each_chunk<T: Send>(
     data: &mut [T],
     chunk_len: usize,
     f: impl Fn(usize, &mut [T]) + Sync + Send,
@@ -33,7 +37,7 @@ pub(crate) fn for_each_chunk<T: Send>(
 
 /// Like [`for_each_chunk`] over two slices cut into chunks of their own lengths
 /// (`a_len` and `b_len` per chunk index).
-pub(crate) fn for_each_chunk2<A: Send, B: Send>(
+pub fn for_each_chunk2<A: Send, B: Send>(
     a: &mut [A],
     a_len: usize,
     b: &mut [B],
@@ -57,7 +61,7 @@ pub(crate) fn for_each_chunk2<A: Send, B: Send>(
 }
 
 /// The sum of `f` over `items` (u64 addition is associative, so any split gives the same sum).
-pub(crate) fn map_sum<I: Sync>(items: &[I], f: impl Fn(&I) -> u64 + Sync + Send) -> u64 {
+pub fn map_sum<I: Sync>(items: &[I], f: impl Fn(&I) -> u64 + Sync + Send) -> u64 {
     #[cfg(feature = "parallel")]
     if parallel() {
         use rayon::prelude::*;
@@ -70,7 +74,7 @@ pub(crate) fn map_sum<I: Sync>(items: &[I], f: impl Fn(&I) -> u64 + Sync + Send)
 /// splits off (once when sequential) and lent to every call of `f` in it: per-row buffers
 /// without an allocation per row. `f` must not let a chunk's result depend on what an earlier
 /// chunk left in the scratch.
-pub(crate) fn for_each_chunk_init<T: Send, S>(
+pub fn for_each_chunk_init<T: Send, S>(
     data: &mut [T],
     chunk_len: usize,
     init: impl Fn() -> S + Sync + Send,
@@ -92,7 +96,7 @@ pub(crate) fn for_each_chunk_init<T: Send, S>(
 }
 
 /// Calls `f(index, item)` for every item, in parallel when the `parallel` feature is on and the pool has several threads.
-pub(crate) fn for_each_item<T: Send>(items: Vec<T>, f: impl Fn(usize, T) + Sync + Send) {
+pub fn for_each_item<T: Send>(items: Vec<T>, f: impl Fn(usize, T) + Sync + Send) {
     #[cfg(feature = "parallel")]
     if parallel() {
         use rayon::prelude::*;
@@ -100,4 +104,15 @@ pub(crate) fn for_each_item<T: Send>(items: Vec<T>, f: impl Fn(usize, T) + Sync 
         return;
     }
     items.into_iter().enumerate().for_each(|(i, t)| f(i, t));
+}
+
+/// `f` of every item, in order, in parallel when the `parallel` feature is on and the pool has
+/// several threads.
+pub fn map_collect<I: Sync, O: Send>(items: &[I], f: impl Fn(&I) -> O + Sync + Send) -> Vec<O> {
+    #[cfg(feature = "parallel")]
+    if parallel() {
+        use rayon::prelude::*;
+        return items.par_iter().map(f).collect();
+    }
+    items.iter().map(f).collect()
 }

@@ -117,11 +117,13 @@ pub mod density;
 pub mod error;
 pub mod frustum;
 pub mod morph;
-mod par;
 pub mod popping;
 pub mod reach;
 pub mod refine;
 pub mod tessellation;
+
+// The row loops are terrain-core's (one copy for the workspace), reached as `crate::par`.
+use terrain_core::par;
 
 pub use cdlod::{
     CdlodConfig, CdlodFrame, CdlodInstance, CdlodMesh, CdlodTree, CdlodView, LodMetric, LodRanges,
