@@ -196,7 +196,7 @@ impl TessHierarchy {
     /// while their edges ask for it, dropped where the frustum misses them.
     ///
     /// Fails on a non-finite camera or field of view, or when more than
-    /// [`TessConfig::max_triangles`] would be emitted.
+    /// [`TessConfig::max_triangles`](super::TessConfig::max_triangles) would be emitted.
     pub fn select(&self, view: &CdlodView<'_>) -> Result<TessFrame, LodError> {
         let d = self.decision(view)?;
         let limit = self.config.max_triangles;
