@@ -414,7 +414,8 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
 /// `placement` (in the larger map's metres), whenever the window holds the stamp's whole
 /// footprint (then the evaluation is the same one, texel for texel). A window cut through a
 /// footprint is evaluated on its own part, within one stored unit of
-/// [`apply_stamp_reference`] as [`apply_stamp`] is. `map`'s own wrap mode is ignored. Returns the covered rect in `map`'s coordinates, if any.
+/// [`apply_stamp_reference`] as [`apply_stamp`] is. `map`'s own wrap mode is ignored. Returns
+/// the covered rect in `map`'s coordinates, if any.
 ///
 /// This is how a stamp lands on tiles of a larger grid (the detail layer gathers the
 /// footprint into one window, stamps it, and scatters it back).
