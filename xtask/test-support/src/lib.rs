@@ -20,3 +20,10 @@
 pub mod fuzz;
 pub mod granular;
 pub mod png;
+
+/// The repository README's code blocks, compiled and run as doc tests (`cargo xtask ci`'s
+/// test step) so that the front page cannot show an API that no longer exists. They live here,
+/// in the one crate that is never published, because the README is outside every crate.
+#[cfg(doctest)]
+#[doc = include_str!("../../../README.md")]
+struct RootReadmeDoctests;
