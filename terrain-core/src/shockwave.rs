@@ -10,6 +10,7 @@ use crate::stamp::TextureStamp;
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
+#[cfg_attr(feature = "schemars", derive(schemars::JsonSchema))]
 pub struct ShockwaveParams {
     /// Samples per side of the wave texture (at least 8).
     pub resolution: u32,

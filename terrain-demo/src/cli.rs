@@ -1,14 +1,20 @@
 //! The command line of the demo.
 
 use clap::{ArgAction, Parser};
+use schemars::JsonSchema;
 use serde::{Serialize, Serializer};
 use std::path::PathBuf;
 
 /// Renders offline frame captures of deformable terrain and a timing report.
 ///
 /// report.json lists every flag of a run (`config.flags`), so a run can be repeated.
-#[derive(Debug, Parser, Serialize)]
+#[derive(Debug, Parser, Serialize, JsonSchema)]
 #[command(version, about)]
+#[schemars(
+    deny_unknown_fields,
+    description = "Every flag of the run, named as in --help with `_` for `-`; absent options \
+                   are null."
+)]
 pub struct Cli {
     /// Folder the captures and report.json are written to.
     #[arg(long, default_value = "captures")]
@@ -56,6 +62,7 @@ pub struct Cli {
     pub format: FormatArg,
     /// Size of a RAW16 or R32 heightmap, as WIDTHxHEIGHT.
     #[arg(long, value_parser = parse_size, requires = "heightmap")]
+    #[schemars(with = "Option<[u32; 2]>")]
     pub raw_size: Option<glam::UVec2>,
     /// Byte order of a RAW16 or R32 heightmap's samples.
     #[arg(long, value_enum, default_value_t = ByteOrderArg::Little)]
@@ -85,6 +92,7 @@ pub struct Cli {
     pub camera: Option<CameraMode>,
     /// Size of the 3D frames, as WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = parse_resolution)]
+    #[schemars(with = "[u32; 2]")]
     pub resolution: glam::UVec2,
     /// Side of the hillshade overview: inset in the 3D frames, or the whole frame when no GPU
     /// adapter exists (the map is shown nearest-texel).
@@ -115,8 +123,8 @@ pub struct Cli {
     /// comparison).
     #[arg(long)]
     pub no_morph: bool,
-    /// With `--lod tessellated`: scale each edge's split by the curvature density map (seed
-    /// 002 ch. 3), or tessellate by projected size alone. Default on.
+    /// With `--lod tessellated`: scale each edge's split by the curvature density map (Cervin
+    /// 2012, ch. 3), or tessellate by projected size alone. Default on.
     #[arg(long, value_enum, value_name = "on|off")]
     pub density_map: Option<Switch>,
     /// With `--lod tessellated`: the target projected edge length in pixels (Cervin 2012's
@@ -159,7 +167,7 @@ fn parse_resolution(s: &str) -> Result<glam::UVec2, String> {
 }
 
 /// The scenarios the demo can run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum ScenarioKind {
     /// Footprints, Gaussian craters and a shockwave across the wrap corner.
@@ -176,7 +184,7 @@ pub enum ScenarioKind {
 }
 
 /// `--format`: how the heightmap file is read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum FormatArg {
     /// By the file's extension (.png, .r16 / .raw, .r32, .tif / .tiff).
@@ -192,7 +200,7 @@ pub enum FormatArg {
 }
 
 /// `--byte-order` of RAW16 and R32 heightmaps.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum ByteOrderArg {
     /// Least significant byte first.
@@ -221,7 +229,7 @@ impl Serialize for HeightRangeArg {
 }
 
 /// `--lod`: the level-of-detail scheme.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum LodArg {
     /// Geometry clipmaps (Flower 2010, sec. 2.3.2).
@@ -233,7 +241,7 @@ pub enum LodArg {
 }
 
 /// `--detail`: where footprints go and how the finest geometry is shaded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum DetailArg {
     /// Coarse-map only.
@@ -246,7 +254,7 @@ pub enum DetailArg {
 }
 
 /// An on / off flag value.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Switch {
     /// On.
@@ -256,7 +264,7 @@ pub enum Switch {
 }
 
 /// `--camera` of the default scenario.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum CameraMode {
     /// Walks behind the walker at eye height.
@@ -275,6 +283,21 @@ impl CameraMode {
             CameraMode::Orbit => "orbit",
             CameraMode::Flyover => "flyover",
         }
+    }
+}
+
+impl JsonSchema for HeightRangeArg {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "HeightRangeArg".into()
+    }
+
+    /// As it is serialised: `auto` or `MIN:MAX`.
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "`auto` or `MIN:MAX` (metres).",
+            "type": "string",
+            "pattern": "^(auto|-?[0-9.e+-]+:-?[0-9.e+-]+)$",
+        })
     }
 }
 

@@ -5,6 +5,7 @@
 
 use anyhow::{Context, Result, anyhow, bail};
 use glam::{Vec2, Vec3};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use terrain_core::ShockwaveParams;
@@ -14,8 +15,9 @@ use terrain_physics::SchedulerConfig;
 /// The largest configuration file read (a parameter file is a few kilobytes).
 const MAX_FILE_BYTES: u64 = 1 << 20;
 
-/// Every parameter of the scenarios.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Every parameter of the scenarios: those of `--config FILE.toml` (see `--print-config`),
+/// defaults included.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DemoParams {
     /// The default scenario's script: footprints, craters, the shockwave.
@@ -51,10 +53,11 @@ impl Default for DemoParams {
 }
 
 /// The default scenario's script.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StampParams {
     /// Footprint size in metres: length along the walking direction, width.
+    #[schemars(with = "[f32; 2]")]
     pub foot_size_m: Vec2,
     /// How deep a footprint presses, in metres.
     pub foot_depth_m: f32,
@@ -65,6 +68,7 @@ pub struct StampParams {
     /// A crater lands every this many frames (0: none).
     pub crater_every: u32,
     /// Crater diameters are drawn between these (metres; at most half the map's side).
+    #[schemars(with = "[f32; 2]")]
     pub crater_size_m: Vec2,
     /// A crater is this many times as deep as it is wide.
     pub crater_depth_ratio: f32,
@@ -103,16 +107,19 @@ impl Default for StampParams {
 }
 
 /// Lighting and colours (what the scenario does not derive from the map).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StyleParams {
     /// Direction towards the sun (any length but zero).
+    #[schemars(with = "[f32; 3]")]
     pub light_dir: Vec3,
     /// Colour the terrain fades to with distance (linear RGB, 0..1).
+    #[schemars(with = "[f32; 3]")]
     pub fog_color: Vec3,
     /// Fog density per metre; absent: chosen from the map's size and the camera.
     pub fog_density: Option<f32>,
     /// Heights (metres) the colour ramp spans; absent: the map's height range.
+    #[schemars(with = "Option<[f32; 2]>")]
     pub ramp_m: Option<Vec2>,
 }
 
@@ -129,7 +136,7 @@ impl Default for StyleParams {
 }
 
 /// The default scenario's cameras.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CameraParams {
     /// Eye height of the walker camera above the ground, in metres.

@@ -1,27 +1,40 @@
-//! `report.json`: what was rendered and how long each step of each frame took.
+//! `report.json`: what was rendered and how long each step of each frame took. Its JSON Schema,
+//! `docs/report.schema.json`, is generated from these types (`schema`, for the tests).
 
+use crate::cli::{CameraMode, Cli, LodArg, ScenarioKind};
+use crate::config::DemoParams;
+use crate::timings::Step;
+use schemars::{JsonSchema, Schema, SchemaGenerator, json_schema};
 use serde::Serialize;
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 
 /// The version of report.json's layout (`docs/report.schema.json`): raised when a field is
 /// renamed, removed or changes meaning (adding one does not).
 pub const SCHEMA_VERSION: u32 = 2;
 
-/// The whole run.
-#[derive(Debug, Serialize)]
+/// What a terrain-demo run rendered and how long each step of each frame took.
+/// `schema_version` is raised when a field is renamed, removed or changes meaning; new optional
+/// fields may appear without it. Every line of frames.jsonl is one element of `frames`.
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(title = "terrain-demo report.json", deny_unknown_fields)]
 pub struct Report {
-    /// [`SCHEMA_VERSION`].
+    /// The version of the report's layout.
+    #[schemars(extend("const" = SCHEMA_VERSION))]
     pub schema_version: u32,
     /// The program that wrote the report.
     pub tool: ToolInfo,
-    /// The run's whole configuration: every flag (defaults included) and the parameter
-    /// structs (`--config`).
+    /// The run's whole configuration: every flag (defaults included) and the parameters of
+    /// `--config` (defaults included). `flags.config` names the parameter file, if any.
+    #[schemars(schema_with = "config_schema")]
     pub config: serde_json::Value,
-    /// Where the heights came from: `procedural` or the heightmap's path.
+    /// Where the heights came from: `procedural`, the heightmap's path, or the streamed
+    /// world's folder.
     pub source: String,
     /// Map size in texels.
     pub size: [u32; 2],
     /// Metres per texel.
+    #[schemars(extend("exclusiveMinimum" = 0))]
     pub texel_size_m: f32,
     /// How stored heights become metres, and the heights the map holds.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -32,27 +45,32 @@ pub struct Report {
     /// The heightmap's nodata samples and what filled them, when it had any.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub nodata: Option<NodataReport>,
-    /// The default scenario's camera: `walker`, `orbit` or `flyover`.
+    /// The default scenario's camera.
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "CameraMode")]
     pub camera: Option<&'static str>,
-    /// The scenario: `default` or `snow`.
+    /// The scenario.
+    #[schemars(with = "ScenarioKind")]
     pub scenario: String,
     /// Scenario (and terrain) seed.
     pub seed: u64,
-    /// The GPU adapter's name, or "none" for overview-only frames.
+    /// The GPU adapter's name, or `none` for overview-only frames.
     pub adapter: String,
-    /// The wgpu backend ("vulkan", "gl"), or "none".
+    /// The wgpu backend (`vulkan`, `gl`, `metal`, `dx12`), or `none`.
     pub backend: String,
     /// Frame size in pixels.
     pub resolution: [u32; 2],
     /// Milliseconds to generate or load the terrain.
+    #[schemars(with = "Ms")]
     pub load_ms: f64,
     /// Milliseconds to compute the first full normal map.
+    #[schemars(with = "Ms")]
     pub initial_normals_ms: f64,
     /// Flyover: tiles written back into the world during and at the end of the run.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub written_back_tiles: Option<u64>,
     /// Frames asked for (`--frames`).
+    #[schemars(range(min = 1))]
     pub frames_requested: u32,
     /// Whether Ctrl-C ended the run early: `frames` lists the frames done before it.
     pub interrupted: bool,
@@ -61,24 +79,107 @@ pub struct Report {
     /// Per frame.
     pub frames: Vec<FrameReport>,
     /// Sum of each step over all frames, in milliseconds.
+    #[schemars(schema_with = "by_step::<Ms>")]
     pub totals_ms: BTreeMap<&'static str, f64>,
     /// Leading frames left out of `steps_ms` (shader compilation, first uploads): `--warmup`,
     /// at most all frames but the last.
     pub warmup_frames: u32,
     /// Per step, over the frames after warm-up that timed it: mean, median, 95th percentile
     /// and maximum in milliseconds.
+    #[schemars(schema_with = "by_step::<StepStats>")]
     pub steps_ms: BTreeMap<&'static str, StepStats>,
 }
 
+/// The JSON Schema (draft 2020-12) of report.json, derived from [`Report`] and the types in
+/// it; `docs/report.schema.json` is this, written out by the test that keeps the two the same.
+#[cfg(test)]
+pub fn schema() -> serde_json::Value {
+    use schemars::generate::SchemaSettings;
+    let generator = SchemaSettings::draft2020_12()
+        .for_serialize()
+        .into_generator();
+    let mut schema = generator.into_root_schema_for::<Report>().to_value();
+    schema["$id"] = format!("urn:terrain-demo:report.schema.json:{SCHEMA_VERSION}").into();
+    unwrap_descriptions(&mut schema);
+    schema
+}
+
+/// Joins the lines of every paragraph of every `description` in `value` (doc comments are
+/// wrapped at 100 columns; a schema reader wraps them itself).
+#[cfg(test)]
+fn unwrap_descriptions(value: &mut serde_json::Value) {
+    match value {
+        serde_json::Value::Object(map) => {
+            for (key, v) in map.iter_mut() {
+                match v {
+                    serde_json::Value::String(text) if key == "description" => {
+                        *text = text
+                            .split("\n\n")
+                            .map(|paragraph| paragraph.split('\n').collect::<Vec<_>>().join(" "))
+                            .collect::<Vec<_>>()
+                            .join("\n\n");
+                    }
+                    _ => unwrap_descriptions(v),
+                }
+            }
+        }
+        serde_json::Value::Array(items) => items.iter_mut().for_each(unwrap_descriptions),
+        _ => {}
+    }
+}
+
+/// The schema of `Report::config`: `flags` as [`Cli`] writes them, `params` as [`DemoParams`].
+fn config_schema(generator: &mut SchemaGenerator) -> Schema {
+    json_schema!({
+        "type": "object",
+        "properties": {
+            "flags": generator.subschema_for::<Cli>(),
+            "params": generator.subschema_for::<DemoParams>(),
+        },
+        "required": ["flags", "params"],
+        "additionalProperties": false,
+    })
+}
+
+/// The schema of a map keyed by [`Step::name`] whose values are `V`s.
+fn by_step<V: JsonSchema>(generator: &mut SchemaGenerator) -> Schema {
+    json_schema!({
+        "type": "object",
+        "propertyNames": generator.subschema_for::<Step>(),
+        "additionalProperties": generator.subschema_for::<V>(),
+    })
+}
+
+/// The schema of a duration in milliseconds (an `f64` of the report): never negative.
+struct Ms;
+
+impl JsonSchema for Ms {
+    fn schema_name() -> Cow<'static, str> {
+        "ms".into()
+    }
+
+    fn json_schema(_: &mut SchemaGenerator) -> Schema {
+        json_schema!({
+            "description": "Milliseconds.",
+            "type": "number",
+            "minimum": 0,
+        })
+    }
+}
+
 /// The program that wrote a report.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct ToolInfo {
     /// `terrain-demo`.
+    #[schemars(extend("const" = env!("CARGO_PKG_NAME")))]
     pub name: &'static str,
     /// The crate version.
+    #[schemars(regex(pattern = r"^[0-9]+\.[0-9]+\.[0-9]+"))]
     pub version: &'static str,
     /// The git commit it was built from (12 hex digits), or `unknown` when built outside a
     /// git checkout.
+    #[schemars(regex(pattern = r"^([0-9a-f]{7,40}|unknown)$"))]
     pub git_revision: &'static str,
 }
 
@@ -94,17 +195,22 @@ impl ToolInfo {
 }
 
 /// A step's milliseconds over the measured frames.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct StepStats {
     /// Frames that timed the step.
     pub frames: usize,
     /// Mean.
+    #[schemars(with = "Ms")]
     pub mean: f64,
     /// Median (nearest rank).
+    #[schemars(with = "Ms")]
     pub p50: f64,
     /// 95th percentile (nearest rank).
+    #[schemars(with = "Ms")]
     pub p95: f64,
     /// Maximum.
+    #[schemars(with = "Ms")]
     pub max: f64,
 }
 
@@ -149,10 +255,56 @@ mod tests {
         let s = StepStats::of_sorted(&[1.0, 2.0, 3.0, 100.0]);
         assert_eq!((s.p50, s.p95), (2.0, 100.0));
     }
+
+    /// `docs/report.schema.json` is [`schema`] written out. `TERRAIN_BLESS=1` rewrites it
+    /// (atomically: a temporary file renamed over it) instead of comparing.
+    #[test]
+    fn docs_report_schema_is_the_generated_schema() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/report.schema.json");
+        let generated = schema();
+        if std::env::var_os("TERRAIN_BLESS").is_some_and(|v| !v.is_empty() && v != "0") {
+            let text = schema_text(&generated);
+            let tmp = path.with_extension("json.tmp");
+            std::fs::write(&tmp, text).unwrap();
+            std::fs::rename(&tmp, &path).unwrap();
+            return;
+        }
+        let text = std::fs::read_to_string(&path).expect("docs/report.schema.json");
+        let on_disk: serde_json::Value = serde_json::from_str(&text).expect("the schema is JSON");
+        assert!(
+            on_disk == generated,
+            "docs/report.schema.json is not the schema of report.json's types; regenerate it with \
+             `TERRAIN_BLESS=1 cargo test -p terrain-demo --bin terrain-demo report::tests` and \
+             review the diff"
+        );
+    }
+
+    /// `schema` as pretty JSON with `$schema`, `$id`, `title` and `description` first and
+    /// `$defs` last (serde_json's maps sort their keys).
+    fn schema_text(schema: &serde_json::Value) -> String {
+        let map = schema.as_object().expect("a schema is an object");
+        let head = ["$schema", "$id", "title", "description"];
+        let middle = map
+            .keys()
+            .map(String::as_str)
+            .filter(|k| !head.contains(k) && *k != "$defs");
+        let keys = head.into_iter().chain(middle).chain(["$defs"]);
+        let fields: Vec<String> = keys
+            .filter_map(|key| {
+                let value = serde_json::to_string_pretty(map.get(key)?).unwrap();
+                let key = serde_json::to_string(key).unwrap();
+                // JSON strings hold no raw newline: every one is between tokens.
+                Some(format!("  {key}: {}", value.replace('\n', "\n  ")))
+            })
+            .collect();
+        format!("{{\n{}\n}}\n", fields.join(",\n"))
+    }
 }
 
 /// A map's height encoding: `metres = offset + scale * stored` (u16).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct HeightEncodingReport {
     /// Metres of stored value 0.
     pub offset: f32,
@@ -173,7 +325,8 @@ pub struct HeightEncodingReport {
 }
 
 /// How `--heightmap` was read.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct HeightmapReport {
     /// `PNG`, `RAW16`, `R32` or `GeoTIFF`.
     pub format: &'static str,
@@ -187,7 +340,8 @@ pub struct HeightmapReport {
 }
 
 /// A heightmap's nodata samples.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct NodataReport {
     /// How many samples were nodata.
     pub count: u64,
@@ -200,7 +354,8 @@ pub struct NodataReport {
 }
 
 /// The memory of a run.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct MemoryReport {
     /// The limit (`--max-memory`, or the default fraction of the machine's memory).
     pub limit_bytes: u64,
@@ -226,19 +381,22 @@ impl MemoryReport {
 }
 
 /// One frame.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct FrameReport {
     /// Frame number from 0.
     pub index: u32,
     /// The image, relative to the output folder.
+    #[schemars(regex(pattern = r"^frame_[0-9]{4,}\.png$"))]
     pub file: String,
     /// What the scenario measured.
     #[serde(flatten)]
     pub stats: FrameStats,
     /// Non-degenerate triangles drawn (0 without the GPU).
     pub triangles: u64,
-    /// The LOD scheme of the 3D frame (`clipmap` or `cdlod`; absent without the GPU).
+    /// The LOD scheme of the 3D frame (absent without the GPU).
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "LodArg")]
     pub lod: Option<&'static str>,
     /// Vertices drawn (shared-mesh vertices per instance).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -255,15 +413,17 @@ pub struct FrameReport {
     /// Height of the camera's eye above the true surface under it (never negative: the camera
     /// is a body on the collision mirror, kept above pending deformations by their bounds).
     pub camera_clearance_m: f32,
-    /// Milliseconds per step, keyed by [`Step::name`](crate::timings::Step::name):
+    /// Milliseconds per step, keyed by the step's name:
     /// `stamp_gpu`, `normals_gpu`, `granular_gpu` and `render` (sky + terrain) are the wall
     /// time of submitting the GPU work and waiting for it; `stamp_cpu`, `normals_cpu`,
     /// `granular_cpu` the same work on the CPU (without a GPU); `lod` (clipmap placement and culling), `capture` (image readback),
     /// `physics` (collision, the camera, and with a GPU the regions read back copied into the
     /// CPU's map), `overview` (hillshade), `write` (PNG), `cache` (flyover).
+    #[schemars(schema_with = "by_step::<Ms>")]
     pub timings_ms: BTreeMap<&'static str, f64>,
     /// GPU timestamp spans of `stamp`, `normals` and `render`, where the adapter has timestamp
     /// queries (on lavapipe they miss deferred compute work: see terrain-gpu's `timer`).
+    #[schemars(schema_with = "by_step::<Ms>")]
     pub gpu_timestamps_ms: BTreeMap<&'static str, f64>,
     /// GPU objects alive after the frame (wgpu's internal counters), with a GPU: they stop
     /// changing after the first frames, since passes allocate only when built.
@@ -272,7 +432,8 @@ pub struct FrameReport {
 }
 
 /// Live GPU objects of the device, from wgpu's internal counters (`counters` feature).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct GpuObjects {
     /// Buffers.
     pub buffers: isize,
@@ -288,7 +449,8 @@ pub struct GpuObjects {
 
 /// The fields of a frame's report that depend on the scenario (zero or absent where it has
 /// no such thing).
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct FrameStats {
     /// Footprints stamped this frame.
     pub footprints: u32,
@@ -303,6 +465,7 @@ pub struct FrameStats {
     /// On frames where a collision readback landed: milliseconds from its request to its
     /// application (the longest, if several landed).
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Ms")]
     pub readback_ms: Option<f64>,
     /// Snow scenario: the u64 sum of the granular heights after the frame (constant with
     /// compression 0: the volume is preserved).
@@ -332,7 +495,8 @@ pub struct FrameStats {
 }
 
 /// The flyover's tile cache in one frame.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct CacheStats {
     /// Tiles the selection wants near the camera that are not in RAM yet (the frame falls back
     /// to coarser data there).
@@ -372,6 +536,7 @@ pub struct CacheStats {
     /// Level-0 tiles of the collision window filled from coarser data (not loaded yet).
     pub collision_coarse_tiles: usize,
     /// Milliseconds the frame thread spent in cache calls, CPU crater stamps on tiles and the
-    /// collision window (GPU stamps are timed as `stamp`).
+    /// collision window (GPU stamps are timed as `stamp_gpu`).
+    #[schemars(with = "Ms")]
     pub frame_thread_ms: f64,
 }

@@ -80,6 +80,22 @@ impl Step {
     }
 }
 
+/// In report.json's schema a step is its name: one of [`Step::ALL`]'s.
+impl schemars::JsonSchema for Step {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "step".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "A timed step of a frame. Where a step can run on either side its \
+                name says which: stamp_gpu / stamp_cpu, normals_gpu / normals_cpu, granular_gpu \
+                / granular_cpu.",
+            "enum": Step::ALL.map(Step::name),
+        })
+    }
+}
+
 /// Milliseconds since `t`.
 pub fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3

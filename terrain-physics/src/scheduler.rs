@@ -36,6 +36,7 @@ use terrain_core::{Grid, Rect, RegionSource, RequestId};
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
+#[cfg_attr(feature = "schemars", derive(schemars::JsonSchema))]
 pub struct SchedulerConfig {
     /// How long no deformation must be noted before the dirty rects are requested. Flower 2010
     /// sec. 3.2.1: "the system waits for a gap of approximately 20 milliseconds". Default 20 ms.
@@ -43,6 +44,7 @@ pub struct SchedulerConfig {
         feature = "serde",
         serde(rename = "quiet_gap_ms", with = "duration_ms")
     )]
+    #[cfg_attr(feature = "schemars", schemars(with = "f64", range(min = 0)))]
     pub quiet_gap: Duration,
     /// The longest a dirty rect waits, even while deformations keep coming (so a continuous
     /// stream of deformations cannot starve collision). Not in the seed; default 250 ms.
@@ -50,6 +52,7 @@ pub struct SchedulerConfig {
         feature = "serde",
         serde(rename = "max_delay_ms", with = "duration_ms")
     )]
+    #[cfg_attr(feature = "schemars", schemars(with = "f64", range(min = 0)))]
     pub max_delay: Duration,
     /// Dirty rects closer than this many texels are merged into one request. Default 16.
     pub merge_distance: u32,
@@ -61,6 +64,7 @@ pub struct SchedulerConfig {
         feature = "serde",
         serde(rename = "request_timeout_ms", with = "duration_ms")
     )]
+    #[cfg_attr(feature = "schemars", schemars(with = "f64", range(min = 0)))]
     pub request_timeout: Duration,
     /// The most requests in flight; a batch waits (its rects stay dirty) while it would go
     /// over. Default 16.

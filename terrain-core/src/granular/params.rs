@@ -7,6 +7,7 @@ use super::GranularError;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
+#[cfg_attr(feature = "schemars", derive(schemars::JsonSchema))]
 pub enum DistanceMetric {
     /// `dx^2 + dy^2` (compared squared, so exactly in integers).
     #[default]
@@ -88,6 +89,7 @@ pub enum SlopeMethod {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
+#[cfg_attr(feature = "schemars", derive(schemars::JsonSchema))]
 pub struct GranularParams {
     /// `compression` in `[0, 1]` (table 4.4, sec. 4.1.4): share of intersected material that is
     /// compressed (removed) instead of displaced; 0 keeps the volume exactly. Default 0.
