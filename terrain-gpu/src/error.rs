@@ -112,6 +112,9 @@ pub enum GpuError {
         /// The regions that did not arrive.
         rects: Vec<Rect>,
     },
+    /// Mapping a [`crate::SmallReadback`] staging buffer failed (device lost).
+    #[error("reading back a counter failed: the staging buffer could not be mapped")]
+    SmallReadbackFailed,
     /// A pass recorded more dispatches than its uniform ring holds without a
     /// `recall()` after the submit that carried them.
     #[error("{pass} recorded {slots} dispatches without recall(): call recall() after each submit")]

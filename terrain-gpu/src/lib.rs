@@ -60,7 +60,9 @@ mod resources;
 pub mod testing;
 
 // The modules sit in folders by role; their public paths stay `terrain_gpu::<module>`.
-pub use device::{compute, context, download, limits, readback, region_source, scope, timer};
+pub use device::{
+    compute, context, download, limits, readback, region_source, scope, small_readback, timer,
+};
 pub use passes::{density, detail_probe, normals, spill, stamp};
 pub use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, tessellation};
 pub use resources::{atlas, detail, maps};
@@ -82,6 +84,7 @@ pub use readback::{ReadbackTicket, RegionData, RegionReadback, RegionView};
 pub use refine::{RefineDraw, RefinePass, RefineRenderer};
 pub use region_source::GpuRegionSource;
 pub use sky::{SkyColors, SkyPass};
+pub use small_readback::SmallReadback;
 pub use spill::{SpillPass, SpillTargets, SpilledStamp};
 pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampOp, StampPass};
 pub use target::TargetFormat;

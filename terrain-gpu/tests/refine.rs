@@ -18,7 +18,7 @@ use terrain_core::{Blend, GaussianStamp, Grid, StampPlacement};
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
     Camera, DetailShading, GpuDetailTiles, GpuError, OffscreenTarget, RefineDraw, RefinePass,
-    RefineRenderer, SkyColors, TargetFormat, TerrainStyle,
+    RefineRenderer, SkyColors, SmallReadback, TargetFormat, TerrainStyle,
 };
 use terrain_lod::refine::RefineView;
 
@@ -139,9 +139,16 @@ fn refined_triangles_equal_the_cpu_reference() {
         };
         let mut encoder = device.create_command_encoder(&Default::default());
         let view = pass.encode(device, queue, &mut encoder, &draw).unwrap();
+        assert!(pass.request_count(&mut encoder).unwrap());
         queue.submit([encoder.finish()]);
         let (gpu, overflow) = pass.read_triangles(device, queue).unwrap();
         assert!(!overflow);
+        // The count that rode the submit arrived by the (blocking) read above.
+        assert_eq!(
+            pass.poll_count(device).unwrap(),
+            Some((gpu.len() as u32, false)),
+            "camera {i}: the asynchronous count is the written one"
+        );
         let cpu = cpu_triangles(&scene, &tiles, &camera);
         let thirds: Vec<[IVec2; 3]> = gpu
             .iter()
@@ -439,4 +446,57 @@ fn refinement_that_does_not_fit_is_refused() {
         "empty"
     );
     scene.ctx.check().expect("no GPU validation errors");
+}
+
+#[test]
+fn counts_ride_the_ring_without_a_wait_and_unsubmitted_requests_free_their_buffers() {
+    let Some(ctx) = context_or_skip("refine small readback") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let source = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("counter"),
+        size: 16,
+        usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut ring = SmallReadback::new(device, 2, 8).unwrap();
+    // Recorded but never submitted: the buffers come back, nothing arrives.
+    for _ in 0..3 {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        assert!(ring.request(&mut encoder, &source, 0).unwrap().is_some());
+        drop(encoder);
+        assert_eq!(ring.in_flight(), 0);
+    }
+    assert!(ring.poll(device).unwrap().is_empty());
+    // Two values in flight fill the ring; a third request is skipped, not an error.
+    let mut sent = Vec::new();
+    for value in [7u32, 9] {
+        queue.write_buffer(&source, 4, bytemuck::bytes_of(&[value, value + 1]));
+        let mut encoder = device.create_command_encoder(&Default::default());
+        sent.push(ring.request(&mut encoder, &source, 4).unwrap().unwrap());
+        queue.submit([encoder.finish()]);
+    }
+    let mut encoder = device.create_command_encoder(&Default::default());
+    assert_eq!(ring.request(&mut encoder, &source, 4).unwrap(), None);
+    drop(encoder);
+    let mut arrived = Vec::new();
+    for _ in 0..1000 {
+        arrived.extend(ring.poll(device).unwrap());
+        if arrived.len() == 2 {
+            break;
+        }
+        device.poll(terrain_gpu::download::wait_bounded()).unwrap();
+    }
+    let values: Vec<(u64, [u32; 2])> = arrived
+        .iter()
+        .map(|(seq, b)| (*seq, [0, 1].map(|i| bytemuck::cast_slice::<u8, u32>(b)[i])))
+        .collect();
+    assert_eq!(values, vec![(sent[0], [7, 8]), (sent[1], [9, 10])]);
+    // Ranges outside the source or unaligned are refused.
+    let mut encoder = device.create_command_encoder(&Default::default());
+    assert!(ring.request(&mut encoder, &source, 12).is_err());
+    assert!(ring.request(&mut encoder, &source, 2).is_err());
+    assert!(SmallReadback::new(device, 0, 8).is_err());
+    assert!(SmallReadback::new(device, 2, 6).is_err());
 }

@@ -60,6 +60,8 @@ pub(super) struct RefinedGeometry {
     pub(super) pass: RefinePass,
     pub(super) renderer: RefineRenderer,
     pub(super) radius_m: f32,
+    /// The newest refined triangle count that came back (the report's).
+    pub(super) last_count: u32,
 }
 
 /// The refined radius of `--detail refine`: 9 m, at most 90 texels (the region must stay where
@@ -104,6 +106,7 @@ impl GpuScene {
                 pass: RefinePass::new(device, view.half_cells())?,
                 renderer: RefineRenderer::new(device, self.renderer.target())?,
                 radius_m,
+                last_count: 0,
             })
         } else {
             None

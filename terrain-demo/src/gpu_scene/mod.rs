@@ -876,6 +876,8 @@ impl GpuScene {
                         target_size: self.target.size(),
                     };
                     let v = r.pass.encode(device, queue, encoder, &draw)?;
+                    // The report's count rides this submit back (no wait of its own).
+                    r.pass.request_count(encoder)?;
                     r.renderer.prepare(device, queue, &draw, &r.pass)?;
                     self.renderer.exclude(Some(v.region()));
                     Some(&*r)
@@ -910,8 +912,15 @@ impl GpuScene {
             })
             .sum();
         // The refined cells are drawn instead of the clipmap's (which still counts them).
-        let refined = match &self.refined {
-            Some(r) => u64::from(r.pass.read_count(device, queue)?.0),
+        // The capture has waited for the frame, so its count has usually arrived; else the
+        // last one that did.
+        let refined = match self.refined.as_mut() {
+            Some(r) => {
+                if let Some((count, _)) = r.pass.poll_count(device)? {
+                    r.last_count = count;
+                }
+                u64::from(r.last_count)
+            }
             None => 0,
         };
         Ok(RenderedFrame {

@@ -213,13 +213,17 @@ impl FlyoverScenario {
     /// under it, else the overview's.
     fn ground(&self, xz: Vec2) -> f32 {
         let xz = xz.clamp(Vec2::ZERO, self.extent);
-        if let Ok(Some(h)) = self.window.height(xz) {
+        let texel = xz / self.texel_size;
+        // The window holds a tile's texels only once it is in RAM (until then, what
+        // `read_region` filled in: not the ground).
+        let t = texel.as_uvec2() / self.tile_size;
+        if !self.window_coarse.contains(&TileId::new(0, t.x, t.y))
+            && let Ok(Some(h)) = self.window.height(xz)
+        {
             return h;
         }
-        let texel = xz / self.texel_size;
         if let Some(pool) = &self.pool {
-            let t = texel.as_uvec2();
-            let id = TileId::new(0, t.x / self.tile_size, t.y / self.tile_size);
+            let id = TileId::new(0, t.x, t.y);
             if let Some((found, data)) = pool.best_available(id)
                 && let Some(grid) = data.as_u16()
             {

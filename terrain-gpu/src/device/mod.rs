@@ -8,4 +8,5 @@ pub mod limits;
 pub mod readback;
 pub mod region_source;
 pub mod scope;
+pub mod small_readback;
 pub mod timer;

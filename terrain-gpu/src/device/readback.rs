@@ -99,25 +99,33 @@ fn stored_metres(encoding: HeightEncoding, v: u32) -> f32 {
     encoding.to_metres(f64::from(v))
 }
 
-const FREE: u8 = 0;
-const PENDING: u8 = 1;
-const MAPPED: u8 = 2;
-const FAILED: u8 = 3;
+pub(crate) const FREE: u8 = 0;
+pub(crate) const PENDING: u8 = 1;
+pub(crate) const MAPPED: u8 = 2;
+pub(crate) const FAILED: u8 = 3;
 /// The commands that would have mapped the slot were dropped without being submitted.
-const ABANDONED: u8 = 4;
+pub(crate) const ABANDONED: u8 = 4;
 
 /// Travels with a request's map callback. wgpu drops the callback uncalled when the encoder
 /// (or the command buffer) that carries it is dropped without submit; the guard then marks
 /// the slot abandoned, so it is freed instead of waiting forever. Once the callback has run it
 /// never touches the slot again (the slot may already serve a newer request by the time the
 /// closure is dropped, on a thread that polls the device).
-struct SubmitGuard {
+pub(crate) struct SubmitGuard {
     state: Arc<AtomicU8>,
     fired: bool,
 }
 
 impl SubmitGuard {
-    fn fire(&mut self, state: u8) {
+    /// A guard for the slot whose state is `state` (set to `PENDING` by the caller).
+    pub(crate) fn new(state: Arc<AtomicU8>) -> Self {
+        Self {
+            state,
+            fired: false,
+        }
+    }
+
+    pub(crate) fn fire(&mut self, state: u8) {
         self.fired = true;
         self.state.store(state, Ordering::Release);
     }
@@ -282,10 +290,7 @@ impl RegionReadback {
         let buffer = &slot.buffer;
         copy_rows(encoder, map, rect, buffer);
         slot.state.store(PENDING, Ordering::Release);
-        let mut guard = SubmitGuard {
-            state: slot.state.clone(),
-            fired: false,
-        };
+        let mut guard = SubmitGuard::new(slot.state.clone());
         encoder.map_buffer_on_submit(buffer, wgpu::MapMode::Read, 0..bytes, move |r| {
             guard.fire(if r.is_ok() { MAPPED } else { FAILED });
         });

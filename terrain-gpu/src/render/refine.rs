@@ -16,6 +16,7 @@
 use crate::device::compute::{buffer_entry, compute_pipeline, shader_module};
 use crate::device::download::download_bytes;
 use crate::device::scope::scoped;
+use crate::device::small_readback::SmallReadback;
 use crate::error::GpuError;
 use crate::render::camera::Camera;
 use crate::render::clipmap::{
@@ -150,7 +151,12 @@ pub struct RefinePass {
     bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
     /// The view of the last encode.
     view: Option<RefineView>,
+    /// Triangle counts on their way back without a wait ([`RefinePass::request_count`]).
+    counts: SmallReadback,
 }
+
+/// Counts in flight at most: a frame asks for one, and it arrives a frame or two later.
+const COUNT_RING: usize = 4;
 
 impl RefinePass {
     /// Compiles the shader and makes room for regions of up to `max_half_cells` cells from the
@@ -260,6 +266,7 @@ impl RefinePass {
             max_half_cells,
             bound: None,
             view: None,
+            counts: SmallReadback::new(device, COUNT_RING, STATE_BYTES)?,
         })
     }
 
@@ -358,8 +365,26 @@ impl RefinePass {
         Ok(view)
     }
 
+    /// Records, after an encode in the same `encoder`, the copy of the triangle count it
+    /// writes, to arrive without a wait ([`RefinePass::poll_count`]). `false` when
+    /// `COUNT_RING` (4) counts are still on their way (this one is skipped).
+    pub fn request_count(&mut self, encoder: &mut wgpu::CommandEncoder) -> Result<bool, GpuError> {
+        Ok(self.counts.request(encoder, &self.state, 0)?.is_some())
+    }
+
+    /// The newest of the requested counts that have arrived since the last call, as
+    /// [`RefinePass::read_count`] gives it, or `None`; never waits.
+    pub fn poll_count(&mut self, device: &wgpu::Device) -> Result<Option<(u32, bool)>, GpuError> {
+        let newest = self.counts.poll(device)?.pop();
+        Ok(newest.map(|(_, bytes)| {
+            let words: &[u32] = bytemuck::cast_slice(&bytes);
+            (words[0].min(self.capacity), words[1] != 0)
+        }))
+    }
+
     /// Reads back how many triangles the last encode wrote (at most [`RefinePass::capacity`])
-    /// and whether more were generated than the output holds. Blocking (a 32-byte download).
+    /// and whether more were generated than the output holds. Blocking (a 32-byte download):
+    /// for tests and tools; a frame uses [`RefinePass::request_count`].
     pub fn read_count(
         &self,
         device: &wgpu::Device,
