@@ -1,7 +1,7 @@
 //! Detail tiles as cache tiles (Flower 2010, sec. 2.4.2 and 3.2.3, fig. 2.4): a
 //! [`terrain_core::detail::DetailLayer`] whose tiles live in a [`World`]'s detail layer on disk,
 //! a working set on the GPU chosen by the nine band regions of the camera's tile, and dirty
-//! tiles written back atomically.
+//! tiles written back atomically, all the store's I/O on worker threads.
 //!
 //! A tile is *loaded* when it holds a GPU slot and *active* when it is drawn. The camera's
 //! tile is split into nine regions by a horizontal and a vertical band across its centre
@@ -12,11 +12,28 @@
 //!
 //! [`DetailCache::update`] turns the camera's band into a plan: tiles to upload (active ones
 //! first, within a per-frame upload budget; tiles a GPU stamp needs this frame whatever the
-//! budget) and tiles to release. A released tile that was deformed is written back at once
-//! (Flower 2010: "when a tile gets unloaded ... immediately written to the hard-disk"), through
+//! budget) and tiles to release. As the RAM pool of height tiles does (Fikkan 2013, sec.
+//! 5.2-5.3), it only queues the store's work and takes in what finished: loader threads read
+//! and decode the band's new tiles, a writer thread writes the deformed tiles that left it
+//! (Flower 2010: "when a tile gets unloaded ... immediately written to the hard-disk") through
 //! [`World::write_tile`]: a temporary file, fsync, rename; a tile back at zero loses its file and
-//! reads as the shared zero tile again. Only released or deformed tiles stay in RAM, so memory
-//! follows the working set, not the world.
+//! reads as the shared zero tile again. A band tile whose read is in flight is not loaded yet
+//! ([`DetailFrame::pending`]): a tile joins the band at least a band's width of camera travel
+//! before it becomes active (a third of a tile by default, 11 m in the demo), so its read has
+//! frames to land. A read leaving the band before a loader takes it is
+//! cancelled, and rescued if the tile comes back first. Only the working set, deformed tiles
+//! and tiles being written stay in RAM, so memory follows the working set, not the world.
+//!
+//! Nothing is lost: RAM is the truth. A read never replaces a tile in RAM; a deformed tile
+//! stays in RAM, dirty, until the write-back of its latest texels is confirmed (a tile stamped
+//! while its write is in flight stays dirty and is written again; a failed write is reported
+//! and retried); a tile wanted again while it is written is loaded from RAM, without I/O. A
+//! tile that must hold its texels now is read on the caller's thread, its read in flight
+//! forgotten (its result dropped on arrival): the `needed` tiles of an update (a GPU stamp over
+//! a tile without a slot is refused, and its footprint would be lost) and the tiles a stamp or
+//! [`DetailCache::write_rect`] changes. Those are the tiles around the walker, which the band
+//! holds already: [`DetailFrame::read_now`] counts the rare exceptions.
+//! [`DetailCache::flush`] writes every dirty tile and waits for the writes (the end of a run).
 //!
 //! The detail's normals are the partial derivatives of eq. 3.3, which the shaders take from the
 //! heights as they draw: a loaded tile needs no normal map rebuilt.
@@ -40,24 +57,35 @@
 //! let mut cache = DetailCache::open(world, layout, BandSelection::default(), 1 << 20)?;
 //! let camera = Vec2::new(20.0, 20.0); // the middle of tile (2, 2): all nine tiles loaded
 //! let frame = cache.update(camera, &[])?;
-//! assert_eq!(frame.load.len(), 9);
-//! assert_eq!(cache.active_tiles().len(), 1);
+//! assert_eq!(frame.pending, 9); // read on the loaders; taken in by later updates
+//! let mut loaded = frame.load.len();
+//! for _ in 0..10_000 {
+//!     if loaded == 9 { break; }
+//!     std::thread::sleep(std::time::Duration::from_millis(1));
+//!     loaded += cache.update(camera, &[])?.load.len();
+//! }
+//! assert_eq!((loaded, cache.active_tiles().len()), (9, 1));
 //!
 //! // A footprint: the tile becomes dirty, and is written back when it leaves the band.
 //! let p = StampPlacement::new(Vec2::new(21.0, 19.0), Vec2::new(0.6, 0.9), -0.1)?;
 //! cache.apply_stamp(&mut GaussianStamp::default(), &p, Blend::Add)?;
 //! assert_eq!(cache.dirty_tiles().len(), 1);
 //! let frame = cache.update(Vec2::new(100.0, 100.0), &[])?;
-//! assert_eq!(frame.written, 1);
+//! assert_eq!(frame.writes, 1); // queued; the flush at the end of a run waits for it
+//! cache.flush()?;
+//! assert!(cache.dirty_tiles().is_empty());
 //! assert!(store.read("detail/00/0002/0002.png", 1 << 20)?.is_some());
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod stream;
+
 use crate::manifest;
 use crate::policy::BandSelection;
-use crate::{CacheError, Layer, TileData, TileId, TileRead, World};
+use crate::{CacheError, Layer, TileId, World};
 use glam::{DVec2, UVec2, Vec2};
 use std::collections::{HashMap, HashSet};
+use stream::{Streams, Texels, Written, read_now};
 use terrain_core::detail::{
     DETAIL_ZERO_RAW, DetailChange, DetailLayer, DetailLayout, detail_encoding,
 };
@@ -158,7 +186,13 @@ pub struct DetailFrame {
     pub unload: Vec<UVec2>,
     /// Tiles of the band the upload budget left for a later frame.
     pub deferred: usize,
-    /// Dirty tiles written back to the world this frame.
+    /// Tiles of the band whose read is in flight: loaded by a later update.
+    pub pending: usize,
+    /// Needed tiles not in RAM, read on the caller's thread (see the [module docs](self)).
+    pub read_now: usize,
+    /// Write-backs of dirty tiles queued this frame.
+    pub writes: usize,
+    /// Write-backs confirmed this frame (the tile is clean, unless stamped since).
     pub written: usize,
     /// Bytes of u8 samples this frame uploads.
     pub upload_bytes: u64,
@@ -168,7 +202,9 @@ pub struct DetailFrame {
 }
 
 /// Detail tiles over one coarse-map, stored in a [`World`]'s detail layer, with the working set
-/// of the camera's band regions on the GPU (see the [module docs](self)).
+/// of the camera's band regions on the GPU (see the [module docs](self)). Owns two loader
+/// threads and a writer thread; dropping it stops them once the write-backs queued are done
+/// (call [`DetailCache::flush`] first to store every dirty tile).
 #[derive(Debug)]
 pub struct DetailCache {
     world: World,
@@ -178,17 +214,21 @@ pub struct DetailCache {
     layer: DetailLayer,
     /// Tiles whose stored texels are in `layer` (read from the world, or written since).
     read: HashSet<UVec2>,
-    /// Tiles deformed since they were last written back.
-    dirty: HashSet<UVec2>,
+    /// Tiles deformed since they were last written back, with their last change's generation.
+    dirty: HashMap<UVec2, u64>,
+    /// The last generation given to a change.
+    changes: u64,
     /// The working set: loaded tiles and whether each is active.
     loaded: HashMap<UVec2, bool>,
+    /// The loaders and the writer, and their jobs in flight.
+    io: Streams,
 }
 
 impl DetailCache {
     /// A cache of `layout`'s tiles stored in `world` (whose manifest must describe the same
     /// detail layer: [`detail_manifest_layout`]), choosing its working set by `band` and
     /// uploading at most `upload_budget_bytes` of samples a frame (at least one tile's). Nothing
-    /// is read until the first update.
+    /// is read until the first update. Fails on a mismatch, or when its threads cannot start.
     pub fn open(
         world: World,
         layout: DetailLayout,
@@ -227,14 +267,17 @@ impl DetailCache {
                 expected: "at least one tile's samples",
             });
         }
+        let io = Streams::start(&world)?;
         Ok(Self {
             world,
             band,
             upload_budget_bytes,
             layer: DetailLayer::new(layout)?,
             read: HashSet::new(),
-            dirty: HashSet::new(),
+            dirty: HashMap::new(),
+            changes: 0,
             loaded: HashMap::new(),
+            io,
         })
     }
 
@@ -267,19 +310,32 @@ impl DetailCache {
         row_major(self.loaded.iter().filter(|(_, a)| **a).map(|(&t, _)| t))
     }
 
-    /// Tiles deformed since their last write-back, in row-major order.
+    /// Tiles deformed since their last confirmed write-back, in row-major order.
     pub fn dirty_tiles(&self) -> Vec<UVec2> {
-        row_major(self.dirty.iter().copied())
+        row_major(self.dirty.keys().copied())
+    }
+
+    /// Whether a read of `tile` is in flight on the loaders.
+    pub fn reading(&self, tile: UVec2) -> bool {
+        self.io.reading(tile)
+    }
+
+    /// Write-backs in flight on the writer.
+    pub fn writes_in_flight(&self) -> usize {
+        self.io.writes_in_flight()
     }
 
     /// Moves the working set to the band of a camera at `camera_xz` (metres), with `needed`
-    /// tiles loaded too (those a GPU stamp writes this frame: loaded whatever the budget, as
-    /// tiles a refused stamp would lose). Tiles that leave it are written back if dirty and
-    /// dropped from RAM; new ones are read from the world (a missing file is the zero tile),
-    /// nearest-need first within the upload budget. A tile that cannot be read or written is
-    /// reported in [`DetailFrame::failed`] and tried again at the next update (nothing is
-    /// lost: an unwritten tile stays dirty in RAM). Fails only on a non-finite camera or a
-    /// needed tile off the grid, before changing anything.
+    /// tiles loaded too (those a GPU stamp writes this frame: loaded whatever the budget, and
+    /// read now if not in RAM, as tiles a refused stamp would lose). Takes in the reads and
+    /// write-backs that finished; tiles that leave the working set are queued for write-back
+    /// if dirty and dropped from RAM once clean; the band's new tiles are queued for reading
+    /// (a missing file is the zero tile) and loaded, nearest-need first within the upload
+    /// budget, by the update after they arrive. Never waits on the store but for `needed`
+    /// tiles not in RAM. A tile that cannot be read or written is reported in
+    /// [`DetailFrame::failed`] and tried again at the next update (nothing is lost: an
+    /// unwritten tile stays dirty in RAM). Fails only on a non-finite camera or a needed tile
+    /// off the grid, before changing anything, or when the cache's threads are gone.
     pub fn update(&mut self, camera_xz: Vec2, needed: &[UVec2]) -> Result<DetailFrame, CacheError> {
         let tiles = self.layout().tiles();
         if let Some(t) = needed.iter().find(|t| t.x >= tiles.x || t.y >= tiles.y) {
@@ -292,6 +348,7 @@ impl DetailCache {
             *e |= b.active;
         }
         let mut frame = DetailFrame::default();
+        self.take_finished(&mut frame);
         let leaving = row_major(
             self.loaded
                 .keys()
@@ -302,28 +359,44 @@ impl DetailCache {
             self.loaded.remove(&t);
             frame.unload.push(t);
         }
-        // Deformed tiles outside the working set (released now, or stamped while away).
+        self.io.cancel_reads(|t| wanted.contains_key(&t));
+        // Deformed tiles outside the working set (released now, stamped while away, or whose
+        // write failed or was overtaken by a stamp) are queued for write-back.
         let away = row_major(
             self.dirty
-                .iter()
-                .filter(|t| !wanted.contains_key(t))
+                .keys()
+                .filter(|t| !wanted.contains_key(t) && !self.io.writing(**t))
                 .copied(),
         );
         for t in away {
-            match self.write_back(t) {
-                Ok(()) => frame.written += 1,
-                Err(e) => frame.failed.push((t, e)),
-            }
+            self.queue_write(t)?;
+            frame.writes += 1;
         }
+        // Clean tiles outside the working set leave RAM (a dirty one once its write lands).
         let drop: Vec<UVec2> = self
             .read
             .iter()
-            .filter(|t| !wanted.contains_key(t) && !self.dirty.contains(t))
+            .filter(|t| !wanted.contains_key(t) && !self.dirty.contains_key(t))
             .copied()
             .collect();
         for t in drop {
             self.layer.clear_tile(t);
             self.read.remove(&t);
+        }
+        // Needed tiles are read now; the band's are asked of the loaders.
+        for &t in needed {
+            if self.read.contains(&t) {
+                continue;
+            }
+            match self.read_into_ram(t) {
+                Ok(()) => frame.read_now += 1,
+                Err(e) => frame.failed.push((t, e)),
+            }
+        }
+        for b in &band {
+            if !self.read.contains(&b.tile) {
+                self.io.request_read(b.tile)?;
+            }
         }
         // Needed tiles first, then the band's active tiles, then the rest of the band.
         let tile_bytes = u64::from(self.layout().tile_size()).pow(2);
@@ -332,15 +405,13 @@ impl DetailCache {
             .map(|&t| (t, true))
             .chain(band.iter().map(|b| (b.tile, false)));
         for (t, must) in order {
-            if self.loaded.contains_key(&t) {
+            if self.loaded.contains_key(&t) || !self.read.contains(&t) {
+                // A band tile not in RAM is being read; a needed one failed (reported above).
+                frame.pending += usize::from(!must && !self.read.contains(&t));
                 continue;
             }
             if !must && frame.upload_bytes + tile_bytes > self.upload_budget_bytes {
                 frame.deferred += 1;
-                continue;
-            }
-            if let Err(e) = self.ensure_read(t) {
-                frame.failed.push((t, e));
                 continue;
             }
             self.loaded.insert(t, false);
@@ -350,13 +421,66 @@ impl DetailCache {
         for (t, active) in self.loaded.iter_mut() {
             *active = wanted.get(t).copied().unwrap_or(false);
         }
+        if frame.read_now + frame.writes + frame.written + frame.failed.len() > 0 {
+            tracing::debug!(
+                loaded = frame.load.len(),
+                pending = frame.pending,
+                read_now = frame.read_now,
+                writes = frame.writes,
+                written = frame.written,
+                failed = frame.failed.len(),
+                "detail cache traffic"
+            );
+        }
         Ok(frame)
     }
 
+    /// Takes in the reads and write-backs that finished (never waits).
+    fn take_finished(&mut self, frame: &mut DetailFrame) {
+        for (t, result) in self.io.finished_reads() {
+            // A tile in RAM is newer than any read (reads of it are superseded, but be sure).
+            if self.read.contains(&t) {
+                continue;
+            }
+            match result.and_then(|texels| self.keep(t, texels)) {
+                Ok(()) => {}
+                Err(e) => frame.failed.push((t, e)),
+            }
+        }
+        for done in self.io.finished_writes() {
+            match self.confirm(done) {
+                Ok(true) => frame.written += 1,
+                Ok(false) => {}
+                Err((t, e)) => frame.failed.push((t, e)),
+            }
+        }
+    }
+
+    /// A write-back that finished: the tile is clean if nothing changed it since it was queued
+    /// (returns whether it is); a failed one stays dirty, to be written again.
+    fn confirm(&mut self, (t, generation, result): Written) -> Result<bool, (UVec2, CacheError)> {
+        result.map_err(|e| (t, e))?;
+        if self.dirty.get(&t) == Some(&generation) {
+            self.dirty.remove(&t);
+        }
+        Ok(true)
+    }
+
+    /// Queues tile `t`'s texels (the zero tile: its file removed) for write-back.
+    fn queue_write(&mut self, t: UVec2) -> Result<(), CacheError> {
+        let side = self.layout().tile_size();
+        let texels = match self.layer.tile(t) {
+            Some(g) => g.clone(),
+            None => Grid::new(side, side, DETAIL_ZERO_RAW)?,
+        };
+        let generation = self.dirty.get(&t).copied().unwrap_or(0);
+        self.io.write(t, generation, texels)
+    }
+
     /// Applies a stamp to the detail layer (as [`DetailLayer::apply_stamp`]), reading the tiles
-    /// it covers from the world first; they become dirty. Tiles outside the working set are
-    /// written back at the next update. Fails as the layer's stamp does, or on a corrupt tile
-    /// file; nothing is written then.
+    /// it covers from the world first if they are not in RAM (on the caller's thread); they
+    /// become dirty. Tiles outside the working set are written back from the next update.
+    /// Fails as the layer's stamp does, or on a corrupt tile file; nothing is written then.
     pub fn apply_stamp<S: Stamp + ?Sized>(
         &mut self,
         stamp: &mut S,
@@ -395,7 +519,9 @@ impl DetailCache {
         if !footprint.is_empty() {
             let pieces = layout.footprint_pieces(footprint)?;
             for (t, _) in terrain_core::detail::tiles_of_pieces(&pieces) {
-                self.ensure_read(t)?;
+                if !self.read.contains(&t) {
+                    self.read_into_ram(t)?;
+                }
             }
         }
         Ok(())
@@ -405,25 +531,34 @@ impl DetailCache {
     fn mark_dirty(&mut self, change: &DetailChange) {
         for (t, _) in &change.tiles {
             if self.layer.tile(*t).is_some() {
-                self.dirty.insert(*t);
+                self.touch(*t);
             }
         }
     }
 
+    /// Tile `t` changed: dirty, with a new generation (a write-back in flight of older texels
+    /// no longer makes it clean).
+    fn touch(&mut self, t: UVec2) {
+        self.changes += 1;
+        self.dirty.insert(t, self.changes);
+    }
+
     /// Replaces a tile's texels (one read back from the GPU after a stamp there): it becomes
-    /// dirty. Fails on a tile off the grid or texels of the wrong size.
+    /// dirty, and a read of it in flight is forgotten. Fails on a tile off the grid or texels
+    /// of the wrong size.
     pub fn write_tile(&mut self, tile: UVec2, texels: Grid<u8>) -> Result<(), CacheError> {
         self.layer.set_tile(tile, texels)?;
+        self.io.supersede(tile);
         self.read.insert(tile);
-        self.dirty.insert(tile);
+        self.touch(tile);
         Ok(())
     }
 
     /// Replaces the texels of `rect` (tile coordinates) of `tile` with `texels`: the dirty rect
     /// of a stamp on the GPU, read back so the cache (collision, write-back) holds the GPU's
-    /// result. The tile is read from the world first if it is not in RAM; it becomes dirty.
-    /// Fails, changing nothing, on a tile off the grid, a rect off the tile, texels of another
-    /// size than the rect, or a corrupt tile file.
+    /// result. The tile is read from the world first (on the caller's thread) if it is not in
+    /// RAM; it becomes dirty. Fails, changing nothing, on a tile off the grid, a rect off the
+    /// tile, texels of another size than the rect, or a corrupt tile file.
     pub fn write_rect(
         &mut self,
         tile: UVec2,
@@ -449,7 +584,9 @@ impl DetailCache {
             }
             .into());
         }
-        self.ensure_read(tile)?;
+        if !self.read.contains(&tile) {
+            self.read_into_ram(tile)?;
+        }
         let mut grid = match self.layer.tile(tile) {
             Some(g) => g.clone(),
             None => Grid::new(side, side, DETAIL_ZERO_RAW)?,
@@ -460,56 +597,61 @@ impl DetailCache {
             grid.as_mut_slice()[start..start + w].copy_from_slice(row);
         }
         self.layer.set_tile(tile, grid)?;
-        self.dirty.insert(tile);
+        self.touch(tile);
         Ok(())
     }
 
-    /// Writes every dirty tile back (the end of a session). Returns how many were written.
+    /// Writes every dirty tile back and waits until each write is confirmed (the end of a
+    /// session; write-backs already in flight are waited for too). Returns how many tiles this
+    /// call queued and stored. A write that fails is not retried here: the tile stays dirty
+    /// and the first error is returned once the other writes have landed.
     pub fn flush(&mut self) -> Result<usize, CacheError> {
-        let dirty = self.dirty_tiles();
-        for &t in &dirty {
-            self.write_back(t)?;
+        let mut stored = 0;
+        let mut queued: HashSet<UVec2> = HashSet::new();
+        let mut failed: Option<CacheError> = None;
+        let mut refused: HashSet<UVec2> = HashSet::new();
+        loop {
+            // Dirty tiles not being written (a tile stamped while its write was in flight is
+            // queued again once that write lands).
+            for t in self.dirty_tiles() {
+                if !self.io.writing(t) && !refused.contains(&t) {
+                    self.queue_write(t)?;
+                    queued.insert(t);
+                }
+            }
+            let Some(done) = self.io.wait_write()? else {
+                break;
+            };
+            let t = done.0;
+            match self.confirm(done) {
+                Ok(_) => stored += usize::from(queued.remove(&t) && !self.dirty.contains_key(&t)),
+                Err((t, e)) => {
+                    refused.insert(t);
+                    failed.get_or_insert(e);
+                }
+            }
         }
-        Ok(dirty.len())
+        match failed {
+            Some(e) => Err(e),
+            None => Ok(stored),
+        }
     }
 
-    /// Reads tile `t`'s stored texels into the layer once.
-    fn ensure_read(&mut self, t: UVec2) -> Result<(), CacheError> {
-        if self.read.contains(&t) {
-            return Ok(());
-        }
-        let id = TileId::new(0, t.x, t.y);
-        match self.world.read_tile(Layer::Detail, id)? {
-            TileRead::Stored(TileData::U8(grid)) => self.layer.set_tile(t, grid)?,
-            TileRead::Stored(other) => {
-                return Err(CacheError::TileDataMismatch {
-                    layer: Layer::Detail,
-                    expected_bits: 8,
-                    size: self.layout().tile_size(),
-                    found_bits: other.bits(),
-                    found_w: other.size().x,
-                    found_h: other.size().y,
-                });
-            }
-            TileRead::Zero => self.layer.clear_tile(t),
+    /// Reads tile `t`'s stored texels into the layer on the caller's thread, forgetting a read
+    /// of it in flight.
+    fn read_into_ram(&mut self, t: UVec2) -> Result<(), CacheError> {
+        let texels = read_now(&self.world, t)?;
+        self.io.supersede(t);
+        self.keep(t, texels)
+    }
+
+    /// Puts tile `t`'s stored texels (`None`: the zero tile) in the layer.
+    fn keep(&mut self, t: UVec2, texels: Texels) -> Result<(), CacheError> {
+        match texels {
+            Some(grid) => self.layer.set_tile(t, grid)?,
+            None => self.layer.clear_tile(t),
         }
         self.read.insert(t);
-        Ok(())
-    }
-
-    /// Writes tile `t` to the world (the zero tile: its file removed) and marks it clean.
-    fn write_back(&mut self, t: UVec2) -> Result<(), CacheError> {
-        let side = self.layout().tile_size();
-        let texels = match self.layer.tile(t) {
-            Some(g) => g.clone(),
-            None => Grid::new(side, side, DETAIL_ZERO_RAW)?,
-        };
-        self.world.write_tile(
-            Layer::Detail,
-            TileId::new(0, t.x, t.y),
-            &TileData::U8(texels),
-        )?;
-        self.dirty.remove(&t);
         Ok(())
     }
 }

@@ -1,11 +1,18 @@
 //! Detail tiles as cache tiles: the band regions of Flower 2010, fig. 2.4 (loaded / active), the
 //! working set within an upload budget, dirty-only atomic write-back and reading back what
-//! was written, refusals.
+//! was written, refusals; and the store's I/O off the caller's thread (Fikkan 2013, sec.
+//! 5.2-5.3): a stalled store does not stall `update`, nothing deformed is lost while reads and
+//! writes are in flight, failed writes are retried, and `flush` waits for the writes.
 
 use glam::{UVec2, Vec2};
 use std::collections::HashSet;
 use std::sync::Arc;
-use terrain_cache::detail::{BandTile, DetailCache, band_tiles, detail_manifest_layout};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Condvar, Mutex};
+use std::time::Duration;
+use terrain_cache::detail::{
+    BandTile, DetailCache, DetailFrame, band_tiles, detail_manifest_layout,
+};
 use terrain_cache::{BandSelection, CacheError, Manifest, ObjectTileStore, TileStore, World};
 use terrain_core::detail::{DETAIL_ZERO_RAW, DetailLayout};
 use terrain_core::{Blend, GaussianStamp, Grid, HeightEncoding, StampPlacement, WrapMode};
@@ -31,6 +38,46 @@ fn world(store: &Arc<dyn TileStore>) -> World {
 
 fn store() -> Arc<dyn TileStore> {
     Arc::new(ObjectTileStore::in_memory().unwrap())
+}
+
+/// Most updates a test waits through for the loaders or the writer (a millisecond apart).
+const TRIES: usize = 20_000;
+
+fn pause() {
+    std::thread::sleep(Duration::from_millis(1));
+}
+
+/// Updates at `camera` until the band has no read in flight (every tile read has landed),
+/// at most [`TRIES`] times; returns the frames, the first included.
+fn settle(cache: &mut DetailCache, camera: Vec2, needed: &[UVec2]) -> Vec<DetailFrame> {
+    let mut frames = Vec::new();
+    for _ in 0..TRIES {
+        let f = cache.update(camera, needed).unwrap();
+        let done = f.pending == 0 && f.deferred == 0;
+        frames.push(f);
+        if done {
+            return frames;
+        }
+        pause();
+    }
+    panic!("the band at {camera} never finished loading");
+}
+
+/// Updates at `camera` until `done` holds, at most [`TRIES`] times; returns the frames.
+fn update_until(
+    cache: &mut DetailCache,
+    camera: Vec2,
+    mut done: impl FnMut(&DetailCache, &[DetailFrame]) -> bool,
+) -> Vec<DetailFrame> {
+    let mut frames = Vec::new();
+    for _ in 0..TRIES {
+        frames.push(cache.update(camera, &[]).unwrap());
+        if done(cache, &frames) {
+            return frames;
+        }
+        pause();
+    }
+    panic!("updates at {camera} never reached the state waited for");
 }
 
 fn counts(b: &[BandTile]) -> (usize, usize) {
@@ -139,28 +186,41 @@ fn the_working_set_follows_the_band_within_the_upload_budget() {
     let mut cache =
         DetailCache::open(world(&s), layout(), BandSelection::default(), 2 * 64 * 64).unwrap();
     let centre = Vec2::new(44.0, 60.0);
+    let active = UVec2::new(5, 7);
+    // The first update only asks the loaders: nothing is in RAM to upload yet.
     let f = cache.update(centre, &[]).unwrap();
-    assert_eq!(f.load.len(), 2, "two tiles' worth of budget");
-    assert_eq!(f.load[0], UVec2::new(5, 7), "the active tile first");
-    assert_eq!((f.deferred, f.upload_bytes), (7, 2 * 64 * 64));
-    let mut frames = 1;
-    while cache.loaded_tiles().len() < 9 {
-        let f = cache.update(centre, &[]).unwrap();
-        assert!(f.load.len() <= 2 && f.unload.is_empty());
-        frames += 1;
-        assert!(frames < 10);
+    assert!(f.load.is_empty() && f.unload.is_empty());
+    assert_eq!((f.pending, f.read_now), (9, 0));
+    assert!(cache.reading(active));
+    // The tiles come in two a frame (the budget), the active one before any inactive one.
+    let mut loaded: Vec<UVec2> = Vec::new();
+    let mut uploading = 0;
+    let frames = update_until(&mut cache, centre, |c, _| c.loaded_tiles().len() == 9);
+    for f in &frames {
+        assert!(f.load.len() <= 2 && f.unload.is_empty(), "{f:?}");
+        assert_eq!(f.upload_bytes, f.load.len() as u64 * 64 * 64);
+        for &t in &f.load {
+            assert!(
+                t == active || loaded.contains(&active),
+                "{t} before the active tile"
+            );
+            loaded.push(t);
+        }
+        uploading += usize::from(!f.load.is_empty());
     }
-    assert_eq!(frames, 5);
-    assert_eq!(cache.active_tiles(), vec![UVec2::new(5, 7)]);
-    // Tiles a GPU stamp needs are loaded at once, whatever the budget, and are not active.
+    assert!(uploading >= 5, "9 tiles at 2 a frame: {uploading} frames");
+    assert_eq!(cache.active_tiles(), vec![active]);
+    // Tiles a GPU stamp needs are read and loaded at once, whatever the budget, and are not
+    // active.
     let far = [UVec2::new(12, 3), UVec2::new(13, 3), UVec2::new(12, 4)];
     let f = cache.update(centre, &far).unwrap();
     assert_eq!(f.load, far.to_vec());
+    assert_eq!(f.read_now, 3);
     assert!(
         cache
             .loaded_tiles()
             .iter()
-            .all(|&(t, a)| a == (t == UVec2::new(5, 7)))
+            .all(|&(t, a)| a == (t == active))
     );
     // Moving on releases what left the band; RAM holds only the working set.
     let f = cache.update(Vec2::new(100.0, 100.0), &[]).unwrap();
@@ -185,7 +245,7 @@ fn deformed_tiles_are_written_back_when_released_and_read_back_later() {
     let mut cache =
         DetailCache::open(world(&s), layout(), BandSelection::default(), 1 << 20).unwrap();
     let here = Vec2::new(44.0, 60.0);
-    cache.update(here, &[]).unwrap();
+    settle(&mut cache, here, &[]);
     // Across the corner of four tiles (48 m, 64 m), and one far outside the working set.
     footprint(&mut cache, Vec2::new(48.0, 64.0), -0.2);
     footprint(&mut cache, Vec2::new(100.0, 20.0), -0.1);
@@ -195,19 +255,23 @@ fn deformed_tiles_are_written_back_when_released_and_read_back_later() {
         .iter()
         .map(|&t| (t, cache.tile(t).unwrap().clone()))
         .collect();
-    // The far tile is written at the next update; those in the band stay in RAM, dirty.
+    // The far tile is queued at the next update and clean once its write lands; those in the
+    // band stay in RAM, dirty.
     let f = cache.update(here, &[]).unwrap();
-    assert_eq!(f.written, 1);
-    assert_eq!(cache.dirty_tiles().len(), 4);
+    assert_eq!(f.writes, 1);
+    update_until(&mut cache, here, |c, _| c.dirty_tiles().len() == 4);
     assert!(
         s.read("detail/00/0002/000c.png", 1 << 20)
             .unwrap()
             .is_some()
     );
-    // Leaving writes the rest back; a second flush has nothing to write (dirty only).
+    // Leaving queues the rest; the flush waits for them, and has nothing of its own to write
+    // (dirty only).
     let f = cache.update(Vec2::new(100.0, 100.0), &[]).unwrap();
-    assert_eq!(f.written, 4);
+    assert_eq!(f.writes, 4);
     assert_eq!(cache.flush().unwrap(), 0);
+    assert!(cache.dirty_tiles().is_empty());
+    assert_eq!(cache.writes_in_flight(), 0);
     // Another cache over the same store reads them back, texel for texel; untouched tiles
     // have no file and read as the zero tile.
     let mut again = DetailCache::open(
@@ -219,7 +283,7 @@ fn deformed_tiles_are_written_back_when_released_and_read_back_later() {
     .unwrap();
     for (t, texels) in &before {
         let centre = (t.as_vec2() + 0.5) * 8.0;
-        again.update(centre, &[]).unwrap();
+        settle(&mut again, centre, &[]);
         assert_eq!(again.tile(*t), Some(texels), "tile {t}");
     }
     assert!(
@@ -247,41 +311,43 @@ fn a_corrupt_tile_file_is_an_error_and_the_rest_still_works() {
     s.write("detail/00/0007/0005.png", b"not a png at all")
         .unwrap();
     let mut cache = DetailCache::open(w, layout(), BandSelection::default(), 1 << 20).unwrap();
-    let f = cache.update(Vec2::new(44.0, 60.0), &[]).unwrap();
-    assert_eq!(f.failed.len(), 1);
-    assert_eq!(f.failed[0].0, UVec2::new(5, 7));
+    let bad = UVec2::new(5, 7);
+    let here = Vec2::new(44.0, 60.0);
+    // The loaders report it when its read lands; the other eight tiles load.
+    let frames = update_until(&mut cache, here, |c, frames| {
+        c.loaded_tiles().len() == 8 && frames.iter().any(|f| !f.failed.is_empty())
+    });
+    let failed: Vec<_> = frames.iter().flat_map(|f| &f.failed).collect();
+    assert_eq!(failed[0].0, bad);
     assert!(
-        matches!(f.failed[0].1, CacheError::CorruptTile { .. }),
-        "{}",
-        f.failed[0].1
-    );
-    assert_eq!(f.load.len(), 8, "the other tiles load");
-    assert!(
-        !cache
-            .loaded_tiles()
+        failed
             .iter()
-            .any(|(t, _)| *t == UVec2::new(5, 7))
+            .all(|(t, e)| *t == bad && matches!(e, CacheError::CorruptTile { .. })),
+        "{failed:?}"
     );
-    // A stamp over it is refused and changes nothing; it is tried again next update.
-    let p = StampPlacement::new(Vec2::new(44.0, 60.0), Vec2::new(0.6, 0.9), -0.1).unwrap();
+    assert!(!cache.loaded_tiles().iter().any(|(t, _)| *t == bad));
+    // A stamp over it is refused and changes nothing; it is tried again by later updates.
+    let p = StampPlacement::new(here, Vec2::new(0.6, 0.9), -0.1).unwrap();
     assert!(
         cache
             .apply_stamp(&mut GaussianStamp::default(), &p, Blend::Add)
             .is_err()
     );
     assert!(cache.dirty_tiles().is_empty());
-    let f = cache.update(Vec2::new(44.0, 60.0), &[]).unwrap();
-    assert_eq!(f.failed.len(), 1);
-    // Far from it, the cache works.
-    let f = cache.update(Vec2::new(100.0, 20.0), &[]).unwrap();
-    assert!(f.failed.is_empty());
-    assert_eq!(f.load.len(), 9 - f.deferred);
+    update_until(&mut cache, here, |_, frames| {
+        frames.last().is_some_and(|f| !f.failed.is_empty())
+    });
+    // Far from it, the cache works (a read of it still in flight may report once more).
+    let frames = settle(&mut cache, Vec2::new(100.0, 20.0), &[]);
     assert!(
-        cache
-            .loaded_tiles()
+        frames
             .iter()
-            .all(|(t, _)| *t != UVec2::new(5, 7))
+            .flat_map(|f| &f.failed)
+            .all(|(t, _)| *t == bad),
+        "{frames:?}"
     );
+    assert_eq!(cache.loaded_tiles().len(), 9);
+    assert!(cache.loaded_tiles().iter().all(|(t, _)| *t != bad));
 }
 
 #[test]
@@ -370,4 +436,239 @@ fn rects_read_back_from_the_gpu_merge_into_the_stored_tile() {
     );
     assert!(cache.write_rect(UVec2::new(16, 0), rect, &texels).is_err());
     assert_eq!(cache.tile(t).unwrap(), &merged);
+}
+
+/// A store in front of another whose detail reads on the cache's loader threads, and detail
+/// writes, can be held at a gate until the test opens it, and whose detail writes can be made
+/// to fail.
+#[derive(Debug)]
+struct GateStore {
+    inner: Arc<dyn TileStore>,
+    hold_reads: bool,
+    hold_writes: bool,
+    open: Mutex<bool>,
+    opened: Condvar,
+    /// Calls that reached the gate (held, or let through once open).
+    arrived: AtomicUsize,
+    /// Detail writes still to fail.
+    failures: AtomicUsize,
+}
+
+impl GateStore {
+    fn new(hold_reads: bool, hold_writes: bool) -> Arc<Self> {
+        Arc::new(Self {
+            inner: store(),
+            hold_reads,
+            hold_writes,
+            open: Mutex::new(false),
+            opened: Condvar::new(),
+            arrived: AtomicUsize::new(0),
+            failures: AtomicUsize::new(0),
+        })
+    }
+
+    fn gate(&self) {
+        self.arrived.fetch_add(1, Ordering::SeqCst);
+        let mut open = self.open.lock().unwrap();
+        while !*open {
+            open = self.opened.wait(open).unwrap();
+        }
+    }
+
+    fn open_gate(&self) {
+        *self.open.lock().unwrap() = true;
+        self.opened.notify_all();
+    }
+
+    /// Waits (a bounded number of tries) until `n` calls reached the gate.
+    fn wait_arrived(&self, n: usize) {
+        for _ in 0..TRIES {
+            if self.arrived.load(Ordering::SeqCst) >= n {
+                return;
+            }
+            pause();
+        }
+        panic!("{n} calls never reached the gate");
+    }
+
+    /// The next detail write fails while `failures` is above zero.
+    fn written(&self, key: &str) -> Result<(), CacheError> {
+        if !key.starts_with("detail/") {
+            return Ok(());
+        }
+        let fail = self
+            .failures
+            .fetch_update(Ordering::SeqCst, Ordering::SeqCst, |n| n.checked_sub(1))
+            .is_ok();
+        if fail {
+            return Err(CacheError::Io {
+                path: key.into(),
+                source: std::io::Error::other("the disk is full"),
+            });
+        }
+        if self.hold_writes {
+            self.gate();
+        }
+        Ok(())
+    }
+}
+
+impl TileStore for GateStore {
+    fn read(&self, key: &str, max_len: u64) -> Result<Option<Vec<u8>>, CacheError> {
+        let loader = std::thread::current()
+            .name()
+            .is_some_and(|n| n.starts_with("terrain-detail-load"));
+        if self.hold_reads && loader && key.starts_with("detail/") {
+            self.gate();
+        }
+        self.inner.read(key, max_len)
+    }
+    fn write(&self, key: &str, bytes: &[u8]) -> Result<(), CacheError> {
+        self.written(key)?;
+        self.inner.write(key, bytes)
+    }
+    fn remove(&self, key: &str) -> Result<(), CacheError> {
+        self.written(key)?;
+        self.inner.remove(key)
+    }
+    fn exists(&self, key: &str) -> Result<bool, CacheError> {
+        self.inner.exists(key)
+    }
+    fn list(&self, prefix: &str) -> Result<Vec<String>, CacheError> {
+        self.inner.list(prefix)
+    }
+}
+
+fn gated_cache(gate: &Arc<GateStore>) -> DetailCache {
+    let s: Arc<dyn TileStore> = gate.clone();
+    DetailCache::open(world(&s), layout(), BandSelection::default(), 1 << 20).unwrap()
+}
+
+#[test]
+fn a_stalled_store_does_not_stall_update_and_a_stamp_outlives_the_read_in_flight() {
+    let gate = GateStore::new(true, false);
+    let mut cache = gated_cache(&gate);
+    let here = Vec2::new(44.0, 60.0);
+    // Every read on the loaders waits at the gate: the updates return all the same (were
+    // they to read, they would wait there forever), with the band pending.
+    let f = cache.update(here, &[]).unwrap();
+    assert_eq!((f.pending, f.load.len()), (9, 0));
+    gate.wait_arrived(2);
+    for _ in 0..3 {
+        let f = cache.update(here, &[]).unwrap();
+        assert_eq!((f.pending, f.load.len()), (9, 0));
+    }
+    // A stamp on the camera's tile, whose read is in flight (perhaps held in a loader): the
+    // stamp reads it on this thread, and the read that lands later is dropped.
+    let t = UVec2::new(5, 7);
+    assert!(cache.reading(t));
+    footprint(&mut cache, Vec2::new(44.0, 60.0), -0.2);
+    assert!(!cache.reading(t));
+    let stamped = cache.tile(t).unwrap().clone();
+    assert!(stamped.as_slice().iter().any(|&v| v != DETAIL_ZERO_RAW));
+    // A needed tile is read now, on this thread, whatever the loaders are doing.
+    let far = UVec2::new(12, 2);
+    let f = cache.update(here, &[far]).unwrap();
+    assert_eq!(f.read_now, 1);
+    assert!(f.load.contains(&t) && f.load.contains(&far));
+    gate.open_gate();
+    settle(&mut cache, here, &[]);
+    assert_eq!(cache.loaded_tiles().len(), 9);
+    assert_eq!(
+        cache.tile(t),
+        Some(&stamped),
+        "the late read overwrote the stamp"
+    );
+    assert_eq!(cache.dirty_tiles(), vec![t]);
+}
+
+#[test]
+fn a_tile_stamped_released_and_loaded_again_reads_back_its_texels() {
+    let gate = GateStore::new(false, true);
+    let mut cache = gated_cache(&gate);
+    let (here, away) = (Vec2::new(44.0, 60.0), Vec2::new(100.0, 100.0));
+    let t = UVec2::new(5, 7);
+    settle(&mut cache, here, &[]);
+    footprint(&mut cache, here, -0.2);
+    let stamped = cache.tile(t).unwrap().clone();
+    // Released: its write-back waits at the gate, so it stays in RAM, dirty.
+    let f = cache.update(away, &[]).unwrap();
+    assert!(f.unload.contains(&t) && f.writes == 1);
+    gate.wait_arrived(1);
+    assert_eq!(cache.tile(t), Some(&stamped));
+    // Back before the write lands: loaded from RAM, no read.
+    let f = cache.update(here, &[]).unwrap();
+    assert!(f.load.contains(&t) && !cache.reading(t));
+    assert_eq!(cache.tile(t), Some(&stamped));
+    assert_eq!(cache.dirty_tiles(), vec![t]);
+    // Stamped again while that write is in flight: the write of the older texels does not make
+    // it clean.
+    footprint(&mut cache, Vec2::new(46.0, 58.0), -0.1);
+    let restamped = cache.tile(t).unwrap().clone();
+    gate.open_gate();
+    update_until(&mut cache, here, |c, _| c.writes_in_flight() == 0);
+    assert_eq!(cache.dirty_tiles(), vec![t]);
+    // Released once more: written, dropped from RAM, and read back from the store.
+    update_until(&mut cache, away, |c, _| c.dirty_tiles().is_empty());
+    update_until(&mut cache, away, |c, _| c.tile(t).is_none());
+    settle(&mut cache, here, &[]);
+    assert_eq!(cache.tile(t), Some(&restamped));
+}
+
+#[test]
+fn a_failing_store_write_keeps_the_tile_dirty_and_is_retried() {
+    let gate = GateStore::new(false, false);
+    let mut cache = gated_cache(&gate);
+    let (here, away) = (Vec2::new(44.0, 60.0), Vec2::new(100.0, 100.0));
+    let t = UVec2::new(5, 7);
+    settle(&mut cache, here, &[]);
+    footprint(&mut cache, here, -0.2);
+    let stamped = cache.tile(t).unwrap().clone();
+    gate.failures.store(3, Ordering::SeqCst);
+    // Three writes fail, each reported, the tile dirty and in RAM meanwhile; the fourth lands.
+    let frames = update_until(&mut cache, away, |c, _| c.dirty_tiles().is_empty());
+    let failed: Vec<_> = frames.iter().flat_map(|f| &f.failed).collect();
+    assert_eq!(failed.len(), 3, "{failed:?}");
+    assert!(failed.iter().all(|(f, _)| *f == t));
+    assert_eq!(frames.iter().map(|f| f.writes).sum::<usize>(), 4);
+    let key = "detail/00/0007/0005.png";
+    assert!(gate.inner.read(key, 1 << 20).unwrap().is_some());
+    // A flush that fails keeps the tile dirty and says why; the next one stores it.
+    footprint(&mut cache, here, -0.1);
+    gate.failures.store(1, Ordering::SeqCst);
+    assert!(matches!(cache.flush(), Err(CacheError::Io { .. })));
+    assert_eq!(cache.dirty_tiles(), vec![t]);
+    assert_eq!(cache.flush().unwrap(), 1);
+    assert!(cache.dirty_tiles().is_empty());
+    settle(&mut cache, here, &[]);
+    assert_ne!(cache.tile(t), Some(&stamped), "the second stamp is kept");
+}
+
+#[test]
+fn flush_waits_for_the_writes() {
+    let gate = GateStore::new(false, true);
+    let mut cache = gated_cache(&gate);
+    let here = Vec2::new(44.0, 60.0);
+    settle(&mut cache, here, &[]);
+    // Across four tiles, and one far away (queued for write-back by the next update).
+    footprint(&mut cache, Vec2::new(48.0, 64.0), -0.2);
+    footprint(&mut cache, Vec2::new(100.0, 20.0), -0.1);
+    let dirty = cache.dirty_tiles();
+    assert_eq!(cache.update(here, &[]).unwrap().writes, 1);
+    // The writer waits at the gate until a helper opens it; the flush waits for the writer.
+    let helper = {
+        let gate = gate.clone();
+        std::thread::spawn(move || {
+            gate.wait_arrived(1);
+            gate.open_gate();
+        })
+    };
+    assert_eq!(cache.flush().unwrap(), 4);
+    helper.join().unwrap();
+    assert!(cache.dirty_tiles().is_empty());
+    assert_eq!(cache.writes_in_flight(), 0);
+    for t in dirty {
+        let key = format!("detail/00/{:04x}/{:04x}.png", t.y, t.x);
+        assert!(gate.inner.read(&key, 1 << 20).unwrap().is_some(), "{key}");
+    }
 }

@@ -31,7 +31,7 @@
 
 mod frame;
 mod tiles;
-mod workers;
+pub(crate) mod workers;
 
 use crate::CacheError;
 use crate::policy::{CameraState, SelectionPolicy, SphericalSelection, TileGrid, Want};

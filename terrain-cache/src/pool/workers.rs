@@ -1,6 +1,7 @@
 //! The pool's threads: loaders decode tiles from the world, the writer stores dirty tiles
 //! atomically (and refreshes their coarser ancestors); the frame thread talks to them through
-//! channels and one atomic state per load job, which it swaps to cancel or rescue a job.
+//! channels and one atomic state per load job, which it swaps to cancel or rescue a job. The
+//! detail cache runs the same threads (`crate::detail`), so both layers stream alike.
 
 use crate::CacheError;
 use crate::build::rebuild_ancestors;
@@ -12,23 +13,23 @@ use std::sync::atomic::{AtomicU8, Ordering};
 
 // The states of a load job's cell: the frame thread swaps QUEUED and CANCELLED, a loader
 // takes QUEUED to LOADING or CANCELLED to SKIPPED.
-pub(super) const QUEUED: u8 = 0;
-pub(super) const LOADING: u8 = 1;
-pub(super) const CANCELLED: u8 = 2;
-pub(super) const SKIPPED: u8 = 3;
+pub(crate) const QUEUED: u8 = 0;
+pub(crate) const LOADING: u8 = 1;
+pub(crate) const CANCELLED: u8 = 2;
+pub(crate) const SKIPPED: u8 = 3;
 
 #[derive(Debug)]
-pub(super) struct JobCell {
-    pub(super) state: AtomicU8,
+pub(crate) struct JobCell {
+    pub(crate) state: AtomicU8,
 }
 
-pub(super) struct LoadJob {
-    pub(super) id: TileId,
-    pub(super) ticket: u64,
-    pub(super) cell: Arc<JobCell>,
+pub(crate) struct LoadJob {
+    pub(crate) id: TileId,
+    pub(crate) ticket: u64,
+    pub(crate) cell: Arc<JobCell>,
 }
 
-pub(super) enum LoadDone {
+pub(crate) enum LoadDone {
     Loaded {
         id: TileId,
         ticket: u64,
@@ -40,19 +41,19 @@ pub(super) enum LoadDone {
     },
 }
 
-pub(super) struct WriteJob {
-    pub(super) id: TileId,
-    pub(super) generation: u64,
-    pub(super) data: Arc<TileData>,
+pub(crate) struct WriteJob {
+    pub(crate) id: TileId,
+    pub(crate) generation: u64,
+    pub(crate) data: Arc<TileData>,
 }
 
-pub(super) struct WriteDone {
-    pub(super) id: TileId,
-    pub(super) generation: u64,
-    pub(super) result: Result<Vec<TileId>, CacheError>,
+pub(crate) struct WriteDone {
+    pub(crate) id: TileId,
+    pub(crate) generation: u64,
+    pub(crate) result: Result<Vec<TileId>, CacheError>,
 }
 
-pub(super) fn loader(world: World, layer: Layer, rx: Receiver<LoadJob>, tx: Sender<LoadDone>) {
+pub(crate) fn loader(world: World, layer: Layer, rx: Receiver<LoadJob>, tx: Sender<LoadDone>) {
     while let Ok(job) = rx.recv() {
         // Take the job (QUEUED -> LOADING) or make its cancellation final (CANCELLED ->
         // SKIPPED); retry if the frame thread swapped the state in between.
@@ -99,7 +100,7 @@ pub(super) fn loader(world: World, layer: Layer, rx: Receiver<LoadJob>, tx: Send
     }
 }
 
-pub(super) fn writer(
+pub(crate) fn writer(
     world: World,
     layer: Layer,
     propagate: bool,
