@@ -125,6 +125,19 @@ pub const CDLOD_ATLAS: &str = concat!(
     include_str!("wgsl/render/cdlod.wgsl")
 );
 
+/// `CdlodRenderer` over a coarse-map with a detail layer: the CDLOD vertex shader on the
+/// coarse surface, shaded as [`CLIPMAP_DETAIL`] (composite normals, parallax, fade).
+pub const CDLOD_DETAIL: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/resources/detail_tiles.wgsl"),
+    include_str!("wgsl/render/clipmap_detail_parallax.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
+    include_str!("wgsl/render/cdlod.wgsl")
+);
+
 /// `TessellationPass`: adaptive tessellation by longest-edge bisection (Cervin 2012, sec. 2.3),
 /// writing triangles and indirect draw arguments.
 pub const TESSELLATE: &str = concat!(wgsl_prelude!(), include_str!("wgsl/render/tessellate.wgsl"));
@@ -136,6 +149,19 @@ pub const TESSELLATED: &str = concat!(
     include_str!("wgsl/render/target_color.wgsl"),
     include_str!("wgsl/resources/detail_sample.wgsl"),
     include_str!("wgsl/render/clipmap_no_detail.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
+    include_str!("wgsl/render/tessellated.wgsl")
+);
+
+/// `TessRenderer` over a coarse-map with a detail layer: the tessellation's triangles shaded
+/// as [`CLIPMAP_DETAIL`] (composite normals, parallax, fade).
+pub const TESSELLATED_DETAIL: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/render/target_color.wgsl"),
+    include_str!("wgsl/resources/detail_sample.wgsl"),
+    include_str!("wgsl/resources/detail_tiles.wgsl"),
+    include_str!("wgsl/render/clipmap_detail_parallax.wgsl"),
     include_str!("wgsl/render/clipmap.wgsl"),
     include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
     include_str!("wgsl/render/tessellated.wgsl")
@@ -275,8 +301,10 @@ pub const ALL: &[(&str, &str)] = &[
     ("density", DENSITY),
     ("cdlod", CDLOD),
     ("cdlod_atlas", CDLOD_ATLAS),
+    ("cdlod_detail", CDLOD_DETAIL),
     ("tessellate", TESSELLATE),
     ("tessellated", TESSELLATED),
+    ("tessellated_detail", TESSELLATED_DETAIL),
     ("sky", SKY),
     ("clipmap", CLIPMAP),
     ("clipmap_granular", CLIPMAP_GRANULAR),

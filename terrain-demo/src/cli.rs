@@ -109,10 +109,11 @@ pub struct Cli {
     pub lod: LodArg,
     /// The default scenario's detail layer (Flower 2010, sec. 2.3): `none` stamps footprints into
     /// the coarse-map; `parallax` stamps them into 8-bit detail tiles refined x3 (streamed
-    /// around the camera) and shades the clipmap through them: parallax occlusion mapping, the
-    /// composite normal of eq. 3.4, faded out with distance; `refine` draws the same tiles as
-    /// geometry within 9 m of the camera (each coarse triangle split in up to nine by the
-    /// refinement patterns of sec. 2.4.3) and by their normals beyond.
+    /// around the camera) and shades the terrain through them under every `--lod` mode:
+    /// parallax occlusion mapping, the composite normal of eq. 3.4, faded out with distance;
+    /// `refine` (with the clipmap) draws the same tiles as geometry within 9 m of the camera
+    /// (each coarse triangle split in up to nine by the refinement patterns of sec. 2.4.3) and
+    /// by their normals beyond.
     #[arg(long, value_enum, default_value_t = DetailArg::None)]
     pub detail: DetailArg,
     /// With `--lod cdlod`: choose the LODs by screen-space error (Cervin 2012, eq. 1.1), at most
@@ -246,10 +247,11 @@ pub enum LodArg {
 pub enum DetailArg {
     /// Coarse-map only.
     None,
-    /// Detail tiles, drawn by parallax occlusion mapping on the unrefined clipmap.
+    /// Detail tiles, drawn by parallax occlusion mapping on the unrefined mesh (any LOD mode).
     Parallax,
     /// Detail tiles, drawn as refined geometry near the camera (Flower 2010, sec. 2.4.3's
-    /// refinement patterns, a compute pass drawn indirectly) and by their normals beyond.
+    /// refinement patterns, a compute pass drawn indirectly) and by their normals beyond, in
+    /// place of the clipmap's finest cells (`--lod clipmap` only).
     Refine,
 }
 

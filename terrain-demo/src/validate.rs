@@ -106,10 +106,10 @@ fn lod_flags(cli: &Cli) -> Result<()> {
              flyover scenarios draw with the clipmap"
         ));
     }
-    if cli.detail != DetailArg::None && cli.lod != LodArg::Clipmap {
+    if cli.detail == DetailArg::Refine && cli.lod != LodArg::Clipmap {
         return Err(anyhow!(
-            "--detail parallax and --detail refine draw the detail tiles with the clipmap: they \
-             need --lod clipmap"
+            "--detail refine draws refined geometry in place of the clipmap's finest cells: it \
+             needs --lod clipmap (--detail parallax draws the detail layer under every LOD mode)"
         ));
     }
     if cli.target_error.is_some() && cli.lod == LodArg::Clipmap {
@@ -173,6 +173,8 @@ mod tests {
             ],
             &["--scenario", "world", "--lod", "cdlod"],
             &["--detail", "refine"],
+            &["--lod", "cdlod", "--detail", "parallax"],
+            &["--lod", "tessellated", "--detail", "parallax"],
             &[
                 "--camera",
                 "orbit",
@@ -205,7 +207,8 @@ mod tests {
             ),
             (&["--scenario", "flyover", "--lod", "cdlod"], "--lod"),
             (&["--scenario", "world", "--lod", "tessellated"], "--lod"),
-            (&["--lod", "cdlod", "--detail", "parallax"], "--detail"),
+            (&["--lod", "cdlod", "--detail", "refine"], "--detail"),
+            (&["--lod", "tessellated", "--detail", "refine"], "--detail"),
             (&["--target-error", "1"], "--target-error"),
             (&["--no-morph"], "--no-morph"),
             (

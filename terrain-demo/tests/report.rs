@@ -60,7 +60,7 @@ fn reports_of_every_scenario_validate_against_the_schema() {
     ));
     std::fs::write(&deep, "[stamps]\nfoot_depth_m = 0.9\n").unwrap();
     let deep_s = deep.to_string_lossy().into_owned();
-    let runs: [(&str, &[&str]); 9] = [
+    let runs: [(&str, &[&str]); 11] = [
         (
             "schema_default",
             &["--size", "96", "--frames", "5", "--resolution", "160x96"],
@@ -113,6 +113,36 @@ fn reports_of_every_scenario_validate_against_the_schema() {
             ],
         ),
         (
+            "schema_cdlod_detail",
+            &[
+                "--size",
+                "128",
+                "--frames",
+                "3",
+                "--resolution",
+                "160x96",
+                "--lod",
+                "cdlod",
+                "--detail",
+                "parallax",
+            ],
+        ),
+        (
+            "schema_tessellated_detail",
+            &[
+                "--size",
+                "128",
+                "--frames",
+                "3",
+                "--resolution",
+                "160x96",
+                "--lod",
+                "tessellated",
+                "--detail",
+                "parallax",
+            ],
+        ),
+        (
             "schema_tessellated",
             &[
                 "--size",
@@ -160,11 +190,18 @@ fn reports_of_every_scenario_validate_against_the_schema() {
             std::fs::copy(out.join("terrain.png"), &dem).unwrap();
         }
         let r = report(&out);
-        if name == "schema_cdlod" || name == "schema_tessellated" {
+        if name.starts_with("schema_cdlod") || name.starts_with("schema_tessellated") {
             // Every frame says how it was drawn; the popping metric needs a frame before it.
-            let mode = name.trim_start_matches("schema_");
+            let mode = name
+                .trim_start_matches("schema_")
+                .trim_end_matches("_detail");
             for (i, f) in r["frames"].as_array().unwrap().iter().enumerate() {
                 assert_eq!(f["lod"], mode, "frame {i}");
+                if name.ends_with("_detail") {
+                    // The footprints go into the detail tiles, drawn by this LOD mode.
+                    assert!(f["detail_tiles_resident"].as_u64() >= Some(1), "frame {i}");
+                    assert!(f["detail_dirty_texels"].as_u64() > Some(0), "frame {i}");
+                }
                 assert!(f["triangles"].as_u64().unwrap() > 0);
                 assert!(f["vertices"].as_u64().unwrap() > 0);
                 assert!(f["max_screen_error_px"].as_f64().is_some());

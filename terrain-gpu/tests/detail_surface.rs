@@ -4,18 +4,21 @@
 //! adapter the machine has (lavapipe in CI); without one they skip, or fail under
 //! `TERRAIN_REQUIRE_GPU=1`.
 
+#[path = "common/footprints.rs"]
+mod footprints;
 #[path = "common/scene.rs"]
 #[allow(dead_code)] // the golden view's parts of the shared scene
 mod scene;
 
-use glam::{IVec2, UVec2, Vec2, Vec3};
+use footprints::{camera, scene_with_footprints};
+use glam::{IVec2, UVec2, Vec2};
 use scene::Scene;
 use terrain_core::detail::{DetailLayer, DetailLayout};
-use terrain_core::{Blend, GaussianStamp, Grid, StampPlacement, composite_normal};
+use terrain_core::{Grid, composite_normal};
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    Camera, ClipmapSurface, ClipmapView, DetailProbe, DetailProbePoint, DetailShading,
-    GpuDetailTiles, GpuError, SkyColors, TerrainStyle,
+    ClipmapSurface, ClipmapView, DetailProbe, DetailProbePoint, DetailShading, GpuDetailTiles,
+    GpuError, SkyColors, TerrainStyle,
 };
 
 /// A 24 x 20 coarse-map at 0.75 m refined x3 (0.25 m detail texels: every probe position below
@@ -144,42 +147,6 @@ fn frame_diff(a: &Grid<[u8; 4]>, b: &Grid<[u8; 4]>) -> (u8, usize) {
         strong += usize::from(d > 8);
     }
     (max, strong)
-}
-
-/// The shared scene's 256 m map with a detail layer refined x8 (12.5 cm texels) in tiles of
-/// `tile` texels, footprints pressed 30 cm deep along a walk in front of `camera()` (starting at
-/// the edge between tile rows 7 and 8 of 128-texel tiles), every touched tile on the GPU.
-fn scene_with_footprints(ctx: terrain_gpu::GpuContext, tile: u32) -> (Scene, DetailLayer) {
-    let scene = Scene::new(ctx, 31, 5);
-    let layout = DetailLayout::new(scene.map.size(), 1.0, 8, tile).unwrap();
-    let mut layer = DetailLayer::new(layout).unwrap();
-    let mut foot = GaussianStamp::default();
-    let mut touched = Vec::new();
-    for i in 0..10 {
-        let side = if i % 2 == 0 { -0.4 } else { 0.4 };
-        // From z = 128 m on: in tile row 8 of 128-texel tiles (16 m), next to row 7's zeros.
-        let c = Vec2::new(120.0 + side, 128.6 + 1.2 * i as f32);
-        let p = StampPlacement::new(c, Vec2::new(0.8, 1.2), -0.3).unwrap();
-        let change = layer
-            .apply_stamp(&mut foot, &p, Blend::Min { base_m: 0.0 })
-            .unwrap();
-        touched.extend(change.tiles.iter().map(|(t, _)| *t));
-    }
-    assert!(!touched.is_empty());
-    let mut tiles = GpuDetailTiles::new(&scene.ctx.device, layout, 16).unwrap();
-    for t in touched {
-        tiles.load(&scene.ctx.queue, t, layer.tile(t)).unwrap();
-    }
-    let mut scene = scene;
-    scene.detail = Some((tiles, DetailShading::default()));
-    (scene, layer)
-}
-
-/// Standing 3 m above the footprints' start, looking along the walk and down.
-fn camera(scene: &Scene) -> Camera {
-    let xz = Vec2::new(120.0, 124.0);
-    let eye = Vec3::new(xz.x, scene.ground(xz) + 3.0, xz.y);
-    Camera::looking(eye, Vec3::new(0.0, -0.6, 1.0))
 }
 
 const SIZE: UVec2 = UVec2::new(256, 160);

@@ -14,8 +14,8 @@ use scene::Scene;
 use std::collections::HashMap;
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    Camera, GpuTessellation, OffscreenTarget, SkyColors, TargetFormat, TerrainStyle, TessDraw,
-    TessRenderer, TessellationPass,
+    Camera, ClipmapSurface, GpuTessellation, OffscreenTarget, SkyColors, TargetFormat,
+    TerrainStyle, TessDraw, TessRenderer, TessellationPass,
 };
 use terrain_lod::{
     CdlodView, DensityMap, DensityParams, Frustum, TessConfig, TessHierarchy, TessTriangle,
@@ -307,8 +307,10 @@ fn no_cracks_from_grazing_views_across_patch_edges() {
                     device,
                     queue,
                     &TessDraw {
-                        map: &scene.gpu_map,
-                        normals: &scene.normals,
+                        surface: ClipmapSurface::Coarse {
+                            map: &scene.gpu_map,
+                            normals: &scene.normals,
+                        },
                         camera: &camera,
                         style: &style,
                         target_size: size,

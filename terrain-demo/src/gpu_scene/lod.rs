@@ -198,8 +198,7 @@ pub(super) fn render_tessellated(
         c.pass
             .encode(device, queue, encoder, &c.gpu, &c.hierarchy, &view)?;
         let draw = TessDraw {
-            map: gpu.map,
-            normals: gpu.normals,
+            surface: gpu.surface,
             camera,
             style: gpu.style,
             target_size: size,
@@ -274,15 +273,9 @@ pub(super) fn render_cdlod(
         target,
         sky,
         timer,
-        map,
-        normals,
-        atlas,
+        surface,
         style,
     } = gpu;
-    let surface = match atlas {
-        Some(atlas) => ClipmapSurface::Atlas { atlas },
-        None => ClipmapSurface::Coarse { map, normals },
-    };
     let (device, queue) = (&ctx.device, &ctx.queue);
     let size = target.size();
     let aspect = size.x as f32 / size.y as f32;

@@ -805,14 +805,26 @@ impl GpuScene {
         // CDLOD draws the coarse-map or a streamed world's atlas; tessellation the coarse-map.
         let cdlod_surface = coarse || self.atlas.is_some();
         if (coarse && self.tess.is_some()) || (cdlod_surface && self.cdlod.is_some()) {
+            // A streamed world's atlas, else the coarse-map with its detail layer if any.
+            let surface = match (self.atlas.as_ref(), self.detail.as_ref()) {
+                (Some(atlas), _) => ClipmapSurface::Atlas { atlas },
+                (None, Some(d)) => ClipmapSurface::Detail {
+                    map: &self.map,
+                    normals: &self.normals,
+                    detail: &d.tiles,
+                    shading: &d.shading,
+                },
+                (None, None) => ClipmapSurface::Coarse {
+                    map: &self.map,
+                    normals: &self.normals,
+                },
+            };
             let gpu = FrameGpu {
                 ctx: &self.ctx,
                 target: &mut self.target,
                 sky: &mut self.sky,
                 timer: &self.timer,
-                map: &self.map,
-                normals: &self.normals,
-                atlas: self.atlas.as_ref(),
+                surface,
                 style: &self.style,
             };
             if let Some(c) = &mut self.tess {
@@ -957,10 +969,9 @@ struct FrameGpu<'a> {
     target: &'a mut OffscreenTarget,
     sky: &'a mut SkyPass,
     timer: &'a GpuTimer,
-    map: &'a GpuHeightMap<u16>,
-    normals: &'a GpuDerivativeMap,
-    /// A streamed world's atlas, drawn instead of `map` where the renderer can.
-    atlas: Option<&'a GpuTileAtlas>,
+    /// What the LOD mode draws: a streamed world's atlas, or the coarse-map with or without
+    /// its detail layer.
+    surface: ClipmapSurface<'a>,
     style: &'a TerrainStyle,
 }
 

@@ -2,15 +2,17 @@
 //! pass: one shared quadrant mesh, instanced per drawn quadrant, morphed per vertex in the vertex
 //! shader (`cdlod.wgsl`) and shaded exactly as the clipmap (same frame uniform, surface and
 //! fragment shader), so the two LOD schemes compare on equal terms. The surface is a
-//! coarse-map or a streamed world's tile atlas, as for the clipmap.
+//! coarse-map, a coarse-map with a detail layer (shaded as the clipmap shades it) or a
+//! streamed world's tile atlas.
 
 use crate::device::scope::{buffer_init, scoped};
 use crate::error::GpuError;
 use crate::render::camera::Camera;
 use crate::render::clipmap::{
-    ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, check_wireframe,
-    frame_uniform,
+    ClipmapSurface, SurfaceKind, SurfacePipeline, TerrainStyle, VertexShape, check_view,
+    check_wireframe, frame_uniform,
 };
+use crate::render::surface::{DetailUniform, fragment_reach};
 use crate::render::target::TargetFormat;
 use glam::UVec2;
 use terrain_core::WrapMode;
@@ -29,11 +31,12 @@ const START_INSTANCES: u64 = 4096;
 /// [`crate::SkyPass`], as the clipmap).
 #[derive(Debug)]
 pub struct CdlodRenderer {
-    pipeline: SurfacePipeline,
-    /// The atlas surface's pipeline, built on its first frame.
-    atlas: Option<SurfacePipeline>,
-    /// Whether the bound group is the atlas pipeline's.
-    on_atlas: bool,
+    /// A pipeline per surface kind drawn so far (the coarse-map's built first).
+    pipelines: Vec<(SurfaceKind, SurfacePipeline)>,
+    /// The surface kind of the bound group.
+    kind: SurfaceKind,
+    /// The detail surface's uniform.
+    detail_uniform: DetailUniform,
     target: TargetFormat,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
@@ -49,8 +52,8 @@ pub struct CdlodRenderer {
 /// Everything one CDLOD frame is drawn from.
 #[derive(Debug, Clone, Copy)]
 pub struct CdlodDraw<'a> {
-    /// The surface: [`ClipmapSurface::Coarse`] or [`ClipmapSurface::Atlas`] (a granular or
-    /// detail surface is [`GpuError::Unsupported`]).
+    /// The surface: [`ClipmapSurface::Coarse`], [`ClipmapSurface::Detail`] or
+    /// [`ClipmapSurface::Atlas`] (a granular surface is [`GpuError::Unsupported`]).
     pub surface: ClipmapSurface<'a>,
     /// The selection (instances and range table) of this frame.
     pub frame: &'a CdlodFrame,
@@ -70,7 +73,7 @@ impl CdlodRenderer {
         mesh: &CdlodMesh,
     ) -> Result<Self, GpuError> {
         target.validate(device)?;
-        let pipeline = surface_pipeline(device, target, false)?;
+        let pipeline = surface_pipeline(device, target, SurfaceKind::Coarse)?;
         let vertices = buffer_init(
             device,
             "cdlod vertices",
@@ -107,9 +110,9 @@ impl CdlodRenderer {
             )
         })?;
         Ok(Self {
-            pipeline,
-            atlas: None,
-            on_atlas: false,
+            pipelines: vec![(SurfaceKind::Coarse, pipeline)],
+            kind: SurfaceKind::Coarse,
+            detail_uniform: DetailUniform::new(device, "cdlod detail"),
             target: *target,
             vertices,
             indices,
@@ -126,9 +129,8 @@ impl CdlodRenderer {
     /// Draws triangle edges as lines from the next draw; fails without
     /// [`wgpu::Features::POLYGON_MODE_LINE`].
     pub fn set_wireframe(&mut self, on: bool) -> Result<(), GpuError> {
-        check_wireframe(&self.pipeline, on, "CdlodRenderer wireframe")?;
-        if let Some(atlas) = &self.atlas {
-            check_wireframe(atlas, on, "CdlodRenderer wireframe")?;
+        for (_, pipeline) in &self.pipelines {
+            check_wireframe(pipeline, on, "CdlodRenderer wireframe")?;
         }
         self.wireframe = on;
         Ok(())
@@ -143,19 +145,17 @@ impl CdlodRenderer {
     ) -> Result<(), GpuError> {
         check_view(draw.camera, draw.target_size, "cdlod target size (pixels)")?;
         let surface = draw.surface;
-        let on_atlas = match surface {
-            ClipmapSurface::Coarse { .. } => false,
-            ClipmapSurface::Atlas { .. } => true,
-            _ => {
-                return Err(GpuError::Unsupported {
-                    what: "CdlodRenderer",
-                    reason: "the surface must be a coarse-map or a tile atlas",
-                });
-            }
-        };
+        let kind = surface.kind();
+        if kind == SurfaceKind::Granular {
+            return Err(GpuError::Unsupported {
+                what: "CdlodRenderer",
+                reason: "the surface must be a coarse-map (with or without detail) or a tile atlas",
+            });
+        }
         let info = surface.check()?;
-        if on_atlas && self.atlas.is_none() {
-            self.atlas = Some(surface_pipeline(device, &self.target, true)?);
+        if !self.pipelines.iter().any(|(k, _)| *k == kind) {
+            let pipeline = surface_pipeline(device, &self.target, kind)?;
+            self.pipelines.push((kind, pipeline));
         }
         let frame = draw.frame;
         if frame.ranges.morph.len() > MAX_CDLOD_LODS as usize {
@@ -166,11 +166,13 @@ impl CdlodRenderer {
         }
         let wrap_offset = match info.wrap {
             WrapMode::Repeat => {
-                // Every texel read: instance origins less the bilinear and normal reach.
+                // Every texel read: instance origins less the bilinear and normal reach, and
+                // a detail surface's parallax reach.
+                let reach = 2 + fragment_reach(&surface);
                 let min = frame
                     .instances
                     .iter()
-                    .map(|i| glam::IVec2::from(i.origin) - 2)
+                    .map(|i| glam::IVec2::from(i.origin) - reach)
                     .fold(glam::IVec2::ZERO, |a, b| a.min(b));
                 crate::device::compute::wrap_offset(min, info.size)?
             }
@@ -205,13 +207,12 @@ impl CdlodRenderer {
         self.instance_count = frame.instances.len() as u32;
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         queue.write_buffer(&self.lods, 0, bytemuck::cast_slice(&lods));
-        let buffers = surface.buffers();
-        if self.on_atlas != on_atlas || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
-            let pipeline = match (&self.atlas, on_atlas) {
-                (Some(atlas), true) => atlas,
-                _ => &self.pipeline,
-            };
-            let group = pipeline.bind_group(
+        let camera_texel = glam::IVec2::from(uniform.camera_texel);
+        let buffers =
+            self.detail_uniform
+                .surface_buffers(queue, &surface, info.texel_size, camera_texel)?;
+        if self.kind != kind || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
+            let group = self.pipeline(kind).bind_group(
                 device,
                 "CdlodRenderer",
                 &self.uniform,
@@ -219,9 +220,15 @@ impl CdlodRenderer {
                 &[(LODS_BINDING, &self.lods)],
             )?;
             self.bound = Some((buffers, group));
-            self.on_atlas = on_atlas;
+            self.kind = kind;
         }
         Ok(())
+    }
+
+    /// The pipeline of a surface kind prepared before (the coarse-map's otherwise).
+    fn pipeline(&self, kind: SurfaceKind) -> &SurfacePipeline {
+        let found = self.pipelines.iter().find(|(k, _)| *k == kind);
+        &found.unwrap_or(&self.pipelines[0]).1
     }
 
     /// Records the prepared frame into `pass`. Draws nothing before the first prepare.
@@ -232,11 +239,7 @@ impl CdlodRenderer {
         if self.instance_count == 0 {
             return;
         }
-        let pipeline = match (&self.atlas, self.on_atlas) {
-            (Some(atlas), true) => atlas,
-            _ => &self.pipeline,
-        };
-        pass.set_pipeline(pipeline.pick(self.wireframe));
+        pass.set_pipeline(self.pipeline(self.kind).pick(self.wireframe));
         pass.set_bind_group(0, group, &[]);
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_vertex_buffer(1, self.instances.slice(..));
@@ -245,33 +248,38 @@ impl CdlodRenderer {
     }
 }
 
-/// The binding of the LOD uniform (`cdlod.wgsl`), after every surface's storage buffers.
-const LODS_BINDING: u32 = 4;
+/// The binding of the LOD uniform (`cdlod.wgsl`), after every surface's bindings.
+const LODS_BINDING: u32 = 6;
 
-/// The CDLOD pipeline over a coarse-map, or over a tile atlas (`atlas`).
+/// The CDLOD pipeline over a surface of `kind` (not granular).
 fn surface_pipeline(
     device: &wgpu::Device,
     target: &TargetFormat,
-    atlas: bool,
+    kind: SurfaceKind,
 ) -> Result<SurfacePipeline, GpuError> {
     const ATTRS: [wgpu::VertexAttribute; 3] =
         wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
+    let (vertex, fragment) = (wgpu::ShaderStages::VERTEX, wgpu::ShaderStages::FRAGMENT);
     let both = wgpu::ShaderStages::VERTEX_FRAGMENT;
-    let (label, source, storage) = if atlas {
-        (
+    let (label, source, storage, uniforms) = match kind {
+        SurfaceKind::Atlas => (
             "cdlod atlas",
             terrain_shaders::CDLOD_ATLAS,
             vec![(both, 1), (both, 2), (both, 3)],
-        )
-    } else {
-        (
+            vec![],
+        ),
+        SurfaceKind::Detail => (
+            "cdlod detail",
+            terrain_shaders::CDLOD_DETAIL,
+            vec![(vertex, 1), (fragment, 2), (fragment, 4), (fragment, 5)],
+            vec![(fragment, 3)],
+        ),
+        SurfaceKind::Coarse | SurfaceKind::Granular => (
             "cdlod.wgsl",
             terrain_shaders::CDLOD,
-            vec![
-                (wgpu::ShaderStages::VERTEX, 1),
-                (wgpu::ShaderStages::FRAGMENT, 2),
-            ],
-        )
+            vec![(vertex, 1), (fragment, 2)],
+            vec![],
+        ),
     };
     SurfacePipeline::new(
         device,
@@ -279,7 +287,7 @@ fn surface_pipeline(
         label,
         source,
         &storage,
-        &[],
+        &uniforms,
         &VertexShape {
             entry: "vs_cdlod",
             vertex_stride: std::mem::size_of::<[f32; 2]>() as u64,

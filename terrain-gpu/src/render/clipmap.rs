@@ -9,7 +9,8 @@ use crate::error::GpuError;
 use crate::render::camera::Camera;
 use crate::render::target::TargetFormat;
 use crate::resources::atlas::GpuTileAtlas;
-use crate::resources::detail::{DetailInfo, DetailShading, GpuDetailTiles};
+use crate::render::surface::{DetailUniform, fragment_reach};
+use crate::resources::detail::{DetailShading, GpuDetailTiles};
 use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2, Vec3, Vec4};
@@ -109,7 +110,7 @@ pub struct ClipmapRenderer {
     indices: wgpu::Buffer,
     uniform: wgpu::Buffer,
     /// The detail surface's `DetailInfo` (binding 3 of its pipeline).
-    detail_uniform: wgpu::Buffer,
+    detail_uniform: DetailUniform,
     instances: wgpu::Buffer,
     parts: Vec<MeshPart>,
     n: u32,
@@ -202,12 +203,7 @@ impl ClipmapRenderer {
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            let detail_uniform = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("clipmap detail"),
-                size: std::mem::size_of::<DetailInfo>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
+            let detail_uniform = DetailUniform::new(device, "clipmap detail");
             let instances = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("clipmap instances"),
                 size: max_instances * std::mem::size_of::<ClipmapInstance>() as u64,
@@ -296,10 +292,7 @@ impl ClipmapRenderer {
         }
         let info = surface.check()?;
         // A detail surface's parallax moves the texels a fragment reads by up to its reach.
-        let reach = match surface {
-            ClipmapSurface::Detail { shading, .. } => shading.max_reach_texels.ceil() as i32 + 1,
-            _ => 0,
-        };
+        let reach = fragment_reach(&surface);
         let wrap_offset = match info.wrap {
             WrapMode::Repeat => wrap_offset_for_frame(frame, info.size, reach)?,
             WrapMode::Clamp => [0, 0],
@@ -345,18 +338,10 @@ impl ClipmapRenderer {
         }
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
 
-        let mut buffers = surface.buffers();
-        if let ClipmapSurface::Detail {
-            detail, shading, ..
-        } = surface
-        {
-            let reach = shading.check(info.texel_size)?;
-            let camera_texel = IVec2::from(uniform.camera_texel);
-            let detail_info = detail.info(camera_texel, shading, reach)?;
-            queue.write_buffer(&self.detail_uniform, 0, bytemuck::bytes_of(&detail_info));
-            // Bindings 3 (this renderer's uniform), 4 and 5 after the coarse surface's.
-            buffers.insert(2, self.detail_uniform.clone());
-        }
+        let camera_texel = IVec2::from(uniform.camera_texel);
+        let buffers =
+            self.detail_uniform
+                .surface_buffers(queue, &surface, info.texel_size, camera_texel)?;
         let kind = surface.kind();
         let rebind = match &self.bound {
             Some((bound, k, _)) => *k != kind || bound.as_slice() != buffers.as_slice(),
@@ -502,7 +487,7 @@ pub(crate) fn check_view(
 
 /// Which pipeline a surface is drawn with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum SurfaceKind {
+pub(crate) enum SurfaceKind {
     Coarse,
     Granular,
     Atlas,
@@ -662,7 +647,7 @@ impl ClipmapSurface<'_> {
         }
     }
 
-    fn kind(&self) -> SurfaceKind {
+    pub(crate) fn kind(&self) -> SurfaceKind {
         match self {
             ClipmapSurface::Coarse { .. } => SurfaceKind::Coarse,
             ClipmapSurface::Granular { .. } => SurfaceKind::Granular,

@@ -8,5 +8,6 @@ pub mod clipmap;
 pub mod offscreen;
 pub mod refine;
 pub mod sky;
+pub(crate) mod surface;
 pub mod target;
 pub mod tessellation;

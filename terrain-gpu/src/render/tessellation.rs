@@ -21,7 +21,7 @@ use crate::render::clipmap::{
     frame_uniform,
 };
 use crate::render::target::TargetFormat;
-use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
+use crate::render::surface::{DetailUniform, fragment_reach};
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::WrapMode;
@@ -341,10 +341,10 @@ impl TessellationPass {
 /// Everything one tessellated frame is drawn from.
 #[derive(Debug, Clone, Copy)]
 pub struct TessDraw<'a> {
-    /// The heights (for the fragment shader's lookups).
-    pub map: &'a GpuHeightMap<u16>,
-    /// Their derivative normals.
-    pub normals: &'a GpuDerivativeMap,
+    /// What the fragments are shaded from: [`ClipmapSurface::Coarse`] (the map the
+    /// tessellation was made of, with its normals) or [`ClipmapSurface::Detail`] (the same
+    /// with a detail layer, shaded as the clipmap shades it).
+    pub surface: ClipmapSurface<'a>,
     /// The camera.
     pub camera: &'a Camera,
     /// Lighting and colours.
@@ -359,6 +359,12 @@ pub struct TessDraw<'a> {
 #[derive(Debug)]
 pub struct TessRenderer {
     pipeline: SurfacePipeline,
+    /// The detail surface's pipeline, built on its first frame.
+    detail: Option<SurfacePipeline>,
+    /// The detail surface's uniform.
+    detail_uniform: DetailUniform,
+    /// Whether the bound group is the detail pipeline's.
+    on_detail: bool,
     target: TargetFormat,
     uniform: wgpu::Buffer,
     bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
@@ -369,26 +375,7 @@ impl TessRenderer {
     /// Builds the pipeline.
     pub fn new(device: &wgpu::Device, target: &TargetFormat) -> Result<Self, GpuError> {
         target.validate(device)?;
-        const ATTRS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
-        let pipeline = SurfacePipeline::new(
-            device,
-            target,
-            "tessellated.wgsl",
-            terrain_shaders::TESSELLATED,
-            &[
-                (wgpu::ShaderStages::FRAGMENT, 1),
-                (wgpu::ShaderStages::FRAGMENT, 2),
-            ],
-            &[],
-            &VertexShape {
-                entry: "vs_tess",
-                vertex_stride: std::mem::size_of::<TessVertex>() as u64,
-                vertex_attrs: &ATTRS,
-                instance_stride: 0,
-                instance_attrs: &[],
-                extra_uniforms: &[],
-            },
-        )?;
+        let pipeline = tess_pipeline(device, target, false)?;
         let uniform = scoped(device, "TessRenderer", || {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("tessellated frame"),
@@ -399,6 +386,9 @@ impl TessRenderer {
         })?;
         Ok(Self {
             pipeline,
+            detail: None,
+            detail_uniform: DetailUniform::new(device, "tessellated detail"),
+            on_detail: false,
             target: *target,
             uniform,
             bound: None,
@@ -410,6 +400,9 @@ impl TessRenderer {
     /// [`wgpu::Features::POLYGON_MODE_LINE`].
     pub fn set_wireframe(&mut self, on: bool) -> Result<(), GpuError> {
         check_wireframe(&self.pipeline, on, "TessRenderer wireframe")?;
+        if let Some(detail) = &self.detail {
+            check_wireframe(detail, on, "TessRenderer wireframe")?;
+        }
         self.wireframe = on;
         Ok(())
     }
@@ -426,15 +419,28 @@ impl TessRenderer {
             draw.target_size,
             "tessellated target size (pixels)",
         )?;
-        let surface = ClipmapSurface::Coarse {
-            map: draw.map,
-            normals: draw.normals,
+        let surface = draw.surface;
+        let on_detail = match surface {
+            ClipmapSurface::Coarse { .. } => false,
+            ClipmapSurface::Detail { .. } => true,
+            _ => {
+                return Err(GpuError::Unsupported {
+                    what: "TessRenderer",
+                    reason: "the surface must be the coarse-map the tessellation was made of, \
+                             with or without a detail layer",
+                });
+            }
         };
         let info = surface.check()?;
+        if on_detail && self.detail.is_none() {
+            self.detail = Some(tess_pipeline(device, &self.target, true)?);
+        }
         let wrap_offset = match info.wrap {
-            // Vertices lie in 0 ..= the map size; fragments read a texel either side.
+            // Vertices lie in 0 ..= the map size; fragments read a texel either side, and a
+            // detail surface's parallax reach beyond.
             WrapMode::Repeat => {
-                crate::device::compute::wrap_offset(glam::IVec2::splat(-2), info.size)?
+                let reach = 2 + fragment_reach(&surface);
+                crate::device::compute::wrap_offset(glam::IVec2::splat(-reach), info.size)?
             }
             WrapMode::Clamp => [0, 0],
         };
@@ -448,14 +454,29 @@ impl TessRenderer {
             wrap_offset,
         );
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
-        let buffers = surface.buffers();
-        if self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
-            let group =
-                self.pipeline
-                    .bind_group(device, "TessRenderer", &self.uniform, &buffers, &[])?;
+        let camera_texel = glam::IVec2::from(uniform.camera_texel);
+        let buffers =
+            self.detail_uniform
+                .surface_buffers(queue, &surface, info.texel_size, camera_texel)?;
+        if self.on_detail != on_detail || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
+            let group = self.pipeline_for(on_detail).bind_group(
+                device,
+                "TessRenderer",
+                &self.uniform,
+                &buffers,
+                &[],
+            )?;
             self.bound = Some((buffers, group));
+            self.on_detail = on_detail;
         }
         Ok(())
+    }
+
+    fn pipeline_for(&self, detail: bool) -> &SurfacePipeline {
+        match (&self.detail, detail) {
+            (Some(d), true) => d,
+            _ => &self.pipeline,
+        }
     }
 
     /// Records the draw of `gpu`'s triangles (as many as the last tessellation wrote) into
@@ -464,9 +485,50 @@ impl TessRenderer {
         let Some((_, group)) = &self.bound else {
             return;
         };
-        pass.set_pipeline(self.pipeline.pick(self.wireframe));
+        pass.set_pipeline(self.pipeline_for(self.on_detail).pick(self.wireframe));
         pass.set_bind_group(0, group, &[]);
         pass.set_vertex_buffer(0, gpu.output.slice(..));
         pass.draw_indirect(&gpu.state, ARGS_OFFSET);
     }
+}
+
+/// The tessellated pipeline over a coarse-map, or over a coarse-map with a detail layer.
+fn tess_pipeline(
+    device: &wgpu::Device,
+    target: &TargetFormat,
+    detail: bool,
+) -> Result<SurfacePipeline, GpuError> {
+    const ATTRS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
+    let fragment = wgpu::ShaderStages::FRAGMENT;
+    let (label, source, storage, uniforms) = if detail {
+        (
+            "tessellated detail",
+            terrain_shaders::TESSELLATED_DETAIL,
+            vec![(fragment, 1), (fragment, 2), (fragment, 4), (fragment, 5)],
+            vec![(fragment, 3)],
+        )
+    } else {
+        (
+            "tessellated.wgsl",
+            terrain_shaders::TESSELLATED,
+            vec![(fragment, 1), (fragment, 2)],
+            vec![],
+        )
+    };
+    SurfacePipeline::new(
+        device,
+        target,
+        label,
+        source,
+        &storage,
+        &uniforms,
+        &VertexShape {
+            entry: "vs_tess",
+            vertex_stride: std::mem::size_of::<TessVertex>() as u64,
+            vertex_attrs: &ATTRS,
+            instance_stride: 0,
+            instance_attrs: &[],
+            extra_uniforms: &[],
+        },
+    )
 }

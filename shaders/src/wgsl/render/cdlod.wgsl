@@ -7,8 +7,8 @@ struct CdlodLods {
     morph: array<vec4<f32>, 16>,
 }
 
-// Binding 4: after every surface's storage buffers (a tile atlas has three).
-@group(0) @binding(4) var<uniform> lods: CdlodLods;
+// Binding 6: after every surface's bindings (a tile atlas has 1-3, a detail surface 1-5).
+@group(0) @binding(6) var<uniform> lods: CdlodLods;
 
 struct CdlodIn {
     @location(0) grid: vec2<f32>,

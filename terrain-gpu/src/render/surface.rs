@@ -1,0 +1,63 @@
+//! What every terrain renderer (clipmap, CDLOD, tessellation) does the same way for its
+//! surface: the detail surface's uniform, written each frame and bound at 3 between the
+//! coarse-map's buffers (1, 2) and the detail tiles' (4, 5), and how far beyond the drawn mesh
+//! a fragment may read (the parallax march's reach). One place, so the three renderers shade
+//! a detail layer identically.
+
+use crate::error::GpuError;
+use crate::render::clipmap::ClipmapSurface;
+use crate::resources::detail::DetailInfo;
+use glam::IVec2;
+
+/// The detail surface's per-frame uniform of one renderer.
+#[derive(Debug)]
+pub(crate) struct DetailUniform {
+    buffer: wgpu::Buffer,
+}
+
+impl DetailUniform {
+    /// The (empty) uniform buffer; written by [`DetailUniform::surface_buffers`].
+    pub(crate) fn new(device: &wgpu::Device, label: &'static str) -> Self {
+        Self {
+            buffer: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: std::mem::size_of::<DetailInfo>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        }
+    }
+
+    /// The buffers `surface` binds at 1, 2, ...: for a detail surface this uniform, written
+    /// for a camera at coarse texel `camera_texel`, goes at 3 between the coarse-map's and the
+    /// tiles'; other surfaces bind their own buffers only. Fails on shading out of range.
+    pub(crate) fn surface_buffers(
+        &self,
+        queue: &wgpu::Queue,
+        surface: &ClipmapSurface<'_>,
+        texel_size: f32,
+        camera_texel: IVec2,
+    ) -> Result<Vec<wgpu::Buffer>, GpuError> {
+        let mut buffers = surface.buffers();
+        if let ClipmapSurface::Detail {
+            detail, shading, ..
+        } = *surface
+        {
+            let reach = shading.check(texel_size)?;
+            let info = detail.info(camera_texel, shading, reach)?;
+            queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&info));
+            buffers.insert(2, self.buffer.clone());
+        }
+        Ok(buffers)
+    }
+}
+
+/// Whole coarse texels a fragment of `surface` may read beyond the drawn mesh's own texels
+/// (a detail surface's parallax march moves the point it shades), plus one for the bilinear
+/// neighbour; 0 for other surfaces.
+pub(crate) fn fragment_reach(surface: &ClipmapSurface<'_>) -> i32 {
+    match surface {
+        ClipmapSurface::Detail { shading, .. } => shading.max_reach_texels.ceil() as i32 + 1,
+        _ => 0,
+    }
+}
