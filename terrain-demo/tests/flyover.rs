@@ -48,7 +48,11 @@ fn flyover_streams_within_budget_and_craters_persist() {
         // The camera stands on the ground it can see: never below it, even on the first
         // frames, before the tiles under it are in RAM.
         let clearance = f["camera_clearance_m"].as_f64();
-        assert!(clearance >= Some(0.0), "frame {}: {clearance:?}", f["index"]);
+        assert!(
+            clearance >= Some(0.0),
+            "frame {}: {clearance:?}",
+            f["index"]
+        );
         let cache = &f["cache"];
         let (ram, budget) = (
             cache["ram_bytes"].as_u64(),

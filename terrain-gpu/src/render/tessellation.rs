@@ -20,8 +20,8 @@ use crate::render::clipmap::{
     ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, check_wireframe,
     frame_uniform,
 };
-use crate::render::target::TargetFormat;
 use crate::render::surface::{DetailUniform, fragment_reach};
+use crate::render::target::TargetFormat;
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::WrapMode;
