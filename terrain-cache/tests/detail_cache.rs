@@ -232,6 +232,48 @@ fn the_working_set_follows_the_band_within_the_upload_budget() {
     );
 }
 
+#[test]
+fn tiles_read_ahead_are_in_ram_when_needed() {
+    let s = store();
+    // A stamped tile far from the band, stored.
+    let far = UVec2::new(12, 2);
+    let mut first =
+        DetailCache::open(world(&s), layout(), BandSelection::default(), 1 << 20).unwrap();
+    footprint(&mut first, Vec2::new(100.0, 20.0), -0.2);
+    let stamped = first.tile(far).unwrap().clone();
+    assert_eq!(first.flush().unwrap(), 1);
+    drop(first);
+    let mut cache = DetailCache::open(
+        world_reopened(&s),
+        layout(),
+        BandSelection::default(),
+        1 << 20,
+    )
+    .unwrap();
+    let here = Vec2::new(44.0, 60.0);
+    // Read ahead by the loaders: in RAM, not loaded (no GPU slot), not active.
+    let f = cache.update_ahead(here, &[], &[far]).unwrap();
+    assert!(cache.reading(far) && !f.load.contains(&far) && f.read_now == 0);
+    for _ in 0..TRIES {
+        if cache.tile(far).is_some() {
+            break;
+        }
+        pause();
+        let f = cache.update_ahead(here, &[], &[far]).unwrap();
+        assert!(!f.load.contains(&far));
+    }
+    assert_eq!(cache.tile(far), Some(&stamped));
+    assert!(cache.loaded_tiles().iter().all(|(t, _)| *t != far));
+    // Needed now: loaded from RAM, nothing read on this thread.
+    let f = cache.update(here, &[far]).unwrap();
+    assert!(f.load.contains(&far));
+    assert_eq!(f.read_now, 0);
+    // Neither needed nor ahead: it leaves RAM.
+    cache.update(here, &[]).unwrap();
+    assert!(cache.tile(far).is_none());
+    assert!(cache.update_ahead(here, &[], &[UVec2::new(0, 16)]).is_err());
+}
+
 fn footprint(cache: &mut DetailCache, at: Vec2, depth: f32) {
     let p = StampPlacement::new(at, Vec2::new(0.6, 0.9), depth).unwrap();
     cache

@@ -134,7 +134,9 @@ impl GpuScene {
 
     /// Makes the GPU's detail slots follow `frame` of `cache` (the detail cache the footprints
     /// are also stamped on, on the CPU): releases the tiles that left its working set and
-    /// uploads those that joined it. Timed as [`Step::Detail`]. Nothing without a detail layer.
+    /// uploads those that joined it (a tile joins once the cache's loaders have read it, never
+    /// before its texels are in RAM). Timed as [`Step::Detail`]. Nothing without a detail
+    /// layer.
     pub fn stream_detail(
         &mut self,
         cache: &DetailCache,

@@ -72,6 +72,10 @@ const FLUSH_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(60);
 /// Samples the detail cache uploads per frame at most: the nine tiles of a band.
 const DETAIL_UPLOAD_BUDGET: u64 = 9 * (DETAIL_TILE as u64) * (DETAIL_TILE as u64);
 
+/// The detail tiles within this distance of the walker are read ahead (by the cache's loaders):
+/// the walker needs those within 2 m, and covers a few metres a frame.
+const DETAIL_READ_AHEAD_M: f32 = 8.0;
+
 impl StampScenario {
     /// Loads or generates the terrain and places the walker and the camera.
     pub fn new(cli: &Cli, params: &DemoParams) -> Result<Self> {
@@ -284,7 +288,9 @@ impl Scenario for StampScenario {
         ctx.timings.add(Step::Physics, ms_since(t));
 
         // The detail tiles: the camera's band, the tiles this frame's footprints stamp and the
-        // walker's (it stands on them), then the GPU's slots follow.
+        // walker's (it stands on them), then the GPU's slots follow. The cache reads and writes
+        // on its own threads; the tiles around the walker, who runs ahead of the camera's band,
+        // are read ahead so none is read here when it is needed.
         if let Some(cache) = self.detail.as_mut() {
             let t = Instant::now();
             let eye = self.rig.eye();
@@ -295,7 +301,10 @@ impl Scenario for StampScenario {
                 needed.sort_unstable_by_key(|t| (t.y, t.x));
                 needed.dedup();
             }
-            let frame = cache.update(Vec2::new(eye.x, eye.z), &needed)?;
+            let ahead = cache
+                .layout()
+                .tiles_within(plan.walker.0, DETAIL_READ_AHEAD_M)?;
+            let frame = cache.update_ahead(Vec2::new(eye.x, eye.z), &needed, &ahead)?;
             if let Some((tile, e)) = frame.failed.first() {
                 return Err(anyhow::anyhow!("detail tile {tile}: {e}"));
             }
