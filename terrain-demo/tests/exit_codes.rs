@@ -28,7 +28,7 @@ fn usage_errors_exit_with_2() {
     let cases: [&[&str]; 17] = [
         &["--scenario", "snow", "--lod", "cdlod", "--no-gpu"],
         &["--scenario", "snow", "--detail", "parallax", "--no-gpu"],
-        &["--lod", "cdlod", "--detail", "parallax", "--no-gpu"],
+        &["--lod", "cdlod", "--detail", "refine", "--no-gpu"],
         &["--lod", "tessellated", "--detail", "refine", "--no-gpu"],
         &["--lod", "cdlod", "--target-error", "0", "--no-gpu"],
         &["--target-error", "2", "--no-gpu"],
