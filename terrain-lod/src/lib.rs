@@ -126,7 +126,8 @@ pub mod tessellation;
 use terrain_core::par;
 
 pub use cdlod::{
-    CdlodConfig, CdlodFrame, CdlodInstance, CdlodMesh, CdlodTree, CdlodView, LodMetric, LodRanges,
+    CdlodConfig, CdlodFrame, CdlodInstance, CdlodMesh, CdlodTree, CdlodUpdater, CdlodView,
+    LodMetric, LodRanges,
 };
 pub use clipmap::{
     ClipmapDraw, ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapMesh, ClipmapVertex,

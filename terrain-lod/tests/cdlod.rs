@@ -124,6 +124,40 @@ proptest! {
         tree.update_rect(&map, rect).unwrap();
         prop_assert_eq!(tree, CdlodTree::from_map(&map, cfg).unwrap());
     }
+
+    /// The worker-thread updater, after a flush, holds the tree an update in place gives,
+    /// for rects crossing the edges of a repeating map or off a clamped one.
+    #[test]
+    fn the_background_updater_equals_a_rebuild_after_a_flush(
+        x in -100i32..200, y in -100i32..200, w in 1u32..90, h in 1u32..90,
+        repeat in any::<bool>(), raise in 1u16..3000,
+    ) {
+        let wrap = if repeat { WrapMode::Repeat } else { WrapMode::Clamp };
+        let mut map = hilly(128, 64, wrap);
+        let cfg = config(8, 8, 4, 5.0);
+        let mut updater =
+            terrain_lod::CdlodUpdater::spawn(CdlodTree::from_map(&map, cfg).unwrap(), &map).unwrap();
+        let before = updater.tree().clone();
+        let rect = Rect::new(IVec2::new(x, y), UVec2::new(w, h));
+        let size = map.size();
+        for i in 0..i64::from(w.min(size.x)) {
+            for j in 0..i64::from(h.min(size.y)) {
+                let (tx, ty) = (i64::from(x) + i, i64::from(y) + j);
+                if !repeat && (tx < 0 || ty < 0 || tx >= i64::from(size.x) || ty >= i64::from(size.y)) {
+                    continue;
+                }
+                let (tx, ty) = (wrap.resolve(tx, size.x), wrap.resolve(ty, size.y));
+                let v = map.grid_mut().get_mut(tx, ty).unwrap();
+                *v = v.saturating_add(raise);
+            }
+        }
+        updater.submit(&map, rect).unwrap();
+        // Nothing waited for yet: the frame's tree is still the one it had.
+        prop_assert_eq!(&**updater.tree(), &*before);
+        updater.flush().unwrap();
+        prop_assert_eq!(updater.pending(), 0);
+        prop_assert_eq!(&**updater.tree(), &CdlodTree::from_map(&map, cfg).unwrap());
+    }
 }
 
 fn view(camera: Vec3, look: Vec3, width: f32) -> (Frustum, f32) {

@@ -23,9 +23,11 @@ use crate::frustum::Frustum;
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use terrain_core::{HeightMap, HeightSample, Rect, WrapMode};
 
+mod background;
 mod morph_reference;
 mod streamed;
 
+pub use background::CdlodUpdater;
 pub use morph_reference::{JumpProbes, morphed_vertex};
 
 /// The largest number of LODs.
