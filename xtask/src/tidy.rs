@@ -22,6 +22,10 @@ const MAX_RS_LINES: usize = 1000;
 /// Two `.rs` files this long or longer with the same content are a copy.
 const MIN_COPY_LINES: usize = 40;
 
+/// The folder beside the repository that nothing in it may name (spelt in two parts so that
+/// this file does not name it either).
+const OUTSIDE: &str = concat!("..", "/", "shared");
+
 /// The clippy lint that must never be silenced.
 const ARGUMENT_LINT: &str = "too_many_arguments";
 
@@ -187,16 +191,17 @@ fn harness_copies(files: &[&TrackedFile]) -> Vec<Problem> {
     problems
 }
 
-/// Rule (c): a mention of `../shared` or of a path starting with `crates/`. The repository
+/// Rule (c): a mention of [`OUTSIDE`] (the folder beside the repository) or of a path starting with `crates/`. The repository
 /// stands alone and its crates are top-level folders.
 fn outside_paths(path: &str, text: &str) -> Vec<Problem> {
     let mut problems = Vec::new();
-    for (i, _) in text.match_indices("../shared") {
+    for (i, _) in text.match_indices(OUTSIDE) {
         problems.push(Problem {
             path: path.to_owned(),
             line: line_of(text, i),
-            message: "names `../shared`, outside the repository: the repository stands alone"
-                .into(),
+            message: format!(
+                "names `{OUTSIDE}`, outside the repository: the repository stands alone"
+            ),
         });
     }
     for (i, _) in text.match_indices("crates/") {
@@ -329,8 +334,8 @@ mod tests {
 
     #[test]
     fn paths_outside_the_repository_are_found() {
-        let text = "see ../shared/lib\n\nthe crate `crates/terrain-core/src`\n";
-        let found = outside_paths("docs/x.md", text);
+        let text = format!("see {OUTSIDE}/lib\n\nthe crate `crates/terrain-core/src`\n");
+        let found = outside_paths("docs/x.md", &text);
         let at: Vec<usize> = found.iter().map(|p| p.line).collect();
         assert_eq!(at, [1, 3]);
         assert!(found[1].message.contains("top-level"), "{}", found[1]);
@@ -346,7 +351,7 @@ mod tests {
         // This file's own patterns and fixtures are not checked against it.
         let me = file(
             SELF,
-            "../shared crates/x #[allow(clippy::too_many_arguments)]\n",
+            &format!("{OUTSIDE} crates/x #[allow(clippy::too_many_arguments)]\n"),
         );
         assert_eq!(check(&[me]), []);
     }
