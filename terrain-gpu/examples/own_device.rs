@@ -7,6 +7,9 @@
 //! cargo run -p terrain-gpu --example own_device -- [OUT.png]
 //! ```
 
+#[path = "../tests/common/engine.rs"]
+mod engine;
+
 use glam::{UVec2, Vec2, Vec3};
 use terrain_core::{
     Blend, GaussianStamp, HeightEncoding, StampPlacement, TerrainParams, TextureStamp,
@@ -14,8 +17,8 @@ use terrain_core::{
 };
 use terrain_gpu::{
     Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuDerivativeMap, GpuHeightMap, GpuStamp,
-    GpuTextureStamp, MapUse, NormalPass, SkyColors, SkyPass, StampOp, StampPass, TargetFormat,
-    TerrainStyle, wgpu,
+    GpuTextureStamp, MapUse, NormalPass, SkyColors, SkyPass, StampOp, StampPass, TerrainStyle,
+    wgpu,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -52,46 +55,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }))?;
     println!("engine device on {}", adapter.get_info().name);
 
-    // The engine's frame: an sRGB colour target with 4x MSAA and its own depth buffer.
-    let format = TargetFormat {
-        color: wgpu::TextureFormat::Bgra8UnormSrgb,
-        depth: wgpu::TextureFormat::Depth24Plus,
-        sample_count: 4,
-    };
-    let texture = |label, format, samples, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width: FRAME.x,
-                height: FRAME.y,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: samples,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage,
-            view_formats: &[],
-        })
-    };
-    let msaa = texture(
-        "msaa",
-        format.color,
-        4,
-        wgpu::TextureUsages::RENDER_ATTACHMENT,
-    );
-    let depth = texture(
-        "depth",
-        format.depth,
-        4,
-        wgpu::TextureUsages::RENDER_ATTACHMENT,
-    );
-    let swapchain = texture(
-        "swapchain-like",
-        format.color,
-        1,
-        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-    );
+    // The engine's frame: an sRGB colour target with 4x MSAA and its own depth buffer (made in
+    // tests/common/engine.rs, which the render test shares to check this path).
+    let format = engine::FORMAT;
+    let targets = engine::EngineTargets::new(&device, FRAME);
 
     // --- terrain-gpu: built once. ---
     let params = TerrainParams {
@@ -176,34 +143,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
     )?;
     {
-        let (msaa_view, depth_view, resolve_view) = (
-            msaa.create_view(&Default::default()),
-            depth.create_view(&Default::default()),
-            swapchain.create_view(&Default::default()),
-        );
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("engine main pass"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &msaa_view,
-                depth_slice: None,
-                resolve_target: Some(&resolve_view),
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Discard,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &depth_view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = targets.begin_pass(&mut encoder);
         sky.draw(&mut pass);
         renderer.draw(&mut pass);
         // ... the engine would draw its own objects into the same pass here.
@@ -214,7 +154,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     stamps.recall();
     normal_pass.recall();
     // Read the "swap chain" back (an engine would present it instead).
-    let image = terrain_gpu::download::read_texture_rgba8(&device, &queue, &swapchain)?;
+    let image = terrain_gpu::download::read_texture_rgba8(&device, &queue, &targets.resolved)?;
     terrain_core::io::write_png_rgba8(&out, &image)?;
     println!(
         "stamped {} dirty rect(s), drew {} triangles into the engine's pass; wrote {}",

@@ -3,6 +3,8 @@
 
 #[path = "common/cracks.rs"]
 mod cracks;
+#[path = "common/engine.rs"]
+mod engine;
 #[path = "common/scene.rs"]
 mod scene;
 use cracks::{holes, is_sky};
@@ -182,55 +184,14 @@ fn renderers_draw_into_the_callers_msaa_srgb_pass_like_the_capture() {
     let size = scene::GOLDEN_SIZE;
     let (capture, _) = scene.render(&camera, size, &SkyColors::default());
 
-    // The engine's side: its own formats, its own textures, its own pass.
-    let format = TargetFormat {
-        color: wgpu::TextureFormat::Bgra8UnormSrgb,
-        depth: wgpu::TextureFormat::Depth24Plus,
-        sample_count: 4,
-    };
+    // The engine's side, as the own_device example makes it: its own formats, its own
+    // textures, its own pass.
+    let format = engine::FORMAT;
     let device = &scene.ctx.device;
     let queue = &scene.ctx.queue;
     let sky = SkyPass::new(device, &format).unwrap();
     let mut renderer = ClipmapRenderer::new(device, &format, &scene.layout).unwrap();
-    let texture = |label, format, samples, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width: size.x,
-                height: size.y,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: samples,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage,
-            view_formats: &[],
-        })
-    };
-    let msaa = texture(
-        "msaa colour",
-        format.color,
-        4,
-        wgpu::TextureUsages::RENDER_ATTACHMENT,
-    );
-    let resolved = texture(
-        "resolved colour",
-        format.color,
-        1,
-        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-    );
-    let depth = texture(
-        "msaa depth",
-        format.depth,
-        4,
-        wgpu::TextureUsages::RENDER_ATTACHMENT,
-    );
-    let (msaa_view, resolved_view, depth_view) = (
-        msaa.create_view(&Default::default()),
-        resolved.create_view(&Default::default()),
-        depth.create_view(&Default::default()),
-    );
+    let targets = engine::EngineTargets::new(device, size);
 
     let aspect = size.x as f32 / size.y as f32;
     let frame = scene
@@ -267,36 +228,14 @@ fn renderers_draw_into_the_callers_msaa_srgb_pass_like_the_capture() {
     renderer.prepare(device, queue, &view).unwrap();
     let mut encoder = device.create_command_encoder(&Default::default());
     {
-        // As the example's engine does: MSAA colour resolved, depth for this pass only.
-        let msaa = wgpu::RenderPassColorAttachment {
-            view: &msaa_view,
-            depth_slice: None,
-            resolve_target: Some(&resolved_view),
-            ops: wgpu::Operations {
-                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                store: wgpu::StoreOp::Discard,
-            },
-        };
-        let depth = wgpu::RenderPassDepthStencilAttachment {
-            view: &depth_view,
-            depth_ops: Some(wgpu::Operations {
-                load: wgpu::LoadOp::Clear(1.0),
-                store: wgpu::StoreOp::Discard,
-            }),
-            stencil_ops: None,
-        };
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("engine pass"),
-            color_attachments: &[Some(msaa)],
-            depth_stencil_attachment: Some(depth),
-            ..Default::default()
-        });
+        let mut pass = targets.begin_pass(&mut encoder);
         sky.draw(&mut pass);
         renderer.draw(&mut pass);
     }
     queue.submit([encoder.finish()]);
     // The resolved BGRA target, as RGBA rows.
-    let engine = terrain_gpu::download::read_texture_rgba8(device, queue, &resolved).unwrap();
+    let engine =
+        terrain_gpu::download::read_texture_rgba8(device, queue, &targets.resolved).unwrap();
     scene.ctx.check().expect("no GPU validation errors");
 
     // Both paths must show terrain, not only sky (the same renderer drawing nothing would
