@@ -120,6 +120,10 @@ pub enum LodError {
         /// The bound ([`crate::cdlod::MAX_VISITED_NODES`]).
         limit: usize,
     },
+    /// A [`crate::LodUpdater`]'s worker thread could not start, or stopped (a panic in an
+    /// update): the updater can no longer take changes.
+    #[error("the LOD updater's worker thread {0}")]
+    UpdaterStopped(&'static str),
     /// A terrain-core operation failed (for example a grid too large to allocate).
     #[error(transparent)]
     Core(#[from] terrain_core::CoreError),

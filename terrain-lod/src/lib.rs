@@ -111,6 +111,7 @@
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
+pub mod background;
 pub mod cdlod;
 pub mod clipmap;
 pub mod density;
@@ -125,9 +126,9 @@ pub mod tessellation;
 // The row loops are terrain-core's (one copy for the workspace), reached as `crate::par`.
 use terrain_core::par;
 
+pub use background::{CdlodUpdater, LodUpdater, RectUpdate, TessState, TessUpdater};
 pub use cdlod::{
-    CdlodConfig, CdlodFrame, CdlodInstance, CdlodMesh, CdlodTree, CdlodUpdater, CdlodView,
-    LodMetric, LodRanges,
+    CdlodConfig, CdlodFrame, CdlodInstance, CdlodMesh, CdlodTree, CdlodView, LodMetric, LodRanges,
 };
 pub use clipmap::{
     ClipmapDraw, ClipmapFrame, ClipmapInstance, ClipmapLayout, ClipmapMesh, ClipmapVertex,

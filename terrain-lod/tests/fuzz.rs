@@ -140,6 +140,7 @@ fn variant(e: &LodError) -> &'static str {
         LodError::InvalidTessParam { .. } => "InvalidTessParam",
         LodError::SelectionTooLarge { .. } => "SelectionTooLarge",
         LodError::InvalidRefineRadius { .. } => "InvalidRefineRadius",
+        LodError::UpdaterStopped(_) => "UpdaterStopped",
         LodError::Core(_) => "Core",
     }
 }

@@ -7,7 +7,7 @@ use super::*;
 /// CDLOD on the GPU scene: the quadtree (on the CPU, kept current by the deformations), the
 /// renderer, and the selections of the last two frames (for the popping metric).
 pub(super) struct CdlodScene {
-    pub(super) tree: CdlodTree,
+    pub(super) tree: CdlodSource,
     pub(super) renderer: CdlodRenderer,
     pub(super) mesh: CdlodMesh,
     /// The last frame's selection with its camera, and the one before.
@@ -15,12 +15,29 @@ pub(super) struct CdlodScene {
     pub(super) previous: Option<(CdlodFrame, glam::Vec3)>,
 }
 
+/// Where CDLOD's quadtree comes from: a map's, updated from the changed regions on a worker
+/// thread (terrain-lod's `CdlodUpdater`), or a streamed world's, built from leaf bounds and
+/// kept current by its scenario.
+pub(super) enum CdlodSource {
+    Map(CdlodUpdater<u16>),
+    Streamed(CdlodTree),
+}
+
+impl CdlodSource {
+    pub(super) fn tree(&self) -> &CdlodTree {
+        match self {
+            Self::Map(updater) => updater.tree(),
+            Self::Streamed(tree) => tree,
+        }
+    }
+}
+
 /// Adaptive tessellation on the GPU scene: the hierarchy and density map (on the CPU, kept
-/// current by the deformations and copied to the GPU where they change), the compute pass that
-/// tessellates, the renderer, and the cameras of the last two frames (for the popping metric).
+/// current from the changed regions on a worker thread, and copied to the GPU where they
+/// change), the compute pass that tessellates, the renderer, and the cameras of the last two
+/// frames (for the popping metric).
 pub(super) struct TessScene {
-    pub(super) hierarchy: TessHierarchy,
-    pub(super) density: Option<DensityMap>,
+    pub(super) updater: TessUpdater<u16>,
     pub(super) gpu: terrain_gpu::GpuTessellation,
     pub(super) pass: TessellationPass,
     pub(super) renderer: TessRenderer,
@@ -43,14 +60,19 @@ impl GpuScene {
     /// Draws the coarse-map with CDLOD instead of the clipmap: the quadtree of `map` with
     /// `config`, kept current by [`GpuScene::update_lod`].
     pub fn enable_cdlod(&mut self, map: &CoarseMap, config: CdlodConfig) -> Result<()> {
-        self.enable_cdlod_tree(CdlodTree::from_map(map, config)?)
+        let tree = CdlodTree::from_map(map, config)?;
+        self.enable_cdlod_source(CdlodSource::Map(CdlodUpdater::spawn(tree, map)?))
     }
 
     /// Draws a streamed world's atlas with CDLOD instead of the clipmap: `tree` is the world's
     /// quadtree (terrain-lod's `CdlodTree::from_leaf_bounds`), kept current by the caller
     /// through [`GpuScene::cdlod_tree_mut`].
     pub fn enable_cdlod_tree(&mut self, tree: CdlodTree) -> Result<()> {
-        let mesh = CdlodMesh::new(tree.config().grid_size);
+        self.enable_cdlod_source(CdlodSource::Streamed(tree))
+    }
+
+    fn enable_cdlod_source(&mut self, tree: CdlodSource) -> Result<()> {
+        let mesh = CdlodMesh::new(tree.tree().config().grid_size);
         let renderer = CdlodRenderer::new(&self.ctx.device, &self.target.format(), &mesh)?;
         self.cdlod = Some(CdlodScene {
             tree,
@@ -62,9 +84,12 @@ impl GpuScene {
         Ok(())
     }
 
-    /// The CDLOD quadtree, when CDLOD draws.
+    /// The streamed world's CDLOD quadtree, when CDLOD draws one.
     pub fn cdlod_tree_mut(&mut self) -> Option<&mut CdlodTree> {
-        self.cdlod.as_mut().map(|c| &mut c.tree)
+        match self.cdlod.as_mut().map(|c| &mut c.tree) {
+            Some(CdlodSource::Streamed(tree)) => Some(tree),
+            _ => None,
+        }
     }
 
     /// Draws the coarse-map with adaptive tessellation instead of the clipmap: the hierarchy of
@@ -90,8 +115,7 @@ impl GpuScene {
         let capacity = config.max_triangles as u32;
         let gpu = terrain_gpu::GpuTessellation::new(device, queue, &hierarchy, capacity)?;
         self.tess = Some(TessScene {
-            hierarchy,
-            density,
+            updater: TessUpdater::spawn(TessState { hierarchy, density }, map)?,
             gpu,
             pass: TessellationPass::new(device)?,
             renderer: TessRenderer::new(device, &self.target.format())?,
@@ -103,33 +127,35 @@ impl GpuScene {
         Ok(())
     }
 
-    /// Brings the CDLOD quadtree's bounds up to date with `map` after deformations in `dirty`
-    /// (timed as `lod`); nothing without CDLOD.
+    /// Hands the deformations in `dirty` (already in `map`) to the LOD data's worker thread
+    /// and takes in what it finished: the CDLOD quadtree, or the tessellation's hierarchy and
+    /// density map, whose changed rows are copied to the GPU (timed as `lod`: the frame pays
+    /// for copying the rects' rows, not for the update). Nothing under the clipmap; a streamed
+    /// world's quadtree is kept current by its scenario.
     pub fn update_lod(
         &mut self,
         map: &CoarseMap,
         dirty: &[Rect],
         timings: &mut Timings,
     ) -> Result<()> {
-        // A streamed world's quadtree is kept current by its scenario (from leaf bounds).
-        if let Some(c) = self.cdlod.as_mut().filter(|_| self.atlas.is_none()) {
-            let t = std::time::Instant::now();
+        let t = std::time::Instant::now();
+        if let Some(CdlodSource::Map(updater)) = self.cdlod.as_mut().map(|c| &mut c.tree) {
+            updater.poll()?;
             for r in dirty {
-                c.tree.update_rect(map, *r)?;
+                updater.submit(map, *r)?;
             }
             timings.add(Step::Lod, crate::timings::ms_since(t));
         }
         if let Some(c) = &mut self.tess {
-            let t = std::time::Instant::now();
-            let mut rows = Vec::new();
-            for r in dirty {
-                if let Some(d) = &mut c.density {
-                    d.update_rect(map, *r)?;
-                }
-                rows.extend(c.hierarchy.update_rect(map, c.density.as_ref(), *r)?);
-            }
+            let updater = &mut c.updater;
+            updater.poll()?;
+            let rows = updater.take_changes();
             if !rows.is_empty() {
-                c.gpu.upload(&self.ctx.queue, &c.hierarchy, &rows)?;
+                c.gpu
+                    .upload(&self.ctx.queue, &updater.state().hierarchy, &rows)?;
+            }
+            for r in dirty {
+                updater.submit(map, *r)?;
             }
             timings.add(Step::Lod, crate::timings::ms_since(t));
         }
@@ -154,6 +180,7 @@ impl GpuScene {
         };
         Some(
             c.tree
+                .tree()
                 .popping_px(map, (now, *eye), (then, *then_eye), &view),
         )
     }
@@ -190,13 +217,14 @@ pub(super) fn render_tessellated(
     timings.add(Step::Lod, crate::timings::ms_since(lod_start));
     // The report's figures from the CPU reference (the same triangles as the GPU's), made
     // first so that a view beyond the output's capacity fails before anything is drawn.
-    let frame = c.hierarchy.select(&view)?;
-    let max_screen_error_px = c.hierarchy.max_screen_error_px(&frame, &view);
+    let hierarchy = &c.updater.state().hierarchy;
+    let frame = hierarchy.select(&view)?;
+    let max_screen_error_px = hierarchy.max_screen_error_px(&frame, &view);
     let view_proj = camera.view_proj_relative(aspect);
     let timing = gpu.timer.time(device, queue, |encoder| {
         sky.prepare(queue, view_proj, &SkyColors::default())?;
         c.pass
-            .encode(device, queue, encoder, &c.gpu, &c.hierarchy, &view)?;
+            .encode(device, queue, encoder, &c.gpu, hierarchy, &view)?;
         let draw = TessDraw {
             surface: gpu.surface,
             camera,
@@ -250,7 +278,7 @@ pub(super) fn tess_jump_px(t: &TessScene, camera: &Camera, size: Vec2) -> Option
         hfov: then_hfov,
     };
     let probes: Vec<Vec2> = t.probes.iter().chain(&t.previous_probes).copied().collect();
-    Some(t.hierarchy.max_height_jump(
+    Some(t.updater.state().hierarchy.max_height_jump(
         &view,
         &previous,
         &probes,
@@ -280,11 +308,12 @@ pub(super) fn render_cdlod(
     let size = target.size();
     let aspect = size.x as f32 / size.y as f32;
     let view = lod_view(camera, size, &frustum);
-    let frame = c.tree.select(&view)?;
+    let tree = c.tree.tree();
+    let frame = tree.select(&view)?;
     // A streamed world's tree knows its errors only as height spans: no measured error.
     let max_screen_error_px = match surface {
         ClipmapSurface::Atlas { .. } => None,
-        _ => Some(c.tree.max_screen_error_px(&frame, &view)),
+        _ => Some(tree.max_screen_error_px(&frame, &view)),
     };
     timings.add(Step::Lod, crate::timings::ms_since(lod_start));
     let view_proj = camera.view_proj_relative(aspect);

@@ -19,8 +19,8 @@ use terrain_gpu::{
     TerrainStyle, TessDraw, TessRenderer, TessellationPass,
 };
 use terrain_lod::{
-    CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodView, ClipmapLayout, DensityMap,
-    DensityParams, Frustum, TessConfig, TessHierarchy,
+    CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodUpdater, CdlodView, ClipmapLayout,
+    DensityMap, DensityParams, Frustum, TessConfig, TessHierarchy, TessState, TessUpdater,
 };
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 

@@ -160,11 +160,11 @@ impl GpuTessellation {
                 actual: hierarchy.grid_size(),
             });
         }
-        // In pieces of at most 256 rows, so the packed copy stays small.
-        let pieces = rows.iter().flat_map(|r| {
-            let r = r.start.min(self.grid.y)..r.end.min(self.grid.y);
-            r.clone().step_by(256).map(move |y| y..(y + 256).min(r.end))
-        });
+        // Ranges of several updates overlap: each row is copied once. In pieces of at most
+        // 256 rows, so the packed copy stays small.
+        let pieces = merge_rows(rows, self.grid.y)
+            .into_iter()
+            .flat_map(|r| r.clone().step_by(256).map(move |y| y..(y + 256).min(r.end)));
         for rows in pieces {
             let w = self.grid.x as usize;
             let (a, b) = (rows.start as usize * w, rows.end as usize * w);
@@ -531,4 +531,37 @@ fn tess_pipeline(
             extra_uniforms: &[],
         },
     )
+}
+
+/// `rows` clipped to `0..grid_rows`, sorted and merged where they overlap or touch.
+fn merge_rows(rows: &[std::ops::Range<u32>], grid_rows: u32) -> Vec<std::ops::Range<u32>> {
+    let mut sorted: Vec<_> = rows
+        .iter()
+        .map(|r| r.start.min(grid_rows)..r.end.min(grid_rows))
+        .filter(|r| !r.is_empty())
+        .collect();
+    sorted.sort_by_key(|r| r.start);
+    let mut merged: Vec<std::ops::Range<u32>> = Vec::with_capacity(sorted.len());
+    for r in sorted {
+        match merged.last_mut() {
+            Some(last) if r.start <= last.end => last.end = last.end.max(r.end),
+            _ => merged.push(r),
+        }
+    }
+    merged
+}
+
+#[cfg(test)]
+mod tests {
+    use super::merge_rows;
+
+    #[test]
+    fn overlapping_and_touching_rows_merge_and_rows_past_the_grid_are_dropped() {
+        let rows = [5..9, 0..2, 8..12, 2..3, 40..50, 20..20, 14..15];
+        assert_eq!(merge_rows(&rows, 45), vec![0..3, 5..12, 14..15, 40..45]);
+        assert_eq!(
+            merge_rows(&[50..60, 45..70], 45),
+            Vec::<std::ops::Range<u32>>::new()
+        );
+    }
 }

@@ -23,11 +23,9 @@ use crate::frustum::Frustum;
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use terrain_core::{HeightMap, HeightSample, Rect, WrapMode};
 
-mod background;
 mod morph_reference;
 mod streamed;
 
-pub use background::CdlodUpdater;
 pub use morph_reference::{JumpProbes, morphed_vertex};
 
 /// The largest number of LODs.
@@ -380,6 +378,22 @@ impl CdlodTree {
     /// The configuration.
     pub fn config(&self) -> &CdlodConfig {
         &self.config
+    }
+
+    /// The size of the map the tree covers (texels).
+    pub fn map_size(&self) -> UVec2 {
+        self.map_size
+    }
+
+    /// How the map wraps.
+    pub fn wrap(&self) -> WrapMode {
+        self.wrap
+    }
+
+    /// Whether the tree was built from leaf bounds (a streamed world): it holds height spans,
+    /// no per-texel errors, and is kept current by `update_leaf_bounds`.
+    pub fn is_streamed(&self) -> bool {
+        self.streamed
     }
 
     /// The side of a node of LOD `lod`, in texels.

@@ -216,7 +216,7 @@ pub struct TessDecision {
 
 /// The saturated bounds of every grid vertex of a heightfield's patches, kept current after
 /// deformations, from which a frame's tessellation is decided.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TessHierarchy {
     config: TessConfig,
     map_size: UVec2,
@@ -388,6 +388,11 @@ impl TessHierarchy {
     /// Metres per texel.
     pub fn texel_size(&self) -> f32 {
         self.texel_size
+    }
+
+    /// The size of the map the hierarchy was built from (texels).
+    pub fn map_size(&self) -> UVec2 {
+        self.map_size
     }
 
     /// The map's wrap mode.
