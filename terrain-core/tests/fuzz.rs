@@ -34,7 +34,7 @@ mod tiff_writer;
 
 use std::path::PathBuf;
 use std::time::Duration;
-use terrain_test_support::fuzz::{self, Target};
+use terrain_test_support::fuzz::{self, Case, Class, Target};
 
 /// A decode of small images takes well under a millisecond; 250 ms leaves room for debug
 /// builds on a loaded machine while still catching a decoder that loops.
@@ -59,6 +59,11 @@ impl Drop for Ctx {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.dir);
     }
+}
+
+/// A class of these targets, for their class lists (one line a class).
+fn class(name: &'static str, run: fn(&Ctx, &mut Case) -> Result<(), String>) -> Class<Ctx> {
+    Class { name, run }
 }
 
 #[test]

@@ -3,9 +3,9 @@
 //! tags): valid files, truncated, bit-flipped, directory fields set to edge values, random
 //! bytes and the file reader.
 
-use crate::Ctx;
 use crate::png_mutations::{limits_for, side};
 use crate::tiff_writer;
+use crate::{Ctx, class};
 use terrain_core::geotiff::{decode_geotiff, read_geotiff};
 use terrain_core::io::ReadLimits;
 use terrain_test_support::fuzz::{Case, Class, Rng};
@@ -193,29 +193,11 @@ fn geotiff_file_reader(ctx: &Ctx, case: &mut Case) -> Result<(), String> {
 /// The target's classes, in the order they run.
 pub(crate) fn classes() -> Vec<Class<Ctx>> {
     vec![
-        Class {
-            name: "valid",
-            run: geotiff_valid,
-        },
-        Class {
-            name: "truncated",
-            run: geotiff_truncated,
-        },
-        Class {
-            name: "bit_flips",
-            run: geotiff_bit_flips,
-        },
-        Class {
-            name: "directory_fields",
-            run: geotiff_directory_fields,
-        },
-        Class {
-            name: "random_bytes",
-            run: geotiff_random,
-        },
-        Class {
-            name: "file_reader",
-            run: geotiff_file_reader,
-        },
+        class("valid", geotiff_valid),
+        class("truncated", geotiff_truncated),
+        class("bit_flips", geotiff_bit_flips),
+        class("directory_fields", geotiff_directory_fields),
+        class("random_bytes", geotiff_random),
+        class("file_reader", geotiff_file_reader),
     ]
 }

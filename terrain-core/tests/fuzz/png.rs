@@ -1,7 +1,6 @@
 //! Classes of the PNG targets `png16` and `png8` (with the RGBA8 capture decoder's own classes),
 //! shared by the decoders through the const parameter `K` (GRAY8, GRAY16 or RGBA8).
 
-use crate::Ctx;
 use crate::png_encoder::Image;
 use crate::png_expect::{
     Kind, Pixels, RGBA8, check_any, check_valid, decode, expected_pixels, kind, read_file,
@@ -10,6 +9,7 @@ use crate::png_mutations::{
     CHUNK_TYPES, chunk_data, chunk_surgery, damage_zlib, limits_for, overwrite_header, seed_file,
     seed_image, side,
 };
+use crate::{Ctx, class};
 use terrain_core::io::{
     DEFAULT_MAX_SIDE, ReadLimits, decode_png, encode_png_rgba8, encode_png8, encode_png16, read_png,
 };
@@ -252,70 +252,25 @@ fn png_file_reader<const K: u8>(ctx: &Ctx, case: &mut Case) -> Result<(), String
 /// capture decoder's own.
 pub(crate) fn classes<const K: u8>(rgba_too: bool) -> Vec<Class<Ctx>> {
     let mut classes = vec![
-        Class {
-            name: "valid_any_format",
-            run: png_valid::<K>,
-        },
-        Class {
-            name: "roundtrip_own_encoder",
-            run: png_roundtrip::<K>,
-        },
-        Class {
-            name: "truncated",
-            run: png_truncated::<K>,
-        },
-        Class {
-            name: "bit_flips",
-            run: png_bit_flips::<K>,
-        },
-        Class {
-            name: "bit_flips_crc_fixed",
-            run: png_bit_flips_crc_fixed::<K>,
-        },
-        Class {
-            name: "header_fields",
-            run: png_header_fields::<K>,
-        },
-        Class {
-            name: "chunk_surgery",
-            run: png_chunk_surgery::<K>,
-        },
-        Class {
-            name: "zlib_damage",
-            run: png_zlib_damage::<K>,
-        },
-        Class {
-            name: "size_limits",
-            run: png_size_limits::<K>,
-        },
-        Class {
-            name: "random_bytes",
-            run: png_random_bytes::<K>,
-        },
-        Class {
-            name: "file_reader",
-            run: png_file_reader::<K>,
-        },
+        class("valid_any_format", png_valid::<K>),
+        class("roundtrip_own_encoder", png_roundtrip::<K>),
+        class("truncated", png_truncated::<K>),
+        class("bit_flips", png_bit_flips::<K>),
+        class("bit_flips_crc_fixed", png_bit_flips_crc_fixed::<K>),
+        class("header_fields", png_header_fields::<K>),
+        class("chunk_surgery", png_chunk_surgery::<K>),
+        class("zlib_damage", png_zlib_damage::<K>),
+        class("size_limits", png_size_limits::<K>),
+        class("random_bytes", png_random_bytes::<K>),
+        class("file_reader", png_file_reader::<K>),
     ];
     if rgba_too {
         // The RGBA8 capture decoder shares the PNG path; a few classes of its own.
         classes.extend([
-            Class {
-                name: "rgba8_valid_any_format",
-                run: png_valid::<RGBA8>,
-            },
-            Class {
-                name: "rgba8_header_fields",
-                run: png_header_fields::<RGBA8>,
-            },
-            Class {
-                name: "rgba8_zlib_damage",
-                run: png_zlib_damage::<RGBA8>,
-            },
-            Class {
-                name: "rgba8_truncated",
-                run: png_truncated::<RGBA8>,
-            },
+            class("rgba8_valid_any_format", png_valid::<RGBA8>),
+            class("rgba8_header_fields", png_header_fields::<RGBA8>),
+            class("rgba8_zlib_damage", png_zlib_damage::<RGBA8>),
+            class("rgba8_truncated", png_truncated::<RGBA8>),
         ]);
     }
     classes

@@ -1,8 +1,8 @@
 //! Classes of the `raw16` target: round trips, lengths that do not match the size, size limits,
 //! random bytes and the file reader.
 
-use crate::Ctx;
 use crate::png_mutations::{limits_for, side};
+use crate::{Ctx, class};
 use glam::UVec2;
 use terrain_core::Grid;
 use terrain_core::io::{
@@ -163,25 +163,10 @@ fn raw16_file_reader(ctx: &Ctx, case: &mut Case) -> Result<(), String> {
 /// The target's classes, in the order they run.
 pub(crate) fn classes() -> Vec<Class<Ctx>> {
     vec![
-        Class {
-            name: "roundtrip",
-            run: raw16_roundtrip,
-        },
-        Class {
-            name: "length_mismatch",
-            run: raw16_length_mismatch,
-        },
-        Class {
-            name: "size_limits",
-            run: raw16_size_limits,
-        },
-        Class {
-            name: "random_bytes",
-            run: raw16_random,
-        },
-        Class {
-            name: "file_reader",
-            run: raw16_file_reader,
-        },
+        class("roundtrip", raw16_roundtrip),
+        class("length_mismatch", raw16_length_mismatch),
+        class("size_limits", raw16_size_limits),
+        class("random_bytes", raw16_random),
+        class("file_reader", raw16_file_reader),
     ]
 }
