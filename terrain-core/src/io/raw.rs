@@ -1,20 +1,61 @@
 //! What the two headerless formats (RAW16 and R32) share: a file's length follows from the
 //! requested size, so it is checked from the metadata before anything is read.
 
-use super::r32::r32_mismatch;
-use super::raw16::raw16_mismatch;
+use super::r32::R32;
+use super::raw16::RAW16;
 use super::{ByteOrder, MapIoError, ReadLimits, check_size, open_regular};
+use crate::grid::Grid;
 use glam::UVec2;
 use std::io::Read;
 use std::path::Path;
 
+/// A headerless format: row-major `T` samples of `N` bytes each, in a byte order the caller
+/// gives. Only how a sample is read and the error for a wrong length differ between RAW16 and
+/// R32; decoding and reading are the same.
+pub(super) struct RawFormat<const N: usize, T> {
+    /// A sample from its bytes in an order.
+    pub(super) sample: fn([u8; N], ByteOrder) -> T,
+    /// The error for data of `actual_bytes` where `size` needs `expected_bytes`.
+    pub(super) mismatch: fn(size: UVec2, expected_bytes: u64, actual_bytes: u64) -> MapIoError,
+}
+
+impl<const N: usize, T: Copy> RawFormat<N, T> {
+    /// Decodes `size.x * size.y` samples in `order`: the size is checked against `limits`
+    /// first, and any other byte count is the format's mismatch.
+    pub(super) fn decode(
+        &self,
+        bytes: &[u8],
+        size: UVec2,
+        order: ByteOrder,
+        limits: &ReadLimits,
+    ) -> Result<Grid<T>, MapIoError> {
+        let expected_bytes = raw_len(size, N as u64, limits)?;
+        let actual_bytes = bytes.len() as u64;
+        if actual_bytes != expected_bytes {
+            return Err((self.mismatch)(size, expected_bytes, actual_bytes));
+        }
+        let samples = raw_samples(bytes, order, self.sample);
+        Ok(Grid::from_vec(size.x, size.y, samples)?)
+    }
+
+    /// Reads a file of `size` and decodes it (see [`read_raw_file`]: the length is checked
+    /// before anything is read).
+    pub(super) fn read(
+        &self,
+        path: &Path,
+        size: UVec2,
+        order: ByteOrder,
+        limits: &ReadLimits,
+    ) -> Result<Grid<T>, MapIoError> {
+        let expected = raw_len(size, N as u64, limits)?;
+        let bytes = read_raw_file(path, size, expected, limits, self.mismatch)?;
+        self.decode(&bytes, size, order, limits)
+    }
+}
+
 /// Checks a headerless file's size and returns the byte count it needs at `sample_bytes` per
 /// sample.
-pub(super) fn raw_len(
-    size: UVec2,
-    sample_bytes: u64,
-    limits: &ReadLimits,
-) -> Result<u64, MapIoError> {
+fn raw_len(size: UVec2, sample_bytes: u64, limits: &ReadLimits) -> Result<u64, MapIoError> {
     check_size(size.x, size.y, limits)?;
     // (2^32 - 1)^2 * 4 can overflow u64 when the limit is raised that far.
     u64::from(size.x)
@@ -28,7 +69,7 @@ pub(super) fn raw_len(
 }
 
 /// The samples of headerless data: `bytes` cut into `N`-byte samples in `order`.
-pub(super) fn raw_samples<const N: usize, T>(
+fn raw_samples<const N: usize, T>(
     bytes: &[u8],
     order: ByteOrder,
     from: fn([u8; N], ByteOrder) -> T,
@@ -46,7 +87,7 @@ pub(super) fn raw_samples<const N: usize, T>(
 /// Reads the whole of a headerless file that must be `expected_bytes` long; `mismatch` makes
 /// the error for another length. The length is checked from the file's metadata before
 /// anything is read, so a wrong size never causes a large read.
-pub(super) fn read_raw_file(
+fn read_raw_file(
     path: &Path,
     size: UVec2,
     expected_bytes: u64,
@@ -104,8 +145,8 @@ pub fn check_raw_file(
     if actual == expected {
         Ok(())
     } else if bytes_per_sample == 4 {
-        Err(r32_mismatch(size, expected, actual))
+        Err((R32.mismatch)(size, expected, actual))
     } else {
-        Err(raw16_mismatch(size, expected, actual))
+        Err((RAW16.mismatch)(size, expected, actual))
     }
 }

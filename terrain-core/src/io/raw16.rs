@@ -1,18 +1,26 @@
 //! RAW16: headerless `u16` samples, row-major, little-endian unless asked otherwise (the
 //! `.r16` / `.raw` heightmaps of terrain tools).
 
-use super::raw::{raw_len, raw_samples, read_raw_file};
+use super::raw::RawFormat;
 use super::{ByteOrder, MapIoError, ReadLimits, write_atomic};
 use crate::grid::Grid;
 use glam::UVec2;
 use std::path::Path;
 
-fn u16_from(b: [u8; 2], order: ByteOrder) -> u16 {
-    match order {
+/// RAW16 as a headerless format: 2-byte `u16` samples, a wrong length is
+/// [`MapIoError::RawSizeMismatch`].
+pub(super) const RAW16: RawFormat<2, u16> = RawFormat {
+    sample: |b, order| match order {
         ByteOrder::Little => u16::from_le_bytes(b),
         ByteOrder::Big => u16::from_be_bytes(b),
-    }
-}
+    },
+    mismatch: |size, expected_bytes, actual_bytes| MapIoError::RawSizeMismatch {
+        width: size.x,
+        height: size.y,
+        expected_bytes,
+        actual_bytes,
+    },
+};
 
 /// Decodes RAW16 data: `size.x * size.y` little-endian `u16` samples, row-major.
 ///
@@ -34,27 +42,7 @@ pub fn decode_raw16_ordered(
     order: ByteOrder,
     limits: &ReadLimits,
 ) -> Result<Grid<u16>, MapIoError> {
-    let expected_bytes = raw_len(size, 2, limits)?;
-    let actual_bytes = bytes.len() as u64;
-    if actual_bytes != expected_bytes {
-        return Err(MapIoError::RawSizeMismatch {
-            width: size.x,
-            height: size.y,
-            expected_bytes,
-            actual_bytes,
-        });
-    }
-    let samples = raw_samples(bytes, order, u16_from);
-    Ok(Grid::from_vec(size.x, size.y, samples)?)
-}
-
-pub(super) fn raw16_mismatch(size: UVec2, expected_bytes: u64, actual_bytes: u64) -> MapIoError {
-    MapIoError::RawSizeMismatch {
-        width: size.x,
-        height: size.y,
-        expected_bytes,
-        actual_bytes,
-    }
+    RAW16.decode(bytes, size, order, limits)
 }
 
 /// Reads a RAW16 file of the given size (see [`decode_raw16`]).
@@ -76,9 +64,7 @@ pub fn read_raw16_ordered(
     order: ByteOrder,
     limits: &ReadLimits,
 ) -> Result<Grid<u16>, MapIoError> {
-    let expected = raw_len(size, 2, limits)?;
-    let bytes = read_raw_file(path.as_ref(), size, expected, limits, raw16_mismatch)?;
-    decode_raw16_ordered(&bytes, size, order, limits)
+    RAW16.read(path.as_ref(), size, order, limits)
 }
 
 /// Encodes a grid as RAW16: little-endian `u16` samples, row-major, no header.
