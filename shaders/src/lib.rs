@@ -90,53 +90,85 @@ pub const SKY: &str = concat!(
     include_str!("wgsl/render/sky.wgsl")
 );
 
+// The renderers' shaders are stacks of the same pieces; each stack that several shaders start
+// with is written once below. They are macros because `concat!` joins only literals and macro
+// calls (not `const`s), and the shaders stay `&'static str` constants.
+
+/// The start of every clipmap-style renderer: the prelude, the target's colour conversion and
+/// the detail sample type the fragment shader takes.
+macro_rules! renderer_head {
+    () => {
+        concat!(
+            wgsl_prelude!(),
+            include_str!("wgsl/render/target_color.wgsl"),
+            include_str!("wgsl/resources/detail_sample.wgsl")
+        )
+    };
+}
+
+/// [`CLIPMAP`]'s text: the clipmap frame and shading over a coarse-map without detail.
+macro_rules! clipmap_coarse {
+    () => {
+        concat!(
+            renderer_head!(),
+            include_str!("wgsl/render/clipmap_no_detail.wgsl"),
+            include_str!("wgsl/render/clipmap.wgsl"),
+            include_str!("wgsl/render/clipmap_surface_coarse.wgsl")
+        )
+    };
+}
+
+/// [`CLIPMAP_ATLAS`]'s text: the clipmap frame and shading over a tile atlas.
+macro_rules! clipmap_atlas {
+    () => {
+        concat!(
+            renderer_head!(),
+            include_str!("wgsl/render/clipmap_no_detail.wgsl"),
+            include_str!("wgsl/render/clipmap.wgsl"),
+            include_str!("wgsl/resources/tile_atlas.wgsl"),
+            include_str!("wgsl/render/clipmap_surface_atlas.wgsl")
+        )
+    };
+}
+
+/// [`CLIPMAP_DETAIL`]'s text: the clipmap frame over a coarse-map, shaded with a detail layer
+/// (parallax, composite normals, fade).
+macro_rules! clipmap_detail {
+    () => {
+        concat!(
+            renderer_head!(),
+            include_str!("wgsl/resources/detail_tiles.wgsl"),
+            include_str!("wgsl/render/clipmap_detail_parallax.wgsl"),
+            include_str!("wgsl/render/clipmap.wgsl"),
+            include_str!("wgsl/render/clipmap_surface_coarse.wgsl")
+        )
+    };
+}
+
+/// [`GRANULAR_COMMON`]'s text, which the granular passes start with.
+macro_rules! granular_common {
+    () => {
+        concat!(
+            wgsl_prelude!(),
+            include_str!("wgsl/granular/granular_common.wgsl")
+        )
+    };
+}
+
 /// `ClipmapRenderer`: displaced, morphed, lit clipmap blocks.
-pub const CLIPMAP: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/render/target_color.wgsl"),
-    include_str!("wgsl/resources/detail_sample.wgsl"),
-    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/render/clipmap.wgsl"),
-    include_str!("wgsl/render/clipmap_surface_coarse.wgsl")
-);
+pub const CLIPMAP: &str = clipmap_coarse!();
 
 /// `CdlodRenderer`: CDLOD quadrants with the per-vertex morph, lit and coloured as the clipmap
 /// (its frame, coarse-map surface and fragment shader).
-pub const CDLOD: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/render/target_color.wgsl"),
-    include_str!("wgsl/resources/detail_sample.wgsl"),
-    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/render/clipmap.wgsl"),
-    include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
-    include_str!("wgsl/render/cdlod.wgsl")
-);
+pub const CDLOD: &str = concat!(clipmap_coarse!(), include_str!("wgsl/render/cdlod.wgsl"));
 
 /// `CdlodRenderer` over a tile atlas (`GpuTileAtlas`): the CDLOD vertex shader on the atlas
 /// surface of [`CLIPMAP_ATLAS`], so a streamed world is drawn by CDLOD as by the clipmap.
-pub const CDLOD_ATLAS: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/render/target_color.wgsl"),
-    include_str!("wgsl/resources/detail_sample.wgsl"),
-    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/render/clipmap.wgsl"),
-    include_str!("wgsl/resources/tile_atlas.wgsl"),
-    include_str!("wgsl/render/clipmap_surface_atlas.wgsl"),
-    include_str!("wgsl/render/cdlod.wgsl")
-);
+pub const CDLOD_ATLAS: &str = concat!(clipmap_atlas!(), include_str!("wgsl/render/cdlod.wgsl"));
 
 /// `CdlodRenderer` over a coarse-map with a detail layer: the CDLOD vertex shader on the
 /// coarse surface, shaded as [`CLIPMAP_DETAIL`] (composite normals, parallax, fade).
-pub const CDLOD_DETAIL: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/render/target_color.wgsl"),
-    include_str!("wgsl/resources/detail_sample.wgsl"),
-    include_str!("wgsl/resources/detail_tiles.wgsl"),
-    include_str!("wgsl/render/clipmap_detail_parallax.wgsl"),
-    include_str!("wgsl/render/clipmap.wgsl"),
-    include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
-    include_str!("wgsl/render/cdlod.wgsl")
-);
+pub const CDLOD_DETAIL: &str = concat!(clipmap_detail!(), include_str!("wgsl/render/cdlod.wgsl"));
 
 /// `TessellationPass`: adaptive tessellation by longest-edge bisection (Cervin 2012, sec. 2.3),
 /// writing triangles and indirect draw arguments.
@@ -145,34 +177,21 @@ pub const TESSELLATE: &str = concat!(wgsl_prelude!(), include_str!("wgsl/render/
 /// `TessRenderer`: the tessellation pass's triangles, lit and coloured as the clipmap (its
 /// frame, coarse-map surface and fragment shader).
 pub const TESSELLATED: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/render/target_color.wgsl"),
-    include_str!("wgsl/resources/detail_sample.wgsl"),
-    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/render/clipmap.wgsl"),
-    include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
+    clipmap_coarse!(),
     include_str!("wgsl/render/tessellated.wgsl")
 );
 
 /// `TessRenderer` over a coarse-map with a detail layer: the tessellation's triangles shaded
 /// as [`CLIPMAP_DETAIL`] (composite normals, parallax, fade).
 pub const TESSELLATED_DETAIL: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/render/target_color.wgsl"),
-    include_str!("wgsl/resources/detail_sample.wgsl"),
-    include_str!("wgsl/resources/detail_tiles.wgsl"),
-    include_str!("wgsl/render/clipmap_detail_parallax.wgsl"),
-    include_str!("wgsl/render/clipmap.wgsl"),
-    include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
+    clipmap_detail!(),
     include_str!("wgsl/render/tessellated.wgsl")
 );
 
 /// `ClipmapRenderer` over a granular map: the clipmap drawn from the granular normals pass's
 /// output (unit normal and float height per texel), so nothing is uploaded per frame.
 pub const CLIPMAP_GRANULAR: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/render/target_color.wgsl"),
-    include_str!("wgsl/resources/detail_sample.wgsl"),
+    renderer_head!(),
     include_str!("wgsl/render/clipmap_no_detail.wgsl"),
     include_str!("wgsl/render/clipmap.wgsl"),
     include_str!("wgsl/render/clipmap_surface_granular.wgsl")
@@ -180,37 +199,19 @@ pub const CLIPMAP_GRANULAR: &str = concat!(
 
 /// `ClipmapRenderer` over a tile atlas (`GpuTileAtlas`): heights from the finest resident level
 /// of the tile pyramid through the indirection table, normals by central differences.
-pub const CLIPMAP_ATLAS: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/render/target_color.wgsl"),
-    include_str!("wgsl/resources/detail_sample.wgsl"),
-    include_str!("wgsl/render/clipmap_no_detail.wgsl"),
-    include_str!("wgsl/render/clipmap.wgsl"),
-    include_str!("wgsl/resources/tile_atlas.wgsl"),
-    include_str!("wgsl/render/clipmap_surface_atlas.wgsl")
-);
+pub const CLIPMAP_ATLAS: &str = clipmap_atlas!();
 
 /// `ClipmapRenderer` over a coarse-map with a detail layer (`GpuDetailTiles`, Flower 2010, sec.
 /// 2.3): the coarse surface, shaded with the composite normal of eq. 3.4 at the point a
 /// parallax march through the detail heights finds, the detail faded out with distance.
-pub const CLIPMAP_DETAIL: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/render/target_color.wgsl"),
-    include_str!("wgsl/resources/detail_sample.wgsl"),
-    include_str!("wgsl/resources/detail_tiles.wgsl"),
-    include_str!("wgsl/render/clipmap_detail_parallax.wgsl"),
-    include_str!("wgsl/render/clipmap.wgsl"),
-    include_str!("wgsl/render/clipmap_surface_coarse.wgsl")
-);
+pub const CLIPMAP_DETAIL: &str = clipmap_detail!();
 
 /// `RefinePass` and `RefineRenderer`: the coarse cells around the camera split by the
 /// refinement patterns of Flower 2010, sec. 2.4.3 into triangles displaced by coarse + detail height
 /// (a compute pass with indirect draw arguments), drawn with the clipmap's frame, surface and
 /// fragment shader, shaded with eq. 3.4's composite normal.
 pub const REFINE: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/render/target_color.wgsl"),
-    include_str!("wgsl/resources/detail_sample.wgsl"),
+    renderer_head!(),
     include_str!("wgsl/resources/detail_tiles.wgsl"),
     include_str!("wgsl/render/clipmap_detail_refined.wgsl"),
     include_str!("wgsl/render/clipmap.wgsl"),
@@ -239,33 +240,26 @@ pub const ATLAS_PROBE: &str = concat!(
 /// The declarations every granular pass shares (uniform block, penetration texel, column
 /// kinds); already joined in front of [`GRANULAR_PENETRATION`], [`GRANULAR_JFA`],
 /// [`GRANULAR_DISPLACE`] and [`GRANULAR_SLOPE`].
-pub const GRANULAR_COMMON: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/granular/granular_common.wgsl")
-);
+pub const GRANULAR_COMMON: &str = granular_common!();
 
 /// Granular deformation (Persson 2019, ch. 4): penetration texture from depth and heights.
 pub const GRANULAR_PENETRATION: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/granular/granular_common.wgsl"),
+    granular_common!(),
     include_str!("wgsl/granular/granular_penetration.wgsl")
 );
 /// Granular deformation: jump flooding passes (closest seed per column).
 pub const GRANULAR_JFA: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/granular/granular_common.wgsl"),
+    granular_common!(),
     include_str!("wgsl/granular/granular_jfa.wgsl")
 );
 /// Granular deformation: displacement of intersected material (the three methods).
 pub const GRANULAR_DISPLACE: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/granular/granular_common.wgsl"),
+    granular_common!(),
     include_str!("wgsl/granular/granular_displace.wgsl")
 );
 /// Granular deformation: evening out slopes (interleaved and scatter).
 pub const GRANULAR_SLOPE: &str = concat!(
-    wgsl_prelude!(),
-    include_str!("wgsl/granular/granular_common.wgsl"),
+    granular_common!(),
     include_str!("wgsl/granular/granular_slope.wgsl")
 );
 /// Granular deformation: symmetric-difference normals and their blur, float heights.
