@@ -16,7 +16,7 @@ use terrain_core::{Grid, Rect, WrapMode};
 use terrain_lod::DensityParams;
 use terrain_lod::density::{density_size, parent_rect, update_regions};
 
-/// The uniform block of `density.wgsl`, byte for byte (24 four-byte fields).
+/// The uniform block of `density.wgsl`, byte for byte: each `[_; 2]` is a WGSL `vec2`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable, Default)]
 struct Params {
@@ -40,7 +40,15 @@ struct Params {
     src_offset: [i32; 2],
 }
 
-const _: () = assert!(std::mem::size_of::<Params>() == 96);
+// The WGSL struct's layout: its size, and its `vec2`s 8-aligned as WGSL places them (a
+// mismatch fails the build, not a dispatch).
+const _: () = {
+    use std::mem::{offset_of, size_of};
+    assert!(size_of::<Params>() == 96);
+    assert!(offset_of!(Params, map_offset) % 8 == 0);
+    assert!(offset_of!(Params, src_size) % 8 == 0);
+    assert!(offset_of!(Params, src_offset) % 8 == 0);
+};
 
 /// A density map and its pyramid on the GPU, for a heightfield of a given size and wrap mode.
 /// Pairs with [`terrain_lod::DensityMap`].

@@ -7,23 +7,18 @@
 
 struct DensityParams {
     // The samples this dispatch writes (inside the level it writes).
-    rect_min_x: i32,
-    rect_min_y: i32,
-    rect_w: u32,
-    rect_h: u32,
-    // Heights: size in texels, wrap code, metres per stored unit, metres per texel, and a
-    // multiple of the size that makes the coordinates read non-negative before `%`.
-    map_w: u32,
-    map_h: u32,
+    rect_min: vec2<i32>,
+    rect_size: vec2<u32>,
+    // Heights: size in texels, wrap code, metres per stored unit, metres per texel, filter, and
+    // a multiple of the size that makes the coordinates read non-negative before `%`.
+    map_size: vec2<u32>,
     wrap: u32,
     scale: f32,
     spacing: f32,
     filter_code: u32,
-    map_offset_x: i32,
-    map_offset_y: i32,
+    map_offset: vec2<i32>,
     // Level 0 (`raw`, `finish`) or the child level (`reduce`): size and first element.
-    src_w: u32,
-    src_h: u32,
+    src_size: vec2<u32>,
     src_base: u32,
     // `finish`: window radii and tile side; `reduce`: tile side; and the level written.
     radius: u32,
@@ -34,8 +29,8 @@ struct DensityParams {
     // gain / full_density_bend, and the curvature exponent.
     density_scale: f32,
     exponent: f32,
-    src_offset_x: i32,
-    src_offset_y: i32,
+    // `finish`: the multiple of the level-0 size that makes its reads non-negative.
+    src_offset: vec2<i32>,
 }
 
 @group(0) @binding(0) var<uniform> p: DensityParams;
@@ -51,8 +46,8 @@ fn resolve(v: i32, n: u32, offset: i32) -> u32 {
 }
 
 fn h(x: i32, y: i32) -> f32 {
-    let row = resolve(y, p.map_h, p.map_offset_y);
-    return f32(heights[row * p.map_w + resolve(x, p.map_w, p.map_offset_x)]);
+    let row = resolve(y, p.map_size.y, p.map_offset.y);
+    return f32(heights[row * p.map_size.x + resolve(x, p.map_size.x, p.map_offset.x)]);
 }
 
 fn cot(a: vec3<f32>, b: vec3<f32>) -> f32 {
@@ -130,11 +125,11 @@ fn curvature(d: array<f32, 8>) -> f32 {
 
 @compute @workgroup_size(8, 8, 1)
 fn raw_density(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= p.rect_w || id.y >= p.rect_h {
+    if id.x >= p.rect_size.x || id.y >= p.rect_size.y {
         return;
     }
-    let i = p.rect_min_x + i32(id.x);
-    let j = p.rect_min_y + i32(id.y);
+    let i = p.rect_min.x + i32(id.x);
+    let j = p.rect_min.y + i32(id.y);
     var m = 0.0;
     for (var ty = 4 * j - 1; ty <= 4 * j + 4; ty++) {
         for (var tx = 4 * i - 1; tx <= 4 * i + 4; tx++) {
@@ -153,29 +148,29 @@ fn raw_density(@builtin(global_invocation_id) id: vec3<u32>) {
             m = max(m, curvature(d));
         }
     }
-    raw_values[u32(j) * p.src_w + u32(i)] = m * p.spacing;
+    raw_values[u32(j) * p.src_size.x + u32(i)] = m * p.spacing;
 }
 
 fn raw_at(x: i32, y: i32) -> f32 {
     var xx: u32;
     var yy: u32;
     if p.wrap == WRAP_REPEAT {
-        xx = u32(x + p.src_offset_x) % p.src_w;
-        yy = u32(y + p.src_offset_y) % p.src_h;
+        xx = u32(x + p.src_offset.x) % p.src_size.x;
+        yy = u32(y + p.src_offset.y) % p.src_size.y;
     } else {
-        xx = u32(clamp(x, 0, i32(p.src_w) - 1));
-        yy = u32(clamp(y, 0, i32(p.src_h) - 1));
+        xx = u32(clamp(x, 0, i32(p.src_size.x) - 1));
+        yy = u32(clamp(y, 0, i32(p.src_size.y) - 1));
     }
-    return raw_values[yy * p.src_w + xx];
+    return raw_values[yy * p.src_size.x + xx];
 }
 
 @compute @workgroup_size(8, 8, 1)
 fn finish_density(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= p.rect_w || id.y >= p.rect_h {
+    if id.x >= p.rect_size.x || id.y >= p.rect_size.y {
         return;
     }
-    let i = p.rect_min_x + i32(id.x);
-    let j = p.rect_min_y + i32(id.y);
+    let i = p.rect_min.x + i32(id.x);
+    let j = p.rect_min.y + i32(id.y);
     var r = i32(p.radius);
     if u32(i) % p.tile == 0u || u32(j) % p.tile == 0u {
         r = i32(p.border_radius);
@@ -195,20 +190,20 @@ fn finish_density(@builtin(global_invocation_id) id: vec3<u32>) {
 
 @compute @workgroup_size(8, 8, 1)
 fn reduce_density(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= p.rect_w || id.y >= p.rect_h {
+    if id.x >= p.rect_size.x || id.y >= p.rect_size.y {
         return;
     }
-    let i = u32(p.rect_min_x) + id.x;
-    let j = u32(p.rect_min_y) + id.y;
-    let cx = min(2u * i, p.src_w - 1u);
-    let cy = min(2u * j, p.src_h - 1u);
+    let i = u32(p.rect_min.x) + id.x;
+    let j = u32(p.rect_min.y) + id.y;
+    let cx = min(2u * i, p.src_size.x - 1u);
+    let cy = min(2u * j, p.src_size.y - 1u);
     var m = 0u;
     if i % p.tile == 0u || j % p.tile == 0u {
-        m = levels[p.src_base + cy * p.src_w + cx];
+        m = levels[p.src_base + cy * p.src_size.x + cx];
     } else {
-        for (var y = max(cy, 1u) - 1u; y <= min(cy + 1u, p.src_h - 1u); y++) {
-            for (var x = max(cx, 1u) - 1u; x <= min(cx + 1u, p.src_w - 1u); x++) {
-                m = max(m, levels[p.src_base + y * p.src_w + x]);
+        for (var y = max(cy, 1u) - 1u; y <= min(cy + 1u, p.src_size.y - 1u); y++) {
+            for (var x = max(cx, 1u) - 1u; x <= min(cx + 1u, p.src_size.x - 1u); x++) {
+                m = max(m, levels[p.src_base + y * p.src_size.x + x]);
             }
         }
     }
