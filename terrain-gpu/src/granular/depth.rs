@@ -49,7 +49,7 @@ struct DepthVertex {
 /// The WGSL `Tile` uniform.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
-struct TileParams {
+pub(super) struct TileParams {
     origin_f: [f32; 2],
     size_f: [f32; 2],
     origin: [u32; 2],
@@ -115,7 +115,7 @@ impl DepthArea {
 #[derive(Debug)]
 pub struct DepthFromBelowPass {
     pipeline: wgpu::RenderPipeline,
-    bindings: PassBindings<TileParams>,
+    pub(super) bindings: PassBindings<TileParams>,
     tile_side: u32,
     target: Option<(wgpu::Texture, wgpu::TextureView)>,
     clear: Option<wgpu::Buffer>,
@@ -228,10 +228,6 @@ impl DepthFromBelowPass {
     pub fn recall(&mut self) {
         self.bindings.recall();
         self.vertices.recall();
-    }
-
-    pub(crate) fn clear_bind_groups(&mut self) {
-        self.bindings.clear_bind_groups();
     }
 
     /// A buffer for the depth of `area`: one `u32` per column, row-major, with the usages

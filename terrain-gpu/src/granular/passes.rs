@@ -40,7 +40,7 @@ fn granular_bindings(
 #[derive(Debug)]
 pub struct PenetrationPass {
     pipeline: wgpu::ComputePipeline,
-    bindings: PassBindings<GranularUniform>,
+    pub(super) bindings: PassBindings<GranularUniform>,
     depth_upload: UploadRing,
 }
 
@@ -75,10 +75,6 @@ impl PenetrationPass {
     pub fn recall(&mut self) {
         self.bindings.recall();
         self.depth_upload.recall();
-    }
-
-    pub(crate) fn clear_bind_groups(&mut self) {
-        self.bindings.clear_bind_groups();
     }
 
     /// Records the upload of a depth grid computed on the CPU (one u32 per column of the area,
@@ -182,7 +178,7 @@ impl<'a> FloodedArea<'a> {
 pub struct JumpFloodPass {
     init: wgpu::ComputePipeline,
     pass: wgpu::ComputePipeline,
-    bindings: PassBindings<GranularUniform>,
+    pub(super) bindings: PassBindings<GranularUniform>,
 }
 
 impl JumpFloodPass {
@@ -201,10 +197,6 @@ impl JumpFloodPass {
     /// Frees the uniform slots recorded so far: call it after the submit that carries them.
     pub fn recall(&mut self) {
         self.bindings.recall();
-    }
-
-    pub(crate) fn clear_bind_groups(&mut self) {
-        self.bindings.clear_bind_groups();
     }
 
     /// Records the seed initialisation from the penetration texture in the area's scratch and
@@ -275,7 +267,7 @@ pub struct DisplacePass {
     iter_pass: wgpu::ComputePipeline,
     iter_flush: wgpu::ComputePipeline,
     writeback: wgpu::ComputePipeline,
-    bindings: PassBindings<GranularUniform>,
+    pub(super) bindings: PassBindings<GranularUniform>,
 }
 
 impl DisplacePass {
@@ -307,10 +299,6 @@ impl DisplacePass {
     /// Frees the uniform slots recorded so far: call it after the submit that carries them.
     pub fn recall(&mut self) {
         self.bindings.recall();
-    }
-
-    pub(crate) fn clear_bind_groups(&mut self) {
-        self.bindings.clear_bind_groups();
     }
 
     /// Records `method` over the flooded area, from its penetration texture and closest seeds
@@ -434,7 +422,7 @@ pub struct SlopePass {
     amounts: wgpu::ComputePipeline,
     apply: wgpu::ComputePipeline,
     writeback: wgpu::ComputePipeline,
-    bindings: PassBindings<GranularUniform>,
+    pub(super) bindings: PassBindings<GranularUniform>,
 }
 
 impl SlopePass {
@@ -460,10 +448,6 @@ impl SlopePass {
     /// Frees the uniform slots recorded so far: call it after the submit that carries them.
     pub fn recall(&mut self) {
         self.bindings.recall();
-    }
-
-    pub(crate) fn clear_bind_groups(&mut self) {
-        self.bindings.clear_bind_groups();
     }
 
     /// Records `settings.iterations` iterations of `method` over `area`, with receivers limited

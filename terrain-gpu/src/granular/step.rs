@@ -141,11 +141,13 @@ impl GpuGranularStep {
         }
         let capacity = columns.max(old + old / 2).min(map_columns.max(columns));
         self.scratch = Some(GranularScratch::new(device, capacity)?);
-        self.penetration.clear_bind_groups();
-        self.jfa.clear_bind_groups();
-        self.displace.clear_bind_groups();
-        self.slope_pass.clear_bind_groups();
-        self.depth_pass.clear_bind_groups();
+        // The passes' cached bind groups would keep the old buffers alive (their `bindings`
+        // are visible to the granular module for this).
+        self.penetration.bindings.clear_bind_groups();
+        self.jfa.bindings.clear_bind_groups();
+        self.displace.bindings.clear_bind_groups();
+        self.slope_pass.bindings.clear_bind_groups();
+        self.depth_pass.bindings.clear_bind_groups();
         Ok(())
     }
 
