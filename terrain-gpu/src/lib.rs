@@ -61,7 +61,8 @@ pub mod testing;
 
 // The modules sit in folders by role; their public paths stay `terrain_gpu::<module>`.
 pub use device::{
-    compute, context, download, limits, readback, region_source, scope, small_readback, timer,
+    compute, context, download, limits, profiler, readback, region_source, scope, small_readback,
+    timer,
 };
 pub use passes::{density, detail_probe, normals, spill, stamp};
 pub use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, tessellation};
@@ -80,6 +81,7 @@ pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
 pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
 pub use normals::NormalPass;
 pub use offscreen::OffscreenTarget;
+pub use profiler::{FrameProfile, GpuProfiler, Scope, ScopeTiming};
 pub use readback::{ReadbackTicket, RegionData, RegionReadback, RegionView};
 pub use refine::{RefineDraw, RefinePass, RefineRenderer};
 pub use region_source::GpuRegionSource;

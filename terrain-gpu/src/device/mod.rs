@@ -5,6 +5,7 @@ pub mod compute;
 pub mod context;
 pub mod download;
 pub mod limits;
+pub mod profiler;
 pub mod readback;
 pub mod region_source;
 pub mod scope;

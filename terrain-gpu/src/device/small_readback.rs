@@ -106,6 +106,11 @@ impl SmallReadback {
         Ok(Some(seq))
     }
 
+    /// How many requests may be in flight at once (the ring's buffers).
+    pub fn capacity(&self) -> usize {
+        self.slots.len()
+    }
+
     /// Requests recorded and not yet handed over (one whose encoder was dropped unsubmitted
     /// is not counted: its buffer is free again).
     pub fn in_flight(&self) -> usize {
