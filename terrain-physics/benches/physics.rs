@@ -257,8 +257,85 @@ fn parry_tiles(c: &mut Criterion) {
     g.finish();
 }
 
+/// The `parry` feature: sphere contacts on a real DEM against parry's `HeightField` over the
+/// same heights, the same queries in the same process. The DEM is the USGS elevation of the
+/// Jacksboro fault, Tennessee (3 arc-seconds, 403 x 344, whole metres; matplotlib's sample
+/// data, `benches/data/`), with square texels of 83 m (the geometric mean of its 74 x 93 m
+/// cells). 20 000 spheres of 50 m at random places, centres 5 to 45 m above the ground under
+/// them, so each touches. Parry is measured twice: the crate's `ParryTerrain` holding the
+/// whole map in one `HeightField` (input checks and wrapping as the collider has them), and
+/// parry's own `query::contact` on that shape alone.
+#[cfg(feature = "parry")]
+fn parry_dem_contacts(c: &mut Criterion) {
+    use terrain_core::io::{ReadLimits, read_png16};
+    use terrain_physics::ParryTerrain;
+    use terrain_physics::parry3d::math::{Pose, Vector as PVec3};
+    use terrain_physics::parry3d::query;
+    use terrain_physics::parry3d::shape::Ball;
+    const RADIUS: f32 = 50.0;
+    const SPHERES: usize = 20_000;
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/benches/data/jacksboro_fault_dem.png"
+    );
+    let dem = read_png16(path, &ReadLimits::default()).expect("the DEM");
+    let enc = HeightEncoding::new(1.0, 0.0).expect("encoding");
+    let map = CoarseMap::coarse(dem, enc, 83.0).expect("map");
+    let mirror = CollisionMirror::from_map(&map).expect("mirror");
+    let collider = mirror.collider();
+    let snapshot = mirror.snapshot();
+    // One tile over the whole map: parry's single HeightField.
+    let terrain = ParryTerrain::new(&snapshot, 4096).expect("terrain");
+    let (pose, shape) = terrain.shapes().next().expect("one tile");
+    let extent = map.size().as_vec2() * 83.0;
+    let mut rng = Lcg(23);
+    let spheres: Vec<Vec3> = (0..SPHERES)
+        .map(|_| {
+            let p = Vec2::new(rng.next_f32(), rng.next_f32()) * extent;
+            let lift = RADIUS * (0.1 + 0.8 * rng.next_f32());
+            Vec3::new(p.x, collider.height(p).expect("finite") + lift, p.y)
+        })
+        .collect();
+    let ball = Ball::new(RADIUS);
+    let mut g = configure(c, "dem_sphere_contact");
+    g.throughput(Throughput::Elements(SPHERES as u64));
+    g.bench_function(BenchmarkId::new("collider", SPHERES), |b| {
+        b.iter(|| {
+            let mut n = 0;
+            for &s in black_box(&spheres) {
+                n += usize::from(collider.sphere_contact(s, RADIUS).expect("valid").is_some());
+            }
+            n
+        })
+    });
+    g.bench_function(BenchmarkId::new("parry_terrain", SPHERES), |b| {
+        b.iter(|| {
+            let mut n = 0;
+            for &s in black_box(&spheres) {
+                n += usize::from(terrain.sphere_contact(s, RADIUS).expect("valid").is_some());
+            }
+            n
+        })
+    });
+    g.bench_function(BenchmarkId::new("parry_heightfield", SPHERES), |b| {
+        b.iter(|| {
+            let mut n = 0;
+            for &s in black_box(&spheres) {
+                let at = Pose::from_translation(PVec3::new(s.x, s.y, s.z));
+                let found = query::contact(&at, &ball, &pose, shape, 0.0).expect("supported");
+                n += usize::from(found.is_some_and(|c| c.dist < 0.0));
+            }
+            n
+        })
+    });
+    g.finish();
+}
+
 #[cfg(not(feature = "parry"))]
 fn parry_tiles(_: &mut Criterion) {}
 
-criterion_group!(benches, streaming, queries, parry_tiles);
+#[cfg(not(feature = "parry"))]
+fn parry_dem_contacts(_: &mut Criterion) {}
+
+criterion_group!(benches, streaming, queries, parry_tiles, parry_dem_contacts);
 criterion_main!(benches);

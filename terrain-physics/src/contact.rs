@@ -5,10 +5,12 @@
 //! The ground is solid: a centre above the surface touches when that distance is below the
 //! radius; a centre below the surface is always in contact, and the depth then counts the
 //! distance back up to the surface as well. Cells are visited around the centre and skipped
-//! when a lower bound of their distance (horizontal gap, corner height range) already exceeds
-//! the best found; within a cell the patch is a family of straight segments (fixed `v`, varying
-//! `u`), so the closest point on each segment is exact and only `v` is searched (9 samples, then
-//! golden-section refinement to about 1e-8 of a cell).
+//! when a lower bound of their distance already exceeds the best found: the larger of the gap
+//! to the cell's box (horizontal gap, corner height range) and the gap to the slab between two
+//! parallel planes that holds the patch; within a cell the patch is a family of straight
+//! segments (fixed `v`, varying `u`), so the closest point on each segment is exact and only
+//! `v` is searched (9 samples, then Brent's parabolic / golden-section refinement to about
+//! 1e-9 of a cell).
 
 use crate::field::{HeightField, Patch};
 use glam::{DVec3, Vec3};
@@ -27,10 +29,19 @@ pub struct Contact {
     pub depth: f32,
 }
 
-/// Samples of `v` per cell before the golden-section refinement.
+/// Samples of `v` per cell before the refinement.
 const V_SAMPLES: usize = 8;
-/// Golden-section iterations (0.618^48 of a cell is about 1e-10).
-const GOLDEN_STEPS: usize = 48;
+/// Newton step (in cells of `v`) below which the convex patch search stops.
+const NEWTON_TOLERANCE: f64 = 1e-12;
+/// Most Newton or bisection steps of the convex patch search (each keeps `v` inside a
+/// bracket that bisection halves; Newton's method converges in about 4).
+const NEWTON_STEPS: usize = 64;
+/// Width of `v` (in cells) at which the refinement stops.
+const V_TOLERANCE: f64 = 1e-9;
+/// Most refinement steps: Brent's method needs about 10 on a smooth patch, and a golden step
+/// at least every other step shrinks the bracket (a quarter of a cell) below the tolerance in
+/// under 90, so this bounds the time without cutting a search short.
+const REFINE_STEPS: usize = 100;
 
 impl HeightField {
     /// The contact of a sphere at local `center` with `radius` (>= 0) against the surface, or
@@ -128,16 +139,25 @@ impl HeightField {
         let z_lo = ((c.z - rz) / ts).floor() as i64;
         let z_hi = ((c.z + rz) / ts).floor() as i64;
         let mut best_d2 = best.distance * best.distance;
+        let inv_ts2 = 1.0 / (ts * ts);
         let visit = |ix: i64, iz: i64, best: &mut Closest, best_d2: &mut f64| {
             let patch = self.patch(ix, iz);
             let (x0, z0) = (ix as f64 * ts, iz as f64 * ts);
             let gx = (x0 - c.x).max(c.x - (x0 + ts)).max(0.0);
             let gz = (z0 - c.z).max(c.z - (z0 + ts)).max(0.0);
             let gy = (patch.min - c.y).max(c.y - patch.max).max(0.0);
-            if gx * gx + gz * gz + gy * gy >= *best_d2 {
+            let box_d2 = gx * gx + gz * gz + gy * gy;
+            let local = DVec3::new(c.x - x0, c.y, c.z - z0);
+            // The patch is the plane a + b u + c v raised by d u v, which lies between 0 and
+            // d: the gap to that slab along the plane's normal bounds the distance too, and
+            // prunes the cells beside the centre that the box bound keeps on a slope.
+            let (u, v) = (local.x / ts, local.z / ts);
+            let s = local.y - (patch.a + patch.b * u + patch.c * v);
+            let gap = (s - patch.d.max(0.0)).max(patch.d.min(0.0) - s).max(0.0);
+            let slab_d2 = gap * gap / (1.0 + (patch.b * patch.b + patch.c * patch.c) * inv_ts2);
+            if box_d2.max(slab_d2) >= *best_d2 {
                 return;
             }
-            let local = DVec3::new(c.x - x0, c.y, c.z - z0);
             let (u, v, d2) = closest_on_patch(&patch, local, ts);
             if d2 < *best_d2 {
                 *best_d2 = d2;
@@ -147,10 +167,14 @@ impl HeightField {
             }
         };
         // The cell under the centre first, so the bound prunes the rest early.
-        visit(cell as i64, row as i64, &mut best, &mut best_d2);
+        let (cell, row) = (cell as i64, row as i64);
+        visit(cell, row, &mut best, &mut best_d2);
         for iz in z_lo..=z_hi {
             for ix in x_lo..=x_hi {
-                visit(ix, iz, &mut best, &mut best_d2);
+                // That cell's closest point is already the best or beaten by it.
+                if (ix, iz) != (cell, row) {
+                    visit(ix, iz, &mut best, &mut best_d2);
+                }
             }
         }
         Some(best)
@@ -169,6 +193,15 @@ struct Closest {
 /// The closest point of a cell's patch to `q` (cell-local metres: the cell spans
 /// `[0, ts] x [0, ts]` in X and Z): returns `(u, v, squared distance)`.
 fn closest_on_patch(patch: &Patch, q: DVec3, ts: f64) -> (f64, f64, f64) {
+    // The squared distance's Hessian in (u, v) is 2 (ts^2 I + g g^T) (g the slope) plus
+    // 2 (h - q.y) d [[0, 1], [1, 0]]: positive definite while |h - q.y| |d| < ts^2 on the whole
+    // patch (h lies between its corners). There the distance is convex, so is its minimum
+    // over u as a function of v, and its one minimum needs no samples (half ts^2: a margin
+    // for rounding).
+    let reach = (patch.max - q.y).abs().max((patch.min - q.y).abs());
+    if reach * patch.d.abs() < 0.5 * ts * ts {
+        return closest_on_convex_patch(patch, q, ts);
+    }
     // For fixed v the patch is the segment S(u) = A(v) + u B(v), u in [0, 1].
     let on_segment = |v: f64| -> (f64, f64) {
         let a = DVec3::new(0.0, patch.a + patch.c * v, v * ts);
@@ -177,50 +210,179 @@ fn closest_on_patch(patch: &Patch, q: DVec3, ts: f64) -> (f64, f64, f64) {
         let u = (w.dot(b) / b.length_squared()).clamp(0.0, 1.0);
         (u, (w - b * u).length_squared())
     };
+    let sample = |i: usize| i as f64 / V_SAMPLES as f64;
+    let d2s: [f64; V_SAMPLES + 1] = std::array::from_fn(|i| on_segment(sample(i)).1);
     let mut best_i = 0;
-    let mut best = f64::INFINITY;
-    for i in 0..=V_SAMPLES {
-        let (_, d2) = on_segment(i as f64 / V_SAMPLES as f64);
-        if d2 < best {
-            best = d2;
+    for (i, &d2) in d2s.iter().enumerate() {
+        if d2 < d2s[best_i] {
             best_i = i;
         }
     }
-    let step = 1.0 / V_SAMPLES as f64;
-    let mut lo = (best_i as f64 - 1.0) * step;
-    let mut hi = (best_i as f64 + 1.0) * step;
-    lo = lo.max(0.0);
-    hi = hi.min(1.0);
-    let g = 0.5 * (5.0_f64.sqrt() - 1.0);
-    let mut m1 = hi - g * (hi - lo);
-    let mut m2 = lo + g * (hi - lo);
-    let mut f1 = on_segment(m1).1;
-    let mut f2 = on_segment(m2).1;
-    for _ in 0..GOLDEN_STEPS {
-        if f1 <= f2 {
-            hi = m2;
-            m2 = m1;
-            f2 = f1;
-            m1 = hi - g * (hi - lo);
-            f1 = on_segment(m1).1;
+    // Brent's minimisation in the bracket around the best sample, from that sample and its
+    // neighbours (their distances are known, so the first step is already parabolic).
+    let (i_lo, i_hi) = (best_i.saturating_sub(1), (best_i + 1).min(V_SAMPLES));
+    let (v_ref, d_ref) = brent(
+        &|v| on_segment(v).1,
+        sample(i_lo),
+        sample(i_hi),
+        (sample(best_i), d2s[best_i]),
+        [(sample(i_lo), d2s[i_lo]), (sample(i_hi), d2s[i_hi])],
+    );
+    let (u_ref, _) = on_segment(v_ref);
+    (u_ref, v_ref, d_ref)
+}
+
+/// [`closest_on_patch`] where the squared distance is convex over the patch: Newton's method
+/// on its derivative along `v` (with `u` at the segment's closest point, where the derivative
+/// along `u` is 0 or `u` is clamped), kept inside a shrinking bracket by bisection, from the
+/// foot of the perpendicular on the plane through the patch.
+fn closest_on_convex_patch(p: &Patch, q: DVec3, ts: f64) -> (f64, f64, f64) {
+    let ts2 = ts * ts;
+    // At `v`: the segment's closest `u`, half the derivative of the squared distance along
+    // `v` and that half's own derivative (along the curve of closest points).
+    let at = |v: f64| -> (f64, f64, f64) {
+        let hu = p.b + p.d * v;
+        let base = p.a + p.c * v - q.y;
+        let auu = ts2 + hu * hu;
+        let free = (q.x * ts - base * hu) / auu;
+        let u = free.clamp(0.0, 1.0);
+        let hv = p.c + p.d * u;
+        let e = base + hu * u;
+        let g = e * hv + ts * (v * ts - q.z);
+        let avv = ts2 + hv * hv;
+        let slope = if u == free {
+            let auv = hu * hv + e * p.d;
+            avv - auv * auv / auu
         } else {
-            lo = m1;
-            m1 = m2;
-            f1 = f2;
-            m2 = lo + g * (hi - lo);
-            f2 = on_segment(m2).1;
+            avv
+        };
+        (u, g, slope)
+    };
+    let n2 = 1.0 + (p.b * p.b + p.c * p.c) / ts2;
+    let s = q.y - (p.a + (p.b * q.x + p.c * q.z) / ts);
+    let mut v = ((q.z + s * p.c / (ts * n2)) / ts).clamp(0.0, 1.0);
+    let (mut u, mut g, mut slope) = at(v);
+    // The bracket holds the minimum; an end counts as known once its derivative's sign is
+    // (below the minimum negative, above it positive).
+    let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
+    let (mut lo_known, mut hi_known) = (false, false);
+    for _ in 0..NEWTON_STEPS {
+        if g > 0.0 {
+            if v <= 0.0 {
+                break;
+            }
+            (hi, hi_known) = (v, true);
+        } else if g < 0.0 {
+            if v >= 1.0 {
+                break;
+            }
+            (lo, lo_known) = (v, true);
+        } else {
+            break;
+        }
+        let mut next = v - g / slope;
+        if !(next > lo && next < hi) {
+            // Past an end not yet tried: the minimum may be that end; else bisect.
+            next = if next <= lo && !lo_known {
+                lo
+            } else if next >= hi && !hi_known {
+                hi
+            } else {
+                0.5 * (lo + hi)
+            };
+        }
+        let done = (next - v).abs() <= NEWTON_TOLERANCE;
+        v = next;
+        (u, g, slope) = at(v);
+        if done {
+            break;
         }
     }
-    // The best of the refined point and the samples (the refinement never loses a sample).
-    let v_ref = 0.5 * (lo + hi);
-    let (u_ref, d_ref) = on_segment(v_ref);
-    let v_best = best_i as f64 * step;
-    if d_ref <= best {
-        (u_ref, v_ref, d_ref)
+    let w = DVec3::new(q.x - u * ts, q.y - p.height(u, v), q.z - v * ts);
+    (u, v, w.length_squared())
+}
+
+/// Brent's minimisation of `f` over `[a, b]` (Brent 1973, ch. 5: parabolic steps through the
+/// three best points, golden-section steps where a parabola is not trusted), from the point
+/// `x` and two more known points `others`, to [`V_TOLERANCE`] or [`REFINE_STEPS`] steps.
+/// Returns the best point found and its value (never worse than `x`).
+fn brent(
+    f: &impl Fn(f64) -> f64,
+    mut a: f64,
+    mut b: f64,
+    (mut x, mut fx): (f64, f64),
+    others: [(f64, f64); 2],
+) -> (f64, f64) {
+    // The golden-section fraction (3 - sqrt 5) / 2.
+    const GOLD: f64 = 0.381_966_011_250_105_1;
+    // The second and third best points (w, then v), from those given.
+    let [(mut w, mut fw), (mut v, mut fv)] = if others[0].1 <= others[1].1 {
+        others
     } else {
-        let (u, d) = on_segment(v_best);
-        (u, v_best, d)
+        [others[1], others[0]]
+    };
+    // `e` is the step before last: the bracket's width lets the first step be parabolic.
+    let (mut d, mut e) = (0.0_f64, b - a);
+    let tol = 0.5 * V_TOLERANCE;
+    for _ in 0..REFINE_STEPS {
+        let xm = 0.5 * (a + b);
+        if (x - xm).abs() <= 2.0 * tol - 0.5 * (b - a) {
+            break;
+        }
+        let golden = |x: f64| if x >= xm { a - x } else { b - x };
+        let mut parabolic = false;
+        if e.abs() > tol {
+            let r = (x - w) * (fx - fv);
+            let q = (x - v) * (fx - fw);
+            let mut p = (x - v) * q - (x - w) * r;
+            let mut q = 2.0 * (q - r);
+            if q > 0.0 {
+                p = -p;
+            }
+            q = q.abs();
+            // A parabola is taken only inside the bracket and moving less than half the step
+            // before last (otherwise it may crawl).
+            if p.abs() < (0.5 * q * e).abs() && p > q * (a - x) && p < q * (b - x) {
+                e = d;
+                d = p / q;
+                let u = x + d;
+                if u - a < 2.0 * tol || b - u < 2.0 * tol {
+                    d = tol.copysign(xm - x);
+                }
+                parabolic = true;
+            }
+        }
+        if !parabolic {
+            e = golden(x);
+            d = GOLD * e;
+        }
+        let u = if d.abs() >= tol {
+            x + d
+        } else {
+            x + tol.copysign(d)
+        };
+        let fu = f(u);
+        if fu <= fx {
+            if u >= x {
+                a = x;
+            } else {
+                b = x;
+            }
+            (v, fv, w, fw, x, fx) = (w, fw, x, fx, u, fu);
+        } else {
+            if u < x {
+                a = u;
+            } else {
+                b = u;
+            }
+            if fu <= fw || w == x {
+                (v, fv, w, fw) = (w, fw, u, fu);
+            } else if fu <= fv || v == x || v == w {
+                (v, fv) = (u, fu);
+            }
+        }
     }
+    (x, fx)
 }
 
 #[cfg(test)]
@@ -363,6 +525,96 @@ mod tests {
             }
         }
         assert_eq!(checked, 48);
+    }
+
+    /// The per-patch search before the convex path and Brent's refinement: 9 samples along
+    /// `v`, then 48 golden-section steps in the best sample's bracket.
+    fn golden_reference(patch: &Patch, q: DVec3, ts: f64) -> f64 {
+        let on_segment = |v: f64| -> f64 {
+            let a = DVec3::new(0.0, patch.a + patch.c * v, v * ts);
+            let b = DVec3::new(ts, patch.b + patch.d * v, 0.0);
+            let w = q - a;
+            let u = (w.dot(b) / b.length_squared()).clamp(0.0, 1.0);
+            (w - b * u).length_squared()
+        };
+        let (mut best_i, mut best) = (0, f64::INFINITY);
+        for i in 0..=8 {
+            let d2 = on_segment(i as f64 / 8.0);
+            if d2 < best {
+                (best_i, best) = (i, d2);
+            }
+        }
+        let lo = ((best_i as f64 - 1.0) / 8.0).max(0.0);
+        let hi = ((best_i as f64 + 1.0) / 8.0).min(1.0);
+        let g = 0.5 * (5.0_f64.sqrt() - 1.0);
+        let (mut lo, mut hi) = (lo, hi);
+        let (mut m1, mut m2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+        let (mut f1, mut f2) = (on_segment(m1), on_segment(m2));
+        for _ in 0..48 {
+            if f1 <= f2 {
+                (hi, m2, f2) = (m2, m1, f1);
+                m1 = hi - g * (hi - lo);
+                f1 = on_segment(m1);
+            } else {
+                (lo, m1, f1) = (m1, m2, f2);
+                m2 = lo + g * (hi - lo);
+                f2 = on_segment(m2);
+            }
+        }
+        on_segment(0.5 * (lo + hi)).min(best)
+    }
+
+    /// On random patches (flat to steeper than 45 degrees, twisted or not) and points above,
+    /// below and beside them, the search finds a point as near as the golden-section search
+    /// it replaced, and no nearer than it by more than that search's own tolerance, on both
+    /// paths (convex patches by Newton's method, the others by samples and Brent's method).
+    #[test]
+    fn the_patch_search_matches_the_golden_section_search() {
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut convex, mut other) = (0, 0);
+        for k in 0..20_000 {
+            let ts = [0.25, 1.0, 83.0][k % 3];
+            let relief = ts * [0.05, 0.5, 2.0][(k / 3) % 3];
+            let mut h = || (next() - 0.5) * 2.0 * relief;
+            let (h00, h10, h01, h11) = (h(), h(), h(), h());
+            let patch = Patch {
+                ix: 0,
+                iz: 0,
+                a: h00,
+                b: h10 - h00,
+                c: h01 - h00,
+                d: h00 - h10 - h01 + h11,
+                min: h00.min(h10).min(h01).min(h11),
+                max: h00.max(h10).max(h01).max(h11),
+            };
+            let q = DVec3::new(
+                (next() * 3.0 - 1.0) * ts,
+                (next() - 0.5) * 6.0 * relief,
+                (next() * 3.0 - 1.0) * ts,
+            );
+            let reach = (patch.max - q.y).abs().max((patch.min - q.y).abs());
+            if reach * patch.d.abs() < 0.5 * ts * ts {
+                convex += 1;
+            } else {
+                other += 1;
+            }
+            let (u, v, d2) = closest_on_patch(&patch, q, ts);
+            let want = golden_reference(&patch, q, ts);
+            let p = DVec3::new(u * ts, patch.height(u, v), v * ts);
+            let scale = ts * ts + relief * relief;
+            assert!(((p - q).length_squared() - d2).abs() <= 1e-12 * scale);
+            assert!(
+                d2 <= want + 1e-12 * scale && d2 >= want - 1e-9 * scale,
+                "patch {patch:?} ts {ts} q {q}: {d2} against {want}"
+            );
+        }
+        assert!(convex > 5_000 && other > 5_000, "{convex} {other}");
     }
 
     #[test]
