@@ -1,17 +1,37 @@
 //! Builds a procedural world tile by tile into a folder, printing a progress line, and reports
-//! the peak memory: a 16384^2 world builds without holding the map.
+//! the time and the peak memory: a 16384^2 world builds without holding the map.
 //!
 //! `cargo run -p terrain-cache --release --example build_world -- [SIDE] [DIR]`
 //! (default 4096 texels into the system temp folder).
+//!
+//! `cargo run -p terrain-cache --release --example build_world -- --convert DIR` rewrites the
+//! world in DIR, of PNG tiles (format version 1), as `.tile` files in place.
 
 use glam::UVec2;
 use std::io::Write;
 use std::sync::Arc;
-use terrain_cache::{FsStore, Manifest, ProceduralSource, TileStore, build_world};
+use terrain_cache::{
+    FsStore, Manifest, ProceduralSource, TileStore, World, build_world, convert_world,
+};
 use terrain_core::{HeightEncoding, TerrainParams, WrapMode};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
+    let mut args = std::env::args().skip(1).peekable();
+    if args.peek().map(String::as_str) == Some("--convert") {
+        let dir = args.nth(1).ok_or("--convert needs the world's folder")?;
+        let store: Arc<dyn TileStore> = Arc::new(FsStore::open(&dir)?);
+        let world = World::open(store)?;
+        let start = std::time::Instant::now();
+        let (_, r) = convert_world(&world)?;
+        println!(
+            "{dir}: {} tile files converted ({:.1} MiB of PNG -> {:.1} MiB of .tile) in {:.1} s",
+            r.tiles,
+            r.png_bytes as f64 / 1048576.0,
+            r.tile_bytes as f64 / 1048576.0,
+            start.elapsed().as_secs_f64()
+        );
+        return Ok(());
+    }
     let side: u32 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(4096);
     let dir = args
         .next()
@@ -51,7 +71,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         })
         .unwrap_or_else(|| "VmHWM: n/a".into());
     println!(
-        "{} levels, {} tiles ({} stored, {} zero), {:.1} MiB of PNG16 in {:.1} s into {}; map would be {:.0} MiB; peak RSS {}",
+        "{} levels, {} tiles ({} stored, {} zero), {:.1} MiB of tile files in {:.1} s into {}; map would be {:.0} MiB; peak RSS {}",
         world.manifest().levels,
         report.tiles,
         report.stored,

@@ -77,7 +77,7 @@
 //! assert_eq!(frame.writes, 1); // queued; the flush at the end of a run waits for it
 //! cache.flush()?;
 //! assert!(cache.dirty_tiles().is_empty());
-//! assert!(store.read("detail/00/0002/0002.png", 1 << 20)?.is_some());
+//! assert!(store.read("detail/00/0002/0002.tile", 1 << 20)?.is_some());
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 

@@ -75,7 +75,8 @@ pub enum CacheError {
         /// The limit.
         max: u64,
     },
-    /// A tile file could not be decoded (corrupt, truncated, not a PNG, wrong bit depth).
+    /// A tile file could not be decoded (corrupt, truncated, a checksum mismatch, not a tile or
+    /// PNG, wrong bit depth).
     #[error("tile {layer:?} {id} is corrupt: {source}")]
     CorruptTile {
         /// The layer.
@@ -84,7 +85,7 @@ pub enum CacheError {
         id: TileId,
         /// The decoder's report.
         #[source]
-        source: MapIoError,
+        source: crate::tile_file::TileFileError,
     },
     /// A tile file decodes but has the wrong size (a foreign image).
     #[error("tile {layer:?} {id} is {found_w}x{found_h} texels, the world says {expected}")]
@@ -157,7 +158,9 @@ pub enum CacheError {
         reason: String,
     },
     /// The manifest's format version is not one this build reads.
-    #[error("manifest format version {found} is not supported (this build reads {supported})")]
+    #[error(
+        "manifest format version {found} is not supported (this build reads versions 1 to {supported})"
+    )]
     ManifestVersion {
         /// The version found.
         found: u32,

@@ -58,6 +58,7 @@
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
+mod convert;
 pub mod detail;
 pub mod error;
 mod granular_window;
@@ -67,17 +68,20 @@ pub mod object;
 mod region_bounds;
 pub mod store;
 pub mod tile;
+pub mod tile_file;
 pub mod tile_stamps;
 pub mod world;
 
+pub use convert::{ConvertReport, convert_world};
 pub use error::CacheError;
 pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
-pub use manifest::{DetailLayout, Manifest, tile_key};
+pub use manifest::{DetailLayout, Manifest, TileFormat, tile_key};
 #[cfg(feature = "object-store")]
 pub use object::ObjectTileStore;
 pub use region_bounds::RegionBounds;
 pub use store::{FsStore, TileStore};
 pub use tile::{Layer, TileData, TileId};
+pub use tile_file::{TileCodec, TileFileError};
 pub use tile_stamps::{TileDeformer, TileStampError, TileStampReport, TileStamps};
 pub use world::{LevelBounds, TileRead, World};
 pub mod build;

@@ -1,7 +1,7 @@
-//! The world layout: [`Manifest`] (format version, tile size, levels, texel size, height
-//! encoding, wrap mode, world size, the zero tile's value, the optional detail layer), stored as
-//! a small JSON file, and the store keys of tiles (folders per level and row, hex names, seed
-//! 004 fig. 5.1).
+//! The world layout: [`Manifest`] (format version, tile file format, tile size, levels, texel
+//! size, height encoding, wrap mode, world size, the zero tile's value, the optional detail
+//! layer), stored as a small JSON file, and the store keys of tiles (folders per level and row,
+//! hex names, Fikkan 2013, fig. 5.1).
 
 use crate::CacheError;
 use crate::tile::{Layer, TileId};
@@ -9,8 +9,41 @@ use glam::{DVec2, UVec2};
 use serde::{Deserialize, Serialize};
 use terrain_core::{HeightEncoding, WrapMode};
 
-/// The manifest format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+/// The manifest format version this build writes: 2, whose tiles are `.tile` files
+/// ([`TileFormat::Tile`]). It also reads and keeps writing version 1, whose tiles are PNG.
+pub const FORMAT_VERSION: u32 = 2;
+/// The oldest manifest format version this build reads (PNG tiles).
+pub const OLDEST_FORMAT_VERSION: u32 = 1;
+
+/// How a world's tile files are encoded (both layers).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum TileFormat {
+    /// PNG16 heights and PNG8 detail, `.png`: worlds of format version 1, which open and are
+    /// written back as they are ([`convert_world`](crate::convert_world) rewrites one as
+    /// [`TileFormat::Tile`]).
+    Png,
+    /// The `.tile` file of [`tile_file`](crate::tile_file): a 24-byte header with a CRC-32,
+    /// raw heights, LZ4-compressed detail. Format version 2.
+    Tile,
+}
+
+impl TileFormat {
+    /// The file name extension of its tiles (without the dot).
+    pub const fn extension(self) -> &'static str {
+        match self {
+            TileFormat::Png => "png",
+            TileFormat::Tile => "tile",
+        }
+    }
+
+    /// The manifest format version that records it.
+    pub const fn format_version(self) -> u32 {
+        match self {
+            TileFormat::Png => 1,
+            TileFormat::Tile => 2,
+        }
+    }
+}
 /// The store key of the manifest.
 pub const MANIFEST_KEY: &str = "manifest.json";
 /// Largest manifest file accepted, in bytes (it is a few hundred bytes when valid).
@@ -80,8 +113,11 @@ impl DetailLayout {
 /// column (clamped padding), so every tile is built from itself and its four children only.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Manifest {
-    /// Format version ([`FORMAT_VERSION`]).
+    /// Format version: [`FORMAT_VERSION`], or 1 for a world of PNG tiles; always
+    /// `tile_format.format_version()`.
     pub format_version: u32,
+    /// How the tile files are encoded.
+    pub tile_format: TileFormat,
     /// Tile side in texels, a power of two in `16..=4096` (default 256).
     pub tile_size: u32,
     /// Level-0 size in texels.
@@ -114,6 +150,7 @@ impl Manifest {
     ) -> Result<Self, CacheError> {
         let mut m = Self {
             format_version: FORMAT_VERSION,
+            tile_format: TileFormat::Tile,
             tile_size,
             world_size,
             levels: 1,
@@ -132,10 +169,19 @@ impl Manifest {
 
     /// Checks every field; a manifest read from a store is validated before use.
     pub fn validate(&self) -> Result<(), CacheError> {
-        if self.format_version != FORMAT_VERSION {
+        if !(OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&self.format_version) {
             return Err(CacheError::ManifestVersion {
                 found: self.format_version,
                 supported: FORMAT_VERSION,
+            });
+        }
+        if self.format_version != self.tile_format.format_version() {
+            return Err(CacheError::Manifest {
+                key: MANIFEST_KEY.into(),
+                reason: format!(
+                    "format version {} does not have {:?} tiles",
+                    self.format_version, self.tile_format
+                ),
             });
         }
         check_tile_size(self.tile_size)?;
@@ -291,6 +337,11 @@ impl Manifest {
         (0..t.y).flat_map(move |y| (0..t.x).map(move |x| TileId::new(level, x, y)))
     }
 
+    /// The store key of tile `id` of `layer` in this world's format.
+    pub fn tile_key(&self, layer: Layer, id: TileId) -> String {
+        tile_key(layer, id, self.tile_format)
+    }
+
     /// Serialises to the JSON text stored under [`MANIFEST_KEY`].
     pub fn to_json(&self) -> String {
         let file = ManifestFile::from(self);
@@ -304,7 +355,7 @@ impl Manifest {
             key: MANIFEST_KEY.into(),
             reason: e.to_string(),
         })?;
-        if file.format_version != FORMAT_VERSION {
+        if !(OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&file.format_version) {
             return Err(CacheError::ManifestVersion {
                 found: file.format_version,
                 supported: FORMAT_VERSION,
@@ -316,15 +367,17 @@ impl Manifest {
     }
 }
 
-/// The store key of a tile: `{layer}/{level:02x}/{y:04x}/{x:04x}.png` (one folder per level,
-/// one per row, hex names: Fikkan 2013, fig. 5.1).
-pub fn tile_key(layer: Layer, id: TileId) -> String {
+/// The store key of a tile: `{layer}/{level:02x}/{y:04x}/{x:04x}.{tile}` (one folder per level,
+/// one per row, hex names: Fikkan 2013, fig. 5.1), `.png` in a world of PNG tiles. A world's
+/// own keys: [`Manifest::tile_key`].
+pub fn tile_key(layer: Layer, id: TileId, format: TileFormat) -> String {
     format!(
-        "{}/{:02x}/{:04x}/{:04x}.png",
+        "{}/{:02x}/{:04x}/{:04x}.{}",
         layer.folder(),
         id.level,
         id.y,
-        id.x
+        id.x,
+        format.extension()
     )
 }
 
@@ -334,7 +387,7 @@ pub fn bounds_key(layer: Layer, level: u32) -> String {
     format!("{}/{:02x}/bounds.bin", layer.folder(), level)
 }
 
-/// Parses a tile key back into its layer and id (`None` for any other key).
+/// Parses a tile key of either format back into its layer and id (`None` for any other key).
 pub fn parse_tile_key(key: &str) -> Option<(Layer, TileId)> {
     let mut parts = key.split('/');
     let layer = match parts.next()? {
@@ -344,7 +397,10 @@ pub fn parse_tile_key(key: &str) -> Option<(Layer, TileId)> {
     };
     let level = parts.next()?;
     let y = parts.next()?;
-    let x = parts.next()?.strip_suffix(".png")?;
+    let name = parts.next()?;
+    let x = name
+        .strip_suffix(".tile")
+        .or_else(|| name.strip_suffix(".png"))?;
     if parts.next().is_some() || level.len() != 2 || y.len() != 4 || x.len() != 4 {
         return None;
     }
@@ -386,6 +442,9 @@ fn check_positive(what: &'static str, v: f32) -> Result<(), CacheError> {
 #[serde(deny_unknown_fields)]
 struct ManifestFile {
     format_version: u32,
+    /// Absent in version 1 (PNG tiles).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    tile_format: Option<String>,
     tile_size: u32,
     world_size: [u32; 2],
     levels: u32,
@@ -419,6 +478,8 @@ impl From<&Manifest> for ManifestFile {
     fn from(m: &Manifest) -> Self {
         Self {
             format_version: m.format_version,
+            // Version 1 had no such field: a version-1 world stays readable by older builds.
+            tile_format: (m.format_version > 1).then(|| m.tile_format.extension().to_owned()),
             tile_size: m.tile_size,
             world_size: m.world_size.to_array(),
             levels: m.levels,
@@ -456,6 +517,20 @@ impl ManifestFile {
                 });
             }
         };
+        let tile_format = match (self.format_version, self.tile_format.as_deref()) {
+            (1, None) => TileFormat::Png,
+            (_, Some("tile")) => TileFormat::Tile,
+            (_, Some("png")) => TileFormat::Png,
+            (v, other) => {
+                return Err(CacheError::Manifest {
+                    key: MANIFEST_KEY.into(),
+                    reason: format!(
+                        "format version {v} with tile_format {other:?}: expected \"tile\" \
+                         (version 2) or none (version 1, PNG tiles)"
+                    ),
+                });
+            }
+        };
         let detail = match self.detail {
             None => None,
             Some(d) => Some(DetailLayout {
@@ -468,6 +543,7 @@ impl ManifestFile {
         };
         Ok(Manifest {
             format_version: self.format_version,
+            tile_format,
             tile_size: self.tile_size,
             world_size: UVec2::from(self.world_size),
             levels: self.levels,
@@ -530,11 +606,33 @@ mod tests {
             Manifest::from_json("{nope"),
             Err(CacheError::Manifest { .. })
         ));
-        let v2 = text.replace("\"format_version\": 1", "\"format_version\": 2");
+        let v3 = text.replace("\"format_version\": 2", "\"format_version\": 3");
         assert!(matches!(
-            Manifest::from_json(&v2),
-            Err(CacheError::ManifestVersion { found: 2, .. })
+            Manifest::from_json(&v3),
+            Err(CacheError::ManifestVersion { found: 3, .. })
         ));
+        // Version 1 (PNG tiles) has no tile_format field; a version 2 without one is refused.
+        let v1 = text
+            .replace("\"format_version\": 2", "\"format_version\": 1")
+            .replace("  \"tile_format\": \"tile\",\n", "");
+        let old = Manifest::from_json(&v1).unwrap();
+        assert_eq!((old.format_version, old.tile_format), (1, TileFormat::Png));
+        assert_eq!(
+            old.to_json(),
+            v1,
+            "a version-1 manifest is written back as it was"
+        );
+        assert_eq!(
+            old.tile_key(Layer::Height, TileId::new(0, 1, 2)),
+            "height/00/0002/0001.png"
+        );
+        let no_format = text.replace("  \"tile_format\": \"tile\",\n", "");
+        assert!(matches!(
+            Manifest::from_json(&no_format),
+            Err(CacheError::Manifest { .. })
+        ));
+        let v1_tile = text.replace("\"format_version\": 2", "\"format_version\": 1");
+        assert!(Manifest::from_json(&v1_tile).is_err());
         let bad = text.replace("\"tile_size\": 64", "\"tile_size\": 65");
         assert!(matches!(
             Manifest::from_json(&bad),
@@ -550,8 +648,11 @@ mod tests {
     #[test]
     fn keys_are_hex_per_level_and_row() {
         let id = TileId::new(3, 0x1a, 0xff);
-        let k = tile_key(Layer::Height, id);
+        let k = tile_key(Layer::Height, id, TileFormat::Png);
         assert_eq!(k, "height/03/00ff/001a.png");
+        assert_eq!(parse_tile_key(&k), Some((Layer::Height, id)));
+        let k = tile_key(Layer::Height, id, TileFormat::Tile);
+        assert_eq!(k, "height/03/00ff/001a.tile");
         assert_eq!(parse_tile_key(&k), Some((Layer::Height, id)));
         assert_eq!(parse_tile_key("detail/00/0000/0001.png").unwrap().1.x, 1);
         for bad in [
@@ -560,6 +661,7 @@ mod tests {
             "height/3/00ff/001a.png",
             "height/03/00FF/001a.png",
             "height/03/00ff/001a",
+            "height/03/00ff/001a.tiles",
             "height/03/bounds.bin",
         ] {
             assert_eq!(parse_tile_key(bad), None, "{bad}");

@@ -1,11 +1,13 @@
-//! A world on a store: [`World`] (manifest + [`TileStore`]), tile encode / decode (PNG16 heights,
-//! PNG8 detail through `terrain_core::io`), the shared zero tile, and the per-level min/max side
-//! files ([`LevelBounds`]).
+//! A world on a store: [`World`] (manifest + [`TileStore`]), tile encode / decode (`.tile` files,
+//! [`tile_file`](crate::tile_file); PNG16 heights and PNG8 detail through `terrain_core::io` in
+//! worlds of format version 1), the shared zero tile, and the per-level min/max side files
+//! ([`LevelBounds`]).
 
 use crate::CacheError;
-use crate::manifest::{MANIFEST_KEY, MAX_MANIFEST_BYTES, Manifest, bounds_key, tile_key};
+use crate::manifest::{MANIFEST_KEY, MAX_MANIFEST_BYTES, Manifest, TileFormat, bounds_key};
 use crate::store::TileStore;
 use crate::tile::{Layer, TileData, TileId};
+use crate::tile_file::{self, TileCodec, TileFileError};
 use glam::UVec2;
 use std::sync::{Arc, OnceLock};
 use terrain_core::Grid;
@@ -94,12 +96,18 @@ impl World {
         Ok(slot.get_or_init(|| z).clone())
     }
 
-    /// Largest file a valid tile of `layer` can take (an uncompressed PNG with generous
-    /// overhead); longer files are refused unread.
+    /// Largest file a valid tile of `layer` can take (a `.tile` file's worst case, or an
+    /// uncompressed PNG with generous overhead); longer files are refused unread.
     pub fn max_tile_file_bytes(&self, layer: Layer) -> u64 {
-        let size = u64::from(self.manifest.layer_tile_size(layer).unwrap_or(0));
-        let raw = size * (size * u64::from(layer.bits() / 8) + 1);
-        2 * raw + 65536
+        let side = self.manifest.layer_tile_size(layer).unwrap_or(0);
+        match self.manifest.tile_format {
+            TileFormat::Tile => tile_file::max_file_len(side, layer.bits()),
+            TileFormat::Png => {
+                let size = u64::from(side);
+                let raw = size * (size * u64::from(layer.bits() / 8) + 1);
+                2 * raw + 65536
+            }
+        }
     }
 
     /// Reads tile `id` of `layer`: the decoded samples, or [`TileRead::Zero`] if it has no file.
@@ -110,7 +118,7 @@ impl World {
     pub fn read_tile(&self, layer: Layer, id: TileId) -> Result<TileRead, CacheError> {
         self.manifest.check_tile(layer, id)?;
         let max = self.max_tile_file_bytes(layer);
-        let bytes = match self.store.read(&tile_key(layer, id), max) {
+        let bytes = match self.store.read(&self.manifest.tile_key(layer, id), max) {
             Ok(Some(b)) => b,
             Ok(None) => return Ok(TileRead::Zero),
             Err(CacheError::TooLarge { len, max, .. }) => {
@@ -142,11 +150,31 @@ impl World {
         bytes: &[u8],
     ) -> Result<TileData, CacheError> {
         let size = self.manifest.layer_tile_size(layer)?;
-        let limits = ReadLimits { max_side: size };
         let corrupt = |source| CacheError::CorruptTile { layer, id, source };
-        let data = match layer {
-            Layer::Height => TileData::U16(decode_png16(bytes, &limits).map_err(corrupt)?),
-            Layer::Detail => TileData::U8(decode_png8(bytes, &limits).map_err(corrupt)?),
+        let data = match self.manifest.tile_format {
+            TileFormat::Tile => match tile_file::decode(bytes, layer, size) {
+                Ok(d) => d,
+                Err(TileFileError::Shape {
+                    found_w, found_h, ..
+                }) => {
+                    return Err(CacheError::WrongTileShape {
+                        layer,
+                        id,
+                        expected: size,
+                        found_w,
+                        found_h,
+                    });
+                }
+                Err(e) => return Err(corrupt(e)),
+            },
+            TileFormat::Png => {
+                let limits = ReadLimits { max_side: size };
+                let png = |e| corrupt(TileFileError::Png(e));
+                match layer {
+                    Layer::Height => TileData::U16(decode_png16(bytes, &limits).map_err(png)?),
+                    Layer::Detail => TileData::U8(decode_png8(bytes, &limits).map_err(png)?),
+                }
+            }
         };
         let s = data.size();
         if s != UVec2::splat(size) {
@@ -178,9 +206,13 @@ impl World {
         Ok(())
     }
 
-    /// Encodes a tile as its file bytes (PNG16 for heights, PNG8 for detail).
+    /// Encodes a tile as its file bytes: a `.tile` file with the layer's codec
+    /// ([`TileCodec::for_layer`]), or PNG16 / PNG8 in a world of PNG tiles.
     pub fn encode_tile(&self, layer: Layer, data: &TileData) -> Result<Vec<u8>, CacheError> {
         self.check_data(layer, data)?;
+        if self.manifest.tile_format == TileFormat::Tile {
+            return Ok(tile_file::encode(data, TileCodec::for_layer(layer)));
+        }
         let encoded = match data {
             TileData::U16(g) => encode_png16(g),
             TileData::U8(g) => encode_png8(g),
@@ -198,7 +230,7 @@ impl World {
     pub fn write_tile(&self, layer: Layer, id: TileId, data: &TileData) -> Result<u64, CacheError> {
         self.manifest.check_tile(layer, id)?;
         self.check_data(layer, data)?;
-        let key = tile_key(layer, id);
+        let key = self.manifest.tile_key(layer, id);
         if data.uniform_value() == Some(self.manifest.layer_fill(layer)?) {
             self.store.remove(&key)?;
             return Ok(0);
@@ -214,23 +246,30 @@ impl World {
         Ok(bytes.len() as u64)
     }
 
-    /// [`write_tile`](Self::write_tile) of a height tile held as a bare grid.
-    pub(crate) fn write_grid16(&self, id: TileId, grid: &Grid<u16>) -> Result<u64, CacheError> {
-        let key = tile_key(Layer::Height, id);
+    /// What [`write_tile`](Self::write_tile) of a height tile held as a bare grid stores: its
+    /// key and file bytes, `None` for a tile equal to the zero tile (its file is removed). The
+    /// builder encodes on its compute threads and writes on its I/O threads.
+    pub(crate) fn encode_grid16(
+        &self,
+        id: TileId,
+        grid: &Grid<u16>,
+    ) -> Result<(String, Option<Vec<u8>>), CacheError> {
+        let key = self.manifest.tile_key(Layer::Height, id);
         if grid
             .as_slice()
             .iter()
             .all(|&v| v == self.manifest.height_fill)
         {
-            self.store.remove(&key)?;
-            return Ok(0);
+            return Ok((key, None));
         }
-        let bytes = encode_png16(grid).map_err(|source| CacheError::Write {
-            key: key.clone(),
-            source,
-        })?;
-        self.store.write(&key, &bytes)?;
-        Ok(bytes.len() as u64)
+        let bytes = match self.manifest.tile_format {
+            TileFormat::Tile => tile_file::encode_u16(grid, TileCodec::for_layer(Layer::Height)),
+            TileFormat::Png => encode_png16(grid).map_err(|source| CacheError::Write {
+                key: key.clone(),
+                source,
+            })?,
+        };
+        Ok((key, Some(bytes)))
     }
 
     /// The min/max side file of height level `level`, if it was written.

@@ -303,7 +303,7 @@ fn deformed_tiles_are_written_back_when_released_and_read_back_later() {
     assert_eq!(f.writes, 1);
     update_until(&mut cache, here, |c, _| c.dirty_tiles().len() == 4);
     assert!(
-        s.read("detail/00/0002/000c.png", 1 << 20)
+        s.read("detail/00/0002/000c.tile", 1 << 20)
             .unwrap()
             .is_some()
     );
@@ -329,7 +329,7 @@ fn deformed_tiles_are_written_back_when_released_and_read_back_later() {
         assert_eq!(again.tile(*t), Some(texels), "tile {t}");
     }
     assert!(
-        s.read("detail/00/0000/0000.png", 1 << 20)
+        s.read("detail/00/0000/0000.tile", 1 << 20)
             .unwrap()
             .is_none()
     );
@@ -338,7 +338,7 @@ fn deformed_tiles_are_written_back_when_released_and_read_back_later() {
     let zero = Grid::new(64, 64, DETAIL_ZERO_RAW).unwrap();
     again.write_tile(t, zero).unwrap();
     assert_eq!(again.flush().unwrap(), 1);
-    let key = format!("detail/00/{:04x}/{:04x}.png", t.y, t.x);
+    let key = format!("detail/00/{:04x}/{:04x}.tile", t.y, t.x);
     assert!(s.read(&key, 1 << 20).unwrap().is_none(), "{key}");
 }
 
@@ -350,7 +350,7 @@ fn world_reopened(s: &Arc<dyn TileStore>) -> World {
 fn a_corrupt_tile_file_is_an_error_and_the_rest_still_works() {
     let s = store();
     let w = world(&s);
-    s.write("detail/00/0007/0005.png", b"not a png at all")
+    s.write("detail/00/0007/0005.tile", b"not a tile at all")
         .unwrap();
     let mut cache = DetailCache::open(w, layout(), BandSelection::default(), 1 << 20).unwrap();
     let bad = UVec2::new(5, 7);
@@ -673,7 +673,7 @@ fn a_failing_store_write_keeps_the_tile_dirty_and_is_retried() {
     assert_eq!(failed.len(), 3, "{failed:?}");
     assert!(failed.iter().all(|(f, _)| *f == t));
     assert_eq!(frames.iter().map(|f| f.writes).sum::<usize>(), 4);
-    let key = "detail/00/0007/0005.png";
+    let key = "detail/00/0007/0005.tile";
     assert!(gate.inner.read(key, 1 << 20).unwrap().is_some());
     // A flush that fails keeps the tile dirty and says why; the next one stores it.
     footprint(&mut cache, here, -0.1);
@@ -710,7 +710,7 @@ fn flush_waits_for_the_writes() {
     assert!(cache.dirty_tiles().is_empty());
     assert_eq!(cache.writes_in_flight(), 0);
     for t in dirty {
-        let key = format!("detail/00/{:04x}/{:04x}.png", t.y, t.x);
+        let key = format!("detail/00/{:04x}/{:04x}.tile", t.y, t.x);
         assert!(gate.inner.read(&key, 1 << 20).unwrap().is_some(), "{key}");
     }
 }

@@ -1,6 +1,6 @@
 //! Fuzz targets for the files of a world, through terrain-cache's public decoding functions:
-//! tile files (`tile`: PNG16 height tiles and PNG8 detail tiles, via `World::decode_tile` and
-//! `World::read_tile`), the manifest (`manifest`: `Manifest::from_json`, `read_manifest`, and
+//! tile files (`tile`: `.tile` files and the PNG16 / PNG8 tiles of version-1 worlds, via
+//! `World::decode_tile` and `World::read_tile`), the manifest (`manifest`: `Manifest::from_json`, `read_manifest`, and
 //! the store keys) and the per-level bounds files (`bounds`: `LevelBounds::from_bytes`,
 //! `World::bounds`). Each target is time-bounded (`TERRAIN_FUZZ_SECONDS`, default 2 s; `cargo
 //! xtask fuzz --seconds N` runs them longer, in release mode); see `terrain_test_support::fuzz`

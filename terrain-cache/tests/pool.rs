@@ -138,7 +138,7 @@ fn zero_tiles_are_shared_and_copied_on_write() {
     // Idle write-back after 2 frames writes only that tile.
     pump(&mut pool, &cam, |p, _| !p.status(id).unwrap().dirty);
     let files = world.store().list("detail").unwrap();
-    assert_eq!(files, vec!["detail/00/0002/0002.png".to_string()]);
+    assert_eq!(files, vec!["detail/00/0002/0002.tile".to_string()]);
     pool.shutdown(Duration::from_secs(5)).unwrap();
 }
 

@@ -8,26 +8,28 @@ use common::{build, temp_dir};
 use glam::{UVec2, Vec3};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+use terrain_cache::tile_file::{self, TileCodec};
 use terrain_cache::{
-    CacheError, CameraState, FsStore, Layer, ObjectTileStore, PoolConfig, RamPool, TileId,
-    TileState, TileStore, World, tile_key,
+    CacheError, CameraState, FsStore, Layer, ObjectTileStore, PoolConfig, RamPool, TileFileError,
+    TileId, TileState, TileStore, World,
 };
 use terrain_core::Grid;
-use terrain_core::io::{encode_png8, encode_png16};
+use terrain_core::io::encode_png16;
 
 #[test]
 fn corrupt_truncated_and_foreign_tiles_are_reported_and_missing() {
     let dir = temp_dir("corrupt");
     let store: Arc<dyn TileStore> = Arc::new(FsStore::open(&dir).unwrap());
     let world = build(store.clone(), UVec2::splat(128), 32);
+    let key = |id| world.manifest().tile_key(Layer::Height, id);
     let good = store
-        .read(&tile_key(Layer::Height, TileId::new(0, 0, 0)), 1 << 20)
+        .read(&key(TileId::new(0, 0, 0)), 1 << 20)
         .unwrap()
         .unwrap();
     let cases: Vec<(TileId, Vec<u8>, &str)> = vec![
         (
             TileId::new(0, 0, 0),
-            b"definitely not a png".to_vec(),
+            b"definitely not a tile".to_vec(),
             "garbage",
         ),
         (
@@ -38,17 +40,19 @@ fn corrupt_truncated_and_foreign_tiles_are_reported_and_missing() {
         (TileId::new(0, 2, 0), Vec::new(), "empty"),
         (
             TileId::new(0, 3, 0),
-            encode_png8(&Grid::new(32, 32, 5u8).unwrap()).unwrap(),
+            tile_file::encode_u8(&Grid::new(32, 32, 5u8).unwrap(), TileCodec::Raw),
             "8-bit",
         ),
         (
             TileId::new(0, 0, 1),
-            encode_png16(&Grid::new(16, 32, 5u16).unwrap()).unwrap(),
+            tile_file::encode_u16(&Grid::new(16, 32, 5u16).unwrap(), TileCodec::Lz4),
             "wrong size",
         ),
         (
             TileId::new(0, 1, 1),
-            encode_png16(&Grid::new(64, 64, 5u16).unwrap()).unwrap(),
+            // Constant, so LZ4 makes it shorter than the largest valid file: the header's
+            // size is what is refused.
+            tile_file::encode_u16(&Grid::new(64, 64, 5u16).unwrap(), TileCodec::Lz4),
             "too wide",
         ),
         (
@@ -67,15 +71,48 @@ fn corrupt_truncated_and_foreign_tiles_are_reported_and_missing() {
             },
             "bit flips",
         ),
+        (
+            TileId::new(0, 0, 2),
+            encode_png16(&Grid::new(32, 32, 5u16).unwrap()).unwrap(),
+            "a PNG",
+        ),
     ];
     for (id, bytes, what) in &cases {
-        store.write(&tile_key(Layer::Height, *id), bytes).unwrap();
+        store.write(&key(*id), bytes).unwrap();
         let err = world.read_tile(Layer::Height, *id).expect_err(what);
         match (&err, *what) {
-            (CacheError::WrongTileShape { .. }, "wrong size") => {}
+            (CacheError::WrongTileShape { .. }, "wrong size" | "too wide") => {}
             (CacheError::TileTooLarge { .. }, "huge") => {}
-            (CacheError::CorruptTile { id: e, .. }, _) => assert_eq!(e, id, "{what}"),
-            (other, _) => panic!("{what}: unexpected {other}"),
+            (
+                CacheError::CorruptTile {
+                    source: TileFileError::Checksum { .. },
+                    ..
+                },
+                "bit flips",
+            ) => {}
+            (
+                CacheError::CorruptTile {
+                    source: TileFileError::Bits { .. },
+                    ..
+                },
+                "8-bit",
+            ) => {}
+            (
+                CacheError::CorruptTile {
+                    source: TileFileError::Length { .. },
+                    ..
+                },
+                "truncated",
+            ) => {}
+            (
+                CacheError::CorruptTile {
+                    id: e,
+                    source: TileFileError::Magic { .. } | TileFileError::Truncated { .. },
+                    ..
+                },
+                "garbage" | "empty" | "a PNG",
+            ) => assert_eq!(e, id, "{what}"),
+            (other, _) => panic!("{what}: unexpected {other:?}"),
         }
         assert!(err.to_string().contains(&id.to_string()), "{what}: {err}");
     }
@@ -195,9 +232,13 @@ fn object_store_backends_and_files_are_bit_identical() {
 fn special_files_in_place_of_tiles_are_errors_not_hangs() {
     let dir = temp_dir("special");
     let store: Arc<dyn TileStore> = Arc::new(FsStore::open(&dir).unwrap());
-    let _world = build(store.clone(), UVec2::splat(64), 32);
-    let pipe_key = tile_key(Layer::Height, TileId::new(0, 1, 0));
-    let dir_key = tile_key(Layer::Height, TileId::new(0, 0, 1));
+    let world = build(store.clone(), UVec2::splat(64), 32);
+    let pipe_key = world
+        .manifest()
+        .tile_key(Layer::Height, TileId::new(0, 1, 0));
+    let dir_key = world
+        .manifest()
+        .tile_key(Layer::Height, TileId::new(0, 0, 1));
     let pipe = dir.join(&pipe_key);
     std::fs::remove_file(&pipe).unwrap();
     let made = std::process::Command::new("mkfifo").arg(&pipe).status();

@@ -101,9 +101,9 @@ fn flyover_streams_within_budget_and_craters_persist() {
         "{}",
         String::from_utf8_lossy(&ok.stdout)
     );
-    let tile = world.join("height/00/0000/0001.png");
+    let tile = world.join("height/00/0000/0001.tile");
     assert!(tile.is_file());
-    std::fs::write(&tile, b"not a png").expect("corrupt a tile");
+    std::fs::write(&tile, b"not a tile").expect("corrupt a tile");
     let bad = demo()
         .arg("--verify-world")
         .arg(&world)
@@ -111,7 +111,7 @@ fn flyover_streams_within_budget_and_craters_persist() {
         .expect("runs");
     assert_eq!(bad.status.code(), Some(1));
     let listed = String::from_utf8_lossy(&bad.stdout);
-    assert!(listed.contains("height/00/0000/0001.png"), "{listed}");
+    assert!(listed.contains("height/00/0000/0001.tile"), "{listed}");
     let _ = std::fs::remove_dir_all(&root);
 }
 

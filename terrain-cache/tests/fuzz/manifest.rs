@@ -6,7 +6,7 @@ use std::sync::Arc;
 use terrain_cache::manifest::{MANIFEST_KEY, bounds_key, parse_tile_key, tile_key};
 use terrain_cache::store::check_key;
 use terrain_cache::world::read_manifest;
-use terrain_cache::{Layer, Manifest, TileId, TileStore, World};
+use terrain_cache::{Layer, Manifest, TileFormat, TileId, TileStore, World};
 use terrain_test_support::fuzz::{Case, Class, Rng};
 
 /// Checks a manifest that parsed: it validates, and its queries answer for any level and tile
@@ -219,7 +219,12 @@ fn keys(_: &(), case: &mut Case) -> Result<(), String> {
         rng.range_u32(0, 65535),
         rng.range_u32(0, 65535),
     );
-    let key = tile_key(layer, id);
+    let format = if rng.chance(1, 2) {
+        TileFormat::Tile
+    } else {
+        TileFormat::Png
+    };
+    let key = tile_key(layer, id, format);
     if parse_tile_key(&key) != Some((layer, id)) {
         return Err(format!("{key} did not parse back to {layer:?} {id}"));
     }
@@ -244,11 +249,14 @@ fn keys(_: &(), case: &mut Case) -> Result<(), String> {
     }
     let text = String::from_utf8_lossy(&bytes);
     if let Some((l, i)) = parse_tile_key(&text)
-        && tile_key(l, i) != text
+        && [TileFormat::Tile, TileFormat::Png]
+            .iter()
+            .all(|&f| tile_key(l, i, f) != text)
     {
         return Err(format!(
-            "{text:?} parsed as {l:?} {i}, which is written {}",
-            tile_key(l, i)
+            "{text:?} parsed as {l:?} {i}, which is written {} or {}",
+            tile_key(l, i, TileFormat::Tile),
+            tile_key(l, i, TileFormat::Png)
         ));
     }
     let _ = check_key(&text);

@@ -1,11 +1,11 @@
-//! Target `tile`: PNG16 height tiles and PNG8 detail tiles through `World::decode_tile` and
-//! `World::read_tile` (through a store in memory and the local file store): valid tiles,
-//! mutated ones, foreign images and random bytes.
+//! Target `tile`: `.tile` files (and the PNG16 / PNG8 tiles of version-1 worlds) through
+//! `World::decode_tile` and `World::read_tile` (through a store in memory and the local file
+//! store): valid tiles, mutated ones, foreign files and random bytes.
 
 use crate::worlds::{any_tile, random_tile, small_world, tile_in};
 use std::sync::Arc;
-use terrain_cache::manifest::tile_key;
-use terrain_cache::{CacheError, FsStore, Layer, TileData, TileRead, TileStore, World};
+use terrain_cache::tile_file::{self, HEADER_LEN, TileCodec};
+use terrain_cache::{CacheError, FsStore, Layer, TileData, TileFormat, TileRead, TileStore, World};
 use terrain_core::Grid;
 use terrain_core::io::{encode_png8, encode_png16};
 use terrain_test_support::fuzz::{Case, Class, Rng};
@@ -70,6 +70,68 @@ fn mutate_png(png: &mut Vec<u8>, rng: &mut Rng) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Tile file mutations
+
+/// Recomputes a tile file's checksum, so a mutation reaches the checks behind it.
+fn fix_checksum(b: &mut [u8]) {
+    if b.len() >= HEADER_LEN {
+        let mut covered = b[..20].to_vec();
+        covered.extend_from_slice(&b[HEADER_LEN..]);
+        let sum = crc32fast::hash(&covered);
+        b[20..24].copy_from_slice(&sum.to_le_bytes());
+    }
+}
+
+/// One mutation of a `.tile` file: truncation, bit flips (checksum fixed or not), a header
+/// field set to an edge value (checksum fixed), the payload replaced by random bytes with a
+/// consistent length and checksum (a crafted file), or trailing bytes.
+fn mutate_tile(b: &mut Vec<u8>, rng: &mut Rng) {
+    match rng.below(6) {
+        0 => {
+            let n = b.len();
+            b.truncate(rng.index(n));
+        }
+        1 => rng.flip_bits(b),
+        2 => {
+            rng.flip_bits(b);
+            fix_checksum(b);
+        }
+        3 => {
+            if b.len() >= HEADER_LEN {
+                match rng.below(4) {
+                    0 => b[4 + rng.index(4)] = rng.pick(&[0, 1, 2, 8, 16, 255]),
+                    1 => b[8..12].copy_from_slice(&rng.u32_edge().to_le_bytes()),
+                    2 => b[12..16].copy_from_slice(&rng.u32_edge().to_le_bytes()),
+                    _ => b[16..20].copy_from_slice(&rng.u32_edge().to_le_bytes()),
+                }
+                fix_checksum(b);
+            }
+        }
+        4 => {
+            if b.len() >= HEADER_LEN {
+                let n = rng.range_usize(0, 3000);
+                b.truncate(HEADER_LEN);
+                b.extend(rng.bytes(n));
+                b[16..20].copy_from_slice(&(n as u32).to_le_bytes());
+                fix_checksum(b);
+            }
+        }
+        _ => {
+            let n = rng.range_usize(1, 64);
+            b.extend(rng.bytes(n));
+        }
+    }
+}
+
+/// A mutation of a tile file in the world's format.
+fn mutate(world: &World, bytes: &mut Vec<u8>, rng: &mut Rng) {
+    match world.manifest().tile_format {
+        TileFormat::Tile => mutate_tile(bytes, rng),
+        TileFormat::Png => mutate_png(bytes, rng),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Classes
 
 /// Checks a decode result: `Ok` only with the layer's sample type and the world's tile size.
@@ -121,8 +183,8 @@ fn tile_valid(_: &(), case: &mut Case) -> Result<(), String> {
     }
 }
 
-/// Valid tile files mutated (truncated, flipped, header fields, chunks, lengths, trailing
-/// bytes), decoded as the layer they were written for.
+/// Valid tile files mutated (truncated, flipped, header fields, payloads, PNG chunks, lengths,
+/// trailing bytes), decoded as the layer they were written for.
 fn tile_mutated(_: &(), case: &mut Case) -> Result<(), String> {
     let rng = &mut case.rng;
     let world = small_world(rng);
@@ -131,13 +193,15 @@ fn tile_mutated(_: &(), case: &mut Case) -> Result<(), String> {
     let data = random_tile(&world, layer, rng);
     let mut bytes = world.encode_tile(layer, &data).map_err(|e| e.to_string())?;
     for _ in 0..rng.range_u32(1, 3) {
-        mutate_png(&mut bytes, rng);
+        mutate(&world, &mut bytes, rng);
     }
     check_tile(&world, layer, &world.decode_tile(layer, id, &bytes))
 }
 
-/// Foreign images where a tile should be: the other layer's depth, other sizes (including
-/// one texel off the tile size), with the tile size as the read limit. Never `Ok`.
+/// Foreign files where a tile should be: the other layer's depth, other sizes (including one
+/// texel off the tile size), with the tile size as the read limit, as the world's format (PNG
+/// or `.tile` with either codec) or the other one. Never `Ok` but for a same-shape, same-depth
+/// file of the world's format.
 fn tile_foreign(_: &(), case: &mut Case) -> Result<(), String> {
     let rng = &mut case.rng;
     let world = small_world(rng);
@@ -151,34 +215,47 @@ fn tile_foreign(_: &(), case: &mut Case) -> Result<(), String> {
     };
     let (w, h) = (side(rng), side(rng));
     let other_depth = rng.chance(1, 2);
-    let bytes = match (layer, other_depth) {
-        (Layer::Height, false) | (Layer::Detail, true) => {
-            encode_png16(&Grid::new(w, h, rng.next_u32() as u16).unwrap())
+    let as_png = rng.chance(1, 2);
+    let codec = rng.pick(&[TileCodec::Raw, TileCodec::Lz4]);
+    let sixteen = matches!(
+        (layer, other_depth),
+        (Layer::Height, false) | (Layer::Detail, true)
+    );
+    let bytes = match (sixteen, as_png) {
+        (true, true) => encode_png16(&Grid::new(w, h, rng.next_u32() as u16).unwrap()).unwrap(),
+        (false, true) => encode_png8(&Grid::new(w, h, rng.next_u32() as u8).unwrap()).unwrap(),
+        (true, false) => {
+            tile_file::encode_u16(&Grid::new(w, h, rng.next_u32() as u16).unwrap(), codec)
         }
-        _ => encode_png8(&Grid::new(w, h, rng.next_u32() as u8).unwrap()),
-    }
-    .unwrap();
+        (false, false) => {
+            tile_file::encode_u8(&Grid::new(w, h, rng.next_u32() as u8).unwrap(), codec)
+        }
+    };
     let same_shape = w == t && h == t;
+    let other_format = as_png != (world.manifest().tile_format == TileFormat::Png);
     match world.decode_tile(layer, id, &bytes) {
-        Ok(_) if other_depth || !same_shape => Err(format!(
-            "a {w}x{h} image of the {} depth decoded as a {layer:?} tile of side {t}",
-            if other_depth { "other" } else { "same" }
+        Ok(_) if other_depth || !same_shape || other_format => Err(format!(
+            "a {w}x{h} file of the {} depth (PNG: {as_png}) decoded as a {layer:?} tile of \
+             side {t} in a {:?} world",
+            if other_depth { "other" } else { "same" },
+            world.manifest().tile_format
         )),
         got => check_tile(&world, layer, &got),
     }
 }
 
-/// Random bytes, bare or after the PNG signature, as a tile file.
+/// Random bytes, bare or after the PNG signature or the tile file's magic and version, as a
+/// tile file.
 fn tile_random_bytes(_: &(), case: &mut Case) -> Result<(), String> {
     let rng = &mut case.rng;
     let world = small_world(rng);
     let layer = random_layer(&world, rng);
     let id = tile_in(&world, layer, rng);
     let n = rng.range_usize(0, 3000);
-    let mut bytes = if rng.chance(1, 2) {
-        vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A]
-    } else {
-        Vec::new()
+    let mut bytes = match rng.below(3) {
+        0 => vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A],
+        1 => [&tile_file::MAGIC[..], &[tile_file::VERSION]].concat(),
+        _ => Vec::new(),
     };
     bytes.extend(rng.bytes(n));
     match world.decode_tile(layer, id, &bytes) {
@@ -200,7 +277,7 @@ fn tile_read_store(_: &(), case: &mut Case) -> Result<(), String> {
         let mut bytes = if rng.chance(1, 2) {
             let data = random_tile(&world, layer, rng);
             let mut b = world.encode_tile(layer, &data).map_err(|e| e.to_string())?;
-            mutate_png(&mut b, rng);
+            mutate(&world, &mut b, rng);
             b
         } else {
             let n = rng.range_usize(0, 2000);
@@ -212,7 +289,7 @@ fn tile_read_store(_: &(), case: &mut Case) -> Result<(), String> {
         }
         world
             .store()
-            .write(&tile_key(layer, id), &bytes)
+            .write(&world.manifest().tile_key(layer, id), &bytes)
             .map_err(|e| e.to_string())?;
         Some(bytes.len() as u64)
     } else {
@@ -246,12 +323,12 @@ fn tile_read_fs(dir: &std::path::Path, case: &mut Case) -> Result<(), String> {
     let data = random_tile(&world, layer, rng);
     let mut bytes = world.encode_tile(layer, &data).map_err(|e| e.to_string())?;
     if rng.chance(2, 3) {
-        mutate_png(&mut bytes, rng);
+        mutate(&world, &mut bytes, rng);
     }
     if rng.chance(1, 8) {
         bytes.resize(world.max_tile_file_bytes(layer) as usize + 1, 0);
     }
-    let path = root.join(tile_key(layer, id));
+    let path = root.join(world.manifest().tile_key(layer, id));
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent).map_err(|e| e.to_string())?;
     }
@@ -306,11 +383,11 @@ pub(crate) fn classes() -> Vec<Class<TileCtx>> {
             run: no_ctx!(tile_valid),
         },
         Class {
-            name: "mutated_png",
+            name: "mutated_file",
             run: no_ctx!(tile_mutated),
         },
         Class {
-            name: "foreign_image",
+            name: "foreign_file",
             run: no_ctx!(tile_foreign),
         },
         Class {

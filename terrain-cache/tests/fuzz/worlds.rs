@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use terrain_cache::manifest::DetailLayout;
 use terrain_cache::store::check_key;
-use terrain_cache::{CacheError, Layer, Manifest, TileData, TileId, TileStore, World};
+use terrain_cache::{CacheError, Layer, Manifest, TileData, TileFormat, TileId, TileStore, World};
 use terrain_core::{Grid, HeightEncoding, WrapMode};
 use terrain_test_support::fuzz::Rng;
 
@@ -93,6 +93,7 @@ pub(crate) fn random_manifest(rng: &mut Rng) -> Manifest {
             continue; // too many tiles per side for this tile size
         };
         m.levels = rng.range_u32(1, m.max_levels());
+        old_format(&mut m, rng);
         m.height_fill = rng.next_u32() as u16;
         m.generation = rng.next_u64();
         if rng.chance(1, 2) {
@@ -109,13 +110,23 @@ pub(crate) fn random_manifest(rng: &mut Rng) -> Manifest {
     }
 }
 
-/// A small world (tiles of 16 to 64 texels) with a detail layer, in memory.
+/// One world in four made a version-1 world of PNG tiles (they still open and are written).
+fn old_format(m: &mut Manifest, rng: &mut Rng) {
+    if rng.chance(1, 4) {
+        m.format_version = 1;
+        m.tile_format = TileFormat::Png;
+    }
+}
+
+/// A small world (tiles of 16 to 64 texels) with a detail layer, in memory; `.tile` files or
+/// (one in four) PNG.
 pub(crate) fn small_world(rng: &mut Rng) -> World {
     let tile = 1u32 << rng.range_u32(4, 6);
     let size = UVec2::new(rng.range_u32(1, 5 * tile), rng.range_u32(1, 5 * tile));
     let enc = HeightEncoding::spanning::<u16>(-10.0, 500.0).unwrap();
     let mut m = Manifest::new(size, tile, 0.5, enc, WrapMode::Repeat).unwrap();
     m.height_fill = rng.next_u32() as u16;
+    old_format(&mut m, rng);
     let dt = 1u32 << rng.range_u32(4, 6);
     m.detail = Some(DetailLayout::covering(m.extent_m().as_vec2(), dt, 0.25).unwrap());
     World::create(Arc::new(MemStore::default()), m).unwrap()

@@ -14,7 +14,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 use terrain_cache::{
-    FsStore, Layer, Manifest, MapSource, ProceduralSource, TileRead, TileStore, World, build_world,
+    FsStore, Layer, Manifest, MapSource, ProceduralSource, TileFormat, TileRead, TileStore, World,
+    build_world,
 };
 use terrain_core::{HeightEncoding, TerrainParams, WrapMode};
 
@@ -77,6 +78,9 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> 
                 world.manifest().world_size,
                 world.manifest().levels
             );
+            if world.manifest().tile_format == TileFormat::Png {
+                eprintln!("{}", png_world_note(&cli.world));
+            }
         }
         return Ok((world, format!("world {}", cli.world.display()), None));
     }
@@ -137,6 +141,17 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> 
         eprintln!();
     }
     Ok((world, source, heights))
+}
+
+/// What a run says about a world of PNG tiles (format version 1): it works as it is, and how
+/// to make it load faster.
+pub fn png_world_note(dir: &Path) -> String {
+    format!(
+        "note: the world in {0} has PNG tiles (format version 1): it opens and is written back \
+         as PNG, but its tiles load several times slower than .tile files. To convert it in \
+         place: cargo run -p terrain-cache --release --example build_world -- --convert {0}",
+        dir.display()
+    )
 }
 
 /// The manifest of the procedural world of `size` x `size` texels.
@@ -225,10 +240,7 @@ pub fn verify(dir: &Path) -> Result<Vec<String>> {
         for id in manifest.tiles_of(Layer::Height, level) {
             match world.read_tile(Layer::Height, id) {
                 Ok(TileRead::Stored(_) | TileRead::Zero) => {}
-                Err(e) => bad.push(format!(
-                    "{}: {e}",
-                    terrain_cache::tile_key(Layer::Height, id)
-                )),
+                Err(e) => bad.push(format!("{}: {e}", manifest.tile_key(Layer::Height, id))),
             }
         }
     }

@@ -1,0 +1,557 @@
+//! The `.tile` file: how worlds of format version 2 store a tile (PNG files stay for version-1
+//! worlds and for import / export).
+//!
+//! Layout (all integers little-endian):
+//!
+//! | bytes  | field                                                                  |
+//! |--------|------------------------------------------------------------------------|
+//! | 0..4   | magic `b"TCTL"`                                                        |
+//! | 4      | version, 1                                                             |
+//! | 5      | bits per sample: 16 (heights) or 8 (detail)                            |
+//! | 6      | codec: 0 raw samples, 1 LZ4 block of the row-delta filtered samples     |
+//! | 7      | flags, 0 (none defined; a set bit is refused)                          |
+//! | 8..12  | width in samples (u32)                                                 |
+//! | 12..16 | height in samples (u32)                                                |
+//! | 16..20 | payload length in bytes (u32): the file is exactly 24 + this long       |
+//! | 20..24 | CRC-32 (IEEE) of bytes 0..20 followed by the payload                   |
+//! | 24..   | payload                                                                |
+//!
+//! Raw payload: the samples row-major, little-endian. LZ4 payload: an LZ4 block that
+//! decompresses to exactly `width * height * bits / 8` bytes: per row, each sample minus the
+//! one to its left (the first minus 0), wrapping, zigzag-coded; 16-bit samples as two planes,
+//! every low byte then every high byte (smooth terrain's deltas are small, so the high plane is
+//! nearly all zero and the low plane has few distinct values).
+//!
+//! Heights are written raw: a 256^2 tile loads in about the time of reading its bytes (the
+//! measured choice, docs/MEASUREMENTS.md), where LZ4 halves the file but adds its decompression
+//! and the filter. Detail tiles are written with LZ4: they are mostly the zero deformation, so
+//! a 2048^2 tile of a few footprints shrinks from 4 MiB to a few KiB.
+
+use crate::tile::{Layer, TileData};
+use terrain_core::Grid;
+use terrain_core::io::MapIoError;
+
+/// The first four bytes of a tile file.
+pub const MAGIC: [u8; 4] = *b"TCTL";
+/// The tile file version this build writes and reads.
+pub const VERSION: u8 = 1;
+/// Bytes before the payload.
+pub const HEADER_LEN: usize = 24;
+
+/// How a tile file's payload holds the samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum TileCodec {
+    /// The samples as they are, little-endian.
+    Raw,
+    /// Row-delta filtered samples, LZ4 block compressed.
+    Lz4,
+}
+
+impl TileCodec {
+    /// The codec byte in the header.
+    pub const fn byte(self) -> u8 {
+        match self {
+            TileCodec::Raw => 0,
+            TileCodec::Lz4 => 1,
+        }
+    }
+
+    /// The codec of a header byte.
+    pub const fn from_byte(b: u8) -> Option<Self> {
+        match b {
+            0 => Some(TileCodec::Raw),
+            1 => Some(TileCodec::Lz4),
+            _ => None,
+        }
+    }
+
+    /// The codec a world of format version 2 writes `layer`'s tiles with.
+    pub const fn for_layer(layer: Layer) -> Self {
+        match layer {
+            Layer::Height => TileCodec::Raw,
+            Layer::Detail => TileCodec::Lz4,
+        }
+    }
+}
+
+/// Why a tile file does not decode.
+#[derive(Debug, thiserror::Error)]
+pub enum TileFileError {
+    /// A PNG tile (a version-1 world's) did not decode.
+    #[error("PNG: {0}")]
+    Png(#[from] MapIoError),
+    /// Shorter than the header.
+    #[error("{len} bytes, shorter than the {HEADER_LEN}-byte tile header")]
+    Truncated {
+        /// The file's length.
+        len: usize,
+    },
+    /// Not a tile file.
+    #[error("not a tile file: magic {found:02x?}, expected \"TCTL\"")]
+    Magic {
+        /// The first four bytes.
+        found: [u8; 4],
+    },
+    /// A version this build does not read.
+    #[error("tile file version {found}; this build reads version {VERSION}")]
+    Version {
+        /// The version byte.
+        found: u8,
+    },
+    /// An unknown codec or a flag this build does not know.
+    #[error("unknown codec {codec} or flags {flags:#04x}")]
+    Codec {
+        /// The codec byte.
+        codec: u8,
+        /// The flags byte.
+        flags: u8,
+    },
+    /// The samples have another bit depth than the layer.
+    #[error("{found} bits per sample, the layer has {expected}")]
+    Bits {
+        /// The header's.
+        found: u8,
+        /// The layer's.
+        expected: u8,
+    },
+    /// The header's size differs from the world's tile size (checked before any allocation).
+    #[error("{found_w}x{found_h} samples, the world's tiles are {expected}x{expected}")]
+    Shape {
+        /// The header's width.
+        found_w: u32,
+        /// The header's height.
+        found_h: u32,
+        /// The world's tile side.
+        expected: u32,
+    },
+    /// The file is longer or shorter than its header says (truncated, or appended to).
+    #[error("the header says {expected} payload bytes, the file holds {found}")]
+    Length {
+        /// The header's payload length.
+        expected: u64,
+        /// The bytes after the header.
+        found: u64,
+    },
+    /// The checksum does not match: the file was damaged.
+    #[error("checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")]
+    Checksum {
+        /// The header's.
+        stored: u32,
+        /// Of the bytes read.
+        computed: u32,
+    },
+    /// A payload whose checksum matches but does not hold the tile's samples (a writer bug, or
+    /// a file crafted with a valid checksum).
+    #[error("the {codec:?} payload does not hold {expected} bytes of samples: {reason}")]
+    Payload {
+        /// The codec.
+        codec: TileCodec,
+        /// Bytes of samples the tile has.
+        expected: usize,
+        /// What was wrong.
+        reason: String,
+    },
+}
+
+/// The file bytes of `data` with `codec`.
+pub fn encode(data: &TileData, codec: TileCodec) -> Vec<u8> {
+    match data {
+        TileData::U16(g) => encode_u16(g, codec),
+        TileData::U8(g) => encode_u8(g, codec),
+    }
+}
+
+/// The file bytes of a height grid.
+pub fn encode_u16(grid: &Grid<u16>, codec: TileCodec) -> Vec<u8> {
+    let samples = grid.as_slice();
+    match codec {
+        TileCodec::Raw => finish(16, codec, grid.width(), grid.height(), |out| {
+            if cfg!(target_endian = "little") {
+                out.extend_from_slice(bytemuck::cast_slice(samples));
+            } else {
+                out.extend(samples.iter().flat_map(|v| v.to_le_bytes()));
+            }
+        }),
+        TileCodec::Lz4 => {
+            let filtered = filter_u16(samples, grid.width() as usize);
+            finish(16, codec, grid.width(), grid.height(), |out| {
+                compress_into(&filtered, out)
+            })
+        }
+    }
+}
+
+/// The file bytes of a detail grid.
+pub fn encode_u8(grid: &Grid<u8>, codec: TileCodec) -> Vec<u8> {
+    let samples = grid.as_slice();
+    match codec {
+        TileCodec::Raw => finish(8, codec, grid.width(), grid.height(), |out| {
+            out.extend_from_slice(samples)
+        }),
+        TileCodec::Lz4 => {
+            let filtered = filter_u8(samples, grid.width() as usize);
+            finish(8, codec, grid.width(), grid.height(), |out| {
+                compress_into(&filtered, out)
+            })
+        }
+    }
+}
+
+/// Header, then the payload `body` appends, then the length and checksum filled in.
+fn finish(bits: u8, codec: TileCodec, w: u32, h: u32, body: impl FnOnce(&mut Vec<u8>)) -> Vec<u8> {
+    let raw_len = w as usize * h as usize * usize::from(bits / 8);
+    let mut out = Vec::with_capacity(HEADER_LEN + raw_len);
+    out.extend_from_slice(&MAGIC);
+    out.extend_from_slice(&[VERSION, bits, codec.byte(), 0]);
+    out.extend_from_slice(&w.to_le_bytes());
+    out.extend_from_slice(&h.to_le_bytes());
+    out.extend_from_slice(&[0; 8]);
+    body(&mut out);
+    // Tiles are at most 4096^2 x 2 bytes (the manifest's bound), far below 4 GiB.
+    let payload_len = (out.len() - HEADER_LEN) as u32;
+    out[16..20].copy_from_slice(&payload_len.to_le_bytes());
+    let sum = checksum(&out[..20], &out[HEADER_LEN..]);
+    out[20..24].copy_from_slice(&sum.to_le_bytes());
+    out
+}
+
+fn checksum(head: &[u8], payload: &[u8]) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    h.update(head);
+    h.update(payload);
+    h.finalize()
+}
+
+fn compress_into(filtered: &[u8], out: &mut Vec<u8>) {
+    let start = out.len();
+    out.resize(
+        start + lz4_flex::block::get_maximum_output_size(filtered.len()),
+        0,
+    );
+    // The buffer has the block format's worst-case size, so compression cannot run out of
+    // room; were it to fail anyway, the raw bytes would not decode as LZ4 and be refused.
+    let n = lz4_flex::block::compress_into(filtered, &mut out[start..]).unwrap_or(0);
+    out.truncate(start + n);
+}
+
+/// The largest file a tile of `side` x `side` samples of `bits` can take in this format.
+pub fn max_file_len(side: u32, bits: u8) -> u64 {
+    let raw = u64::from(side) * u64::from(side) * u64::from(bits / 8);
+    let lz4_worst = lz4_flex::block::get_maximum_output_size(raw as usize) as u64;
+    HEADER_LEN as u64 + raw.max(lz4_worst)
+}
+
+/// Decodes a tile file of `layer` whose tiles are `side` x `side`: header and length checked,
+/// then the checksum, then the payload; allocation is bounded by `side`, never by the header.
+pub fn decode(bytes: &[u8], layer: Layer, side: u32) -> Result<TileData, TileFileError> {
+    if bytes.len() < HEADER_LEN {
+        return Err(TileFileError::Truncated { len: bytes.len() });
+    }
+    let u32_at =
+        |i: usize| u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+    let magic = [bytes[0], bytes[1], bytes[2], bytes[3]];
+    if magic != MAGIC {
+        return Err(TileFileError::Magic { found: magic });
+    }
+    if bytes[4] != VERSION {
+        return Err(TileFileError::Version { found: bytes[4] });
+    }
+    let (bits, codec_byte, flags) = (bytes[5], bytes[6], bytes[7]);
+    let codec = match TileCodec::from_byte(codec_byte) {
+        Some(c) if flags == 0 => c,
+        _ => {
+            return Err(TileFileError::Codec {
+                codec: codec_byte,
+                flags,
+            });
+        }
+    };
+    if bits != layer.bits() {
+        return Err(TileFileError::Bits {
+            found: bits,
+            expected: layer.bits(),
+        });
+    }
+    let (w, h) = (u32_at(8), u32_at(12));
+    if w != side || h != side {
+        return Err(TileFileError::Shape {
+            found_w: w,
+            found_h: h,
+            expected: side,
+        });
+    }
+    let payload = &bytes[HEADER_LEN..];
+    let declared = u64::from(u32_at(16));
+    if declared != payload.len() as u64 {
+        return Err(TileFileError::Length {
+            expected: declared,
+            found: payload.len() as u64,
+        });
+    }
+    let stored = u32_at(20);
+    let computed = checksum(&bytes[..20], payload);
+    if stored != computed {
+        return Err(TileFileError::Checksum { stored, computed });
+    }
+    let n = side as usize * side as usize;
+    let bad = |expected: usize, reason: String| TileFileError::Payload {
+        codec,
+        expected,
+        reason,
+    };
+    Ok(match (layer, codec) {
+        (Layer::Height, TileCodec::Raw) => {
+            if payload.len() != 2 * n {
+                return Err(bad(2 * n, format!("{} bytes", payload.len())));
+            }
+            let mut out = vec![0u16; n];
+            bytemuck::cast_slice_mut::<u16, u8>(&mut out).copy_from_slice(payload);
+            if cfg!(target_endian = "big") {
+                out.iter_mut().for_each(|v| *v = u16::from_le(*v));
+            }
+            TileData::U16(grid(side, out))
+        }
+        (Layer::Detail, TileCodec::Raw) => {
+            if payload.len() != n {
+                return Err(bad(n, format!("{} bytes", payload.len())));
+            }
+            TileData::U8(grid(side, payload.to_vec()))
+        }
+        (Layer::Height, TileCodec::Lz4) => {
+            let planes = decompress(payload, 2 * n).map_err(|r| bad(2 * n, r))?;
+            TileData::U16(grid(side, unfilter_u16(&planes, side as usize)))
+        }
+        (Layer::Detail, TileCodec::Lz4) => {
+            let mut filtered = decompress(payload, n).map_err(|r| bad(n, r))?;
+            unfilter_u8(&mut filtered, side as usize);
+            TileData::U8(grid(side, filtered))
+        }
+    })
+}
+
+/// A `side` x `side` grid of `data`, which has `side^2` samples by construction.
+fn grid<T: Copy + Default>(side: u32, data: Vec<T>) -> Grid<T> {
+    Grid::from_vec(side, side, data).unwrap_or_else(|_| {
+        // Unreachable: every caller sized `data` from `side`, which the manifest bounds.
+        Grid::new(1, 1, T::default()).unwrap_or_else(|_| unreachable!("1x1 grid"))
+    })
+}
+
+/// Exactly `len` bytes out of an LZ4 block, or why not.
+fn decompress(payload: &[u8], len: usize) -> Result<Vec<u8>, String> {
+    let mut out = vec![0u8; len];
+    match lz4_flex::block::decompress_into(payload, &mut out) {
+        Ok(n) if n == len => Ok(out),
+        Ok(n) => Err(format!("it decompresses to {n} bytes")),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+fn zigzag16(d: u16) -> u16 {
+    let s = d as i16;
+    ((s << 1) ^ (s >> 15)) as u16
+}
+
+fn unzigzag16(z: u16) -> u16 {
+    (z >> 1) ^ (z & 1).wrapping_neg()
+}
+
+fn zigzag8(d: u8) -> u8 {
+    let s = d as i8;
+    ((s << 1) ^ (s >> 7)) as u8
+}
+
+fn unzigzag8(z: u8) -> u8 {
+    (z >> 1) ^ (z & 1).wrapping_neg()
+}
+
+/// Row deltas, zigzag, split into a low-byte plane then a high-byte plane.
+fn filter_u16(samples: &[u16], width: usize) -> Vec<u8> {
+    let n = samples.len();
+    let mut out = vec![0u8; 2 * n];
+    let (lo, hi) = out.split_at_mut(n);
+    for (r, row) in samples.chunks_exact(width.max(1)).enumerate() {
+        let mut prev = 0u16;
+        for (i, &v) in row.iter().enumerate() {
+            let z = zigzag16(v.wrapping_sub(prev));
+            prev = v;
+            lo[r * width + i] = z as u8;
+            hi[r * width + i] = (z >> 8) as u8;
+        }
+    }
+    out
+}
+
+fn unfilter_u16(planes: &[u8], width: usize) -> Vec<u16> {
+    let n = planes.len() / 2;
+    let (lo, hi) = planes.split_at(n);
+    let mut out = vec![0u16; n];
+    for ((row, lo), hi) in out
+        .chunks_exact_mut(width.max(1))
+        .zip(lo.chunks_exact(width.max(1)))
+        .zip(hi.chunks_exact(width.max(1)))
+    {
+        let mut prev = 0u16;
+        for ((o, &l), &h) in row.iter_mut().zip(lo).zip(hi) {
+            prev = prev.wrapping_add(unzigzag16(u16::from(l) | (u16::from(h) << 8)));
+            *o = prev;
+        }
+    }
+    out
+}
+
+fn filter_u8(samples: &[u8], width: usize) -> Vec<u8> {
+    let mut out = Vec::with_capacity(samples.len());
+    for row in samples.chunks_exact(width.max(1)) {
+        let mut prev = 0u8;
+        out.extend(row.iter().map(|&v| {
+            let z = zigzag8(v.wrapping_sub(prev));
+            prev = v;
+            z
+        }));
+    }
+    out
+}
+
+fn unfilter_u8(filtered: &mut [u8], width: usize) {
+    for row in filtered.chunks_exact_mut(width.max(1)) {
+        let mut prev = 0u8;
+        for v in row {
+            prev = prev.wrapping_add(unzigzag8(*v));
+            *v = prev;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn heights(side: u32) -> Grid<u16> {
+        Grid::from_fn(side, side, |x, y| {
+            (30_000.0 + 8_000.0 * ((x as f32) * 0.05).sin() * ((y as f32) * 0.03).cos()) as u16
+                ^ ((x * 7 + y * 13) % 5) as u16
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn zigzag_is_invertible() {
+        for v in 0..=u16::MAX {
+            assert_eq!(unzigzag16(zigzag16(v)), v);
+        }
+        for v in 0..=u8::MAX {
+            assert_eq!(unzigzag8(zigzag8(v)), v);
+        }
+        assert_eq!(zigzag16(1u16.wrapping_neg()), 1);
+        assert_eq!(zigzag16(1), 2);
+    }
+
+    #[test]
+    fn every_codec_round_trips_both_layers() {
+        let h = heights(64);
+        let d = Grid::from_fn(64, 64, |x, y| if x > 20 && y < 9 { 90 } else { 128u8 }).unwrap();
+        for codec in [TileCodec::Raw, TileCodec::Lz4] {
+            let bytes = encode_u16(&h, codec);
+            assert!(bytes.len() as u64 <= max_file_len(64, 16));
+            assert_eq!(
+                decode(&bytes, Layer::Height, 64).unwrap(),
+                TileData::U16(h.clone())
+            );
+            let bytes = encode_u8(&d, codec);
+            assert_eq!(
+                decode(&bytes, Layer::Detail, 64).unwrap(),
+                TileData::U8(d.clone())
+            );
+        }
+        // Mostly-constant detail compresses to a small fraction.
+        assert!(encode_u8(&d, TileCodec::Lz4).len() < 64 * 64 / 10);
+        assert_eq!(
+            encode_u16(&h, TileCodec::Raw).len(),
+            HEADER_LEN + 64 * 64 * 2
+        );
+    }
+
+    #[test]
+    fn damaged_files_are_refused_by_kind() {
+        let good = encode_u16(&heights(32), TileCodec::Lz4);
+        let err = |b: &[u8]| decode(b, Layer::Height, 32).unwrap_err();
+        assert!(matches!(
+            err(&good[..10]),
+            TileFileError::Truncated { len: 10 }
+        ));
+        assert!(matches!(
+            err(&good[..good.len() - 1]),
+            TileFileError::Length { .. }
+        ));
+        let mut long = good.clone();
+        long.push(0);
+        assert!(matches!(err(&long), TileFileError::Length { .. }));
+        let mut b = good.clone();
+        b[0] = b'X';
+        assert!(matches!(err(&b), TileFileError::Magic { .. }));
+        let mut b = good.clone();
+        b[4] = 2;
+        assert!(matches!(err(&b), TileFileError::Version { found: 2 }));
+        let mut b = good.clone();
+        b[6] = 9;
+        assert!(matches!(err(&b), TileFileError::Codec { codec: 9, .. }));
+        let mut b = good.clone();
+        b[7] = 1;
+        assert!(matches!(err(&b), TileFileError::Codec { flags: 1, .. }));
+        assert!(matches!(
+            decode(&good, Layer::Detail, 32).unwrap_err(),
+            TileFileError::Bits {
+                found: 16,
+                expected: 8
+            }
+        ));
+        assert!(matches!(
+            decode(&good, Layer::Height, 64).unwrap_err(),
+            TileFileError::Shape { found_w: 32, .. }
+        ));
+        // An absurd size is refused from the header, before anything is allocated.
+        let mut b = good.clone();
+        b[8..12].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(matches!(err(&b), TileFileError::Shape { .. }));
+        for i in [21, HEADER_LEN, good.len() - 1] {
+            let mut b = good.clone();
+            b[i] ^= 0x40;
+            assert!(
+                matches!(err(&b), TileFileError::Checksum { .. }),
+                "byte {i}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_payload_with_a_valid_checksum_but_wrong_content_is_refused() {
+        // Raw codec with a short payload, checksum recomputed: a crafted file.
+        let mut b = encode_u16(&heights(32), TileCodec::Raw);
+        b.truncate(b.len() - 2);
+        let len = (b.len() - HEADER_LEN) as u32;
+        b[16..20].copy_from_slice(&len.to_le_bytes());
+        let sum = checksum(&b[..20], &b[HEADER_LEN..]);
+        b[20..24].copy_from_slice(&sum.to_le_bytes());
+        assert!(matches!(
+            decode(&b, Layer::Height, 32).unwrap_err(),
+            TileFileError::Payload {
+                codec: TileCodec::Raw,
+                ..
+            }
+        ));
+        // An LZ4 block of another tile's size.
+        let small = encode_u16(&heights(16), TileCodec::Lz4);
+        let mut b = small.clone();
+        b[8..16].copy_from_slice(&[32, 0, 0, 0, 32, 0, 0, 0]);
+        let sum = checksum(&b[..20], &b[HEADER_LEN..]);
+        b[20..24].copy_from_slice(&sum.to_le_bytes());
+        assert!(matches!(
+            decode(&b, Layer::Height, 32).unwrap_err(),
+            TileFileError::Payload {
+                codec: TileCodec::Lz4,
+                ..
+            }
+        ));
+    }
+}
