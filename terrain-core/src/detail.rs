@@ -558,6 +558,8 @@ impl DetailLayer {
         placement: &StampPlacement,
         blend: Blend,
     ) -> Result<DetailChange, CoreError> {
+        #[cfg(feature = "cpu-work")]
+        crate::cpu_work::count(|w| w.detail_stamps += 1);
         let ts = self.layout.detail_texel_m();
         let footprint = placement.footprint(ts)?;
         if footprint.is_empty() {

@@ -33,6 +33,8 @@
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 
+#[cfg(feature = "cpu-work")]
+pub mod cpu_work;
 pub mod dem;
 pub mod detail;
 pub mod detail_spill;

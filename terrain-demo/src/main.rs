@@ -10,6 +10,8 @@ mod config;
 mod driver;
 mod frame_plan;
 mod gpu_scene;
+#[cfg(test)]
+mod gpu_truth;
 mod images;
 mod interrupt;
 mod logging;

@@ -166,6 +166,8 @@ impl GranularSim {
     /// Fails with [`GranularError::ParamOutOfRange`] when the displacement method's settings
     /// are out of range ([`DisplacementMethod::validate`]).
     pub fn step(&mut self, objects: &[GranularObject<'_>]) -> Result<StepReport, GranularError> {
+        #[cfg(feature = "cpu-work")]
+        crate::cpu_work::count(|w| w.granular_steps += 1);
         self.displacement.validate()?;
         let areas = self.active_areas(objects)?;
         let p = self.params;

@@ -404,6 +404,8 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
     placement: &StampPlacement,
     blend: Blend,
 ) -> Result<Vec<DirtyRect>, CoreError> {
+    #[cfg(feature = "cpu-work")]
+    crate::cpu_work::count(|w| w.stamps += 1);
     let prepared = prepare_stamp(map, stamp, placement, blend, None)?;
     apply_prepared(map, stamp, prepared)
 }
@@ -426,6 +428,8 @@ pub fn apply_stamp_window<T: HeightSample, S: Stamp + ?Sized>(
     placement: &StampPlacement,
     blend: Blend,
 ) -> Result<Option<DirtyRect>, CoreError> {
+    #[cfg(feature = "cpu-work")]
+    crate::cpu_work::count(|w| w.stamps += 1);
     let prepared = prepare_stamp(map, stamp, placement, blend, Some(origin))?;
     Ok(apply_prepared(map, stamp, prepared)?.into_iter().next())
 }
