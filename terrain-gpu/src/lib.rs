@@ -65,7 +65,7 @@ pub use device::{
     timer,
 };
 pub use passes::{density, detail_probe, normals, spill, stamp};
-pub use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, tessellation};
+pub use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
 pub use resources::{atlas, detail, maps};
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
@@ -90,6 +90,7 @@ pub use small_readback::SmallReadback;
 pub use spill::{SpillPass, SpillTargets, SpilledStamp};
 pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampOp, StampPass};
 pub use target::TargetFormat;
+pub use terrain::{TESS_CAPACITY, TerrainFrame, TerrainRenderer, TerrainView};
 pub use tessellation::{GpuTessellation, TessDraw, TessRenderer, TessellationPass};
 pub use timer::{GpuTimer, GpuTiming};
 

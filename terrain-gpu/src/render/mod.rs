@@ -10,4 +10,5 @@ pub mod refine;
 pub mod sky;
 pub(crate) mod surface;
 pub mod target;
+pub mod terrain;
 pub mod tessellation;

@@ -1,0 +1,538 @@
+//! [`TerrainRenderer`]: one renderer for every LOD mode (geometry clipmaps, CDLOD, adaptive
+//! tessellation; Cervin 2012) over every surface (a coarse-map with or without its detail
+//! layer, a granular map, a streamed world's atlas), driven the same way each frame:
+//! [`TerrainRenderer::heights_changed`] after deformations, [`TerrainRenderer::prepare`],
+//! [`TerrainRenderer::draw`] inside the caller's pass.
+//!
+//! The LOD data that depends on heights (CDLOD's quadtree, the tessellation's hierarchy and
+//! density map) is updated on a worker thread (terrain-lod's `LodUpdater`) from the changed
+//! rects the caller hands over (with a GPU, the rects read back: nothing is re-stamped to
+//! learn the new heights). A frame takes in the newest finished update without waiting, so
+//! the LOD lags the heights by a frame or two under heavy deformation.
+
+use crate::clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};
+use crate::error::GpuError;
+use crate::render::camera::Camera;
+use crate::render::cdlod::{CdlodDraw, CdlodRenderer};
+use crate::render::target::TargetFormat;
+use crate::render::tessellation::{GpuTessellation, TessDraw, TessRenderer, TessellationPass};
+use glam::{IVec2, UVec2, Vec2, Vec3};
+use terrain_core::{CoarseMap, Rect};
+use terrain_lod::{
+    CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodUpdater, CdlodView, ClipmapLayout,
+    DensityMap, DensityParams, Frustum, PoppingView, TessConfig, TessHierarchy, TessState,
+    TessUpdater,
+};
+
+/// Triangles a tessellated frame may hold (72 MiB of vertices).
+pub const TESS_CAPACITY: u32 = 1 << 21;
+
+/// Drawn vertices per frame the tessellation's popping metric probes.
+const JUMP_PROBES: usize = 4096;
+
+/// What a frame drew, for reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TerrainFrame {
+    /// `"clipmap"`, `"cdlod"` or `"tessellated"`.
+    pub mode: &'static str,
+    /// Triangles drawn.
+    pub triangles: u64,
+    /// Distinct vertices drawn.
+    pub vertices: u64,
+    /// The largest screen-space error of the drawn mesh in pixels, where the mode measures it
+    /// (CDLOD over a map, the tessellation).
+    pub max_screen_error_px: Option<f32>,
+}
+
+/// The view of one frame.
+#[derive(Debug, Clone, Copy)]
+pub struct TerrainView<'a> {
+    /// What is drawn: CDLOD draws a coarse, detail or atlas surface, the tessellation a coarse
+    /// or detail surface (of the map it was made of), the clipmap any.
+    pub surface: ClipmapSurface<'a>,
+    /// The camera.
+    pub camera: &'a Camera,
+    /// Lighting and colours.
+    pub style: &'a TerrainStyle,
+    /// The render target's size in pixels.
+    pub target_size: UVec2,
+}
+
+/// The quadtree of a map (updated on a worker) or of a streamed world (kept current by its
+/// owner through [`TerrainRenderer::streamed_tree_mut`]).
+enum CdlodSource {
+    Map(CdlodUpdater<u16>),
+    Streamed(CdlodTree),
+}
+
+impl CdlodSource {
+    fn tree(&self) -> &CdlodTree {
+        match self {
+            Self::Map(updater) => updater.tree(),
+            Self::Streamed(tree) => tree,
+        }
+    }
+}
+
+struct Clipmap {
+    layout: ClipmapLayout,
+    renderer: ClipmapRenderer,
+    /// Distinct vertices of each part of the layout's mesh.
+    part_vertices: Vec<u64>,
+    height_range: (f32, f32),
+}
+
+struct Cdlod {
+    source: CdlodSource,
+    renderer: CdlodRenderer,
+    mesh: CdlodMesh,
+    /// The last frame's selection with its camera, and the one before (the popping metric).
+    last: Option<(CdlodFrame, Vec3)>,
+    previous: Option<(CdlodFrame, Vec3)>,
+}
+
+struct Tessellated {
+    updater: TessUpdater<u16>,
+    gpu: GpuTessellation,
+    pass: TessellationPass,
+    renderer: TessRenderer,
+    /// The last two frames' views (camera, width, hfov) and probes (the popping metric).
+    last: Option<(Vec3, f32, f32)>,
+    previous: Option<(Vec3, f32, f32)>,
+    probes: Vec<Vec2>,
+    previous_probes: Vec<Vec2>,
+}
+
+enum Lod {
+    Clipmap(Clipmap),
+    Cdlod(Cdlod),
+    Tessellated(Box<Tessellated>),
+}
+
+/// Draws the terrain with one LOD mode (see the module docs).
+pub struct TerrainRenderer {
+    lod: Lod,
+}
+
+impl std::fmt::Debug for TerrainRenderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TerrainRenderer")
+            .field("mode", &self.mode())
+            .finish_non_exhaustive()
+    }
+}
+
+impl TerrainRenderer {
+    /// Geometry clipmaps of `layout`, placed each frame for heights within `height_range`
+    /// (metres: what the frustum culling assumes).
+    pub fn clipmap(
+        device: &wgpu::Device,
+        target: &TargetFormat,
+        layout: ClipmapLayout,
+        height_range: (f32, f32),
+    ) -> Result<Self, GpuError> {
+        let renderer = ClipmapRenderer::new(device, target, &layout)?;
+        let mesh = layout.mesh();
+        let part_vertices = mesh
+            .parts
+            .iter()
+            .map(|p| {
+                let used: std::collections::HashSet<u32> = mesh.indices
+                    [p.indices.start as usize..p.indices.end as usize]
+                    .iter()
+                    .copied()
+                    .collect();
+                used.len() as u64
+            })
+            .collect();
+        Ok(Self {
+            lod: Lod::Clipmap(Clipmap {
+                layout,
+                renderer,
+                part_vertices,
+                height_range,
+            }),
+        })
+    }
+
+    /// CDLOD over `map` with `config`, its quadtree updated on a worker thread.
+    pub fn cdlod(
+        device: &wgpu::Device,
+        target: &TargetFormat,
+        map: &CoarseMap,
+        config: CdlodConfig,
+    ) -> Result<Self, GpuError> {
+        let tree = CdlodTree::from_map(map, config)?;
+        let updater = CdlodUpdater::spawn(tree, map)?;
+        Self::with_cdlod(device, target, CdlodSource::Map(updater))
+    }
+
+    /// CDLOD over a streamed world: `tree` is built from the world's leaf bounds
+    /// (`CdlodTree::from_leaf_bounds`) and kept current by the caller
+    /// ([`TerrainRenderer::streamed_tree_mut`]).
+    pub fn cdlod_streamed(
+        device: &wgpu::Device,
+        target: &TargetFormat,
+        tree: CdlodTree,
+    ) -> Result<Self, GpuError> {
+        Self::with_cdlod(device, target, CdlodSource::Streamed(tree))
+    }
+
+    fn with_cdlod(
+        device: &wgpu::Device,
+        target: &TargetFormat,
+        source: CdlodSource,
+    ) -> Result<Self, GpuError> {
+        let mesh = CdlodMesh::new(source.tree().config().grid_size);
+        let renderer = CdlodRenderer::new(device, target, &mesh)?;
+        Ok(Self {
+            lod: Lod::Cdlod(Cdlod {
+                source,
+                renderer,
+                mesh,
+                last: None,
+                previous: None,
+            }),
+        })
+    }
+
+    /// Adaptive tessellation of `map` with `config` (its triangle bound capped at
+    /// [`TESS_CAPACITY`]), driven by the curvature density map when `density`; the hierarchy
+    /// and density map are updated on a worker thread and their changed rows copied to the GPU.
+    pub fn tessellated(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        target: &TargetFormat,
+        map: &CoarseMap,
+        config: TessConfig,
+        density: bool,
+    ) -> Result<Self, GpuError> {
+        let density = density
+            .then(|| DensityMap::from_map(map, DensityParams::default()))
+            .transpose()?;
+        // The CPU reference selects within the GPU's capacity: a view that needs more
+        // triangles fails with a clear error instead of drawing holes.
+        let config = TessConfig {
+            max_triangles: config.max_triangles.min(TESS_CAPACITY as usize),
+            ..config
+        };
+        let hierarchy = TessHierarchy::from_map(map, density.as_ref(), config)?;
+        let gpu = GpuTessellation::new(device, queue, &hierarchy, config.max_triangles as u32)?;
+        Ok(Self {
+            lod: Lod::Tessellated(Box::new(Tessellated {
+                updater: TessUpdater::spawn(TessState { hierarchy, density }, map)?,
+                gpu,
+                pass: TessellationPass::new(device)?,
+                renderer: TessRenderer::new(device, target)?,
+                last: None,
+                previous: None,
+                probes: Vec::new(),
+                previous_probes: Vec::new(),
+            })),
+        })
+    }
+
+    /// `"clipmap"`, `"cdlod"` or `"tessellated"`.
+    pub fn mode(&self) -> &'static str {
+        match self.lod {
+            Lod::Clipmap(_) => "clipmap",
+            Lod::Cdlod(_) => "cdlod",
+            Lod::Tessellated(_) => "tessellated",
+        }
+    }
+
+    /// The streamed world's quadtree, when this renderer draws one with CDLOD.
+    pub fn streamed_tree_mut(&mut self) -> Option<&mut CdlodTree> {
+        match &mut self.lod {
+            Lod::Cdlod(Cdlod {
+                source: CdlodSource::Streamed(tree),
+                ..
+            }) => Some(tree),
+            _ => None,
+        }
+    }
+
+    /// The clipmap's layout, when this renderer is a clipmap.
+    pub fn clipmap_layout(&self) -> Option<&ClipmapLayout> {
+        match &self.lod {
+            Lod::Clipmap(c) => Some(&c.layout),
+            _ => None,
+        }
+    }
+
+    /// Leaves `region` to another renderer (the refined cells of a detail layer): see
+    /// [`ClipmapRenderer::exclude`]. Only the clipmap excludes.
+    pub fn exclude(&mut self, region: Option<(IVec2, IVec2)>) {
+        if let Lod::Clipmap(c) = &mut self.lod {
+            c.renderer.exclude(region);
+        }
+    }
+
+    /// Hands the rects of `map` whose heights changed (already in `map`) to the LOD data's
+    /// worker, and takes in what it has finished: the tessellation's changed rows are copied
+    /// to the GPU here. The frame pays for copying the rects' rows, not for the update.
+    /// Nothing to do for the clipmap or a streamed quadtree.
+    pub fn heights_changed(
+        &mut self,
+        queue: &wgpu::Queue,
+        map: &CoarseMap,
+        rects: &[Rect],
+    ) -> Result<(), GpuError> {
+        match &mut self.lod {
+            Lod::Clipmap(_) => {}
+            Lod::Cdlod(c) => {
+                if let CdlodSource::Map(updater) = &mut c.source {
+                    updater.poll()?;
+                    for r in rects {
+                        updater.submit(map, *r)?;
+                    }
+                }
+            }
+            Lod::Tessellated(t) => {
+                let updater = &mut t.updater;
+                updater.poll()?;
+                let rows = updater.take_changes();
+                if !rows.is_empty() {
+                    t.gpu.upload(queue, &updater.state().hierarchy, &rows)?;
+                }
+                for r in rects {
+                    updater.submit(map, *r)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Waits until the worker has every change handed over, and copies the tessellation's
+    /// changed rows: the LOD then equals one built from the current heights. For the end of a
+    /// run and tests, never inside a frame.
+    pub fn flush(&mut self, queue: &wgpu::Queue) -> Result<(), GpuError> {
+        match &mut self.lod {
+            Lod::Clipmap(_) => {}
+            Lod::Cdlod(c) => {
+                if let CdlodSource::Map(updater) = &mut c.source {
+                    updater.flush()?;
+                }
+            }
+            Lod::Tessellated(t) => {
+                t.updater.flush()?;
+                let rows = t.updater.take_changes();
+                if !rows.is_empty() {
+                    t.gpu.upload(queue, &t.updater.state().hierarchy, &rows)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The tessellation's GPU output (what the last prepared frame's compute pass writes),
+    /// when this renderer tessellates.
+    pub fn tessellation(&self) -> Option<&GpuTessellation> {
+        match &self.lod {
+            Lod::Tessellated(t) => Some(&t.gpu),
+            _ => None,
+        }
+    }
+
+    /// Selects this frame's geometry for `view` and writes what [`TerrainRenderer::draw`]
+    /// draws; the tessellation's compute pass is recorded into `encoder` (submit it with, or
+    /// before, the pass that draws). Returns what the frame draws; the tessellation's figures
+    /// come from its CPU reference selection (the same triangles as the GPU's), which costs
+    /// CPU time.
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        view: &TerrainView<'_>,
+    ) -> Result<TerrainFrame, GpuError> {
+        let TerrainView {
+            surface,
+            camera,
+            style,
+            target_size,
+        } = *view;
+        let size = target_size.as_vec2();
+        let aspect = size.x / size.y.max(1.0);
+        let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
+        let lod_view = lod_view(camera, target_size, &frustum);
+        match &mut self.lod {
+            Lod::Clipmap(c) => {
+                let texel_size = match surface {
+                    ClipmapSurface::Atlas { atlas } => atlas.config().world.texel_size,
+                    ClipmapSurface::Coarse { map, .. } | ClipmapSurface::Detail { map, .. } => {
+                        map.texel_size()
+                    }
+                    ClipmapSurface::Granular { map, .. } => map.texel_size(),
+                };
+                let eye = Vec2::new(camera.position.x, camera.position.z);
+                let frame = c
+                    .layout
+                    .place(eye, texel_size, c.height_range, Some(&frustum))?;
+                c.renderer.prepare(
+                    device,
+                    queue,
+                    &ClipmapView {
+                        surface,
+                        frame: &frame,
+                        camera,
+                        style,
+                        target_size,
+                    },
+                )?;
+                let vertices = frame
+                    .draws
+                    .iter()
+                    .filter_map(|d| {
+                        let part = c
+                            .layout
+                            .mesh()
+                            .parts
+                            .iter()
+                            .position(|p| p.kind == d.part)?;
+                        c.part_vertices.get(part).copied()
+                    })
+                    .sum();
+                Ok(TerrainFrame {
+                    mode: "clipmap",
+                    triangles: frame.triangle_count(c.layout.mesh()),
+                    vertices,
+                    max_screen_error_px: None,
+                })
+            }
+            Lod::Cdlod(c) => {
+                let tree = c.source.tree();
+                let frame = tree.select(&lod_view)?;
+                // A streamed world's tree knows its errors only as height spans.
+                let max_screen_error_px = match c.source {
+                    CdlodSource::Streamed(_) => None,
+                    CdlodSource::Map(_) => Some(tree.max_screen_error_px(&frame, &lod_view)),
+                };
+                let draw = CdlodDraw {
+                    surface,
+                    frame: &frame,
+                    camera,
+                    style,
+                    target_size,
+                };
+                c.renderer.prepare(device, queue, &draw)?;
+                let stats = TerrainFrame {
+                    mode: "cdlod",
+                    triangles: frame.triangle_count(&c.mesh),
+                    vertices: frame.vertex_count(&c.mesh),
+                    max_screen_error_px,
+                };
+                c.previous = c.last.replace((frame, camera.position));
+                Ok(stats)
+            }
+            Lod::Tessellated(t) => {
+                let hierarchy = &t.updater.state().hierarchy;
+                // The CPU reference first: a view beyond the output's capacity fails before
+                // anything is recorded.
+                let frame = hierarchy.select(&lod_view)?;
+                let max_screen_error_px = hierarchy.max_screen_error_px(&frame, &lod_view);
+                t.pass
+                    .encode(device, queue, encoder, &t.gpu, hierarchy, &lod_view)?;
+                let draw = TessDraw {
+                    surface,
+                    camera,
+                    style,
+                    target_size,
+                };
+                t.renderer.prepare(device, queue, &draw)?;
+                t.previous = t.last.replace((camera.position, size.x, lod_view.hfov));
+                let stride = (frame.triangles.len() / JUMP_PROBES).max(1);
+                let probes = frame
+                    .triangles
+                    .iter()
+                    .step_by(stride)
+                    .map(|t| Vec2::from(t[2].texel))
+                    .collect();
+                t.previous_probes = std::mem::replace(&mut t.probes, probes);
+                Ok(TerrainFrame {
+                    mode: "tessellated",
+                    triangles: frame.triangle_count(),
+                    vertices: frame.vertex_count(),
+                    max_screen_error_px: Some(max_screen_error_px),
+                })
+            }
+        }
+    }
+
+    /// Draws what [`TerrainRenderer::prepare`] wrote into `pass`.
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
+        match &self.lod {
+            Lod::Clipmap(c) => c.renderer.draw(pass),
+            Lod::Cdlod(c) => c.renderer.draw(pass),
+            Lod::Tessellated(t) => t.renderer.draw(pass, &t.gpu),
+        }
+    }
+
+    /// Lets the tessellation's per-frame buffers be reused once the frame's work was
+    /// submitted (see [`TessellationPass::recall`]); nothing for the other modes.
+    pub fn recall(&mut self) {
+        if let Lod::Tessellated(t) = &mut self.lod {
+            t.pass.recall();
+        }
+    }
+
+    /// The popping metric of the last frame against the one before, in pixels: the largest
+    /// screen-space jump of the drawn surface between the two frames' LOD decisions, both
+    /// evaluated on `map` and projected with `camera` on a `target_size` target, so only a
+    /// change of the mesh counts. `None` for the clipmap, a streamed quadtree, or before two
+    /// frames.
+    pub fn popping_px(&self, map: &CoarseMap, camera: &Camera, target_size: UVec2) -> Option<f32> {
+        let size = target_size.as_vec2();
+        let view_proj = camera.view_proj_world(size.x / size.y.max(1.0));
+        match &self.lod {
+            Lod::Clipmap(_) => None,
+            Lod::Cdlod(c) => {
+                let CdlodSource::Map(_) = c.source else {
+                    return None;
+                };
+                let ((now, eye), (then, then_eye)) = (c.last.as_ref()?, c.previous.as_ref()?);
+                let view = PoppingView {
+                    forward: camera.forward,
+                    view_proj,
+                    target: size,
+                };
+                Some(
+                    c.source
+                        .tree()
+                        .popping_px(map, (now, *eye), (then, *then_eye), &view),
+                )
+            }
+            Lod::Tessellated(t) => {
+                let ((eye, width, hfov), (then_eye, then_width, then_hfov)) =
+                    (t.last?, t.previous?);
+                let view = |camera, viewport_width, hfov| CdlodView {
+                    camera,
+                    frustum: None,
+                    viewport_width,
+                    hfov,
+                };
+                let probes: Vec<Vec2> =
+                    t.probes.iter().chain(&t.previous_probes).copied().collect();
+                Some(t.updater.state().hierarchy.max_height_jump(
+                    &view(eye, width, hfov),
+                    &view(then_eye, then_width, then_hfov),
+                    &probes,
+                    view_proj,
+                    size,
+                ))
+            }
+        }
+    }
+}
+
+/// What CDLOD's and the tessellation's decisions are made for: the camera, its frustum and the
+/// target's width and horizontal field of view.
+fn lod_view<'a>(camera: &Camera, size: UVec2, frustum: &'a Frustum) -> CdlodView<'a> {
+    let aspect = size.x as f32 / size.y.max(1) as f32;
+    CdlodView {
+        camera: camera.position,
+        frustum: Some(frustum),
+        viewport_width: size.x as f32,
+        hfov: 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan(),
+    }
+}
