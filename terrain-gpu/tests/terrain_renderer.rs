@@ -72,9 +72,10 @@ fn render(
     };
     let target = OffscreenTarget::new(device, SIZE).unwrap();
     let mut encoder = device.create_command_encoder(&Default::default());
-    let frame = renderer
+    renderer
         .prepare(device, queue, &mut encoder, &view)
         .unwrap();
+    let frame = renderer.figures(&view).unwrap();
     {
         let mut pass = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
         renderer.draw(&mut pass);

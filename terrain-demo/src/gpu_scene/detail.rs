@@ -104,7 +104,7 @@ impl GpuScene {
             shading.parallax_steps = 0;
             Some(RefinedGeometry {
                 pass: RefinePass::new(device, view.half_cells())?,
-                renderer: RefineRenderer::new(device, self.renderer.target())?,
+                renderer: RefineRenderer::new(device, &self.target.format())?,
                 radius_m,
                 last_count: 0,
             })

@@ -12,16 +12,12 @@ use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_core::{FixedPointMap, Rect, StampPlacement};
 use terrain_gpu::granular::{GpuGranularNormals, GpuGranularStep, GranularNormalsPass, VolumePass};
 use terrain_gpu::{
-    CdlodDraw, CdlodRenderer, ClipmapRenderer, ClipmapSurface, ClipmapView, DetailShading,
-    GpuContext, GpuDerivativeMap, GpuDetailTiles, GpuHeightMap, GpuRegionSource, GpuStamp,
-    GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget, RefineDraw, RefinePass,
-    RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp, StampPass,
-    TerrainStyle, TessDraw, TessRenderer, TessellationPass,
+    ClipmapSurface, DetailShading, GpuContext, GpuDerivativeMap, GpuDetailTiles, GpuHeightMap,
+    GpuRegionSource, GpuStamp, GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget,
+    RefineDraw, RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp,
+    StampPass, TerrainRenderer, TerrainStyle, TerrainView,
 };
-use terrain_lod::{
-    CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodUpdater, CdlodView, ClipmapLayout,
-    DensityMap, DensityParams, Frustum, TessConfig, TessHierarchy, TessState, TessUpdater,
-};
+use terrain_lod::{CdlodConfig, CdlodTree, ClipmapLayout, TessConfig};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 
 use crate::frame_plan::{FramePlan, StampKind};
@@ -33,7 +29,6 @@ mod lod;
 
 pub use detail::{DETAIL_SLOTS, SPILL_WINDOW_TEXELS};
 use detail::{DetailScene, RefinedGeometry};
-use lod::{CdlodScene, TessScene, render_cdlod, render_tessellated};
 
 pub use terrain_gpu::Camera;
 
@@ -51,8 +46,8 @@ pub struct GpuScene {
     stamps: StampPass,
     normal_pass: NormalPass,
     sky: SkyPass,
-    renderer: ClipmapRenderer,
-    layout: ClipmapLayout,
+    /// The terrain in its LOD mode (the clipmap unless `--lod` says otherwise).
+    terrain: TerrainRenderer,
     target: OffscreenTarget,
     footprint: Option<GpuTextureStamp>,
     /// The shockwave's change of the frame, rewritten in place each frame.
@@ -70,17 +65,11 @@ pub struct GpuScene {
     tile_readback: Option<RegionReadback>,
     /// The texture of the last texture stamp on an atlas tile, rewritten in place.
     tile_texture: Option<GpuTextureStamp>,
-    /// CDLOD instead of the clipmap (`--lod cdlod`), for the coarse-map.
-    cdlod: Option<CdlodScene>,
-    /// Adaptive tessellation instead of the clipmap (`--lod tessellated`), for the coarse-map.
-    tess: Option<TessScene>,
     /// The detail layer's tiles (`--detail parallax|refine`), drawn with the coarse-map.
     detail: Option<DetailScene>,
     /// `--detail refine`: the refined geometry near the camera (the clipmap shades the rest
     /// with the detail normals, no parallax).
     refined: Option<RefinedGeometry>,
-    /// Vertices of each part of the clipmap's shared mesh, by part index.
-    clipmap_part_vertices: Vec<u64>,
     /// Frames rendered so far.
     frames: u32,
     /// Fault injection for the device-loss test: destroy the device before rendering this
@@ -300,9 +289,7 @@ impl GpuScene {
             stamps: StampPass::new(device)?,
             normal_pass,
             sky: SkyPass::new(device, &target.format())?,
-            renderer: ClipmapRenderer::new(device, &target.format(), &layout)?,
-            clipmap_part_vertices: part_vertices(&layout),
-            layout,
+            terrain: TerrainRenderer::clipmap(device, &target.format(), layout, (lo, hi))?,
             target,
             footprint: None,
             shock: None,
@@ -313,8 +300,6 @@ impl GpuScene {
             atlas: None,
             tile_readback: None,
             tile_texture: None,
-            cdlod: None,
-            tess: None,
             detail: None,
             refined: None,
             frames: 0,
@@ -362,9 +347,11 @@ impl GpuScene {
 
     /// How far the clipmap reaches from the camera, metres: its coarsest level's half side.
     pub fn clipmap_reach_m(&self) -> f32 {
-        (CLIPMAP_N - 1) as f32 / 2.0
-            * (1u32 << (self.layout.levels() - 1)) as f32
-            * self.map.texel_size()
+        let levels = self
+            .terrain
+            .clipmap_layout()
+            .map_or(CLIPMAP_LEVELS, ClipmapLayout::levels);
+        (CLIPMAP_N - 1) as f32 / 2.0 * (1u32 << (levels - 1)) as f32 * self.map.texel_size()
     }
 
     /// Makes the clipmap reach `radius` metres around the camera (its coarsest level's half
@@ -377,11 +364,11 @@ impl GpuScene {
             self.map.texel_size(),
             CLIPMAP_LEVELS,
         );
-        if levels != self.layout.levels() {
+        let now = self.terrain.clipmap_layout().map(ClipmapLayout::levels);
+        if now.is_some_and(|n| n != levels) {
             let layout = ClipmapLayout::new(CLIPMAP_N, levels)?;
-            self.renderer = ClipmapRenderer::new(&self.ctx.device, &self.target.format(), &layout)?;
-            self.clipmap_part_vertices = part_vertices(&layout);
-            self.layout = layout;
+            let (device, format) = (&self.ctx.device, self.target.format());
+            self.terrain = TerrainRenderer::clipmap(device, &format, layout, self.height_range)?;
         }
         Ok(())
     }
@@ -420,6 +407,7 @@ impl GpuScene {
                 enc.to_metres(f64::from(lo)) - 1.0,
                 enc.to_metres(f64::from(hi)) + 2.0,
             );
+            self.terrain.set_height_range(self.height_range);
         }
         self.granular = Some(GranularScene {
             step: GpuGranularStep::new(device, params)?,
@@ -514,6 +502,7 @@ impl GpuScene {
         let atlas = GpuTileAtlas::new(&self.ctx.device, &self.ctx.queue, config)?;
         let enc = config.world.encoding;
         self.height_range = (enc.to_metres(0.0), enc.to_metres(f64::from(u16::MAX)));
+        self.terrain.set_height_range(self.height_range);
         self.atlas = Some(atlas);
         self.tile_readback = Some(RegionReadback::new(&self.ctx.device, TILE_READBACK_RING)?);
         Ok(())
@@ -792,87 +781,41 @@ impl GpuScene {
         // A lost device reports nothing for the work sent to it: stop here with the reason.
         self.ctx.check().context("rendering a frame")?;
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let size = self.target.size().as_vec2();
-        let aspect = size.x / size.y;
-        let t = std::time::Instant::now();
-        let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
-        // The texel size of the surface drawn (a streamed world's finest level).
-        let texel_size = match &self.atlas {
-            Some(atlas) => atlas.config().world.texel_size,
-            None => self.map.texel_size(),
-        };
-        let coarse = self.granular.is_none() && self.atlas.is_none();
-        // CDLOD draws the coarse-map or a streamed world's atlas; tessellation the coarse-map.
-        let cdlod_surface = coarse || self.atlas.is_some();
-        if (coarse && self.tess.is_some()) || (cdlod_surface && self.cdlod.is_some()) {
-            // A streamed world's atlas, else the coarse-map with its detail layer if any.
-            let surface = match (self.atlas.as_ref(), self.detail.as_ref()) {
-                (Some(atlas), _) => ClipmapSurface::Atlas { atlas },
-                (None, Some(d)) => ClipmapSurface::Detail {
-                    map: &self.map,
-                    normals: &self.normals,
-                    detail: &d.tiles,
-                    shading: &d.shading,
-                },
-                (None, None) => ClipmapSurface::Coarse {
-                    map: &self.map,
-                    normals: &self.normals,
-                },
-            };
-            let gpu = FrameGpu {
-                ctx: &self.ctx,
-                target: &mut self.target,
-                sky: &mut self.sky,
-                timer: &self.timer,
-                surface,
-                style: &self.style,
-            };
-            if let Some(c) = &mut self.tess {
-                return render_tessellated(c, gpu, camera, frustum, t, timings);
-            }
-            if let Some(c) = &mut self.cdlod {
-                return render_cdlod(c, gpu, camera, frustum, t, timings);
-            }
-        }
-        let placement = self.layout.place(
-            Vec2::new(camera.position.x, camera.position.z),
-            texel_size,
-            self.height_range,
-            Some(&frustum),
-        )?;
-        timings.add(Step::Lod, crate::timings::ms_since(t));
-        let view_proj = camera.view_proj_relative(aspect);
-        let sky_colors = SkyColors::default();
-        // A streamed world is drawn from its atlas even while a granular window steps on the
-        // GPU: the window's areas reach the atlas through the tiles they are handed back to.
-        let surface = match (&self.granular, &self.atlas) {
-            (_, Some(atlas)) => ClipmapSurface::Atlas { atlas },
-            (Some(g), None) => ClipmapSurface::Granular {
+        let size = self.target.size();
+        let aspect = size.x as f32 / size.y as f32;
+        // A streamed world is drawn from its atlas (even while a granular window steps on the
+        // GPU: the window's areas reach the atlas through the tiles they are handed back to),
+        // else the granular map, else the coarse-map with its detail layer if any.
+        let surface = match (&self.atlas, &self.granular, &self.detail) {
+            (Some(atlas), ..) => ClipmapSurface::Atlas { atlas },
+            (None, Some(g), _) => ClipmapSurface::Granular {
                 map: &g.map,
                 surface: g.normals.buffer(),
             },
-            (None, None) => match &self.detail {
-                Some(d) => ClipmapSurface::Detail {
-                    map: &self.map,
-                    normals: &self.normals,
-                    detail: &d.tiles,
-                    shading: &d.shading,
-                },
-                None => ClipmapSurface::Coarse {
-                    map: &self.map,
-                    normals: &self.normals,
-                },
+            (None, None, Some(d)) => ClipmapSurface::Detail {
+                map: &self.map,
+                normals: &self.normals,
+                detail: &d.tiles,
+                shading: &d.shading,
+            },
+            (None, None, None) => ClipmapSurface::Coarse {
+                map: &self.map,
+                normals: &self.normals,
             },
         };
-        let view = ClipmapView {
+        let view = TerrainView {
             surface,
-            frame: &placement,
             camera,
             style: &self.style,
-            target_size: self.target.size(),
+            target_size: size,
         };
+        let mut drawn = None;
         let timing = self.timer.time(device, queue, |encoder| {
-            self.sky.prepare(queue, view_proj, &sky_colors)?;
+            self.sky.prepare(
+                queue,
+                camera.view_proj_relative(aspect),
+                &SkyColors::default(),
+            )?;
             // `--detail refine`: the cells near the camera refined first, the clipmap leaving
             // them out.
             let refined = match (self.refined.as_mut(), self.detail.as_ref()) {
@@ -885,44 +828,38 @@ impl GpuScene {
                         shading: &d.shading,
                         camera,
                         style: &self.style,
-                        target_size: self.target.size(),
+                        target_size: size,
                     };
                     let v = r.pass.encode(device, queue, encoder, &draw)?;
                     // The report's count rides this submit back (no wait of its own).
                     r.pass.request_count(encoder)?;
                     r.renderer.prepare(device, queue, &draw, &r.pass)?;
-                    self.renderer.exclude(Some(v.region()));
+                    self.terrain.exclude(Some(v.region()));
                     Some(&*r)
                 }
                 _ => None,
             };
-            self.renderer.prepare(device, queue, &view)?;
+            // The LOD's selection is CPU work: timed as `lod`, not in the GPU's `render`; the
+            // report's figures (the tessellation's CPU reference) are not timed.
+            let t = std::time::Instant::now();
+            self.terrain.prepare(device, queue, encoder, &view)?;
+            timings.add(Step::Lod, crate::timings::ms_since(t));
+            drawn = Some(self.terrain.figures(&view)?);
             let mut pass = self.target.begin_pass(encoder, wgpu::Color::BLACK);
             self.sky.draw(&mut pass);
-            self.renderer.draw(&mut pass);
+            self.terrain.draw(&mut pass);
             if let Some(r) = refined {
                 r.renderer.draw(&mut pass, &r.pass);
             }
             Ok(())
         })?;
+        self.terrain.recall();
         let t = std::time::Instant::now();
         let image = self.target.read_rgba8(device, queue)?;
         self.ctx.check()?;
         timings.add(Step::Capture, crate::timings::ms_since(t));
         record(timings, Step::Render, timing);
-        let vertices = placement
-            .draws
-            .iter()
-            .filter_map(|d| {
-                let part = self
-                    .layout
-                    .mesh()
-                    .parts
-                    .iter()
-                    .position(|p| p.kind == d.part)?;
-                self.clipmap_part_vertices.get(part).copied()
-            })
-            .sum();
+        let drawn = drawn.context("the frame was not prepared")?;
         // The refined cells are drawn instead of the clipmap's (which still counts them).
         // The capture has waited for the frame, so its count has usually arrived; else the
         // last one that did.
@@ -937,56 +874,12 @@ impl GpuScene {
         };
         Ok(RenderedFrame {
             image,
-            triangles: placement.triangle_count(self.layout.mesh()) + refined,
+            triangles: drawn.triangles + refined,
             lod: LodStats {
-                mode: "clipmap",
-                vertices,
-                max_screen_error_px: None,
+                mode: drawn.mode,
+                vertices: drawn.vertices,
+                max_screen_error_px: drawn.max_screen_error_px,
             },
         })
     }
-}
-
-/// The distinct vertices each part of a clipmap layout's mesh draws.
-fn part_vertices(layout: &ClipmapLayout) -> Vec<u64> {
-    let mesh = layout.mesh();
-    mesh.parts
-        .iter()
-        .map(|p| {
-            let used: std::collections::HashSet<u32> = mesh.indices
-                [p.indices.start as usize..p.indices.end as usize]
-                .iter()
-                .copied()
-                .collect();
-            used.len() as u64
-        })
-        .collect()
-}
-
-/// The scene's parts a CDLOD or tessellated frame is drawn with.
-struct FrameGpu<'a> {
-    ctx: &'a GpuContext,
-    target: &'a mut OffscreenTarget,
-    sky: &'a mut SkyPass,
-    timer: &'a GpuTimer,
-    /// What the LOD mode draws: a streamed world's atlas, or the coarse-map with or without
-    /// its detail layer.
-    surface: ClipmapSurface<'a>,
-    style: &'a TerrainStyle,
-}
-
-/// Reads the rendered frame back (timed as `capture`) and records its GPU `timing` as
-/// `render`.
-fn capture(
-    ctx: &GpuContext,
-    target: &mut OffscreenTarget,
-    timing: GpuTiming,
-    timings: &mut Timings,
-) -> Result<Grid<[u8; 4]>> {
-    let t = std::time::Instant::now();
-    let image = target.read_rgba8(&ctx.device, &ctx.queue)?;
-    ctx.check()?;
-    timings.add(Step::Capture, crate::timings::ms_since(t));
-    record(timings, Step::Render, timing);
-    Ok(image)
 }

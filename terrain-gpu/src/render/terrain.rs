@@ -80,6 +80,8 @@ struct Clipmap {
     /// Distinct vertices of each part of the layout's mesh.
     part_vertices: Vec<u64>,
     height_range: (f32, f32),
+    /// The figures of the frame last prepared.
+    last: Option<TerrainFrame>,
 }
 
 struct Cdlod {
@@ -151,6 +153,7 @@ impl TerrainRenderer {
                 renderer,
                 part_vertices,
                 height_range,
+                last: None,
             }),
         })
     }
@@ -260,6 +263,14 @@ impl TerrainRenderer {
         }
     }
 
+    /// The heights (metres) the clipmap's culling boxes span from now on (after the surface
+    /// changed); nothing for the other modes, whose bounds follow the heights.
+    pub fn set_height_range(&mut self, range: (f32, f32)) {
+        if let Lod::Clipmap(c) = &mut self.lod {
+            c.height_range = range;
+        }
+    }
+
     /// Leaves `region` to another renderer (the refined cells of a detail layer): see
     /// [`ClipmapRenderer::exclude`]. Only the clipmap excludes.
     pub fn exclude(&mut self, region: Option<(IVec2, IVec2)>) {
@@ -336,25 +347,22 @@ impl TerrainRenderer {
 
     /// Selects this frame's geometry for `view` and writes what [`TerrainRenderer::draw`]
     /// draws; the tessellation's compute pass is recorded into `encoder` (submit it with, or
-    /// before, the pass that draws). Returns what the frame draws; the tessellation's figures
-    /// come from its CPU reference selection (the same triangles as the GPU's), which costs
-    /// CPU time.
+    /// before, the pass that draws). What a frame needs and no more: the figures a report
+    /// wants are [`TerrainRenderer::figures`].
     pub fn prepare(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         view: &TerrainView<'_>,
-    ) -> Result<TerrainFrame, GpuError> {
+    ) -> Result<(), GpuError> {
         let TerrainView {
             surface,
             camera,
             style,
             target_size,
         } = *view;
-        let size = target_size.as_vec2();
-        let aspect = size.x / size.y.max(1.0);
-        let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
+        let frustum = frustum(camera, target_size);
         let lod_view = lod_view(camera, target_size, &frustum);
         match &mut self.lod {
             Lod::Clipmap(c) => {
@@ -380,6 +388,7 @@ impl TerrainRenderer {
                         target_size,
                     },
                 )?;
+                // Counting what was placed is cheap: kept for `figures`.
                 let vertices = frame
                     .draws
                     .iter()
@@ -393,21 +402,15 @@ impl TerrainRenderer {
                         c.part_vertices.get(part).copied()
                     })
                     .sum();
-                Ok(TerrainFrame {
+                c.last = Some(TerrainFrame {
                     mode: "clipmap",
                     triangles: frame.triangle_count(c.layout.mesh()),
                     vertices,
                     max_screen_error_px: None,
-                })
+                });
             }
             Lod::Cdlod(c) => {
-                let tree = c.source.tree();
-                let frame = tree.select(&lod_view)?;
-                // A streamed world's tree knows its errors only as height spans.
-                let max_screen_error_px = match c.source {
-                    CdlodSource::Streamed(_) => None,
-                    CdlodSource::Map(_) => Some(tree.max_screen_error_px(&frame, &lod_view)),
-                };
+                let frame = c.source.tree().select(&lod_view)?;
                 let draw = CdlodDraw {
                     surface,
                     frame: &frame,
@@ -416,21 +419,10 @@ impl TerrainRenderer {
                     target_size,
                 };
                 c.renderer.prepare(device, queue, &draw)?;
-                let stats = TerrainFrame {
-                    mode: "cdlod",
-                    triangles: frame.triangle_count(&c.mesh),
-                    vertices: frame.vertex_count(&c.mesh),
-                    max_screen_error_px,
-                };
                 c.previous = c.last.replace((frame, camera.position));
-                Ok(stats)
             }
             Lod::Tessellated(t) => {
                 let hierarchy = &t.updater.state().hierarchy;
-                // The CPU reference first: a view beyond the output's capacity fails before
-                // anything is recorded.
-                let frame = hierarchy.select(&lod_view)?;
-                let max_screen_error_px = hierarchy.max_screen_error_px(&frame, &lod_view);
                 t.pass
                     .encode(device, queue, encoder, &t.gpu, hierarchy, &lod_view)?;
                 let draw = TessDraw {
@@ -440,7 +432,45 @@ impl TerrainRenderer {
                     target_size,
                 };
                 t.renderer.prepare(device, queue, &draw)?;
-                t.previous = t.last.replace((camera.position, size.x, lod_view.hfov));
+                let width = target_size.x as f32;
+                t.previous = t.last.replace((camera.position, width, lod_view.hfov));
+            }
+        }
+        Ok(())
+    }
+
+    /// What the frame last prepared for `view` draws, for reports. CDLOD's screen error and
+    /// the tessellation's figures come from terrain-lod's CPU reference (the tessellation's
+    /// triangles are the GPU's), which costs CPU time a frame need not spend; it also fails
+    /// when that frame needs more triangles than the tessellation's output holds (the GPU
+    /// then drops the rest). The tessellation's popping metric probes the vertices found here.
+    pub fn figures(&mut self, view: &TerrainView<'_>) -> Result<TerrainFrame, GpuError> {
+        let frustum = frustum(view.camera, view.target_size);
+        let lod_view = lod_view(view.camera, view.target_size, &frustum);
+        let not_prepared = GpuError::Unsupported {
+            what: "TerrainRenderer::figures",
+            reason: "no frame was prepared",
+        };
+        match &mut self.lod {
+            Lod::Clipmap(c) => c.last.ok_or(not_prepared),
+            Lod::Cdlod(c) => {
+                let (frame, _) = c.last.as_ref().ok_or(not_prepared)?;
+                let tree = c.source.tree();
+                Ok(TerrainFrame {
+                    mode: "cdlod",
+                    triangles: frame.triangle_count(&c.mesh),
+                    vertices: frame.vertex_count(&c.mesh),
+                    // A streamed world's tree knows its errors only as height spans.
+                    max_screen_error_px: match c.source {
+                        CdlodSource::Streamed(_) => None,
+                        CdlodSource::Map(_) => Some(tree.max_screen_error_px(frame, &lod_view)),
+                    },
+                })
+            }
+            Lod::Tessellated(t) => {
+                let hierarchy = &t.updater.state().hierarchy;
+                let frame = hierarchy.select(&lod_view)?;
+                let max_screen_error_px = hierarchy.max_screen_error_px(&frame, &lod_view);
                 let stride = (frame.triangles.len() / JUMP_PROBES).max(1);
                 let probes = frame
                     .triangles
@@ -523,6 +553,12 @@ impl TerrainRenderer {
             }
         }
     }
+}
+
+/// The camera's frustum on a target of `size` pixels.
+fn frustum(camera: &Camera, size: UVec2) -> Frustum {
+    let aspect = size.x as f32 / size.y.max(1) as f32;
+    Frustum::from_view_proj(camera.view_proj_world(aspect))
 }
 
 /// What CDLOD's and the tessellation's decisions are made for: the camera, its frustum and the
