@@ -8,7 +8,7 @@
 //! | 0..4   | magic `b"TCTL"`                                                        |
 //! | 4      | version, 1                                                             |
 //! | 5      | bits per sample: 16 (heights) or 8 (detail)                            |
-//! | 6      | codec: 0 raw samples, 1 LZ4 block of the row-delta filtered samples     |
+//! | 6      | codec: 0 raw samples, 1 LZ4 block (of filtered samples for 16 bits)    |
 //! | 7      | flags, 0 (none defined; a set bit is refused)                          |
 //! | 8..12  | width in samples (u32)                                                 |
 //! | 12..16 | height in samples (u32)                                                |
@@ -17,15 +17,17 @@
 //! | 24..   | payload                                                                |
 //!
 //! Raw payload: the samples row-major, little-endian. LZ4 payload: an LZ4 block that
-//! decompresses to exactly `width * height * bits / 8` bytes: per row, each sample minus the
-//! one to its left (the first minus 0), wrapping, zigzag-coded; 16-bit samples as two planes,
-//! every low byte then every high byte (smooth terrain's deltas are small, so the high plane is
-//! nearly all zero and the low plane has few distinct values).
+//! decompresses to exactly `width * height * bits / 8` bytes. 8-bit samples go in as they
+//! are. 16-bit samples are filtered first: per row, each sample minus the one to its left (the
+//! first minus 0), wrapping, zigzag-coded, as two planes, every low byte then every high byte
+//! (smooth terrain's deltas are small, so the high plane is nearly all zero).
 //!
-//! Heights are written raw: a 256^2 tile loads in about the time of reading its bytes (the
-//! measured choice, docs/MEASUREMENTS.md), where LZ4 halves the file but adds its decompression
-//! and the filter. Detail tiles are written with LZ4: they are mostly the zero deformation, so
-//! a 2048^2 tile of a few footprints shrinks from 4 MiB to a few KiB.
+//! Measured choices (docs/MEASUREMENTS.md): heights are written raw, since a 256^2 tile then
+//! loads in about 1.3x the time of reading and copying its bytes, while LZ4 saved nothing on
+//! the procedural world's noisy 256^2 tiles (25 % at 2048^2) and took 4x as long to load.
+//! Detail tiles are written with LZ4: they are mostly the zero deformation, so a 2048^2 tile
+//! with 40 footprints shrinks from 4 MiB to 3 % and decodes in about 1 ms; a delta filter
+//! saved another 15 % of the size but made decoding 4x slower.
 
 use crate::tile::{Layer, TileData};
 use terrain_core::Grid;
@@ -188,12 +190,9 @@ pub fn encode_u8(grid: &Grid<u8>, codec: TileCodec) -> Vec<u8> {
         TileCodec::Raw => finish(8, codec, grid.width(), grid.height(), |out| {
             out.extend_from_slice(samples)
         }),
-        TileCodec::Lz4 => {
-            let filtered = filter_u8(samples, grid.width() as usize);
-            finish(8, codec, grid.width(), grid.height(), |out| {
-                compress_into(&filtered, out)
-            })
-        }
+        TileCodec::Lz4 => finish(8, codec, grid.width(), grid.height(), |out| {
+            compress_into(samples, out)
+        }),
     }
 }
 
@@ -322,9 +321,7 @@ pub fn decode(bytes: &[u8], layer: Layer, side: u32) -> Result<TileData, TileFil
             TileData::U16(grid(side, unfilter_u16(&planes, side as usize)))
         }
         (Layer::Detail, TileCodec::Lz4) => {
-            let mut filtered = decompress(payload, n).map_err(|r| bad(n, r))?;
-            unfilter_u8(&mut filtered, side as usize);
-            TileData::U8(grid(side, filtered))
+            TileData::U8(grid(side, decompress(payload, n).map_err(|r| bad(n, r))?))
         }
     })
 }
@@ -353,15 +350,6 @@ fn zigzag16(d: u16) -> u16 {
 }
 
 fn unzigzag16(z: u16) -> u16 {
-    (z >> 1) ^ (z & 1).wrapping_neg()
-}
-
-fn zigzag8(d: u8) -> u8 {
-    let s = d as i8;
-    ((s << 1) ^ (s >> 7)) as u8
-}
-
-fn unzigzag8(z: u8) -> u8 {
     (z >> 1) ^ (z & 1).wrapping_neg()
 }
 
@@ -400,29 +388,6 @@ fn unfilter_u16(planes: &[u8], width: usize) -> Vec<u16> {
     out
 }
 
-fn filter_u8(samples: &[u8], width: usize) -> Vec<u8> {
-    let mut out = Vec::with_capacity(samples.len());
-    for row in samples.chunks_exact(width.max(1)) {
-        let mut prev = 0u8;
-        out.extend(row.iter().map(|&v| {
-            let z = zigzag8(v.wrapping_sub(prev));
-            prev = v;
-            z
-        }));
-    }
-    out
-}
-
-fn unfilter_u8(filtered: &mut [u8], width: usize) {
-    for row in filtered.chunks_exact_mut(width.max(1)) {
-        let mut prev = 0u8;
-        for v in row {
-            prev = prev.wrapping_add(unzigzag8(*v));
-            *v = prev;
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -439,9 +404,6 @@ mod tests {
     fn zigzag_is_invertible() {
         for v in 0..=u16::MAX {
             assert_eq!(unzigzag16(zigzag16(v)), v);
-        }
-        for v in 0..=u8::MAX {
-            assert_eq!(unzigzag8(zigzag8(v)), v);
         }
         assert_eq!(zigzag16(1u16.wrapping_neg()), 1);
         assert_eq!(zigzag16(1), 2);
