@@ -60,9 +60,10 @@ impl fmt::Display for TileId {
 /// Which map a tile belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Layer {
-    /// The u16 coarse-map pyramid (PNG16 files).
+    /// The u16 coarse-map pyramid (raw `.tile` files; PNG16 in version-1 worlds).
     Height,
-    /// The u8 detail-map tiles (PNG8 files, one level), Flower 2010, sec. 2.4.2.
+    /// The u8 detail-map tiles (one level, LZ4 `.tile` files; PNG8 in version-1 worlds),
+    /// Flower 2010, sec. 2.4.2.
     Detail,
 }
 

@@ -472,7 +472,7 @@ mod tests {
         // Writing the zero tile removes the file.
         assert_eq!(w.write_tile(Layer::Height, id, &a).unwrap(), 0);
         assert_eq!(w.read_tile(Layer::Height, id).unwrap(), TileRead::Zero);
-        // Detail tiles: PNG8, fill = zero deformation.
+        // Detail tiles: u8 (LZ4 .tile files), fill = zero deformation.
         let d = w.zero_tile(Layer::Detail).unwrap();
         assert_eq!(
             d.uniform_value(),
