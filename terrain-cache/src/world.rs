@@ -1,5 +1,5 @@
 //! A world on a store: [`World`] (manifest + [`TileStore`]), tile encode / decode (`.tile` files,
-//! [`tile_file`](crate::tile_file); PNG16 heights and PNG8 detail through `terrain_core::io` in
+//! [`tile_file`]; PNG16 heights and PNG8 detail through `terrain_core::io` in
 //! worlds of format version 1), the shared zero tile, and the per-level min/max side files
 //! ([`LevelBounds`]).
 
