@@ -353,7 +353,7 @@ impl Manifest {
     pub fn from_json(text: &str) -> Result<Self, CacheError> {
         let file: ManifestFile = serde_json::from_str(text).map_err(|e| CacheError::Manifest {
             key: MANIFEST_KEY.into(),
-            reason: e.to_string(),
+            reason: bounded(e.to_string()),
         })?;
         if !(OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&file.format_version) {
             return Err(CacheError::ManifestVersion {
@@ -365,6 +365,23 @@ impl Manifest {
         m.validate()?;
         Ok(m)
     }
+}
+
+/// The most bytes of a JSON error kept in [`CacheError::Manifest`]: serde_json quotes an
+/// unknown field's name, which the file makes as long as it likes (the decoder target
+/// `manifest` found a 2 kB message; a 64 KiB manifest would make one of 64 KiB).
+const MAX_REASON: usize = 240;
+
+/// `reason` cut to [`MAX_REASON`] bytes at a character boundary, saying how much was left out.
+fn bounded(reason: String) -> String {
+    if reason.len() <= MAX_REASON {
+        return reason;
+    }
+    let end = (0..=MAX_REASON)
+        .rev()
+        .find(|&i| reason.is_char_boundary(i))
+        .unwrap_or(0);
+    format!("{}... ({} more bytes)", &reason[..end], reason.len() - end)
 }
 
 /// The store key of a tile: `{layer}/{level:02x}/{y:04x}/{x:04x}.{tile}` (one folder per level,

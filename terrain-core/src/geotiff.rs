@@ -398,7 +398,9 @@ fn read_nodata<R: Read + Seek>(
         tiff::decoder::ifd::Value::Ascii(s) => s,
         other => {
             return Err(MapIoError::Corrupt {
-                reason: format!("the GDAL nodata tag (42113) is not text: {other:?}"),
+                reason: bounded(format!(
+                    "the GDAL nodata tag (42113) is not text: {other:?}"
+                )),
             });
         }
     };
@@ -411,7 +413,9 @@ fn read_nodata<R: Read + Seek>(
         .parse::<f64>()
         .map(Some)
         .map_err(|_| MapIoError::Corrupt {
-            reason: format!("the GDAL nodata tag (42113) holds `{trimmed}`, which is no number"),
+            reason: bounded(format!(
+                "the GDAL nodata tag (42113) holds `{trimmed}`, which is no number"
+            )),
         })
 }
 
@@ -563,6 +567,23 @@ fn decoded_name(d: &DecodingResult) -> &'static str {
     }
 }
 
+/// The most bytes of a reason that quotes the file (a tag's values, the TIFF decoder's
+/// message, which lists every value of a bad tag): the file decides how long those are, up to
+/// megabytes, and an error is read by a person (the decoders' fuzz targets found a 14 kB one).
+const MAX_REASON: usize = 240;
+
+/// `reason` cut to [`MAX_REASON`] bytes at a character boundary, saying how much was left out.
+fn bounded(reason: String) -> String {
+    if reason.len() <= MAX_REASON {
+        return reason;
+    }
+    let mut end = MAX_REASON;
+    while !reason.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!("{}... ({} more bytes)", &reason[..end], reason.len() - end)
+}
+
 /// Maps a `tiff` error to ours.
 fn map_tiff_error(e: TiffError, origin: Origin<'_>) -> MapIoError {
     match e {
@@ -577,17 +598,17 @@ fn map_tiff_error(e: TiffError, origin: Origin<'_>) -> MapIoError {
                 source,
             },
             Origin::Memory => MapIoError::Corrupt {
-                reason: format!("reading the TIFF data failed: {source}"),
+                reason: bounded(format!("reading the TIFF data failed: {source}")),
             },
         },
         TiffError::FormatError(TiffFormatError::TiffSignatureNotFound) => MapIoError::Corrupt {
             reason: "not a TIFF file (it does not start with II or MM)".to_owned(),
         },
         TiffError::FormatError(f) => MapIoError::Corrupt {
-            reason: format!("invalid TIFF: {f}"),
+            reason: bounded(format!("invalid TIFF: {f}")),
         },
         TiffError::UnsupportedError(u) => MapIoError::UnsupportedTiff {
-            reason: u.to_string(),
+            reason: bounded(u.to_string()),
         },
         TiffError::LimitsExceeded => MapIoError::Corrupt {
             reason: "the TIFF's chunks need more memory than its image size allows".to_owned(),
@@ -596,7 +617,7 @@ fn map_tiff_error(e: TiffError, origin: Origin<'_>) -> MapIoError {
             reason: "a TIFF size or offset does not fit this platform".to_owned(),
         },
         TiffError::UsageError(u) => MapIoError::Corrupt {
-            reason: format!("the TIFF decoder refused the file: {u}"),
+            reason: bounded(format!("the TIFF decoder refused the file: {u}")),
         },
     }
 }
