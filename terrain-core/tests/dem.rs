@@ -1,12 +1,9 @@
 //! DEM import per format, with small files made here: PNG 8/16, RAW16 in both byte orders,
-//! R32, and GeoTIFFs written by the tests' own baseline TIFF writer (`dem/tiff_writer.rs`,
+//! R32, and GeoTIFFs written by the tests' own baseline TIFF writer (`terrain_test_support::tiff`,
 //! not the `tiff` crate the reader uses) in every sample type, both byte orders, strips and
 //! tiles, classic and BigTIFF, and by the `tiff` crate's encoder with LZW and Deflate
 //! compression; nodata fills, georeferencing (pixel scale, geographic rasters, feet), the
 //! format choice, and bad files (truncated, multi-band, huge, special files) with clear errors.
-
-#[path = "dem/tiff_writer.rs"]
-mod tiff_writer;
 
 use glam::UVec2;
 use std::path::{Path, PathBuf};
@@ -18,6 +15,7 @@ use terrain_core::geotiff::{
 };
 use terrain_core::io::{ByteOrder, MapIoError, ReadLimits, encode_png8, encode_png16};
 use terrain_core::{CoarseMap, Grid};
+use terrain_test_support::tiff as tiff_writer;
 use tiff_writer::{Layout, Sample, TiffSpec};
 
 /// A fresh folder for one test, removed at the end.

@@ -1,36 +1,36 @@
 //! Fuzz targets for terrain-core's map decoders: PNG 16-bit (`png16`), PNG 8-bit and RGBA8
 //! captures (`png8`), RAW16 (`raw16`) and GeoTIFF DEMs (`geotiff`, seeded by the tests' own
-//! TIFF writer in `dem/tiff_writer.rs`: every sample type, strips and tiles, both byte orders,
-//! classic and BigTIFF, with GeoTIFF tags). Each target is time-bounded (`TERRAIN_FUZZ_SECONDS`,
-//! default 2 s; `cargo xtask fuzz --seconds N` runs them longer, in release mode) and prints how
-//! many cases each input class ran; see `terrain_test_support::fuzz` for the seed, replay and
-//! class selection variables. The classes live in `fuzz/`, one module per format (the PNG
-//! targets' encoder, expectations and mutations in modules of their own).
+//! TIFF writer, `terrain_test_support::tiff`: every sample type, strips and tiles, both byte
+//! orders, classic and BigTIFF, with GeoTIFF tags). Each target is time-bounded
+//! (`TERRAIN_FUZZ_SECONDS`, default 2 s; `cargo xtask fuzz --seconds N` runs them longer, in
+//! release mode) and prints how many cases each input class ran; see
+//! `terrain_test_support::fuzz` for the seed, replay and class selection variables. The classes
+//! live in `fuzz/`, one module per format (the PNG targets' expectations and mutations in
+//! modules of their own).
 //!
-//! Seeds are valid files made here by an encoder independent of the png crate (every bit
-//! depth and colour type, Adam7 interlacing, all five row filters, stored deflate blocks of
-//! random sizes, image data split over several IDAT chunks, ancillary chunks) and by
-//! terrain-core's own encoder (compressed deflate). They are then truncated, bit-flipped,
-//! their header fields overwritten, their chunks removed / duplicated / grown, their zlib
-//! stream damaged (with chunk CRCs fixed, so the damage reaches the parsers behind the CRC
-//! check), or replaced by random bytes. Valid inputs must decode to exactly the samples
-//! encoded (or to the error the header calls for); every other input must give `Ok` or `Err`,
-//! never a panic or a hang, and an `Ok` must respect the read limits.
+//! These classes are structure-aware: they know the formats' checksums and compression, which
+//! byte-level coverage-guided fuzzing (`terrain_test_support::decoders`, `cargo xtask fuzz
+//! --engine libfuzzer`) rarely gets past. Seeds are valid files made by an encoder independent
+//! of the png crate (`terrain_test_support::png_encoder`: every bit depth and colour type,
+//! Adam7 interlacing, all five row filters, stored deflate blocks of random sizes, image data
+//! split over several IDAT chunks, ancillary chunks) and by terrain-core's own encoder
+//! (compressed deflate). They are then truncated, bit-flipped, their header fields
+//! overwritten, their chunks removed / duplicated / grown, their zlib stream damaged (with
+//! chunk CRCs fixed, so the damage reaches the parsers behind the CRC check), or replaced by
+//! random bytes. Valid inputs must decode to exactly the samples encoded (or to the error the
+//! header calls for); every other input must give `Ok` or `Err`, never a panic or a hang, and
+//! an `Ok` must respect the read limits.
 
 #[path = "fuzz/geotiff.rs"]
 mod geotiff;
 #[path = "fuzz/png.rs"]
 mod png;
-#[path = "fuzz/png_encoder.rs"]
-mod png_encoder;
 #[path = "fuzz/png_expect.rs"]
 mod png_expect;
 #[path = "fuzz/png_mutations.rs"]
 mod png_mutations;
 #[path = "fuzz/raw16.rs"]
 mod raw16;
-#[path = "dem/tiff_writer.rs"]
-mod tiff_writer;
 
 use std::path::PathBuf;
 use std::time::Duration;

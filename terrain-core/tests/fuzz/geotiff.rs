@@ -1,14 +1,14 @@
-//! Classes of the `geotiff` target, seeded by the tests' own TIFF writer (`dem/tiff_writer.rs`:
+//! Classes of the `geotiff` target, seeded by the tests' own TIFF writer (`terrain_test_support::tiff`:
 //! every sample type, strips and tiles, both byte orders, classic and BigTIFF, with GeoTIFF
 //! tags): valid files, truncated, bit-flipped, directory fields set to edge values, random
 //! bytes and the file reader.
 
 use crate::png_mutations::{limits_for, side};
-use crate::tiff_writer;
 use crate::{Ctx, class};
 use terrain_core::geotiff::{decode_geotiff, read_geotiff};
 use terrain_core::io::ReadLimits;
 use terrain_test_support::fuzz::{Case, Class, Rng};
+use terrain_test_support::tiff as tiff_writer;
 
 /// A valid GeoTIFF from the tests' writer, and the heights it must decode to.
 fn geotiff_seed(rng: &mut Rng) -> (Vec<u8>, Vec<f32>) {

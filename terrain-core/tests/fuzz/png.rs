@@ -1,7 +1,6 @@
 //! Classes of the PNG targets `png16` and `png8` (with the RGBA8 capture decoder's own classes),
 //! shared by the decoders through the const parameter `K` (GRAY8, GRAY16 or RGBA8).
 
-use crate::png_encoder::Image;
 use crate::png_expect::{
     Kind, Pixels, RGBA8, check_any, check_valid, decode, expected_pixels, kind, read_file,
 };
@@ -15,6 +14,7 @@ use terrain_core::io::{
 };
 use terrain_test_support::fuzz::{Case, Class, Rng};
 use terrain_test_support::png::{SIGNATURE, chunk, chunks_of, fix_crcs};
+use terrain_test_support::png_encoder::Image;
 
 /// Valid files of every format from the independent encoder: exact pixels or the right error.
 fn png_valid<const K: u8>(_: &Ctx, case: &mut Case) -> Result<(), String> {

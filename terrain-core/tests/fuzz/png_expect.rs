@@ -1,13 +1,13 @@
 //! What each PNG decoder must return: the decoder a target drives (16-bit, 8-bit or the RGBA8
 //! capture decoder), the pixels a valid file decodes to, and the checks on any other input.
 
-use crate::png_encoder::Image;
 use glam::UVec2;
 use terrain_core::Grid;
 use terrain_core::io::{
     GrayImage, MapIoError, ReadLimits, decode_png, decode_png_rgba8, decode_png8, decode_png16,
     read_png8, read_png16,
 };
+use terrain_test_support::png_encoder::Image;
 
 /// Which decoder a target drives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

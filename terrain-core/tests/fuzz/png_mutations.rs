@@ -2,11 +2,11 @@
 //! damage done to them (bit flips, chunk surgery, header fields, a damaged zlib stream with the
 //! chunk CRCs fixed).
 
-use crate::png_encoder::{Image, VALID_FORMATS};
 use crate::png_expect::{Kind, Pixels, expected_pixels};
 use terrain_core::io::{DEFAULT_MAX_SIDE, ReadLimits, encode_png_rgba8, encode_png8, encode_png16};
 use terrain_test_support::fuzz::Rng;
 use terrain_test_support::png::{chunk, chunks_of, fix_crcs};
+use terrain_test_support::png_encoder::{Image, VALID_FORMATS};
 
 /// A small random image side, biased to the sizes that stress row and pass handling.
 pub(crate) fn side(rng: &mut Rng) -> u32 {

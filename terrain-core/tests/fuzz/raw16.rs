@@ -1,5 +1,8 @@
-//! Classes of the `raw16` target: round trips, lengths that do not match the size, size limits,
-//! random bytes and the file reader.
+//! Classes of the `raw16` target: round trips, size limits and the file reader. Random bytes at
+//! any size, byte count and limit are the decoder target `raw16` of
+//! `terrain_test_support::decoders` (coverage-guided under libFuzzer, briefly under `cargo
+//! test`), whose check this file shares: it replaced the `random_bytes` and `length_mismatch`
+//! classes that were here.
 
 use crate::png_mutations::{limits_for, side};
 use crate::{Ctx, class};
@@ -8,60 +11,17 @@ use terrain_core::Grid;
 use terrain_core::io::{
     DEFAULT_MAX_SIDE, MapIoError, ReadLimits, decode_raw16, encode_raw16, read_raw16,
 };
+use terrain_test_support::decoders::check_raw;
 use terrain_test_support::fuzz::{Case, Class, Rng};
 
-/// The error `decode_raw16` must give for `len` bytes at `size` under `limits`, if any.
-fn raw16_expected(len: usize, size: UVec2, limits: &ReadLimits) -> Option<&'static str> {
-    if size.x == 0 || size.y == 0 {
-        return Some("ZeroSize");
-    }
-    if size.x > limits.max_side || size.y > limits.max_side {
-        return Some("TooLarge");
-    }
-    let need = u128::from(size.x) * u128::from(size.y) * 2;
-    if need > u128::from(u64::MAX) {
-        return Some("TooLarge");
-    }
-    (len as u128 != need).then_some("RawSizeMismatch")
-}
-
-fn raw16_variant(e: &MapIoError) -> &'static str {
-    match e {
-        MapIoError::ZeroSize { .. } => "ZeroSize",
-        MapIoError::TooLarge { .. } => "TooLarge",
-        MapIoError::RawSizeMismatch { .. } => "RawSizeMismatch",
-        _ => "other",
-    }
-}
-
+/// Checks a RAW16 decode of `bytes` at `size` (little-endian samples) against the contract.
 fn check_raw16(
     bytes: &[u8],
     size: UVec2,
     limits: &ReadLimits,
     got: Result<Grid<u16>, MapIoError>,
 ) -> Result<(), String> {
-    let want = raw16_expected(bytes.len(), size, limits);
-    match (want, got) {
-        (None, Ok(g)) => {
-            let same = g.size() == size
-                && g.as_slice()
-                    .iter()
-                    .zip(bytes.chunks_exact(2))
-                    .all(|(v, b)| *v == u16::from_le_bytes([b[0], b[1]]));
-            if same {
-                Ok(())
-            } else {
-                Err(format!("{size} from {} bytes: wrong samples", bytes.len()))
-            }
-        }
-        (Some(v), Err(e)) if raw16_variant(&e) == v => Ok(()),
-        (want, got) => Err(format!(
-            "{size} from {} bytes, limits {limits:?}: expected {}, got {:?}",
-            bytes.len(),
-            want.unwrap_or("Ok"),
-            got.map(|g| g.size())
-        )),
-    }
+    check_raw(bytes, size, limits, &got, u16::to_le_bytes)
 }
 
 /// Round trips through `encode_raw16`.
@@ -75,22 +35,6 @@ fn raw16_roundtrip(_: &Ctx, case: &mut Case) -> Result<(), String> {
         Ok(d) if d == g => Ok(()),
         other => Err(format!("{w}x{h}: round trip gave {other:?}")),
     }
-}
-
-/// Byte counts beside the right one (short, long, odd) for the size given.
-fn raw16_length_mismatch(_: &Ctx, case: &mut Case) -> Result<(), String> {
-    let rng = &mut case.rng;
-    let size = UVec2::new(side(rng), side(rng));
-    let right = (size.x * size.y * 2) as usize;
-    let len = match rng.below(4) {
-        0 => right + rng.range_usize(1, 3),
-        1 => right.saturating_sub(rng.range_usize(1, 3)),
-        2 => rng.index(2 * right + 2),
-        _ => right,
-    };
-    let bytes = rng.bytes(len);
-    let limits = limits_for(rng);
-    check_raw16(&bytes, size, &limits, decode_raw16(&bytes, size, &limits))
 }
 
 /// Sizes at and past the limits: zero sides, `max_side` and its neighbours, sizes whose byte
@@ -120,16 +64,6 @@ fn raw16_size_limits(_: &Ctx, case: &mut Case) -> Result<(), String> {
         rng.index(64)
     };
     let bytes = rng.bytes(len);
-    check_raw16(&bytes, size, &limits, decode_raw16(&bytes, size, &limits))
-}
-
-/// Random bytes at random small sizes.
-fn raw16_random(_: &Ctx, case: &mut Case) -> Result<(), String> {
-    let rng = &mut case.rng;
-    let size = UVec2::new(rng.range_u32(0, 40), rng.range_u32(0, 40));
-    let n = rng.range_usize(0, 4000);
-    let bytes = rng.bytes(n);
-    let limits = limits_for(rng);
     check_raw16(&bytes, size, &limits, decode_raw16(&bytes, size, &limits))
 }
 
@@ -164,9 +98,7 @@ fn raw16_file_reader(ctx: &Ctx, case: &mut Case) -> Result<(), String> {
 pub(crate) fn classes() -> Vec<Class<Ctx>> {
     vec![
         class("roundtrip", raw16_roundtrip),
-        class("length_mismatch", raw16_length_mismatch),
         class("size_limits", raw16_size_limits),
-        class("random_bytes", raw16_random),
         class("file_reader", raw16_file_reader),
     ]
 }

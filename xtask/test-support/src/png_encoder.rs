@@ -1,9 +1,10 @@
-//! An independent PNG encoder for the PNG targets' seeds: every bit depth and colour type,
+//! An independent PNG encoder for the PNG fuzz targets' seeds (terrain-core's hand-rolled
+//! classes and the [`decoders`](crate::decoders) corpora): every bit depth and colour type,
 //! Adam7 interlacing, all five row filters, stored deflate blocks of random sizes and image data
 //! split over several IDAT chunks, written without the png crate the decoders use.
 
-use terrain_test_support::fuzz::Rng;
-use terrain_test_support::png::{SIGNATURE, adler32, chunk};
+use crate::fuzz::Rng;
+use crate::png::{SIGNATURE, adler32, chunk};
 
 /// A zlib stream of stored (uncompressed) deflate blocks of random sizes.
 fn zlib_stored(data: &[u8], rng: &mut Rng) -> Vec<u8> {
@@ -40,16 +41,16 @@ fn channels(color_type: u8) -> usize {
 
 /// An image to encode: every channel sample as a u16 (only the low `bit_depth` bits count).
 #[derive(Debug, Clone)]
-pub(crate) struct Image {
-    pub(crate) width: u32,
-    pub(crate) height: u32,
-    pub(crate) color_type: u8,
-    pub(crate) bit_depth: u8,
-    pub(crate) samples: Vec<u16>,
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub color_type: u8,
+    pub bit_depth: u8,
+    pub samples: Vec<u16>,
 }
 
 /// The valid (colour type, bit depth) pairs of the PNG specification.
-pub(crate) const VALID_FORMATS: [(u8, u8); 15] = [
+pub const VALID_FORMATS: [(u8, u8); 15] = [
     (0, 1),
     (0, 2),
     (0, 4),
@@ -68,13 +69,8 @@ pub(crate) const VALID_FORMATS: [(u8, u8); 15] = [
 ];
 
 impl Image {
-    pub(crate) fn random(
-        rng: &mut Rng,
-        width: u32,
-        height: u32,
-        color_type: u8,
-        bit_depth: u8,
-    ) -> Self {
+    /// A `width` x `height` image of the format: a smooth ramp or noise, half the time each.
+    pub fn random(rng: &mut Rng, width: u32, height: u32, color_type: u8, bit_depth: u8) -> Self {
         let n = width as usize * height as usize * channels(color_type);
         let mask = if bit_depth >= 16 {
             u16::MAX
@@ -186,7 +182,7 @@ impl Image {
 
     /// The PNG file: IHDR, PLTE for palette images, well-formed ancillary chunks, the image
     /// data over 1 to 4 IDAT chunks (some possibly empty), IEND.
-    pub(crate) fn encode(&self, rng: &mut Rng) -> Vec<u8> {
+    pub fn encode(&self, rng: &mut Rng) -> Vec<u8> {
         let interlaced = rng.chance(1, 3);
         let mut ihdr = Vec::new();
         ihdr.extend_from_slice(&self.width.to_be_bytes());
