@@ -1,9 +1,15 @@
-//! `cargo xtask fuzz --seconds N [--target NAME] [--seed S]`: runs the fuzz targets (the
-//! `tests/fuzz.rs` files of the crates in [`FUZZ_TARGETS`]) for N seconds each, in release
-//! mode, and prints a table of every input class: cases run and result. CI has no fuzz step of
-//! its own: its `test` step runs every target already, for the default 2 seconds each
+//! `cargo xtask fuzz [--engine harness|libfuzzer] [--seconds N] [--target NAME] [--seed S]`.
+//!
+//! The default engine, `harness`, runs the time-bounded fuzz targets (the `tests/fuzz.rs`
+//! files of the crates in [`FUZZ_TARGETS`]) for N seconds each, in release mode, and prints a
+//! table of every input class: cases run and result. CI has no fuzz step of its own: its
+//! `test` step runs every target already, for the default 2 seconds each
 //! (`TERRAIN_FUZZ_SECONDS` unset), which is the short run of each that CI makes.
+//!
+//! `--engine libfuzzer` runs the decoders' coverage-guided targets instead ([`crate::libfuzzer`]:
+//! nightly, cargo-fuzz), 60 s each unless `--seconds` says otherwise; never part of CI.
 
+use crate::libfuzzer::{self, LIBFUZZER_TARGETS};
 use crate::util::{cargo_exe, root};
 use anyhow::{Context, Result, bail};
 use std::process::Command;
@@ -11,7 +17,7 @@ use std::time::Instant;
 
 /// The fuzz targets: crate, target name (as the target prints it), test function in the crate's
 /// `tests/fuzz.rs`.
-pub const FUZZ_TARGETS: [(&str, &str, &str); 9] = [
+pub const FUZZ_TARGETS: [(&str, &str, &str); 10] = [
     ("terrain-core", "png16", "fuzz_png16"),
     ("terrain-core", "png8", "fuzz_png8"),
     ("terrain-core", "raw16", "fuzz_raw16"),
@@ -21,6 +27,8 @@ pub const FUZZ_TARGETS: [(&str, &str, &str); 9] = [
     ("terrain-cache", "bounds", "fuzz_bounds"),
     ("terrain-physics", "physics", "fuzz_physics"),
     ("terrain-lod", "lod", "fuzz_lod"),
+    // The decoders' libFuzzer target bodies, briefly (terrain_test_support::decoders).
+    ("terrain-test-support", "decoders", "fuzz_decoders"),
 ];
 
 /// What `fuzz` learned of one input class from the target's output.
@@ -102,11 +110,13 @@ fn parse_fuzz_line(line: &str) -> Option<FuzzLine> {
     })
 }
 
-/// `cargo xtask fuzz --seconds N [--target NAME] [--seed S]`: see the module docs.
+/// `cargo xtask fuzz [--engine E] [--seconds N] [--target NAME] [--seed S]`: see the module
+/// docs.
 pub fn fuzz(args: &[String]) -> Result<()> {
     let mut seconds: Option<f64> = None;
     let mut only: Option<String> = None;
     let mut seed: Option<String> = None;
+    let mut libfuzzer = false;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         let mut value = |flag: &str| {
@@ -127,21 +137,40 @@ pub fn fuzz(args: &[String]) -> Result<()> {
             }
             "--target" => only = Some(value("--target")?),
             "--seed" => seed = Some(value("--seed")?),
+            "--engine" => match value("--engine")?.as_str() {
+                "harness" => libfuzzer = false,
+                "libfuzzer" => libfuzzer = true,
+                other => bail!("--engine {other:?}: harness (the default) or libfuzzer"),
+            },
             other => bail!(
-                "unknown argument {other:?}: cargo xtask fuzz --seconds N [--target NAME] [--seed S]"
+                "unknown argument {other:?}: cargo xtask fuzz [--engine harness|libfuzzer] \
+                 --seconds N [--target NAME] [--seed S]"
             ),
         }
     }
-    let seconds = seconds.context("cargo xtask fuzz needs --seconds N (seconds per target)")?;
+    if libfuzzer {
+        let opts = libfuzzer::Options {
+            // Whole seconds: libFuzzer's -max_total_time takes no fraction.
+            seconds: seconds.map_or(60, |s| s.ceil() as u64),
+            target: only,
+            seed,
+        };
+        return libfuzzer::run(&opts);
+    }
+    let seconds = seconds.context(
+        "cargo xtask fuzz needs --seconds N (seconds per target; the libFuzzer engine's \
+         targets are --engine libfuzzer)",
+    )?;
     let targets: Vec<(&str, &str, &str)> = FUZZ_TARGETS
         .into_iter()
         .filter(|t| only.as_deref().is_none_or(|o| o == t.1 || o == t.2))
         .collect();
     if targets.is_empty() {
         bail!(
-            "no fuzz target named {:?}; targets: {}",
+            "no fuzz target named {:?}; targets: {} (libFuzzer's, with --engine libfuzzer: {})",
             only.unwrap_or_default(),
-            FUZZ_TARGETS.map(|t| t.1).join(", ")
+            FUZZ_TARGETS.map(|t| t.1).join(", "),
+            LIBFUZZER_TARGETS.join(", ")
         );
     }
     let started = Instant::now();
@@ -274,6 +303,14 @@ pub fn fuzz(args: &[String]) -> Result<()> {
 mod tests {
     use super::*;
 
+    /// A crate's folder: the crates are top-level folders, but for test-support, beside xtask.
+    fn crate_dir(krate: &str) -> std::path::PathBuf {
+        match krate {
+            "terrain-test-support" => root().join("xtask").join("test-support"),
+            _ => root().join(krate),
+        }
+    }
+
     #[test]
     fn fuzz_lines_parse() {
         let ok = "fuzz png16: class truncated: 396397 cases in 5.5 s: ok";
@@ -338,7 +375,7 @@ mod tests {
         let mut crates: Vec<&str> = FUZZ_TARGETS.iter().map(|t| t.0).collect();
         crates.dedup();
         for krate in &crates {
-            let path = root().join(krate).join("tests/fuzz.rs");
+            let path = crate_dir(krate).join("tests/fuzz.rs");
             let targets = std::fs::read_to_string(&path)
                 .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             let listed: Vec<&str> = FUZZ_TARGETS

@@ -8,6 +8,7 @@ mod ci;
 mod examples;
 mod fuzz;
 mod golden;
+mod libfuzzer;
 mod mutants;
 mod package;
 mod smoke;
@@ -37,7 +38,7 @@ fn main() -> Result<()> {
 
 fn usage() {
     eprintln!(
-        "usage: cargo xtask <ci|tidy|smoke|package|examples|golden|bench-report [--quick] [--write-docs]|fuzz --seconds N [--target NAME] [--seed S]|mutants [--shard K/N] [--crate NAME] | --summary>"
+        "usage: cargo xtask <ci|tidy|smoke|package|examples|golden|bench-report [--quick] [--write-docs]|fuzz [--engine harness|libfuzzer] --seconds N [--target NAME] [--seed S]|mutants [--shard K/N] [--crate NAME] | --summary>"
     );
     eprintln!(
         "  ci      tidy, fmt, clippy, tests, docs, package, examples, demo smoke (what CI runs)"
@@ -61,6 +62,13 @@ fn usage() {
     eprintln!(
         "          (ci's `test` step already runs each target for 2 s; targets: {})",
         fuzz::FUZZ_TARGETS.map(|t| t.1).join(", ")
+    );
+    eprintln!(
+        "          --engine libfuzzer: the decoders' coverage-guided targets instead (nightly, cargo-fuzz;"
+    );
+    eprintln!(
+        "          default 60 s each; crash inputs under target/fuzz/artifacts; not part of ci): {}",
+        libfuzzer::LIBFUZZER_TARGETS.join(", ")
     );
     eprintln!(
         "  mutants run cargo-mutants on the algorithm files; print caught / missed / score per crate"

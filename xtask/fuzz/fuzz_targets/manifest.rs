@@ -1,0 +1,8 @@
+//! libFuzzer target `manifest`: `terrain_test_support::decoders::manifest` (see there for the input and
+//! the checks).
+
+#![no_main]
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    terrain_test_support::decoders::manifest(data);
+});

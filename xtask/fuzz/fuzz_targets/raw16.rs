@@ -1,0 +1,8 @@
+//! libFuzzer target `raw16`: `terrain_test_support::decoders::raw16` (see there for the input and
+//! the checks).
+
+#![no_main]
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    terrain_test_support::decoders::raw16(data);
+});

@@ -1,0 +1,8 @@
+//! libFuzzer target `tile`: `terrain_test_support::decoders::tile` (see there for the input and
+//! the checks).
+
+#![no_main]
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    terrain_test_support::decoders::tile(data);
+});
