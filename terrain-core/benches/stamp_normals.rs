@@ -1,13 +1,15 @@
 //! Stamp + normal regeneration over square regions of 100 to 2000 texels a side (Flower 2010
-//! table 4.3 deforms 10 to 200 m at 0.1 m per texel), beside plain copies of the region's bytes
-//! (contiguous, and in place in the map's rows).
+//! table 4.3 deforms 10 to 200 m at 0.1 m per texel), beside plain copies of the region's u16
+//! heights (out of the map into a buffer of their own, and in place into a second map's rows),
+//! and the stores alone of the normals' output.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use glam::{IVec2, UVec2, Vec2};
 use std::hint::black_box;
 use terrain_core::{
-    Blend, CoarseMap, DerivativeMap, GaussianStamp, Grid, HeightEncoding, Rect, StampPlacement,
-    TerrainParams, TextureStamp, apply_stamp, apply_stamp_reference, generate_coarse_map,
+    Blend, CoarseMap, DERIVATIVE_APRON, DerivativeMap, GaussianStamp, Grid, HeightEncoding, Rect,
+    StampPlacement, TerrainParams, TextureStamp, apply_stamp, apply_stamp_reference,
+    generate_coarse_map,
 };
 
 const MAP: u32 = 4096;
@@ -114,11 +116,36 @@ fn bench(c: &mut Criterion) {
                 }
             })
         });
-        // The baseline: copying the region's height bytes (side^2 x 2 bytes) once.
-        let src = vec![7u16; (side * side) as usize];
-        let mut dst = vec![0u16; (side * side) as usize];
+        // What the normals' writes cost alone: a plain loop storing a value into each texel
+        // the normals regenerate (8 bytes, rows 32 KiB apart in a second map-sized grid).
+        let mut gradients = vec![Vec2::ZERO; (MAP * MAP) as usize];
+        let m = n + 2 * DERIVATIVE_APRON as usize;
+        let (gx, gy) = (
+            x0 - DERIVATIVE_APRON as usize,
+            y0 - DERIVATIVE_APRON as usize,
+        );
+        group.bench_function(BenchmarkId::new("normals_stores", side), |b| {
+            b.iter(|| {
+                for y in gy..gy + m {
+                    let row = black_box(&mut gradients[y * stride + gx..y * stride + gx + m]);
+                    for (i, v) in row.iter_mut().enumerate() {
+                        *v = Vec2::new(i as f32, 1.0);
+                    }
+                }
+            })
+        });
+        // The baseline: a plain copy of the region's u16 heights (side^2 texels, its rows read
+        // from the map) into a buffer of their own.
+        let mut dst = vec![0u16; n * n];
         group.bench_function(BenchmarkId::new("memcpy", side), |b| {
-            b.iter(|| dst.copy_from_slice(black_box(&src)))
+            b.iter(|| {
+                let src = black_box(map.grid().as_slice());
+                for (j, out) in dst.chunks_exact_mut(n).enumerate() {
+                    let at = (y0 + j) * stride + x0;
+                    out.copy_from_slice(&src[at..at + n]);
+                }
+                black_box(&dst);
+            })
         });
     }
     group.finish();

@@ -21,6 +21,10 @@ pub const DERIVATIVE_APRON: u32 = 2;
 /// a slope of 1 is the steepest it represents.
 pub const DEFAULT_SNORM_MAX_SLOPE: f32 = 1.0;
 
+/// Fewest texels regenerated on the pool's threads: below this (a 181 x 181 rect) handing
+/// rows to another thread costs more than it saves.
+const PARALLEL_TEXELS: usize = 1 << 15;
+
 /// Height gradients of a map, one per texel, with the map's spacing and wrap mode.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DerivativeMap {
@@ -67,8 +71,9 @@ impl DerivativeMap {
     }
 
     /// Writes the derivatives of `rect` (inside the map) from the heights of `map`, rows in
-    /// parallel. Eq. 3.3 on integer samples is an exact integer in f64 (|sum| < 18 * 2^32), so
-    /// the order of its terms does not matter and every path gives the same bits.
+    /// parallel for a large rect. Eq. 3.3 on integer samples is an exact integer in f64
+    /// (|sum| < 18 * 2^32), so the order of its terms does not matter and every path gives the
+    /// same bits.
     fn fill<T: HeightSample>(&mut self, map: &HeightMap<T>, rect: Rect) {
         let h = map.grid();
         let wrap = map.wrap();
@@ -82,27 +87,35 @@ impl DerivativeMap {
         let diff = |a: T, b: T, c: T, d: T| {
             (a.to_raw_f64() - d.to_raw_f64()) + 8.0 * (c.to_raw_f64() - b.to_raw_f64())
         };
-        crate::par::for_each_chunk(out, w, |j, out_row| {
+        // Columns whose 4 horizontal taps are inside the row need no wrapping. The others (at
+        // most two on each side, where the rect meets the map's edge) have their columns
+        // resolved once here, not in every row (wrapping costs an integer division).
+        let (ia, ib) = (x0.max(2), x1.min(w.saturating_sub(2)).max(x0.max(2)));
+        let border: Vec<(usize, [usize; 4])> = (x0..ia.min(x1))
+            .chain(ib.max(x0)..x1)
+            .map(|x| {
+                (
+                    x,
+                    [-2, -1, 1, 2].map(|d| wrap.resolve(x as i64 + d, w as u32) as usize),
+                )
+            })
+            .collect();
+        let body = |j: usize, out_row: &mut [Vec2]| {
             let y = (y0 + j) as i64;
-            let row_of = |d: i64| h.row(wrap.resolve(y + d, hh));
+            let row_of = |d: i64| {
+                let r = y + d;
+                h.row(if (0..i64::from(hh)).contains(&r) {
+                    r as u32
+                } else {
+                    wrap.resolve(r, hh)
+                })
+            };
             let (up2, up1, here, dn1, dn2) =
                 (row_of(-2), row_of(-1), row_of(0), row_of(1), row_of(2));
-            let col = |x: i64| wrap.resolve(x, w as u32) as usize;
-            // Columns whose 4 horizontal taps are inside the row need no wrapping.
-            let (ia, ib) = (x0.max(2), x1.min(w.saturating_sub(2)).max(x0.max(2)));
-            let edge = |x: usize, out: &mut Vec2| {
-                let xi = x as i64;
-                let dx = diff(
-                    here[col(xi - 2)],
-                    here[col(xi - 1)],
-                    here[col(xi + 1)],
-                    here[col(xi + 2)],
-                );
+            for &(x, [l2, l1, r1, r2]) in &border {
+                let dx = diff(here[l2], here[l1], here[r1], here[r2]);
                 let dz = diff(up2[x], up1[x], dn1[x], dn2[x]);
-                *out = Vec2::new((dx * k) as f32, (dz * k) as f32);
-            };
-            for x in (x0..ia.min(x1)).chain(ib.max(x0)..x1) {
-                edge(x, &mut out_row[x]);
+                out_row[x] = Vec2::new((dx * k) as f32, (dz * k) as f32);
             }
             if ia < ib {
                 let n = ib - ia;
@@ -119,7 +132,15 @@ impl DerivativeMap {
                     }
                 }
             }
-        });
+        };
+        // Rows in parallel only where there are enough texels to pay for waking the pool.
+        if (x1 - x0) * (y1 - y0) >= PARALLEL_TEXELS {
+            crate::par::for_each_chunk(out, w, body);
+        } else {
+            for (j, out_row) in out.chunks_mut(w).enumerate() {
+                body(j, out_row);
+            }
+        }
     }
 
     /// A derivative map from gradients computed elsewhere (a GPU pass's download).

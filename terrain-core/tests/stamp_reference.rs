@@ -312,6 +312,47 @@ proptest! {
     }
 }
 
+/// Maps large enough for the rows to be shared among threads (and whose interior rows hold
+/// many blocks of the vectorised loop and a tail), u8 and u16, wrapping and clamped: the
+/// derivatives equal the per-texel formula bit for bit, and so does a dirty rect on an edge.
+#[test]
+fn large_maps_on_threads_equal_the_per_texel_formula() {
+    let e = HeightEncoding::new(0.013, -2.0).unwrap();
+    for (w, h) in [(301, 263), (270, 250)] {
+        for wrap in [WrapMode::Repeat, WrapMode::Clamp] {
+            let m16 = HeightMap::new(hashed::<u16>(w, h, 0, 65_536), e, 0.3, wrap).unwrap();
+            let m8 = HeightMap::new(hashed::<u8>(w, h, 0, 256), e, 0.3, wrap).unwrap();
+            let rect =
+                terrain_core::Rect::new(glam::IVec2::new(1, 0), glam::UVec2::new(w - 1, 270));
+            for threads in [1, 3] {
+                let (d16, d8) = in_pool(threads, || {
+                    (
+                        terrain_core::DerivativeMap::from_map(&m16),
+                        terrain_core::DerivativeMap::from_map(&m8),
+                    )
+                });
+                assert!(d16.grid().as_slice() == naive_derivatives(&m16).as_slice());
+                assert!(d8.grid().as_slice() == naive_derivatives(&m8).as_slice());
+                let mut part = terrain_core::DerivativeMap::from_grid(
+                    Grid::new(w, h, Vec2::ZERO).unwrap(),
+                    0.3,
+                    wrap,
+                )
+                .unwrap();
+                in_pool(threads, || {
+                    part.update_rect(
+                        &m16,
+                        rect.intersect(&terrain_core::Rect::from_size(m16.size()))
+                            .unwrap(),
+                    )
+                })
+                .unwrap();
+                assert!(part == d16, "{w} x {h} {wrap:?} on {threads} threads");
+            }
+        }
+    }
+}
+
 /// The bound check of `separable_gaussian_is_within_the_rounding_bound*` for any sample type.
 fn check_gaussian_bound<T: HeightSample + PartialEq + Copy + std::fmt::Debug>(
     before: HeightMap<T>,

@@ -196,12 +196,14 @@ pub fn bench_report(args: &[String]) -> Result<()> {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut rows = Vec::new();
     let mut md = format!(
-        "| benchmark | {threads} cores (ms) | 1 core (ms) | thesis (ms) | thesis figure | x thesis | x copy | x copy in the map |\n|---|---|---|---|---|---|---|---|\n",
+        "| benchmark | {threads} cores (ms) | 1 core (ms) | thesis (ms) | thesis figure | x thesis | x copy | x copy, 1 core | x copy in the map |\n|---|---|---|---|---|---|---|---|---|\n",
     );
     for h in headlines() {
         let ns = criterion_median_ns(&criterion_dir, &h.id)?;
         let one_ns = criterion_median_ns(&one_core_dir, &h.id)?;
         let copy_ns = criterion_median_ns(&criterion_dir, &h.copy_id)?;
+        // The one-core figure over the copy of the same run: both on one thread.
+        let one_copy_ns = criterion_median_ns(&one_core_dir, &h.copy_id)?;
         let map_copy_ns = match &h.map_copy_id {
             Some(id) => Some(criterion_median_ns(&criterion_dir, id)?),
             None => None,
@@ -209,7 +211,7 @@ pub fn bench_report(args: &[String]) -> Result<()> {
         let ms = ns / 1e6;
         let vs_thesis = h.thesis_ms.map(|t| ms / t);
         md.push_str(&format!(
-            "| `{}` | {:.3} | {:.3} | {} | {} | {} | {:.1} ({:.1} us) | {} |\n",
+            "| `{}` | {:.3} | {:.3} | {} | {} | {} | {:.1} ({:.1} us) | {:.1} ({:.1} us) | {} |\n",
             h.id,
             ms,
             one_ns / 1e6,
@@ -218,6 +220,8 @@ pub fn bench_report(args: &[String]) -> Result<()> {
             vs_thesis.map_or("-".into(), |r| format!("{r:.2}")),
             ns / copy_ns,
             copy_ns / 1e3,
+            one_ns / one_copy_ns,
+            one_copy_ns / 1e3,
             map_copy_ns.map_or("-".into(), |c| format!("{:.1} ({:.1} us)", ns / c, c / 1e3)),
         ));
         rows.push(serde_json::json!({
@@ -230,6 +234,8 @@ pub fn bench_report(args: &[String]) -> Result<()> {
             "copy_id": h.copy_id,
             "copy_ms": copy_ns / 1e6,
             "ratio_to_copy": ns / copy_ns,
+            "one_core_copy_ms": one_copy_ns / 1e6,
+            "one_core_ratio_to_copy": one_ns / one_copy_ns,
             "map_copy_id": h.map_copy_id,
             "map_copy_ms": map_copy_ns.map(|c| c / 1e6),
             "ratio_to_map_copy": map_copy_ns.map(|c| ns / c),
@@ -237,10 +243,12 @@ pub fn bench_report(args: &[String]) -> Result<()> {
     }
     md.push_str(&format!(
         "\nCriterion medians{}, on {threads} CPU threads and on 1 (`RAYON_NUM_THREADS=1`). \
-         \"x copy\": the figure over a plain `copy_from_slice` of the same bytes (the region's \
-         u16 heights, or the area's u32 columns) between two buffers of that size; \"x copy in \
-         the map\": over copying the region's rows in place in the 4096^2 map (the strided, \
-         cache-missing access a stamp makes). Both copies run on one thread, in the same run. \
+         \"x copy\": the figure over a plain `copy_from_slice` of the same texels (the region's \
+         u16 heights, its rows read from the map into a buffer of their own, or the area's u32 \
+         columns between two buffers); \"x copy, 1 core\": the one-core figure over the copy \
+         of its own run (both on one thread: the fair ratio); \"x copy in the map\": over \
+         copying the region's rows in place into a second 4096^2 map (the strided, \
+         cache-missing access a stamp makes). The copies run on one thread, in the same run. \
          Figures from a shared machine are noisy; compare ratios measured in the same run.\n",
         if quick { " (--quick)" } else { "" },
     ));
