@@ -7,6 +7,7 @@ use crate::memory_limit;
 use crate::report::{FrameReport, Report, StepStats};
 use crate::summary::{self, Series, Thumb};
 use crate::timings::{Step, Timings};
+use crate::usage_error::UsageExt;
 use anyhow::{Context, Result};
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -39,8 +40,7 @@ impl<'a> Capture<'a> {
     /// A capture of `total` frames into `out` (which exists, cleared of an earlier run's
     /// outputs by [`remove_old_outputs`]), the first `warmup` left out of the statistics.
     pub fn new(out: &'a Path, total: u32, warmup: u32) -> Result<Self> {
-        let path = out.join(FRAMES_JSONL);
-        let lines = File::create(&path).with_context(|| format!("creating {}", path.display()))?;
+        let lines = create_regular(&out.join(FRAMES_JSONL))?;
         Ok(Self {
             out,
             frames: Vec::with_capacity(total.min(1 << 16) as usize),
@@ -190,6 +190,41 @@ pub fn step_stats(frames: &[FrameReport]) -> BTreeMap<&'static str, StepStats> {
         .collect()
 }
 
+/// Creates `path` as a new regular file, replacing an earlier run's regular file. Anything
+/// else there (a link, which would be written through to a file outside `--out`; a named
+/// pipe, on which opening blocks; a device; a folder) is refused, untouched, with a usage
+/// error. The creation refuses whatever appears at `path` in between (`O_EXCL` never follows
+/// a link).
+fn create_regular(path: &Path) -> Result<File> {
+    match std::fs::symlink_metadata(path) {
+        Ok(meta) if meta.file_type().is_file() => {
+            std::fs::remove_file(path).with_context(|| format!("replacing {}", path.display()))?
+        }
+        Ok(meta) => {
+            let kind = if meta.file_type().is_symlink() {
+                "a symbolic link"
+            } else if meta.is_dir() {
+                "a folder"
+            } else {
+                "a special file (a named pipe, a socket or a device)"
+            };
+            return Err(anyhow::anyhow!(
+                "{} is {kind}: the demo writes only regular files of its own there; remove it \
+                 or choose another --out",
+                path.display()
+            ))
+            .usage();
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => return Err(e).with_context(|| format!("checking {}", path.display())),
+    }
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(path)
+        .with_context(|| format!("creating {}", path.display()))
+}
+
 /// Set once a failed folder sync has been reported (it would repeat for every file).
 static SYNC_WARNED: AtomicBool = AtomicBool::new(false);
 
@@ -200,7 +235,7 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), io::MapIoError> {
     if let Some(e) = written.dir_sync_error
         && !SYNC_WARNED.swap(true, Ordering::Relaxed)
     {
-        eprintln!(
+        crate::console::note!(
             "warning: {} is written, but its folder could not be synced ({e}): files of this \
              run might not survive a power loss",
             path.display()

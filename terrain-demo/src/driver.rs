@@ -151,7 +151,7 @@ pub fn run(
         steps_ms: BTreeMap::new(),
     })?;
     if !cli.quiet {
-        eprintln!(
+        crate::console::note!(
             "wrote {} frames of {}x{} to {} on {} ({})",
             report.frames.len(),
             report.resolution[0],
@@ -166,7 +166,7 @@ pub fn run(
     if let Some(peak) = m.peak_rss_bytes
         && peak > m.estimate_bytes
     {
-        eprintln!(
+        crate::console::note!(
             "warning: peak resident memory {} above the estimate of {} (limit {})",
             format_bytes(peak),
             format_bytes(m.estimate_bytes),
@@ -198,7 +198,7 @@ fn open_gpu(
             } else {
                 ""
             };
-            eprintln!("warning: {e:#}; writing top-down overview frames only{hint}");
+            crate::console::note!("warning: {e:#}; writing top-down overview frames only{hint}");
             return Ok(None);
         }
     };

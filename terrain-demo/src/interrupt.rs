@@ -13,16 +13,18 @@ static REQUESTED: AtomicBool = AtomicBool::new(false);
 pub fn install() {
     let installed = ctrlc::set_handler(|| {
         if REQUESTED.swap(true, Ordering::SeqCst) {
-            eprintln!("\ninterrupted again: stopping now");
+            crate::console::note!("\ninterrupted again: stopping now");
             std::process::exit(INTERRUPTED_EXIT);
         }
-        eprintln!(
+        crate::console::note!(
             "\ninterrupted: ending after the frame in progress and writing the report \
              (Ctrl-C again to stop now)"
         );
     });
     if let Err(e) = installed {
-        eprintln!("warning: no Ctrl-C handler ({e}): an interrupted run leaves no report.json");
+        crate::console::note!(
+            "warning: no Ctrl-C handler ({e}): an interrupted run leaves no report.json"
+        );
     }
 }
 

@@ -7,6 +7,7 @@ mod camera_rig;
 mod capture;
 mod cli;
 mod config;
+mod console;
 mod driver;
 mod frame_plan;
 mod gpu_scene;
@@ -38,14 +39,16 @@ fn main() {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) if !e.use_stderr() => {
-            // --help and --version.
-            let _ = e.print();
+            // --help and --version; a closed or full stdout is a failure, not a panic.
+            if e.print().is_err() {
+                std::process::exit(usage_error::FAILURE_EXIT);
+            }
             return;
         }
         Err(e) => {
             let msg = e.to_string();
             let first = msg.lines().next().unwrap_or("invalid arguments");
-            eprintln!("{first} (see --help)");
+            console::note!("{first} (see --help)");
             std::process::exit(USAGE_EXIT);
         }
     };
@@ -54,7 +57,7 @@ fn main() {
     match run(&cli) {
         Ok(Ended::Done) => {}
         Ok(Ended::Interrupted { frames }) => {
-            eprintln!(
+            console::note!(
                 "interrupted after {frames} of {} frames: report.json lists them",
                 cli.frames
             );
@@ -73,10 +76,10 @@ fn main() {
             }
             if interrupt::requested() {
                 // Ctrl-C during setup (a world build cancelled, say): no frame, no report.
-                eprintln!("interrupted: {line}");
+                console::note!("interrupted: {line}");
                 std::process::exit(INTERRUPTED_EXIT);
             }
-            eprintln!("error: {line}");
+            console::note!("error: {line}");
             std::process::exit(usage_error::exit_status(&e));
         }
     }
@@ -111,22 +114,22 @@ fn run(cli: &Cli) -> Result<Ended> {
     if let Some(dir) = &cli.verify_world {
         let bad = scenarios::world_files::verify(dir)?;
         if bad.is_empty() {
-            println!(
-                "world {}: every tile and the manifest are valid",
+            console::stdout(&format!(
+                "world {}: every tile and the manifest are valid\n",
                 dir.display()
-            );
+            ))?;
             return Ok(Ended::Done);
         }
         for line in &bad {
-            println!("{line}");
+            console::stdout(&format!("{line}\n"))?;
         }
-        eprintln!("world {}: {} bad tile(s)", dir.display(), bad.len());
+        console::note!("world {}: {} bad tile(s)", dir.display(), bad.len());
         std::process::exit(usage_error::FAILURE_EXIT);
     }
     validate::flags(cli)?;
     let params = config::DemoParams::load(cli.config.as_deref()).usage()?;
     if cli.print_config {
-        print!("{}", params.to_toml()?);
+        console::stdout(&params.to_toml()?)?;
         return Ok(Ended::Done);
     }
     // What the run needs, from its flags and input headers, before anything large exists.

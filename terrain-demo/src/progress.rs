@@ -63,7 +63,7 @@ impl Progress {
                     let elapsed = start.elapsed().as_secs_f64();
                     let rate = f64::from(done) / elapsed.max(1e-9);
                     let eta = f64::from(*total - done) / rate.max(1e-9);
-                    eprintln!(
+                    crate::console::note!(
                         "frame {done}/{total} ({:.0} %), {rate:.1} frames/s, {elapsed:.0} s elapsed, about {eta:.0} s left",
                         100.0 * f64::from(done) / f64::from((*total).max(1))
                     );

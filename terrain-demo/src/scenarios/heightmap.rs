@@ -278,7 +278,7 @@ fn from_dem(
         line.push_str(&format!("; {} samples clamped to the range", q.clamped));
     }
     if !cli.quiet {
-        eprintln!("{line}");
+        crate::console::note!("{line}");
     }
     let map = CoarseMap::coarse(q.grid, q.encoding, texel)?;
     Ok(Terrain {
@@ -308,7 +308,7 @@ fn texel_size(cli: &Cli, path: &Path, dem: &Dem) -> (f32, &'static str) {
     match dem.georeference.and_then(|g| g.texel_size()) {
         Some(TexelSize::Metres { x_m, y_m }) => {
             if (x_m - y_m).abs() > 0.01 * x_m {
-                eprintln!(
+                crate::console::note!(
                     "warning: {name} has {x_m} x {y_m} m pixels; texels are square here, so \
                      it is drawn at {x_m} m (rows stretched {:.2} times)",
                     x_m / y_m
@@ -331,7 +331,7 @@ fn texel_size(cli: &Cli, path: &Path, dem: &Dem) -> (f32, &'static str) {
             let at = latitude.map_or("at the equator (the file gives no latitude)".into(), |l| {
                 format!("at latitude {l:.2}°")
             });
-            eprintln!(
+            crate::console::note!(
                 "warning: {name}: {why} a geographic raster ({:.7}° per pixel), {north_south_m:.2} \
                  m north-south and {east_west_m:.2} m east-west {at}; drawn with square \
                  {north_south_m:.2} m texels (east-west stretched {:.2} times). Reproject it \
@@ -345,7 +345,7 @@ fn texel_size(cli: &Cli, path: &Path, dem: &Dem) -> (f32, &'static str) {
             )
         }
         Some(TexelSize::UnknownUnit { unit, per_pixel }) => {
-            eprintln!(
+            crate::console::note!(
                 "warning: {name}: pixel scale {per_pixel} in linear unit {unit}, which this \
                  reader does not know: taken as metres (give --texel-size if it is not)"
             );

@@ -416,7 +416,7 @@ mod tests {
                 panic!("{test}: TERRAIN_REQUIRE_GPU=1 but no GPU: {e:#}")
             }
             Err(e) => {
-                eprintln!("skipping {test}: {e:#}");
+                crate::console::note!("skipping {test}: {e:#}");
                 None
             }
         }

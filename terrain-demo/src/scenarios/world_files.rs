@@ -8,7 +8,7 @@ use crate::scenarios::heightmap::{HeightsInfo, PlannedMap};
 use crate::usage_error::{UsageExt, usage};
 use anyhow::{Context, Result};
 use glam::UVec2;
-use std::io::{IsTerminal, Write};
+use std::io::IsTerminal;
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -72,14 +72,14 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> 
             .with_context(|| format!("the world in {} cannot be opened", cli.world.display()))
             .usage()?;
         if !cli.quiet {
-            eprintln!(
+            crate::console::note!(
                 "world {}: {} texels, {} levels (deformations of earlier runs included)",
                 cli.world.display(),
                 world.manifest().world_size,
                 world.manifest().levels
             );
             if world.manifest().tile_format == TileFormat::Png {
-                eprintln!("{}", png_world_note(&cli.world));
+                crate::console::note!("{}", png_world_note(&cli.world));
             }
         }
         return Ok((world, format!("world {}", cli.world.display()), None));
@@ -93,7 +93,7 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> 
         let step = (p.total / 20).max(1);
         let bucket = p.done / step;
         if !cli.quiet && (last.fetch_max(bucket, Ordering::Relaxed) < bucket || p.done == p.total) {
-            eprint!(
+            crate::console::stderr(format_args!(
                 "{}building world {}: {}/{} tiles ({:.0} %, {:.0} s){}",
                 if terminal { "\r" } else { "" },
                 cli.world.display(),
@@ -102,8 +102,7 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> 
                 100.0 * p.done as f64 / p.total.max(1) as f64,
                 started.elapsed().as_secs_f64(),
                 if terminal { "" } else { "\n" },
-            );
-            let _ = std::io::stderr().flush();
+            ));
         }
         // Ctrl-C cancels the build (the manifest is written last, so the next run builds the
         // world again instead of opening half of it).
@@ -138,7 +137,7 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> 
         }
     };
     if terminal && !cli.quiet {
-        eprintln!();
+        crate::console::note!();
     }
     Ok((world, source, heights))
 }
