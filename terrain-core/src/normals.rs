@@ -21,9 +21,9 @@ pub const DERIVATIVE_APRON: u32 = 2;
 /// a slope of 1 is the steepest it represents.
 pub const DEFAULT_SNORM_MAX_SLOPE: f32 = 1.0;
 
-/// Fewest texels regenerated on the pool's threads: below this (a 181 x 181 rect) handing
+/// Fewest texels regenerated on the pool's threads: below this (a 256 x 256 rect) handing
 /// rows to another thread costs more than it saves.
-const PARALLEL_TEXELS: usize = 1 << 15;
+const PARALLEL_TEXELS: usize = 1 << 16;
 
 /// Height gradients of a map, one per texel, with the map's spacing and wrap mode.
 #[derive(Debug, Clone, PartialEq)]
