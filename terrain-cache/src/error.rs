@@ -28,6 +28,30 @@ pub enum CacheError {
         #[source]
         source: std::io::Error,
     },
+    /// Another process writes to this world folder (it holds the folder's lock, see
+    /// [`FsStore::open`](crate::FsStore::open)); open it read-only or wait for that process.
+    #[error("the world in {} is in use by {owner}", dir.display())]
+    WorldLocked {
+        /// The world folder.
+        dir: PathBuf,
+        /// Who holds it, as its lock file says (pid, host, start time).
+        owner: String,
+    },
+    /// A write or remove on a store opened read-only.
+    #[error("store opened read-only: cannot {op} {key:?}")]
+    ReadOnly {
+        /// The operation (`write`, `remove`).
+        op: &'static str,
+        /// The store key.
+        key: String,
+    },
+    /// A file or folder inside a world folder is a symbolic link: it could lead reads and
+    /// writes anywhere, so the store refuses it.
+    #[error("{} is a symbolic link inside the world folder; links are refused", path.display())]
+    LinkInWorld {
+        /// The link.
+        path: PathBuf,
+    },
     /// An atomic file write failed (terrain-core's writer: temp file, fsync, rename, dir fsync).
     #[error("writing {key:?} failed: {source}")]
     Write {

@@ -62,6 +62,7 @@ mod convert;
 pub mod detail;
 pub mod error;
 mod granular_window;
+pub mod lock;
 pub mod manifest;
 #[cfg(feature = "object-store")]
 pub mod object;
@@ -106,6 +107,11 @@ pub mod trace_sim;
 #[doc(hidden)]
 pub use trace_sim as sim;
 pub use trace_sim::{CameraPath, SimConfig, SimPolicy, SimResult, comparison_table, simulate};
+pub mod verify;
+pub use verify::{
+    Defect, DefectKind, RepairReport, VerifyError, VerifyOptions, VerifyProgress, VerifyReport,
+    repair_world, verify_world,
+};
 
 /// The README's code blocks, compiled and run as doc tests so that they cannot go stale.
 #[cfg(doctest)]

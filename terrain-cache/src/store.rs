@@ -7,10 +7,12 @@
 //! are reserved for temp files and never listed.
 
 use crate::CacheError;
+use crate::lock::{LOCK_FILE, WorldLock, lock_world};
 use std::fmt;
 use std::fs::{self, File};
 use std::io::{self, Read};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Where tiles live: a local folder, a bucket, memory.
 ///
@@ -71,25 +73,62 @@ pub(crate) fn check_prefix(prefix: &str) -> Result<(), CacheError> {
 /// Tiles as files under a root folder, written atomically with terrain-core's writer (temp file
 /// in the same folder, write, fsync, rename, folder fsync).
 ///
-/// A write whose process dies leaves at most a `.{name}.{pid}.{n}.tmp` file beside the target;
-/// such files are never listed, and [`FsStore::open`] removes them.
+/// - **One writer per folder.** [`open`](FsStore::open) takes the folder's lock
+///   ([`crate::lock`]) for as long as the store (or a clone) lives; a second process gets
+///   [`CacheError::WorldLocked`] naming the owner. Tools that only read use
+///   [`open_read_only`](FsStore::open_read_only), which takes no lock and refuses writes.
+/// - **No links.** A key whose file or any folder on the way is a symbolic link is refused
+///   with [`CacheError::LinkInWorld`]: a link could lead reads and writes out of the world.
+/// - **Own temp files only.** A write whose process dies leaves at most a
+///   `.{name}.{pid}.{n}.tmp` file beside the target; such files are never listed, and
+///   [`open`](FsStore::open) removes them, but only in a folder that is a world (it holds a
+///   manifest or an earlier store's lock file) and only names of exactly that pattern.
 #[derive(Debug, Clone)]
 pub struct FsStore {
     root: PathBuf,
+    /// The folder's lock, `None` when opened read-only.
+    lock: Option<Arc<WorldLock>>,
 }
 
 impl FsStore {
-    /// A store over `root`, created if missing. Temp files left by writers that died are removed
-    /// (only call this when no other process writes to the same folder).
+    /// A writing store over `root`, created if missing, holding the folder's lock. Temp files
+    /// left by writers that died are removed (safe: no other process writes while we hold the
+    /// lock).
     pub fn open(root: impl AsRef<Path>) -> Result<Self, CacheError> {
         let root = root.as_ref().to_path_buf();
         fs::create_dir_all(&root).map_err(|source| CacheError::Io {
             path: root.clone(),
             source,
         })?;
-        let store = Self { root };
-        store.remove_temp_files()?;
+        // Decided before the lock file is created: a folder our lock file was already in has
+        // had one of our stores writing to it, even if the manifest never came.
+        let ours = root.join(crate::manifest::MANIFEST_KEY).is_file()
+            || fs::symlink_metadata(root.join(LOCK_FILE)).is_ok_and(|m| m.is_file());
+        let lock = lock_world(&root)?;
+        let store = Self {
+            root,
+            lock: Some(lock),
+        };
+        if ours {
+            store.remove_temp_files()?;
+        }
         Ok(store)
+    }
+
+    /// A store over the existing folder `root` that only reads: no lock is taken, nothing is
+    /// created or cleaned, and [`write`](TileStore::write) and [`remove`](TileStore::remove)
+    /// fail with [`CacheError::ReadOnly`]. For viewers and checking tools; a writer may be
+    /// replacing tiles meanwhile (each read still sees a whole file, old or new).
+    pub fn open_read_only(root: impl AsRef<Path>) -> Result<Self, CacheError> {
+        let root = root.as_ref().to_path_buf();
+        match fs::metadata(&root) {
+            Ok(m) if m.is_dir() => Ok(Self { root, lock: None }),
+            Ok(_) => Err(CacheError::Io {
+                path: root,
+                source: io::Error::new(io::ErrorKind::InvalidInput, "not a folder"),
+            }),
+            Err(source) => Err(CacheError::Io { path: root, source }),
+        }
     }
 
     /// The root folder.
@@ -97,28 +136,58 @@ impl FsStore {
         &self.root
     }
 
-    /// The file of `key`.
+    /// Whether this store may write (it was opened with [`open`](FsStore::open)).
+    pub fn is_writable(&self) -> bool {
+        self.lock.is_some()
+    }
+
+    /// The file of `key`, refused if it or a folder between the root and it is a link.
     pub fn path_of(&self, key: &str) -> Result<PathBuf, CacheError> {
         check_key(key)?;
+        let mut path = self.root.clone();
+        for part in key.split('/') {
+            path.push(part);
+            match fs::symlink_metadata(&path) {
+                Ok(m) if m.file_type().is_symlink() => {
+                    return Err(CacheError::LinkInWorld { path });
+                }
+                Ok(_) => {}
+                // The rest does not exist yet (a missing tile, a write creating its folders).
+                Err(e) if e.kind() == io::ErrorKind::NotFound => break,
+                Err(source) => return Err(CacheError::Io { path, source }),
+            }
+        }
         Ok(self.root.join(key))
     }
 
-    /// Removes leftover temp files (names starting with `.` and ending in `.tmp`) anywhere under
-    /// the root; returns how many were removed.
+    /// The error for a write on a read-only store.
+    fn check_writable(&self, op: &'static str, key: &str) -> Result<(), CacheError> {
+        match self.lock {
+            Some(_) => Ok(()),
+            None => Err(CacheError::ReadOnly {
+                op,
+                key: key.to_owned(),
+            }),
+        }
+    }
+
+    /// Removes leftover temp files of this crate's atomic writer (names `.{name}.{pid}.{n}.tmp`)
+    /// in the root and its folders, never through a link; returns how many were removed.
+    /// Fails with [`CacheError::ReadOnly`] on a read-only store.
     pub fn remove_temp_files(&self) -> Result<usize, CacheError> {
+        self.check_writable("remove temp files in", "")?;
         let mut removed = 0;
         let mut stack = vec![self.root.clone()];
         while let Some(dir) = stack.pop() {
-            for entry in read_dir(&dir)? {
-                let (path, is_dir, name) = entry;
-                if is_dir {
-                    stack.push(path);
-                } else if name.starts_with('.') && name.ends_with(".tmp") {
-                    match fs::remove_file(&path) {
+            for (path, kind, name) in read_dir(&dir)? {
+                match kind {
+                    EntryKind::Dir if !name.starts_with('.') => stack.push(path),
+                    EntryKind::File if is_writer_temp(&name) => match fs::remove_file(&path) {
                         Ok(()) => removed += 1,
                         Err(e) if e.kind() == io::ErrorKind::NotFound => {}
                         Err(source) => return Err(CacheError::Io { path, source }),
-                    }
+                    },
+                    _ => {}
                 }
             }
         }
@@ -189,8 +258,34 @@ fn sync_dir(dir: &Path) -> Result<(), CacheError> {
     }
 }
 
-/// Entries of `dir` as (path, is_dir, name); a missing folder has none.
-fn read_dir(dir: &Path) -> Result<Vec<(PathBuf, bool, String)>, CacheError> {
+/// What a folder entry is, without following links.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum EntryKind {
+    Dir,
+    File,
+    Link,
+    /// A named pipe, socket or device.
+    Special,
+}
+
+/// Whether `name` is a temp file of terrain-core's atomic writer: `.{name}.{pid}.{n}.tmp`
+/// with a non-empty name and decimal pid and counter. Nothing else is ever cleaned up.
+fn is_writer_temp(name: &str) -> bool {
+    let Some(inner) = name
+        .strip_prefix('.')
+        .and_then(|rest| rest.strip_suffix(".tmp"))
+    else {
+        return false;
+    };
+    let mut parts = inner.rsplitn(3, '.');
+    let digits = |p: Option<&str>| {
+        p.is_some_and(|p| !p.is_empty() && p.len() <= 20 && p.bytes().all(|b| b.is_ascii_digit()))
+    };
+    digits(parts.next()) && digits(parts.next()) && parts.next().is_some_and(|n| !n.is_empty())
+}
+
+/// Entries of `dir` as (path, kind, name); a missing folder has none.
+fn read_dir(dir: &Path) -> Result<Vec<(PathBuf, EntryKind, String)>, CacheError> {
     let io_err = |source| CacheError::Io {
         path: dir.to_path_buf(),
         source,
@@ -205,7 +300,16 @@ fn read_dir(dir: &Path) -> Result<Vec<(PathBuf, bool, String)>, CacheError> {
         let entry = entry.map_err(io_err)?;
         let ft = entry.file_type().map_err(io_err)?;
         let name = entry.file_name().to_string_lossy().into_owned();
-        out.push((entry.path(), ft.is_dir(), name));
+        let kind = if ft.is_symlink() {
+            EntryKind::Link
+        } else if ft.is_dir() {
+            EntryKind::Dir
+        } else if ft.is_file() {
+            EntryKind::File
+        } else {
+            EntryKind::Special
+        };
+        out.push((entry.path(), kind, name));
     }
     Ok(out)
 }
@@ -270,6 +374,7 @@ impl TileStore for FsStore {
     }
 
     fn write(&self, key: &str, bytes: &[u8]) -> Result<(), CacheError> {
+        self.check_writable("write", key)?;
         let path = self.path_of(key)?;
         self.ensure_parent(&path)?;
         terrain_core::io::write_atomic(&path, bytes).map_err(|source| CacheError::Write {
@@ -279,6 +384,7 @@ impl TileStore for FsStore {
     }
 
     fn remove(&self, key: &str) -> Result<(), CacheError> {
+        self.check_writable("remove", key)?;
         let path = self.path_of(key)?;
         match fs::remove_file(&path) {
             Ok(()) => {
@@ -307,7 +413,7 @@ impl TileStore for FsStore {
         let start = if prefix.is_empty() {
             self.root.clone()
         } else {
-            self.root.join(prefix)
+            self.path_of(prefix)?
         };
         let mut out = Vec::new();
         if start.is_file() {
@@ -316,7 +422,7 @@ impl TileStore for FsStore {
         }
         let mut stack = vec![(start, prefix.to_owned())];
         while let Some((dir, key_prefix)) = stack.pop() {
-            for (path, is_dir, name) in read_dir(&dir)? {
+            for (path, kind, name) in read_dir(&dir)? {
                 if name.starts_with('.') {
                     continue;
                 }
@@ -325,10 +431,12 @@ impl TileStore for FsStore {
                 } else {
                     format!("{key_prefix}/{name}")
                 };
-                if is_dir {
-                    stack.push((path, key));
-                } else {
-                    out.push(key);
+                match kind {
+                    EntryKind::Dir => stack.push((path, key)),
+                    EntryKind::File => out.push(key),
+                    EntryKind::Link => return Err(CacheError::LinkInWorld { path }),
+                    // Not a tile and never one: a pipe or device is skipped, as readers refuse it.
+                    EntryKind::Special => {}
                 }
             }
         }
@@ -400,6 +508,103 @@ pub(crate) mod tests {
         let store = FsStore::open(&dir).unwrap();
         assert!(!dir.join("a/.d.png.1.2.tmp").exists());
         assert_eq!(store.remove_temp_files().unwrap(), 0);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn only_the_writers_own_temp_files_in_a_world_are_cleaned() {
+        let dir = temp_dir("clean");
+        fs::create_dir_all(dir.join("height/00")).unwrap();
+        let temps = ["height/00/.0001.tile.77.3.tmp", ".manifest.json.1.0.tmp"];
+        let kept = [
+            "height/00/.notes.tmp",
+            "height/00/.x.tmp",
+            "height/00/.a.b.c.tmp",
+            "height/00/.a.1.x.tmp",
+            ".hidden/.a.1.2.tmp",
+        ];
+        fs::create_dir_all(dir.join(".hidden")).unwrap();
+        for name in temps.iter().chain(&kept) {
+            fs::write(dir.join(name), b"x").unwrap();
+        }
+        // Not a world yet (no manifest, no lock file): nothing is touched.
+        drop(FsStore::open(&dir).unwrap());
+        for name in temps.iter().chain(&kept) {
+            assert!(
+                dir.join(name).exists(),
+                "{name} was removed from a non-world"
+            );
+        }
+        // Now it has our lock file: the writer's temps go, nothing else does.
+        drop(FsStore::open(&dir).unwrap());
+        for name in temps {
+            assert!(!dir.join(name).exists(), "{name} was kept");
+        }
+        for name in kept {
+            assert!(dir.join(name).exists(), "{name} was removed");
+        }
+        #[cfg(unix)]
+        {
+            // A linked folder is not followed.
+            let outside = temp_dir("clean-outside");
+            fs::create_dir_all(&outside).unwrap();
+            fs::write(outside.join(".t.1.2.tmp"), b"x").unwrap();
+            std::os::unix::fs::symlink(&outside, dir.join("height/01")).unwrap();
+            drop(FsStore::open(&dir).unwrap());
+            assert!(outside.join(".t.1.2.tmp").exists());
+            fs::remove_dir_all(&outside).unwrap();
+        }
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn links_inside_the_world_are_refused() {
+        let dir = temp_dir("links");
+        let outside = temp_dir("links-outside");
+        fs::create_dir_all(outside.join("00")).unwrap();
+        fs::write(outside.join("00/0000.tile"), b"secret").unwrap();
+        let store = FsStore::open(&dir).unwrap();
+        std::os::unix::fs::symlink(&outside, dir.join("height")).unwrap();
+        let link = |r: Result<_, CacheError>| matches!(r, Err(CacheError::LinkInWorld { .. }));
+        assert!(link(store.read("height/00/0000.tile", 100).map(|_| ())));
+        assert!(link(store.write("height/00/0001.tile", b"x")));
+        assert!(link(store.exists("height/00/0000.tile").map(|_| ())));
+        assert!(link(store.list("").map(|_| ())));
+        assert!(link(store.list("height").map(|_| ())));
+        assert!(!outside.join("00/0001.tile").exists());
+        // A tile file that is a link is refused too.
+        fs::remove_file(dir.join("height")).unwrap();
+        fs::create_dir_all(dir.join("height/00")).unwrap();
+        std::os::unix::fs::symlink(
+            outside.join("00/0000.tile"),
+            dir.join("height/00/0000.tile"),
+        )
+        .unwrap();
+        assert!(link(store.read("height/00/0000.tile", 100).map(|_| ())));
+        drop(store);
+        fs::remove_dir_all(&dir).unwrap();
+        fs::remove_dir_all(&outside).unwrap();
+    }
+
+    #[test]
+    fn a_read_only_store_reads_and_refuses_every_change() {
+        let dir = temp_dir("ro");
+        let writer = FsStore::open(&dir).unwrap();
+        writer.write("a/b.tile", b"bytes").unwrap();
+        fs::write(dir.join("a/.b.tile.1.2.tmp"), b"x").unwrap();
+        let reader = FsStore::open_read_only(&dir).unwrap();
+        assert!(!reader.is_writable() && writer.is_writable());
+        assert_eq!(reader.read("a/b.tile", 100).unwrap().unwrap(), b"bytes");
+        assert_eq!(reader.list("").unwrap(), vec!["a/b.tile"]);
+        let ro = |r: Result<_, CacheError>| matches!(r, Err(CacheError::ReadOnly { .. }));
+        assert!(ro(reader.write("a/c.tile", b"x")));
+        assert!(ro(reader.remove("a/b.tile")));
+        assert!(ro(reader.remove_temp_files().map(|_| ())));
+        assert!(dir.join("a/.b.tile.1.2.tmp").exists());
+        assert!(FsStore::open_read_only(dir.join("missing")).is_err());
+        assert!(!dir.join("missing").exists());
+        drop(writer);
         fs::remove_dir_all(&dir).unwrap();
     }
 }
