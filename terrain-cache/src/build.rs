@@ -234,10 +234,11 @@ struct BuildCtx<'a, S: TileSource> {
     writes: crossbeam_channel::Sender<WriteJob>,
 }
 
-struct Node {
-    grid: Grid<u16>,
-    min: u16,
-    max: u16,
+/// A built tile: its samples and the min / max of the level-0 samples under it.
+pub(crate) struct Node {
+    pub(crate) grid: Grid<u16>,
+    pub(crate) min: u16,
+    pub(crate) max: u16,
 }
 
 /// Builds the height pyramid of `manifest` from `source` into `store` and writes the manifest
@@ -478,7 +479,7 @@ pub fn reduce_levels(grid: &Grid<u16>, levels: u32) -> Result<Grid<u16>, CacheEr
 
 /// The parent tile from its (up to four) children: 2x2 mean into each quadrant, then clamped
 /// padding beyond the parent level's size.
-fn reduce_children(m: &Manifest, id: TileId, children: &[Option<Node>; 4]) -> Node {
+pub(crate) fn reduce_children(m: &Manifest, id: TileId, children: &[Option<Node>; 4]) -> Node {
     let ts = m.tile_size;
     let half = ts / 2;
     let mut out = vec![0u16; (ts * ts) as usize];

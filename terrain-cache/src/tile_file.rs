@@ -6,15 +6,31 @@
 //! | bytes  | field                                                                  |
 //! |--------|------------------------------------------------------------------------|
 //! | 0..4   | magic `b"TCTL"`                                                        |
-//! | 4      | version, 1                                                             |
+//! | 4      | version: 1, or 2 for a file that names its tile (below)                |
 //! | 5      | bits per sample: 16 (heights) or 8 (detail)                            |
 //! | 6      | codec: 0 raw samples, 1 LZ4 block (of filtered samples for 16 bits)    |
 //! | 7      | flags, 0 (none defined; a set bit is refused)                          |
 //! | 8..12  | width in samples (u32)                                                 |
 //! | 12..16 | height in samples (u32)                                                |
 //! | 16..20 | payload length in bytes (u32): the file is exactly 24 + this long       |
-//! | 20..24 | CRC-32 (IEEE) of bytes 0..20 followed by the payload                   |
-//! | 24..   | payload                                                                |
+//! | 20..24 | CRC-32 (IEEE) of bytes 0..20 followed by everything after byte 24      |
+//! | 24..   | payload (version 1)                                                    |
+//!
+//! Version 2 (what a [`World`](crate::World) writes) inserts the tile's identity before the
+//! payload, covered by the checksum, so a valid file copied or moved to another tile's path is
+//! refused ([`TileFileError::Identity`]) instead of read as that tile:
+//!
+//! | bytes  | field                                                                  |
+//! |--------|------------------------------------------------------------------------|
+//! | 24     | layer: 0 heights, 1 detail                                             |
+//! | 25..28 | reserved, 0                                                            |
+//! | 28..32 | level (u32)                                                            |
+//! | 32..36 | column x (u32)                                                         |
+//! | 36..40 | row y (u32)                                                            |
+//! | 40..   | payload                                                                |
+//!
+//! Version-1 files (written before, or by [`encode`] without an identity) still decode; they
+//! carry no identity to check.
 //!
 //! Raw payload: the samples row-major, little-endian. LZ4 payload: an LZ4 block that
 //! decompresses to exactly `width * height * bits / 8` bytes. 8-bit samples go in as they
@@ -29,16 +45,52 @@
 //! with 40 footprints shrinks from 4 MiB to 3 % and decodes in about 1 ms; a delta filter
 //! saved another 15 % of the size but made decoding 4x slower.
 
-use crate::tile::{Layer, TileData};
+use crate::tile::{Layer, TileData, TileId};
 use terrain_core::Grid;
 use terrain_core::io::MapIoError;
 
 /// The first four bytes of a tile file.
 pub const MAGIC: [u8; 4] = *b"TCTL";
-/// The tile file version this build writes and reads.
+/// The tile file version without an identity, which [`encode`] writes (and every build reads).
 pub const VERSION: u8 = 1;
-/// Bytes before the payload.
+/// The tile file version that names its tile ([`encode_as`]; what worlds write).
+pub const VERSION_WITH_IDENTITY: u8 = 2;
+/// Bytes before the payload in a version-1 file (and the common header of both versions).
 pub const HEADER_LEN: usize = 24;
+/// Bytes before the payload in a version-2 file: the header and the identity.
+pub const HEADER_LEN_WITH_IDENTITY: usize = 40;
+
+/// Which tile a file was written for: what a version-2 file carries after its header.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct TileIdentity {
+    /// The layer.
+    pub layer: Layer,
+    /// The tile.
+    pub id: TileId,
+}
+
+impl TileIdentity {
+    /// Tile `id` of `layer`.
+    pub const fn new(layer: Layer, id: TileId) -> Self {
+        Self { layer, id }
+    }
+
+    fn to_bytes(self) -> [u8; 16] {
+        let mut b = [0u8; 16];
+        b[0] = layer_byte(self.layer);
+        b[4..8].copy_from_slice(&self.id.level.to_le_bytes());
+        b[8..12].copy_from_slice(&self.id.x.to_le_bytes());
+        b[12..16].copy_from_slice(&self.id.y.to_le_bytes());
+        b
+    }
+}
+
+const fn layer_byte(layer: Layer) -> u8 {
+    match layer {
+        Layer::Height => 0,
+        Layer::Detail => 1,
+    }
+}
 
 /// How a tile file's payload holds the samples.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -95,7 +147,9 @@ pub enum TileFileError {
         found: [u8; 4],
     },
     /// A version this build does not read.
-    #[error("tile file version {found}; this build reads version {VERSION}")]
+    #[error(
+        "tile file version {found}; this build reads versions {VERSION} and {VERSION_WITH_IDENTITY}"
+    )]
     Version {
         /// The version byte.
         found: u8,
@@ -142,6 +196,22 @@ pub enum TileFileError {
         /// Of the bytes read.
         computed: u32,
     },
+    /// A valid file written for another tile (copied or moved to this tile's path).
+    #[error(
+        "the file was written for {} tile L{level}({x:#x}, {y:#x}), not this one (a tile file \
+         copied or moved from another path)",
+        match layer { 0 => "height", 1 => "detail", _ => "an unknown layer's" }
+    )]
+    Identity {
+        /// The layer byte found (0 heights, 1 detail).
+        layer: u8,
+        /// The level found.
+        level: u32,
+        /// The column found.
+        x: u32,
+        /// The row found.
+        y: u32,
+    },
     /// A payload whose checksum matches but does not hold the tile's samples (a writer bug, or
     /// a file crafted with a valid checksum).
     #[error("the {codec:?} payload does not hold {expected} bytes of samples: {reason}")]
@@ -155,7 +225,7 @@ pub enum TileFileError {
     },
 }
 
-/// The file bytes of `data` with `codec`.
+/// The file bytes of `data` with `codec`, version 1 (no identity).
 pub fn encode(data: &TileData, codec: TileCodec) -> Vec<u8> {
     match data {
         TileData::U16(g) => encode_u16(g, codec),
@@ -163,11 +233,28 @@ pub fn encode(data: &TileData, codec: TileCodec) -> Vec<u8> {
     }
 }
 
-/// The file bytes of a height grid.
+/// The file bytes of `data` with `codec`, version 2: naming the tile it is written for.
+pub fn encode_as(data: &TileData, codec: TileCodec, identity: TileIdentity) -> Vec<u8> {
+    match data {
+        TileData::U16(g) => encode_u16_with(g, codec, Some(identity)),
+        TileData::U8(g) => encode_u8_with(g, codec, Some(identity)),
+    }
+}
+
+/// The file bytes of a height grid, version 1 (no identity).
 pub fn encode_u16(grid: &Grid<u16>, codec: TileCodec) -> Vec<u8> {
+    encode_u16_with(grid, codec, None)
+}
+
+/// The file bytes of a height grid, version 2 when `identity` is given.
+pub fn encode_u16_with(
+    grid: &Grid<u16>,
+    codec: TileCodec,
+    identity: Option<TileIdentity>,
+) -> Vec<u8> {
     let samples = grid.as_slice();
     match codec {
-        TileCodec::Raw => finish(16, codec, grid.width(), grid.height(), |out| {
+        TileCodec::Raw => finish(16, codec, grid.width(), grid.height(), identity, |out| {
             if cfg!(target_endian = "little") {
                 out.extend_from_slice(bytemuck::cast_slice(samples));
             } else {
@@ -176,38 +263,64 @@ pub fn encode_u16(grid: &Grid<u16>, codec: TileCodec) -> Vec<u8> {
         }),
         TileCodec::Lz4 => {
             let filtered = filter_u16(samples, grid.width() as usize);
-            finish(16, codec, grid.width(), grid.height(), |out| {
+            finish(16, codec, grid.width(), grid.height(), identity, |out| {
                 compress_into(&filtered, out)
             })
         }
     }
 }
 
-/// The file bytes of a detail grid.
+/// The file bytes of a detail grid, version 1 (no identity).
 pub fn encode_u8(grid: &Grid<u8>, codec: TileCodec) -> Vec<u8> {
+    encode_u8_with(grid, codec, None)
+}
+
+/// The file bytes of a detail grid, version 2 when `identity` is given.
+pub fn encode_u8_with(
+    grid: &Grid<u8>,
+    codec: TileCodec,
+    identity: Option<TileIdentity>,
+) -> Vec<u8> {
     let samples = grid.as_slice();
     match codec {
-        TileCodec::Raw => finish(8, codec, grid.width(), grid.height(), |out| {
+        TileCodec::Raw => finish(8, codec, grid.width(), grid.height(), identity, |out| {
             out.extend_from_slice(samples)
         }),
-        TileCodec::Lz4 => finish(8, codec, grid.width(), grid.height(), |out| {
+        TileCodec::Lz4 => finish(8, codec, grid.width(), grid.height(), identity, |out| {
             compress_into(samples, out)
         }),
     }
 }
 
-/// Header, then the payload `body` appends, then the length and checksum filled in.
-fn finish(bits: u8, codec: TileCodec, w: u32, h: u32, body: impl FnOnce(&mut Vec<u8>)) -> Vec<u8> {
+/// Header (and identity), then the payload `body` appends, then the length and checksum
+/// filled in.
+fn finish(
+    bits: u8,
+    codec: TileCodec,
+    w: u32,
+    h: u32,
+    identity: Option<TileIdentity>,
+    body: impl FnOnce(&mut Vec<u8>),
+) -> Vec<u8> {
     let raw_len = w as usize * h as usize * usize::from(bits / 8);
-    let mut out = Vec::with_capacity(HEADER_LEN + raw_len);
+    let mut out = Vec::with_capacity(HEADER_LEN_WITH_IDENTITY + raw_len);
     out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&[VERSION, bits, codec.byte(), 0]);
+    let version = if identity.is_some() {
+        VERSION_WITH_IDENTITY
+    } else {
+        VERSION
+    };
+    out.extend_from_slice(&[version, bits, codec.byte(), 0]);
     out.extend_from_slice(&w.to_le_bytes());
     out.extend_from_slice(&h.to_le_bytes());
     out.extend_from_slice(&[0; 8]);
+    if let Some(identity) = identity {
+        out.extend_from_slice(&identity.to_bytes());
+    }
+    let header = out.len();
     body(&mut out);
     // Tiles are at most 4096^2 x 2 bytes (the manifest's bound), far below 4 GiB.
-    let payload_len = (out.len() - HEADER_LEN) as u32;
+    let payload_len = (out.len() - header) as u32;
     out[16..20].copy_from_slice(&payload_len.to_le_bytes());
     let sum = checksum(&out[..20], &out[HEADER_LEN..]);
     out[20..24].copy_from_slice(&sum.to_le_bytes());
@@ -237,12 +350,34 @@ fn compress_into(filtered: &[u8], out: &mut Vec<u8>) {
 pub fn max_file_len(side: u32, bits: u8) -> u64 {
     let raw = u64::from(side) * u64::from(side) * u64::from(bits / 8);
     let lz4_worst = lz4_flex::block::get_maximum_output_size(raw as usize) as u64;
-    HEADER_LEN as u64 + raw.max(lz4_worst)
+    HEADER_LEN_WITH_IDENTITY as u64 + raw.max(lz4_worst)
 }
 
 /// Decodes a tile file of `layer` whose tiles are `side` x `side`: header and length checked,
 /// then the checksum, then the payload; allocation is bounded by `side`, never by the header.
+/// A version-2 file's identity is checked for integrity only; [`decode_as`] also checks that
+/// it names the tile asked for.
 pub fn decode(bytes: &[u8], layer: Layer, side: u32) -> Result<TileData, TileFileError> {
+    decode_checked(bytes, layer, side, None)
+}
+
+/// Decodes the file of tile `identity` as [`decode`] does, and refuses a version-2 file
+/// written for another tile ([`TileFileError::Identity`]). A version-1 file names no tile and
+/// is accepted as it decodes.
+pub fn decode_as(
+    bytes: &[u8],
+    identity: TileIdentity,
+    side: u32,
+) -> Result<TileData, TileFileError> {
+    decode_checked(bytes, identity.layer, side, Some(identity))
+}
+
+fn decode_checked(
+    bytes: &[u8],
+    layer: Layer,
+    side: u32,
+    expected: Option<TileIdentity>,
+) -> Result<TileData, TileFileError> {
     if bytes.len() < HEADER_LEN {
         return Err(TileFileError::Truncated { len: bytes.len() });
     }
@@ -252,9 +387,14 @@ pub fn decode(bytes: &[u8], layer: Layer, side: u32) -> Result<TileData, TileFil
     if magic != MAGIC {
         return Err(TileFileError::Magic { found: magic });
     }
-    if bytes[4] != VERSION {
-        return Err(TileFileError::Version { found: bytes[4] });
-    }
+    let header = match bytes[4] {
+        VERSION => HEADER_LEN,
+        VERSION_WITH_IDENTITY if bytes.len() >= HEADER_LEN_WITH_IDENTITY => {
+            HEADER_LEN_WITH_IDENTITY
+        }
+        VERSION_WITH_IDENTITY => return Err(TileFileError::Truncated { len: bytes.len() }),
+        found => return Err(TileFileError::Version { found }),
+    };
     let (bits, codec_byte, flags) = (bytes[5], bytes[6], bytes[7]);
     let codec = match TileCodec::from_byte(codec_byte) {
         Some(c) if flags == 0 => c,
@@ -279,7 +419,7 @@ pub fn decode(bytes: &[u8], layer: Layer, side: u32) -> Result<TileData, TileFil
             expected: side,
         });
     }
-    let payload = &bytes[HEADER_LEN..];
+    let payload = &bytes[header..];
     let declared = u64::from(u32_at(16));
     if declared != payload.len() as u64 {
         return Err(TileFileError::Length {
@@ -288,9 +428,21 @@ pub fn decode(bytes: &[u8], layer: Layer, side: u32) -> Result<TileData, TileFil
         });
     }
     let stored = u32_at(20);
-    let computed = checksum(&bytes[..20], payload);
+    let computed = checksum(&bytes[..20], &bytes[HEADER_LEN..]);
     if stored != computed {
         return Err(TileFileError::Checksum { stored, computed });
+    }
+    if header == HEADER_LEN_WITH_IDENTITY {
+        let found: [u8; 16] = std::array::from_fn(|i| bytes[HEADER_LEN + i]);
+        let known = matches!(found[0], 0 | 1) && found[1..4] == [0, 0, 0];
+        if !known || expected.is_some_and(|e| e.to_bytes() != found) {
+            return Err(TileFileError::Identity {
+                layer: found[0],
+                level: u32_at(28),
+                x: u32_at(32),
+                y: u32_at(36),
+            });
+        }
     }
     let n = side as usize * side as usize;
     let bad = |expected: usize, reason: String| TileFileError::Payload {
@@ -453,8 +605,8 @@ mod tests {
         b[0] = b'X';
         assert!(matches!(err(&b), TileFileError::Magic { .. }));
         let mut b = good.clone();
-        b[4] = 2;
-        assert!(matches!(err(&b), TileFileError::Version { found: 2 }));
+        b[4] = 3;
+        assert!(matches!(err(&b), TileFileError::Version { found: 3 }));
         let mut b = good.clone();
         b[6] = 9;
         assert!(matches!(err(&b), TileFileError::Codec { codec: 9, .. }));
@@ -484,6 +636,65 @@ mod tests {
                 "byte {i}"
             );
         }
+    }
+
+    #[test]
+    fn a_file_naming_its_tile_is_refused_at_another_tiles_path() {
+        let h = heights(32);
+        let here = TileIdentity::new(Layer::Height, TileId::new(2, 5, 7));
+        for codec in [TileCodec::Raw, TileCodec::Lz4] {
+            let bytes = encode_u16_with(&h, codec, Some(here));
+            assert_eq!(bytes[4], VERSION_WITH_IDENTITY);
+            assert!(bytes.len() as u64 <= max_file_len(32, 16));
+            let want = TileData::U16(h.clone());
+            assert_eq!(decode_as(&bytes, here, 32).unwrap(), want);
+            assert_eq!(decode(&bytes, Layer::Height, 32).unwrap(), want);
+            for other in [
+                TileIdentity::new(Layer::Height, TileId::new(2, 5, 8)),
+                TileIdentity::new(Layer::Height, TileId::new(2, 6, 7)),
+                TileIdentity::new(Layer::Height, TileId::new(1, 5, 7)),
+            ] {
+                assert!(matches!(
+                    decode_as(&bytes, other, 32).unwrap_err(),
+                    TileFileError::Identity {
+                        layer: 0,
+                        level: 2,
+                        x: 5,
+                        y: 7
+                    }
+                ));
+            }
+            // The identity is under the checksum: editing it is damage, not a new name.
+            for i in HEADER_LEN..HEADER_LEN_WITH_IDENTITY {
+                let mut b = bytes.clone();
+                b[i] ^= 1;
+                assert!(
+                    matches!(
+                        decode(&b, Layer::Height, 32).unwrap_err(),
+                        TileFileError::Checksum { .. }
+                    ),
+                    "byte {i}"
+                );
+            }
+            // Cut inside the identity.
+            assert!(matches!(
+                decode(&bytes[..30], Layer::Height, 32).unwrap_err(),
+                TileFileError::Truncated { len: 30 }
+            ));
+        }
+        // Detail tiles name their layer.
+        let d = Grid::new(16, 16, 3u8).unwrap();
+        let id = TileId::new(0, 1, 1);
+        let bytes = encode_u8_with(
+            &d,
+            TileCodec::Lz4,
+            Some(TileIdentity::new(Layer::Detail, id)),
+        );
+        assert!(decode_as(&bytes, TileIdentity::new(Layer::Detail, id), 16).is_ok());
+        // A version-1 file names no tile: accepted at any path, as before.
+        let old = encode_u16(&h, TileCodec::Raw);
+        assert_eq!(old[4], VERSION);
+        assert!(decode_as(&old, here, 32).is_ok());
     }
 
     #[test]

@@ -7,7 +7,7 @@ use crate::CacheError;
 use crate::manifest::{MANIFEST_KEY, MAX_MANIFEST_BYTES, Manifest, TileFormat, bounds_key};
 use crate::store::TileStore;
 use crate::tile::{Layer, TileData, TileId};
-use crate::tile_file::{self, TileCodec, TileFileError};
+use crate::tile_file::{self, TileCodec, TileFileError, TileIdentity};
 use glam::UVec2;
 use std::sync::{Arc, OnceLock};
 use terrain_core::Grid;
@@ -142,7 +142,8 @@ impl World {
         }
     }
 
-    /// Decodes the bytes of a tile file of `layer` and checks its shape.
+    /// Decodes the bytes of the file of tile `id` of `layer` and checks its shape and, for a
+    /// `.tile` file that names its tile (version 2), that it names this one.
     pub fn decode_tile(
         &self,
         layer: Layer,
@@ -152,21 +153,23 @@ impl World {
         let size = self.manifest.layer_tile_size(layer)?;
         let corrupt = |source| CacheError::CorruptTile { layer, id, source };
         let data = match self.manifest.tile_format {
-            TileFormat::Tile => match tile_file::decode(bytes, layer, size) {
-                Ok(d) => d,
-                Err(TileFileError::Shape {
-                    found_w, found_h, ..
-                }) => {
-                    return Err(CacheError::WrongTileShape {
-                        layer,
-                        id,
-                        expected: size,
-                        found_w,
-                        found_h,
-                    });
+            TileFormat::Tile => {
+                match tile_file::decode_as(bytes, TileIdentity::new(layer, id), size) {
+                    Ok(d) => d,
+                    Err(TileFileError::Shape {
+                        found_w, found_h, ..
+                    }) => {
+                        return Err(CacheError::WrongTileShape {
+                            layer,
+                            id,
+                            expected: size,
+                            found_w,
+                            found_h,
+                        });
+                    }
+                    Err(e) => return Err(corrupt(e)),
                 }
-                Err(e) => return Err(corrupt(e)),
-            },
+            }
             TileFormat::Png => {
                 let limits = ReadLimits { max_side: size };
                 let png = |e| corrupt(TileFileError::Png(e));
@@ -207,11 +210,37 @@ impl World {
     }
 
     /// Encodes a tile as its file bytes: a `.tile` file with the layer's codec
-    /// ([`TileCodec::for_layer`]), or PNG16 / PNG8 in a world of PNG tiles.
+    /// ([`TileCodec::for_layer`]) and no identity (version 1, valid at any tile's path), or
+    /// PNG16 / PNG8 in a world of PNG tiles. [`write_tile`](Self::write_tile) writes the
+    /// file naming its tile ([`encode_tile_as`](Self::encode_tile_as)).
     pub fn encode_tile(&self, layer: Layer, data: &TileData) -> Result<Vec<u8>, CacheError> {
+        self.encode_with(layer, None, data)
+    }
+
+    /// Encodes tile `id` of `layer` as its file bytes: a `.tile` file naming the tile (version
+    /// 2, refused at any other tile's path), or PNG16 / PNG8 in a world of PNG tiles.
+    pub fn encode_tile_as(
+        &self,
+        layer: Layer,
+        id: TileId,
+        data: &TileData,
+    ) -> Result<Vec<u8>, CacheError> {
+        self.encode_with(layer, Some(TileIdentity::new(layer, id)), data)
+    }
+
+    fn encode_with(
+        &self,
+        layer: Layer,
+        identity: Option<TileIdentity>,
+        data: &TileData,
+    ) -> Result<Vec<u8>, CacheError> {
         self.check_data(layer, data)?;
         if self.manifest.tile_format == TileFormat::Tile {
-            return Ok(tile_file::encode(data, TileCodec::for_layer(layer)));
+            let codec = TileCodec::for_layer(layer);
+            return Ok(match identity {
+                Some(identity) => tile_file::encode_as(data, codec, identity),
+                None => tile_file::encode(data, codec),
+            });
         }
         let encoded = match data {
             TileData::U16(g) => encode_png16(g),
@@ -235,7 +264,7 @@ impl World {
             self.store.remove(&key)?;
             return Ok(0);
         }
-        let bytes = self.encode_tile(layer, data).map_err(|e| match e {
+        let bytes = self.encode_tile_as(layer, id, data).map_err(|e| match e {
             CacheError::Write { source, .. } => CacheError::Write {
                 key: key.clone(),
                 source,
@@ -263,7 +292,11 @@ impl World {
             return Ok((key, None));
         }
         let bytes = match self.manifest.tile_format {
-            TileFormat::Tile => tile_file::encode_u16(grid, TileCodec::for_layer(Layer::Height)),
+            TileFormat::Tile => tile_file::encode_u16_with(
+                grid,
+                TileCodec::for_layer(Layer::Height),
+                Some(TileIdentity::new(Layer::Height, id)),
+            ),
             TileFormat::Png => encode_png16(grid).map_err(|source| CacheError::Write {
                 key: key.clone(),
                 source,
