@@ -118,6 +118,9 @@ pub fn check(files: &[TrackedFile]) -> Vec<Problem> {
         }
         problems.extend(outside_paths(&f.path, &f.text));
         problems.extend(theses_by_number(&f.path, &f.text));
+        if f.path.ends_with(".rs") {
+            problems.extend(lone_compile_fail(&f.path, &f.text));
+        }
     }
     problems.extend(harness_copies(&others));
     for f in files {
@@ -244,6 +247,102 @@ fn theses_by_number(path: &str, text: &str) -> Vec<Problem> {
         }
     }
     problems
+}
+
+/// Rule (f): a `compile_fail` doctest without a companion. Such a test passes for any
+/// compile error, a stale argument list included, so it proves nothing unless the next block
+/// of the same doc comment compiles (plain, `rust`, `no_run` or `should_panic`) and differs
+/// from it in exactly one line: then that line is why it fails. (Rustdoc checks an error code
+/// given as `compile_fail,E0277` only on nightly.)
+fn lone_compile_fail(path: &str, text: &str) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    for comment in doc_comments(text) {
+        let blocks = code_blocks(&comment);
+        for (i, block) in blocks.iter().enumerate() {
+            if !block.attrs.split(',').any(|a| a.trim() == "compile_fail") {
+                continue;
+            }
+            let companion = blocks.get(i + 1).filter(|next| {
+                next.attrs.split(',').all(|a| {
+                    matches!(
+                        a.trim(),
+                        "" | "rust" | "no_run" | "should_panic" | "edition2024"
+                    )
+                }) && next.lines.len() == block.lines.len()
+                    && next
+                        .lines
+                        .iter()
+                        .zip(&block.lines)
+                        .filter(|(a, b)| a != b)
+                        .count()
+                        == 1
+            });
+            if companion.is_none() {
+                problems.push(Problem {
+                    path: path.to_owned(),
+                    line: block.line,
+                    message: "a compile_fail doctest needs a companion: the next block of the                               comment must compile and differ from it in one line (the reason                               it fails), or any stale call would pass it"
+                        .into(),
+                });
+            }
+        }
+    }
+    problems
+}
+
+/// A doc comment's text lines (`///` or `//!` prefix and one space removed) with their 1-based
+/// line numbers, one entry per run of consecutive doc lines.
+fn doc_comments(text: &str) -> Vec<Vec<(usize, &str)>> {
+    let mut comments = Vec::new();
+    let mut current: Vec<(usize, &str)> = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let trimmed = line.trim_start();
+        match trimmed
+            .strip_prefix("///")
+            .or_else(|| trimmed.strip_prefix("//!"))
+        {
+            Some(rest) => current.push((n + 1, rest.strip_prefix(' ').unwrap_or(rest))),
+            None if !current.is_empty() => comments.push(std::mem::take(&mut current)),
+            None => {}
+        }
+    }
+    if !current.is_empty() {
+        comments.push(current);
+    }
+    comments
+}
+
+/// A fenced code block of a doc comment.
+struct CodeBlock<'a> {
+    /// What follows the opening fence (`compile_fail`, `no_run`, ...).
+    attrs: &'a str,
+    /// The line of the opening fence.
+    line: usize,
+    /// The block's lines, fences excluded.
+    lines: Vec<&'a str>,
+}
+
+/// The fenced blocks of one doc comment, in order (an unclosed one runs to its end).
+fn code_blocks<'a>(comment: &[(usize, &'a str)]) -> Vec<CodeBlock<'a>> {
+    let mut blocks = Vec::new();
+    let mut open: Option<CodeBlock<'a>> = None;
+    for &(line, text) in comment {
+        let fence = text.trim_start().strip_prefix("```");
+        match (&mut open, fence) {
+            (None, Some(attrs)) => {
+                open = Some(CodeBlock {
+                    attrs: attrs.trim(),
+                    line,
+                    lines: Vec::new(),
+                })
+            }
+            (Some(_), Some(_)) => blocks.extend(open.take()),
+            (Some(block), None) => block.lines.push(text),
+            (None, None) => {}
+        }
+    }
+    blocks.extend(open);
+    blocks
 }
 
 /// Rule (d): a `.rs` file over [`MAX_RS_LINES`] lines (a generated one, marked `@generated`
@@ -393,5 +492,25 @@ mod tests {
         assert!(!is_checked_path("target/debug/build/x.rs"));
         assert!(!is_checked_path("docs/frame.png"));
         assert!(!is_checked_path(".ci/run"));
+    }
+
+    #[test]
+    fn compile_fail_doctests_need_a_companion_one_line_apart() {
+        let good = "/// ```compile_fail\n/// let a: u32 = f();\n/// g(a);\n/// ```\n///\n\
+                    /// ```no_run\n/// let a: u16 = f();\n/// g(a);\n/// ```\nfn x() {}\n";
+        assert_eq!(lone_compile_fail("a/src/lib.rs", good), []);
+        // No companion, one in another comment, or one differing in two lines.
+        let lone = "fn y() {}\n/// ```compile_fail\n/// g(1);\n/// ```\nfn x() {}\n";
+        let split = "/// ```compile_fail\n/// g(1);\n/// ```\nfn x() {}\n\
+                     /// ```\n/// g(2);\n/// ```\nfn z() {}\n";
+        let two = "//! ```compile_fail\n//! let a = 1;\n//! g(a);\n//! ```\n\
+                   //! ```\n//! let a = 2;\n//! h(a);\n//! ```\n";
+        let ignored =
+            "/// ```compile_fail\n/// g(1);\n/// ```\n/// ```ignore\n/// g(2);\n/// ```\n";
+        for (text, line) in [(lone, 2), (split, 1), (two, 1), (ignored, 1)] {
+            let found = lone_compile_fail("a/src/lib.rs", text);
+            assert_eq!(found.len(), 1, "{text}");
+            assert_eq!(found[0].line, line, "{text}");
+        }
     }
 }

@@ -46,16 +46,38 @@ pub(crate) fn map_buffer(
 /// and clipmap shaders (u8 and u16; u32 fixed-point heights are not, and have their own
 /// granular passes). Sealed: the passes' exactness depends on it.
 ///
-/// A u32 map cannot reach the stamp pass:
+/// A u32 map cannot reach the stamp pass, while the same call on a u16 map compiles (the two
+/// blocks differ in the map's sample type only, which `cargo xtask ci` checks, so the first
+/// fails for that reason and no other):
 ///
 /// ```compile_fail
 /// # fn f(device: &wgpu::Device, queue: &wgpu::Queue, pass: &mut terrain_gpu::StampPass,
-/// #      map: &terrain_gpu::GpuHeightMap<u32>, p: &terrain_core::StampPlacement) {
+/// #      p: terrain_core::StampPlacement) -> Result<(), terrain_gpu::GpuError> {
+/// let map: &terrain_gpu::GpuHeightMap<u32> = todo!();
 /// let mut encoder = device.create_command_encoder(&Default::default());
 /// let g = terrain_core::GaussianStamp::default();
-/// pass.encode(device, queue, &mut encoder, map, terrain_gpu::GpuStamp::Gaussian(&g), p,
-///             terrain_core::Blend::Add);
-/// # }
+/// let op = terrain_gpu::StampOp {
+///     stamp: terrain_gpu::GpuStamp::Gaussian(&g),
+///     placement: p,
+///     blend: terrain_core::Blend::Add,
+/// };
+/// pass.encode(device, queue, &mut encoder, map, &op)?;
+/// # Ok(()) }
+/// ```
+///
+/// ```no_run
+/// # fn f(device: &wgpu::Device, queue: &wgpu::Queue, pass: &mut terrain_gpu::StampPass,
+/// #      p: terrain_core::StampPlacement) -> Result<(), terrain_gpu::GpuError> {
+/// let map: &terrain_gpu::GpuHeightMap<u16> = todo!();
+/// let mut encoder = device.create_command_encoder(&Default::default());
+/// let g = terrain_core::GaussianStamp::default();
+/// let op = terrain_gpu::StampOp {
+///     stamp: terrain_gpu::GpuStamp::Gaussian(&g),
+///     placement: p,
+///     blend: terrain_core::Blend::Add,
+/// };
+/// pass.encode(device, queue, &mut encoder, map, &op)?;
+/// # Ok(()) }
 /// ```
 pub trait ExactInF32: HeightSample + sealed::Sealed {}
 impl ExactInF32 for u8 {}
