@@ -14,10 +14,9 @@ use terrain_gpu::{
     GpuStamp, GpuTextureStamp, StampOp, StampPass,
 };
 
-/// GPU and CPU stamps may differ by one stored unit where a value lands within rounding error
-/// of .5 (the GPU's f32 `exp` and sums differ from the CPU's in the last bits), as on the
-/// coarse-map (tests/passes.rs).
-const STAMP_BOUND_LSB: i32 = 1;
+/// GPU and CPU stamps may not differ at all: both run terrain-core's exact integer stamp
+/// program, as on the coarse-map (tests/passes.rs).
+const STAMP_BOUND_LSB: i32 = 0;
 
 /// A 48 x 40 coarse-map at 0.1 m refined x3: 144 x 120 detail texels in 5 x 4 tiles of 32
 /// (the last column and row of tiles reach past the map).
@@ -164,7 +163,7 @@ fn detail_stamps_match_the_cpu_layer_across_tile_corners_and_the_wrap() {
         ctx.report().name
     );
     assert!(max <= STAMP_BOUND_LSB, "max difference {max} LSB");
-    assert!(differ < 40, "{differ} texels differ");
+    assert_eq!(differ, 0, "{differ} texels differ");
     // The wrap-corner stamp reached the four corner tiles; every covered tile has a slot,
     // every other tile is still the shared zero tile.
     for t in [(0, 0), (4, 0), (0, 3), (4, 3)] {
@@ -542,7 +541,7 @@ fn spilled_detail_stamps_match_the_cpu_spill_rule() {
     );
     let (max, differ) = compare(&ctx, &tiles, &layer);
     assert!(max <= STAMP_BOUND_LSB, "detail: max difference {max} LSB");
-    assert!(differ < 40, "detail: {differ} texels differ");
+    assert_eq!(differ, 0, "detail: {differ} texels differ");
     // One unit of one texel's excess moves a coarse texel by at most r^2 k = 1/255 m / 1 mm
     // (3.9 units), and a stamp differs from the CPU's by one unit where a value rounds.
     let gpu = gpu_coarse.read(device, queue).unwrap();

@@ -1,42 +1,24 @@
-//! The per-placement state the reference and the fast paths of a stamp share: the local frame
-//! of the footprint in texel units (with the row span it covers) and the blend of a stamp value
-//! into a stored height. Both compute exactly what the GPU pass computes.
+//! The row span of a placement's footprint: which texels of a row the exact stamp program
+//! ([`super::fixed`]) visits. The inside test is the program's own, per texel; the span only
+//! skips texels that cannot pass it.
 
-use crate::map::HeightSample;
-use glam::Vec2;
+use super::fixed::{FixedFrame, LOCAL_ONE};
 
-/// A placement's local frame in texel units (see [`StampPlacement::local_frame`]).
-#[derive(Debug, Clone, Copy)]
-pub(super) struct Frame {
-    pub(super) center: Vec2,
-    pub(super) inv_half: Vec2,
-    pub(super) sin: f32,
-    pub(super) cos: f32,
-}
-
-impl Frame {
-    /// Local coordinates of the texel at unwrapped coordinates `(ux, uy)`, in f32 exactly as
-    /// the GPU pass computes them.
-    #[inline(always)]
-    pub(super) fn local(&self, ux: i32, uy: i32) -> Vec2 {
-        let dx = ux as f32 - self.center.x;
-        let dy = uy as f32 - self.center.y;
-        Vec2::new(dx * self.cos + dy * self.sin, dy * self.cos - dx * self.sin) * self.inv_half
-    }
-
+impl FixedFrame {
     /// The texels `[a, b)` of row `uy` within `[lo, hi)` that are inside the footprint
-    /// (`!(|local.x| > 1 || |local.y| > 1)`, the per-texel test). Each of the four half-tests
-    /// is monotone along a row (an f32 affine function of x, every rounding monotone), so each
-    /// holds on a prefix or a suffix, found by bisection: `O(log(hi - lo))` evaluations.
+    /// ([`super::fixed::inside`]). Each of the four half-tests is an integer affine function
+    /// of x (monotone while nothing wraps: [`FixedFrame::monotone`]), so it holds on a prefix
+    /// or a suffix, found by bisection: `O(log(hi - lo))` evaluations. Without `monotone`, the
+    /// whole range (the caller tests every texel).
     pub(super) fn row_span(&self, uy: i32, lo: i32, hi: i32) -> (i32, i32) {
-        // `!(v > 1)` rather than `v <= 1`: NaN passes, as in the per-texel test.
-        use std::cmp::Ordering::Greater;
-        use std::cmp::Ordering::Less;
+        if !self.monotone {
+            return (lo, hi.max(lo));
+        }
         let tests: [&dyn Fn(i32) -> bool; 4] = [
-            &|x| self.local(x, uy).x.partial_cmp(&1.0) != Some(Greater),
-            &|x| self.local(x, uy).x.partial_cmp(&-1.0) != Some(Less),
-            &|x| self.local(x, uy).y.partial_cmp(&1.0) != Some(Greater),
-            &|x| self.local(x, uy).y.partial_cmp(&-1.0) != Some(Less),
+            &|x| self.local_q(x, uy)[0] <= LOCAL_ONE,
+            &|x| self.local_q(x, uy)[0] >= -LOCAL_ONE,
+            &|x| self.local_q(x, uy)[1] <= LOCAL_ONE,
+            &|x| self.local_q(x, uy)[1] >= -LOCAL_ONE,
         ];
         let (mut a, mut b) = (lo, hi);
         for t in tests {
@@ -65,52 +47,6 @@ fn monotone_span(lo: i32, hi: i32, p: &dyn Fn(i32) -> bool) -> (i32, i32) {
                 if p(m) == first { l = m } else { h = m }
             }
             if first { (lo, h) } else { (h, hi) }
-        }
-    }
-}
-
-/// The blend of one stamp value into a stored height, in f64 stored units.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct BlendOp {
-    /// 0 add, 1 min, 2 max.
-    pub(super) kind: u8,
-    pub(super) add_scale: f64,
-    pub(super) base_raw: f64,
-}
-
-impl BlendOp {
-    /// The stored-unit term of value `v`, or the value that leaves a texel unchanged when `v`
-    /// is NaN or infinite (0 for add, +inf for min, -inf for max).
-    #[inline(always)]
-    pub(super) fn z(&self, v: f32) -> f64 {
-        if v.is_finite() {
-            self.add_scale * f64::from(v)
-        } else {
-            [0.0, f64::INFINITY, f64::NEG_INFINITY][usize::from(self.kind)]
-        }
-    }
-
-    /// Blends the terms `z` into `dst`: `round(old + z)`, `round(min(old, base + z))` or
-    /// `round(max(old, base + z))`, rounded half up and clamped to the sample's range.
-    #[inline(always)]
-    pub(super) fn apply<T: HeightSample>(&self, dst: &mut [T], z: &[f64]) {
-        let base = self.base_raw;
-        match self.kind {
-            0 => {
-                for (d, &z) in dst.iter_mut().zip(z) {
-                    *d = T::from_raw_f64_floor_clamped(d.to_raw_f64() + z + 0.5);
-                }
-            }
-            1 => {
-                for (d, &z) in dst.iter_mut().zip(z) {
-                    *d = T::from_raw_f64_floor_clamped(d.to_raw_f64().min(base + z) + 0.5);
-                }
-            }
-            _ => {
-                for (d, &z) in dst.iter_mut().zip(z) {
-                    *d = T::from_raw_f64_floor_clamped(d.to_raw_f64().max(base + z) + 0.5);
-                }
-            }
         }
     }
 }

@@ -6,9 +6,12 @@
 //! On a repeating (toroidal) map a footprint across an edge or corner is cut into 2 or 4 rects
 //! that each land where they wrap to; on a clamped map the part off the map is dropped.
 //!
-//! This module holds the stamp API and the per-texel reference; `kernels` holds the fast,
-//! vectorised paths [`apply_stamp`] takes (Gaussian and texture kernels, integer blends), and
-//! `frame` the per-placement state both share (the local frame, the blend).
+//! Every stamp is evaluated by one exact integer program ([`fixed`]), which the GPU pass runs
+//! too: CPU and GPU heights are bit-identical for every stamp kind and blend (the user's
+//! procedural stamps included when their CPU and WGSL functions agree bit for bit).
+//!
+//! This module holds the stamp API and the per-texel reference; `kernels` runs the program
+//! row-parallel for [`apply_stamp`], `frame` finds each row's span of the footprint.
 
 use crate::error::CoreError;
 use crate::grid::{Grid, WrapMode};
@@ -17,10 +20,11 @@ use crate::rect::{DirtyRect, Rect, WrappedPiece};
 use crate::sample::bilinear_taps;
 use glam::{IVec2, UVec2, Vec2};
 
+pub mod fixed;
 mod frame;
 mod kernels;
 
-use frame::{BlendOp, Frame};
+use fixed::{FixedBlend, FixedFrame};
 use kernels::apply_prepared;
 
 /// Where and how strongly a stamp is applied.
@@ -87,7 +91,8 @@ impl StampPlacement {
     /// The stamp's local frame in texel units for a map of `texel_size` metres per texel:
     /// `(centre, 1 / half-size, sin, cos)`. A texel at unwrapped coordinates `u` has
     /// `d = u - centre` and local coordinates `(d.x cos + d.y sin, d.y cos - d.x sin) * inv_half`;
-    /// the GPU pass receives exactly these values, so both compute the same coordinates.
+    /// stamps are evaluated from these values rounded once to integers ([`fixed_program`],
+    /// computed in f64), the same integers on the CPU and the GPU.
     pub fn local_frame(&self, texel_size: f32) -> (Vec2, Vec2, f32, f32) {
         let center = self.center / texel_size;
         let inv_half = Vec2::ONE / (self.scale * 0.5 / texel_size);
@@ -164,14 +169,15 @@ pub trait Stamp {
 #[derive(Debug, Clone, Copy)]
 #[non_exhaustive]
 pub enum StampKernel<'a> {
-    /// `value(local) = exp(-beta |local|^2)`: evaluated separably in map coordinates, without
-    /// an `exp` per texel.
+    /// `value(local) = exp(-beta |local|^2)`: evaluated by the exact program ([`fixed`]), from
+    /// tables, without an `exp` per texel.
     Gaussian {
         /// The falloff in units of the normalised radius.
         beta: f32,
     },
     /// Bilinear, clamped sampling of these values with pixel centres at `(i + 0.5) / n` of
-    /// the footprint, as [`TextureStamp`] samples: evaluated inline and row-parallel.
+    /// the footprint, as [`TextureStamp`] samples: evaluated by the exact program ([`fixed`]:
+    /// values quantised to Q24, weights to Q12), row-parallel.
     Texture(&'a Grid<f32>),
     /// [`Stamp::value`] for every texel, on the calling thread.
     PerTexel,
@@ -386,15 +392,11 @@ pub fn stamp_region(
 /// map coordinates: one for a footprint inside the map, 2 or 4 across a repeating map's edge
 /// or corner, none for a footprint wholly off a clamped map.
 ///
-/// How values are evaluated depends on [`Stamp::kernel`]. A texture stamp is sampled exactly
-/// as [`TextureStamp::value`] does, inline and row-parallel: the result equals
-/// [`apply_stamp_reference`] (the per-texel evaluation) bit for bit. A Gaussian is evaluated
-/// separably in map coordinates, `exp(-beta (A dx^2 + 2 B dx dy + C dy^2))` as a product of a
-/// column table, a row factor and (for a rotated, non-square footprint) a cross factor built
-/// incrementally per row, all in f64: no `exp` per texel. It differs from the per-texel f32
-/// evaluation by at most 1 stored unit, only where the exact value lies within
-/// [`gaussian_rounding_bound`] of a rounding boundary (the reference's own f32 error is of
-/// that size). Other stamps call [`Stamp::value`] per texel, on one thread.
+/// Every texel gets the exact integer program of [`fixed`], which terrain-gpu's stamp pass runs
+/// too: the result equals the GPU's and [`apply_stamp_reference`]'s bit for bit, for every
+/// thread count. Texture and Gaussian stamps ([`Stamp::kernel`]) run row-parallel; other
+/// stamps call [`Stamp::value`] per texel, on one thread, and their f32 value is converted
+/// exactly ([`fixed::user_v31`]).
 ///
 /// Fails on an invalid placement, an error from the stamp's `prepare`, a non-finite blend
 /// base, or a footprint larger than a repeating map (it would overlap itself).
@@ -415,8 +417,8 @@ pub fn apply_stamp<T: HeightSample, S: Stamp + ?Sized>(
 /// `origin + (x, y)` of the larger map would get from [`apply_stamp`] with the same
 /// `placement` (in the larger map's metres), whenever the window holds the stamp's whole
 /// footprint (then the evaluation is the same one, texel for texel). A window cut through a
-/// footprint is evaluated on its own part, within one stored unit of
-/// [`apply_stamp_reference`] as [`apply_stamp`] is. `map`'s own wrap mode is ignored. Returns
+/// footprint gets the same too (the program's frame is anchored at the whole footprint's
+/// first texel, not the window's). `map`'s own wrap mode is ignored. Returns
 /// the covered rect in `map`'s coordinates, if any.
 ///
 /// This is how a stamp lands on tiles of a larger grid (the detail layer gathers the
@@ -436,13 +438,41 @@ pub fn apply_stamp_window<T: HeightSample, S: Stamp + ?Sized>(
 
 /// A placement ready to apply: the pieces (map rect, offset to unwrapped coordinates), the
 /// local frame and the blend.
-type Prepared = (Vec<(Rect, IVec2)>, Frame, BlendOp);
+type Prepared = (Vec<(Rect, IVec2)>, FixedFrame, FixedBlend);
 
-/// The relative size of the difference between [`apply_stamp`]'s separable Gaussian and the
-/// per-texel f32 evaluation of [`apply_stamp_reference`] before rounding: the two stored
-/// results differ (by exactly 1 unit) only at texels whose exact unrounded new value lies
-/// within `gaussian_rounding_bound(beta, placement) * |intensity / encoding scale|` of a
-/// half-integer.
+/// The integers of the exact stamp program ([`fixed`]) for `placement` on a map of `texel_size`
+/// metres per texel and encoding `enc`, with `blend`: what [`apply_stamp`] evaluates and what
+/// the GPU pass uploads. The frame's anchor is the placement's whole footprint's first texel,
+/// so a texel's arithmetic is the same in every piece, window and tile.
+///
+/// Fails on an invalid placement or texel size, or a non-finite blend base.
+pub fn fixed_program(
+    placement: &StampPlacement,
+    texel_size: f32,
+    enc: crate::map::HeightEncoding,
+    blend: Blend,
+) -> Result<(FixedFrame, FixedBlend), CoreError> {
+    check_blend(blend)?;
+    let footprint = placement.footprint(texel_size)?;
+    let ts = f64::from(texel_size);
+    let center = placement.center.as_dvec2() / ts;
+    let inv_half = glam::DVec2::ONE / (placement.scale.as_dvec2() * 0.5 / ts);
+    let (sin, cos) = f64::from(placement.rotation).sin_cos();
+    let frame = FixedFrame::new(footprint.min, footprint.size, center, inv_half, sin, cos);
+    let add_scale = f64::from(placement.intensity) / f64::from(enc.scale);
+    let op = match blend {
+        Blend::Add => FixedBlend::new(0, add_scale, 0.0),
+        // In stored units: base + value * units.
+        Blend::Min { base_m } => FixedBlend::new(1, add_scale, enc.to_raw(base_m)),
+        Blend::Max { base_m } => FixedBlend::new(2, add_scale, enc.to_raw(base_m)),
+    };
+    Ok((frame, op))
+}
+
+/// The relative rounding error of a per-texel f32 Gaussian `exp(-beta |local|^2)` (as
+/// [`GaussianStamp::value`] computes it), before rounding to stored units. [`apply_stamp`] no
+/// longer evaluates it (it runs the exact program of [`fixed`], whose own error against the
+/// exact Gaussian is below 2^-26 relative); kept as the bound of f32 evaluations.
 ///
 /// The bound is the reference's own f32 error, with a factor 2 of margin: local coordinates
 /// rounded in 3 operations each, whose cancellation grows with the footprint's aspect ratio
@@ -505,42 +535,13 @@ fn prepare_stamp<T: HeightSample, S: Stamp + ?Sized>(
         }
     };
     stamp.prepare(placement)?;
-    let enc = map.encoding();
-    // Local coordinates in texel units: the same arithmetic for a texel whatever piece it is
-    // in, so a stamp across the wrap edge equals the same stamp on a shifted map.
-    let (center, inv_half, sin, cos) = placement.local_frame(ts);
-    let add_scale = f64::from(placement.intensity) / f64::from(enc.scale);
-    let op = match blend {
-        Blend::Add => BlendOp {
-            kind: 0,
-            add_scale,
-            base_raw: 0.0,
-        },
-        // In stored units, as the GPU pass computes it: base + value * units.
-        Blend::Min { base_m } => BlendOp {
-            kind: 1,
-            add_scale,
-            base_raw: enc.to_raw(base_m),
-        },
-        Blend::Max { base_m } => BlendOp {
-            kind: 2,
-            add_scale,
-            base_raw: enc.to_raw(base_m),
-        },
-    };
-    let frame = Frame {
-        center,
-        inv_half,
-        sin,
-        cos,
-    };
+    let (frame, op) = fixed_program(placement, ts, map.encoding(), blend)?;
     Ok(Some((pieces, frame, op)))
 }
 
-/// The per-texel evaluation: [`Stamp::value`] at every texel of the footprint through the
-/// trait, each result rounded on its own. This is how [`apply_stamp`] worked before its fast
-/// paths, kept as the reference they are tested and benchmarked against; it is several
-/// hundred times slower than a copy of the region's bytes.
+/// The per-texel evaluation of the exact program ([`fixed`]): every texel of the footprint's
+/// pieces in turn, on one thread, without the row spans or threads of [`apply_stamp`]; the
+/// reference [`apply_stamp`] is tested and benchmarked against (they are equal bit for bit).
 ///
 /// Fails as [`apply_stamp`] does.
 pub fn apply_stamp_reference<T: HeightSample, S: Stamp + ?Sized>(
@@ -552,26 +553,15 @@ pub fn apply_stamp_reference<T: HeightSample, S: Stamp + ?Sized>(
     let Some((pieces, frame, op)) = prepare_stamp(map, stamp, placement, blend, None)? else {
         return Ok(Vec::new());
     };
+    let kernel = kernels::Kernel::of(stamp);
     let grid = map.grid_mut();
     for &(rect, offset) in &pieces {
         for y in rect.min.y..rect.max().y {
             let row = grid.row_mut(y as u32);
             for x in rect.min.x..rect.max().x {
-                let local = frame.local(x + offset.x, y + offset.y);
-                if local.x.abs() > 1.0 || local.y.abs() > 1.0 {
-                    continue;
-                }
-                let v = stamp.value(local);
-                if !v.is_finite() {
-                    continue;
-                }
-                let old = row[x as usize].to_raw_f64();
-                let new = match op.kind {
-                    0 => old + op.add_scale * f64::from(v),
-                    1 => old.min(op.base_raw + op.add_scale * f64::from(v)),
-                    _ => old.max(op.base_raw + op.add_scale * f64::from(v)),
-                };
-                row[x as usize] = T::from_raw_f64_clamped(new);
+                let l = frame.local_q(x + offset.x, y + offset.y);
+                let d = &mut row[x as usize];
+                *d = kernels::texel(&kernel, &*stamp, &op, l, *d);
             }
         }
     }

@@ -1,5 +1,10 @@
 //! `StampPass`: every stamp kind of terrain-core (Gaussian, texture, shockwave as a texture,
 //! user procedural WGSL) applied on the GPU to the stamp's region only, in place.
+//!
+//! The shader runs terrain-core's exact stamp program ([`terrain_core::stamp::fixed`]) on the
+//! integers [`terrain_core::stamp::fixed_program`] computes, so its heights equal
+//! [`terrain_core::apply_stamp`]'s bit for bit on any conforming GPU (a user stamp's when its
+//! WGSL and Rust functions agree bit for bit).
 
 use crate::device::compute::{
     PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
@@ -12,6 +17,7 @@ use crate::resources::maps::{ExactInF32, GpuHeightMap, MapView};
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::detail::{detail_encoding, tiles_of_pieces};
+use terrain_core::stamp::{fixed, fixed_program};
 use terrain_core::{
     Blend, DirtyRect, GaussianStamp, HeightEncoding, Rect, StampPlacement, TextureStamp, WrapMode,
     stamp_region,
@@ -26,14 +32,19 @@ struct StampParams {
     map_size: [u32; 2],
     wrap: u32,
     kind: u32,
-    center: [f32; 2],
-    inv_half: [f32; 2],
-    cos_sin: [f32; 2],
+    anchor: [i32; 2],
+    l0x: [u32; 2],
+    l0y: [u32; 2],
+    lxx: [u32; 2],
+    lxy: [u32; 2],
+    lyx: [u32; 2],
+    lyy: [u32; 2],
+    base_q16: [u32; 2],
     blend: u32,
-    raw_per_value: f32,
-    base_raw: f32,
-    max_raw: f32,
-    beta: f32,
+    m: i32,
+    shift: i32,
+    max_raw: u32,
+    beta_q: u32,
     base: u32,
     tex_size: [u32; 2],
     wrap_offset: [i32; 2],
@@ -41,15 +52,22 @@ struct StampParams {
     spill_min: [i32; 2],
     spill_width: u32,
     pad0: u32,
-    pad1: [u32; 2],
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<StampParams>() == 128);
+const _: () = assert!(std::mem::size_of::<StampParams>() == 160);
+
+/// An i64 of the exact program as the shader's `vec2<u32>(lo, hi)`.
+fn split64(v: i64) -> [u32; 2] {
+    [v as u32, (v >> 32) as u32]
+}
 
 use terrain_shaders::codes::{
     BLEND_ADD, BLEND_MAX, BLEND_MIN, STAMP_GAUSSIAN, STAMP_TEXTURE, STAMP_USER,
 };
+
+// The shader's blend codes are the exact program's kinds (`FixedBlend::kind`).
+const _: () = assert!(BLEND_ADD == 0 && BLEND_MIN == 1 && BLEND_MAX == 2);
 
 /// A texture stamp's values uploaded once (the shockwave uploads its change every frame).
 #[derive(Debug)]
@@ -64,7 +82,7 @@ impl GpuTextureStamp {
         let values = buffer_init(
             device,
             "GpuTextureStamp",
-            bytemuck::cast_slice(stamp.values().as_slice()),
+            bytemuck::cast_slice(&quantized(stamp)),
             wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         )?;
         Ok(Self {
@@ -82,13 +100,13 @@ impl GpuTextureStamp {
         queue: &wgpu::Queue,
         stamp: &TextureStamp,
     ) -> Result<(), GpuError> {
-        let values = stamp.values().as_slice();
-        let bytes = std::mem::size_of_val(values) as u64;
+        let values = quantized(stamp);
+        let bytes = std::mem::size_of_val(values.as_slice()) as u64;
         if bytes > self.values.size() {
             *self = Self::new(device, stamp)?;
             return Ok(());
         }
-        queue.write_buffer(&self.values, 0, bytemuck::cast_slice(values));
+        queue.write_buffer(&self.values, 0, bytemuck::cast_slice(&values));
         self.size = stamp.values().size();
         Ok(())
     }
@@ -99,10 +117,27 @@ impl GpuTextureStamp {
     }
 }
 
+/// A texture stamp's values as the exact program reads them (Q24 integers).
+fn quantized(stamp: &TextureStamp) -> Vec<i32> {
+    let v = stamp.values().as_slice();
+    let mut q: Vec<i32> = v
+        .iter()
+        .map(|&v| fixed::quantize_texture_value(v))
+        .collect();
+    if q.is_empty() {
+        q.push(0); // a storage buffer may not be empty
+    }
+    q
+}
+
 /// A user-defined procedural stamp: a WGSL function
 /// `fn user_stamp_value(local: vec2<f32>) -> f32` (local coordinates in `[-1, 1]^2`, the value
 /// multiplied by the intensity), compiled into its own variant of the stamp pipeline. It is the
-/// GPU side of a [`terrain_core::Stamp`] implementation; keep both in step.
+/// GPU side of a [`terrain_core::Stamp`] implementation; keep both in step. Heights equal the
+/// CPU's bit for bit when both functions return the same f32 for the same `local` (which is
+/// exact on both sides): write them with exact operations (comparisons, sums and products of
+/// few bits), not `length`, `sqrt`, `exp` or an `a * b + c` whose product is inexact, which a
+/// GPU may evaluate to other last bits or fuse into an `fma`.
 #[derive(Debug)]
 pub struct GpuProceduralStamp {
     pipeline: wgpu::ComputePipeline,
@@ -171,6 +206,8 @@ pub struct StampPass {
     empty_values: wgpu::Buffer,
     /// Bound as the excess window of stamps that do not spill (never written).
     no_excess: wgpu::Buffer,
+    /// terrain-core's Gaussian tables ([`fixed::gaussian_tables`]), uploaded once.
+    exp_table: wgpu::Buffer,
 }
 
 /// Where a spilling detail stamp writes its excess: a window of the footprint's texels
@@ -193,6 +230,7 @@ impl StampPass {
                 StorageBinding::compute(false),
                 StorageBinding::compute(true),
                 StorageBinding::compute(false),
+                StorageBinding::compute(true),
             ],
         );
         let module = shader_module(device, "stamp.wgsl", terrain_shaders::STAMP)?;
@@ -209,11 +247,18 @@ impl StampPass {
             bytemuck::cast_slice(&[0i32; 4]),
             wgpu::BufferUsages::STORAGE,
         )?;
+        let exp_table = buffer_init(
+            device,
+            "StampPass Gaussian tables",
+            bytemuck::cast_slice(fixed::gaussian_tables()),
+            wgpu::BufferUsages::STORAGE,
+        )?;
         Ok(Self {
             pipeline,
             bindings,
             empty_values,
             no_excess,
+            exp_table,
         })
     }
 
@@ -336,7 +381,7 @@ impl StampPass {
                 device,
                 queue,
                 encoder,
-                [tiles.heights_buffer(), excess],
+                [tiles.heights_buffer(), excess, &self.exp_table],
                 &Prepared { params, ..prepared },
             )?;
         }
@@ -378,7 +423,7 @@ impl StampPass {
             device,
             queue,
             encoder,
-            [map.buffer, &self.no_excess],
+            [map.buffer, &self.no_excess, &self.exp_table],
             &Prepared { params, ..prepared },
         )?;
         Ok(region.pieces.iter().map(|p| p.map).collect())
@@ -394,7 +439,7 @@ fn record(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     encoder: &mut wgpu::CommandEncoder,
-    [heights, excess]: [&wgpu::Buffer; 2],
+    [heights, excess, exp_table]: [&wgpu::Buffer; 3],
     prepared: &Prepared<'_>,
 ) -> Result<(), GpuError> {
     let size = UVec2::from_array(prepared.params.region_size);
@@ -403,7 +448,7 @@ fn record(
         device,
         queue,
         &prepared.params,
-        &[heights, prepared.values, excess],
+        &[heights, prepared.values, excess, exp_table],
     )?;
     dispatch(
         encoder,
@@ -438,31 +483,18 @@ fn prepare<'a>(
         ref placement,
         blend,
     } = *op;
-    // Checks the placement and texel size (the region functions check them again).
-    placement.footprint(ts)?;
-    let (center, inv_half, sin, cos) = placement.local_frame(ts);
-    let (blend_code, base_m) = match blend {
-        Blend::Add => (BLEND_ADD, 0.0),
-        Blend::Min { base_m } => (BLEND_MIN, base_m),
-        Blend::Max { base_m } => (BLEND_MAX, base_m),
-    };
-    if !base_m.is_finite() {
-        return Err(terrain_core::CoreError::NonFinite {
-            what: "blend base height",
-            value: base_m,
-        }
-        .into());
-    }
-    let (kind, beta, values, tex_size, pipeline) = match stamp {
+    // Checks the placement, texel size and blend; the integers of the exact program.
+    let (frame, op) = fixed_program(placement, ts, enc, blend)?;
+    let (kind, beta_q, values, tex_size, pipeline) = match stamp {
         GpuStamp::Gaussian(g) => (
             STAMP_GAUSSIAN,
-            g.beta_for(placement.intensity),
+            fixed::gaussian_beta_q(g.beta_for(placement.intensity)),
             empty_values,
             UVec2::ONE,
             pipeline,
         ),
-        GpuStamp::Texture(t) => (STAMP_TEXTURE, 0.0, &t.values, t.size, pipeline),
-        GpuStamp::Procedural(p) => (STAMP_USER, 0.0, empty_values, UVec2::ONE, &p.pipeline),
+        GpuStamp::Texture(t) => (STAMP_TEXTURE, 0, &t.values, t.size, pipeline),
+        GpuStamp::Procedural(p) => (STAMP_USER, 0, empty_values, UVec2::ONE, &p.pipeline),
     };
     let params = StampParams {
         region_min: [0; 2],
@@ -470,14 +502,19 @@ fn prepare<'a>(
         map_size: [0; 2],
         wrap: 0,
         kind,
-        center: center.to_array(),
-        inv_half: inv_half.to_array(),
-        cos_sin: [cos, sin],
-        blend: blend_code,
-        raw_per_value: placement.intensity / enc.scale,
-        base_raw: enc.to_raw(base_m) as f32,
-        max_raw: max_raw as f32,
-        beta,
+        anchor: frame.anchor.to_array(),
+        l0x: split64(frame.l0[0]),
+        l0y: split64(frame.l0[1]),
+        lxx: split64(frame.lx[0]),
+        lxy: split64(frame.lx[1]),
+        lyx: split64(frame.ly[0]),
+        lyy: split64(frame.ly[1]),
+        base_q16: split64(op.base_q16),
+        blend: op.kind,
+        m: op.m,
+        shift: op.shift,
+        max_raw,
+        beta_q,
         base: 0,
         tex_size: tex_size.to_array(),
         wrap_offset: [0; 2],
@@ -485,7 +522,6 @@ fn prepare<'a>(
         spill_min: [0; 2],
         spill_width: 0,
         pad0: 0,
-        pad1: [0; 2],
     };
     Ok(Prepared {
         params,
