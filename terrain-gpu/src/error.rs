@@ -166,6 +166,25 @@ pub enum GpuError {
         /// Why not.
         reason: &'static str,
     },
+    /// A renderer cannot draw into a pass with this many samples per pixel.
+    #[error(
+        "cannot render {count}x multisampled into {color:?} with depth {depth:?}: {whose} \
+         sample counts {color_allows:?} for {color:?} and {depth_allows:?} for {depth:?}"
+    )]
+    UnsupportedSampleCount {
+        /// The colour format.
+        color: wgpu::TextureFormat,
+        /// The depth format.
+        depth: wgpu::TextureFormat,
+        /// The sample count asked for.
+        count: u32,
+        /// Whose capabilities were checked (every adapter's guaranteed ones, or this one's).
+        whose: &'static str,
+        /// The counts the colour format allows.
+        color_allows: Vec<u32>,
+        /// The counts the depth format allows.
+        depth_allows: Vec<u32>,
+    },
     /// A detail tile a stamp or read needs is not loaded (its texels are in the cache or on
     /// disk): load it first.
     #[error("detail tile {tile} is not loaded: load it before stamping over or reading it")]

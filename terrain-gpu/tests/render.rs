@@ -298,16 +298,90 @@ fn renderers_refuse_targets_they_cannot_draw_into() {
         },
     ];
     for format in bad {
-        assert!(matches!(
-            ClipmapRenderer::new(&ctx.device, &format, &layout),
-            Err(GpuError::UnsupportedTarget { .. })
+        let refused = |r: Result<(), GpuError>| {
+            matches!(
+                r,
+                Err(GpuError::UnsupportedTarget { .. } | GpuError::UnsupportedSampleCount { .. })
+            )
+        };
+        assert!(refused(
+            ClipmapRenderer::new(&ctx.device, &format, &layout).map(|_| ())
         ));
-        assert!(matches!(
-            SkyPass::new(&ctx.device, &format),
-            Err(GpuError::UnsupportedTarget { .. })
-        ));
+        assert!(refused(SkyPass::new(&ctx.device, &format).map(|_| ())));
+        assert!(refused(format.validate_on(&ctx.adapter, &ctx.device)));
     }
+    let err = TargetFormat {
+        sample_count: 3,
+        ..TargetFormat::CAPTURE
+    }
+    .validate_on(&ctx.adapter, &ctx.device)
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("3x multisampled into Rgba8Unorm with depth Depth32Float")
+            && err.contains("sample counts [1, ")
+            && err.contains("for Rgba8Unorm and [1, "),
+        "the error names the formats, the count and what is allowed: {err}"
+    );
     ctx.check().expect("refused before wgpu saw them");
+}
+
+/// The sample counts a format allows are the adapter's where the device may use them: a
+/// count the adapter supports beyond the guaranteed ones (Rgba8Unorm x2 on lavapipe, where
+/// every adapter guarantees only 1 and 4) is accepted and builds, one it does not is refused
+/// with what it allows.
+#[test]
+fn target_sample_counts_follow_the_adapter() {
+    let Some(ctx) = context_or_skip("target_sample_counts_follow_the_adapter") else {
+        return;
+    };
+    let adapter_specific = ctx
+        .device
+        .features()
+        .contains(wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES);
+    for color in [
+        wgpu::TextureFormat::Rgba32Float,
+        wgpu::TextureFormat::Rgba16Float,
+        wgpu::TextureFormat::Rgba8Unorm,
+    ] {
+        for count in [1, 2, 4, 8, 16] {
+            let format = TargetFormat {
+                color,
+                depth: wgpu::TextureFormat::Depth32Float,
+                sample_count: count,
+            };
+            let features = |f: wgpu::TextureFormat| {
+                if adapter_specific {
+                    ctx.adapter.get_texture_format_features(f)
+                } else {
+                    f.guaranteed_format_features(ctx.device.features())
+                }
+            };
+            let renderable = features(color)
+                .allowed_usages
+                .contains(wgpu::TextureUsages::RENDER_ATTACHMENT);
+            let supported = renderable
+                && features(color).flags.sample_count_supported(count)
+                && features(format.depth).flags.sample_count_supported(count);
+            let checked = format.validate_on(&ctx.adapter, &ctx.device);
+            assert_eq!(
+                checked.is_ok(),
+                supported,
+                "{color:?} x{count}: {checked:?}"
+            );
+            if supported {
+                // Accepted means usable: the sky pipeline builds without a wgpu error.
+                SkyPass::new(&ctx.device, &format).expect("a supported target");
+            } else if renderable {
+                let msg = checked.unwrap_err().to_string();
+                assert!(
+                    msg.contains(&format!("{count}x multisampled into {color:?}")),
+                    "{msg}"
+                );
+            }
+        }
+    }
+    ctx.check().expect("no wgpu error");
 }
 
 #[test]

@@ -24,11 +24,52 @@ impl TargetFormat {
         sample_count: 1,
     };
 
-    /// Checks that `device` can render to these formats with this sample count, using the
-    /// features every adapter guarantees for them.
+    /// Checks that `device` can render to these formats with this sample count, before wgpu
+    /// sees them. Without the adapter at hand the formats' guaranteed features decide, which is
+    /// exactly what wgpu allows on a device without
+    /// `TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES`. On a device with it (as
+    /// [`crate::GpuContext`] asks for where the adapter has it) a sample count beyond the
+    /// guaranteed ones may still be allowed by the adapter: such a count (2, 4, 8 or 16) is
+    /// let through, and the renderer's pipeline creation, which runs in an error scope, has
+    /// the last word. [`validate_on`](Self::validate_on) answers exactly.
     pub fn validate(&self, device: &wgpu::Device) -> Result<(), GpuError> {
         let features = device.features();
         let color = self.color.guaranteed_format_features(features);
+        let depth = self.depth.guaranteed_format_features(features);
+        let adapter_decides =
+            features.contains(wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES);
+        self.check(color, depth, "every adapter guarantees", adapter_decides)
+    }
+
+    /// Checks these formats against what `adapter` (the one `device` was created on) supports
+    /// for them, the way wgpu will: the adapter's own per-format features where the device
+    /// has `TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES`, the guaranteed ones otherwise. A sample
+    /// count that is refused gets an error naming the formats, the count and the counts
+    /// allowed.
+    pub fn validate_on(
+        &self,
+        adapter: &wgpu::Adapter,
+        device: &wgpu::Device,
+    ) -> Result<(), GpuError> {
+        let features = device.features();
+        if !features.contains(wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES) {
+            return self.validate(device);
+        }
+        let color = adapter.get_texture_format_features(self.color);
+        let depth = adapter.get_texture_format_features(self.depth);
+        self.check(color, depth, "this adapter supports", false)
+    }
+
+    /// The checks of [`validate`](Self::validate) on the formats' `color` and `depth`
+    /// features (`whose` says whose features they are, for the message). With
+    /// `counts_may_be_more`, a power-of-two count up to 16 is not refused.
+    fn check(
+        &self,
+        color: wgpu::TextureFormatFeatures,
+        depth: wgpu::TextureFormatFeatures,
+        whose: &'static str,
+        counts_may_be_more: bool,
+    ) -> Result<(), GpuError> {
         if !self.color.has_color_aspect()
             || self.color.is_depth_stencil_format()
             || !color
@@ -46,13 +87,24 @@ impl TargetFormat {
                 reason: "the depth format has no depth aspect",
             });
         }
-        let depth = self.depth.guaranteed_format_features(features);
-        if !color.flags.sample_count_supported(self.sample_count)
-            || !depth.flags.sample_count_supported(self.sample_count)
-        {
-            return Err(GpuError::UnsupportedTarget {
-                format: *self,
-                reason: "the sample count is not supported by both formats (1 and 4 are usual)",
+        let allowed = |f: &wgpu::TextureFormatFeatures| -> Vec<u32> {
+            [1, 2, 4, 8, 16]
+                .into_iter()
+                .filter(|&n| f.flags.sample_count_supported(n))
+                .collect()
+        };
+        let (color_allows, depth_allows) = (allowed(&color), allowed(&depth));
+        let count = self.sample_count;
+        let supported = color_allows.contains(&count) && depth_allows.contains(&count);
+        let maybe = counts_may_be_more && matches!(count, 2 | 4 | 8 | 16);
+        if !supported && !maybe {
+            return Err(GpuError::UnsupportedSampleCount {
+                color: self.color,
+                depth: self.depth,
+                count,
+                whose,
+                color_allows,
+                depth_allows,
             });
         }
         Ok(())
