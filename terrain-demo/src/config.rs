@@ -198,7 +198,8 @@ impl DemoParams {
     /// The parameters of a TOML document over the defaults: a key it leaves out keeps its
     /// default; a key the defaults do not have is an error.
     pub fn from_toml(text: &str) -> Result<Self> {
-        let given: toml::Table = toml::from_str(text).map_err(|e| anyhow!("{}", e.message()))?;
+        // A value TOML itself cannot hold (an integer beyond i64) is named by its line too.
+        let given: toml::Table = toml::from_str(text).map_err(|e| locate(text, &e))?;
         let mut merged = toml::Table::try_from(Self::default())?;
         merge(&mut merged, given, "")?;
         // Read back from text, so that an error has a place: the line it names says which key.
@@ -219,89 +220,96 @@ impl DemoParams {
         ))
     }
 
-    /// Values the scenarios cannot run with: an error naming the key.
+    /// Values the scenarios cannot run with: an error naming the key and its range (see
+    /// [`crate::ranges::KEYS`], which `--help` prints).
     pub fn validate(&self) -> Result<()> {
+        use crate::ranges::{check, check_as};
+        let each = |name: &str, values: &[f32]| {
+            values
+                .iter()
+                .enumerate()
+                .try_for_each(|(i, &v)| check_as(name, &format!("{name}[{i}]"), v))
+        };
         let s = &self.stamps;
-        let positive = |name: &str, v: f32| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(anyhow!("{name} = {v}: must be a finite number above 0"))
-            }
-        };
-        let at_least_zero = |name: &str, v: f32| {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(anyhow!("{name} = {v}: must be a finite number, at least 0"))
-            }
-        };
-        positive("stamps.foot_size_m[0]", s.foot_size_m.x)?;
-        positive("stamps.foot_size_m[1]", s.foot_size_m.y)?;
-        at_least_zero("stamps.foot_depth_m", s.foot_depth_m)?;
-        positive("stamps.stride_m", s.stride_m)?;
-        positive("stamps.crater_size_m[0]", s.crater_size_m.x)?;
-        positive("stamps.crater_size_m[1]", s.crater_size_m.y)?;
+        each("stamps.foot_size_m", &s.foot_size_m.to_array())?;
+        check("stamps.foot_depth_m", s.foot_depth_m)?;
+        check("stamps.steps_per_frame", s.steps_per_frame)?;
+        check("stamps.stride_m", s.stride_m)?;
+        check("stamps.crater_every", s.crater_every)?;
+        each("stamps.crater_size_m", &s.crater_size_m.to_array())?;
         if s.crater_size_m.y < s.crater_size_m.x {
             bail!("stamps.crater_size_m: the largest size is below the smallest");
         }
-        at_least_zero("stamps.crater_depth_ratio", s.crater_depth_ratio)?;
-        at_least_zero("stamps.shock_size_fraction", s.shock_size_fraction)?;
-        if s.shock_size_fraction > 1.0 {
-            bail!(
-                "stamps.shock_size_fraction = {}: at most 1",
-                s.shock_size_fraction
-            );
-        }
-        at_least_zero("stamps.shock_amplitude_m", s.shock_amplitude_m)?;
-        // Per-frame counts bound the work of a frame; the walker needs a step to move.
-        for (name, v, least) in [
-            ("stamps.steps_per_frame", s.steps_per_frame, 1),
-            ("stamps.shock_steps_per_frame", s.shock_steps_per_frame, 0),
-        ] {
-            if !(least..=64).contains(&v) {
-                bail!("{name} = {v}: {least} to 64 per frame");
-            }
-        }
+        check("stamps.crater_depth_ratio", s.crater_depth_ratio)?;
+        check("stamps.shock_size_fraction", s.shock_size_fraction)?;
+        check("stamps.shock_amplitude_m", s.shock_amplitude_m)?;
+        check("stamps.shock_steps_per_frame", s.shock_steps_per_frame)?;
+        let w = &s.shockwave;
+        check("stamps.shockwave.resolution", w.resolution)?;
+        check("stamps.shockwave.gamma", w.gamma)?;
+        check("stamps.shockwave.initial_sigma", w.initial_sigma)?;
+        check("stamps.shockwave.damping", w.damping)?;
         terrain_core::Shockwave::new(s.shockwave).context("stamps.shockwave")?;
+        let g = &self.granular;
+        check("granular.compression", g.compression)?;
+        check("granular.roughness", g.roughness)?;
+        check("granular.slope_threshold", g.slope_threshold)?;
+        check("granular.slope_d", g.slope_d)?;
+        check(
+            "granular.num_iterations_even_out_slopes",
+            g.num_iterations_even_out_slopes,
+        )?;
+        check(
+            "granular.num_iterations_blur_normals",
+            g.num_iterations_blur_normals,
+        )?;
+        check("granular.obstacle_margin_m", g.obstacle_margin_m)?;
+        check("granular.active_area_margin", g.active_area_margin)?;
+        check("granular.merge_distance", g.merge_distance)?;
         self.granular.validate().context("granular")?;
         let c = &self.scheduler;
-        if c.max_in_flight == 0 || c.max_in_flight > MAX_READBACK_RING {
+        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+        check("scheduler.quiet_gap_ms", ms(c.quiet_gap))?;
+        check("scheduler.max_delay_ms", ms(c.max_delay))?;
+        check("scheduler.merge_distance", c.merge_distance)?;
+        check("scheduler.max_requests", c.max_requests)?;
+        check("scheduler.request_timeout_ms", ms(c.request_timeout))?;
+        check("scheduler.max_in_flight", c.max_in_flight)?;
+        if c.max_requests > c.max_in_flight {
             bail!(
-                "scheduler.max_in_flight = {}: 1 to {MAX_READBACK_RING} (each is a GPU buffer)",
+                "scheduler.max_requests = {} is above scheduler.max_in_flight = {}",
+                c.max_requests,
                 c.max_in_flight
             );
         }
         terrain_physics::ReadbackScheduler::new(glam::UVec2::splat(16), *c).context("scheduler")?;
         let st = &self.style;
-        if !st.light_dir.is_finite() || st.light_dir.length_squared() == 0.0 {
-            bail!("style.light_dir must be a finite, non-zero direction");
+        each("style.light_dir", &st.light_dir.to_array())?;
+        if st.light_dir.length_squared() == 0.0 {
+            bail!("style.light_dir must be a non-zero direction");
         }
-        if !st.fog_color.is_finite() || st.fog_color.min_element() < 0.0 {
-            bail!("style.fog_color must be finite and non-negative");
-        }
+        each("style.fog_color", &st.fog_color.to_array())?;
         if let Some(d) = st.fog_density {
-            at_least_zero("style.fog_density", d)?;
+            check("style.fog_density", d)?;
         }
-        if let Some(r) = st.ramp_m
-            && !(r.is_finite() && r.y > r.x)
-        {
-            bail!("style.ramp_m = [{}, {}]: finite, low below high", r.x, r.y);
+        if let Some(r) = st.ramp_m {
+            each("style.ramp_m", &r.to_array())?;
+            if r.y <= r.x {
+                bail!("style.ramp_m = [{}, {}]: low below high", r.x, r.y);
+            }
         }
         let cam = &self.camera;
-        positive("camera.walker_eye_height_m", cam.walker_eye_height_m)?;
-        at_least_zero("camera.walker_behind_m", cam.walker_behind_m)?;
-        positive("camera.walker_ahead_m", cam.walker_ahead_m)?;
-        positive("camera.orbit_period_s", cam.orbit_period_s)?;
-        positive("camera.flyover_period_s", cam.flyover_period_s)?;
-        positive("camera.flyover_height", cam.flyover_height)?;
-        for (name, deg) in [
+        for (name, v) in [
+            ("camera.walker_eye_height_m", cam.walker_eye_height_m),
+            ("camera.walker_behind_m", cam.walker_behind_m),
+            ("camera.walker_ahead_m", cam.walker_ahead_m),
             ("camera.orbit_pitch_deg", cam.orbit_pitch_deg),
+            ("camera.orbit_period_s", cam.orbit_period_s),
+            ("camera.flyover_period_s", cam.flyover_period_s),
+            ("camera.flyover_height", cam.flyover_height),
             ("camera.flyover_pitch_deg", cam.flyover_pitch_deg),
         ] {
-            if !(deg.is_finite() && deg > 0.0 && deg < 90.0) {
-                bail!("{name} = {deg}: between 0 and 90 degrees");
-            }
+            check(name, v)?;
         }
         Ok(())
     }

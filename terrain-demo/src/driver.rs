@@ -55,65 +55,43 @@ pub fn run(
     // Scenario time: 30 frames per second whatever the render speed.
     let sim_start = Instant::now();
     let mut progress = Progress::new(cli.frames, cli.quiet);
+    // A failure during the run ends the loop; the report and the contact sheet of the frames
+    // done are still written, then the error is returned.
+    let mut failure: Option<anyhow::Error> = None;
     for index in 0..cli.frames {
         if interrupt::requested() {
             break;
         }
-        let mut timings = Timings::default();
-        let frame = scenario.advance(&mut FrameContext {
-            now: sim_start + Duration::from_secs_f64(f64::from(index) * FRAME_DT),
-            gpu: gpu.as_mut(),
-            timings: &mut timings,
-        })?;
-        let overlaid = timings.time(Step::Overview, || {
-            overview.update(scenario.map(), &frame.dirty)?;
-            anyhow::Ok(scenario.overlay(overview.image()))
-        })?;
-        let overview_image = overlaid.as_ref().unwrap_or(overview.image());
-        let report = FrameReport {
+        let now = sim_start + Duration::from_secs_f64(f64::from(index) * FRAME_DT);
+        let step = FrameStep {
             index,
-            file: String::new(),
-            stats: frame.stats,
-            triangles: 0,
-            lod: None,
-            vertices: None,
-            max_screen_error_px: None,
-            max_vertex_jump_px: None,
-            camera_clearance_m: frame.camera_clearance_m,
-            timings_ms: BTreeMap::new(),
-            gpu_timestamps_ms: BTreeMap::new(),
-            gpu_objects: None,
+            now,
+            scenario: &mut *scenario,
+            gpu: gpu.as_mut(),
+            overview: &mut overview,
+            capture: &mut capture,
         };
-        match gpu.as_mut() {
-            // The 3D frame with the overview inset, the camera marked on it.
-            Some(scene) => {
-                scene.update_lod(scenario.map(), &frame.dirty, &mut timings)?;
-                let mut rendered = scene.render(&frame.camera, &mut timings)?;
-                let max_vertex_jump_px = scene.lod_jump_px(scenario.map(), &frame.camera);
-                let eye = frame.camera.position;
-                let uv = Vec2::new(eye.x, eye.z) / scenario.map().extent_m();
-                images::inset_overview(&mut rendered.image, overview_image, uv);
-                let report = FrameReport {
-                    triangles: rendered.triangles,
-                    lod: Some(rendered.lod.mode),
-                    vertices: Some(rendered.lod.vertices),
-                    max_screen_error_px: rendered.lod.max_screen_error_px,
-                    max_vertex_jump_px,
-                    gpu_objects: Some(scene.live_objects()),
-                    ..report
-                };
-                capture.push(&rendered.image, report, timings)?;
-            }
-            // Without a GPU the overview is the frame.
-            None => capture.push(overview_image, report, timings)?,
+        if let Err(e) = step.run() {
+            failure = Some(e.context(format!("frame {index}")));
+            break;
         }
         progress.frames_done(index + 1);
     }
     progress.finish();
-    let finish = scenario.finish(gpu.as_mut())?;
+    let finish = match scenario.finish(gpu.as_mut()) {
+        Ok(finish) => finish,
+        Err(e) => {
+            failure.get_or_insert(e.context("ending the run"));
+            Default::default()
+        }
+    };
     let terrain_final = cli.out.join("terrain_final.png");
-    capture::write_file(&terrain_final, &io::encode_png16(scenario.map().grid())?)
-        .with_context(|| format!("writing {}", terrain_final.display()))?;
+    let written = io::encode_png16(scenario.map().grid())
+        .and_then(|png| capture::write_file(&terrain_final, &png))
+        .with_context(|| format!("writing {}", terrain_final.display()));
+    if let Err(e) = written {
+        failure.get_or_insert(e);
+    }
 
     let done = capture.done();
     let info = scenario.info();
@@ -143,13 +121,32 @@ pub fn run(
         initial_normals_ms: info.initial_normals_ms,
         written_back_tiles: finish.written_back_tiles,
         frames_requested: cli.frames,
-        interrupted: done < cli.frames,
+        interrupted: failure.is_none() && done < cli.frames,
+        error: failure.as_ref().map(|e| format!("{e:#}")),
         memory,
         frames: Vec::new(),
         totals_ms: BTreeMap::new(),
         warmup_frames: 0,
         steps_ms: BTreeMap::new(),
-    })?;
+    });
+    let report = match (report, failure) {
+        (Ok(_), Some(e)) => {
+            crate::console::note!(
+                "the run failed after {done} of {} frames: {} lists them, with summary.png",
+                cli.frames,
+                cli.out.join("report.json").display()
+            );
+            return Err(e);
+        }
+        (Err(written), Some(e)) => {
+            crate::console::note!(
+                "warning: the report of the failed run is incomplete: {written:#}"
+            );
+            return Err(e);
+        }
+        (Err(written), None) => return Err(written),
+        (Ok(report), None) => report,
+    };
     if !cli.quiet {
         crate::console::note!(
             "wrote {} frames of {}x{} to {} on {} ({})",
@@ -174,6 +171,78 @@ pub fn run(
         );
     }
     Ok(report)
+}
+
+/// One frame of the loop: advance the scenario, update the overview, render (or take the
+/// overview as the frame), capture.
+struct FrameStep<'a, 'c> {
+    index: u32,
+    now: Instant,
+    scenario: &'a mut dyn Scenario,
+    gpu: Option<&'a mut GpuScene>,
+    overview: &'a mut Overview,
+    capture: &'a mut Capture<'c>,
+}
+
+impl FrameStep<'_, '_> {
+    fn run(self) -> Result<()> {
+        let Self {
+            index,
+            now,
+            scenario,
+            mut gpu,
+            overview,
+            capture,
+        } = self;
+        let mut timings = Timings::default();
+        let frame = scenario.advance(&mut FrameContext {
+            now,
+            gpu: gpu.as_deref_mut(),
+            timings: &mut timings,
+        })?;
+        let overlaid = timings.time(Step::Overview, || {
+            overview.update(scenario.map(), &frame.dirty)?;
+            anyhow::Ok(scenario.overlay(overview.image()))
+        })?;
+        let overview_image = overlaid.as_ref().unwrap_or(overview.image());
+        let report = FrameReport {
+            index,
+            file: String::new(),
+            stats: frame.stats,
+            triangles: 0,
+            lod: None,
+            vertices: None,
+            max_screen_error_px: None,
+            max_vertex_jump_px: None,
+            camera_clearance_m: frame.camera_clearance_m,
+            timings_ms: BTreeMap::new(),
+            gpu_timestamps_ms: BTreeMap::new(),
+            gpu_objects: None,
+        };
+        match gpu {
+            // The 3D frame with the overview inset, the camera marked on it.
+            Some(scene) => {
+                scene.update_lod(scenario.map(), &frame.dirty, &mut timings)?;
+                let mut rendered = scene.render(&frame.camera, &mut timings)?;
+                let max_vertex_jump_px = scene.lod_jump_px(scenario.map(), &frame.camera);
+                let eye = frame.camera.position;
+                let uv = Vec2::new(eye.x, eye.z) / scenario.map().extent_m();
+                images::inset_overview(&mut rendered.image, overview_image, uv);
+                let report = FrameReport {
+                    triangles: rendered.triangles,
+                    lod: Some(rendered.lod.mode),
+                    vertices: Some(rendered.lod.vertices),
+                    max_screen_error_px: rendered.lod.max_screen_error_px,
+                    max_vertex_jump_px,
+                    gpu_objects: Some(scene.live_objects()),
+                    ..report
+                };
+                capture.push(&rendered.image, report, timings)
+            }
+            // Without a GPU the overview is the frame.
+            None => capture.push(overview_image, report, timings),
+        }
+    }
 }
 
 /// The GPU scene for the scenario's map, prepared by the scenario; `None` (after saying why)

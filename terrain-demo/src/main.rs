@@ -20,15 +20,17 @@ mod memory_estimate;
 mod memory_limit;
 mod overview;
 mod progress;
+mod ranges;
 mod report;
 mod scenarios;
 mod summary;
 mod timings;
 mod usage_error;
 mod validate;
+mod writable;
 
 use anyhow::Result;
-use clap::Parser;
+use clap::{CommandFactory, FromArgMatches};
 use cli::Cli;
 use memory_estimate::RunShape;
 use report::MemoryReport;
@@ -36,7 +38,12 @@ use usage_error::{INTERRUPTED_EXIT, USAGE_EXIT, UsageExt};
 
 fn main() {
     quiet_vulkan_device_select();
-    let cli = match Cli::try_parse() {
+    // --help ends with the valid range of every numeric flag and config key.
+    let parsed = Cli::command()
+        .after_help(ranges::help_table())
+        .try_get_matches()
+        .and_then(|m| Cli::from_arg_matches(&m));
+    let cli = match parsed {
         Ok(cli) => cli,
         Err(e) if !e.use_stderr() => {
             // --help and --version; a closed or full stdout is a failure, not a panic.
@@ -112,18 +119,9 @@ enum Ended {
 
 fn run(cli: &Cli) -> Result<Ended> {
     if let Some(dir) = &cli.verify_world {
-        let bad = scenarios::world_files::verify(dir)?;
-        if bad.is_empty() {
-            console::stdout(&format!(
-                "world {}: every tile and the manifest are valid\n",
-                dir.display()
-            ))?;
+        if scenarios::world_files::verify_command(dir, cli.repair, cli.quiet)? {
             return Ok(Ended::Done);
         }
-        for line in &bad {
-            console::stdout(&format!("{line}\n"))?;
-        }
-        console::note!("world {}: {} bad tile(s)", dir.display(), bad.len());
         std::process::exit(usage_error::FAILURE_EXIT);
     }
     validate::flags(cli)?;
@@ -132,11 +130,22 @@ fn run(cli: &Cli) -> Result<Ended> {
         console::stdout(&params.to_toml()?)?;
         return Ok(Ended::Done);
     }
+    // Where the run writes, before anything long starts: its outputs, and the streamed
+    // world it builds and writes deformations back into.
+    writable::check_dir(&cli.out, "--out")?;
+    if matches!(
+        cli.scenario,
+        cli::ScenarioKind::Flyover | cli::ScenarioKind::World
+    ) {
+        writable::check_dir(&cli.world, "--world")?;
+    }
     // What the run needs, from its flags and input headers, before anything large exists.
     let limit = cli.max_memory.unwrap_or_else(memory_limit::default_limit);
-    let needed = RunShape::of(cli)?.estimate();
+    let shape = RunShape::of(cli)?;
+    let needed = shape.estimate();
     memory_limit::check(&needed, limit).usage()?;
-    let mut scenario = scenarios::open(cli, &params)?;
+    // The heightmap is read only as it was measured for the estimate.
+    let mut scenario = scenarios::open(cli, &params, shape.heightmap)?;
     let config = serde_json::json!({ "flags": cli, "params": params });
     let report = driver::run(
         cli,

@@ -38,8 +38,9 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         .map_err(|_| format!("`{s}` is not a size (as 1536M or 8G)"))?;
     let bytes = value * (1u64 << shift) as f64;
     // 2^63 bytes is far beyond any machine and keeps the sums of an estimate exact in u64.
-    if !(bytes >= 1.0 && bytes < 2f64.powi(63)) {
-        return Err(format!("`{s}`: the size must be at least 1 byte"));
+    let range = crate::ranges::of("--max-memory");
+    if !range.contains(bytes) {
+        return Err(format!("`{s}`: give {}", range.describe()));
     }
     Ok(bytes as u64)
 }

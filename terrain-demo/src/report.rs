@@ -74,6 +74,11 @@ pub struct Report {
     pub frames_requested: u32,
     /// Whether Ctrl-C ended the run early: `frames` lists the frames done before it.
     pub interrupted: bool,
+    /// The error that ended the run early (a frame that could not be written, a world tile
+    /// that could not be read or written back): `frames` lists the frames done before it, and
+    /// the run exits with a non-zero status. Absent when no error ended the run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
     /// The run's memory: its limit, the estimate it was accepted on, the peak measured.
     pub memory: MemoryReport,
     /// Per frame.

@@ -4,7 +4,8 @@
 //! run never starts and fails later on a flag. Checks that need an input's contents (a
 //! heightmap's size, a world's manifest) stay where that input is read.
 
-use crate::cli::{Cli, DetailArg, LodArg, ScenarioKind, Switch};
+use crate::cli::{Cli, DetailArg, HeightRangeArg, LodArg, ScenarioKind, Switch};
+use crate::ranges;
 use crate::usage_error::usage;
 use anyhow::{Result, anyhow};
 use terrain_lod::TessConfig;
@@ -66,32 +67,64 @@ fn scenario_flags(cli: &Cli) -> Result<()> {
     Ok(())
 }
 
-/// Numbers clap parses but does not bound.
+/// Every numeric flag against its range in [`ranges::FLAGS`].
 fn numbers(cli: &Cli) -> Result<()> {
-    if !(cli.speed.is_finite() && cli.speed > 0.0 && cli.speed <= 1000.0) {
-        return Err(anyhow!(
-            "--speed must be 0 to 1000 metres per second, got {}",
-            cli.speed
-        ));
+    if let Some(size) = cli.size {
+        ranges::check("--size", size)?;
     }
-    if let Some(max) = cli.max_height
-        && !(max.is_finite() && max > 0.0)
-    {
-        return Err(anyhow!(
-            "--max-height must be a positive number of metres, got {max}"
-        ));
+    if let Some(raw) = cli.raw_size {
+        ranges::check_as(
+            "--raw-size",
+            &format!("--raw-size {}x{}", raw.x, raw.y),
+            f64::from(raw.min_element()),
+        )?;
+        ranges::check_as(
+            "--raw-size",
+            &format!("--raw-size {}x{}", raw.x, raw.y),
+            f64::from(raw.max_element()),
+        )?;
     }
-    if let Some(t) = cli.texel_size
-        && !(t.is_finite() && t > 0.0)
-    {
-        return Err(anyhow!(
-            "--texel-size must be a positive number of metres, got {t}"
-        ));
+    let res = cli.resolution;
+    for side in [res.x, res.y] {
+        ranges::check_as(
+            "--resolution",
+            &format!("--resolution {}x{}", res.x, res.y),
+            side,
+        )?;
     }
-    if let Some(tau) = cli.target_error
-        && !(tau.is_finite() && (0.01..=1000.0).contains(&tau))
-    {
-        return Err(anyhow!("--target-error {tau}: give 0.01 to 1000 pixels"));
+    ranges::check("--frames", cli.frames)?;
+    ranges::check("--warmup", cli.warmup)?;
+    ranges::check("--overview-size", cli.overview_size)?;
+    // Exact: both bounds are far below 2^53.
+    ranges::check("--ram-budget", cli.ram_budget)?;
+    ranges::check("--vram-budget", cli.vram_budget)?;
+    ranges::check("--speed", cli.speed)?;
+    if let Some(t) = cli.texel_size {
+        ranges::check("--texel-size", t)?;
+    }
+    if let Some(max) = cli.max_height {
+        ranges::check("--max-height", max)?;
+    }
+    if let Some(HeightRangeArg::Span(lo, hi)) = cli.height_range {
+        let shown = format!("--height-range {lo}:{hi}");
+        ranges::check_as("--height-range", &shown, lo)?;
+        ranges::check_as("--height-range", &shown, hi)?;
+        if f64::from(hi) - f64::from(lo) < ranges::MIN_HEIGHT_SPAN_M {
+            return Err(anyhow!(
+                "{shown}: MAX - MIN must be at least {} m (the u16 steps of a narrower span \
+                 are below f32's resolution of its heights)",
+                ranges::MIN_HEIGHT_SPAN_M
+            ));
+        }
+    }
+    if let Some(tau) = cli.target_error {
+        ranges::check("--target-error", tau)?;
+    }
+    if let Some(w) = cli.triangle_width {
+        ranges::check("--triangle-width", w)?;
+    }
+    if let Some(bytes) = cli.max_memory {
+        ranges::check("--max-memory", bytes)?;
     }
     Ok(())
 }
@@ -198,6 +231,11 @@ mod tests {
                 "--heightmap",
             ),
             (&["--speed", "0"], "--speed"),
+            (&["--size", "8"], "--size"),
+            (&["--frames", "0"], "--frames"),
+            (&["--resolution", "8x8"], "--resolution"),
+            (&["--vram-budget", "65536"], "--vram-budget"),
+            (&["--height-range", "0:0.0001"], "--height-range"),
             (&["--speed", "1e30"], "--speed"),
             (&["--max-height=-1"], "--max-height"),
             (&["--texel-size", "0"], "--texel-size"),

@@ -1,6 +1,7 @@
 //! Exit statuses: 2 for usage errors (bad flags, unreadable input), found before any frame;
 //! 1 for failures while the run goes on (here a frame that cannot be written), after which
-//! the frames already done are still listed in `frames.jsonl`.
+//! the frames already done are still listed in `frames.jsonl`, `report.json` and
+//! `summary.png`.
 
 mod common;
 
@@ -75,6 +76,12 @@ fn a_failure_during_the_run_exits_with_1_and_keeps_the_frames_done() {
         .collect();
     assert_eq!(frames.len(), 1, "{lines}");
     assert_eq!(frames[0]["index"].as_u64(), Some(0));
+    // report.json and summary.png are still written, over the frame done, with the error.
+    let report = common::report(&out);
+    assert_eq!(report["frames"].as_array().map(Vec::len), Some(1));
+    let error = report["error"].as_str().expect("error in report.json");
+    assert!(error.contains("frame_0001.png"), "{error}");
+    assert!(out.join("summary.png").is_file());
     let temps: Vec<String> = std::fs::read_dir(&out)
         .expect("out")
         .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())

@@ -454,10 +454,22 @@ impl Scenario for FlyoverScenario {
                 slot_bytes >> 10
             )));
         }
-        scene.enable_atlas(&AtlasConfig {
-            slots,
-            world: self.manifest.tile_layout(),
-        })?;
+        scene
+            .enable_atlas(&AtlasConfig {
+                slots,
+                world: self.manifest.tile_layout(),
+            })
+            .map_err(|e| {
+                // The adapter's buffers are smaller than the budget asks for: the user's to fix.
+                let too_large = e
+                    .downcast_ref::<terrain_gpu::GpuError>()
+                    .is_some_and(|g| matches!(g, terrain_gpu::GpuError::MapTooLarge { .. }));
+                let e = e.context(format!(
+                    "--vram-budget {} MiB: the tile atlas does not fit this adapter",
+                    self.vram_budget >> 20
+                ));
+                if too_large { usage(e) } else { e }
+            })?;
         self.vram = Some(VramPool::new(VramConfig::new(&self.manifest, slots))?);
         Ok(())
     }
@@ -570,6 +582,11 @@ impl Scenario for FlyoverScenario {
         };
         self.last_camera = Some(state);
         let report = self.pool()?.update(&state)?;
+        // A tile that could not be read (corrupt, unreadable) or written back ends the run;
+        // the driver still writes the report of the frames done.
+        if let Some((id, e)) = self.pool()?.errors().first() {
+            bail!("tile {id} of the world: {e}");
+        }
         self.written_back += report.written as u64;
         // The VRAM pool uploads the nearest wanted tiles in RAM, within the per-frame budget.
         let mut vram_report = None;

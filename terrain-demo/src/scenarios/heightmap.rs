@@ -118,7 +118,15 @@ impl HeightsInfo {
 /// The map `cli` asks for. Every error is the user's to fix (a flag, or the heightmap file):
 /// a usage error.
 pub fn load(cli: &Cli) -> Result<Terrain> {
-    make(cli).usage()
+    make(cli, None).usage()
+}
+
+/// The map `cli` asks for, its heightmap read only as `planned` measured it (for the memory
+/// estimate that `--max-memory` accepted): the reader refuses a side beyond the measured
+/// largest one before it allocates, and a file of another format or size (replaced or
+/// rewritten since it was measured) is refused. Errors are usage errors.
+pub fn load_planned(cli: &Cli, planned: Option<PlannedMap>) -> Result<Terrain> {
+    make(cli, planned).usage()
 }
 
 /// The range `cli` asks for and the name report.json gives its source.
@@ -139,13 +147,32 @@ fn height_range(cli: &Cli) -> Result<(HeightRange, &'static str)> {
     })
 }
 
-fn make(cli: &Cli) -> Result<Terrain> {
+fn make(cli: &Cli, planned: Option<PlannedMap>) -> Result<Terrain> {
     let (range, range_source) = height_range(cli)?;
     match &cli.heightmap {
         None => procedural(cli, range),
         Some(path) => {
-            let dem = read_dem(path, &dem_options(cli))
+            let mut options = dem_options(cli);
+            if let Some(p) = planned {
+                options.limits.max_side = options.limits.max_side.min(p.size.max_element());
+            }
+            let dem = read_dem(path, &options)
                 .with_context(|| format!("cannot use heightmap {}", path.display()))?;
+            if let Some(p) = planned
+                && (p.size != dem.size() || p.format != Some(dem.format))
+            {
+                bail!(
+                    "heightmap {} changed while the run started: it was measured as {} {}x{} \
+                     (the memory estimate), and read as {} {}x{}",
+                    path.display(),
+                    p.format.map_or("?", DemFormat::name),
+                    p.size.x,
+                    p.size.y,
+                    dem.format.name(),
+                    dem.size().x,
+                    dem.size().y
+                );
+            }
             from_dem(cli, path, dem, range, range_source)
         }
     }

@@ -28,10 +28,15 @@ pub use stamps::{DETAIL_REFINE, DETAIL_TILE};
 /// Seconds of scenario time per frame (30 frames per second), whatever the render speed.
 pub const FRAME_DT: f64 = 1.0 / 30.0;
 
-/// The scenario `cli` asks for, set up (terrain loaded or generated, bodies placed).
-pub fn open(cli: &Cli, params: &DemoParams) -> Result<Box<dyn Scenario>> {
+/// The scenario `cli` asks for, set up (terrain loaded or generated, bodies placed);
+/// `heightmap` is the default scenario's heightmap as the memory estimate measured it.
+pub fn open(
+    cli: &Cli,
+    params: &DemoParams,
+    heightmap: Option<heightmap::PlannedMap>,
+) -> Result<Box<dyn Scenario>> {
     Ok(match cli.scenario {
-        ScenarioKind::Default => Box::new(stamps::StampScenario::new(cli, params)?),
+        ScenarioKind::Default => Box::new(stamps::StampScenario::new(cli, params, heightmap)?),
         ScenarioKind::Snow => Box::new(snow::SnowScenario::new(cli, params)?),
         ScenarioKind::Flyover | ScenarioKind::World => {
             Box::new(flyover::FlyoverScenario::new(cli, params)?)

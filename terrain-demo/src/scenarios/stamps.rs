@@ -78,9 +78,14 @@ const DETAIL_READ_AHEAD_M: f32 = 8.0;
 
 impl StampScenario {
     /// Loads or generates the terrain and places the walker and the camera.
-    pub fn new(cli: &Cli, params: &DemoParams) -> Result<Self> {
+    /// `planned` is the heightmap as the memory estimate measured it (read only as such).
+    pub fn new(
+        cli: &Cli,
+        params: &DemoParams,
+        planned: Option<heightmap::PlannedMap>,
+    ) -> Result<Self> {
         let t = Instant::now();
-        let terrain = heightmap::load(cli)?;
+        let terrain = heightmap::load_planned(cli, planned)?;
         let map = terrain.map;
         let load_ms = ms_since(t);
         let t = Instant::now();
@@ -433,7 +438,7 @@ mod tests {
                 Cli::try_parse_from(["demo", "--size", "128", "--seed", "3", "--detail", detail])
                     .expect("flags");
             let params = DemoParams::default();
-            let mut scenario = StampScenario::new(&cli, &params).expect("scenario");
+            let mut scenario = StampScenario::new(&cli, &params, None).expect("scenario");
             let Some(mut scene) = gpu_scene(&mut scenario, "cpu_map_is_only_read_back") else {
                 return;
             };
