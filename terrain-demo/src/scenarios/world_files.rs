@@ -1,6 +1,7 @@
 //! The flyover's streamed world on disk: opened from `--world DIR`, or built there once (from
-//! the procedural default or `--heightmap`) with a progress line; and `--verify-world`, which
-//! decodes every tile and checks the manifest.
+//! the procedural default or `--heightmap`) with a progress line; and `--verify-world` (with
+//! `--repair`), which checks everything the manifest promises and rebuilds what level 0
+//! determines.
 
 use crate::cli::Cli;
 use crate::interrupt;
@@ -11,11 +12,12 @@ use glam::UVec2;
 use std::io::IsTerminal;
 use std::path::Path;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 use terrain_cache::{
-    FsStore, Layer, Manifest, MapSource, ProceduralSource, TileFormat, TileRead, TileStore, World,
-    build_world,
+    FsStore, Manifest, MapSource, ProceduralSource, RepairReport, TileFormat, TileStore,
+    VerifyError, VerifyOptions, VerifyProgress, VerifyReport, World, build_world, repair_world,
+    verify_world,
 };
 use terrain_core::{HeightEncoding, TerrainParams, WrapMode};
 
@@ -218,9 +220,15 @@ pub enum WorldBuild {
     Heightmap(PlannedMap),
 }
 
-/// Decodes every tile file of the world in `dir` and checks its manifest. Returns the bad
-/// tiles (key and why); an unreadable manifest is an error.
-pub fn verify(dir: &Path) -> Result<Vec<String>> {
+/// `--verify-world DIR` (with `--repair`): checks everything the world's manifest promises
+/// (terrain-cache's `verify_world`: every tile present or rightly the zero tile and decoding as
+/// itself, coarser levels equal to the reduction of their children, each level's `bounds.bin`
+/// equal to what the tiles give), lists each defect on stdout (key, what, whether repairable),
+/// and with `repair` rebuilds what level 0 determines, then checks again. Returns whether the
+/// world is valid (after the repair). Ctrl-C ends it with an error (`interrupt::requested`);
+/// a folder without a world, and a manifest promising more tiles than a verification walks,
+/// are usage errors.
+pub fn verify_command(dir: &Path, repair: bool, quiet: bool) -> Result<bool> {
     if !dir.is_dir() {
         return Err(usage(anyhow::anyhow!(
             "{} is not a world folder",
@@ -233,15 +241,115 @@ pub fn verify(dir: &Path) -> Result<Vec<String>> {
     let world = World::open(store)
         .with_context(|| format!("no valid world in {}", dir.display()))
         .usage()?;
-    let manifest = *world.manifest();
-    let mut bad = Vec::new();
-    for level in 0..manifest.levels {
-        for id in manifest.tiles_of(Layer::Height, level) {
-            match world.read_tile(Layer::Height, id) {
-                Ok(TileRead::Stored(_) | TileRead::Zero) => {}
-                Err(e) => bad.push(format!("{}: {e}", manifest.tile_key(Layer::Height, id))),
+    let options = VerifyOptions::default();
+    let walk = |repairing: bool| -> Result<Walked> {
+        let what = if repairing { "repairing" } else { "verifying" };
+        let cancel = AtomicBool::new(false);
+        let started = Instant::now();
+        let last = AtomicU64::new(0);
+        let terminal = std::io::stderr().is_terminal();
+        let mut progress = |p: VerifyProgress| {
+            // Ctrl-C stops the walk before its next tile.
+            if interrupt::requested() {
+                cancel.store(true, Ordering::Relaxed);
             }
+            let bucket = p.done / (p.total / 20).max(1);
+            if terminal && !quiet && last.fetch_max(bucket, Ordering::Relaxed) < bucket {
+                crate::console::stderr(format_args!(
+                    "\r{what} {}: {}/{} tiles ({:.0} %, {:.0} s)",
+                    dir.display(),
+                    p.done,
+                    p.total,
+                    100.0 * p.done as f64 / p.total.max(1) as f64,
+                    started.elapsed().as_secs_f64(),
+                ));
+            }
+        };
+        let done = if repairing {
+            repair_world(&world, &options, &cancel, &mut progress).map(Walked::Repaired)
+        } else {
+            verify_world(&world, &options, &cancel, &mut progress).map(Walked::Verified)
+        };
+        if terminal && !quiet && last.load(Ordering::Relaxed) > 0 {
+            crate::console::note!();
         }
+        done.map_err(|e| match e {
+            VerifyError::TooManyTiles { .. } => usage(
+                anyhow::Error::new(e).context(format!("{} cannot be verified", dir.display())),
+            ),
+            e => anyhow::Error::new(e).context(format!("{what} {}", dir.display())),
+        })
+    };
+    let report = match walk(repair)? {
+        Walked::Verified(report) => report,
+        Walked::Repaired(r) => {
+            if r.found.is_valid() {
+                return valid(dir, &r.found);
+            }
+            print_defects(&r.found)?;
+            crate::console::note!(
+                "world {}: {} defect(s), {} repairable: rewrote {} tile(s) and {} bounds.bin \
+                 file(s); checking again",
+                dir.display(),
+                r.found.defects,
+                r.found.defects - r.found.unrepairable,
+                r.tiles_rewritten,
+                r.bounds_rewritten
+            );
+            let after = match walk(false)? {
+                Walked::Verified(after) => after,
+                Walked::Repaired(again) => again.found,
+            };
+            if after.is_valid() {
+                return valid(dir, &after);
+            }
+            crate::console::stdout("left after the repair:\n")?;
+            after
+        }
+    };
+    if report.is_valid() {
+        return valid(dir, &report);
     }
-    Ok(bad)
+    print_defects(&report)?;
+    crate::console::note!(
+        "world {}: {} defect(s), {} of them not repairable from level 0{}",
+        dir.display(),
+        report.defects,
+        report.unrepairable,
+        if repair || report.defects == report.unrepairable {
+            ""
+        } else {
+            " (--repair rebuilds the others)"
+        }
+    );
+    Ok(false)
+}
+
+/// What one walk over a world gave.
+enum Walked {
+    Verified(VerifyReport),
+    Repaired(RepairReport),
+}
+
+/// Prints the listed defects on stdout, one a line, and how many more were counted.
+fn print_defects(report: &VerifyReport) -> Result<()> {
+    for d in &report.listed {
+        crate::console::stdout(&format!("{d}\n"))?;
+    }
+    if report.unlisted() > 0 {
+        crate::console::stdout(&format!("... and {} more defect(s)\n", report.unlisted()))?;
+    }
+    Ok(())
+}
+
+/// Says on stdout that the world in `dir` is valid.
+fn valid(dir: &Path, report: &VerifyReport) -> Result<bool> {
+    crate::console::stdout(&format!(
+        "world {}: every tile, level and bounds.bin is valid ({} tiles: {} stored, {} empty)\n",
+        dir.display(),
+        report.tiles,
+        report.stored,
+        report.zero
+    ))?;
+    Ok(true)
 }
