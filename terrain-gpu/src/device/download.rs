@@ -33,6 +33,7 @@ pub fn download_bytes(
     let mut encoder = device.create_command_encoder(&Default::default());
     encoder.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
     queue.submit([encoder.finish()]);
+    crate::device::trace::record("download: submitted copy (bytes)", size);
     map_and_read(device, &staging)
 }
 
@@ -43,10 +44,13 @@ pub fn map_and_read(device: &wgpu::Device, staging: &wgpu::Buffer) -> Result<Vec
     staging.map_async(wgpu::MapMode::Read, .., move |r| {
         let _ = tx.send(r);
     });
+    crate::device::trace::record("map_and_read: blocking poll (bytes)", staging.size());
     device.poll(wait_bounded())?;
+    crate::device::trace::record("map_and_read: poll returned, waiting for the map", 0);
     rx.recv().map_err(|_| GpuError::MapDropped)??;
     let bytes = staging.get_mapped_range(..)?.to_vec();
     staging.unmap();
+    crate::device::trace::record("map_and_read: mapped and read (bytes)", bytes.len() as u64);
     Ok(bytes)
 }
 

@@ -11,3 +11,4 @@ pub mod region_source;
 pub mod scope;
 pub mod small_readback;
 pub mod timer;
+pub(crate) mod trace;

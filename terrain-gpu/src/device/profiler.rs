@@ -289,6 +289,7 @@ impl GpuProfiler {
     /// Waits (bounded) until every frame ended has arrived, and hands them over: the end of a
     /// run or a test, never inside a frame.
     pub fn flush(&mut self, device: &wgpu::Device) -> Result<Vec<FrameProfile>, GpuError> {
+        crate::device::trace::record("profiler: flush, blocking poll", 0);
         device.poll(crate::device::download::wait_bounded())?;
         self.poll(device)
     }

@@ -327,6 +327,10 @@ impl RegionReadback {
     ) -> Result<Vec<R>, GpuError> {
         device.poll(wgpu::PollType::Poll)?;
         let arrived = self.collect(convert)?;
+        crate::device::trace::record(
+            "region readback: poll (regions arrived)",
+            arrived.len() as u64,
+        );
         if !arrived.is_empty() {
             tracing::debug!(regions = arrived.len(), "region readbacks arrived");
         }
@@ -339,7 +343,9 @@ impl RegionReadback {
         device: &wgpu::Device,
         convert: impl FnMut(RegionView<'_>) -> R,
     ) -> Result<Vec<R>, GpuError> {
+        crate::device::trace::record("region readback: blocking poll", 0);
         device.poll(crate::device::download::wait_bounded())?;
+        crate::device::trace::record("region readback: blocking poll returned", 0);
         self.collect(convert)
     }
 

@@ -124,6 +124,7 @@ impl SmallReadback {
     /// without waiting for the others. A failed mapping is an error (its buffer is freed).
     pub fn poll(&mut self, device: &wgpu::Device) -> Result<Vec<(u64, Vec<u8>)>, GpuError> {
         device.poll(wgpu::PollType::Poll)?;
+        crate::device::trace::record("small readback: poll (in flight)", self.in_flight() as u64);
         self.free_abandoned();
         let mut arrived = Vec::new();
         let mut failed = false;

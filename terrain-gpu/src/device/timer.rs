@@ -115,6 +115,7 @@ impl GpuTimer {
         }
         let start = Instant::now();
         queue.submit([encoder.finish()]);
+        crate::device::trace::record("timer: submitted, blocking poll", 0);
         device.poll(crate::device::download::wait_bounded())?;
         let wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let timestamp_ms = match &self.queries {

@@ -439,6 +439,7 @@ impl DepthFromBelowPass {
         let recorded = self.encode(device, queue, &mut encoder, objects, area, &out);
         if recorded.is_ok() {
             queue.submit([encoder.finish()]);
+            crate::device::trace::record("granular depth: submitted", 0);
         }
         self.recall();
         recorded?;

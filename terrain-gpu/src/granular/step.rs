@@ -235,6 +235,7 @@ impl GpuGranularStep {
         let recorded = self.encode(device, queue, &mut encoder, map, objects);
         if recorded.is_ok() {
             queue.submit([encoder.finish()]);
+            crate::device::trace::record("granular step: submitted", 0);
         }
         self.recall();
         let active_areas = recorded?;

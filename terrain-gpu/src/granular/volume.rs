@@ -170,6 +170,7 @@ impl VolumePass {
         let recorded = self.encode(device, queue, &mut encoder, map);
         if recorded.is_ok() {
             queue.submit([encoder.finish()]);
+            crate::device::trace::record("granular volume: submitted", 0);
         }
         self.recall();
         recorded?;
