@@ -73,6 +73,14 @@ pub enum CacheError {
         #[source]
         source: object_store::Error,
     },
+    /// A conditional write was refused: the object changed (or was created or deleted) since
+    /// this store last read it, so writing would silently replace another writer's version.
+    /// Read the key again and reapply the change (see `ObjectTileStore`, module `object`).
+    #[error("{key:?} was changed by another writer since it was read; not overwritten")]
+    Conflict {
+        /// The store key.
+        key: String,
+    },
     /// A store URL could not be parsed or names a scheme this build does not support.
     #[error("store URL {url:?}: {reason}")]
     InvalidUrl {
