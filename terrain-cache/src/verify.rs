@@ -244,6 +244,11 @@ pub fn repair_world(
     let mut walk = Walk::new(world, options, cancel, progress, true)?;
     walk.walk()?;
     let bounds_rewritten = walk.finish_bounds()?;
+    // Every coarser level now matches level 0: interrupted write-backs have nothing left to
+    // recover.
+    if !cancel.load(std::sync::atomic::Ordering::Relaxed) {
+        crate::pool::journal::clear(world).map_err(VerifyError::from)?;
+    }
     Ok(RepairReport {
         tiles_rewritten: walk.rewritten,
         bounds_rewritten,

@@ -12,11 +12,12 @@ use common::{Rng, build, temp_dir};
 use glam::UVec2;
 use std::process::{Command, Stdio};
 use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use terrain_cache::detail::{DetailCache, detail_manifest_layout};
 use terrain_cache::{
     BandSelection, CameraState, FsStore, Layer, Manifest, PoolConfig, RamPool, TileData, TileId,
-    TileStore, World, manifest::parse_tile_key,
+    TileStore, VerifyOptions, World, manifest::parse_tile_key, verify_world,
 };
 use terrain_core::detail::DetailLayout;
 use terrain_core::{Grid, WrapMode};
@@ -110,6 +111,17 @@ fn killed_writers_leave_old_or_new_tiles_and_a_valid_manifest() {
             }
             last[i] = v;
         }
+        // The next writer recovers write-backs the kill interrupted (the journal): the world
+        // then verifies whole, coarser levels and bounds included.
+        drop(RamPool::new(world.clone(), PoolConfig::new(Layer::Height, 1 << 24)).unwrap());
+        let verified = verify_world(
+            world,
+            &VerifyOptions::default(),
+            &AtomicBool::new(false),
+            &mut |_| {},
+        )
+        .unwrap();
+        assert!(verified.is_valid(), "round {round}: {verified:?}");
         // Every other tile file (ancestors refreshed by the writer) decodes.
         for key in world.store().list("height").unwrap() {
             if let Some((layer, id)) = parse_tile_key(&key) {

@@ -30,6 +30,7 @@
 //! of the loaded tiles, `workers` the loader and writer threads with the jobs they exchange.
 
 mod frame;
+pub(crate) mod journal;
 mod tiles;
 pub(crate) mod workers;
 
@@ -284,7 +285,9 @@ impl RamPool {
         Self::with_policy(world, cfg, Box::new(policy))
     }
 
-    /// A pool over `world` selecting with `policy`.
+    /// A pool over `world` selecting with `policy`. A height pool that propagates to coarser
+    /// levels first rebuilds the ancestors of write-backs a previous writer left unfinished
+    /// (killed between a tile and its ancestors; see the write-back journal).
     pub fn with_policy(
         world: World,
         cfg: PoolConfig,
@@ -327,6 +330,15 @@ impl RamPool {
         let (written_tx, written_rx) = unbounded::<WriteDone>();
         let (req_tx, req_rx) = unbounded();
         let mut threads = Vec::new();
+        if cfg.propagate_to_coarser && cfg.layer == Layer::Height {
+            // A previous writer killed mid-write-back left stale ancestors: rebuilt before any
+            // load can read them. A read-only store has nothing to fix with.
+            match journal::recover(&world) {
+                Ok(0) | Err(CacheError::ReadOnly { .. }) => {}
+                Ok(n) => tracing::info!(tiles = n, "recovered interrupted write-backs"),
+                Err(e) => return Err(e),
+            }
+        }
         for i in 0..cfg.workers {
             let rx = load_rx.clone();
             let tx = done_tx.clone();

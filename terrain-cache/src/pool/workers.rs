@@ -3,6 +3,7 @@
 //! channels and one atomic state per load job, which it swaps to cancel or rescue a job. The
 //! detail cache runs the same threads (`crate::detail`), so both layers stream alike.
 
+use super::journal;
 use crate::CacheError;
 use crate::build::rebuild_ancestors;
 use crate::tile::{Layer, TileData, TileId};
@@ -108,13 +109,18 @@ pub(crate) fn writer(
     tx: Sender<WriteDone>,
 ) {
     while let Ok(job) = rx.recv() {
-        let result = world.write_tile(layer, job.id, &job.data).and_then(|_| {
-            if propagate {
-                rebuild_ancestors(&world, &[job.id])
-            } else {
-                Ok(Vec::new())
-            }
-        });
+        let result = if propagate {
+            // Journalled: a kill between the tile and its ancestors is recovered by the next
+            // writer (journal.rs).
+            journal::begin(&world, job.id)
+                .and_then(|_| world.write_tile(layer, job.id, &job.data))
+                .and_then(|_| rebuild_ancestors(&world, &[job.id]))
+                .and_then(|rebuilt| journal::end(&world, job.id).map(|_| rebuilt))
+        } else {
+            world
+                .write_tile(layer, job.id, &job.data)
+                .map(|_| Vec::new())
+        };
         drop(job.data);
         if tx
             .send(WriteDone {
