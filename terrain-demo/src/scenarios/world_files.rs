@@ -237,7 +237,18 @@ pub fn verify_command(dir: &Path, repair: bool, quiet: bool) -> Result<bool> {
     }
     // The manifest alone first: anything but a regular file (a pipe would block) is refused.
     existing_manifest(dir)?;
-    let store: Arc<dyn TileStore> = Arc::new(FsStore::open(dir).usage()?);
+    // Checking only reads: no lock, so a world in use by a run can be verified meanwhile. A
+    // repair writes, so it takes the world's lock (exit 2 naming the owner while a run has it).
+    let store = if repair {
+        FsStore::open(dir)
+    } else {
+        FsStore::open_read_only(dir)
+    };
+    let store: Arc<dyn TileStore> = Arc::new(
+        store
+            .with_context(|| format!("cannot use world folder {}", dir.display()))
+            .usage()?,
+    );
     let world = World::open(store)
         .with_context(|| format!("no valid world in {}", dir.display()))
         .usage()?;

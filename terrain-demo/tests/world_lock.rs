@@ -1,0 +1,121 @@
+//! One writer per world: a second run on a world in use exits 2 naming the owner, a run after
+//! `kill -9` of the owner takes the world over (recovering an interrupted write-back), and
+//! `--verify-world` passes after each case.
+
+mod common;
+
+use common::{demo, fresh_dir, run_within};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const LIMIT: Duration = Duration::from_secs(180);
+
+fn flyover(world: &Path, out: &Path, frames: u32) -> Command {
+    let mut cmd = demo();
+    cmd.args(["--scenario", "flyover", "--no-gpu", "--size", "1024"])
+        .args(["--ram-budget", "4", "--overview-size", "64"])
+        .args(["--frames", &frames.to_string()])
+        .arg("--world")
+        .arg(world)
+        .arg("--out")
+        .arg(out);
+    cmd
+}
+
+fn verify_passes(world: &Path, dir: &Path, case: &str) {
+    let mut cmd = demo();
+    cmd.arg("--verify-world").arg(world);
+    let done = run_within(cmd, dir, LIMIT);
+    assert!(
+        done.status.success(),
+        "--verify-world after {case}: {}; {}",
+        done.status,
+        done.stderr
+    );
+}
+
+/// Waits until the run in `out` has written `n` frames (so it holds the world and streams).
+fn wait_for_frames(child: &mut Child, out: &Path, n: usize) {
+    let started = Instant::now();
+    loop {
+        let lines = std::fs::read_to_string(out.join("frames.jsonl"))
+            .map(|t| t.lines().count())
+            .unwrap_or(0);
+        if lines >= n {
+            return;
+        }
+        if let Some(status) = child.try_wait().expect("wait") {
+            panic!("the owner ended early: {status}");
+        }
+        if started.elapsed() > LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the owner wrote no {n} frames in {LIMIT:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn a_second_writer_is_refused_and_a_killed_owners_world_is_taken_over() {
+    let dir = fresh_dir("world_lock");
+    let world = dir.join("world");
+    let mut owner = flyover(&world, &dir.join("owner"), 100_000)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("demo starts");
+    wait_for_frames(&mut owner, &dir.join("owner"), 3);
+
+    // A second run on the same world: refused up front, naming the owner.
+    let second = run_within(flyover(&world, &dir.join("second"), 2), &dir, LIMIT);
+    let pid = owner.id();
+    assert_eq!(second.status.code(), Some(2), "{}", second.stderr);
+    assert!(
+        second
+            .stderr
+            .contains(&format!("in use by pid {pid} on host ")),
+        "the error names the owner: {}",
+        second.stderr
+    );
+    assert!(!dir.join("second/frames.jsonl").exists(), "nothing ran");
+    // A reader needs no lock: the check runs while the owner writes (it may catch a parent
+    // tile not yet rebuilt after a write-back in flight: exit 1, never the refusal's 2). A
+    // repair writes: refused like the second run.
+    let mut check = demo();
+    check.arg("--verify-world").arg(&world);
+    let check = run_within(check, &dir, LIMIT);
+    assert!(
+        matches!(check.status.code(), Some(0 | 1)),
+        "{}",
+        check.stderr
+    );
+    let mut repair = demo();
+    repair.arg("--verify-world").arg(&world).arg("--repair");
+    let repair = run_within(repair, &dir, LIMIT);
+    assert_eq!(repair.status.code(), Some(2), "{}", repair.stderr);
+    assert!(
+        repair.stderr.contains(&format!("in use by pid {pid} ")),
+        "{}",
+        repair.stderr
+    );
+
+    // kill -9: the kernel drops the lock with the process.
+    owner.kill().expect("kill -9");
+    owner.wait().expect("reaped");
+    // The next writer takes the world over, recovering a write-back the kill interrupted.
+    let third = run_within(flyover(&world, &dir.join("third"), 5), &dir, LIMIT);
+    assert!(
+        third.status.success(),
+        "the world is taken over: {}",
+        third.stderr
+    );
+    let lock = std::fs::read_to_string(world.join(".terrain-lock")).expect("lock file");
+    assert!(
+        !lock.contains(&format!("pid {pid} ")),
+        "the new owner named itself: {lock}"
+    );
+    verify_passes(&world, &dir, "the run that took over");
+    let _ = std::fs::remove_dir_all(&dir);
+}
