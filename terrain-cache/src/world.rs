@@ -171,7 +171,10 @@ impl World {
                 }
             }
             TileFormat::Png => {
-                let limits = ReadLimits { max_side: size };
+                let limits = ReadLimits {
+                    max_side: size,
+                    ..ReadLimits::default()
+                };
                 let png = |e| corrupt(TileFileError::Png(e));
                 match layer {
                     Layer::Height => TileData::U16(decode_png16(bytes, &limits).map_err(png)?),

@@ -50,7 +50,14 @@ fn a_png_world_opens_streams_and_is_written_as_png() {
     let tiles: Vec<&String> = keys.iter().filter(|k| !k.ends_with("bounds.bin")).collect();
     assert!(tiles.iter().all(|k| k.ends_with(".png")), "{keys:?}");
     let png = std::fs::read(dir.join(tiles[0])).unwrap();
-    let grid = decode_png16(&png, &ReadLimits { max_side: 32 }).unwrap();
+    let grid = decode_png16(
+        &png,
+        &ReadLimits {
+            max_side: 32,
+            ..ReadLimits::default()
+        },
+    )
+    .unwrap();
     assert_eq!(grid.size(), UVec2::splat(32));
 
     let mut world = World::open(store.clone()).unwrap();

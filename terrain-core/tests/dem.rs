@@ -635,7 +635,10 @@ fn bad_geotiffs_get_clear_errors() {
     patch_dimension(&mut bytes, 257, 1 << 30);
     let e = decode_geotiff(&bytes, &l).unwrap_err();
     assert!(matches!(e, MapIoError::TooLarge { .. }), "{e}");
-    let raised = ReadLimits { max_side: u32::MAX };
+    let raised = ReadLimits {
+        max_side: u32::MAX,
+        ..ReadLimits::default()
+    };
     let e = decode_geotiff(&bytes, &raised).unwrap_err();
     assert!(
         matches!(

@@ -514,7 +514,10 @@ fn oversized_header_is_rejected_before_decoding() {
         ));
     }
     // A custom limit applies to each side, inclusive.
-    let tight = ReadLimits { max_side: 8 };
+    let tight = ReadLimits {
+        max_side: 8,
+        ..ReadLimits::default()
+    };
     let ok = encode_png8(&grid8(8, 8)).unwrap();
     assert_eq!(decode_png8(&ok, &tight).unwrap(), grid8(8, 8));
     let wide = encode_png8(&grid8(9, 3)).unwrap();
@@ -526,6 +529,21 @@ fn oversized_header_is_rejected_before_decoding() {
             max_side: 8
         })
     ));
+    // A sample limit applies to the product, inclusive (a long thin image within the sides).
+    let counted = ReadLimits {
+        max_samples: 64,
+        ..ReadLimits::default()
+    };
+    assert_eq!(decode_png8(&ok, &counted).unwrap(), grid8(8, 8));
+    for (w, h) in [(65, 1), (9, 8), (1, 65)] {
+        assert!(matches!(
+            decode_png8(&encode_png8(&grid8(w, h)).unwrap(), &counted),
+            Err(MapIoError::TooManySamples {
+                max_samples: 64,
+                ..
+            })
+        ));
+    }
     // A file on disk too.
     let dir = TempDir::new("toolarge");
     let p = dir.path().join("big.png");
@@ -591,7 +609,10 @@ fn raw16_of_wrong_length_is_a_size_mismatch() {
         decode_raw16(
             &[],
             UVec2::new(u32::MAX, u32::MAX),
-            &ReadLimits { max_side: u32::MAX }
+            &ReadLimits {
+                max_side: u32::MAX,
+                ..ReadLimits::default()
+            }
         ),
         Err(MapIoError::TooLarge { .. }) | Err(MapIoError::RawSizeMismatch { .. })
     ));
@@ -716,7 +737,10 @@ fn png_size_comes_from_the_header_alone() {
     let head = dir.path().join("head.png");
     std::fs::write(&head, &bytes[..33]).unwrap();
     assert_eq!(read_png_size(&head, &limits()).unwrap(), UVec2::new(300, 7));
-    let small = ReadLimits { max_side: 100 };
+    let small = ReadLimits {
+        max_side: 100,
+        ..ReadLimits::default()
+    };
     assert!(matches!(
         read_png_size(&p, &small),
         Err(MapIoError::TooLarge {
@@ -886,7 +910,7 @@ proptest! {
         if let Some(c) = cut {
             bytes.truncate(c % (bytes.len() + 1));
         }
-        let small = ReadLimits { max_side: 64 };
+        let small = ReadLimits { max_side: 64, ..ReadLimits::default() };
         if let Ok(img) = decode_png(&bytes, &small) {
             let s = img.size();
             prop_assert!(s.x >= 1 && s.y >= 1 && s.x <= 64 && s.y <= 64);
@@ -920,7 +944,10 @@ fn raised_limits_never_abort_on_a_huge_header() {
     png[20..24].copy_from_slice(&(1u32 << 30).to_be_bytes());
     let crc = crc32(&[&png[12..29]]);
     png[29..33].copy_from_slice(&crc.to_be_bytes());
-    let limits = ReadLimits { max_side: u32::MAX };
+    let limits = ReadLimits {
+        max_side: u32::MAX,
+        ..ReadLimits::default()
+    };
     assert!(decode_png16(&png, &limits).is_err());
     assert!(decode_png(&png, &limits).is_err());
 }

@@ -60,7 +60,8 @@ pub(crate) fn open_regular(path: &Path) -> Result<File, MapIoError> {
     Ok(file)
 }
 
-/// Checks a size against the limits: zero sides first, then the largest side.
+/// Checks a size against the limits: zero sides first, then the largest side, then the
+/// number of samples.
 pub(crate) fn check_size(width: u32, height: u32, limits: &ReadLimits) -> Result<(), MapIoError> {
     if width == 0 || height == 0 {
         return Err(MapIoError::ZeroSize { width, height });
@@ -70,6 +71,13 @@ pub(crate) fn check_size(width: u32, height: u32, limits: &ReadLimits) -> Result
             width,
             height,
             max_side: limits.max_side,
+        });
+    }
+    if u64::from(width) * u64::from(height) > limits.max_samples {
+        return Err(MapIoError::TooManySamples {
+            width,
+            height,
+            max_samples: limits.max_samples,
         });
     }
     Ok(())
@@ -103,7 +111,10 @@ mod tests {
 
     #[test]
     fn check_size_orders_zero_then_large() {
-        let l = ReadLimits { max_side: 10 };
+        let l = ReadLimits {
+            max_side: 10,
+            ..ReadLimits::default()
+        };
         assert!(check_size(1, 1, &l).is_ok());
         assert!(check_size(10, 10, &l).is_ok());
         assert!(matches!(

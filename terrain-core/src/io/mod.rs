@@ -60,12 +60,17 @@ pub struct ReadLimits {
     /// The largest width and the largest height accepted, in samples. A file whose header
     /// announces a larger side is rejected with [`MapIoError::TooLarge`].
     pub max_side: u32,
+    /// The most samples (width times height) accepted: a caller that measured a file before
+    /// reading it sets this to what it measured, so a file swapped in between cannot make the
+    /// read larger than planned ([`MapIoError::TooManySamples`]).
+    pub max_samples: u64,
 }
 
 impl Default for ReadLimits {
     fn default() -> Self {
         Self {
             max_side: DEFAULT_MAX_SIDE,
+            max_samples: u64::MAX,
         }
     }
 }
@@ -180,6 +185,19 @@ pub enum MapIoError {
         height: u32,
         /// The limit in force.
         max_side: u32,
+    },
+    /// The image has more samples than the reader accepts.
+    #[error(
+        "image size {width}x{height} is too large: at most {max_samples} samples are accepted \
+         (ReadLimits::max_samples)"
+    )]
+    TooManySamples {
+        /// Width announced or requested.
+        width: u32,
+        /// Height announced or requested.
+        height: u32,
+        /// The limit in force.
+        max_samples: u64,
     },
     /// Decoding needs a buffer larger than the machine can allocate (a header announcing a huge
     /// image under raised limits): refused instead of aborting the process.

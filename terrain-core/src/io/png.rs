@@ -734,7 +734,10 @@ mod tests {
     fn png_decoder_limit_covers_widest_row() {
         let l = ReadLimits::default();
         assert!(png_decoder_limits(&l).bytes > DEFAULT_MAX_SIDE as usize * 2 + 1);
-        let huge = ReadLimits { max_side: u32::MAX };
+        let huge = ReadLimits {
+            max_side: u32::MAX,
+            ..ReadLimits::default()
+        };
         assert!(png_decoder_limits(&huge).bytes >= u32::MAX as usize);
     }
 }

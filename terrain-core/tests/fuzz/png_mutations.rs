@@ -59,6 +59,7 @@ pub(crate) fn limits_for(rng: &mut Rng) -> ReadLimits {
     if rng.chance(1, 4) {
         ReadLimits {
             max_side: rng.range_u32(1, 80),
+            ..ReadLimits::default()
         }
     } else {
         ReadLimits::default()

@@ -43,7 +43,10 @@ pub fn dem_options(cli: &Cli) -> DemOptions {
             ByteOrderArg::Little => ByteOrder::Little,
             ByteOrderArg::Big => ByteOrder::Big,
         },
-        limits: ReadLimits { max_side: MAX_SIDE },
+        limits: ReadLimits {
+            max_side: MAX_SIDE,
+            ..ReadLimits::default()
+        },
     }
 }
 
@@ -153,8 +156,11 @@ fn make(cli: &Cli, planned: Option<PlannedMap>) -> Result<Terrain> {
         None => procedural(cli, range),
         Some(path) => {
             let mut options = dem_options(cli);
+            // The read is bounded by what the memory estimate measured: a file swapped in
+            // since then is refused from its header, before any larger buffer exists.
             if let Some(p) = planned {
                 options.limits.max_side = options.limits.max_side.min(p.size.max_element());
+                options.limits.max_samples = u64::from(p.size.x) * u64::from(p.size.y);
             }
             let dem = read_dem(path, &options)
                 .with_context(|| format!("cannot use heightmap {}", path.display()))?;

@@ -39,7 +39,10 @@ use terrain_core::io::ReadLimits;
 
 /// The read limits of the map decoders' targets: 1024 texels a side keeps the largest decoded
 /// image at 4 MiB (RGBA8), so a run stays fast and an allocation far beyond it is a finding.
-pub const LIMITS: ReadLimits = ReadLimits { max_side: 1024 };
+pub const LIMITS: ReadLimits = ReadLimits {
+    max_side: 1024,
+    max_samples: 1024 * 1024,
+};
 
 /// The longest error message accepted, in bytes: an error that quotes its input is not clean.
 pub const MAX_MESSAGE: usize = 2048;
@@ -142,6 +145,7 @@ fn check_within(what: &str, size: UVec2, limits: &ReadLimits) {
 fn tighter(size: UVec2) -> Option<ReadLimits> {
     (size.max_element() > 1).then(|| ReadLimits {
         max_side: size.max_element() - 1,
+        ..ReadLimits::default()
     })
 }
 

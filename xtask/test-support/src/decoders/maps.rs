@@ -221,6 +221,7 @@ fn raw_params(p: &[u8; 13]) -> (UVec2, ReadLimits, ByteOrder) {
     };
     let limits = ReadLimits {
         max_side: le32(p, 8),
+        ..ReadLimits::default()
     };
     (UVec2::new(le32(p, 0), le32(p, 4)), limits, order)
 }
