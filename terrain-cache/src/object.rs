@@ -236,6 +236,9 @@ fn seen_of(e_tag: Option<String>, version: Option<String>) -> Option<Seen> {
         .then_some(Seen::Version(UpdateVersion { e_tag, version }))
 }
 
+/// An object's bytes and the version it was read at, `None` for a missing key.
+type Fetched = Option<(Vec<u8>, Option<Seen>)>;
+
 /// Whether retrying the operation may help: `object_store`'s catch-all for failed requests
 /// (retries exhausted, timeouts, dropped connections, 5xx) as opposed to definite answers.
 fn transient(e: &object_store::Error) -> bool {
@@ -516,7 +519,7 @@ impl ObjectTileStore {
         path: &ObjectPath,
         key: &str,
         max_len: u64,
-    ) -> Result<Result<Option<(Vec<u8>, Option<Seen>)>, object_store::Error>, CacheError> {
+    ) -> Result<Result<Fetched, object_store::Error>, CacheError> {
         self.block_on("get", async {
             let got = match self.store.get(path).await {
                 Ok(g) => g,
@@ -548,11 +551,7 @@ impl ObjectTileStore {
     }
 
     /// Reads `key` and returns its bytes and version, with retries, remembering nothing.
-    fn fetch(
-        &self,
-        key: &str,
-        max_len: u64,
-    ) -> Result<Option<(Vec<u8>, Option<Seen>)>, CacheError> {
+    fn fetch(&self, key: &str, max_len: u64) -> Result<Fetched, CacheError> {
         let path = self.path(key)?;
         self.attempt("get", key, || self.get_once(&path, key, max_len))?
             .map_err(Self::os_err("get", key))

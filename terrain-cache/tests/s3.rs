@@ -275,7 +275,7 @@ fn unreadable_tile_falls_back_to_its_parent_in_the_pool() {
     });
     // 1 + max_retries requests per attempt, attempts per load, nothing more.
     let tries = proxy.fired()[0];
-    assert!(tries >= 6 && tries % 6 == 0, "{tries}");
+    assert!(tries >= 6 && tries.is_multiple_of(6), "{tries}");
     let (stand_in, data) = pool.best_available(bad).unwrap();
     assert!(stand_in.level > 0, "{stand_in}");
     assert_eq!(*data, *built.load_tile(Layer::Height, stand_in).unwrap());

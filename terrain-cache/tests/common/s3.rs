@@ -110,10 +110,10 @@ fn start_moto() -> Result<Moto, String> {
                 py.display()
             ));
         }
-        if let Ok(resp) = raw_request(addr, "GET", "/", b"") {
-            if resp.starts_with("HTTP/1.") {
-                break;
-            }
+        if let Ok(resp) = raw_request(addr, "GET", "/", b"")
+            && resp.starts_with("HTTP/1.")
+        {
+            break;
         }
         if start.elapsed() > Duration::from_secs(30) {
             let _ = child.kill();
@@ -266,7 +266,7 @@ impl Rule {
         }
         self.matched += 1;
         if self.matched <= self.skip
-            || (self.matched - self.skip - 1) % self.every != 0
+            || !(self.matched - self.skip - 1).is_multiple_of(self.every)
             || self.fired >= self.times
         {
             return None;
@@ -385,7 +385,10 @@ fn header<'h>(headers: &'h [(String, String)], name: &str) -> Option<&'h str> {
         .map(|(_, v)| v.as_str())
 }
 
-fn read_head(r: &mut impl BufRead) -> std::io::Result<Option<(String, Vec<(String, String)>)>> {
+/// A request or status line and the header fields after it.
+type Head = (String, Vec<(String, String)>);
+
+fn read_head(r: &mut impl BufRead) -> std::io::Result<Option<Head>> {
     let mut first = String::new();
     if r.read_line(&mut first)? == 0 {
         return Ok(None);
