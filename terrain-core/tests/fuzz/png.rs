@@ -138,7 +138,10 @@ fn png_size_limits<const K: u8>(_: &Ctx, case: &mut Case) -> Result<(), String> 
         let (ct, bits) = k.format();
         let img = Image::random(rng, w, h, ct, bits);
         let bytes = img.encode(rng);
-        let limits = ReadLimits { max_side };
+        let limits = ReadLimits {
+            max_side,
+            ..ReadLimits::default()
+        };
         return check_valid(k, &img, &limits, decode(k, &bytes, &limits));
     }
     let mut bytes = seed_file(k, rng);

@@ -46,7 +46,10 @@ fn raw16_size_limits(_: &Ctx, case: &mut Case) -> Result<(), String> {
         1 => DEFAULT_MAX_SIDE,
         _ => u32::MAX,
     };
-    let limits = ReadLimits { max_side };
+    let limits = ReadLimits {
+        max_side,
+        ..ReadLimits::default()
+    };
     let pick_side = |rng: &mut Rng| match rng.below(4) {
         0 => rng.u32_edge(),
         1 => max_side
