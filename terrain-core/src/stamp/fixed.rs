@@ -9,7 +9,8 @@
 //! floor exactly the same way everywhere. Every per-placement value (the local frame, the
 //! Gaussian's falloff, the blend's scale and base) is computed once, here on the CPU, rounded to
 //! integers and handed to the GPU unchanged; what depends on the placement's floats (`sin`,
-//! `cos`, `ln`, `exp` of the tables) is therefore computed once on one machine.
+//! `cos`, `ln`, `exp` of the tables) is therefore computed once, with the pure-Rust `libm`
+//! crate, so every platform gets the same integers.
 //!
 //! The program, per texel at unwrapped coordinates `(ux, uy)`:
 //! 1. Local coordinates in Q32 (`local * 2^32`): `L = l0 + i lx + j ly` (wrapping i64) with
@@ -145,18 +146,98 @@ pub fn local_f32(l: [i64; 2]) -> Vec2 {
     Vec2::new(c(l[0]), c(l[1]))
 }
 
+/// Every Gaussian table entry, laid out as [`gaussian_tables`] returns them.
+const EXP_TABLES_LEN: usize = EXP_HI_LEN + EXP_MID_LEN + EXP_LO_LEN;
+
 /// The three Gaussian tables, Q31: `exp(-k 2^-6)` for `k < EXP_HI_LEN`, then `exp(-k 2^-16)`
-/// and `exp(-k 2^-26)` for `k < 1024`. Computed once (f64 `exp`, rounded to nearest) and
-/// uploaded unchanged by the GPU pass.
+/// and `exp(-k 2^-26)` for `k < 1024`. Computed once with the pure-Rust `libm` crate's `exp`
+/// (the same bits on every platform, whatever its C library or instruction set), rounded to
+/// nearest, and uploaded unchanged by the GPU pass.
 pub fn gaussian_tables() -> &'static [u32] {
-    static TABLES: OnceLock<Vec<u32>> = OnceLock::new();
+    &exp_tables()[..]
+}
+
+/// [`gaussian_tables`] as one array (so [`GaussianTables`] can split it without a check).
+fn exp_tables() -> &'static [u32; EXP_TABLES_LEN] {
+    static TABLES: OnceLock<Box<[u32; EXP_TABLES_LEN]>> = OnceLock::new();
     TABLES.get_or_init(|| {
-        let q = |x: f64| ((-x).exp() * 2f64.powi(31)).round() as u32;
-        let hi = (0..EXP_HI_LEN).map(|k| q(k as f64 / 64.0));
-        let mid = (0..EXP_MID_LEN).map(|k| q(k as f64 / 65_536.0));
-        let lo = (0..EXP_LO_LEN).map(|k| q(k as f64 / 67_108_864.0));
-        hi.chain(mid).chain(lo).collect()
+        let q = |x: f64| (libm::exp(-x) * 2f64.powi(31)).round() as u32;
+        let mut t = Box::new([0u32; EXP_TABLES_LEN]);
+        let (hi, rest) = t.split_at_mut(EXP_HI_LEN);
+        let (mid, lo) = rest.split_at_mut(EXP_MID_LEN);
+        for (k, e) in hi.iter_mut().enumerate() {
+            *e = q(k as f64 / 64.0);
+        }
+        for (k, e) in mid.iter_mut().enumerate() {
+            *e = q(k as f64 / 65_536.0);
+        }
+        for (k, e) in lo.iter_mut().enumerate() {
+            *e = q(k as f64 / 67_108_864.0);
+        }
+        t
     })
+}
+
+/// The three Gaussian tables as arrays of their own lengths: indices masked to a table's
+/// length need no bounds check in the CPU's inner loops.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct GaussianTables {
+    hi: &'static [u32; EXP_HI_LEN],
+    mid: &'static [u32; EXP_MID_LEN],
+    lo: &'static [u32; EXP_LO_LEN],
+}
+
+impl GaussianTables {
+    /// The tables of [`gaussian_tables`].
+    pub(crate) fn get() -> Self {
+        let (hi, rest) = exp_tables()
+            .split_first_chunk::<EXP_HI_LEN>()
+            .expect("lengths");
+        let (mid, lo) = rest.split_first_chunk::<EXP_MID_LEN>().expect("lengths");
+        let lo = lo.first_chunk::<EXP_LO_LEN>().expect("lengths");
+        Self { hi, mid, lo }
+    }
+
+    /// [`gaussian_v31`] at a texel inside the footprint (`|L| <= 2^32`), in 32-bit pieces
+    /// where the values fit (so a vectorised loop multiplies 32 x 32 bits) and without a
+    /// branch: the same integers.
+    #[inline(always)]
+    pub(crate) fn v31_inside(&self, beta_q: u32, l: [i64; 2]) -> i64 {
+        // |L >> 8| <= 2^24 fits an i32; r2 <= 2^31 a u32.
+        let sq = |v: i64| {
+            let a = ((v >> 8) as i32).unsigned_abs();
+            u64::from(a) * u64::from(a)
+        };
+        let r2 = ((sq(l[0]) + sq(l[1])) >> 18) as u32;
+        let t = (u64::from(beta_q) * u64::from(r2)) >> 27;
+        let tc = t.min(EXP_T_LIMIT - 1) as u32;
+        let hi = self.hi[((tc >> 20) as usize).min(EXP_HI_LEN - 1)];
+        let mid = self.mid[((tc >> 10) & 1023) as usize];
+        let lo = self.lo[(tc & 1023) as usize];
+        // Table entries are at most 2^31, so the product shifted is too.
+        let p = ((u64::from(hi) * u64::from(mid)) >> 31) as u32;
+        let v = ((u64::from(p) * u64::from(lo)) >> 31) as i64;
+        if t >= EXP_T_LIMIT { 0 } else { v }
+    }
+
+    /// [`gaussian_v31`] with these tables.
+    #[inline(always)]
+    pub(crate) fn v31(&self, beta_q: u32, l: [i64; 2]) -> i64 {
+        let sq = |v: i64| {
+            let a = (v >> 8).unsigned_abs();
+            a * a
+        };
+        // Inside the footprint |L >> 8| <= 2^24: r2 <= 2^31.
+        let r2 = (sq(l[0]) + sq(l[1])) >> 18;
+        let t = (u64::from(beta_q) * r2) >> 27;
+        if t >= EXP_T_LIMIT {
+            return 0;
+        }
+        let hi = u64::from(self.hi[(t >> 20) as usize]);
+        let mid = u64::from(self.mid[((t >> 10) & 1023) as usize]);
+        let lo = u64::from(self.lo[(t & 1023) as usize]);
+        ((((hi * mid) >> 31) * lo) >> 31) as i64
+    }
 }
 
 /// `round(beta 2^23)` for a Gaussian falloff (0 for NaN or negative values; `beta` from
@@ -173,21 +254,7 @@ pub fn gaussian_beta_q(beta: f32) -> u32 {
 /// `exp(-beta r^2) * 2^31` at Q32 local coordinates `l` (module docs, step 2).
 #[inline(always)]
 pub fn gaussian_v31(beta_q: u32, l: [i64; 2]) -> i64 {
-    let sq = |v: i64| {
-        let a = (v >> 8).unsigned_abs();
-        a * a
-    };
-    // Inside the footprint |L >> 8| <= 2^24: r2 <= 2^31.
-    let r2 = (sq(l[0]) + sq(l[1])) >> 18;
-    let t = (u64::from(beta_q) * r2) >> 27;
-    if t >= EXP_T_LIMIT {
-        return 0;
-    }
-    let tab = gaussian_tables();
-    let hi = u64::from(tab[(t >> 20) as usize]);
-    let mid = u64::from(tab[EXP_HI_LEN + ((t >> 10) & 1023) as usize]);
-    let lo = u64::from(tab[EXP_HI_LEN + EXP_MID_LEN + (t & 1023) as usize]);
-    ((((hi * mid) >> 31) * lo) >> 31) as i64
+    GaussianTables::get().v31(beta_q, l)
 }
 
 /// A texture value quantised to Q24, clamped to `+-VALUE_LIMIT` (what the GPU pass uploads).
@@ -259,16 +326,15 @@ impl FixedBlend {
         let (m, shift) = if add_scale == 0.0 || !add_scale.is_finite() {
             (0, 0)
         } else {
-            // |add_scale| = mant 2^(e - 23) with mant in [2^23, 2^24].
-            let e = add_scale.abs().log2().floor() as i32;
-            let mut e = e.clamp(-1100, 1100);
-            let mut mant = (add_scale.abs() * 2f64.powi(23 - e)).round();
+            // |add_scale| = mant 2^(e - 23) with mant in [2^23, 2^24]: the exponent read
+            // exactly from the bits (`frexp`, not a platform's `log2`), the scaling by a power
+            // of two exact (`scalbn`), so the integers are the same on every platform.
+            let (_, ex) = libm::frexp(add_scale.abs());
+            let mut e = ex - 1;
+            let mut mant = libm::scalbn(add_scale.abs(), 23 - e).round();
             if mant >= 16_777_216.0 {
-                mant = (mant / 2.0).round();
+                mant = 8_388_608.0;
                 e += 1;
-            } else if mant < 8_388_608.0 {
-                mant = (add_scale.abs() * 2f64.powi(24 - e)).round();
-                e -= 1;
             }
             // term_q16 = v31 2^-31 mant 2^(e - 23) 2^16 = v31 mant >> (38 - e).
             let m = mant as i32 * if add_scale < 0.0 { -1 } else { 1 };

@@ -105,7 +105,9 @@ impl StampPlacement {
     pub fn footprint(&self, texel_size: f32) -> Result<Rect, CoreError> {
         self.validate()?;
         crate::map::check_texel_size(texel_size)?;
-        let (s, c) = f64::from(self.rotation).sin_cos();
+        // libm's `sincos`, as `fixed_program`'s: the footprint's first texel anchors the exact
+        // program's frame, so it must be the same on every platform.
+        let (s, c) = libm::sincos(f64::from(self.rotation));
         let h = self.scale.as_dvec2() * 0.5;
         let half = glam::DVec2::new(c.abs() * h.x + s.abs() * h.y, s.abs() * h.x + c.abs() * h.y);
         let ts = f64::from(texel_size);
@@ -289,11 +291,12 @@ impl GaussianStamp {
         self.epsilon_m
     }
 
-    /// The falloff for a given intensity, in units of the normalised radius.
+    /// The falloff for a given intensity, in units of the normalised radius: the f64 `log` of
+    /// the pure-Rust `libm` crate rounded to f32, the same bits on every platform (the exact
+    /// program's `beta_q` comes from it).
     pub fn beta_for(&self, intensity: f32) -> f32 {
-        (intensity.abs() / self.epsilon_m)
-            .max(std::f32::consts::E)
-            .ln()
+        let ratio = (intensity.abs() / self.epsilon_m).max(std::f32::consts::E);
+        libm::log(f64::from(ratio)) as f32
     }
 
     /// The falloff set by the last [`Stamp::prepare`].
@@ -457,7 +460,8 @@ pub fn fixed_program(
     let ts = f64::from(texel_size);
     let center = placement.center.as_dvec2() / ts;
     let inv_half = glam::DVec2::ONE / (placement.scale.as_dvec2() * 0.5 / ts);
-    let (sin, cos) = f64::from(placement.rotation).sin_cos();
+    // The pure-Rust libm, not the platform's: the frame's integers are the same everywhere.
+    let (sin, cos) = libm::sincos(f64::from(placement.rotation));
     let frame = FixedFrame::new(footprint.min, footprint.size, center, inv_half, sin, cos);
     let add_scale = f64::from(placement.intensity) / f64::from(enc.scale);
     let op = match blend {
@@ -573,6 +577,9 @@ mod tests {
     use super::*;
     use crate::map::{CoarseMap, HeightEncoding};
 
+    /// FNV-1a (64-bit) of the Gaussian tables' little-endian bytes, computed once.
+    const TABLES_FNV1A: u64 = 2_089_011_250_706_007_205;
+
     fn flat(size: u32, raw: u16, ts: f32) -> CoarseMap {
         let g = Grid::new(size, size, raw).unwrap();
         CoarseMap::coarse(g, HeightEncoding::new(0.01, 0.0).unwrap(), ts).unwrap()
@@ -640,6 +647,67 @@ mod tests {
         let edge = p.intensity * g.value(Vec2::new(1.0, 0.0));
         assert!((edge - 0.01).abs() < 1e-5, "edge height {edge}");
         assert!((erf(1.0) - 0.842_700_79).abs() < 2e-7);
+    }
+
+    /// The integers the exact program is built from are pinned to values computed once: the
+    /// tables (libm's `exp`), a rotated frame (libm's `sincos`), the falloff (libm's `log`)
+    /// and the blend's mantissa (an exact exponent). A platform whose own functions differ
+    /// gives these same integers; a change of libm or of the arithmetic fails here.
+    #[test]
+    fn program_integers_are_the_same_on_every_platform() {
+        let t = fixed::gaussian_tables();
+        let pins = [
+            (0, 1u32 << 31),
+            (1, 2_114_190_000),
+            (100, 450_137_026),
+            (777, 11_464),
+            (1407, 1),
+            (1409, 2_147_450_880),
+            (1963, 2_129_374_197),
+            (2431, 2_114_222_260),
+            (2433, 2_147_483_616),
+            (3455, 2_147_450_912),
+        ];
+        for (k, want) in pins {
+            assert_eq!(t[k], want, "table entry {k}");
+        }
+        // FNV-1a over every entry.
+        let hash = t.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &v| {
+            v.to_le_bytes()
+                .iter()
+                .fold(h, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3))
+        });
+        assert_eq!(hash, TABLES_FNV1A, "the tables changed");
+        let p = StampPlacement::new(Vec2::new(123.37, 45.81), Vec2::new(17.3, 9.1), -1.7)
+            .unwrap()
+            .with_rotation(0.7)
+            .unwrap();
+        let enc = HeightEncoding::new(0.01, -20.0).unwrap();
+        let (f, b) = fixed_program(&p, 0.25, enc, Blend::Max { base_m: 3.3 }).unwrap();
+        assert_eq!(f.anchor, IVec2::new(456, 148));
+        assert_eq!(f.l0, [-6_376_478_589, -662_594_842]);
+        assert_eq!(f.lx, [94_941_398, -152_027_129]);
+        assert_eq!(f.ly, [79_968_034, 180_492_971]);
+        assert!(f.monotone);
+        assert_eq!(
+            (b.kind, b.m, b.shift, b.base_q16),
+            (2, -11_141_121, 31, 152_698_883)
+        );
+        let g = GaussianStamp::default();
+        for (intensity, bits, beta_q) in [
+            (-1.7f32, 1_089_341_245u32, 62_397_684u32),
+            (0.05, 1_081_761_430, 32_816_428),
+            (3.0, 1_090_525_717, 67_162_280),
+            (250.0, 1_095_163_410, 104_263_824),
+        ] {
+            let beta = g.beta_for(intensity);
+            assert_eq!(beta.to_bits(), bits, "beta for {intensity}");
+            assert_eq!(
+                fixed::gaussian_beta_q(beta),
+                beta_q,
+                "beta_q for {intensity}"
+            );
+        }
     }
 
     #[test]
