@@ -8,6 +8,7 @@ mod ci;
 mod examples;
 mod fuzz;
 mod golden;
+mod gpu_report;
 mod libfuzzer;
 mod mutants;
 mod package;
@@ -27,6 +28,7 @@ fn main() -> Result<()> {
         Some("examples") => examples::examples(),
         Some("golden") => golden::golden(),
         Some("bench-report") => bench_report::bench_report(&args[1..]),
+        Some("gpu-report") => gpu_report::gpu_report(&args[1..]),
         Some("fuzz") => fuzz::fuzz(&args[1..]),
         Some("mutants") => mutants::mutants(&args[1..]),
         _ => {
@@ -38,7 +40,7 @@ fn main() -> Result<()> {
 
 fn usage() {
     eprintln!(
-        "usage: cargo xtask <ci|tidy|smoke|package|examples|golden|bench-report [--quick] [--write-docs]|fuzz [--engine harness|libfuzzer] --seconds N [--target NAME] [--seed S]|mutants [--shard K/N] [--crate NAME] | --summary>"
+        "usage: cargo xtask <ci|tidy|smoke|package|examples|golden|bench-report [--quick] [--write-docs]|gpu-report [--minutes N]|fuzz [--engine harness|libfuzzer] --seconds N [--target NAME] [--seed S]|mutants [--shard K/N] [--crate NAME] | --summary>"
     );
     eprintln!(
         "  ci      tidy, fmt, clippy, tests, docs, package, examples, demo smoke (what CI runs)"
@@ -55,6 +57,12 @@ fn usage() {
     eprintln!("  golden  regenerate the render test's golden image (never done by tests)");
     eprintln!(
         "  bench-report  run the headline CPU benches (all cores, then one); write target/bench-report.{{json,md}}; --write-docs also writes docs/BENCHMARKS.md"
+    );
+    eprintln!(
+        "  gpu-report  on a machine with a GPU: release GPU tests (watchdog), demo runs and GPU benches"
+    );
+    eprintln!(
+        "          within one budget (8 min default); writes target/gpu-report/gpu-report.md"
     );
     eprintln!(
         "  fuzz    run the fuzz targets N seconds each (release), print cases and results per input class"
