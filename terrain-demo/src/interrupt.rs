@@ -8,18 +8,32 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// Set by the first Ctrl-C.
 static REQUESTED: AtomicBool = AtomicBool::new(false);
 
+/// What the first Ctrl-C ends, as its message says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stops {
+    /// A run: after the frame in progress, with the report of the frames done.
+    Run,
+    /// `--verify-world`: before the next tile, with no verdict.
+    Check,
+}
+
 /// Installs the handler. Without one (the platform refused it) Ctrl-C ends the process as
 /// usual, which is said once on stderr.
-pub fn install() {
-    let installed = ctrlc::set_handler(|| {
+pub fn install(stops: Stops) {
+    let installed = ctrlc::set_handler(move || {
         if REQUESTED.swap(true, Ordering::SeqCst) {
             crate::console::note!("\ninterrupted again: stopping now");
             std::process::exit(INTERRUPTED_EXIT);
         }
-        crate::console::note!(
-            "\ninterrupted: ending after the frame in progress and writing the report \
-             (Ctrl-C again to stop now)"
-        );
+        match stops {
+            Stops::Run => crate::console::note!(
+                "\ninterrupted: ending after the frame in progress and writing the report \
+                 (Ctrl-C again to stop now)"
+            ),
+            Stops::Check => crate::console::note!(
+                "\ninterrupted: ending the check before its next tile (Ctrl-C again to stop now)"
+            ),
+        }
     });
     if let Err(e) = installed {
         crate::console::note!(

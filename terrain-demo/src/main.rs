@@ -60,7 +60,11 @@ fn main() {
         }
     };
     logging::install(cli.verbose);
-    interrupt::install();
+    interrupt::install(if cli.verify_world.is_some() {
+        interrupt::Stops::Check
+    } else {
+        interrupt::Stops::Run
+    });
     match run(&cli) {
         Ok(Ended::Done) => {}
         Ok(Ended::Interrupted { frames }) => {

@@ -190,5 +190,12 @@ fn ctrl_c_interrupts_a_long_verification() {
         "{:?}",
         started.elapsed()
     );
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().expect("piped"), &mut stderr)
+        .expect("stderr");
+    assert!(
+        stderr.contains("ending the check before its next tile") && !stderr.contains("frame"),
+        "the message speaks of the check: {stderr}"
+    );
     let _ = std::fs::remove_dir_all(&root);
 }
