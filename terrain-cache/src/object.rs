@@ -13,7 +13,7 @@
 //! # Over a network: retries, timeouts, conflicts
 //!
 //! Bucket stores are configured by an [`ObjectStoreConfig`] (its defaults are documented per
-//! field); [`ObjectTileStore::s3`] and [`ObjectTileStore::from_url`] apply it.
+//! field); `ObjectTileStore::s3` (feature `aws`) and [`ObjectTileStore::from_url`] apply it.
 //!
 //! - **Each HTTP request** is bounded by `request_timeout` (a stalled server is abandoned) and
 //!   `connect_timeout`, and retried by `object_store`'s own `RetryConfig` (set explicitly from
@@ -282,7 +282,7 @@ impl ObjectTileStore {
 
     /// Wraps any `object_store` store with the operation attempts and conflict detection of
     /// `config` (its timeouts and request retries belong to the store, which was built
-    /// already: for S3 use [`s3`](Self::s3)). Conflict detection needs a store that
+    /// already: for S3 use `ObjectTileStore::s3`, feature `aws`). Conflict detection needs a store that
     /// implements `PutMode::Create` and `PutMode::Update` (S3 with conditional puts,
     /// `InMemory`; not `LocalFileSystem`).
     pub fn with_config(
@@ -378,7 +378,7 @@ impl ObjectTileStore {
     /// `s3://bucket/prefix`, `gs://bucket/prefix`, `az://container/prefix`. Credentials and
     /// regions come from the environment as `object_store` reads them (for S3 also
     /// `AWS_ENDPOINT` and `AWS_ALLOW_HTTP`, for S3-compatible servers); S3 buckets get
-    /// [`ObjectStoreConfig::default`] through [`s3`](Self::s3).
+    /// [`ObjectStoreConfig::default`] through `ObjectTileStore::s3`.
     pub fn from_url(url: &str) -> Result<Self, CacheError> {
         let invalid = |reason: String| CacheError::InvalidUrl {
             url: url.to_owned(),

@@ -104,7 +104,8 @@ fn start_moto() -> Result<Moto, String> {
     loop {
         if let Some(status) = child.try_wait().map_err(|e| e.to_string())? {
             let text = std::fs::read_to_string(&log).unwrap_or_default();
-            let tail: String = text.lines().rev().take(5).collect::<Vec<_>>().join(" | ");
+            let lines: Vec<&str> = text.lines().collect();
+            let tail = lines[lines.len().saturating_sub(3)..].join(" | ");
             return Err(format!(
                 "{} -m moto.server exited with {status} (is moto installed? `pip install 'moto[s3]' flask flask-cors`): {tail}",
                 py.display()
