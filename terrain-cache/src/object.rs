@@ -717,6 +717,13 @@ mod tests {
             ObjectTileStore::from_url("s3://bucket/x"),
             Err(CacheError::InvalidUrl { .. })
         ));
+        // S3 URLs get the network settings (nothing is sent until the first call).
+        #[cfg(feature = "aws")]
+        {
+            let s = ObjectTileStore::from_url("s3://bucket/some/prefix").unwrap();
+            assert_eq!(s.config(), &ObjectStoreConfig::default());
+            assert_eq!(s.prefix, "some/prefix");
+        }
     }
 
     fn shared(mem: &Arc<object_store::memory::InMemory>, capacity: usize) -> ObjectTileStore {
