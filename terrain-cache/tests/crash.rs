@@ -86,6 +86,8 @@ fn killed_writers_leave_old_or_new_tiles_and_a_valid_manifest() {
                 .write_tile(Layer::Height, id, &version(id, 1))
                 .unwrap();
         }
+        // Coarser levels and bounds as a write-back leaves them: the world verifies whole.
+        terrain_cache::build::rebuild_ancestors(&world, &ids).unwrap();
         ids
         // The store goes here, and with it this process's lock on the world: the child
         // writes to it, and after each kill -9 this process takes the lock over.
