@@ -260,11 +260,19 @@ pub fn gaussian_v31(beta_q: u32, l: [i64; 2]) -> i64 {
 /// A texture value quantised to Q24, clamped to `+-VALUE_LIMIT` (what the GPU pass uploads).
 pub fn quantize_texture_value(v: f32) -> i32 {
     let lim = f64::from(VALUE_LIMIT) * 2f64.powi(TEXTURE_FRACTION_BITS as i32);
-    let q = (f64::from(v) * 2f64.powi(TEXTURE_FRACTION_BITS as i32)).round();
-    if q.is_nan() {
-        0
+    // `round` (half away from zero) of the clamped value without a call to `round` (a library
+    // call without SSE4.1; a texture is quantised once per stamp): the clamp's bounds are
+    // integers, so clamping first changes nothing; `as` truncates exactly (NaN gives 0) and
+    // the fraction `x - trunc(x)` is exact below 2^52.
+    let x = (f64::from(v) * 2f64.powi(TEXTURE_FRACTION_BITS as i32)).clamp(-lim, lim);
+    let t = x as i32;
+    let frac = x - f64::from(t);
+    if frac >= 0.5 {
+        t + 1
+    } else if frac <= -0.5 {
+        t - 1
     } else {
-        q.clamp(-lim, lim) as i32
+        t
     }
 }
 
@@ -416,6 +424,45 @@ mod tests {
         assert_eq!(b.blend(10, 1 << 30), 9); // 10 - 1.5 rounds half up to 9
         let far = FixedBlend::new(1, -1e5, 1e5);
         assert_eq!(far.blend(500, 1 << 31), 0);
+    }
+
+    #[test]
+    fn texture_values_round_as_f64_round() {
+        let mut v = [
+            0.0f32,
+            0.5,
+            -0.5,
+            1.0,
+            64.0,
+            -64.0,
+            65.0,
+            -1e9,
+            f32::NAN,
+            f32::INFINITY,
+        ]
+        .to_vec();
+        // Halves of the Q24 step, both signs, and values around them.
+        for k in [1i32, 3, 5, 1 << 20, (1 << 30) - 1] {
+            let h = (k as f32) * 2f32.powi(-25);
+            v.extend([
+                h,
+                -h,
+                h.next_up(),
+                h.next_down(),
+                -h.next_up(),
+                -h.next_down(),
+            ]);
+        }
+        for v in v {
+            let lim = 64.0 * 2f64.powi(24);
+            let q = (f64::from(v) * 2f64.powi(24)).round();
+            let want = if q.is_nan() {
+                0
+            } else {
+                q.clamp(-lim, lim) as i32
+            };
+            assert_eq!(quantize_texture_value(v), want, "{v}");
+        }
     }
 
     #[test]

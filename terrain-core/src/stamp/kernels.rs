@@ -243,7 +243,9 @@ fn texture_block(t: &PaddedTexture, l: [i64; 2], step: [i64; 2], out: &mut [i64]
     );
     for (i, o) in out.iter_mut().enumerate() {
         let i = i as i64;
-        *o = t.v31(
+        *o = texture_tap(
+            &t.values,
+            t.stride,
             px.wrapping_add(i.wrapping_mul(dx)),
             pz.wrapping_add(i.wrapping_mul(dz)),
         );
@@ -353,10 +355,10 @@ impl Fast {
 }
 
 /// Quantised texture values with a border of one copied pixel on every side: the clamped
-/// lookups of `fixed::texture_v31` without a clamp (inside the footprint a pixel index is
-/// within `[-1, n]`).
+/// lookups of `fixed::texture_v31` without a clamp (inside the footprint a pixel index is within
+/// `[-1, n]`).
 struct PaddedTexture {
-    values: Vec<i64>,
+    values: Vec<i32>,
     w: u32,
     h: u32,
     /// Row length of `values` (`w + 2`).
@@ -368,11 +370,10 @@ impl PaddedTexture {
         let stride = w as usize + 2;
         let mut padded = Vec::with_capacity(stride * (h as usize + 2));
         for z in -1..=h as i64 {
-            let z = z.clamp(0, i64::from(h) - 1) as usize;
-            for x in -1..=w as i64 {
-                let x = x.clamp(0, i64::from(w) - 1) as usize;
-                padded.push(i64::from(values[z * w as usize + x]));
-            }
+            let row = &values[z.clamp(0, i64::from(h) - 1) as usize * w as usize..][..w as usize];
+            padded.push(row[0]);
+            padded.extend_from_slice(row);
+            padded.push(row[w as usize - 1]);
         }
         Self {
             values: padded,
@@ -381,20 +382,21 @@ impl PaddedTexture {
             stride,
         }
     }
+}
 
-    /// `fixed::texture_v31` at the pixel coordinates (Q33) `px`, `pz` of a texel inside.
-    #[inline(always)]
-    fn v31(&self, px: i64, pz: i64) -> i64 {
-        // Inside: px, pz >= -2^32, so the padded indices (px >> 33) + 1 are >= 0.
-        let x = ((px >> 33) + 1) as usize;
-        let z = ((pz >> 33) + 1) as usize;
-        let (fx, fz) = ((px >> 21) & 4095, (pz >> 21) & 4095);
-        let i = z * self.stride + x;
-        let (top, bot) = (&self.values[i..i + 2], &self.values[i + self.stride..][..2]);
-        let top = top[0] * (4096 - fx) + top[1] * fx;
-        let bot = bot[0] * (4096 - fx) + bot[1] * fx;
-        (top * (4096 - fz) + bot * fz) >> 17
-    }
+/// `fixed::texture_v31` at the pixel coordinates (Q33) `px`, `pz` of a texel inside.
+#[inline(always)]
+fn texture_tap(values: &[i32], stride: usize, px: i64, pz: i64) -> i64 {
+    // Inside: px, pz >= -2^32, so the padded indices (px >> 33) + 1 are >= 0, and the four
+    // taps are within the padded values.
+    let x = ((px >> 33) + 1) as usize;
+    let z = ((pz >> 33) + 1) as usize;
+    let (fx, fz) = ((px >> 21) & 4095, (pz >> 21) & 4095);
+    let i = z * stride + x;
+    let at = |k: usize| i64::from(values[k]);
+    let top = at(i) * (4096 - fx) + at(i + 1) * fx;
+    let bot = at(i + stride) * (4096 - fx) + at(i + stride + 1) * fx;
+    (top * (4096 - fz) + bot * fz) >> 17
 }
 
 #[cfg(test)]
