@@ -83,11 +83,19 @@ pub(crate) fn lock_world(dir: &Path) -> Result<Arc<WorldLock>, CacheError> {
     let ours_dying = held.contains_key(&canonical);
     let path = canonical.join(LOCK_FILE);
     let mut file = open_lock_file(&path).map_err(io_err(&path))?;
-    match file.try_lock() {
-        Ok(()) => {}
-        Err(TryLockError::WouldBlock) if ours_dying => {
-            file.lock().map_err(io_err(&path))?;
+    // Our own dying lock is released within moments; never a blocking wait, since another
+    // process may take the lock in between.
+    let tries = if ours_dying { 200 } else { 1 };
+    let mut attempt = file.try_lock();
+    for _ in 1..tries {
+        if !matches!(attempt, Err(TryLockError::WouldBlock)) {
+            break;
         }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+        attempt = file.try_lock();
+    }
+    match attempt {
+        Ok(()) => {}
         Err(TryLockError::WouldBlock) => {
             return Err(CacheError::WorldLocked {
                 dir: canonical,
