@@ -21,7 +21,7 @@ fn key(id: TileId) -> String {
 fn parse(key: &str) -> Option<TileId> {
     let name = key.strip_prefix(PREFIX)?.strip_prefix('/')?;
     let mut parts = name.split('-');
-    let level = u32::from_str_radix(parts.next()?, 10).ok()?;
+    let level = parts.next()?.parse::<u32>().ok()?;
     let x = u32::from_str_radix(parts.next()?, 16).ok()?;
     let y = u32::from_str_radix(parts.next()?, 16).ok()?;
     parts.next().is_none().then_some(TileId::new(level, x, y))
