@@ -267,7 +267,8 @@ pub const GRANULAR_NORMALS: &str = concat!(
     wgsl_prelude!(),
     include_str!("wgsl/granular/granular_normals.wgsl")
 );
-/// Granular deformation: depth of objects seen from below (render pipeline).
+/// Granular deformation: depth of objects seen from below (an exact integer rasterizer in a
+/// compute pass).
 pub const GRANULAR_DEPTH: &str = concat!(
     wgsl_prelude!(),
     include_str!("wgsl/granular/granular_depth.wgsl")

@@ -1,39 +1,19 @@
 //! `DepthFromBelowPass` against the CPU rasterizer `terrain_core::granular::depth_from_below_into`
-//! (Persson 2019, sec. 4.1.2) on whatever adapter the machine has (lavapipe in CI).
+//! (Persson 2019, sec. 4.1.2) on whatever adapter the machine has (lavapipe in CI). Both run
+//! one integer program, so every comparison asks for 0 differing columns.
 
-use glam::{Affine3A, IVec2, Quat, UVec2, Vec3};
-use terrain_core::granular::{GranularObject, NO_OBJECT, TriMesh, depth_from_below_into};
+use glam::{Affine3A, DVec3, IVec2, Quat, UVec2, Vec3};
+use terrain_core::granular::{
+    DepthTriangle, GranularObject, NO_OBJECT, TriMesh, depth_from_below_into, depth_triangles,
+    rasterize_triangle,
+};
 use terrain_core::{Grid, HeightEncoding, Rect};
 use terrain_gpu::GpuContext;
 use terrain_gpu::granular::{DepthArea, DepthFromBelowPass};
 use terrain_gpu::testing::context_or_skip;
 
-/// Largest height difference, in units, between GPU and CPU on columns covered by both, where
-/// the surface around them is gentle: f32 interpolation against f64 (steep slopes add a
-/// share of their step, see [`compare_within`]).
-const INTERIOR_BOUND_UNITS: u32 = 1;
-/// Largest share of the footprint (columns covered by either) whose coverage differs: vertex
-/// snapping at footprint edges.
-const EDGE_SHARE_BOUND: f64 = 0.02;
-
 fn enc() -> HeightEncoding {
     HeightEncoding::fixed_point(10_000).unwrap()
-}
-
-#[derive(Debug, Default)]
-struct Agreement {
-    footprint: usize,
-    coverage_diff: usize,
-    height_diff: usize,
-    max_interior_diff: u32,
-}
-
-impl Agreement {
-    /// The share of the footprint whose coverage differs (the rasterization rules' part;
-    /// edge heights are checked column by column instead).
-    fn share(&self) -> f64 {
-        self.coverage_diff as f64 / self.footprint.max(1) as f64
-    }
 }
 
 fn gpu_depth(
@@ -61,118 +41,7 @@ fn cpu_depth(objects: &[GranularObject<'_>], ts: f32, area: Rect) -> Grid<u32> {
     out
 }
 
-/// Compares GPU and CPU and asserts the bounds: heights within one unit plus what 1/64 texel
-/// changes on the steepest slope around a column (at footprint edges: within the CPU's heights
-/// around it, so widened), coverage differences only where the CPU footprint has an edge in
-/// the 3x3 neighbourhood and on less than [`EDGE_SHARE_BOUND`] of the footprint.
-fn compare(name: &str, gpu: &Grid<u32>, cpu: &Grid<u32>) -> Agreement {
-    compare_within(name, gpu, cpu, EDGE_SHARE_BOUND)
-}
-
-fn compare_within(name: &str, gpu: &Grid<u32>, cpu: &Grid<u32>, share_bound: f64) -> Agreement {
-    assert_eq!(gpu.size(), cpu.size());
-    let (w, h) = (cpu.width() as i64, cpu.height() as i64);
-    let covered = |x: i64, y: i64| -> Option<bool> {
-        (x >= 0 && y >= 0 && x < w && y < h).then(|| cpu.get(x as u32, y as u32) != Some(NO_OBJECT))
-    };
-    let mut a = Agreement::default();
-    for y in 0..h {
-        for x in 0..w {
-            let (g, c) = (
-                gpu.get(x as u32, y as u32).unwrap(),
-                cpu.get(x as u32, y as u32).unwrap(),
-            );
-            if g == NO_OBJECT && c == NO_OBJECT {
-                continue;
-            }
-            a.footprint += 1;
-            // Neighbours off the grid count as "same as the centre".
-            let centre = c != NO_OBJECT;
-            let interior = (-1..=1)
-                .all(|dy| (-1..=1).all(|dx| covered(x + dx, y + dy).unwrap_or(centre) == centre));
-            if (g == NO_OBJECT) != (c == NO_OBJECT) {
-                a.coverage_diff += 1;
-                assert!(
-                    !interior,
-                    "{name}: column ({x}, {y}) differs in coverage (gpu {g}, cpu {c}) away from \
-                     any footprint edge"
-                );
-                continue;
-            }
-            // GPU and CPU sample the same piecewise-planar surface, but the rasterizer snaps
-            // vertices to a sub-pixel grid (1/256 texel on NVIDIA; lavapipe measured exact) and
-            // interpolates in f32. On a steep face that small shift moves the sampled height
-            // by many units (up to 16 measured on an H200): at creases inside the footprint
-            // and at its edges. So a height may differ by one unit plus what a shift of 1/64
-            // texel changes on the steepest slope around the column (the largest CPU height
-            // step to a covered neighbour, over at most sqrt 2 texels). At an edge the face
-            // can be a sliver seen almost edge-on (a tilted box's side: under a texel wide,
-            // decimetres high) that the CPU's samples around it miss, so its slope is not
-            // known: there the height must lie within the CPU's heights around the column,
-            // widened by the same allowance.
-            let near = || {
-                (-1..=1)
-                    .flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy)))
-                    .filter(|&(u, v)| covered(u, v) == Some(true))
-                    .map(|(u, v)| cpu.get(u as u32, v as u32).unwrap())
-            };
-            let steepest = near().map(|n| n.abs_diff(c)).max().unwrap_or(0);
-            let bound = INTERIOR_BOUND_UNITS + steepest / 64;
-            let (lo, hi) = near().fold((c, c), |(lo, hi), n| (lo.min(n), hi.max(n)));
-            let d = g.abs_diff(c);
-            let on_surface = d <= bound
-                || (!interior && g.saturating_add(bound) >= lo && g <= hi.saturating_add(bound));
-            assert!(
-                on_surface,
-                "{name}: column ({x}, {y}): gpu {g}, cpu {c}, bound {bound}, cpu around it \
-                 {lo}..={hi} ({})",
-                if interior { "interior" } else { "at an edge" }
-            );
-            if d > INTERIOR_BOUND_UNITS {
-                a.height_diff += 1;
-            }
-            if interior {
-                a.max_interior_diff = a.max_interior_diff.max(d);
-            }
-        }
-    }
-    if std::env::var("DEPTH_DEBUG").is_ok() {
-        for y in 0..h {
-            let row: String = (0..w)
-                .map(|x| {
-                    let (g, c) = (
-                        gpu.get(x as u32, y as u32).unwrap(),
-                        cpu.get(x as u32, y as u32).unwrap(),
-                    );
-                    match (g == NO_OBJECT, c == NO_OBJECT) {
-                        (true, true) => '.',
-                        (false, true) => 'G',
-                        (true, false) => 'C',
-                        _ if g.abs_diff(c) > 1 => 'x',
-                        _ => '#',
-                    }
-                })
-                .collect();
-            println!("{row}");
-        }
-    }
-    println!(
-        "{name}: footprint {} columns, coverage differs {}, height differs > {INTERIOR_BOUND_UNITS} \
-         on {} columns (steep slopes), coverage share {:.3} %, max interior diff {} units",
-        a.footprint,
-        a.coverage_diff,
-        a.height_diff,
-        a.share() * 100.0,
-        a.max_interior_diff
-    );
-    assert!(
-        a.share() < share_bound,
-        "{name}: the coverage of {:.3} % of the footprint differs",
-        a.share() * 100.0
-    );
-    a
-}
-
+/// Columns covered by either side, after asserting that GPU and CPU agree on every column.
 fn check(
     ctx: &GpuContext,
     pass: &mut DepthFromBelowPass,
@@ -180,10 +49,30 @@ fn check(
     objects: &[GranularObject<'_>],
     ts: f32,
     area: Rect,
-) -> Agreement {
+) -> usize {
     let gpu = gpu_depth(ctx, pass, objects, ts, area);
     let cpu = cpu_depth(objects, ts, area);
-    compare(name, &gpu, &cpu)
+    assert_same(name, &gpu, &cpu)
+}
+
+fn assert_same(name: &str, gpu: &Grid<u32>, cpu: &Grid<u32>) -> usize {
+    assert_eq!(gpu.size(), cpu.size());
+    let differing: Vec<(u32, u32, u32, u32)> = (0..cpu.height())
+        .flat_map(|y| (0..cpu.width()).map(move |x| (x, y)))
+        .filter_map(|(x, y)| {
+            let (g, c) = (gpu.get(x, y).unwrap(), cpu.get(x, y).unwrap());
+            (g != c).then_some((x, y, g, c))
+        })
+        .collect();
+    assert!(
+        differing.is_empty(),
+        "{name}: {} columns differ, first (x, y, gpu, cpu): {:?}",
+        differing.len(),
+        &differing[..differing.len().min(8)]
+    );
+    let footprint = cpu.as_slice().iter().filter(|&&v| v != NO_OBJECT).count();
+    println!("{name}: {footprint} columns covered, 0 differ");
+    footprint
 }
 
 fn placements() -> Vec<Affine3A> {
@@ -213,11 +102,9 @@ fn box_wheel_and_foot_match_the_cpu_rasterizer() {
     let foot = TriMesh::foot(0.9, 0.35, 0.1).unwrap();
     let area = Rect::new(IVec2::new(8, 5), UVec2::new(96, 80));
     let ts = 0.03;
-    let mut worst = 0.0f64;
-    let mut total_footprint = 0;
     for (k, at) in placements().into_iter().enumerate() {
         for (mesh_name, mesh) in [("box", &cuboid), ("wheel", &wheel), ("foot", &foot)] {
-            let a = check(
+            let footprint = check(
                 &ctx,
                 &mut pass,
                 &format!("{mesh_name} #{k}"),
@@ -225,15 +112,9 @@ fn box_wheel_and_foot_match_the_cpu_rasterizer() {
                 ts,
                 area,
             );
-            assert!(a.footprint > 50, "{mesh_name} #{k} should cover the area");
-            worst = worst.max(a.share());
-            total_footprint += a.footprint;
+            assert!(footprint > 50, "{mesh_name} #{k} should cover the area");
         }
     }
-    println!(
-        "worst share {:.3} % over {total_footprint} footprint columns",
-        worst * 100.0
-    );
 }
 
 #[test]
@@ -249,18 +130,21 @@ fn flat_box_bottom_is_one_height() {
     let objects = [GranularObject::new(&cuboid, at)];
     let gpu = gpu_depth(&ctx, &mut pass, &objects, 0.04, area);
     let cpu = cpu_depth(&objects, 0.04, area);
+    assert_same("flat box", &gpu, &cpu);
+    // 0.5 m in units, within one unit of the f32 bottom's rounding; one height everywhere
+    // (the bottom's vertices snap to the same 1/256 unit).
     let expected = cpu
         .as_slice()
         .iter()
         .copied()
         .find(|&v| v != NO_OBJECT)
         .unwrap();
-    // 0.5 m in units, within one unit of f32 rounding of the bottom.
     assert!(expected.abs_diff(5000) <= 1, "cpu bottom {expected}");
-    for &v in gpu.as_slice() {
-        assert!(v == NO_OBJECT || v.abs_diff(expected) <= 1, "gpu {v}");
-    }
-    compare("flat box", &gpu, &cpu);
+    assert!(
+        cpu.as_slice()
+            .iter()
+            .all(|&v| v == NO_OBJECT || v == expected)
+    );
 }
 
 #[test]
@@ -270,14 +154,14 @@ fn texel_aligned_box_matches_exactly() {
     };
     let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     // Corners on sample points (texel size a power of two): the half-open footprint [a, b) of
-    // the CPU's top-left rule must come out identical if pixel centres are aligned.
+    // the top-left rule.
     let cuboid = TriMesh::cuboid(Vec3::new(1.0, 0.25, 0.75)).unwrap();
     let at = Affine3A::from_translation(Vec3::new(3.0, 1.0, 2.5));
     let area = Rect::new(IVec2::new(2, 1), UVec2::new(24, 20));
     let objects = [GranularObject::new(&cuboid, at)];
     let gpu = gpu_depth(&ctx, &mut pass, &objects, 0.25, area);
     let cpu = cpu_depth(&objects, 0.25, area);
-    assert_eq!(gpu, cpu);
+    assert_same("texel-aligned box", &gpu, &cpu);
     // Box from x = 2 .. 4 m, z = 1.75 .. 3.25 m: columns 8..16, 7..13.
     let covered: Vec<(u32, u32)> = (0..20)
         .flat_map(|y| (0..24).map(move |x| (x, y)))
@@ -333,7 +217,7 @@ fn objects_partly_or_wholly_outside_the_area() {
             Quat::from_rotation_y(0.3 + k as f32),
             Vec3::new(x + 0.011, 0.6, z - 0.007),
         );
-        let a = check(
+        let footprint = check(
             &ctx,
             &mut pass,
             &format!("wheel at corner {k}"),
@@ -341,7 +225,7 @@ fn objects_partly_or_wholly_outside_the_area() {
             ts,
             area,
         );
-        assert!(a.footprint > 20 && a.footprint < 40 * 30);
+        assert!(footprint > 20 && footprint < 40 * 30);
     }
     let far = Affine3A::from_translation(Vec3::new(-5.0, 0.6, 40.0));
     let gpu = gpu_depth(
@@ -392,35 +276,33 @@ fn heights_clamp_like_the_cpu() {
     let cuboid = TriMesh::cuboid(Vec3::new(0.5, 0.3, 0.5)).unwrap();
     // Below the encoding's zero: 0; above u32 units (1e6 m * 1e4): NO_OBJECT - 1.
     for (y, expected) in [(-2.0, 0), (999_990.0, NO_OBJECT - 1)] {
-        // Off the sample grid: edges exactly on sample points are the f32 snapping case.
         let at = Affine3A::from_translation(Vec3::new(1.613, y, 1.587));
         let objects = [GranularObject::new(&cuboid, at)];
         let gpu = gpu_depth(&ctx, &mut pass, &objects, 0.1, area);
         let cpu = cpu_depth(&objects, 0.1, area);
-        assert_eq!(gpu, cpu);
+        assert_same(&format!("box at {y} m"), &gpu, &cpu);
         assert!(cpu.as_slice().contains(&expected));
     }
-    // A tilted box spanning the zero of the encoding.
+    // A tilted box spanning the zero of the encoding: the base is negative, the sum is
+    // clamped after the interpolation.
     let at = Affine3A::from_rotation_translation(
         Quat::from_rotation_z(0.5),
         Vec3::new(1.613, 0.1, 1.587),
     );
-    check(
-        &ctx,
-        &mut pass,
-        "box across zero",
-        &[GranularObject::new(&cuboid, at)],
-        0.1,
-        area,
-    );
+    let objects = [GranularObject::new(&cuboid, at)];
+    check(&ctx, &mut pass, "box across zero", &objects, 0.1, area);
+    let cpu = cpu_depth(&objects, 0.1, area);
+    assert!(cpu.as_slice().contains(&0));
+    assert!(cpu.as_slice().iter().any(|&v| v > 0 && v != NO_OBJECT));
 }
 
 #[test]
-fn areas_wider_than_a_tile_are_rendered_in_tiles() {
-    let Some(ctx) = context_or_skip("areas_wider_than_a_tile_are_rendered_in_tiles") else {
+fn areas_wider_than_a_dispatch_tile() {
+    let Some(ctx) = context_or_skip("areas_wider_than_a_dispatch_tile") else {
         return;
     };
     let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    // As wide as the render pipeline's tiles were, and a seam of those tiles.
     let side = terrain_gpu::granular::depth::MAX_TILE_SIDE
         .min(ctx.device.limits().max_texture_dimension_2d);
     let area = Rect::new(IVec2::new(-3, 0), UVec2::new(side + 37, 6));
@@ -431,15 +313,15 @@ fn areas_wider_than_a_tile_are_rendered_in_tiles() {
         Quat::from_rotation_x(0.2) * Quat::from_rotation_y(0.05),
         Vec3::new(seam + 0.0013, 0.5, 0.031),
     );
-    let a = check(
+    let footprint = check(
         &ctx,
         &mut pass,
-        "box across the tile seam",
+        "box across the old tile seam",
         &[GranularObject::new(&cuboid, at)],
         ts,
         area,
     );
-    assert!(a.footprint > 100);
+    assert!(footprint > 100);
 }
 
 #[test]
@@ -501,65 +383,247 @@ fn bad_inputs_are_errors() {
 }
 
 #[test]
-fn edges_a_hair_off_sample_points_differ_only_at_the_edge() {
-    let Some(ctx) = context_or_skip("edges_a_hair_off_sample_points_differ_only_at_the_edge")
-    else {
+fn edges_a_hair_off_sample_points_snap_onto_them() {
+    let Some(ctx) = context_or_skip("edges_a_hair_off_sample_points_snap_onto_them") else {
         return;
     };
     let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
-    // 0.6 / 0.03 in f32 inputs is 20.000001 texels: the CPU leaves column 20 out, the GPU
-    // (f32 position snapped to 1/256 texel) takes it in. A whole edge row or column of the
-    // footprint may flip, never an interior column (`compare` asserts that).
+    // 0.6 / 0.03 in f32 inputs is 20.000001 texels: the f64 rasterizer left column 20 out,
+    // the render pipeline (1/256 texel snapping on NVIDIA) took it in. Both sides now snap to
+    // 1/256 texel, so the edges lie on the samples and the footprint is the half-open
+    // [20, 60) x [20, 60).
     let cuboid = TriMesh::cuboid(Vec3::new(0.6, 0.1, 0.6)).unwrap();
     let objects = [GranularObject::new(
         &cuboid,
         Affine3A::from_translation(Vec3::new(1.2, 0.75, 1.2)),
     )];
     let area = Rect::new(IVec2::ZERO, UVec2::new(64, 64));
-    let gpu = gpu_depth(&ctx, &mut pass, &objects, 0.03, area);
+    let footprint = check(
+        &ctx,
+        &mut pass,
+        "box with edges on samples",
+        &objects,
+        0.03,
+        area,
+    );
+    assert_eq!(footprint, 40 * 40);
     let cpu = cpu_depth(&objects, 0.03, area);
-    let a = compare_within("box with edges on sample points", &gpu, &cpu, 0.15);
-    // At most the four edge lines of a 40 x 40 footprint.
-    assert!(a.coverage_diff <= 4 * 41);
+    assert_ne!(cpu.get(20, 20), Some(NO_OBJECT));
+    assert_eq!(cpu.get(60, 30), Some(NO_OBJECT));
 }
 
-/// The comparison itself (no GPU): a height a little off on a steep slope passes, one
-/// further off, or a little off on a gentle slope, fails; at an edge a height between the
-/// CPU's around it passes.
+/// A fan of triangles whose vertices all lie on sample points, sharing edges (horizontal,
+/// vertical, diagonal) and a centre vertex: every sample of the fan's square is covered by
+/// exactly one triangle (counted on the CPU triangle by triangle), and the GPU agrees.
 #[test]
-fn heights_must_stay_on_the_surface_around_them() {
-    // A 6 x 6 footprint in an 8 x 8 grid, rising `step` units a column.
-    let grid = |step: u32| {
-        Grid::from_fn(8, 8, |x, y| {
-            if (1..7).contains(&x) && (1..7).contains(&y) {
-                1000 + step * x
-            } else {
-                NO_OBJECT
-            }
-        })
-        .unwrap()
+fn shared_edges_through_sample_points_are_covered_once() {
+    let Some(ctx) = context_or_skip("shared_edges_through_sample_points_are_covered_once") else {
+        return;
     };
-    let with = |cpu: &Grid<u32>, (x, y): (u32, u32), g: u32| {
-        let mut gpu = cpu.clone();
-        *gpu.get_mut(x, y).unwrap() = g;
-        gpu
-    };
-    let fails = |gpu: Grid<u32>, cpu: &Grid<u32>| {
-        std::panic::catch_unwind(|| compare("off the surface", &gpu, cpu)).is_err()
-    };
-    // 400 units a column: 1 + 400 / 64 = 7 units pass, at the edge (6, 3) and inside (3, 3).
-    let steep = grid(400);
-    for at in [(6, 3), (3, 3)] {
-        let c = steep.get(at.0, at.1).unwrap();
-        compare("steep, 7 units up", &with(&steep, at, c + 7), &steep);
-        assert!(fails(with(&steep, at, c + 8), &steep));
-        assert!(fails(with(&steep, at, 9000), &steep));
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let ts = 0.25;
+    // A 16 x 16 texel square from (4, 4) split at its centre (12, 12) into eight triangles
+    // through the corners and edge midpoints; heights differ per vertex.
+    let t = |x: f32, z: f32, h: f32| Vec3::new(x * ts, h, z * ts);
+    let ring = [
+        (4.0, 4.0),
+        (12.0, 4.0),
+        (20.0, 4.0),
+        (20.0, 12.0),
+        (20.0, 20.0),
+        (12.0, 20.0),
+        (4.0, 20.0),
+        (4.0, 12.0),
+    ];
+    let mut vertices = vec![t(12.0, 12.0, 1.0)];
+    vertices.extend(
+        ring.iter()
+            .enumerate()
+            .map(|(k, &(x, z))| t(x, z, 1.1 + 0.03 * k as f32)),
+    );
+    let triangles: Vec<[u32; 3]> = (0..8u32).map(|k| [0, 1 + k, 1 + (k + 1) % 8]).collect();
+    let mesh = TriMesh::new(vertices, triangles).unwrap();
+    let objects = [GranularObject::new(&mesh, Affine3A::IDENTITY)];
+    let area = Rect::new(IVec2::ZERO, UVec2::new(24, 24));
+    let mut tris: Vec<DepthTriangle> = Vec::new();
+    depth_triangles(&objects, enc(), ts, area, &mut tris).unwrap();
+    assert_eq!(tris.len(), 8);
+    let mut count = Grid::new(24, 24, 0u32).unwrap();
+    for tri in &tris {
+        let mut one = Grid::new(24, 24, NO_OBJECT).unwrap();
+        rasterize_triangle(tri, area, &mut one);
+        for (c, &v) in count.as_mut_slice().iter_mut().zip(one.as_slice()) {
+            *c += u32::from(v != NO_OBJECT);
+        }
     }
-    // At the edge, a height between the CPU's around it passes; inside, it does not.
-    compare("edge, 300 units down", &with(&steep, (6, 3), 3100), &steep);
-    assert!(fails(with(&steep, (3, 3), 2200 - 300), &steep));
-    // 10 units a column: one unit passes, two fail.
-    let gentle = grid(10);
-    compare("gentle, 1 unit up", &with(&gentle, (3, 3), 1031), &gentle);
-    assert!(fails(with(&gentle, (3, 3), 1032), &gentle));
+    for y in 0..24 {
+        for x in 0..24 {
+            let expected = u32::from((4..20).contains(&x) && (4..20).contains(&y));
+            assert_eq!(count.get(x, y), Some(expected), "sample ({x}, {y})");
+        }
+    }
+    let footprint = check(&ctx, &mut pass, "fan on sample points", &objects, ts, area);
+    assert_eq!(footprint, 16 * 16);
+    // The centre vertex's height, exactly: 1 m is 10 000 units.
+    assert_eq!(cpu_depth(&objects, ts, area).get(12, 12), Some(10_000));
+}
+
+/// One tilted triangle far larger than the area and than a record's tile: the whole area is
+/// covered, the plane's height exact to the unit at sample points where it is known exactly.
+#[test]
+fn large_ground_plane_triangle() {
+    let Some(ctx) = context_or_skip("large_ground_plane_triangle") else {
+        return;
+    };
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let ts = 0.5;
+    // 3000 texels a side, the plane rising 1 mm per metre in x (2 units a texel).
+    let h = |x: f32| 2.0 + 0.001 * x;
+    let mesh = TriMesh::new(
+        vec![
+            Vec3::new(-500.0, h(-500.0), -500.0),
+            Vec3::new(1000.0, h(1000.0), -500.0),
+            Vec3::new(-500.0, h(-500.0), 1000.0),
+        ],
+        vec![[0, 1, 2]],
+    )
+    .unwrap();
+    let objects = [GranularObject::new(&mesh, Affine3A::IDENTITY)];
+    let area = Rect::new(IVec2::new(-40, 7), UVec2::new(300, 200));
+    let footprint = check(&ctx, &mut pass, "ground plane", &objects, ts, area);
+    assert_eq!(footprint, 300 * 200);
+    let cpu = cpu_depth(&objects, ts, area);
+    // Column x stands at x / 2 m: 20 000 + 5 x units (within a unit of the f32 vertices).
+    for (i, x) in [(0u32, -40i32), (140, 100), (299, 259)] {
+        let expected = 20_000 + 5 * x;
+        let got = cpu.get(i, 100).unwrap() as i32;
+        assert!(
+            (got - expected).abs() <= 1,
+            "column {x}: {got}, expected {expected}"
+        );
+    }
+}
+
+/// A steep, tall triangle (heights spanning 10^9 units: the heights keep fewer fractional
+/// bits) and one, beside it, high above the top of the encoding with its base beyond 32 bits:
+/// the 64-bit paths of the program agree.
+#[test]
+fn tall_triangles_keep_fewer_height_bits() {
+    let Some(ctx) = context_or_skip("tall_triangles_keep_fewer_height_bits") else {
+        return;
+    };
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let ts = 0.5;
+    let mesh = TriMesh::new(
+        vec![
+            Vec3::new(-10.0, -50_000.0, -10.0),
+            Vec3::new(90.0, 50_000.0, -5.0),
+            Vec3::new(-7.0, 1.0, 80.0),
+            Vec3::new(75.0, 990_000.0, 50.0),
+            Vec3::new(105.0, 999_000.0, 50.0),
+            Vec3::new(75.0, 980_000.0, 80.0),
+        ],
+        vec![[0, 1, 2], [3, 4, 5]],
+    )
+    .unwrap();
+    let objects = [GranularObject::new(&mesh, Affine3A::IDENTITY)];
+    let area = Rect::new(IVec2::new(-30, -30), UVec2::new(240, 220));
+    let mut tris = Vec::new();
+    depth_triangles(&objects, enc(), ts, area, &mut tris).unwrap();
+    assert!(tris.iter().any(|t| t.frac_bits < 8), "{tris:?}");
+    assert!(
+        tris.iter().any(|t| t.base > i64::from(u32::MAX)),
+        "{tris:?}"
+    );
+    let footprint = check(&ctx, &mut pass, "tall triangles", &objects, ts, area);
+    assert!(footprint > 1000);
+    let cpu = cpu_depth(&objects, ts, area);
+    assert!(cpu.as_slice().contains(&0));
+    assert!(cpu.as_slice().contains(&(NO_OBJECT - 1)));
+}
+
+/// Degenerate triangles (a repeated vertex, collinear vertices, a vertical face, and one
+/// thinner than 1/512 texel, which snaps to zero area) cover nothing on either side.
+#[test]
+fn degenerate_and_vertical_triangles_cover_nothing() {
+    let Some(ctx) = context_or_skip("degenerate_and_vertical_triangles_cover_nothing") else {
+        return;
+    };
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let ts = 0.1;
+    let mesh = TriMesh::new(
+        vec![
+            Vec3::new(0.5, 1.0, 0.5),
+            Vec3::new(2.0, 1.0, 0.5),
+            Vec3::new(1.25, 1.5, 0.5),
+            Vec3::new(0.5, 0.3, 0.5),
+            Vec3::new(2.0, 0.3, 2.0),
+            Vec3::new(1.0, 0.3, 1.0),
+            Vec3::new(2.0, 0.4, 2.0 + 1.0e-4),
+        ],
+        vec![
+            // Repeated vertex.
+            [0, 0, 1],
+            // Vertical face in the plane z = 0.5.
+            [0, 1, 2],
+            // Collinear in projection (the diagonal x = z).
+            [3, 4, 5],
+            // A sliver 1e-4 m = 1/1000 texel wide: snaps onto the diagonal.
+            [3, 4, 6],
+        ],
+    )
+    .unwrap();
+    let objects = [GranularObject::new(&mesh, Affine3A::IDENTITY)];
+    let area = Rect::new(IVec2::ZERO, UVec2::new(32, 32));
+    let mut tris = Vec::new();
+    depth_triangles(&objects, enc(), ts, area, &mut tris).unwrap();
+    assert!(tris.is_empty(), "{tris:?}");
+    assert_eq!(check(&ctx, &mut pass, "degenerate", &objects, ts, area), 0);
+}
+
+/// The integer program's bounds are errors, not overflow: a triangle spanning 2^15 texels or
+/// more is refused on both sides with the same message.
+#[test]
+fn triangles_beyond_the_span_limit_are_refused() {
+    let Some(ctx) = context_or_skip("triangles_beyond_the_span_limit_are_refused") else {
+        return;
+    };
+    let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
+    let ts = 0.01;
+    // 400 m at 1 cm texels: 40 000 texels.
+    let mesh = TriMesh::new(
+        vec![
+            Vec3::new(-200.0, 1.0, 0.0),
+            Vec3::new(200.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.3),
+        ],
+        vec![[0, 1, 2]],
+    )
+    .unwrap();
+    let objects = [GranularObject::new(&mesh, Affine3A::IDENTITY)];
+    let area = Rect::new(IVec2::ZERO, UVec2::new(16, 16));
+    let mut grid = Grid::new(16, 16, 0).unwrap();
+    let cpu = depth_from_below_into(&objects, enc(), ts, area, &mut grid).unwrap_err();
+    let view = DepthArea::new(enc(), ts, area).unwrap();
+    let gpu = pass
+        .run(&ctx.device, &ctx.queue, &objects, &view)
+        .unwrap_err();
+    assert!(cpu.to_string().contains("MAX_TRIANGLE_SPAN"), "{cpu}");
+    assert!(gpu.to_string().contains("MAX_TRIANGLE_SPAN"), "{gpu}");
+    // One just inside the limit is fine, and agrees.
+    let p = [
+        DVec3::new(-150.0, 1.0, 0.0),
+        DVec3::new(150.0, 1.0, 0.0),
+        DVec3::new(0.0, 1.0, 0.3),
+    ];
+    assert!(
+        terrain_core::granular::depth_triangle(p, enc(), ts, area)
+            .unwrap()
+            .is_some()
+    );
+    let inside = TriMesh::new(p.iter().map(|v| v.as_vec3()).collect(), vec![[0, 1, 2]]).unwrap();
+    let objects = [GranularObject::new(&inside, Affine3A::IDENTITY)];
+    let area = Rect::new(IVec2::new(-40, 0), UVec2::new(80, 30));
+    assert!(check(&ctx, &mut pass, "long sliver", &objects, ts, area) > 0);
+    ctx.check().unwrap();
 }

@@ -46,7 +46,11 @@ mod sim;
 mod slope;
 
 pub use active::{ActiveArea, merge_active_areas, object_active_area};
-pub use depth::{NO_OBJECT, depth_from_below, depth_from_below_into, object_footprint};
+pub use depth::{
+    DepthTriangle, MAX_HEIGHT_FRAC_BITS, MAX_TRIANGLE_SPAN, NO_OBJECT, SUBTEXEL_BITS,
+    depth_from_below, depth_from_below_into, depth_triangle, depth_triangles, object_footprint,
+    rasterize_triangle,
+};
 pub use displace::{
     MAX_TARGETS, MULTI_TARGET_CHUNK, displace_closest_seed, displace_iterative,
     displace_multiple_targets, iterative_pass, lower_neighbour_counts,

@@ -1,65 +1,76 @@
-//! `DepthFromBelowPass` (Persson 2019, sec. 4.1.2): the objects rendered with an orthographic camera
-//! looking up from below the terrain over an active area, leaving per column the lowest object
-//! surface above it in fixed-point height units; the GPU side of
-//! [`terrain_core::granular::depth_from_below_into`].
+//! `DepthFromBelowPass` (Persson 2019, sec. 4.1.2): the lowest object surface above each column
+//! of an active area, in fixed-point height units, as seen by an orthographic camera looking up
+//! from below the terrain; the GPU side of [`terrain_core::granular::depth_from_below_into`].
 //!
-//! Each fragment keeps the lowest height per column with `atomicMin` into a `u32` storage
-//! buffer, exact to the unit (fragment-stage storage writes: ask
-//! [`DepthFromBelowPass::is_supported`]); pixel centres are the CPU reference's sample points,
-//! and heights travel relative to each triangle's lowest vertex. Why a buffer and not a depth
-//! attachment, and how pixel centres and heights match the CPU reference, is derived in the
-//! repository's `docs/derivations.md` ("Depth from below on the GPU").
+//! A compute pass runs the CPU reference's integer program (see
+//! [`terrain_core::granular::DepthTriangle`]): the CPU snaps every triangle once
+//! ([`terrain_core::granular::depth_triangles`]) and uploads it as integer records, one per
+//! triangle and 16 x 16 tile of the samples it may cover; one workgroup per record tests the
+//! tile's samples with exact edge functions (64-bit values as two `u32`), interpolates the
+//! height exactly and keeps the lowest with `atomicMin` into a `u32` per column. The result is
+//! bit-identical to the CPU reference on any conforming GPU (no rasterizer, no float).
 //!
 //! # Resources
 //!
-//! The pipeline, its bind group layout and a uniform ring (one slot per tile) are made in
-//! [`DepthFromBelowPass::new`]. The tile target, the buffer of [`NO_OBJECT`]s the output is
-//! cleared from and the vertex buffer persist in the pass and are replaced only by larger ones
-//! when an area or an object list needs more; triangles are written with `queue.write_buffer`
-//! at the next free offset of the vertex buffer, so several areas can be recorded into one
-//! encoder. Call [`DepthFromBelowPass::recall`] after the submit that carries them.
+//! The pipeline, its bind group layout and a uniform ring (one slot per dispatch of at most
+//! [`MAX_RECORDS_PER_DISPATCH`] records) are made in [`DepthFromBelowPass::new`]. The buffer of
+//! [`NO_OBJECT`](terrain_core::granular::NO_OBJECT)s the output is cleared from and the record buffer persist in the pass and are
+//! replaced only by larger ones when an area or an object list needs more; records are written
+//! with `queue.write_buffer` at the next free offset of the record buffer, so several areas can
+//! be recorded into one encoder. Call [`DepthFromBelowPass::recall`] after the submit that
+//! carries them.
 
 use bytemuck::{Pod, Zeroable};
-use glam::UVec2;
-use terrain_core::granular::{GranularObject, NO_OBJECT};
+use terrain_core::granular::{DepthTriangle, GranularObject, depth_triangles};
 use terrain_core::{CoreError, Grid, HeightEncoding, HeightSample, Rect};
 
 use super::upload::UploadRing;
-use crate::device::compute::{PassBindings, StorageBinding, shader_module};
+use crate::device::compute::{PassBindings, StorageBinding, compute_pipeline, shader_module};
 use crate::device::download::download_bytes;
 use crate::device::scope::scoped;
 use crate::error::GpuError;
 use crate::resources::maps::{GpuHeightMap, map_buffer};
 
-/// Largest tile side rendered in one render pass (further limited by the device's
-/// `max_texture_dimension_2d`).
+/// Kept for callers of the render-pipeline pass, whose areas were drawn in tiles of this side:
+/// the compute pass covers any area in one go (its records are tiled instead, by
+/// [`RECORD_TILE`]).
 pub const MAX_TILE_SIDE: u32 = 4096;
 
-/// Format of the per-tile colour attachment that only makes the render pass valid.
-const TILE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
+/// Side of the sample tile one record (one workgroup) covers.
+pub const RECORD_TILE: u32 = 16;
 
-/// One vertex: area-relative texel position `(u, v)`, height units above `base`, and `base`.
+/// Most records one dispatch takes (one workgroup each, on the x axis; further limited by the
+/// device's `max_compute_workgroups_per_dimension`).
+pub const MAX_RECORDS_PER_DISPATCH: u32 = 65_535;
+
+/// One record: a triangle of the integer program over one tile of its samples (the WGSL
+/// layout is listed in `granular_depth.wgsl`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
-struct DepthVertex {
-    uvh: [f32; 3],
-    base: u32,
+struct DepthRecord {
+    verts: [i32; 6],
+    origin: [i32; 2],
+    rel: [u32; 3],
+    frac_bits: u32,
+    base: [u32; 2],
+    area2: [u32; 2],
+    tile_min: [u32; 2],
+    tile_max: [u32; 2],
 }
 
-/// The WGSL `Tile` uniform.
+/// The WGSL `Params` uniform.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
-pub(super) struct TileParams {
-    origin_f: [f32; 2],
-    size_f: [f32; 2],
-    origin: [u32; 2],
+pub(super) struct DepthParams {
+    first: u32,
+    count: u32,
     area_width: u32,
     _pad: u32,
 }
 
-// The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<TileParams>() == 32);
-const _: () = assert!(std::mem::size_of::<DepthVertex>() == 16);
+// The WGSL layouts: a mismatch fails the build, not a dispatch.
+const _: () = assert!(std::mem::size_of::<DepthParams>() == 16);
+const _: () = assert!(std::mem::size_of::<DepthRecord>() == 80);
 
 /// What a depth-from-below render looks at: a non-empty area (in map columns) and the map's
 /// height encoding and texel size (positive and finite), checked when made. The arguments of
@@ -110,17 +121,17 @@ impl DepthArea {
     }
 }
 
-/// Renders [`GranularObject`]s from below over an active area into a `u32` per column
-/// (Persson 2019, sec. 4.1.2); see the module docs for the method, its precision and its resources.
+/// Rasterizes [`GranularObject`]s from below over an active area into a `u32` per column
+/// (Persson 2019, sec. 4.1.2); see the module docs for the method and its resources.
 #[derive(Debug)]
 pub struct DepthFromBelowPass {
-    pipeline: wgpu::RenderPipeline,
-    pub(super) bindings: PassBindings<TileParams>,
-    tile_side: u32,
-    target: Option<(wgpu::Texture, wgpu::TextureView)>,
+    pipeline: wgpu::ComputePipeline,
+    pub(super) bindings: PassBindings<DepthParams>,
+    max_groups: u32,
     clear: Option<wgpu::Buffer>,
-    vertices: UploadRing,
-    triangles: Vec<DepthVertex>,
+    uploads: UploadRing,
+    triangles: Vec<DepthTriangle>,
+    records: Vec<DepthRecord>,
 }
 
 /// A size that grows by half again at least, so an input that grows a little every frame
@@ -130,104 +141,66 @@ fn grown(old: u64, need: u64) -> u64 {
 }
 
 impl DepthFromBelowPass {
-    /// Whether `adapter` can run this pass: it needs storage writes and atomics in fragment
-    /// shaders ([`wgpu::DownlevelFlags::FRAGMENT_WRITABLE_STORAGE`]; Vulkan, Metal, D3D12 and
-    /// GL 4.3 / GLES 3.1 have them, WebGL2 does not).
+    /// Whether `adapter` can run this pass: a compute pass with storage buffers, which every
+    /// adapter this crate runs on has (kept from the render-pipeline pass, which needed
+    /// fragment-stage storage writes).
     pub fn is_supported(adapter: &wgpu::Adapter) -> bool {
         adapter
             .get_downlevel_capabilities()
             .flags
-            .contains(wgpu::DownlevelFlags::FRAGMENT_WRITABLE_STORAGE)
+            .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
     }
 
-    /// Builds the pipeline (one shader module), its bindings and uniform ring. Fails with
+    /// Builds the pipeline, its bindings and uniform ring. Fails with
     /// [`GpuError::Unsupported`] on devices without storage buffers, or
-    /// [`GpuError::Validation`] if the shader is rejected (which is what a device without
-    /// fragment-stage storage writes gives: check [`Self::is_supported`] first).
+    /// [`GpuError::Validation`] if the shader is rejected.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        // `Device::limits` reflects what the device was created with; downlevel support is the
-        // adapter's, which the device does not expose, so the limit stands in for it.
-        if device.limits().max_storage_buffers_per_shader_stage == 0 {
+        if device.limits().max_storage_buffers_per_shader_stage < 2 {
             return Err(GpuError::Unsupported {
                 what: "DepthFromBelowPass",
-                reason: "the device has no storage buffers in the fragment stage \
-                         (FRAGMENT_WRITABLE_STORAGE)",
+                reason: "the device has fewer than two storage buffers in the compute stage",
             });
         }
         let bindings = PassBindings::new(
             device,
             "DepthFromBelowPass",
-            wgpu::ShaderStages::VERTEX_FRAGMENT,
-            &[StorageBinding {
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                read_only: false,
-            }],
+            wgpu::ShaderStages::COMPUTE,
+            &[
+                StorageBinding::compute(true),
+                StorageBinding::compute(false),
+            ],
         );
         let module = shader_module(
             device,
             "granular_depth.wgsl",
             terrain_shaders::GRANULAR_DEPTH,
         )?;
-        let pipeline = scoped(device, "DepthFromBelowPass", || {
-            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("DepthFromBelowPass"),
-                bind_group_layouts: &[Some(bindings.layout())],
-                immediate_size: 0,
-            });
-            let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32];
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("DepthFromBelowPass"),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
-                        array_stride: std::mem::size_of::<DepthVertex>() as u64,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &attributes,
-                    })],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: None,
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: TILE_FORMAT,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::empty(),
-                    })],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        })?;
+        let pipeline = compute_pipeline(
+            device,
+            "DepthFromBelowPass",
+            &module,
+            bindings.layout(),
+            "main",
+        )?;
         Ok(Self {
             pipeline,
             bindings,
-            tile_side: device
+            max_groups: device
                 .limits()
-                .max_texture_dimension_2d
-                .clamp(1, MAX_TILE_SIDE),
-            target: None,
+                .max_compute_workgroups_per_dimension
+                .clamp(1, MAX_RECORDS_PER_DISPATCH),
             clear: None,
-            vertices: UploadRing::new("DepthFromBelowPass vertices", wgpu::BufferUsages::VERTEX),
+            uploads: UploadRing::new("DepthFromBelowPass records", wgpu::BufferUsages::STORAGE),
             triangles: Vec::new(),
+            records: Vec::new(),
         })
     }
 
-    /// Frees the uniform slots and vertex uploads recorded so far: call it after the submit
+    /// Frees the uniform slots and record uploads recorded so far: call it after the submit
     /// that carries them.
     pub fn recall(&mut self) {
         self.bindings.recall();
-        self.vertices.recall();
+        self.uploads.recall();
     }
 
     /// A buffer for the depth of `area`: one `u32` per column, row-major, with the usages
@@ -238,7 +211,7 @@ impl DepthFromBelowPass {
         map_buffer(device, "DepthFromBelowPass output", area.size, bytes)
     }
 
-    /// Makes the buffer of [`NO_OBJECT`]s the output is cleared from hold at least `bytes`.
+    /// Makes the buffer of [`NO_OBJECT`](terrain_core::granular::NO_OBJECT)s the output is cleared from hold at least `bytes`.
     fn ensure_clear(&mut self, device: &wgpu::Device, bytes: u64) -> Result<(), GpuError> {
         let old = self.clear.as_ref().map_or(0, wgpu::Buffer::size);
         if old >= bytes {
@@ -265,61 +238,22 @@ impl DepthFromBelowPass {
         Ok(())
     }
 
-    /// Makes the tile target cover `size` texels.
-    fn ensure_target(&mut self, device: &wgpu::Device, size: UVec2) -> Result<(), GpuError> {
-        let old = self
-            .target
-            .as_ref()
-            .map_or(UVec2::ZERO, |(t, _)| UVec2::new(t.width(), t.height()));
-        if old.cmpge(size).all() {
-            return Ok(());
-        }
-        let side = |o: u32, n: u32| {
-            if o >= n {
-                o
-            } else {
-                (grown(u64::from(o), u64::from(n)) as u32)
-                    .min(self.tile_side)
-                    .max(n)
-            }
-        };
-        let new = UVec2::new(side(old.x, size.x), side(old.y, size.y));
-        let texture = scoped(device, "DepthFromBelowPass tile target", || {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("DepthFromBelowPass tile target"),
-                size: wgpu::Extent3d {
-                    width: new.x,
-                    height: new.y,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: TILE_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-                view_formats: &[],
-            })
-        })?;
-        let view = texture.create_view(&Default::default());
-        self.target = Some((texture, view));
-        Ok(())
-    }
-
     /// Records the depth from below of `objects` over `area` into `out` (at least
     /// `4 * area.size.x * area.size.y` bytes, usages `STORAGE | COPY_DST`; see
     /// [`Self::create_output`]): element `j * area.size.x + i` is column `area.min + (i, j)`,
-    /// in units of the area's encoding (`floor((y - offset) / scale)` clamped to
-    /// `0 ..= NO_OBJECT - 1`), or [`NO_OBJECT`] where no object covers it. The whole area is
+    /// in units of the area's encoding, or [`NO_OBJECT`](terrain_core::granular::NO_OBJECT) where no object covers it, exactly as
+    /// [`terrain_core::granular::depth_from_below_into`] computes it. The whole area is
     /// overwritten.
     ///
-    /// The objects' world-space triangles are written into the pass's vertex buffer on every
-    /// call (triangles with zero projected area, or wholly outside the area, are dropped on the
-    /// CPU as the reference does). Whether the area lies inside the map is the caller's
-    /// concern, as with the CPU reference's `_into` form: any non-empty area is rendered.
+    /// The objects' triangles are snapped on the CPU and written into the pass's record buffer
+    /// on every call (triangles with zero area after snapping, or wholly outside the area, are
+    /// dropped). Whether the area lies inside the map is the caller's concern, as with the CPU
+    /// reference's `_into` form: any non-empty area is computed.
     ///
     /// Fails on an output buffer that is too small, an object that fails
     /// [`GranularObject::validate`] (non-finite transform, vertices beyond
-    /// `MAX_COORDINATE_M`; reported as [`GpuError::Granular`]), more triangles than the
+    /// `MAX_COORDINATE_M`; reported as [`GpuError::Granular`]), a triangle the integer program
+    /// refuses (see [`terrain_core::granular::depth_triangle`]), more records than the
     /// device's largest buffer holds, or a wgpu validation error.
     pub fn encode(
         &mut self,
@@ -340,15 +274,24 @@ impl DepthFromBelowPass {
             }
             .into());
         }
-        world_triangles(objects, area, &mut self.triangles)?;
-        let vertex_bytes = std::mem::size_of_val(self.triangles.as_slice()) as u64;
-        if vertex_bytes > device.limits().max_buffer_size
-            || self.triangles.len() > u32::MAX as usize
-        {
+        depth_triangles(
+            objects,
+            area.encoding,
+            area.texel_size,
+            rect,
+            &mut self.triangles,
+        )?;
+        tile_records(&self.triangles, rect, &mut self.records);
+        let record_bytes = std::mem::size_of_val(self.records.as_slice()) as u64;
+        let limit = device
+            .limits()
+            .max_storage_buffer_binding_size
+            .min(device.limits().max_buffer_size);
+        if record_bytes > limit {
             return Err(CoreError::OutOfRange {
-                what: "DepthFromBelowPass vertex bytes (3 vertices of 16 bytes per triangle)",
-                value: vertex_bytes as f64,
-                expected: "within the device's max_buffer_size",
+                what: "DepthFromBelowPass record bytes (80 per triangle and 16 x 16 tile)",
+                value: record_bytes as f64,
+                expected: "within the device's storage buffer binding size",
             }
             .into());
         }
@@ -356,55 +299,36 @@ impl DepthFromBelowPass {
         if let Some(clear) = &self.clear {
             encoder.copy_buffer_to_buffer(clear, 0, out, 0, bytes);
         }
-        if self.triangles.is_empty() {
+        if self.records.is_empty() {
             return Ok(());
         }
-        let (vertex_buffer, vertex_offset) =
-            self.vertices
-                .push(device, queue, bytemuck::cast_slice(&self.triangles))?;
-        let vertex_count = self.triangles.len() as u32;
-        let tile_side = self.tile_side;
-        self.ensure_target(device, rect.size.min(UVec2::splat(tile_side)))?;
-        let Some((_, view)) = &self.target else {
-            return Ok(());
-        };
-        for ty in (0..rect.size.y).step_by(tile_side as usize) {
-            for tx in (0..rect.size.x).step_by(tile_side as usize) {
-                let size = (rect.size - UVec2::new(tx, ty)).min(UVec2::splat(tile_side));
-                let params = TileParams {
-                    origin_f: [tx as f32, ty as f32],
-                    size_f: [size.x as f32, size.y as f32],
-                    origin: [tx, ty],
-                    area_width: rect.size.x,
-                    _pad: 0,
-                };
-                let (group, offset) = self.bindings.bind(device, queue, &params, &[out])?;
-                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("DepthFromBelowPass"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                            store: wgpu::StoreOp::Discard,
-                        },
-                    })],
-                    depth_stencil_attachment: None,
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
-                pass.set_viewport(0.0, 0.0, size.x as f32, size.y as f32, 0.0, 1.0);
-                pass.set_scissor_rect(0, 0, size.x, size.y);
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &group, &[offset]);
-                pass.set_vertex_buffer(
-                    0,
-                    vertex_buffer.slice(vertex_offset..vertex_offset + vertex_bytes),
-                );
-                pass.draw(0..vertex_count, 0..1);
-            }
+        let (buffer, offset) =
+            self.uploads
+                .push(device, queue, bytemuck::cast_slice(&self.records))?;
+        let words = (std::mem::size_of::<DepthRecord>() / 4) as u32;
+        let total = self.records.len() as u32;
+        let mut groups = Vec::new();
+        for start in (0..total).step_by(self.max_groups as usize) {
+            let count = (total - start).min(self.max_groups);
+            let params = DepthParams {
+                first: (offset / 4) as u32 + start * words,
+                count,
+                area_width: rect.size.x,
+                _pad: 0,
+            };
+            let (group, slot) = self
+                .bindings
+                .bind(device, queue, &params, &[&buffer, out])?;
+            groups.push((group, slot, count));
+        }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("DepthFromBelowPass"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        for (group, slot, count) in &groups {
+            pass.set_bind_group(0, group, &[*slot]);
+            pass.dispatch_workgroups(*count, 1, 1);
         }
         Ok(())
     }
@@ -497,64 +421,40 @@ fn check_params(encoding: HeightEncoding, texel_size: f32) -> Result<(), GpuErro
     Ok(())
 }
 
-/// Every triangle of `objects` that may cover a column of `area`, as area-relative vertices.
-fn world_triangles(
-    objects: &[GranularObject<'_>],
-    area: &DepthArea,
-    out: &mut Vec<DepthVertex>,
-) -> Result<(), GpuError> {
-    let ts = f64::from(area.texel_size);
-    let scale = f64::from(area.encoding.scale);
-    let offset = f64::from(area.encoding.offset);
-    let rect = area.rect;
-    let (x0, y0) = (f64::from(rect.min.x), f64::from(rect.min.y));
-    let (x1, y1) = (x0 + f64::from(rect.size.x), y0 + f64::from(rect.size.y));
-    let max_depth = f64::from(NO_OBJECT - 1);
+/// Splits every triangle's samples (already clipped to `area`) into [`RECORD_TILE`]-sided
+/// tiles, one record each, in area-relative coordinates.
+fn tile_records(triangles: &[DepthTriangle], area: Rect, out: &mut Vec<DepthRecord>) {
     out.clear();
-    for object in objects {
-        let verts = object.world_vertices()?;
-        for tri in object.mesh.triangles() {
-            // Indices were checked by `TriMesh::new`; `get` keeps a bad one from panicking.
-            let mut p = [glam::DVec3::ZERO; 3];
-            for (k, &i) in tri.iter().enumerate() {
-                match verts.get(i as usize) {
-                    Some(v) => p[k] = v.as_dvec3(),
-                    None => {
-                        return Err(CoreError::OutOfRange {
-                            what: "granular mesh vertex index",
-                            value: f64::from(i),
-                            expected: "below the mesh's vertex count",
-                        }
-                        .into());
-                    }
-                }
-            }
-            let uv = p.map(|q| glam::DVec2::new(q.x / ts, q.z / ts));
-            // As the CPU reference: no projected area, no coverage.
-            if (uv[1] - uv[0]).perp_dot(uv[2] - uv[0]) == 0.0 {
-                continue;
-            }
-            let lo = uv[0].min(uv[1]).min(uv[2]);
-            let hi = uv[0].max(uv[1]).max(uv[2]);
-            // Samples lie at integer (u, v) in [x0, x1) x [y0, y1); keep a texel of margin.
-            if hi.x < x0 - 1.0 || hi.y < y0 - 1.0 || lo.x > x1 || lo.y > y1 {
-                continue;
-            }
-            let units = p.map(|q| (q.y - offset) / scale);
-            let min_units = units[0].min(units[1]).min(units[2]).floor();
-            let base = min_units.clamp(0.0, max_depth);
-            for k in 0..3 {
-                let rel = if min_units >= max_depth {
-                    0.0
-                } else {
-                    units[k] - base
-                };
-                out.push(DepthVertex {
-                    uvh: [(uv[k].x - x0) as f32, (uv[k].y - y0) as f32, rel as f32],
-                    base: base as u32,
-                });
+    let min = [i64::from(area.min.x), i64::from(area.min.y)];
+    let side = RECORD_TILE as usize;
+    for t in triangles {
+        // `depth_triangle` clipped the samples to the area and bounded the triangle's span, so
+        // these fit: samples in 0 .. area size, the origin within 2^15 texels of them.
+        let s0 = [t.samples_min[0] - min[0], t.samples_min[1] - min[1]].map(|v| v as u32);
+        let s1 = [t.samples_max[0] - min[0], t.samples_max[1] - min[1]].map(|v| v as u32);
+        let mut record = DepthRecord {
+            verts: [
+                t.verts[0][0],
+                t.verts[0][1],
+                t.verts[1][0],
+                t.verts[1][1],
+                t.verts[2][0],
+                t.verts[2][1],
+            ],
+            origin: [(t.origin[0] - min[0]) as i32, (t.origin[1] - min[1]) as i32],
+            rel: t.rel,
+            frac_bits: t.frac_bits,
+            base: [t.base as u32, (t.base >> 32) as u32],
+            area2: [t.area2 as u32, (t.area2 >> 32) as u32],
+            tile_min: [0; 2],
+            tile_max: [0; 2],
+        };
+        for y in (s0[1]..s1[1]).step_by(side) {
+            for x in (s0[0]..s1[0]).step_by(side) {
+                record.tile_min = [x, y];
+                record.tile_max = [(x + RECORD_TILE).min(s1[0]), (y + RECORD_TILE).min(s1[1])];
+                out.push(record);
             }
         }
     }
-    Ok(())
 }
