@@ -78,7 +78,7 @@ pub use error::CacheError;
 pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
 pub use manifest::{DetailLayout, Manifest, TileFormat, tile_key};
 #[cfg(feature = "object-store")]
-pub use object::ObjectTileStore;
+pub use object::{ObjectStoreConfig, ObjectTileStore};
 pub use region_bounds::RegionBounds;
 pub use store::{FsStore, TileStore};
 pub use tile::{Layer, TileData, TileId};

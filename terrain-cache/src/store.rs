@@ -26,7 +26,9 @@ use std::sync::Arc;
 pub trait TileStore: Send + Sync + fmt::Debug {
     /// The bytes of `key`, `None` if there is no such object.
     fn read(&self, key: &str, max_len: u64) -> Result<Option<Vec<u8>>, CacheError>;
-    /// Replaces (or creates) `key` with `bytes`, atomically.
+    /// Replaces (or creates) `key` with `bytes`, atomically. A store that detects concurrent
+    /// writers (a bucket with conditional puts, `ObjectTileStore::s3`) refuses a write over a
+    /// version it has not seen with [`CacheError::Conflict`]; read the key again first.
     fn write(&self, key: &str, bytes: &[u8]) -> Result<(), CacheError>;
     /// Removes `key`; removing a missing key is not an error.
     fn remove(&self, key: &str) -> Result<(), CacheError>;
