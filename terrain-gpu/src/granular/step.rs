@@ -24,8 +24,8 @@ pub struct GpuStepReport {
 /// Where a step's depth from below comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum DepthSource {
-    /// Rendered on the GPU by [`DepthFromBelowPass`] (coverage may differ from the CPU
-    /// rasterizer on exactly grid-aligned edges: see its tests).
+    /// Rasterised on the GPU by [`DepthFromBelowPass`] (the CPU reference's integer program:
+    /// the same columns bit for bit).
     #[default]
     Gpu,
     /// Rasterised on the CPU ([`depth_from_below_into`]) and uploaded: the whole step then
