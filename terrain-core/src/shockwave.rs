@@ -94,8 +94,9 @@ impl Shockwave {
             if x == 0 || y == 0 || x == n - 1 || y == n - 1 {
                 return 0.0;
             }
-            let d2 = (x as f32 - c).powi(2) + (y as f32 - c).powi(2);
-            (-d2 * k).exp()
+            let (dx, dy) = (x as f32 - c, y as f32 - c);
+            // libm's `expf`, not the platform's: the same starting wave on every platform.
+            libm::expf(-(dx * dx + dy * dy) * k)
         })?;
         Ok(Self {
             params,

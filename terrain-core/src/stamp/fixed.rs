@@ -17,10 +17,16 @@
 //!    `i = ux - anchor.x`, `j = uy - anchor.y` (both `>= 0`: the anchor is the footprint's
 //!    first texel). Inside the footprint iff `|L.x| <= 2^32` and `|L.y| <= 2^32`.
 //! 2. The stamp value `v31` (`value * 2^31`, i64):
-//!    - Gaussian: `r2 = ((L.x >> 8)^2 + (L.y >> 8)^2) >> 18` (`r^2` in Q30), `t = (beta_q r2)
-//!      >> 27` (`beta r^2` in Q26, `beta_q = round(beta 2^23)`), and `exp(-t)` as the product of
-//!      three table entries (Q31) for the bits of `t` (`>> 31` after each product): no `exp`
-//!      on either side. `t >= 22` gives 0.
+//!    - Gaussian, separable frame (`lx.y == 0` and `ly.x == 0`: unrotated; [`gaussian_separable`]):
+//!      `exp(-beta x^2) exp(-beta y^2)` as two factors of one axis each
+//!      ([`gaussian_factor31`]: `x2 = (L.x >> 8)^2 >> 18` in Q30, `t = (beta_q x2) >> 27` in
+//!      Q26, `exp(-t)` from the tables as below), multiplied and rounded half up:
+//!      `(fx fy + 2^30) >> 31`. X depends on the column only and Y on the row only, so the CPU
+//!      computes the factors once per column and row: one product per texel.
+//!    - Gaussian, any other frame: `r2 = ((L.x >> 8)^2 + (L.y >> 8)^2) >> 18` (`r^2` in Q30),
+//!      `t = (beta_q r2) >> 27` (`beta r^2` in Q26, `beta_q = round(beta 2^23)`), and `exp(-t)`
+//!      as the product of three table entries (Q31) for the bits of `t` (`>> 31` after each
+//!      product): no `exp` on either side. `t >= 22` gives 0.
 //!    - Texture: values quantised once to Q24 (`round(v 2^24)`, clamped to `+-64`); the pixel
 //!      coordinate `((local + 1) n / 2 - 1/2)` in Q33; the bilinear weights in Q12; the
 //!      interpolation exact in Q48, then `>> 17`.
@@ -220,6 +226,24 @@ impl GaussianTables {
         if t >= EXP_T_LIMIT { 0 } else { v }
     }
 
+    /// [`gaussian_factor31`] with these tables. Any `l` gives some value without a panic (the
+    /// CPU fills its column factors for every column of a footprint); the program's only at a
+    /// texel inside.
+    #[inline(always)]
+    pub(crate) fn factor31(&self, beta_q: u32, l: i64) -> u32 {
+        // Inside |L >> 8| <= 2^24: x2 <= 2^30.
+        let a = ((l >> 8) as i32).unsigned_abs();
+        let x2 = ((u64::from(a) * u64::from(a)) >> 18) as u32;
+        let t = (u64::from(beta_q) * u64::from(x2)) >> 27;
+        let tc = t.min(EXP_T_LIMIT - 1) as u32;
+        let hi = self.hi[((tc >> 20) as usize).min(EXP_HI_LEN - 1)];
+        let mid = self.mid[((tc >> 10) & 1023) as usize];
+        let lo = self.lo[(tc & 1023) as usize];
+        let p = ((u64::from(hi) * u64::from(mid)) >> 31) as u32;
+        let v = ((u64::from(p) * u64::from(lo)) >> 31) as u32;
+        if t >= EXP_T_LIMIT { 0 } else { v }
+    }
+
     /// [`gaussian_v31`] with these tables.
     #[inline(always)]
     pub(crate) fn v31(&self, beta_q: u32, l: [i64; 2]) -> i64 {
@@ -251,10 +275,41 @@ pub fn gaussian_beta_q(beta: f32) -> u32 {
     }
 }
 
-/// `exp(-beta r^2) * 2^31` at Q32 local coordinates `l` (module docs, step 2).
+/// `exp(-beta r^2) * 2^31` at Q32 local coordinates `l` of a frame that is not
+/// [`gaussian_separable`] (module docs, step 2).
 #[inline(always)]
 pub fn gaussian_v31(beta_q: u32, l: [i64; 2]) -> i64 {
     GaussianTables::get().v31(beta_q, l)
+}
+
+/// Whether the frame's Gaussian is the separable program ([`gaussian_sep_v31`]): local X
+/// depends on the column only and local Y on the row only (`lx.y == 0` and `ly.x == 0`, an
+/// unrotated placement), decided from the integers alone, as the GPU decides.
+#[inline(always)]
+pub fn gaussian_separable(frame: &FixedFrame) -> bool {
+    frame.lx[1] == 0 && frame.ly[0] == 0
+}
+
+/// `exp(-beta x^2) * 2^31` of one Q32 local coordinate `l` inside the footprint (`|l| <=
+/// 2^32`): `x2 = (|l >> 8|^2) >> 18` (Q30), `t = (beta_q x2) >> 27` (Q26), and the three
+/// tables' product as in [`gaussian_v31`]; `t >= 22` gives 0.
+#[inline(always)]
+pub fn gaussian_factor31(beta_q: u32, l: i64) -> u32 {
+    GaussianTables::get().factor31(beta_q, l)
+}
+
+/// The separable Gaussian at Q32 local `l` inside the footprint: the product of the two axes'
+/// factors ([`gaussian_factor31`]), rounded half up to Q31: `(fx fy + 2^30) >> 31`.
+#[inline(always)]
+pub fn gaussian_sep_v31(beta_q: u32, l: [i64; 2]) -> i64 {
+    let t = GaussianTables::get();
+    sep_product(t.factor31(beta_q, l[0]), t.factor31(beta_q, l[1]))
+}
+
+/// `(fx fy + 2^30) >> 31`: both at most 2^31, so the sum fits a u64.
+#[inline(always)]
+pub(crate) fn sep_product(fx: u32, fy: u32) -> i64 {
+    ((u64::from(fx) * u64::from(fy) + (1 << 30)) >> 31) as i64
 }
 
 /// A texture value quantised to Q24, clamped to `+-VALUE_LIMIT` (what the GPU pass uploads).
@@ -273,6 +328,66 @@ pub fn quantize_texture_value(v: f32) -> i32 {
         t - 1
     } else {
         t
+    }
+}
+
+/// A texture's values quantised to Q24 ([`quantize_texture_value`]): what the exact program
+/// samples, computed once per texture (a [`TextureStamp`](super::TextureStamp) keeps its own),
+/// with a copy bordered by one repeated pixel on every side (the CPU's clamped lookups without
+/// a clamp).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct QuantizedTexture {
+    values: Vec<i32>,
+    padded: Vec<i32>,
+    w: u32,
+    h: u32,
+}
+
+impl QuantizedTexture {
+    /// Quantises `values` (each as [`quantize_texture_value`]).
+    pub fn new(values: &crate::grid::Grid<f32>) -> Self {
+        let (w, h) = (values.width(), values.height());
+        let q: Vec<i32> = values
+            .as_slice()
+            .iter()
+            .map(|&v| quantize_texture_value(v))
+            .collect();
+        let mut padded = Vec::new();
+        if w > 0 && h > 0 {
+            padded.reserve((w as usize + 2) * (h as usize + 2));
+            for z in -1..=i64::from(h) {
+                let row = &q[z.clamp(0, i64::from(h) - 1) as usize * w as usize..][..w as usize];
+                padded.push(row[0]);
+                padded.extend_from_slice(row);
+                padded.push(row[w as usize - 1]);
+            }
+        }
+        Self {
+            values: q,
+            padded,
+            w,
+            h,
+        }
+    }
+
+    /// The Q24 values, row-major (what the GPU pass uploads).
+    pub fn values(&self) -> &[i32] {
+        &self.values
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.w
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.h
+    }
+
+    /// The values with their one-pixel border, rows of `width + 2`.
+    pub(crate) fn padded(&self) -> &[i32] {
+        &self.padded
     }
 }
 
@@ -410,6 +525,30 @@ mod tests {
             assert!((got - want).abs() < 1e-7, "({x}, {y}): {got} vs {want}");
         }
         assert_eq!(gaussian_v31(beta_q, [0, 0]), 1 << 31);
+    }
+
+    #[test]
+    fn separable_gaussian_equals_exp_closely() {
+        let beta_q = gaussian_beta_q(4.6);
+        for (x, y) in [
+            (0.0, 0.0),
+            (0.3, -0.2),
+            (1.0, 1.0),
+            (-0.7, 0.05),
+            (1.0, 0.0),
+        ] {
+            let l = [(x * 2f64.powi(32)) as i64, (y * 2f64.powi(32)) as i64];
+            let got = gaussian_sep_v31(beta_q, l) as f64 / 2f64.powi(31);
+            let want = (-4.6f64 * (x * x + y * y)).exp();
+            assert!((got - want).abs() < 1e-7, "({x}, {y}): {got} vs {want}");
+            let radial = gaussian_v31(beta_q, l);
+            assert!(
+                (gaussian_sep_v31(beta_q, l) - radial).abs() <= 64,
+                "({x}, {y})"
+            );
+        }
+        assert_eq!(gaussian_sep_v31(beta_q, [0, 0]), 1 << 31);
+        assert_eq!(gaussian_factor31(beta_q, 0), 1 << 31);
     }
 
     #[test]

@@ -3,36 +3,35 @@
 //! Every texel gets the program's integer result, whatever path, thread count or instruction
 //! set: the same bits as the GPU pass and as [`apply_stamp_reference`](super::apply_stamp_reference).
 
-use super::fixed::{self, FixedBlend, FixedFrame, GaussianTables, LOCAL_ONE};
+use super::fixed::{self, FixedBlend, FixedFrame, GaussianTables, LOCAL_ONE, QuantizedTexture};
 use super::{Prepared, Stamp, StampKernel};
 use crate::error::CoreError;
 use crate::map::{HeightMap, HeightSample};
 use crate::rect::DirtyRect;
+use std::borrow::Cow;
 
 /// How a stamp's value is evaluated, from [`Stamp::kernel`].
-pub(super) enum Kernel {
-    /// `round(beta 2^23)`.
-    Gaussian(u32),
-    /// Quantised values (Q24), width, height.
-    Texture(Vec<i32>, u32, u32),
+pub(super) enum Kernel<'a> {
+    /// `round(beta 2^23)`, and whether the frame is [`fixed::gaussian_separable`].
+    Gaussian(u32, bool),
+    /// Quantised values (Q24): the stamp's own, or quantised for this placement.
+    Texture(Cow<'a, QuantizedTexture>),
     /// [`Stamp::value`] per texel, converted by [`fixed::user_v31`].
     PerTexel,
 }
 
-impl Kernel {
-    pub(super) fn of<S: Stamp + ?Sized>(stamp: &S) -> Self {
+impl<'a> Kernel<'a> {
+    pub(super) fn of<S: Stamp + ?Sized>(stamp: &'a S, frame: &FixedFrame) -> Self {
         match stamp.kernel() {
-            StampKernel::Gaussian { beta } => Kernel::Gaussian(fixed::gaussian_beta_q(beta)),
+            StampKernel::Gaussian { beta } => Kernel::Gaussian(
+                fixed::gaussian_beta_q(beta),
+                fixed::gaussian_separable(frame),
+            ),
             StampKernel::Texture(values) if values.width() > 0 && values.height() > 0 => {
-                Kernel::Texture(
-                    values
-                        .as_slice()
-                        .iter()
-                        .map(|&v| fixed::quantize_texture_value(v))
-                        .collect(),
-                    values.width(),
-                    values.height(),
-                )
+                Kernel::Texture(Cow::Owned(QuantizedTexture::new(values)))
+            }
+            StampKernel::Quantized(q) if q.width() > 0 && q.height() > 0 => {
+                Kernel::Texture(Cow::Borrowed(q))
             }
             _ => Kernel::PerTexel,
         }
@@ -43,8 +42,9 @@ impl Kernel {
     #[inline(always)]
     pub(super) fn v31<S: Stamp + ?Sized>(&self, stamp: &S, l: [i64; 2]) -> Option<i64> {
         match self {
-            Kernel::Gaussian(beta_q) => Some(fixed::gaussian_v31(*beta_q, l)),
-            Kernel::Texture(v, w, h) => Some(fixed::texture_v31(v, *w, *h, l)),
+            Kernel::Gaussian(beta_q, false) => Some(fixed::gaussian_v31(*beta_q, l)),
+            Kernel::Gaussian(beta_q, true) => Some(fixed::gaussian_sep_v31(*beta_q, l)),
+            Kernel::Texture(t) => Some(fixed::texture_v31(t.values(), t.width(), t.height(), l)),
             Kernel::PerTexel => {
                 let v = stamp.value(fixed::local_f32(l));
                 v.is_finite().then(|| fixed::user_v31(v))
@@ -56,7 +56,7 @@ impl Kernel {
 /// One texel of the program: `old` blended with the value at `l`, clamped to `T`'s range.
 #[inline(always)]
 pub(super) fn texel<T: HeightSample, S: Stamp + ?Sized>(
-    kernel: &Kernel,
+    kernel: &Kernel<'_>,
     stamp: &S,
     op: &FixedBlend,
     l: [i64; 2],
@@ -88,8 +88,8 @@ pub(super) fn apply_prepared<T: HeightSample, S: Stamp + ?Sized>(
     let Some((pieces, frame, op)) = prepared else {
         return Ok(Vec::new());
     };
-    let kernel = Kernel::of(stamp);
-    let fast = Fast::new(&kernel, &frame, &op);
+    let kernel = Kernel::of(&*stamp, &frame);
+    let fast = Fast::new(&kernel, &frame, &op, &pieces);
     let texels: usize = pieces.iter().map(|(r, _)| r.area() as usize).sum();
     let width = map.size().x as usize;
     let grid = map.grid_mut();
@@ -164,7 +164,7 @@ impl Piece<'_> {
     /// Row `j` texel by texel: the program as [`texel`] writes it (any frame, any blend).
     fn row_texels<T: HeightSample, S: Stamp + ?Sized>(
         &self,
-        kernel: &Kernel,
+        kernel: &Kernel<'_>,
         stamp: &S,
         j: usize,
         row: &mut [T],
@@ -178,15 +178,27 @@ impl Piece<'_> {
     /// Row `j` by [`Fast`], in blocks: the values of a block (local coordinates stepped
     /// from the span's first texel, every texel of the span inside: the frame is monotone),
     /// then its blend.
-    fn row_fast<T: HeightSample>(&self, fast: &Fast, j: usize, row: &mut [T]) {
+    fn row_fast<T: HeightSample>(&self, fast: &Fast<'_>, j: usize, row: &mut [T]) {
         let (uy, a, span) = self.span(j);
         let mut v = [0i64; BLOCK];
+        // The separable Gaussian's row factor (local Y depends on the row only).
+        let row_factor = match &fast.eval {
+            Eval::GaussianSep { tables, beta_q, .. } => {
+                tables.factor31(*beta_q, self.frame.local_q(a, uy)[1])
+            }
+            _ => 0,
+        };
         for (k, dst) in row[span].chunks_mut(BLOCK).enumerate() {
-            let l = self.frame.local_q(a + (k * BLOCK) as i32, uy);
+            let ux = a + (k * BLOCK) as i32;
+            let l = self.frame.local_q(ux, uy);
             let v = &mut v[..dst.len()];
             match &fast.eval {
                 Eval::Gaussian(tables, beta_q) => {
                     gaussian_block(tables, *beta_q, l, self.frame.lx, v)
+                }
+                Eval::GaussianSep { cols, i0, .. } => {
+                    let i = (i64::from(ux) - i64::from(self.frame.anchor.x) - i0) as usize;
+                    gaussian_sep_block(&cols[i..i + v.len()], row_factor, v)
                 }
                 Eval::Texture(t) => texture_block(t, l, self.frame.lx, v),
             }
@@ -222,13 +234,25 @@ fn gaussian_block(
     }
 }
 
+/// `fixed::gaussian_sep_v31` of texels whose column factors are `cols` and row factor `row`;
+/// compiled as [`gaussian_block`] is.
+#[multiversion::multiversion(targets(
+    "x86_64+avx512f+avx512bw+avx512vl+avx512dq+avx2+fma",
+    "x86_64+avx2+fma"
+))]
+fn gaussian_sep_block(cols: &[u32], row: u32, out: &mut [i64]) {
+    for (o, &c) in out.iter_mut().zip(cols) {
+        *o = fixed::sep_product(c, row);
+    }
+}
+
 /// `fixed::texture_v31` of `out.len()` texels inside the footprint from local `l`, `step`
 /// apart; compiled as [`gaussian_block`] is.
 #[multiversion::multiversion(targets(
     "x86_64+avx512f+avx512bw+avx512vl+avx512dq+avx2+fma",
     "x86_64+avx2+fma"
 ))]
-fn texture_block(t: &PaddedTexture, l: [i64; 2], step: [i64; 2], out: &mut [i64]) {
+fn texture_block(t: &PaddedTexture<'_>, l: [i64; 2], step: [i64; 2], out: &mut [i64]) {
     // The pixel coordinates (Q33) of `fixed::texture_v31`, stepped: the same integers modulo
     // 2^64 (`(L + i lx + 1) n - 1 = (L + 1) n - 1 + i lx n`).
     let pix = |l: i64, n: u32| {
@@ -244,7 +268,7 @@ fn texture_block(t: &PaddedTexture, l: [i64; 2], step: [i64; 2], out: &mut [i64]
     for (i, o) in out.iter_mut().enumerate() {
         let i = i as i64;
         *o = texture_tap(
-            &t.values,
+            t.values,
             t.stride,
             px.wrapping_add(i.wrapping_mul(dx)),
             pz.wrapping_add(i.wrapping_mul(dz)),
@@ -258,7 +282,7 @@ fn texture_block(t: &PaddedTexture, l: [i64; 2], step: [i64; 2], out: &mut [i64]
     "x86_64+avx512f+avx512bw+avx512vl+avx512dq+avx2+fma",
     "x86_64+avx2+fma"
 ))]
-fn blend_block<T: HeightSample>(fast: &Fast, dst: &mut [T], v: &[i64]) {
+fn blend_block<T: HeightSample>(fast: &Fast<'_>, dst: &mut [T], v: &[i64]) {
     let (m, shift, base) = (fast.m, fast.shift, fast.base);
     let max = T::MAX_RAW as i64;
     let v = &v[..dst.len()];
@@ -318,8 +342,8 @@ fn store<T: HeightSample>(v: i64, max: i64) -> T {
 /// inside: no per-texel test) and a term that is a right shift (every finite placement whose
 /// intensity is below ~2^22 encoding units per unit value); other placements run
 /// [`Piece::row_texels`]. The same integers as [`texel`], bit for bit.
-struct Fast {
-    eval: Eval,
+struct Fast<'a> {
+    eval: Eval<'a>,
     kind: u32,
     /// The term's mantissa and right shift (at most 62).
     m: i64,
@@ -329,19 +353,59 @@ struct Fast {
 }
 
 /// The value of a [`Fast`] kernel.
-enum Eval {
+enum Eval<'a> {
     Gaussian(GaussianTables, u32),
-    Texture(PaddedTexture),
+    /// The separable Gaussian: the factor of every column `i0 + k` (`i` counted from the
+    /// frame's anchor) of the pieces; each row's factor is computed per row.
+    GaussianSep {
+        tables: GaussianTables,
+        beta_q: u32,
+        cols: Vec<u32>,
+        i0: i64,
+    },
+    Texture(PaddedTexture<'a>),
 }
 
-impl Fast {
-    fn new(kernel: &Kernel, frame: &FixedFrame, op: &FixedBlend) -> Option<Self> {
+impl<'a> Fast<'a> {
+    fn new(
+        kernel: &'a Kernel<'_>,
+        frame: &FixedFrame,
+        op: &FixedBlend,
+        pieces: &[(crate::rect::Rect, glam::IVec2)],
+    ) -> Option<Self> {
         if !frame.monotone || op.shift < 0 {
             return None;
         }
         let eval = match kernel {
-            Kernel::Gaussian(beta_q) => Eval::Gaussian(GaussianTables::get(), *beta_q),
-            Kernel::Texture(v, w, h) => Eval::Texture(PaddedTexture::new(v, *w, *h)),
+            Kernel::Gaussian(beta_q, false) => Eval::Gaussian(GaussianTables::get(), *beta_q),
+            Kernel::Gaussian(beta_q, true) => {
+                // Columns i = ux - anchor.x of every piece (unwrapped `[lo, hi)`).
+                let cols = |r: &(crate::rect::Rect, glam::IVec2)| {
+                    let lo = i64::from(r.0.min.x + r.1.x) - i64::from(frame.anchor.x);
+                    (lo, lo + i64::from(r.0.size.x))
+                };
+                let i0 = pieces.iter().map(|r| cols(r).0).min()?;
+                let i1 = pieces.iter().map(|r| cols(r).1).max()?;
+                let tables = GaussianTables::get();
+                let cols = (i0..i1)
+                    .map(|i| {
+                        let l = frame.l0[0].wrapping_add(i.wrapping_mul(frame.lx[0]));
+                        tables.factor31(*beta_q, l)
+                    })
+                    .collect();
+                Eval::GaussianSep {
+                    tables,
+                    beta_q: *beta_q,
+                    cols,
+                    i0,
+                }
+            }
+            Kernel::Texture(t) => Eval::Texture(PaddedTexture {
+                values: t.padded(),
+                w: t.width(),
+                h: t.height(),
+                stride: t.width() as usize + 2,
+            }),
             Kernel::PerTexel => return None,
         };
         Some(Self {
@@ -354,34 +418,15 @@ impl Fast {
     }
 }
 
-/// Quantised texture values with a border of one copied pixel on every side: the clamped
-/// lookups of `fixed::texture_v31` without a clamp (inside the footprint a pixel index is within
-/// `[-1, n]`).
-struct PaddedTexture {
-    values: Vec<i32>,
+/// Quantised texture values with a border of one copied pixel on every side
+/// ([`QuantizedTexture`]'s): the clamped lookups of `fixed::texture_v31` without a clamp
+/// (inside the footprint a pixel index is within `[-1, n]`).
+struct PaddedTexture<'a> {
+    values: &'a [i32],
     w: u32,
     h: u32,
     /// Row length of `values` (`w + 2`).
     stride: usize,
-}
-
-impl PaddedTexture {
-    fn new(values: &[i32], w: u32, h: u32) -> Self {
-        let stride = w as usize + 2;
-        let mut padded = Vec::with_capacity(stride * (h as usize + 2));
-        for z in -1..=h as i64 {
-            let row = &values[z.clamp(0, i64::from(h) - 1) as usize * w as usize..][..w as usize];
-            padded.push(row[0]);
-            padded.extend_from_slice(row);
-            padded.push(row[w as usize - 1]);
-        }
-        Self {
-            values: padded,
-            w,
-            h,
-            stride,
-        }
-    }
 }
 
 /// `fixed::texture_v31` at the pixel coordinates (Q33) `px`, `pz` of a texel inside.

@@ -181,6 +181,9 @@ pub enum StampKernel<'a> {
     /// the footprint, as [`TextureStamp`] samples: evaluated by the exact program ([`fixed`]:
     /// values quantised to Q24, weights to Q12), row-parallel.
     Texture(&'a Grid<f32>),
+    /// As [`StampKernel::Texture`], with the values already quantised (a stamp applied often
+    /// keeps them, as [`TextureStamp`] does, instead of quantising them per placement).
+    Quantized(&'a fixed::QuantizedTexture),
     /// [`Stamp::value`] for every texel, on the calling thread.
     PerTexel,
 }
@@ -190,24 +193,36 @@ pub enum StampKernel<'a> {
 /// Which end is an impression: values run from 0 (black) to 1 (white) and are multiplied by
 /// the intensity, so white is the full effect and black none. A footprint image is white where
 /// the foot presses hardest and is applied with a negative intensity.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Clone)]
 pub struct TextureStamp {
     values: Grid<f32>,
+    /// The values quantised for the exact program, made by the first placement.
+    quantized: std::sync::OnceLock<fixed::QuantizedTexture>,
+}
+
+impl PartialEq for TextureStamp {
+    fn eq(&self, other: &Self) -> bool {
+        self.values == other.values
+    }
+}
+
+impl std::fmt::Debug for TextureStamp {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TextureStamp")
+            .field("values", &self.values)
+            .finish_non_exhaustive()
+    }
 }
 
 impl TextureStamp {
     /// From an 8-bit image: value = pixel / 255.
     pub fn from_gray8(image: &Grid<u8>) -> Self {
-        Self {
-            values: image.map(|&v| f32::from(v) / 255.0),
-        }
+        Self::new(image.map(|&v| f32::from(v) / 255.0))
     }
 
     /// From a 16-bit image: value = pixel / 65535.
     pub fn from_gray16(image: &Grid<u16>) -> Self {
-        Self {
-            values: image.map(|&v| f32::from(v) / 65535.0),
-        }
+        Self::new(image.map(|&v| f32::from(v) / 65535.0))
     }
 
     /// From any finite values (a dynamic texture such as the shockwave's displacement).
@@ -218,7 +233,14 @@ impl TextureStamp {
                 value: bad,
             });
         }
-        Ok(Self { values })
+        Ok(Self::new(values))
+    }
+
+    fn new(values: Grid<f32>) -> Self {
+        Self {
+            values,
+            quantized: std::sync::OnceLock::new(),
+        }
     }
 
     /// The stamp's values.
@@ -229,7 +251,10 @@ impl TextureStamp {
 
 impl Stamp for TextureStamp {
     fn kernel(&self) -> StampKernel<'_> {
-        StampKernel::Texture(&self.values)
+        StampKernel::Quantized(
+            self.quantized
+                .get_or_init(|| fixed::QuantizedTexture::new(&self.values)),
+        )
     }
 
     fn value(&self, local: Vec2) -> f32 {
@@ -557,7 +582,7 @@ pub fn apply_stamp_reference<T: HeightSample, S: Stamp + ?Sized>(
     let Some((pieces, frame, op)) = prepare_stamp(map, stamp, placement, blend, None)? else {
         return Ok(Vec::new());
     };
-    let kernel = kernels::Kernel::of(stamp);
+    let kernel = kernels::Kernel::of(stamp, &frame);
     let grid = map.grid_mut();
     for &(rect, offset) in &pieces {
         for y in rect.min.y..rect.max().y {

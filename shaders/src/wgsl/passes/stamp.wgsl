@@ -170,20 +170,37 @@ fn inside1(l: vec2<u32>) -> bool {
     return hi >= -1 && (hi < 1 || (hi == 1 && l.x == 0u));
 }
 
-fn gaussian_v31(lx: vec2<u32>, ly: vec2<u32>) -> vec2<u32> {
-    let ax = u32(abs(i32(sar64(lx, 8u).x)));
-    let ay = u32(abs(i32(sar64(ly, 8u).x)));
-    let r2 = shr64(add64(mul32(ax, ax), mul32(ay, ay)), 18u).x;
-    let t64 = shr64(mul32(p.beta_q, r2), 27u);
+// exp(-t) 2^31 from the three tables, t = beta x^2 in Q26 as (lo, hi); 0 from EXP_T_LIMIT.
+fn exp_q31(t64: vec2<u32>) -> u32 {
     if t64.y != 0u || t64.x >= EXP_T_LIMIT {
-        return vec2<u32>(0u, 0u);
+        return 0u;
     }
     let t = t64.x;
     let hi = exp_table[t >> 20u];
     let mid = exp_table[EXP_HI_LEN + ((t >> 10u) & 1023u)];
     let lo = exp_table[EXP_HI_LEN + 1024u + (t & 1023u)];
     let hm = shr64(mul32(hi, mid), 31u).x;
-    return vec2<u32>(shr64(mul32(hm, lo), 31u).x, 0u);
+    return shr64(mul32(hm, lo), 31u).x;
+}
+
+// One axis's factor of the separable Gaussian (terrain-core's gaussian_factor31).
+fn gaussian_factor31(l: vec2<u32>) -> u32 {
+    let a = u32(abs(i32(sar64(l, 8u).x)));
+    let x2 = shr64(mul32(a, a), 18u).x;
+    return exp_q31(shr64(mul32(p.beta_q, x2), 27u));
+}
+
+// The separable Gaussian (an unrotated frame: lxy == 0 and lyx == 0): (fx fy + 2^30) >> 31.
+fn gaussian_sep_v31(lx: vec2<u32>, ly: vec2<u32>) -> vec2<u32> {
+    let prod = add64(mul32(gaussian_factor31(lx), gaussian_factor31(ly)), vec2<u32>(0x40000000u, 0u));
+    return shr64(prod, 31u);
+}
+
+fn gaussian_v31(lx: vec2<u32>, ly: vec2<u32>) -> vec2<u32> {
+    let ax = u32(abs(i32(sar64(lx, 8u).x)));
+    let ay = u32(abs(i32(sar64(ly, 8u).x)));
+    let r2 = shr64(add64(mul32(ax, ax), mul32(ay, ay)), 18u).x;
+    return vec2<u32>(exp_q31(shr64(mul32(p.beta_q, r2), 27u)), 0u);
 }
 
 fn tex_at(x: i32, y: i32) -> vec2<u32> {
@@ -251,7 +268,14 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     var v31: vec2<u32>;
     switch p.kind {
-        case STAMP_GAUSSIAN: { v31 = gaussian_v31(lx, ly); }
+        case STAMP_GAUSSIAN: {
+            // terrain-core's gaussian_separable, from the frame's integers.
+            if all(p.lxy == vec2<u32>(0u, 0u)) && all(p.lyx == vec2<u32>(0u, 0u)) {
+                v31 = gaussian_sep_v31(lx, ly);
+            } else {
+                v31 = gaussian_v31(lx, ly);
+            }
+        }
         case STAMP_TEXTURE: { v31 = texture_v31(lx, ly); }
         default: {
             let scale = 1.0 / 16777216.0;
