@@ -184,11 +184,15 @@ impl FsStore {
             for (path, kind, name) in read_dir(&dir)? {
                 match kind {
                     EntryKind::Dir if !name.starts_with('.') => stack.push(path),
-                    EntryKind::File if is_writer_temp(&name) => match fs::remove_file(&path) {
-                        Ok(()) => removed += 1,
-                        Err(e) if e.kind() == io::ErrorKind::NotFound => {}
-                        Err(source) => return Err(CacheError::Io { path, source }),
-                    },
+                    // This process's own temp files may belong to writes in flight through
+                    // another store over the same folder (stores in one process share the lock).
+                    EntryKind::File if is_writer_temp(&name) && !is_own_temp(&name) => {
+                        match fs::remove_file(&path) {
+                            Ok(()) => removed += 1,
+                            Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+                            Err(source) => return Err(CacheError::Io { path, source }),
+                        }
+                    }
                     _ => {}
                 }
             }
@@ -284,6 +288,15 @@ fn is_writer_temp(name: &str) -> bool {
         p.is_some_and(|p| !p.is_empty() && p.len() <= 20 && p.bytes().all(|b| b.is_ascii_digit()))
     };
     digits(parts.next()) && digits(parts.next()) && parts.next().is_some_and(|n| !n.is_empty())
+}
+
+/// Whether the writer temp file `name` was made by this process (`.{name}.{pid}.{n}.tmp`).
+fn is_own_temp(name: &str) -> bool {
+    let pid = std::process::id().to_string();
+    name.strip_suffix(".tmp")
+        .and_then(|rest| rest.rsplit_once('.'))
+        .and_then(|(rest, _n)| rest.rsplit_once('.'))
+        .is_some_and(|(_, p)| p == pid)
 }
 
 /// Entries of `dir` as (path, kind, name); a missing folder has none.
@@ -537,12 +550,15 @@ pub(crate) mod tests {
                 "{name} was removed from a non-world"
             );
         }
+        // This process's own temps may be writes in flight of another store: kept.
+        let own = format!("height/00/.0002.tile.{}.5.tmp", std::process::id());
+        fs::write(dir.join(&own), b"x").unwrap();
         // Now it has our lock file: the writer's temps go, nothing else does.
         drop(FsStore::open(&dir).unwrap());
         for name in temps {
             assert!(!dir.join(name).exists(), "{name} was kept");
         }
-        for name in kept {
+        for name in kept.iter().copied().chain([own.as_str()]) {
             assert!(dir.join(name).exists(), "{name} was removed");
         }
         #[cfg(unix)]

@@ -281,7 +281,9 @@ fn lone_compile_fail(path: &str, text: &str) -> Vec<Problem> {
                 problems.push(Problem {
                     path: path.to_owned(),
                     line: block.line,
-                    message: "a compile_fail doctest needs a companion: the next block of the                               comment must compile and differ from it in one line (the reason                               it fails), or any stale call would pass it"
+                    message: "a compile_fail doctest needs a companion: the next block of the comment must compile \
+                              and differ from it in one line (the reason it fails), or any stale call \
+                              would pass it"
                         .into(),
                 });
             }
