@@ -15,10 +15,13 @@ pub const REQUIRE_GPU_ENV: &str = "TERRAIN_REQUIRE_GPU";
 /// # Panics
 /// When no adapter exists and `TERRAIN_REQUIRE_GPU=1`: CI must not silently skip GPU tests.
 pub fn context_or_skip(test: &str) -> Option<GpuContext> {
-    arm_watchdog_from_env();
     crate::device::trace::progress();
     match GpuContext::new_headless() {
-        Ok(ctx) => Some(ctx),
+        Ok(ctx) => {
+            // Armed only where GPU work runs: a binary that skips has nothing to watch.
+            arm_watchdog_from_env();
+            Some(ctx)
+        }
         Err(e) => {
             if std::env::var(REQUIRE_GPU_ENV).is_ok_and(|v| v == "1") {
                 panic!("{test}: {REQUIRE_GPU_ENV}=1 but no GPU context: {e}");
@@ -50,7 +53,8 @@ fn arm_watchdog_from_env() {
 
 /// Arms (once per process; later calls keep the first limit) a watchdog thread that fires when
 /// neither a GPU operation at a waiting point (submits of downloads, maps, polls) nor a test
-/// start ([`context_or_skip`]) happened for `limit`. It then prints, on stderr, the last GPU
+/// start ([`context_or_skip`]) happened for `limit`. [`context_or_skip`] arms it once a
+/// context exists, so a binary whose tests all skip is never watched. It then prints, on stderr, the last GPU
 /// operations and every thread's stack (through `gdb`, else `eu-stack`, else each thread's
 /// name, state and kernel wait channel from `/proc`), and aborts the process, so the test
 /// binary fails instead of hanging until an outer timeout kills it without a trace.
@@ -77,8 +81,20 @@ pub fn arm_watchdog(limit: std::time::Duration) {
     });
 }
 
-/// Prints what the process was doing and aborts it.
+/// How long one stack-dumping tool may take: attaching to a thread stuck in the kernel (a
+/// driver call in uninterruptible sleep) may never complete.
+const TOOL_LIMIT: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// Prints what the process was doing and aborts it (a backstop aborts anyway if printing
+/// itself hangs).
 fn fire(idle_ms: u64) -> ! {
+    let _ = std::thread::Builder::new()
+        .name("terrain-watchdog-backstop".into())
+        .spawn(|| {
+            std::thread::sleep(3 * TOOL_LIMIT);
+            eprintln!("=== terrain-gpu watchdog: the dump itself hung; aborting ===");
+            std::process::abort()
+        });
     let pid = std::process::id();
     eprintln!(
         "\n=== terrain-gpu watchdog: no progress for {:.1} s (pid {pid}) ===",
@@ -116,11 +132,7 @@ fn print_stacks(pid: u32) -> bool {
         ("eu-stack", vec!["-p", &pid]),
     ];
     for (tool, args) in tools {
-        let Ok(out) = std::process::Command::new(tool)
-            .args(&args)
-            .stdin(std::process::Stdio::null())
-            .output()
-        else {
+        let Some(out) = run_bounded(tool, &args) else {
             continue;
         };
         let text = String::from_utf8_lossy(&out.stdout);
@@ -134,6 +146,49 @@ fn print_stacks(pid: u32) -> bool {
         );
     }
     false
+}
+
+/// Runs `tool` with `args`, its output to temp files, killed after [`TOOL_LIMIT`]; `None` when
+/// it could not start or did not finish.
+fn run_bounded(tool: &str, args: &[&str]) -> Option<std::process::Output> {
+    let dir = std::env::temp_dir();
+    let tag = format!("terrain-watchdog-{}-{tool}", std::process::id());
+    let (out_path, err_path) = (
+        dir.join(format!("{tag}.out")),
+        dir.join(format!("{tag}.err")),
+    );
+    let mut child = std::process::Command::new(tool)
+        .args(args)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::fs::File::create(&out_path).ok()?)
+        .stderr(std::fs::File::create(&err_path).ok()?)
+        .spawn()
+        .ok()?;
+    let started = std::time::Instant::now();
+    let status = loop {
+        match child.try_wait() {
+            Ok(Some(status)) => break status,
+            Ok(None) if started.elapsed() < TOOL_LIMIT => {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+            _ => {
+                let _ = child.kill();
+                let _ = child.wait();
+                eprintln!("({tool} did not finish within {} s)", TOOL_LIMIT.as_secs());
+                return None;
+            }
+        }
+    };
+    let read = |p: &std::path::Path| {
+        let bytes = std::fs::read(p).unwrap_or_default();
+        let _ = std::fs::remove_file(p);
+        bytes
+    };
+    Some(std::process::Output {
+        status,
+        stdout: read(&out_path),
+        stderr: read(&err_path),
+    })
 }
 
 /// Without a debugger: each thread's name, state and kernel wait channel (where it sleeps).
