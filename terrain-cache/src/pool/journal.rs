@@ -38,16 +38,25 @@ pub(crate) fn end(world: &World, id: TileId) -> Result<(), CacheError> {
 }
 
 /// Rebuilds the ancestors of every tile a write-back in progress left in the journal (a
-/// writer that died), then clears those entries; returns how many tiles were recovered. An
-/// entry naming no tile of this world is removed as well.
+/// writer that died, or a write-back that failed), then clears those entries; returns how many
+/// tiles were recovered. An entry naming no tile of this world is removed as well. An entry
+/// whose ancestors cannot be rebuilt (its tile is damaged) stays, logged: the pool still
+/// starts, and `repair_world` or a later write-back of the tile settles it.
 pub(crate) fn recover(world: &World) -> Result<usize, CacheError> {
     let m = world.manifest();
     let mut recovered = 0;
     for entry in world.store().list(PREFIX)? {
         if let Some(id) = parse(&entry).filter(|&id| m.check_tile(crate::Layer::Height, id).is_ok())
         {
-            rebuild_ancestors(world, &[id])?;
-            recovered += 1;
+            match rebuild_ancestors(world, &[id]) {
+                Ok(_) => recovered += 1,
+                // Nothing can be written: not ours to settle.
+                Err(e @ CacheError::ReadOnly { .. }) => return Err(e),
+                Err(e) => {
+                    tracing::warn!(%id, error = %e, "interrupted write-back not recovered");
+                    continue;
+                }
+            }
         }
         world.store().remove(&entry)?;
     }
