@@ -430,6 +430,33 @@ impl ObjectTileStore {
             .len()
     }
 
+    /// The versions' clock now: a read notes it before its GET.
+    fn version_clock(&self) -> u64 {
+        self.versions
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .tick
+    }
+
+    /// [`remember`](Self::remember) for a read whose GET started at `started` (the clock):
+    /// skipped when the key was set since (a write, or a later read, saw a newer state; the
+    /// older answer arriving last must not replace it, or the next write would conflict with
+    /// our own).
+    fn remember_read(&self, key: &str, seen: Option<Seen>, started: u64) {
+        if !self.config.conflict_detection {
+            return;
+        }
+        let mut versions = self.versions.lock().unwrap_or_else(PoisonError::into_inner);
+        if versions
+            .map
+            .get(key)
+            .is_some_and(|(_, set_at)| *set_at > started)
+        {
+            return;
+        }
+        versions.set(key, seen, self.config.version_capacity);
+    }
+
     fn remember(&self, key: &str, seen: Option<Seen>) {
         if self.config.conflict_detection {
             self.versions
@@ -560,13 +587,14 @@ impl ObjectTileStore {
 
 impl TileStore for ObjectTileStore {
     fn read(&self, key: &str, max_len: u64) -> Result<Option<Vec<u8>>, CacheError> {
+        let started = self.version_clock();
         match self.fetch(key, max_len)? {
             Some((bytes, seen)) => {
-                self.remember(key, seen);
+                self.remember_read(key, seen, started);
                 Ok(Some(bytes))
             }
             None => {
-                self.remember(key, Some(Seen::Absent));
+                self.remember_read(key, Some(Seen::Absent), started);
                 Ok(None)
             }
         }
@@ -773,6 +801,20 @@ mod tests {
         b.forget_version("t");
         b.write("t", b"b5").unwrap();
         assert_eq!(a.read("t", 100).unwrap().unwrap(), b"b5");
+    }
+
+    #[test]
+    fn a_read_answered_after_a_write_does_not_replace_the_writes_version() {
+        let s = shared(&Arc::new(object_store::memory::InMemory::new()), 8);
+        let started = s.version_clock();
+        s.remember("k", Some(Seen::Absent));
+        // A GET that began before that write and answers after it: ignored.
+        s.remember_read("k", None, started);
+        assert_eq!(s.versions.lock().unwrap().get("k"), Some(&Seen::Absent));
+        // One that began after it is taken.
+        let later = s.version_clock();
+        s.remember_read("k", None, later);
+        assert_eq!(s.versions.lock().unwrap().get("k"), None);
     }
 
     #[test]
