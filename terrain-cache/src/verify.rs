@@ -12,9 +12,10 @@
 //!   never stored: no file *means* the zero tile. So a missing file is valid exactly where the
 //!   zero tile is the right content:
 //!   - at a coarser level, where the reduction of its children is all fill;
-//!   - at level 0, where level 0's `bounds.bin` records the tile as `[fill, fill]` (or has no
-//!     entry for it, `[u16::MAX, 0]`); a missing file whose recorded bounds are anything else
-//!     is a lost tile;
+//!   - at level 0, where level 0's `bounds.bin` records the tile as `[fill, fill]`; a missing
+//!     file whose recorded bounds are anything else is a lost tile, except an entry never
+//!     written (`[u16::MAX, 0]`): the tile is then taken as the zero tile and the entry is
+//!     reported as a `bounds.bin` defect (repairable), not as a lost tile;
 //!   - in the detail layer, always: detail tiles are the zero deformation until first written.
 //! - **Coarser levels** equal the reduction of their children bit for bit (the 2x2 mean
 //!   rounded to nearest, clamped padding beyond the level's size, exactly as the builder
