@@ -597,6 +597,32 @@ pub fn rebuild_ancestors(world: &World, changed: &[TileId]) -> Result<Vec<TileId
     Ok(rewritten)
 }
 
+/// How many times [`rebuild_ancestors`] is run again after a [`CacheError::Conflict`].
+const CONFLICT_RETRIES: u32 = 8;
+
+/// [`rebuild_ancestors`] for a store shared with other writers (a bucket with conflict
+/// detection): a coarser tile or `bounds.bin` that another writer changed since this store
+/// last saw it is refused with [`CacheError::Conflict`]; the key is then read again (the
+/// store learns its new version) and the ancestors are recomputed from the children as they
+/// are now, which include the other writer's, up to [`CONFLICT_RETRIES`] times. Derived data
+/// is never a conflict to report: it only has to be recomputed.
+pub fn rebuild_ancestors_shared(
+    world: &World,
+    changed: &[TileId],
+) -> Result<Vec<TileId>, CacheError> {
+    let mut retries = 0;
+    loop {
+        match rebuild_ancestors(world, changed) {
+            Err(CacheError::Conflict { key }) if retries < CONFLICT_RETRIES => {
+                retries += 1;
+                tracing::debug!(%key, retries, "derived tile changed by another writer");
+                world.store().read(&key, u64::MAX)?;
+            }
+            done => return done,
+        }
+    }
+}
+
 fn level_bounds<'a>(
     world: &World,
     cache: &'a mut [Option<LevelBounds>],

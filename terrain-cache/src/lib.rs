@@ -88,7 +88,7 @@ pub use world::{LevelBounds, TileRead, World};
 pub mod build;
 pub use build::{
     BuildProgress, BuildReport, MapSource, ProceduralSource, Raw16Source, TileSource, build_world,
-    rebuild_ancestors, reduce_levels,
+    rebuild_ancestors, rebuild_ancestors_shared, reduce_levels,
 };
 pub mod policy;
 pub mod pool;

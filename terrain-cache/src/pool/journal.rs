@@ -6,7 +6,7 @@
 //! of every entry it finds, so a world whose owner died mid-write-back is consistent again as
 //! soon as another process takes it over.
 
-use crate::build::rebuild_ancestors;
+use crate::build::rebuild_ancestors_shared;
 use crate::{CacheError, TileId, World};
 
 /// The store folder of the entries.
@@ -48,7 +48,7 @@ pub(crate) fn recover(world: &World) -> Result<usize, CacheError> {
     for entry in world.store().list(PREFIX)? {
         if let Some(id) = parse(&entry).filter(|&id| m.check_tile(crate::Layer::Height, id).is_ok())
         {
-            match rebuild_ancestors(world, &[id]) {
+            match rebuild_ancestors_shared(world, &[id]) {
                 Ok(_) => recovered += 1,
                 // Nothing can be written: not ours to settle.
                 Err(e @ CacheError::ReadOnly { .. }) => return Err(e),

@@ -66,7 +66,8 @@ pub struct PoolConfig {
     /// writes back only on eviction and [`RamPool::flush`].
     pub write_back_idle_frames: Option<u64>,
     /// After writing back height tiles, refresh their coarser ancestors on disk
-    /// ([`rebuild_ancestors`](crate::build::rebuild_ancestors)) on the writer thread.
+    /// ([`rebuild_ancestors_shared`](crate::build::rebuild_ancestors_shared)) on the writer
+    /// thread.
     pub propagate_to_coarser: bool,
     /// A failed tile is retried after this many frames.
     pub retry_failed_frames: u64,

@@ -5,7 +5,7 @@
 
 use super::journal;
 use crate::CacheError;
-use crate::build::rebuild_ancestors;
+use crate::build::rebuild_ancestors_shared;
 use crate::tile::{Layer, TileData, TileId};
 use crate::world::World;
 use crossbeam_channel::{Receiver, Sender};
@@ -114,7 +114,7 @@ pub(crate) fn writer(
             // writer (journal.rs).
             journal::begin(&world, job.id)
                 .and_then(|_| world.write_tile(layer, job.id, &job.data))
-                .and_then(|_| rebuild_ancestors(&world, &[job.id]))
+                .and_then(|_| rebuild_ancestors_shared(&world, &[job.id]))
                 .and_then(|rebuilt| journal::end(&world, job.id).map(|_| rebuilt))
         } else {
             world
