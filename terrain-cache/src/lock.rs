@@ -73,45 +73,45 @@ pub(crate) fn lock_world(dir: &Path) -> Result<Arc<WorldLock>, CacheError> {
         move |source| CacheError::Io { path, source }
     };
     let canonical = dir.canonicalize().map_err(io_err(dir))?;
-    let mut held = held();
-    let held = held.get_or_insert_with(HashMap::new);
-    if let Some(lock) = held.get(&canonical).and_then(Weak::upgrade) {
-        return Ok(lock);
-    }
-    // An entry that no longer upgrades is this process's own lock being dropped right now: its
-    // release is a moment away, so wait for it instead of refusing ourselves.
-    let ours_dying = held.contains_key(&canonical);
     let path = canonical.join(LOCK_FILE);
-    let mut file = open_lock_file(&path).map_err(io_err(&path))?;
-    // Our own dying lock is released within moments; never a blocking wait, since another
-    // process may take the lock in between.
-    let tries = if ours_dying { 200 } else { 1 };
-    let mut attempt = file.try_lock();
-    for _ in 1..tries {
-        if !matches!(attempt, Err(TryLockError::WouldBlock)) {
-            break;
+    let mut waits = 0;
+    loop {
+        let mut guard = held();
+        let held = guard.get_or_insert_with(HashMap::new);
+        if let Some(lock) = held.get(&canonical).and_then(Weak::upgrade) {
+            return Ok(lock);
         }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-        attempt = file.try_lock();
-    }
-    match attempt {
-        Ok(()) => {}
-        Err(TryLockError::WouldBlock) => {
-            return Err(CacheError::WorldLocked {
-                dir: canonical,
-                owner: read_owner(&mut file),
-            });
+        // An entry that no longer upgrades is this process's own lock being dropped right
+        // now: its release is a moment away. It is waited for (at most 1 s, polling with the
+        // registry released, so other folders' opens go on), never with a blocking lock,
+        // since another process may take the lock in between.
+        let ours_dying = held.contains_key(&canonical);
+        let mut file = open_lock_file(&path).map_err(io_err(&path))?;
+        match file.try_lock() {
+            Ok(()) => {
+                // Ours now: whatever an earlier (dead) owner wrote is replaced by who we are.
+                write_owner(&mut file).map_err(io_err(&path))?;
+                let lock = Arc::new(WorldLock {
+                    file,
+                    dir: canonical.clone(),
+                });
+                held.insert(canonical, Arc::downgrade(&lock));
+                return Ok(lock);
+            }
+            Err(TryLockError::WouldBlock) if ours_dying && waits < 200 => {
+                drop(guard);
+                waits += 1;
+                std::thread::sleep(std::time::Duration::from_millis(5));
+            }
+            Err(TryLockError::WouldBlock) => {
+                return Err(CacheError::WorldLocked {
+                    dir: canonical,
+                    owner: read_owner(&mut file),
+                });
+            }
+            Err(TryLockError::Error(source)) => return Err(CacheError::Io { path, source }),
         }
-        Err(TryLockError::Error(source)) => return Err(CacheError::Io { path, source }),
     }
-    // Ours now: whatever an earlier (dead) owner wrote is replaced by who we are.
-    write_owner(&mut file).map_err(io_err(&path))?;
-    let lock = Arc::new(WorldLock {
-        file,
-        dir: canonical.clone(),
-    });
-    held.insert(canonical, Arc::downgrade(&lock));
-    Ok(lock)
 }
 
 /// Opens (creating) the lock file without following a link there and refusing anything but a
