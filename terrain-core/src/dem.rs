@@ -31,8 +31,9 @@ use crate::grid::Grid;
 use crate::io::{self, ByteOrder, MapIoError, ReadLimits, open_regular};
 use crate::map::{HeightEncoding, HeightSample};
 use glam::UVec2;
-use std::io::Read;
-use std::path::Path;
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
 
 /// Floats at least this large in magnitude are nodata: tools without a nodata tag mark holes
 /// with `f32::MIN` (-3.4e38) or 1e38, and no height in metres comes near.
@@ -178,18 +179,27 @@ pub fn resolve_format(
     options: &DemOptions,
 ) -> Result<DemFormat, MapIoError> {
     let path = path.as_ref();
-    let file = open_regular(path)?;
+    resolve_format_of(&open_regular(path)?, path, options)
+}
+
+/// [`resolve_format`] of a file already open (its first bytes are read through `file`; `path`
+/// gives the extension and names the file in errors, and is never opened).
+fn resolve_format_of(
+    file: &File,
+    path: &Path,
+    options: &DemOptions,
+) -> Result<DemFormat, MapIoError> {
     let format = match options.format.or_else(|| DemFormat::from_extension(path)) {
         Some(f) => f,
         None => {
+            let io_err = |source| MapIoError::Io {
+                path: path.to_path_buf(),
+                source,
+            };
             let mut head = [0u8; 8];
-            let n = file
-                .take(8)
-                .read(&mut head)
-                .map_err(|source| MapIoError::Io {
-                    path: path.to_path_buf(),
-                    source,
-                })?;
+            let mut f = file;
+            f.seek(SeekFrom::Start(0)).map_err(io_err)?;
+            let n = f.take(8).read(&mut head).map_err(io_err)?;
             match &head[..n] {
                 [0x89, b'P', b'N', b'G', ..] => DemFormat::Png,
                 [b'I', b'I', 42 | 43, 0, ..] | [b'M', b'M', 0, 42 | 43, ..] => DemFormat::GeoTiff,
@@ -213,74 +223,160 @@ pub fn resolve_format(
     }
 }
 
+/// A DEM file opened once: its format and size are measured through the open handle, and
+/// [`DemFile::read`] decodes the samples from that same handle, so the file read is the file
+/// measured even if the path is replaced in between (a caller plans memory from
+/// [`DemFile::size`], then reads). The read is bounded by the measured size: a file rewritten
+/// in place to a larger image is refused from its header ([`MapIoError::TooLarge`] or
+/// [`MapIoError::TooManySamples`]) before any larger buffer exists, and one that decodes to
+/// another size is [`MapIoError::Corrupt`].
+#[derive(Debug)]
+pub struct DemFile {
+    file: File,
+    path: PathBuf,
+    options: DemOptions,
+    format: DemFormat,
+    size: UVec2,
+}
+
+impl DemFile {
+    /// Opens the DEM file at `path` (a regular file only: see [`resolve_format`] for the
+    /// checks and how the format is chosen) and reads its size from its header (or, for a
+    /// headerless file, takes the size given, checked against the file's length), without
+    /// reading its samples.
+    pub fn open(path: impl AsRef<Path>, options: &DemOptions) -> Result<Self, MapIoError> {
+        let path = path.as_ref();
+        let file = open_regular(path)?;
+        let format = resolve_format_of(&file, path, options)?;
+        let limits = &options.limits;
+        let size = match (format, options.raw_size) {
+            (DemFormat::Png, _) => io::read_png_size_from_file(&file, path, limits)?,
+            (DemFormat::GeoTiff, _) => geotiff::read_geotiff_size_from_file(&file, path, limits)?,
+            (DemFormat::Raw16, Some(size)) => {
+                io::check_raw_from_file(&file, path, size, 2, limits)?;
+                size
+            }
+            (DemFormat::R32, Some(size)) => {
+                io::check_raw_from_file(&file, path, size, 4, limits)?;
+                size
+            }
+            (f, None) => return Err(MapIoError::RawSizeRequired { format: f.name() }),
+        };
+        Ok(Self {
+            file,
+            path: path.to_path_buf(),
+            options: *options,
+            format,
+            size,
+        })
+    }
+
+    /// The path it was opened from (for messages: it is never opened again).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Its format.
+    pub fn format(&self) -> DemFormat {
+        self.format
+    }
+
+    /// Its size in samples, as measured when it was opened.
+    pub fn size(&self) -> UVec2 {
+        self.size
+    }
+
+    /// Reads the DEM through the handle opened by [`DemFile::open`] (from its start, the path
+    /// is not opened again): its heights with nodata filled, and what the file says about
+    /// them. Each reader checks the file as [`crate::io`] and [`crate::geotiff`] describe,
+    /// within the measured size.
+    pub fn read(self) -> Result<Dem, MapIoError> {
+        let Self {
+            file,
+            path,
+            options,
+            format,
+            size,
+        } = self;
+        let path = path.as_path();
+        let limits = ReadLimits {
+            max_side: options.limits.max_side.min(size.max_element()),
+            max_samples: options
+                .limits
+                .max_samples
+                .min(u64::from(size.x) * u64::from(size.y)),
+        };
+        let limits = &limits;
+        let stored = |grid: Grid<f32>, sample, full_scale| Dem {
+            heights: grid,
+            format,
+            sample,
+            units: HeightUnits::Stored { full_scale },
+            nodata: None,
+            georeference: None,
+        };
+        let dem = match (format, options.raw_size) {
+            (DemFormat::Png, _) => match io::read_png_from_file(&file, path, limits, None)? {
+                io::GrayImage::Gray8(g) => stored(g.map(|&v| f32::from(v)), SampleType::U8, 255),
+                io::GrayImage::Gray16(g) => {
+                    stored(g.map(|&v| f32::from(v)), SampleType::U16, 65535)
+                }
+            },
+            (DemFormat::Raw16, Some(size)) => {
+                let g = io::read_raw16_from_file(&file, path, size, options.byte_order, limits)?;
+                stored(g.map(|&v| f32::from(v)), SampleType::U16, 65535)
+            }
+            (DemFormat::R32, Some(size)) => {
+                let mut heights =
+                    io::read_r32_from_file(&file, path, size, options.byte_order, limits)?;
+                let nodata = fill_nodata(heights.as_mut_slice(), None)?;
+                Dem {
+                    heights,
+                    format,
+                    sample: SampleType::F32,
+                    units: HeightUnits::Metres,
+                    nodata,
+                    georeference: None,
+                }
+            }
+            (DemFormat::GeoTiff, _) => {
+                Dem::from_geotiff(geotiff::read_geotiff_from_file(&file, path, limits)?)?
+            }
+            (f, None) => return Err(MapIoError::RawSizeRequired { format: f.name() }),
+        };
+        if dem.size() != size {
+            return Err(MapIoError::Corrupt {
+                reason: format!(
+                    "{} changed while it was open: measured as {}x{}, decoded as {}x{}",
+                    path.display(),
+                    size.x,
+                    size.y,
+                    dem.size().x,
+                    dem.size().y
+                ),
+            });
+        }
+        Ok(dem)
+    }
+}
+
 /// The format and size of a DEM file from its header (or, for a headerless file, the size
 /// given, checked against the file's length), without reading its samples: to plan memory
-/// before reading it. See [`resolve_format`] for how the format is chosen.
+/// before reading it. See [`resolve_format`] for how the format is chosen. To read the file
+/// measured, keep the [`DemFile`] this opens instead.
 pub fn dem_size(
     path: impl AsRef<Path>,
     options: &DemOptions,
 ) -> Result<(DemFormat, UVec2), MapIoError> {
-    let path = path.as_ref();
-    let format = resolve_format(path, options)?;
-    let limits = &options.limits;
-    let size = match (format, options.raw_size) {
-        (DemFormat::Png, _) => io::read_png_size(path, limits)?,
-        (DemFormat::GeoTiff, _) => geotiff::read_geotiff_size(path, limits)?,
-        (DemFormat::Raw16, Some(size)) => {
-            io::check_raw_file(path, size, 2, limits)?;
-            size
-        }
-        (DemFormat::R32, Some(size)) => {
-            io::check_raw_file(path, size, 4, limits)?;
-            size
-        }
-        (f, None) => return Err(MapIoError::RawSizeRequired { format: f.name() }),
-    };
-    Ok((format, size))
+    let file = DemFile::open(path, options)?;
+    Ok((file.format(), file.size()))
 }
 
 /// Reads a DEM file: its heights with nodata filled, and what the file says about them. See
 /// [`resolve_format`] for how the format is chosen; each reader checks the file as
-/// [`crate::io`] and [`crate::geotiff`] describe.
+/// [`crate::io`] and [`crate::geotiff`] describe. The file is opened once ([`DemFile`]).
 pub fn read_dem(path: impl AsRef<Path>, options: &DemOptions) -> Result<Dem, MapIoError> {
-    let path = path.as_ref();
-    let format = resolve_format(path, options)?;
-    let limits = &options.limits;
-    let stored = |grid: Grid<f32>, sample, full_scale| Dem {
-        heights: grid,
-        format,
-        sample,
-        units: HeightUnits::Stored { full_scale },
-        nodata: None,
-        georeference: None,
-    };
-    match (format, options.raw_size) {
-        (DemFormat::Png, _) => Ok(match io::read_png(path, limits)? {
-            io::GrayImage::Gray8(g) => stored(g.map(|&v| f32::from(v)), SampleType::U8, 255),
-            io::GrayImage::Gray16(g) => stored(g.map(|&v| f32::from(v)), SampleType::U16, 65535),
-        }),
-        (DemFormat::Raw16, Some(size)) => {
-            let g = io::read_raw16_ordered(path, size, options.byte_order, limits)?;
-            Ok(stored(g.map(|&v| f32::from(v)), SampleType::U16, 65535))
-        }
-        (DemFormat::R32, Some(size)) => {
-            let mut heights = io::read_r32(path, size, options.byte_order, limits)?;
-            let nodata = fill_nodata(heights.as_mut_slice(), None)?;
-            Ok(Dem {
-                heights,
-                format,
-                sample: SampleType::F32,
-                units: HeightUnits::Metres,
-                nodata,
-                georeference: None,
-            })
-        }
-        (DemFormat::GeoTiff, _) => {
-            let tiff = geotiff::read_geotiff(path, limits)?;
-            Ok(Dem::from_geotiff(tiff)?)
-        }
-        (f, None) => Err(MapIoError::RawSizeRequired { format: f.name() }),
-    }
+    DemFile::open(path, options)?.read()
 }
 
 impl Dem {

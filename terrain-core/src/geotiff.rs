@@ -240,11 +240,20 @@ enum Origin<'a> {
 /// Reads a GeoTIFF DEM file. See the module docs for what is accepted and checked.
 pub fn read_geotiff(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<GeoTiff, MapIoError> {
     let path = path.as_ref();
-    let file = open_regular(path)?;
-    let len = file_len(&file, path)?;
+    read_geotiff_from_file(&open_regular(path)?, path, limits)
+}
+
+/// Reads a GeoTIFF DEM from an open file, from its start (see [`read_geotiff`]); `path` names
+/// the file in errors only, and is never opened.
+pub(crate) fn read_geotiff_from_file(
+    file: &File,
+    path: &Path,
+    limits: &ReadLimits,
+) -> Result<GeoTiff, MapIoError> {
+    let len = file_len(file, path)?;
     let origin = Origin::File(path);
-    check_first_ifd(&mut BufReader::new(&file), len, limits, origin)?;
-    decode_from(rewound(&file, path)?, len, limits, origin)
+    check_first_ifd(&mut rewound(file, path)?, len, limits, origin)?;
+    decode_from(rewound(file, path)?, len, limits, origin)
 }
 
 /// Decodes a GeoTIFF DEM held in memory (see [`read_geotiff`]).
@@ -258,11 +267,20 @@ pub fn decode_geotiff(bytes: &[u8], limits: &ReadLimits) -> Result<GeoTiff, MapI
 /// side limits checked: to plan memory before reading it.
 pub fn read_geotiff_size(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<UVec2, MapIoError> {
     let path = path.as_ref();
-    let file = open_regular(path)?;
-    let len = file_len(&file, path)?;
+    read_geotiff_size_from_file(&open_regular(path)?, path, limits)
+}
+
+/// The size of a GeoTIFF from the first image directory of an open file (see
+/// [`read_geotiff_size`]); `path` names the file in errors only.
+pub(crate) fn read_geotiff_size_from_file(
+    file: &File,
+    path: &Path,
+    limits: &ReadLimits,
+) -> Result<UVec2, MapIoError> {
+    let len = file_len(file, path)?;
     let origin = Origin::File(path);
-    check_first_ifd(&mut BufReader::new(&file), len, limits, origin)?;
-    let mut decoder = Decoder::new(rewound(&file, path)?).map_err(|e| map_tiff_error(e, origin))?;
+    check_first_ifd(&mut rewound(file, path)?, len, limits, origin)?;
+    let mut decoder = Decoder::new(rewound(file, path)?).map_err(|e| map_tiff_error(e, origin))?;
     let (w, h) = decoder
         .dimensions()
         .map_err(|e| map_tiff_error(e, origin))?;

@@ -91,7 +91,7 @@ const VRAM_POOL_SLACK: u64 = 16 << 20;
 const WORLD_BUILD: u64 = 64 << 20;
 
 /// What a run is made of, as far as memory goes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, PartialEq, Eq)]
 pub struct RunShape {
     /// The scenario.
     pub scenario: ScenarioKind,
@@ -118,7 +118,7 @@ pub struct RunShape {
 }
 
 /// The memory side of a flyover.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, PartialEq, Eq)]
 pub struct FlyoverShape {
     /// RAM pool budget in bytes.
     pub ram_budget: u64,
@@ -139,8 +139,9 @@ impl RunShape {
         let (map, flyover) = match cli.scenario {
             ScenarioKind::Default => {
                 let planned = heightmap::planned(cli)?;
+                let size = planned.size;
                 heightmap = planned.format.is_some().then_some(planned);
-                (planned.size, None)
+                (size, None)
             }
             ScenarioKind::Snow => (UVec2::splat(cli.size.unwrap_or(snow::SNOW_SIZE)), None),
             ScenarioKind::Flyover | ScenarioKind::World => {
@@ -185,7 +186,7 @@ impl RunShape {
         if self.gpu {
             parts.push(("gpu_driver", GPU_DRIVER));
         }
-        if let Some(planned) = self.heightmap {
+        if let Some(planned) = &self.heightmap {
             parts.push(("dem_import", import_bytes(planned)));
         }
         match self.scenario {
@@ -246,13 +247,13 @@ impl RunShape {
                 if self.gpu {
                     parts.push(("gpu_map", per_texel(GPU_MAP_PER_TEXEL)));
                 }
-                if let Some(f) = self.flyover {
+                if let Some(f) = &self.flyover {
                     parts.push(("ram_pool", f.ram_budget.saturating_add(RAM_POOL_SLACK)));
                     if self.gpu {
                         let vram = f.atlas.saturating_add(f.atlas_table);
                         parts.push(("vram_pool", vram.saturating_add(VRAM_POOL_SLACK)));
                     }
-                    match f.build {
+                    match &f.build {
                         None => {}
                         Some(WorldBuild::Procedural) => parts.push(("world_build", WORLD_BUILD)),
                         Some(WorldBuild::Heightmap(planned)) => {
@@ -286,7 +287,7 @@ impl RunShape {
 
 /// The import of a heightmap beyond its map: decoded samples, and a GeoTIFF's directory as the
 /// decoder reads it (bounded by terrain-core's walk of it).
-fn import_bytes(planned: PlannedMap) -> u64 {
+fn import_bytes(planned: &PlannedMap) -> u64 {
     let directory = match planned.format {
         Some(DemFormat::GeoTiff) => terrain_core::geotiff::DIRECTORY_BYTES_BOUND,
         _ => 0,
@@ -387,7 +388,7 @@ mod tests {
             "--vram-budget",
             "10",
         ]);
-        let f = s.flyover.expect("flyover");
+        let f = s.flyover.as_ref().expect("flyover");
         assert_eq!(f.build, Some(WorldBuild::Procedural));
         // 40 whole 256^2 u32 tiles fit 10 MiB.
         assert_eq!(f.atlas, 40 * 256 * 256 * 4);

@@ -45,8 +45,12 @@ pub use self::png::{
     encode_png16, read_png, read_png_rgba8, read_png_size, read_png8, read_png16, write_png_rgba8,
     write_png8, write_png16,
 };
+pub(crate) use self::png::{read_png_from_file, read_png_size_from_file};
+pub(crate) use self::r32::read_r32_from_file;
 pub use self::r32::{decode_r32, read_r32};
 pub use self::raw::check_raw_file;
+pub(crate) use self::raw::check_raw_from_file;
+pub(crate) use self::raw16::read_raw16_from_file;
 pub use self::raw16::{
     decode_raw16, decode_raw16_ordered, encode_raw16, read_raw16, read_raw16_ordered, write_raw16,
 };

@@ -431,12 +431,34 @@ fn read_png_file(
     limits: &ReadLimits,
     want: Option<u8>,
 ) -> Result<GrayImage, MapIoError> {
-    let file = open_regular(path)?;
+    read_png_from_file(&open_regular(path)?, path, limits, want)
+}
+
+/// Seeks an open file back to its start (a caller may have read from it already).
+fn rewind(file: &File, path: &Path) -> Result<(), MapIoError> {
+    let mut f = file;
+    f.seek(io::SeekFrom::Start(0))
+        .map(|_| ())
+        .map_err(|source| MapIoError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+}
+
+/// Reads a grayscale PNG from an open file, from its start (see [`read_png`]); `path` names
+/// the file in errors only, and is never opened. `want` is the bit depth required, if any.
+pub(crate) fn read_png_from_file(
+    file: &File,
+    path: &Path,
+    limits: &ReadLimits,
+    want: Option<u8>,
+) -> Result<GrayImage, MapIoError> {
+    rewind(file, path)?;
     decode_png_from(
-        BufReader::new(&file),
+        BufReader::new(file),
         limits,
         want,
-        Source::File { path, file: &file },
+        Source::File { path, file },
     )
 }
 
@@ -473,10 +495,19 @@ pub fn read_png8(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<Grid<u8>
 /// check them; the colour type and bit depth are not (the full read reports them).
 pub fn read_png_size(path: impl AsRef<Path>, limits: &ReadLimits) -> Result<UVec2, MapIoError> {
     let path = path.as_ref();
-    let file = open_regular(path)?;
-    let mut decoder = png_decoder(BufReader::new(&file), limits);
-    let (width, height, _, _) =
-        read_header(&mut decoder, limits, Source::File { path, file: &file })?;
+    read_png_size_from_file(&open_regular(path)?, path, limits)
+}
+
+/// The size of a PNG from the header of an open file, read from its start (see
+/// [`read_png_size`]); `path` names the file in errors only.
+pub(crate) fn read_png_size_from_file(
+    file: &File,
+    path: &Path,
+    limits: &ReadLimits,
+) -> Result<UVec2, MapIoError> {
+    rewind(file, path)?;
+    let mut decoder = png_decoder(BufReader::new(file), limits);
+    let (width, height, _, _) = read_header(&mut decoder, limits, Source::File { path, file })?;
     check_size(width, height, limits)?;
     Ok(UVec2::new(width, height))
 }

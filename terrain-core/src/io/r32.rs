@@ -4,6 +4,7 @@ use super::raw::RawFormat;
 use super::{ByteOrder, MapIoError, ReadLimits};
 use crate::grid::Grid;
 use glam::UVec2;
+use std::fs::File;
 use std::path::Path;
 
 /// R32 as a headerless format: 4-byte `f32` samples, a wrong length is
@@ -43,4 +44,16 @@ pub fn read_r32(
     limits: &ReadLimits,
 ) -> Result<Grid<f32>, MapIoError> {
     R32.read(path.as_ref(), size, order, limits)
+}
+
+/// Reads an open R32 file of the given size from its start (see [`read_r32`]); `path` names
+/// the file in errors only.
+pub(crate) fn read_r32_from_file(
+    file: &File,
+    path: &Path,
+    size: UVec2,
+    order: ByteOrder,
+    limits: &ReadLimits,
+) -> Result<Grid<f32>, MapIoError> {
+    R32.read_from_file(file, path, size, order, limits)
 }

@@ -6,7 +6,8 @@ use super::raw16::RAW16;
 use super::{ByteOrder, MapIoError, ReadLimits, check_size, open_regular};
 use crate::grid::Grid;
 use glam::UVec2;
-use std::io::Read;
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
 /// A headerless format: row-major `T` samples of `N` bytes each, in a byte order the caller
@@ -47,8 +48,21 @@ impl<const N: usize, T: Copy> RawFormat<N, T> {
         order: ByteOrder,
         limits: &ReadLimits,
     ) -> Result<Grid<T>, MapIoError> {
+        self.read_from_file(&open_regular(path)?, path, size, order, limits)
+    }
+
+    /// Reads an open file of `size` from its start and decodes it (see [`Self::read`]);
+    /// `path` names the file in errors only, and is never opened.
+    pub(super) fn read_from_file(
+        &self,
+        file: &File,
+        path: &Path,
+        size: UVec2,
+        order: ByteOrder,
+        limits: &ReadLimits,
+    ) -> Result<Grid<T>, MapIoError> {
         let expected = raw_len(size, N as u64, limits)?;
-        let bytes = read_raw_file(path, size, expected, limits, self.mismatch)?;
+        let bytes = read_raw_file(file, path, size, expected, limits, self.mismatch)?;
         self.decode(&bytes, size, order, limits)
     }
 }
@@ -88,6 +102,7 @@ fn raw_samples<const N: usize, T>(
 /// the error for another length. The length is checked from the file's metadata before
 /// anything is read, so a wrong size never causes a large read.
 fn read_raw_file(
+    file: &File,
     path: &Path,
     size: UVec2,
     expected_bytes: u64,
@@ -98,7 +113,6 @@ fn read_raw_file(
         path: path.to_path_buf(),
         source,
     };
-    let file = open_regular(path)?;
     let actual_bytes = file.metadata().map_err(io_err)?.len();
     if actual_bytes != expected_bytes {
         return Err(mismatch(size, expected_bytes, actual_bytes));
@@ -116,6 +130,8 @@ fn read_raw_file(
             height: size.y,
             bytes: capacity,
         })?;
+    let mut file = file;
+    file.seek(SeekFrom::Start(0)).map_err(io_err)?;
     // Read at most one byte more than expected, so a file that changed since the metadata
     // check is still caught without reading it all.
     file.take(expected_bytes.saturating_add(1))
@@ -133,8 +149,19 @@ pub fn check_raw_file(
     limits: &ReadLimits,
 ) -> Result<(), MapIoError> {
     let path = path.as_ref();
+    check_raw_from_file(&open_regular(path)?, path, size, bytes_per_sample, limits)
+}
+
+/// Checks that an open headerless file holds exactly `size` (see [`check_raw_file`]); `path`
+/// names the file in errors only.
+pub(crate) fn check_raw_from_file(
+    file: &File,
+    path: &Path,
+    size: UVec2,
+    bytes_per_sample: u8,
+    limits: &ReadLimits,
+) -> Result<(), MapIoError> {
     let expected = raw_len(size, u64::from(bytes_per_sample), limits)?;
-    let file = open_regular(path)?;
     let actual = file
         .metadata()
         .map_err(|source| MapIoError::Io {

@@ -5,6 +5,7 @@ use super::raw::RawFormat;
 use super::{ByteOrder, MapIoError, ReadLimits, write_atomic};
 use crate::grid::Grid;
 use glam::UVec2;
+use std::fs::File;
 use std::path::Path;
 
 /// RAW16 as a headerless format: 2-byte `u16` samples, a wrong length is
@@ -65,6 +66,18 @@ pub fn read_raw16_ordered(
     limits: &ReadLimits,
 ) -> Result<Grid<u16>, MapIoError> {
     RAW16.read(path.as_ref(), size, order, limits)
+}
+
+/// Reads an open RAW16 file of the given size from its start, its samples in `order` (see
+/// [`read_raw16`]); `path` names the file in errors only.
+pub(crate) fn read_raw16_from_file(
+    file: &File,
+    path: &Path,
+    size: UVec2,
+    order: ByteOrder,
+    limits: &ReadLimits,
+) -> Result<Grid<u16>, MapIoError> {
+    RAW16.read_from_file(file, path, size, order, limits)
 }
 
 /// Encodes a grid as RAW16: little-endian `u16` samples, row-major, no header.

@@ -11,7 +11,7 @@ use anyhow::{Context, Result, bail};
 use glam::UVec2;
 use std::path::Path;
 use terrain_core::dem::{
-    CoarseHeights, Dem, DemFormat, DemOptions, HeightRange, HeightUnits, dem_size, read_dem,
+    CoarseHeights, Dem, DemFile, DemFormat, DemOptions, HeightRange, HeightUnits, read_dem,
 };
 use terrain_core::geotiff::TexelSize;
 use terrain_core::io::{ByteOrder, ReadLimits};
@@ -50,30 +50,46 @@ pub fn dem_options(cli: &Cli) -> DemOptions {
     }
 }
 
-/// The map `cli` asks for, known before anything is made or read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// The map `cli` asks for, known before anything is made or read. A heightmap's is measured
+/// through its open file, which is kept here and read as it was measured: the path is not
+/// opened again, so a file swapped in since is not the one read.
+#[derive(Debug)]
 pub struct PlannedMap {
     /// Its size in texels.
     pub size: UVec2,
     /// The heightmap's format, when one is read.
     pub format: Option<DemFormat>,
+    /// The heightmap, open, when one is read.
+    dem: Option<DemFile>,
 }
 
+/// Plans are compared by what they measured (size and format), not by their open file.
+impl PartialEq for PlannedMap {
+    fn eq(&self, other: &Self) -> bool {
+        (self.size, self.format) == (other.size, other.format)
+    }
+}
+
+impl Eq for PlannedMap {}
+
 /// The map `cli` asks for: `--size` (or the default), or the heightmap's size from its header
-/// (or `--raw-size`, checked against the file's length). Its errors are usage errors.
+/// (or `--raw-size`, checked against the file's length), the heightmap kept open to be read.
+/// Its errors are usage errors.
 pub fn planned(cli: &Cli) -> Result<PlannedMap> {
     match &cli.heightmap {
         None => Ok(PlannedMap {
             size: UVec2::splat(cli.size.unwrap_or(DEFAULT_SIZE)),
             format: None,
+            dem: None,
         }),
         Some(path) => {
-            let (format, size) = dem_size(path, &dem_options(cli))
+            let dem = DemFile::open(path, &dem_options(cli))
                 .with_context(|| format!("cannot use heightmap {}", path.display()))
                 .usage()?;
             Ok(PlannedMap {
-                size,
-                format: Some(format),
+                size: dem.size(),
+                format: Some(dem.format()),
+                dem: Some(dem),
             })
         }
     }
@@ -124,10 +140,10 @@ pub fn load(cli: &Cli) -> Result<Terrain> {
     make(cli, None).usage()
 }
 
-/// The map `cli` asks for, its heightmap read only as `planned` measured it (for the memory
-/// estimate that `--max-memory` accepted): the reader refuses a side beyond the measured
-/// largest one before it allocates, and a file of another format or size (replaced or
-/// rewritten since it was measured) is refused. Errors are usage errors.
+/// The map `cli` asks for, its heightmap read through the file `planned` opened and measured
+/// (for the memory estimate that `--max-memory` accepted): a file swapped in at the path since
+/// is not read, and one rewritten in place is refused beyond the measured size before any
+/// larger buffer exists. Errors are usage errors.
 pub fn load_planned(cli: &Cli, planned: Option<PlannedMap>) -> Result<Terrain> {
     make(cli, planned).usage()
 }
@@ -155,30 +171,13 @@ fn make(cli: &Cli, planned: Option<PlannedMap>) -> Result<Terrain> {
     match &cli.heightmap {
         None => procedural(cli, range),
         Some(path) => {
-            let mut options = dem_options(cli);
-            // The read is bounded by what the memory estimate measured: a file swapped in
-            // since then is refused from its header, before any larger buffer exists.
-            if let Some(p) = planned {
-                options.limits.max_side = options.limits.max_side.min(p.size.max_element());
-                options.limits.max_samples = u64::from(p.size.x) * u64::from(p.size.y);
+            // The heightmap the memory estimate measured is read through the file it opened
+            // (bounded by the size it measured); without a plan, it is opened here.
+            let dem = match planned.and_then(|p| p.dem) {
+                Some(file) => file.read(),
+                None => read_dem(path, &dem_options(cli)),
             }
-            let dem = read_dem(path, &options)
-                .with_context(|| format!("cannot use heightmap {}", path.display()))?;
-            if let Some(p) = planned
-                && (p.size != dem.size() || p.format != Some(dem.format))
-            {
-                bail!(
-                    "heightmap {} changed while the run started: it was measured as {} {}x{} \
-                     (the memory estimate), and read as {} {}x{}",
-                    path.display(),
-                    p.format.map_or("?", DemFormat::name),
-                    p.size.x,
-                    p.size.y,
-                    dem.format.name(),
-                    dem.size().x,
-                    dem.size().y
-                );
-            }
+            .with_context(|| format!("cannot use heightmap {}", path.display()))?;
             from_dem(cli, path, dem, range, range_source)
         }
     }

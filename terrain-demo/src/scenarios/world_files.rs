@@ -203,7 +203,7 @@ pub fn planned_world(cli: &Cli) -> Result<PlannedWorld> {
 }
 
 /// The world a flyover will stream, and whether it is built first.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug)]
 pub struct PlannedWorld {
     /// Its layout.
     pub manifest: Manifest,
@@ -212,7 +212,7 @@ pub struct PlannedWorld {
 }
 
 /// Where a world to build comes from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, PartialEq, Eq)]
 pub enum WorldBuild {
     /// The procedural terrain, generated tile by tile.
     Procedural,
