@@ -148,8 +148,16 @@ fn run(cli: &Cli) -> Result<Ended> {
     let shape = RunShape::of(cli)?;
     let needed = shape.estimate();
     memory_limit::check(&needed, limit).usage()?;
-    // The heightmap is read only as it was measured for the estimate.
-    let mut scenario = scenarios::open(cli, &params, shape.heightmap)?;
+    // The heightmap is read only as it was measured for the estimate (the default scenario's,
+    // or the one a flyover builds its world from).
+    let heightmap = match shape.flyover {
+        Some(f) => match f.build {
+            Some(scenarios::world_files::WorldBuild::Heightmap(planned)) => Some(planned),
+            _ => None,
+        },
+        None => shape.heightmap,
+    };
+    let mut scenario = scenarios::open(cli, &params, heightmap)?;
     let config = serde_json::json!({ "flags": cli, "params": params });
     let report = driver::run(
         cli,

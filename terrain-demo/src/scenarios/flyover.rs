@@ -115,10 +115,15 @@ pub struct FlyoverScenario {
 }
 
 impl FlyoverScenario {
-    /// Opens (or builds) the world and starts the RAM pool.
-    pub fn new(cli: &Cli, params: &crate::config::DemoParams) -> Result<Self> {
+    /// Opens (or builds, from `heightmap` as the memory estimate measured it) the world and
+    /// starts the RAM pool.
+    pub fn new(
+        cli: &Cli,
+        params: &crate::config::DemoParams,
+        heightmap: Option<super::heightmap::PlannedMap>,
+    ) -> Result<Self> {
         let t = Instant::now();
-        let (world, source, built_from) = world_files::open_or_build(cli)?;
+        let (world, source, built_from) = world_files::open_or_build(cli, heightmap)?;
         let manifest = *world.manifest();
         if manifest.world_size.max_element() < manifest.tile_size {
             bail!(

@@ -134,13 +134,7 @@ impl HeightsInfo {
     }
 }
 
-/// The map `cli` asks for. Every error is the user's to fix (a flag, or the heightmap file):
-/// a usage error.
-pub fn load(cli: &Cli) -> Result<Terrain> {
-    make(cli, None).usage()
-}
-
-/// The map `cli` asks for, its heightmap read through the file `planned` opened and measured
+/// The map `cli` asks for (every error is the user's to fix: a usage error), its heightmap read through the file `planned` opened and measured
 /// (for the memory estimate that `--max-memory` accepted): a file swapped in at the path since
 /// is not read, and one rewritten in place is refused beyond the measured size before any
 /// larger buffer exists. Errors are usage errors.

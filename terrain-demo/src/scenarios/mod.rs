@@ -29,7 +29,8 @@ pub use stamps::{DETAIL_REFINE, DETAIL_TILE};
 pub const FRAME_DT: f64 = 1.0 / 30.0;
 
 /// The scenario `cli` asks for, set up (terrain loaded or generated, bodies placed);
-/// `heightmap` is the default scenario's heightmap as the memory estimate measured it.
+/// `heightmap` is the heightmap (the default scenario's, or the one a flyover builds its world
+/// from) as the memory estimate measured it.
 pub fn open(
     cli: &Cli,
     params: &DemoParams,
@@ -39,7 +40,7 @@ pub fn open(
         ScenarioKind::Default => Box::new(stamps::StampScenario::new(cli, params, heightmap)?),
         ScenarioKind::Snow => Box::new(snow::SnowScenario::new(cli, params)?),
         ScenarioKind::Flyover | ScenarioKind::World => {
-            Box::new(flyover::FlyoverScenario::new(cli, params)?)
+            Box::new(flyover::FlyoverScenario::new(cli, params, heightmap)?)
         }
     })
 }

@@ -61,7 +61,10 @@ pub fn existing_manifest(dir: &Path) -> Result<Option<Manifest>> {
 /// The world in `cli.world`: opened if it has a manifest, else built there. Returns the world,
 /// where its heights came from, and, when it was built from `--heightmap`, what the import
 /// chose (for report.json).
-pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> {
+pub fn open_or_build(
+    cli: &Cli,
+    heightmap: Option<super::heightmap::PlannedMap>,
+) -> Result<(World, String, Option<HeightsInfo>)> {
     let store: Arc<dyn TileStore> = Arc::new(
         FsStore::open(&cli.world)
             .with_context(|| format!("cannot use world folder {}", cli.world.display()))
@@ -112,7 +115,8 @@ pub fn open_or_build(cli: &Cli) -> Result<(World, String, Option<HeightsInfo>)> 
     };
     let (world, source, heights) = match &cli.heightmap {
         Some(_) => {
-            let terrain = super::heightmap::load(cli)?;
+            // Read through the file the memory estimate measured (never opened again).
+            let terrain = super::heightmap::load_planned(cli, heightmap)?;
             let map = terrain.map;
             let manifest = Manifest::new(
                 map.size(),
