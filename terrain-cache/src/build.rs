@@ -604,7 +604,7 @@ const CONFLICT_RETRIES: u32 = 8;
 /// detection): a coarser tile or `bounds.bin` that another writer changed since this store
 /// last saw it is refused with [`CacheError::Conflict`]; the key is then read again (the
 /// store learns its new version) and the ancestors are recomputed from the children as they
-/// are now, which include the other writer's, up to [`CONFLICT_RETRIES`] times. Derived data
+/// are now, which include the other writer's, up to 8 times. Derived data
 /// is never a conflict to report: it only has to be recomputed.
 pub fn rebuild_ancestors_shared(
     world: &World,
