@@ -5,7 +5,7 @@
 mod common;
 
 use common::{demo, fresh_dir};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 const LIMIT: Duration = Duration::from_secs(120);
@@ -42,22 +42,7 @@ fn ctrl_c_leaves_a_valid_report_of_the_frames_done() {
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(sent.success());
-    let status = loop {
-        if let Some(status) = child.try_wait().expect("wait") {
-            break status;
-        }
-        if started.elapsed() > LIMIT {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("the demo did not end after Ctrl-C");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let (status, _) = common::interrupt_and_wait(&mut child, LIMIT);
     assert_eq!(status.code(), Some(130), "{status}");
 
     let report = common::report(&out);
@@ -110,29 +95,12 @@ fn ctrl_c_while_a_world_is_built_cancels_the_build() {
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(sent.success());
-    let interrupted = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().expect("wait") {
-            break status;
-        }
-        if started.elapsed() > LIMIT {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("the demo did not end after Ctrl-C during the build");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let (status, after) = common::interrupt_and_wait(&mut child, LIMIT);
     let stderr = std::fs::read_to_string(&log).unwrap_or_default();
     assert_eq!(status.code(), Some(130), "{stderr}");
     assert!(
-        interrupted.elapsed() < Duration::from_secs(20),
-        "the build stopped {:?} after Ctrl-C",
-        interrupted.elapsed()
+        after < Duration::from_secs(20),
+        "the build stopped {after:?} after Ctrl-C"
     );
     // No manifest: the next run builds the world again rather than opening half of it.
     assert!(!world.join("manifest.json").exists());

@@ -9,7 +9,7 @@ mod common;
 use common::{demo, fresh_dir};
 use glam::UVec2;
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Output, Stdio};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use terrain_cache::manifest::MANIFEST_KEY;
@@ -167,29 +167,9 @@ fn ctrl_c_interrupts_a_long_verification() {
         child.try_wait().expect("wait").is_none(),
         "the check ended within 0.7 s: nothing to interrupt"
     );
-    let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(sent.success());
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().expect("wait") {
-            break status;
-        }
-        if started.elapsed() > LIMIT {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("--verify-world did not end after Ctrl-C");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let (status, after) = common::interrupt_and_wait(&mut child, LIMIT);
     assert_eq!(status.code(), Some(130), "{status}");
-    assert!(
-        started.elapsed() < Duration::from_secs(10),
-        "{:?}",
-        started.elapsed()
-    );
+    assert!(after < Duration::from_secs(10), "{after:?}");
     let mut stderr = String::new();
     std::io::Read::read_to_string(&mut child.stderr.take().expect("piped"), &mut stderr)
         .expect("stderr");

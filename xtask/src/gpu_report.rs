@@ -177,14 +177,7 @@ impl Report {
 
     /// Every test binary of terrain-gpu, one at a time, with its result and time.
     fn test_binaries(&mut self) -> Result<()> {
-        let mut names: Vec<String> = std::fs::read_dir(root().join("terrain-gpu/tests"))?
-            .filter_map(|e| e.ok())
-            .filter_map(|e| {
-                let name = e.file_name().to_string_lossy().into_owned();
-                name.strip_suffix(".rs").map(str::to_owned)
-            })
-            .collect();
-        names.sort();
+        let names = rs_stems(&root().join("terrain-gpu/tests"))?;
         self.md.push_str(
             "## terrain-gpu test binaries (release, watchdog at 120 s)\n\n| binary | result | s | tests |\n|---|---|---|---|\n",
         );
@@ -264,14 +257,7 @@ impl Report {
     /// Each GPU bench in criterion's quick mode; every benchmark's median.
     fn benches(&mut self) -> Result<()> {
         let home = self.dir.join("criterion");
-        let mut names: Vec<String> = std::fs::read_dir(root().join("terrain-gpu/benches"))?
-            .filter_map(|e| e.ok())
-            .filter_map(|e| {
-                let name = e.file_name().to_string_lossy().into_owned();
-                name.strip_suffix(".rs").map(str::to_owned)
-            })
-            .collect();
-        names.sort();
+        let names = rs_stems(&root().join("terrain-gpu/benches"))?;
         self.md.push_str(
             "## GPU benches (criterion --quick)\n\n| bench | result | s |\n|---|---|---|\n",
         );
@@ -298,6 +284,20 @@ impl Report {
         self.md.push('\n');
         Ok(())
     }
+}
+
+/// The names of the `.rs` files directly in `dir` (test binaries, benches), sorted.
+fn rs_stems(dir: &Path) -> Result<Vec<String>> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .with_context(|| format!("listing {}", dir.display()))?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            name.strip_suffix(".rs").map(str::to_owned)
+        })
+        .collect();
+    names.sort();
+    Ok(names)
 }
 
 /// The adapter and `step p50 / p95` of a demo run's report.json (dashes when it has none).

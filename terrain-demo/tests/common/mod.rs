@@ -4,7 +4,7 @@
 #![allow(dead_code)] // Each test file uses its own subset.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitStatus, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 /// The demo binary.
@@ -86,4 +86,26 @@ pub fn tile_files(world: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
         }
     }
     out
+}
+
+/// Sends Ctrl-C (SIGINT) to `child` and waits for it to end, killing it (and failing) after
+/// `limit`; returns its status and how long it took to end after the signal.
+pub fn interrupt_and_wait(child: &mut Child, limit: Duration) -> (ExitStatus, Duration) {
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(sent.success());
+    let interrupted = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            return (status, interrupted.elapsed());
+        }
+        if interrupted.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the demo did not end within {limit:?} after Ctrl-C");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
