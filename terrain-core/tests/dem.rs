@@ -4,16 +4,20 @@
 //! tiles, classic and BigTIFF, and by the `tiff` crate's encoder with LZW and Deflate
 //! compression; nodata fills, georeferencing (pixel scale, geographic rasters, feet), the
 //! format choice, and bad files (truncated, multi-band, huge, special files) with clear errors.
+//! `DemFile`: a DEM opened once is read through the handle it was measured by, so a file
+//! swapped in at its path between the measure and the read is not the one read.
 
 use glam::UVec2;
 use std::path::{Path, PathBuf};
 use terrain_core::dem::{
-    DemFormat, DemOptions, HeightRange, HeightUnits, dem_size, read_dem, resolve_format,
+    DemFile, DemFormat, DemOptions, HeightRange, HeightUnits, dem_size, read_dem, resolve_format,
 };
 use terrain_core::geotiff::{
     MAX_DIRECTORY_VALUES, RasterModel, SampleType, TexelSize, decode_geotiff, read_geotiff,
 };
-use terrain_core::io::{ByteOrder, MapIoError, ReadLimits, encode_png8, encode_png16};
+use terrain_core::io::{
+    ByteOrder, MapIoError, ReadLimits, encode_png8, encode_png16, encode_raw16,
+};
 use terrain_core::{CoarseMap, Grid};
 use terrain_test_support::tiff as tiff_writer;
 use tiff_writer::{Layout, Sample, TiffSpec};
@@ -756,4 +760,68 @@ fn special_files_are_refused_by_every_format() {
     }
     let e = read_geotiff(dir.0.join("missing.tif"), &ReadLimits::default()).unwrap_err();
     assert!(e.to_string().contains("missing.tif"), "{e}");
+}
+
+// --- DemFile: measured and read through one handle ---
+
+fn file_grid(w: u32, h: u32, base: u16) -> Grid<u16> {
+    Grid::from_fn(w, h, |x, y| base + (x * 7 + y * 3) as u16).unwrap()
+}
+
+fn file_heights(g: &Grid<u16>) -> Vec<f32> {
+    g.as_slice().iter().map(|&v| f32::from(v)).collect()
+}
+
+#[test]
+fn a_png_replaced_after_open_is_read_as_opened() {
+    let s = Scratch::new("png");
+    let first = file_grid(5, 3, 100);
+    let path = s.file("dem.png", &encode_png16(&first).unwrap());
+    let dem = DemFile::open(&path, &DemOptions::default()).unwrap();
+    assert_eq!(
+        (dem.format(), dem.size()),
+        (DemFormat::Png, UVec2::new(5, 3))
+    );
+    // Another valid DEM, of another size, renamed over the path.
+    let other = s.file("other.png", &encode_png16(&file_grid(9, 4, 5000)).unwrap());
+    std::fs::rename(&other, &path).unwrap();
+    assert_eq!(
+        terrain_core::dem::dem_size(&path, &DemOptions::default()).unwrap(),
+        (DemFormat::Png, UVec2::new(9, 4))
+    );
+    let read = dem.read().unwrap();
+    assert_eq!(read.size(), UVec2::new(5, 3));
+    assert_eq!(read.heights.as_slice(), file_heights(&first));
+}
+
+#[test]
+fn a_raw16_replaced_after_open_is_read_as_opened() {
+    let s = Scratch::new("raw");
+    let first = file_grid(4, 4, 7);
+    let path = s.file("dem.r16", &encode_raw16(&first));
+    let options = DemOptions {
+        raw_size: Some(UVec2::new(4, 4)),
+        byte_order: ByteOrder::Little,
+        ..DemOptions::default()
+    };
+    let dem = DemFile::open(&path, &options).unwrap();
+    assert_eq!(
+        (dem.format(), dem.size()),
+        (DemFormat::Raw16, UVec2::new(4, 4))
+    );
+    let other = s.file("other.r16", &encode_raw16(&file_grid(8, 2, 900)));
+    std::fs::rename(&other, &path).unwrap();
+    let read = dem.read().unwrap();
+    assert_eq!(read.heights.as_slice(), file_heights(&first));
+}
+
+#[test]
+fn a_format_sniffed_from_the_first_bytes_still_reads_from_the_start() {
+    let s = Scratch::new("sniff");
+    let first = file_grid(3, 2, 40);
+    // No extension: the format comes from the signature, read through the same handle.
+    let path = s.file("dem", &encode_png16(&first).unwrap());
+    let dem = DemFile::open(&path, &DemOptions::default()).unwrap();
+    assert_eq!(dem.format(), DemFormat::Png);
+    assert_eq!(dem.read().unwrap().heights.as_slice(), file_heights(&first));
 }
