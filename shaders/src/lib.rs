@@ -69,19 +69,34 @@ shared_codes! {
     INVALID_SLOT: u32 = 0xffffffff "u";
     /// The raw detail value of 0 m (`terrain_core::detail::DETAIL_ZERO_RAW`).
     DETAIL_ZERO_RAW: u32 = 128 "u";
+    /// The slope angle of slope code 127, in degrees
+    /// (`terrain_core::slope_code::SLOPE_CODE_MAX_DEGREES`).
+    SLOPE_CODE_MAX_DEGREES: u32 = 85 "u";
 }
 
 /// The WGSL `const` declarations of [`codes`], as every shader here starts with them.
 pub const PRELUDE: &str = wgsl_prelude!();
 
 /// `StampPass`: one stamp (Gaussian, texture or user procedural) applied in place.
-pub const STAMP: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/stamp.wgsl"));
+pub const STAMP: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/resources/packed.wgsl"),
+    include_str!("wgsl/passes/stamp.wgsl")
+);
 
 /// `DensityPass`: curvature density maps and their max pyramid (Cervin 2012, ch. 3).
-pub const DENSITY: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/density.wgsl"));
+pub const DENSITY: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/resources/packed.wgsl"),
+    include_str!("wgsl/passes/density.wgsl")
+);
 
 /// `NormalPass`: partial-derivative normals (Flower 2010, eq. 3.3) over a region.
-pub const NORMALS: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/normals.wgsl"));
+pub const NORMALS: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/resources/packed.wgsl"),
+    include_str!("wgsl/passes/normals.wgsl")
+);
 
 /// `SkyPass`: a full-screen gradient by view-ray elevation.
 pub const SKY: &str = concat!(
@@ -94,12 +109,13 @@ pub const SKY: &str = concat!(
 // with is written once below. They are macros because `concat!` joins only literals and macro
 // calls (not `const`s), and the shaders stay `&'static str` constants.
 
-/// The start of every clipmap-style renderer: the prelude, the target's colour conversion and
-/// the detail sample type the fragment shader takes.
+/// The start of every clipmap-style renderer: the prelude, packed texel access, the target's
+/// colour conversion and the detail sample type the fragment shader takes.
 macro_rules! renderer_head {
     () => {
         concat!(
             wgsl_prelude!(),
+            include_str!("wgsl/resources/packed.wgsl"),
             include_str!("wgsl/render/target_color.wgsl"),
             include_str!("wgsl/resources/detail_sample.wgsl")
         )
@@ -223,6 +239,7 @@ pub const REFINE: &str = concat!(
 /// (the same functions the detail clipmap shades with).
 pub const DETAIL_PROBE: &str = concat!(
     wgsl_prelude!(),
+    include_str!("wgsl/resources/packed.wgsl"),
     include_str!("wgsl/resources/detail_sample.wgsl"),
     include_str!("wgsl/resources/detail_tiles.wgsl"),
     include_str!("wgsl/passes/detail_probe.wgsl")
@@ -232,6 +249,7 @@ pub const DETAIL_PROBE: &str = concat!(
 /// (the same functions the clipmap draws with).
 pub const ATLAS_PROBE: &str = concat!(
     wgsl_prelude!(),
+    include_str!("wgsl/resources/packed.wgsl"),
     include_str!("wgsl/resources/tile_atlas.wgsl"),
     include_str!("wgsl/render/clipmap_surface_atlas.wgsl"),
     include_str!("wgsl/resources/atlas_probe.wgsl")
@@ -282,7 +300,11 @@ pub const GRANULAR_VOLUME: &str = concat!(
 
 /// `SpillPass`: the excess of a detail stamp moved into the coarse-map (terrain-core's
 /// `detail_spill` rule).
-pub const SPILL: &str = concat!(wgsl_prelude!(), include_str!("wgsl/passes/spill.wgsl"));
+pub const SPILL: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/resources/packed.wgsl"),
+    include_str!("wgsl/passes/spill.wgsl")
+);
 
 /// The markers around the default user procedural stamp function in [`STAMP`]; a user stamp
 /// replaces the text between them with its own `fn user_stamp_value(local: vec2<f32>) -> f32`.

@@ -52,6 +52,7 @@ pub mod readback;
 pub mod rect;
 pub mod sample;
 pub mod shockwave;
+pub mod slope_code;
 pub mod stamp;
 pub mod terrain_gen;
 pub mod tile_atlas;
@@ -76,6 +77,7 @@ pub use readback::{ArrivedRegion, RegionSource, RequestId};
 pub use rect::{DirtyRect, Rect, WrappedPiece};
 pub use sample::bilinear;
 pub use shockwave::{MAX_SHOCKWAVE_GAMMA, Shockwave, ShockwaveParams};
+pub use slope_code::{SlopeCodec, decode_slope};
 pub use stamp::{
     Blend, DEFAULT_GAUSSIAN_EPSILON_M, GaussianStamp, Stamp, StampKernel, StampPlacement,
     StampRegion, TextureStamp, apply_stamp, apply_stamp_reference, apply_stamp_window,

@@ -4,7 +4,8 @@
 use glam::{IVec2, UVec2, Vec2};
 use terrain_core::{
     Blend, DerivativeMap, GaussianStamp, Grid, HeightEncoding, HeightMap, HeightSample, Rect,
-    Shockwave, ShockwaveParams, Stamp, StampPlacement, TextureStamp, WrapMode, apply_stamp,
+    Shockwave, ShockwaveParams, SlopeCodec, Stamp, StampPlacement, TextureStamp, WrapMode,
+    apply_stamp,
 };
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
@@ -259,14 +260,60 @@ fn u32_maps_and_oversized_stamps_are_errors() {
     ));
 }
 
-/// Largest relative difference between GPU and CPU derivatives: both stencils are exact
-/// integers; only the final scale by `k` rounds (f32 on the GPU, f64 then f32 on the CPU).
-const NORMAL_BOUND_REL: f32 = 1e-6;
-
+/// The GPU's derivatives are 8-bit slope codes (terrain_core::slope_code): decoded, each
+/// component's slope angle is within half a code step of the CPU's f32 derivative, or both are
+/// at the steepest code.
 fn assert_derivatives_close(cpu: &DerivativeMap, gpu: &DerivativeMap) {
+    let half = 0.5 * terrain_core::slope_code::SLOPE_CODE_STEP + 1e-6;
+    let top = f64::from(terrain_core::slope_code::SLOPE_CODE_MAX_DEGREES).to_radians() - half;
     for (a, b) in cpu.grid().as_slice().iter().zip(gpu.grid().as_slice()) {
-        let tol = NORMAL_BOUND_REL * a.abs().max_element().max(1e-3);
-        assert!((*a - *b).abs().max_element() <= tol, "cpu {a} gpu {b}");
+        for (a, b) in [(a.x, b.x), (a.y, b.y)] {
+            let (ta, tb) = (f64::from(a).atan(), f64::from(b).atan());
+            let clamped = ta.abs() >= top && tb.abs() >= top && ta.signum() == tb.signum();
+            assert!(clamped || (ta - tb).abs() <= half, "cpu {a} gpu {b}");
+        }
+    }
+}
+
+#[test]
+fn normal_codes_equal_the_cpu_codes_bit_for_bit() {
+    let Some(ctx) = context_or_skip("normal_codes_equal_the_cpu_codes") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    // Odd widths put a padding lane in each row's last word; the hashed heights give every
+    // code from flat to the clamped ±127, the smooth ramp every code in between.
+    for (w, h) in [(96, 80), (37, 21), (1, 5), (2, 3)] {
+        for wrap in [WrapMode::Repeat, WrapMode::Clamp] {
+            for smooth in [false, true] {
+                let grid = if smooth {
+                    Grid::from_fn(w, h, |x, y| (30_000 + x * x * 7 + y * 131) as u16).unwrap()
+                } else {
+                    hashed::<u16>(w, h, 1000, 60_000)
+                };
+                let enc = HeightEncoding::new(0.002, 0.0).unwrap();
+                let map = HeightMap::new(grid, enc, 0.5, wrap).unwrap();
+                let gpu_map = GpuHeightMap::from_map(device, queue, &map).unwrap();
+                let gpu_normals = GpuDerivativeMap::for_map(device, &gpu_map).unwrap();
+                let mut pass = NormalPass::new(device).unwrap();
+                let mut encoder = device.create_command_encoder(&Default::default());
+                pass.encode_full(device, queue, &mut encoder, &gpu_map, &gpu_normals)
+                    .unwrap();
+                queue.submit([encoder.finish()]);
+                let want = SlopeCodec::for_map(&map).codes(&map);
+                let got = gpu_normals.read_codes(device, queue).unwrap();
+                assert_eq!(got, want, "{w}x{h} {wrap:?} smooth {smooth}");
+                if w == 96 {
+                    let codes: std::collections::HashSet<i8> =
+                        want.as_slice().iter().flatten().copied().collect();
+                    assert!(
+                        codes.len() > if smooth { 20 } else { 100 },
+                        "{}",
+                        codes.len()
+                    );
+                }
+            }
+        }
     }
 }
 
@@ -293,6 +340,11 @@ fn normals_match_the_cpu_reference_full_and_in_dirty_rects() {
         queue.submit([encoder.finish()]);
         let mut cpu_normals = DerivativeMap::from_map(&map);
         assert_derivatives_close(&cpu_normals, &gpu_normals.read(device, queue).unwrap());
+        let codec = SlopeCodec::for_map(&map);
+        assert_eq!(
+            gpu_normals.read_codes(device, queue).unwrap(),
+            codec.codes(&map)
+        );
 
         // Change heights in two rects (one across the corner on the repeating map), upload,
         // regenerate only those rects on both sides.
@@ -322,6 +374,11 @@ fn normals_match_the_cpu_reference_full_and_in_dirty_rects() {
         }
         queue.submit([encoder.finish()]);
         assert_derivatives_close(&cpu_normals, &gpu_normals.read(device, queue).unwrap());
+        // Only the dirty rects were regenerated, and every code is the new map's.
+        assert_eq!(
+            gpu_normals.read_codes(device, queue).unwrap(),
+            codec.codes(&map)
+        );
         assert_derivatives_close(&DerivativeMap::from_map(&map), &cpu_normals);
         ctx.check().expect("no GPU validation errors");
     }

@@ -4,6 +4,7 @@
 
 use crate::error::GpuError;
 use crate::resources::maps::{GpuHeightMap, MapView};
+use crate::resources::packing;
 use glam::UVec2;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
@@ -148,7 +149,16 @@ impl Drop for SubmitGuard {
 struct Slot {
     buffer: wgpu::Buffer,
     state: Arc<AtomicU8>,
-    request: Option<(ReadbackTicket, Rect, HeightEncoding)>,
+    request: Option<Request>,
+}
+
+/// A request in flight: what was asked, and where its rows lie in the staging buffer.
+#[derive(Debug)]
+struct Request {
+    ticket: ReadbackTicket,
+    rect: Rect,
+    encoding: HeightEncoding,
+    copies: RegionCopies,
 }
 
 /// A ring of staging buffers for asynchronous region readback.
@@ -282,13 +292,14 @@ impl RegionReadback {
         let Some(slot) = self.slots.iter_mut().find(|s| s.request.is_none()) else {
             return Err(GpuError::ReadbackBusy { ring });
         };
-        let bytes = rect.area() * 4;
+        let copies = RegionCopies::plan(map, rect);
+        let bytes = copies.words.max(1) * 4;
         // A slot keeps its staging buffer; it is only replaced by a larger one.
         if slot.buffer.size() < bytes {
             slot.buffer = staging(device, bytes);
         }
         let buffer = &slot.buffer;
-        copy_rows(encoder, map, rect, buffer);
+        copies.record(encoder, map, buffer);
         slot.state.store(PENDING, Ordering::Release);
         let mut guard = SubmitGuard::new(slot.state.clone());
         encoder.map_buffer_on_submit(buffer, wgpu::MapMode::Read, 0..bytes, move |r| {
@@ -296,7 +307,12 @@ impl RegionReadback {
         });
         // Process-wide, so a ring made again never repeats a ticket an older one handed out.
         let ticket = ReadbackTicket(terrain_core::RequestId::fresh().0);
-        slot.request = Some((ticket, rect, map.encoding));
+        slot.request = Some(Request {
+            ticket,
+            rect,
+            encoding: map.encoding,
+            copies,
+        });
         Ok(ticket)
     }
 
@@ -378,7 +394,13 @@ impl RegionReadback {
             if state != MAPPED && state != FAILED {
                 continue;
             }
-            let Some((ticket, rect, encoding)) = slot.request.take() else {
+            let Some(Request {
+                ticket,
+                rect,
+                encoding,
+                copies,
+            }) = slot.request.take()
+            else {
                 continue;
             };
             let buffer = &slot.buffer;
@@ -390,13 +412,14 @@ impl RegionReadback {
             }
             // A region that cannot be viewed counts as failed, like a failed mapping: the
             // regions already collected are still handed over.
-            let bytes = rect.area() * 4;
+            let bytes = copies.words.max(1) * 4;
             let converted = buffer.get_mapped_range(0..bytes).ok().and_then(|view| {
-                let values: &[u32] = bytemuck::try_cast_slice(&view).ok()?;
+                let words: &[u32] = bytemuck::try_cast_slice(&view).ok()?;
+                let values = copies.unpack(words, rect);
                 Some(convert(RegionView {
                     ticket,
                     rect,
-                    values,
+                    values: &values,
                     encoding,
                 }))
             });
@@ -417,41 +440,109 @@ impl RegionReadback {
     }
 }
 
-/// Copies the rows of `rect` (wrapped on a repeating map) into `dst`, packed row-major.
-fn copy_rows(encoder: &mut wgpu::CommandEncoder, map: MapView<'_>, rect: Rect, dst: &wgpu::Buffer) {
-    let size: UVec2 = map.size;
-    let pieces = match map.wrap {
-        WrapMode::Repeat => rect.split_toroidal(size),
-        WrapMode::Clamp => vec![terrain_core::WrappedPiece {
-            map: rect,
-            unwrapped: rect,
-        }],
-    };
-    let base = u64::from(map.base);
-    for piece in pieces {
-        let rows = piece.map.size.y;
-        if piece.map.size.x == size.x && rect.size.x == size.x {
-            // Whole rows of the map, whole rows of the region: contiguous on both sides, so one
-            // copy instead of one a row (4096 commands for a full 4096^2 readback).
-            let src = (base + piece.map.min.y as u64 * u64::from(size.x)) * 4;
-            let uy = (piece.unwrapped.min.y - rect.min.y) as u64;
-            let bytes = u64::from(rows) * u64::from(size.x) * 4;
-            encoder.copy_buffer_to_buffer(map.buffer, src, dst, uy * u64::from(size.x) * 4, bytes);
-            continue;
+/// How a region's rows travel: per piece of the rect (one, or up to four across a repeating
+/// map's edges), the packed words of its rows, copied one after the other into the staging
+/// buffer, and unpacked into the rect's row-major texels when they arrive.
+#[derive(Debug)]
+struct RegionCopies {
+    pieces: Vec<PieceCopy>,
+    bits: u32,
+    /// Words of the staging buffer used.
+    words: u64,
+}
+
+/// One piece: `rows` rows of `pitch` words from word `at` of the staging buffer; its texel
+/// `(0, 0)` is lane `lane0` of its first word and texel `offset` of the rect.
+#[derive(Debug)]
+struct PieceCopy {
+    map: Rect,
+    offset: UVec2,
+    at: u64,
+    pitch: u64,
+    lane0: u32,
+}
+
+impl RegionCopies {
+    fn plan(map: MapView<'_>, rect: Rect) -> Self {
+        let pieces = match map.wrap {
+            WrapMode::Repeat => rect.split_toroidal(map.size),
+            WrapMode::Clamp => vec![terrain_core::WrappedPiece {
+                map: rect,
+                unwrapped: rect,
+            }],
+        };
+        let lanes = packing::lanes(map.bits);
+        let mut at = 0;
+        let pieces = pieces
+            .into_iter()
+            .map(|p| {
+                let (x0, x1) = (p.map.min.x as u32, p.map.max().x as u32);
+                let pitch = u64::from(x1.div_ceil(lanes) - x0 / lanes);
+                let piece = PieceCopy {
+                    map: p.map,
+                    offset: (p.unwrapped.min - rect.min).as_uvec2(),
+                    at,
+                    pitch,
+                    lane0: x0 % lanes,
+                };
+                at += pitch * u64::from(p.map.size.y);
+                piece
+            })
+            .collect();
+        Self {
+            pieces,
+            bits: map.bits,
+            words: at,
         }
-        for row in 0..rows {
-            let my = piece.map.min.y as u64 + u64::from(row);
-            let src = (base + my * u64::from(size.x) + piece.map.min.x as u64) * 4;
-            let uy = (piece.unwrapped.min.y - rect.min.y) as u64 + u64::from(row);
-            let ux = (piece.unwrapped.min.x - rect.min.x) as u64;
-            let dst_offset = (uy * u64::from(rect.size.x) + ux) * 4;
-            encoder.copy_buffer_to_buffer(
-                map.buffer,
-                src,
-                dst,
-                dst_offset,
-                u64::from(piece.map.size.x) * 4,
-            );
+    }
+
+    /// Records the copies into `dst`.
+    fn record(&self, encoder: &mut wgpu::CommandEncoder, map: MapView<'_>, dst: &wgpu::Buffer) {
+        let map_pitch = u64::from(packing::pitch(map.size.x, self.bits));
+        let lanes = packing::lanes(self.bits);
+        let base = u64::from(map.base);
+        for piece in &self.pieces {
+            let first_word = u64::from(piece.map.min.x as u32 / lanes);
+            let row0 = piece.map.min.y as u64;
+            if piece.pitch == map_pitch {
+                // Whole rows of the map: contiguous, so one copy instead of one a row (4096
+                // commands for a full 4096^2 readback).
+                let rows = u64::from(piece.map.size.y);
+                let src = (base + row0 * map_pitch) * 4;
+                encoder.copy_buffer_to_buffer(
+                    map.buffer,
+                    src,
+                    dst,
+                    piece.at * 4,
+                    rows * map_pitch * 4,
+                );
+                continue;
+            }
+            for row in 0..u64::from(piece.map.size.y) {
+                let src = (base + (row0 + row) * map_pitch + first_word) * 4;
+                let at = (piece.at + row * piece.pitch) * 4;
+                encoder.copy_buffer_to_buffer(map.buffer, src, dst, at, piece.pitch * 4);
+            }
         }
+    }
+
+    /// The rect's texel values, row-major, from the staging buffer's `words`.
+    fn unpack(&self, words: &[u32], rect: Rect) -> Vec<u32> {
+        let mut out = vec![0u32; rect.area() as usize];
+        let lanes = packing::lanes(self.bits);
+        let mask = u32::MAX >> (32 - self.bits);
+        let w = rect.size.x as usize;
+        for piece in &self.pieces {
+            for row in 0..piece.map.size.y {
+                let start = (piece.at + u64::from(row) * piece.pitch) as usize;
+                let src = &words[start..start + piece.pitch as usize];
+                let o = (piece.offset.y + row) as usize * w + piece.offset.x as usize;
+                for (i, d) in out[o..o + piece.map.size.x as usize].iter_mut().enumerate() {
+                    let x = piece.lane0 + i as u32;
+                    *d = (src[(x / lanes) as usize] >> ((x % lanes) * self.bits)) & mask;
+                }
+            }
+        }
+        out
     }
 }

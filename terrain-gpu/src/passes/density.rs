@@ -38,13 +38,15 @@ struct Params {
     density_scale: f32,
     exponent: f32,
     src_offset: [i32; 2],
+    bits: u32,
+    pad: u32,
 }
 
 // The WGSL struct's layout: its size, and its `vec2`s 8-aligned as WGSL places them (a
 // mismatch fails the build, not a dispatch).
 const _: () = {
     use std::mem::{offset_of, size_of};
-    assert!(size_of::<Params>() == 96);
+    assert!(size_of::<Params>() == 104);
     assert!(offset_of!(Params, map_offset) % 8 == 0);
     assert!(offset_of!(Params, src_size) % 8 == 0);
     assert!(offset_of!(Params, src_offset) % 8 == 0);
@@ -257,6 +259,7 @@ impl DensityPass {
             density_scale: p.gain / p.full_density_bend,
             exponent: p.exponent,
             src_offset: wrap_offset(IVec2::splat(-(border_radius as i32)), size0)?,
+            bits: GpuHeightMap::<T>::BITS,
             ..Params::default()
         };
         let mut recording = Recording {

@@ -1,5 +1,5 @@
 //! `NormalPass`: regenerates partial-derivative normals (Flower 2010, eq. 3.3) in a dirty rect plus
-//! its 2-texel apron, on the GPU.
+//! its 2-texel apron, on the GPU, as 8-bit slope codes ([`terrain_core::SlopeCodec`]).
 
 use crate::device::compute::{
     PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
@@ -7,8 +7,9 @@ use crate::device::compute::{
 };
 use crate::error::GpuError;
 use crate::resources::maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
+use crate::resources::packing;
 use bytemuck::{Pod, Zeroable};
-use terrain_core::{Rect, derivative_region};
+use terrain_core::{Rect, SlopeCodec, WrapMode, derivative_region};
 
 /// The uniform block of `normals.wgsl`, byte for byte.
 #[repr(C)]
@@ -18,12 +19,15 @@ struct NormalParams {
     region_size: [u32; 2],
     map_size: [u32; 2],
     wrap: u32,
-    k: f32,
+    bits: u32,
     wrap_offset: [i32; 2],
+    start_x: u32,
+    _pad: u32,
+    thresholds: [u32; 128],
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<NormalParams>() == 40);
+const _: () = assert!(std::mem::size_of::<NormalParams>() == 560);
 
 /// Computes derivatives from a [`GpuHeightMap`] into a [`GpuDerivativeMap`] over a region.
 #[derive(Debug)]
@@ -75,23 +79,34 @@ impl NormalPass {
         let Some(region) = derivative_region(map.size(), map.wrap(), dirty)? else {
             return Ok(());
         };
-        let k = (f64::from(map.encoding().scale) / (12.0 * f64::from(map.texel_size()))) as f32;
+        let codec = SlopeCodec::new(map.encoding().scale, map.texel_size())?;
+        let mut thresholds = [u32::MAX; 128];
+        thresholds[..127].copy_from_slice(codec.thresholds());
+        // Covers the region and the stencil's reach of 2 texels around any wrapped texel.
+        let offset = wrap_offset(
+            region
+                .min
+                .min(glam::IVec2::ZERO)
+                .saturating_sub(glam::IVec2::splat(2)),
+            map.size(),
+        )?;
+        let start_x = match map.wrap() {
+            WrapMode::Repeat => region.min.x + offset[0],
+            WrapMode::Clamp => region.min.x,
+        } as u32;
         let params = NormalParams {
             region_min: region.min.to_array(),
             region_size: region.size.to_array(),
             map_size: map.size().to_array(),
             wrap: wrap_code(map.wrap()),
-            k,
-            // Covers the region and the stencil's reach of 2 texels around any wrapped texel.
-            wrap_offset: wrap_offset(
-                region
-                    .min
-                    .min(glam::IVec2::ZERO)
-                    .saturating_sub(glam::IVec2::splat(2)),
-                map.size(),
-            )?,
+            bits: GpuHeightMap::<T>::BITS,
+            wrap_offset: offset,
+            start_x,
+            _pad: 0,
+            thresholds,
         };
-        let groups = dispatch_size(device, region.size)?;
+        let words = packing::word_groups(start_x, region.size.x, map.size().x, 16);
+        let groups = dispatch_size(device, glam::UVec2::new(words, region.size.y))?;
         let (group, offset) =
             self.bindings
                 .bind(device, queue, &params, &[map.buffer(), out.buffer()])?;

@@ -15,10 +15,11 @@ use crate::error::GpuError;
 use crate::passes::stamp::{ExcessWindow, StampOp, StampPass};
 use crate::resources::detail::GpuDetailTiles;
 use crate::resources::maps::{ExactInF32, GpuHeightMap};
+use crate::resources::packing;
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::detail_spill::{check_spill_fits, coarse_pieces, spill_factor, spill_rect};
-use terrain_core::{DirtyRect, Rect};
+use terrain_core::{DirtyRect, Rect, WrapMode};
 
 /// The uniform block of `spill.wgsl` (`SpillParams`), byte for byte.
 #[repr(C)]
@@ -34,9 +35,11 @@ struct SpillParams {
     wrap_offset: [i32; 2],
     k: f32,
     max_raw: f32,
+    bits: u32,
+    start_x: u32,
 }
 
-const _: () = assert!(std::mem::size_of::<SpillParams>() == 64);
+const _: () = assert!(std::mem::size_of::<SpillParams>() == 72);
 
 /// What a spilling detail stamp covered.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -173,19 +176,34 @@ impl SpillPass {
         }
         let rect = spill_rect(footprint, layout.refine());
         check_spill_fits(rect, coarse.size(), coarse.wrap())?;
+        // A clamped coarse-map keeps nothing beyond its edges: only its texels are dispatched.
+        let (dispatched, offset, start_x) = match coarse.wrap() {
+            WrapMode::Repeat => {
+                let offset = wrap_offset(rect.min, coarse.size())?;
+                (rect, offset, (rect.min.x + offset[0]) as u32)
+            }
+            WrapMode::Clamp => {
+                let inside = rect.intersect(&Rect::from_size(coarse.size()));
+                let inside = inside.unwrap_or(Rect::new(glam::IVec2::ZERO, UVec2::ZERO));
+                (inside, [0; 2], inside.min.x as u32)
+            }
+        };
         let params = SpillParams {
-            rect_min: rect.min.to_array(),
-            rect_size: rect.size.to_array(),
+            rect_min: dispatched.min.to_array(),
+            rect_size: dispatched.size.to_array(),
             map_size: coarse.size().to_array(),
             wrap: wrap_code(coarse.wrap()),
             refine: layout.refine(),
             window_min: footprint.min.to_array(),
             window_size: footprint.size.to_array(),
-            wrap_offset: wrap_offset(rect.min, coarse.size())?,
+            wrap_offset: offset,
             k: spill_factor(layout.refine(), coarse.encoding()),
             max_raw: coarse.max_raw() as f32,
+            bits: GpuHeightMap::<T>::BITS,
+            start_x,
         };
-        let groups = dispatch_size(device, rect.size)?;
+        let words = packing::word_groups(start_x, dispatched.size.x, coarse.size().x, params.bits);
+        let groups = dispatch_size(device, UVec2::new(words, dispatched.size.y))?;
         encoder.clear_buffer(&self.excess, 0, Some(footprint.area() * 4));
         let window = ExcessWindow {
             buffer: &self.excess,

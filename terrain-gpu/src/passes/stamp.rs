@@ -14,6 +14,7 @@ use crate::device::scope::buffer_init;
 use crate::error::GpuError;
 use crate::resources::detail::GpuDetailTiles;
 use crate::resources::maps::{ExactInF32, GpuHeightMap, MapView};
+use crate::resources::packing;
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::detail::{detail_encoding, tiles_of_pieces};
@@ -51,11 +52,13 @@ struct StampParams {
     texel_offset: [i32; 2],
     spill_min: [i32; 2],
     spill_width: u32,
-    pad0: u32,
+    bits: u32,
+    start_x: u32,
+    pad1: u32,
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<StampParams>() == 160);
+const _: () = assert!(std::mem::size_of::<StampParams>() == 168);
 
 /// An i64 of the exact program as the shader's `vec2<u32>(lo, hi)`.
 fn split64(v: i64) -> [u32; 2] {
@@ -368,9 +371,11 @@ impl StampPass {
                 map_size: [side; 2],
                 wrap: wrap_code(WrapMode::Clamp),
                 // Below 2^32 texels in all: `GpuDetailTiles::new` checked slots x tile texels.
-                base: slot * side * side,
+                base: slot * tiles.slot_words(),
                 wrap_offset: [0; 2],
                 texel_offset: (piece.local.min - piece.unwrapped).to_array(),
+                bits: GpuDetailTiles::BITS,
+                start_x: piece.local.min.x as u32,
                 spill_min: spill.map_or([0; 2], |w| w.origin.to_array()),
                 spill_width: spill.map_or(0, |w| w.width),
                 ..prepared.params
@@ -408,14 +413,20 @@ impl StampPass {
         let Some(region) = stamp_region(map.size, map.wrap, ts, &op.placement)? else {
             return Ok(Vec::new());
         };
+        let offset = wrap_offset(region.footprint.min, map.size)?;
         let params = StampParams {
             region_min: region.footprint.min.to_array(),
             region_size: region.footprint.size.to_array(),
             map_size: map.size.to_array(),
             wrap: wrap_code(map.wrap),
             base: map.base,
-            wrap_offset: wrap_offset(region.footprint.min, map.size)?,
+            wrap_offset: offset,
             texel_offset: [0; 2],
+            bits: map.bits,
+            start_x: match map.wrap {
+                WrapMode::Repeat => region.footprint.min.x + offset[0],
+                WrapMode::Clamp => region.footprint.min.x,
+            } as u32,
             ..prepared.params
         };
         record(
@@ -442,8 +453,9 @@ fn record(
     [heights, excess, exp_table]: [&wgpu::Buffer; 3],
     prepared: &Prepared<'_>,
 ) -> Result<(), GpuError> {
-    let size = UVec2::from_array(prepared.params.region_size);
-    let groups = dispatch_size(device, size)?;
+    let p = &prepared.params;
+    let words = packing::word_groups(p.start_x, p.region_size[0], p.map_size[0], p.bits);
+    let groups = dispatch_size(device, UVec2::new(words, p.region_size[1]))?;
     let (group, offset) = bindings.bind(
         device,
         queue,
@@ -521,7 +533,9 @@ fn prepare<'a>(
         texel_offset: [0; 2],
         spill_min: [0; 2],
         spill_width: 0,
-        pad0: 0,
+        bits: 32,
+        start_x: 0,
+        pad1: 0,
     };
     Ok(Prepared {
         params,

@@ -1,5 +1,5 @@
 //! `GpuTileAtlas`: the VRAM side of the tile cache (Fikkan 2013, sec. 4.2, 5.6) — a fixed number of
-//! tile slots in one storage buffer of u32 heights and an indirection table over every tile of
+//! tile slots in one storage buffer of 16-bit heights (two per u32 word) and an indirection table over every tile of
 //! every level of the world, implementing terrain-core's [`TileUploadTarget`] — and
 //! `AtlasProbe`, which reads back what the atlas surface of the clipmap renderer sees at given
 //! texels. The CPU reference is [`terrain_core::TileAtlas`].
@@ -14,6 +14,7 @@ use crate::device::download::map_and_read;
 use crate::device::scope::{buffer_init, scoped};
 use crate::error::GpuError;
 use crate::resources::maps::{MapView, map_buffer};
+use crate::resources::packing;
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2};
 use terrain_core::{
@@ -49,11 +50,18 @@ pub struct AtlasConfig {
 }
 
 impl AtlasConfig {
-    /// Bytes of the slots' storage buffer (u32 per texel).
+    /// Bytes of the slots' storage buffer (16-bit texels packed two per u32 word: 2 bytes per
+    /// texel).
     pub fn slot_bytes(&self) -> u64 {
         u64::from(self.slots)
-            .saturating_mul(self.world.tile_texels())
+            .saturating_mul(self.slot_words())
             .saturating_mul(4)
+    }
+
+    /// u32 words of one tile slot: rows of 16-bit texels packed two per word.
+    pub fn slot_words(&self) -> u64 {
+        let ts = self.world.tile_size;
+        packing::words(ts, ts, GpuTileAtlas::BITS)
     }
 
     /// Bytes of the indirection table (u32 per tile of every level).
@@ -128,6 +136,9 @@ pub struct GpuTileAtlas {
 }
 
 impl GpuTileAtlas {
+    /// Bits per texel in the slots' buffer.
+    pub const BITS: u32 = 16;
+
     /// Builds the atlas on `device`; uploads go through `queue` (a clone is kept).
     pub fn new(
         device: &wgpu::Device,
@@ -188,7 +199,7 @@ impl GpuTileAtlas {
             info,
             heights,
             table,
-            staging: vec![0; layout.tile_texels() as usize],
+            staging: vec![0; config.slot_words() as usize],
             uploads: 0,
             uploaded_bytes: 0,
         })
@@ -199,8 +210,8 @@ impl GpuTileAtlas {
         &self.config
     }
 
-    /// The slots' storage buffer: slot `s` holds `tile_size^2` u32 heights from element
-    /// `s * tile_size^2`, row-major.
+    /// The slots' storage buffer: slot `s` holds `tile_size^2` 16-bit heights from word
+    /// `s * AtlasConfig::slot_words()`, rows of texels packed two per u32 word.
     pub fn heights_buffer(&self) -> &wgpu::Buffer {
         &self.heights
     }
@@ -265,12 +276,13 @@ impl GpuTileAtlas {
         Ok(MapView {
             buffer: &self.heights,
             // Below 2^32 texels in all: `validate` checked slots x tile texels.
-            base: slot * ts * ts,
+            base: slot * self.config.slot_words() as u32,
             size: UVec2::splat(ts),
             wrap: WrapMode::Clamp,
             encoding: layout.encoding,
             texel_size: layout.texel_size * (1u32 << level) as f32,
             max_raw: u32::from(u16::MAX),
+            bits: Self::BITS,
         })
     }
 
@@ -310,9 +322,9 @@ impl TileUploadTarget for GpuTileAtlas {
         self.config.slots
     }
 
-    /// u32 per texel.
+    /// 2 bytes per texel (a slot's packed words).
     fn upload_bytes(&self) -> u64 {
-        self.config.world.tile_texels() * 4
+        self.config.slot_words() * 4
     }
 
     fn upload(
@@ -331,9 +343,7 @@ impl TileUploadTarget for GpuTileAtlas {
                 actual: heights.size(),
             });
         }
-        for (d, &s) in self.staging.iter_mut().zip(heights.as_slice()) {
-            *d = u32::from(s);
-        }
+        self.staging = packing::pack(heights.as_slice().iter().map(|&h| u32::from(h)), ts, 16);
         let bytes = self.upload_bytes();
         self.queue.write_buffer(
             &self.heights,

@@ -1,6 +1,7 @@
 //! `GpuDetailTiles`: the VRAM side of terrain-core's detail layer (Flower 2010, sec. 2.3.1): a fixed
-//! number of tile slots in one storage buffer (a u32 per detail texel, as every map of the
-//! crate) and the slot of each tile of the layout. [`crate::StampPass::encode_detail`] stamps
+//! number of tile slots in one storage buffer (8-bit texels packed four per u32 word, one byte
+//! per texel as the thesis's 8-bit detail-maps; rows of whole words, as every map of the crate:
+//! `resources::packing`) and the slot of each tile of the layout. [`crate::StampPass::encode_detail`] stamps
 //! them; the CPU reference is [`terrain_core::detail::DetailLayer`].
 //!
 //! A tile is in one of three states:
@@ -49,6 +50,7 @@
 use crate::device::download::download_bytes;
 use crate::error::GpuError;
 use crate::resources::maps::map_buffer;
+use crate::resources::packing;
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2};
 use terrain_core::detail::{DETAIL_ZERO_RAW, DetailLayer, DetailLayout, detail_encoding};
@@ -81,7 +83,7 @@ pub struct GpuDetailTiles {
     state: Grid<u32>,
     /// Free slots; the last is handed out first (the lowest, until slots are freed).
     free: Vec<u32>,
-    /// A tile's texels widened to u32, made once.
+    /// A tile's texels packed, made once.
     staging: Vec<u32>,
 }
 
@@ -102,11 +104,12 @@ impl GpuDetailTiles {
             }
             .into());
         }
+        let slot_words = packing::words(side, side, Self::BITS);
         let heights = map_buffer(
             device,
             "GpuDetailTiles slots",
             UVec2::new(side, side.saturating_mul(slots)),
-            texels * 4,
+            u64::from(slots) * slot_words * 4,
         )?;
         let tiles = layout.tiles();
         let state = Grid::new(tiles.x, tiles.y, ZERO)?;
@@ -123,8 +126,24 @@ impl GpuDetailTiles {
             table,
             state,
             free: (0..slots).rev().collect(),
-            staging: vec![0; tile_texels as usize],
+            staging: vec![0; slot_words as usize],
         })
+    }
+
+    /// Bits per detail texel in the slots' buffer.
+    pub const BITS: u32 = 8;
+
+    /// u32 words one tile slot takes (rows of packed 8-bit texels).
+    pub fn slot_words(&self) -> u32 {
+        // Below 2^32: `new` checked slots x tile texels.
+        packing::words(self.layout.tile_size(), self.layout.tile_size(), Self::BITS) as u32
+    }
+
+    /// Bytes the slots' buffer takes per detail texel it holds (1, plus row padding when the
+    /// tile side is not a multiple of 4).
+    pub fn bytes_per_texel(&self) -> f64 {
+        let side = f64::from(self.layout.tile_size());
+        self.heights.size() as f64 / (side * side * f64::from(self.slots))
     }
 
     /// The layout.
@@ -200,9 +219,8 @@ impl GpuDetailTiles {
             DetailTileState::Resident(slot) => slot,
             _ => self.take_slot(queue, tile)?,
         };
-        for (d, &v) in self.staging.iter_mut().zip(texels.as_slice()) {
-            *d = u32::from(v);
-        }
+        let side = self.layout.tile_size();
+        self.staging = packing::pack(texels.as_slice().iter().map(|&v| u32::from(v)), side, 8);
         self.write_slot(queue, slot);
         Ok(())
     }
@@ -246,16 +264,17 @@ impl GpuDetailTiles {
             DetailTileState::Resident(slot) => slot,
         };
         // The rows of the rect, first to last, in one download (whole rows: one copy).
-        let tile_start = u64::from(slot) * u64::from(side) * u64::from(side);
-        let first = tile_start + rect.min.y as u64 * u64::from(side);
+        let pitch = u64::from(packing::pitch(side, Self::BITS));
+        let first = u64::from(slot) * u64::from(self.slot_words()) + rect.min.y as u64 * pitch;
         let bytes = download_bytes(
             device,
             queue,
             &self.heights,
             first * 4,
-            u64::from(rect.size.y) * u64::from(side) * 4,
+            u64::from(rect.size.y) * pitch * 4,
         )?;
-        let values: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
+        let values = packing::unpack(&words, side, Self::BITS);
         let (x0, w) = (rect.min.x as usize, side as usize);
         Ok(Grid::from_fn(rect.size.x, rect.size.y, |x, y| {
             values[y as usize * w + x0 + x as usize].min(255) as u8
@@ -276,12 +295,13 @@ impl GpuDetailTiles {
         Ok(crate::resources::maps::MapView {
             buffer: &self.heights,
             // Below 2^32 texels in all: `new` checked slots x tile texels.
-            base: slot * side * side,
+            base: slot * self.slot_words(),
             size: UVec2::splat(side),
             wrap: terrain_core::WrapMode::Clamp,
             encoding: detail_encoding(),
             texel_size: self.layout.detail_texel_m(),
             max_raw: 255,
+            bits: Self::BITS,
         })
     }
 
@@ -373,7 +393,8 @@ impl GpuDetailTiles {
                 free: self.free.len(),
             });
         }
-        self.staging.fill(u32::from(DETAIL_ZERO_RAW));
+        // Every lane of every word DETAIL_ZERO_RAW (row padding included: never read).
+        self.staging.fill(u32::from(DETAIL_ZERO_RAW) * 0x0101_0101);
         for tile in tiles {
             if self.state(tile) == Some(DetailTileState::Zero) {
                 let slot = self.take_slot(queue, tile)?;

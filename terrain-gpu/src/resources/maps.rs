@@ -1,18 +1,24 @@
-//! GPU mirrors of terrain-core maps: `GpuHeightMap` (heights, one u32 per texel) and
-//! `GpuDerivativeMap` (two f32 gradient components per texel), with upload and download.
+//! GPU mirrors of terrain-core maps: `GpuHeightMap` (heights, packed at the sample's own
+//! width: 2 bytes per u16 texel, 1 per u8) and `GpuDerivativeMap` (two 8-bit slope codes per
+//! texel, 2 bytes), with upload and download. A 16-bit coarse-map takes 4 bytes per texel with
+//! its normals, the thesis format (Flower 2010, sec. 3.1: R16 heights, RG8 derivatives).
 //!
 //! Why storage buffers rather than textures: the passes need exact integer read-modify-write of
 //! the heights, which an `R16Uint`/`R16Unorm` storage texture cannot give on every backend (GL
 //! has no writable 16-bit storage formats; WebGPU none at all), and a buffer needs no backup
-//! copy for in-place stamping. One u32 per texel keeps every invocation's writes to its own
-//! element.
+//! copy for in-place stamping. Texels are packed into u32 words by rows
+//! ([`crate::resources::packing`]); a writer owns whole words, so no invocation's write races
+//! another's.
 
 use crate::device::download::download_bytes;
 use crate::device::scope::scoped;
 use crate::error::GpuError;
+use crate::resources::packing;
 use glam::{UVec2, Vec2};
 use std::marker::PhantomData;
-use terrain_core::{DerivativeMap, Grid, HeightEncoding, HeightMap, HeightSample, WrapMode};
+use terrain_core::{
+    DerivativeMap, Grid, HeightEncoding, HeightMap, HeightSample, WrapMode, decode_slope,
+};
 
 /// A storage buffer of `bytes` for a map of `size` texels (copyable both ways), after checking
 /// it fits the device's storage binding and buffer limits. Every per-texel buffer of the crate
@@ -89,8 +95,9 @@ mod sealed {
     impl Sealed for u16 {}
 }
 
-/// A heightmap on the GPU: a storage buffer of one u32 per texel, row-major, with the map's
-/// encoding, spacing and wrap mode. Pairs with [`terrain_core::HeightMap<T>`]: `u16` for the
+/// A heightmap on the GPU: a storage buffer of rows of texels packed at the sample's width
+/// (16-bit texels two per u32 word, 8-bit four, 32-bit one), with the map's encoding, spacing
+/// and wrap mode. Pairs with [`terrain_core::HeightMap<T>`]: `u16` for the
 /// coarse-map, `u8` for detail tiles, `u32` for the fixed-point heights of granular
 /// deformation. The sample type is part of the type, so a download cannot clamp silently.
 #[derive(Debug)]
@@ -111,7 +118,7 @@ impl<T: HeightSample> GpuHeightMap<T> {
         map: &HeightMap<T>,
     ) -> Result<Self, GpuError> {
         let size = map.size();
-        let bytes = u64::from(size.x) * u64::from(size.y) * 4;
+        let bytes = packing::words(size.x, size.y, Self::BITS) * 4;
         let buffer = map_buffer(device, "GpuHeightMap", size, bytes)?;
         let gpu = Self {
             buffer,
@@ -140,11 +147,12 @@ impl<T: HeightSample> GpuHeightMap<T> {
             });
         }
         let values = map.grid().as_slice();
-        if T::MAX_RAW == f64::from(u32::MAX) && std::mem::size_of::<T>() == 4 {
+        if Self::BITS == 32 {
             // u32 heights go up as they are.
             queue.write_buffer(&self.buffer, 0, bytemuck::cast_slice(values));
         } else {
-            let data: Vec<u32> = values.iter().map(|v| v.to_raw_f64() as u32).collect();
+            let raw = values.iter().map(|v| v.to_raw_f64() as u32);
+            let data = packing::pack(raw, self.size.x, Self::BITS);
             queue.write_buffer(&self.buffer, 0, bytemuck::cast_slice(&data));
         }
         Ok(())
@@ -172,17 +180,26 @@ impl<T: HeightSample> GpuHeightMap<T> {
         )?)
     }
 
-    /// Downloads the stored values as u32, row-major (waits for the GPU).
+    /// Downloads the stored values as u32, one per texel, row-major (waits for the GPU).
     pub fn read_raw(
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<Vec<u32>, GpuError> {
         let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
-        Ok(bytemuck::pod_collect_to_vec(&bytes))
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
+        Ok(packing::unpack(&words, self.size.x, Self::BITS))
     }
 
-    /// The storage buffer.
+    /// Bits per texel in the buffer: 8, 16 or 32, the sample's width.
+    pub const BITS: u32 = packing::bits_of(std::mem::size_of::<T>());
+
+    /// Bytes the buffer takes per texel (1, 2 or 4; rows are padded to whole u32 words).
+    pub fn bytes_per_texel(&self) -> f64 {
+        self.buffer.size() as f64 / (f64::from(self.size.x) * f64::from(self.size.y))
+    }
+
+    /// The storage buffer: rows of packed texels (see [`GpuHeightMap`]).
     pub fn buffer(&self) -> &wgpu::Buffer {
         &self.buffer
     }
@@ -222,14 +239,15 @@ impl<T: HeightSample> GpuHeightMap<T> {
             encoding: self.encoding,
             texel_size: self.texel_size,
             max_raw: self.max_raw(),
+            bits: Self::BITS,
         }
     }
 }
 
-/// A height map as the stamp pass and the region readback address it: `size` u32 texels,
-/// row-major, from element `base` of `buffer`. A [`GpuHeightMap`] is one from element 0; a
-/// tile slot of a [`crate::GpuTileAtlas`] is one from its slot's first texel, so both passes
-/// work on either without a copy.
+/// A height map as the stamp pass and the region readback address it: `size` texels of `bits`
+/// bits, packed by rows ([`packing`]), from word `base` of `buffer`. A [`GpuHeightMap`] is one
+/// from word 0; a tile slot of a [`crate::GpuTileAtlas`] is one from its slot's first word, so
+/// both passes work on either without a copy.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct MapView<'a> {
     pub buffer: &'a wgpu::Buffer,
@@ -239,6 +257,7 @@ pub(crate) struct MapView<'a> {
     pub encoding: HeightEncoding,
     pub texel_size: f32,
     pub max_raw: u32,
+    pub bits: u32,
 }
 
 impl GpuHeightMap<u32> {
@@ -248,8 +267,11 @@ impl GpuHeightMap<u32> {
     }
 }
 
-/// Partial-derivative normals on the GPU: a storage buffer of `vec2<f32>` gradients
-/// `(dh/dX, dh/dZ)` per texel. Pairs with [`terrain_core::DerivativeMap`].
+/// Partial-derivative normals on the GPU: per texel, the 8-bit slope codes
+/// ([`terrain_core::SlopeCodec`]) of `(dh/dX, dh/dZ)`, dX in the low byte, as 16-bit texels
+/// packed two per u32 word (2 bytes per texel; Flower 2010 stores the two components in
+/// `GL_RG8`). Pairs with [`terrain_core::DerivativeMap`] ([`GpuDerivativeMap::read`] decodes)
+/// and [`terrain_core::SlopeCodec::codes`] ([`GpuDerivativeMap::read_codes`], bit for bit).
 #[derive(Debug)]
 pub struct GpuDerivativeMap {
     buffer: wgpu::Buffer,
@@ -259,7 +281,10 @@ pub struct GpuDerivativeMap {
 }
 
 impl GpuDerivativeMap {
-    /// An all-zero derivative map for a height map of `size`, spacing and wrap.
+    /// Bits per texel of the buffer: two 8-bit codes.
+    pub const BITS: u32 = 16;
+
+    /// An all-zero (flat) derivative map for a height map of `size`, spacing and wrap.
     pub fn new(
         device: &wgpu::Device,
         size: UVec2,
@@ -268,7 +293,7 @@ impl GpuDerivativeMap {
     ) -> Result<Self, GpuError> {
         // Validate up front: the spacing is only used when reading back.
         DerivativeMap::from_grid(Grid::new(1, 1, Vec2::ZERO)?, texel_size, wrap)?;
-        let bytes = u64::from(size.x) * u64::from(size.y) * 8;
+        let bytes = packing::words(size.x, size.y, Self::BITS) * 4;
         let buffer = map_buffer(device, "GpuDerivativeMap", size, bytes)?;
         Ok(Self {
             buffer,
@@ -286,23 +311,38 @@ impl GpuDerivativeMap {
         Self::new(device, map.size(), map.texel_size(), map.wrap())
     }
 
-    /// Downloads the gradients, waiting for the GPU.
+    /// Downloads the slope codes `[dX, dZ]` per texel, waiting for the GPU.
+    pub fn read_codes(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<Grid<[i8; 2]>, GpuError> {
+        let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
+        let codes = packing::unpack(&words, self.size.x, Self::BITS)
+            .into_iter()
+            .map(|v| [v as u8 as i8, (v >> 8) as u8 as i8])
+            .collect();
+        Ok(Grid::from_vec(self.size.x, self.size.y, codes)?)
+    }
+
+    /// Downloads the gradients (the slopes the codes stand for), waiting for the GPU.
     pub fn read(
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<DerivativeMap, GpuError> {
-        let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
-        let raw: &[[f32; 2]] = bytemuck::cast_slice(&bytes);
-        let grid = Grid::from_vec(
-            self.size.x,
-            self.size.y,
-            raw.iter().map(|&d| Vec2::from(d)).collect(),
-        )?;
+        let codes = self.read_codes(device, queue)?;
+        let grid = codes.map(|&[x, z]| Vec2::new(decode_slope(x), decode_slope(z)));
         Ok(DerivativeMap::from_grid(grid, self.texel_size, self.wrap)?)
     }
 
-    /// The storage buffer.
+    /// Bytes the buffer takes per texel (2; rows are padded to whole u32 words).
+    pub fn bytes_per_texel(&self) -> f64 {
+        self.buffer.size() as f64 / (f64::from(self.size.x) * f64::from(self.size.y))
+    }
+
+    /// The storage buffer (see [`GpuDerivativeMap`] for its layout).
     pub fn buffer(&self) -> &wgpu::Buffer {
         &self.buffer
     }

@@ -4,3 +4,4 @@
 pub mod atlas;
 pub mod detail;
 pub mod maps;
+pub(crate) mod packing;

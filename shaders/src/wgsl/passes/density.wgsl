@@ -31,6 +31,9 @@ struct DensityParams {
     exponent: f32,
     // `finish`: the multiple of the level-0 size that makes its reads non-negative.
     src_offset: vec2<i32>,
+    // Bits per height texel (8 or 16; packed.wgsl).
+    bits: u32,
+    _pad: u32,
 }
 
 @group(0) @binding(0) var<uniform> p: DensityParams;
@@ -47,7 +50,8 @@ fn resolve(v: i32, n: u32, offset: i32) -> u32 {
 
 fn h(x: i32, y: i32) -> f32 {
     let row = resolve(y, p.map_size.y, p.map_offset.y);
-    return f32(heights[row * p.map_size.x + resolve(x, p.map_size.x, p.map_offset.x)]);
+    let col = resolve(x, p.map_size.x, p.map_offset.x);
+    return f32(packed_get(heights[packed_index(col, row, p.map_size.x, p.bits)], col, p.bits));
 }
 
 fn cot(a: vec3<f32>, b: vec3<f32>) -> f32 {

@@ -1,7 +1,8 @@
 // SpillPass: moves the excess a detail stamp left in its spill window into the coarse-map, by
 // the rule of terrain-core's `detail_spill` (the transpose of the bilinear interpolation from
-// coarse to detail texels). Invocation (i, j) owns coarse texel rect_min + (i, j) and writes
-// only it, so no two invocations touch the same texel.
+// coarse to detail texels). Invocation (i, j) owns the i-th word of row j of the rect (the
+// coarse texels packed in it, packed.wgsl) and writes only that word, so no two invocations
+// touch the same texel or word.
 
 struct SpillParams {
     // Coarse texels of the spill rect (unwrapped).
@@ -20,6 +21,11 @@ struct SpillParams {
     // Coarse raw units per tent-weighted detail unit: detail scale / (coarse scale r^4).
     k: f32,
     max_raw: f32,
+    // Bits per coarse texel (8 or 16).
+    bits: u32,
+    // rect_min.x made non-negative (plus wrap_offset.x on a repeating map; a clamped map's
+    // rect is inside it): where the rect's word groups start.
+    start_x: u32,
 }
 
 @group(0) @binding(0) var<uniform> p: SpillParams;
@@ -28,10 +34,35 @@ struct SpillParams {
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= p.rect_size.x || id.y >= p.rect_size.y {
+    let group = packed_group(p.start_x, id.x, p.map_size.x, p.bits);
+    if id.y >= p.rect_size.y || group.first >= p.start_x + p.rect_size.x {
         return;
     }
-    let c = p.rect_min + vec2<i32>(id.xy);
+    let cy = p.rect_min.y + i32(id.y);
+    var y = u32(cy);
+    if p.wrap == WRAP_REPEAT {
+        y = u32(cy + p.wrap_offset.y) % p.map_size.y;
+    }
+    let idx = y * packed_pitch(p.map_size.x, p.bits) + group.word;
+    var word = heights[idx];
+    let lanes = 32u / p.bits;
+    for (var lane = 0u; lane < lanes; lane++) {
+        let col = group.first + lane;
+        let x = group.word * lanes + lane;
+        if col >= p.start_x && col < p.start_x + p.rect_size.x && x < p.map_size.x {
+            let c = vec2<i32>(p.rect_min.x + i32(col - p.start_x), cy);
+            let delta = spill_at(c);
+            if delta != 0.0 {
+                let old = f32(packed_get(word, x, p.bits));
+                word = packed_set(word, x, p.bits, u32(clamp(old + delta, 0.0, p.max_raw)));
+            }
+        }
+    }
+    heights[idx] = word;
+}
+
+// The change of coarse texel c (unwrapped) in stored units.
+fn spill_at(c: vec2<i32>) -> f32 {
     let r = i32(p.refine);
     let centre = c * r - p.window_min;
     var sum = 0.0;
@@ -49,23 +80,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
     }
-    let delta = floor(sum * p.k + 0.5);
-    if delta == 0.0 {
-        return;
-    }
-    var x: u32;
-    var y: u32;
-    if p.wrap == WRAP_REPEAT {
-        x = u32(c.x + p.wrap_offset.x) % p.map_size.x;
-        y = u32(c.y + p.wrap_offset.y) % p.map_size.y;
-    } else {
-        // A clamped coarse-map keeps nothing beyond its edges.
-        if c.x < 0 || c.y < 0 || c.x >= i32(p.map_size.x) || c.y >= i32(p.map_size.y) {
-            return;
-        }
-        x = u32(c.x);
-        y = u32(c.y);
-    }
-    let i = y * p.map_size.x + x;
-    heights[i] = u32(clamp(f32(heights[i]) + delta, 0.0, p.max_raw));
+    return floor(sum * p.k + 0.5);
 }

@@ -1,6 +1,6 @@
-// StampPass: applies one stamp to a height buffer (one u32 per texel), in place.
-// Each invocation reads and writes only its own texel, so no backup copy of the map is needed
-// (Flower 2010 measured its backup copy as the deformation bottleneck).
+// StampPass: applies one stamp to a height buffer (texels packed into u32 words, packed.wgsl),
+// in place. Each invocation reads and writes only its own word, so no backup copy of the map is
+// needed (Flower 2010 measured its backup copy as the deformation bottleneck).
 //
 // Exact: this is terrain-core's exact stamp program (terrain_core::stamp::fixed), step for step,
 // in 32-bit integers with its 64-bit values emulated as vec2<u32> (lo, hi), two's complement.
@@ -14,7 +14,8 @@
 // No `exp`, no `a * b + c` with an inexact product, no division.
 
 struct StampParams {
-    // Footprint in unwrapped texel coordinates: invocation (i, j) handles region_min + (i, j).
+    // Footprint in unwrapped texel coordinates: row j of invocations handles its row
+    // region_min.y + j, invocation i the i-th word of that row it touches (packed_group).
     region_min: vec2<i32>,
     region_size: vec2<u32>,
     map_size: vec2<u32>,
@@ -42,7 +43,7 @@ struct StampParams {
     max_raw: u32,
     // Gaussian falloff, round(beta 2^23).
     beta_q: u32,
-    // Element of `heights` where the map starts (a tile slot of an atlas; 0 for a whole map).
+    // Word of `heights` where the map starts (a tile slot of an atlas; 0 for a whole map).
     base: u32,
     // Size of the texture stamp's values.
     tex_size: vec2<u32>,
@@ -56,7 +57,12 @@ struct StampParams {
     // coordinates of its texel (0, 0) and its width; width 0 writes no excess.
     spill_min: vec2<i32>,
     spill_width: u32,
-    pad0: u32,
+    // Bits per stored texel (8 or 16; packed.wgsl).
+    bits: u32,
+    // The region's first column made non-negative (region_min.x plus wrap_offset.x on a
+    // repeating map, plus texel_offset.x on a clamped one): where its word groups start.
+    start_x: u32,
+    pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> p: StampParams;
@@ -253,18 +259,43 @@ fn term_q16(v31: vec2<u32>) -> vec2<u32> {
     return shl64(prod, ls);
 }
 
+// One invocation per word of the map that the region touches (32 / bits texels of one row):
+// it stamps the word's texels inside the region and writes the word back, so no two
+// invocations share a word and packing needs no atomics (packed.wgsl).
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= p.region_size.x || id.y >= p.region_size.y {
+    let group = packed_group(p.start_x, id.x, p.map_size.x, p.bits);
+    if id.y >= p.region_size.y || group.first >= p.start_x + p.region_size.x {
         return;
     }
-    let u = p.region_min + vec2<i32>(id.xy);
+    let uy = p.region_min.y + i32(id.y);
+    var y = u32(uy + p.texel_offset.y);
+    if p.wrap == WRAP_REPEAT {
+        y = u32(uy + p.wrap_offset.y) % p.map_size.y;
+    }
+    let idx = p.base + y * packed_pitch(p.map_size.x, p.bits) + group.word;
+    var word = heights[idx];
+    let lanes = 32u / p.bits;
+    for (var lane = 0u; lane < lanes; lane++) {
+        let c = group.first + lane;
+        let x = group.word * lanes + lane;
+        if c >= p.start_x && c < p.start_x + p.region_size.x && x < p.map_size.x {
+            let ux = p.region_min.x + i32(c - p.start_x);
+            word = stamp_texel(vec2<i32>(ux, uy), x, word);
+        }
+    }
+    heights[idx] = word;
+}
+
+// The stamp at unwrapped texel u, which is texel x of the row in `word`: the word with that
+// texel's new height (unchanged where the stamp does not reach).
+fn stamp_texel(u: vec2<i32>, x: u32, word: u32) -> u32 {
     let i = u32(u.x - p.anchor.x);
     let j = u32(u.y - p.anchor.y);
     let lx = add64(add64(p.l0x, mul64(p.lxx, i)), mul64(p.lyx, j));
     let ly = add64(add64(p.l0y, mul64(p.lxy, i)), mul64(p.lyy, j));
     if !(inside1(lx) && inside1(ly)) {
-        return;
+        return word;
     }
     var v31: vec2<u32>;
     switch p.kind {
@@ -283,19 +314,12 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             let v = user_stamp_value(local);
             // NaN or infinite values leave the texel unchanged (as the CPU).
             if !(abs(v) <= 0x1.fffffep+127f) {
-                return;
+                return word;
             }
             v31 = user_v31(v);
         }
     }
-    var x = u32(u.x + p.texel_offset.x);
-    var y = u32(u.y + p.texel_offset.y);
-    if p.wrap == WRAP_REPEAT {
-        x = u32(u.x + p.wrap_offset.x) % p.map_size.x;
-        y = u32(u.y + p.wrap_offset.y) % p.map_size.y;
-    }
-    let idx = p.base + y * p.map_size.x + x;
-    let old = from_i32(i32(heights[idx]));
+    let old = from_i32(i32(packed_get(word, x, p.bits)));
     let t = term_q16(v31);
     var new_raw: vec2<u32>;
     switch p.blend {
@@ -311,10 +335,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     let kept = clamp64(new_raw, 0, i32(p.max_raw));
-    heights[idx] = u32(kept);
     if p.spill_width != 0u {
         let w = vec2<u32>(u - p.spill_min);
         let wide = clamp64(new_raw, -WIDE_SHIFT, i32(p.max_raw) + WIDE_SHIFT);
         excess[w.y * p.spill_width + w.x] = wide - kept;
     }
+    return packed_set(word, x, p.bits, u32(kept));
 }

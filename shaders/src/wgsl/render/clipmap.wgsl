@@ -44,14 +44,17 @@ struct Frame {
 // clipmap_surface_*.wgsl placed after this file.
 
 // The map texel a grid texel reads: wrapped on a toroidal map, clamped to the edges otherwise.
-fn texel_index(t: vec2<i32>) -> u32 {
+fn map_texel(t: vec2<i32>) -> vec2<u32> {
     if frame.wrap == WRAP_REPEAT {
-        let x = u32(t.x + frame.wrap_offset.x) % frame.map_size.x;
-        let y = u32(t.y + frame.wrap_offset.y) % frame.map_size.y;
-        return y * frame.map_size.x + x;
+        return vec2<u32>(t + frame.wrap_offset) % frame.map_size;
     }
-    let c = clamp(t, vec2<i32>(0, 0), vec2<i32>(frame.map_size) - vec2<i32>(1, 1));
-    return u32(c.y) * frame.map_size.x + u32(c.x);
+    return vec2<u32>(clamp(t, vec2<i32>(0, 0), vec2<i32>(frame.map_size) - vec2<i32>(1, 1)));
+}
+
+// Its index in a buffer of one element per texel.
+fn texel_index(t: vec2<i32>) -> u32 {
+    let c = map_texel(t);
+    return c.y * frame.map_size.x + c.x;
 }
 
 struct VsIn {

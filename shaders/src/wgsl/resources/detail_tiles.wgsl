@@ -1,5 +1,5 @@
 // GpuDetailTiles as shaders read them (Flower 2010, sec. 2.3.1): the tile-slot table and the slots
-// of raw u8 detail values (one u32 each), with bilinear heights and eq. 3.3 gradients across
+// of raw u8 detail values (packed four per u32 word), with bilinear heights and eq. 3.3 gradients across
 // tile edges and the layer's wrap. CPU reference: terrain_core::detail::DetailLayer's
 // height_m and gradient_m.
 
@@ -49,7 +49,10 @@ fn detail_raw(p: vec2<i32>) -> f32 {
         return f32(DETAIL_ZERO_RAW);
     }
     let local = q % detail.tile_size;
-    return f32(detail_heights[(slot * detail.tile_size + local.y) * detail.tile_size + local.x]);
+    // Slots of rows of 8-bit texels packed four per word (packed.wgsl).
+    let slot_words = packed_pitch(detail.tile_size, 8u) * detail.tile_size;
+    let word = detail_heights[slot * slot_words + packed_index(local.x, local.y, detail.tile_size, 8u)];
+    return f32(packed_get(word, local.x, 8u));
 }
 
 // Whether the tile of detail texel `p` has no slot (the zero tile, or not loaded: 0 m).

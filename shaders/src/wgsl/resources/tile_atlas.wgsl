@@ -1,4 +1,5 @@
-// Tile atlas lookup (Fikkan 2013, sec. 4.2, 5.6): tile slots of u32 heights and an indirection
+// Tile atlas lookup (Fikkan 2013, sec. 4.2, 5.6): tile slots of 16-bit heights (packed two per
+// u32 word) and an indirection
 // table over every tile of every level of the world (a slot, or INVALID_SLOT). A level-0 texel
 // t reads the finest level l whose tile covering t >> l is resident, so a missing tile shows as
 // a coarser one, never as a hole. CPU reference: terrain_core::TileAtlas::stored_at.
@@ -39,7 +40,11 @@ fn atlas_stored(t: vec2<u32>) -> u32 {
             // INVALID_SLOT (and anything else out of range) is not resident.
             if slot < atlas.slot_count {
                 let w = c & vec2<u32>(mask, mask);
-                stored = atlas_heights[(slot << (2u * shift)) + (w.y << shift) + w.x];
+                // Slots of rows of 16-bit texels packed two per word (packed.wgsl).
+                let side = 1u << shift;
+                let words = packed_pitch(side, 16u) * side;
+                let word = atlas_heights[slot * words + packed_index(w.x, w.y, side, 16u)];
+                stored = packed_get(word, w.x, 16u);
                 found = true;
             }
         }
