@@ -150,9 +150,10 @@ impl TileUploadTarget for TileAtlas {
         self.slots
     }
 
-    /// u32 per texel, as on the GPU.
+    /// 2 bytes per texel, as on the GPU (16-bit texels packed two per u32 word, rows of
+    /// whole words).
     fn upload_bytes(&self) -> u64 {
-        self.layout.tile_texels() * 4
+        u64::from(self.layout.tile_size.div_ceil(2)) * u64::from(self.layout.tile_size) * 4
     }
 
     fn upload(

@@ -475,9 +475,10 @@ fn bad_calls_are_errors_not_panics() {
     assert!(atlas.map(0, UVec2::ZERO, Some(4)).is_err());
     assert!(atlas.map(0, UVec2::ZERO, Some(INVALID_SLOT)).is_err());
     assert!(atlas.map(2, UVec2::new(1, 0), None).is_err());
-    assert_eq!(atlas.upload(3, 2, UVec2::ZERO, &tile).unwrap(), 16 * 16 * 4);
+    // 2 bytes per texel: 16-bit heights packed two per word.
+    assert_eq!(atlas.upload(3, 2, UVec2::ZERO, &tile).unwrap(), 16 * 16 * 2);
     atlas.map(2, UVec2::ZERO, Some(3)).unwrap();
-    assert_eq!((atlas.uploads(), atlas.uploaded_bytes()), (1, 1024));
+    assert_eq!((atlas.uploads(), atlas.uploaded_bytes()), (1, 512));
     // Sizes past the device's limits or the shaders' u32 indices.
     let huge = AtlasConfig {
         slots: 65_535,
@@ -497,7 +498,7 @@ fn bad_calls_are_errors_not_panics() {
     assert!(GpuTileAtlas::new(device, queue, &too_many).is_err());
     assert!(GpuTileAtlas::new(device, queue, &AtlasConfig { slots: 0, ..config }).is_err());
     let limits = huge.required_limits(wgpu::Limits::default()).unwrap();
-    assert_eq!(limits.max_storage_buffer_binding_size, 65_535 * 65_536 * 4);
+    assert_eq!(limits.max_storage_buffer_binding_size, 65_535 * 65_536 * 2);
     // The probe refuses texels its i32 arithmetic cannot take, and too many.
     let mut probe = AtlasProbe::new(device, 8).unwrap();
     assert!(

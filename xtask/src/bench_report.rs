@@ -1,7 +1,8 @@
 //! `cargo xtask bench-report [--quick] [--write-docs]`: runs the headline CPU benches briefly
 //! and compares each figure with the thesis figure and with plain copies of the same bytes
-//! measured in the same run, since absolute times on a shared machine mean little. With
-//! `--write-docs` the table becomes `docs/BENCHMARKS.md`, a whole generated file.
+//! measured in the same run, since absolute times on a shared machine mean little; then the bytes
+//! per texel of every GPU resource (terrain-gpu's `gpu_memory` example). With `--write-docs`
+//! the tables become `docs/BENCHMARKS.md`, a whole generated file.
 
 use crate::util::{cargo, root, target_dir, write_atomically};
 use anyhow::{Context, Result, bail};
@@ -252,6 +253,10 @@ pub fn bench_report(args: &[String]) -> Result<()> {
          Figures from a shared machine are noisy; compare ratios measured in the same run.\n",
         if quick { " (--quick)" } else { "" },
     ));
+    md.push_str(&format!(
+        "\n## GPU memory per texel\n\n{}",
+        gpu_memory_table()?
+    ));
     let json = serde_json::json!({ "quick": quick, "threads": threads, "figures": rows });
     std::fs::create_dir_all(&target)?;
     let json_path = target.join("bench-report.json");
@@ -267,6 +272,30 @@ pub fn bench_report(args: &[String]) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// The bytes per texel of every GPU resource, measured by terrain-gpu's `gpu_memory` example
+/// from the buffers it allocates on this machine's adapter (a software one will do: sizes do
+/// not depend on the adapter).
+fn gpu_memory_table() -> Result<String> {
+    let out = std::process::Command::new(crate::util::cargo_exe())
+        .args([
+            "run",
+            "--locked",
+            "--release",
+            "-p",
+            "terrain-gpu",
+            "--example",
+            "gpu_memory",
+        ])
+        .current_dir(root())
+        .stderr(std::process::Stdio::inherit())
+        .output()
+        .context("running terrain-gpu's gpu_memory example")?;
+    if !out.status.success() {
+        bail!("terrain-gpu's gpu_memory example failed ({})", out.status);
+    }
+    String::from_utf8(out.stdout).context("gpu_memory's table is not UTF-8")
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use std::process::Command;
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 10] = [
+const EXAMPLES: [(&str, &str, &[&str]); 11] = [
     (
         "terrain-core",
         "stamp_heightmap",
@@ -24,6 +24,7 @@ const EXAMPLES: [(&str, &str, &[&str]); 10] = [
         &["--size", "64", "--spheres", "2", "--steps", "90"],
     ),
     ("terrain-gpu", "own_device", &["{out}/own_device.png"]),
+    ("terrain-gpu", "gpu_memory", &["64"]),
     ("terrain-lod", "clipmap_frame", &["63", "4"]),
     (
         "terrain-lod",

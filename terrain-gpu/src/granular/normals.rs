@@ -38,6 +38,11 @@ pub struct GpuGranularNormals {
 }
 
 impl GpuGranularNormals {
+    /// Bytes of GPU memory it takes (the normals and the blur's scratch).
+    pub fn memory_bytes(&self) -> u64 {
+        self.normals.size() + self.scratch.size()
+    }
+
     /// Zeroed normals for a map of `size` texels.
     pub fn new(device: &wgpu::Device, size: UVec2) -> Result<Self, GpuError> {
         let bytes = u64::from(size.x) * u64::from(size.y) * 16;

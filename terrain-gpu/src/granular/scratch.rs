@@ -69,6 +69,17 @@ pub struct GranularScratch {
 }
 
 impl GranularScratch {
+    /// Bytes of GPU memory its buffers take (every per-column buffer, the counter and its
+    /// readback).
+    pub fn memory_bytes(&self) -> u64 {
+        let per_column = [&self.depth, &self.pen, &self.acc, &self.amounts, &self.dist];
+        per_column.iter().map(|b| b.size()).sum::<u64>()
+            + self.seeds.iter().map(|b| b.size()).sum::<u64>()
+            + self.carried.size()
+            + self.removed.size()
+            + self.removed_readback.size()
+    }
+
     /// Buffers for areas of up to `columns` columns.
     pub fn new(device: &wgpu::Device, columns: u64) -> Result<Self, GpuError> {
         let columns = columns.max(1);

@@ -66,6 +66,11 @@ pub struct GpuDensityMap {
 }
 
 impl GpuDensityMap {
+    /// Bytes of GPU memory it takes (the raw curvature values and every pyramid level).
+    pub fn memory_bytes(&self) -> u64 {
+        self.raw.size() + self.levels.size()
+    }
+
     /// An all-zero density map for a heightfield of `map_size` texels (fill it with
     /// [`DensityPass::encode_full`]). Fails on invalid `params` or a map too large for the
     /// device's storage buffers.
