@@ -176,6 +176,21 @@ fn stamps_match_the_cpu_reference_on_a_wrapping_coarse_map() {
     );
     assert!(max == STAMP_BOUND_LSB, "max difference {max} LSB");
     assert_eq!(differ, 0, "{differ} texels differ");
+
+    // Odd sizes: each row's last word holds one texel and a padding lane, and the wrap falls
+    // inside a word's run of columns; u8 maps pack four texels a word. Both wrap modes.
+    for (w, h) in [(201, 151), (199, 149)] {
+        for wrap in [WrapMode::Repeat, WrapMode::Clamp] {
+            let enc = HeightEncoding::new(0.001, -5.0).unwrap();
+            let map = HeightMap::new(hashed::<u16>(w, h, 20_000, 20_000), enc, 0.25, wrap).unwrap();
+            let (max, differ) = compare_stamps(&ctx, map, &mut stamps, &mut pass);
+            assert_eq!((max, differ), (STAMP_BOUND_LSB, 0), "u16 {w}x{h} {wrap:?}");
+            let enc8 = HeightEncoding::new(0.2, -5.0).unwrap();
+            let map8 = HeightMap::new(hashed::<u8>(w, h, 60, 120), enc8, 0.25, wrap).unwrap();
+            let (max, differ) = compare_stamps(&ctx, map8, &mut stamps, &mut pass);
+            assert_eq!((max, differ), (STAMP_BOUND_LSB, 0), "u8 {w}x{h} {wrap:?}");
+        }
+    }
 }
 
 #[test]
@@ -475,6 +490,68 @@ fn readback_delivers_regions_without_waiting_and_equals_the_map() {
 /// Full-width rects (one copy for all their rows), a band across the map's wrap (two pieces
 /// of whole rows) and the whole map, read with `wait_with` straight into u16 rows and
 /// metres: equal to the map, and to what `wait` hands over.
+#[test]
+fn packed_rows_of_odd_maps_read_back_texel_for_texel() {
+    let Some(ctx) = context_or_skip("packed_rows_of_odd_maps") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut readback = RegionReadback::new(device, 4).unwrap();
+    // Odd widths and starts: rects begin and end mid-word, cross the wrap inside a word's
+    // columns, and cover whole odd rows (the one-copy path with a padding lane per row).
+    let map = HeightMap::new(
+        hashed::<u16>(37, 23, 0, 65_000),
+        HeightEncoding::new(0.01, 1.0).unwrap(),
+        1.0,
+        WrapMode::Repeat,
+    )
+    .unwrap();
+    let gpu = GpuHeightMap::from_map(device, queue, &map).unwrap();
+    assert_eq!(gpu.read_raw(device, queue).unwrap().len(), 37 * 23);
+    let rects = [
+        Rect::new(IVec2::new(3, 1), UVec2::new(1, 1)),
+        Rect::new(IVec2::new(35, 20), UVec2::new(5, 6)),
+        Rect::new(IVec2::new(-3, 2), UVec2::new(37, 4)),
+        Rect::new(IVec2::new(0, 0), UVec2::new(37, 23)),
+    ];
+    let mut encoder = device.create_command_encoder(&Default::default());
+    for r in rects {
+        readback.request(device, &mut encoder, &gpu, r).unwrap();
+    }
+    queue.submit([encoder.finish()]);
+    for (data, rect) in readback.wait(device).unwrap().iter().zip(rects) {
+        let rows = data.to_u16();
+        for y in 0..rect.size.y {
+            for x in 0..rect.size.x {
+                let p = rect.min + IVec2::new(x as i32, y as i32);
+                let want = map.grid().get_wrapped(p, WrapMode::Repeat);
+                assert_eq!(rows.get(x, y), Some(want), "{rect:?} texel {p}");
+            }
+        }
+    }
+    // u8 maps pack four texels a word.
+    let map8 = HeightMap::new(
+        hashed::<u8>(13, 5, 0, 255),
+        HeightEncoding::new(0.01, 0.0).unwrap(),
+        1.0,
+        WrapMode::Clamp,
+    )
+    .unwrap();
+    let gpu8 = GpuHeightMap::from_map(device, queue, &map8).unwrap();
+    assert_eq!(gpu8.read(device, queue).unwrap(), map8);
+    let rect = Rect::new(IVec2::new(5, 1), UVec2::new(7, 3));
+    let mut encoder = device.create_command_encoder(&Default::default());
+    readback.request(device, &mut encoder, &gpu8, rect).unwrap();
+    queue.submit([encoder.finish()]);
+    let data = readback.wait(device).unwrap().remove(0);
+    for y in 0..3 {
+        for x in 0..7 {
+            let want = map8.grid().get(5 + x, 1 + y).unwrap();
+            assert_eq!(data.raw.get(x, y), Some(u32::from(want)));
+        }
+    }
+}
+
 #[test]
 fn whole_rows_and_direct_conversion_equal_the_map() {
     let Some(ctx) = context_or_skip("whole_rows_and_direct_conversion") else {
