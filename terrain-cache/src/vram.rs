@@ -36,7 +36,7 @@ use glam::{DVec2, DVec3, UVec2};
 use std::collections::HashMap;
 use terrain_core::{Grid, TileLayout, TileUploadTarget, WrapMode};
 
-/// Default per-frame upload budget: 2 MiB, eight 256^2 tiles of u32 heights. Fikkan 2013, sec. 5.3
+/// Default per-frame upload budget: 2 MiB, sixteen 256^2 tiles of 16-bit heights. Fikkan 2013, sec. 5.3
 /// limits transfers to a fixed share of the frame (2 ms of 16.7 ms); the bytes that take depend
 /// on the hardware, so the budget is a plain number to tune (see the atlas upload bench).
 pub const DEFAULT_UPLOAD_BUDGET_BYTES: u64 = 2 << 20;

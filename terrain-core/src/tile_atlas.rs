@@ -1,5 +1,5 @@
 //! [`TileAtlas`]: the CPU reference of a tile upload target (terrain-gpu's `GpuTileAtlas` is
-//! its GPU mirror): tile slots of u32 heights, the indirection table, and the lookup a renderer
+//! its GPU mirror): tile slots of heights, the indirection table, and the lookup a renderer
 //! does, the finest resident level covering a texel ([`TileAtlas::stored_at`]).
 //!
 //! It is also what tests of a tile pool upload into, and what a user without a GPU samples.
@@ -9,8 +9,9 @@ use crate::grid::Grid;
 use crate::tile_upload::{INVALID_SLOT, TileLayout, TileUploadTarget};
 use glam::{IVec2, UVec2};
 
-/// Tile slots and an indirection table in memory, laid out as the GPU atlas lays them out:
-/// slot `s` holds `tile_size^2` u32 heights from index `s * tile_size^2`, row-major; table
+/// Tile slots and an indirection table in memory, laid out as the GPU atlas lays them out
+/// (one u32 per height here; the GPU packs two 16-bit heights per word): slot `s` holds
+/// `tile_size^2` heights from index `s * tile_size^2`, row-major; table
 /// entry [`TileLayout::table_index`] holds a slot or [`INVALID_SLOT`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct TileAtlas {
@@ -245,7 +246,7 @@ mod tests {
         a.map(0, UVec2::new(2, 1), None).unwrap();
         assert_eq!(a.stored_at(IVec2::new(17, 9)), 30_102);
         assert_eq!(a.uploads(), 2);
-        assert_eq!(a.uploaded_bytes(), 2 * 64 * 4);
+        assert_eq!(a.uploaded_bytes(), 2 * 64 * 2);
         assert_eq!(a.mapped(), 1);
     }
 

@@ -53,13 +53,13 @@ const TESS_PER_TEXEL: u64 = 16 + 16 + 16 + 1;
 /// capacity): the GPU's output (36 bytes each), the CPU reference's per-row triangles and
 /// the frame they are joined into (36 + 36), and the vertex count's keys (24).
 const TESS_FIXED: u64 = (36 + 36 + 36 + 24) << 21;
-/// Bytes per texel of a coarse-map on the GPU: u32 heights, `vec2<f32>` normals, and the upload
-/// (a u32 copy and wgpu's staging buffer).
-const GPU_MAP_PER_TEXEL: u64 = 4 + 8 + 4 + 4;
+/// Bytes per texel of a coarse-map on the GPU: 16-bit heights and 16-bit slope codes (each
+/// packed two per u32 word), and the upload (a packed copy and wgpu's staging buffer).
+const GPU_MAP_PER_TEXEL: u64 = 2 + 2 + 2 + 2;
 /// Bytes per texel of the default scenario's collision readback on the GPU: a ring of 4
-/// staging buffers that grow to the largest merged dirty region (at most the map, u32 per
-/// texel), and the arrived region converted to u16.
-const GPU_READBACK_PER_TEXEL: u64 = 4 * 4 + 2;
+/// staging buffers that grow to the largest merged dirty region (at most the map, 2 bytes per
+/// texel), the arrived region unpacked to u32 and converted to u16.
+const GPU_READBACK_PER_TEXEL: u64 = 4 * 2 + 4 + 2;
 /// Bytes per texel of the snow field on the CPU: f32 ground while it is made, the u32 heights
 /// of the simulation and their initial copy.
 const SNOW_FIELD_PER_TEXEL: u64 = 4 + 4 + 4;
@@ -148,7 +148,11 @@ impl RunShape {
                 let planned = world_files::planned_world(cli)?;
                 let m = planned.manifest;
                 let layout = m.tile_layout();
-                let slot = layout.tile_texels().saturating_mul(4);
+                let slot = terrain_gpu::AtlasConfig {
+                    slots: 1,
+                    world: layout,
+                }
+                .slot_bytes();
                 let slots = cli.vram_budget.saturating_mul(1 << 20) / slot.max(1);
                 let shape = FlyoverShape {
                     ram_budget: cli.ram_budget.saturating_mul(1 << 20),

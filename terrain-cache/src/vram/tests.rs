@@ -158,7 +158,7 @@ fn uploads_stay_within_budget_nearest_first_and_within_the_slots() {
     let m = manifest(WrapMode::Clamp);
     let ram = MockRam::all(&m);
     let mut cfg = VramConfig::new(&m, 24);
-    let tile_bytes = u64::from(TS * TS) * 4;
+    let tile_bytes = u64::from(TS * TS) * 2;
     cfg.upload_budget_bytes = 3 * tile_bytes + 5;
     let mut pool = VramPool::new(cfg).unwrap();
     let mut target = Logged::new(&m, 24);

@@ -449,9 +449,10 @@ impl Scenario for FlyoverScenario {
     }
 
     /// With a GPU the world is drawn from a tile atlas of as many slots as the VRAM budget
-    /// holds (u32 per texel), filled by the VRAM pool.
+    /// holds (2 bytes per texel), filled by the VRAM pool.
     fn prepare_gpu(&mut self, scene: &mut GpuScene) -> Result<()> {
-        let slot_bytes = u64::from(self.tile_size).pow(2) * 4;
+        let world = self.manifest.tile_layout();
+        let slot_bytes = AtlasConfig { slots: 1, world }.slot_bytes();
         let slots = u32::try_from(self.vram_budget / slot_bytes).unwrap_or(u32::MAX);
         if slots < 2 {
             return Err(usage(anyhow::anyhow!(
@@ -460,10 +461,7 @@ impl Scenario for FlyoverScenario {
             )));
         }
         scene
-            .enable_atlas(&AtlasConfig {
-                slots,
-                world: self.manifest.tile_layout(),
-            })
+            .enable_atlas(&AtlasConfig { slots, world })
             .map_err(|e| {
                 // The adapter's buffers are smaller than the budget asks for: the user's to fix.
                 let too_large = e

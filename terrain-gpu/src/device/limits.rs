@@ -3,9 +3,9 @@
 //!
 //! No feature is required. [`OPTIONAL_FEATURES`] are used when the device has them. Every map
 //! lives in one storage buffer per quantity, so the limits that grow with the map are
-//! `max_storage_buffer_binding_size` and `max_buffer_size`: an 8192^2 map of u32 heights needs
-//! a 256 MiB binding (wgpu's default limit is 128 MiB), its derivative normals 512 MiB, and the
-//! granular normals (`vec4<f32>`) 1 GiB. A map side also bounds the dispatch size:
+//! `max_storage_buffer_binding_size` and `max_buffer_size`: an 8192^2 coarse-map (16-bit heights
+//! and 16-bit slope codes, packed two per u32 word) needs a 128 MiB binding for each (wgpu's
+//! default limit), a granular map of u32 heights 256 MiB, and its normals (`vec4<f32>`) 1 GiB. A map side also bounds the dispatch size:
 //! `max_compute_workgroups_per_dimension` of 65 535 covers sides up to 524 280 texels.
 
 use crate::device::compute::WORKGROUP;
@@ -21,7 +21,8 @@ pub const OPTIONAL_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY
 /// Bytes per texel of the buffers of a map, by what the map is used for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MapUse {
-    /// Stamps, derivative normals and the clipmap: heights (4 B) and `vec2<f32>` gradients (8 B).
+    /// Stamps, derivative normals and the clipmap: 16-bit heights (2 B) and two 8-bit slope
+    /// codes (2 B).
     Coarse,
     /// Granular deformation: u32 heights (4 B) and `vec4<f32>` normals with float heights (16 B).
     Granular,
@@ -40,7 +41,7 @@ impl MapUse {
     /// The largest per-texel buffer of this use, in bytes per texel.
     pub fn max_bytes_per_texel(self) -> u64 {
         match self {
-            MapUse::Coarse => 8,
+            MapUse::Coarse => 2,
             MapUse::Granular => 16,
         }
     }
@@ -127,14 +128,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn an_8192_map_needs_a_256_mib_height_binding_and_more_for_normals() {
+    fn an_8192_coarse_map_fits_the_default_binding_and_granular_needs_more() {
         let base = wgpu::Limits::default();
         let coarse = required_limits(UVec2::splat(8192), MapUse::Coarse, base.clone()).unwrap();
-        assert_eq!(coarse.max_storage_buffer_binding_size, 8192 * 8192 * 8);
+        assert_eq!(coarse.max_storage_buffer_binding_size, 8192 * 8192 * 2);
+        assert!(check_limits(&base, UVec2::splat(8192), MapUse::Coarse).is_ok());
         let granular = required_limits(UVec2::splat(8192), MapUse::Granular, base.clone()).unwrap();
         assert_eq!(granular.max_storage_buffer_binding_size, 1 << 30);
-        assert!(check_limits(&base, UVec2::splat(8192), MapUse::Coarse).is_err());
-        assert!(check_limits(&coarse, UVec2::splat(8192), MapUse::Coarse).is_ok());
+        assert!(check_limits(&base, UVec2::splat(16_384), MapUse::Coarse).is_err());
+        let big = required_limits(UVec2::splat(16_384), MapUse::Coarse, base.clone()).unwrap();
+        assert!(check_limits(&big, UVec2::splat(16_384), MapUse::Coarse).is_ok());
         // A small map fits the smallest devices; granular needs 7 storage buffers a stage.
         let low = wgpu::Limits::downlevel_defaults();
         assert!(check_limits(&low, UVec2::splat(64), MapUse::Coarse).is_ok());
