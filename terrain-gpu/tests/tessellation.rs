@@ -1,6 +1,7 @@
 //! Adaptive tessellation on the GPU: the compute pass emits the triangles of terrain-lod's CPU
-//! reference (same set, same drawn heights), draws them without cracks from grazing views
-//! across patch edges, and bounds its output.
+//! reference (same set, same drawn heights), also where a view refines through every level,
+//! draws them without cracks from grazing views across patch edges, and bounds its output and
+//! its level queues.
 
 #[path = "common/cracks.rs"]
 mod cracks;
@@ -135,6 +136,143 @@ fn the_gpu_emits_the_cpu_reference_triangles() {
         scene.ctx.check().expect("no GPU validation errors");
     }
     assert!(compared > 100_000, "{compared} triangles compared");
+}
+
+/// The number of missing and extra triangles of the GPU's `gpu` against the CPU's `cpu`, and
+/// the largest difference of the drawn heights of the triangles both have.
+fn compare(cpu: &[TessTriangle], gpu: &[TessTriangle]) -> (usize, usize, f32) {
+    let (a, b) = (by_corners(cpu), by_corners(gpu));
+    let missing = a.keys().filter(|k| !b.contains_key(*k)).count();
+    let extra = b.keys().filter(|k| !a.contains_key(*k)).count();
+    let mut worst = 0.0f32;
+    for (k, h) in &a {
+        if let Some(g) = b.get(k) {
+            for i in 0..3 {
+                worst = worst.max((h[i] - g[i]).abs());
+            }
+        }
+    }
+    (missing, extra, worst)
+}
+
+/// The squared hypotenuse of a triangle in texels: `2 patch_size^2 / 2^level`.
+fn hypotenuse2(t: &TessTriangle) -> u32 {
+    Vec2::from(t[0].texel).distance_squared(Vec2::from(t[1].texel)) as u32
+}
+
+/// A camera half a metre above the ground refines down to the texels near it: triangles of
+/// the finest of the 16 levels of 256-texel patches (of the 12 of 64-texel ones) and of
+/// coarser levels further off, every level its own dispatch, and the GPU still emits the
+/// CPU's triangles.
+#[test]
+fn deep_refinement_emits_the_cpu_reference_triangles() {
+    let Some(ctx) = context_or_skip("tessellation deep refinement") else {
+        return;
+    };
+    let scene = Scene::new(ctx, 31, 5);
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let density = DensityMap::from_map(&scene.map, DensityParams::default()).unwrap();
+    let mut pass = TessellationPass::new(device).unwrap();
+    let size = UVec2::new(640, 360);
+    for patch_size in [256, 64] {
+        let config = TessConfig {
+            patch_size,
+            triangle_width_px: 16.0,
+            ..TessConfig::default()
+        };
+        let tess = TessHierarchy::from_map(&scene.map, Some(&density), config).unwrap();
+        let gpu = GpuTessellation::new(device, queue, &tess, 1 << 20).unwrap();
+        let xz = Vec2::new(120.5, 90.3);
+        let eye = Vec3::new(xz.x, scene.ground(xz) + 0.5, xz.y);
+        let camera = Camera::looking(eye, Vec3::new(0.6, -0.3, 0.8));
+        let frustum =
+            Frustum::from_view_proj(camera.view_proj_world(size.x as f32 / size.y as f32));
+        for culled in [false, true] {
+            let view = view_of(&camera, size, culled.then_some(&frustum));
+            let cpu = tess.select(&view).unwrap();
+            let levels: std::collections::HashSet<u32> =
+                cpu.triangles.iter().map(hypotenuse2).collect();
+            let finest = levels.iter().copied().min().unwrap();
+            assert!(
+                finest == 2 && levels.len() >= 5,
+                "patch {patch_size}: the view must refine deeply: {} levels, finest {finest}",
+                levels.len()
+            );
+            let (tris, overflow) = tessellate(device, queue, &mut pass, &gpu, &tess, &view);
+            assert!(!overflow);
+            let (missing, extra, worst) = compare(&cpu.triangles, &tris);
+            assert!(
+                (missing + extra) * 1000 <= cpu.triangles.len(),
+                "patch {patch_size} culled {culled}: {} CPU triangles, {} GPU, {missing} \
+                 missing, {extra} extra",
+                cpu.triangles.len(),
+                tris.len()
+            );
+            assert!(worst <= 1e-4, "drawn heights differ by {worst} m");
+            eprintln!(
+                "patch {patch_size} culled {culled}: {} CPU triangles over {} levels, {missing} \
+                 missing on the GPU, {extra} extra",
+                cpu.triangles.len(),
+                levels.len()
+            );
+        }
+        scene.ctx.check().expect("no GPU validation errors");
+    }
+}
+
+/// Level queues too small for a view: the pass ends, reports the overflow, writes no more
+/// than the output holds, and emits the children that found no room unsplit, so that the
+/// triangles still cover the whole map once (without culling). A queue large enough for the
+/// view reports nothing.
+#[test]
+fn a_full_level_queue_reports_overflow_and_still_covers_the_map() {
+    let Some(ctx) = context_or_skip("tessellation queue overflow") else {
+        return;
+    };
+    let scene = Scene::new(ctx, 31, 5);
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let config = TessConfig {
+        patch_size: 64,
+        ..TessConfig::default()
+    };
+    let tess = TessHierarchy::from_map(&scene.map, None, config).unwrap();
+    let mut pass = TessellationPass::new(device).unwrap();
+    let camera = Camera::looking(Vec3::new(128.0, 30.0, 128.0), Vec3::new(1.0, -0.5, 0.0));
+    let view = view_of(&camera, UVec2::new(640, 360), None);
+    let cpu = tess.select(&view).unwrap();
+    let area = |tris: &[TessTriangle]| -> f64 {
+        tris.iter()
+            .map(|t| {
+                let [l, r, a] = t.map(|v| glam::DVec2::new(v.texel[0].into(), v.texel[1].into()));
+                (r - l).perp_dot(a - l).abs() / 2.0
+            })
+            .sum()
+    };
+    let side = (tess.patches() * config.patch_size).as_dvec2();
+    assert_eq!(area(&cpu.triangles), side.x * side.y);
+    for queue_capacity in [1, 64, 1000] {
+        let gpu =
+            GpuTessellation::with_queues(device, queue, &tess, 1 << 20, queue_capacity).unwrap();
+        assert_eq!(gpu.queue_capacity(), queue_capacity);
+        let (tris, overflow) = tessellate(device, queue, &mut pass, &gpu, &tess, &view);
+        assert!(overflow, "queues of {queue_capacity}");
+        assert!(
+            tris.len() < cpu.triangles.len(),
+            "queues of {queue_capacity}"
+        );
+        assert_eq!(area(&tris), side.x * side.y, "queues of {queue_capacity}");
+        scene.ctx.check().expect("no GPU validation errors");
+    }
+    let gpu = GpuTessellation::with_queues(device, queue, &tess, 1 << 20, 1 << 17).unwrap();
+    let (tris, overflow) = tessellate(device, queue, &mut pass, &gpu, &tess, &view);
+    assert!(!overflow);
+    let (missing, extra, _) = compare(&cpu.triangles, &tris);
+    assert!((missing + extra) * 1000 <= cpu.triangles.len());
+    // With a small output too, both bounds hold at once.
+    let gpu = GpuTessellation::with_queues(device, queue, &tess, 500, 64).unwrap();
+    let (tris, overflow) = tessellate(device, queue, &mut pass, &gpu, &tess, &view);
+    assert!(overflow && tris.len() == 500);
+    scene.ctx.check().expect("no GPU validation errors");
 }
 
 /// After deformations (one across the repeating map's corner) the rows `update_rect` reports

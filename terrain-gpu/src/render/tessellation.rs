@@ -5,9 +5,18 @@
 //! into the caller's pass with `draw_indirect`, shaded exactly as the clipmap. The CPU
 //! reference is [`terrain_lod::TessHierarchy::select`]: same decisions, same f32 operations.
 //!
+//! The refinement runs breadth first, one dispatch per level: Cervin refines in a hardware
+//! tessellator, and the compute equivalent of the CPU's depth-first walk (one invocation per
+//! base triangle with a private stack) leaves a real GPU nearly idle (two invocations per
+//! patch, long divergent loops, large private arrays that cut occupancy). Level 0 runs two
+//! invocations per patch; each later level one per triangle its predecessor queued (the
+//! visible children of the triangles it split, in a ping-pong pair of queues), dispatched
+//! indirectly from that count, which a one-invocation pass turns into the dispatch size.
+//!
 //! [`GpuTessellation`] holds the persistent resources: the hierarchy's per-vertex bounds
-//! (height, saturated radius, density and error), the patch bounds, the output triangles and
-//! the counter with the draw arguments. Nothing is allocated per frame.
+//! (height, saturated radius, density and error), the patch bounds, the output triangles, the
+//! two level queues, the counters with the draw arguments and the per-level dispatch
+//! arguments. Nothing is allocated per frame.
 
 use crate::device::compute::{
     PassBindings, StorageBinding, compute_pipeline, shader_module, wrap_code,
@@ -25,6 +34,7 @@ use crate::render::target::TargetFormat;
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::WrapMode;
+use terrain_lod::tessellation::MAX_LEVELS;
 use terrain_lod::{CdlodView, TessHierarchy, TessTriangle, TessVertex};
 
 /// The uniform block of `tessellate.wgsl`, byte for byte.
@@ -45,48 +55,84 @@ struct Params {
     grid: [u32; 2],
     wrap: u32,
     error_metric: u32,
-    _pad: [u32; 2],
+    queue_capacity: u32,
+    max_groups: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<Params>() == 176);
 
-/// Bytes of the counter block: count, overflow, two pads, then the four `draw_indirect`
-/// arguments.
-const STATE_BYTES: u64 = 32;
+/// Bytes of the counter block: count, overflow, the level, a pad, the four `draw_indirect`
+/// arguments, the two queues' counts and two pads.
+const STATE_BYTES: u64 = 48;
 /// Where the draw arguments start in the counter block.
 const ARGS_OFFSET: u64 = 16;
 /// Bytes per grid vertex: height, radius, density, error.
 const VERTEX_BYTES: u64 = 16;
 /// Bytes per triangle in the output (three [`TessVertex`]).
 const TRIANGLE_BYTES: u64 = std::mem::size_of::<TessTriangle>() as u64;
+/// Bytes per triangle in a level queue: the apex, three heights, the patch and the direction
+/// of a leg.
+const QUEUED_BYTES: u64 = 24;
+/// Patches a level queue's entry can name (28 bits).
+const MAX_PATCHES: u64 = 1 << 28;
+/// Bytes of the `dispatch_workgroups_indirect` arguments of one level (three counts, a pad).
+const DISPATCH_BYTES: u64 = 16;
+/// Invocations per workgroup of `generate`.
+const GROUP: u64 = 64;
 
-/// A [`TessHierarchy`] on the GPU, with room for `capacity` triangles of output.
+/// A [`TessHierarchy`] on the GPU, with room for `capacity` triangles of output and
+/// `queue_capacity` triangles in each of the two level queues.
 #[derive(Debug)]
 pub struct GpuTessellation {
     vertices: wgpu::Buffer,
     patch_bounds: wgpu::Buffer,
     output: wgpu::Buffer,
     state: wgpu::Buffer,
+    queues: wgpu::Buffer,
+    dispatch: wgpu::Buffer,
     capacity: u32,
+    queue_capacity: u32,
     grid: UVec2,
     patches: UVec2,
 }
 
 impl GpuTessellation {
-    /// Uploads `hierarchy` and makes room for `capacity` triangles (at least 1). Fails when
-    /// the buffers exceed the device's limits.
+    /// Uploads `hierarchy` and makes room for `capacity` triangles (at least 1), with level
+    /// queues of as many triangles each (fewer where the device's storage buffer limit asks
+    /// for it; 24 bytes a triangle, so the two add 48 bytes per triangle of capacity to the
+    /// output's 36): a level queues only visible children of the triangles that split, each
+    /// of which leads to at least one emitted triangle unless the frustum misses both of its
+    /// own children. Fails when the buffers exceed the device's limits.
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         hierarchy: &TessHierarchy,
         capacity: u32,
     ) -> Result<Self, GpuError> {
+        let limit = device.limits().max_storage_buffer_binding_size;
+        let fit = u32::try_from(limit / (2 * QUEUED_BYTES)).unwrap_or(u32::MAX);
+        Self::with_queues(device, queue, hierarchy, capacity, capacity.min(fit))
+    }
+
+    /// As [`GpuTessellation::new`], with room for `queue_capacity` triangles (at least 1) in
+    /// each of the two level queues. A view whose refinement queues more triangles in one
+    /// level emits those that find no room unsplit and reports an overflow, as a full output
+    /// does. Fails when the buffers exceed the device's limits.
+    pub fn with_queues(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        hierarchy: &TessHierarchy,
+        capacity: u32,
+        queue_capacity: u32,
+    ) -> Result<Self, GpuError> {
         let grid = hierarchy.grid_size();
         let patches = hierarchy.patches();
         let capacity = capacity.max(1);
+        let queue_capacity = queue_capacity.max(1);
         let limit = device.limits().max_storage_buffer_binding_size;
         let vertex_bytes = u64::from(grid.x) * u64::from(grid.y) * VERTEX_BYTES;
         let output_bytes = u64::from(capacity) * TRIANGLE_BYTES;
+        let queue_bytes = 2 * u64::from(queue_capacity) * QUEUED_BYTES;
         if vertex_bytes > limit {
             return Err(GpuError::MapTooLarge {
                 size: grid,
@@ -101,8 +147,22 @@ impl GpuTessellation {
                          limit (36 bytes per triangle): ask for fewer",
             });
         }
+        if u64::from(patches.x) * u64::from(patches.y) > MAX_PATCHES {
+            return Err(GpuError::Unsupported {
+                what: "GpuTessellation",
+                reason: "more than 2^28 patches: use larger patches",
+            });
+        }
+        if queue_bytes > limit {
+            return Err(GpuError::Unsupported {
+                what: "GpuTessellation",
+                reason: "the level queues for this many triangles exceed the device's storage \
+                         buffer limit (48 bytes per triangle): ask for fewer",
+            });
+        }
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
-        let (vertices, patch_bounds, output, state) = scoped(device, "GpuTessellation", || {
+        let indirect = storage | wgpu::BufferUsages::INDIRECT;
+        let buffers = scoped(device, "GpuTessellation", || {
             let buffer = |label, size: u64, usage| {
                 device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some(label),
@@ -128,16 +188,26 @@ impl GpuTessellation {
                 buffer(
                     "tessellation state",
                     STATE_BYTES,
-                    storage | wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_SRC,
+                    indirect | wgpu::BufferUsages::COPY_SRC,
+                ),
+                buffer("tessellation queues", queue_bytes, storage),
+                buffer(
+                    "tessellation dispatch",
+                    u64::from(MAX_LEVELS + 1) * DISPATCH_BYTES,
+                    indirect,
                 ),
             )
         })?;
+        let (vertices, patch_bounds, output, state, queues, dispatch) = buffers;
         let out = Self {
             vertices,
             patch_bounds,
             output,
             state,
+            queues,
+            dispatch,
             capacity,
+            queue_capacity,
             grid,
             patches,
         };
@@ -192,9 +262,14 @@ impl GpuTessellation {
         self.capacity
     }
 
+    /// Triangles each of the two level queues holds.
+    pub fn queue_capacity(&self) -> u32 {
+        self.queue_capacity
+    }
+
     /// Reads back what the last [`TessellationPass::encode`] wrote: its triangles (in no
-    /// particular order) and whether more were generated than the output holds. Blocking: for
-    /// tests and tools.
+    /// particular order) and whether more were generated than the output or a level queue
+    /// holds. Blocking: for tests and tools.
     pub fn read_triangles(
         &self,
         device: &wgpu::Device,
@@ -220,29 +295,35 @@ impl GpuTessellation {
     }
 }
 
-/// The compute pass that tessellates a [`GpuTessellation`] for a view. Build it once per
-/// device.
+/// The compute pass that tessellates a [`GpuTessellation`] for a view, one dispatch per
+/// level. Build it once per device.
 #[derive(Debug)]
 pub struct TessellationPass {
+    /// `generate`'s bindings: the hierarchy, the output, the counters and the queues.
     bindings: PassBindings<Params>,
+    /// `advance`'s: the same and the dispatch arguments, which `generate` reads as indirect
+    /// arguments and so must not have bound.
+    advance_bindings: PassBindings<Params>,
     generate: wgpu::ComputePipeline,
+    advance: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
 }
 
 impl TessellationPass {
-    /// Compiles the shader and builds both pipelines.
+    /// Compiles the shader and builds the pipelines.
     pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
-        let bindings = PassBindings::new(
-            device,
-            "TessellationPass",
-            wgpu::ShaderStages::COMPUTE,
-            &[
-                StorageBinding::compute(true),
-                StorageBinding::compute(true),
-                StorageBinding::compute(false),
-                StorageBinding::compute(false),
-            ],
-        );
+        let mut storage = vec![
+            StorageBinding::compute(true),
+            StorageBinding::compute(true),
+            StorageBinding::compute(false),
+            StorageBinding::compute(false),
+            StorageBinding::compute(false),
+        ];
+        let compute = wgpu::ShaderStages::COMPUTE;
+        let bindings = PassBindings::new(device, "TessellationPass", compute, &storage);
+        storage.push(StorageBinding::compute(false));
+        let advance_bindings =
+            PassBindings::new(device, "TessellationPass advance", compute, &storage);
         let module = shader_module(device, "tessellate.wgsl", terrain_shaders::TESSELLATE)?;
         let generate = compute_pipeline(
             device,
@@ -250,6 +331,13 @@ impl TessellationPass {
             &module,
             bindings.layout(),
             "generate",
+        )?;
+        let advance = compute_pipeline(
+            device,
+            "tessellate advance",
+            &module,
+            advance_bindings.layout(),
+            "advance",
         )?;
         let finish = compute_pipeline(
             device,
@@ -260,14 +348,18 @@ impl TessellationPass {
         )?;
         Ok(Self {
             bindings,
+            advance_bindings,
             generate,
+            advance,
             finish,
         })
     }
 
     /// Records the tessellation of `gpu` (uploaded from `hierarchy`) for `view` into
-    /// `encoder`: clears the counter, refines every patch, writes the draw arguments. Checks
-    /// the view as [`TessHierarchy::select`] does.
+    /// `encoder`: clears the counters, refines every patch level by level (level 0 over the
+    /// patches, then for each further level the dispatch size from the queue's count and
+    /// the level over the queue), writes the draw arguments. Checks the view as
+    /// [`TessHierarchy::select`] does.
     pub fn encode(
         &mut self,
         device: &wgpu::Device,
@@ -285,6 +377,9 @@ impl TessellationPass {
         }
         let d = hierarchy.decision(view)?;
         let c = hierarchy.config();
+        // 2 log2(patch_size) <= MAX_LEVELS: the dispatch arguments have a slot per level.
+        let levels = d.split_levels.min(MAX_LEVELS);
+        let max_groups = device.limits().max_compute_workgroups_per_dimension;
         let mut planes = [[0.0f32; 4]; 6];
         if let Some(f) = view.frustum {
             for (p, q) in planes.iter_mut().zip(f.planes()) {
@@ -298,7 +393,7 @@ impl TessellationPass {
             scale: d.scale,
             inv_morph_range: d.inv_morph_range,
             use_density: u32::from(d.use_density),
-            split_levels: d.split_levels,
+            split_levels: levels,
             patch_size: c.patch_size,
             capacity: gpu.capacity,
             cull: u32::from(view.frustum.is_some()),
@@ -306,35 +401,57 @@ impl TessellationPass {
             grid: gpu.grid.to_array(),
             wrap: wrap_code(hierarchy.grid_wrap()),
             error_metric: u32::from(d.error_metric),
-            _pad: [0; 2],
+            queue_capacity: gpu.queue_capacity,
+            max_groups,
         };
-        let buffers = [&gpu.vertices, &gpu.patch_bounds, &gpu.output, &gpu.state];
-        let (group, offset) = self.bindings.bind(device, queue, &params, &buffers)?;
-        encoder.clear_buffer(&gpu.state, 0, None);
+        // Level 0: two invocations per patch, over two dimensions past the device's limit.
         let threads = 2 * u64::from(gpu.patches.x) * u64::from(gpu.patches.y);
-        let groups = threads.div_ceil(64);
-        let max = u64::from(device.limits().max_compute_workgroups_per_dimension);
-        if groups > max {
+        let groups = threads.div_ceil(GROUP);
+        let x = groups.min(u64::from(max_groups));
+        let y = groups.div_ceil(x.max(1));
+        if y > u64::from(max_groups) {
             return Err(GpuError::Unsupported {
                 what: "TessellationPass",
                 reason: "more patches than one dispatch of the device covers: use larger patches",
             });
         }
+        let mut buffers = vec![
+            &gpu.vertices,
+            &gpu.patch_bounds,
+            &gpu.output,
+            &gpu.state,
+            &gpu.queues,
+        ];
+        let (group, offset) = self.bindings.bind(device, queue, &params, &buffers)?;
+        buffers.push(&gpu.dispatch);
+        let (advance_group, advance_offset) = self
+            .advance_bindings
+            .bind(device, queue, &params, &buffers)?;
+        encoder.clear_buffer(&gpu.state, 0, None);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("TessellationPass"),
             timestamp_writes: None,
         });
         pass.set_bind_group(0, &group, &[offset]);
         pass.set_pipeline(&self.generate);
-        pass.dispatch_workgroups(groups as u32, 1, 1);
+        pass.dispatch_workgroups(x as u32, y as u32, 1);
+        for level in 1..=levels {
+            pass.set_bind_group(0, &advance_group, &[advance_offset]);
+            pass.set_pipeline(&self.advance);
+            pass.dispatch_workgroups(1, 1, 1);
+            pass.set_bind_group(0, &group, &[offset]);
+            pass.set_pipeline(&self.generate);
+            pass.dispatch_workgroups_indirect(&gpu.dispatch, u64::from(level) * DISPATCH_BYTES);
+        }
         pass.set_pipeline(&self.finish);
         pass.dispatch_workgroups(1, 1, 1);
         Ok(())
     }
 
-    /// Frees the uniform ring's slots: call after the submit carrying the encoded work.
+    /// Frees the uniform rings' slots: call after the submit carrying the encoded work.
     pub fn recall(&mut self) {
         self.bindings.recall();
+        self.advance_bindings.recall();
     }
 }
 
