@@ -50,9 +50,10 @@ const TERRAIN_PNG_PER_TEXEL: u64 = 5;
 /// is uploaded), and the density map (a f32 and about 1.33 u8 per 16 texels, rounded up).
 const TESS_PER_TEXEL: u64 = 16 + 16 + 16 + 1;
 /// Bytes of `--lod tessellated` beyond its per-texel part, for 2^21 triangles (the output's
-/// capacity): the GPU's output (36 bytes each), the CPU reference's per-row triangles and
-/// the frame they are joined into (36 + 36), and the vertex count's keys (24).
-const TESS_FIXED: u64 = (36 + 36 + 36 + 24) << 21;
+/// capacity): the GPU's output (36 bytes each) and its breadth-first level queues (48), the
+/// CPU reference's per-row triangles and the frame they are joined into (36 + 36), and the
+/// vertex count's keys (24).
+const TESS_FIXED: u64 = (36 + 48 + 36 + 36 + 24) << 21;
 /// Bytes per texel of a coarse-map on the GPU: 16-bit heights and 16-bit slope codes (each
 /// packed two per u32 word), and the upload (a packed copy and wgpu's staging buffer).
 const GPU_MAP_PER_TEXEL: u64 = 2 + 2 + 2 + 2;

@@ -7,7 +7,7 @@
 //! the heights, which an `R16Uint`/`R16Unorm` storage texture cannot give on every backend (GL
 //! has no writable 16-bit storage formats; WebGPU none at all), and a buffer needs no backup
 //! copy for in-place stamping. Texels are packed into u32 words by rows
-//! ([`crate::resources::packing`]); a writer owns whole words, so no invocation's write races
+//! (`resources::packing`); a writer owns whole words, so no invocation's write races
 //! another's.
 
 use crate::device::download::download_bytes;
@@ -245,7 +245,7 @@ impl<T: HeightSample> GpuHeightMap<T> {
 }
 
 /// A height map as the stamp pass and the region readback address it: `size` texels of `bits`
-/// bits, packed by rows ([`packing`]), from word `base` of `buffer`. A [`GpuHeightMap`] is one
+/// bits, packed by rows (`packing`), from word `base` of `buffer`. A [`GpuHeightMap`] is one
 /// from word 0; a tile slot of a [`crate::GpuTileAtlas`] is one from its slot's first word, so
 /// both passes work on either without a copy.
 #[derive(Debug, Clone, Copy)]
