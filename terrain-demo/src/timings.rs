@@ -101,12 +101,26 @@ pub fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
+/// A GPU timestamp figure of `step` in frame `frame` that arrived in a later frame (GPU timing
+/// in timestamp mode: see `gpu_scene::frame_timer`), to be credited to its own frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GpuFigure {
+    /// The frame's index.
+    pub frame: u64,
+    /// The step.
+    pub step: Step,
+    /// Milliseconds between its timestamps.
+    pub ms: f64,
+}
+
 /// One frame's timings: wall-clock milliseconds per step (a step timed twice adds up), and GPU
-/// timestamp spans where the adapter has them.
+/// timestamp spans where the adapter has them; and the GPU figures of earlier frames that
+/// arrived during this one.
 #[derive(Debug, Default)]
 pub struct Timings {
     wall: BTreeMap<Step, f64>,
     gpu: BTreeMap<Step, f64>,
+    late_gpu: Vec<GpuFigure>,
 }
 
 impl Timings {
@@ -128,8 +142,24 @@ impl Timings {
     pub fn add_gpu(&mut self, step: Step, wall_ms: f64, timestamp_ms: Option<f64>) {
         self.add(step, wall_ms);
         if let Some(ts) = timestamp_ms {
-            *self.gpu.entry(step).or_default() += ts;
+            self.add_gpu_timestamp(step, ts);
         }
+    }
+
+    /// Adds a GPU timestamp span of `step` (no wall time).
+    pub fn add_gpu_timestamp(&mut self, step: Step, ms: f64) {
+        *self.gpu.entry(step).or_default() += ms;
+    }
+
+    /// Keeps a GPU figure of an earlier frame that arrived in this one.
+    pub fn add_late_gpu(&mut self, figure: GpuFigure) {
+        self.late_gpu.push(figure);
+    }
+
+    /// The GPU figures of earlier frames that arrived in this one, for the capture to credit
+    /// to their frames.
+    pub fn take_late_gpu(&mut self) -> Vec<GpuFigure> {
+        std::mem::take(&mut self.late_gpu)
     }
 
     /// Wall-clock milliseconds by report key.

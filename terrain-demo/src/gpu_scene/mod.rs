@@ -13,22 +13,24 @@ use terrain_core::{FixedPointMap, Rect, StampPlacement};
 use terrain_gpu::granular::{GpuGranularNormals, GpuGranularStep, GranularNormalsPass, VolumePass};
 use terrain_gpu::{
     ClipmapSurface, DetailShading, GpuContext, GpuDerivativeMap, GpuDetailTiles, GpuHeightMap,
-    GpuRegionSource, GpuStamp, GpuTextureStamp, GpuTimer, GpuTiming, NormalPass, OffscreenTarget,
-    RefineDraw, RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp,
-    StampPass, TerrainRenderer, TerrainStyle, TerrainView,
+    GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass, OffscreenTarget, RefineDraw,
+    RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp, StampPass,
+    TerrainRenderer, TerrainStyle, TerrainView,
 };
 use terrain_lod::{CdlodConfig, CdlodTree, ClipmapLayout, TessConfig};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
 
 use crate::frame_plan::{FramePlan, StampKind};
-use crate::report::GpuObjects;
-use crate::timings::{Step, Timings};
+use crate::report::{GpuObjects, GpuTiming};
+use crate::timings::{GpuFigure, Step, Timings};
 
 mod detail;
+mod frame_timer;
 mod lod;
 
 pub use detail::{DETAIL_SLOTS, SPILL_WINDOW_TEXELS};
 use detail::{DetailScene, RefinedGeometry};
+use frame_timer::FrameTimer;
 
 pub use terrain_gpu::Camera;
 
@@ -53,7 +55,8 @@ pub struct GpuScene {
     /// The shockwave's change of the frame, rewritten in place each frame.
     shock: Option<GpuTextureStamp>,
     readback: RegionReadback,
-    timer: GpuTimer,
+    /// Times the GPU steps: timestamps read back later, or submit-and-wait (`frame_timer`).
+    timer: FrameTimer,
     style: TerrainStyle,
     /// Lowest and highest height the map can hold (metres): the culling boxes' vertical extent.
     height_range: (f32, f32),
@@ -148,11 +151,6 @@ pub struct LodStats {
     pub vertices: u64,
     /// CDLOD: the largest projected geometric error of the drawn nodes, pixels.
     pub max_screen_error_px: Option<f32>,
-}
-
-/// Records a GPU timing as `step`.
-fn record(timings: &mut Timings, step: Step, t: GpuTiming) {
-    timings.add_gpu(step, t.ms, t.timestamp_ms);
 }
 
 impl GpuScene {
@@ -283,6 +281,8 @@ impl GpuScene {
         let target = OffscreenTarget::new(device, resolution)?;
         let layout = ClipmapLayout::new(CLIPMAP_N, CLIPMAP_LEVELS)?;
         let (lo, hi) = map.encoding().range::<u16>();
+        let timer = FrameTimer::new(&ctx);
+        tracing::info!(mode = ?timer.mode(), "GPU steps timed");
         Ok(Self {
             map: gpu_map,
             normals,
@@ -294,7 +294,7 @@ impl GpuScene {
             footprint: None,
             shock: None,
             readback: RegionReadback::new(device, readback_ring)?,
-            timer: GpuTimer::new(device, queue),
+            timer,
             height_range: (lo, hi),
             granular: None,
             atlas: None,
@@ -439,10 +439,12 @@ impl GpuScene {
             .map(|r| (r.rect, r.raw))
             .collect();
         let mut areas = Vec::new();
-        let step_time = self.timer.time(device, queue, |encoder| {
-            areas = g.step.encode(device, queue, encoder, &g.map, objects)?;
-            Ok(())
-        })?;
+        let step_time = self
+            .timer
+            .time(device, queue, Step::GranularGpu, |encoder| {
+                areas = g.step.encode(device, queue, encoder, &g.map, objects)?;
+                Ok(())
+            })?;
         g.step.recall();
         let removed = match g.step.scratch() {
             Some(s) => s.read_removed(device, queue)?,
@@ -453,41 +455,43 @@ impl GpuScene {
         // iteration.
         let full = Rect::from_size(g.map.size());
         let reach = 1 + g.blur_iterations;
-        let normal_time = self.timer.time(device, queue, |encoder| {
-            for rect in &areas {
-                let Some(r) = rect.expand(reach).intersect(&full) else {
-                    continue;
-                };
-                g.normal_pass
-                    .encode(device, queue, encoder, &g.map, &g.normals, r)?;
-                g.normal_pass.encode_blur(
-                    device,
-                    queue,
-                    encoder,
-                    &g.normals,
-                    r,
-                    g.blur_iterations,
-                )?;
-            }
-            g.volume.encode(device, queue, encoder, &g.map)?;
-            // The changed areas go to the CPU copy behind the overview and collision.
-            g.pending.extend(areas.iter().copied());
-            let mut waiting = Vec::new();
-            for rect in g.pending.drain(..) {
-                match g.readback.request(device, encoder, &g.map, rect) {
-                    Ok(_) => {}
-                    Err(terrain_gpu::GpuError::ReadbackBusy { .. }) => waiting.push(rect),
-                    Err(e) => return Err(e),
+        let normal_time = self
+            .timer
+            .time(device, queue, Step::NormalsGpu, |encoder| {
+                for rect in &areas {
+                    let Some(r) = rect.expand(reach).intersect(&full) else {
+                        continue;
+                    };
+                    g.normal_pass
+                        .encode(device, queue, encoder, &g.map, &g.normals, r)?;
+                    g.normal_pass.encode_blur(
+                        device,
+                        queue,
+                        encoder,
+                        &g.normals,
+                        r,
+                        g.blur_iterations,
+                    )?;
                 }
-            }
-            g.pending = waiting;
-            Ok(())
-        })?;
+                g.volume.encode(device, queue, encoder, &g.map)?;
+                // The changed areas go to the CPU copy behind the overview and collision.
+                g.pending.extend(areas.iter().copied());
+                let mut waiting = Vec::new();
+                for rect in g.pending.drain(..) {
+                    match g.readback.request(device, encoder, &g.map, rect) {
+                        Ok(_) => {}
+                        Err(terrain_gpu::GpuError::ReadbackBusy { .. }) => waiting.push(rect),
+                        Err(e) => return Err(e),
+                    }
+                }
+                g.pending = waiting;
+                Ok(())
+            })?;
         g.normal_pass.recall();
         g.volume.recall();
         let volume = g.volume.read(device)?;
-        record(timings, Step::GranularGpu, step_time);
-        record(timings, Step::NormalsGpu, normal_time);
+        step_time.record(timings);
+        normal_time.record(timings);
         Ok(GranularFrame {
             areas,
             removed,
@@ -542,7 +546,7 @@ impl GpuScene {
             blend: terrain_core::Blend::Add,
         };
         let mut tickets = Vec::new();
-        let time = self.timer.time(device, queue, |encoder| {
+        let time = self.timer.time(device, queue, Step::StampGpu, |encoder| {
             let rects = self
                 .stamps
                 .encode_tile(device, queue, encoder, atlas, tile, &op)?;
@@ -558,7 +562,7 @@ impl GpuScene {
         self.ctx
             .check()
             .context("stamping a tile of the streamed world")?;
-        timings.add_gpu(Step::StampGpu, time.ms, time.timestamp_ms);
+        time.record(timings);
         Ok(Some(tickets))
     }
 
@@ -633,6 +637,30 @@ impl GpuScene {
         }
     }
 
+    /// How the GPU steps are timed: timestamps read back a frame or more later (no wait), or
+    /// the wall time of submit and wait per step; report.json's `gpu_timing`.
+    #[expect(
+        dead_code,
+        reason = "called by driver.rs and capture.rs once the GPU timing hook of issue 36 lands there"
+    )]
+    pub fn gpu_timing(&self) -> GpuTiming {
+        self.timer.mode()
+    }
+
+    /// The end of the run: waits (bounded) for the GPU timestamps still on their way and
+    /// returns their figures, each for the frame it belongs to (none in wall mode).
+    #[expect(
+        dead_code,
+        reason = "called by driver.rs and capture.rs once the GPU timing hook of issue 36 lands there"
+    )]
+    pub fn flush_gpu_timings(&mut self) -> Result<Vec<GpuFigure>> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        self.timer
+            .flush(device, queue)
+            .context("reading the last GPU timestamps back")
+            .map_err(|e| self.lost_or(e))
+    }
+
     /// The adapter's name and backend.
     pub fn adapter(&self) -> (String, String) {
         let r = self.ctx.report();
@@ -655,7 +683,7 @@ impl GpuScene {
         let shock = plan.shock_delta.as_ref().and(self.shock.as_ref());
         let mut dirty = Vec::new();
         let in_detail = self.detail.is_some();
-        let stamp_time = self.timer.time(device, queue, |encoder| {
+        let stamp_time = self.timer.time(device, queue, Step::StampGpu, |encoder| {
             for (i, d) in plan.deformations.iter().enumerate() {
                 if in_detail && d.kind == StampKind::Footprint {
                     continue;
@@ -679,17 +707,25 @@ impl GpuScene {
             }
             Ok(())
         })?;
-        let normal_time = self.timer.time(device, queue, |encoder| {
-            for (_, r) in &dirty {
-                self.normal_pass
-                    .encode(device, queue, encoder, &self.map, &self.normals, *r)?;
-            }
-            Ok(())
-        })?;
+        let normal_time = self
+            .timer
+            .time(device, queue, Step::NormalsGpu, |encoder| {
+                for (_, r) in &dirty {
+                    self.normal_pass.encode(
+                        device,
+                        queue,
+                        encoder,
+                        &self.map,
+                        &self.normals,
+                        *r,
+                    )?;
+                }
+                Ok(())
+            })?;
         // Footprints into the detail tiles, as one more submit.
         if let (Some(detail), Some(foot)) = (self.detail.as_mut(), self.footprint.as_ref()) {
             let mut texels = 0;
-            let time = self.timer.time(device, queue, |encoder| {
+            let time = self.timer.time(device, queue, Step::Detail, |encoder| {
                 // Rects stamped earlier that the ring had no room for, before the new stamps.
                 let pending = std::mem::take(&mut detail.pending);
                 detail.request(device, encoder, pending)?;
@@ -736,13 +772,13 @@ impl GpuScene {
             })?;
             detail.spill.recall();
             detail.dirty_texels = texels;
-            record(timings, Step::Detail, time);
+            time.record(timings);
         }
         // Every submit is done: the passes' uniform slots are free again.
         self.stamps.recall();
         self.normal_pass.recall();
-        record(timings, Step::StampGpu, stamp_time);
-        record(timings, Step::NormalsGpu, normal_time);
+        stamp_time.record(timings);
+        normal_time.record(timings);
         Ok(dirty)
     }
 
@@ -777,6 +813,7 @@ impl GpuScene {
         if self.destroy_at == Some(self.frames) {
             self.ctx.device.destroy();
         }
+        let index = u64::from(self.frames);
         self.frames += 1;
         // A lost device reports nothing for the work sent to it: stop here with the reason.
         self.ctx.check().context("rendering a frame")?;
@@ -810,7 +847,8 @@ impl GpuScene {
             target_size: size,
         };
         let mut drawn = None;
-        let timing = self.timer.time(device, queue, |encoder| {
+        let mut lod_ms = 0.0;
+        let timing = self.timer.time(device, queue, Step::Render, |encoder| {
             self.sky.prepare(
                 queue,
                 camera.view_proj_relative(aspect),
@@ -843,7 +881,8 @@ impl GpuScene {
             // report's figures (the tessellation's CPU reference) are not timed.
             let t = std::time::Instant::now();
             self.terrain.prepare(device, queue, encoder, &view)?;
-            timings.add(Step::Lod, crate::timings::ms_since(t));
+            lod_ms = crate::timings::ms_since(t);
+            timings.add(Step::Lod, lod_ms);
             drawn = Some(self.terrain.figures(&view)?);
             let mut pass = self.target.begin_pass(encoder, wgpu::Color::BLACK);
             self.sky.draw(&mut pass);
@@ -854,11 +893,16 @@ impl GpuScene {
             Ok(())
         })?;
         self.terrain.recall();
+        // The render was the frame's last timed step.
+        self.timer.end_frame(device, queue)?;
         let t = std::time::Instant::now();
         let image = self.target.read_rgba8(device, queue)?;
         self.ctx.check()?;
         timings.add(Step::Capture, crate::timings::ms_since(t));
-        record(timings, Step::Render, timing);
+        timing.excluding(lod_ms).record(timings);
+        // The capture has waited for the GPU, so this frame's timestamps have usually arrived
+        // too (else a later frame credits them to this one).
+        self.timer.poll(device, index, timings)?;
         let drawn = drawn.context("the frame was not prepared")?;
         // The refined cells are drawn instead of the clipmap's (which still counts them).
         // The capture has waited for the frame, so its count has usually arrived; else the
