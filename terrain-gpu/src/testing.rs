@@ -4,16 +4,18 @@
 //! with every thread's stack and the last GPU operations (hangs seen on hardware only must be
 //! found, not waited out).
 
+#[cfg(feature = "blocking")]
 use crate::device::context::GpuContext;
 
 /// Environment variable that turns a missing adapter into a test failure.
 pub const REQUIRE_GPU_ENV: &str = "TERRAIN_REQUIRE_GPU";
 
 /// A headless context for `test`, or `None` (after printing why) when no adapter exists and
-/// `TERRAIN_REQUIRE_GPU` is not `1`.
+/// `TERRAIN_REQUIRE_GPU` is not `1`. Needs the `blocking` feature (it makes the context).
 ///
 /// # Panics
 /// When no adapter exists and `TERRAIN_REQUIRE_GPU=1`: CI must not silently skip GPU tests.
+#[cfg(feature = "blocking")]
 pub fn context_or_skip(test: &str) -> Option<GpuContext> {
     crate::device::trace::progress();
     match GpuContext::new_headless() {
@@ -41,6 +43,7 @@ pub const WATCHDOG_ENV: &str = "TERRAIN_WATCHDOG_SECS";
 pub const WATCHDOG_DEFAULT_SECS: u64 = 300;
 
 /// Arms the watchdog with the limit of [`WATCHDOG_ENV`] (once per process).
+#[cfg(feature = "blocking")]
 fn arm_watchdog_from_env() {
     let secs = match std::env::var(WATCHDOG_ENV) {
         Ok(v) => v.trim().parse().unwrap_or(WATCHDOG_DEFAULT_SECS),

@@ -10,10 +10,11 @@ use std::time::Instant;
 type Step = (&'static str, fn() -> Result<()>);
 
 pub fn ci() -> Result<()> {
-    let steps: [Step; 8] = [
+    let steps: [Step; 9] = [
         ("tidy", crate::tidy::tidy),
         ("fmt", fmt),
         ("clippy", clippy),
+        ("features", features),
         ("test", test),
         ("doc", doc),
         ("package", crate::package::package),
@@ -34,6 +35,34 @@ pub fn ci() -> Result<()> {
         "xtask ci: all steps passed in {:.1} s",
         total.elapsed().as_secs_f64()
     );
+    Ok(())
+}
+
+/// The library crates, each checked alone with no default features and with all of them.
+const LIBRARIES: [&str; 6] = [
+    "terrain-core",
+    "terrain-lod",
+    "terrain-cache",
+    "terrain-gpu",
+    "terrain-physics",
+    "terrain-shaders",
+];
+
+/// Every library crate builds (and passes clippy) with `--no-default-features` and with
+/// `--all-features`, alone: what an engine that picks its features gets. Clippy, so the
+/// dependencies' check builds of the clippy step are reused.
+fn features() -> Result<()> {
+    for krate in LIBRARIES {
+        for features in ["--no-default-features", "--all-features"] {
+            cargo(
+                &[
+                    "clippy", "-p", krate, features, "--lib", "--locked", "--", "-D", "warnings",
+                ],
+                &[],
+            )
+            .with_context(|| format!("{krate} {features}"))?;
+        }
+    }
     Ok(())
 }
 

@@ -74,6 +74,7 @@ pub(crate) fn record(what: &'static str, detail: u64) {
 }
 
 /// Marks progress without an operation (a test starting).
+#[cfg(feature = "blocking")]
 pub(crate) fn progress() {
     LAST_MS.store(now_ms(), Ordering::Relaxed);
 }
