@@ -6,7 +6,7 @@ use crate::images::{self, Image};
 use crate::memory_limit;
 use crate::report::{FrameReport, Report, StepStats};
 use crate::summary::{self, Series, Thumb};
-use crate::timings::{Step, Timings};
+use crate::timings::{GpuFigure, Step, Timings};
 use crate::usage_error::UsageExt;
 use anyhow::{Context, Result};
 use std::collections::BTreeMap;
@@ -73,6 +73,9 @@ impl<'a> Capture<'a> {
         frame.file = file;
         frame.timings_ms = timings.wall_by_name();
         frame.gpu_timestamps_ms = timings.gpu_by_name();
+        // GPU timestamps of earlier frames that arrived during this one go to their frames
+        // (in report.json; their lines in frames.jsonl are written already).
+        crate::report::credit_gpu(&mut self.frames, &timings.take_late_gpu());
         if index % self.thumb_every == self.thumb_every - 1 || index + 1 == self.total {
             let size = images::fit_within(image.size(), summary::THUMB_SIDE);
             self.thumbs.push(Thumb {
@@ -88,6 +91,12 @@ impl<'a> Capture<'a> {
             .with_context(|| format!("writing {}", self.out.join(FRAMES_JSONL).display()))?;
         self.frames.push(frame);
         Ok(())
+    }
+
+    /// Credits GPU timestamps that arrived after the run's last frame (the GPU scene's
+    /// `flush_gpu_timings`) to their frames in report.json.
+    pub fn credit_gpu(&mut self, figures: &[GpuFigure]) {
+        crate::report::credit_gpu(&mut self.frames, figures);
     }
 
     /// Frames captured so far.

@@ -85,6 +85,15 @@ pub fn run(
             Default::default()
         }
     };
+    // The GPU timestamps still on their way go to the frames they belong to.
+    if let Some(scene) = gpu.as_mut() {
+        match scene.flush_gpu_timings() {
+            Ok(figures) => capture.credit_gpu(&figures),
+            Err(e) => {
+                failure.get_or_insert(e.context("ending the run"));
+            }
+        }
+    }
     let terrain_final = cli.out.join("terrain_final.png");
     let written = io::encode_png16(scenario.map().grid())
         .and_then(|png| capture::write_file(&terrain_final, &png))
@@ -116,6 +125,7 @@ pub fn run(
         seed: cli.seed,
         adapter,
         backend,
+        gpu_timing: gpu.as_ref().map(GpuScene::gpu_timing),
         resolution: resolution.to_array(),
         load_ms: info.load_ms,
         initial_normals_ms: info.initial_normals_ms,

@@ -58,6 +58,14 @@ pub struct Report {
     pub adapter: String,
     /// The wgpu backend (`vulkan`, `gl`, `metal`, `dx12`), or `none`.
     pub backend: String,
+    /// How the GPU steps were timed: `timestamps` (a hardware adapter with timestamp queries:
+    /// the frames' `timings_ms` of GPU steps are the CPU time to record and submit them, their
+    /// GPU time is in `gpu_timestamps_ms`, read back a frame or more later) or `wall` (a
+    /// software adapter, whose timestamps miss deferred compute work, or no timestamp queries:
+    /// `timings_ms` holds the wall time of submitting each step and waiting for it). Absent
+    /// without a GPU.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gpu_timing: Option<GpuTiming>,
     /// Frame size in pixels.
     pub resolution: [u32; 2],
     /// Milliseconds to generate or load the terrain.
@@ -504,13 +512,6 @@ pub enum GpuTiming {
 /// Credits GPU timestamp figures that arrived after their frames were captured to those
 /// frames (`frames[i]` is frame `i`): a step's figures add up; figures of frames not captured
 /// are left out. A frame no figure arrived for keeps its GPU timings absent, not zero.
-#[cfg_attr(
-    not(test),
-    expect(
-        dead_code,
-        reason = "called by driver.rs and capture.rs once the GPU timing hook of issue 36 lands there"
-    )
-)]
 pub fn credit_gpu(frames: &mut [FrameReport], figures: &[GpuFigure]) {
     for figure in figures {
         let Some(frame) = usize::try_from(figure.frame)

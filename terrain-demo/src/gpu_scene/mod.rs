@@ -639,20 +639,12 @@ impl GpuScene {
 
     /// How the GPU steps are timed: timestamps read back a frame or more later (no wait), or
     /// the wall time of submit and wait per step; report.json's `gpu_timing`.
-    #[expect(
-        dead_code,
-        reason = "called by driver.rs and capture.rs once the GPU timing hook of issue 36 lands there"
-    )]
     pub fn gpu_timing(&self) -> GpuTiming {
         self.timer.mode()
     }
 
     /// The end of the run: waits (bounded) for the GPU timestamps still on their way and
     /// returns their figures, each for the frame it belongs to (none in wall mode).
-    #[expect(
-        dead_code,
-        reason = "called by driver.rs and capture.rs once the GPU timing hook of issue 36 lands there"
-    )]
     pub fn flush_gpu_timings(&mut self) -> Result<Vec<GpuFigure>> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         self.timer
