@@ -117,3 +117,6 @@ pub use verify::{
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]
 struct ReadmeDoctests;
+
+/// The glam of this crate's public API (its vectors), so callers use the same version.
+pub use glam;

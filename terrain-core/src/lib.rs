@@ -91,3 +91,6 @@ pub use tile_upload::{INVALID_SLOT, MAX_TILE_LEVELS, TileLayout, TileUploadTarge
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]
 struct ReadmeDoctests;
+
+/// The glam of this crate's public API (its vectors), so callers use the same version.
+pub use glam;

@@ -146,3 +146,6 @@ pub use tessellation::{TessConfig, TessFrame, TessHierarchy, TessTriangle, TessV
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]
 struct ReadmeDoctests;
+
+/// The glam of this crate's public API (its vectors), so callers use the same version.
+pub use glam;

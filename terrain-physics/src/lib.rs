@@ -119,3 +119,6 @@ pub use window::{CollisionWindow, MAX_WINDOW_SIDE, WINDOW_STEP, WindowError};
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]
 struct ReadmeDoctests;
+
+/// The glam of this crate's public API (its vectors), so callers use the same version.
+pub use glam;
