@@ -3,28 +3,35 @@
 //! `cargo xtask bench-report` appends its table to the report.
 //!
 //! ```sh
-//! cargo run -p terrain-gpu --example gpu_memory -- [SIDE]   # default 4096, the thesis map
+//! cargo run -p terrain-gpu --example gpu_memory -- [SIDE]   # default 1024
 //! ```
+//!
+//! Bytes per texel do not depend on the side (a power of two: no row padding), so the default
+//! keeps every buffer within wgpu's default 128 MiB binding; the report scales them to a
+//! 4096^2 map.
 
 use glam::UVec2;
 use terrain_core::detail::DetailLayout;
 use terrain_core::{HeightEncoding, TileLayout, WrapMode};
+use terrain_gpu::GpuTessellation;
 use terrain_gpu::granular::{GpuGranularNormals, GranularScratch};
 use terrain_gpu::{
     AtlasConfig, GpuContext, GpuDensityMap, GpuDerivativeMap, GpuDetailTiles, GpuHeightMap,
     GpuTileAtlas,
 };
-use terrain_lod::DensityParams;
+use terrain_lod::{DensityParams, TessConfig, TessHierarchy};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let side: u32 = match std::env::args().nth(1) {
         Some(a) => a
             .parse()
             .map_err(|_| format!("SIDE must be a texel count, not {a:?}"))?,
-        None => 4096,
+        None => 1024,
     };
-    if !(64..=8192).contains(&side) || !side.is_power_of_two() {
-        return Err("SIDE must be a power of two from 64 to 8192".into());
+    // Past 2048 the granular normals and tessellation vertices (16 bytes a texel) outgrow
+    // wgpu's default 128 MiB storage binding, which the headless context asks for.
+    if !(64..=2048).contains(&side) || !side.is_power_of_two() {
+        return Err("SIDE must be a power of two from 64 to 2048".into());
     }
     let ctx = GpuContext::new_headless()?;
     let (device, queue) = (&ctx.device, &ctx.queue);
@@ -69,7 +76,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let columns = 242_064u64;
     let scratch = GranularScratch::new(device, columns)?;
 
-    let rows: [(&str, f64, &str); 8] = [
+    // Adaptive tessellation: its vertex grid over the map, and room for 2^16 triangles.
+    let hierarchy = TessHierarchy::from_map(&coarse, None, TessConfig::default())?;
+    let triangles = 1u32 << 16;
+    let tess = GpuTessellation::new(device, queue, &hierarchy, triangles)?;
+    let grid = hierarchy.grid_size();
+    let vertices = f64::from(grid.x) * f64::from(grid.y);
+
+    let rows: [(&str, f64, &str); 10] = [
         (
             "coarse heights (`GpuHeightMap<u16>`)",
             heights.bytes_per_texel(),
@@ -110,6 +124,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             scratch.memory_bytes() as f64 / columns as f64,
             "-",
         ),
+        (
+            "tessellation vertices (`GpuTessellation`), per grid vertex",
+            tess.vertex_bytes() as f64 / vertices,
+            "-",
+        ),
+        (
+            "tessellation output and level queues, per triangle of capacity",
+            tess.triangle_bytes() as f64 / f64::from(triangles),
+            "-",
+        ),
     ];
     println!(
         "GPU memory on {} ({}), {side}^2 texels:\n",
@@ -121,8 +145,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("| {what} | {bytes:.2} | {thesis} |");
     }
     println!(
-        "\nHeights + normals of the coarse-map: {per_coarse:.2} bytes per texel, {:.1} MiB for {side}^2.",
-        per_coarse * texels / (1 << 20) as f64
+        "\nHeights + normals of the coarse-map: {per_coarse:.2} bytes per texel, {:.1} MiB for a \
+         4096^2 map.",
+        per_coarse * 4096.0 * 4096.0 / (1 << 20) as f64
     );
     Ok(())
 }

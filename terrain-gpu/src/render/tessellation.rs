@@ -262,6 +262,26 @@ impl GpuTessellation {
         self.capacity
     }
 
+    /// Bytes of GPU memory the grid's vertices take (16 per vertex: height and bounds).
+    pub fn vertex_bytes(&self) -> u64 {
+        self.vertices.size()
+    }
+
+    /// Bytes of GPU memory of the output, the level queues and the small state buffers: what
+    /// grows with the triangle capacity.
+    pub fn triangle_bytes(&self) -> u64 {
+        [
+            &self.patch_bounds,
+            &self.output,
+            &self.state,
+            &self.queues,
+            &self.dispatch,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum()
+    }
+
     /// Triangles each of the two level queues holds.
     pub fn queue_capacity(&self) -> u32 {
         self.queue_capacity
