@@ -400,6 +400,17 @@ fn normals_match_the_cpu_reference_full_and_in_dirty_rects() {
 }
 
 /// The repeating 70 x 50 map the readback tests read from.
+/// `rows`, read back for `rect` (unwrapped), are the map's texels there, wrapped.
+fn assert_rows_are_the_map(rows: &Grid<u16>, rect: Rect, map: &HeightMap<u16>) {
+    for y in 0..rect.size.y {
+        for x in 0..rect.size.x {
+            let p = rect.min + IVec2::new(x as i32, y as i32);
+            let want = map.grid().get_wrapped(p, WrapMode::Repeat);
+            assert_eq!(rows.get(x, y), Some(want), "texel {p} of {rect:?}");
+        }
+    }
+}
+
 fn readback_map() -> HeightMap<u16> {
     HeightMap::new(
         hashed::<u16>(70, 50, 0, 65_000),
@@ -520,14 +531,7 @@ fn packed_rows_of_odd_maps_read_back_texel_for_texel() {
     }
     queue.submit([encoder.finish()]);
     for (data, rect) in readback.wait(device).unwrap().iter().zip(rects) {
-        let rows = data.to_u16();
-        for y in 0..rect.size.y {
-            for x in 0..rect.size.x {
-                let p = rect.min + IVec2::new(x as i32, y as i32);
-                let want = map.grid().get_wrapped(p, WrapMode::Repeat);
-                assert_eq!(rows.get(x, y), Some(want), "{rect:?} texel {p}");
-            }
-        }
+        assert_rows_are_the_map(&data.to_u16(), rect, &map);
     }
     // u8 maps pack four texels a word.
     let map8 = HeightMap::new(
@@ -586,13 +590,7 @@ fn whole_rows_and_direct_conversion_equal_the_map() {
         assert_eq!(*rect, want_rect);
         assert_eq!(*rows, data.to_u16());
         assert_eq!(*metres, data.to_metres());
-        for y in 0..rect.size.y {
-            for x in 0..rect.size.x {
-                let p = rect.min + IVec2::new(x as i32, y as i32);
-                let want = map.grid().get_wrapped(p, WrapMode::Repeat);
-                assert_eq!(rows.get(x, y), Some(want), "texel {p} of {rect:?}");
-            }
-        }
+        assert_rows_are_the_map(rows, *rect, &map);
     }
     ctx.check().expect("no GPU validation errors");
 }
