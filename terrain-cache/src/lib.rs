@@ -120,3 +120,13 @@ struct ReadmeDoctests;
 
 /// The glam of this crate's public API (its vectors), so callers use the same version.
 pub use glam;
+
+// Engines keep the pools in state shared across threads (Bevy's `Resource` is `Send + Sync`):
+// a type that loses either fails this build.
+const _: () = {
+    const fn send_sync<T: Send + Sync>() {}
+    send_sync::<RamPool>();
+    send_sync::<VramPool>();
+    send_sync::<TileStamps<u8>>();
+    send_sync::<World>();
+};

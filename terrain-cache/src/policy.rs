@@ -259,7 +259,7 @@ pub struct Want {
 }
 
 /// A selection policy: which tiles to hold for a camera.
-pub trait SelectionPolicy: Send + fmt::Debug {
+pub trait SelectionPolicy: Send + Sync + fmt::Debug {
     /// Appends the tiles wanted for `camera` to `out` (each at most once).
     fn select(&mut self, camera: &CameraState, grid: &TileGrid, out: &mut Vec<Want>);
 }

@@ -25,9 +25,9 @@ use terrain_core::{
     TextureStamp, WrapMode, apply_stamp,
 };
 use terrain_gpu::{
-    AtlasConfig, Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuStamp, GpuTextureStamp,
-    GpuTileAtlas, RegionReadback, SkyColors, SkyPass, StampOp, StampPass, TargetFormat,
-    TerrainStyle, TileSlot, wgpu,
+    AtlasConfig, Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DepthConvention, GpuStamp,
+    GpuTextureStamp, GpuTileAtlas, RegionReadback, SkyColors, SkyPass, StampOp, StampPass,
+    TargetFormat, TerrainStyle, TileSlot, wgpu,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 use terrain_physics::{CameraBody, CollisionWindow};
@@ -147,6 +147,7 @@ fn main() -> Result<()> {
         color: wgpu::TextureFormat::Rgba8UnormSrgb,
         depth: wgpu::TextureFormat::Depth32Float,
         sample_count: 1,
+        depth_convention: DepthConvention::Forward,
     };
     let target = |fmt, usage| {
         device.create_texture(&wgpu::TextureDescriptor {

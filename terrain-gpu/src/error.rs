@@ -133,13 +133,24 @@ pub enum GpuError {
         /// Bytes uploaded since the last recall, including the refused upload.
         bytes: u64,
     },
-    /// A camera with a non-finite field, a zero direction, or planes out of order.
+    /// A view the renderers cannot draw (see [`crate::RenderView`] for what they take).
     #[error(
-        "invalid camera {camera:?}: needs finite values, a non-zero direction, 0 < fov < pi and 0 < near < far"
+        "invalid view: {reason} (a Camera needs finite values, a non-zero direction, 0 < fov < pi and 0 < near < far)"
     )]
-    InvalidCamera {
-        /// The camera given.
-        camera: crate::render::camera::Camera,
+    InvalidView {
+        /// What is wrong with it.
+        reason: &'static str,
+    },
+    /// A view whose projection follows the other depth convention than the target the
+    /// renderer was built for.
+    #[error(
+        "the view's projection has {view:?} depth but the renderer was built for a {target:?} depth target (TargetFormat::depth_convention)"
+    )]
+    DepthConventionMismatch {
+        /// The view's convention.
+        view: crate::render::camera::DepthConvention,
+        /// The target's.
+        target: crate::render::camera::DepthConvention,
     },
     /// An input the operation does not handle.
     #[error("{what}: {reason}")]

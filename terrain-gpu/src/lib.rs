@@ -69,7 +69,7 @@ pub use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain
 pub use resources::{atlas, detail, maps};
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
-pub use camera::Camera;
+pub use camera::{Camera, DepthConvention, RenderView, ViewMatrices};
 pub use cdlod::{CdlodDraw, CdlodRenderer};
 pub use clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};
 pub use context::{AdapterReport, GpuContext};
@@ -103,3 +103,20 @@ pub use wgpu;
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]
 struct ReadmeDoctests;
+
+// Engines keep passes and renderers in state shared across threads (Bevy's `Resource` is
+// `Send + Sync`): a type that loses either fails this build.
+const _: () = {
+    const fn send_sync<T: Send + Sync>() {}
+    send_sync::<TerrainRenderer>();
+    send_sync::<ClipmapRenderer>();
+    send_sync::<SkyPass>();
+    send_sync::<StampPass>();
+    send_sync::<NormalPass>();
+    send_sync::<GpuHeightMap<u16>>();
+    send_sync::<GpuDerivativeMap>();
+    send_sync::<GpuTileAtlas>();
+    send_sync::<RegionReadback>();
+    send_sync::<GpuRegionSource>();
+    send_sync::<granular::GpuGranularStep>();
+};

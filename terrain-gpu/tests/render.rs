@@ -13,8 +13,8 @@ use glam::{UVec2, Vec2, Vec3};
 use scene::Scene;
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuError, SkyColors, SkyPass,
-    TargetFormat, TerrainStyle,
+    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DepthConvention, GpuError, SkyColors,
+    SkyPass, TargetFormat, TerrainStyle,
 };
 
 #[test]
@@ -294,6 +294,7 @@ fn renderers_refuse_targets_they_cannot_draw_into() {
         },
         TargetFormat {
             sample_count: 3,
+            depth_convention: DepthConvention::Forward,
             ..TargetFormat::CAPTURE
         },
     ];
@@ -312,6 +313,7 @@ fn renderers_refuse_targets_they_cannot_draw_into() {
     }
     let err = TargetFormat {
         sample_count: 3,
+        depth_convention: DepthConvention::Forward,
         ..TargetFormat::CAPTURE
     }
     .validate_on(&ctx.adapter, &ctx.device)
@@ -349,6 +351,7 @@ fn target_sample_counts_follow_the_adapter() {
                 color,
                 depth: wgpu::TextureFormat::Depth32Float,
                 sample_count: count,
+                depth_convention: DepthConvention::Forward,
             };
             let features = |f: wgpu::TextureFormat| {
                 if adapter_specific {

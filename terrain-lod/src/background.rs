@@ -17,7 +17,9 @@ use crate::error::LodError;
 use crate::{CdlodTree, DensityMap, TessHierarchy};
 use glam::UVec2;
 use std::sync::Arc;
-use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
+// crossbeam's receiver is `Sync` (std's is not), so an updater, and the renderers holding one, can
+// live in an engine's shared resources (Bevy's `Resource` needs `Send + Sync`).
+use crossbeam_channel::{Receiver, Sender, TryRecvError, unbounded as channel};
 use std::thread::JoinHandle;
 use terrain_core::{Grid, HeightMap, HeightSample, Rect, WrapMode};
 

@@ -122,3 +122,13 @@ struct ReadmeDoctests;
 
 /// The glam of this crate's public API (its vectors), so callers use the same version.
 pub use glam;
+
+// Engines keep collision state shared across threads (Bevy's `Resource` is `Send + Sync`): a
+// type that loses either fails this build.
+const _: () = {
+    const fn send_sync<T: Send + Sync>() {}
+    send_sync::<CollisionMirror>();
+    send_sync::<CollisionWindow>();
+    send_sync::<ReadbackScheduler>();
+    send_sync::<CameraBody>();
+};

@@ -7,7 +7,7 @@
 
 use crate::device::scope::{buffer_init, scoped};
 use crate::error::GpuError;
-use crate::render::camera::Camera;
+use crate::render::camera::RenderView;
 use crate::render::clipmap::{
     ClipmapSurface, SurfaceKind, SurfacePipeline, TerrainStyle, VertexShape, check_view,
     check_wireframe, frame_uniform,
@@ -57,8 +57,9 @@ pub struct CdlodDraw<'a> {
     pub surface: ClipmapSurface<'a>,
     /// The selection (instances and range table) of this frame.
     pub frame: &'a CdlodFrame,
-    /// The camera the selection was made for.
-    pub camera: &'a Camera,
+    /// The camera the selection was made for: a [`crate::Camera`], an engine's
+    /// [`crate::ViewMatrices`], or any [`RenderView`].
+    pub camera: &'a dyn RenderView,
     /// Lighting and colours.
     pub style: &'a TerrainStyle,
     /// The render target's size in pixels.
@@ -143,7 +144,12 @@ impl CdlodRenderer {
         queue: &wgpu::Queue,
         draw: &CdlodDraw<'_>,
     ) -> Result<(), GpuError> {
-        check_view(draw.camera, draw.target_size, "cdlod target size (pixels)")?;
+        let view = check_view(
+            draw.camera,
+            Some(&self.target),
+            draw.target_size,
+            "cdlod target size (pixels)",
+        )?;
         let surface = draw.surface;
         let kind = surface.kind();
         if kind == SurfaceKind::Granular {
@@ -178,15 +184,7 @@ impl CdlodRenderer {
             }
             WrapMode::Clamp => [0, 0],
         };
-        let uniform = frame_uniform(
-            &info,
-            draw.camera,
-            draw.style,
-            &self.target,
-            draw.target_size,
-            (0, 0),
-            wrap_offset,
-        );
+        let uniform = frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset);
         let mut lods: LodsUniform = [[0.0, -1.0, 0.0, 0.0]; MAX_CDLOD_LODS as usize];
         for (slot, &(start, end)) in lods.iter_mut().zip(&frame.ranges.morph) {
             if end.is_finite() && start.is_finite() && end > start {

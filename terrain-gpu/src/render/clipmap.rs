@@ -6,7 +6,7 @@
 use crate::device::compute::shader_module;
 use crate::device::scope::{buffer_init, scoped};
 use crate::error::GpuError;
-use crate::render::camera::Camera;
+use crate::render::camera::{RenderView, ResolvedView};
 use crate::render::surface::{DetailUniform, fragment_reach};
 use crate::render::target::TargetFormat;
 use crate::resources::atlas::GpuTileAtlas;
@@ -283,7 +283,12 @@ impl ClipmapRenderer {
             style,
             target_size,
         } = *view;
-        check_view(camera, target_size, "clipmap target size (pixels)")?;
+        let resolved = check_view(
+            camera,
+            Some(&self.target),
+            target_size,
+            "clipmap target size (pixels)",
+        )?;
         if frame.levels.len() != self.levels as usize {
             return Err(GpuError::Unsupported {
                 what: "ClipmapRenderer",
@@ -299,10 +304,9 @@ impl ClipmapRenderer {
         };
         let mut uniform = frame_uniform(
             &info,
-            camera,
+            &resolved,
             style,
             &self.target,
-            target_size,
             (self.n, self.levels),
             wrap_offset,
         );
@@ -418,21 +422,19 @@ impl ClipmapRenderer {
     }
 }
 
-/// The frame uniform of a view of `info` by `camera` on a target of `target_size` pixels, with
-/// the clipmap's `(n, levels)` (ignored by other renderers) and the wrap offset of the texels
-/// the frame reads.
+/// The frame uniform of a view of `info` by `view` on `target`, with the clipmap's
+/// `(n, levels)` (ignored by other renderers) and the wrap offset of the texels the frame
+/// reads.
 pub(crate) fn frame_uniform(
     info: &SurfaceInfo,
-    camera: &Camera,
+    view: &ResolvedView,
     style: &TerrainStyle,
     target: &TargetFormat,
-    target_size: UVec2,
     (n, levels): (u32, u32),
     wrap_offset: [i32; 2],
 ) -> FrameUniform {
-    let size = target_size.as_vec2();
     let ts = info.texel_size;
-    let cam_texel = glam::Vec2::new(camera.position.x, camera.position.z) / ts;
+    let cam_texel = glam::Vec2::new(view.eye.x, view.eye.z) / ts;
     let cam_int = cam_texel.floor();
     let enc = info.encoding;
     let wrap = match info.wrap {
@@ -440,12 +442,10 @@ pub(crate) fn frame_uniform(
         WrapMode::Clamp => WRAP_CLAMP,
     };
     FrameUniform {
-        view_proj: camera
-            .view_proj_relative(size.x / size.y)
-            .to_cols_array_2d(),
+        view_proj: view.view_proj_relative.to_cols_array_2d(),
         camera_texel: cam_int.as_ivec2().to_array(),
         camera_frac: (cam_texel - cam_int).to_array(),
-        camera_height: camera.position.y,
+        camera_height: view.eye.y,
         texel_size: ts,
         height_scale: enc.scale,
         height_offset: enc.offset,
@@ -465,15 +465,14 @@ pub(crate) fn frame_uniform(
     }
 }
 
-/// Checks a camera and a target size before a renderer uses them.
+/// Checks a view and a target size before a renderer built for `target` (or a compute pass,
+/// `None`) uses them, and resolves the view.
 pub(crate) fn check_view(
-    camera: &Camera,
+    camera: &dyn RenderView,
+    target: Option<&TargetFormat>,
     target_size: UVec2,
     what: &'static str,
-) -> Result<(), GpuError> {
-    if !camera.is_valid() {
-        return Err(GpuError::InvalidCamera { camera: *camera });
-    }
+) -> Result<ResolvedView, GpuError> {
     if target_size.x == 0 || target_size.y == 0 {
         return Err(terrain_core::CoreError::OutOfRange {
             what,
@@ -482,7 +481,11 @@ pub(crate) fn check_view(
         }
         .into());
     }
-    Ok(())
+    let view = ResolvedView::new(camera, target_size)?;
+    if let Some(target) = target {
+        view.check_depth(target)?;
+    }
+    Ok(view)
 }
 
 /// Which pipeline a surface is drawn with.
@@ -501,8 +504,9 @@ pub struct ClipmapView<'a> {
     pub surface: ClipmapSurface<'a>,
     /// The placed, culled frame of the renderer's layout.
     pub frame: &'a ClipmapFrame,
-    /// The camera.
-    pub camera: &'a Camera,
+    /// The camera: a [`crate::Camera`], an engine's [`crate::ViewMatrices`], or any
+    /// [`RenderView`].
+    pub camera: &'a dyn RenderView,
     /// Lighting and colours.
     pub style: &'a TerrainStyle,
     /// Size of the render target in pixels (for the aspect ratio).
@@ -798,7 +802,7 @@ impl SurfacePipeline {
                         polygon_mode,
                         ..Default::default()
                     },
-                    depth_stencil: Some(target.depth_state(true, wgpu::CompareFunction::Less)),
+                    depth_stencil: Some(target.terrain_depth_state()),
                     multisample: target.multisample(),
                     fragment: Some(wgpu::FragmentState {
                         module: &module,

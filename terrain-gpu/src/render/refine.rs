@@ -18,7 +18,7 @@ use crate::device::download::download_bytes;
 use crate::device::scope::scoped;
 use crate::device::small_readback::SmallReadback;
 use crate::error::GpuError;
-use crate::render::camera::Camera;
+use crate::render::camera::{RenderView, ResolvedView};
 use crate::render::clipmap::{
     ClipmapSurface, FrameUniform, SurfaceInfo, SurfacePipeline, TerrainStyle, VertexShape,
     check_view, check_wireframe, frame_uniform,
@@ -70,8 +70,9 @@ pub struct RefineDraw<'a> {
     /// geometry). With the clipmap outside the region drawn through the same shading and no
     /// parallax steps, the normals fade alike on both sides of the region's edge.
     pub shading: &'a DetailShading,
-    /// The camera.
-    pub camera: &'a Camera,
+    /// The camera: a [`crate::Camera`], an engine's [`crate::ViewMatrices`], or any
+    /// [`RenderView`].
+    pub camera: &'a dyn RenderView,
     /// Lighting and colours.
     pub style: &'a TerrainStyle,
     /// The render target's size in pixels.
@@ -81,8 +82,16 @@ pub struct RefineDraw<'a> {
 impl RefineDraw<'_> {
     /// Checks the parts agree (as the detail clipmap surface does) and returns the map's
     /// description, the refinement view and the texels the shaders may read from the camera.
-    fn check(&self) -> Result<(SurfaceInfo, RefineView, u32), GpuError> {
-        check_view(self.camera, self.target_size, "refine target size (pixels)")?;
+    fn check(
+        &self,
+        target: Option<&TargetFormat>,
+    ) -> Result<(SurfaceInfo, RefineView, u32, ResolvedView), GpuError> {
+        let resolved = check_view(
+            self.camera,
+            target,
+            self.target_size,
+            "refine target size (pixels)",
+        )?;
         let info = ClipmapSurface::Detail {
             map: self.map,
             normals: self.normals,
@@ -90,29 +99,22 @@ impl RefineDraw<'_> {
             shading: self.shading,
         }
         .check()?;
-        let xz = Vec2::new(self.camera.position.x, self.camera.position.z);
+        let xz = Vec2::new(resolved.eye.x, resolved.eye.z);
         let view = RefineView::new(xz, info.texel_size, self.radius_m)?;
         // Vertices reach one texel past the region, the fragments' differences two more.
         let reach = view.half_cells() + 3;
-        Ok((info, view, reach))
+        Ok((info, view, reach, resolved))
     }
 
     /// The frame uniform of this draw for `target`, its wrap offset covering the region.
     fn frame(
         &self,
         info: &SurfaceInfo,
+        view: &ResolvedView,
         target: &TargetFormat,
         reach: u32,
     ) -> Result<FrameUniform, GpuError> {
-        let mut uniform = frame_uniform(
-            info,
-            self.camera,
-            self.style,
-            target,
-            self.target_size,
-            (0, 0),
-            [0, 0],
-        );
+        let mut uniform = frame_uniform(info, view, self.style, target, (0, 0), [0, 0]);
         if info.wrap == WrapMode::Repeat {
             let lowest = IVec2::from(uniform.camera_texel) - IVec2::splat(reach as i32);
             uniform.wrap_offset = crate::device::compute::wrap_offset(lowest, info.size)?;
@@ -296,7 +298,7 @@ impl RefinePass {
         encoder: &mut wgpu::CommandEncoder,
         draw: &RefineDraw<'_>,
     ) -> Result<RefineView, GpuError> {
-        let (info, view, reach) = draw.check()?;
+        let (info, view, reach, resolved) = draw.check(None)?;
         if view.half_cells() > self.max_half_cells {
             return Err(GpuError::Unsupported {
                 what: "RefinePass",
@@ -305,7 +307,7 @@ impl RefinePass {
             });
         }
         // The compute pass reads the frame's camera, encoding and wrap, not its target.
-        let frame = draw.frame(&info, &TargetFormat::CAPTURE, reach)?;
+        let frame = draw.frame(&info, &resolved, &TargetFormat::CAPTURE, reach)?;
         let detail = draw.detail_info(&frame, reach)?;
         let params = Params {
             half_cells: view.half_cells(),
@@ -508,14 +510,14 @@ impl RefineRenderer {
         draw: &RefineDraw<'_>,
         refine: &RefinePass,
     ) -> Result<(), GpuError> {
-        let (info, view, reach) = draw.check()?;
+        let (info, view, reach, resolved) = draw.check(Some(&self.target))?;
         if refine.view() != Some(&view) {
             return Err(GpuError::Unsupported {
                 what: "RefineRenderer",
                 reason: "the refine pass was last encoded for another camera or radius",
             });
         }
-        let frame = draw.frame(&info, &self.target, reach)?;
+        let frame = draw.frame(&info, &resolved, &self.target, reach)?;
         let detail = draw.detail_info(&frame, reach)?;
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&frame));
         queue.write_buffer(&self.detail_uniform, 0, bytemuck::bytes_of(&detail));

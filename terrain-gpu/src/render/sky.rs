@@ -46,6 +46,8 @@ pub struct SkyPass {
     uniform: wgpu::Buffer,
     group: wgpu::BindGroup,
     srgb_target: u32,
+    /// 1 when the target's depth falls with distance (reverse-Z).
+    reverse_depth: u32,
 }
 
 impl SkyPass {
@@ -112,12 +114,16 @@ impl SkyPass {
                 uniform,
                 group,
                 srgb_target: target.srgb_flag(),
+                reverse_depth: u32::from(
+                    target.depth_convention == crate::DepthConvention::Reverse,
+                ),
             }
         })
     }
 
-    /// Writes the frame's uniforms: the camera's `view_proj` (its inverse must exist) and the
-    /// colours.
+    /// Writes the frame's uniforms: the camera's `view_proj` (world or camera-relative, with
+    /// the target's depth convention, finite or infinite far plane; its inverse must exist)
+    /// and the colours.
     pub fn prepare(
         &self,
         queue: &wgpu::Queue,
@@ -135,7 +141,7 @@ impl SkyPass {
             inv_view_proj: inverse.to_cols_array_2d(),
             horizon: colors.horizon.extend(1.0).to_array(),
             zenith: colors.zenith.extend(1.0).to_array(),
-            flags: [self.srgb_target, 0, 0, 0],
+            flags: [self.srgb_target, self.reverse_depth, 0, 0],
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&params));
         Ok(())

@@ -2,6 +2,7 @@
 //! before wgpu sees them.
 
 use crate::error::GpuError;
+use crate::render::camera::DepthConvention;
 
 /// The colour and depth formats and the sample count of the render pass a renderer draws into
 /// (the caller's own pass, an engine's swap chain, or an [`crate::OffscreenTarget`]).
@@ -14,6 +15,9 @@ pub struct TargetFormat {
     pub depth: wgpu::TextureFormat,
     /// Samples per pixel (1, or 4 for MSAA).
     pub sample_count: u32,
+    /// Whether the pass's depth grows (cleared to 1) or falls (cleared to 0, reverse-Z) with
+    /// distance; every view drawn must project with the same convention.
+    pub depth_convention: DepthConvention,
 }
 
 impl TargetFormat {
@@ -22,7 +26,16 @@ impl TargetFormat {
         color: crate::render::offscreen::COLOR_FORMAT,
         depth: crate::render::offscreen::DEPTH_FORMAT,
         sample_count: 1,
+        depth_convention: DepthConvention::Forward,
     };
+
+    /// These formats with `convention`.
+    pub fn with_depth_convention(self, convention: DepthConvention) -> Self {
+        Self {
+            depth_convention: convention,
+            ..self
+        }
+    }
 
     /// Checks that `device` can render to these formats with this sample count, before wgpu
     /// sees them. Without the adapter at hand the formats' guaranteed features decide, which is
@@ -128,6 +141,12 @@ impl TargetFormat {
             stencil: Default::default(),
             bias: Default::default(),
         }
+    }
+
+    /// The terrain's depth state: written, and tested so the nearer fragment wins under the
+    /// target's convention.
+    pub(crate) fn terrain_depth_state(&self) -> wgpu::DepthStencilState {
+        self.depth_state(true, self.depth_convention.compare())
     }
 
     /// The pipeline's multisample state.

@@ -12,8 +12,9 @@
 
 use crate::clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};
 use crate::error::GpuError;
-use crate::render::camera::Camera;
+use crate::render::camera::{RenderView, ResolvedView};
 use crate::render::cdlod::{CdlodDraw, CdlodRenderer};
+use crate::render::clipmap::check_view;
 use crate::render::target::TargetFormat;
 use crate::render::tessellation::{GpuTessellation, TessDraw, TessRenderer, TessellationPass};
 use glam::{IVec2, UVec2, Vec2, Vec3};
@@ -50,8 +51,9 @@ pub struct TerrainView<'a> {
     /// What is drawn: CDLOD draws a coarse, detail or atlas surface, the tessellation a coarse
     /// or detail surface (of the map it was made of), the clipmap any.
     pub surface: ClipmapSurface<'a>,
-    /// The camera.
-    pub camera: &'a Camera,
+    /// The camera: a [`crate::Camera`], an engine's [`crate::ViewMatrices`], or any
+    /// [`RenderView`].
+    pub camera: &'a dyn RenderView,
     /// Lighting and colours.
     pub style: &'a TerrainStyle,
     /// The render target's size in pixels.
@@ -362,8 +364,9 @@ impl TerrainRenderer {
             style,
             target_size,
         } = *view;
-        let frustum = frustum(camera, target_size);
-        let lod_view = lod_view(camera, target_size, &frustum);
+        let resolved = check_view(camera, None, target_size, "terrain target size (pixels)")?;
+        let frustum = Frustum::from_view_proj(resolved.view_proj_world);
+        let lod_view = lod_view(&resolved, target_size, &frustum);
         match &mut self.lod {
             Lod::Clipmap(c) => {
                 let texel_size = match surface {
@@ -373,7 +376,7 @@ impl TerrainRenderer {
                     }
                     ClipmapSurface::Granular { map, .. } => map.texel_size(),
                 };
-                let eye = Vec2::new(camera.position.x, camera.position.z);
+                let eye = Vec2::new(resolved.eye.x, resolved.eye.z);
                 let frame = c
                     .layout
                     .place(eye, texel_size, c.height_range, Some(&frustum))?;
@@ -419,7 +422,7 @@ impl TerrainRenderer {
                     target_size,
                 };
                 c.renderer.prepare(device, queue, &draw)?;
-                c.previous = c.last.replace((frame, camera.position));
+                c.previous = c.last.replace((frame, resolved.eye));
             }
             Lod::Tessellated(t) => {
                 let hierarchy = &t.updater.state().hierarchy;
@@ -433,7 +436,7 @@ impl TerrainRenderer {
                 };
                 t.renderer.prepare(device, queue, &draw)?;
                 let width = target_size.x as f32;
-                t.previous = t.last.replace((camera.position, width, lod_view.hfov));
+                t.previous = t.last.replace((resolved.eye, width, lod_view.hfov));
             }
         }
         Ok(())
@@ -445,8 +448,14 @@ impl TerrainRenderer {
     /// when that frame needs more triangles than the tessellation's output holds (the GPU
     /// then drops the rest). The tessellation's popping metric probes the vertices found here.
     pub fn figures(&mut self, view: &TerrainView<'_>) -> Result<TerrainFrame, GpuError> {
-        let frustum = frustum(view.camera, view.target_size);
-        let lod_view = lod_view(view.camera, view.target_size, &frustum);
+        let resolved = check_view(
+            view.camera,
+            None,
+            view.target_size,
+            "terrain target size (pixels)",
+        )?;
+        let frustum = Frustum::from_view_proj(resolved.view_proj_world);
+        let lod_view = lod_view(&resolved, view.target_size, &frustum);
         let not_prepared = GpuError::Unsupported {
             what: "TerrainRenderer::figures",
             reason: "no frame was prepared",
@@ -510,10 +519,16 @@ impl TerrainRenderer {
     /// screen-space jump of the drawn surface between the two frames' LOD decisions, both
     /// evaluated on `map` and projected with `camera` on a `target_size` target, so only a
     /// change of the mesh counts. `None` for the clipmap, a streamed quadtree, or before two
-    /// frames.
-    pub fn popping_px(&self, map: &CoarseMap, camera: &Camera, target_size: UVec2) -> Option<f32> {
+    /// frames, or for a view the renderers refuse.
+    pub fn popping_px(
+        &self,
+        map: &CoarseMap,
+        camera: &dyn RenderView,
+        target_size: UVec2,
+    ) -> Option<f32> {
         let size = target_size.as_vec2();
-        let view_proj = camera.view_proj_world(size.x / size.y.max(1.0));
+        let resolved = ResolvedView::new(camera, target_size).ok()?;
+        let view_proj = resolved.view_proj_world;
         match &self.lod {
             Lod::Clipmap(_) => None,
             Lod::Cdlod(c) => {
@@ -522,7 +537,7 @@ impl TerrainRenderer {
                 };
                 let ((now, eye), (then, then_eye)) = (c.last.as_ref()?, c.previous.as_ref()?);
                 let view = PoppingView {
-                    forward: camera.forward,
+                    forward: resolved.forward,
                     view_proj,
                     target: size,
                 };
@@ -555,20 +570,14 @@ impl TerrainRenderer {
     }
 }
 
-/// The camera's frustum on a target of `size` pixels.
-fn frustum(camera: &Camera, size: UVec2) -> Frustum {
-    let aspect = size.x as f32 / size.y.max(1) as f32;
-    Frustum::from_view_proj(camera.view_proj_world(aspect))
-}
-
-/// What CDLOD's and the tessellation's decisions are made for: the camera, its frustum and the
-/// target's width and horizontal field of view.
-fn lod_view<'a>(camera: &Camera, size: UVec2, frustum: &'a Frustum) -> CdlodView<'a> {
-    let aspect = size.x as f32 / size.y.max(1) as f32;
+/// What CDLOD's and the tessellation's decisions are made for: the eye, the frustum and the
+/// target's width and horizontal field of view (so the screen-space error follows the
+/// engine's projection, whatever its depth convention).
+fn lod_view<'a>(view: &ResolvedView, size: UVec2, frustum: &'a Frustum) -> CdlodView<'a> {
     CdlodView {
-        camera: camera.position,
+        camera: view.eye,
         frustum: Some(frustum),
         viewport_width: size.x as f32,
-        hfov: 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan(),
+        hfov: view.hfov,
     }
 }

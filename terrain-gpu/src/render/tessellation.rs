@@ -24,7 +24,7 @@ use crate::device::compute::{
 use crate::device::download::download_bytes;
 use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::render::camera::Camera;
+use crate::render::camera::RenderView;
 use crate::render::clipmap::{
     ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, check_wireframe,
     frame_uniform,
@@ -482,8 +482,9 @@ pub struct TessDraw<'a> {
     /// tessellation was made of, with its normals) or [`ClipmapSurface::Detail`] (the same
     /// with a detail layer, shaded as the clipmap shades it).
     pub surface: ClipmapSurface<'a>,
-    /// The camera.
-    pub camera: &'a Camera,
+    /// The camera: a [`crate::Camera`], an engine's [`crate::ViewMatrices`], or any
+    /// [`RenderView`].
+    pub camera: &'a dyn RenderView,
     /// Lighting and colours.
     pub style: &'a TerrainStyle,
     /// The render target's size in pixels.
@@ -551,8 +552,9 @@ impl TessRenderer {
         queue: &wgpu::Queue,
         draw: &TessDraw<'_>,
     ) -> Result<(), GpuError> {
-        check_view(
+        let view = check_view(
             draw.camera,
+            Some(&self.target),
             draw.target_size,
             "tessellated target size (pixels)",
         )?;
@@ -581,15 +583,7 @@ impl TessRenderer {
             }
             WrapMode::Clamp => [0, 0],
         };
-        let uniform = frame_uniform(
-            &info,
-            draw.camera,
-            draw.style,
-            &self.target,
-            draw.target_size,
-            (0, 0),
-            wrap_offset,
-        );
+        let uniform = frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset);
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         let camera_texel = glam::IVec2::from(uniform.camera_texel);
         let buffers =

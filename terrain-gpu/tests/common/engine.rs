@@ -4,13 +4,14 @@
 //! this path with the offscreen capture, so the test checks what the example shows.
 
 use glam::UVec2;
-use terrain_gpu::{TargetFormat, wgpu};
+use terrain_gpu::{DepthConvention, TargetFormat, wgpu};
 
 /// The engine's formats: BGRA sRGB colour and 24-bit depth, 4x MSAA.
 pub const FORMAT: TargetFormat = TargetFormat {
     color: wgpu::TextureFormat::Bgra8UnormSrgb,
     depth: wgpu::TextureFormat::Depth24Plus,
     sample_count: 4,
+    depth_convention: DepthConvention::Forward,
 };
 
 /// The engine's frame textures of one size, in [`FORMAT`].

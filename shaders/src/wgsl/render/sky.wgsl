@@ -5,7 +5,8 @@ struct SkyParams {
     inv_view_proj: mat4x4<f32>,
     horizon: vec4<f32>,
     zenith: vec4<f32>,
-    // x: 1 when the colour target is sRGB (see to_target).
+    // x: 1 when the colour target is sRGB (see to_target); y: 1 when depth falls with
+    // distance (reverse-Z).
     flags: vec4<u32>,
 }
 
@@ -27,9 +28,12 @@ fn vs_main(@builtin(vertex_index) i: u32) -> VsOut {
 
 @fragment
 fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
-    let near = sky.inv_view_proj * vec4<f32>(in.ndc, 0.0, 1.0);
-    let far = sky.inv_view_proj * vec4<f32>(in.ndc, 1.0, 1.0);
-    let dir = normalize(far.xyz / far.w - near.xyz / near.w);
+    // Two depths strictly inside the view volume: with an infinite far plane, depth 1 (or 0
+    // under reverse-Z) is a point at infinity, whose w is 0.
+    let a = sky.inv_view_proj * vec4<f32>(in.ndc, 0.25, 1.0);
+    let b = sky.inv_view_proj * vec4<f32>(in.ndc, 0.75, 1.0);
+    let away = select(1.0, -1.0, sky.flags.y == 1u);
+    let dir = normalize(b.xyz / b.w - a.xyz / a.w) * away;
     let t = clamp(dir.y * 2.5, 0.0, 1.0);
     return vec4<f32>(to_target(mix(sky.horizon.rgb, sky.zenith.rgb, sqrt(t)), sky.flags.x), 1.0);
 }

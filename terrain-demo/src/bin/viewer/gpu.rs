@@ -13,9 +13,9 @@ use std::time::Instant;
 use terrain_core::DirtyRect;
 use terrain_core::{CoarseMap, Grid, TextureStamp};
 use terrain_gpu::{
-    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuDerivativeMap, GpuHeightMap,
-    GpuRegionSource, GpuTextureStamp, GpuTimer, MapUse, NormalPass, RegionReadback, SkyColors,
-    SkyPass, StampOp, StampPass, TargetFormat, TerrainStyle,
+    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DepthConvention, GpuDerivativeMap,
+    GpuHeightMap, GpuRegionSource, GpuTextureStamp, GpuTimer, MapUse, NormalPass, RegionReadback,
+    SkyColors, SkyPass, StampOp, StampPass, TargetFormat, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
@@ -255,6 +255,7 @@ impl Gpu {
             color: FRAME_COLOR,
             depth: FRAME_DEPTH,
             sample_count: 1,
+            depth_convention: DepthConvention::Forward,
         };
         let gpu_map = GpuHeightMap::from_map(&device, &queue, map)?;
         let normals = GpuDerivativeMap::for_map(&device, &gpu_map)?;
