@@ -16,7 +16,10 @@ pub struct Frustum {
 
 impl Frustum {
     /// Extracts the planes from `view_proj` (clip = `view_proj * world`) with the
-    /// Gribb-Hartmann method, for clip-space depth in `[0, 1]`.
+    /// Gribb-Hartmann method, for clip-space depth in `[0, 1]`: forward or reverse depth
+    /// (the planes `z >= 0` and `z <= w` swap roles), finite or infinite far plane (the far
+    /// plane then has a zero normal and keeps everything in front of the eye), perspective or
+    /// orthographic.
     ///
     /// A matrix with non-finite entries gives planes that reject nothing (every test says
     /// "inside"), so culling with it is merely ineffective, never wrong.
@@ -146,5 +149,36 @@ mod tests {
         let f = Frustum::from_view_proj(Mat4::from_cols_array(&[f32::NAN; 16]));
         assert!(f.contains_point(Vec3::ZERO));
         assert!(f.intersects_aabb(Vec3::ZERO, Vec3::ONE));
+    }
+
+    /// Reverse-Z with an infinite far plane (what Bevy and most engines use): the planes
+    /// z >= 0 and z <= w swap roles, the far one degenerates to "always inside", and the
+    /// frustum is the same as forward depth's up to the far plane.
+    #[test]
+    fn reverse_z_and_infinite_far_planes_cull_like_forward_depth() {
+        use glam::camera::rh::proj::directx;
+        let view = glam::camera::rh::view::look_to_mat4(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y);
+        let fov = 90f32.to_radians();
+        let forward = looking_down_neg_z();
+        let reverse =
+            Frustum::from_view_proj(directx::perspective_infinite_reverse(fov, 1.0, 1.0) * view);
+        let infinite = Frustum::from_view_proj(directx::perspective_infinite(fov, 1.0, 1.0) * view);
+        for f in [&reverse, &infinite] {
+            for plane in f.planes() {
+                assert!(plane.is_finite(), "{plane}");
+            }
+            // Inside the finite frustum: inside these too.
+            assert!(f.contains_point(Vec3::new(0.0, 0.0, -10.0)));
+            assert!(f.contains_point(Vec3::new(4.9, -4.9, -5.0)));
+            // Beyond any finite far plane: still inside.
+            assert!(f.contains_point(Vec3::new(0.0, 0.0, -1.0e7)));
+            // Behind the camera, before the near plane, outside a side plane.
+            assert!(!f.contains_point(Vec3::new(0.0, 0.0, 10.0)));
+            assert!(!f.contains_point(Vec3::new(0.0, 0.0, -0.5)));
+            assert!(!f.contains_point(Vec3::new(5.1, 0.0, -5.0)));
+            assert!(!f.intersects_aabb(Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, 1.0, 4.0)));
+            assert!(f.intersects_aabb(Vec3::new(-1.0, -1.0, -6.0), Vec3::new(1.0, 1.0, -4.0)));
+        }
+        assert!(!forward.contains_point(Vec3::new(0.0, 0.0, -1.0e7)));
     }
 }
