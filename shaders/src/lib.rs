@@ -7,6 +7,9 @@
 //! assert!(terrain_shaders::STAMP.contains("@compute"));
 //! assert!(terrain_shaders::ALL.iter().all(|(name, src)| !name.is_empty() && !src.is_empty()));
 //! ```
+
+// docs.rs: label feature-gated items with the features they need.
+#![cfg_attr(docsrs, feature(doc_cfg))]
 #![warn(missing_docs)]
 
 /// Declares codes shared by Rust and WGSL once: each becomes a Rust `pub const` in [`codes`] and

@@ -55,6 +55,9 @@
 //! goes into RAM with [`RamPool::write_rect`] (or a whole tile with [`RamPool::write`]) and
 //! [`VramPool::release`] ends the hold. [`RamPool::read_region`] copies any level-0 rect out
 //! of the loaded tiles (coarser data where a tile is missing), e.g. to fill a collision window.
+
+// docs.rs: label feature-gated items with the features they need.
+#![cfg_attr(docsrs, feature(doc_cfg))]
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 

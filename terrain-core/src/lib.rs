@@ -30,6 +30,9 @@
 //! assert_eq!(dirty.len(), 4);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+
+// docs.rs: label feature-gated items with the features they need.
+#![cfg_attr(docsrs, feature(doc_cfg))]
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 

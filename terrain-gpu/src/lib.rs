@@ -48,6 +48,9 @@
 //! let deformed: CoarseMap = gpu_map.read(device, queue)?;
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+
+// docs.rs: label feature-gated items with the features they need.
+#![cfg_attr(docsrs, feature(doc_cfg))]
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 

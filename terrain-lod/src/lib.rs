@@ -108,6 +108,9 @@
 //! assert!(tess.max_screen_error_px(&frame, &view) <= 1.0);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+
+// docs.rs: label feature-gated items with the features they need.
+#![cfg_attr(docsrs, feature(doc_cfg))]
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 

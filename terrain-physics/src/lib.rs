@@ -73,6 +73,9 @@
 //! snapshots as tiled `parry3d` heightfields for a parry or rapier world, rebuilt per dirty
 //! rect, with the difference between parry's triangles and the bilinear surface bounded
 //! (`|h00 - h10 - h01 + h11| / 4` per cell) and tested; its module docs have a runnable example.
+
+// docs.rs: label feature-gated items with the features they need.
+#![cfg_attr(docsrs, feature(doc_cfg))]
 #![warn(missing_docs)]
 #![warn(clippy::unwrap_used)]
 

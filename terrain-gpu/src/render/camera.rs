@@ -160,7 +160,7 @@ pub struct ViewMatrices {
 
 impl ViewMatrices {
     /// From the camera's transform in the world (view space to world, e.g. Bevy's
-    /// `GlobalTransform::compute_matrix()`) and its projection (Bevy's `clip_from_view`).
+    /// `GlobalTransform` as a matrix) and its projection (Bevy's `clip_from_view`).
     pub fn from_camera_transform(camera_to_world: Mat4, projection: Mat4) -> Self {
         Self {
             view: camera_to_world.inverse(),
