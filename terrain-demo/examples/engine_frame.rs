@@ -384,7 +384,7 @@ fn main() -> Result<()> {
     };
     let late = tile_stamps.finish_into_world(&world, &mut deformer)?;
     rebuild_ancestors(&world, &late)?;
-    let image = terrain_gpu::download::read_texture_rgba8(&device, &queue, &color)?;
+    let image = terrain_gpu::read_texture_rgba8(&device, &queue, &color)?;
     let png = out.join("engine_frame.png");
     terrain_core::io::write_png_rgba8(&png, &image)?;
     println!(

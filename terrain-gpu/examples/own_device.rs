@@ -154,7 +154,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     stamps.recall();
     normal_pass.recall();
     // Read the "swap chain" back (an engine would present it instead).
-    let image = terrain_gpu::download::read_texture_rgba8(&device, &queue, &targets.resolved)?;
+    let image = terrain_gpu::read_texture_rgba8(&device, &queue, &targets.resolved)?;
     terrain_core::io::write_png_rgba8(&out, &image)?;
     println!(
         "stamped {} dirty rect(s), drew {} triangles into the engine's pass; wrote {}",

@@ -55,21 +55,21 @@
 #![warn(clippy::unwrap_used)]
 
 mod device;
-pub mod error;
+mod error;
 pub mod granular;
 mod passes;
 mod render;
 mod resources;
+#[cfg(feature = "testing")]
 pub mod testing;
 
-// The modules sit in folders by role; their public paths stay `terrain_gpu::<module>`.
-pub use device::{
-    compute, context, download, limits, profiler, readback, region_source, scope, small_readback,
-    timer,
-};
-pub use passes::{density, detail_probe, normals, spill, stamp};
-pub use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
-pub use resources::{atlas, detail, maps};
+// The modules sit in folders by role and are private: every public item has one path, at the
+// crate root (the granular passes under `granular`, the test helpers under `testing`). These
+// imports give the crate's own code the short paths `crate::<module>`.
+use device::{context, download, limits, profiler, readback, region_source, small_readback, timer};
+use passes::{density, detail_probe, normals, spill, stamp};
+use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
+use resources::{atlas, detail, maps};
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
 pub use camera::{Camera, DepthConvention, RenderView, ViewMatrices};
@@ -77,19 +77,24 @@ pub use cdlod::{CdlodDraw, CdlodRenderer};
 pub use clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};
 pub use context::{AdapterReport, GpuContext};
 pub use density::{DensityPass, GpuDensityMap};
-pub use detail::{DetailShading, DetailTileState, GpuDetailTiles};
-pub use detail_probe::{DetailProbe, DetailProbePoint, DetailProbeSample};
+pub use detail::{
+    DetailShading, DetailTileState, GpuDetailTiles, MAX_PARALLAX_REACH, MAX_PARALLAX_STEPS,
+};
+pub use detail_probe::{DetailProbe, DetailProbePoint, DetailProbeSample, MAX_PROBE_OFFSET};
+pub use download::{WAIT_TIMEOUT, download_bytes, read_texture_rgba8, wait_bounded};
 pub use error::GpuError;
 pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
 pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
 pub use normals::NormalPass;
 pub use offscreen::OffscreenTarget;
-pub use profiler::{FrameProfile, GpuProfiler, Scope, ScopeTiming};
-pub use readback::{ReadbackTicket, RegionData, RegionReadback, RegionView};
+pub use profiler::{
+    FrameProfile, GpuProfiler, MAX_PROFILER_FRAMES, MAX_PROFILER_SCOPES, Scope, ScopeTiming,
+};
+pub use readback::{MAX_READBACK_RING, ReadbackTicket, RegionData, RegionReadback, RegionView};
 pub use refine::{RefineDraw, RefinePass, RefineRenderer};
 pub use region_source::GpuRegionSource;
 pub use sky::{SkyColors, SkyPass};
-pub use small_readback::SmallReadback;
+pub use small_readback::{MAX_SMALL_READBACK_BYTES, MAX_SMALL_READBACK_RING, SmallReadback};
 pub use spill::{SpillPass, SpillTargets, SpilledStamp};
 pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampOp, StampPass};
 pub use target::TargetFormat;

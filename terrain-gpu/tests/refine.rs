@@ -486,7 +486,7 @@ fn counts_ride_the_ring_without_a_wait_and_unsubmitted_requests_free_their_buffe
         if arrived.len() == 2 {
             break;
         }
-        device.poll(terrain_gpu::download::wait_bounded()).unwrap();
+        device.poll(terrain_gpu::wait_bounded()).unwrap();
     }
     let values: Vec<(u64, [u32; 2])> = arrived
         .iter()

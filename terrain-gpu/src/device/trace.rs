@@ -1,10 +1,12 @@
 //! The last GPU operations this process made at the points where it waits for the GPU
 //! (submits of downloads, maps, blocking and non-blocking polls), kept only while a watchdog is
-//! armed ([`crate::testing::arm_watchdog`]): when a test stops making progress, the watchdog
-//! prints them beside every thread's stack, which tells a hang inside a poll from one in the
-//! test's own code.
+//! armed (`testing::arm_watchdog`, behind the `testing` feature): when a test stops making
+//! progress, the watchdog prints them beside every thread's stack, which tells a hang inside a
+//! poll from one in the test's own code.
 //!
-//! Recording costs one relaxed atomic load when no watchdog is armed.
+//! Recording costs one relaxed atomic load when no watchdog is armed, and nothing without the
+//! `testing` feature (no watchdog can be armed then: `record` is empty).
+#![cfg_attr(not(feature = "testing"), allow(dead_code))]
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -50,7 +52,13 @@ pub(crate) fn enable() {
     ON.store(true, Ordering::Relaxed);
 }
 
+/// Without the `testing` feature nothing arms a watchdog, so nothing is recorded.
+#[cfg(not(feature = "testing"))]
+#[inline(always)]
+pub(crate) fn record(_what: &'static str, _detail: u64) {}
+
 /// Records `what` (a fixed label) with a number (a size, a submission, 0).
+#[cfg(feature = "testing")]
 pub(crate) fn record(what: &'static str, detail: u64) {
     if !ON.load(Ordering::Relaxed) {
         return;

@@ -14,7 +14,7 @@
 //! encoder, ..)`, which writes uniforms into the next slots of its ring and records commands;
 //! call `recall()` on it after the submit that carries them.
 
-pub mod depth;
+mod depth;
 mod normals;
 mod passes;
 mod scratch;
@@ -22,7 +22,9 @@ mod step;
 mod upload;
 mod volume;
 
-pub use depth::{DepthArea, DepthFromBelowPass};
+pub use depth::{
+    DepthArea, DepthFromBelowPass, MAX_RECORDS_PER_DISPATCH, MAX_TILE_SIDE, RECORD_TILE,
+};
 pub use normals::{GpuGranularNormals, GranularNormalsPass};
 pub use passes::{
     DisplacePass, FloodedArea, JumpFloodPass, PenetrationPass, SlopePass, SlopeSettings,
