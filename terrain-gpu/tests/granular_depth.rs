@@ -303,8 +303,8 @@ fn areas_wider_than_a_dispatch_tile() {
     };
     let mut pass = DepthFromBelowPass::new(&ctx.device).unwrap();
     // As wide as the render pipeline's tiles were, and a seam of those tiles.
-    let side = terrain_gpu::granular::MAX_TILE_SIDE
-        .min(ctx.device.limits().max_texture_dimension_2d);
+    let side =
+        terrain_gpu::granular::MAX_TILE_SIDE.min(ctx.device.limits().max_texture_dimension_2d);
     let area = Rect::new(IVec2::new(-3, 0), UVec2::new(side + 37, 6));
     let ts = 0.01;
     let seam = (side as f32 - 3.0) * ts;

@@ -234,8 +234,7 @@ fn renderers_draw_into_the_callers_msaa_srgb_pass_like_the_capture() {
     }
     queue.submit([encoder.finish()]);
     // The resolved BGRA target, as RGBA rows.
-    let engine =
-        terrain_gpu::read_texture_rgba8(device, queue, &targets.resolved).unwrap();
+    let engine = terrain_gpu::read_texture_rgba8(device, queue, &targets.resolved).unwrap();
     scene.ctx.check().expect("no GPU validation errors");
 
     // Both paths must show terrain, not only sky (the same renderer drawing nothing would

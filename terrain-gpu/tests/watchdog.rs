@@ -22,8 +22,7 @@ fn watchdog_child() {
         usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::STORAGE,
         mapped_at_creation: false,
     });
-    terrain_gpu::download_bytes(&ctx.device, &ctx.queue, &buffer, 0, 256)
-        .expect("download");
+    terrain_gpu::download_bytes(&ctx.device, &ctx.queue, &buffer, 0, 256).expect("download");
     std::thread::Builder::new()
         .name("stuck-in-test".into())
         .spawn(|| std::thread::sleep(Duration::from_secs(120)))

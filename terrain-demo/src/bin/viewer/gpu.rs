@@ -550,11 +550,7 @@ impl Gpu {
 
     /// The last frame drawn, as RGBA8 rows from the top (the bytes the window shows).
     pub fn read_frame(&self) -> Result<Grid<[u8; 4]>> {
-        let image = terrain_gpu::read_texture_rgba8(
-            &self.device,
-            &self.queue,
-            &self.frame.color,
-        )?;
+        let image = terrain_gpu::read_texture_rgba8(&self.device, &self.queue, &self.frame.color)?;
         self.check()?;
         Ok(image)
     }
