@@ -1,6 +1,7 @@
 //! `cargo xtask package`: packages every publishable crate as crates.io would receive it and
 //! verifies that each package builds on its own from its `.crate`, so a crate that only builds
-//! inside the workspace is caught before a release.
+//! inside the workspace is caught before a release. It first checks that CHANGELOG.md has a
+//! section for every version being packaged.
 
 use crate::util::{cargo, cargo_exe, root};
 use anyhow::{Context, Result, bail};
@@ -16,6 +17,13 @@ pub fn package() -> Result<()> {
     let crates = publishable_crates()?;
     if crates.is_empty() {
         bail!("no publishable crate found in `cargo metadata`");
+    }
+    let changelog = std::fs::read_to_string(root().join("CHANGELOG.md"))
+        .context("reading CHANGELOG.md (every release has a section there)")?;
+    for (name, version) in &crates {
+        if !has_section(&changelog, version) {
+            bail!("CHANGELOG.md has no `## {version}` section, but {name} {version} is packaged");
+        }
     }
     clear_package_overlays()?;
     // Verification builds our packaged crates as registry crates, which cargo never rebuilds
@@ -42,7 +50,7 @@ pub fn package() -> Result<()> {
     }
     let target_s = target.to_string_lossy().into_owned();
     let mut args = vec!["package", "--allow-dirty", "--target-dir", &target_s];
-    for name in &crates {
+    for (name, _) in &crates {
         args.extend(["-p", name.as_str()]);
     }
     cargo(&args, &[])?;
@@ -77,8 +85,26 @@ fn clear_package_overlays() -> Result<()> {
     Ok(())
 }
 
-/// The workspace members without `publish = false`, from `cargo metadata`.
-fn publishable_crates() -> Result<Vec<String>> {
+/// Whether `changelog` has a level-2 heading for `version`: `## 0.1.0`, `## [0.1.0]`, followed
+/// by the end of the line or a space (`## 0.1.0 (unreleased)`, `## 0.1.0 - 2027-01-10`).
+fn has_section(changelog: &str, version: &str) -> bool {
+    changelog.lines().any(|line| {
+        let Some(title) = line.strip_prefix("## ") else {
+            return false;
+        };
+        let title = title.trim_start();
+        let rest = match title.strip_prefix('[') {
+            Some(bracketed) => bracketed
+                .strip_prefix(version)
+                .and_then(|r| r.strip_prefix(']')),
+            None => title.strip_prefix(version),
+        };
+        rest.is_some_and(|r| r.is_empty() || r.starts_with(' '))
+    })
+}
+
+/// The workspace members without `publish = false`, with their versions, from `cargo metadata`.
+fn publishable_crates() -> Result<Vec<(String, String)>> {
     let output = Command::new(cargo_exe())
         .args(["metadata", "--format-version", "1", "--no-deps", "--locked"])
         .current_dir(root())
@@ -99,6 +125,30 @@ fn publishable_crates() -> Result<Vec<String>> {
         .into_iter()
         .flatten()
         .filter(|p| p["publish"].as_array().is_none_or(|r| !r.is_empty()))
-        .filter_map(|p| p["name"].as_str().map(str::to_owned))
+        .filter_map(|p| {
+            Some((
+                p["name"].as_str()?.to_owned(),
+                p["version"].as_str()?.to_owned(),
+            ))
+        })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::has_section;
+
+    #[test]
+    fn a_release_needs_its_own_heading() {
+        let log = "# Changelog\n\n## 0.2.0 (unreleased)\n- new\n\n## [0.1.0] - 2027-01-10\n";
+        assert!(has_section(log, "0.2.0"));
+        assert!(has_section(log, "0.1.0"));
+        // Mentions, prefixes and other heading levels are not sections.
+        assert!(!has_section(log, "0.1"));
+        assert!(!has_section(log, "0.2.0.1"));
+        assert!(!has_section("## 0.1.00\n", "0.1.0"));
+        assert!(!has_section("### 0.3.0\n", "0.3.0"));
+        assert!(!has_section("since 0.3.0\n", "0.3.0"));
+        assert!(!has_section("", "0.1.0"));
+    }
 }
