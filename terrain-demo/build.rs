@@ -9,8 +9,24 @@ fn git(args: &[&str]) -> Option<String> {
     (out.status.success() && !text.trim().is_empty()).then(|| text.trim().to_string())
 }
 
+/// The commit a packaged copy (`cargo install terrain-demo`) was made from: `cargo package`
+/// records it in `.cargo_vcs_info.json` as `"sha1": "<40 hex digits>"`.
+fn packaged_revision() -> Option<String> {
+    let text = std::fs::read_to_string(".cargo_vcs_info.json").ok()?;
+    let after = text.split("\"sha1\"").nth(1)?;
+    let hex: String = after
+        .chars()
+        .skip_while(|c| !c.is_ascii_hexdigit())
+        .take_while(char::is_ascii_hexdigit)
+        .take(12)
+        .collect();
+    (hex.len() == 12).then_some(hex)
+}
+
 fn main() {
-    let revision = git(&["rev-parse", "--short=12", "HEAD"]).unwrap_or_else(|| "unknown".into());
+    let revision = packaged_revision()
+        .or_else(|| git(&["rev-parse", "--short=12", "HEAD"]))
+        .unwrap_or_else(|| "unknown".into());
     println!("cargo:rustc-env=TERRAIN_DEMO_GIT_REVISION={revision}");
     // Built again when HEAD moves: a checkout (HEAD) or a commit on the branch (its ref, or
     // packed-refs after a gc).

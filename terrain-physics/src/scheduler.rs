@@ -425,7 +425,7 @@ impl ReadbackScheduler {
         let (lost, kept): (VecDeque<InFlight>, VecDeque<InFlight>) =
             std::mem::take(&mut self.in_flight)
                 .into_iter()
-                .partition(|f| overdue(f));
+                .partition(overdue);
         self.in_flight = kept;
         for f in lost {
             self.abandon(f, now, report);

@@ -39,7 +39,7 @@ pub fn ci() -> Result<()> {
 }
 
 /// The library crates, each checked alone with no default features and with all of them.
-const LIBRARIES: [&str; 6] = [
+pub const LIBRARIES: [&str; 6] = [
     "terrain-core",
     "terrain-lod",
     "terrain-cache",

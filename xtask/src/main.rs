@@ -10,6 +10,7 @@ mod fuzz;
 mod golden;
 mod gpu_report;
 mod libfuzzer;
+mod msrv;
 mod mutants;
 mod package;
 mod smoke;
@@ -31,6 +32,7 @@ fn main() -> Result<()> {
         Some("gpu-report") => gpu_report::gpu_report(&args[1..]),
         Some("fuzz") => fuzz::fuzz(&args[1..]),
         Some("mutants") => mutants::mutants(&args[1..]),
+        Some("msrv") => msrv::msrv(),
         _ => {
             usage();
             std::process::exit(2);
@@ -40,7 +42,7 @@ fn main() -> Result<()> {
 
 fn usage() {
     eprintln!(
-        "usage: cargo xtask <ci|tidy|smoke|package|examples|golden|bench-report [--quick] [--write-docs]|gpu-report [--minutes N]|fuzz [--engine harness|libfuzzer] --seconds N [--target NAME] [--seed S]|mutants [--shard K/N] [--crate NAME] | --summary>"
+        "usage: cargo xtask <ci|tidy|smoke|package|examples|golden|bench-report [--quick] [--write-docs]|gpu-report [--minutes N]|fuzz [--engine harness|libfuzzer] --seconds N [--target NAME] [--seed S]|mutants [--shard K/N] [--crate NAME] | --summary|msrv>"
     );
     eprintln!(
         "  ci      tidy, fmt, clippy, tests, docs, package, examples, demo smoke (what CI runs)"
@@ -54,6 +56,9 @@ fn usage() {
     eprintln!("  examples  run every library example once at a tiny size");
     eprintln!("  smoke   only the demo smoke runs (default backend, then GL)");
     eprintln!("  package package and verify the publishable crates (`cargo package`)");
+    eprintln!(
+        "  msrv    check the workspace with the declared rust-version (rustup installs it; not part of ci)"
+    );
     eprintln!("  golden  regenerate the render test's golden image (never done by tests)");
     eprintln!(
         "  bench-report  run the headline CPU benches (all cores, then one); write target/bench-report.{{json,md}}; --write-docs also writes docs/BENCHMARKS.md"
