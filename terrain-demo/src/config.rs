@@ -1,6 +1,6 @@
-//! `--config FILE.toml` and `--print-config`: the scenarios' parameters as one document, so a
+//! `--config FILE.toml` and `print-config`: the scenarios' parameters as one document, so a
 //! scenario can be written down and shared. Every key is optional: a file holds only what it
-//! changes, over the defaults (`--print-config` prints them all). Unknown keys and values out
+//! changes, over the defaults (`print-config` prints them all). Unknown keys and values out
 //! of range are errors that name the key.
 
 use anyhow::{Context, Result, anyhow, bail};
@@ -15,7 +15,7 @@ use terrain_physics::SchedulerConfig;
 /// The largest configuration file read (a parameter file is a few kilobytes).
 const MAX_FILE_BYTES: u64 = 1 << 20;
 
-/// Every parameter of the scenarios: those of `--config FILE.toml` (see `--print-config`),
+/// Every parameter of the scenarios: those of `--config FILE.toml` (see `print-config`),
 /// defaults included.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]

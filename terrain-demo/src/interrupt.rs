@@ -13,7 +13,7 @@ static REQUESTED: AtomicBool = AtomicBool::new(false);
 pub enum Stops {
     /// A run: after the frame in progress, with the report of the frames done.
     Run,
-    /// `--verify-world`: before the next tile, with no verdict.
+    /// `verify-world`: before the next tile, with no verdict.
     Check,
 }
 

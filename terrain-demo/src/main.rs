@@ -31,7 +31,7 @@ mod writable;
 
 use anyhow::Result;
 use clap::{CommandFactory, FromArgMatches};
-use cli::Cli;
+use cli::{Cli, Command};
 use memory_estimate::RunShape;
 use report::MemoryReport;
 use usage_error::{INTERRUPTED_EXIT, USAGE_EXIT, UsageExt};
@@ -39,9 +39,9 @@ use usage_error::{INTERRUPTED_EXIT, USAGE_EXIT, UsageExt};
 fn main() {
     quiet_vulkan_device_select();
     // --help ends with the valid range of every numeric flag and config key.
-    let parsed = Cli::command()
-        .after_help(ranges::help_table())
-        .try_get_matches()
+    let mut command = Cli::command().after_help(ranges::help_table());
+    let parsed = command
+        .try_get_matches_from_mut(std::env::args_os())
         .and_then(|m| Cli::from_arg_matches(&m));
     let cli = match parsed {
         Ok(cli) => cli,
@@ -53,17 +53,16 @@ fn main() {
             return;
         }
         Err(e) => {
-            let msg = e.to_string();
-            let first = msg.lines().next().unwrap_or("invalid arguments");
-            console::note!("{first} (see --help)");
+            // clap's whole message: the error, its tips and the usage line. A closed or full
+            // stderr loses it, not the exit status.
+            let _ = cli::explain_replaced_flags(e, &mut command).print();
             std::process::exit(USAGE_EXIT);
         }
     };
     logging::install(cli.verbose);
-    interrupt::install(if cli.verify_world.is_some() {
-        interrupt::Stops::Check
-    } else {
-        interrupt::Stops::Run
+    interrupt::install(match cli.command {
+        Some(Command::VerifyWorld { .. }) => interrupt::Stops::Check,
+        _ => interrupt::Stops::Run,
     });
     match run(&cli) {
         Ok(Ended::Done) => {}
@@ -122,18 +121,22 @@ enum Ended {
 }
 
 fn run(cli: &Cli) -> Result<Ended> {
-    if let Some(dir) = &cli.verify_world {
-        if scenarios::world_files::verify_command(dir, cli.repair, cli.quiet)? {
+    match &cli.command {
+        Some(Command::VerifyWorld { dir, repair, quiet }) => {
+            if scenarios::world_files::verify_command(dir, *repair, *quiet)? {
+                return Ok(Ended::Done);
+            }
+            std::process::exit(usage_error::FAILURE_EXIT);
+        }
+        Some(Command::PrintConfig { config: file }) => {
+            let params = config::DemoParams::load(file.as_deref()).usage()?;
+            console::stdout(&params.to_toml()?)?;
             return Ok(Ended::Done);
         }
-        std::process::exit(usage_error::FAILURE_EXIT);
+        None => {}
     }
     validate::flags(cli)?;
     let params = config::DemoParams::load(cli.config.as_deref()).usage()?;
-    if cli.print_config {
-        console::stdout(&params.to_toml()?)?;
-        return Ok(Ended::Done);
-    }
     // Where the run writes, before anything long starts: its outputs, and the streamed
     // world it builds and writes deformations back into.
     writable::check_dir(&cli.out, "--out")?;

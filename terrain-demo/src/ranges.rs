@@ -282,7 +282,7 @@ pub fn help_table() -> String {
         text.push_str(&format!("  {:<40} {}\n", r.name, r.describe()));
     }
     text.push_str(&format!("  {:<40} any u64 (0 to {})\n", "--seed", u64::MAX));
-    text.push_str("--config keys (see --print-config):\n");
+    text.push_str("--config keys (see the print-config command):\n");
     for r in KEYS {
         text.push_str(&format!("  {:<40} {}\n", r.name, r.describe()));
     }

@@ -4,7 +4,7 @@
 //! run never starts and fails later on a flag. Checks that need an input's contents (a
 //! heightmap's size, a world's manifest) stay where that input is read.
 
-use crate::cli::{Cli, DetailArg, HeightRangeArg, LodArg, ScenarioKind, Switch};
+use crate::cli::{Cli, DetailArg, HeightRangeArg, LodArg, ScenarioKind};
 use crate::ranges;
 use crate::usage_error::usage;
 use anyhow::{Result, anyhow};
@@ -20,12 +20,12 @@ pub fn flags(cli: &Cli) -> Result<()> {
 }
 
 /// The tessellation of `--lod tessellated`: patches of 32 texels, split by edge size
-/// (`--triangle-width`, scaled by the density map unless `--density-map off`) or by
+/// (`--triangle-width`, scaled by the density map unless `--no-density-map`) or by
 /// screen-space error (`--target-error`).
 pub fn tess_config(cli: &Cli) -> Result<TessConfig> {
     let config = TessConfig {
         triangle_width_px: cli.triangle_width.unwrap_or(8.0),
-        use_density: cli.density_map != Some(Switch::Off),
+        use_density: !cli.no_density_map,
         morph: !cli.no_morph,
         max_error_px: cli.target_error,
         ..TessConfig::default()
@@ -157,14 +157,13 @@ fn lod_flags(cli: &Cli) -> Result<()> {
              --lod tessellated"
         ));
     }
-    if (cli.density_map.is_some() || cli.triangle_width.is_some()) && cli.lod != LodArg::Tessellated
-    {
+    if (cli.no_density_map || cli.triangle_width.is_some()) && cli.lod != LodArg::Tessellated {
         return Err(anyhow!(
-            "--density-map and --triangle-width steer the adaptive tessellation: they need \
+            "--no-density-map and --triangle-width steer the adaptive tessellation: they need \
              --lod tessellated"
         ));
     }
-    if cli.target_error.is_some() && (cli.density_map.is_some() || cli.triangle_width.is_some()) {
+    if cli.target_error.is_some() && (cli.no_density_map || cli.triangle_width.is_some()) {
         return Err(anyhow!(
             "--target-error splits the tessellation by screen-space error, without the density \
              map or a triangle width: give one or the other"
@@ -194,8 +193,7 @@ mod tests {
                 "tessellated",
                 "--triangle-width",
                 "4",
-                "--density-map",
-                "off",
+                "--no-density-map",
             ],
             &[
                 "--lod",
@@ -216,6 +214,41 @@ mod tests {
                 "--texel-size",
                 "0.5",
             ],
+        ] {
+            check(args).unwrap_or_else(|e| panic!("{args:?}: {e:#}"));
+        }
+    }
+
+    /// The boundary values of every flag's range pass (tests/ranges.rs runs the binary
+    /// with the values just outside; a run with these would run).
+    #[test]
+    fn the_boundary_values_of_every_range_pass() {
+        for args in [
+            &["--size", "16"][..],
+            &["--size", "65536"],
+            &["--heightmap", "x.r16", "--raw-size", "16x65536"],
+            &["--texel-size", "0.001"],
+            &["--texel-size", "10000"],
+            &["--height-range", "-100000:100000"],
+            &["--height-range", "0:0.001"],
+            &["--max-height", "0.001"],
+            &["--max-height", "100000"],
+            &["--frames", "1", "--warmup", "0"],
+            &["--frames", "100000", "--warmup", "100000"],
+            &["--seed", "0"],
+            &["--seed", "18446744073709551615"],
+            &["--resolution", "16x16", "--overview-size", "16"],
+            &["--resolution", "8192x8192", "--overview-size", "8192"],
+            &["--ram-budget", "1", "--vram-budget", "1"],
+            &["--ram-budget", "1048576", "--vram-budget", "4095"],
+            &["--speed", "1e-30"],
+            &["--speed", "1000"],
+            &["--lod", "cdlod", "--target-error", "0.01"],
+            &["--lod", "cdlod", "--target-error", "1000"],
+            &["--lod", "tessellated", "--triangle-width", "0.01"],
+            &["--lod", "tessellated", "--triangle-width", "10000"],
+            &["--max-memory", "1"],
+            &["--max-memory", "8388607T"],
         ] {
             check(args).unwrap_or_else(|e| panic!("{args:?}: {e:#}"));
         }
@@ -249,6 +282,7 @@ mod tests {
             (&["--lod", "tessellated", "--detail", "refine"], "--detail"),
             (&["--target-error", "1"], "--target-error"),
             (&["--no-morph"], "--no-morph"),
+            (&["--no-density-map"], "--no-density-map"),
             (
                 &["--lod", "cdlod", "--triangle-width", "4"],
                 "--triangle-width",
@@ -259,8 +293,7 @@ mod tests {
                     "tessellated",
                     "--target-error",
                     "1",
-                    "--density-map",
-                    "on",
+                    "--no-density-map",
                 ],
                 "--target-error",
             ),

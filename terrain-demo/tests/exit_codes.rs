@@ -34,7 +34,7 @@ fn usage_errors_exit_with_2() {
         &["--lod", "cdlod", "--target-error", "0", "--no-gpu"],
         &["--target-error", "2", "--no-gpu"],
         &["--no-morph", "--no-gpu"],
-        &["--density-map", "off", "--no-gpu"],
+        &["--no-density-map", "--no-gpu"],
         &["--lod", "cdlod", "--triangle-width", "4", "--no-gpu"],
         &["--lod", "tessellated", "--triangle-width", "0", "--no-gpu"],
         &["--no-such-flag"],
@@ -48,45 +48,85 @@ fn usage_errors_exit_with_2() {
     for args in cases {
         let (code, stderr) = status_of("usage", args);
         assert_eq!(code, Some(2), "{args:?}: {stderr}");
-        assert_eq!(stderr.lines().count(), 1, "{args:?}: one line: {stderr}");
+        let first = common::usage_error(&stderr);
+        // clap's errors keep their usage line; the demo's own are one line.
+        if first.starts_with("error: unexpected argument") {
+            assert!(
+                stderr.contains("\nUsage: terrain-demo [OPTIONS]"),
+                "{args:?}: {stderr}"
+            );
+        } else {
+            assert_eq!(stderr.lines().count(), 1, "{args:?}: one line: {stderr}");
+        }
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A command line clap cannot parse: its whole message (the error, a tip and the usage line
+/// where clap has them, the pointer to --help), exit status 2, nothing run.
 #[test]
-fn a_failure_during_the_run_exits_with_1_and_keeps_the_frames_done() {
-    let dir = fresh_dir("runtime_failure");
-    let out = dir.join("out");
-    // The second frame's file is taken by a folder that is not empty: writing it fails.
-    std::fs::create_dir_all(out.join("frame_0001.png/inside")).expect("folder");
-    let mut cmd = demo();
-    cmd.args(["--no-gpu", "--size", "32", "--overview-size", "32"])
-        .args(["--frames", "4"])
-        .arg("--out")
-        .arg(&out);
-    let done = run_within(cmd, &dir, LIMIT);
-    assert_eq!(done.status.code(), Some(1), "{}", done.stderr);
-    assert!(done.stderr.contains("frame_0001.png"), "{}", done.stderr);
-    // The first frame is done and listed; no temp file of the failed write is left.
-    assert!(out.join("frame_0000.png").is_file());
-    let lines = std::fs::read_to_string(out.join("frames.jsonl")).expect("frames.jsonl");
-    let frames: Vec<serde_json::Value> = lines
-        .lines()
-        .map(|l| serde_json::from_str(l).expect("each line is a frame"))
-        .collect();
-    assert_eq!(frames.len(), 1, "{lines}");
-    assert_eq!(frames[0]["index"].as_u64(), Some(0));
-    // report.json and summary.png are still written, over the frame done, with the error.
-    let report = common::report(&out);
-    assert_eq!(report["frames"].as_array().map(Vec::len), Some(1));
-    let error = report["error"].as_str().expect("error in report.json");
-    assert!(error.contains("frame_0001.png"), "{error}");
-    assert!(out.join("summary.png").is_file());
-    let temps: Vec<String> = std::fs::read_dir(&out)
-        .expect("out")
-        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
-        .filter(|n| n.ends_with(".tmp"))
-        .collect();
-    assert!(temps.is_empty(), "temp files left: {temps:?}");
+fn a_command_line_mistake_shows_clap_s_tips_and_usage() {
+    let dir = fresh_dir("clap_usage");
+    let run = |args: &[&str]| {
+        let mut cmd = demo();
+        cmd.args(args);
+        let done = run_within(cmd, &dir, LIMIT);
+        (done.status.code(), done.stderr)
+    };
+    // (arguments, in the error line, elsewhere in the message)
+    let cases: [(&[&str], &str, &str); 7] = [
+        // A value clap cannot parse: the error and the pointer to --help.
+        (
+            &["--frames", "abc"],
+            "invalid value 'abc' for '--frames <FRAMES>'",
+            "\n\nFor more information, try '--help'.",
+        ),
+        // A mistyped flag gets clap's suggestion.
+        (
+            &["--frame", "3"],
+            "'--frame'",
+            "tip: a similar argument exists: '--frames'\n\nUsage: terrain-demo --frames",
+        ),
+        // The flags that became commands or changed name their replacement.
+        (
+            &["--print-config"],
+            "'--print-config'",
+            "tip: `terrain-demo print-config [--config FILE.toml]`",
+        ),
+        (
+            &["--verify-world", "w"],
+            "'--verify-world'",
+            "tip: `terrain-demo verify-world DIR`",
+        ),
+        (
+            &["--density-map", "off"],
+            "'--density-map'",
+            "tip: `--no-density-map`",
+        ),
+        // Run flags and a command do not mix.
+        (
+            &["--frames", "3", "verify-world", "w"],
+            "'verify-world' cannot be used with '--frames <FRAMES>'",
+            "Usage: terrain-demo [OPTIONS]",
+        ),
+        (
+            &["print-config", "--no-gpu"],
+            "'--no-gpu'",
+            "Usage: terrain-demo print-config",
+        ),
+    ];
+    for (args, says, tip) in cases {
+        let (code, stderr) = run(args);
+        assert_eq!(code, Some(2), "{args:?}: {stderr}");
+        let first = common::usage_error(&stderr);
+        assert!(first.contains(says), "{args:?}: `{says}` in: {stderr}");
+        assert!(stderr.contains(tip), "{args:?}: `{tip}` in: {stderr}");
+        if args[0] != "--frames" || args.len() > 2 {
+            assert!(
+                stderr.contains("\nUsage: terrain-demo "),
+                "{args:?}: {stderr}"
+            );
+        }
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -1,7 +1,7 @@
 //! The flyover over a streamed world, run as a user runs it (without a GPU, so it needs no
 //! adapter): the world is built on first use, the RAM pool stays within its budget and has
 //! every wanted tile after the first second, the craters are written back and the next run
-//! starts from them, and `--verify-world` tells a valid world from one with a corrupt tile.
+//! starts from them, and `verify-world` tells a valid world from one with a corrupt tile.
 
 mod common;
 
@@ -89,9 +89,9 @@ fn flyover_streams_within_budget_and_craters_persist() {
         "the craters of the first run persist in the world"
     );
 
-    // --verify-world: valid, then one corrupt tile is listed and the exit status is 1.
+    // verify-world: valid, then one corrupt tile is listed and the exit status is 1.
     let ok = demo()
-        .arg("--verify-world")
+        .arg("verify-world")
         .arg(&world)
         .output()
         .expect("runs");
@@ -105,7 +105,7 @@ fn flyover_streams_within_budget_and_craters_persist() {
     assert!(tile.is_file());
     std::fs::write(&tile, b"not a tile").expect("corrupt a tile");
     let bad = demo()
-        .arg("--verify-world")
+        .arg("verify-world")
         .arg(&world)
         .output()
         .expect("runs");

@@ -1,7 +1,7 @@
 //! The artefacts a user reads, checked as a user gets them: report.json validates against
 //! `docs/report.schema.json` for every scenario (frames.jsonl's lines too), summary.png has its
 //! chart, stderr carries no driver noise, `-q` is quiet, an earlier run's frames do not linger,
-//! and `--config` / `--print-config` work.
+//! and `--config` / `print-config` work.
 
 mod common;
 
@@ -476,15 +476,15 @@ fn a_config_file_sets_the_scenario_and_print_config_round_trips() {
         assert_eq!(f["craters"], 1, "{f}");
     }
 
-    // --print-config prints the parameters; read back, they print the same.
-    let printed = demo().arg("--print-config").output().unwrap();
+    // print-config prints the parameters; read back, they print the same.
+    let printed = demo().arg("print-config").output().unwrap();
     assert!(printed.status.success());
     let text = String::from_utf8(printed.stdout).unwrap();
     assert!(text.contains("[granular]") && text.contains("quiet_gap_ms"));
     let copy = dir.join("defaults.toml");
     std::fs::write(&copy, &text).unwrap();
     let again = demo()
-        .args(["--print-config", "--config"])
+        .args(["print-config", "--config"])
         .arg(&copy)
         .output()
         .unwrap();
@@ -511,7 +511,7 @@ fn a_config_file_sets_the_scenario_and_print_config_round_trips() {
         assert!(!bad_out.exists());
     }
     let done = demo()
-        .args(["--print-config", "--config"])
+        .args(["print-config", "--config"])
         .arg(&dir)
         .output()
         .unwrap();

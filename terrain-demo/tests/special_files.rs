@@ -93,7 +93,7 @@ fn a_world_whose_manifest_is_a_named_pipe_is_refused_without_blocking() {
         .expect("mkfifo runs");
     assert!(made.success(), "mkfifo failed");
     for args in [
-        vec!["--verify-world".to_string(), world.display().to_string()],
+        vec!["verify-world".to_string(), world.display().to_string()],
         vec![
             "--scenario".into(),
             "flyover".into(),
@@ -171,12 +171,12 @@ fn a_full_stdout_or_stderr_is_an_error_not_a_panic() {
             .expect("/dev/full")
     };
     let status = demo()
-        .arg("--print-config")
+        .arg("print-config")
         .stdout(full())
         .stderr(std::process::Stdio::null())
         .status()
         .expect("demo runs");
-    assert_eq!(status.code(), Some(1), "--print-config into /dev/full");
+    assert_eq!(status.code(), Some(1), "print-config into /dev/full");
     let status = demo()
         .arg("--help")
         .stdout(full())

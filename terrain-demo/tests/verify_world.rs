@@ -1,8 +1,9 @@
-//! `--verify-world DIR` and `--repair`, run as a user runs them: exit 0 for a valid world, 1 with
-//! the defects listed on stdout (a stale coarser tile, a damaged bounds.bin, a corrupt level-0
-//! tile), `--repair` rebuilding what level 0 determines (exit 0 afterwards, 1 while level-0
-//! damage remains), 2 for a manifest promising billions of tiles (at once) or `--repair` alone,
-//! and 130 when Ctrl-C interrupts a long check.
+//! `verify-world DIR` and its `--repair`, run as a user runs them: exit 0 for a valid world, 1
+//! with the defects listed on stdout (a stale coarser tile, a damaged bounds.bin, a corrupt
+//! level-0 tile), `--repair` rebuilding what level 0 determines (exit 0 afterwards, 1 while
+//! level-0 damage remains), 2 for a manifest promising billions of tiles (at once), no folder,
+//! `--repair` without the command or run flags with it, and 130 when Ctrl-C interrupts a long
+//! check.
 
 mod common;
 
@@ -44,7 +45,7 @@ fn with_world(dir: &Path, edit: impl FnOnce(&World)) {
 
 fn verify(dir: &Path, extra: &[&str]) -> Output {
     demo()
-        .arg("--verify-world")
+        .arg("verify-world")
         .arg(dir)
         .args(extra)
         .output()
@@ -114,9 +115,31 @@ fn verify_and_repair_exit_codes() {
     );
     assert_eq!(std::fs::read(&tile).expect("tile"), b"not a tile");
 
-    // --repair alone is a usage error.
-    let alone = demo().arg("--repair").output().expect("runs");
-    assert_eq!(alone.status.code(), Some(2), "{}", text(&alone));
+    // --repair without the command, the command without its folder, and run flags with it
+    // are usage errors: clap's message, with the usage line.
+    for args in [
+        &["--repair"][..],
+        &["verify-world"],
+        &["verify-world", "--repair"],
+        &["--frames", "2", "verify-world", "w"],
+    ] {
+        let wrong = demo().args(args).output().expect("runs");
+        assert_eq!(wrong.status.code(), Some(2), "{args:?}: {}", text(&wrong));
+        common::usage_error(&String::from_utf8_lossy(&wrong.stderr));
+        assert!(
+            String::from_utf8_lossy(&wrong.stderr).contains("Usage: terrain-demo"),
+            "{args:?}: {}",
+            text(&wrong)
+        );
+    }
+    // -q goes with the command: the same verdict.
+    let quiet = verify(&dir, &["-q"]);
+    assert_eq!(quiet.status.code(), Some(1), "{}", text(&quiet));
+    assert!(
+        String::from_utf8_lossy(&quiet.stdout).contains("not repairable"),
+        "{}",
+        text(&quiet)
+    );
     let _ = std::fs::remove_dir_all(&root);
 }
 
@@ -156,7 +179,7 @@ fn ctrl_c_interrupts_a_long_verification() {
     // 2048^2 + 1024^2 + ... = 5.6 M tiles, under the limit: minutes of missing files to probe.
     crafted(&dir, 1 << 15);
     let mut child = demo()
-        .arg("--verify-world")
+        .arg("verify-world")
         .arg(&dir)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())

@@ -1,6 +1,6 @@
 //! One writer per world: a second run on a world in use exits 2 naming the owner, a run after
 //! `kill -9` of the owner takes the world over (recovering an interrupted write-back), and
-//! `--verify-world` passes after each case.
+//! `verify-world` passes after each case.
 
 mod common;
 
@@ -25,11 +25,11 @@ fn flyover(world: &Path, out: &Path, frames: u32) -> Command {
 
 fn verify_passes(world: &Path, dir: &Path, case: &str) {
     let mut cmd = demo();
-    cmd.arg("--verify-world").arg(world);
+    cmd.arg("verify-world").arg(world);
     let done = run_within(cmd, dir, LIMIT);
     assert!(
         done.status.success(),
-        "--verify-world after {case}: {}; {}",
+        "verify-world after {case}: {}; {}",
         done.status,
         done.stderr
     );
@@ -84,7 +84,7 @@ fn a_second_writer_is_refused_and_a_killed_owners_world_is_taken_over() {
     // tile not yet rebuilt after a write-back in flight: exit 1, never the refusal's 2). A
     // repair writes: refused like the second run.
     let mut check = demo();
-    check.arg("--verify-world").arg(&world);
+    check.arg("verify-world").arg(&world);
     let check = run_within(check, &dir, LIMIT);
     assert!(
         matches!(check.status.code(), Some(0 | 1)),
@@ -92,7 +92,7 @@ fn a_second_writer_is_refused_and_a_killed_owners_world_is_taken_over() {
         check.stderr
     );
     let mut repair = demo();
-    repair.arg("--verify-world").arg(&world).arg("--repair");
+    repair.arg("verify-world").arg(&world).arg("--repair");
     let repair = run_within(repair, &dir, LIMIT);
     assert_eq!(repair.status.code(), Some(2), "{}", repair.stderr);
     assert!(

@@ -1,5 +1,5 @@
 //! The flyover's streamed world on disk: opened from `--world DIR`, or built there once (from
-//! the procedural default or `--heightmap`) with a progress line; and `--verify-world` (with
+//! the procedural default or `--heightmap`) with a progress line; and `verify-world` (with
 //! `--repair`), which checks everything the manifest promises and rebuilds what level 0
 //! determines.
 
@@ -224,7 +224,7 @@ pub enum WorldBuild {
     Heightmap(PlannedMap),
 }
 
-/// `--verify-world DIR` (with `--repair`): checks everything the world's manifest promises
+/// `verify-world DIR` (with `--repair`): checks everything the world's manifest promises
 /// (terrain-cache's `verify_world`: every tile present or rightly the zero tile and decoding as
 /// itself, coarser levels equal to the reduction of their children, each level's `bounds.bin`
 /// equal to what the tiles give), lists each defect on stdout (key, what, whether repairable),

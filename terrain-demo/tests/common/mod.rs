@@ -60,6 +60,27 @@ pub fn run_within(mut cmd: Command, dir: &Path, limit: Duration) -> Finished {
     }
 }
 
+/// Checks that `stderr` is one usage error and returns its first line: one line of the
+/// demo's own (a flag out of range or out of place, an unreadable input), or clap's whole
+/// message for a command line it cannot parse (the error line, any tips and usage line, and
+/// the pointer to `--help`).
+pub fn usage_error(stderr: &str) -> &str {
+    let first = stderr.lines().next().unwrap_or_default();
+    assert!(
+        first.starts_with("error: "),
+        "an error line first: {stderr}"
+    );
+    if stderr.trim_end().lines().count() > 1 {
+        assert!(
+            stderr
+                .trim_end()
+                .ends_with("For more information, try '--help'."),
+            "clap's pointer to --help last: {stderr}"
+        );
+    }
+    first
+}
+
 /// report.json of the run in `out`.
 pub fn report(out: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
