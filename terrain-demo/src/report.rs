@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 
 /// The version of report.json's layout (`docs/report.schema.json`): raised when a field is
 /// renamed, removed or changes meaning (adding one does not).
-pub const SCHEMA_VERSION: u32 = 2;
+pub const SCHEMA_VERSION: u32 = 3;
 
 /// What a terrain-demo run rendered and how long each step of each frame took.
 /// `schema_version` is raised when a field is renamed, removed or changes meaning; new optional

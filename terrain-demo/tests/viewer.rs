@@ -21,7 +21,7 @@ const RUN_LIMIT: Duration = Duration::from_secs(120);
 /// The screenshot's size.
 const SIZE: (u32, u32) = (320, 240);
 /// The built-in script, as the viewer embeds it.
-const BUILTIN: &str = include_str!("../src/bin/viewer/builtin_script.txt");
+const BUILTIN: &str = include_str!("../src/bin/terrain-viewer/builtin_script.txt");
 
 fn required() -> bool {
     std::env::var_os("CI").is_some_and(|v| !v.is_empty())
@@ -152,7 +152,7 @@ struct Run {
 fn viewer(display: Option<&str>, args: &[&str], dir: &Path, name: &str) -> Run {
     let out = dir.join(format!("{name}.stdout"));
     let err = dir.join(format!("{name}.stderr"));
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_viewer"));
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_terrain-viewer"));
     cmd.args(args)
         .env_remove("WAYLAND_DISPLAY")
         .env_remove("WAYLAND_SOCKET")

@@ -2,7 +2,7 @@
 //! clicks that stamp craters and footprints, mode keys, wireframe, on-screen frame timings.
 //!
 //! ```sh
-//! cargo run --release -p terrain-demo --bin viewer
+//! cargo run --release -p terrain-demo --bin terrain-viewer
 //! viewer --frames 30 --screenshot shot.png --script-builtin --resolution 320x240
 //! ```
 //!
@@ -36,7 +36,7 @@ use winit::event_loop::EventLoop;
 
 /// Interactive viewer of the deformable terrain.
 #[derive(Debug, Parser)]
-#[command(name = "viewer", version)]
+#[command(name = "terrain-viewer", version)]
 struct Args {
     /// Side of the procedural terrain in texels (0.1 m each).
     #[arg(long, default_value_t = 1024)]
