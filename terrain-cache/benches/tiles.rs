@@ -3,9 +3,11 @@
 //! the PNG16 files of version-1 worlds, beside plain handling of the same samples measured in
 //! the same run: `plain_read_copy` (`std::fs::read` of a warm file of the raw samples, then a
 //! copy of its bytes into a `u16` buffer, what any load must at least do), memcpy, and a plain
-//! file read / write without fsync. Compare with Fikkan 2013, graph 6.2 (1.6 ms per 256^2
-//! block from SSD) and Flower 2010, tables 4.6 / 4.7 (160.7 ms to page a 2048^2 detail tile
-//! out, 47.1 ms projected to load one).
+//! file read / write without fsync. Compare with Flower 2010, tables 4.7 / 4.6's disk side
+//! ("System and Hdd": 22.4 ms to load a 2048^2 8-bit detail tile, 134.0 ms to write one; their
+//! 47.1 / 160.7 ms totals add the GPU bus copy). Fikkan 2013, graph 6.2's 1.6 ms per 256^2 block
+//! is an average over 1 000 random cold reads of texture and heights: these warm reads of one
+//! file do not measure the disk.
 //!
 //! `TERRAIN_BENCH_QUICK=1` measures 256^2 only, briefly.
 

@@ -84,10 +84,11 @@ fn steps(c: &mut Criterion) {
             });
         }
         // One whole step over the area as GranularSim::step runs it (depth, penetration,
-        // nearest seeds, 10 iterative displacement passes, 10 scatter slope passes).
+        // nearest seeds, closest-seed displacement, 10 scatter slope passes): Persson 2019's
+        // SSBO pair (table 5.1), whose steps table 5.5 times.
         for (name, exact) in [
-            ("step_jfa_iterative10_scatter10", false),
-            ("step_exact_iterative10_scatter10", true),
+            ("step_jfa_closest_seed_scatter10", false),
+            ("step_exact_closest_seed_scatter10", true),
         ] {
             g.bench_function(BenchmarkId::new(name, size), |b| {
                 b.iter_batched_ref(
@@ -101,8 +102,7 @@ fn steps(c: &mut Criterion) {
                         } else {
                             jump_flood(&pen, area, params.metric, true).expect("jfa")
                         };
-                        displace_iterative(m, &pen, &seeds, area, 32768, 10, params.metric)
-                            .expect("displace");
+                        displace_closest_seed(m, &pen, &seeds, area, 32768).expect("displace");
                         even_out_slopes_scatter(m, &pen, area, t, r15, 10).expect("slope");
                     },
                     criterion::BatchSize::LargeInput,
@@ -115,8 +115,13 @@ fn steps(c: &mut Criterion) {
         g.bench_function(BenchmarkId::new("memcpy_u32", size), |b| {
             b.iter(|| dst.copy_from_slice(black_box(&src)))
         });
+        // Table 5.6 compares the methods with one iterative pass; table 5.4 runs ten.
         for (name, method) in [
             ("displace_iterative10", DisplacementMethod::iterative()),
+            (
+                "displace_iterative1",
+                DisplacementMethod::Iterative { iterations: 1 },
+            ),
             ("displace_closest_seed", DisplacementMethod::ClosestSeed),
             (
                 "displace_multiple_targets",
@@ -228,10 +233,12 @@ fn vehicles(c: &mut Criterion) {
     g.finish();
 }
 
-/// The whole CPU step of `GranularSim` on the 4096 map (200 m, table 5.3 settings: iterative
-/// displacement with 10 passes, 10 scatter slope passes) over one 492^2 = 242 064-column active
-/// area (a drum 23.2 m wide and long, sunk 0.25 m, plus the 8-texel margin), volume included;
-/// jump flooding (as the GPU) or the exact transform.
+/// The whole CPU step of `GranularSim` on the 4096 map (200 m, table 5.3 settings) over one
+/// 492^2 = 242 064-column active area (a drum 23.2 m wide and long, sunk 0.25 m, plus the
+/// 8-texel margin), volume included, with each method pair Persson 2019 ran (table 5.1): the
+/// iterative pair (10 iterative displacement passes, 10 interleaved slope passes; table 5.4)
+/// and the SSBO pair (closest-seed displacement, 10 scatter slope passes; table 5.5), with jump
+/// flooding as the thesis; the SSBO pair also with the exact transform.
 fn full_step(c: &mut Criterion) {
     let mut g = c.benchmark_group("granular_step");
     g.sample_size(10);
@@ -245,13 +252,29 @@ fn full_step(c: &mut Criterion) {
         &drum,
         Affine3A::from_translation(Vec3::new(centre, 1.0 + half - 0.25, centre)),
     )];
-    for (name, distance) in [
-        ("jfa_iterative10_scatter10", DistanceTransform::JumpFlood),
-        ("exact_iterative10_scatter10", DistanceTransform::Exact),
+    for (name, displacement, slopes, distance) in [
+        (
+            "jfa_iterative10_interleaved10",
+            DisplacementMethod::iterative(),
+            SlopeMethod::Interleaved,
+            DistanceTransform::JumpFlood,
+        ),
+        (
+            "jfa_closest_seed_scatter10",
+            DisplacementMethod::ClosestSeed,
+            SlopeMethod::Scatter,
+            DistanceTransform::JumpFlood,
+        ),
+        (
+            "exact_closest_seed_scatter10",
+            DisplacementMethod::ClosestSeed,
+            SlopeMethod::Scatter,
+            DistanceTransform::Exact,
+        ),
     ] {
         let mut sim = GranularSim::new(snow(4096, texel), GranularParams::default())
             .expect("sim")
-            .with_methods(DisplacementMethod::iterative(), SlopeMethod::Scatter)
+            .with_methods(displacement, slopes)
             .with_distance_transform(distance);
         let areas = sim.active_areas(&obj).expect("areas");
         assert_eq!(areas.len(), 1);

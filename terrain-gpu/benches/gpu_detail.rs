@@ -1,6 +1,7 @@
 //! The detail layer on the GPU, beside Flower 2010's tables 4.6-4.9: loading a detail tile into
-//! its slot (upload, submit and wait; the thesis's 2048^2 tile load took 47.1 ms) and reading
-//! one back (the write-back before an unload; its unload took 160.7 ms), at 256^2 and 2048^2;
+//! its slot (upload, submit and wait; the thesis's bus copy of a 2048^2 tile took 24.7 ms, of
+//! its 47.1 ms load) and reading one back (the write-back before an unload; the same 24.7 ms
+//! bus copy of its 160.7 ms unload), at 256^2 and 2048^2;
 //! and the frame cost of the same view drawn without detail, with the detail's composite
 //! normals only, with parallax occlusion mapping, and with refined geometry (`RefinePass`, sec.
 //! 2.4.3; the thesis: tessellated 9.82 ms,
