@@ -8,8 +8,14 @@ use std::hint::black_box;
 use terrain_core::{HeightEncoding, Rect, TerrainParams, generate_coarse_map};
 use terrain_lod::{CurvatureFilter, DensityMap, DensityParams};
 
-/// Sides of square maps of about 1M, 2M, 4M and 8M samples (table 4.1's rows).
-const SIDES: [(u32, &str); 4] = [(1024, "1M"), (1448, "2M"), (2048, "4M"), (2896, "8M")];
+/// Sides of square maps of about 1M, 2M, 3M, 4M and 8M samples (table 4.1's rows).
+const SIDES: [(u32, &str); 5] = [
+    (1024, "1M"),
+    (1448, "2M"),
+    (1732, "3M"),
+    (2048, "4M"),
+    (2896, "8M"),
+];
 
 fn bench(c: &mut Criterion) {
     let quick = std::env::var_os("TERRAIN_BENCH_QUICK").is_some();
