@@ -5,7 +5,7 @@
 //! dependencies would not fit CI's time budget. Run it before a release.
 
 use crate::ci::LIBRARIES;
-use crate::util::{cargo_exe, root, target_dir};
+use crate::util::{root, target_dir, workspace_metadata};
 use anyhow::{Context, Result, bail};
 use std::process::Command;
 
@@ -54,20 +54,7 @@ pub fn msrv() -> Result<()> {
 
 /// The workspace's `rust-version` (every member inherits it), from `cargo metadata`.
 fn declared_rust_version() -> Result<String> {
-    let output = Command::new(cargo_exe())
-        .args(["metadata", "--format-version", "1", "--no-deps", "--locked"])
-        .current_dir(root())
-        .output()
-        .context("could not start cargo metadata")?;
-    if !output.status.success() {
-        bail!(
-            "`cargo metadata` exited with {}: {}",
-            output.status,
-            String::from_utf8_lossy(&output.stderr).trim()
-        );
-    }
-    let metadata: serde_json::Value =
-        serde_json::from_slice(&output.stdout).context("cargo metadata is not valid JSON")?;
+    let metadata = workspace_metadata()?;
     let mut versions: Vec<&str> = metadata["packages"]
         .as_array()
         .into_iter()

@@ -3,9 +3,8 @@
 //! inside the workspace is caught before a release. It first checks that CHANGELOG.md has a
 //! section for every version being packaged.
 
-use crate::util::{cargo, cargo_exe, root};
+use crate::util::{cargo, root, workspace_metadata};
 use anyhow::{Context, Result, bail};
-use std::process::Command;
 
 /// Packages and verifies the publishable crates (cargo >= 1.90 packages workspace members that
 /// depend on one another through a local registry, without publishing them first).
@@ -109,20 +108,7 @@ fn has_section(changelog: &str, version: &str) -> bool {
 
 /// The workspace members without `publish = false`, with their versions, from `cargo metadata`.
 fn publishable_crates() -> Result<Vec<(String, String)>> {
-    let output = Command::new(cargo_exe())
-        .args(["metadata", "--format-version", "1", "--no-deps", "--locked"])
-        .current_dir(root())
-        .output()
-        .context("could not start cargo metadata")?;
-    if !output.status.success() {
-        bail!(
-            "`cargo metadata` exited with {}: {}",
-            output.status,
-            String::from_utf8_lossy(&output.stderr).trim()
-        );
-    }
-    let metadata: serde_json::Value =
-        serde_json::from_slice(&output.stdout).context("cargo metadata is not valid JSON")?;
+    let metadata = workspace_metadata()?;
     // `publish` is null when publishing is allowed anywhere, `[]` for `publish = false`.
     Ok(metadata["packages"]
         .as_array()

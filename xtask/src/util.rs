@@ -42,6 +42,23 @@ pub fn cargo(args: &[&str], env: &[(&str, &str)]) -> Result<()> {
     Ok(())
 }
 
+/// The workspace's members as `cargo metadata --no-deps` describes them (JSON).
+pub fn workspace_metadata() -> Result<serde_json::Value> {
+    let output = Command::new(cargo_exe())
+        .args(["metadata", "--format-version", "1", "--no-deps", "--locked"])
+        .current_dir(root())
+        .output()
+        .context("could not start cargo metadata")?;
+    if !output.status.success() {
+        bail!(
+            "`cargo metadata` exited with {}: {}",
+            output.status,
+            String::from_utf8_lossy(&output.stderr).trim()
+        );
+    }
+    serde_json::from_slice(&output.stdout).context("cargo metadata is not valid JSON")
+}
+
 /// Runs the demo binary as the test step built it: `cargo test --workspace` builds it with the
 /// workspace's unified features, and a `cargo run -p terrain-demo` would resolve the demo's own
 /// and rebuild wgpu and its dependencies (minutes on two cores). `cargo test --no-run` makes it
