@@ -120,7 +120,9 @@ macro_rules! renderer_head {
             wgsl_prelude!(),
             include_str!("wgsl/resources/packed.wgsl"),
             include_str!("wgsl/render/target_color.wgsl"),
-            include_str!("wgsl/resources/detail_sample.wgsl")
+            include_str!("wgsl/resources/detail_sample.wgsl"),
+            include_str!("wgsl/render/materials_common.wgsl"),
+            include_str!("wgsl/render/materials.wgsl")
         )
     };
 }
@@ -313,6 +315,14 @@ pub const SPILL: &str = concat!(
 /// replaces the text between them with its own `fn user_stamp_value(local: vec2<f32>) -> f32`.
 pub const USER_STAMP_MARKERS: (&str, &str) = ("// USER_STAMP_BEGIN", "// USER_STAMP_END");
 
+/// The autoshader's weights and curvature at a list of points (the functions every renderer
+/// shades with), for the GPU == CPU test against `terrain_core::material`.
+pub const MATERIAL_PROBE: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/render/materials_common.wgsl"),
+    include_str!("wgsl/passes/material_probe.wgsl")
+);
+
 /// Every shader with its name, for validation and tooling.
 pub const ALL: &[(&str, &str)] = &[
     ("stamp", STAMP),
@@ -333,6 +343,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("refine", REFINE),
     ("atlas_probe", ATLAS_PROBE),
     ("detail_probe", DETAIL_PROBE),
+    ("material_probe", MATERIAL_PROBE),
     ("granular_penetration", GRANULAR_PENETRATION),
     ("granular_jfa", GRANULAR_JFA),
     ("granular_displace", GRANULAR_DISPLACE),

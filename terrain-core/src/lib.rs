@@ -48,6 +48,7 @@ pub mod grid;
 pub mod hillshade;
 pub mod io;
 pub mod map;
+pub mod material;
 pub mod normals;
 #[doc(hidden)]
 pub mod par;
@@ -71,6 +72,10 @@ pub use io::MapIoError;
 pub use map::{
     CoarseMap, DEFAULT_FIXED_POINT_UNITS_PER_M, DETAIL_MAX_RANGE_M, DetailTile, FixedPointMap,
     HeightEncoding, HeightMap, HeightSample,
+};
+pub use material::{
+    AutoshadeParams, MATERIALS, MaterialImages, MaterialTextures, autoshade_weights,
+    curvature_from_derivatives,
 };
 pub use normals::{
     DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal, derivative_at,

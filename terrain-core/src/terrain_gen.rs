@@ -170,7 +170,7 @@ pub fn generate_coarse_map(
 
 /// The splitmix64 finaliser: a bijective avalanche mix of 64 bits.
 #[inline]
-const fn mix64(mut z: u64) -> u64 {
+pub(crate) const fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)

@@ -69,7 +69,7 @@ pub mod testing;
 use device::{context, download, limits, profiler, readback, region_source, small_readback, timer};
 use passes::{density, detail_probe, normals, spill, stamp};
 use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
-use resources::{atlas, detail, maps};
+use resources::{atlas, detail, maps, materials};
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
 pub use camera::{Camera, DepthConvention, RenderView, ViewMatrices};
@@ -85,6 +85,7 @@ pub use download::{WAIT_TIMEOUT, download_bytes, read_texture_rgba8, wait_bounde
 pub use error::GpuError;
 pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
 pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
+pub use materials::{GpuMaterials, MaterialStyle, PROCEDURAL_MATERIAL_SIZE, SurfaceShading};
 pub use normals::NormalPass;
 pub use offscreen::OffscreenTarget;
 pub use profiler::{

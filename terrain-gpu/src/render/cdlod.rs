@@ -14,6 +14,7 @@ use crate::render::clipmap::{
 };
 use crate::render::surface::{DetailUniform, fragment_reach};
 use crate::render::target::TargetFormat;
+use crate::resources::materials::{GpuMaterials, MaterialSlot};
 use glam::UVec2;
 use terrain_core::WrapMode;
 use terrain_lod::cdlod::MAX_CDLOD_LODS;
@@ -47,6 +48,8 @@ pub struct CdlodRenderer {
     instance_count: u32,
     bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
     wireframe: bool,
+    /// The materials of [`crate::SurfaceShading::Materials`].
+    materials: MaterialSlot,
 }
 
 /// Everything one CDLOD frame is drawn from.
@@ -124,7 +127,14 @@ impl CdlodRenderer {
             instance_count: 0,
             bound: None,
             wireframe: false,
+            materials: MaterialSlot::default(),
         })
+    }
+
+    /// Shades [`crate::SurfaceShading::Materials`] frames with `materials` from the next
+    /// prepare (until then, and without a call, with [`GpuMaterials::procedural`]).
+    pub fn set_materials(&mut self, materials: &GpuMaterials) {
+        self.materials.set(materials);
     }
 
     /// Draws triangle edges as lines from the next draw; fails without
@@ -184,7 +194,7 @@ impl CdlodRenderer {
             }
             WrapMode::Clamp => [0, 0],
         };
-        let uniform = frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset);
+        let uniform = frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset)?;
         let mut lods: LodsUniform = [[0.0, -1.0, 0.0, 0.0]; MAX_CDLOD_LODS as usize];
         for (slot, &(start, end)) in lods.iter_mut().zip(&frame.ranges.morph) {
             if end.is_finite() && start.is_finite() && end > start {
@@ -209,13 +219,18 @@ impl CdlodRenderer {
         let buffers =
             self.detail_uniform
                 .surface_buffers(queue, &surface, info.texel_size, camera_texel)?;
-        if self.kind != kind || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
+        let (materials, new_materials) = self.materials.get(device, queue)?;
+        if new_materials
+            || self.kind != kind
+            || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers)
+        {
             let group = self.pipeline(kind).bind_group(
                 device,
                 "CdlodRenderer",
                 &self.uniform,
                 &buffers,
                 &[(LODS_BINDING, &self.lods)],
+                &materials,
             )?;
             self.bound = Some((buffers, group));
             self.kind = kind;

@@ -12,6 +12,9 @@ use crate::render::target::TargetFormat;
 use crate::resources::atlas::GpuTileAtlas;
 use crate::resources::detail::{DetailShading, GpuDetailTiles};
 use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
+use crate::resources::materials::{
+    self, GpuMaterials, MaterialSlot, MaterialStyle, SurfaceShading,
+};
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2, Vec3, Vec4};
 use terrain_core::WrapMode;
@@ -47,10 +50,12 @@ pub(crate) struct FrameUniform {
     /// fragments are discarded: another renderer draws them. Empty ([`NOTHING_EXCLUDED`])
     /// unless set.
     pub(crate) excluded: [f32; 4],
+    /// Material shading: see `resources::materials::frame_fields`.
+    material: [[f32; 4]; 3],
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<FrameUniform>() == 192);
+const _: () = assert!(std::mem::size_of::<FrameUniform>() == 240);
 
 /// An exclusion rect with min above max: nothing is discarded.
 pub(crate) const NOTHING_EXCLUDED: [f32; 4] = [1.0, 1.0, -1.0, -1.0];
@@ -72,6 +77,12 @@ pub struct TerrainStyle {
     /// toroidal map, the extended edges of a clamped one) is not drawn, so the sky shows
     /// there. For views that frame a whole map; off by default.
     pub hide_outside_map: bool,
+    /// The height ramp, or the materials ([`crate::GpuMaterials`]) weighted by the autoshader.
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub shading: SurfaceShading,
+    /// How the materials are laid on the surface (with [`SurfaceShading::Materials`]).
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub materials: MaterialStyle,
 }
 
 impl Default for TerrainStyle {
@@ -82,6 +93,8 @@ impl Default for TerrainStyle {
             fog_color: Vec3::new(0.74, 0.82, 0.90),
             fog_density: 0.0,
             hide_outside_map: false,
+            shading: SurfaceShading::Ramp,
+            materials: MaterialStyle::default(),
         }
     }
 }
@@ -119,6 +132,8 @@ pub struct ClipmapRenderer {
     bound: Option<(Vec<wgpu::Buffer>, SurfaceKind, wgpu::BindGroup)>,
     /// Draws of the prepared frame: (part index, first instance, instance count).
     runs: Vec<(usize, u32, u32)>,
+    /// The materials of [`SurfaceShading::Materials`].
+    materials: MaterialSlot,
     /// Draw the wireframe pipelines (only when they exist).
     wireframe: bool,
     /// Texels another renderer draws (see [`ClipmapRenderer::exclude`]).
@@ -226,6 +241,7 @@ impl ClipmapRenderer {
                 levels: layout.levels(),
                 bound: None,
                 runs: Vec::new(),
+                materials: MaterialSlot::default(),
                 wireframe: false,
                 excluded: None,
             }
@@ -236,6 +252,12 @@ impl ClipmapRenderer {
     /// [`wgpu::Features::POLYGON_MODE_LINE`].
     pub fn has_wireframe(&self) -> bool {
         self.coarse.wireframe.is_some()
+    }
+
+    /// Shades [`SurfaceShading::Materials`] frames with `materials` from the next prepare
+    /// (until then, and without a call, with [`GpuMaterials::procedural`]).
+    pub fn set_materials(&mut self, materials: &GpuMaterials) {
+        self.materials.set(materials);
     }
 
     /// Draws triangle edges as lines (`true`) or filled triangles (`false`, the default) from
@@ -309,7 +331,7 @@ impl ClipmapRenderer {
             &self.target,
             (self.n, self.levels),
             wrap_offset,
-        );
+        )?;
         if let Some(region) = self.excluded {
             uniform.excluded = self.exclusion(region, Vec2::from(uniform.camera_frac))?;
         }
@@ -347,8 +369,11 @@ impl ClipmapRenderer {
             self.detail_uniform
                 .surface_buffers(queue, &surface, info.texel_size, camera_texel)?;
         let kind = surface.kind();
+        let (materials, new_materials) = self.materials.get(device, queue)?;
         let rebind = match &self.bound {
-            Some((bound, k, _)) => *k != kind || bound.as_slice() != buffers.as_slice(),
+            Some((bound, k, _)) => {
+                new_materials || *k != kind || bound.as_slice() != buffers.as_slice()
+            }
             None => true,
         };
         if rebind {
@@ -358,6 +383,7 @@ impl ClipmapRenderer {
                 &self.uniform,
                 &buffers,
                 &[],
+                &materials,
             )?;
             self.bound = Some((buffers, kind, group));
         }
@@ -432,7 +458,7 @@ pub(crate) fn frame_uniform(
     target: &TargetFormat,
     (n, levels): (u32, u32),
     wrap_offset: [i32; 2],
-) -> FrameUniform {
+) -> Result<FrameUniform, GpuError> {
     let ts = info.texel_size;
     let cam_texel = glam::Vec2::new(view.eye.x, view.eye.z) / ts;
     let cam_int = cam_texel.floor();
@@ -441,7 +467,13 @@ pub(crate) fn frame_uniform(
         WrapMode::Repeat => WRAP_REPEAT,
         WrapMode::Clamp => WRAP_CLAMP,
     };
-    FrameUniform {
+    let material = materials::frame_fields(
+        style.shading,
+        &style.materials,
+        cam_int.as_ivec2().to_array(),
+        ts,
+    )?;
+    Ok(FrameUniform {
         view_proj: view.view_proj_relative.to_cols_array_2d(),
         camera_texel: cam_int.as_ivec2().to_array(),
         camera_frac: (cam_texel - cam_int).to_array(),
@@ -462,7 +494,8 @@ pub(crate) fn frame_uniform(
         light_dir: style.light_dir.extend(0.0).to_array(),
         fog_color: Vec4::from((style.fog_color, style.fog_density)).to_array(),
         excluded: NOTHING_EXCLUDED,
-    }
+        material,
+    })
 }
 
 /// Checks a view and a target size before a renderer built for `target` (or a compute pass,
@@ -766,6 +799,7 @@ impl SurfacePipeline {
                     count: None,
                 }
             }));
+            entries.extend(materials::layout_entries());
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some(label),
                 entries: &entries,
@@ -837,8 +871,9 @@ impl SurfacePipeline {
         }
     }
 
-    /// A bind group of `uniform` at binding 0, the surface's `buffers` at 1, 2, ... and
-    /// `extra` (binding, buffer) after them, over this pipeline's layout.
+    /// A bind group of `uniform` at binding 0, the surface's `buffers` at 1, 2, ...,
+    /// `extra` (binding, buffer) after them and the `materials` at 10 to 12, over this
+    /// pipeline's layout.
     pub(crate) fn bind_group(
         &self,
         device: &wgpu::Device,
@@ -846,6 +881,7 @@ impl SurfacePipeline {
         uniform: &wgpu::Buffer,
         buffers: &[wgpu::Buffer],
         extra: &[(u32, &wgpu::Buffer)],
+        materials: &GpuMaterials,
     ) -> Result<wgpu::BindGroup, GpuError> {
         let mut entries = vec![wgpu::BindGroupEntry {
             binding: 0,
@@ -864,6 +900,7 @@ impl SurfacePipeline {
             binding,
             resource: b.as_entire_binding(),
         }));
+        entries.extend(materials.entries());
         scoped(device, label, || {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some(label),

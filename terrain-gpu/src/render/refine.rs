@@ -26,6 +26,7 @@ use crate::render::clipmap::{
 use crate::render::target::TargetFormat;
 use crate::resources::detail::{DetailInfo, DetailShading, GpuDetailTiles};
 use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
+use crate::resources::materials::{GpuMaterials, MaterialSlot};
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use terrain_core::WrapMode;
@@ -114,7 +115,7 @@ impl RefineDraw<'_> {
         target: &TargetFormat,
         reach: u32,
     ) -> Result<FrameUniform, GpuError> {
-        let mut uniform = frame_uniform(info, view, self.style, target, (0, 0), [0, 0]);
+        let mut uniform = frame_uniform(info, view, self.style, target, (0, 0), [0, 0])?;
         if info.wrap == WrapMode::Repeat {
             let lowest = IVec2::from(uniform.camera_texel) - IVec2::splat(reach as i32);
             uniform.wrap_offset = crate::device::compute::wrap_offset(lowest, info.size)?;
@@ -442,6 +443,8 @@ pub struct RefineRenderer {
     detail_uniform: wgpu::Buffer,
     bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
     wireframe: bool,
+    /// The materials of [`crate::SurfaceShading::Materials`].
+    materials: MaterialSlot,
 }
 
 impl RefineRenderer {
@@ -490,7 +493,14 @@ impl RefineRenderer {
             detail_uniform,
             bound: None,
             wireframe: false,
+            materials: MaterialSlot::default(),
         })
+    }
+
+    /// Shades [`crate::SurfaceShading::Materials`] frames with `materials` from the next
+    /// prepare (until then, and without a call, with [`GpuMaterials::procedural`]).
+    pub fn set_materials(&mut self, materials: &GpuMaterials) {
+        self.materials.set(materials);
     }
 
     /// Draws triangle edges as lines from the next draw; fails without
@@ -527,7 +537,8 @@ impl RefineRenderer {
             draw.detail.table_buffer().clone(),
             draw.detail.heights_buffer().clone(),
         ];
-        if self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
+        let (materials, new_materials) = self.materials.get(device, queue)?;
+        if new_materials || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
             // Binding 1 (the heights) is not read: the vertices carry them.
             let group = self.pipeline.bind_group(
                 device,
@@ -540,6 +551,7 @@ impl RefineRenderer {
                     (4, &buffers[2]),
                     (5, &buffers[3]),
                 ],
+                &materials,
             )?;
             self.bound = Some((buffers, group));
         }

@@ -246,6 +246,16 @@ impl TerrainRenderer {
         }
     }
 
+    /// Shades [`crate::SurfaceShading::Materials`] frames with `materials` (by default
+    /// [`crate::GpuMaterials::procedural`]).
+    pub fn set_materials(&mut self, materials: &crate::GpuMaterials) {
+        match &mut self.lod {
+            Lod::Clipmap(c) => c.renderer.set_materials(materials),
+            Lod::Cdlod(c) => c.renderer.set_materials(materials),
+            Lod::Tessellated(t) => t.renderer.set_materials(materials),
+        }
+    }
+
     /// The streamed world's quadtree, when this renderer draws one with CDLOD.
     pub fn streamed_tree_mut(&mut self) -> Option<&mut CdlodTree> {
         match &mut self.lod {

@@ -31,6 +31,7 @@ use crate::render::clipmap::{
 };
 use crate::render::surface::{DetailUniform, fragment_reach};
 use crate::render::target::TargetFormat;
+use crate::resources::materials::{GpuMaterials, MaterialSlot};
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::WrapMode;
@@ -507,6 +508,8 @@ pub struct TessRenderer {
     uniform: wgpu::Buffer,
     bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
     wireframe: bool,
+    /// The materials of [`crate::SurfaceShading::Materials`].
+    materials: MaterialSlot,
 }
 
 impl TessRenderer {
@@ -531,7 +534,14 @@ impl TessRenderer {
             uniform,
             bound: None,
             wireframe: false,
+            materials: MaterialSlot::default(),
         })
+    }
+
+    /// Shades [`crate::SurfaceShading::Materials`] frames with `materials` from the next
+    /// prepare (until then, and without a call, with [`GpuMaterials::procedural`]).
+    pub fn set_materials(&mut self, materials: &GpuMaterials) {
+        self.materials.set(materials);
     }
 
     /// Draws triangle edges as lines from the next draw; fails without
@@ -583,19 +593,24 @@ impl TessRenderer {
             }
             WrapMode::Clamp => [0, 0],
         };
-        let uniform = frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset);
+        let uniform = frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset)?;
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         let camera_texel = glam::IVec2::from(uniform.camera_texel);
         let buffers =
             self.detail_uniform
                 .surface_buffers(queue, &surface, info.texel_size, camera_texel)?;
-        if self.on_detail != on_detail || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
+        let (materials, new_materials) = self.materials.get(device, queue)?;
+        if new_materials
+            || self.on_detail != on_detail
+            || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers)
+        {
             let group = self.pipeline_for(on_detail).bind_group(
                 device,
                 "TessRenderer",
                 &self.uniform,
                 &buffers,
                 &[],
+                &materials,
             )?;
             self.bound = Some((buffers, group));
             self.on_detail = on_detail;

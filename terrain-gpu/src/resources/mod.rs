@@ -4,4 +4,5 @@
 pub mod atlas;
 pub mod detail;
 pub mod maps;
+pub mod materials;
 pub(crate) mod packing;

@@ -37,6 +37,14 @@ struct Frame {
     // Texels (relative to the camera's whole texel) another renderer draws: fragments inside
     // (min.xy, max.zw) are discarded (RefineRenderer's region). Empty when min > max.
     excluded: vec4<f32>,
+    // Material shading (materials.wgsl): where the camera's whole texel falls in the material
+    // images' repeat (x, y), repeats per metre (z), how strongly their normals bend the
+    // surface's (w).
+    material: vec4<f32>,
+    // The autoshader's edges: rock slope (x, y), snow height (z, w).
+    autoshade: vec4<f32>,
+    // The dirt curvature's edges (x, y); z: 1 to shade with materials, 0 with the height ramp.
+    autoshade_dirt: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -116,6 +124,11 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     // position; adding the camera's fraction makes it relative to the camera's whole texel.
     let p = in.rel_texel;
     let q = p + frame.camera_frac;
+    // The fragment relative to the camera, in metres.
+    let world = vec3<f32>(p.x * frame.texel_size, in.height - frame.camera_height, p.y * frame.texel_size);
+    // Screen derivatives for the material images, taken here in uniform control flow.
+    let dworld_dx = dpdx(world);
+    let dworld_dy = dpdy(world);
     if frame.hide_outside != 0u {
         // The fragment's texel position on the unwrapped map plane.
         let t = vec2<f32>(frame.camera_texel) + q;
@@ -127,8 +140,6 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     if all(q > frame.excluded.xy) && all(q < frame.excluded.zw) {
         discard;
     }
-    // The fragment relative to the camera, in metres.
-    let world = vec3<f32>(p.x * frame.texel_size, in.height - frame.camera_height, p.y * frame.texel_size);
     // The surface's detail (none for most surfaces): what it adds, and where to shade.
     let fd = fragment_detail(q, world, in.view_dist);
     let qs = fd.q;
@@ -140,16 +151,37 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     let d01 = derivative_at(t0 + vec2<i32>(0, 1));
     let d11 = derivative_at(t0 + vec2<i32>(1, 1));
     let d = mix(mix(d00, d10, f.x), mix(d01, d11, f.x), f.y);
-    let n = composite_normal(d, fd.sample.gradient);
+    let n_surface = composite_normal(d, fd.sample.gradient);
     let height = in.height + fd.sample.height;
 
     let t = clamp((height - frame.ramp_low) / max(frame.ramp_high - frame.ramp_low, 1e-3), 0.0, 1.0);
-    let grass = mix(vec3<f32>(0.20, 0.36, 0.16), vec3<f32>(0.45, 0.55, 0.25), smoothstep(0.0, 0.45, t));
-    let high = mix(vec3<f32>(0.55, 0.46, 0.36), vec3<f32>(0.93, 0.93, 0.96), smoothstep(0.55, 0.9, t));
-    var albedo = mix(grass, high, smoothstep(0.35, 0.65, t));
-    // Steep slopes are bare rock.
-    let slope = length(d);
-    albedo = mix(albedo, vec3<f32>(0.42, 0.38, 0.34), smoothstep(0.6, 1.1, slope));
+    var albedo: vec3<f32>;
+    var n = n_surface;
+    if frame.autoshade_dirt.z > 0.5 {
+        // Materials weighted by the autoshader from the slope and curvature the detail and the
+        // deformations give the surface.
+        let slope = length(d + fd.sample.gradient);
+        let curvature = curvature_from_derivatives(d00, d10, d01, d11, frame.texel_size);
+        let w = autoshade_weights(frame.autoshade, frame.autoshade_dirt.xy, t, slope, curvature);
+        let k = frame.material.z;
+        // Ground coordinates of the fragment in repeats, from the camera's place in the repeat
+        // (exact for any world size) plus the fragment's offset.
+        let ground = frame.material.xy + qs * frame.texel_size * k;
+        let up = height * k;
+        let top = Projection(ground, dworld_dx.xz * k, dworld_dy.xz * k);
+        let side_x = Projection(vec2<f32>(ground.y, up), dworld_dx.zy * k, dworld_dy.zy * k);
+        let side_z = Projection(vec2<f32>(ground.x, up), dworld_dx.xy * k, dworld_dy.xy * k);
+        let m = material_surface(w, top, side_x, side_z, n_surface, frame.material.w);
+        albedo = m.albedo;
+        n = m.normal;
+    } else {
+        let grass = mix(vec3<f32>(0.20, 0.36, 0.16), vec3<f32>(0.45, 0.55, 0.25), smoothstep(0.0, 0.45, t));
+        let high = mix(vec3<f32>(0.55, 0.46, 0.36), vec3<f32>(0.93, 0.93, 0.96), smoothstep(0.55, 0.9, t));
+        albedo = mix(grass, high, smoothstep(0.35, 0.65, t));
+        // Steep slopes are bare rock.
+        let slope = length(d);
+        albedo = mix(albedo, vec3<f32>(0.42, 0.38, 0.34), smoothstep(0.6, 1.1, slope));
+    }
 
     let l = normalize(frame.light_dir.xyz);
     let diffuse = max(dot(n, l), 0.0);

@@ -1,0 +1,75 @@
+// Material shading of the terrain renderers (terrain_gpu::GpuMaterials): four materials' albedo
+// and normal images in texture arrays, blended by weights, projected from above on gentle
+// ground and from the sides on steep ground (triplanar mapping), their normals perturbing the
+// surface's.
+
+@group(0) @binding(10) var material_albedo: texture_2d_array<f32>;
+@group(0) @binding(11) var material_normal: texture_2d_array<f32>;
+@group(0) @binding(12) var material_sampler: sampler;
+
+struct MaterialSurface {
+    albedo: vec3<f32>,
+    normal: vec3<f32>,
+}
+
+// Texture coordinates of one projection and their screen derivatives.
+struct Projection {
+    uv: vec2<f32>,
+    ddx: vec2<f32>,
+    ddy: vec2<f32>,
+}
+
+// One material's share: its albedo and normal bend weighted by `wm` and the projections'
+// blend, and the weight it took (projections of negligible blend are not sampled; the
+// explicit gradients make that branch legal).
+struct MaterialShare {
+    albedo: vec3<f32>,
+    bend: vec3<f32>,
+    weight: f32,
+}
+
+fn material_share(m: i32, wm: f32, blend: vec3<f32>, top: Projection, side_x: Projection, side_z: Projection) -> MaterialShare {
+    var share = MaterialShare(vec3<f32>(0.0, 0.0, 0.0), vec3<f32>(0.0, 0.0, 0.0), 0.0);
+    if wm <= 0.002 {
+        return share;
+    }
+    if blend.y > 0.01 {
+        let k = wm * blend.y;
+        share.albedo += k * textureSampleGrad(material_albedo, material_sampler, top.uv, m, top.ddx, top.ddy).rgb;
+        let t = textureSampleGrad(material_normal, material_sampler, top.uv, m, top.ddx, top.ddy).xy * 2.0 - 1.0;
+        share.bend += k * vec3<f32>(t.x, 0.0, t.y);
+        share.weight += k;
+    }
+    if blend.x > 0.01 {
+        let k = wm * blend.x;
+        share.albedo += k * textureSampleGrad(material_albedo, material_sampler, side_x.uv, m, side_x.ddx, side_x.ddy).rgb;
+        let t = textureSampleGrad(material_normal, material_sampler, side_x.uv, m, side_x.ddx, side_x.ddy).xy * 2.0 - 1.0;
+        share.bend += k * vec3<f32>(0.0, t.y, t.x);
+        share.weight += k;
+    }
+    if blend.z > 0.01 {
+        let k = wm * blend.z;
+        share.albedo += k * textureSampleGrad(material_albedo, material_sampler, side_z.uv, m, side_z.ddx, side_z.ddy).rgb;
+        let t = textureSampleGrad(material_normal, material_sampler, side_z.uv, m, side_z.ddx, side_z.ddy).xy * 2.0 - 1.0;
+        share.bend += k * vec3<f32>(t.x, t.y, 0.0);
+        share.weight += k;
+    }
+    return share;
+}
+
+// `w`: the materials' weights; `top`, `side_x`, `side_z`: the three projections; `n`: the
+// surface normal. Written without loops: software rasterisers compile loops over texture
+// samples, inlined into a surface's own loops, very slowly.
+fn material_surface(w: vec4<f32>, top: Projection, side_x: Projection, side_z: Projection, n: vec3<f32>, strength: f32) -> MaterialSurface {
+    var blend = pow(abs(n), vec3<f32>(4.0, 4.0, 4.0));
+    blend = blend / (blend.x + blend.y + blend.z);
+    let s0 = material_share(0, w.x, blend, top, side_x, side_z);
+    let s1 = material_share(1, w.y, blend, top, side_x, side_z);
+    let s2 = material_share(2, w.z, blend, top, side_x, side_z);
+    let s3 = material_share(3, w.w, blend, top, side_x, side_z);
+    let albedo = s0.albedo + s1.albedo + s2.albedo + s3.albedo;
+    let bend = s0.bend + s1.bend + s2.bend + s3.bend;
+    // Shares skipped leave the weights short of 1: renormalise.
+    let total = s0.weight + s1.weight + s2.weight + s3.weight;
+    return MaterialSurface(albedo / max(total, 1e-4), normalize(n + strength * bend));
+}

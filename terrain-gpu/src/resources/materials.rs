@@ -1,0 +1,329 @@
+//! [`GpuMaterials`]: the surface materials' images as two texture arrays (albedo as sRGB
+//! bytes, tangent-space normals) with their mip chains and one repeating sampler, bound by every
+//! terrain renderer at 10, 11 and 12. [`MaterialStyle`] and [`SurfaceShading`] choose, per
+//! [`crate::TerrainStyle`], whether a frame is shaded by the height ramp or by the materials,
+//! weighted by the autoshader (`terrain_core::material`).
+//!
+//! Textures rather than storage buffers (unlike the heights): the images are only sampled,
+//! and hardware filtering with mips is what keeps a repeated image from shimmering far away.
+
+use crate::device::scope::scoped;
+use crate::error::GpuError;
+use terrain_core::{AutoshadeParams, CoreError, MATERIALS, MaterialImages, MaterialTextures};
+
+/// How the renderers colour the surface.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
+pub enum SurfaceShading {
+    /// A colour ramp over height, rock on steep slopes: no images, the cheapest.
+    #[default]
+    Ramp,
+    /// The four materials' images ([`GpuMaterials`]), weighted by the autoshader from height,
+    /// slope and curvature, projected from three sides on steep ground.
+    Materials,
+}
+
+/// How the materials are laid on the surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields, default))]
+pub struct MaterialStyle {
+    /// Metres one material image covers before it repeats.
+    pub scale_m: f32,
+    /// How strongly the images' normals bend the surface's (0: not at all; at most 4).
+    pub normal_strength: f32,
+    /// Where each material goes.
+    pub autoshade: AutoshadeParams,
+}
+
+impl Default for MaterialStyle {
+    fn default() -> Self {
+        Self {
+            scale_m: 4.0,
+            normal_strength: 0.6,
+            autoshade: AutoshadeParams::default(),
+        }
+    }
+}
+
+impl MaterialStyle {
+    /// Fails on a repeat outside (0, 1e6] m, a strength outside [0, 4] or bad autoshade edges.
+    pub fn validate(&self) -> Result<(), GpuError> {
+        if !(self.scale_m > 0.0 && self.scale_m <= 1e6) {
+            return Err(CoreError::OutOfRange {
+                what: "material scale_m",
+                value: f64::from(self.scale_m),
+                expected: "metres in (0, 1e6]",
+            }
+            .into());
+        }
+        if !(0.0..=4.0).contains(&self.normal_strength) {
+            return Err(CoreError::OutOfRange {
+                what: "material normal_strength",
+                value: f64::from(self.normal_strength),
+                expected: "0 to 4",
+            }
+            .into());
+        }
+        Ok(self.autoshade.validate()?)
+    }
+}
+
+/// Side of the procedural images [`GpuMaterials::procedural`] makes.
+pub const PROCEDURAL_MATERIAL_SIZE: u32 = 128;
+
+/// The materials on the GPU (see the module docs). Cloning shares the textures.
+#[derive(Debug, Clone)]
+pub struct GpuMaterials {
+    albedo: wgpu::TextureView,
+    normal: wgpu::TextureView,
+    sampler: wgpu::Sampler,
+    bytes: u64,
+}
+
+impl GpuMaterials {
+    /// Uploads `textures` with their mip chains (albedo averaged in linear light).
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        textures: &MaterialTextures,
+    ) -> Result<Self, GpuError> {
+        let size = textures.size();
+        let max = device.limits().max_texture_dimension_2d;
+        if size > max {
+            return Err(CoreError::OutOfRange {
+                what: "material image side",
+                value: f64::from(size),
+                expected: "at most the device's max_texture_dimension_2d",
+            }
+            .into());
+        }
+        let mips = size.ilog2() + 1;
+        // Every layer's mip chain, level by level.
+        let chains: Vec<Vec<MaterialImages>> = textures
+            .layers()
+            .iter()
+            .map(|layer| {
+                let mut chain = vec![layer.clone()];
+                for level in 1..mips {
+                    let above = &chain[level as usize - 1];
+                    chain.push(above.downsample(size >> (level - 1)));
+                }
+                chain
+            })
+            .collect();
+        let make = |label, format, pick: fn(&MaterialImages) -> &Vec<[u8; 4]>| {
+            let texture = scoped(device, label, || {
+                device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d {
+                        width: size,
+                        height: size,
+                        depth_or_array_layers: MATERIALS as u32,
+                    },
+                    mip_level_count: mips,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                    view_formats: &[],
+                })
+            })?;
+            for (layer, chain) in chains.iter().enumerate() {
+                for (level, images) in chain.iter().enumerate() {
+                    let side = (size >> level).max(1);
+                    queue.write_texture(
+                        wgpu::TexelCopyTextureInfo {
+                            texture: &texture,
+                            mip_level: level as u32,
+                            origin: wgpu::Origin3d {
+                                x: 0,
+                                y: 0,
+                                z: layer as u32,
+                            },
+                            aspect: wgpu::TextureAspect::All,
+                        },
+                        bytemuck::cast_slice(pick(images)),
+                        wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(4 * side),
+                            rows_per_image: Some(side),
+                        },
+                        wgpu::Extent3d {
+                            width: side,
+                            height: side,
+                            depth_or_array_layers: 1,
+                        },
+                    );
+                }
+            }
+            Ok::<_, GpuError>(texture.create_view(&wgpu::TextureViewDescriptor {
+                label: Some(label),
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            }))
+        };
+        let albedo = make(
+            "material albedo",
+            // The renderers shade in display-referred values (target_color.wgsl): the sRGB
+            // bytes are read as they are, not decoded to linear.
+            wgpu::TextureFormat::Rgba8Unorm,
+            |i| &i.albedo,
+        )?;
+        let normal = make("material normals", wgpu::TextureFormat::Rgba8Unorm, |i| {
+            &i.normal
+        })?;
+        // Anisotropic filtering where the adapter has it: the images are seen at grazing
+        // angles most of the time.
+        let anisotropic = device.adapter_info().device_type.ne(&wgpu::DeviceType::Cpu);
+        let sampler = scoped(device, "material sampler", || {
+            device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("material sampler"),
+                address_mode_u: wgpu::AddressMode::Repeat,
+                address_mode_v: wgpu::AddressMode::Repeat,
+                address_mode_w: wgpu::AddressMode::Repeat,
+                mag_filter: wgpu::FilterMode::Linear,
+                min_filter: wgpu::FilterMode::Linear,
+                mipmap_filter: wgpu::MipmapFilterMode::Linear,
+                anisotropy_clamp: if anisotropic { 8 } else { 1 },
+                ..Default::default()
+            })
+        })?;
+        // Two RGBA8 arrays with mip chains (4/3 of the top level).
+        let bytes = 2 * MATERIALS as u64 * 4 * u64::from(size) * u64::from(size) * 4 / 3;
+        Ok(Self {
+            albedo,
+            normal,
+            sampler,
+            bytes,
+        })
+    }
+
+    /// The project's procedural materials ([`MaterialTextures::procedural`] at
+    /// [`PROCEDURAL_MATERIAL_SIZE`]); what a renderer draws with until given others. The
+    /// images are made once per process.
+    pub fn procedural(device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Self, GpuError> {
+        static IMAGES: std::sync::OnceLock<Result<MaterialTextures, CoreError>> =
+            std::sync::OnceLock::new();
+        let textures = IMAGES
+            .get_or_init(|| MaterialTextures::procedural(PROCEDURAL_MATERIAL_SIZE))
+            .as_ref()
+            .map_err(|e| GpuError::Core(e.clone()))?;
+        Self::new(device, queue, textures)
+    }
+
+    /// GPU bytes of the images and their mips.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
+    /// The bind group entries at 10, 11 and 12 of every terrain pipeline.
+    pub(crate) fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 3] {
+        [
+            wgpu::BindGroupEntry {
+                binding: 10,
+                resource: wgpu::BindingResource::TextureView(&self.albedo),
+            },
+            wgpu::BindGroupEntry {
+                binding: 11,
+                resource: wgpu::BindingResource::TextureView(&self.normal),
+            },
+            wgpu::BindGroupEntry {
+                binding: 12,
+                resource: wgpu::BindingResource::Sampler(&self.sampler),
+            },
+        ]
+    }
+}
+
+/// The materials a renderer binds: the caller's ([`MaterialSlot::set`]), or the procedural
+/// set made on its first frame.
+#[derive(Debug, Default)]
+pub(crate) struct MaterialSlot {
+    materials: Option<GpuMaterials>,
+    /// Set since the renderer last bound them.
+    changed: bool,
+}
+
+impl MaterialSlot {
+    /// Binds `materials` from the next frame on.
+    pub(crate) fn set(&mut self, materials: &GpuMaterials) {
+        self.materials = Some(materials.clone());
+        self.changed = true;
+    }
+
+    /// The materials to bind (made on first use; a clone shares the textures), and whether
+    /// they changed since the last call (the bind group must be made again).
+    pub(crate) fn get(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<(GpuMaterials, bool), GpuError> {
+        let changed = std::mem::take(&mut self.changed);
+        let materials = match self.materials.take() {
+            Some(m) => m,
+            None => GpuMaterials::procedural(device, queue)?,
+        };
+        Ok((self.materials.insert(materials).clone(), changed))
+    }
+}
+
+/// The layout entries of [`GpuMaterials::entries`] (fragment stage).
+pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 3] {
+    let texture = |binding| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            view_dimension: wgpu::TextureViewDimension::D2Array,
+            multisampled: false,
+        },
+        count: None,
+    };
+    [
+        texture(10),
+        texture(11),
+        wgpu::BindGroupLayoutEntry {
+            binding: 12,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+            count: None,
+        },
+    ]
+}
+
+/// The frame uniform's material fields: the camera's whole texel's place in the images'
+/// repeat and the repeats per metre, the strength; the autoshade edges; the dirt edges and
+/// whether materials shade. Computed in f64 so the repeat stays exact far from the origin.
+pub(crate) fn frame_fields(
+    shading: SurfaceShading,
+    style: &MaterialStyle,
+    camera_texel: [i32; 2],
+    texel_size: f32,
+) -> Result<[[f32; 4]; 3], GpuError> {
+    style.validate()?;
+    let per_m = 1.0 / f64::from(style.scale_m);
+    let origin = |t: i32| (f64::from(t) * f64::from(texel_size) * per_m).rem_euclid(1.0) as f32;
+    let a = style.autoshade;
+    Ok([
+        [
+            origin(camera_texel[0]),
+            origin(camera_texel[1]),
+            per_m as f32,
+            style.normal_strength,
+        ],
+        [
+            a.rock_slope.0,
+            a.rock_slope.1,
+            a.snow_height.0,
+            a.snow_height.1,
+        ],
+        [
+            a.dirt_curvature.0,
+            a.dirt_curvature.1,
+            f32::from(u8::from(shading == SurfaceShading::Materials)),
+            0.0,
+        ],
+    ])
+}

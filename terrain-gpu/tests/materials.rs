@@ -1,0 +1,397 @@
+//! Material shading: the autoshader's weights and curvature on the GPU equal
+//! terrain_core::material's, and every LOD mode draws a frame's flat lowland as grass, its
+//! cliff as rock and its flat highland as snow, in the colours of the material images it was
+//! given; the procedural images show texture where the ramp is flat.
+
+use glam::{UVec2, Vec2, Vec3, Vec4};
+use terrain_core::{
+    AutoshadeParams, CoarseMap, Grid, HeightEncoding, MATERIALS, MaterialImages, MaterialTextures,
+    WrapMode, autoshade_weights, curvature_from_derivatives,
+};
+use terrain_gpu::testing::context_or_skip;
+use terrain_gpu::{
+    ClipmapSurface, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuMaterials, MaterialStyle,
+    NormalPass, OffscreenTarget, SurfaceShading, TargetFormat, TerrainRenderer, TerrainStyle,
+    TerrainView, ViewMatrices,
+};
+use terrain_lod::{CdlodConfig, ClipmapLayout, LodMetric, TessConfig};
+use wgpu::util::DeviceExt;
+
+/// Probe input as materials_probe.wgsl reads it.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ProbePoint {
+    a: [f32; 4],
+    b: [f32; 4],
+    c: [f32; 4],
+}
+
+/// Runs the probe over `points` with `params`; per point the weights and the curvature.
+fn probe(ctx: &GpuContext, params: &AutoshadeParams, points: &[ProbePoint]) -> Vec<[Vec4; 2]> {
+    let device = &ctx.device;
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("material probe"),
+        source: wgpu::ShaderSource::Wgsl(terrain_shaders::MATERIAL_PROBE.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("material probe"),
+        layout: None,
+        module: &module,
+        entry_point: Some("probe_main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let uniform = [
+        params.rock_slope.0,
+        params.rock_slope.1,
+        params.snow_height.0,
+        params.snow_height.1,
+        params.dirt_curvature.0,
+        params.dirt_curvature.1,
+        f32::from_bits(points.len() as u32),
+        0.0,
+    ];
+    let init = |contents: &[u8], usage| {
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents,
+            usage,
+        })
+    };
+    let uniform = init(bytemuck::cast_slice(&uniform), wgpu::BufferUsages::UNIFORM);
+    let input = init(bytemuck::cast_slice(points), wgpu::BufferUsages::STORAGE);
+    let out_bytes = (points.len() * 32) as u64;
+    let output = device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: out_bytes,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: None,
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: uniform.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: input.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: output.as_entire_binding(),
+            },
+        ],
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups((points.len() as u32).div_ceil(64), 1, 1);
+    }
+    ctx.queue.submit([encoder.finish()]);
+    let bytes = terrain_gpu::download_bytes(device, &ctx.queue, &output, 0, out_bytes)
+        .expect("probe output downloads");
+    let values: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+    values
+        .chunks_exact(2)
+        .map(|c| [Vec4::from(c[0]), Vec4::from(c[1])])
+        .collect()
+}
+
+/// Each weight is a product of at most three smoothsteps of a few f32 operations: conforming
+/// devices may fuse multiply-adds and divide within 2.5 ULP, a few ULP of 1.0 in all; the
+/// curvature is a difference of gradients of order 1 over 2 texel sizes.
+const WEIGHT_TOLERANCE: f32 = 1e-5;
+
+#[test]
+fn autoshade_weights_and_curvature_on_the_gpu_equal_the_cpu_reference() {
+    let Some(ctx) = context_or_skip("material probe") else {
+        return;
+    };
+    let params = AutoshadeParams::default();
+    // Every region of every smoothstep: below, across and above each pair of edges.
+    let mut points = Vec::new();
+    let mut seed = 0x1234_5678_u32;
+    let mut next = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 17;
+        seed ^= seed << 5;
+        (seed >> 8) as f32 / (1u32 << 24) as f32
+    };
+    for i in 0..2000 {
+        let t = next() * 1.2 - 0.1;
+        let slope = next() * 1.6;
+        let curvature = (next() - 0.5) * 0.4;
+        let texel = [0.25, 0.5, 1.0, 30.0][i % 4];
+        let g = |r: f32| (r - 0.5) * 3.0;
+        points.push(ProbePoint {
+            a: [t, slope, curvature, texel],
+            b: [g(next()), g(next()), g(next()), g(next())],
+            c: [g(next()), g(next()), g(next()), g(next())],
+        });
+    }
+    let gpu = probe(&ctx, &params, &points);
+    let mut worst = (0.0f32, 0.0f32);
+    for (p, [w, c]) in points.iter().zip(&gpu) {
+        let expected = autoshade_weights(&params, p.a[0], p.a[1], p.a[2]);
+        let curvature = curvature_from_derivatives(
+            Vec2::new(p.b[0], p.b[1]),
+            Vec2::new(p.b[2], p.b[3]),
+            Vec2::new(p.c[0], p.c[1]),
+            Vec2::new(p.c[2], p.c[3]),
+            p.a[3],
+        );
+        worst.0 = worst.0.max((*w - expected).abs().max_element());
+        worst.1 = worst
+            .1
+            .max((c.x - curvature).abs() / curvature.abs().max(1.0));
+    }
+    eprintln!(
+        "largest differences: weights {:e}, curvature {:e}",
+        worst.0, worst.1
+    );
+    assert!(
+        worst.0 <= WEIGHT_TOLERANCE,
+        "weights differ by {:e}",
+        worst.0
+    );
+    assert!(
+        worst.1 <= WEIGHT_TOLERANCE,
+        "curvature differs by {:e}",
+        worst.1
+    );
+    ctx.check().expect("no GPU validation errors");
+}
+
+const SIZE: UVec2 = UVec2::new(320, 180);
+const MAP: u32 = 256;
+/// The lowland's and the highland's heights; the ramp spans 0..40 m.
+const LOW: f32 = 2.0;
+const HIGH: f32 = 38.0;
+/// The cliff between them rises over these columns (slope 36 / 16 = 2.25: all rock).
+const CLIFF: (u32, u32) = (120, 136);
+
+/// Lowland west of the cliff, highland east of it; the same along z.
+fn cliff_map() -> CoarseMap {
+    let enc = HeightEncoding::spanning::<u16>(0.0, 40.0).expect("range");
+    let grid = Grid::from_fn(MAP, MAP, |x, _| {
+        let f = ((x as f32 - CLIFF.0 as f32) / (CLIFF.1 - CLIFF.0) as f32).clamp(0.0, 1.0);
+        enc.to_raw(LOW + (HIGH - LOW) * f).round() as u16
+    })
+    .expect("grid");
+    CoarseMap::new(grid, enc, 1.0, WrapMode::Clamp).expect("map")
+}
+
+/// Solid-colour materials (flat normals), one distinct colour each.
+const SOLID: [[u8; 4]; MATERIALS] = [
+    [200, 40, 40, 255],
+    [40, 200, 40, 255],
+    [40, 40, 200, 255],
+    [220, 220, 60, 255],
+];
+
+fn solid_materials() -> MaterialTextures {
+    let layers = SOLID
+        .iter()
+        .map(|&c| MaterialImages {
+            albedo: vec![c; 16 * 16],
+            normal: vec![[128, 128, 255, 255]; 16 * 16],
+        })
+        .collect();
+    MaterialTextures::new(16, layers).expect("valid images")
+}
+
+/// The mean and the mean absolute deviation (sRGB bytes) of the pixels over map columns
+/// `columns` (rows 30 to 30 from the bottom), in the top-down view of [`draw`].
+fn region(image: &Grid<[u8; 4]>, columns: (u32, u32)) -> (Vec3, f32) {
+    // The orthographic view spans map x 0..256 across the 320 pixels (0.8 m a pixel).
+    let px = |x: u32| (x as f32 * SIZE.x as f32 / MAP as f32) as u32;
+    let mut pixels = Vec::new();
+    for y in 30..SIZE.y - 30 {
+        for x in px(columns.0)..px(columns.1) {
+            let p = image.get(x, y).expect("inside");
+            pixels.push(Vec3::new(p[0].into(), p[1].into(), p[2].into()));
+        }
+    }
+    let mean = pixels.iter().sum::<Vec3>() / pixels.len() as f32;
+    let spread = pixels
+        .iter()
+        .map(|p| (*p - mean).abs().element_sum() / 3.0)
+        .sum::<f32>()
+        / pixels.len() as f32;
+    (mean, spread)
+}
+
+/// One top-down frame of `renderer` over `map` with `shading`.
+fn draw(
+    ctx: &GpuContext,
+    renderer: &mut TerrainRenderer,
+    gpu: &(GpuHeightMap<u16>, GpuDerivativeMap),
+    shading: SurfaceShading,
+) -> Grid<[u8; 4]> {
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let target = OffscreenTarget::new(device, SIZE).expect("target");
+    // Straight down on the map's middle, 256 m x 144 m.
+    let view = ViewMatrices {
+        view: glam::camera::rh::view::look_to_mat4(
+            Vec3::new(128.0, 300.0, 128.0),
+            Vec3::NEG_Y,
+            // Screen right is world +X.
+            Vec3::NEG_Z,
+        ),
+        projection: glam::camera::rh::proj::directx::orthographic(
+            -128.0, 128.0, -72.0, 72.0, 1.0, 1000.0,
+        ),
+    };
+    let style = TerrainStyle {
+        ramp: (0.0, 40.0),
+        // From the west: the cliff (facing west) and the flats are both lit, and the flats'
+        // specular reflection points away from the camera.
+        light_dir: Vec3::new(-0.8, 0.6, 0.0),
+        shading,
+        materials: MaterialStyle {
+            scale_m: 8.0,
+            ..MaterialStyle::default()
+        },
+        ..TerrainStyle::default()
+    };
+    let terrain_view = TerrainView {
+        surface: ClipmapSurface::Coarse {
+            map: &gpu.0,
+            normals: &gpu.1,
+        },
+        camera: &view,
+        style: &style,
+        target_size: SIZE,
+    };
+    let mut encoder = device.create_command_encoder(&Default::default());
+    renderer
+        .prepare(device, queue, &mut encoder, &terrain_view)
+        .expect("prepare");
+    {
+        let mut pass = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
+        renderer.draw(&mut pass);
+    }
+    queue.submit([encoder.finish()]);
+    renderer.recall();
+    let image = target.read_rgba8(device, queue).expect("read back");
+    ctx.check().expect("no GPU validation errors");
+    image
+}
+
+fn renderers(ctx: &GpuContext, map: &CoarseMap) -> Vec<TerrainRenderer> {
+    let (device, queue, format) = (&ctx.device, &ctx.queue, &TargetFormat::CAPTURE);
+    let cdlod = CdlodConfig {
+        leaf_size: 16,
+        grid_size: 16,
+        lod_count: 4,
+        metric: LodMetric::Distance,
+        ..CdlodConfig::default()
+    };
+    let layout = ClipmapLayout::new(63, 4).expect("layout");
+    vec![
+        TerrainRenderer::clipmap(device, format, layout, (0.0, 40.0)).expect("clipmap"),
+        TerrainRenderer::cdlod(device, format, map, cdlod).expect("cdlod"),
+        TerrainRenderer::tessellated(device, queue, format, map, TessConfig::default(), true)
+            .expect("tessellated"),
+    ]
+}
+
+fn upload(ctx: &GpuContext, map: &CoarseMap) -> (GpuHeightMap<u16>, GpuDerivativeMap) {
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let heights = GpuHeightMap::from_map(device, queue, map).expect("heights");
+    let normals = GpuDerivativeMap::for_map(device, &heights).expect("normals");
+    let mut pass = NormalPass::new(device).expect("normal pass");
+    let mut encoder = device.create_command_encoder(&Default::default());
+    pass.encode_full(device, queue, &mut encoder, &heights, &normals)
+        .expect("normals");
+    queue.submit([encoder.finish()]);
+    (heights, normals)
+}
+
+/// A solid material's colour lit by diffuse `diffuse` (the shader's 0.28 ambient + 0.8
+/// diffuse), in bytes: the renderers shade the images' sRGB values as they are.
+fn lit(material: usize, diffuse: f32) -> Vec3 {
+    let c = SOLID[material];
+    Vec3::new(c[0].into(), c[1].into(), c[2].into()) * (0.28 + 0.8 * diffuse)
+}
+
+/// Texture filtering of a constant image returns the constant within the filter's weight
+/// precision, and the 8-bit output rounds once: a few sRGB steps cover any conforming device.
+const COLOUR_TOLERANCE: f32 = 4.0;
+
+#[test]
+fn every_lod_mode_shades_lowland_grass_cliff_rock_and_highland_snow() {
+    let Some(ctx) = context_or_skip("material shading") else {
+        return;
+    };
+    let map = cliff_map();
+    let gpu = upload(&ctx, &map);
+    let solid = GpuMaterials::new(&ctx.device, &ctx.queue, &solid_materials()).expect("upload");
+    let l = Vec3::new(-0.8, 0.6, 0.0).normalize();
+    // The cliff's normal: slope 36 m over 16 m rising eastwards.
+    let cliff_n = Vec3::new(-36.0 / 16.0, 1.0, 0.0).normalize();
+    let expected = [
+        ((20, 100), lit(0, l.y)),
+        ((124, 132), lit(2, cliff_n.dot(l))),
+        ((156, 236), lit(3, l.y)),
+    ];
+    for mut renderer in renderers(&ctx, &map) {
+        let mode = renderer.mode();
+        renderer.set_materials(&solid);
+        let image = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Materials);
+        let ramp = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Ramp);
+        for (columns, want) in expected {
+            let (mean, _) = region(&image, columns);
+            let (ramp_mean, _) = region(&ramp, columns);
+            eprintln!("{mode} {columns:?}: {mean} (want {want}; ramp {ramp_mean})");
+            assert!(
+                (mean - want).abs().max_element() <= COLOUR_TOLERANCE,
+                "{mode}: columns {columns:?} are {mean}, not the material's {want}"
+            );
+            // The ramp draws something else: the test sees the materials, not the ramp.
+            assert!(
+                (ramp_mean - want).abs().max_element() > 20.0,
+                "{mode}: {columns:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_procedural_materials_show_texture_where_the_ramp_is_flat() {
+    let Some(ctx) = context_or_skip("procedural materials") else {
+        return;
+    };
+    let map = cliff_map();
+    let gpu = upload(&ctx, &map);
+    let mut renderer = renderers(&ctx, &map).swap_remove(0);
+    let image = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Materials);
+    let ramp = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Ramp);
+    let procedural = MaterialTextures::procedural(terrain_gpu::PROCEDURAL_MATERIAL_SIZE)
+        .expect("procedural images");
+    for (columns, material) in [((20, 100), 0), ((156, 236), 3)] {
+        let (mean, spread) = region(&image, columns);
+        let (_, ramp_spread) = region(&ramp, columns);
+        eprintln!("{columns:?}: mean {mean}, spread {spread} (ramp {ramp_spread})");
+        assert!(ramp_spread < 0.5, "the ramp is flat on flat ground");
+        // At 0.8 m a pixel the 8 m images are seen through their small mips: little but
+        // clear texture.
+        assert!(
+            spread > 0.5 && spread > 4.0 * ramp_spread,
+            "{columns:?}: no texture (spread {spread}, ramp {ramp_spread})"
+        );
+        // From afar the material's mean colour shows, lit (its normals tilt the light a
+        // little, hence the wide margin).
+        let albedo = procedural.mean_albedo(material).expect("layer");
+        let want = albedo * 255.0 * (0.28 + 0.8 * 0.6);
+        assert!(
+            (mean - want).abs().max_element() <= 16.0,
+            "{columns:?}: {mean} against the material's {want}"
+        );
+    }
+}
