@@ -134,7 +134,8 @@ macro_rules! clipmap_coarse {
             renderer_head!(),
             include_str!("wgsl/render/clipmap_no_detail.wgsl"),
             include_str!("wgsl/render/clipmap.wgsl"),
-            include_str!("wgsl/render/clipmap_surface_coarse.wgsl")
+            include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
+            include_str!("wgsl/render/surface_curvature_heights.wgsl")
         )
     };
 }
@@ -147,7 +148,8 @@ macro_rules! clipmap_atlas {
             include_str!("wgsl/render/clipmap_no_detail.wgsl"),
             include_str!("wgsl/render/clipmap.wgsl"),
             include_str!("wgsl/resources/tile_atlas.wgsl"),
-            include_str!("wgsl/render/clipmap_surface_atlas.wgsl")
+            include_str!("wgsl/render/clipmap_surface_atlas.wgsl"),
+            include_str!("wgsl/render/surface_curvature_atlas.wgsl")
         )
     };
 }
@@ -161,7 +163,8 @@ macro_rules! clipmap_detail {
             include_str!("wgsl/resources/detail_tiles.wgsl"),
             include_str!("wgsl/render/clipmap_detail_parallax.wgsl"),
             include_str!("wgsl/render/clipmap.wgsl"),
-            include_str!("wgsl/render/clipmap_surface_coarse.wgsl")
+            include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
+            include_str!("wgsl/render/surface_curvature_heights.wgsl")
         )
     };
 }
@@ -215,7 +218,8 @@ pub const CLIPMAP_GRANULAR: &str = concat!(
     renderer_head!(),
     include_str!("wgsl/render/clipmap_no_detail.wgsl"),
     include_str!("wgsl/render/clipmap.wgsl"),
-    include_str!("wgsl/render/clipmap_surface_granular.wgsl")
+    include_str!("wgsl/render/clipmap_surface_granular.wgsl"),
+    include_str!("wgsl/render/surface_curvature_heights.wgsl")
 );
 
 /// `ClipmapRenderer` over a tile atlas (`GpuTileAtlas`): heights from the finest resident level
@@ -237,6 +241,7 @@ pub const REFINE: &str = concat!(
     include_str!("wgsl/render/clipmap_detail_refined.wgsl"),
     include_str!("wgsl/render/clipmap.wgsl"),
     include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
+    include_str!("wgsl/render/surface_curvature_heights.wgsl"),
     include_str!("wgsl/render/refine.wgsl")
 );
 

@@ -75,7 +75,7 @@ pub use map::{
 };
 pub use material::{
     AutoshadeParams, MATERIALS, MaterialImages, MaterialTextures, autoshade_weights,
-    curvature_from_derivatives,
+    curvature_from_gradients, curvature_from_heights,
 };
 pub use normals::{
     DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal, derivative_at,

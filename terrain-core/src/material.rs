@@ -3,8 +3,8 @@
 //! Four materials (grass, dirt, rock, snow) are blended per fragment by weights that sum to 1.
 //! Without a material layer the weights come from the autoshader ([`autoshade_weights`]):
 //! bare rock on steep slopes, snow above a height, dirt where the ground bends sharply (crater
-//! rims and floors, gullies), grass elsewhere. Slope and curvature come from the
-//! partial-derivative normal map (Flower 2010, eq. 3.3), so a deformation that changes the
+//! walls, gullies), grass elsewhere. The slope comes from the partial-derivative normal map
+//! (Flower 2010, eq. 3.3), the curvature from the heights, so a deformation that changes the
 //! shape also changes what the ground shows. The renderers' WGSL (`materials.wgsl` in
 //! terrain-shaders) evaluates the same formulas, operation for operation; a GPU test compares
 //! the two.
@@ -39,6 +39,9 @@ pub struct AutoshadeParams {
     /// Curvature magnitudes (1/m: the Laplacian of the heights) over which dirt shows through
     /// grass and snow.
     pub dirt_curvature: (f32, f32),
+    /// How far apart (metres) the heights the curvature is measured from lie; the renderers
+    /// round it to whole texels, from one to six. Larger spacings see only larger features.
+    pub curvature_spacing_m: f32,
 }
 
 impl Default for AutoshadeParams {
@@ -46,7 +49,11 @@ impl Default for AutoshadeParams {
         Self {
             rock_slope: (0.6, 1.1),
             snow_height: (0.62, 0.8),
-            dirt_curvature: (0.04, 0.16),
+            // The demo's procedural ground at 0.1 m texels has |curvature| over 0.27 /m at one
+            // point in ten and over 0.44 at one in a hundred (0.5 m apart); a Gaussian
+            // crater's walls reach 0.6 to 3.
+            dirt_curvature: (0.35, 0.9),
+            curvature_spacing_m: 0.5,
         }
     }
 }
@@ -65,13 +72,21 @@ impl AutoshadeParams {
                     return Err(CoreError::NonFinite { what, value: v });
                 }
             }
-            if lo < 0.0 || hi <= lo {
+            if lo < 0.0 || hi <= lo || hi > 1e6 {
                 return Err(CoreError::OutOfRange {
                     what,
                     value: f64::from(hi),
-                    expected: "a pair of edges with 0 <= low < high",
+                    expected: "a pair of edges with 0 <= low < high <= 1e6",
                 });
             }
+        }
+        let spacing = self.curvature_spacing_m;
+        if !(spacing > 0.0 && spacing <= 1e6) {
+            return Err(CoreError::OutOfRange {
+                what: "autoshade curvature_spacing_m",
+                value: f64::from(spacing),
+                expected: "metres in (0, 1e6]",
+            });
         }
         Ok(())
     }
@@ -101,10 +116,24 @@ pub fn autoshade_weights(params: &AutoshadeParams, t: f32, slope: f32, curvature
     Vec4::new(open - dirt, dirt, rock, snow)
 }
 
-/// The Laplacian of the heights (1/m) inside a texel cell from the gradients (metres per
-/// metre) at its four corners `d00, d10, d01, d11` (x then z), `texel_size` metres apart:
-/// what the renderers feed [`autoshade_weights`] as curvature.
-pub fn curvature_from_derivatives(
+/// The Laplacian of the heights (1/m): `centre` and its four neighbours `spacing_m` metres
+/// away along x (`x_minus`, `x_plus`) and z (`z_minus`, `z_plus`), all in metres. What the
+/// renderers feed [`autoshade_weights`] as curvature, with the neighbours
+/// [`AutoshadeParams::curvature_spacing_m`] apart (at least one texel): heights, not the
+/// 8-bit slope codes, whose steps would show as curvature noise on fine texels.
+pub fn curvature_from_heights(
+    centre: f32,
+    [x_minus, x_plus, z_minus, z_plus]: [f32; 4],
+    spacing_m: f32,
+) -> f32 {
+    ((x_minus + x_plus) + (z_minus + z_plus) - 4.0 * centre) / (spacing_m * spacing_m)
+}
+
+/// The Laplacian (1/m) inside a texel cell from the gradients (metres per metre) at its
+/// corners `d00, d10, d01, d11` (x then z), `texel_size` metres apart: the curvature on
+/// surfaces whose gradients are exact differences of their heights (a streamed world's atlas),
+/// where reading more heights costs more than these four gradients.
+pub fn curvature_from_gradients(
     d00: Vec2,
     d10: Vec2,
     d01: Vec2,
@@ -397,7 +426,7 @@ mod tests {
             assert!((w.element_sum() - 1.0).abs() < 1e-6, "{w}");
         }
         assert_eq!(autoshade_weights(&p, 0.1, 0.0, 0.0), Vec4::X);
-        assert_eq!(autoshade_weights(&p, 0.1, 0.0, 0.5), Vec4::Y);
+        assert_eq!(autoshade_weights(&p, 0.1, 0.0, 2.0), Vec4::Y);
         assert_eq!(autoshade_weights(&p, 0.1, 3.0, 0.0), Vec4::Z);
         assert_eq!(autoshade_weights(&p, 0.95, 0.0, 0.0), Vec4::W);
     }
@@ -412,6 +441,11 @@ mod tests {
         assert!(p.validate().is_err());
         p.rock_slope = (-1.0, 1.0);
         assert!(p.validate().is_err());
+        p = AutoshadeParams::default();
+        for spacing in [0.0, -1.0, f32::NAN, f32::INFINITY, 1e7] {
+            p.curvature_spacing_m = spacing;
+            assert!(p.validate().is_err(), "{spacing}");
+        }
         for size in [0, 3, 100, 8192, u32::MAX] {
             assert!(MaterialTextures::procedural(size).is_err(), "{size}");
         }
@@ -424,11 +458,18 @@ mod tests {
 
     #[test]
     fn curvature_of_a_paraboloid_is_its_laplacian() {
-        // h = a (x^2 + z^2): gradient (2ax, 2az), Laplacian 4a.
+        // h = a (x^2 + z^2): Laplacian 4a at any point and spacing.
         let a = 0.3;
-        let s = 0.5;
+        let h = |x: f32, z: f32| a * (x * x + z * z);
+        let (x, z, s) = (1.5, -2.0, 0.5);
+        let c = curvature_from_heights(
+            h(x, z),
+            [h(x - s, z), h(x + s, z), h(x, z - s), h(x, z + s)],
+            s,
+        );
+        assert!((c - 4.0 * a).abs() < 1e-4, "{c}");
         let g = |x: f32, z: f32| Vec2::new(2.0 * a * x, 2.0 * a * z);
-        let c = curvature_from_derivatives(g(0.0, 0.0), g(s, 0.0), g(0.0, s), g(s, s), s);
+        let c = curvature_from_gradients(g(0.0, 0.0), g(s, 0.0), g(0.0, s), g(s, s), s);
         assert!((c - 4.0 * a).abs() < 1e-5, "{c}");
     }
 

@@ -121,6 +121,22 @@ pub struct StyleParams {
     /// Heights (metres) the colour ramp spans; absent: the map's height range.
     #[schemars(with = "Option<[f32; 2]>")]
     pub ramp_m: Option<Vec2>,
+    /// `materials`: grass, dirt, rock and snow images placed by height, slope and curvature
+    /// (so craters and trails change what the ground shows); `ramp`: a colour ramp over
+    /// height, the cheapest.
+    pub shading: ShadingParam,
+    /// Metres one material image covers before it repeats.
+    pub material_scale_m: f32,
+}
+
+/// `style.shading`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum ShadingParam {
+    /// The material images, weighted by the autoshader.
+    Materials,
+    /// The height ramp.
+    Ramp,
 }
 
 impl Default for StyleParams {
@@ -131,6 +147,8 @@ impl Default for StyleParams {
             fog_color: style.fog_color,
             fog_density: None,
             ramp_m: None,
+            shading: ShadingParam::Materials,
+            material_scale_m: style.materials.scale_m,
         }
     }
 }
@@ -298,6 +316,7 @@ impl DemoParams {
                 bail!("style.ramp_m = [{}, {}]: low below high", r.x, r.y);
             }
         }
+        check("style.material_scale_m", st.material_scale_m)?;
         let cam = &self.camera;
         for (name, v) in [
             ("camera.walker_eye_height_m", cam.walker_eye_height_m),

@@ -147,6 +147,7 @@ pub const KEYS: &[Range] = &[
     closed("style.light_dir", -1e6, 1e6, "(not all 0)"),
     closed("style.fog_color", 0.0, 1.0, "linear RGB"),
     closed("style.fog_density", 0.0, 10.0, "per m"),
+    closed("style.material_scale_m", 0.01, 10_000.0, "m"),
     closed(
         "style.ramp_m",
         -MAX_HEIGHT_M,

@@ -169,6 +169,7 @@ const KEYS: &[(&str, &str)] = &[
     ("style", "fog_color = [0.5, 0.5, {v}]"),
     ("style", "fog_density = {v}"),
     ("style", "ramp_m = [0, {v}]"),
+    ("style", "material_scale_m = {v}"),
     ("camera", "walker_eye_height_m = {v}"),
     ("camera", "walker_behind_m = {v}"),
     ("camera", "walker_ahead_m = {v}"),
@@ -232,7 +233,7 @@ fn boundary_config_values_are_accepted() {
                [scheduler]\nquiet_gap_ms = 0\nmax_delay_ms = 0\nmerge_distance = 0\n\
                max_requests = 1\nrequest_timeout_ms = 1e-3\nmax_in_flight = 1\n\
                [style]\nlight_dir = [-1e6, -1e6, -1e6]\nfog_color = [0, 0, 0]\n\
-               fog_density = 0\nramp_m = [-100000, -99999]\n\
+               fog_density = 0\nramp_m = [-100000, -99999]\nmaterial_scale_m = 0.01\n\
                [camera]\nwalker_eye_height_m = 1e-30\nwalker_behind_m = 0\n\
                walker_ahead_m = 1e-30\norbit_pitch_deg = 0.001\norbit_period_s = 1e-30\n\
                flyover_period_s = 1e-30\nflyover_height = 1e-30\nflyover_pitch_deg = 0.001\n";
@@ -249,7 +250,8 @@ fn boundary_config_values_are_accepted() {
                 merge_distance = 65536\nmax_requests = 16\nrequest_timeout_ms = 600000\n\
                 max_in_flight = 16\n\
                 [style]\nlight_dir = [1e6, 1e6, 1e6]\nfog_color = [1, 1, 1]\n\
-                fog_density = 10\nramp_m = [99999, 100000]\n\
+                fog_density = 10\nramp_m = [99999, 100000]\nshading = \"ramp\"\n\
+                material_scale_m = 10000\n\
                 [camera]\nwalker_eye_height_m = 1000\nwalker_behind_m = 10000\n\
                 walker_ahead_m = 10000\norbit_pitch_deg = 89.999\norbit_period_s = 86400\n\
                 flyover_period_s = 86400\nflyover_height = 100\nflyover_pitch_deg = 89.999\n";

@@ -6,7 +6,7 @@
 use glam::{UVec2, Vec2, Vec3, Vec4};
 use terrain_core::{
     AutoshadeParams, CoarseMap, Grid, HeightEncoding, MATERIALS, MaterialImages, MaterialTextures,
-    WrapMode, autoshade_weights, curvature_from_derivatives,
+    WrapMode, autoshade_weights, curvature_from_gradients, curvature_from_heights,
 };
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
@@ -24,6 +24,8 @@ struct ProbePoint {
     a: [f32; 4],
     b: [f32; 4],
     c: [f32; 4],
+    d: [f32; 4],
+    e: [f32; 4],
 }
 
 /// Runs the probe over `points` with `params`; per point the weights and the curvature.
@@ -104,7 +106,8 @@ fn probe(ctx: &GpuContext, params: &AutoshadeParams, points: &[ProbePoint]) -> V
 
 /// Each weight is a product of at most three smoothsteps of a few f32 operations: conforming
 /// devices may fuse multiply-adds and divide within 2.5 ULP, a few ULP of 1.0 in all; the
-/// curvature is a difference of gradients of order 1 over 2 texel sizes.
+/// curvature is a sum of five heights divided by the spacing squared, within a few ULP of its
+/// terms' size.
 const WEIGHT_TOLERANCE: f32 = 1e-5;
 
 #[test]
@@ -125,30 +128,38 @@ fn autoshade_weights_and_curvature_on_the_gpu_equal_the_cpu_reference() {
     for i in 0..2000 {
         let t = next() * 1.2 - 0.1;
         let slope = next() * 1.6;
-        let curvature = (next() - 0.5) * 0.4;
-        let texel = [0.25, 0.5, 1.0, 30.0][i % 4];
+        let curvature = (next() - 0.5) * 2.4;
+        let spacing = [0.1, 0.5, 1.0, 30.0][i % 4];
+        // Heights of a 0..50 m terrain.
+        let h = |r: f32| r * 50.0;
         let g = |r: f32| (r - 0.5) * 3.0;
         points.push(ProbePoint {
-            a: [t, slope, curvature, texel],
-            b: [g(next()), g(next()), g(next()), g(next())],
-            c: [g(next()), g(next()), g(next()), g(next())],
+            a: [t, slope, curvature, spacing],
+            b: [h(next()), h(next()), h(next()), h(next())],
+            c: [h(next()), spacing, 0.0, 0.0],
+            d: [g(next()), g(next()), g(next()), g(next())],
+            e: [g(next()), g(next()), g(next()), g(next())],
         });
     }
     let gpu = probe(&ctx, &params, &points);
     let mut worst = (0.0f32, 0.0f32);
     for (p, [w, c]) in points.iter().zip(&gpu) {
         let expected = autoshade_weights(&params, p.a[0], p.a[1], p.a[2]);
-        let curvature = curvature_from_derivatives(
-            Vec2::new(p.b[0], p.b[1]),
-            Vec2::new(p.b[2], p.b[3]),
-            Vec2::new(p.c[0], p.c[1]),
-            Vec2::new(p.c[2], p.c[3]),
-            p.a[3],
+        let curvature = curvature_from_heights(p.c[0], p.b, p.a[3]);
+        let from_gradients = curvature_from_gradients(
+            Vec2::new(p.d[0], p.d[1]),
+            Vec2::new(p.d[2], p.d[3]),
+            Vec2::new(p.e[0], p.e[1]),
+            Vec2::new(p.e[2], p.e[3]),
+            p.c[1],
         );
         worst.0 = worst.0.max((*w - expected).abs().max_element());
-        worst.1 = worst
-            .1
-            .max((c.x - curvature).abs() / curvature.abs().max(1.0));
+        // Relative to the terms' size: heights of up to 50 m over the spacing squared, and
+        // gradients of up to 1.5 over twice the texel size.
+        let heights = 200.0 / (p.a[3] * p.a[3]);
+        let gradients = 6.0 / (2.0 * p.c[1]);
+        worst.1 = worst.1.max((c.x - curvature).abs() / heights);
+        worst.1 = worst.1.max((c.y - from_gradients).abs() / gradients);
     }
     eprintln!(
         "largest differences: weights {:e}, curvature {:e}",
@@ -170,9 +181,9 @@ fn autoshade_weights_and_curvature_on_the_gpu_equal_the_cpu_reference() {
 const SIZE: UVec2 = UVec2::new(320, 180);
 const MAP: u32 = 256;
 /// The lowland's and the highland's heights; the ramp spans 0..40 m.
-const LOW: f32 = 2.0;
+const LOW: f32 = 6.0;
 const HIGH: f32 = 38.0;
-/// The cliff between them rises over these columns (slope 36 / 16 = 2.25: all rock).
+/// The cliff between them rises over these columns (slope 32 / 16 = 2: all rock).
 const CLIFF: (u32, u32) = (120, 136);
 
 /// Lowland west of the cliff, highland east of it; the same along z.
@@ -333,8 +344,8 @@ fn every_lod_mode_shades_lowland_grass_cliff_rock_and_highland_snow() {
     let gpu = upload(&ctx, &map);
     let solid = GpuMaterials::new(&ctx.device, &ctx.queue, &solid_materials()).expect("upload");
     let l = Vec3::new(-0.8, 0.6, 0.0).normalize();
-    // The cliff's normal: slope 36 m over 16 m rising eastwards.
-    let cliff_n = Vec3::new(-36.0 / 16.0, 1.0, 0.0).normalize();
+    // The cliff's normal: rising eastwards.
+    let cliff_n = Vec3::new(-(HIGH - LOW) / 16.0, 1.0, 0.0).normalize();
     let expected = [
         ((20, 100), lit(0, l.y)),
         ((124, 132), lit(2, cliff_n.dot(l))),
@@ -394,4 +405,58 @@ fn the_procedural_materials_show_texture_where_the_ramp_is_flat() {
             "{columns:?}: {mean} against the material's {want}"
         );
     }
+}
+
+#[test]
+fn a_crater_changes_what_the_ground_shows() {
+    let Some(ctx) = context_or_skip("material after a crater") else {
+        return;
+    };
+    let mut map = cliff_map();
+    let solid = GpuMaterials::new(&ctx.device, &ctx.queue, &solid_materials()).expect("upload");
+    let mut renderer = renderers(&ctx, &map).swap_remove(0);
+    renderer.set_materials(&solid);
+    // Pixels within 4 m of the crater's centre (map (60, 128); 0.8 m a pixel, rows from
+    // z = 56 down) that are not grass (red).
+    let not_grass = |image: &Grid<[u8; 4]>| {
+        let (cx, cy) = (60.0 / 0.8, (128.0 - 56.0) / 0.8);
+        let (mut n, mut other) = (0, 0);
+        for y in 0..SIZE.y {
+            for x in 0..SIZE.x {
+                if (x as f32 - cx).hypot(y as f32 - cy) <= 4.0 / 0.8 {
+                    let p = image.get(x, y).expect("inside");
+                    n += 1;
+                    other += usize::from(p[1] > p[0] || p[2] > p[0]);
+                }
+            }
+        }
+        other as f64 / n as f64
+    };
+    let before = draw(
+        &ctx,
+        &mut renderer,
+        &upload(&ctx, &map),
+        SurfaceShading::Materials,
+    );
+    let placement =
+        terrain_core::StampPlacement::new(Vec2::new(60.0, 128.0), Vec2::splat(16.0), -5.0)
+            .expect("placement");
+    terrain_core::apply_stamp(
+        &mut map,
+        &mut terrain_core::GaussianStamp::default(),
+        &placement,
+        terrain_core::Blend::Add,
+    )
+    .expect("crater");
+    let after = draw(
+        &ctx,
+        &mut renderer,
+        &upload(&ctx, &map),
+        SurfaceShading::Materials,
+    );
+    let (b, a) = (not_grass(&before), not_grass(&after));
+    eprintln!("not grass in the crater: before {b:.2}, after {a:.2}");
+    assert_eq!(b, 0.0, "flat lowland is grass");
+    // The crater's walls bend and slope enough for dirt and rock.
+    assert!(a > 0.3, "the crater shows {a:.2} dirt or rock");
 }

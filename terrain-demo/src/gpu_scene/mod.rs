@@ -332,6 +332,11 @@ impl GpuScene {
         if let Some(r) = style.ramp_m {
             self.style.ramp = (r.x, r.y);
         }
+        self.style.shading = match style.shading {
+            crate::config::ShadingParam::Materials => terrain_gpu::SurfaceShading::Materials,
+            crate::config::ShadingParam::Ramp => terrain_gpu::SurfaceShading::Ramp,
+        };
+        self.style.materials.scale_m = style.material_scale_m;
     }
 
     /// Sets the fog's density per metre (the terrain fades to the fog colour with distance).

@@ -272,7 +272,7 @@ fn surface_pipeline(
 ) -> Result<SurfacePipeline, GpuError> {
     const ATTRS: [wgpu::VertexAttribute; 3] =
         wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
-    let (vertex, fragment) = (wgpu::ShaderStages::VERTEX, wgpu::ShaderStages::FRAGMENT);
+    let fragment = wgpu::ShaderStages::FRAGMENT;
     let both = wgpu::ShaderStages::VERTEX_FRAGMENT;
     let (label, source, storage, uniforms) = match kind {
         SurfaceKind::Atlas => (
@@ -284,13 +284,13 @@ fn surface_pipeline(
         SurfaceKind::Detail => (
             "cdlod detail",
             terrain_shaders::CDLOD_DETAIL,
-            vec![(vertex, 1), (fragment, 2), (fragment, 4), (fragment, 5)],
+            vec![(both, 1), (fragment, 2), (fragment, 4), (fragment, 5)],
             vec![(fragment, 3)],
         ),
         SurfaceKind::Coarse | SurfaceKind::Granular => (
             "cdlod.wgsl",
             terrain_shaders::CDLOD,
-            vec![(vertex, 1), (fragment, 2)],
+            vec![(both, 1), (fragment, 2)],
             vec![],
         ),
     };

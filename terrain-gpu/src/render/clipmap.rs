@@ -157,7 +157,8 @@ impl ClipmapRenderer {
             "clipmap.wgsl",
             terrain_shaders::CLIPMAP,
             &[
-                (wgpu::ShaderStages::VERTEX, 1),
+                // The fragments read heights too (the material shading's curvature).
+                (wgpu::ShaderStages::VERTEX_FRAGMENT, 1),
                 (wgpu::ShaderStages::FRAGMENT, 2),
             ],
             &[],
@@ -191,7 +192,8 @@ impl ClipmapRenderer {
             "clipmap detail",
             terrain_shaders::CLIPMAP_DETAIL,
             &[
-                (wgpu::ShaderStages::VERTEX, 1),
+                // The fragments read heights too (the material shading's curvature).
+                (wgpu::ShaderStages::VERTEX_FRAGMENT, 1),
                 (wgpu::ShaderStages::FRAGMENT, 2),
                 (wgpu::ShaderStages::FRAGMENT, 4),
                 (wgpu::ShaderStages::FRAGMENT, 5),

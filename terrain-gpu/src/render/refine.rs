@@ -117,7 +117,8 @@ impl RefineDraw<'_> {
     ) -> Result<FrameUniform, GpuError> {
         let mut uniform = frame_uniform(info, view, self.style, target, (0, 0), [0, 0])?;
         if info.wrap == WrapMode::Repeat {
-            let lowest = IVec2::from(uniform.camera_texel) - IVec2::splat(reach as i32);
+            let lowest = IVec2::from(uniform.camera_texel)
+                - IVec2::splat(reach as i32 + crate::render::surface::MATERIAL_REACH);
             uniform.wrap_offset = crate::device::compute::wrap_offset(lowest, info.size)?;
         }
         Ok(uniform)
@@ -458,6 +459,7 @@ impl RefineRenderer {
             "refine.wgsl",
             terrain_shaders::REFINE,
             &[
+                (wgpu::ShaderStages::FRAGMENT, 1),
                 (wgpu::ShaderStages::FRAGMENT, 2),
                 (wgpu::ShaderStages::FRAGMENT, 4),
                 (wgpu::ShaderStages::FRAGMENT, 5),
@@ -539,13 +541,15 @@ impl RefineRenderer {
         ];
         let (materials, new_materials) = self.materials.get(device, queue)?;
         if new_materials || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
-            // Binding 1 (the heights) is not read: the vertices carry them.
+            // The vertices carry their heights; the fragments read the map's (the material
+            // shading's curvature).
             let group = self.pipeline.bind_group(
                 device,
                 "RefineRenderer",
                 &self.uniform,
                 &[],
                 &[
+                    (1, &buffers[0]),
                     (2, &buffers[1]),
                     (3, &self.detail_uniform),
                     (4, &buffers[2]),

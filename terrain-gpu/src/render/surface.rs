@@ -52,12 +52,20 @@ impl DetailUniform {
     }
 }
 
-/// Whole coarse texels a fragment of `surface` may read beyond the drawn mesh's own texels
-/// (a detail surface's parallax march moves the point it shades), plus one for the bilinear
-/// neighbour; 0 for other surfaces.
+/// Whole coarse texels a fragment of `surface` may read beyond the drawn mesh's own texels:
+/// the material shading's curvature stencil ([`MATERIAL_REACH`]), plus for a detail surface
+/// the parallax march's reach and one for the bilinear neighbour.
 pub(crate) fn fragment_reach(surface: &ClipmapSurface<'_>) -> i32 {
-    match surface {
-        ClipmapSurface::Detail { shading, .. } => shading.max_reach_texels.ceil() as i32 + 1,
-        _ => 0,
-    }
+    MATERIAL_REACH
+        + match surface {
+            ClipmapSurface::Detail { shading, .. } => shading.max_reach_texels.ceil() as i32 + 1,
+            _ => 0,
+        }
 }
+
+/// Texels the material shading reads around a fragment: its nearest texel (one past the
+/// cell) and the curvature's neighbours at most [`MAX_CURVATURE_STEP`] beyond.
+pub(crate) const MATERIAL_REACH: i32 = MAX_CURVATURE_STEP as i32 + 2;
+
+/// The most texels between the heights the curvature is measured from.
+pub(crate) const MAX_CURVATURE_STEP: f32 = 6.0;

@@ -294,8 +294,8 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 3] {
 }
 
 /// The frame uniform's material fields: the camera's whole texel's place in the images'
-/// repeat and the repeats per metre, the strength; the autoshade edges; the dirt edges and
-/// whether materials shade. Computed in f64 so the repeat stays exact far from the origin.
+/// repeat and the repeats per metre, the strength; the autoshade edges; the dirt edges,
+/// whether materials shade and the curvature's spacing in texels. Computed in f64 so the repeat stays exact far from the origin.
 pub(crate) fn frame_fields(
     shading: SurfaceShading,
     style: &MaterialStyle,
@@ -323,7 +323,10 @@ pub(crate) fn frame_fields(
             a.dirt_curvature.0,
             a.dirt_curvature.1,
             f32::from(u8::from(shading == SurfaceShading::Materials)),
-            0.0,
+            // Whole texels, from one to the stencil's reach (the spacing is validated finite).
+            (a.curvature_spacing_m / texel_size)
+                .round()
+                .clamp(1.0, crate::render::surface::MAX_CURVATURE_STEP),
         ],
     ])
 }

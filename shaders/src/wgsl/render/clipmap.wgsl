@@ -43,7 +43,8 @@ struct Frame {
     material: vec4<f32>,
     // The autoshader's edges: rock slope (x, y), snow height (z, w).
     autoshade: vec4<f32>,
-    // The dirt curvature's edges (x, y); z: 1 to shade with materials, 0 with the height ramp.
+    // The dirt curvature's edges (x, y); z: 1 to shade with materials, 0 with the height ramp;
+    // w: texels between the heights the curvature is measured from.
     autoshade_dirt: vec4<f32>,
 }
 
@@ -161,7 +162,7 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
         // Materials weighted by the autoshader from the slope and curvature the detail and the
         // deformations give the surface.
         let slope = length(d + fd.sample.gradient);
-        let curvature = curvature_from_derivatives(d00, d10, d01, d11, frame.texel_size);
+        let curvature = surface_curvature(qs, d00, d10, d01, d11);
         let w = autoshade_weights(frame.autoshade, frame.autoshade_dirt.xy, t, slope, curvature);
         let k = frame.material.z;
         // Ground coordinates of the fragment in repeats, from the camera's place in the repeat

@@ -19,8 +19,15 @@ fn autoshade_weights(edges: vec4<f32>, dirt_edges: vec2<f32>, t: f32, slope: f32
     return vec4<f32>(open - dirt, dirt, rock, snow);
 }
 
-// The heights' Laplacian (1/m) in a texel cell from its corner gradients.
-fn curvature_from_derivatives(d00: vec2<f32>, d10: vec2<f32>, d01: vec2<f32>, d11: vec2<f32>, texel_size: f32) -> f32 {
+// The heights' Laplacian (1/m) from a centre height and its four neighbours (x-, x+, z-, z+)
+// `spacing` metres away.
+fn curvature_from_heights(centre: f32, around: vec4<f32>, spacing: f32) -> f32 {
+    return ((around.x + around.y) + (around.z + around.w) - 4.0 * centre) / (spacing * spacing);
+}
+
+// The Laplacian (1/m) inside a texel cell from the gradients at its corners (x then z),
+// `texel_size` apart: for surfaces whose gradients are exact differences of their heights.
+fn curvature_from_gradients(d00: vec2<f32>, d10: vec2<f32>, d01: vec2<f32>, d11: vec2<f32>, texel_size: f32) -> f32 {
     let dxx = (d10.x - d00.x) + (d11.x - d01.x);
     let dzz = (d01.y - d00.y) + (d11.y - d10.y);
     return (dxx + dzz) / (2.0 * texel_size);
