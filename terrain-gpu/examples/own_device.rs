@@ -1,7 +1,8 @@
 //! terrain-gpu in an engine that owns its device: the engine makes its own wgpu instance,
 //! adapter, device and a swap-chain-like colour target (`Bgra8UnormSrgb`, 4x MSAA, its own depth
 //! buffer); terrain-gpu stamps a crater and a ridge into a coarse-map, regenerates the normals,
-//! and draws the sky and the clipmap into the engine's render pass. The frame is written as PNG.
+//! and draws the sky and the clipmap, shaded with materials, into the engine's render pass.
+//! The frame is written as PNG.
 //!
 //! ```sh
 //! cargo run -p terrain-gpu --example own_device -- [OUT.png]
@@ -17,8 +18,8 @@ use terrain_core::{
 };
 use terrain_gpu::{
     Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuDerivativeMap, GpuHeightMap, GpuStamp,
-    GpuTextureStamp, MapUse, NormalPass, SkyColors, SkyPass, StampOp, StampPass, TerrainStyle,
-    wgpu,
+    GpuTextureStamp, MapUse, NormalPass, SkyColors, SkyPass, StampOp, StampPass, SurfaceShading,
+    TerrainStyle, wgpu,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -119,8 +120,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (0.0, 30.0),
         Some(&Frustum::from_view_proj(camera.view_proj_world(aspect))),
     )?;
+    // Shaded with the procedural materials (an engine passes its own images to
+    // `GpuMaterials::new` and `renderer.set_materials`).
     let style = TerrainStyle {
         ramp: (0.0, 30.0),
+        shading: SurfaceShading::Materials,
         ..TerrainStyle::default()
     };
     sky.prepare(
