@@ -122,7 +122,8 @@ macro_rules! renderer_head {
             include_str!("wgsl/render/target_color.wgsl"),
             include_str!("wgsl/resources/detail_sample.wgsl"),
             include_str!("wgsl/render/materials_common.wgsl"),
-            include_str!("wgsl/render/materials.wgsl")
+            include_str!("wgsl/render/materials.wgsl"),
+            include_str!("wgsl/render/surface_weights.wgsl")
         )
     };
 }
@@ -327,6 +328,10 @@ pub const MATERIAL_PROBE: &str = concat!(
     include_str!("wgsl/render/materials_common.wgsl"),
     include_str!("wgsl/passes/material_probe.wgsl")
 );
+
+/// The markers around `surface_weights` in every renderer's shader: an engine's own WGSL
+/// function `fn surface_weights(p: SurfacePoint) -> vec4<f32>` replaces what lies between them.
+pub const USER_SURFACE_MARKERS: (&str, &str) = ("// USER_SURFACE_BEGIN", "// USER_SURFACE_END");
 
 /// Every shader with its name, for validation and tooling.
 pub const ALL: &[(&str, &str)] = &[

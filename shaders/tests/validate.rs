@@ -33,6 +33,35 @@ fn the_user_stamp_markers_enclose_a_replaceable_function() {
 }
 
 #[test]
+fn every_renderer_carries_the_user_surface_markers_once_around_a_replaceable_function() {
+    let (begin, end) = terrain_shaders::USER_SURFACE_MARKERS;
+    let renderers = [
+        ("clipmap", terrain_shaders::CLIPMAP),
+        ("clipmap_atlas", terrain_shaders::CLIPMAP_ATLAS),
+        ("clipmap_detail", terrain_shaders::CLIPMAP_DETAIL),
+        ("clipmap_granular", terrain_shaders::CLIPMAP_GRANULAR),
+        ("cdlod", terrain_shaders::CDLOD),
+        ("cdlod_atlas", terrain_shaders::CDLOD_ATLAS),
+        ("cdlod_detail", terrain_shaders::CDLOD_DETAIL),
+        ("tessellated", terrain_shaders::TESSELLATED),
+        ("tessellated_detail", terrain_shaders::TESSELLATED_DETAIL),
+        ("refine", terrain_shaders::REFINE),
+    ];
+    for (name, src) in renderers {
+        assert_eq!(src.matches(begin).count(), 1, "{name}");
+        let (a, b) = (src.find(begin).unwrap(), src.find(end).unwrap());
+        assert!(a < b, "{name}");
+        let custom = format!(
+            "{}{begin}\nfn surface_weights(p: SurfacePoint) -> vec4<f32> {{ \
+             return vec4<f32>(p.ramp, 0.0, p.slope, fract(p.position.x)); }}\n{}",
+            &src[..a],
+            &src[b..]
+        );
+        validate(name, &custom);
+    }
+}
+
+#[test]
 fn a_broken_shader_is_caught() {
     let broken =
         terrain_shaders::NORMALS.replace("return u32(clamp(v, 0, i32(n) - 1));", "return v;");

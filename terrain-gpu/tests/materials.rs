@@ -10,9 +10,9 @@ use terrain_core::{
 };
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    ClipmapSurface, GpuContext, GpuDerivativeMap, GpuHeightMap, GpuMaterials, MaterialStyle,
-    NormalPass, OffscreenTarget, SurfaceShading, TargetFormat, TerrainRenderer, TerrainStyle,
-    TerrainView, ViewMatrices,
+    ClipmapSurface, GpuContext, GpuDerivativeMap, GpuError, GpuHeightMap, GpuMaterials,
+    MaterialStyle, NormalPass, OffscreenTarget, SurfaceShading, TargetFormat, TerrainRenderer,
+    TerrainStyle, TerrainView, ViewMatrices,
 };
 use terrain_lod::{CdlodConfig, ClipmapLayout, LodMetric, TessConfig};
 use wgpu::util::DeviceExt;
@@ -459,4 +459,51 @@ fn a_crater_changes_what_the_ground_shows() {
     assert_eq!(b, 0.0, "flat lowland is grass");
     // The crater's walls bend and slope enough for dirt and rock.
     assert!(a > 0.3, "the crater shows {a:.2} dirt or rock");
+}
+
+#[test]
+fn an_engine_shades_every_lod_mode_with_its_own_surface_function() {
+    let Some(ctx) = context_or_skip("user surface function") else {
+        return;
+    };
+    let map = cliff_map();
+    let gpu = upload(&ctx, &map);
+    let solid = GpuMaterials::new(&ctx.device, &ctx.queue, &solid_materials()).expect("upload");
+    // Dirt west of x = 64 m, snow east of it, whatever the ground: a painted road's shape.
+    let painted = "fn surface_weights(p: SurfacePoint) -> vec4<f32> {\n\
+                   return select(vec4<f32>(0.0, 0.0, 0.0, 1.0), vec4<f32>(0.0, 1.0, 0.0, 0.0), \
+                   p.position.x < 64.0);\n}";
+    let l = Vec3::new(-0.8, 0.6, 0.0).normalize();
+    for mut renderer in renderers(&ctx, &map) {
+        let mode = renderer.mode();
+        renderer.set_materials(&solid);
+        // A function that does not compile is refused and changes nothing.
+        let err = renderer.set_surface_shader(&ctx.device, Some("fn surface_weights("));
+        assert!(
+            matches!(err, Err(GpuError::UserShader { .. })),
+            "{mode}: {err:?}"
+        );
+        renderer
+            .set_surface_shader(&ctx.device, Some(painted))
+            .expect("the painted function compiles");
+        let image = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Materials);
+        for (columns, material) in [((10, 56), 1), ((72, 110), 3), ((156, 236), 3)] {
+            let (mean, _) = region(&image, columns);
+            let want = lit(material, l.y);
+            assert!(
+                (mean - want).abs().max_element() <= COLOUR_TOLERANCE,
+                "{mode}: {columns:?} are {mean}, not {want}"
+            );
+        }
+        // Back to the autoshader: the lowland is grass again.
+        renderer
+            .set_surface_shader(&ctx.device, None)
+            .expect("built-in");
+        let image = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Materials);
+        let (mean, _) = region(&image, (10, 56));
+        assert!(
+            (mean - lit(0, l.y)).abs().max_element() <= COLOUR_TOLERANCE,
+            "{mode}: {mean}"
+        );
+    }
 }

@@ -12,7 +12,7 @@ use crate::render::clipmap::{
     ClipmapSurface, SurfaceKind, SurfacePipeline, TerrainStyle, VertexShape, check_view,
     check_wireframe, frame_uniform,
 };
-use crate::render::surface::{DetailUniform, fragment_reach};
+use crate::render::surface::{DetailUniform, fragment_reach, with_surface_weights};
 use crate::render::target::TargetFormat;
 use crate::resources::materials::{GpuMaterials, MaterialSlot};
 use glam::UVec2;
@@ -50,6 +50,8 @@ pub struct CdlodRenderer {
     wireframe: bool,
     /// The materials of [`crate::SurfaceShading::Materials`].
     materials: MaterialSlot,
+    /// An engine's `surface_weights` ([`CdlodRenderer::set_surface_shader`]).
+    user_surface: Option<String>,
 }
 
 /// Everything one CDLOD frame is drawn from.
@@ -77,7 +79,7 @@ impl CdlodRenderer {
         mesh: &CdlodMesh,
     ) -> Result<Self, GpuError> {
         target.validate(device)?;
-        let pipeline = surface_pipeline(device, target, SurfaceKind::Coarse)?;
+        let pipeline = surface_pipeline(device, target, SurfaceKind::Coarse, None)?;
         let vertices = buffer_init(
             device,
             "cdlod vertices",
@@ -128,6 +130,7 @@ impl CdlodRenderer {
             bound: None,
             wireframe: false,
             materials: MaterialSlot::default(),
+            user_surface: None,
         })
     }
 
@@ -135,6 +138,27 @@ impl CdlodRenderer {
     /// prepare (until then, and without a call, with [`GpuMaterials::procedural`]).
     pub fn set_materials(&mut self, materials: &GpuMaterials) {
         self.materials.set(materials);
+    }
+
+    /// Computes the material weights with an engine's `surface_weights` function, or the
+    /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
+    pub fn set_surface_shader(
+        &mut self,
+        device: &wgpu::Device,
+        wgsl_function: Option<&str>,
+    ) -> Result<(), GpuError> {
+        let user = |e| GpuError::UserShader {
+            source: Box::new(e),
+        };
+        // The coarse pipeline now, so a function that does not compile fails here; the other
+        // surfaces' on their first frame.
+        let coarse = surface_pipeline(device, &self.target, SurfaceKind::Coarse, wgsl_function)
+            .map_err(user)?;
+        self.pipelines = vec![(SurfaceKind::Coarse, coarse)];
+        self.user_surface = wgsl_function.map(str::to_owned);
+        self.kind = SurfaceKind::Coarse;
+        self.bound = None;
+        Ok(())
     }
 
     /// Draws triangle edges as lines from the next draw; fails without
@@ -170,7 +194,8 @@ impl CdlodRenderer {
         }
         let info = surface.check()?;
         if !self.pipelines.iter().any(|(k, _)| *k == kind) {
-            let pipeline = surface_pipeline(device, &self.target, kind)?;
+            let pipeline =
+                surface_pipeline(device, &self.target, kind, self.user_surface.as_deref())?;
             self.pipelines.push((kind, pipeline));
         }
         let frame = draw.frame;
@@ -264,11 +289,13 @@ impl CdlodRenderer {
 /// The binding of the LOD uniform (`cdlod.wgsl`), after every surface's bindings.
 const LODS_BINDING: u32 = 6;
 
-/// The CDLOD pipeline over a surface of `kind` (not granular).
+/// The CDLOD pipeline over a surface of `kind` (not granular), with an engine's
+/// `surface_weights` (`user`) or the built-in one.
 fn surface_pipeline(
     device: &wgpu::Device,
     target: &TargetFormat,
     kind: SurfaceKind,
+    user: Option<&str>,
 ) -> Result<SurfacePipeline, GpuError> {
     const ATTRS: [wgpu::VertexAttribute; 3] =
         wgpu::vertex_attr_array![1 => Sint32x2, 2 => Uint32, 3 => Uint32];
@@ -298,7 +325,7 @@ fn surface_pipeline(
         device,
         target,
         label,
-        source,
+        &with_surface_weights(source, user),
         &storage,
         &uniforms,
         &VertexShape {

@@ -7,7 +7,7 @@ use crate::device::compute::shader_module;
 use crate::device::scope::{buffer_init, scoped};
 use crate::error::GpuError;
 use crate::render::camera::{RenderView, ResolvedView};
-use crate::render::surface::{DetailUniform, fragment_reach};
+use crate::render::surface::{DetailUniform, fragment_reach, with_surface_weights};
 use crate::render::target::TargetFormat;
 use crate::resources::atlas::GpuTileAtlas;
 use crate::resources::detail::{DetailShading, GpuDetailTiles};
@@ -151,56 +151,7 @@ impl ClipmapRenderer {
         let mesh = layout.mesh();
         // Every instance a placed frame of this layout can hold.
         let max_instances = u64::from(layout.levels()) * MAX_DRAWS_PER_LEVEL as u64;
-        let coarse = SurfacePipeline::new(
-            device,
-            target,
-            "clipmap.wgsl",
-            terrain_shaders::CLIPMAP,
-            &[
-                // The fragments read heights too (the material shading's curvature).
-                (wgpu::ShaderStages::VERTEX_FRAGMENT, 1),
-                (wgpu::ShaderStages::FRAGMENT, 2),
-            ],
-            &[],
-            &clipmap_shape(),
-        )?;
-        let granular = SurfacePipeline::new(
-            device,
-            target,
-            "clipmap granular",
-            terrain_shaders::CLIPMAP_GRANULAR,
-            &[(wgpu::ShaderStages::VERTEX_FRAGMENT, 1)],
-            &[],
-            &clipmap_shape(),
-        )?;
-        let atlas = SurfacePipeline::new(
-            device,
-            target,
-            "clipmap atlas",
-            terrain_shaders::CLIPMAP_ATLAS,
-            &[
-                (wgpu::ShaderStages::VERTEX_FRAGMENT, 1),
-                (wgpu::ShaderStages::VERTEX_FRAGMENT, 2),
-                (wgpu::ShaderStages::VERTEX_FRAGMENT, 3),
-            ],
-            &[],
-            &clipmap_shape(),
-        )?;
-        let detail = SurfacePipeline::new(
-            device,
-            target,
-            "clipmap detail",
-            terrain_shaders::CLIPMAP_DETAIL,
-            &[
-                // The fragments read heights too (the material shading's curvature).
-                (wgpu::ShaderStages::VERTEX_FRAGMENT, 1),
-                (wgpu::ShaderStages::FRAGMENT, 2),
-                (wgpu::ShaderStages::FRAGMENT, 4),
-                (wgpu::ShaderStages::FRAGMENT, 5),
-            ],
-            &[(wgpu::ShaderStages::FRAGMENT, 3)],
-            &clipmap_shape(),
-        )?;
+        let [coarse, granular, atlas, detail] = clipmap_pipelines(device, target, None)?;
         let vertices = buffer_init(
             device,
             "clipmap vertices",
@@ -260,6 +211,26 @@ impl ClipmapRenderer {
     /// (until then, and without a call, with [`GpuMaterials::procedural`]).
     pub fn set_materials(&mut self, materials: &GpuMaterials) {
         self.materials.set(materials);
+    }
+
+    /// Computes the material weights with `wgsl_function`, an engine's
+    /// `fn surface_weights(p: SurfacePoint) -> vec4<f32>` (see terrain-shaders'
+    /// `surface_weights.wgsl` for `SurfacePoint`), or with the autoshader again for `None`.
+    /// The pipelines are rebuilt now; a function that does not compile is
+    /// [`GpuError::UserShader`] and leaves the renderer as it was.
+    pub fn set_surface_shader(
+        &mut self,
+        device: &wgpu::Device,
+        wgsl_function: Option<&str>,
+    ) -> Result<(), GpuError> {
+        let user = |e| GpuError::UserShader {
+            source: Box::new(e),
+        };
+        let [coarse, granular, atlas, detail] =
+            clipmap_pipelines(device, &self.target, wgsl_function).map_err(user)?;
+        (self.coarse, self.granular, self.atlas, self.detail) = (coarse, granular, atlas, detail);
+        self.bound = None;
+        Ok(())
     }
 
     /// Draws triangle edges as lines (`true`) or filled triangles (`false`, the default) from
@@ -694,6 +665,66 @@ impl ClipmapSurface<'_> {
             ClipmapSurface::Detail { .. } => SurfaceKind::Detail,
         }
     }
+}
+
+/// The clipmap's pipelines over a coarse-map, a granular map, an atlas and a coarse-map with
+/// detail, with an engine's `surface_weights` (`user`) or the built-in one.
+fn clipmap_pipelines(
+    device: &wgpu::Device,
+    target: &TargetFormat,
+    user: Option<&str>,
+) -> Result<[SurfacePipeline; 4], GpuError> {
+    let coarse = SurfacePipeline::new(
+        device,
+        target,
+        "clipmap.wgsl",
+        &with_surface_weights(terrain_shaders::CLIPMAP, user),
+        &[
+            // The fragments read heights too (the material shading's curvature).
+            (wgpu::ShaderStages::VERTEX_FRAGMENT, 1),
+            (wgpu::ShaderStages::FRAGMENT, 2),
+        ],
+        &[],
+        &clipmap_shape(),
+    )?;
+    let granular = SurfacePipeline::new(
+        device,
+        target,
+        "clipmap granular",
+        &with_surface_weights(terrain_shaders::CLIPMAP_GRANULAR, user),
+        &[(wgpu::ShaderStages::VERTEX_FRAGMENT, 1)],
+        &[],
+        &clipmap_shape(),
+    )?;
+    let atlas = SurfacePipeline::new(
+        device,
+        target,
+        "clipmap atlas",
+        &with_surface_weights(terrain_shaders::CLIPMAP_ATLAS, user),
+        &[
+            (wgpu::ShaderStages::VERTEX_FRAGMENT, 1),
+            (wgpu::ShaderStages::VERTEX_FRAGMENT, 2),
+            (wgpu::ShaderStages::VERTEX_FRAGMENT, 3),
+        ],
+        &[],
+        &clipmap_shape(),
+    )?;
+    let detail = SurfacePipeline::new(
+        device,
+        target,
+        "clipmap detail",
+        &with_surface_weights(terrain_shaders::CLIPMAP_DETAIL, user),
+        &[
+            // The fragments read heights too (the material shading's curvature).
+            (wgpu::ShaderStages::VERTEX_FRAGMENT, 1),
+            (wgpu::ShaderStages::FRAGMENT, 2),
+            (wgpu::ShaderStages::FRAGMENT, 4),
+            (wgpu::ShaderStages::FRAGMENT, 5),
+        ],
+        &[(wgpu::ShaderStages::FRAGMENT, 3)],
+        &clipmap_shape(),
+    )?;
+    Ok([coarse, granular, atlas, detail])
 }
 
 /// The vertex inputs and entry point of a terrain pipeline: the clipmap's, or another

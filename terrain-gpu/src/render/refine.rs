@@ -23,6 +23,7 @@ use crate::render::clipmap::{
     ClipmapSurface, FrameUniform, SurfaceInfo, SurfacePipeline, TerrainStyle, VertexShape,
     check_view, check_wireframe, frame_uniform,
 };
+use crate::render::surface::with_surface_weights;
 use crate::render::target::TargetFormat;
 use crate::resources::detail::{DetailInfo, DetailShading, GpuDetailTiles};
 use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
@@ -452,28 +453,7 @@ impl RefineRenderer {
     /// Builds the pipeline.
     pub fn new(device: &wgpu::Device, target: &TargetFormat) -> Result<Self, GpuError> {
         target.validate(device)?;
-        const ATTRS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
-        let pipeline = SurfacePipeline::new(
-            device,
-            target,
-            "refine.wgsl",
-            terrain_shaders::REFINE,
-            &[
-                (wgpu::ShaderStages::FRAGMENT, 1),
-                (wgpu::ShaderStages::FRAGMENT, 2),
-                (wgpu::ShaderStages::FRAGMENT, 4),
-                (wgpu::ShaderStages::FRAGMENT, 5),
-            ],
-            &[(wgpu::ShaderStages::FRAGMENT, 3)],
-            &VertexShape {
-                entry: "vs_refined",
-                vertex_stride: VERTEX_BYTES,
-                vertex_attrs: &ATTRS,
-                instance_stride: 0,
-                instance_attrs: &[],
-                extra_uniforms: &[],
-            },
-        )?;
+        let pipeline = refine_pipeline(device, target, None)?;
         let (uniform, detail_uniform) = scoped(device, "RefineRenderer", || {
             let buffer = |label, size| {
                 device.create_buffer(&wgpu::BufferDescriptor {
@@ -503,6 +483,22 @@ impl RefineRenderer {
     /// prepare (until then, and without a call, with [`GpuMaterials::procedural`]).
     pub fn set_materials(&mut self, materials: &GpuMaterials) {
         self.materials.set(materials);
+    }
+
+    /// Computes the material weights with an engine's `surface_weights` function, or the
+    /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
+    pub fn set_surface_shader(
+        &mut self,
+        device: &wgpu::Device,
+        wgsl_function: Option<&str>,
+    ) -> Result<(), GpuError> {
+        self.pipeline = refine_pipeline(device, &self.target, wgsl_function).map_err(|e| {
+            GpuError::UserShader {
+                source: Box::new(e),
+            }
+        })?;
+        self.bound = None;
+        Ok(())
     }
 
     /// Draws triangle edges as lines from the next draw; fails without
@@ -573,4 +569,35 @@ impl RefineRenderer {
         pass.set_vertex_buffer(0, refine.output.slice(..));
         pass.draw_indirect(&refine.state, ARGS_OFFSET);
     }
+}
+
+/// The refined geometry's pipeline, with an engine's `surface_weights` (`user`) or the
+/// built-in one.
+fn refine_pipeline(
+    device: &wgpu::Device,
+    target: &TargetFormat,
+    user: Option<&str>,
+) -> Result<SurfacePipeline, GpuError> {
+    const ATTRS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
+    SurfacePipeline::new(
+        device,
+        target,
+        "refine.wgsl",
+        &with_surface_weights(terrain_shaders::REFINE, user),
+        &[
+            (wgpu::ShaderStages::FRAGMENT, 1),
+            (wgpu::ShaderStages::FRAGMENT, 2),
+            (wgpu::ShaderStages::FRAGMENT, 4),
+            (wgpu::ShaderStages::FRAGMENT, 5),
+        ],
+        &[(wgpu::ShaderStages::FRAGMENT, 3)],
+        &VertexShape {
+            entry: "vs_refined",
+            vertex_stride: VERTEX_BYTES,
+            vertex_attrs: &ATTRS,
+            instance_stride: 0,
+            instance_attrs: &[],
+            extra_uniforms: &[],
+        },
+    )
 }

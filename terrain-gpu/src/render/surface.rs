@@ -69,3 +69,24 @@ pub(crate) const MATERIAL_REACH: i32 = MAX_CURVATURE_STEP as i32 + 2;
 
 /// The most texels between the heights the curvature is measured from.
 pub(crate) const MAX_CURVATURE_STEP: f32 = 6.0;
+
+/// `source` with an engine's `surface_weights` function (see
+/// [`crate::TerrainRenderer::set_surface_shader`]) between its user markers, or `source` as it
+/// is without one.
+pub(crate) fn with_surface_weights(
+    source: &'static str,
+    user: Option<&str>,
+) -> std::borrow::Cow<'static, str> {
+    let Some(user) = user else {
+        return source.into();
+    };
+    let (begin, end) = terrain_shaders::USER_SURFACE_MARKERS;
+    // terrain-shaders' tests check every renderer's shader carries the markers once, in order;
+    // a source without them is drawn as it is.
+    match (source.find(begin), source.find(end)) {
+        (Some(a), Some(b)) if a < b => {
+            format!("{}{begin}\n{user}\n{}", &source[..a], &source[b..]).into()
+        }
+        _ => source.into(),
+    }
+}

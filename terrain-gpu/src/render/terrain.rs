@@ -256,6 +256,25 @@ impl TerrainRenderer {
         }
     }
 
+    /// Computes the material weights of [`crate::SurfaceShading::Materials`] with
+    /// `wgsl_function`, an engine's `fn surface_weights(p: SurfacePoint) -> vec4<f32>`, or with
+    /// the autoshader again for `None`. `SurfacePoint` holds the fragment's world position (x,
+    /// z), height, ramp fraction, slope and curvature; the weights are those of grass, dirt,
+    /// rock and snow (the [`crate::GpuMaterials`] layers), normalised by the blend. The
+    /// function may read `frame` (the renderers' uniform) and call `autoshade_weights`. One
+    /// that does not compile is [`GpuError::UserShader`], the renderer unchanged.
+    pub fn set_surface_shader(
+        &mut self,
+        device: &wgpu::Device,
+        wgsl_function: Option<&str>,
+    ) -> Result<(), GpuError> {
+        match &mut self.lod {
+            Lod::Clipmap(c) => c.renderer.set_surface_shader(device, wgsl_function),
+            Lod::Cdlod(c) => c.renderer.set_surface_shader(device, wgsl_function),
+            Lod::Tessellated(t) => t.renderer.set_surface_shader(device, wgsl_function),
+        }
+    }
+
     /// The streamed world's quadtree, when this renderer draws one with CDLOD.
     pub fn streamed_tree_mut(&mut self) -> Option<&mut CdlodTree> {
         match &mut self.lod {

@@ -29,7 +29,7 @@ use crate::render::clipmap::{
     ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, check_wireframe,
     frame_uniform,
 };
-use crate::render::surface::{DetailUniform, fragment_reach};
+use crate::render::surface::{DetailUniform, fragment_reach, with_surface_weights};
 use crate::render::target::TargetFormat;
 use crate::resources::materials::{GpuMaterials, MaterialSlot};
 use bytemuck::{Pod, Zeroable};
@@ -510,13 +510,15 @@ pub struct TessRenderer {
     wireframe: bool,
     /// The materials of [`crate::SurfaceShading::Materials`].
     materials: MaterialSlot,
+    /// An engine's `surface_weights` ([`TessRenderer::set_surface_shader`]).
+    user_surface: Option<String>,
 }
 
 impl TessRenderer {
     /// Builds the pipeline.
     pub fn new(device: &wgpu::Device, target: &TargetFormat) -> Result<Self, GpuError> {
         target.validate(device)?;
-        let pipeline = tess_pipeline(device, target, false)?;
+        let pipeline = tess_pipeline(device, target, false, None)?;
         let uniform = scoped(device, "TessRenderer", || {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("tessellated frame"),
@@ -535,6 +537,7 @@ impl TessRenderer {
             bound: None,
             wireframe: false,
             materials: MaterialSlot::default(),
+            user_surface: None,
         })
     }
 
@@ -542,6 +545,24 @@ impl TessRenderer {
     /// prepare (until then, and without a call, with [`GpuMaterials::procedural`]).
     pub fn set_materials(&mut self, materials: &GpuMaterials) {
         self.materials.set(materials);
+    }
+
+    /// Computes the material weights with an engine's `surface_weights` function, or the
+    /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
+    pub fn set_surface_shader(
+        &mut self,
+        device: &wgpu::Device,
+        wgsl_function: Option<&str>,
+    ) -> Result<(), GpuError> {
+        let user = |e| GpuError::UserShader {
+            source: Box::new(e),
+        };
+        self.pipeline = tess_pipeline(device, &self.target, false, wgsl_function).map_err(user)?;
+        self.detail = None;
+        self.on_detail = false;
+        self.user_surface = wgsl_function.map(str::to_owned);
+        self.bound = None;
+        Ok(())
     }
 
     /// Draws triangle edges as lines from the next draw; fails without
@@ -582,7 +603,12 @@ impl TessRenderer {
         };
         let info = surface.check()?;
         if on_detail && self.detail.is_none() {
-            self.detail = Some(tess_pipeline(device, &self.target, true)?);
+            self.detail = Some(tess_pipeline(
+                device,
+                &self.target,
+                true,
+                self.user_surface.as_deref(),
+            )?);
         }
         let wrap_offset = match info.wrap {
             // Vertices lie in 0 ..= the map size; fragments read a texel either side, and a
@@ -643,6 +669,7 @@ fn tess_pipeline(
     device: &wgpu::Device,
     target: &TargetFormat,
     detail: bool,
+    user: Option<&str>,
 ) -> Result<SurfacePipeline, GpuError> {
     const ATTRS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
     let fragment = wgpu::ShaderStages::FRAGMENT;
@@ -665,7 +692,7 @@ fn tess_pipeline(
         device,
         target,
         label,
-        source,
+        &with_surface_weights(source, user),
         &storage,
         &uniforms,
         &VertexShape {

@@ -163,7 +163,8 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
         // deformations give the surface.
         let slope = length(d + fd.sample.gradient);
         let curvature = surface_curvature(qs, d00, d10, d01, d11);
-        let w = autoshade_weights(frame.autoshade, frame.autoshade_dirt.xy, t, slope, curvature);
+        let position = (vec2<f32>(frame.camera_texel) + qs) * frame.texel_size;
+        let w = surface_weights(SurfacePoint(position, height, t, slope, curvature));
         let k = frame.material.z;
         // Ground coordinates of the fragment in repeats, from the camera's place in the repeat
         // (exact for any world size) plus the fragment's offset.

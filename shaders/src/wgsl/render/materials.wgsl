@@ -60,7 +60,10 @@ fn material_share(m: i32, wm: f32, blend: vec3<f32>, top: Projection, side_x: Pr
 // `w`: the materials' weights; `top`, `side_x`, `side_z`: the three projections; `n`: the
 // surface normal. Written without loops: software rasterisers compile loops over texture
 // samples, inlined into a surface's own loops, very slowly.
-fn material_surface(w: vec4<f32>, top: Projection, side_x: Projection, side_z: Projection, n: vec3<f32>, strength: f32) -> MaterialSurface {
+fn material_surface(weights: vec4<f32>, top: Projection, side_x: Projection, side_z: Projection, n: vec3<f32>, strength: f32) -> MaterialSurface {
+    // A user's weights may not sum to 1 (or be negative): normalised here.
+    let clamped = max(weights, vec4<f32>(0.0, 0.0, 0.0, 0.0));
+    let w = clamped / max(clamped.x + clamped.y + clamped.z + clamped.w, 1e-6);
     var blend = pow(abs(n), vec3<f32>(4.0, 4.0, 4.0));
     blend = blend / (blend.x + blend.y + blend.z);
     let s0 = material_share(0, w.x, blend, top, side_x, side_z);
