@@ -232,7 +232,7 @@ pub struct GeoTiff {
 
 /// Where the bytes come from, for errors: an I/O error on a file names it.
 #[derive(Clone, Copy)]
-enum Origin<'a> {
+pub(crate) enum Origin<'a> {
     Memory,
     File(&'a Path),
 }
@@ -603,7 +603,7 @@ fn bounded(reason: String) -> String {
 }
 
 /// Maps a `tiff` error to ours.
-fn map_tiff_error(e: TiffError, origin: Origin<'_>) -> MapIoError {
+pub(crate) fn map_tiff_error(e: TiffError, origin: Origin<'_>) -> MapIoError {
     match e {
         TiffError::IoError(io) if io.kind() == io::ErrorKind::UnexpectedEof => {
             MapIoError::Truncated {
@@ -720,7 +720,7 @@ fn read_at<const N: usize>(
 /// (which reads the directory with its default limits, up to 256 MiB per tag) allocates no
 /// more than the file could justify. The image size is checked against `limits` here too,
 /// before the decoder works out strips and tiles for it.
-fn check_first_ifd(
+pub(crate) fn check_first_ifd(
     r: &mut (impl Read + Seek),
     len: u64,
     limits: &ReadLimits,

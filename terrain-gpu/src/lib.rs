@@ -85,7 +85,9 @@ pub use download::{WAIT_TIMEOUT, download_bytes, read_texture_rgba8, wait_bounde
 pub use error::GpuError;
 pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
 pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
-pub use materials::{GpuMaterials, MaterialStyle, PROCEDURAL_MATERIAL_SIZE, SurfaceShading};
+pub use materials::{
+    GpuColorLayer, GpuMaterials, MaterialStyle, PROCEDURAL_MATERIAL_SIZE, SurfaceShading,
+};
 pub use normals::NormalPass;
 pub use offscreen::OffscreenTarget;
 pub use profiler::{

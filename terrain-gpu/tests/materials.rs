@@ -507,3 +507,55 @@ fn an_engine_shades_every_lod_mode_with_its_own_surface_function() {
         );
     }
 }
+
+#[test]
+fn a_colour_layer_gives_the_albedo_in_every_lod_mode() {
+    let Some(ctx) = context_or_skip("colour layer") else {
+        return;
+    };
+    let map = cliff_map();
+    let gpu = upload(&ctx, &map);
+    // An "orthophoto": orange west of x = 64, teal east of it.
+    let (west, east) = ([230u8, 120, 30, 255], [30u8, 160, 170, 255]);
+    let colors = Grid::from_fn(MAP, MAP, |x, _| if x < 64 { west } else { east }).expect("grid");
+    let layer = terrain_gpu::GpuColorLayer::new(&ctx.device, &ctx.queue, &colors).expect("upload");
+    let wrong = Grid::new(MAP / 2, MAP, west).expect("grid");
+    let wrong = terrain_gpu::GpuColorLayer::new(&ctx.device, &ctx.queue, &wrong).expect("upload");
+    let l = Vec3::new(-0.8, 0.6, 0.0).normalize();
+    let lit = |c: [u8; 4]| Vec3::new(c[0].into(), c[1].into(), c[2].into()) * (0.28 + 0.8 * l.y);
+    for mut renderer in renderers(&ctx, &map) {
+        let mode = renderer.mode();
+        renderer.set_color_layer(Some(&layer));
+        let image = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Ramp);
+        for (columns, want) in [((10, 56), lit(west)), ((72, 110), lit(east))] {
+            let (mean, _) = region(&image, columns);
+            assert!(
+                (mean - want).abs().max_element() <= COLOUR_TOLERANCE,
+                "{mode}: {columns:?} are {mean}, not the layer's {want}"
+            );
+        }
+        // A layer of another size than the map is refused, not drawn misplaced.
+        renderer.set_color_layer(Some(&wrong));
+        let (device, queue) = (&ctx.device, &ctx.queue);
+        let style = TerrainStyle::default();
+        let view = terrain_gpu::Camera::looking(Vec3::new(128.0, 60.0, 128.0), Vec3::X);
+        let terrain_view = TerrainView {
+            surface: ClipmapSurface::Coarse {
+                map: &gpu.0,
+                normals: &gpu.1,
+            },
+            camera: &view,
+            style: &style,
+            target_size: SIZE,
+        };
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let err = renderer.prepare(device, queue, &mut encoder, &terrain_view);
+        assert!(
+            matches!(
+                err,
+                Err(GpuError::Core(terrain_core::CoreError::SizeMismatch { .. }))
+            ),
+            "{mode}: {err:?}"
+        );
+    }
+}

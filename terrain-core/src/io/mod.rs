@@ -32,6 +32,7 @@ use std::io;
 use std::path::PathBuf;
 
 mod atomic;
+mod color;
 mod guard;
 mod png;
 mod r32;
@@ -39,6 +40,7 @@ mod raw;
 mod raw16;
 
 pub use self::atomic::{AtomicWrite, write_atomic, write_atomic_report};
+pub use self::color::{decode_color_image, read_color_image};
 pub(crate) use self::guard::{check_size, open_regular, try_zeroed};
 pub use self::png::{
     decode_png, decode_png_rgba8, decode_png8, decode_png16, encode_png_rgba8, encode_png8,

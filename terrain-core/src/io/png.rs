@@ -238,6 +238,8 @@ enum Accept {
     Gray(Option<u8>),
     /// 8-bit RGBA (frame captures).
     Rgba8,
+    /// 8-bit RGB or RGBA (colour layers).
+    Color8,
 }
 
 /// A PNG decoder with our memory limits, keeping the samples as stored.
@@ -323,6 +325,24 @@ fn decode_png_pixels<R: BufRead + Seek>(
                 });
             }
             4
+        }
+        Accept::Color8 => {
+            let channels = match color_type {
+                png::ColorType::Rgb => 3,
+                png::ColorType::Rgba => 4,
+                other => {
+                    return Err(MapIoError::NotRgba {
+                        color_type: color_type_name(other).to_owned(),
+                    });
+                }
+            };
+            if bits != 8 {
+                return Err(MapIoError::WrongBitDepth {
+                    expected: 8,
+                    found: bits,
+                });
+            }
+            channels
         }
     };
 
@@ -546,6 +566,26 @@ pub fn read_png_rgba8(
     let pixels = buf
         .chunks_exact(4)
         .map(|p| [p[0], p[1], p[2], p[3]])
+        .collect();
+    Ok(Grid::from_vec(width, height, pixels)?)
+}
+
+/// Decodes an 8-bit RGB or RGBA PNG held in memory into RGBA pixels (alpha 255 for RGB);
+/// other colour types are [`MapIoError::NotRgba`].
+pub(crate) fn decode_png_color(
+    bytes: &[u8],
+    limits: &ReadLimits,
+) -> Result<Grid<[u8; 4]>, MapIoError> {
+    let (width, height, _, buf) = decode_png_pixels(
+        Cursor::new(bytes),
+        limits,
+        Accept::Color8,
+        Source::Memory(bytes),
+    )?;
+    let channels = buf.len() / (width as usize * height as usize).max(1);
+    let pixels = buf
+        .chunks_exact(channels.max(1))
+        .map(|p| [p[0], p[1], p[2], if channels == 4 { p[3] } else { 255 }])
         .collect();
     Ok(Grid::from_vec(width, height, pixels)?)
 }

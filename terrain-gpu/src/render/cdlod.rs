@@ -14,7 +14,7 @@ use crate::render::clipmap::{
 };
 use crate::render::surface::{DetailUniform, fragment_reach, with_surface_weights};
 use crate::render::target::TargetFormat;
-use crate::resources::materials::{GpuMaterials, MaterialSlot};
+use crate::resources::materials::{GpuColorLayer, GpuMaterials, MaterialSlot};
 use glam::UVec2;
 use terrain_core::WrapMode;
 use terrain_lod::cdlod::MAX_CDLOD_LODS;
@@ -140,6 +140,12 @@ impl CdlodRenderer {
         self.materials.set(materials);
     }
 
+    /// Draws `color` as the surface's albedo from the next prepare (`None`: no colour layer).
+    /// Its size must be the drawn surface's, else the prepare fails.
+    pub fn set_color_layer(&mut self, color: Option<&GpuColorLayer>) {
+        self.materials.set_color(color);
+    }
+
     /// Computes the material weights with an engine's `surface_weights` function, or the
     /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
     pub fn set_surface_shader(
@@ -219,7 +225,10 @@ impl CdlodRenderer {
             }
             WrapMode::Clamp => [0, 0],
         };
-        let uniform = frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset)?;
+        let mut uniform =
+            frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset)?;
+        let (shading, new_shading) = self.materials.get(device, queue, info.size)?;
+        uniform.set_color_layer(shading.has_color);
         let mut lods: LodsUniform = [[0.0, -1.0, 0.0, 0.0]; MAX_CDLOD_LODS as usize];
         for (slot, &(start, end)) in lods.iter_mut().zip(&frame.ranges.morph) {
             if end.is_finite() && start.is_finite() && end > start {
@@ -244,8 +253,7 @@ impl CdlodRenderer {
         let buffers =
             self.detail_uniform
                 .surface_buffers(queue, &surface, info.texel_size, camera_texel)?;
-        let (materials, new_materials) = self.materials.get(device, queue)?;
-        if new_materials
+        if new_shading
             || self.kind != kind
             || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers)
         {
@@ -255,7 +263,7 @@ impl CdlodRenderer {
                 &self.uniform,
                 &buffers,
                 &[(LODS_BINDING, &self.lods)],
-                &materials,
+                &shading,
             )?;
             self.bound = Some((buffers, group));
             self.kind = kind;

@@ -13,7 +13,7 @@ use crate::resources::atlas::GpuTileAtlas;
 use crate::resources::detail::{DetailShading, GpuDetailTiles};
 use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
 use crate::resources::materials::{
-    self, GpuMaterials, MaterialSlot, MaterialStyle, SurfaceShading,
+    self, GpuColorLayer, GpuMaterials, MaterialSlot, MaterialStyle, ShadingBindings, SurfaceShading,
 };
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2, Vec3, Vec4};
@@ -50,12 +50,19 @@ pub(crate) struct FrameUniform {
     /// fragments are discarded: another renderer draws them. Empty ([`NOTHING_EXCLUDED`])
     /// unless set.
     pub(crate) excluded: [f32; 4],
-    /// Material shading: see `resources::materials::frame_fields`.
-    material: [[f32; 4]; 3],
+    /// Material shading and the colour layer: see `resources::materials::frame_fields`.
+    material: [[f32; 4]; 4],
+}
+
+impl FrameUniform {
+    /// Marks whether a colour layer is bound (see [`crate::GpuColorLayer`]).
+    pub(crate) fn set_color_layer(&mut self, on: bool) {
+        self.material[3][0] = f32::from(u8::from(on));
+    }
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<FrameUniform>() == 240);
+const _: () = assert!(std::mem::size_of::<FrameUniform>() == 256);
 
 /// An exclusion rect with min above max: nothing is discarded.
 pub(crate) const NOTHING_EXCLUDED: [f32; 4] = [1.0, 1.0, -1.0, -1.0];
@@ -213,6 +220,12 @@ impl ClipmapRenderer {
         self.materials.set(materials);
     }
 
+    /// Draws `color` as the surface's albedo from the next prepare (`None`: no colour layer).
+    /// Its size must be the drawn surface's, else the prepare fails.
+    pub fn set_color_layer(&mut self, color: Option<&GpuColorLayer>) {
+        self.materials.set_color(color);
+    }
+
     /// Computes the material weights with `wgsl_function`, an engine's
     /// `fn surface_weights(p: SurfacePoint) -> vec4<f32>` (see terrain-shaders'
     /// `surface_weights.wgsl` for `SurfacePoint`), or with the autoshader again for `None`.
@@ -308,6 +321,8 @@ impl ClipmapRenderer {
         if let Some(region) = self.excluded {
             uniform.excluded = self.exclusion(region, Vec2::from(uniform.camera_frac))?;
         }
+        let (shading, new_shading) = self.materials.get(device, queue, info.size)?;
+        uniform.set_color_layer(shading.has_color);
 
         // Instances grouped by part, so each part is one instanced draw.
         let mut by_part: Vec<Vec<ClipmapInstance>> = vec![Vec::new(); self.parts.len()];
@@ -342,10 +357,9 @@ impl ClipmapRenderer {
             self.detail_uniform
                 .surface_buffers(queue, &surface, info.texel_size, camera_texel)?;
         let kind = surface.kind();
-        let (materials, new_materials) = self.materials.get(device, queue)?;
         let rebind = match &self.bound {
             Some((bound, k, _)) => {
-                new_materials || *k != kind || bound.as_slice() != buffers.as_slice()
+                new_shading || *k != kind || bound.as_slice() != buffers.as_slice()
             }
             None => true,
         };
@@ -356,7 +370,7 @@ impl ClipmapRenderer {
                 &self.uniform,
                 &buffers,
                 &[],
-                &materials,
+                &shading,
             )?;
             self.bound = Some((buffers, kind, group));
         }
@@ -905,8 +919,8 @@ impl SurfacePipeline {
     }
 
     /// A bind group of `uniform` at binding 0, the surface's `buffers` at 1, 2, ...,
-    /// `extra` (binding, buffer) after them and the `materials` at 10 to 12, over this
-    /// pipeline's layout.
+    /// `extra` (binding, buffer) after them and the `shading` (materials, colour layer) at 10
+    /// to 13, over this pipeline's layout.
     pub(crate) fn bind_group(
         &self,
         device: &wgpu::Device,
@@ -914,7 +928,7 @@ impl SurfacePipeline {
         uniform: &wgpu::Buffer,
         buffers: &[wgpu::Buffer],
         extra: &[(u32, &wgpu::Buffer)],
-        materials: &GpuMaterials,
+        shading: &ShadingBindings,
     ) -> Result<wgpu::BindGroup, GpuError> {
         let mut entries = vec![wgpu::BindGroupEntry {
             binding: 0,
@@ -933,7 +947,7 @@ impl SurfacePipeline {
             binding,
             resource: b.as_entire_binding(),
         }));
-        entries.extend(materials.entries());
+        entries.extend(shading.entries());
         scoped(device, label, || {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some(label),

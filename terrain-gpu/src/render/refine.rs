@@ -27,7 +27,7 @@ use crate::render::surface::with_surface_weights;
 use crate::render::target::TargetFormat;
 use crate::resources::detail::{DetailInfo, DetailShading, GpuDetailTiles};
 use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
-use crate::resources::materials::{GpuMaterials, MaterialSlot};
+use crate::resources::materials::{GpuColorLayer, GpuMaterials, MaterialSlot};
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use terrain_core::WrapMode;
@@ -485,6 +485,12 @@ impl RefineRenderer {
         self.materials.set(materials);
     }
 
+    /// Draws `color` as the surface's albedo from the next prepare (`None`: no colour layer);
+    /// its size must be the coarse-map's.
+    pub fn set_color_layer(&mut self, color: Option<&GpuColorLayer>) {
+        self.materials.set_color(color);
+    }
+
     /// Computes the material weights with an engine's `surface_weights` function, or the
     /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
     pub fn set_surface_shader(
@@ -525,7 +531,9 @@ impl RefineRenderer {
                 reason: "the refine pass was last encoded for another camera or radius",
             });
         }
-        let frame = draw.frame(&info, &resolved, &self.target, reach)?;
+        let mut frame = draw.frame(&info, &resolved, &self.target, reach)?;
+        let (shading, new_shading) = self.materials.get(device, queue, info.size)?;
+        frame.set_color_layer(shading.has_color);
         let detail = draw.detail_info(&frame, reach)?;
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&frame));
         queue.write_buffer(&self.detail_uniform, 0, bytemuck::bytes_of(&detail));
@@ -535,8 +543,7 @@ impl RefineRenderer {
             draw.detail.table_buffer().clone(),
             draw.detail.heights_buffer().clone(),
         ];
-        let (materials, new_materials) = self.materials.get(device, queue)?;
-        if new_materials || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
+        if new_shading || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
             // The vertices carry their heights; the fragments read the map's (the material
             // shading's curvature).
             let group = self.pipeline.bind_group(
@@ -551,7 +558,7 @@ impl RefineRenderer {
                     (4, &buffers[2]),
                     (5, &buffers[3]),
                 ],
-                &materials,
+                &shading,
             )?;
             self.bound = Some((buffers, group));
         }

@@ -256,6 +256,16 @@ impl TerrainRenderer {
         }
     }
 
+    /// Draws `color` (an orthophoto over the map) as the surface's albedo from the next
+    /// prepare, `None` for none; its size must be the drawn surface's, else the prepare fails.
+    pub fn set_color_layer(&mut self, color: Option<&crate::GpuColorLayer>) {
+        match &mut self.lod {
+            Lod::Clipmap(c) => c.renderer.set_color_layer(color),
+            Lod::Cdlod(c) => c.renderer.set_color_layer(color),
+            Lod::Tessellated(t) => t.renderer.set_color_layer(color),
+        }
+    }
+
     /// Computes the material weights of [`crate::SurfaceShading::Materials`] with
     /// `wgsl_function`, an engine's `fn surface_weights(p: SurfacePoint) -> vec4<f32>`, or with
     /// the autoshader again for `None`. `SurfacePoint` holds the fragment's world position (x,

@@ -31,7 +31,7 @@ use crate::render::clipmap::{
 };
 use crate::render::surface::{DetailUniform, fragment_reach, with_surface_weights};
 use crate::render::target::TargetFormat;
-use crate::resources::materials::{GpuMaterials, MaterialSlot};
+use crate::resources::materials::{GpuColorLayer, GpuMaterials, MaterialSlot};
 use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::WrapMode;
@@ -547,6 +547,12 @@ impl TessRenderer {
         self.materials.set(materials);
     }
 
+    /// Draws `color` as the surface's albedo from the next prepare (`None`: no colour layer).
+    /// Its size must be the drawn surface's, else the prepare fails.
+    pub fn set_color_layer(&mut self, color: Option<&GpuColorLayer>) {
+        self.materials.set_color(color);
+    }
+
     /// Computes the material weights with an engine's `surface_weights` function, or the
     /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
     pub fn set_surface_shader(
@@ -619,14 +625,16 @@ impl TessRenderer {
             }
             WrapMode::Clamp => [0, 0],
         };
-        let uniform = frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset)?;
+        let mut uniform =
+            frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset)?;
+        let (shading, new_shading) = self.materials.get(device, queue, info.size)?;
+        uniform.set_color_layer(shading.has_color);
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         let camera_texel = glam::IVec2::from(uniform.camera_texel);
         let buffers =
             self.detail_uniform
                 .surface_buffers(queue, &surface, info.texel_size, camera_texel)?;
-        let (materials, new_materials) = self.materials.get(device, queue)?;
-        if new_materials
+        if new_shading
             || self.on_detail != on_detail
             || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers)
         {
@@ -636,7 +644,7 @@ impl TessRenderer {
                 &self.uniform,
                 &buffers,
                 &[],
-                &materials,
+                &shading,
             )?;
             self.bound = Some((buffers, group));
             self.on_detail = on_detail;

@@ -1,6 +1,7 @@
 //! [`GpuMaterials`]: the surface materials' images as two texture arrays (albedo as sRGB
 //! bytes, tangent-space normals) with their mip chains and one repeating sampler, bound by every
-//! terrain renderer at 10, 11 and 12. [`MaterialStyle`] and [`SurfaceShading`] choose, per
+//! terrain renderer at 10, 11 and 12, and [`GpuColorLayer`], an image drawn over a map (an
+//! orthophoto), at 13. [`MaterialStyle`] and [`SurfaceShading`] choose, per
 //! [`crate::TerrainStyle`], whether a frame is shaded by the height ramp or by the materials,
 //! weighted by the autoshader (`terrain_core::material`).
 //!
@@ -237,11 +238,40 @@ impl GpuMaterials {
     }
 }
 
+/// What a renderer's shading binds besides its surface: the materials and the colour layer.
+#[derive(Debug, Clone)]
+pub(crate) struct ShadingBindings {
+    pub(crate) materials: GpuMaterials,
+    /// The colour layer's buffer, or a one-word stand-in.
+    pub(crate) color: wgpu::Buffer,
+    /// Whether a colour layer is drawn.
+    pub(crate) has_color: bool,
+}
+
+impl ShadingBindings {
+    /// The bind group entries at 10 to 13 of every terrain pipeline.
+    pub(crate) fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 4] {
+        let [a, n, s] = self.materials.entries();
+        [
+            a,
+            n,
+            s,
+            wgpu::BindGroupEntry {
+                binding: 13,
+                resource: self.color.as_entire_binding(),
+            },
+        ]
+    }
+}
+
 /// The materials a renderer binds: the caller's ([`MaterialSlot::set`]), or the procedural
-/// set made on its first frame.
+/// set made on its first frame; and the colour layer, if any.
 #[derive(Debug, Default)]
 pub(crate) struct MaterialSlot {
     materials: Option<GpuMaterials>,
+    color: Option<GpuColorLayer>,
+    /// Bound while no colour layer is.
+    no_color: Option<wgpu::Buffer>,
     /// Set since the renderer last bound them.
     changed: bool,
 }
@@ -253,24 +283,61 @@ impl MaterialSlot {
         self.changed = true;
     }
 
-    /// The materials to bind (made on first use; a clone shares the textures), and whether
-    /// they changed since the last call (the bind group must be made again).
+    /// Draws `color` (or no colour layer) from the next frame on.
+    pub(crate) fn set_color(&mut self, color: Option<&GpuColorLayer>) {
+        self.color = color.cloned();
+        self.changed = true;
+    }
+
+    /// What to bind for a surface of `surface_size` texels (the materials made on first use;
+    /// clones share the GPU objects), and whether it changed since the last call (the bind
+    /// group must be made again). A colour layer of another size is refused.
     pub(crate) fn get(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-    ) -> Result<(GpuMaterials, bool), GpuError> {
-        let changed = std::mem::take(&mut self.changed);
+        surface_size: glam::UVec2,
+    ) -> Result<(ShadingBindings, bool), GpuError> {
+        if let Some(color) = &self.color
+            && color.size != surface_size
+        {
+            return Err(CoreError::SizeMismatch {
+                expected: surface_size,
+                actual: color.size,
+            }
+            .into());
+        }
         let materials = match self.materials.take() {
             Some(m) => m,
             None => GpuMaterials::procedural(device, queue)?,
         };
-        Ok((self.materials.insert(materials).clone(), changed))
+        let materials = self.materials.insert(materials).clone();
+        let color = match (&self.color, &self.no_color) {
+            (Some(c), _) => c.buffer.clone(),
+            (None, Some(stand_in)) => stand_in.clone(),
+            (None, None) => {
+                let stand_in = scoped(device, "no colour layer", || {
+                    device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("no colour layer"),
+                        size: 4,
+                        usage: wgpu::BufferUsages::STORAGE,
+                        mapped_at_creation: false,
+                    })
+                })?;
+                self.no_color.insert(stand_in).clone()
+            }
+        };
+        let bindings = ShadingBindings {
+            materials,
+            color,
+            has_color: self.color.is_some(),
+        };
+        Ok((bindings, std::mem::take(&mut self.changed)))
     }
 }
 
-/// The layout entries of [`GpuMaterials::entries`] (fragment stage).
-pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 3] {
+/// The layout entries of [`ShadingBindings::entries`] (fragment stage).
+pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 4] {
     let texture = |binding| wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::FRAGMENT,
@@ -290,18 +357,29 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 3] {
             ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
             count: None,
         },
+        wgpu::BindGroupLayoutEntry {
+            binding: 13,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        },
     ]
 }
 
 /// The frame uniform's material fields: the camera's whole texel's place in the images'
 /// repeat and the repeats per metre, the strength; the autoshade edges; the dirt edges,
-/// whether materials shade and the curvature's spacing in texels. Computed in f64 so the repeat stays exact far from the origin.
+/// whether materials shade and the curvature's spacing in texels; the colour layer's flag
+/// (0 here: see `FrameUniform::set_color_layer`). Computed in f64 so the repeat stays exact far from the origin.
 pub(crate) fn frame_fields(
     shading: SurfaceShading,
     style: &MaterialStyle,
     camera_texel: [i32; 2],
     texel_size: f32,
-) -> Result<[[f32; 4]; 3], GpuError> {
+) -> Result<[[f32; 4]; 4], GpuError> {
     style.validate()?;
     let per_m = 1.0 / f64::from(style.scale_m);
     let origin = |t: i32| (f64::from(t) * f64::from(texel_size) * per_m).rem_euclid(1.0) as f32;
@@ -328,5 +406,42 @@ pub(crate) fn frame_fields(
                 .round()
                 .clamp(1.0, crate::render::surface::MAX_CURVATURE_STEP),
         ],
+        // Whether a colour layer is drawn: set by the renderer that binds one.
+        [0.0; 4],
     ])
+}
+
+/// A colour layer over a map (an orthophoto beside a DEM): one RGBA8 texel per map texel, in
+/// sRGB as the image holds it, drawn as the surface's albedo in place of the materials' or
+/// the ramp's (the materials' normals still bend the light). One u32 word per texel in a
+/// storage buffer, read bilinearly and wrapped like the heights.
+#[derive(Debug, Clone)]
+pub struct GpuColorLayer {
+    buffer: wgpu::Buffer,
+    size: glam::UVec2,
+}
+
+impl GpuColorLayer {
+    /// Uploads `colors` (row-major, one `[r, g, b, a]` per map texel).
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        colors: &terrain_core::Grid<[u8; 4]>,
+    ) -> Result<Self, GpuError> {
+        let size = glam::UVec2::new(colors.width(), colors.height());
+        let bytes = 4 * u64::from(size.x) * u64::from(size.y);
+        let buffer = crate::resources::maps::map_buffer(device, "colour layer", size, bytes)?;
+        queue.write_buffer(&buffer, 0, bytemuck::cast_slice(colors.as_slice()));
+        Ok(Self { buffer, size })
+    }
+
+    /// The layer's size in texels (the map's it is drawn over).
+    pub fn size(&self) -> glam::UVec2 {
+        self.size
+    }
+
+    /// GPU bytes: 4 per texel.
+    pub fn bytes(&self) -> u64 {
+        self.buffer.size()
+    }
 }

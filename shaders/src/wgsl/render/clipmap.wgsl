@@ -46,6 +46,8 @@ struct Frame {
     // The dirt curvature's edges (x, y); z: 1 to shade with materials, 0 with the height ramp;
     // w: texels between the heights the curvature is measured from.
     autoshade_dirt: vec4<f32>,
+    // x: 1 when a colour layer (materials.wgsl) gives the albedo.
+    color_layer: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -183,6 +185,10 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
         // Steep slopes are bare rock.
         let slope = length(d);
         albedo = mix(albedo, vec3<f32>(0.42, 0.38, 0.34), smoothstep(0.6, 1.1, slope));
+    }
+
+    if frame.color_layer.x > 0.5 {
+        albedo = color_layer_at(qs);
     }
 
     let l = normalize(frame.light_dir.xyz);
