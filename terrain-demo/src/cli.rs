@@ -58,6 +58,10 @@ pub struct Cli {
     /// (.tif, .tiff), chosen by --format.
     #[arg(long, conflicts_with = "size", help_heading = HEIGHTMAP)]
     pub heightmap: Option<PathBuf>,
+    /// A colour image drawn over the heightmap (an orthophoto): 8-bit RGB or RGBA, PNG or
+    /// (Geo)TIFF, the heightmap's size. GPU frames show it; the overview does not.
+    #[arg(long, value_name = "FILE", requires = "heightmap", help_heading = HEIGHTMAP)]
+    pub color: Option<PathBuf>,
     /// The heightmap's format: `auto` by its extension (else its first bytes, else RAW16 when
     /// --raw-size is given).
     #[arg(long, value_enum, default_value_t = FormatArg::Auto, help_heading = HEIGHTMAP)]

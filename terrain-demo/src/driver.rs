@@ -264,6 +264,8 @@ fn open_gpu(
 ) -> Result<Option<GpuScene>> {
     // The flags were checked together before the run (`validate::flags`).
     let tess_config = crate::validate::tess_config(cli).usage()?;
+    // `--color` is read and checked even without a GPU: a wrong file is the user's to fix.
+    let colors = color_layer(cli, scenario.map()).usage()?;
     if cli.no_gpu {
         return Ok(None);
     }
@@ -296,7 +298,39 @@ fn open_gpu(
         }
         LodArg::Clipmap => {}
     }
+    if let Some(colors) = &colors {
+        scene.set_color_layer(colors)?;
+    }
     Ok(Some(scene))
+}
+
+/// `--color`'s image, which must be the map's size.
+fn color_layer(
+    cli: &Cli,
+    map: &terrain_core::CoarseMap,
+) -> Result<Option<terrain_core::Grid<[u8; 4]>>> {
+    let Some(path) = &cli.color else {
+        return Ok(None);
+    };
+    let size = map.size();
+    let limits = terrain_core::io::ReadLimits {
+        max_samples: u64::from(size.x) * u64::from(size.y),
+        ..terrain_core::io::ReadLimits::default()
+    };
+    let colors = terrain_core::io::read_color_image(path, &limits)
+        .with_context(|| format!("--color {}", path.display()))?;
+    let found = glam::UVec2::new(colors.width(), colors.height());
+    if found != size {
+        anyhow::bail!(
+            "--color {} is {}x{}; it must be the heightmap's size, {}x{}",
+            path.display(),
+            found.x,
+            found.y,
+            size.x,
+            size.y
+        );
+    }
+    Ok(Some(colors))
 }
 
 /// The CDLOD quadtree for a heightfield of `size` texels that draws as far as `reach_m` (the clipmap's reach, so both

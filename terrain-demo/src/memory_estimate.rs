@@ -108,6 +108,8 @@ pub struct RunShape {
     /// The heightmap the default scenario imports (`None` for the procedural terrain; a
     /// flyover's is in its `build`).
     pub heightmap: Option<PlannedMap>,
+    /// `--color`: a colour layer of the map's size.
+    pub color: bool,
     /// Frame size with a GPU.
     pub resolution: UVec2,
     /// Size of the overview (the frame without a GPU).
@@ -176,6 +178,7 @@ impl RunShape {
             gpu,
             map,
             heightmap,
+            color: cli.color.is_some(),
             resolution: cli.resolution,
             overview,
             frames: cli.frames,
@@ -193,6 +196,10 @@ impl RunShape {
         }
         if let Some(planned) = &self.heightmap {
             parts.push(("dem_import", import_bytes(planned)));
+        }
+        if self.color {
+            // `--color`: the file's bytes while read, its RGBA pixels, and the GPU's copy.
+            parts.push(("color_layer", per_texel(if self.gpu { 12 } else { 8 })));
         }
         match self.scenario {
             ScenarioKind::Default => {

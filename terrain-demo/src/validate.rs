@@ -59,6 +59,12 @@ fn scenario_flags(cli: &Cli) -> Result<()> {
              flyover and world scenarios have no detail layer yet"
         ));
     }
+    if cli.color.is_some() && cli.scenario != ScenarioKind::Default {
+        return Err(anyhow!(
+            "--color draws an image over the default scenario's heightmap; the {name} scenario \
+             has no colour layer (a streamed world's is not built yet)"
+        ));
+    }
     if cli.heightmap.is_some() && cli.scenario == ScenarioKind::Snow {
         return Err(anyhow!(
             "--heightmap is not used by the snow scenario (it generates its snow field)"

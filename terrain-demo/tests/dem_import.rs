@@ -544,3 +544,86 @@ fn a_10m_dem_with_the_default_camera_is_not_a_flat_plain() {
     eprintln!("DEM {dem:?}; old plain {plain:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// An RGB TIFF of `n` x `n` pixels, all `rgb`.
+fn write_rgb_tiff(path: &Path, n: u32, rgb: [u8; 3]) {
+    let data: Vec<u8> = (0..n * n).flat_map(|_| rgb).collect();
+    let file = std::fs::File::create(path).expect("create");
+    let mut enc = TiffEncoder::new(std::io::BufWriter::new(file)).expect("encoder");
+    enc.write_image::<colortype::RGB8>(n, n, &data)
+        .expect("write");
+}
+
+#[test]
+fn an_rgb_geotiff_over_a_dem_colours_every_lod_mode() {
+    let Some(ctx) = terrain_gpu::testing::context_or_skip("dem_color_layer") else {
+        return;
+    };
+    drop(ctx);
+    let dir = fresh_dir("dem_color");
+    let n = 128;
+    let tif = dir.join("dem.tif");
+    write_geotiff(&tif, n, &mountain(n, 100.0, 400.0), 10.0, None, &PROJECTED);
+    let color = dir.join("ortho.tif");
+    write_rgb_tiff(&color, n, [200, 40, 200]);
+    for lod in ["clipmap", "cdlod", "tessellated"] {
+        let args = [
+            "--heightmap",
+            tif.to_str().unwrap(),
+            "--color",
+            color.to_str().unwrap(),
+            "--lod",
+            lod,
+            "--frames",
+            "2",
+            "--resolution",
+            "160x90",
+            "--overview-size",
+            "16",
+        ];
+        let (code, stderr, r) = run(&dir, &args);
+        assert_eq!(code, Some(0), "{lod}: {stderr}");
+        assert_eq!(r.expect("report")["config"]["flags"]["lod"], lod);
+        // The terrain's pixels are the layer's magenta, lit (the sky and the inset left out).
+        let image =
+            terrain_core::io::read_png_rgba8(dir.join("out/frame_0001.png"), &Default::default())
+                .expect("frame");
+        let (mut terrain, mut magenta) = (0usize, 0usize);
+        for (i, p) in image.as_slice().iter().enumerate() {
+            let (x, y) = (i as u32 % 160, i as u32 / 160);
+            let [r, g, b, _] = p.map(i32::from);
+            if (x >= 160 - 28 && y < 28) || (b > r + 12 && b >= g) {
+                continue;
+            }
+            terrain += 1;
+            magenta += usize::from(r > g + 40 && b > g + 40);
+        }
+        assert!(terrain > 1000, "{lod}: {terrain} terrain pixels");
+        let share = magenta as f64 / terrain as f64;
+        assert!(
+            share > 0.8,
+            "{lod}: {share:.2} of the terrain shows the layer"
+        );
+    }
+    // A layer of another size than the DEM, or without a heightmap, is a usage error.
+    let small = dir.join("small.tif");
+    write_rgb_tiff(&small, n / 2, [0, 0, 0]);
+    let (code, stderr, _) = run(
+        &dir,
+        &[
+            "--heightmap",
+            tif.to_str().unwrap(),
+            "--color",
+            small.to_str().unwrap(),
+            "--no-gpu",
+        ],
+    );
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains("--color") && stderr.contains("64x64"),
+        "{stderr}"
+    );
+    let (code, stderr, _) = run(&dir, &["--color", color.to_str().unwrap()]);
+    assert_eq!(code, Some(2), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

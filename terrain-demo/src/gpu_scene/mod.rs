@@ -339,6 +339,16 @@ impl GpuScene {
         self.style.materials.scale_m = style.material_scale_m;
     }
 
+    /// Draws `colors` (one RGBA8 texel per map texel: `--color`) as the terrain's albedo.
+    pub fn set_color_layer(&mut self, colors: &Grid<[u8; 4]>) -> Result<()> {
+        let layer = terrain_gpu::GpuColorLayer::new(&self.ctx.device, &self.ctx.queue, colors)?;
+        self.terrain.set_color_layer(Some(&layer));
+        if let Some(refined) = self.refined.as_mut() {
+            refined.renderer.set_color_layer(Some(&layer));
+        }
+        Ok(())
+    }
+
     /// Sets the fog's density per metre (the terrain fades to the fog colour with distance).
     pub fn set_fog(&mut self, density: f32) {
         self.style.fog_density = density;
