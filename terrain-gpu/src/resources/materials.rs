@@ -242,8 +242,8 @@ impl GpuMaterials {
 #[derive(Debug, Clone)]
 pub(crate) struct ShadingBindings {
     pub(crate) materials: GpuMaterials,
-    /// The colour layer's buffer, or a one-word stand-in.
-    pub(crate) color: wgpu::Buffer,
+    /// The colour layer, or a one-texel stand-in.
+    pub(crate) color: wgpu::TextureView,
     /// Whether a colour layer is drawn.
     pub(crate) has_color: bool,
 }
@@ -258,7 +258,7 @@ impl ShadingBindings {
             s,
             wgpu::BindGroupEntry {
                 binding: 13,
-                resource: self.color.as_entire_binding(),
+                resource: wgpu::BindingResource::TextureView(&self.color),
             },
         ]
     }
@@ -271,7 +271,7 @@ pub(crate) struct MaterialSlot {
     materials: Option<GpuMaterials>,
     color: Option<GpuColorLayer>,
     /// Bound while no colour layer is.
-    no_color: Option<wgpu::Buffer>,
+    no_color: Option<wgpu::TextureView>,
     /// Set since the renderer last bound them.
     changed: bool,
 }
@@ -313,17 +313,16 @@ impl MaterialSlot {
         };
         let materials = self.materials.insert(materials).clone();
         let color = match (&self.color, &self.no_color) {
-            (Some(c), _) => c.buffer.clone(),
+            (Some(c), _) => c.view.clone(),
             (None, Some(stand_in)) => stand_in.clone(),
             (None, None) => {
-                let stand_in = scoped(device, "no colour layer", || {
-                    device.create_buffer(&wgpu::BufferDescriptor {
-                        label: Some("no colour layer"),
-                        size: 4,
-                        usage: wgpu::BufferUsages::STORAGE,
-                        mapped_at_creation: false,
-                    })
-                })?;
+                let stand_in = rgba8_texture(
+                    device,
+                    queue,
+                    "no colour layer",
+                    glam::UVec2::ONE,
+                    &[[0; 4]],
+                )?;
                 self.no_color.insert(stand_in).clone()
             }
         };
@@ -360,10 +359,10 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 4] {
         wgpu::BindGroupLayoutEntry {
             binding: 13,
             visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                has_dynamic_offset: false,
-                min_binding_size: None,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
             },
             count: None,
         },
@@ -413,26 +412,35 @@ pub(crate) fn frame_fields(
 
 /// A colour layer over a map (an orthophoto beside a DEM): one RGBA8 texel per map texel, in
 /// sRGB as the image holds it, drawn as the surface's albedo in place of the materials' or
-/// the ramp's (the materials' normals still bend the light). One u32 word per texel in a
-/// storage buffer, read bilinearly and wrapped like the heights.
+/// the ramp's (the materials' normals still bend the light). A texture read texel by texel
+/// (bilinear in the shader, wrapped like the heights): storage buffers per shader stage are
+/// few on some devices, and the detail surface already uses four.
 #[derive(Debug, Clone)]
 pub struct GpuColorLayer {
-    buffer: wgpu::Buffer,
+    view: wgpu::TextureView,
     size: glam::UVec2,
 }
 
 impl GpuColorLayer {
-    /// Uploads `colors` (row-major, one `[r, g, b, a]` per map texel).
+    /// Uploads `colors` (row-major, one `[r, g, b, a]` per map texel). Fails on a side above
+    /// the device's `max_texture_dimension_2d`.
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         colors: &terrain_core::Grid<[u8; 4]>,
     ) -> Result<Self, GpuError> {
         let size = glam::UVec2::new(colors.width(), colors.height());
-        let bytes = 4 * u64::from(size.x) * u64::from(size.y);
-        let buffer = crate::resources::maps::map_buffer(device, "colour layer", size, bytes)?;
-        queue.write_buffer(&buffer, 0, bytemuck::cast_slice(colors.as_slice()));
-        Ok(Self { buffer, size })
+        let max = device.limits().max_texture_dimension_2d;
+        if size.max_element() > max {
+            return Err(CoreError::OutOfRange {
+                what: "colour layer side",
+                value: f64::from(size.max_element()),
+                expected: "at most the device's max_texture_dimension_2d",
+            }
+            .into());
+        }
+        let view = rgba8_texture(device, queue, "colour layer", size, colors.as_slice())?;
+        Ok(Self { view, size })
     }
 
     /// The layer's size in texels (the map's it is drawn over).
@@ -442,6 +450,49 @@ impl GpuColorLayer {
 
     /// GPU bytes: 4 per texel.
     pub fn bytes(&self) -> u64 {
-        self.buffer.size()
+        4 * u64::from(self.size.x) * u64::from(self.size.y)
     }
+}
+
+/// A 2D `Rgba8Unorm` texture of `size` holding `texels`, and its view.
+fn rgba8_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &'static str,
+    size: glam::UVec2,
+    texels: &[[u8; 4]],
+) -> Result<wgpu::TextureView, GpuError> {
+    let extent = wgpu::Extent3d {
+        width: size.x,
+        height: size.y,
+        depth_or_array_layers: 1,
+    };
+    let texture = scoped(device, label, || {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: extent,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8Unorm,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        })
+    })?;
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture: &texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        bytemuck::cast_slice(texels),
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(4 * size.x),
+            rows_per_image: Some(size.y),
+        },
+        extent,
+    );
+    Ok(texture.create_view(&Default::default()))
 }

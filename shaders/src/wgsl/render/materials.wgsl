@@ -6,8 +6,9 @@
 @group(0) @binding(10) var material_albedo: texture_2d_array<f32>;
 @group(0) @binding(11) var material_normal: texture_2d_array<f32>;
 @group(0) @binding(12) var material_sampler: sampler;
-// The colour layer (GpuColorLayer): one RGBA8 word per map texel, sRGB as the image holds it.
-@group(0) @binding(13) var<storage, read> color_layer: array<u32>;
+// The colour layer (GpuColorLayer): one RGBA8 texel per map texel, sRGB as the image holds it
+// (a texture: storage buffers per stage are few on some devices).
+@group(0) @binding(13) var color_layer: texture_2d<f32>;
 
 // The colour layer at `q` (texels relative to the camera's whole texel), bilinear between the
 // four texels around it, wrapped or clamped like the heights.
@@ -15,10 +16,10 @@ fn color_layer_at(q: vec2<f32>) -> vec3<f32> {
     let p0 = floor(q);
     let f = q - p0;
     let t0 = frame.camera_texel + vec2<i32>(p0);
-    let c00 = unpack4x8unorm(color_layer[texel_index(t0)]).rgb;
-    let c10 = unpack4x8unorm(color_layer[texel_index(t0 + vec2<i32>(1, 0))]).rgb;
-    let c01 = unpack4x8unorm(color_layer[texel_index(t0 + vec2<i32>(0, 1))]).rgb;
-    let c11 = unpack4x8unorm(color_layer[texel_index(t0 + vec2<i32>(1, 1))]).rgb;
+    let c00 = textureLoad(color_layer, map_texel(t0), 0).rgb;
+    let c10 = textureLoad(color_layer, map_texel(t0 + vec2<i32>(1, 0)), 0).rgb;
+    let c01 = textureLoad(color_layer, map_texel(t0 + vec2<i32>(0, 1)), 0).rgb;
+    let c11 = textureLoad(color_layer, map_texel(t0 + vec2<i32>(1, 1)), 0).rgb;
     return mix(mix(c00, c10, f.x), mix(c01, c11, f.x), f.y);
 }
 
