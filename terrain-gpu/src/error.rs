@@ -160,8 +160,9 @@ pub enum GpuError {
         /// Why.
         reason: &'static str,
     },
-    /// A user procedural stamp's WGSL did not compile into the stamp shader.
-    #[error("user stamp shader rejected: {source}")]
+    /// A user's WGSL (a procedural stamp's, or a renderer's `surface_weights`) did not compile
+    /// into its shader.
+    #[error("user shader rejected: {source}")]
     UserShader {
         /// Why (the shader module's or pipeline's validation error).
         source: Box<GpuError>,
@@ -219,4 +220,14 @@ pub enum GpuError {
     /// A level-of-detail parameter error from terrain-lod (density map parameters).
     #[error(transparent)]
     Lod(#[from] terrain_lod::LodError),
+}
+
+impl GpuError {
+    /// `source`, the error of compiling a shader with a user's WGSL in it, as
+    /// [`GpuError::UserShader`].
+    pub(crate) fn user_shader(source: GpuError) -> Self {
+        Self::UserShader {
+            source: Box::new(source),
+        }
+    }
 }

@@ -161,10 +161,8 @@ impl GpuProceduralStamp {
             _ => unreachable!("terrain_shaders::STAMP carries its user markers"),
         };
         let source = format!("{}{begin}\n{wgsl_function}\n{}", &src[..a], &src[b..]);
-        let user = |e| GpuError::UserShader {
-            source: Box::new(e),
-        };
-        let module = shader_module(device, "user procedural stamp", &source).map_err(user)?;
+        let module = shader_module(device, "user procedural stamp", &source)
+            .map_err(GpuError::user_shader)?;
         let pipeline = compute_pipeline(
             device,
             "user procedural stamp",
@@ -172,7 +170,7 @@ impl GpuProceduralStamp {
             pass.bindings.layout(),
             "main",
         )
-        .map_err(user)?;
+        .map_err(GpuError::user_shader)?;
         Ok(Self { pipeline })
     }
 }

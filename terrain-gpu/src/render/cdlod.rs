@@ -153,13 +153,10 @@ impl CdlodRenderer {
         device: &wgpu::Device,
         wgsl_function: Option<&str>,
     ) -> Result<(), GpuError> {
-        let user = |e| GpuError::UserShader {
-            source: Box::new(e),
-        };
         // The coarse pipeline now, so a function that does not compile fails here; the other
         // surfaces' on their first frame.
         let coarse = surface_pipeline(device, &self.target, SurfaceKind::Coarse, wgsl_function)
-            .map_err(user)?;
+            .map_err(GpuError::user_shader)?;
         self.pipelines = vec![(SurfaceKind::Coarse, coarse)];
         self.user_surface = wgsl_function.map(str::to_owned);
         self.kind = SurfaceKind::Coarse;

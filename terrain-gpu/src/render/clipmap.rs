@@ -236,11 +236,9 @@ impl ClipmapRenderer {
         device: &wgpu::Device,
         wgsl_function: Option<&str>,
     ) -> Result<(), GpuError> {
-        let user = |e| GpuError::UserShader {
-            source: Box::new(e),
-        };
         let [coarse, granular, atlas, detail] =
-            clipmap_pipelines(device, &self.target, wgsl_function).map_err(user)?;
+            clipmap_pipelines(device, &self.target, wgsl_function)
+                .map_err(GpuError::user_shader)?;
         (self.coarse, self.granular, self.atlas, self.detail) = (coarse, granular, atlas, detail);
         self.bound = None;
         Ok(())

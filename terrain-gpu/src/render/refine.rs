@@ -498,11 +498,8 @@ impl RefineRenderer {
         device: &wgpu::Device,
         wgsl_function: Option<&str>,
     ) -> Result<(), GpuError> {
-        self.pipeline = refine_pipeline(device, &self.target, wgsl_function).map_err(|e| {
-            GpuError::UserShader {
-                source: Box::new(e),
-            }
-        })?;
+        self.pipeline =
+            refine_pipeline(device, &self.target, wgsl_function).map_err(GpuError::user_shader)?;
         self.bound = None;
         Ok(())
     }

@@ -560,10 +560,8 @@ impl TessRenderer {
         device: &wgpu::Device,
         wgsl_function: Option<&str>,
     ) -> Result<(), GpuError> {
-        let user = |e| GpuError::UserShader {
-            source: Box::new(e),
-        };
-        self.pipeline = tess_pipeline(device, &self.target, false, wgsl_function).map_err(user)?;
+        self.pipeline = tess_pipeline(device, &self.target, false, wgsl_function)
+            .map_err(GpuError::user_shader)?;
         self.detail = None;
         self.on_detail = false;
         self.user_surface = wgsl_function.map(str::to_owned);
