@@ -329,6 +329,12 @@ pub const MATERIAL_PROBE: &str = concat!(
     include_str!("wgsl/passes/material_probe.wgsl")
 );
 
+/// `MaterialEffectPass`: a stamp's material effect painted on a material layer.
+pub const MATERIAL_EFFECT: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/passes/material_effect.wgsl")
+);
+
 /// The markers around `surface_weights` in every renderer's shader: an engine's own WGSL
 /// function `fn surface_weights(p: SurfacePoint) -> vec4<f32>` replaces what lies between them.
 pub const USER_SURFACE_MARKERS: (&str, &str) = ("// USER_SURFACE_BEGIN", "// USER_SURFACE_END");
@@ -354,6 +360,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("atlas_probe", ATLAS_PROBE),
     ("detail_probe", DETAIL_PROBE),
     ("material_probe", MATERIAL_PROBE),
+    ("material_effect", MATERIAL_EFFECT),
     ("granular_penetration", GRANULAR_PENETRATION),
     ("granular_jfa", GRANULAR_JFA),
     ("granular_displace", GRANULAR_DISPLACE),

@@ -49,6 +49,7 @@ pub mod hillshade;
 pub mod io;
 pub mod map;
 pub mod material;
+pub mod material_effect;
 pub mod normals;
 #[doc(hidden)]
 pub mod par;
@@ -76,6 +77,9 @@ pub use map::{
 pub use material::{
     AutoshadeParams, MATERIALS, MaterialImages, MaterialTextures, autoshade_weights,
     curvature_from_gradients, curvature_from_heights,
+};
+pub use material_effect::{
+    EffectFrame, MaterialEffect, apply_material_effect, effect_amount, paint_texel,
 };
 pub use normals::{
     DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal, derivative_at,

@@ -67,9 +67,9 @@ pub mod testing;
 // crate root (the granular passes under `granular`, the test helpers under `testing`). These
 // imports give the crate's own code the short paths `crate::<module>`.
 use device::{context, download, limits, profiler, readback, region_source, small_readback, timer};
-use passes::{density, detail_probe, normals, spill, stamp};
+use passes::{density, detail_probe, material_effect, normals, spill, stamp};
 use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
-use resources::{atlas, detail, maps, materials};
+use resources::{atlas, detail, maps, material_layer, materials};
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
 pub use camera::{Camera, DepthConvention, RenderView, ViewMatrices};
@@ -85,6 +85,8 @@ pub use download::{WAIT_TIMEOUT, download_bytes, read_texture_rgba8, wait_bounde
 pub use error::GpuError;
 pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
 pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
+pub use material_effect::MaterialEffectPass;
+pub use material_layer::GpuMaterialLayer;
 pub use materials::{
     GpuColorLayer, GpuMaterials, MaterialStyle, PROCEDURAL_MATERIAL_SIZE, SurfaceShading,
 };

@@ -1,18 +1,20 @@
 //! Material shading: the autoshader's weights and curvature on the GPU equal
 //! terrain_core::material's, and every LOD mode draws a frame's flat lowland as grass, its
 //! cliff as rock and its flat highland as snow, in the colours of the material images it was
-//! given; the procedural images show texture where the ramp is flat.
+//! given; the procedural images show texture where the ramp is flat; material effects painted on
+//! the GPU equal terrain_core's and show in every LOD mode.
 
 use glam::{UVec2, Vec2, Vec3, Vec4};
 use terrain_core::{
-    AutoshadeParams, CoarseMap, Grid, HeightEncoding, MATERIALS, MaterialImages, MaterialTextures,
-    WrapMode, autoshade_weights, curvature_from_gradients, curvature_from_heights,
+    AutoshadeParams, CoarseMap, Grid, HeightEncoding, MATERIALS, MaterialEffect, MaterialImages,
+    MaterialTextures, StampPlacement, WrapMode, autoshade_weights, curvature_from_gradients,
+    curvature_from_heights,
 };
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    ClipmapSurface, GpuContext, GpuDerivativeMap, GpuError, GpuHeightMap, GpuMaterials,
-    MaterialStyle, NormalPass, OffscreenTarget, SurfaceShading, TargetFormat, TerrainRenderer,
-    TerrainStyle, TerrainView, ViewMatrices,
+    ClipmapSurface, GpuContext, GpuDerivativeMap, GpuError, GpuHeightMap, GpuMaterialLayer,
+    GpuMaterials, MaterialEffectPass, MaterialStyle, NormalPass, OffscreenTarget, SurfaceShading,
+    TargetFormat, TerrainRenderer, TerrainStyle, TerrainView, ViewMatrices,
 };
 use terrain_lod::{CdlodConfig, ClipmapLayout, LodMetric, TessConfig};
 use wgpu::util::DeviceExt;
@@ -556,6 +558,207 @@ fn a_colour_layer_gives_the_albedo_in_every_lod_mode() {
                 Err(GpuError::Core(terrain_core::CoreError::SizeMismatch { .. }))
             ),
             "{mode}: {err:?}"
+        );
+    }
+}
+
+/// A material layer with some paint already on it (a splat map that is not all zero).
+fn painted_layer(size: UVec2) -> Grid<[u8; 4]> {
+    Grid::from_fn(size.x, size.y, |x, y| {
+        // Two weights from the texel's place, the rest of the cover in snow.
+        let (a, b) = ((x * 37 + y * 11) % 128, (x * 5 + y * 53) % 128);
+        [a as u8, b as u8, 0, (255 - a - b) as u8]
+    })
+    .expect("grid")
+}
+
+#[test]
+fn material_effects_on_the_gpu_equal_the_cpu_reference() {
+    let Some(ctx) = context_or_skip("material effects") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let size = UVec2::new(100, 72);
+    let texel = 0.5;
+    let mut cpu = painted_layer(size);
+    let gpu = GpuMaterialLayer::new(device, queue, &cpu).expect("upload");
+    let mut pass = MaterialEffectPass::new(device).expect("pass");
+    let place = |c: Vec2, s: Vec2, r: f32| {
+        StampPlacement::new(c, s, -1.0)
+            .and_then(|p| p.with_rotation(r))
+            .expect("placement")
+    };
+    // Across the repeating layer's corner, a long rotated one, and two that overlap (so a
+    // texel is painted at most twice).
+    let effects = [
+        (
+            place(Vec2::new(1.0, 0.5), Vec2::splat(9.0), 0.0),
+            MaterialEffect::new(1, 1.0),
+        ),
+        (
+            place(Vec2::new(25.0, 18.0), Vec2::new(30.0, 6.0), 0.7),
+            MaterialEffect::new(2, 0.8),
+        ),
+        (
+            place(Vec2::new(12.0, 20.0), Vec2::splat(12.0), 0.0),
+            MaterialEffect::new(3, 0.35),
+        ),
+        (
+            place(Vec2::new(14.0, 22.0), Vec2::splat(12.0), 0.3),
+            MaterialEffect::new(0, 0.6),
+        ),
+    ];
+    let mut encoder = device.create_command_encoder(&Default::default());
+    for (placement, effect) in &effects {
+        let effect = effect.as_ref().expect("effect");
+        let want = terrain_core::apply_material_effect(
+            &mut cpu,
+            WrapMode::Repeat,
+            texel,
+            placement,
+            effect,
+        )
+        .expect("cpu");
+        let got = pass
+            .encode(
+                device,
+                queue,
+                &mut encoder,
+                &gpu,
+                WrapMode::Repeat,
+                texel,
+                placement,
+                effect,
+            )
+            .expect("gpu");
+        assert_eq!(got, want, "the same rects");
+    }
+    // Refused with nothing recorded, as on the CPU.
+    let bad = MaterialEffect {
+        material: 4,
+        strength: 1.0,
+    };
+    assert!(
+        pass.encode(
+            device,
+            queue,
+            &mut encoder,
+            &gpu,
+            WrapMode::Repeat,
+            texel,
+            &effects[0].0,
+            &bad
+        )
+        .is_err()
+    );
+    queue.submit([encoder.finish()]);
+    pass.recall();
+    let read = gpu.read(device, queue).expect("read back");
+    ctx.check().expect("no GPU validation errors");
+    // An amount may differ by one step where the GPU fuses a multiply and an add (see
+    // terrain_core::material_effect); each painting then moves a channel by at most one.
+    let (mut differ, mut painted) = (0, 0);
+    let start = painted_layer(size);
+    for ((g, c), s) in read
+        .as_slice()
+        .iter()
+        .zip(cpu.as_slice())
+        .zip(start.as_slice())
+    {
+        painted += usize::from(c != s);
+        if g != c {
+            differ += 1;
+            let d = g
+                .iter()
+                .zip(c)
+                .map(|(a, b)| a.abs_diff(*b))
+                .max()
+                .unwrap_or(0);
+            assert!(d <= 2, "GPU {g:?} against CPU {c:?}");
+        }
+    }
+    eprintln!("{painted} texels painted, {differ} differ by a step");
+    assert!(painted > 500, "the effects painted {painted} texels");
+    assert!(differ * 100 <= painted, "{differ} of {painted} differ");
+}
+
+/// Renders a frame of every LOD mode after a shallow stamp that paints rock (a blast's
+/// scorch): without the effect the flat lowland stays grass (the autoshader sees no slope or
+/// curvature in a 0.2 m dip), with it the stamp's centre shows the rock material.
+#[test]
+fn a_stamps_material_effect_shows_in_every_lod_mode() {
+    let Some(ctx) = context_or_skip("material effect render") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let map = cliff_map();
+    let gpu = upload(&ctx, &map);
+    let solid = GpuMaterials::new(device, queue, &solid_materials()).expect("upload");
+    let layer = GpuMaterialLayer::new(device, queue, &Grid::new(MAP, MAP, [0u8; 4]).expect("grid"))
+        .expect("layer");
+    let placement =
+        StampPlacement::new(Vec2::new(60.0, 128.0), Vec2::splat(24.0), -0.2).expect("placement");
+    let mut stamps = terrain_gpu::StampPass::new(device).expect("stamp pass");
+    let mut effects = MaterialEffectPass::new(device).expect("effect pass");
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let gaussian = terrain_core::GaussianStamp::default();
+    let op = terrain_gpu::StampOp {
+        stamp: terrain_gpu::GpuStamp::Gaussian(&gaussian),
+        placement,
+        blend: terrain_core::Blend::Add,
+    };
+    stamps
+        .encode(device, queue, &mut encoder, &gpu.0, &op)
+        .expect("stamp");
+    let rock = MaterialEffect::new(2, 1.0).expect("effect");
+    effects
+        .encode(
+            device,
+            queue,
+            &mut encoder,
+            &layer,
+            WrapMode::Clamp,
+            1.0,
+            &placement,
+            &rock,
+        )
+        .expect("effect");
+    let mut normals = NormalPass::new(device).expect("normal pass");
+    normals
+        .encode_full(device, queue, &mut encoder, &gpu.0, &gpu.1)
+        .expect("normals");
+    queue.submit([encoder.finish()]);
+    // Pixels within 0.8 m of the centre (map (60, 128); 0.8 m a pixel, rows from z = 56 down):
+    // 99% rock there.
+    let centre = |image: &Grid<[u8; 4]>| {
+        let (cx, cy) = (60.0 / 0.8, (128.0 - 56.0) / 0.8);
+        let mut sum = Vec3::ZERO;
+        let mut n = 0.0;
+        for y in 0..SIZE.y {
+            for x in 0..SIZE.x {
+                if (x as f32 - cx).hypot(y as f32 - cy) <= 1.0 {
+                    let p = image.get(x, y).expect("inside");
+                    sum += Vec3::new(p[0].into(), p[1].into(), p[2].into());
+                    n += 1.0;
+                }
+            }
+        }
+        sum / n
+    };
+    let l = Vec3::new(-0.8, 0.6, 0.0).normalize();
+    for mut renderer in renderers(&ctx, &map) {
+        let mode = renderer.mode();
+        renderer.set_materials(&solid);
+        let unpainted = centre(&draw(&ctx, &mut renderer, &gpu, SurfaceShading::Materials));
+        assert!(
+            (unpainted - lit(0, l.y)).abs().max_element() <= COLOUR_TOLERANCE,
+            "{mode}: without the layer the dip is grass, not {unpainted}"
+        );
+        renderer.set_material_layer(Some(&layer));
+        let painted = centre(&draw(&ctx, &mut renderer, &gpu, SurfaceShading::Materials));
+        assert!(
+            (painted - lit(2, l.y)).abs().max_element() <= COLOUR_TOLERANCE + 2.0,
+            "{mode}: the effect paints rock, the frame shows {painted}"
         );
     }
 }

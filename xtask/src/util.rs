@@ -87,7 +87,7 @@ pub fn demo(args: &[&str], env: &[(&str, &str)]) -> Result<()> {
 /// Mesa's Vulkan device-select layer prints `XDG_RUNTIME_DIR is invalid or not set` for every
 /// GPU test on a machine without a desktop session; it only reorders adapters, which
 /// terrain-gpu ranks itself (the demo turns it off the same way).
-fn quiet_device_select(cmd: &mut Command) {
+pub fn quiet_device_select(cmd: &mut Command) {
     if std::env::var_os("MESA_VK_DEVICE_SELECT").is_none() {
         cmd.env("NODEVICE_SELECT", "1");
     }

@@ -146,6 +146,12 @@ impl CdlodRenderer {
         self.materials.set_color(color);
     }
 
+    /// Blends `layer`'s painted weights over the surface's, as
+    /// [`crate::ClipmapRenderer::set_material_layer`].
+    pub fn set_material_layer(&mut self, layer: Option<&crate::GpuMaterialLayer>) {
+        self.materials.set_paint(layer);
+    }
+
     /// Computes the material weights with an engine's `surface_weights` function, or the
     /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
     pub fn set_surface_shader(
@@ -225,7 +231,7 @@ impl CdlodRenderer {
         let mut uniform =
             frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset)?;
         let (shading, new_shading) = self.materials.get(device, queue, info.size)?;
-        uniform.set_color_layer(shading.has_color);
+        uniform.set_layers(&shading);
         let mut lods: LodsUniform = [[0.0, -1.0, 0.0, 0.0]; MAX_CDLOD_LODS as usize];
         for (slot, &(start, end)) in lods.iter_mut().zip(&frame.ranges.morph) {
             if end.is_finite() && start.is_finite() && end > start {

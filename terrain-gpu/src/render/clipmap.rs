@@ -55,9 +55,10 @@ pub(crate) struct FrameUniform {
 }
 
 impl FrameUniform {
-    /// Marks whether a colour layer is bound (see [`crate::GpuColorLayer`]).
-    pub(crate) fn set_color_layer(&mut self, on: bool) {
-        self.material[3][0] = f32::from(u8::from(on));
+    /// Marks which layers `shading` binds ([`crate::GpuColorLayer`],
+    /// [`crate::GpuMaterialLayer`]).
+    pub(crate) fn set_layers(&mut self, shading: &ShadingBindings) {
+        self.material[3] = shading.layer_flags();
     }
 }
 
@@ -226,6 +227,13 @@ impl ClipmapRenderer {
         self.materials.set_color(color);
     }
 
+    /// Blends `layer`'s painted weights over the surface's ([`crate::GpuMaterialLayer`]) in
+    /// [`SurfaceShading::Materials`] frames from the next prepare (`None`: none). Its size must
+    /// be the drawn surface's, else the prepare fails.
+    pub fn set_material_layer(&mut self, layer: Option<&crate::GpuMaterialLayer>) {
+        self.materials.set_paint(layer);
+    }
+
     /// Computes the material weights with `wgsl_function`, an engine's
     /// `fn surface_weights(p: SurfacePoint) -> vec4<f32>` (see terrain-shaders'
     /// `surface_weights.wgsl` for `SurfacePoint`), or with the autoshader again for `None`.
@@ -320,7 +328,7 @@ impl ClipmapRenderer {
             uniform.excluded = self.exclusion(region, Vec2::from(uniform.camera_frac))?;
         }
         let (shading, new_shading) = self.materials.get(device, queue, info.size)?;
-        uniform.set_color_layer(shading.has_color);
+        uniform.set_layers(&shading);
 
         // Instances grouped by part, so each part is one instanced draw.
         let mut by_part: Vec<Vec<ClipmapInstance>> = vec![Vec::new(); self.parts.len()];

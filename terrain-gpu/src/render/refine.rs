@@ -491,6 +491,12 @@ impl RefineRenderer {
         self.materials.set_color(color);
     }
 
+    /// Blends `layer`'s painted weights over the surface's, as
+    /// [`crate::ClipmapRenderer::set_material_layer`].
+    pub fn set_material_layer(&mut self, layer: Option<&crate::GpuMaterialLayer>) {
+        self.materials.set_paint(layer);
+    }
+
     /// Computes the material weights with an engine's `surface_weights` function, or the
     /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
     pub fn set_surface_shader(
@@ -530,7 +536,7 @@ impl RefineRenderer {
         }
         let mut frame = draw.frame(&info, &resolved, &self.target, reach)?;
         let (shading, new_shading) = self.materials.get(device, queue, info.size)?;
-        frame.set_color_layer(shading.has_color);
+        frame.set_layers(&shading);
         let detail = draw.detail_info(&frame, reach)?;
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&frame));
         queue.write_buffer(&self.detail_uniform, 0, bytemuck::bytes_of(&detail));

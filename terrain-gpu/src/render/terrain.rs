@@ -266,6 +266,18 @@ impl TerrainRenderer {
         }
     }
 
+    /// Blends `layer`'s painted weights ([`crate::GpuMaterialLayer`], painted by
+    /// [`crate::MaterialEffectPass`]) over the autoshader's or the engine's in
+    /// [`crate::SurfaceShading::Materials`] frames from the next prepare, `None` for none; its
+    /// size must be the drawn surface's, else the prepare fails.
+    pub fn set_material_layer(&mut self, layer: Option<&crate::GpuMaterialLayer>) {
+        match &mut self.lod {
+            Lod::Clipmap(c) => c.renderer.set_material_layer(layer),
+            Lod::Cdlod(c) => c.renderer.set_material_layer(layer),
+            Lod::Tessellated(t) => t.renderer.set_material_layer(layer),
+        }
+    }
+
     /// Computes the material weights of [`crate::SurfaceShading::Materials`] with
     /// `wgsl_function`, an engine's `fn surface_weights(p: SurfacePoint) -> vec4<f32>`, or with
     /// the autoshader again for `None`. `SurfacePoint` holds the fragment's world position (x,

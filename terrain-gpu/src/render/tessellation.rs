@@ -553,6 +553,12 @@ impl TessRenderer {
         self.materials.set_color(color);
     }
 
+    /// Blends `layer`'s painted weights over the surface's, as
+    /// [`crate::ClipmapRenderer::set_material_layer`].
+    pub fn set_material_layer(&mut self, layer: Option<&crate::GpuMaterialLayer>) {
+        self.materials.set_paint(layer);
+    }
+
     /// Computes the material weights with an engine's `surface_weights` function, or the
     /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
     pub fn set_surface_shader(
@@ -626,7 +632,7 @@ impl TessRenderer {
         let mut uniform =
             frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset)?;
         let (shading, new_shading) = self.materials.get(device, queue, info.size)?;
-        uniform.set_color_layer(shading.has_color);
+        uniform.set_layers(&shading);
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         let camera_texel = glam::IVec2::from(uniform.camera_texel);
         let buffers =

@@ -10,6 +10,7 @@
 
 use crate::device::scope::scoped;
 use crate::error::GpuError;
+use crate::resources::material_layer::GpuMaterialLayer;
 use terrain_core::{AutoshadeParams, CoreError, MATERIALS, MaterialImages, MaterialTextures};
 
 /// How the renderers colour the surface.
@@ -238,7 +239,8 @@ impl GpuMaterials {
     }
 }
 
-/// What a renderer's shading binds besides its surface: the materials and the colour layer.
+/// What a renderer's shading binds besides its surface: the materials, the colour layer and
+/// the material layer.
 #[derive(Debug, Clone)]
 pub(crate) struct ShadingBindings {
     pub(crate) materials: GpuMaterials,
@@ -246,11 +248,15 @@ pub(crate) struct ShadingBindings {
     pub(crate) color: wgpu::TextureView,
     /// Whether a colour layer is drawn.
     pub(crate) has_color: bool,
+    /// The material layer's texture, or the same stand-in.
+    pub(crate) paint: wgpu::TextureView,
+    /// Whether a material layer is drawn.
+    pub(crate) has_paint: bool,
 }
 
 impl ShadingBindings {
-    /// The bind group entries at 10 to 13 of every terrain pipeline.
-    pub(crate) fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 4] {
+    /// The bind group entries at 10 to 14 of every terrain pipeline.
+    pub(crate) fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 5] {
         let [a, n, s] = self.materials.entries();
         [
             a,
@@ -260,17 +266,28 @@ impl ShadingBindings {
                 binding: 13,
                 resource: wgpu::BindingResource::TextureView(&self.color),
             },
+            wgpu::BindGroupEntry {
+                binding: 14,
+                resource: wgpu::BindingResource::TextureView(&self.paint),
+            },
         ]
+    }
+
+    /// The frame uniform's flags of the two layers (`color_layer.x` and `.y` in the shader).
+    pub(crate) fn layer_flags(&self) -> [f32; 4] {
+        let on = |b: bool| f32::from(u8::from(b));
+        [on(self.has_color), on(self.has_paint), 0.0, 0.0]
     }
 }
 
 /// The materials a renderer binds: the caller's ([`MaterialSlot::set`]), or the procedural
-/// set made on its first frame; and the colour layer, if any.
+/// set made on its first frame; and the colour and material layers, if any.
 #[derive(Debug, Default)]
 pub(crate) struct MaterialSlot {
     materials: Option<GpuMaterials>,
     color: Option<GpuColorLayer>,
-    /// Bound while no colour layer is.
+    paint: Option<GpuMaterialLayer>,
+    /// Bound while no colour or material layer is.
     no_color: Option<wgpu::TextureView>,
     /// Set since the renderer last bound them.
     changed: bool,
@@ -289,21 +306,26 @@ impl MaterialSlot {
         self.changed = true;
     }
 
+    /// Draws `layer`'s painted weights (or none) from the next frame on.
+    pub(crate) fn set_paint(&mut self, layer: Option<&GpuMaterialLayer>) {
+        self.paint = layer.cloned();
+        self.changed = true;
+    }
+
     /// What to bind for a surface of `surface_size` texels (the materials made on first use;
     /// clones share the GPU objects), and whether it changed since the last call (the bind
-    /// group must be made again). A colour layer of another size is refused.
+    /// group must be made again). A colour or material layer of another size is refused.
     pub(crate) fn get(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         surface_size: glam::UVec2,
     ) -> Result<(ShadingBindings, bool), GpuError> {
-        if let Some(color) = &self.color
-            && color.size != surface_size
-        {
+        let sizes = [self.color.as_ref().map(|c| c.size), self.paint.as_ref().map(|p| p.size)];
+        if let Some(actual) = sizes.into_iter().flatten().find(|s| *s != surface_size) {
             return Err(CoreError::SizeMismatch {
                 expected: surface_size,
-                actual: color.size,
+                actual,
             }
             .into());
         }
@@ -312,60 +334,49 @@ impl MaterialSlot {
             None => GpuMaterials::procedural(device, queue)?,
         };
         let materials = self.materials.insert(materials).clone();
-        let color = match (&self.color, &self.no_color) {
-            (Some(c), _) => c.view.clone(),
-            (None, Some(stand_in)) => stand_in.clone(),
-            (None, None) => {
-                let stand_in = rgba8_texture(
-                    device,
-                    queue,
-                    "no colour layer",
-                    glam::UVec2::ONE,
-                    &[[0; 4]],
-                )?;
+        let stand_in = match &self.no_color {
+            Some(stand_in) => stand_in.clone(),
+            None => {
+                let stand_in =
+                    rgba8_texture(device, queue, "no layer", glam::UVec2::ONE, &[[0; 4]])?;
                 self.no_color.insert(stand_in).clone()
             }
         };
         let bindings = ShadingBindings {
             materials,
-            color,
+            color: self.color.as_ref().map_or(stand_in.clone(), |c| c.view.clone()),
             has_color: self.color.is_some(),
+            paint: self.paint.as_ref().map_or(stand_in, |p| p.view.clone()),
+            has_paint: self.paint.is_some(),
         };
         Ok((bindings, std::mem::take(&mut self.changed)))
     }
 }
 
 /// The layout entries of [`ShadingBindings::entries`] (fragment stage).
-pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 4] {
-    let texture = |binding| wgpu::BindGroupLayoutEntry {
+pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 5] {
+    let texture = |binding, view_dimension| wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::FRAGMENT,
         ty: wgpu::BindingType::Texture {
             sample_type: wgpu::TextureSampleType::Float { filterable: true },
-            view_dimension: wgpu::TextureViewDimension::D2Array,
+            view_dimension,
             multisampled: false,
         },
         count: None,
     };
+    let layer = |binding| texture(binding, wgpu::TextureViewDimension::D2);
     [
-        texture(10),
-        texture(11),
+        texture(10, wgpu::TextureViewDimension::D2Array),
+        texture(11, wgpu::TextureViewDimension::D2Array),
         wgpu::BindGroupLayoutEntry {
             binding: 12,
             visibility: wgpu::ShaderStages::FRAGMENT,
             ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
             count: None,
         },
-        wgpu::BindGroupLayoutEntry {
-            binding: 13,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        },
+        layer(13),
+        layer(14),
     ]
 }
 
@@ -462,6 +473,19 @@ fn rgba8_texture(
     size: glam::UVec2,
     texels: &[[u8; 4]],
 ) -> Result<wgpu::TextureView, GpuError> {
+    rgba8_texture_with(device, queue, label, size, texels, wgpu::TextureUsages::empty())
+        .map(|(_, view)| view)
+}
+
+/// [`rgba8_texture`] with `usage` besides sampling and uploads, and the texture itself.
+pub(crate) fn rgba8_texture_with(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &'static str,
+    size: glam::UVec2,
+    texels: &[[u8; 4]],
+    usage: wgpu::TextureUsages,
+) -> Result<(wgpu::Texture, wgpu::TextureView), GpuError> {
     let extent = wgpu::Extent3d {
         width: size.x,
         height: size.y,
@@ -475,7 +499,7 @@ fn rgba8_texture(
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: wgpu::TextureFormat::Rgba8Unorm,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST | usage,
             view_formats: &[],
         })
     })?;
@@ -494,5 +518,6 @@ fn rgba8_texture(
         },
         extent,
     );
-    Ok(texture.create_view(&Default::default()))
+    let view = texture.create_view(&Default::default());
+    Ok((texture, view))
 }

@@ -1,8 +1,10 @@
 //! GPU-resident terrain data that passes write and renderers read: height and derivative
-//! maps, the tile atlas of a streamed world, and the detail layer's tiles.
+//! maps, the tile atlas of a streamed world, the detail layer's tiles, and the material
+//! images and layers the renderers shade with.
 
 pub mod atlas;
 pub mod detail;
 pub mod maps;
+pub mod material_layer;
 pub mod materials;
 pub(crate) mod packing;

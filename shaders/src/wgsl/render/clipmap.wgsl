@@ -46,7 +46,8 @@ struct Frame {
     // The dirt curvature's edges (x, y); z: 1 to shade with materials, 0 with the height ramp;
     // w: texels between the heights the curvature is measured from.
     autoshade_dirt: vec4<f32>,
-    // x: 1 when a colour layer (materials.wgsl) gives the albedo.
+    // x: 1 when a colour layer (materials.wgsl) gives the albedo; y: 1 when a material layer's
+    // paint is blended over the weights.
     color_layer: vec4<f32>,
 }
 
@@ -166,7 +167,10 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
         let slope = length(d + fd.sample.gradient);
         let curvature = surface_curvature(qs, d00, d10, d01, d11);
         let position = (vec2<f32>(frame.camera_texel) + qs) * frame.texel_size;
-        let w = surface_weights(SurfacePoint(position, height, t, slope, curvature));
+        var w = surface_weights(SurfacePoint(position, height, t, slope, curvature));
+        if frame.color_layer.y > 0.5 {
+            w = painted_weights(qs, w);
+        }
         let k = frame.material.z;
         // Ground coordinates of the fragment in repeats, from the camera's place in the repeat
         // (exact for any world size) plus the fragment's offset.

@@ -9,18 +9,35 @@
 // The colour layer (GpuColorLayer): one RGBA8 texel per map texel, sRGB as the image holds it
 // (a texture: storage buffers per stage are few on some devices).
 @group(0) @binding(13) var color_layer: texture_2d<f32>;
+// The material layer (GpuMaterialLayer): painted weights of the four materials per map texel,
+// their sum the paint's cover (terrain_core::material_effect).
+@group(0) @binding(14) var material_layer: texture_2d<f32>;
 
-// The colour layer at `q` (texels relative to the camera's whole texel), bilinear between the
-// four texels around it, wrapped or clamped like the heights.
-fn color_layer_at(q: vec2<f32>) -> vec3<f32> {
+// `layer` at `q` (texels relative to the camera's whole texel), bilinear between the four
+// texels around it, wrapped or clamped like the heights.
+fn layer_at(layer: texture_2d<f32>, q: vec2<f32>) -> vec4<f32> {
     let p0 = floor(q);
     let f = q - p0;
     let t0 = frame.camera_texel + vec2<i32>(p0);
-    let c00 = textureLoad(color_layer, map_texel(t0), 0).rgb;
-    let c10 = textureLoad(color_layer, map_texel(t0 + vec2<i32>(1, 0)), 0).rgb;
-    let c01 = textureLoad(color_layer, map_texel(t0 + vec2<i32>(0, 1)), 0).rgb;
-    let c11 = textureLoad(color_layer, map_texel(t0 + vec2<i32>(1, 1)), 0).rgb;
+    let c00 = textureLoad(layer, map_texel(t0), 0);
+    let c10 = textureLoad(layer, map_texel(t0 + vec2<i32>(1, 0)), 0);
+    let c01 = textureLoad(layer, map_texel(t0 + vec2<i32>(0, 1)), 0);
+    let c11 = textureLoad(layer, map_texel(t0 + vec2<i32>(1, 1)), 0);
     return mix(mix(c00, c10, f.x), mix(c01, c11, f.x), f.y);
+}
+
+fn color_layer_at(q: vec2<f32>) -> vec3<f32> {
+    return layer_at(color_layer, q).rgb;
+}
+
+// The weights `w` (the autoshader's or an engine's) with the material layer's paint at `q`
+// over them: all paint where its cover is full, none where it is zero.
+fn painted_weights(q: vec2<f32>, w: vec4<f32>) -> vec4<f32> {
+    let paint = layer_at(material_layer, q);
+    let cover = paint.x + paint.y + paint.z + paint.w;
+    let base = max(w, vec4<f32>(0.0, 0.0, 0.0, 0.0));
+    let unpainted = base / max(base.x + base.y + base.z + base.w, 1e-6);
+    return unpainted * max(1.0 - cover, 0.0) + paint / max(cover, 1.0);
 }
 
 struct MaterialSurface {

@@ -1,0 +1,129 @@
+//! [`GpuMaterialLayer`]: a material layer (a splat map, `terrain_core::material_effect`) on the
+//! GPU, painted by [`crate::MaterialEffectPass`] and drawn by every renderer
+//! (`set_material_layer`).
+//!
+//! Two copies: a storage buffer the effect pass reads and writes (rows padded to 256 bytes),
+//! and a texture the renderers read at binding 14. The pass copies the rects it painted from
+//! the one to the other in the same command encoder. Why not one: a texture cannot be read and
+//! written by a compute pass on every backend (read-write storage textures of RGBA8 are not in
+//! WebGPU, and GL has none), and a fifth storage buffer is more than the renderers' fragment
+//! stage may bind on some devices (the detail surface already binds four).
+
+use crate::device::download::download_bytes;
+use crate::error::GpuError;
+use crate::resources::maps::map_buffer;
+use crate::resources::materials::rgba8_texture_with;
+use glam::UVec2;
+use terrain_core::{CoreError, Grid, Rect};
+
+/// Texels per padded row of the layer's buffer: a multiple of 64 (256 bytes, the row alignment
+/// of a buffer-to-texture copy).
+fn pitch(width: u32) -> u32 {
+    width.div_ceil(64) * 64
+}
+
+/// A material layer on the GPU (see the module docs). Cloning shares the buffer and texture.
+#[derive(Debug, Clone)]
+pub struct GpuMaterialLayer {
+    pub(crate) buffer: wgpu::Buffer,
+    pub(crate) texture: wgpu::Texture,
+    pub(crate) view: wgpu::TextureView,
+    pub(crate) size: UVec2,
+    pub(crate) pitch: u32,
+}
+
+impl GpuMaterialLayer {
+    /// Uploads `layer` (row-major, one `[grass, dirt, rock, snow]` weight per map texel; all
+    /// zero for the autoshader everywhere). Fails on a side above the device's
+    /// `max_texture_dimension_2d` or a layer larger than one storage buffer may be.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        layer: &Grid<[u8; 4]>,
+    ) -> Result<Self, GpuError> {
+        let size = layer.size();
+        let max = device.limits().max_texture_dimension_2d;
+        if size.max_element() > max {
+            return Err(CoreError::OutOfRange {
+                what: "material layer side",
+                value: f64::from(size.max_element()),
+                expected: "at most the device's max_texture_dimension_2d",
+            }
+            .into());
+        }
+        let pitch = pitch(size.x);
+        let bytes = 4 * u64::from(pitch) * u64::from(size.y);
+        let buffer = map_buffer(device, "GpuMaterialLayer", size, bytes)?;
+        let mut padded = vec![[0u8; 4]; pitch as usize * size.y as usize];
+        for (y, row) in padded.chunks_exact_mut(pitch as usize).enumerate() {
+            row[..size.x as usize].copy_from_slice(layer.row(y as u32));
+        }
+        queue.write_buffer(&buffer, 0, bytemuck::cast_slice(&padded));
+        let (texture, view) = rgba8_texture_with(
+            device,
+            queue,
+            "material layer",
+            size,
+            layer.as_slice(),
+            wgpu::TextureUsages::empty(),
+        )?;
+        Ok(Self {
+            buffer,
+            texture,
+            view,
+            size,
+            pitch,
+        })
+    }
+
+    /// The layer's size in texels (the map's it is drawn over).
+    pub fn size(&self) -> UVec2 {
+        self.size
+    }
+
+    /// GPU bytes: the buffer's padded rows and the texture, 4 bytes per texel each.
+    pub fn bytes(&self) -> u64 {
+        4 * (u64::from(self.pitch) + u64::from(self.size.x)) * u64::from(self.size.y)
+    }
+
+    /// Downloads the layer (waiting for the GPU): what to write back after effects painted it.
+    pub fn read(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Grid<[u8; 4]>, GpuError> {
+        let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
+        let texels: &[[u8; 4]] = bytemuck::cast_slice(&bytes);
+        let mut out = Vec::with_capacity(self.size.x as usize * self.size.y as usize);
+        for row in texels.chunks_exact(self.pitch as usize) {
+            out.extend_from_slice(&row[..self.size.x as usize]);
+        }
+        Ok(Grid::from_vec(self.size.x, self.size.y, out)?)
+    }
+
+    /// Records the copy of `rect` (layer texels) from the buffer to the texture.
+    pub(crate) fn copy_to_texture(&self, encoder: &mut wgpu::CommandEncoder, rect: Rect) {
+        let offset = 4 * (u64::from(rect.min.y as u32) * u64::from(self.pitch) + rect.min.x as u64);
+        encoder.copy_buffer_to_texture(
+            wgpu::TexelCopyBufferInfo {
+                buffer: &self.buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset,
+                    bytes_per_row: Some(4 * self.pitch),
+                    rows_per_image: Some(rect.size.y),
+                },
+            },
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: rect.min.x as u32,
+                    y: rect.min.y as u32,
+                    z: 0,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::Extent3d {
+                width: rect.size.x,
+                height: rect.size.y,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+}
