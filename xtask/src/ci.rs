@@ -212,7 +212,10 @@ fn gpu_tests_on_gl() -> Result<()> {
     }
     // The library's unit tests and one binary per file in tests/.
     if binaries.len() < 2 {
-        bail!("cargo listed {} test binaries of terrain-gpu", binaries.len());
+        bail!(
+            "cargo listed {} test binaries of terrain-gpu",
+            binaries.len()
+        );
     }
     for exe in &binaries {
         eprintln!("xtask ci: {exe} on GL");
@@ -222,7 +225,9 @@ fn gpu_tests_on_gl() -> Result<()> {
             .env("TERRAIN_REQUIRE_GPU", "1")
             .env("WGPU_BACKEND", "gl");
         quiet_device_select(&mut cmd);
-        let status = cmd.status().with_context(|| format!("could not start {exe}"))?;
+        let status = cmd
+            .status()
+            .with_context(|| format!("could not start {exe}"))?;
         if !status.success() {
             bail!("{exe} on GL exited with {status}");
         }

@@ -11,7 +11,9 @@ use crate::device::compute::{
 use crate::error::GpuError;
 use crate::resources::material_layer::GpuMaterialLayer;
 use bytemuck::{Pod, Zeroable};
-use terrain_core::{DirtyRect, EffectFrame, MaterialEffect, StampPlacement, WrapMode, stamp_region};
+use terrain_core::{
+    DirtyRect, EffectFrame, MaterialEffect, StampPlacement, WrapMode, stamp_region,
+};
 
 /// The uniform block of `material_effect.wgsl` (`EffectParams`), byte for byte.
 #[repr(C)]
@@ -52,8 +54,13 @@ impl MaterialEffectPass {
             "material_effect.wgsl",
             terrain_shaders::MATERIAL_EFFECT,
         )?;
-        let pipeline =
-            compute_pipeline(device, "MaterialEffectPass", &module, bindings.layout(), "main")?;
+        let pipeline = compute_pipeline(
+            device,
+            "MaterialEffectPass",
+            &module,
+            bindings.layout(),
+            "main",
+        )?;
         Ok(Self { pipeline, bindings })
     }
 
@@ -100,7 +107,9 @@ impl MaterialEffectPass {
                 strength: 255.0 * effect.strength,
                 pad: 0,
             };
-            let (group, offset) = self.bindings.bind(device, queue, &params, &[&layer.buffer])?;
+            let (group, offset) = self
+                .bindings
+                .bind(device, queue, &params, &[&layer.buffer])?;
             recorded.push((groups, group, offset));
         }
         for (groups, group, offset) in &recorded {

@@ -87,7 +87,11 @@ impl GpuMaterialLayer {
     }
 
     /// Downloads the layer (waiting for the GPU): what to write back after effects painted it.
-    pub fn read(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Grid<[u8; 4]>, GpuError> {
+    pub fn read(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<Grid<[u8; 4]>, GpuError> {
         let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
         let texels: &[[u8; 4]] = bytemuck::cast_slice(&bytes);
         let mut out = Vec::with_capacity(self.size.x as usize * self.size.y as usize);

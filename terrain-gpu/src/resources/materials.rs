@@ -321,7 +321,10 @@ impl MaterialSlot {
         queue: &wgpu::Queue,
         surface_size: glam::UVec2,
     ) -> Result<(ShadingBindings, bool), GpuError> {
-        let sizes = [self.color.as_ref().map(|c| c.size), self.paint.as_ref().map(|p| p.size)];
+        let sizes = [
+            self.color.as_ref().map(|c| c.size),
+            self.paint.as_ref().map(|p| p.size),
+        ];
         if let Some(actual) = sizes.into_iter().flatten().find(|s| *s != surface_size) {
             return Err(CoreError::SizeMismatch {
                 expected: surface_size,
@@ -344,7 +347,10 @@ impl MaterialSlot {
         };
         let bindings = ShadingBindings {
             materials,
-            color: self.color.as_ref().map_or(stand_in.clone(), |c| c.view.clone()),
+            color: self
+                .color
+                .as_ref()
+                .map_or(stand_in.clone(), |c| c.view.clone()),
             has_color: self.color.is_some(),
             paint: self.paint.as_ref().map_or(stand_in, |p| p.view.clone()),
             has_paint: self.paint.is_some(),
@@ -473,8 +479,15 @@ fn rgba8_texture(
     size: glam::UVec2,
     texels: &[[u8; 4]],
 ) -> Result<wgpu::TextureView, GpuError> {
-    rgba8_texture_with(device, queue, label, size, texels, wgpu::TextureUsages::empty())
-        .map(|(_, view)| view)
+    rgba8_texture_with(
+        device,
+        queue,
+        label,
+        size,
+        texels,
+        wgpu::TextureUsages::empty(),
+    )
+    .map(|(_, view)| view)
 }
 
 /// [`rgba8_texture`] with `usage` besides sampling and uploads, and the texture itself.
