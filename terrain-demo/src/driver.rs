@@ -301,6 +301,14 @@ fn open_gpu(
     if let Some(colors) = &colors {
         scene.set_color_layer(colors)?;
     }
+    // Craters and footprints paint dirt where the frames shade with materials; a map too
+    // large for the layer's buffer keeps the autoshader alone.
+    if cli.scenario == ScenarioKind::Default
+        && params.style.shading == crate::config::ShadingParam::Materials
+        && let Err(e) = scene.enable_material_effects()
+    {
+        crate::console::note!("warning: no material effects: {e:#}");
+    }
     Ok(Some(scene))
 }
 

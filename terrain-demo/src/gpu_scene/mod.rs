@@ -27,6 +27,7 @@ use crate::timings::{GpuFigure, Step, Timings};
 mod detail;
 mod frame_timer;
 mod lod;
+mod paint;
 
 pub use detail::{DETAIL_SLOTS, SPILL_WINDOW_TEXELS};
 use detail::{DetailScene, RefinedGeometry};
@@ -73,6 +74,8 @@ pub struct GpuScene {
     /// `--detail refine`: the refined geometry near the camera (the clipmap shades the rest
     /// with the detail normals, no parallax).
     refined: Option<RefinedGeometry>,
+    /// The material layer the default scenario's deformations paint (`paint`).
+    paint: Option<paint::Paint>,
     /// Frames rendered so far.
     frames: u32,
     /// Fault injection for the device-loss test: destroy the device before rendering this
@@ -302,6 +305,7 @@ impl GpuScene {
             tile_texture: None,
             detail: None,
             refined: None,
+            paint: None,
             frames: 0,
             destroy_at: std::env::var(DESTROY_DEVICE_ENV)
                 .ok()
@@ -710,6 +714,9 @@ impl GpuScene {
                     blend: terrain_core::Blend::Add,
                 };
                 let rects = self.stamps.encode(device, queue, encoder, &self.map, &op)?;
+                if let Some(paint) = self.paint.as_mut() {
+                    paint.encode(device, queue, encoder, &self.map, d.kind, &d.placement)?;
+                }
                 dirty.extend(rects.into_iter().map(|r| (i, r)));
             }
             Ok(())
@@ -761,6 +768,9 @@ impl GpuScene {
                         &op,
                     )?;
                     texels += out.detail.iter().map(|(_, r)| r.area()).sum::<u64>();
+                    if let Some(paint) = self.paint.as_mut() {
+                        paint.encode(device, queue, encoder, &self.map, d.kind, &d.placement)?;
+                    }
                     // Back to the CPU through the ring, recorded after the stamp.
                     detail.request(device, encoder, out.detail)?;
                     for r in out.coarse {
@@ -784,6 +794,9 @@ impl GpuScene {
         // Every submit is done: the passes' uniform slots are free again.
         self.stamps.recall();
         self.normal_pass.recall();
+        if let Some(paint) = self.paint.as_mut() {
+            paint.recall();
+        }
         stamp_time.record(timings);
         normal_time.record(timings);
         Ok(dirty)
