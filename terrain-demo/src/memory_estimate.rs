@@ -222,6 +222,9 @@ impl RunShape {
                 if self.gpu {
                     let gpu = GPU_MAP_PER_TEXEL + GPU_READBACK_PER_TEXEL;
                     parts.push(("gpu_map", per_texel(gpu)));
+                    // The material layer the stamps paint (its buffer and texture, 4 bytes a
+                    // texel each), counted whatever the shading: the flags do not say it.
+                    parts.push(("material_layer", per_texel(8)));
                     if self.lod == crate::cli::LodArg::Tessellated {
                         let tess = per_texel(TESS_PER_TEXEL).saturating_add(TESS_FIXED);
                         parts.push(("tessellation", tess));
