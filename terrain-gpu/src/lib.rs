@@ -85,7 +85,7 @@ pub use download::{WAIT_TIMEOUT, download_bytes, read_texture_rgba8, wait_bounde
 pub use error::GpuError;
 pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
 pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
-pub use material_effect::MaterialEffectPass;
+pub use material_effect::{EffectOp, MaterialEffectPass};
 pub use material_layer::GpuMaterialLayer;
 pub use materials::{
     GpuColorLayer, GpuMaterials, MaterialStyle, PROCEDURAL_MATERIAL_SIZE, SurfaceShading,

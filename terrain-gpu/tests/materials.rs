@@ -12,9 +12,9 @@ use terrain_core::{
 };
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    ClipmapSurface, GpuContext, GpuDerivativeMap, GpuError, GpuHeightMap, GpuMaterialLayer,
-    GpuMaterials, MaterialEffectPass, MaterialStyle, NormalPass, OffscreenTarget, SurfaceShading,
-    TargetFormat, TerrainRenderer, TerrainStyle, TerrainView, ViewMatrices,
+    ClipmapSurface, EffectOp, GpuContext, GpuDerivativeMap, GpuError, GpuHeightMap,
+    GpuMaterialLayer, GpuMaterials, MaterialEffectPass, MaterialStyle, NormalPass, OffscreenTarget,
+    SurfaceShading, TargetFormat, TerrainRenderer, TerrainStyle, TerrainView, ViewMatrices,
 };
 use terrain_lod::{CdlodConfig, ClipmapLayout, LodMetric, TessConfig};
 use wgpu::util::DeviceExt;
@@ -608,9 +608,18 @@ fn material_effects_on_the_gpu_equal_the_cpu_reference() {
             MaterialEffect::new(0, 0.6),
         ),
     ];
+    // The map the effects go with: the layer's size, repeating, `texel` metres a texel.
+    let enc = HeightEncoding::spanning::<u16>(0.0, 10.0).expect("range");
+    let heights = Grid::new(size.x, size.y, 0u16).expect("grid");
+    let map = CoarseMap::new(heights, enc, texel, WrapMode::Repeat).expect("map");
+    let map = GpuHeightMap::from_map(device, queue, &map).expect("upload");
     let mut encoder = device.create_command_encoder(&Default::default());
     for (placement, effect) in &effects {
         let effect = effect.as_ref().expect("effect");
+        let op = EffectOp {
+            placement: *placement,
+            effect: *effect,
+        };
         let want = terrain_core::apply_material_effect(
             &mut cpu,
             WrapMode::Repeat,
@@ -620,16 +629,7 @@ fn material_effects_on_the_gpu_equal_the_cpu_reference() {
         )
         .expect("cpu");
         let got = pass
-            .encode(
-                device,
-                queue,
-                &mut encoder,
-                &gpu,
-                WrapMode::Repeat,
-                texel,
-                placement,
-                effect,
-            )
+            .encode(device, queue, &mut encoder, &gpu, &map, &op)
             .expect("gpu");
         assert_eq!(got, want, "the same rects");
     }
@@ -638,18 +638,28 @@ fn material_effects_on_the_gpu_equal_the_cpu_reference() {
         material: 4,
         strength: 1.0,
     };
+    let bad = EffectOp {
+        placement: effects[0].0,
+        effect: bad,
+    };
     assert!(
-        pass.encode(
-            device,
-            queue,
-            &mut encoder,
-            &gpu,
-            WrapMode::Repeat,
-            texel,
-            &effects[0].0,
-            &bad
-        )
-        .is_err()
+        pass.encode(device, queue, &mut encoder, &gpu, &map, &bad)
+            .is_err()
+    );
+    // A layer of another size than the map is refused.
+    let small = GpuMaterialLayer::new(device, queue, &Grid::new(8, 8, [0u8; 4]).expect("grid"))
+        .expect("upload");
+    let fine = EffectOp {
+        placement: effects[0].0,
+        effect: MaterialEffect::new(1, 1.0).expect("effect"),
+    };
+    let err = pass.encode(device, queue, &mut encoder, &small, &map, &fine);
+    assert!(
+        matches!(
+            err,
+            Err(GpuError::Core(terrain_core::CoreError::SizeMismatch { .. }))
+        ),
+        "{err:?}"
     );
     queue.submit([encoder.finish()]);
     pass.recall();
@@ -710,18 +720,12 @@ fn a_stamps_material_effect_shows_in_every_lod_mode() {
     stamps
         .encode(device, queue, &mut encoder, &gpu.0, &op)
         .expect("stamp");
-    let rock = MaterialEffect::new(2, 1.0).expect("effect");
+    let rock = EffectOp {
+        placement,
+        effect: MaterialEffect::new(2, 1.0).expect("effect"),
+    };
     effects
-        .encode(
-            device,
-            queue,
-            &mut encoder,
-            &layer,
-            WrapMode::Clamp,
-            1.0,
-            &placement,
-            &rock,
-        )
+        .encode(device, queue, &mut encoder, &layer, &gpu.0, &rock)
         .expect("effect");
     let mut normals = NormalPass::new(device).expect("normal pass");
     normals

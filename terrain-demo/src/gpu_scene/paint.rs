@@ -7,7 +7,7 @@ use crate::frame_plan::StampKind;
 use anyhow::Result;
 use terrain_core::{Grid, MaterialEffect, StampPlacement};
 use terrain_gpu::GpuError;
-use terrain_gpu::{GpuHeightMap, GpuMaterialLayer, MaterialEffectPass};
+use terrain_gpu::{EffectOp, GpuHeightMap, GpuMaterialLayer, MaterialEffectPass};
 
 /// The material layer over the coarse-map and the pass that paints it.
 pub struct Paint {
@@ -42,17 +42,12 @@ impl Paint {
         placement: &StampPlacement,
     ) -> Result<(), GpuError> {
         if let Some(effect) = effect(kind) {
-            let (wrap, texel) = (map.wrap(), map.texel_size());
-            self.pass.encode(
-                device,
-                queue,
-                encoder,
-                &self.layer,
-                wrap,
-                texel,
-                placement,
-                &effect,
-            )?;
+            let op = EffectOp {
+                placement: *placement,
+                effect,
+            };
+            self.pass
+                .encode(device, queue, encoder, &self.layer, map, &op)?;
         }
         Ok(())
     }

@@ -9,11 +9,21 @@ use crate::device::compute::{
     PassBindings, StorageBinding, compute_pipeline, dispatch, dispatch_size, shader_module,
 };
 use crate::error::GpuError;
+use crate::resources::maps::GpuHeightMap;
 use crate::resources::material_layer::GpuMaterialLayer;
 use bytemuck::{Pod, Zeroable};
 use terrain_core::{
-    DirtyRect, EffectFrame, MaterialEffect, StampPlacement, WrapMode, stamp_region,
+    CoreError, DirtyRect, EffectFrame, HeightSample, MaterialEffect, StampPlacement, stamp_region,
 };
+
+/// One material effect to paint: where (the placement of the stamp it goes with) and what.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EffectOp {
+    /// The stamp's placement.
+    pub placement: StampPlacement,
+    /// The material and its strength.
+    pub effect: MaterialEffect,
+}
 
 /// The uniform block of `material_effect.wgsl` (`EffectParams`), byte for byte.
 #[repr(C)]
@@ -70,25 +80,31 @@ impl MaterialEffectPass {
         self.bindings.recall();
     }
 
-    /// Records `effect` over the footprint of a stamp at `placement` on `layer` (a layer over a
-    /// map of `texel_size` metres per texel with `wrap`: the map the stamp changes) and the
-    /// copy of the painted rects to the layer's texture, and returns those rects (as
+    /// Records `op`'s effect on `layer`, the material layer over `map` (the map its stamp
+    /// changes: its size, wrap and texel size place the effect), and the copy of the painted
+    /// rects to the layer's texture, and returns those rects (as
     /// [`terrain_core::apply_material_effect`]). Fails, with nothing recorded, where that
-    /// function fails.
-    #[allow(clippy::too_many_arguments)]
-    pub fn encode(
+    /// function fails and on a layer of another size than the map.
+    pub fn encode<T: HeightSample>(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         layer: &GpuMaterialLayer,
-        wrap: WrapMode,
-        texel_size: f32,
-        placement: &StampPlacement,
-        effect: &MaterialEffect,
+        map: &GpuHeightMap<T>,
+        op: &EffectOp,
     ) -> Result<Vec<DirtyRect>, GpuError> {
+        let EffectOp { placement, effect } = op;
         effect.validate()?;
-        let Some(region) = stamp_region(layer.size, wrap, texel_size, placement)? else {
+        if layer.size != map.size() {
+            return Err(CoreError::SizeMismatch {
+                expected: map.size(),
+                actual: layer.size,
+            }
+            .into());
+        }
+        let texel_size = map.texel_size();
+        let Some(region) = stamp_region(layer.size, map.wrap(), texel_size, placement)? else {
             return Ok(Vec::new());
         };
         let frame = EffectFrame::new(placement, texel_size);
