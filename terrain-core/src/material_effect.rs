@@ -28,7 +28,7 @@ use glam::{IVec2, Vec2};
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct MaterialEffect {
-    /// The material's index ([`crate::MATERIAL_NAMES`]: 0 grass, 1 dirt, 2 rock, 3 snow).
+    /// The material's index ([`crate::material::MATERIAL_NAMES`]: 0 grass, 1 dirt, 2 rock, 3 snow).
     pub material: u32,
     /// How much of the material covers the centre after one stamp, 0 to 1 (1: all of it).
     pub strength: f32,
