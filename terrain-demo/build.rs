@@ -29,14 +29,26 @@ fn main() {
         .unwrap_or_else(|| "unknown".into());
     println!("cargo:rustc-env=TERRAIN_DEMO_GIT_REVISION={revision}");
     // Built again when HEAD moves: a checkout (HEAD) or a commit on the branch (its ref, or
-    // packed-refs after a gc).
-    let mut watched = vec!["HEAD".to_string(), "packed-refs".to_string()];
+    // packed-refs after a gc). Only files that exist are watched: cargo runs a build script
+    // again on every build while a watched file is missing, which rebuilt the demo and all its
+    // tests at each cargo command of a CI run (a checkout without packed-refs). A branch whose
+    // ref lives only in packed-refs has its folder watched, where its next commit writes it.
+    let mut watched = vec![
+        ("HEAD".to_string(), false),
+        ("packed-refs".to_string(), false),
+    ];
     if let Some(branch) = git(&["symbolic-ref", "-q", "HEAD"]) {
-        watched.push(branch);
+        watched.push((branch, true));
     }
-    for name in watched {
-        if let Some(path) = git(&["rev-parse", "--git-path", &name]) {
-            println!("cargo:rerun-if-changed={path}");
+    for (name, or_folder) in watched {
+        let Some(path) = git(&["rev-parse", "--git-path", &name]) else {
+            continue;
+        };
+        let path = std::path::Path::new(&path);
+        if path.exists() {
+            println!("cargo:rerun-if-changed={}", path.display());
+        } else if let Some(folder) = path.parent().filter(|f| or_folder && f.is_dir()) {
+            println!("cargo:rerun-if-changed={}", folder.display());
         }
     }
     println!("cargo:rerun-if-changed=build.rs");

@@ -50,19 +50,21 @@ pub const LIBRARIES: [&str; 6] = [
 ];
 
 /// Every library crate builds (and passes clippy) with `--no-default-features` and with
-/// `--all-features`, alone: what an engine that picks its features gets. Clippy, so the
-/// dependencies' check builds of the clippy step are reused.
+/// `--all-features`: what an engine that picks its features gets. One run per feature choice
+/// for all six libraries rather than one per library (twelve runs checked the dependencies
+/// again for each feature set: 276 s of a cold CI run on 2 cores). Selecting them together
+/// changes nothing about the libraries' own features: no library depends on another with a
+/// feature turned on (terrain-core and terrain-lod are taken without default features, and
+/// nothing depends on terrain-cache, terrain-gpu or terrain-physics), so each still builds with
+/// only its own choice. Only external crates' features are unified between them.
 fn features() -> Result<()> {
-    for krate in LIBRARIES {
-        for features in ["--no-default-features", "--all-features"] {
-            cargo(
-                &[
-                    "clippy", "-p", krate, features, "--lib", "--locked", "--", "-D", "warnings",
-                ],
-                &[],
-            )
-            .with_context(|| format!("{krate} {features}"))?;
+    for features in ["--no-default-features", "--all-features"] {
+        let mut args = vec!["clippy"];
+        for krate in LIBRARIES {
+            args.extend(["-p", krate]);
         }
+        args.extend([features, "--lib", "--locked", "--", "-D", "warnings"]);
+        cargo(&args, &[]).with_context(|| format!("the libraries with {features}"))?;
     }
     Ok(())
 }
@@ -72,12 +74,10 @@ fn fmt() -> Result<()> {
 }
 
 /// The features of the workspace's optional adapters that the default build leaves out:
-/// terrain-cache's S3 backend and terrain-physics's parry heightfields. Clippy and rustdoc see
-/// them in the same run as the rest of the workspace rather than in runs of their own. Each
-/// library without them, and with every feature, is the `features` step's. (Measured cold on
-/// 2 cores: clippy 630 -> 537 s, but `features` 193 -> 276 s, as its single-crate runs had
-/// reused those runs' checks: one run is simpler, not faster.)
-const ADAPTERS: &str = "terrain-cache/aws,terrain-physics/parry";
+/// terrain-cache's S3 backend and terrain-physics's parry heightfields. Clippy, the tests and
+/// rustdoc see them in the same run as the rest of the workspace rather than in runs of their
+/// own. Each library without them, and with every feature, is the `features` step's.
+pub const ADAPTERS: &str = "terrain-cache/aws,terrain-physics/parry";
 
 fn clippy() -> Result<()> {
     cargo(
@@ -97,29 +97,17 @@ fn clippy() -> Result<()> {
 }
 
 fn test() -> Result<()> {
-    // GPU tests fail instead of skipping when no adapter is found (DESIGN.md).
+    // One build for every test: the workspace with the adapters' features, so terrain-cache's
+    // S3 tests and terrain-physics's parry tests run in it instead of in single-crate runs that
+    // resolved (and built) the dependencies again, 4-5 minutes of a cold run on 2 cores.
+    // GPU tests fail instead of skipping when no adapter is found (DESIGN.md), and the S3
+    // tests (against moto, the S3-compatible server .ci/run installs, behind a fault-injecting
+    // proxy) when the server cannot be started.
     cargo(
-        &["test", "--workspace", "--locked"],
-        &[("TERRAIN_REQUIRE_GPU", "1")],
+        &["test", "--workspace", "--features", ADAPTERS, "--locked"],
+        &[("TERRAIN_REQUIRE_GPU", "1"), ("TERRAIN_REQUIRE_S3", "1")],
     )?;
     gpu_tests_on_gl()?;
-    // terrain-cache's object store against a real S3-compatible server (moto, installed by
-    // .ci/run) behind a fault-injecting proxy: fails instead of skipping when the server
-    // cannot be started. The lib's object-store unit tests run again with S3 compiled in.
-    cargo(
-        &[
-            "test",
-            "-p",
-            "terrain-cache",
-            "--features",
-            "aws",
-            "--lib",
-            "--test",
-            "s3",
-            "--locked",
-        ],
-        &[("TERRAIN_REQUIRE_S3", "1")],
-    )?;
     // The collision mirror under shuttle's randomized scheduler: its own feature (shuttle's
     // primitives replace the real ones), so only that test runs with it.
     cargo(
@@ -134,18 +122,6 @@ fn test() -> Result<()> {
             "--locked",
         ],
         &[],
-    )?;
-    // The optional parry adapter: the crate's tests and doc tests with it compiled in.
-    cargo(
-        &[
-            "test",
-            "-p",
-            "terrain-physics",
-            "--features",
-            "parry",
-            "--locked",
-        ],
-        &[],
     )
 }
 
@@ -153,7 +129,8 @@ fn test() -> Result<()> {
 /// gets: its shader compiler has its own bugs (the atlas lookup once read wrong heights there).
 ///
 /// The test binaries the workspace run built are run as they are (cargo lists them and builds
-/// nothing new) rather than through `cargo test -p terrain-gpu`: alone, terrain-gpu resolves
+/// nothing new; the listing must name the same features as the run) rather than through
+/// `cargo test -p terrain-gpu`: alone, terrain-gpu resolves
 /// wgpu with other features than the workspace does, which rebuilt wgpu, naga and every crate
 /// above them, 4.6 minutes of a cold CI run on 2 cores.
 fn gpu_tests_on_gl() -> Result<()> {
@@ -161,6 +138,8 @@ fn gpu_tests_on_gl() -> Result<()> {
         .args([
             "test",
             "--workspace",
+            "--features",
+            ADAPTERS,
             "--locked",
             "--tests",
             "--no-run",

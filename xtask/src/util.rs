@@ -61,10 +61,20 @@ pub fn workspace_metadata() -> Result<serde_json::Value> {
 
 /// Runs the demo binary as the test step built it: `cargo test --workspace` builds it with the
 /// workspace's unified features, and a `cargo run -p terrain-demo` would resolve the demo's own
-/// and rebuild wgpu and its dependencies (minutes on two cores). `cargo test --no-run` makes it
-/// current first (nothing to do right after the test step).
+/// and rebuild wgpu and its dependencies (minutes on two cores). `cargo test --no-run` with the
+/// test step's features makes it current first (nothing to do right after the test step).
 pub fn demo(args: &[&str], env: &[(&str, &str)]) -> Result<()> {
-    cargo(&["test", "--workspace", "--locked", "--no-run"], &[])?;
+    cargo(
+        &[
+            "test",
+            "--workspace",
+            "--features",
+            crate::ci::ADAPTERS,
+            "--locked",
+            "--no-run",
+        ],
+        &[],
+    )?;
     let exe = root()
         .join("target")
         .join("debug")
