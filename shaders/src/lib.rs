@@ -291,6 +291,13 @@ pub const GRANULAR_SLOPE: &str = concat!(
     granular_common!(),
     include_str!("wgsl/granular/granular_slope.wgsl")
 );
+/// Granular deformation: a trail painted on a material layer where the step presses the
+/// material down (`TrailEffectPass`).
+pub const GRANULAR_TRAIL: &str = concat!(
+    granular_common!(),
+    include_str!("wgsl/passes/paint.wgsl"),
+    include_str!("wgsl/granular/granular_trail.wgsl")
+);
 /// Granular deformation: symmetric-difference normals and their blur, float heights.
 pub const GRANULAR_NORMALS: &str = concat!(
     wgsl_prelude!(),
@@ -332,6 +339,7 @@ pub const MATERIAL_PROBE: &str = concat!(
 /// `MaterialEffectPass`: a stamp's material effect painted on a material layer.
 pub const MATERIAL_EFFECT: &str = concat!(
     wgsl_prelude!(),
+    include_str!("wgsl/passes/paint.wgsl"),
     include_str!("wgsl/passes/material_effect.wgsl")
 );
 
@@ -365,6 +373,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("granular_jfa", GRANULAR_JFA),
     ("granular_displace", GRANULAR_DISPLACE),
     ("granular_slope", GRANULAR_SLOPE),
+    ("granular_trail", GRANULAR_TRAIL),
     ("granular_normals", GRANULAR_NORMALS),
     ("granular_depth", GRANULAR_DEPTH),
     ("granular_volume", GRANULAR_VOLUME),

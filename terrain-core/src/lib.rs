@@ -79,7 +79,8 @@ pub use material::{
     curvature_from_gradients, curvature_from_heights,
 };
 pub use material_effect::{
-    EffectFrame, MaterialEffect, apply_material_effect, effect_amount, paint_texel,
+    EffectFrame, MaterialEffect, apply_material_effect, apply_trail_effect, effect_amount,
+    paint_texel,
 };
 pub use normals::{
     DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal, derivative_at,

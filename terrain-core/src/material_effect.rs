@@ -15,11 +15,15 @@
 //! integer; the GPU runs the same operations, so its amounts differ by at most one step where a
 //! conforming GPU fuses a multiply and an add (WGSL allows it) and a product lands on a
 //! rounding boundary.
+//!
+//! A granular trail paints the same way where an object presses the material down
+//! ([`apply_trail_effect`]): the whole amount on every pressed column, integers only.
 
 use crate::error::CoreError;
+use crate::granular::{ColumnKind, Penetration};
 use crate::grid::{Grid, WrapMode};
 use crate::material::MATERIALS;
-use crate::rect::DirtyRect;
+use crate::rect::{DirtyRect, Rect};
 use crate::stamp::{StampPlacement, stamp_region};
 use glam::{IVec2, Vec2};
 
@@ -124,6 +128,52 @@ pub fn apply_material_effect(
         }
     }
     Ok(region.pieces.iter().map(|p| p.map).collect())
+}
+
+/// Paints `effect` under a granular trail: every column a granular step presses down (a
+/// `Penetrating` column of `penetration`, the step's penetration texture over `area` of the
+/// map, as [`crate::granular::penetration_texture`] computes it before the step moves any
+/// material) gets the effect's full amount, `effect_amount(0, strength)`. An object resting in
+/// its hollow presses nothing more, so a trail is painted once, as the object moves on. The
+/// CPU reference of terrain-gpu's `TrailEffectPass`; integer arithmetic only, so the two agree
+/// bit for bit.
+///
+/// Returns `area` if a column was painted. Fails, with the layer unchanged, on an invalid
+/// effect, an area not inside the layer, and a penetration texture of another size.
+pub fn apply_trail_effect(
+    layer: &mut Grid<[u8; 4]>,
+    penetration: &Grid<Penetration>,
+    area: Rect,
+    effect: &MaterialEffect,
+) -> Result<Option<DirtyRect>, CoreError> {
+    effect.validate()?;
+    if area.is_empty() || !Rect::from_size(layer.size()).contains_rect(&area) {
+        return Err(CoreError::RegionOutOfBounds {
+            rect: area,
+            map_size: layer.size(),
+        });
+    }
+    if penetration.size() != area.size {
+        return Err(CoreError::SizeMismatch {
+            expected: area.size,
+            actual: penetration.size(),
+        });
+    }
+    let amount = effect_amount(Vec2::ZERO, effect.strength);
+    let pressed = ColumnKind::Penetrating as i32;
+    let mut painted = false;
+    let x0 = area.min.x as usize;
+    for j in 0..area.size.y {
+        let row = layer.row_mut(area.min.y as u32 + j);
+        let texels = &mut row[x0..x0 + area.size.x as usize];
+        for (texel, column) in texels.iter_mut().zip(penetration.row(j)) {
+            if column.kind == pressed && amount > 0 {
+                *texel = paint_texel(*texel, effect.material, amount);
+                painted = true;
+            }
+        }
+    }
+    Ok(painted.then_some(area))
 }
 
 /// A stamp's local frame in texels, as the GPU receives it: the centre, the inverse half-size
@@ -292,5 +342,53 @@ mod tests {
         );
         assert!(layer.as_slice().iter().all(|t| *t == [7; 4]));
         assert_eq!(layer.size(), UVec2::splat(16));
+    }
+
+    #[test]
+    fn a_trail_paints_the_pressed_columns_only() {
+        let mut layer = Grid::new(8, 6, [0u8, 0, 0, 255]).unwrap();
+        let seed = Penetration {
+            seed_x: 0,
+            seed_y: 0,
+            kind: ColumnKind::Seed as i32,
+            penetration: 0,
+        };
+        let mut pen = Grid::new(4, 3, seed).unwrap();
+        let pressed = Penetration {
+            kind: ColumnKind::Penetrating as i32,
+            penetration: 5,
+            ..seed
+        };
+        *pen.get_mut(1, 2).unwrap() = pressed;
+        *pen.get_mut(3, 0).unwrap() = Penetration {
+            kind: ColumnKind::Obstacle as i32,
+            ..seed
+        };
+        let area = Rect::new(IVec2::new(2, 1), UVec2::new(4, 3));
+        let effect = MaterialEffect::new(1, 0.5).unwrap();
+        let dirty = apply_trail_effect(&mut layer, &pen, area, &effect).unwrap();
+        assert_eq!(dirty, Some(area));
+        // Column (1, 2) of the area is texel (3, 3): half dirt over full snow.
+        assert_eq!(layer.get(3, 3), Some(paint_texel([0, 0, 0, 255], 1, 128)));
+        let changed = layer.as_slice().iter().filter(|t| **t != [0, 0, 0, 255]);
+        assert_eq!(changed.count(), 1, "obstacles and seeds keep their paint");
+        // Nothing pressed: nothing painted, no rect.
+        let none = Grid::new(4, 3, seed).unwrap();
+        assert_eq!(
+            apply_trail_effect(&mut layer, &none, area, &effect).unwrap(),
+            None
+        );
+        // Areas off the layer, textures of another size and bad effects change nothing.
+        let before = layer.clone();
+        let off = Rect::new(IVec2::new(6, 4), UVec2::new(4, 3));
+        assert!(apply_trail_effect(&mut layer, &pen, off, &effect).is_err());
+        let small = Rect::new(IVec2::new(0, 0), UVec2::new(3, 3));
+        assert!(apply_trail_effect(&mut layer, &pen, small, &effect).is_err());
+        let bad = MaterialEffect {
+            material: 9,
+            strength: 1.0,
+        };
+        assert!(apply_trail_effect(&mut layer, &pen, area, &bad).is_err());
+        assert_eq!(layer, before);
     }
 }

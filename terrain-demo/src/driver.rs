@@ -301,13 +301,18 @@ fn open_gpu(
     if let Some(colors) = &colors {
         scene.set_color_layer(colors)?;
     }
-    // Craters and footprints paint dirt where the frames shade with materials; a map too
-    // large for the layer's buffer keeps the autoshader alone.
-    if cli.scenario == ScenarioKind::Default
-        && params.style.shading == crate::config::ShadingParam::Materials
-        && let Err(e) = scene.enable_material_effects()
-    {
-        crate::console::note!("warning: no material effects: {e:#}");
+    // Craters and footprints paint dirt, and granular trails darken the snow, where the
+    // frames shade with materials; a map too large for the layer's buffer keeps the
+    // autoshader alone.
+    if params.style.shading == crate::config::ShadingParam::Materials {
+        let painted = match cli.scenario {
+            ScenarioKind::Default => scene.enable_material_effects(),
+            ScenarioKind::Snow => scene.enable_granular_trails(),
+            ScenarioKind::Flyover | ScenarioKind::World => Ok(()),
+        };
+        if let Err(e) = painted {
+            crate::console::note!("warning: no material effects: {e:#}");
+        }
     }
     Ok(Some(scene))
 }

@@ -245,6 +245,8 @@ impl RunShape {
                 if self.gpu {
                     let gpu = GPU_MAP_PER_TEXEL + SNOW_GPU_PER_TEXEL;
                     parts.push(("gpu_map", per_texel(gpu)));
+                    // The material layer the trails paint, whatever the shading (as above).
+                    parts.push(("material_layer", per_texel(8)));
                 }
             }
             ScenarioKind::Flyover | ScenarioKind::World => {

@@ -1,12 +1,13 @@
 //! The chained GPU granular step: volume conservation over 500 frames with three moving
 //! objects (checked every frame by the GPU sum), equality with the CPU `GranularSim` step by
-//! step, and no GPU objects made per frame once the step has run.
+//! step, no GPU objects made per frame once the step has run, and the trail it paints.
 
 use terrain_core::granular::*;
-use terrain_gpu::GpuHeightMap;
-use terrain_gpu::granular::{DepthSource, GpuGranularStep, VolumePass};
+use terrain_core::{Grid, MaterialEffect, apply_trail_effect};
+use terrain_gpu::granular::{DepthSource, GpuGranularStep, Trail, VolumePass};
 use terrain_gpu::testing::context_or_skip;
-use terrain_test_support::granular::{bumpy_map, meshes, objects_at, small_params};
+use terrain_gpu::{GpuHeightMap, GpuMaterialLayer};
+use terrain_test_support::granular::{bumpy_map, empty_pen, meshes, objects_at, small_params};
 
 const METHODS: [(DisplacementMethod, SlopeMethod); 6] = [
     (DisplacementMethod::ClosestSeed, SlopeMethod::Scatter),
@@ -202,5 +203,89 @@ fn steady_state_steps_make_no_gpu_objects() {
         .poll(wgpu::PollType::wait_indefinitely())
         .expect("poll");
     assert_eq!(live_objects(device), before, "after the frames");
+    ctx.check().expect("validation");
+}
+
+/// A trail painted during GPU steps (`TrailEffectPass`, in the step's encoder) equals
+/// `apply_trail_effect` over the CPU penetration texture of each step, bit for bit, on a layer
+/// with paint on it already; a trail that does not fit the map is refused with nothing
+/// recorded.
+#[test]
+fn a_trail_painted_on_the_gpu_equals_the_cpu_reference() {
+    let Some(ctx) = context_or_skip("a_trail_painted_on_the_gpu_equals_the_cpu_reference") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let m = meshes();
+    let map = bumpy_map(96, 0.05);
+    let p = small_params();
+    let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
+    let mut step = GpuGranularStep::new(device, p).expect("step");
+    step.depth_source = DepthSource::Cpu;
+    let mut sim = GranularSim::new(map, p).expect("sim");
+    // Snow painted everywhere, so the trail's paint blends with paint already there.
+    let mut expected = Grid::new(96, 96, [0u8, 0, 0, 255]).expect("layer");
+    let layer = GpuMaterialLayer::new(device, queue, &expected).expect("layer");
+    let effect = MaterialEffect::new(1, 0.35).expect("effect");
+    let trail = Trail {
+        layer: &layer,
+        effect,
+    };
+    let mut painted = 0;
+    for frame in 0..40u32 {
+        // One object, one area: the CPU penetration of the map before the step is the GPU's.
+        let all = objects_at(&m, frame * 5, 96.0 * 0.05);
+        let objs = &all[..1];
+        for area in sim.active_areas(objs).expect("areas") {
+            let rect = area.rect;
+            let depth = depth_from_below(objs, sim.map(), rect).expect("depth");
+            let mut pen = empty_pen(rect.size);
+            penetration_texture(sim.map(), &depth, rect, 0, &mut pen).expect("penetration");
+            let dirty = apply_trail_effect(&mut expected, &pen, rect, &effect).expect("trail");
+            painted += u32::from(dirty.is_some());
+        }
+        sim.step(objs).expect("cpu step");
+        let mut encoder = device.create_command_encoder(&Default::default());
+        step.encode_with_trail(device, queue, &mut encoder, &gmap, objs, Some(trail))
+            .expect("encode");
+        queue.submit([encoder.finish()]);
+        step.recall();
+        let gpu = layer.read(device, queue).expect("read layer");
+        assert!(gpu == expected, "frame {frame}: the GPU trail differs");
+    }
+    assert!(painted > 10, "the object pressed on {painted} frames only");
+    let darkened = expected.as_slice().iter().filter(|t| t[1] > 0).count();
+    assert!(darkened > 50, "{darkened} texels on the trail");
+    // Refused: a layer of another size, an invalid effect.
+    let small = GpuMaterialLayer::new(device, queue, &Grid::new(32, 32, [0; 4]).unwrap())
+        .expect("small layer");
+    let bad = [
+        Trail {
+            layer: &small,
+            effect,
+        },
+        Trail {
+            layer: &layer,
+            effect: MaterialEffect {
+                material: 4,
+                strength: 1.0,
+            },
+        },
+    ];
+    let objs = objects_at(&m, 300, 96.0 * 0.05);
+    for trail in bad {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        assert!(
+            step.encode_with_trail(device, queue, &mut encoder, &gmap, &objs[..1], Some(trail))
+                .is_err()
+        );
+        queue.submit([encoder.finish()]);
+        step.recall();
+    }
+    assert!(
+        gmap.read(device, queue).expect("read") == *sim.map(),
+        "a refused step ran"
+    );
+    assert!(layer.read(device, queue).expect("read") == expected);
     ctx.check().expect("validation");
 }

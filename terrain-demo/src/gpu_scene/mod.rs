@@ -10,12 +10,14 @@ use terrain_core::detail::DetailLayout;
 use terrain_core::granular::{GranularObject, GranularParams};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_core::{FixedPointMap, Rect, StampPlacement};
-use terrain_gpu::granular::{GpuGranularNormals, GpuGranularStep, GranularNormalsPass, VolumePass};
+use terrain_gpu::granular::{
+    GpuGranularNormals, GpuGranularStep, GranularNormalsPass, Trail, VolumePass,
+};
 use terrain_gpu::{
     ClipmapSurface, DetailShading, GpuContext, GpuDerivativeMap, GpuDetailTiles, GpuHeightMap,
-    GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass, OffscreenTarget, RefineDraw,
-    RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp, StampPass,
-    TerrainRenderer, TerrainStyle, TerrainView,
+    GpuMaterialLayer, GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass, OffscreenTarget,
+    RefineDraw, RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp,
+    StampPass, TerrainRenderer, TerrainStyle, TerrainView,
 };
 use terrain_lod::{CdlodConfig, CdlodTree, ClipmapLayout, TessConfig};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
@@ -121,6 +123,8 @@ struct GranularScene {
     readback: RegionReadback,
     /// Changed areas not yet requested (the ring was busy).
     pending: Vec<Rect>,
+    /// The material layer the steps' trails paint (`enable_granular_trails`).
+    trail: Option<GpuMaterialLayer>,
 }
 
 /// What one GPU granular step did.
@@ -437,6 +441,7 @@ impl GpuScene {
             volume: VolumePass::new(device)?,
             readback: RegionReadback::new(device, 8)?,
             pending: Vec::new(),
+            trail: None,
         });
         Ok(())
     }
@@ -461,7 +466,13 @@ impl GpuScene {
         let step_time = self
             .timer
             .time(device, queue, Step::GranularGpu, |encoder| {
-                areas = g.step.encode(device, queue, encoder, &g.map, objects)?;
+                let trail = g.trail.as_ref().map(|layer| Trail {
+                    layer,
+                    effect: paint::TRAIL,
+                });
+                areas = g
+                    .step
+                    .encode_with_trail(device, queue, encoder, &g.map, objects, trail)?;
                 Ok(())
             })?;
         g.step.recall();

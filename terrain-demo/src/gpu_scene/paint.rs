@@ -1,10 +1,12 @@
-//! Material effects of the default scenario's deformations: a crater exposes dirt, a
-//! footprint presses the cover down to the dirt under it. Painted on the GPU by
-//! `MaterialEffectPass` into a material layer the renderers blend over the autoshader.
+//! Material effects of the scenarios' deformations, painted on the GPU into a material layer
+//! the renderers blend over the autoshader. The default scenario's stamps paint with
+//! `MaterialEffectPass`: a crater exposes dirt, a footprint presses the cover down to the dirt
+//! under it, a shockwave scorches the ground around its centre. The snow scenario's granular
+//! steps paint their trails with `TrailEffectPass`: pressed snow darkens.
 
 use super::GpuScene;
 use crate::frame_plan::StampKind;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use terrain_core::{Grid, MaterialEffect, StampPlacement};
 use terrain_gpu::GpuError;
 use terrain_gpu::{EffectOp, GpuHeightMap, GpuMaterialLayer, MaterialEffectPass};
@@ -16,19 +18,24 @@ pub struct Paint {
 }
 
 /// What each kind of deformation paints: dirt (material 1) under craters and, less of it,
-/// under footprints. The shockwave paints nothing: its footprint is a ring, and an effect
-/// fades from the footprint's centre.
-fn effect(kind: StampKind) -> Option<MaterialEffect> {
-    let strength = match kind {
-        StampKind::Crater => 0.85,
-        StampKind::Footprint => 0.45,
-        StampKind::Shockwave => return None,
+/// under footprints. The shockwave scorches: its change is stamped on every frame the wave
+/// runs, and each paints a little rock-grey (material 2) fading from the blast's centre, so
+/// the mark darkens while the wave travels (to about 70 % at the centre after 30 frames).
+fn effect(kind: StampKind) -> MaterialEffect {
+    let (material, strength) = match kind {
+        StampKind::Crater => (1, 0.85),
+        StampKind::Footprint => (1, 0.45),
+        StampKind::Shockwave => (2, 0.04),
     };
-    Some(MaterialEffect {
-        material: 1,
-        strength,
-    })
+    MaterialEffect { material, strength }
 }
+
+/// What a granular trail paints on every column it presses: a third of dirt's colour over the
+/// snow (compressed snow is darker and shows the ground through it).
+pub const TRAIL: MaterialEffect = MaterialEffect {
+    material: 1,
+    strength: 0.35,
+};
 
 impl Paint {
     /// Records the effect of a `kind` deformation at `placement` on `map` into `encoder`.
@@ -41,14 +48,12 @@ impl Paint {
         kind: StampKind,
         placement: &StampPlacement,
     ) -> Result<(), GpuError> {
-        if let Some(effect) = effect(kind) {
-            let op = EffectOp {
-                placement: *placement,
-                effect,
-            };
-            self.pass
-                .encode(device, queue, encoder, &self.layer, map, &op)?;
-        }
+        let op = EffectOp {
+            placement: *placement,
+            effect: effect(kind),
+        };
+        self.pass
+            .encode(device, queue, encoder, &self.layer, map, &op)?;
         Ok(())
     }
 
@@ -75,6 +80,26 @@ impl GpuScene {
             layer,
             pass: MaterialEffectPass::new(device)?,
         });
+        Ok(())
+    }
+
+    /// Darkens the snow where granular steps press it ([`TRAIL`]): a material layer of the
+    /// granular map's size that every GPU step paints and every LOD mode draws. Call it after
+    /// `enable_granular` and after the LOD mode is chosen. Fails, with nothing changed,
+    /// without granular deformation on the GPU or where the GPU cannot hold the layer.
+    pub fn enable_granular_trails(&mut self) -> Result<()> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let g = self
+            .granular
+            .as_mut()
+            .context("granular deformation was not enabled on the GPU scene")?;
+        let size = g.map.size();
+        let layer = GpuMaterialLayer::new(device, queue, &Grid::new(size.x, size.y, [0; 4])?)?;
+        self.terrain.set_material_layer(Some(&layer));
+        if let Some(refined) = self.refined.as_mut() {
+            refined.renderer.set_material_layer(Some(&layer));
+        }
+        g.trail = Some(layer);
         Ok(())
     }
 }

@@ -3,7 +3,8 @@
 //!
 //! The integer passes ([`PenetrationPass`], [`JumpFloodPass`], [`DisplacePass`],
 //! [`SlopePass`]) reproduce the CPU reference bit for bit; [`GranularNormalsPass`] is a float
-//! pass that agrees within a tolerance; [`VolumePass`] sums a map exactly. Heights live in a
+//! pass that agrees within a tolerance; [`VolumePass`] sums a map exactly; [`TrailEffectPass`]
+//! paints the columns a step presses down on a material layer. Heights live in a
 //! [`crate::GpuHeightMap<u32>`] (one u32 per column); per-area buffers in a
 //! [`GranularScratch`], which a [`GranularArea`] pairs with the map and an area.
 //! [`GpuGranularStep`] chains the passes over the merged active areas of a list of objects, as
@@ -19,6 +20,7 @@ mod normals;
 mod passes;
 mod scratch;
 mod step;
+mod trail;
 mod upload;
 mod volume;
 
@@ -31,6 +33,7 @@ pub use passes::{
 };
 pub use scratch::{GranularArea, GranularScratch};
 pub use step::{DepthSource, GpuGranularStep, GpuStepReport};
+pub use trail::{Trail, TrailEffectPass};
 pub use volume::VolumePass;
 
 // The shaders' codes are terrain-core's values: a mismatch fails the build.

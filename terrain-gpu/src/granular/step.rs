@@ -4,6 +4,7 @@
 use super::depth::{DepthArea, DepthFromBelowPass};
 use super::passes::{DisplacePass, JumpFloodPass, PenetrationPass, SlopePass, SlopeSettings};
 use super::scratch::{GranularArea, GranularScratch};
+use super::trail::{Trail, TrailEffectPass};
 use crate::error::GpuError;
 use crate::resources::maps::GpuHeightMap;
 use terrain_core::Grid;
@@ -35,7 +36,8 @@ pub enum DepthSource {
 
 /// Chains [`DepthFromBelowPass`] (or the CPU rasterizer), [`PenetrationPass`],
 /// [`JumpFloodPass`], [`DisplacePass`] and [`SlopePass`] over the active areas of a step, with
-/// the settings of [`terrain_core::granular::GranularSim`].
+/// the settings of [`terrain_core::granular::GranularSim`], and optionally a
+/// [`TrailEffectPass`] ([`Self::encode_with_trail`]).
 ///
 /// The passes are built in [`Self::new`]; the scratch buffers on the first step, and again only
 /// when an area has more columns than they hold. A recorded step only writes uniforms (and, with
@@ -48,6 +50,8 @@ pub struct GpuGranularStep {
     displace: DisplacePass,
     slope_pass: SlopePass,
     depth_pass: DepthFromBelowPass,
+    /// Built on the first step that paints a trail.
+    trail_pass: Option<TrailEffectPass>,
     scratch: Option<GranularScratch>,
     params: GranularParams,
     /// Where the depth from below comes from.
@@ -71,6 +75,7 @@ impl GpuGranularStep {
             displace: DisplacePass::new(device)?,
             slope_pass: SlopePass::new(device)?,
             depth_pass: DepthFromBelowPass::new(device)?,
+            trail_pass: None,
             scratch: None,
             params,
             depth_source: DepthSource::default(),
@@ -98,6 +103,9 @@ impl GpuGranularStep {
         self.displace.recall();
         self.slope_pass.recall();
         self.depth_pass.recall();
+        if let Some(trail) = self.trail_pass.as_mut() {
+            trail.recall();
+        }
     }
 
     /// The areas a step with `objects` runs over on `map`.
@@ -148,6 +156,9 @@ impl GpuGranularStep {
         self.displace.bindings.clear_bind_groups();
         self.slope_pass.bindings.clear_bind_groups();
         self.depth_pass.bindings.clear_bind_groups();
+        if let Some(trail) = self.trail_pass.as_mut() {
+            trail.bindings.clear_bind_groups();
+        }
         Ok(())
     }
 
@@ -163,7 +174,29 @@ impl GpuGranularStep {
         map: &GpuHeightMap<u32>,
         objects: &[GranularObject<'_>],
     ) -> Result<Vec<ActiveArea>, GpuError> {
+        self.encode_with_trail(device, queue, encoder, map, objects, None)
+    }
+
+    /// [`Self::encode`], painting `trail` (if any) on the columns the step presses down
+    /// ([`TrailEffectPass`], between the penetration and the jump flooding passes of each
+    /// area). A trail whose effect or layer size does not fit the map is refused with nothing
+    /// recorded.
+    pub fn encode_with_trail(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        map: &GpuHeightMap<u32>,
+        objects: &[GranularObject<'_>],
+        trail: Option<Trail<'_>>,
+    ) -> Result<Vec<ActiveArea>, GpuError> {
         self.displacement.validate()?;
+        if let Some(trail) = &trail {
+            TrailEffectPass::check(trail, map.size())?;
+            if self.trail_pass.is_none() {
+                self.trail_pass = Some(TrailEffectPass::new(device)?);
+            }
+        }
         let areas = self.active_areas(map, objects)?;
         let need = areas.iter().map(|a| a.columns()).max().unwrap_or(1);
         let map_columns = u64::from(map.size().x) * u64::from(map.size().y);
@@ -205,6 +238,9 @@ impl GpuGranularStep {
             }
             self.penetration
                 .encode(device, queue, encoder, &area, margin)?;
+            if let (Some(trail), Some(pass)) = (&trail, self.trail_pass.as_mut()) {
+                pass.encode(device, queue, encoder, &area, trail)?;
+            }
             let flooded =
                 self.jfa
                     .encode(device, queue, encoder, &area, p.metric, p.jfa_extra_pass)?;

@@ -1,7 +1,8 @@
 // MaterialEffectPass: a stamp's material effect painted over one piece of its footprint on a
 // material layer (terrain_core::material_effect, its CPU reference, evaluated in the same
 // order). The layer is one RGBA8 texel per u32 word (R in the low byte), rows `pitch` words
-// apart (a multiple of 64, so a rect of it copies to the layer's texture as is).
+// apart (a multiple of 64, so a rect of it copies to the layer's texture as is); paint.wgsl
+// paints a texel.
 
 struct EffectParams {
     // The piece in layer texels and in the footprint's unwrapped frame.
@@ -42,12 +43,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let i = (p.map_min.y + id.y) * p.pitch + p.map_min.x + id.x;
-    let old = layer[i];
-    var out = 0u;
-    for (var ch = 0u; ch < 4u; ch++) {
-        let v = (old >> (8u * ch)) & 255u;
-        let target_v = select(0u, 255u, ch == p.material);
-        out |= ((v * (255u - a) + target_v * a + 127u) / 255u) << (8u * ch);
-    }
-    layer[i] = out;
+    layer[i] = paint_texel(layer[i], p.material, a);
 }
