@@ -83,8 +83,11 @@ fn unpack(target: &std::path::Path, crates: &[(String, String)]) -> Result<std::
         let file = target
             .join("package")
             .join(format!("{name}-{version}.crate"));
+        // `-m`: the files get the time of extraction. A `.crate` stores one fixed time for every
+        // file, older than any check of an earlier run, whose stale artifacts cargo would then
+        // take as current (the unpacked folders have the same paths every run).
         let status = std::process::Command::new("tar")
-            .arg("-xzf")
+            .arg("-xzmf")
             .arg(&file)
             .arg("-C")
             .arg(&unpacked)
