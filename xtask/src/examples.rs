@@ -106,8 +106,7 @@ pub fn examples() -> Result<()> {
     // current and builds nothing right after that step. Then each binary runs. `cargo run -p`
     // would resolve each crate's features on its own and rebuild the dependencies for it, a
     // build without those features rebuilt every crate above object_store and parry (2.5
-    // minutes), and `cargo build` our crates again (the test profile's artifacts are not the
-    // dev profile's).
+    // minutes), and `cargo build --examples` with them still compiled our crates again.
     for (krate, example, feature, _) in FEATURE_EXAMPLES {
         let needed = format!("{krate}/{feature}");
         if !crate::ci::ADAPTERS.split(',').any(|f| f == needed) {

@@ -100,12 +100,20 @@ fn unpack(target: &std::path::Path, crates: &[(String, String)]) -> Result<std::
         patches.push_str(&format!("{name} = {{ path = \"{name}-{version}\" }}\n"));
     }
     let ours = std::fs::read_to_string(root().join("Cargo.toml")).context("reading Cargo.toml")?;
-    let profiles = ours
-        .find("\n[profile.")
-        .map(|at| ours[at..].to_owned())
-        .unwrap_or_default();
+    // The `[profile.*]` tables, whatever follows them.
+    let mut profiles = String::new();
+    let mut in_profile = false;
+    for line in ours.lines() {
+        if line.starts_with('[') {
+            in_profile = line.starts_with("[profile.");
+        }
+        if in_profile {
+            profiles.push_str(line);
+            profiles.push('\n');
+        }
+    }
     let manifest = format!(
-        "[workspace]\nmembers = [{members}]\nresolver = \"3\"\n\n[patch.crates-io]\n{patches}{profiles}"
+        "[workspace]\nmembers = [{members}]\nresolver = \"3\"\n\n[patch.crates-io]\n{patches}\n{profiles}"
     );
     std::fs::write(unpacked.join("Cargo.toml"), manifest)
         .context("writing the packages' workspace")?;
