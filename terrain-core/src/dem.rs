@@ -134,6 +134,9 @@ pub struct Dem {
     pub units: HeightUnits,
     /// The nodata samples, when there were any.
     pub nodata: Option<NodataFill>,
+    /// The nodata samples as a hole mask ([`crate::holes`]), when there were any: where the
+    /// ground is missing, for a renderer to leave out and collision to ignore.
+    pub holes: Option<Grid<u8>>,
     /// A GeoTIFF's georeferencing (its pixel scale gives the texel size).
     pub georeference: Option<GeoReference>,
 }
@@ -313,6 +316,7 @@ impl DemFile {
             sample,
             units: HeightUnits::Stored { full_scale },
             nodata: None,
+            holes: None,
             georeference: None,
         };
         let dem = match (format, options.raw_size) {
@@ -329,6 +333,7 @@ impl DemFile {
             (DemFormat::R32, Some(size)) => {
                 let mut heights =
                     io::read_r32_from_file(&file, path, size, options.byte_order, limits)?;
+                let holes = nodata_holes(&heights);
                 let nodata = fill_nodata(heights.as_mut_slice(), None)?;
                 Dem {
                     heights,
@@ -336,6 +341,7 @@ impl DemFile {
                     sample: SampleType::F32,
                     units: HeightUnits::Metres,
                     nodata,
+                    holes,
                     georeference: None,
                 }
             }
@@ -383,6 +389,7 @@ impl Dem {
     /// A DEM from a decoded GeoTIFF (metres; nodata filled).
     pub fn from_geotiff(tiff: geotiff::GeoTiff) -> Result<Self, MapIoError> {
         let mut heights = tiff.heights;
+        let holes = nodata_holes(&heights);
         let nodata = fill_nodata(heights.as_mut_slice(), tiff.nodata)?;
         Ok(Self {
             heights,
@@ -390,6 +397,7 @@ impl Dem {
             sample: tiff.sample,
             units: HeightUnits::Metres,
             nodata,
+            holes,
             georeference: Some(tiff.geo),
         })
     }
@@ -478,10 +486,23 @@ impl Dem {
     }
 }
 
+/// Whether a height sample read from a file is nodata: NaN, infinite or huge.
+pub fn is_nodata(h: f32) -> bool {
+    !h.is_finite() || f64::from(h).abs() >= HUGE_FLOAT_NODATA
+}
+
+/// The hole mask of `heights`' nodata, or `None` when they have none.
+fn nodata_holes(heights: &Grid<f32>) -> Option<Grid<u8>> {
+    heights
+        .as_slice()
+        .iter()
+        .any(|&h| is_nodata(h))
+        .then(|| crate::holes::holes_from_nodata(heights))
+}
+
 /// Replaces NaN, infinite and huge samples (nodata) with the lowest valid height; says how
 /// many there were. All nodata is [`MapIoError::NoValidHeights`].
 fn fill_nodata(heights: &mut [f32], value: Option<f64>) -> Result<Option<NodataFill>, MapIoError> {
-    let is_nodata = |h: f32| !h.is_finite() || f64::from(h).abs() >= HUGE_FLOAT_NODATA;
     let mut count = 0u64;
     let mut lowest = f32::INFINITY;
     for &h in heights.iter() {
@@ -527,6 +548,7 @@ mod tests {
             sample: SampleType::F32,
             units,
             nodata: None,
+            holes: None,
             georeference: None,
         }
     }

@@ -46,6 +46,7 @@ pub mod geotiff;
 pub mod granular;
 pub mod grid;
 pub mod hillshade;
+pub mod holes;
 pub mod io;
 pub mod map;
 pub mod material;
@@ -69,6 +70,7 @@ pub use hillshade::{
     HillshadeParams, hillshade, hillshade_from_heights, hillshade_range, update_hillshade,
     update_hillshade_from_heights,
 };
+pub use holes::{GROUND, HOLE, HoleOp, apply_hole_stamp, count_holes, is_hole};
 pub use io::MapIoError;
 pub use map::{
     CoarseMap, DEFAULT_FIXED_POINT_UNITS_PER_M, DETAIL_MAX_RANGE_M, DetailTile, FixedPointMap,

@@ -112,6 +112,7 @@ fn png16_and_png8_are_integers_mapped_by_the_range() {
     assert_eq!(dem.sample, SampleType::U16);
     assert_eq!(dem.units, HeightUnits::Stored { full_scale: 65535 });
     assert_eq!(dem.nodata, None);
+    assert_eq!(dem.holes, None);
     // A span: the samples are kept exactly, the encoding spans it.
     let q = dem
         .to_coarse_heights(HeightRange::Span {
@@ -231,6 +232,9 @@ fn r32_keeps_metres_and_fills_nodata() {
             dem.heights.as_slice(),
             [120.5, 99.25, 99.25, 99.25, 300.0, 99.25, 150.0, 101.0]
         );
+        // The filled samples are the DEM's holes.
+        let holes = dem.holes.as_ref().expect("holes from nodata");
+        assert_eq!(holes.as_slice(), [0, 255, 0, 255, 0, 255, 0, 0]);
         let q = dem.to_coarse_heights(HeightRange::Auto).unwrap();
         assert_eq!((q.data_min_m, q.data_max_m), (99.25, 300.0));
     }
@@ -381,6 +385,10 @@ fn geotiff_nodata_is_filled_and_reported() {
         (25, Some(-32768.0), lowest)
     );
     assert!(dem.heights.as_slice().iter().all(|&h| h >= lowest));
+    let holes = dem.holes.as_ref().expect("holes from nodata");
+    assert_eq!(terrain_core::count_holes(holes), 25);
+    assert!(terrain_core::is_hole(holes.get(4, 1).unwrap()));
+    assert!(!terrain_core::is_hole(holes.get(5, 1).unwrap()));
     // Without the tag, -32768 is a height like any other: the tag is what matters.
     let untagged = TiffSpec::new(20, 20, Sample::I16, values);
     let tiff = decode_geotiff(&untagged.write(), &ReadLimits::default()).unwrap();
