@@ -69,7 +69,7 @@ pub mod testing;
 use device::{context, download, limits, profiler, readback, region_source, small_readback, timer};
 use passes::{density, detail_probe, material_effect, normals, spill, stamp};
 use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
-use resources::{atlas, detail, maps, material_layer, materials};
+use resources::{atlas, detail, hole_mask, maps, material_layer, materials};
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
 pub use camera::{Camera, DepthConvention, RenderView, ViewMatrices};
@@ -83,6 +83,7 @@ pub use detail::{
 pub use detail_probe::{DetailProbe, DetailProbePoint, DetailProbeSample, MAX_PROBE_OFFSET};
 pub use download::{WAIT_TIMEOUT, download_bytes, read_texture_rgba8, wait_bounded};
 pub use error::GpuError;
+pub use hole_mask::GpuHoleMask;
 pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
 pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
 pub use material_effect::{EffectOp, MaterialEffectPass};

@@ -2,7 +2,8 @@
 //! terrain_core::material's, and every LOD mode draws a frame's flat lowland as grass, its
 //! cliff as rock and its flat highland as snow, in the colours of the material images it was
 //! given; the procedural images show texture where the ramp is flat; material effects painted on
-//! the GPU equal terrain_core's and show in every LOD mode.
+//! the GPU equal terrain_core's and show in every LOD mode; a hole mask leaves its cells out of
+//! every LOD mode's frame.
 
 use glam::{UVec2, Vec2, Vec3, Vec4};
 use terrain_core::{
@@ -12,7 +13,7 @@ use terrain_core::{
 };
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    ClipmapSurface, EffectOp, GpuContext, GpuDerivativeMap, GpuError, GpuHeightMap,
+    ClipmapSurface, EffectOp, GpuContext, GpuDerivativeMap, GpuError, GpuHeightMap, GpuHoleMask,
     GpuMaterialLayer, GpuMaterials, MaterialEffectPass, MaterialStyle, NormalPass, OffscreenTarget,
     SurfaceShading, TargetFormat, TerrainRenderer, TerrainStyle, TerrainView, ViewMatrices,
 };
@@ -765,4 +766,148 @@ fn a_stamps_material_effect_shows_in_every_lod_mode() {
             "{mode}: the effect paints rock, the frame shows {painted}"
         );
     }
+}
+
+/// The mean colour of the pixels whose centres lie within `radius` pixels of map point
+/// `(x, z)` in [`draw`]'s view (0.8 m a pixel; the view's top edge is z = 56).
+fn around(image: &Grid<[u8; 4]>, x: f32, z: f32, radius: f32) -> Vec3 {
+    let (cx, cy) = (x / 0.8, (z - 56.0) / 0.8);
+    let mut sum = Vec3::ZERO;
+    let mut n = 0.0;
+    for y in 0..SIZE.y {
+        for px in 0..SIZE.x {
+            if (px as f32 + 0.5 - cx).hypot(y as f32 + 0.5 - cy) <= radius {
+                let p = image.get(px, y).expect("inside");
+                sum += Vec3::new(p[0].into(), p[1].into(), p[2].into());
+                n += 1.0;
+            }
+        }
+    }
+    assert!(n > 0.0, "no pixel centre within {radius} px of ({x}, {z})");
+    sum / n
+}
+
+#[test]
+fn a_hole_shows_what_lies_behind_in_every_lod_mode_and_shading() {
+    let Some(ctx) = context_or_skip("hole render") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let map = cliff_map();
+    let gpu = upload(&ctx, &map);
+    // A 20 m disc cut from the lowland at (60, 128), and one cell at (30, 100) alone.
+    let mut mask = Grid::new(MAP, MAP, terrain_core::GROUND).expect("grid");
+    let disc =
+        StampPlacement::new(Vec2::new(60.0, 128.0), Vec2::splat(20.0), -1.0).expect("placement");
+    terrain_core::apply_hole_stamp(
+        &mut mask,
+        WrapMode::Clamp,
+        1.0,
+        &disc,
+        terrain_core::HoleOp::Cut,
+    )
+    .expect("cut");
+    let holes =
+        GpuHoleMask::new(device, queue, &Grid::new(MAP, MAP, 0u8).expect("grid")).expect("mask");
+    // Uploaded by rect, as an engine updates it after a stamp: the disc's, then the cell's.
+    *mask.get_mut(30, 100).expect("inside") = terrain_core::HOLE;
+    holes
+        .write(
+            queue,
+            &mask,
+            terrain_core::Rect::new(glam::IVec2::new(48, 116), UVec2::splat(24)),
+        )
+        .expect("write");
+    holes
+        .write(
+            queue,
+            &mask,
+            terrain_core::Rect::new(glam::IVec2::new(30, 100), UVec2::ONE),
+        )
+        .expect("write");
+    // A rect off the mask and a mask of another size are refused.
+    assert!(
+        holes
+            .write(
+                queue,
+                &mask,
+                terrain_core::Rect::new(glam::IVec2::new(250, 0), UVec2::splat(8))
+            )
+            .is_err()
+    );
+    assert!(
+        holes
+            .write(
+                queue,
+                &Grid::new(8, 8, 0u8).expect("grid"),
+                terrain_core::Rect::new(glam::IVec2::ZERO, UVec2::ONE)
+            )
+            .is_err()
+    );
+    let black = |c: Vec3| c.max_element() <= 1.0;
+    for mut renderer in renderers(&ctx, &map) {
+        let mode = renderer.mode();
+        renderer
+            .set_materials(&GpuMaterials::new(device, queue, &solid_materials()).expect("upload"));
+        for shading in [SurfaceShading::Materials, SurfaceShading::Ramp] {
+            let whole = draw(&ctx, &mut renderer, &gpu, shading);
+            assert!(
+                !black(around(&whole, 60.0, 128.0, 3.0)),
+                "{mode}: ground before the cut"
+            );
+            renderer.set_hole_mask(Some(&holes));
+            let cut = draw(&ctx, &mut renderer, &gpu, shading);
+            // The clear colour (black) shows through the disc, and through the lone cell's
+            // middle (the pixel whose centre is at (30.8, 100.4)).
+            let inside = around(&cut, 60.0, 128.0, 10.0);
+            assert!(black(inside), "{mode} {shading:?}: the hole shows {inside}");
+            let cell = around(&cut, 30.5, 100.5, 0.5);
+            assert!(black(cell), "{mode} {shading:?}: the cut cell shows {cell}");
+            // Ground beyond the disc, and beside the cell, is drawn as before.
+            for (x, z) in [(60.0, 106.0), (84.0, 128.0), (33.5, 100.5), (30.5, 103.5)] {
+                let before = around(&whole, x, z, 1.0);
+                let after = around(&cut, x, z, 1.0);
+                assert!(
+                    (before - after).abs().max_element() <= 1.0,
+                    "{mode} {shading:?}: ({x}, {z}) changed from {before} to {after}"
+                );
+            }
+            renderer.set_hole_mask(None);
+        }
+    }
+    // A mask of another size than the surface fails the prepare.
+    let small =
+        GpuHoleMask::new(device, queue, &Grid::new(8, 8, 0u8).expect("grid")).expect("mask");
+    let mut renderer = renderers(&ctx, &map).remove(0);
+    renderer.set_hole_mask(Some(&small));
+    let target = OffscreenTarget::new(device, SIZE).expect("target");
+    let view = ViewMatrices {
+        view: glam::Mat4::look_at_rh(
+            Vec3::new(128.0, 300.0, 128.0),
+            Vec3::new(128.0, 0.0, 127.0),
+            Vec3::Y,
+        ),
+        projection: glam::Mat4::perspective_rh(1.0, 16.0 / 9.0, 1.0, 1000.0),
+    };
+    let style = TerrainStyle::default();
+    let view = TerrainView {
+        surface: ClipmapSurface::Coarse {
+            map: &gpu.0,
+            normals: &gpu.1,
+        },
+        camera: &view,
+        style: &style,
+        target_size: target.size(),
+    };
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let err = renderer
+        .prepare(device, queue, &mut encoder, &view)
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            GpuError::Core(terrain_core::CoreError::SizeMismatch { .. })
+        ),
+        "{err}"
+    );
 }

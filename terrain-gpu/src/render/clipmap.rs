@@ -234,6 +234,14 @@ impl ClipmapRenderer {
         self.materials.set_paint(layer);
     }
 
+    /// Leaves out the cells `mask` marks as holes ([`crate::GpuHoleMask`],
+    /// `terrain_core::holes`) from the next prepare (`None`: none), in every shading: their
+    /// fragments are discarded, so what lies behind shows through. Its size must be the drawn
+    /// surface's, else the prepare fails.
+    pub fn set_hole_mask(&mut self, mask: Option<&crate::GpuHoleMask>) {
+        self.materials.set_holes(mask);
+    }
+
     /// Computes the material weights with `wgsl_function`, an engine's
     /// `fn surface_weights(p: SurfacePoint) -> vec4<f32>` (see terrain-shaders'
     /// `surface_weights.wgsl` for `SurfacePoint`), or with the autoshader again for `None`.

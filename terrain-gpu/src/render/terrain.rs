@@ -278,6 +278,17 @@ impl TerrainRenderer {
         }
     }
 
+    /// Leaves out the cells `mask` marks as holes ([`crate::GpuHoleMask`]) in every LOD mode
+    /// from the next prepare, `None` for none; its size must be the drawn surface's, else the
+    /// prepare fails.
+    pub fn set_hole_mask(&mut self, mask: Option<&crate::GpuHoleMask>) {
+        match &mut self.lod {
+            Lod::Clipmap(c) => c.renderer.set_hole_mask(mask),
+            Lod::Cdlod(c) => c.renderer.set_hole_mask(mask),
+            Lod::Tessellated(t) => t.renderer.set_hole_mask(mask),
+        }
+    }
+
     /// Computes the material weights of [`crate::SurfaceShading::Materials`] with
     /// `wgsl_function`, an engine's `fn surface_weights(p: SurfacePoint) -> vec4<f32>`, or with
     /// the autoshader again for `None`. `SurfacePoint` holds the fragment's world position (x,

@@ -559,6 +559,11 @@ impl TessRenderer {
         self.materials.set_paint(layer);
     }
 
+    /// Leaves out the cells `mask` marks as holes, as [`crate::ClipmapRenderer::set_hole_mask`].
+    pub fn set_hole_mask(&mut self, mask: Option<&crate::GpuHoleMask>) {
+        self.materials.set_holes(mask);
+    }
+
     /// Computes the material weights with an engine's `surface_weights` function, or the
     /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
     pub fn set_surface_shader(

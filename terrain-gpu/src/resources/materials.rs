@@ -10,6 +10,7 @@
 
 use crate::device::scope::scoped;
 use crate::error::GpuError;
+use crate::resources::hole_mask::GpuHoleMask;
 use crate::resources::material_layer::GpuMaterialLayer;
 use terrain_core::{AutoshadeParams, CoreError, MATERIALS, MaterialImages, MaterialTextures};
 
@@ -239,8 +240,8 @@ impl GpuMaterials {
     }
 }
 
-/// What a renderer's shading binds besides its surface: the materials, the colour layer and
-/// the material layer.
+/// What a renderer's shading binds besides its surface: the materials, the colour layer, the
+/// material layer and the hole mask.
 #[derive(Debug, Clone)]
 pub(crate) struct ShadingBindings {
     pub(crate) materials: GpuMaterials,
@@ -252,11 +253,15 @@ pub(crate) struct ShadingBindings {
     pub(crate) paint: wgpu::TextureView,
     /// Whether a material layer is drawn.
     pub(crate) has_paint: bool,
+    /// The hole mask's texture, or the same stand-in.
+    pub(crate) holes: wgpu::TextureView,
+    /// Whether a hole mask is bound.
+    pub(crate) has_holes: bool,
 }
 
 impl ShadingBindings {
-    /// The bind group entries at 10 to 14 of every terrain pipeline.
-    pub(crate) fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 5] {
+    /// The bind group entries at 10 to 15 of every terrain pipeline.
+    pub(crate) fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 6] {
         let [a, n, s] = self.materials.entries();
         [
             a,
@@ -270,24 +275,35 @@ impl ShadingBindings {
                 binding: 14,
                 resource: wgpu::BindingResource::TextureView(&self.paint),
             },
+            wgpu::BindGroupEntry {
+                binding: 15,
+                resource: wgpu::BindingResource::TextureView(&self.holes),
+            },
         ]
     }
 
-    /// The frame uniform's flags of the two layers (`color_layer.x` and `.y` in the shader).
+    /// The frame uniform's flags of the three layers (`color_layer.x`, `.y` and `.z` in the
+    /// shader).
     pub(crate) fn layer_flags(&self) -> [f32; 4] {
         let on = |b: bool| f32::from(u8::from(b));
-        [on(self.has_color), on(self.has_paint), 0.0, 0.0]
+        [
+            on(self.has_color),
+            on(self.has_paint),
+            on(self.has_holes),
+            0.0,
+        ]
     }
 }
 
 /// The materials a renderer binds: the caller's ([`MaterialSlot::set`]), or the procedural
-/// set made on its first frame; and the colour and material layers, if any.
+/// set made on its first frame; and the colour and material layers and the hole mask, if any.
 #[derive(Debug, Default)]
 pub(crate) struct MaterialSlot {
     materials: Option<GpuMaterials>,
     color: Option<GpuColorLayer>,
     paint: Option<GpuMaterialLayer>,
-    /// Bound while no colour or material layer is.
+    holes: Option<GpuHoleMask>,
+    /// Bound while no colour or material layer or hole mask is.
     no_color: Option<wgpu::TextureView>,
     /// Set since the renderer last bound them.
     changed: bool,
@@ -312,6 +328,12 @@ impl MaterialSlot {
         self.changed = true;
     }
 
+    /// Leaves out the cells `mask` marks (or none) from the next frame on.
+    pub(crate) fn set_holes(&mut self, mask: Option<&GpuHoleMask>) {
+        self.holes = mask.cloned();
+        self.changed = true;
+    }
+
     /// What to bind for a surface of `surface_size` texels (the materials made on first use;
     /// clones share the GPU objects), and whether it changed since the last call (the bind
     /// group must be made again). A colour or material layer of another size is refused.
@@ -324,6 +346,7 @@ impl MaterialSlot {
         let sizes = [
             self.color.as_ref().map(|c| c.size),
             self.paint.as_ref().map(|p| p.size),
+            self.holes.as_ref().map(|h| h.size),
         ];
         if let Some(actual) = sizes.into_iter().flatten().find(|s| *s != surface_size) {
             return Err(CoreError::SizeMismatch {
@@ -352,15 +375,20 @@ impl MaterialSlot {
                 .as_ref()
                 .map_or(stand_in.clone(), |c| c.view.clone()),
             has_color: self.color.is_some(),
-            paint: self.paint.as_ref().map_or(stand_in, |p| p.view.clone()),
+            paint: self
+                .paint
+                .as_ref()
+                .map_or(stand_in.clone(), |p| p.view.clone()),
             has_paint: self.paint.is_some(),
+            holes: self.holes.as_ref().map_or(stand_in, |h| h.view.clone()),
+            has_holes: self.holes.is_some(),
         };
         Ok((bindings, std::mem::take(&mut self.changed)))
     }
 }
 
 /// The layout entries of [`ShadingBindings::entries`] (fragment stage).
-pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 5] {
+pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
     let texture = |binding, view_dimension| wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::FRAGMENT,
@@ -383,6 +411,7 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 5] {
         },
         layer(13),
         layer(14),
+        layer(15),
     ]
 }
 

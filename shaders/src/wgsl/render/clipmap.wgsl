@@ -47,7 +47,7 @@ struct Frame {
     // w: texels between the heights the curvature is measured from.
     autoshade_dirt: vec4<f32>,
     // x: 1 when a colour layer (materials.wgsl) gives the albedo; y: 1 when a material layer's
-    // paint is blended over the weights.
+    // paint is blended over the weights; z: 1 when a hole mask leaves cells out.
     color_layer: vec4<f32>,
 }
 
@@ -142,6 +142,10 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
         }
     }
     if all(q > frame.excluded.xy) && all(q < frame.excluded.zw) {
+        discard;
+    }
+    // Cells cut away (terrain_core::holes) are not drawn: what lies behind shows through.
+    if frame.color_layer.z > 0.5 && in_hole(q) {
         discard;
     }
     // The surface's detail (none for most surfaces): what it adds, and where to shade.

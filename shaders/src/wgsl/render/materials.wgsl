@@ -12,6 +12,15 @@
 // The material layer (GpuMaterialLayer): painted weights of the four materials per map texel,
 // their sum the paint's cover (terrain_core::material_effect).
 @group(0) @binding(14) var material_layer: texture_2d<f32>;
+// The hole mask (GpuHoleMask, terrain_core::holes): nonzero at the cells cut away.
+@group(0) @binding(15) var hole_mask: texture_2d<f32>;
+
+// Whether the cell under `q` (texels relative to the camera's whole texel) is a hole: the cell
+// whose lower corner is floor(q), as collision finds it.
+fn in_hole(q: vec2<f32>) -> bool {
+    let cell = frame.camera_texel + vec2<i32>(floor(q));
+    return textureLoad(hole_mask, map_texel(cell), 0).r > 0.0;
+}
 
 // `layer` at `q` (texels relative to the camera's whole texel), bilinear between the four
 // texels around it, wrapped or clamped like the heights.
