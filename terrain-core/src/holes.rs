@@ -142,7 +142,11 @@ mod tests {
     fn a_cut_follows_rotation_and_wraps() {
         let mut mask = Grid::new(16, 16, GROUND).unwrap();
         // A 12 x 2 m slot turned a quarter: it runs along Z.
-        let p = placement(Vec2::new(0.0, 0.0), Vec2::new(12.0, 2.0), std::f32::consts::FRAC_PI_2);
+        let p = placement(
+            Vec2::new(0.0, 0.0),
+            Vec2::new(12.0, 2.0),
+            std::f32::consts::FRAC_PI_2,
+        );
         let dirty = apply_hole_stamp(&mut mask, WrapMode::Repeat, 1.0, &p, HoleOp::Cut).unwrap();
         assert_eq!(dirty.len(), 4);
         assert!(is_hole(mask.get(0, 5).unwrap()));
@@ -169,8 +173,12 @@ mod tests {
 
     #[test]
     fn nodata_becomes_holes() {
-        let h = Grid::from_vec(6, 1, vec![1.0, f32::NAN, -9999.0, f32::INFINITY, -2e30, 3.0])
-            .unwrap();
+        let h = Grid::from_vec(
+            6,
+            1,
+            vec![1.0, f32::NAN, -9999.0, f32::INFINITY, -2e30, 3.0],
+        )
+        .unwrap();
         assert_eq!(holes_from_nodata(&h).as_slice(), &[0, 255, 0, 255, 255, 0]);
     }
 }

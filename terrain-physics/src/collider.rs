@@ -17,7 +17,8 @@ use terrain_core::CoarseMap;
 ///
 /// [`BoundedGround`]: crate::BoundedGround
 pub trait GroundQuery {
-    /// Ground height in metres at world `pos = (X, Z)`.
+    /// Ground height in metres at world `pos = (X, Z)`; `f32::NEG_INFINITY` where there is no
+    /// ground (over a hole: a body there falls).
     fn ground_height(&self, pos: Vec2) -> Result<f32, PhysicsError>;
     /// Unit ground normal (Y up) at world `pos = (X, Z)`.
     fn ground_normal(&self, pos: Vec2) -> Result<Vec3, PhysicsError>;
@@ -97,7 +98,8 @@ impl HeightfieldCollider {
         Ok(local)
     }
 
-    /// Height in metres at world `pos = (X, Z)` (bilinear, wrap addressing, listing 3.2).
+    /// Height in metres at world `pos = (X, Z)` (bilinear, wrap addressing, listing 3.2): the
+    /// surface's, over a hole too (see [`GroundQuery::ground_height`] for the ground's).
     pub fn height(&self, pos: Vec2) -> Result<f32, PhysicsError> {
         Ok(self.field.height_local(self.local2(pos)?) + self.translation.y)
     }
@@ -105,6 +107,20 @@ impl HeightfieldCollider {
     /// Unit surface normal (Y up) at world `pos = (X, Z)`.
     pub fn normal(&self, pos: Vec2) -> Result<Vec3, PhysicsError> {
         Ok(self.field.normal_local(self.local2(pos)?))
+    }
+
+    /// Whether world `pos = (X, Z)` lies over a hole ([`HeightField::with_holes`]).
+    pub fn is_hole(&self, pos: Vec2) -> Result<bool, PhysicsError> {
+        Ok(self.field.is_hole_local(self.local2(pos)?))
+    }
+
+    /// The ground height at world `pos` for a body: [`HeightfieldCollider::height`], or
+    /// `f32::NEG_INFINITY` over a hole.
+    pub(crate) fn ground_height_at(&self, pos: Vec2) -> Result<f32, PhysicsError> {
+        if self.is_hole(pos)? {
+            return Ok(f32::NEG_INFINITY);
+        }
+        self.height(pos)
     }
 
     /// The first hit of the ray from world `origin` along `dir` (any non-zero length) within
@@ -157,7 +173,7 @@ pub(crate) fn check_radius(radius: f32) -> Result<(), PhysicsError> {
 
 impl GroundQuery for HeightfieldCollider {
     fn ground_height(&self, pos: Vec2) -> Result<f32, PhysicsError> {
-        self.height(pos)
+        self.ground_height_at(pos)
     }
 
     fn ground_normal(&self, pos: Vec2) -> Result<Vec3, PhysicsError> {

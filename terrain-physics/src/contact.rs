@@ -45,7 +45,8 @@ const REFINE_STEPS: usize = 100;
 
 impl HeightField {
     /// The contact of a sphere at local `center` with `radius` (>= 0) against the surface, or
-    /// `None` if they do not touch. Inputs must be finite and the radius not negative
+    /// `None` if they do not touch. Cells cut away ([`HeightField::with_holes`]) are no
+    /// surface: a sphere over a hole touches only the ground around it. Inputs must be finite and the radius not negative
     /// ([`HeightfieldCollider::sphere_contact`] checks them); other inputs give `None`.
     ///
     /// Cost: the cells under the sphere (radius / texel size squared), or for a centre below
@@ -113,10 +114,16 @@ impl HeightField {
         let row = (c.z / ts).floor();
         let under = self.patch(cell as i64, row as i64);
         let h_c = under.height(c.x / ts - cell, c.z / ts - row);
-        let below = c.y < h_c;
+        // Over a hole nothing is below ground, and the point straight below is no candidate.
+        let over_hole = self.hole_cell(cell as i64, row as i64);
+        let below = c.y < h_c && !over_hole;
         let mut best = Closest {
             point: DVec3::new(c.x, h_c, c.z),
-            distance: (h_c - c.y).abs(),
+            distance: if over_hole {
+                f64::INFINITY
+            } else {
+                (h_c - c.y).abs()
+            },
             normal: under.normal(c.x / ts - cell, c.z / ts - row, ts),
             below,
         };
@@ -141,6 +148,9 @@ impl HeightField {
         let mut best_d2 = best.distance * best.distance;
         let inv_ts2 = 1.0 / (ts * ts);
         let visit = |ix: i64, iz: i64, best: &mut Closest, best_d2: &mut f64| {
+            if self.hole_cell(ix, iz) {
+                return;
+            }
             let patch = self.patch(ix, iz);
             let (x0, z0) = (ix as f64 * ts, iz as f64 * ts);
             let gx = (x0 - c.x).max(c.x - (x0 + ts)).max(0.0);

@@ -8,6 +8,7 @@
 
 use crate::error::PhysicsError;
 use glam::{DVec3, UVec2, Vec2, Vec3};
+use std::sync::Arc;
 use terrain_core::{CoarseMap, Grid, HeightEncoding, WrapMode};
 
 /// Largest side of a mirrored map, in texels: keeps every texel coordinate, wrapped or not,
@@ -30,6 +31,8 @@ pub struct HeightField {
     /// Conservative bounds of the stored values: every sample lies in `raw_min..=raw_max`.
     raw_min: u16,
     raw_max: u16,
+    /// The cells cut away (`terrain_core::holes`), shared between snapshots.
+    holes: Option<Arc<Grid<u8>>>,
 }
 
 /// The four corner heights of one cell, in metres, as the bilinear patch
@@ -108,7 +111,58 @@ impl HeightField {
             version: 0,
             raw_min,
             raw_max,
+            holes: None,
         })
+    }
+
+    /// The same field with the cells `holes` marks cut away (`terrain_core::holes`: mask
+    /// texel `(x, z)` nonzero removes the cell whose lower corner is texel `(x, z)`), or with
+    /// none for `None`. Over a hole rays pass through, spheres find no contact and
+    /// [`GroundQuery::ground_height`](crate::GroundQuery::ground_height) is `-inf`; heights and
+    /// normals still describe the surface the hole was cut from. A hole has no walls: a body
+    /// in it touches only the top surface of the ground around it.
+    ///
+    /// Fails on a mask of another size than the field.
+    pub fn with_holes(mut self, holes: Option<Arc<Grid<u8>>>) -> Result<Self, PhysicsError> {
+        if let Some(mask) = &holes
+            && mask.size() != self.size()
+        {
+            return Err(PhysicsError::SizeMismatch {
+                expected: self.size(),
+                actual: mask.size(),
+            });
+        }
+        self.set_holes(holes);
+        Ok(self)
+    }
+
+    /// The hole mask, if the field has a hole.
+    pub fn holes(&self) -> Option<&Arc<Grid<u8>>> {
+        self.holes.as_ref()
+    }
+
+    /// Whether local position `pos = (X, Z)` lies over a hole (the field repeats; a
+    /// non-finite position is over none).
+    pub fn is_hole_local(&self, pos: Vec2) -> bool {
+        if self.holes.is_none() || !pos.is_finite() {
+            return false;
+        }
+        let (px, pz) = self.period_m();
+        let (x, _) = reduce(f64::from(pos.x), px);
+        let (z, _) = reduce(f64::from(pos.y), pz);
+        let ts = f64::from(self.texel_size);
+        self.hole_cell((x / ts).floor() as i64, (z / ts).floor() as i64)
+    }
+
+    /// Whether cell `(ix, iz)` (unwrapped cell coordinates) is cut away.
+    #[inline]
+    pub(crate) fn hole_cell(&self, ix: i64, iz: i64) -> bool {
+        let Some(mask) = &self.holes else {
+            return false;
+        };
+        let (x, _) = self.wrap_pair_x(ix);
+        let (z, _) = self.wrap_pair_z(iz);
+        mask.get(x, z).is_some_and(terrain_core::is_hole)
     }
 
     /// The stored samples (the coarse-map's own u16 encoding).
@@ -280,10 +334,17 @@ impl HeightField {
         self.raw_max = hi;
     }
 
-    /// The bounds of `other` (when the writer rebuilds a buffer from it).
+    /// The bounds and the holes of `other` (when the writer rebuilds a buffer from it).
     pub(crate) fn copy_bounds_from(&mut self, other: &HeightField) {
         self.raw_min = other.raw_min;
         self.raw_max = other.raw_max;
+        self.holes.clone_from(&other.holes);
+    }
+
+    /// Replaces the holes (the mask's size already checked); a mask without a hole is kept as
+    /// none, so it costs the queries nothing.
+    pub(crate) fn set_holes(&mut self, holes: Option<Arc<Grid<u8>>>) {
+        self.holes = holes.filter(|m| m.as_slice().iter().any(|&v| terrain_core::is_hole(v)));
     }
 }
 

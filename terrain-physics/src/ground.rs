@@ -195,9 +195,9 @@ impl<'a> BoundedGround<'a> {
 }
 
 impl GroundQuery for BoundedGround<'_> {
-    /// The mirrored height plus the pending raise there.
+    /// The mirrored height plus the pending raise there (`-inf` over a hole).
     fn ground_height(&self, pos: Vec2) -> Result<f32, PhysicsError> {
-        Ok(self.collider.height(pos)? + self.raise_at(pos)?)
+        Ok(self.collider.ground_height_at(pos)? + self.raise_at(pos)?)
     }
 
     /// The mirrored normal (a bound says nothing about the new slope).

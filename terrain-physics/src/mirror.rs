@@ -123,6 +123,41 @@ impl CollisionMirror {
         Ok(version)
     }
 
+    /// Publishes a snapshot with the cells `holes` marks cut away (`None`: no holes), the
+    /// heights and the version unchanged (a hole is no height update: the readback versions
+    /// stay the scheduler's). Holes change rarely, so the whole mask is passed; the caller
+    /// keeps it (e.g. the mask it uploads to the GPU) and shares it through the `Arc`.
+    ///
+    /// Fails on a mask of another size than the map; the mirror is then unchanged.
+    pub fn set_holes(&self, holes: Option<Arc<Grid<u8>>>) -> Result<(), PhysicsError> {
+        if let Some(mask) = &holes
+            && mask.size() != self.size
+        {
+            return Err(PhysicsError::SizeMismatch {
+                expected: self.size,
+                actual: mask.size(),
+            });
+        }
+        let mut writer = self.writer.lock();
+        let front = self.snapshot();
+        let (mut back, stale) = match writer.back.take() {
+            Some(back) => (back, std::mem::take(&mut writer.stale)),
+            None => (front.clone(), Vec::new()),
+        };
+        let buf = Arc::make_mut(&mut back);
+        for r in stale {
+            copy_rect(front.heights(), buf.heights_mut(), r);
+        }
+        buf.copy_bounds_from(&front);
+        buf.set_holes(holes);
+        buf.set_version(front.version());
+        let old = self.front.swap(back);
+        drop(front);
+        writer.back = Some(old);
+        writer.stale = Vec::new();
+        Ok(())
+    }
+
     /// Copies the mirror's heights of `rect` (it may wrap) into `map`, a map of the mirror's
     /// size and encoding: how a CPU copy of the terrain (an overview, a save) follows the
     /// regions read back into the mirror, region by region, without deforming anything of its

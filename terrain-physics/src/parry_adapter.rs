@@ -682,7 +682,23 @@ impl ParryTerrain {
         }
         let ts = self.texel_size;
         let size_m = cells.as_vec2() * ts;
-        let shape = ParryHeightField::new(heights, PVec3::new(size_m.x, 1.0, size_m.y));
+        let mut shape = ParryHeightField::new(heights, PVec3::new(size_m.x, 1.0, size_m.y));
+        // Cells cut away (HeightField::with_holes) are removed cells for parry too: its queries
+        // skip them as this crate's do.
+        if snapshot.holes().is_some() {
+            for z in 0..cells.y {
+                for x in 0..cells.x {
+                    let cell = (first + UVec2::new(x, z)).as_ivec2();
+                    if snapshot.hole_cell(i64::from(cell.x), i64::from(cell.y)) {
+                        shape.set_cell_status(
+                            z as usize,
+                            x as usize,
+                            parry3d::shape::HeightFieldCellStatus::CELL_REMOVED,
+                        );
+                    }
+                }
+            }
+        }
         let centre = first.as_vec2() * ts + size_m * 0.5;
         ParryTile {
             index: t,

@@ -74,7 +74,11 @@ impl HeightField {
     /// the surface, or `None`.
     ///
     /// The ground is solid: a ray whose origin is at or below the surface hits at distance 0
-    /// with the normal there. Otherwise the hit is the first crossing of the bilinear surface,
+    /// with the normal there, unless the origin is over a hole. Cells cut away
+    /// ([`HeightField::with_holes`]) have no surface: rays pass through them, and a ray that
+    /// enters the ground beside a hole from below its surface is stopped where it enters
+    /// (solid ground, as for an origin below the surface). Below the field's lowest height
+    /// there is nothing to hit. Otherwise the hit is the first crossing of the bilinear surface,
     /// found exactly cell by cell. Rays cross the map's edges freely (the surface repeats).
     /// `max_dist` must be finite and not negative ([`HeightfieldCollider::raycast`] checks it);
     /// the walk costs one step per cell crossed within the field's height bounds, at most
@@ -102,7 +106,7 @@ impl HeightField {
         // At or below the surface at the origin: solid ground, hit at 0.
         let o_xz = Vec2::new(ox as f32, oz as f32);
         let h0 = f64::from(self.height_local(o_xz));
-        if o.y <= h0 {
+        if o.y <= h0 && !self.is_hole_local(o_xz) {
             let normal = self.normal_local(o_xz);
             return Ok(Some(RayHit {
                 point: ray.origin(),
@@ -202,7 +206,8 @@ fn walk(
     let capped = max_steps == max_walk_cells(field);
     for _ in 0..=max_steps {
         let t_out = t_max_x.min(t_max_z).min(t_end);
-        if t_out >= t_in {
+        // A hole's cell has no surface: the ray passes through it.
+        if t_out >= t_in && !field.hole_cell(ix, iz) {
             let patch = field.patch(ix, iz);
             if let Some(t) = hit_in_cell(&patch, &ray, t_in, t_out) {
                 let p = o + d * t;
