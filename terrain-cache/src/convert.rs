@@ -36,7 +36,7 @@ pub fn convert_world(world: &World) -> Result<(World, ConvertReport), CacheError
     new.tile_format = TileFormat::Tile;
     let converted = World::unwritten(store.clone(), new);
     let mut png_keys = Vec::new();
-    for layer in [Layer::Height, Layer::Detail] {
+    for layer in Layer::ALL {
         png_keys.extend(
             store
                 .list(layer.folder())?

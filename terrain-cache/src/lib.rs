@@ -65,6 +65,7 @@ mod convert;
 pub mod detail;
 pub mod error;
 mod granular_window;
+pub mod holes;
 pub mod lock;
 pub mod manifest;
 #[cfg(feature = "object-store")]
@@ -79,6 +80,7 @@ pub mod world;
 pub use convert::{ConvertReport, convert_world};
 pub use error::CacheError;
 pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
+pub use holes::{MAX_HOLE_REGION_CELLS, read_holes, write_holes};
 pub use manifest::{DetailLayout, Manifest, TileFormat, tile_key};
 #[cfg(feature = "object-store")]
 pub use object::{ObjectStoreConfig, ObjectTileStore};

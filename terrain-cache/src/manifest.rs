@@ -259,6 +259,7 @@ impl Manifest {
     pub fn layer_tiles(&self, layer: Layer, level: u32) -> UVec2 {
         match layer {
             Layer::Height if level < self.levels => self.tiles_at(level),
+            Layer::Hole if level == 0 => self.tiles_at(0),
             Layer::Detail => match &self.detail {
                 Some(d) if level == 0 => d.tiles,
                 _ => UVec2::ZERO,
@@ -267,18 +268,19 @@ impl Manifest {
         }
     }
 
-    /// Levels of `layer` (the detail layer has one).
+    /// Levels of `layer` (the detail and hole layers have one).
     pub fn layer_levels(&self, layer: Layer) -> u32 {
         match layer {
             Layer::Height => self.levels,
             Layer::Detail => u32::from(self.detail.is_some()),
+            Layer::Hole => 1,
         }
     }
 
     /// Tile side of `layer`.
     pub fn layer_tile_size(&self, layer: Layer) -> Result<u32, CacheError> {
         match layer {
-            Layer::Height => Ok(self.tile_size),
+            Layer::Height | Layer::Hole => Ok(self.tile_size),
             Layer::Detail => self
                 .detail
                 .map(|d| d.tile_size)
@@ -290,6 +292,7 @@ impl Manifest {
     pub fn layer_fill(&self, layer: Layer) -> Result<u16, CacheError> {
         match layer {
             Layer::Height => Ok(self.height_fill),
+            Layer::Hole => Ok(u16::from(terrain_core::GROUND)),
             Layer::Detail => self
                 .detail
                 .map(|d| u16::from(d.fill))
@@ -410,6 +413,7 @@ pub fn parse_tile_key(key: &str) -> Option<(Layer, TileId)> {
     let layer = match parts.next()? {
         "height" => Layer::Height,
         "detail" => Layer::Detail,
+        "hole" => Layer::Hole,
         _ => return None,
     };
     let level = parts.next()?;

@@ -65,6 +65,16 @@ pub enum Layer {
     /// The u8 detail-map tiles (one level, LZ4 `.tile` files; PNG8 in version-1 worlds),
     /// Flower 2010, sec. 2.4.2.
     Detail,
+    /// The u8 hole mask (`terrain_core::holes`) over the height pyramid's level 0: one byte
+    /// per level-0 cell, 0 for ground, in tiles of the height tiles' size. Every world has the
+    /// layer; a tile without a hole is not stored (the zero tile), so a world without holes
+    /// has no file of it.
+    Hole,
+}
+
+impl Layer {
+    /// Every layer, in the order of their index.
+    pub const ALL: [Layer; 3] = [Layer::Height, Layer::Detail, Layer::Hole];
 }
 
 impl Layer {
@@ -73,14 +83,15 @@ impl Layer {
         match self {
             Layer::Height => "height",
             Layer::Detail => "detail",
+            Layer::Hole => "hole",
         }
     }
 
-    /// Bits per stored sample: 16 for heights, 8 for detail.
+    /// Bits per stored sample: 16 for heights, 8 for detail and holes.
     pub const fn bits(self) -> u8 {
         match self {
             Layer::Height => 16,
-            Layer::Detail => 8,
+            Layer::Detail | Layer::Hole => 8,
         }
     }
 
@@ -104,7 +115,9 @@ impl TileData {
     pub fn filled(layer: Layer, size: u32, value: u16) -> Result<Self, crate::CacheError> {
         Ok(match layer {
             Layer::Height => TileData::U16(Grid::new(size, size, value)?),
-            Layer::Detail => TileData::U8(Grid::new(size, size, value.min(255) as u8)?),
+            Layer::Detail | Layer::Hole => {
+                TileData::U8(Grid::new(size, size, value.min(255) as u8)?)
+            }
         })
     }
 

@@ -89,6 +89,7 @@ const fn layer_byte(layer: Layer) -> u8 {
     match layer {
         Layer::Height => 0,
         Layer::Detail => 1,
+        Layer::Hole => 2,
     }
 }
 
@@ -123,7 +124,8 @@ impl TileCodec {
     pub const fn for_layer(layer: Layer) -> Self {
         match layer {
             Layer::Height => TileCodec::Raw,
-            Layer::Detail => TileCodec::Lz4,
+            // Holes are rare: LZ4 keeps a tile with a few of them small.
+            Layer::Detail | Layer::Hole => TileCodec::Lz4,
         }
     }
 }
@@ -434,7 +436,7 @@ fn decode_checked(
     }
     if header == HEADER_LEN_WITH_IDENTITY {
         let found: [u8; 16] = std::array::from_fn(|i| bytes[HEADER_LEN + i]);
-        let known = matches!(found[0], 0 | 1) && found[1..4] == [0, 0, 0];
+        let known = matches!(found[0], 0..=2) && found[1..4] == [0, 0, 0];
         if !known || expected.is_some_and(|e| e.to_bytes() != found) {
             return Err(TileFileError::Identity {
                 layer: found[0],
@@ -462,7 +464,7 @@ fn decode_checked(
             }
             TileData::U16(grid(side, out))
         }
-        (Layer::Detail, TileCodec::Raw) => {
+        (Layer::Detail | Layer::Hole, TileCodec::Raw) => {
             if payload.len() != n {
                 return Err(bad(n, format!("{} bytes", payload.len())));
             }
@@ -472,7 +474,7 @@ fn decode_checked(
             let planes = decompress(payload, 2 * n).map_err(|r| bad(2 * n, r))?;
             TileData::U16(grid(side, unfilter_u16(&planes, side as usize)))
         }
-        (Layer::Detail, TileCodec::Lz4) => {
+        (Layer::Detail | Layer::Hole, TileCodec::Lz4) => {
             TileData::U8(grid(side, decompress(payload, n).map_err(|r| bad(n, r))?))
         }
     })

@@ -16,7 +16,8 @@
 //!     file whose recorded bounds are anything else is a lost tile, except an entry never
 //!     written (`[u16::MAX, 0]`): the tile is then taken as the zero tile and the entry is
 //!     reported as a `bounds.bin` defect (repairable), not as a lost tile;
-//!   - in the detail layer, always: detail tiles are the zero deformation until first written.
+//!   - in the detail layer, always: detail tiles are the zero deformation until first written;
+//!   - in the hole layer, always: a tile without a hole is not stored.
 //! - **Coarser levels** equal the reduction of their children bit for bit (the 2x2 mean
 //!   rounded to nearest, clamped padding beyond the level's size, exactly as the builder
 //!   computes them).
@@ -257,12 +258,13 @@ pub fn repair_world(
     })
 }
 
-/// Tiles `m` promises, both layers, saturating.
+/// Tiles `m` promises, every layer, saturating.
 fn promised_tiles(m: &Manifest) -> u64 {
     let count = |t: glam::UVec2| u64::from(t.x).saturating_mul(u64::from(t.y));
     (0..m.levels)
         .map(|l| count(m.tiles_at(l)))
         .chain(std::iter::once(count(m.layer_tiles(Layer::Detail, 0))))
+        .chain(std::iter::once(count(m.layer_tiles(Layer::Hole, 0))))
         .fold(0u64, u64::saturating_add)
 }
 
@@ -392,8 +394,12 @@ impl<'a> Walk<'a> {
         if self.m.detail.is_some() {
             let ids: Vec<TileId> = self.m.tiles_of(Layer::Detail, 0).collect();
             for id in ids {
-                self.detail(id)?;
+                self.flat_tile(Layer::Detail, id)?;
             }
+        }
+        let ids: Vec<TileId> = self.m.tiles_of(Layer::Hole, 0).collect();
+        for id in ids {
+            self.flat_tile(Layer::Hole, id)?;
         }
         Ok(())
     }
@@ -583,14 +589,15 @@ impl<'a> Walk<'a> {
         }
     }
 
-    /// A detail tile: it decodes as itself, or has no file (the zero deformation).
-    fn detail(&mut self, id: TileId) -> Result<(), VerifyError> {
+    /// A detail or hole tile: it decodes as itself, or has no file (the zero deformation, no
+    /// hole).
+    fn flat_tile(&mut self, layer: Layer, id: TileId) -> Result<(), VerifyError> {
         self.tick()?;
-        match self.world.read_tile(Layer::Detail, id) {
+        match self.world.read_tile(layer, id) {
             Ok(TileRead::Stored(_)) => self.report.stored += 1,
             Ok(TileRead::Zero) => self.report.zero += 1,
             Err(e) => {
-                let key = self.m.tile_key(Layer::Detail, id);
+                let key = self.m.tile_key(layer, id);
                 self.defect(key, DefectKind::Unreadable, false, e.to_string());
             }
         }

@@ -28,7 +28,7 @@ pub enum TileRead {
 pub struct World {
     store: Arc<dyn TileStore>,
     manifest: Manifest,
-    zero: Arc<[OnceLock<Arc<TileData>>; 2]>,
+    zero: Arc<[OnceLock<Arc<TileData>>; 3]>,
 }
 
 impl World {
@@ -54,7 +54,7 @@ impl World {
         Self {
             store,
             manifest,
-            zero: Arc::new([OnceLock::new(), OnceLock::new()]),
+            zero: Arc::new([OnceLock::new(), OnceLock::new(), OnceLock::new()]),
         }
     }
 
@@ -78,7 +78,7 @@ impl World {
         m.validate()?;
         self.store.write(MANIFEST_KEY, m.to_json().as_bytes())?;
         self.manifest = m;
-        self.zero = Arc::new([OnceLock::new(), OnceLock::new()]);
+        self.zero = Arc::new([OnceLock::new(), OnceLock::new(), OnceLock::new()]);
         Ok(())
     }
 
@@ -178,7 +178,9 @@ impl World {
                 let png = |e| corrupt(TileFileError::Png(e));
                 match layer {
                     Layer::Height => TileData::U16(decode_png16(bytes, &limits).map_err(png)?),
-                    Layer::Detail => TileData::U8(decode_png8(bytes, &limits).map_err(png)?),
+                    Layer::Detail | Layer::Hole => {
+                        TileData::U8(decode_png8(bytes, &limits).map_err(png)?)
+                    }
                 }
             }
         };

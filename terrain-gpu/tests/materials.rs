@@ -882,12 +882,12 @@ fn a_hole_shows_what_lies_behind_in_every_lod_mode_and_shading() {
     renderer.set_hole_mask(Some(&small));
     let target = OffscreenTarget::new(device, SIZE).expect("target");
     let view = ViewMatrices {
-        view: glam::Mat4::look_at_rh(
+        view: glam::camera::rh::view::look_to_mat4(
             Vec3::new(128.0, 300.0, 128.0),
-            Vec3::new(128.0, 0.0, 127.0),
-            Vec3::Y,
+            Vec3::NEG_Y,
+            Vec3::NEG_Z,
         ),
-        projection: glam::Mat4::perspective_rh(1.0, 16.0 / 9.0, 1.0, 1000.0),
+        projection: glam::camera::rh::proj::directx::perspective(1.0, 16.0 / 9.0, 1.0, 1000.0),
     };
     let style = TerrainStyle::default();
     let view = TerrainView {

@@ -149,7 +149,7 @@ pub(crate) fn random_tile(world: &World, layer: Layer, rng: &mut Rng) -> TileDat
         .collect();
     match layer {
         Layer::Height => TileData::U16(Grid::from_vec(size, size, v).unwrap()),
-        Layer::Detail => {
+        Layer::Detail | Layer::Hole => {
             TileData::U8(Grid::from_vec(size, size, v.iter().map(|&x| x as u8).collect()).unwrap())
         }
     }

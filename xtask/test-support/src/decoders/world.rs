@@ -71,7 +71,7 @@ pub fn manifest(data: &[u8]) -> Outcome {
         panic!("manifest: a valid manifest creates no world: {e}");
     }
     let _ = (m.max_levels(), m.extent_m());
-    for layer in [Layer::Height, Layer::Detail] {
+    for layer in Layer::ALL {
         let levels = m.layer_levels(layer);
         let _ = (m.layer_tile_size(layer), m.layer_fill(layer));
         for level in [0, levels.saturating_sub(1), levels, u32::MAX] {
@@ -235,7 +235,7 @@ pub(super) fn seed_tile(world: &World, layer: Layer, seed: u64) -> TileData {
         .collect();
     match layer {
         Layer::Height => TileData::U16(Grid::from_vec(side, side, v).expect("a tile")),
-        Layer::Detail => {
+        Layer::Detail | Layer::Hole => {
             let v = v.into_iter().map(|x| x as u8).collect();
             TileData::U8(Grid::from_vec(side, side, v).expect("a tile"))
         }

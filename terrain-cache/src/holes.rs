@@ -1,0 +1,233 @@
+//! A streamed world's holes ([`Layer::Hole`], `terrain_core::holes`): read a region's hole mask
+//! from the hole tiles ([`read_holes`]) and write one back ([`write_holes`]).
+//!
+//! Holes are read and written on the world directly, not through the RAM pool: a mask is one
+//! byte per cell, most tiles have no file (no hole), and holes change rarely (a stamp cuts one),
+//! so a region read when the camera moves on and a write of the tiles a cut touched cost little.
+//! Each tile is written atomically ([`World::write_tile`]); a tile left without a hole loses its
+//! file.
+
+use crate::error::CacheError;
+use crate::tile::{Layer, TileData, TileId};
+use crate::world::World;
+use glam::{IVec2, UVec2};
+use terrain_core::{Grid, Rect, WrapMode};
+
+/// Most cells one [`read_holes`] or [`write_holes`] call covers (a 16384^2 region): bounds the
+/// mask it allocates.
+pub const MAX_HOLE_REGION_CELLS: u64 = 1 << 28;
+
+/// The level-0 hole mask of `rect` (cells; on a repeating world it may cross the edges and
+/// wraps, at most one world in size), row-major in the rect's own coordinates.
+///
+/// Fails on a rect off a clamped world, an empty or oversized rect (more than
+/// [`MAX_HOLE_REGION_CELLS`]), and on a hole tile that does not decode (naming it).
+pub fn read_holes(world: &World, rect: Rect) -> Result<Grid<u8>, CacheError> {
+    let pieces = pieces(world, rect)?;
+    let mut out = Grid::new(rect.size.x, rect.size.y, terrain_core::GROUND)?;
+    for_each_tile(
+        world,
+        &pieces,
+        |id, tile_rect, piece_map, piece_unwrapped| {
+            let tile = world.load_tile(Layer::Hole, id)?;
+            let TileData::U8(cells) = tile.as_ref() else {
+                return Err(CacheError::NoSuchLayer { layer: Layer::Hole });
+            };
+            let Some(overlap) = piece_map.intersect(&tile_rect) else {
+                return Ok(());
+            };
+            let at = overlap.min - piece_map.min + piece_unwrapped.min - rect.min;
+            let src = overlap.min - tile_rect.min;
+            for row in 0..overlap.size.y {
+                let from = &cells.row(src.y as u32 + row)
+                    [src.x as usize..src.x as usize + overlap.size.x as usize];
+                let to = out.row_mut(at.y as u32 + row);
+                to[at.x as usize..at.x as usize + overlap.size.x as usize].copy_from_slice(from);
+            }
+            Ok(())
+        },
+    )?;
+    Ok(out)
+}
+
+/// Writes `mask`, the level-0 hole mask of `rect` (as [`read_holes`] returns it), into the hole
+/// tiles it covers: each tile is read, changed and written back atomically, and one left
+/// without a hole loses its file. Returns the tiles whose content changed.
+///
+/// Fails, before anything is written, on a mask of another size than the rect and on a rect
+/// [`read_holes`] refuses; a tile that does not decode fails the call at that tile (the tiles
+/// before it are written).
+pub fn write_holes(world: &World, rect: Rect, mask: &Grid<u8>) -> Result<u32, CacheError> {
+    if mask.size() != rect.size {
+        return Err(CacheError::Core(terrain_core::CoreError::SizeMismatch {
+            expected: rect.size,
+            actual: mask.size(),
+        }));
+    }
+    let pieces = pieces(world, rect)?;
+    let mut changed = 0u32;
+    for_each_tile(
+        world,
+        &pieces,
+        |id, tile_rect, piece_map, piece_unwrapped| {
+            let Some(overlap) = piece_map.intersect(&tile_rect) else {
+                return Ok(());
+            };
+            let mut tile = world.load_tile(Layer::Hole, id)?.as_ref().clone();
+            let Some(cells) = tile.as_u8_mut() else {
+                return Err(CacheError::NoSuchLayer { layer: Layer::Hole });
+            };
+            let at = overlap.min - piece_map.min + piece_unwrapped.min - rect.min;
+            let dst = overlap.min - tile_rect.min;
+            let mut differs = false;
+            for row in 0..overlap.size.y {
+                let from = &mask.row(at.y as u32 + row)
+                    [at.x as usize..at.x as usize + overlap.size.x as usize];
+                let to = &mut cells.row_mut(dst.y as u32 + row)
+                    [dst.x as usize..dst.x as usize + overlap.size.x as usize];
+                differs |= to != from;
+                to.copy_from_slice(from);
+            }
+            if differs {
+                world.write_tile(Layer::Hole, id, &tile)?;
+                changed += 1;
+            }
+            Ok(())
+        },
+    )?;
+    Ok(changed)
+}
+
+/// The pieces of `rect` on the world's level 0 (split across the edges of a repeating world),
+/// after the checks both calls share.
+fn pieces(world: &World, rect: Rect) -> Result<Vec<(Rect, Rect)>, CacheError> {
+    let m = world.manifest();
+    let size = m.world_size;
+    if rect.is_empty() || rect.area() > MAX_HOLE_REGION_CELLS {
+        return Err(CacheError::OutOfRange {
+            what: "hole region (cells)",
+            value: rect.area() as f64,
+            expected: "1 ..= 2^28 cells",
+        });
+    }
+    match m.wrap {
+        WrapMode::Repeat => {
+            if rect.size.cmpgt(size).any() {
+                return Err(region_off(rect, size));
+            }
+            Ok(rect
+                .split_toroidal(size)
+                .into_iter()
+                .map(|p| (p.map, p.unwrapped))
+                .collect())
+        }
+        WrapMode::Clamp => {
+            if !Rect::from_size(size).contains_rect(&rect) {
+                return Err(region_off(rect, size));
+            }
+            Ok(vec![(rect, rect)])
+        }
+    }
+}
+
+fn region_off(rect: Rect, map_size: UVec2) -> CacheError {
+    CacheError::Core(terrain_core::CoreError::RegionOutOfBounds { rect, map_size })
+}
+
+/// Calls `f(tile, tile's rect, piece in map coordinates, the same piece unwrapped)` for every
+/// level-0 hole tile a piece overlaps.
+fn for_each_tile(
+    world: &World,
+    pieces: &[(Rect, Rect)],
+    mut f: impl FnMut(TileId, Rect, Rect, Rect) -> Result<(), CacheError>,
+) -> Result<(), CacheError> {
+    let ts = world.manifest().tile_size;
+    for &(map, unwrapped) in pieces {
+        let first = map.min.as_uvec2() / ts;
+        let last = (map.max() - IVec2::ONE).as_uvec2() / ts;
+        for ty in first.y..=last.y {
+            for tx in first.x..=last.x {
+                let tile_rect = Rect::new((UVec2::new(tx, ty) * ts).as_ivec2(), UVec2::splat(ts));
+                f(TileId::new(0, tx, ty), tile_rect, map, unwrapped)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::manifest::Manifest;
+    use crate::store::FsStore;
+    use std::sync::Arc;
+    use terrain_core::HeightEncoding;
+
+    fn world(dir: &std::path::Path, wrap: WrapMode) -> World {
+        let enc = HeightEncoding::spanning::<u16>(0.0, 100.0).expect("range");
+        let m = Manifest::new(UVec2::new(80, 48), 16, 1.0, enc, wrap).expect("manifest");
+        World::create(Arc::new(FsStore::open(dir).expect("store")), m).expect("world")
+    }
+
+    #[test]
+    fn holes_written_read_back_across_tiles_and_the_wrap() {
+        let dir = crate::store::tests::temp_dir("holes");
+        let w = world(&dir, WrapMode::Repeat);
+        // A rect across the world's corner: 4 pieces, 4 tiles.
+        let rect = Rect::new(IVec2::new(76, 44), UVec2::new(8, 8));
+        let mask =
+            Grid::from_fn(8, 8, |x, y| if (x + y) % 3 == 0 { 255 } else { 0 }).expect("mask");
+        assert_eq!(write_holes(&w, rect, &mask).expect("write"), 4);
+        // Reopened: the same holes, and where nothing was written none.
+        let w2 = World::open(w.store().clone()).expect("open");
+        assert_eq!(read_holes(&w2, rect).expect("read"), mask);
+        let at = |x, y| {
+            read_holes(&w2, Rect::new(IVec2::new(x, y), UVec2::ONE))
+                .expect("read")
+                .as_slice()[0]
+        };
+        assert_eq!(at(0, 0), mask.get(4, 4).expect("cell"));
+        assert_eq!(at(79, 47), mask.get(3, 3).expect("cell"));
+        assert_eq!(at(40, 20), 0);
+        // The same mask again changes nothing; clearing it removes every hole file.
+        assert_eq!(write_holes(&w, rect, &mask).expect("write"), 0);
+        let clear = Grid::new(8, 8, 0u8).expect("mask");
+        assert_eq!(write_holes(&w, rect, &clear).expect("write"), 4);
+        assert!(w.store().list("hole").expect("list").is_empty());
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn bad_regions_are_refused_and_write_nothing() {
+        let dir = crate::store::tests::temp_dir("holes-bad");
+        let w = world(&dir, WrapMode::Clamp);
+        let mask = Grid::new(8, 8, 255u8).expect("mask");
+        for rect in [
+            Rect::new(IVec2::new(76, 0), UVec2::splat(8)),
+            Rect::new(IVec2::new(-1, 0), UVec2::splat(8)),
+            Rect::new(IVec2::ZERO, UVec2::ZERO),
+        ] {
+            assert!(read_holes(&w, rect).is_err(), "{rect:?}");
+        }
+        let wrong = Rect::new(IVec2::ZERO, UVec2::splat(4));
+        assert!(write_holes(&w, wrong, &mask).is_err());
+        let huge = Rect::new(IVec2::ZERO, UVec2::splat(1 << 15));
+        assert!(read_holes(&w, huge).is_err());
+        assert!(w.store().list("hole").expect("list").is_empty());
+        // A damaged hole file is an error naming the tile, not a panic.
+        let key = w.manifest().tile_key(Layer::Hole, TileId::new(0, 0, 0));
+        w.store().write(&key, b"not a tile").expect("write");
+        let e = read_holes(&w, Rect::new(IVec2::ZERO, UVec2::splat(4))).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                CacheError::CorruptTile {
+                    layer: Layer::Hole,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
