@@ -81,6 +81,11 @@ pub struct StampParams {
     pub shock_steps_per_frame: u32,
     /// The wave simulation (terrain-core's `ShockwaveParams`).
     pub shockwave: ShockwaveParams,
+    /// On this frame a hole (a cave mouth) is cut beside the walker's path, 30 m ahead and
+    /// 10 m to the side, so the camera walks past it (0: none).
+    pub hole_frame: u32,
+    /// The hole's diameter in metres (at most half the map's side).
+    pub hole_size_m: f32,
 }
 
 impl Default for StampParams {
@@ -102,6 +107,8 @@ impl Default for StampParams {
                 damping: 0.002,
                 ..ShockwaveParams::default()
             },
+            hole_frame: 3,
+            hole_size_m: 9.0,
         }
     }
 }
@@ -262,6 +269,8 @@ impl DemoParams {
         check("stamps.shock_size_fraction", s.shock_size_fraction)?;
         check("stamps.shock_amplitude_m", s.shock_amplitude_m)?;
         check("stamps.shock_steps_per_frame", s.shock_steps_per_frame)?;
+        check("stamps.hole_frame", s.hole_frame)?;
+        check("stamps.hole_size_m", s.hole_size_m)?;
         let w = &s.shockwave;
         check("stamps.shockwave.resolution", w.resolution)?;
         check("stamps.shockwave.gamma", w.gamma)?;

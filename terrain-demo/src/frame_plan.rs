@@ -34,6 +34,9 @@ pub struct FramePlan {
     pub shock_delta: Option<TextureStamp>,
     /// The walker's position (metres, X Z) and unit heading after this frame's steps.
     pub walker: (Vec2, Vec2),
+    /// A hole cut into the ground this frame (`terrain_core::holes`: the cells inside the
+    /// placement's ellipse).
+    pub hole: Option<StampPlacement>,
 }
 
 impl FramePlan {

@@ -206,6 +206,10 @@ impl RunShape {
                 parts.push(("map", per_texel(MAP_PER_TEXEL)));
                 parts.push(("normals", per_texel(NORMALS_PER_TEXEL)));
                 parts.push(("collision", per_texel(COLLISION_PER_TEXEL)));
+                // The hole mask once a hole is cut (`[stamps] hole_frame`, or a heightmap's
+                // nodata): the CPU's, the collision snapshot's and the GPU's, a byte a texel
+                // each, counted whether or not one is cut (the flags do not say it).
+                parts.push(("holes", per_texel(if self.gpu { 3 } else { 2 })));
                 if self.detail {
                     // The CPU layer if every tile were stamped (one byte per detail texel),
                     // and the GPU's tile slots and spill window.

@@ -115,6 +115,8 @@ pub const KEYS: &[Range] = &[
     closed("stamps.shock_size_fraction", 0.0, 1.0, ""),
     closed("stamps.shock_amplitude_m", 0.0, 1000.0, "m"),
     closed("stamps.shock_steps_per_frame", 0.0, 64.0, "per frame"),
+    closed("stamps.hole_frame", 0.0, 4_294_967_295.0, "frame (0: none)"),
+    above("stamps.hole_size_m", 0.0, 100_000.0, "m"),
     closed("stamps.shockwave.resolution", 8.0, 4096.0, "samples"),
     above("stamps.shockwave.gamma", 0.0, 0.5, ""),
     above("stamps.shockwave.initial_sigma", 0.0, 4096.0, "samples"),

@@ -146,6 +146,8 @@ const KEYS: &[(&str, &str)] = &[
     ("stamps", "shock_size_fraction = {v}"),
     ("stamps", "shock_amplitude_m = {v}"),
     ("stamps", "shock_steps_per_frame = {v}"),
+    ("stamps", "hole_frame = {v}"),
+    ("stamps", "hole_size_m = {v}"),
     ("stamps.shockwave", "resolution = {v}"),
     ("stamps.shockwave", "gamma = {v}"),
     ("stamps.shockwave", "initial_sigma = {v}"),
@@ -224,7 +226,8 @@ fn boundary_config_values_are_accepted() {
     let low = "[stamps]\nfoot_size_m = [1e-30, 1e-30]\nfoot_depth_m = 0\nsteps_per_frame = 1\n\
                stride_m = 1e-30\ncrater_every = 0\ncrater_size_m = [1e-30, 1e-30]\n\
                crater_depth_ratio = 0\nshock_size_fraction = 0\nshock_amplitude_m = 0\n\
-               shock_steps_per_frame = 0\n[stamps.shockwave]\nresolution = 8\ngamma = 1e-30\n\
+               shock_steps_per_frame = 0\nhole_frame = 0\nhole_size_m = 1e-30\n\
+               [stamps.shockwave]\nresolution = 8\ngamma = 1e-30\n\
                initial_sigma = 1e-30\ndamping = 0\n\
                [granular]\ncompression = 0\nroughness = 0\nslope_threshold = 0\n\
                slope_d = 1.0001e-6\nnum_iterations_even_out_slopes = 0\n\
@@ -240,7 +243,8 @@ fn boundary_config_values_are_accepted() {
     let high = "[stamps]\nfoot_size_m = [100, 100]\nfoot_depth_m = 100\nsteps_per_frame = 64\n\
                 stride_m = 1000\ncrater_every = 100000\ncrater_size_m = [100000, 100000]\n\
                 crater_depth_ratio = 10\nshock_size_fraction = 1\nshock_amplitude_m = 1000\n\
-                shock_steps_per_frame = 64\n[stamps.shockwave]\nresolution = 4096\n\
+                shock_steps_per_frame = 64\nhole_frame = 4294967295\n\
+                hole_size_m = 100000\n[stamps.shockwave]\nresolution = 4096\n\
                 gamma = 0.5\ninitial_sigma = 4096\ndamping = 0.999\n\
                 [granular]\ncompression = 1\nroughness = 1\nslope_threshold = 1e6\n\
                 slope_d = 1e6\nnum_iterations_even_out_slopes = 1024\n\

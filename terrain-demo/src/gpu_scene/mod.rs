@@ -78,6 +78,8 @@ pub struct GpuScene {
     refined: Option<RefinedGeometry>,
     /// The material layer the default scenario's deformations paint (`paint`).
     paint: Option<paint::Paint>,
+    /// The hole mask every renderer leaves out, once a hole is cut.
+    holes: Option<terrain_gpu::GpuHoleMask>,
     /// Frames rendered so far.
     frames: u32,
     /// Fault injection for the device-loss test: destroy the device before rendering this
@@ -310,6 +312,7 @@ impl GpuScene {
             detail: None,
             refined: None,
             paint: None,
+            holes: None,
             frames: 0,
             destroy_at: std::env::var(DESTROY_DEVICE_ENV)
                 .ok()

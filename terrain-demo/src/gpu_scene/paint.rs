@@ -2,14 +2,15 @@
 //! the renderers blend over the autoshader. The default scenario's stamps paint with
 //! `MaterialEffectPass`: a crater exposes dirt, a footprint presses the cover down to the dirt
 //! under it, a shockwave scorches the ground around its centre. The snow scenario's granular
-//! steps paint their trails with `TrailEffectPass`: pressed snow darkens.
+//! steps paint their trails with `TrailEffectPass`: pressed snow darkens. A hole cut into the
+//! ground (`terrain_core::holes`) is left out of every renderer's frame.
 
 use super::GpuScene;
 use crate::frame_plan::StampKind;
 use anyhow::{Context, Result};
-use terrain_core::{Grid, MaterialEffect, StampPlacement};
+use terrain_core::{DirtyRect, Grid, MaterialEffect, StampPlacement};
 use terrain_gpu::GpuError;
-use terrain_gpu::{EffectOp, GpuHeightMap, GpuMaterialLayer, MaterialEffectPass};
+use terrain_gpu::{EffectOp, GpuHeightMap, GpuHoleMask, GpuMaterialLayer, MaterialEffectPass};
 
 /// The material layer over the coarse-map and the pass that paints it.
 pub struct Paint {
@@ -81,6 +82,34 @@ impl GpuScene {
             pass: MaterialEffectPass::new(device)?,
         });
         Ok(())
+    }
+
+    /// Uploads the `rects` of `mask` (the coarse-map's hole mask as the CPU holds it, after a
+    /// cut changed them); the first call makes the GPU's mask and hands it to the renderers.
+    pub fn update_holes(&mut self, mask: &Grid<u8>, rects: &[DirtyRect]) -> Result<()> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        match &self.holes {
+            Some(holes) => {
+                for rect in rects {
+                    holes.write(queue, mask, *rect)?;
+                }
+            }
+            None => {
+                let holes = GpuHoleMask::new(device, queue, mask)?;
+                self.terrain.set_hole_mask(Some(&holes));
+                if let Some(refined) = self.refined.as_mut() {
+                    refined.renderer.set_hole_mask(Some(&holes));
+                }
+                self.holes = Some(holes);
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether the renderers have a hole mask.
+    #[cfg(test)]
+    pub fn has_holes(&self) -> bool {
+        self.holes.is_some()
     }
 
     /// Darkens the snow where granular steps press it ([`TRAIL`]): a material layer of the

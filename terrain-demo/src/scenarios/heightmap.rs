@@ -104,6 +104,8 @@ pub struct Terrain {
     pub source: String,
     /// Its heights, for report.json.
     pub heights: HeightsInfo,
+    /// The heightmap's nodata as holes (`terrain_core::holes`), when it had any.
+    pub holes: Option<terrain_core::Grid<u8>>,
 }
 
 /// What report.json says of a terrain's heights.
@@ -209,6 +211,7 @@ fn procedural(cli: &Cli, range: HeightRange) -> Result<Terrain> {
         heights: HeightsInfo::of_encoding(encoding, stored_range(&map), source),
         map,
         source: "procedural".into(),
+        holes: None,
     })
 }
 
@@ -296,7 +299,8 @@ fn from_dem(
             .value
             .map_or("NaN / infinite".to_owned(), |v| v.to_string());
         line.push_str(&format!(
-            "; {} nodata samples ({value}) filled with {:.2} m, the lowest valid height",
+            "; {} nodata samples ({value}) filled with {:.2} m, the lowest valid height, and \
+             left out as holes",
             n.count, n.fill_m
         ));
     }
@@ -309,6 +313,7 @@ fn from_dem(
     let map = CoarseMap::coarse(q.grid, q.encoding, texel)?;
     Ok(Terrain {
         map,
+        holes: dem.holes,
         source: path.display().to_string(),
         heights: HeightsInfo {
             encoding,

@@ -118,6 +118,15 @@ impl StampScript {
             });
         }
 
+        // The hole: cut once, beside the path ahead on the outside of its curve (the path bends
+        // away from it), so the camera walks past and looks in.
+        if p.hole_frame > 0 && frame == p.hole_frame {
+            let (walker, heading) = plan.walker;
+            let pos = walker + heading * 30.0 - heading.perp() * 10.0;
+            let size = p.hole_size_m.min(min_side * 0.5);
+            plan.hole = Some(StampPlacement::new(pos, Vec2::splat(size), 0.0)?);
+        }
+
         // The shockwave starts on frame 1 and is stamped as its change every frame.
         if frame == 1 && p.shock_size_fraction > 0.0 {
             self.shockwave = Some(Shockwave::new(p.shockwave)?);

@@ -2,7 +2,8 @@
 //! on the GPU map when there is one (the CPU's map then follows it through the collision
 //! readback only), else on the CPU map; a collision mirror fed by readbacks of the dirty
 //! regions, and a camera on it (`--camera`): walking behind the walker, or orbiting or flying
-//! over the whole map (the default with `--heightmap`).
+//! over the whole map (the default with `--heightmap`). A hole cut beside the walker's path
+//! (`[stamps] hole_frame`) leaves its cells out of collision and of every GPU frame.
 //!
 //! With `--detail parallax` or `refine` the footprints go into a detail layer instead (Flower 2010
 //! sec. 2.3: 8-bit tiles refined x3 over the coarse-map), held by a detail cache (the band
@@ -26,11 +27,14 @@ use anyhow::Context as _;
 use anyhow::Result;
 use glam::Vec2;
 use std::collections::HashMap;
+use std::sync::Arc;
 use std::time::Instant;
 use terrain_cache::detail::{DetailCache, detail_manifest_layout};
 use terrain_cache::{BandSelection, FsStore, Manifest, TileStore, World};
 use terrain_core::detail::{DetailLayout, tiles_of_pieces};
-use terrain_core::{CoarseMap, DerivativeMap, bilinear};
+use terrain_core::{
+    CoarseMap, DerivativeMap, Grid, HoleOp, StampPlacement, apply_hole_stamp, bilinear,
+};
 use terrain_physics::{
     CollisionMirror, CpuRegionSource, DetailGround, ReadbackScheduler, RequestId,
 };
@@ -57,6 +61,9 @@ pub struct StampScenario {
     detail: Option<DetailCache>,
     /// How the GPU draws it (`--detail`).
     detail_mode: crate::cli::DetailArg,
+    /// The hole mask of the coarse-map (`terrain_core::holes`), once a hole is cut: the CPU
+    /// holds it and hands it to collision and the GPU.
+    holes: Option<Grid<u8>>,
 }
 
 /// Detail texels per coarse texel (Flower 2010's 1/gamma = 3).
@@ -87,6 +94,7 @@ impl StampScenario {
         let t = Instant::now();
         let terrain = heightmap::load_planned(cli, planned)?;
         let map = terrain.map;
+        let holes = terrain.holes;
         let load_ms = ms_since(t);
         let t = Instant::now();
         let normals = DerivativeMap::from_map(&map);
@@ -102,6 +110,9 @@ impl StampScenario {
             }
         };
         let mirror = CollisionMirror::from_map(&map)?;
+        if let Some(mask) = &holes {
+            mirror.set_holes(Some(Arc::new(mask.clone())))?;
+        }
         // The GPU scene's readback ring has `max_in_flight` buffers (see `driver::open_gpu`).
         let scheduler = ReadbackScheduler::for_mirror(&mirror, params.scheduler)?;
         let mode = camera_mode(cli);
@@ -148,6 +159,7 @@ impl StampScenario {
             rig,
             detail,
             detail_mode: cli.detail,
+            holes,
         })
     }
 }
@@ -212,6 +224,27 @@ fn needed_detail_tiles(layout: &DetailLayout, plan: &FramePlan) -> Result<Vec<gl
     Ok(needed)
 }
 
+impl StampScenario {
+    /// Cuts a hole at `placement` into the coarse-map's hole mask (made on the first cut), and
+    /// hands the mask to collision (rays and bodies pass through) and to the GPU's renderers.
+    fn cut_hole(&mut self, placement: &StampPlacement, gpu: Option<&mut GpuScene>) -> Result<()> {
+        let map = self.cpu.map();
+        let (size, wrap, texel) = (map.size(), map.wrap(), map.texel_size());
+        let mask = match self.holes.as_mut() {
+            Some(mask) => mask,
+            None => self
+                .holes
+                .insert(Grid::new(size.x, size.y, terrain_core::GROUND)?),
+        };
+        let rects = apply_hole_stamp(mask, wrap, texel, placement, HoleOp::Cut)?;
+        self.mirror.set_holes(Some(Arc::new(mask.clone())))?;
+        if let Some(scene) = gpu {
+            scene.update_holes(mask, &rects)?;
+        }
+        Ok(())
+    }
+}
+
 impl Scenario for StampScenario {
     fn info(&self) -> &ScenarioInfo {
         &self.info
@@ -255,6 +288,9 @@ impl Scenario for StampScenario {
         if let Some(cache) = &self.detail {
             let refine = self.detail_mode == crate::cli::DetailArg::Refine;
             scene.enable_detail(*cache.layout(), refine)?;
+        }
+        if let Some(mask) = &self.holes {
+            scene.update_holes(mask, &[mask.rect()])?;
         }
         scene.set_footprint(self.script.footprint())
     }
@@ -358,6 +394,10 @@ impl Scenario for StampScenario {
                 (deformed.clone(), deformed, detail_texels)
             }
         };
+
+        if let Some(placement) = plan.hole {
+            self.cut_hole(&placement, ctx.gpu.as_deref_mut())?;
+        }
 
         // The camera: a body on the mirror, kept above pending deformations by their bounds.
         let t = Instant::now();
@@ -509,6 +549,69 @@ mod tests {
                     !timings.wall_by_name().contains_key(step),
                     "{detail}: {step} ran beside the GPU"
                 );
+            }
+        }
+    }
+
+    /// The hole the script cuts (`[stamps] hole_frame`) reaches collision on both paths: a ray
+    /// down through its middle misses, one beside it hits; with a GPU its renderers get the
+    /// mask too.
+    #[test]
+    fn the_scripted_hole_reaches_collision_and_the_gpu() {
+        let cli = Cli::try_parse_from(["demo", "--size", "256", "--seed", "3"]).expect("flags");
+        let params = DemoParams::default();
+        for gpu in [false, true] {
+            let mut scenario = StampScenario::new(&cli, &params, None).expect("scenario");
+            let mut scene = match gpu {
+                true => match gpu_scene(&mut scenario, "scripted_hole") {
+                    Some(scene) => Some(scene),
+                    None => continue,
+                },
+                false => None,
+            };
+            let t0 = Instant::now();
+            let mut timings = Timings::default();
+            for frame in 0..=params.stamps.hole_frame {
+                assert!(
+                    scenario.holes.is_none(),
+                    "gpu {gpu}: a hole before frame {frame}"
+                );
+                let now = t0 + std::time::Duration::from_secs_f64(f64::from(frame) * FRAME_DT);
+                scenario
+                    .advance(&mut FrameContext {
+                        now,
+                        gpu: scene.as_mut(),
+                        timings: &mut timings,
+                    })
+                    .expect("frame");
+            }
+            // A cell deep inside the hole (every cell within 2 of it cut), in metres.
+            let mask = scenario.holes.as_ref().expect("a mask");
+            let cut = |x: i32, y: i32| {
+                let v = mask.get_wrapped(glam::IVec2::new(x, y), terrain_core::WrapMode::Repeat);
+                terrain_core::is_hole(v)
+            };
+            let inner = (0..mask.height() as i32)
+                .flat_map(|y| (0..mask.width() as i32).map(move |x| (x, y)))
+                .find(|&(x, y)| (-2..=2).all(|j| (-2..=2).all(|i| cut(x + i, y + j))))
+                .expect("a hole 9 m wide");
+            let texel = scenario.map().texel_size();
+            let centre = (glam::Vec2::new(inner.0 as f32, inner.1 as f32) + 0.5) * texel;
+            let collider = scenario.mirror.collider();
+            let above = glam::Vec3::new(centre.x, 500.0, centre.y);
+            let through = collider
+                .raycast(above, glam::Vec3::NEG_Y, 1000.0)
+                .expect("ray");
+            assert_eq!(through, None, "gpu {gpu}: the ray through the hole hit");
+            let side = glam::Vec3::new(centre.x + 20.0, 500.0, centre.y);
+            assert!(
+                collider
+                    .raycast(side, glam::Vec3::NEG_Y, 1000.0)
+                    .expect("ray")
+                    .is_some()
+            );
+            if let Some(scene) = &scene {
+                assert!(scene.has_holes(), "the GPU's renderers got no mask");
             }
         }
     }
