@@ -911,3 +911,65 @@ fn a_hole_shows_what_lies_behind_in_every_lod_mode_and_shading() {
         "{err}"
     );
 }
+
+#[test]
+fn a_hole_window_shows_its_holes_and_nothing_beyond_it() {
+    let Some(ctx) = context_or_skip("hole window render") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let map = cliff_map();
+    let gpu = upload(&ctx, &map);
+    // The whole map's mask with a 20 m disc at (60, 128), as a streamed world stores it.
+    let mut mask = Grid::new(MAP, MAP, terrain_core::GROUND).expect("grid");
+    let disc =
+        StampPlacement::new(Vec2::new(60.0, 128.0), Vec2::splat(20.0), -1.0).expect("placement");
+    terrain_core::apply_hole_stamp(
+        &mut mask,
+        WrapMode::Clamp,
+        1.0,
+        &disc,
+        terrain_core::HoleOp::Cut,
+    )
+    .expect("cut");
+    let window = GpuHoleMask::window(device, 48).expect("window");
+    assert!(window.is_window());
+    assert_eq!(
+        window.covered(),
+        [0, 0, 0, 0],
+        "covers nothing until placed"
+    );
+    let black = |c: Vec3| c.max_element() <= 1.0;
+    for mut renderer in renderers(&ctx, &map) {
+        let mode = renderer.mode();
+        renderer.set_hole_mask(Some(&window));
+        // Placed over the disc (its origin not a multiple of its side, so the cells wrap in
+        // the texture): the disc shows through; then moved off it: ground again.
+        for (origin, hole) in [
+            (glam::IVec2::new(37, 101), true),
+            (glam::IVec2::new(150, 20), false),
+        ] {
+            let region = mask
+                .copy_rect(terrain_core::Rect::new(origin, UVec2::splat(48)))
+                .expect("inside");
+            window.move_window(queue, origin, &region).expect("move");
+            let image = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Materials);
+            let inside = around(&image, 60.0, 128.0, 10.0);
+            assert_eq!(black(inside), hole, "{mode}: window at {origin}: {inside}");
+            // Ground beside the disc is drawn wherever the window is.
+            assert!(!black(around(&image, 84.0, 128.0, 1.0)), "{mode}");
+        }
+    }
+    // A whole-map write to a window and a window move of another size are refused.
+    let rect = terrain_core::Rect::new(glam::IVec2::ZERO, UVec2::ONE);
+    assert!(window.write(queue, &mask, rect).is_err());
+    let small = Grid::new(8, 8, 0u8).expect("grid");
+    assert!(
+        window
+            .move_window(queue, glam::IVec2::ZERO, &small)
+            .is_err()
+    );
+    let whole = GpuHoleMask::new(device, queue, &mask).expect("mask");
+    assert!(whole.move_window(queue, glam::IVec2::ZERO, &mask).is_err());
+    assert!(GpuHoleMask::window(device, 0).is_err());
+}

@@ -52,18 +52,21 @@ pub(crate) struct FrameUniform {
     pub(crate) excluded: [f32; 4],
     /// Material shading and the colour layer: see `resources::materials::frame_fields`.
     material: [[f32; 4]; 4],
+    /// The cells the hole mask covers: origin (x, z) and size, in world cells.
+    holes: [i32; 4],
 }
 
 impl FrameUniform {
     /// Marks which layers `shading` binds ([`crate::GpuColorLayer`],
-    /// [`crate::GpuMaterialLayer`]).
+    /// [`crate::GpuMaterialLayer`], [`crate::GpuHoleMask`]) and where the hole mask lies.
     pub(crate) fn set_layers(&mut self, shading: &ShadingBindings) {
         self.material[3] = shading.layer_flags();
+        self.holes = shading.hole_window;
     }
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<FrameUniform>() == 256);
+const _: () = assert!(std::mem::size_of::<FrameUniform>() == 272);
 
 /// An exclusion rect with min above max: nothing is discarded.
 pub(crate) const NOTHING_EXCLUDED: [f32; 4] = [1.0, 1.0, -1.0, -1.0];
@@ -496,6 +499,7 @@ pub(crate) fn frame_uniform(
         fog_color: Vec4::from((style.fog_color, style.fog_density)).to_array(),
         excluded: NOTHING_EXCLUDED,
         material,
+        holes: [0; 4],
     })
 }
 

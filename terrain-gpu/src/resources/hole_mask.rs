@@ -4,36 +4,64 @@
 //! The mask is authored on the CPU and uploaded by rect ([`GpuHoleMask::write`]): collision
 //! needs it on the CPU anyway, it is one byte per cell and it changes rarely, so an upload of
 //! the cells a stamp changed costs less than a compute pass and a readback would.
+//!
+//! Two shapes: the whole map's mask ([`GpuHoleMask::new`]), or a window of cells that follows
+//! the camera over a world larger than memory ([`GpuHoleMask::window`], placed by
+//! [`GpuHoleMask::move_window`]); cells outside a window are drawn as ground. Either way world
+//! cell `c` lies at texel `c mod size`, so the whole map's mask is the window at origin 0.
 
 use crate::device::scope::scoped;
 use crate::error::GpuError;
-use glam::UVec2;
+use glam::{IVec2, UVec2};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicI32, Ordering};
 use terrain_core::{CoreError, Grid, Rect};
 
-/// A hole mask on the GPU: an R8 texture of one texel per map cell, nonzero where the ground
-/// is cut away. Cloning shares the texture.
+/// A hole mask on the GPU: an R8 texture of one texel per cell, nonzero where the ground is
+/// cut away. Cloning shares the texture and the window's place.
 #[derive(Debug, Clone)]
 pub struct GpuHoleMask {
-    pub(crate) texture: wgpu::Texture,
     pub(crate) view: wgpu::TextureView,
+    texture: wgpu::Texture,
     pub(crate) size: UVec2,
+    /// A window's origin (world cells; shared by the clones the renderers hold), or `None` for
+    /// the whole map's mask.
+    origin: Option<Arc<[AtomicI32; 2]>>,
 }
 
 impl GpuHoleMask {
-    /// Uploads `mask` (row-major, one byte per map cell, 0 for ground). Fails on a side above
-    /// the device's `max_texture_dimension_2d`.
+    /// Uploads `mask` (row-major, one byte per map cell, 0 for ground), the whole map's. Fails
+    /// on a side above the device's `max_texture_dimension_2d`.
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         mask: &Grid<u8>,
     ) -> Result<Self, GpuError> {
-        let size = mask.size();
+        let out = Self::with_texture(device, mask.size(), None)?;
+        out.write(queue, mask, Rect::from_size(out.size))?;
+        Ok(out)
+    }
+
+    /// A window of `side` x `side` cells over a larger world: all ground, and covering no cell
+    /// until [`GpuHoleMask::move_window`] places it. Fails on a side of 0 or above the device's
+    /// `max_texture_dimension_2d`.
+    pub fn window(device: &wgpu::Device, side: u32) -> Result<Self, GpuError> {
+        let origin = Arc::new([AtomicI32::new(i32::MIN), AtomicI32::new(i32::MIN)]);
+        let out = Self::with_texture(device, UVec2::splat(side), Some(origin))?;
+        Ok(out)
+    }
+
+    fn with_texture(
+        device: &wgpu::Device,
+        size: UVec2,
+        origin: Option<Arc<[AtomicI32; 2]>>,
+    ) -> Result<Self, GpuError> {
         let max = device.limits().max_texture_dimension_2d;
-        if size.max_element() > max {
+        if size.min_element() == 0 || size.max_element() > max {
             return Err(CoreError::OutOfRange {
                 what: "hole mask side",
-                value: f64::from(size.max_element()),
-                expected: "at most the device's max_texture_dimension_2d",
+                value: f64::from(size.max_element().max(size.min_element())),
+                expected: "1 up to the device's max_texture_dimension_2d",
             }
             .into());
         }
@@ -54,16 +82,15 @@ impl GpuHoleMask {
             })
         })?;
         let view = texture.create_view(&Default::default());
-        let out = Self {
-            texture,
+        Ok(Self {
             view,
+            texture,
             size,
-        };
-        out.write(queue, mask, Rect::from_size(size))?;
-        Ok(out)
+            origin,
+        })
     }
 
-    /// The mask's size in cells (the map's it is drawn over).
+    /// The mask's size in cells: the map's, or the window's.
     pub fn size(&self) -> UVec2 {
         self.size
     }
@@ -73,10 +100,87 @@ impl GpuHoleMask {
         u64::from(self.size.x) * u64::from(self.size.y)
     }
 
-    /// Uploads `rect` of `mask` (the whole mask, as the CPU holds it; e.g. a rect that
+    /// Whether this is a window ([`GpuHoleMask::window`]).
+    pub fn is_window(&self) -> bool {
+        self.origin.is_some()
+    }
+
+    /// The world cells it covers: origin (x, z) and size. A window covers none (size 0) until
+    /// its first [`GpuHoleMask::move_window`].
+    pub fn covered(&self) -> [i32; 4] {
+        let (w, h) = (self.size.x as i32, self.size.y as i32);
+        match &self.origin {
+            None => [0, 0, w, h],
+            Some(o) => {
+                let (x, z) = (o[0].load(Ordering::Relaxed), o[1].load(Ordering::Relaxed));
+                if x == i32::MIN {
+                    [0, 0, 0, 0]
+                } else {
+                    [x, z, w, h]
+                }
+            }
+        }
+    }
+
+    /// Places a window at world cell `origin` with `mask`, the hole mask of the cells
+    /// `origin .. origin + side` (row-major, as `terrain_cache::read_holes` returns it), drawn
+    /// from the next submission on. Fails, with nothing changed, on the whole map's mask, on a
+    /// mask of another size than the window, and on an origin whose window would leave `i32`.
+    pub fn move_window(
+        &self,
+        queue: &wgpu::Queue,
+        origin: IVec2,
+        mask: &Grid<u8>,
+    ) -> Result<(), GpuError> {
+        let Some(at) = &self.origin else {
+            return Err(CoreError::OutOfRange {
+                what: "hole mask to move",
+                value: 0.0,
+                expected: "a window (GpuHoleMask::window), not a whole map's mask",
+            }
+            .into());
+        };
+        if mask.size() != self.size {
+            return Err(CoreError::SizeMismatch {
+                expected: self.size,
+                actual: mask.size(),
+            }
+            .into());
+        }
+        let end = origin.as_i64vec2() + self.size.as_i64vec2();
+        if origin.min_element() == i32::MIN || end.max_element() > i64::from(i32::MAX) {
+            return Err(CoreError::OutOfRange {
+                what: "hole window origin",
+                value: f64::from(origin.abs().max_element()),
+                expected: "a window inside the i32 range of cells",
+            }
+            .into());
+        }
+        // Cell `origin + i` lies at texel `(origin + i) mod size`: the window's rect split
+        // where it wraps over the texture's edges.
+        for piece in Rect::new(origin, self.size).split_toroidal(self.size) {
+            let src = (piece.unwrapped.min - origin).as_uvec2();
+            let offset = u64::from(src.y) * u64::from(self.size.x) + u64::from(src.x);
+            self.upload(queue, mask.as_slice(), offset, piece.map);
+        }
+        at[0].store(origin.x, Ordering::Relaxed);
+        at[1].store(origin.y, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Uploads `rect` of `mask` (the whole map's mask, as the CPU holds it; e.g. a rect that
     /// `terrain_core::apply_hole_stamp` returned), drawn from the next submission on. Fails,
-    /// with nothing uploaded, on a mask of another size or a rect not inside it.
+    /// with nothing uploaded, on a window (rewritten whole by [`GpuHoleMask::move_window`]), a
+    /// mask of another size, or a rect not inside it.
     pub fn write(&self, queue: &wgpu::Queue, mask: &Grid<u8>, rect: Rect) -> Result<(), GpuError> {
+        if self.is_window() {
+            return Err(CoreError::OutOfRange {
+                what: "hole mask to write by rect",
+                value: 0.0,
+                expected: "a whole map's mask (a window is written by move_window)",
+            }
+            .into());
+        }
         if mask.size() != self.size {
             return Err(CoreError::SizeMismatch {
                 expected: self.size,
@@ -95,6 +199,12 @@ impl GpuHoleMask {
             return Ok(());
         }
         let offset = u64::from(rect.min.y as u32) * u64::from(self.size.x) + rect.min.x as u64;
+        self.upload(queue, mask.as_slice(), offset, rect);
+        Ok(())
+    }
+
+    /// Writes `rect` of the texture from `bytes` (rows of the texture's width) from `offset`.
+    fn upload(&self, queue: &wgpu::Queue, bytes: &[u8], offset: u64, rect: Rect) {
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &self.texture,
@@ -106,7 +216,7 @@ impl GpuHoleMask {
                 },
                 aspect: wgpu::TextureAspect::All,
             },
-            mask.as_slice(),
+            bytes,
             wgpu::TexelCopyBufferLayout {
                 offset,
                 bytes_per_row: Some(self.size.x),
@@ -118,6 +228,5 @@ impl GpuHoleMask {
                 depth_or_array_layers: 1,
             },
         );
-        Ok(())
     }
 }

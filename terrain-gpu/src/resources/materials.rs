@@ -257,6 +257,8 @@ pub(crate) struct ShadingBindings {
     pub(crate) holes: wgpu::TextureView,
     /// Whether a hole mask is bound.
     pub(crate) has_holes: bool,
+    /// The world cells it covers (origin x, z and size), for the frame uniform.
+    pub(crate) hole_window: [i32; 4],
 }
 
 impl ShadingBindings {
@@ -346,7 +348,11 @@ impl MaterialSlot {
         let sizes = [
             self.color.as_ref().map(|c| c.size),
             self.paint.as_ref().map(|p| p.size),
-            self.holes.as_ref().map(|h| h.size),
+            // A window follows the camera over a larger surface; a whole-map mask must match.
+            self.holes
+                .as_ref()
+                .filter(|h| !h.is_window())
+                .map(|h| h.size),
         ];
         if let Some(actual) = sizes.into_iter().flatten().find(|s| *s != surface_size) {
             return Err(CoreError::SizeMismatch {
@@ -382,6 +388,7 @@ impl MaterialSlot {
             has_paint: self.paint.is_some(),
             holes: self.holes.as_ref().map_or(stand_in, |h| h.view.clone()),
             has_holes: self.holes.is_some(),
+            hole_window: self.holes.as_ref().map_or([0; 4], |h| h.covered()),
         };
         Ok((bindings, std::mem::take(&mut self.changed)))
     }

@@ -12,14 +12,27 @@
 // The material layer (GpuMaterialLayer): painted weights of the four materials per map texel,
 // their sum the paint's cover (terrain_core::material_effect).
 @group(0) @binding(14) var material_layer: texture_2d<f32>;
-// The hole mask (GpuHoleMask, terrain_core::holes): nonzero at the cells cut away.
+// The hole mask (GpuHoleMask, terrain_core::holes): nonzero at the cells cut away, over the
+// world cells frame.holes covers (the whole map, or a window around the camera), each cell at
+// its coordinates modulo the mask's size.
 @group(0) @binding(15) var hole_mask: texture_2d<f32>;
 
 // Whether the cell under `q` (texels relative to the camera's whole texel) is a hole: the cell
-// whose lower corner is floor(q), as collision finds it.
+// whose lower corner is floor(q), as collision finds it. Cells outside the mask are ground.
 fn in_hole(q: vec2<f32>) -> bool {
-    let cell = frame.camera_texel + vec2<i32>(floor(q));
-    return textureLoad(hole_mask, map_texel(cell), 0).r > 0.0;
+    let cell = vec2<i32>(map_texel(frame.camera_texel + vec2<i32>(floor(q))));
+    let size = frame.holes.zw;
+    var rel = cell - frame.holes.xy;
+    if frame.wrap == WRAP_REPEAT {
+        // On a repeating world the window may reach across the edge.
+        let m = vec2<i32>(frame.map_size);
+        rel = ((rel % m) + m) % m;
+    }
+    if any(rel < vec2<i32>(0, 0)) || any(rel >= size) {
+        return false;
+    }
+    let t = ((frame.holes.xy + rel) % size + size) % size;
+    return textureLoad(hole_mask, t, 0).r > 0.0;
 }
 
 // `layer` at `q` (texels relative to the camera's whole texel), bilinear between the four
