@@ -183,6 +183,41 @@ impl CollisionWindow {
         Ok(true)
     }
 
+    /// Cuts the holes of `mask`, the hole mask (`terrain_core::holes`) of the window's rect
+    /// ([`window`](Self::window)) row-major as `terrain_cache::read_holes` returns it, into the
+    /// window, or none for `None`: over them rays pass through and bodies fall. Call it after a
+    /// [`recenter`](Self::recenter) that moved the window and after a hole is cut inside it.
+    /// Fails, with the window unchanged, before the first fill and on a mask of another size.
+    pub fn set_holes(&self, mask: Option<&Grid<u8>>) -> Result<(), PhysicsError> {
+        let Some(mask) = mask else {
+            return self.mirror.set_holes(None);
+        };
+        let Some(w) = self.window else {
+            return Err(PhysicsError::OutOfRange {
+                what: "collision window holes",
+                value: 0.0,
+                expected: "a window filled by recenter first",
+            });
+        };
+        if mask.size() != w.size {
+            return Err(PhysicsError::SizeMismatch {
+                expected: w.size,
+                actual: mask.size(),
+            });
+        }
+        // World cell (x, y) sits at (x mod w, y mod h) in the mirror, as its heights do.
+        let (sw, sh) = (self.size.x as usize, self.size.y as usize);
+        let mut toroidal = Grid::new(self.size.x, self.size.y, terrain_core::GROUND)?;
+        let out = toroidal.as_mut_slice();
+        for j in 0..w.size.y {
+            let y = (w.min.y as usize + j as usize) % sh;
+            for (i, &v) in mask.row(j).iter().enumerate() {
+                out[y * sw + (w.min.x as usize + i) % sw] = v;
+            }
+        }
+        self.mirror.set_holes(Some(Arc::new(toroidal)))
+    }
+
     /// Whether world position `pos` (metres) can be answered: its cell lies inside the window
     /// (a query there reads no texel outside it).
     pub fn contains(&self, pos: Vec2) -> bool {

@@ -196,3 +196,44 @@ fn parry_tiles_remove_the_hole_cells() {
         .expect("hit");
     assert!((beside.distance - 20.0).abs() < 1e-3);
 }
+
+#[test]
+fn a_collision_window_takes_the_holes_of_its_rect() {
+    // A 256 x 256 world of flat ground at 10 m, 1 m texels; a 64-texel window around (100, 70).
+    let enc = HeightEncoding::spanning::<u16>(0.0, 50.0).expect("range");
+    let raw = enc.to_raw(10.0).round() as u16;
+    let mut window = terrain_physics::CollisionWindow::new(64, glam::UVec2::splat(256), enc, 1.0)
+        .expect("window");
+    let holes = Grid::new(8, 8, 255u8).expect("mask");
+    assert!(window.set_holes(Some(&holes)).is_err(), "no window yet");
+    window
+        .recenter(Vec2::new(100.0, 70.0), |_, out| {
+            out.as_mut_slice().fill(raw);
+            Ok::<(), ()>(())
+        })
+        .expect("fill");
+    let rect = window.window().expect("placed");
+    // The world's mask (as read_holes gives the window's rect): a 6 m disc at (100, 70).
+    let mut world = Grid::new(256, 256, GROUND).expect("mask");
+    let disc = StampPlacement::new(Vec2::new(100.0, 70.0), Vec2::splat(6.0), -1.0).expect("disc");
+    apply_hole_stamp(&mut world, WrapMode::Clamp, 1.0, &disc, HoleOp::Cut).expect("cut");
+    let mask = world.copy_rect(rect).expect("inside");
+    assert!(window.set_holes(Some(&holes)).is_err(), "another size");
+    window.set_holes(Some(&mask)).expect("holes");
+    let c = window.collider();
+    let down = |x: f32, z: f32| {
+        c.raycast(Vec3::new(x, 30.0, z), Vec3::NEG_Y, 100.0)
+            .expect("ray")
+    };
+    assert_eq!(down(100.5, 70.5), None, "through the hole");
+    assert!(down(106.5, 70.5).is_some(), "beside it");
+    assert!(down(100.5, 76.5).is_some(), "beside it");
+    window.set_holes(None).expect("none");
+    assert!(
+        window
+            .collider()
+            .raycast(Vec3::new(100.5, 30.0, 70.5), Vec3::NEG_Y, 100.0)
+            .expect("ray")
+            .is_some()
+    );
+}
