@@ -1,13 +1,24 @@
 //! The flyover over a streamed world, run as a user runs it (without a GPU, so it needs no
 //! adapter): the world is built on first use, the RAM pool stays within its budget and has
 //! every wanted tile after the first second, the craters are written back and the next run
-//! starts from them, and `verify-world` tells a valid world from one with a corrupt tile.
+//! starts from them, the hole cut beside the path is saved in the world's hole tiles and kept
+//! by the next run, and `verify-world` tells a valid world from one with a corrupt tile.
 
 mod common;
 
 use common::tile_files;
 use std::path::Path;
 use std::process::Command;
+
+/// The hole cells the world's level-0 hole tiles hold.
+fn hole_cells(world: &Path) -> u64 {
+    use terrain_cache::{FsStore, World, read_holes};
+    let store = std::sync::Arc::new(FsStore::open_read_only(world).expect("store"));
+    let world = World::open(store).expect("world");
+    let size = world.manifest().world_size;
+    let mask = read_holes(&world, terrain_core::Rect::from_size(size)).expect("holes");
+    terrain_core::count_holes(&mask)
+}
 
 fn demo() -> Command {
     Command::new(env!("CARGO_BIN_EXE_terrain-demo"))
@@ -80,9 +91,14 @@ fn flyover_streams_within_budget_and_craters_persist() {
         "craters written back"
     );
 
-    // The second run starts from the deformed world.
+    // The hole cut on frame 8 is in the world's hole tiles.
+    let holes = hole_cells(&world);
+    assert!(holes > 50, "hole cells saved: {holes}");
+
+    // The second run starts from the deformed world, and keeps the hole.
     let start1 = std::fs::read(root.join("run1/terrain.png")).expect("terrain.png");
     run(&world, &root.join("run2"), 2);
+    assert_eq!(hole_cells(&world), holes, "the second run keeps the hole");
     let start2 = std::fs::read(root.join("run2/terrain.png")).expect("terrain.png");
     assert_ne!(
         start1, start2,

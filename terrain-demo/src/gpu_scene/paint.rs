@@ -8,6 +8,7 @@
 use super::GpuScene;
 use crate::frame_plan::StampKind;
 use anyhow::{Context, Result};
+use glam::IVec2;
 use terrain_core::{DirtyRect, Grid, MaterialEffect, StampPlacement};
 use terrain_gpu::GpuError;
 use terrain_gpu::{EffectOp, GpuHeightMap, GpuHoleMask, GpuMaterialLayer, MaterialEffectPass};
@@ -103,6 +104,27 @@ impl GpuScene {
                 self.holes = Some(holes);
             }
         }
+        Ok(())
+    }
+
+    /// Places the hole window the renderers draw (`side` cells, made on the first call) at
+    /// world cell `origin` with `mask`, the hole mask of its cells: a streamed world's holes
+    /// around the camera.
+    pub fn move_hole_window(&mut self, side: u32, origin: IVec2, mask: &Grid<u8>) -> Result<()> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let holes = match &self.holes {
+            Some(holes) if holes.is_window() && holes.size().x == side => holes.clone(),
+            _ => {
+                let holes = GpuHoleMask::window(device, side)?;
+                self.terrain.set_hole_mask(Some(&holes));
+                if let Some(refined) = self.refined.as_mut() {
+                    refined.renderer.set_hole_mask(Some(&holes));
+                }
+                self.holes = Some(holes.clone());
+                holes
+            }
+        };
+        holes.move_window(queue, origin, mask)?;
         Ok(())
     }
 

@@ -9,6 +9,9 @@
 //! else on the CPU in RAM. Changed tiles are written back into the world (atomically, off the
 //! frame thread) when evicted and at the end, so a second run starts from the deformed world.
 //!
+//! On frame [`HOLE_FRAME`] a hole is cut beside the path into the world's hole tiles (saved at
+//! once); collision and the GPU's frames leave it out (`world_holes`), in this run and the next.
+//!
 //! Collision follows the camera: a `CollisionWindow` of [`COLLISION_WINDOW`] texels filled from
 //! the RAM pool (coarser data where a level-0 tile is not loaded yet, refilled when it is)
 //! and updated by every crater's changed rects; the camera's ground is read from it.
@@ -22,6 +25,7 @@
 use super::tile_overlay;
 use super::trails::Trails;
 use super::world_files;
+use super::world_holes::WorldHoles;
 use super::world_stamps::{WorldDeformer, WorldShock, WorldStamp, reach};
 use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
 use crate::cli::Cli;
@@ -54,6 +58,12 @@ const CRATER_EVERY: u32 = 6;
 const CRATER_AHEAD: f32 = 30.0;
 const CRATER_SIZE: f32 = 12.0;
 const CRATER_DEPTH: f32 = -2.0;
+/// The frame a hole is cut, this far ahead (metres) and to the side opposite the craters,
+/// this wide.
+pub const HOLE_FRAME: u32 = 8;
+const HOLE_AHEAD: f32 = 25.0;
+const HOLE_ASIDE: f32 = 10.0;
+const HOLE_SIZE: f32 = 12.0;
 /// Side of the collision window around the camera (level-0 texels).
 pub const COLLISION_WINDOW: u32 = 512;
 /// How long the end of the run may wait for the last write-backs.
@@ -104,6 +114,8 @@ pub struct FlyoverScenario {
     window: CollisionWindow,
     /// Level-0 tiles in the window filled from coarser data (refilled once loaded).
     window_coarse: HashSet<TileId>,
+    /// The world's holes around the camera.
+    holes: WorldHoles,
     /// Tile stamps done on the GPU and on the CPU so far.
     gpu_tile_stamps: u64,
     cpu_tile_stamps: u64,
@@ -201,6 +213,7 @@ impl FlyoverScenario {
             written_back: 0,
             window,
             window_coarse: HashSet::new(),
+            holes: WorldHoles::default(),
             gpu_tile_stamps: 0,
             cpu_tile_stamps: 0,
             last_camera: None,
@@ -660,6 +673,18 @@ impl Scenario for FlyoverScenario {
         }
         let dirty = self.update_overview(&changed)?;
         self.update_window(xz)?;
+        // The hole: into the world's files at once; the masks around the camera follow.
+        let world = self.pool()?.world().clone();
+        if self.frame == HOLE_FRAME {
+            let ts = self.texel_size;
+            let aside = -self.heading.perp() * HOLE_ASIDE;
+            let center = reflect_into(travelled + self.heading * HOLE_AHEAD + aside, self.extent);
+            let size = HOLE_SIZE.clamp(4.0 * ts, self.tile_size as f32 * ts);
+            let placement = StampPlacement::new(center, Vec2::splat(size), 0.0)?;
+            self.holes.cut(&world, &placement)?;
+        }
+        self.holes
+            .follow(&world, &self.window, xz, ctx.gpu.as_deref_mut())?;
         // CDLOD's quadtree follows the changes (timed as `lod`).
         if let (Some(bounds), Some(pool), Some(tree)) = (
             self.bounds.as_mut(),

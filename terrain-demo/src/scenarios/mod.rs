@@ -11,6 +11,7 @@ mod stamps;
 pub mod tile_overlay;
 pub mod trails;
 pub mod world_files;
+mod world_holes;
 mod world_stamps;
 
 use crate::cli::{Cli, ScenarioKind};
