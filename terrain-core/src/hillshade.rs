@@ -1,9 +1,11 @@
 //! Top-down hillshade images of a map, lit with its partial-derivative normals and coloured by
-//! height: the demo's overview map.
+//! height, or by the autoshader's materials as the renderers place them: the demo's overview
+//! map, and its frames without a GPU.
 
 use crate::error::CoreError;
 use crate::grid::Grid;
 use crate::map::{HeightMap, HeightSample};
+use crate::material::{AutoshadeParams, MATERIALS, MaterialTextures, autoshade_weights};
 use crate::normals::{DerivativeMap, derivative_at, derivative_region, normal_from_derivatives};
 use crate::rect::Rect;
 use glam::{UVec2, Vec3};
@@ -17,6 +19,35 @@ pub struct HillshadeParams {
     pub ambient: f32,
     /// Output size in pixels; each pixel shows the nearest texel.
     pub size: UVec2,
+    /// Colour by the autoshader's materials instead of the height ramp.
+    pub materials: Option<HillshadeMaterials>,
+}
+
+/// What a materials hillshade colours with: the autoshader's weights (from the height within
+/// the colour range, the slope and the curvature, as the renderers' `surface_weights`) blending
+/// each material's colour from afar.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HillshadeMaterials {
+    /// Where each material goes.
+    pub autoshade: AutoshadeParams,
+    /// Each material's colour (grass, dirt, rock, snow; sRGB over 0..=1): the mean of its
+    /// albedo image ([`MaterialTextures::mean_albedo`]).
+    pub albedo: [Vec3; MATERIALS],
+}
+
+impl HillshadeMaterials {
+    /// The colours of `textures` (four layers), placed by `autoshade`.
+    pub fn new(textures: &MaterialTextures, autoshade: AutoshadeParams) -> Result<Self, CoreError> {
+        let mut albedo = [Vec3::ZERO; MATERIALS];
+        for (m, a) in albedo.iter_mut().enumerate() {
+            *a = textures.mean_albedo(m).ok_or(CoreError::OutOfRange {
+                what: "material layers",
+                value: textures.layers().len() as f64,
+                expected: "four (grass, dirt, rock, snow)",
+            })?;
+        }
+        Ok(Self { autoshade, albedo })
+    }
 }
 
 impl HillshadeParams {
@@ -26,6 +57,7 @@ impl HillshadeParams {
             light_dir: Vec3::new(-1.0, 1.4, -1.0),
             ambient: 0.25,
             size,
+            materials: None,
         }
     }
 }
@@ -163,6 +195,7 @@ struct Shader<'a, T> {
     out: UVec2,
     lo: f64,
     span: f64,
+    materials: Option<HillshadeMaterials>,
 }
 
 impl<'a, T: HeightSample> Shader<'a, T> {
@@ -210,6 +243,7 @@ impl<'a, T: HeightSample> Shader<'a, T> {
             out: params.size,
             lo,
             span: (hi - lo).max(1.0),
+            materials: params.materials,
         })
     }
 
@@ -226,8 +260,34 @@ impl<'a, T: HeightSample> Shader<'a, T> {
         };
         let n = d.map_or(Vec3::Y, normal_from_derivatives);
         let shade = self.ambient + (1.0 - self.ambient) * n.dot(self.light).max(0.0);
-        let c = (ramp(t) * shade * 1.25).clamp(Vec3::ZERO, Vec3::ONE) * 255.0;
+        let colour = match &self.materials {
+            None => ramp(t),
+            Some(m) => {
+                let slope = d.map_or(0.0, |d| d.length());
+                let w = autoshade_weights(&m.autoshade, t, slope, self.curvature(x, y));
+                let sum = w.x + w.y + w.z + w.w;
+                let mix = m.albedo[0] * w.x + m.albedo[1] * w.y + m.albedo[2] * w.z;
+                (mix + m.albedo[3] * w.w) / sum.max(1e-6)
+            }
+        };
+        let c = (colour * shade * 1.25).clamp(Vec3::ZERO, Vec3::ONE) * 255.0;
         [c.x as u8, c.y as u8, c.z as u8, 255]
+    }
+
+    /// The curvature (1/m) at texel `(x, y)` from its four neighbours one texel away (wrapped
+    /// or clamped like the map), as the renderers' autoshader measures it at that spacing.
+    fn curvature(&self, x: u32, y: u32) -> f32 {
+        let (map, wrap) = (self.map, self.map.wrap());
+        let h = |dx: i32, dy: i32| {
+            let p = glam::IVec2::new(x as i32 + dx, y as i32 + dy);
+            map.encoding()
+                .to_metres(map.grid().get_wrapped(p, wrap).to_raw_f64())
+        };
+        crate::material::curvature_from_heights(
+            h(0, 0),
+            [h(-1, 0), h(1, 0), h(0, -1), h(0, 1)],
+            map.texel_size(),
+        )
     }
 }
 
@@ -286,6 +346,59 @@ mod tests {
             let want = [c.x as u8, c.y as u8, c.z as u8, 255];
             assert_eq!(img.get(x, 4).unwrap(), want, "column {x}");
         }
+    }
+
+    /// With materials, flat low ground is grass, a steep slope rock and flat high ground
+    /// snow, in the materials' colours; a crater's rim, curved, shows dirt.
+    #[test]
+    fn materials_colour_the_ground_as_the_autoshader_places_them() {
+        // Low flat (x < 16) with a trench 0.5 m deep at x = 8, a cliff rising 20 m over 8
+        // texels (slope 2.5), high flat (x > 24).
+        let enc = HeightEncoding::new(0.01, 0.0).unwrap();
+        let g = Grid::from_fn(40, 8, |x, _| {
+            let f = ((x as f32 - 16.0) / 8.0).clamp(0.0, 1.0);
+            let trench = if x == 8 { 0.5 } else { 0.0 };
+            enc.to_raw(5.0 + 20.0 * f - trench).round() as u16
+        })
+        .unwrap();
+        let m = CoarseMap::new(g, enc, 1.0, crate::WrapMode::Clamp).unwrap();
+        let albedo = [
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(1.0, 1.0, 0.0),
+        ];
+        let params = HillshadeParams {
+            materials: Some(HillshadeMaterials {
+                autoshade: AutoshadeParams::default(),
+                albedo,
+            }),
+            ..HillshadeParams::with_size(UVec2::new(40, 8))
+        };
+        let img = hillshade_from_heights(&m, &params).unwrap();
+        let hue = |p: [u8; 4]| {
+            let (r, g, b) = (p[0] as i32, p[1] as i32, p[2] as i32);
+            match () {
+                _ if r > 3 * (g + b + 1) => "grass",
+                _ if b > 3 * (r + g + 1) => "rock",
+                _ if r > 3 * (b + 1) && g > 3 * (b + 1) => "snow",
+                _ if g > 3 * (r + b + 1) => "dirt",
+                _ => "mixed",
+            }
+        };
+        assert_eq!(hue(img.get(6, 4).unwrap()), "grass");
+        assert_eq!(hue(img.get(20, 4).unwrap()), "rock");
+        assert_eq!(hue(img.get(34, 4).unwrap()), "snow");
+        // The trench bends the ground (curvature 1 /m) without steepening it: dirt.
+        assert_eq!(hue(img.get(8, 4).unwrap()), "dirt");
+        // Four layers are needed.
+        let bad = MaterialTextures::new(16, Vec::new());
+        assert!(
+            bad.is_err()
+                || HillshadeMaterials::new(&bad.unwrap(), AutoshadeParams::default()).is_err()
+        );
+        let procedural = MaterialTextures::procedural(16).unwrap();
+        assert!(HillshadeMaterials::new(&procedural, AutoshadeParams::default()).is_ok());
     }
 
     #[test]

@@ -67,8 +67,8 @@ pub mod tile_upload;
 pub use error::CoreError;
 pub use grid::{Grid, WrapMode};
 pub use hillshade::{
-    HillshadeParams, hillshade, hillshade_from_heights, hillshade_range, update_hillshade,
-    update_hillshade_from_heights,
+    HillshadeMaterials, HillshadeParams, hillshade, hillshade_from_heights, hillshade_range,
+    update_hillshade, update_hillshade_from_heights,
 };
 pub use holes::{GROUND, HOLE, HoleOp, apply_hole_stamp, count_holes, is_hole};
 pub use io::MapIoError;

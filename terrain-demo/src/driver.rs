@@ -51,7 +51,9 @@ pub fn run(
         .as_ref()
         .map_or(("none".into(), "none".into()), GpuScene::adapter);
     let overview_px = scenario.overview_size(cli.overview_size);
-    let mut overview = Overview::new(scenario.map(), overview_px)?;
+    // The overview (the frames without a GPU) shades like the frames: materials or the ramp.
+    let materials = params.style.shading == crate::config::ShadingParam::Materials;
+    let mut overview = Overview::new(scenario.map(), overview_px, materials, scenario.holes())?;
     // Scenario time: 30 frames per second whatever the render speed.
     let sim_start = Instant::now();
     let mut progress = Progress::new(cli.frames, cli.quiet);
@@ -211,7 +213,7 @@ impl FrameStep<'_, '_> {
             timings: &mut timings,
         })?;
         let overlaid = timings.time(Step::Overview, || {
-            overview.update(scenario.map(), &frame.dirty)?;
+            overview.update(scenario.map(), &frame.dirty, scenario.holes())?;
             anyhow::Ok(scenario.overlay(overview.image()))
         })?;
         let overview_image = overlaid.as_ref().unwrap_or(overview.image());

@@ -110,6 +110,12 @@ pub trait Scenario {
     /// `terrain.png` / `terrain_final.png`, shown in the overview, uploaded to the GPU scene.
     fn map(&self) -> &CoarseMap;
 
+    /// The map's hole mask (`terrain_core::holes`), if it has a hole: the overview leaves the
+    /// holes dark. The frame's `dirty` rects cover the cells a cut changed.
+    fn holes(&self) -> Option<&terrain_core::Grid<u8>> {
+        None
+    }
+
     /// Uploads what the scenario needs on the GPU beyond the map (stamps, colours, a granular
     /// map to deform there); once, when the run has a GPU.
     fn prepare_gpu(&mut self, _scene: &mut GpuScene) -> Result<()> {

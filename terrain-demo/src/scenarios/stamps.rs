@@ -227,7 +227,12 @@ fn needed_detail_tiles(layout: &DetailLayout, plan: &FramePlan) -> Result<Vec<gl
 impl StampScenario {
     /// Cuts a hole at `placement` into the coarse-map's hole mask (made on the first cut), and
     /// hands the mask to collision (rays and bodies pass through) and to the GPU's renderers.
-    fn cut_hole(&mut self, placement: &StampPlacement, gpu: Option<&mut GpuScene>) -> Result<()> {
+    /// Returns the rects it changed.
+    fn cut_hole(
+        &mut self,
+        placement: &StampPlacement,
+        gpu: Option<&mut GpuScene>,
+    ) -> Result<Vec<terrain_core::DirtyRect>> {
         let map = self.cpu.map();
         let (size, wrap, texel) = (map.size(), map.wrap(), map.texel_size());
         let mask = match self.holes.as_mut() {
@@ -241,7 +246,7 @@ impl StampScenario {
         if let Some(scene) = gpu {
             scene.update_holes(mask, &rects)?;
         }
-        Ok(())
+        Ok(rects)
     }
 }
 
@@ -276,6 +281,10 @@ impl Scenario for StampScenario {
 
     fn map(&self) -> &CoarseMap {
         self.cpu.map()
+    }
+
+    fn holes(&self) -> Option<&Grid<u8>> {
+        self.holes.as_ref()
     }
 
     fn prepare_gpu(&mut self, scene: &mut GpuScene) -> Result<()> {
@@ -395,8 +404,9 @@ impl Scenario for StampScenario {
             }
         };
 
+        let mut dirty = dirty;
         if let Some(placement) = plan.hole {
-            self.cut_hole(&placement, ctx.gpu.as_deref_mut())?;
+            dirty.extend(self.cut_hole(&placement, ctx.gpu.as_deref_mut())?);
         }
 
         // The camera: a body on the mirror, kept above pending deformations by their bounds.
