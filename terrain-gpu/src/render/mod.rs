@@ -5,6 +5,7 @@
 pub mod camera;
 pub mod cdlod;
 pub mod clipmap;
+pub(crate) mod frame;
 pub mod offscreen;
 pub mod refine;
 pub mod sky;
