@@ -576,7 +576,9 @@ pub fn rebuild_ancestors(world: &World, changed: &[TileId]) -> Result<Vec<TileId
                 }
                 let grid = match world.load_tile(Layer::Height, k)?.as_ref() {
                     TileData::U16(g) => g.clone(),
-                    TileData::U8(_) => uniform_grid(m.tile_size, m.height_fill)?,
+                    TileData::U8(_) | TileData::Rgba8(_) => {
+                        uniform_grid(m.tile_size, m.height_fill)?
+                    }
                 };
                 let [min, max] = child_bounds.get(k.x, k.y).unwrap_or([u16::MAX, 0]);
                 *slot = Some(Node { grid, min, max });

@@ -65,11 +65,11 @@ mod convert;
 pub mod detail;
 pub mod error;
 mod granular_window;
-pub mod holes;
 pub mod lock;
 pub mod manifest;
 #[cfg(feature = "object-store")]
 pub mod object;
+pub mod overlays;
 mod region_bounds;
 pub mod store;
 pub mod tile;
@@ -80,10 +80,10 @@ pub mod world;
 pub use convert::{ConvertReport, convert_world};
 pub use error::CacheError;
 pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
-pub use holes::{MAX_HOLE_REGION_CELLS, read_holes, write_holes};
 pub use manifest::{DetailLayout, Manifest, TileFormat, tile_key};
 #[cfg(feature = "object-store")]
 pub use object::{ObjectStoreConfig, ObjectTileStore};
+pub use overlays::{MAX_OVERLAY_REGION_CELLS, read_holes, read_paint, write_holes, write_paint};
 pub use region_bounds::RegionBounds;
 pub use store::{FsStore, TileStore};
 pub use tile::{Layer, TileData, TileId};

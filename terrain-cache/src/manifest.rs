@@ -260,6 +260,10 @@ impl Manifest {
         match layer {
             Layer::Height if level < self.levels => self.tiles_at(level),
             Layer::Hole if level == 0 => self.tiles_at(0),
+            // RGBA tiles have no PNG form here: a version-1 world has no material layer.
+            Layer::Material if level == 0 && self.tile_format == TileFormat::Tile => {
+                self.tiles_at(0)
+            }
             Layer::Detail => match &self.detail {
                 Some(d) if level == 0 => d.tiles,
                 _ => UVec2::ZERO,
@@ -274,13 +278,14 @@ impl Manifest {
             Layer::Height => self.levels,
             Layer::Detail => u32::from(self.detail.is_some()),
             Layer::Hole => 1,
+            Layer::Material => u32::from(self.tile_format == TileFormat::Tile),
         }
     }
 
     /// Tile side of `layer`.
     pub fn layer_tile_size(&self, layer: Layer) -> Result<u32, CacheError> {
         match layer {
-            Layer::Height | Layer::Hole => Ok(self.tile_size),
+            Layer::Height | Layer::Hole | Layer::Material => Ok(self.tile_size),
             Layer::Detail => self
                 .detail
                 .map(|d| d.tile_size)
@@ -292,7 +297,7 @@ impl Manifest {
     pub fn layer_fill(&self, layer: Layer) -> Result<u16, CacheError> {
         match layer {
             Layer::Height => Ok(self.height_fill),
-            Layer::Hole => Ok(u16::from(terrain_core::GROUND)),
+            Layer::Hole | Layer::Material => Ok(0),
             Layer::Detail => self
                 .detail
                 .map(|d| u16::from(d.fill))
@@ -319,7 +324,8 @@ impl Manifest {
 
     /// Checks that `id` lies in `layer`'s pyramid.
     pub fn check_tile(&self, layer: Layer, id: TileId) -> Result<(), CacheError> {
-        if layer == Layer::Detail && self.detail.is_none() {
+        let material_in_png = layer == Layer::Material && self.tile_format == TileFormat::Png;
+        if (layer == Layer::Detail && self.detail.is_none()) || material_in_png {
             return Err(CacheError::NoSuchLayer { layer });
         }
         let t = self.layer_tiles(layer, id.level);

@@ -70,11 +70,16 @@ pub enum Layer {
     /// layer; a tile without a hole is not stored (the zero tile), so a world without holes
     /// has no file of it.
     Hole,
+    /// The RGBA8 material layer (`terrain_core::material_effect`: painted weights of grass,
+    /// dirt, rock and snow, their sum the paint's cover) over the height pyramid's level 0, in
+    /// tiles of the height tiles' size. Every world has the layer; an unpainted tile (all zero:
+    /// the autoshader shows) is not stored.
+    Material,
 }
 
 impl Layer {
     /// Every layer, in the order of their index.
-    pub const ALL: [Layer; 3] = [Layer::Height, Layer::Detail, Layer::Hole];
+    pub const ALL: [Layer; 4] = [Layer::Height, Layer::Detail, Layer::Hole, Layer::Material];
 }
 
 impl Layer {
@@ -84,14 +89,16 @@ impl Layer {
             Layer::Height => "height",
             Layer::Detail => "detail",
             Layer::Hole => "hole",
+            Layer::Material => "material",
         }
     }
 
-    /// Bits per stored sample: 16 for heights, 8 for detail and holes.
+    /// Bits per stored sample: 16 for heights, 8 for detail and holes, 32 for materials.
     pub const fn bits(self) -> u8 {
         match self {
             Layer::Height => 16,
             Layer::Detail | Layer::Hole => 8,
+            Layer::Material => 32,
         }
     }
 
@@ -106,8 +113,10 @@ impl Layer {
 pub enum TileData {
     /// A height tile.
     U16(Grid<u16>),
-    /// A detail tile.
+    /// A detail or hole tile.
     U8(Grid<u8>),
+    /// A material tile: four 8-bit channels per texel.
+    Rgba8(Grid<[u8; 4]>),
 }
 
 impl TileData {
@@ -118,6 +127,7 @@ impl TileData {
             Layer::Detail | Layer::Hole => {
                 TileData::U8(Grid::new(size, size, value.min(255) as u8)?)
             }
+            Layer::Material => TileData::Rgba8(Grid::new(size, size, [value.min(255) as u8; 4])?),
         })
     }
 
@@ -126,6 +136,7 @@ impl TileData {
         match self {
             TileData::U16(_) => 16,
             TileData::U8(_) => 8,
+            TileData::Rgba8(_) => 32,
         }
     }
 
@@ -134,6 +145,7 @@ impl TileData {
         match self {
             TileData::U16(g) => g.size(),
             TileData::U8(g) => g.size(),
+            TileData::Rgba8(g) => g.size(),
         }
     }
 
@@ -142,6 +154,7 @@ impl TileData {
         match self {
             TileData::U16(g) => g.as_slice().len() as u64 * 2,
             TileData::U8(g) => g.as_slice().len() as u64,
+            TileData::Rgba8(g) => g.as_slice().len() as u64 * 4,
         }
     }
 
@@ -150,6 +163,7 @@ impl TileData {
         match self {
             TileData::U16(g) => bytemuck::cast_slice(g.as_slice()),
             TileData::U8(g) => g.as_slice(),
+            TileData::Rgba8(g) => bytemuck::cast_slice(g.as_slice()),
         }
     }
 
@@ -157,7 +171,7 @@ impl TileData {
     pub fn as_u16(&self) -> Option<&Grid<u16>> {
         match self {
             TileData::U16(g) => Some(g),
-            TileData::U8(_) => None,
+            _ => None,
         }
     }
 
@@ -165,27 +179,43 @@ impl TileData {
     pub fn as_u16_mut(&mut self) -> Option<&mut Grid<u16>> {
         match self {
             TileData::U16(g) => Some(g),
-            TileData::U8(_) => None,
+            _ => None,
         }
     }
 
-    /// The detail samples, if this is a detail tile.
+    /// The detail (or hole) samples, if this is such a tile.
     pub fn as_u8(&self) -> Option<&Grid<u8>> {
         match self {
             TileData::U8(g) => Some(g),
-            TileData::U16(_) => None,
+            _ => None,
         }
     }
 
-    /// The detail samples, mutable, if this is a detail tile.
+    /// The detail (or hole) samples, mutable, if this is such a tile.
     pub fn as_u8_mut(&mut self) -> Option<&mut Grid<u8>> {
         match self {
             TileData::U8(g) => Some(g),
-            TileData::U16(_) => None,
+            _ => None,
         }
     }
 
-    /// The smallest and largest sample, widened to u16.
+    /// The material texels, if this is a material tile.
+    pub fn as_rgba8(&self) -> Option<&Grid<[u8; 4]>> {
+        match self {
+            TileData::Rgba8(g) => Some(g),
+            _ => None,
+        }
+    }
+
+    /// The material texels, mutable, if this is a material tile.
+    pub fn as_rgba8_mut(&mut self) -> Option<&mut Grid<[u8; 4]>> {
+        match self {
+            TileData::Rgba8(g) => Some(g),
+            _ => None,
+        }
+    }
+
+    /// The smallest and largest sample, widened to u16 (of a material tile: of its bytes).
     pub fn min_max(&self) -> (u16, u16) {
         fn mm<T: Copy + Ord + Into<u16>>(s: &[T]) -> (u16, u16) {
             let mut lo = u16::MAX;
@@ -200,10 +230,11 @@ impl TileData {
         match self {
             TileData::U16(g) => mm(g.as_slice()),
             TileData::U8(g) => mm(g.as_slice()),
+            TileData::Rgba8(g) => mm(bytemuck::cast_slice::<[u8; 4], u8>(g.as_slice())),
         }
     }
 
-    /// `Some(v)` if every sample equals `v`.
+    /// `Some(v)` if every sample equals `v` (of a material tile: every byte).
     pub fn uniform_value(&self) -> Option<u16> {
         fn uni<T: Copy + PartialEq + Into<u16>>(s: &[T]) -> Option<u16> {
             let first = *s.first()?;
@@ -212,6 +243,7 @@ impl TileData {
         match self {
             TileData::U16(g) => uni(g.as_slice()),
             TileData::U8(g) => uni(g.as_slice()),
+            TileData::Rgba8(g) => uni(bytemuck::cast_slice::<[u8; 4], u8>(g.as_slice())),
         }
     }
 }

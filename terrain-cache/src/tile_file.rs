@@ -90,6 +90,7 @@ const fn layer_byte(layer: Layer) -> u8 {
         Layer::Height => 0,
         Layer::Detail => 1,
         Layer::Hole => 2,
+        Layer::Material => 3,
     }
 }
 
@@ -125,7 +126,7 @@ impl TileCodec {
         match layer {
             Layer::Height => TileCodec::Raw,
             // Holes are rare: LZ4 keeps a tile with a few of them small.
-            Layer::Detail | Layer::Hole => TileCodec::Lz4,
+            Layer::Detail | Layer::Hole | Layer::Material => TileCodec::Lz4,
         }
     }
 }
@@ -202,10 +203,16 @@ pub enum TileFileError {
     #[error(
         "the file was written for {} tile L{level}({x:#x}, {y:#x}), not this one (a tile file \
          copied or moved from another path)",
-        match layer { 0 => "height", 1 => "detail", _ => "an unknown layer's" }
+        match layer {
+            0 => "height",
+            1 => "detail",
+            2 => "hole",
+            3 => "material",
+            _ => "an unknown layer's",
+        }
     )]
     Identity {
-        /// The layer byte found (0 heights, 1 detail).
+        /// The layer byte found (0 heights, 1 detail, 2 holes, 3 materials).
         layer: u8,
         /// The level found.
         level: u32,
@@ -232,6 +239,7 @@ pub fn encode(data: &TileData, codec: TileCodec) -> Vec<u8> {
     match data {
         TileData::U16(g) => encode_u16(g, codec),
         TileData::U8(g) => encode_u8(g, codec),
+        TileData::Rgba8(g) => encode_rgba8_with(g, codec, None),
     }
 }
 
@@ -240,6 +248,7 @@ pub fn encode_as(data: &TileData, codec: TileCodec, identity: TileIdentity) -> V
     match data {
         TileData::U16(g) => encode_u16_with(g, codec, Some(identity)),
         TileData::U8(g) => encode_u8_with(g, codec, Some(identity)),
+        TileData::Rgba8(g) => encode_rgba8_with(g, codec, Some(identity)),
     }
 }
 
@@ -291,6 +300,29 @@ pub fn encode_u8_with(
         TileCodec::Lz4 => finish(8, codec, grid.width(), grid.height(), identity, |out| {
             compress_into(samples, out)
         }),
+    }
+}
+
+/// The file bytes of a material grid, version 2 when `identity` is given. LZ4 takes the
+/// four channels as planes (all grass, then all dirt, ...): a channel varies smoothly, so a
+/// plane compresses better than interleaved texels.
+pub fn encode_rgba8_with(
+    grid: &Grid<[u8; 4]>,
+    codec: TileCodec,
+    identity: Option<TileIdentity>,
+) -> Vec<u8> {
+    let (w, h) = (grid.width(), grid.height());
+    match codec {
+        TileCodec::Raw => finish(32, codec, w, h, identity, |out| {
+            out.extend_from_slice(bytemuck::cast_slice(grid.as_slice()))
+        }),
+        TileCodec::Lz4 => {
+            let texels = grid.as_slice();
+            let planes: Vec<u8> = (0..4)
+                .flat_map(|c| texels.iter().map(move |t| t[c]))
+                .collect();
+            finish(32, codec, w, h, identity, |out| compress_into(&planes, out))
+        }
     }
 }
 
@@ -436,7 +468,7 @@ fn decode_checked(
     }
     if header == HEADER_LEN_WITH_IDENTITY {
         let found: [u8; 16] = std::array::from_fn(|i| bytes[HEADER_LEN + i]);
-        let known = matches!(found[0], 0..=2) && found[1..4] == [0, 0, 0];
+        let known = matches!(found[0], 0..=3) && found[1..4] == [0, 0, 0];
         if !known || expected.is_some_and(|e| e.to_bytes() != found) {
             return Err(TileFileError::Identity {
                 layer: found[0],
@@ -476,6 +508,26 @@ fn decode_checked(
         }
         (Layer::Detail | Layer::Hole, TileCodec::Lz4) => {
             TileData::U8(grid(side, decompress(payload, n).map_err(|r| bad(n, r))?))
+        }
+        (Layer::Material, TileCodec::Raw) => {
+            if payload.len() != 4 * n {
+                return Err(bad(4 * n, format!("{} bytes", payload.len())));
+            }
+            TileData::Rgba8(grid(side, bytemuck::cast_slice(payload).to_vec()))
+        }
+        (Layer::Material, TileCodec::Lz4) => {
+            let planes = decompress(payload, 4 * n).map_err(|r| bad(4 * n, r))?;
+            let texels = (0..n)
+                .map(|i| {
+                    [
+                        planes[i],
+                        planes[n + i],
+                        planes[2 * n + i],
+                        planes[3 * n + i],
+                    ]
+                })
+                .collect();
+            TileData::Rgba8(grid(side, texels))
         }
     })
 }
@@ -564,9 +616,14 @@ mod tests {
     }
 
     #[test]
-    fn every_codec_round_trips_both_layers() {
+    fn every_codec_round_trips_every_layer() {
         let h = heights(64);
         let d = Grid::from_fn(64, 64, |x, y| if x > 20 && y < 9 { 90 } else { 128u8 }).unwrap();
+        let paint = Grid::from_fn(64, 64, |x, y| {
+            let a = (200u32.saturating_sub(3 * (x + y))) as u8;
+            [0, a, a / 4, 0]
+        })
+        .unwrap();
         for codec in [TileCodec::Raw, TileCodec::Lz4] {
             let bytes = encode_u16(&h, codec);
             assert!(bytes.len() as u64 <= max_file_len(64, 16));
@@ -579,7 +636,18 @@ mod tests {
                 decode(&bytes, Layer::Detail, 64).unwrap(),
                 TileData::U8(d.clone())
             );
+            let bytes = encode_rgba8_with(&paint, codec, None);
+            assert!(bytes.len() as u64 <= max_file_len(64, 32));
+            assert_eq!(
+                decode(&bytes, Layer::Material, 64).unwrap(),
+                TileData::Rgba8(paint.clone())
+            );
+            // A material file is refused as another layer's, and the other way round.
+            assert!(decode(&bytes, Layer::Detail, 64).is_err());
+            assert!(decode(&encode_u8(&d, codec), Layer::Material, 64).is_err());
         }
+        // Paint that covers a crater's corner of the tile compresses to a small fraction.
+        assert!(encode_rgba8_with(&paint, TileCodec::Lz4, None).len() < 64 * 64 * 4 / 10);
         // Mostly-constant detail compresses to a small fraction.
         assert!(encode_u8(&d, TileCodec::Lz4).len() < 64 * 64 / 10);
         assert_eq!(

@@ -17,7 +17,8 @@
 //!     written (`[u16::MAX, 0]`): the tile is then taken as the zero tile and the entry is
 //!     reported as a `bounds.bin` defect (repairable), not as a lost tile;
 //!   - in the detail layer, always: detail tiles are the zero deformation until first written;
-//!   - in the hole layer, always: a tile without a hole is not stored.
+//!   - in the hole and material layers, always: a tile without a hole, or unpainted, is not
+//!     stored.
 //! - **Coarser levels** equal the reduction of their children bit for bit (the 2x2 mean
 //!   rounded to nearest, clamped padding beyond the level's size, exactly as the builder
 //!   computes them).
@@ -265,6 +266,7 @@ fn promised_tiles(m: &Manifest) -> u64 {
         .map(|l| count(m.tiles_at(l)))
         .chain(std::iter::once(count(m.layer_tiles(Layer::Detail, 0))))
         .chain(std::iter::once(count(m.layer_tiles(Layer::Hole, 0))))
+        .chain(std::iter::once(count(m.layer_tiles(Layer::Material, 0))))
         .fold(0u64, u64::saturating_add)
 }
 
@@ -397,9 +399,11 @@ impl<'a> Walk<'a> {
                 self.flat_tile(Layer::Detail, id)?;
             }
         }
-        let ids: Vec<TileId> = self.m.tiles_of(Layer::Hole, 0).collect();
-        for id in ids {
-            self.flat_tile(Layer::Hole, id)?;
+        for layer in [Layer::Hole, Layer::Material] {
+            let ids: Vec<TileId> = self.m.tiles_of(layer, 0).collect();
+            for id in ids {
+                self.flat_tile(layer, id)?;
+            }
         }
         Ok(())
     }
@@ -460,12 +464,12 @@ impl<'a> Walk<'a> {
                 let (min, max) = min_max(&grid);
                 Some(Node { grid, min, max })
             }
-            Ok(TileRead::Stored(TileData::U8(_))) => {
+            Ok(TileRead::Stored(TileData::U8(_) | TileData::Rgba8(_))) => {
                 self.defect(
                     key,
                     DefectKind::Unreadable,
                     false,
-                    "an 8-bit tile in the height layer".into(),
+                    "a tile of another sample type in the height layer".into(),
                 );
                 None
             }
@@ -534,9 +538,9 @@ impl<'a> Walk<'a> {
                     ))
                 }
             }
-            Ok(TileRead::Stored(TileData::U8(_))) => Some((
+            Ok(TileRead::Stored(TileData::U8(_) | TileData::Rgba8(_))) => Some((
                 DefectKind::Unreadable,
-                "an 8-bit tile in the height layer".into(),
+                "a tile of another sample type in the height layer".into(),
             )),
             Ok(TileRead::Zero) if is_zero => None,
             Ok(TileRead::Zero) => Some((
@@ -568,13 +572,13 @@ impl<'a> Walk<'a> {
         match self.world.read_tile(Layer::Height, id) {
             Ok(TileRead::Stored(TileData::U16(_))) => self.report.stored += 1,
             Ok(TileRead::Zero) => self.report.zero += 1,
-            Ok(TileRead::Stored(TileData::U8(_))) => {
+            Ok(TileRead::Stored(TileData::U8(_) | TileData::Rgba8(_))) => {
                 let key = self.m.tile_key(Layer::Height, id);
                 self.defect(
                     key,
                     DefectKind::Unreadable,
                     false,
-                    "an 8-bit tile in the height layer".into(),
+                    "a tile of another sample type in the height layer".into(),
                 );
             }
             Err(e) => {
@@ -589,8 +593,8 @@ impl<'a> Walk<'a> {
         }
     }
 
-    /// A detail or hole tile: it decodes as itself, or has no file (the zero deformation, no
-    /// hole).
+    /// A detail, hole or material tile: it decodes as itself, or has no file (the zero
+    /// deformation, no hole, no paint).
     fn flat_tile(&mut self, layer: Layer, id: TileId) -> Result<(), VerifyError> {
         self.tick()?;
         match self.world.read_tile(layer, id) {

@@ -28,7 +28,7 @@ pub enum TileRead {
 pub struct World {
     store: Arc<dyn TileStore>,
     manifest: Manifest,
-    zero: Arc<[OnceLock<Arc<TileData>>; 3]>,
+    zero: Arc<[OnceLock<Arc<TileData>>; 4]>,
 }
 
 impl World {
@@ -54,7 +54,7 @@ impl World {
         Self {
             store,
             manifest,
-            zero: Arc::new([OnceLock::new(), OnceLock::new(), OnceLock::new()]),
+            zero: Arc::new(std::array::from_fn(|_| OnceLock::new())),
         }
     }
 
@@ -78,7 +78,7 @@ impl World {
         m.validate()?;
         self.store.write(MANIFEST_KEY, m.to_json().as_bytes())?;
         self.manifest = m;
-        self.zero = Arc::new([OnceLock::new(), OnceLock::new(), OnceLock::new()]);
+        self.zero = Arc::new(std::array::from_fn(|_| OnceLock::new()));
         Ok(())
     }
 
@@ -181,6 +181,7 @@ impl World {
                     Layer::Detail | Layer::Hole => {
                         TileData::U8(decode_png8(bytes, &limits).map_err(png)?)
                     }
+                    Layer::Material => return Err(CacheError::NoSuchLayer { layer }),
                 }
             }
         };
@@ -250,6 +251,7 @@ impl World {
         let encoded = match data {
             TileData::U16(g) => encode_png16(g),
             TileData::U8(g) => encode_png8(g),
+            TileData::Rgba8(_) => return Err(CacheError::NoSuchLayer { layer }),
         };
         encoded.map_err(|source| CacheError::Write {
             key: String::new(),

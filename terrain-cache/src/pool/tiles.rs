@@ -191,7 +191,7 @@ impl RamPool {
         }
         match self.tile(id) {
             Some(TileData::U16(_)) => {}
-            Some(TileData::U8(_)) => {
+            Some(TileData::U8(_) | TileData::Rgba8(_)) => {
                 return Err(CacheError::NoSuchLayer {
                     layer: Layer::Height,
                 });

@@ -152,6 +152,14 @@ pub(crate) fn random_tile(world: &World, layer: Layer, rng: &mut Rng) -> TileDat
         Layer::Detail | Layer::Hole => {
             TileData::U8(Grid::from_vec(size, size, v.iter().map(|&x| x as u8).collect()).unwrap())
         }
+        Layer::Material => TileData::Rgba8(
+            Grid::from_vec(
+                size,
+                size,
+                v.iter().map(|&x| [x as u8, (x >> 8) as u8, 0, 1]).collect(),
+            )
+            .unwrap(),
+        ),
     }
 }
 

@@ -1,11 +1,12 @@
-//! A streamed world's holes ([`Layer::Hole`], `terrain_core::holes`): read a region's hole mask
-//! from the hole tiles ([`read_holes`]) and write one back ([`write_holes`]).
+//! The layers laid over a streamed world's level 0: its holes ([`Layer::Hole`],
+//! `terrain_core::holes`) and its paint ([`Layer::Material`], `terrain_core::material_effect`).
+//! Read a region of either ([`read_holes`], [`read_paint`]) and write one back
+//! ([`write_holes`], [`write_paint`]).
 //!
-//! Holes are read and written on the world directly, not through the RAM pool: a mask is one
-//! byte per cell, most tiles have no file (no hole), and holes change rarely (a stamp cuts one),
-//! so a region read when the camera moves on and a write of the tiles a cut touched cost little.
-//! Each tile is written atomically ([`World::write_tile`]); a tile left without a hole loses its
-//! file.
+//! They are read and written on the world directly, not through the RAM pool: most tiles have
+//! no file (no hole, no paint), and a cut or a crater's paint changes a few tiles, so a region
+//! read when the camera moves on and a write of the tiles a change touched cost little. Each
+//! tile is written atomically ([`World::write_tile`]); a tile left empty loses its file.
 
 use crate::error::CacheError;
 use crate::tile::{Layer, TileData, TileId};
@@ -13,41 +14,22 @@ use crate::world::World;
 use glam::{IVec2, UVec2};
 use terrain_core::{Grid, Rect, WrapMode};
 
-/// Most cells one [`read_holes`] or [`write_holes`] call covers (a 16384^2 region): bounds the
-/// mask it allocates.
-pub const MAX_HOLE_REGION_CELLS: u64 = 1 << 28;
+/// Most cells one read or write covers (a 16384^2 region): bounds the grid it allocates.
+pub const MAX_OVERLAY_REGION_CELLS: u64 = 1 << 28;
 
 /// The level-0 hole mask of `rect` (cells; on a repeating world it may cross the edges and
 /// wraps, at most one world in size), row-major in the rect's own coordinates.
 ///
 /// Fails on a rect off a clamped world, an empty or oversized rect (more than
-/// [`MAX_HOLE_REGION_CELLS`]), and on a hole tile that does not decode (naming it).
+/// [`MAX_OVERLAY_REGION_CELLS`]), and on a hole tile that does not decode (naming it).
 pub fn read_holes(world: &World, rect: Rect) -> Result<Grid<u8>, CacheError> {
-    let pieces = pieces(world, rect)?;
-    let mut out = Grid::new(rect.size.x, rect.size.y, terrain_core::GROUND)?;
-    for_each_tile(
+    read_region(
         world,
-        &pieces,
-        |id, tile_rect, piece_map, piece_unwrapped| {
-            let tile = world.load_tile(Layer::Hole, id)?;
-            let TileData::U8(cells) = tile.as_ref() else {
-                return Err(CacheError::NoSuchLayer { layer: Layer::Hole });
-            };
-            let Some(overlap) = piece_map.intersect(&tile_rect) else {
-                return Ok(());
-            };
-            let at = overlap.min - piece_map.min + piece_unwrapped.min - rect.min;
-            let src = overlap.min - tile_rect.min;
-            for row in 0..overlap.size.y {
-                let from = &cells.row(src.y as u32 + row)
-                    [src.x as usize..src.x as usize + overlap.size.x as usize];
-                let to = out.row_mut(at.y as u32 + row);
-                to[at.x as usize..at.x as usize + overlap.size.x as usize].copy_from_slice(from);
-            }
-            Ok(())
-        },
-    )?;
-    Ok(out)
+        Layer::Hole,
+        rect,
+        terrain_core::GROUND,
+        TileData::as_u8,
+    )
 }
 
 /// Writes `mask`, the level-0 hole mask of `rect` (as [`read_holes`] returns it), into the hole
@@ -58,13 +40,67 @@ pub fn read_holes(world: &World, rect: Rect) -> Result<Grid<u8>, CacheError> {
 /// [`read_holes`] refuses; a tile that does not decode fails the call at that tile (the tiles
 /// before it are written).
 pub fn write_holes(world: &World, rect: Rect, mask: &Grid<u8>) -> Result<u32, CacheError> {
-    if mask.size() != rect.size {
+    write_region(world, Layer::Hole, rect, mask, TileData::as_u8_mut)
+}
+
+/// The level-0 material layer (painted weights, RGBA8) of `rect`, as [`read_holes`] reads
+/// holes. Fails as it does, and with [`CacheError::NoSuchLayer`] on a version-1 (PNG) world.
+pub fn read_paint(world: &World, rect: Rect) -> Result<Grid<[u8; 4]>, CacheError> {
+    read_region(world, Layer::Material, rect, [0; 4], TileData::as_rgba8)
+}
+
+/// Writes `paint`, the material layer of `rect`, into the material tiles, as [`write_holes`]
+/// writes holes; an unpainted tile loses its file.
+pub fn write_paint(world: &World, rect: Rect, paint: &Grid<[u8; 4]>) -> Result<u32, CacheError> {
+    write_region(world, Layer::Material, rect, paint, TileData::as_rgba8_mut)
+}
+
+fn read_region<T: Copy>(
+    world: &World,
+    layer: Layer,
+    rect: Rect,
+    empty: T,
+    samples: fn(&TileData) -> Option<&Grid<T>>,
+) -> Result<Grid<T>, CacheError> {
+    let pieces = pieces(world, layer, rect)?;
+    let mut out = Grid::new(rect.size.x, rect.size.y, empty)?;
+    for_each_tile(
+        world,
+        &pieces,
+        |id, tile_rect, piece_map, piece_unwrapped| {
+            let tile = world.load_tile(layer, id)?;
+            let cells = samples(tile.as_ref()).ok_or(CacheError::NoSuchLayer { layer })?;
+            let Some(overlap) = piece_map.intersect(&tile_rect) else {
+                return Ok(());
+            };
+            let at = overlap.min - piece_map.min + piece_unwrapped.min - rect.min;
+            let src = overlap.min - tile_rect.min;
+            let w = overlap.size.x as usize;
+            for row in 0..overlap.size.y {
+                let from = &cells.row(src.y as u32 + row)[src.x as usize..src.x as usize + w];
+                let to = out.row_mut(at.y as u32 + row);
+                to[at.x as usize..at.x as usize + w].copy_from_slice(from);
+            }
+            Ok(())
+        },
+    )?;
+    Ok(out)
+}
+
+fn write_region<T: Copy + PartialEq>(
+    world: &World,
+    layer: Layer,
+    rect: Rect,
+    region: &Grid<T>,
+    samples: fn(&mut TileData) -> Option<&mut Grid<T>>,
+) -> Result<u32, CacheError> {
+    if region.size() != rect.size {
         return Err(CacheError::Core(terrain_core::CoreError::SizeMismatch {
             expected: rect.size,
-            actual: mask.size(),
+            actual: region.size(),
         }));
     }
-    let pieces = pieces(world, rect)?;
+    let pieces = pieces(world, layer, rect)?;
     let mut changed = 0u32;
     for_each_tile(
         world,
@@ -73,23 +109,20 @@ pub fn write_holes(world: &World, rect: Rect, mask: &Grid<u8>) -> Result<u32, Ca
             let Some(overlap) = piece_map.intersect(&tile_rect) else {
                 return Ok(());
             };
-            let mut tile = world.load_tile(Layer::Hole, id)?.as_ref().clone();
-            let Some(cells) = tile.as_u8_mut() else {
-                return Err(CacheError::NoSuchLayer { layer: Layer::Hole });
-            };
+            let mut tile = world.load_tile(layer, id)?.as_ref().clone();
+            let cells = samples(&mut tile).ok_or(CacheError::NoSuchLayer { layer })?;
             let at = overlap.min - piece_map.min + piece_unwrapped.min - rect.min;
             let dst = overlap.min - tile_rect.min;
+            let w = overlap.size.x as usize;
             let mut differs = false;
             for row in 0..overlap.size.y {
-                let from = &mask.row(at.y as u32 + row)
-                    [at.x as usize..at.x as usize + overlap.size.x as usize];
-                let to = &mut cells.row_mut(dst.y as u32 + row)
-                    [dst.x as usize..dst.x as usize + overlap.size.x as usize];
+                let from = &region.row(at.y as u32 + row)[at.x as usize..at.x as usize + w];
+                let to = &mut cells.row_mut(dst.y as u32 + row)[dst.x as usize..dst.x as usize + w];
                 differs |= to != from;
                 to.copy_from_slice(from);
             }
             if differs {
-                world.write_tile(Layer::Hole, id, &tile)?;
+                world.write_tile(layer, id, &tile)?;
                 changed += 1;
             }
             Ok(())
@@ -99,13 +132,16 @@ pub fn write_holes(world: &World, rect: Rect, mask: &Grid<u8>) -> Result<u32, Ca
 }
 
 /// The pieces of `rect` on the world's level 0 (split across the edges of a repeating world),
-/// after the checks both calls share.
-fn pieces(world: &World, rect: Rect) -> Result<Vec<(Rect, Rect)>, CacheError> {
+/// after the checks both directions share.
+fn pieces(world: &World, layer: Layer, rect: Rect) -> Result<Vec<(Rect, Rect)>, CacheError> {
     let m = world.manifest();
+    if m.layer_levels(layer) == 0 {
+        return Err(CacheError::NoSuchLayer { layer });
+    }
     let size = m.world_size;
-    if rect.is_empty() || rect.area() > MAX_HOLE_REGION_CELLS {
+    if rect.is_empty() || rect.area() > MAX_OVERLAY_REGION_CELLS {
         return Err(CacheError::OutOfRange {
-            what: "hole region (cells)",
+            what: "level-0 region (cells)",
             value: rect.area() as f64,
             expected: "1 ..= 2^28 cells",
         });
@@ -135,7 +171,7 @@ fn region_off(rect: Rect, map_size: UVec2) -> CacheError {
 }
 
 /// Calls `f(tile, tile's rect, piece in map coordinates, the same piece unwrapped)` for every
-/// level-0 hole tile a piece overlaps.
+/// level-0 tile a piece overlaps.
 fn for_each_tile(
     world: &World,
     pieces: &[(Rect, Rect)],
@@ -171,7 +207,7 @@ mod tests {
 
     #[test]
     fn holes_written_read_back_across_tiles_and_the_wrap() {
-        let dir = crate::store::tests::temp_dir("holes");
+        let dir = crate::store::tests::temp_dir("overlays");
         let w = world(&dir, WrapMode::Repeat);
         // A rect across the world's corner: 4 pieces, 4 tiles.
         let rect = Rect::new(IVec2::new(76, 44), UVec2::new(8, 8));
@@ -194,12 +230,20 @@ mod tests {
         let clear = Grid::new(8, 8, 0u8).expect("mask");
         assert_eq!(write_holes(&w, rect, &clear).expect("write"), 4);
         assert!(w.store().list("hole").expect("list").is_empty());
+        // Paint the same way: written across the corner, read back after a reopen, cleared.
+        let paint = Grid::from_fn(8, 8, |x, y| [x as u8 * 30, y as u8 * 30, 7, 0]).expect("paint");
+        assert_eq!(write_paint(&w, rect, &paint).expect("write"), 4);
+        let w3 = World::open(w.store().clone()).expect("open");
+        assert_eq!(read_paint(&w3, rect).expect("read"), paint);
+        let none = Grid::new(8, 8, [0u8; 4]).expect("paint");
+        assert_eq!(write_paint(&w, rect, &none).expect("write"), 4);
+        assert!(w.store().list("material").expect("list").is_empty());
         let _ = std::fs::remove_dir_all(dir);
     }
 
     #[test]
     fn bad_regions_are_refused_and_write_nothing() {
-        let dir = crate::store::tests::temp_dir("holes-bad");
+        let dir = crate::store::tests::temp_dir("overlays-bad");
         let w = world(&dir, WrapMode::Clamp);
         let mask = Grid::new(8, 8, 255u8).expect("mask");
         for rect in [
