@@ -79,6 +79,7 @@ impl TrailEffectPass {
     /// size.
     pub(super) fn check(trail: &Trail<'_>, map_size: glam::UVec2) -> Result<(), GpuError> {
         trail.effect.validate()?;
+        trail.layer.check_paintable()?;
         if trail.layer.size != map_size {
             return Err(CoreError::SizeMismatch {
                 expected: map_size,

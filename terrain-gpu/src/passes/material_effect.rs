@@ -96,6 +96,7 @@ impl MaterialEffectPass {
     ) -> Result<Vec<DirtyRect>, GpuError> {
         let EffectOp { placement, effect } = op;
         effect.validate()?;
+        layer.check_paintable()?;
         if layer.size != map.size() {
             return Err(CoreError::SizeMismatch {
                 expected: map.size(),

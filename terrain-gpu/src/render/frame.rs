@@ -43,6 +43,8 @@ pub(crate) struct FrameUniform {
     material: [[f32; 4]; 4],
     /// The cells the hole mask covers: origin (x, z) and size, in world cells.
     holes: [i32; 4],
+    /// The cells the material layer covers, likewise.
+    paint: [i32; 4],
 }
 
 impl FrameUniform {
@@ -51,11 +53,12 @@ impl FrameUniform {
     pub(crate) fn set_layers(&mut self, shading: &ShadingBindings) {
         self.material[3] = shading.layer_flags();
         self.holes = shading.hole_window;
+        self.paint = shading.paint_window;
     }
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<FrameUniform>() == 272);
+const _: () = assert!(std::mem::size_of::<FrameUniform>() == 288);
 
 /// An exclusion rect with min above max: nothing is discarded.
 pub(crate) const NOTHING_EXCLUDED: [f32; 4] = [1.0, 1.0, -1.0, -1.0];
@@ -108,5 +111,6 @@ pub(crate) fn frame_uniform(
         excluded: NOTHING_EXCLUDED,
         material,
         holes: [0; 4],
+        paint: [0; 4],
     })
 }

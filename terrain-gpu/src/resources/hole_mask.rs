@@ -12,9 +12,8 @@
 
 use crate::device::scope::scoped;
 use crate::error::GpuError;
+use crate::resources::window::{WindowOrigin, covered, window_pieces};
 use glam::{IVec2, UVec2};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicI32, Ordering};
 use terrain_core::{CoreError, Grid, Rect};
 
 /// A hole mask on the GPU: an R8 texture of one texel per cell, nonzero where the ground is
@@ -24,9 +23,8 @@ pub struct GpuHoleMask {
     pub(crate) view: wgpu::TextureView,
     texture: wgpu::Texture,
     pub(crate) size: UVec2,
-    /// A window's origin (world cells; shared by the clones the renderers hold), or `None` for
-    /// the whole map's mask.
-    origin: Option<Arc<[AtomicI32; 2]>>,
+    /// A window's origin, or `None` for the whole map's mask.
+    origin: Option<WindowOrigin>,
 }
 
 impl GpuHoleMask {
@@ -46,15 +44,13 @@ impl GpuHoleMask {
     /// until [`GpuHoleMask::move_window`] places it. Fails on a side of 0 or above the device's
     /// `max_texture_dimension_2d`.
     pub fn window(device: &wgpu::Device, side: u32) -> Result<Self, GpuError> {
-        let origin = Arc::new([AtomicI32::new(i32::MIN), AtomicI32::new(i32::MIN)]);
-        let out = Self::with_texture(device, UVec2::splat(side), Some(origin))?;
-        Ok(out)
+        Self::with_texture(device, UVec2::splat(side), Some(WindowOrigin::unset()))
     }
 
     fn with_texture(
         device: &wgpu::Device,
         size: UVec2,
-        origin: Option<Arc<[AtomicI32; 2]>>,
+        origin: Option<WindowOrigin>,
     ) -> Result<Self, GpuError> {
         let max = device.limits().max_texture_dimension_2d;
         if size.min_element() == 0 || size.max_element() > max {
@@ -108,18 +104,7 @@ impl GpuHoleMask {
     /// The world cells it covers: origin (x, z) and size. A window covers none (size 0) until
     /// its first [`GpuHoleMask::move_window`].
     pub fn covered(&self) -> [i32; 4] {
-        let (w, h) = (self.size.x as i32, self.size.y as i32);
-        match &self.origin {
-            None => [0, 0, w, h],
-            Some(o) => {
-                let (x, z) = (o[0].load(Ordering::Relaxed), o[1].load(Ordering::Relaxed));
-                if x == i32::MIN {
-                    [0, 0, 0, 0]
-                } else {
-                    [x, z, w, h]
-                }
-            }
-        }
+        covered(self.origin.as_ref(), self.size)
     }
 
     /// Places a window at world cell `origin` with `mask`, the hole mask of the cells
@@ -147,24 +132,10 @@ impl GpuHoleMask {
             }
             .into());
         }
-        let end = origin.as_i64vec2() + self.size.as_i64vec2();
-        if origin.min_element() == i32::MIN || end.max_element() > i64::from(i32::MAX) {
-            return Err(CoreError::OutOfRange {
-                what: "hole window origin",
-                value: f64::from(origin.abs().max_element()),
-                expected: "a window inside the i32 range of cells",
-            }
-            .into());
+        for (offset, texels) in window_pieces(origin, self.size)? {
+            self.upload(queue, mask.as_slice(), offset, texels);
         }
-        // Cell `origin + i` lies at texel `(origin + i) mod size`: the window's rect split
-        // where it wraps over the texture's edges.
-        for piece in Rect::new(origin, self.size).split_toroidal(self.size) {
-            let src = (piece.unwrapped.min - origin).as_uvec2();
-            let offset = u64::from(src.y) * u64::from(self.size.x) + u64::from(src.x);
-            self.upload(queue, mask.as_slice(), offset, piece.map);
-        }
-        at[0].store(origin.x, Ordering::Relaxed);
-        at[1].store(origin.y, Ordering::Relaxed);
+        at.set(origin);
         Ok(())
     }
 

@@ -8,12 +8,19 @@
 //! written by a compute pass on every backend (read-write storage textures of RGBA8 are not in
 //! WebGPU, and GL has none), and a fifth storage buffer is more than the renderers' fragment
 //! stage may bind on some devices (the detail surface already binds four).
+//!
+//! A world larger than memory draws its paint (its `Layer::Material` tiles) through a window
+//! of cells that follows the camera ([`GpuMaterialLayer::window`], placed by
+//! [`GpuMaterialLayer::move_window`], as `GpuHoleMask`'s): written on the CPU, not painted by
+//! the effect passes, and faded out over the outer eighth of the window so its moves never
+//! pop.
 
 use crate::device::download::download_bytes;
 use crate::error::GpuError;
 use crate::resources::maps::map_buffer;
 use crate::resources::materials::rgba8_texture_with;
-use glam::UVec2;
+use crate::resources::window::{WindowOrigin, covered, window_pieces};
+use glam::{IVec2, UVec2};
 use terrain_core::{CoreError, Grid, Rect};
 
 /// Texels per padded row of the layer's buffer: a multiple of 64 (256 bytes, the row alignment
@@ -30,6 +37,8 @@ pub struct GpuMaterialLayer {
     pub(crate) view: wgpu::TextureView,
     pub(crate) size: UVec2,
     pub(crate) pitch: u32,
+    /// A window's origin, or `None` for the whole map's layer.
+    origin: Option<WindowOrigin>,
 }
 
 impl GpuMaterialLayer {
@@ -73,7 +82,105 @@ impl GpuMaterialLayer {
             view,
             size,
             pitch,
+            origin: None,
         })
+    }
+
+    /// A window of `side` x `side` cells over a larger world: unpainted, and covering no cell
+    /// until [`GpuMaterialLayer::move_window`] places it. Effect passes refuse it (its paint
+    /// is written on the CPU). Fails as [`GpuMaterialLayer::new`] does, and on a side of 0.
+    pub fn window(device: &wgpu::Device, queue: &wgpu::Queue, side: u32) -> Result<Self, GpuError> {
+        if side == 0 {
+            return Err(CoreError::OutOfRange {
+                what: "material window side",
+                value: 0.0,
+                expected: "at least 1 cell",
+            }
+            .into());
+        }
+        let layer = Self::new(device, queue, &Grid::new(side, side, [0u8; 4])?)?;
+        Ok(Self {
+            origin: Some(WindowOrigin::unset()),
+            ..layer
+        })
+    }
+
+    /// Whether this is a window ([`GpuMaterialLayer::window`]).
+    pub fn is_window(&self) -> bool {
+        self.origin.is_some()
+    }
+
+    /// The world cells it covers: origin (x, z) and size. A window covers none (size 0) until
+    /// its first [`GpuMaterialLayer::move_window`].
+    pub fn covered(&self) -> [i32; 4] {
+        covered(self.origin.as_ref(), self.size)
+    }
+
+    /// Places a window at world cell `origin` with `paint`, the material layer of the cells
+    /// `origin .. origin + side` (as `terrain_cache::read_paint` returns it), drawn from the
+    /// next submission on. Fails, with nothing changed, on the whole map's layer, on paint of
+    /// another size than the window and on an origin whose window would leave `i32`.
+    pub fn move_window(
+        &self,
+        queue: &wgpu::Queue,
+        origin: IVec2,
+        paint: &Grid<[u8; 4]>,
+    ) -> Result<(), GpuError> {
+        let Some(at) = &self.origin else {
+            return Err(CoreError::OutOfRange {
+                what: "material layer to move",
+                value: 0.0,
+                expected: "a window (GpuMaterialLayer::window), not a whole map's layer",
+            }
+            .into());
+        };
+        if paint.size() != self.size {
+            return Err(CoreError::SizeMismatch {
+                expected: self.size,
+                actual: paint.size(),
+            }
+            .into());
+        }
+        for (offset, texels) in window_pieces(origin, self.size)? {
+            queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &self.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: texels.min.x as u32,
+                        y: texels.min.y as u32,
+                        z: 0,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                bytemuck::cast_slice(paint.as_slice()),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 4 * offset,
+                    bytes_per_row: Some(4 * self.size.x),
+                    rows_per_image: Some(texels.size.y),
+                },
+                wgpu::Extent3d {
+                    width: texels.size.x,
+                    height: texels.size.y,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+        at.set(origin);
+        Ok(())
+    }
+
+    /// Refuses a window where a pass paints the layer (a window's paint is the CPU's).
+    pub(crate) fn check_paintable(&self) -> Result<(), GpuError> {
+        if self.is_window() {
+            return Err(CoreError::OutOfRange {
+                what: "material layer to paint on the GPU",
+                value: 0.0,
+                expected: "a whole map's layer (a window's paint is written by move_window)",
+            }
+            .into());
+        }
+        Ok(())
     }
 
     /// The layer's size in texels (the map's it is drawn over).
@@ -87,11 +194,13 @@ impl GpuMaterialLayer {
     }
 
     /// Downloads the layer (waiting for the GPU): what to write back after effects painted it.
+    /// Fails on a window (its paint is the CPU's already).
     pub fn read(
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<Grid<[u8; 4]>, GpuError> {
+        self.check_paintable()?;
         let bytes = download_bytes(device, queue, &self.buffer, 0, self.buffer.size())?;
         let texels: &[[u8; 4]] = bytemuck::cast_slice(&bytes);
         let mut out = Vec::with_capacity(self.size.x as usize * self.size.y as usize);

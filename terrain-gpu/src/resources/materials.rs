@@ -259,6 +259,8 @@ pub(crate) struct ShadingBindings {
     pub(crate) has_holes: bool,
     /// The world cells it covers (origin x, z and size), for the frame uniform.
     pub(crate) hole_window: [i32; 4],
+    /// The world cells the material layer covers, likewise.
+    pub(crate) paint_window: [i32; 4],
 }
 
 impl ShadingBindings {
@@ -347,7 +349,10 @@ impl MaterialSlot {
     ) -> Result<(ShadingBindings, bool), GpuError> {
         let sizes = [
             self.color.as_ref().map(|c| c.size),
-            self.paint.as_ref().map(|p| p.size),
+            self.paint
+                .as_ref()
+                .filter(|p| !p.is_window())
+                .map(|p| p.size),
             // A window follows the camera over a larger surface; a whole-map mask must match.
             self.holes
                 .as_ref()
@@ -389,6 +394,7 @@ impl MaterialSlot {
             holes: self.holes.as_ref().map_or(stand_in, |h| h.view.clone()),
             has_holes: self.holes.is_some(),
             hole_window: self.holes.as_ref().map_or([0; 4], |h| h.covered()),
+            paint_window: self.paint.as_ref().map_or([0; 4], |p| p.covered()),
         };
         Ok((bindings, std::mem::take(&mut self.changed)))
     }

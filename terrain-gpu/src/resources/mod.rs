@@ -9,3 +9,4 @@ pub mod maps;
 pub mod material_layer;
 pub mod materials;
 pub(crate) mod packing;
+pub(crate) mod window;

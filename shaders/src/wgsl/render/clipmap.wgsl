@@ -49,8 +49,9 @@ struct Frame {
     // x: 1 when a colour layer (materials.wgsl) gives the albedo; y: 1 when a material layer's
     // paint is blended over the weights; z: 1 when a hole mask leaves cells out.
     color_layer: vec4<f32>,
-    // The world cells the hole mask covers: origin (x, y) and size (z, w).
+    // The world cells the hole mask and the material layer cover: origin (x, y) and size (z, w).
     holes: vec4<i32>,
+    paint_window: vec4<i32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;

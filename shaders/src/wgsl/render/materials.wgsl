@@ -20,19 +20,8 @@
 // Whether the cell under `q` (texels relative to the camera's whole texel) is a hole: the cell
 // whose lower corner is floor(q), as collision finds it. Cells outside the mask are ground.
 fn in_hole(q: vec2<f32>) -> bool {
-    let cell = vec2<i32>(map_texel(frame.camera_texel + vec2<i32>(floor(q))));
-    let size = frame.holes.zw;
-    var rel = cell - frame.holes.xy;
-    if frame.wrap == WRAP_REPEAT {
-        // On a repeating world the window may reach across the edge.
-        let m = vec2<i32>(frame.map_size);
-        rel = ((rel % m) + m) % m;
-    }
-    if any(rel < vec2<i32>(0, 0)) || any(rel >= size) {
-        return false;
-    }
-    let t = ((frame.holes.xy + rel) % size + size) % size;
-    return textureLoad(hole_mask, t, 0).r > 0.0;
+    let w = window_texel(frame.camera_texel + vec2<i32>(floor(q)), frame.holes);
+    return w.z != 0 && textureLoad(hole_mask, w.xy, 0).r > 0.0;
 }
 
 // `layer` at `q` (texels relative to the camera's whole texel), bilinear between the four
@@ -52,10 +41,59 @@ fn color_layer_at(q: vec2<f32>) -> vec3<f32> {
     return layer_at(color_layer, q).rgb;
 }
 
+// Where world cell `t` lies in a layer covering the cells `window` (origin xy, size zw: the
+// whole map, or a window around the camera): its texel (xy) and whether it is covered (z).
+// Cell `c` lies at texel `c mod size`.
+fn window_texel(t: vec2<i32>, window: vec4<i32>) -> vec3<i32> {
+    let cell = vec2<i32>(map_texel(t));
+    let size = window.zw;
+    var rel = cell - window.xy;
+    if frame.wrap == WRAP_REPEAT {
+        // On a repeating world the window may reach across the edge.
+        let m = vec2<i32>(frame.map_size);
+        rel = ((rel % m) + m) % m;
+    }
+    if any(rel < vec2<i32>(0, 0)) || any(rel >= size) {
+        return vec3<i32>(0, 0, 0);
+    }
+    return vec3<i32>(((window.xy + rel) % size + size) % size, 1);
+}
+
+// The material layer's texel at world cell `t`: nothing outside its window.
+fn paint_texel(t: vec2<i32>) -> vec4<f32> {
+    let w = window_texel(t, frame.paint_window);
+    if w.z == 0 {
+        return vec4<f32>(0.0, 0.0, 0.0, 0.0);
+    }
+    return textureLoad(material_layer, w.xy, 0);
+}
+
+// The paint at `q`, bilinear like `layer_at`. A window smaller than the map fades its paint
+// out over its outer eighth, so a move of the window never pops.
+fn paint_at(q: vec2<f32>) -> vec4<f32> {
+    let p0 = floor(q);
+    let f = q - p0;
+    let t0 = frame.camera_texel + vec2<i32>(p0);
+    let c00 = paint_texel(t0);
+    let c10 = paint_texel(t0 + vec2<i32>(1, 0));
+    let c01 = paint_texel(t0 + vec2<i32>(0, 1));
+    let c11 = paint_texel(t0 + vec2<i32>(1, 1));
+    let paint = mix(mix(c00, c10, f.x), mix(c01, c11, f.x), f.y);
+    let size = frame.paint_window.zw;
+    if all(size >= vec2<i32>(frame.map_size)) {
+        return paint;
+    }
+    // Distance (cells) from the fragment to the window's nearest edge.
+    let rel = vec2<f32>(frame.camera_texel - frame.paint_window.xy) + q;
+    let edge = min(min(rel.x, rel.y), min(f32(size.x) - rel.x, f32(size.y) - rel.y));
+    let fade = clamp(edge / max(f32(min(size.x, size.y)) * 0.125, 1.0), 0.0, 1.0);
+    return paint * fade;
+}
+
 // The weights `w` (the autoshader's or an engine's) with the material layer's paint at `q`
 // over them: all paint where its cover is full, none where it is zero.
 fn painted_weights(q: vec2<f32>, w: vec4<f32>) -> vec4<f32> {
-    let paint = layer_at(material_layer, q);
+    let paint = paint_at(q);
     let cover = paint.x + paint.y + paint.z + paint.w;
     let base = max(w, vec4<f32>(0.0, 0.0, 0.0, 0.0));
     let unpainted = base / max(base.x + base.y + base.z + base.w, 1e-6);
