@@ -20,6 +20,16 @@ fn hole_cells(world: &Path) -> u64 {
     terrain_core::count_holes(&mask)
 }
 
+/// The texels the world's level-0 material tiles hold paint on.
+fn painted_texels(world: &Path) -> usize {
+    use terrain_cache::{FsStore, World, read_paint};
+    let store = std::sync::Arc::new(FsStore::open_read_only(world).expect("store"));
+    let world = World::open(store).expect("world");
+    let size = world.manifest().world_size;
+    let paint = read_paint(&world, terrain_core::Rect::from_size(size)).expect("paint");
+    paint.as_slice().iter().filter(|t| **t != [0; 4]).count()
+}
+
 fn demo() -> Command {
     Command::new(env!("CARGO_BIN_EXE_terrain-demo"))
 }
@@ -91,14 +101,18 @@ fn flyover_streams_within_budget_and_craters_persist() {
         "craters written back"
     );
 
-    // The hole cut on frame 8 is in the world's hole tiles.
+    // The hole cut on frame 8 is in the world's hole tiles, the craters' dirt in its
+    // material tiles.
     let holes = hole_cells(&world);
     assert!(holes > 50, "hole cells saved: {holes}");
+    let painted = painted_texels(&world);
+    assert!(painted > 100, "painted texels saved: {painted}");
 
     // The second run starts from the deformed world, and keeps the hole.
     let start1 = std::fs::read(root.join("run1/terrain.png")).expect("terrain.png");
     run(&world, &root.join("run2"), 2);
     assert_eq!(hole_cells(&world), holes, "the second run keeps the hole");
+    assert_eq!(painted_texels(&world), painted, "the second run keeps the paint");
     let start2 = std::fs::read(root.join("run2/terrain.png")).expect("terrain.png");
     assert_ne!(
         start1, start2,

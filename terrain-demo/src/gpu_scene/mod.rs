@@ -32,6 +32,7 @@ mod lod;
 mod paint;
 
 pub use detail::{DETAIL_SLOTS, SPILL_WINDOW_TEXELS};
+pub use paint::CRATER_DIRT;
 use detail::{DetailScene, RefinedGeometry};
 use frame_timer::FrameTimer;
 
@@ -80,6 +81,8 @@ pub struct GpuScene {
     paint: Option<paint::Paint>,
     /// The hole mask every renderer leaves out, once a hole is cut.
     holes: Option<terrain_gpu::GpuHoleMask>,
+    /// A streamed world's paint around the camera.
+    paint_window: Option<terrain_gpu::GpuMaterialLayer>,
     /// Frames rendered so far.
     frames: u32,
     /// Fault injection for the device-loss test: destroy the device before rendering this
@@ -313,6 +316,7 @@ impl GpuScene {
             refined: None,
             paint: None,
             holes: None,
+            paint_window: None,
             frames: 0,
             destroy_at: std::env::var(DESTROY_DEVICE_ENV)
                 .ok()

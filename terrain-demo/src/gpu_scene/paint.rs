@@ -25,12 +25,18 @@ pub struct Paint {
 /// the mark darkens while the wave travels (to about 70 % at the centre after 30 frames).
 fn effect(kind: StampKind) -> MaterialEffect {
     let (material, strength) = match kind {
-        StampKind::Crater => (1, 0.85),
+        StampKind::Crater => (CRATER_DIRT.material, CRATER_DIRT.strength),
         StampKind::Footprint => (1, 0.45),
         StampKind::Shockwave => (2, 0.04),
     };
     MaterialEffect { material, strength }
 }
+
+/// What a crater paints: dirt (material 1), most of the cover at its centre.
+pub const CRATER_DIRT: MaterialEffect = MaterialEffect {
+    material: 1,
+    strength: 0.85,
+};
 
 /// What a granular trail paints on every column it presses: a third of dirt's colour over the
 /// snow (compressed snow is darker and shows the ground through it).
@@ -125,6 +131,32 @@ impl GpuScene {
             }
         };
         holes.move_window(queue, origin, mask)?;
+        Ok(())
+    }
+
+    /// Places the paint window the renderers draw (`side` cells, made on the first call) at
+    /// world cell `origin` with `paint`, the material layer of its cells: a streamed world's
+    /// paint around the camera.
+    pub fn move_paint_window(
+        &mut self,
+        side: u32,
+        origin: IVec2,
+        paint: &Grid<[u8; 4]>,
+    ) -> Result<()> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let layer = match &self.paint_window {
+            Some(layer) if layer.size().x == side => layer.clone(),
+            _ => {
+                let layer = GpuMaterialLayer::window(device, queue, side)?;
+                self.terrain.set_material_layer(Some(&layer));
+                if let Some(refined) = self.refined.as_mut() {
+                    refined.renderer.set_material_layer(Some(&layer));
+                }
+                self.paint_window = Some(layer.clone());
+                layer
+            }
+        };
+        layer.move_window(queue, origin, paint)?;
         Ok(())
     }
 

@@ -25,7 +25,7 @@
 use super::tile_overlay;
 use super::trails::Trails;
 use super::world_files;
-use super::world_holes::WorldHoles;
+use super::world_overlays::WorldOverlays;
 use super::world_stamps::{WorldDeformer, WorldShock, WorldStamp, reach};
 use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
 use crate::cli::Cli;
@@ -114,8 +114,8 @@ pub struct FlyoverScenario {
     window: CollisionWindow,
     /// Level-0 tiles in the window filled from coarser data (refilled once loaded).
     window_coarse: HashSet<TileId>,
-    /// The world's holes around the camera.
-    holes: WorldHoles,
+    /// The world's holes and paint around the camera.
+    overlays: WorldOverlays,
     /// Tile stamps done on the GPU and on the CPU so far.
     gpu_tile_stamps: u64,
     cpu_tile_stamps: u64,
@@ -213,7 +213,7 @@ impl FlyoverScenario {
             written_back: 0,
             window,
             window_coarse: HashSet::new(),
-            holes: WorldHoles::default(),
+            overlays: WorldOverlays::default(),
             gpu_tile_stamps: 0,
             cpu_tile_stamps: 0,
             last_camera: None,
@@ -578,6 +578,12 @@ impl Scenario for FlyoverScenario {
             } else {
                 crater = self.stamps.push(WorldStamp::Crater, placement)? > 0;
             }
+            // Its dirt goes into the world's material tiles at once.
+            if crater {
+                let world = self.pool()?.world().clone();
+                self.overlays
+                    .paint(&world, &placement, &crate::gpu_scene::CRATER_DIRT)?;
+            }
         }
         // The world scenario's shockwave beside the path.
         let mut shock = false;
@@ -681,9 +687,9 @@ impl Scenario for FlyoverScenario {
             let center = reflect_into(travelled + self.heading * HOLE_AHEAD + aside, self.extent);
             let size = HOLE_SIZE.clamp(4.0 * ts, self.tile_size as f32 * ts);
             let placement = StampPlacement::new(center, Vec2::splat(size), 0.0)?;
-            self.holes.cut(&world, &placement)?;
+            self.overlays.cut(&world, &placement)?;
         }
-        self.holes
+        self.overlays
             .follow(&world, &self.window, xz, ctx.gpu.as_deref_mut())?;
         // CDLOD's quadtree follows the changes (timed as `lod`).
         if let (Some(bounds), Some(pool), Some(tree)) = (

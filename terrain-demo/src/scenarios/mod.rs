@@ -11,7 +11,7 @@ mod stamps;
 pub mod tile_overlay;
 pub mod trails;
 pub mod world_files;
-mod world_holes;
+mod world_overlays;
 mod world_stamps;
 
 use crate::cli::{Cli, ScenarioKind};

@@ -87,10 +87,15 @@ pub fn report(out: &Path) -> serde_json::Value {
     serde_json::from_str(&text).expect("report.json parses")
 }
 
-/// Every height tile file of a world: path under the world -> bytes.
+/// Every tile file of a world (heights, holes, paint): path under the world -> bytes.
 pub fn tile_files(world: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
     let mut out = std::collections::BTreeMap::new();
-    let mut stack = vec![world.join("height")];
+    // The heights, and the holes and paint laid over them (folders made on first write).
+    let mut stack: Vec<_> = ["height", "hole", "material"]
+        .iter()
+        .map(|l| world.join(l))
+        .filter(|d| d.is_dir())
+        .collect();
     while let Some(dir) = stack.pop() {
         for e in std::fs::read_dir(&dir).expect("world folder") {
             let p = e.expect("entry").path();

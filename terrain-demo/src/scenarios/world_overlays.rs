@@ -1,0 +1,131 @@
+//! What a streamed world lays over its heights: holes (`terrain_core::holes`, the world's hole
+//! tiles) and paint (`terrain_core::material_effect`, its material tiles). A hole cut beside
+//! the path, or a crater's dirt, is written into the world at once (atomically, tile by tile),
+//! and the layers around the camera follow: the collision window's holes, and the GPU's hole
+//! and paint windows of [`GPU_WINDOW`] cells, moved when the camera leaves their middle half.
+//! A second run reads both back from the world.
+
+use crate::gpu_scene::GpuScene;
+use anyhow::Result;
+use glam::{IVec2, UVec2, Vec2};
+use terrain_cache::{World, read_holes, read_paint, write_holes, write_paint};
+use terrain_core::{
+    HoleOp, MaterialEffect, Rect, StampPlacement, WrapMode, apply_hole_stamp,
+    apply_material_effect,
+};
+use terrain_physics::CollisionWindow;
+
+/// Side of the hole and paint windows the GPU draws (cells): 1 MiB of holes and 8 MiB of
+/// paint (its texture and buffer), within about 500 cells of the camera.
+pub const GPU_WINDOW: u32 = 1024;
+
+/// The layers that follow the camera over a streamed world.
+#[derive(Debug, Default)]
+pub struct WorldOverlays {
+    /// The collision window's rect its holes were read for.
+    collision: Option<Rect>,
+    /// The GPU windows' origin.
+    gpu: Option<IVec2>,
+}
+
+/// The cells of a stamp's footprint on the world (clamped to a clamped world; a repeating
+/// world's rect wraps in the region reads and writes), and the placement in those cells' own
+/// frame; `None` for a footprint off a clamped world.
+fn footprint(world: &World, placement: &StampPlacement) -> Result<Option<(Rect, StampPlacement)>> {
+    let m = world.manifest();
+    let footprint = placement.footprint(m.texel_size)?;
+    let rect = match m.wrap {
+        WrapMode::Clamp => match footprint.intersect(&Rect::from_size(m.world_size)) {
+            Some(r) => r,
+            None => return Ok(None),
+        },
+        WrapMode::Repeat => footprint,
+    };
+    let local = StampPlacement {
+        center: placement.center - rect.min.as_vec2() * m.texel_size,
+        ..*placement
+    };
+    local.validate()?;
+    Ok(Some((rect, local)))
+}
+
+impl WorldOverlays {
+    /// Cuts a hole at `placement` (world metres) into `world`'s hole tiles, and has the masks
+    /// read again. Returns the tiles written.
+    pub fn cut(&mut self, world: &World, placement: &StampPlacement) -> Result<u32> {
+        let Some((rect, local)) = footprint(world, placement)? else {
+            return Ok(0);
+        };
+        let mut region = read_holes(world, rect)?;
+        let ts = world.manifest().texel_size;
+        apply_hole_stamp(&mut region, WrapMode::Clamp, ts, &local, HoleOp::Cut)?;
+        let written = write_holes(world, rect, &region)?;
+        self.collision = None;
+        self.gpu = None;
+        Ok(written)
+    }
+
+    /// Paints `effect` over the footprint of a stamp at `placement` into `world`'s material
+    /// tiles (the crater's dirt), and has the GPU's paint read again. Returns the tiles written.
+    pub fn paint(
+        &mut self,
+        world: &World,
+        placement: &StampPlacement,
+        effect: &MaterialEffect,
+    ) -> Result<u32> {
+        let Some((rect, local)) = footprint(world, placement)? else {
+            return Ok(0);
+        };
+        let mut region = read_paint(world, rect)?;
+        let ts = world.manifest().texel_size;
+        apply_material_effect(&mut region, WrapMode::Clamp, ts, &local, effect)?;
+        let written = write_paint(world, rect, &region)?;
+        self.gpu = None;
+        Ok(written)
+    }
+
+    /// Brings the layers to the camera at `xz` (world metres): the collision window's holes
+    /// when its rect changed, the GPU's holes and paint when the camera left their middle half.
+    pub fn follow(
+        &mut self,
+        world: &World,
+        window: &CollisionWindow,
+        xz: Vec2,
+        scene: Option<&mut GpuScene>,
+    ) -> Result<()> {
+        if let Some(rect) = window.window()
+            && self.collision != Some(rect)
+        {
+            window.set_holes(Some(&read_holes(world, rect)?))?;
+            self.collision = Some(rect);
+        }
+        let Some(scene) = scene else {
+            return Ok(());
+        };
+        let m = world.manifest();
+        let side = UVec2::splat(GPU_WINDOW.min(m.world_size.min_element()));
+        let cell = (xz / m.texel_size).floor().as_ivec2();
+        let centred = cell - (side / 2).as_ivec2();
+        let moved = match self.gpu {
+            None => true,
+            Some(origin) => {
+                let off = (cell - origin - (side / 2).as_ivec2()).abs();
+                off.cmpgt((side / 4).as_ivec2()).any()
+            }
+        };
+        if moved {
+            // Inside a clamped world; anywhere on a repeating one (the rect wraps).
+            let origin = match m.wrap {
+                WrapMode::Clamp => centred
+                    .max(IVec2::ZERO)
+                    .min((m.world_size - side).as_ivec2()),
+                WrapMode::Repeat => centred,
+            };
+            let rect = Rect::new(origin, side);
+            scene.move_hole_window(side.x, origin, &read_holes(world, rect)?)?;
+            scene.move_paint_window(side.x, origin, &read_paint(world, rect)?)?;
+            self.gpu = Some(origin);
+        }
+        Ok(())
+    }
+}
