@@ -429,7 +429,13 @@ fn a_crafted_manifest_promising_billions_of_tiles_is_refused_at_once() {
     };
     let e = verify_world(&small, &options, &cancel, &mut |_| {}).unwrap_err();
     assert!(
-        matches!(e, VerifyError::TooManyTiles { tiles: 104, max: 103 }),
+        matches!(
+            e,
+            VerifyError::TooManyTiles {
+                tiles: 104,
+                max: 103
+            }
+        ),
         "{e}"
     );
 }
@@ -440,7 +446,13 @@ fn the_cancel_flag_stops_the_walk() {
     let cancel = AtomicBool::new(true);
     let e = verify_world(&world, &VerifyOptions::default(), &cancel, &mut |_| {}).unwrap_err();
     assert!(
-        matches!(e, VerifyError::Cancelled { done: 0, total: 104 }),
+        matches!(
+            e,
+            VerifyError::Cancelled {
+                done: 0,
+                total: 104
+            }
+        ),
         "{e}"
     );
     // Set from the progress callback (as a Ctrl-C handler would, from anywhere).

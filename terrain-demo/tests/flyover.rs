@@ -112,7 +112,11 @@ fn flyover_streams_within_budget_and_craters_persist() {
     let start1 = std::fs::read(root.join("run1/terrain.png")).expect("terrain.png");
     run(&world, &root.join("run2"), 2);
     assert_eq!(hole_cells(&world), holes, "the second run keeps the hole");
-    assert_eq!(painted_texels(&world), painted, "the second run keeps the paint");
+    assert_eq!(
+        painted_texels(&world),
+        painted,
+        "the second run keeps the paint"
+    );
     let start2 = std::fs::read(root.join("run2/terrain.png")).expect("terrain.png");
     assert_ne!(
         start1, start2,

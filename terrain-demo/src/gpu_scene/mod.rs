@@ -32,9 +32,9 @@ mod lod;
 mod paint;
 
 pub use detail::{DETAIL_SLOTS, SPILL_WINDOW_TEXELS};
-pub use paint::CRATER_DIRT;
 use detail::{DetailScene, RefinedGeometry};
 use frame_timer::FrameTimer;
+pub use paint::CRATER_DIRT;
 
 pub use terrain_gpu::Camera;
 

@@ -10,8 +10,7 @@ use anyhow::Result;
 use glam::{IVec2, UVec2, Vec2};
 use terrain_cache::{World, read_holes, read_paint, write_holes, write_paint};
 use terrain_core::{
-    HoleOp, MaterialEffect, Rect, StampPlacement, WrapMode, apply_hole_stamp,
-    apply_material_effect,
+    HoleOp, MaterialEffect, Rect, StampPlacement, WrapMode, apply_hole_stamp, apply_material_effect,
 };
 use terrain_physics::CollisionWindow;
 
