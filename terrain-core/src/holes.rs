@@ -18,10 +18,9 @@
 
 use crate::error::CoreError;
 use crate::grid::{Grid, WrapMode};
-use crate::material_effect::EffectFrame;
+use crate::material_effect::for_each_in_footprint;
 use crate::rect::DirtyRect;
-use crate::stamp::{StampPlacement, stamp_region};
-use glam::IVec2;
+use crate::stamp::StampPlacement;
 
 /// A mask value of ground.
 pub const GROUND: u8 = 0;
@@ -61,30 +60,16 @@ pub fn apply_hole_stamp(
     placement: &StampPlacement,
     op: HoleOp,
 ) -> Result<Vec<DirtyRect>, CoreError> {
-    let Some(region) = stamp_region(mask.size(), wrap, texel_size, placement)? else {
-        return Ok(Vec::new());
-    };
-    let frame = EffectFrame::new(placement, texel_size);
     let value = match op {
         HoleOp::Cut => HOLE,
         HoleOp::Fill => GROUND,
     };
-    for piece in &region.pieces {
-        let (map, unwrapped) = (piece.map, piece.unwrapped);
-        for dy in 0..map.size.y {
-            let row = mask.row_mut((map.min.y + dy as i32) as u32);
-            let start = map.min.x as usize;
-            let cells = &mut row[start..start + map.size.x as usize];
-            for (dx, cell) in cells.iter_mut().enumerate() {
-                let u = unwrapped.min + IVec2::new(dx as i32, dy as i32);
-                // NaN compares false: a texel the frame cannot place is outside.
-                if frame.local(u).length_squared() < 1.0 {
-                    *cell = value;
-                }
-            }
+    for_each_in_footprint(mask, wrap, texel_size, placement, |cell, local| {
+        // NaN compares false: a texel the frame cannot place is outside.
+        if local.length_squared() < 1.0 {
+            *cell = value;
         }
-    }
-    Ok(region.pieces.iter().map(|p| p.map).collect())
+    })
 }
 
 /// The hole mask of a DEM's nodata: a hole at every cell whose corner sample is nodata (NaN,

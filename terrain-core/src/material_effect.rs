@@ -108,22 +108,41 @@ pub fn apply_material_effect(
     effect: &MaterialEffect,
 ) -> Result<Vec<DirtyRect>, CoreError> {
     effect.validate()?;
-    let Some(region) = stamp_region(layer.size(), wrap, texel_size, placement)? else {
+    for_each_in_footprint(layer, wrap, texel_size, placement, |texel, local| {
+        let amount = effect_amount(local, effect.strength);
+        if amount > 0 {
+            *texel = paint_texel(*texel, effect.material, amount);
+        }
+    })
+}
+
+/// Calls `f(texel, local)` for every texel of `grid` (a layer over a map of `texel_size`
+/// metres per texel with `wrap`) under the footprint of a stamp at `placement`, `local` the
+/// texel's place in the stamp's frame ([`EffectFrame::local`]), and returns the rects it
+/// covered in grid coordinates: 1, 2 or 4 on a repeating grid, none for a footprint wholly off
+/// a clamped one. Fails, with nothing called, on an invalid placement or texel size and on a
+/// footprint larger than a repeating grid. What the material effects and the hole stamps
+/// share.
+pub(crate) fn for_each_in_footprint<T: Copy>(
+    grid: &mut Grid<T>,
+    wrap: WrapMode,
+    texel_size: f32,
+    placement: &StampPlacement,
+    mut f: impl FnMut(&mut T, Vec2),
+) -> Result<Vec<DirtyRect>, CoreError> {
+    let Some(region) = stamp_region(grid.size(), wrap, texel_size, placement)? else {
         return Ok(Vec::new());
     };
     let frame = EffectFrame::new(placement, texel_size);
     for piece in &region.pieces {
         let (map, unwrapped) = (piece.map, piece.unwrapped);
         for dy in 0..map.size.y {
-            let row = layer.row_mut((map.min.y + dy as i32) as u32);
+            let row = grid.row_mut((map.min.y + dy as i32) as u32);
             let start = map.min.x as usize;
             let texels = &mut row[start..start + map.size.x as usize];
             for (dx, texel) in texels.iter_mut().enumerate() {
                 let u = unwrapped.min + IVec2::new(dx as i32, dy as i32);
-                let amount = effect_amount(frame.local(u), effect.strength);
-                if amount > 0 {
-                    *texel = paint_texel(*texel, effect.material, amount);
-                }
+                f(texel, frame.local(u));
             }
         }
     }

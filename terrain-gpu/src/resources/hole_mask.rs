@@ -12,7 +12,7 @@
 
 use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::resources::window::{WindowOrigin, covered, window_pieces};
+use crate::resources::window::{WindowOrigin, covered, planned_move};
 use glam::{IVec2, UVec2};
 use terrain_core::{CoreError, Grid, Rect};
 
@@ -117,22 +117,14 @@ impl GpuHoleMask {
         origin: IVec2,
         mask: &Grid<u8>,
     ) -> Result<(), GpuError> {
-        let Some(at) = &self.origin else {
-            return Err(CoreError::OutOfRange {
-                what: "hole mask to move",
-                value: 0.0,
-                expected: "a window (GpuHoleMask::window), not a whole map's mask",
-            }
-            .into());
-        };
-        if mask.size() != self.size {
-            return Err(CoreError::SizeMismatch {
-                expected: self.size,
-                actual: mask.size(),
-            }
-            .into());
-        }
-        for (offset, texels) in window_pieces(origin, self.size)? {
+        let (at, pieces) = planned_move(
+            self.origin.as_ref(),
+            "hole mask to move",
+            self.size,
+            origin,
+            mask.size(),
+        )?;
+        for (offset, texels) in pieces {
             self.upload(queue, mask.as_slice(), offset, texels);
         }
         at.set(origin);

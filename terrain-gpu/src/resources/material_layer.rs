@@ -19,7 +19,7 @@ use crate::device::download::download_bytes;
 use crate::error::GpuError;
 use crate::resources::maps::map_buffer;
 use crate::resources::materials::rgba8_texture_with;
-use crate::resources::window::{WindowOrigin, covered, window_pieces};
+use crate::resources::window::{WindowOrigin, covered, planned_move};
 use glam::{IVec2, UVec2};
 use terrain_core::{CoreError, Grid, Rect};
 
@@ -126,22 +126,14 @@ impl GpuMaterialLayer {
         origin: IVec2,
         paint: &Grid<[u8; 4]>,
     ) -> Result<(), GpuError> {
-        let Some(at) = &self.origin else {
-            return Err(CoreError::OutOfRange {
-                what: "material layer to move",
-                value: 0.0,
-                expected: "a window (GpuMaterialLayer::window), not a whole map's layer",
-            }
-            .into());
-        };
-        if paint.size() != self.size {
-            return Err(CoreError::SizeMismatch {
-                expected: self.size,
-                actual: paint.size(),
-            }
-            .into());
-        }
-        for (offset, texels) in window_pieces(origin, self.size)? {
+        let (at, pieces) = planned_move(
+            self.origin.as_ref(),
+            "material layer to move",
+            self.size,
+            origin,
+            paint.size(),
+        )?;
+        for (offset, texels) in pieces {
             queue.write_texture(
                 wgpu::TexelCopyTextureInfo {
                     texture: &self.texture,

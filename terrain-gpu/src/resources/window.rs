@@ -37,10 +37,38 @@ impl WindowOrigin {
     }
 }
 
+/// A checked move of a layer of `size` cells whose place is `window` (`None`: a whole map's
+/// layer) to world cell `origin`, with new cells of `data` in size: the window's origin to set
+/// once they are uploaded, and the pieces to upload them in ([`window_pieces`]). Fails on a
+/// whole map's layer (`what` names it), on cells of another size, and on an origin whose window
+/// would leave the `i32` range of cells.
+pub(crate) fn planned_move<'a>(
+    window: Option<&'a WindowOrigin>,
+    what: &'static str,
+    size: UVec2,
+    origin: IVec2,
+    data: UVec2,
+) -> Result<(&'a WindowOrigin, Vec<(u64, Rect)>), CoreError> {
+    let Some(at) = window else {
+        return Err(CoreError::OutOfRange {
+            what,
+            value: 0.0,
+            expected: "a window, not a whole map's layer",
+        });
+    };
+    if data != size {
+        return Err(CoreError::SizeMismatch {
+            expected: size,
+            actual: data,
+        });
+    }
+    Ok((at, window_pieces(origin, size)?))
+}
+
 /// The pieces a window of `size` at `origin` is uploaded in: for each, the offset of its first
 /// cell in the window's row-major cells, and the texels it goes to. Fails on an origin whose
 /// window would leave the `i32` range of cells.
-pub(crate) fn window_pieces(origin: IVec2, size: UVec2) -> Result<Vec<(u64, Rect)>, CoreError> {
+fn window_pieces(origin: IVec2, size: UVec2) -> Result<Vec<(u64, Rect)>, CoreError> {
     let end = origin.as_i64vec2() + size.as_i64vec2();
     if origin.min_element() == i32::MIN || end.max_element() > i64::from(i32::MAX) {
         return Err(CoreError::OutOfRange {
