@@ -139,22 +139,7 @@ impl CollisionMirror {
             });
         }
         let mut writer = self.writer.lock();
-        let front = self.snapshot();
-        let (mut back, stale) = match writer.back.take() {
-            Some(back) => (back, std::mem::take(&mut writer.stale)),
-            None => (front.clone(), Vec::new()),
-        };
-        let buf = Arc::make_mut(&mut back);
-        for r in stale {
-            copy_rect(front.heights(), buf.heights_mut(), r);
-        }
-        buf.copy_bounds_from(&front);
-        buf.set_holes(holes);
-        buf.set_version(front.version());
-        let old = self.front.swap(back);
-        drop(front);
-        writer.back = Some(old);
-        writer.stale = Vec::new();
+        self.publish(&mut writer, Vec::new(), |buf| buf.set_holes(holes));
         Ok(())
     }
 
@@ -202,6 +187,44 @@ impl CollisionMirror {
             });
         }
         let pieces = rect.split_toroidal(self.size);
+        let replaced = pieces.iter().map(|p| p.map).collect();
+        self.publish(writer, replaced, |buf| {
+            let grid = buf.heights_mut();
+            // The region's value range, taken row by row while each row is in cache.
+            let (mut lo, mut hi) = (u16::MAX, 0u16);
+            for piece in &pieces {
+                let off = (piece.unwrapped.min - rect.min).as_uvec2();
+                let (x0, w) = (piece.map.min.x as usize, piece.map.size.x as usize);
+                for row in 0..piece.map.size.y {
+                    let src = &heights.row(off.y + row)[off.x as usize..off.x as usize + w];
+                    let dst = grid.row_mut(piece.map.min.y as u32 + row);
+                    dst[x0..x0 + w].copy_from_slice(src);
+                    let (l, h) = min_max(src);
+                    lo = lo.min(l);
+                    hi = hi.max(h);
+                }
+            }
+            if rect.size == self.size {
+                // Every texel was replaced: the bounds are exact again.
+                buf.set_bounds(lo, hi);
+            } else {
+                buf.widen_bounds(lo, hi);
+            }
+            buf.set_version(version);
+        });
+        Ok(())
+    }
+
+    /// Publishes the next snapshot: the back buffer brought up to the front (what it lacks
+    /// copied from the front, except inside `replaced`, the rects `edit` rewrites), with the
+    /// front's bounds, holes and version, then changed by `edit` and swapped in. The old front
+    /// becomes the back buffer, lacking `replaced`.
+    fn publish(
+        &self,
+        writer: &mut Writer,
+        replaced: Vec<Rect>,
+        edit: impl FnOnce(&mut HeightField),
+    ) {
         let front = self.snapshot();
         // The back buffer and what it lacks; without one, start from the front (cloned below).
         let (mut back, stale) = match writer.back.take() {
@@ -211,38 +234,17 @@ impl CollisionMirror {
         // Clones only if a reader still holds the back buffer (or it is the front itself).
         let buf = Arc::make_mut(&mut back);
         for r in stale {
-            if !pieces.iter().any(|p| p.map.contains_rect(&r)) {
+            if !replaced.iter().any(|p| p.contains_rect(&r)) {
                 copy_rect(front.heights(), buf.heights_mut(), r);
             }
         }
         buf.copy_bounds_from(&front);
-        let grid = buf.heights_mut();
-        // The region's value range, taken row by row while each row is in cache.
-        let (mut lo, mut hi) = (u16::MAX, 0u16);
-        for piece in &pieces {
-            let off = (piece.unwrapped.min - rect.min).as_uvec2();
-            let (x0, w) = (piece.map.min.x as usize, piece.map.size.x as usize);
-            for row in 0..piece.map.size.y {
-                let src = &heights.row(off.y + row)[off.x as usize..off.x as usize + w];
-                let dst = grid.row_mut(piece.map.min.y as u32 + row);
-                dst[x0..x0 + w].copy_from_slice(src);
-                let (l, h) = min_max(src);
-                lo = lo.min(l);
-                hi = hi.max(h);
-            }
-        }
-        if rect.size == self.size {
-            // Every texel was replaced: the bounds are exact again.
-            buf.set_bounds(lo, hi);
-        } else {
-            buf.widen_bounds(lo, hi);
-        }
-        buf.set_version(version);
+        buf.set_version(front.version());
+        edit(buf);
         let old = self.front.swap(back);
         drop(front);
         writer.back = Some(old);
-        writer.stale = pieces.iter().map(|p| p.map).collect();
-        Ok(())
+        writer.stale = replaced;
     }
 }
 
