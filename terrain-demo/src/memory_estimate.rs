@@ -265,9 +265,16 @@ impl RunShape {
                 parts.push(("normals", per_texel(NORMALS_PER_TEXEL)));
                 let window = u64::from(flyover::COLLISION_WINDOW).pow(2);
                 parts.push(("collision", window.saturating_mul(COLLISION_PER_TEXEL)));
+                // Holes in the collision window (its mask and the one read for it); with a
+                // GPU, its hole (1 byte) and paint (4 bytes) windows, and the two read for
+                // them when they move.
+                let mut overlays = window.saturating_mul(2);
                 if self.gpu {
                     parts.push(("gpu_map", per_texel(GPU_MAP_PER_TEXEL)));
+                    let gpu_window = u64::from(crate::scenarios::GPU_OVERLAY_WINDOW).pow(2);
+                    overlays = overlays.saturating_add(gpu_window.saturating_mul(2 * 5));
                 }
+                parts.push(("overlays", overlays));
                 if let Some(f) = &self.flyover {
                     parts.push(("ram_pool", f.ram_budget.saturating_add(RAM_POOL_SLACK)));
                     if self.gpu {

@@ -25,6 +25,7 @@ use std::time::Instant;
 use terrain_core::{CoarseMap, DirtyRect};
 
 pub use stamps::{DETAIL_REFINE, DETAIL_TILE};
+pub use world_overlays::GPU_WINDOW as GPU_OVERLAY_WINDOW;
 
 /// Seconds of scenario time per frame (30 frames per second), whatever the render speed.
 pub const FRAME_DT: f64 = 1.0 / 30.0;

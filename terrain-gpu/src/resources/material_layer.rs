@@ -98,10 +98,34 @@ impl GpuMaterialLayer {
             }
             .into());
         }
-        let layer = Self::new(device, queue, &Grid::new(side, side, [0u8; 4])?)?;
+        let max = device.limits().max_texture_dimension_2d;
+        if side > max {
+            return Err(CoreError::OutOfRange {
+                what: "material window side",
+                value: f64::from(side),
+                expected: "at most the device's max_texture_dimension_2d",
+            }
+            .into());
+        }
+        let size = UVec2::splat(side);
+        let zeros = vec![[0u8; 4]; side as usize * side as usize];
+        let (texture, view) = rgba8_texture_with(
+            device,
+            queue,
+            "material window",
+            size,
+            &zeros,
+            wgpu::TextureUsages::empty(),
+        )?;
+        // No pass paints a window, so its buffer is a stand-in of one padded row.
+        let buffer = map_buffer(device, "GpuMaterialLayer window", UVec2::ONE, 256)?;
         Ok(Self {
+            buffer,
+            texture,
+            view,
+            size,
+            pitch: 0,
             origin: Some(WindowOrigin::unset()),
-            ..layer
         })
     }
 
@@ -180,7 +204,8 @@ impl GpuMaterialLayer {
         self.size
     }
 
-    /// GPU bytes: the buffer's padded rows and the texture, 4 bytes per texel each.
+    /// GPU bytes: the buffer's padded rows and the texture, 4 bytes per texel each (a
+    /// window: its texture).
     pub fn bytes(&self) -> u64 {
         4 * (u64::from(self.pitch) + u64::from(self.size.x)) * u64::from(self.size.y)
     }
