@@ -40,13 +40,29 @@ pub trait TileSource: Sync {
     fn size(&self) -> UVec2;
     /// The samples of `rect` (inside `0..size`), row-major, `rect.size` in size.
     fn region(&self, rect: Rect) -> Result<Grid<u16>, Self::Error>;
+    /// The hole mask (`terrain_core::holes`) of `rect`, or `None` where it has no hole (the
+    /// default: a source without holes). The builder stores it in [`Layer::Hole`] tiles.
+    fn holes(&self, rect: Rect) -> Result<Option<Grid<u8>>, Self::Error> {
+        let _ = rect;
+        Ok(None)
+    }
 }
 
-/// A source over a coarse-map in memory (the demo's procedural default, or a DEM already read).
+/// A source over a coarse-map in memory (the demo's procedural default, or a DEM already read),
+/// and its holes, if any (a DEM's nodata: `terrain_core::dem::Dem::holes`).
 #[derive(Debug, Clone, Copy)]
 pub struct MapSource<'a> {
     /// The map.
     pub map: &'a CoarseMap,
+    /// Its hole mask, of the map's size.
+    pub holes: Option<&'a Grid<u8>>,
+}
+
+impl<'a> MapSource<'a> {
+    /// A source over `map`, without holes.
+    pub fn new(map: &'a CoarseMap) -> Self {
+        Self { map, holes: None }
+    }
 }
 
 impl TileSource for MapSource<'_> {
@@ -56,6 +72,23 @@ impl TileSource for MapSource<'_> {
     }
     fn region(&self, rect: Rect) -> Result<Grid<u16>, Self::Error> {
         self.map.grid().copy_rect(rect)
+    }
+    fn holes(&self, rect: Rect) -> Result<Option<Grid<u8>>, Self::Error> {
+        let Some(mask) = self.holes else {
+            return Ok(None);
+        };
+        if mask.size() != self.map.size() {
+            return Err(terrain_core::CoreError::SizeMismatch {
+                expected: self.map.size(),
+                actual: mask.size(),
+            });
+        }
+        let region = mask.copy_rect(rect)?;
+        Ok(region
+            .as_slice()
+            .iter()
+            .any(|&v| terrain_core::is_hole(v))
+            .then_some(region))
     }
 }
 
@@ -336,6 +369,7 @@ pub fn build_world<S: TileSource>(
             .collect();
         world.write_bounds(level, &LevelBounds { tiles: t, min_max })?;
     }
+    write_source_holes(&world, source)?;
     let world = World::create(store, manifest)?;
     let report = BuildReport {
         tiles: total,
@@ -352,6 +386,43 @@ pub fn build_world<S: TileSource>(
         "world built"
     );
     Ok((world, report))
+}
+
+/// Stores the source's holes in the hole tiles that have one (before the manifest: a build cut
+/// short leaves no world that opens without them).
+fn write_source_holes<S: TileSource>(world: &World, source: &S) -> Result<(), CacheError> {
+    let m = world.manifest();
+    let ts = m.tile_size;
+    for id in m.tiles_of(Layer::Hole, 0) {
+        let min = UVec2::new(id.x, id.y) * ts;
+        let size = (m.world_size - min).min(UVec2::splat(ts));
+        let rect = Rect::new(min.as_ivec2(), size);
+        let holes = source.holes(rect).map_err(|e| CacheError::Source {
+            id,
+            source: Box::new(e),
+        })?;
+        let Some(holes) = holes else {
+            continue;
+        };
+        if holes.size() != size {
+            return Err(CacheError::Source {
+                id,
+                source: format!(
+                    "the source's hole mask of a {}x{} region is {}x{}",
+                    size.x,
+                    size.y,
+                    holes.size().x,
+                    holes.size().y
+                )
+                .into(),
+            });
+        }
+        // Cells beyond the world's edge are ground.
+        let mut tile = Grid::new(ts, ts, terrain_core::GROUND)?;
+        tile.paste(&holes, glam::IVec2::ZERO)?;
+        world.write_tile(Layer::Hole, id, &TileData::U8(tile))?;
+    }
+    Ok(())
 }
 
 /// Builds, stores and returns tile `id` (`None` beyond the level's tiles).
@@ -701,7 +772,7 @@ mod tests {
         let m = Manifest::new(size, 32, 1.0, enc(), WrapMode::Repeat).unwrap();
         let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
         let calls = AtomicU64::new(0);
-        let (world, report) = build_world(store, m, &MapSource { map: &map }, &|p| {
+        let (world, report) = build_world(store, m, &MapSource::new(&map), &|p| {
             calls.fetch_add(1, Ordering::Relaxed);
             assert!(p.done <= p.total);
             true
@@ -737,6 +808,37 @@ mod tests {
     }
 
     #[test]
+    fn a_sources_holes_go_into_the_hole_tiles_that_have_one() {
+        // 100 x 70 texels in 32-texel tiles (4 x 3, the last ones partial), holes in two tiles.
+        let size = UVec2::new(100, 70);
+        let map = CoarseMap::coarse(Grid::new(size.x, size.y, 7u16).unwrap(), enc(), 1.0).unwrap();
+        let mask = Grid::from_fn(size.x, size.y, |x, y| {
+            u8::from((x, y) == (3, 4) || (x == 99 && y >= 64)) * 255
+        })
+        .unwrap();
+        let m = Manifest::new(size, 32, 1.0, enc(), WrapMode::Clamp).unwrap();
+        let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
+        let source = MapSource {
+            map: &map,
+            holes: Some(&mask),
+        };
+        let (world, _) = build_world(store.clone(), m, &source, &|_| true).unwrap();
+        assert_eq!(store.list("hole").unwrap().len(), 2);
+        let all = crate::read_holes(&world, Rect::from_size(size)).unwrap();
+        assert_eq!(all, mask);
+        // A mask of another size is the source's error, and no world is made.
+        let small = Grid::new(10, 10, 0u8).unwrap();
+        let bad = MapSource {
+            map: &map,
+            holes: Some(&small),
+        };
+        let store2: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
+        let e = build_world(store2.clone(), m, &bad, &|_| true).unwrap_err();
+        assert!(matches!(e, CacheError::Source { .. }), "{e}");
+        assert!(crate::world::read_manifest(store2.as_ref()).is_err());
+    }
+
+    #[test]
     fn zero_tiles_are_not_stored_and_cancel_works() {
         let size = UVec2::new(128, 128);
         let grid =
@@ -744,14 +846,13 @@ mod tests {
         let map = CoarseMap::coarse(grid, enc(), 1.0).unwrap();
         let m = Manifest::new(size, 32, 1.0, enc(), WrapMode::Clamp).unwrap();
         let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
-        let (_, r) = build_world(store.clone(), m, &MapSource { map: &map }, &|_| true).unwrap();
+        let (_, r) = build_world(store.clone(), m, &MapSource::new(&map), &|_| true).unwrap();
         // Level 0: 1 of 16 stored; level 1: 1 of 4; level 2: 1 of 1.
         assert_eq!((r.tiles, r.stored, r.zero), (21, 3, 18));
         let keys = store.list("height").unwrap();
         assert_eq!(keys.iter().filter(|k| k.ends_with(".tile")).count(), 3);
         let store2: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
-        let e =
-            build_world(store2.clone(), m, &MapSource { map: &map }, &|p| p.done < 5).unwrap_err();
+        let e = build_world(store2.clone(), m, &MapSource::new(&map), &|p| p.done < 5).unwrap_err();
         assert!(matches!(e, CacheError::Cancelled { .. }), "{e}");
         assert!(
             World::open(store2).is_err(),
@@ -800,7 +901,7 @@ mod tests {
         }
         let map = CoarseMap::coarse(full, enc(), 1.0).unwrap();
         let store2: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
-        let (w2, _) = build_world(store2, m, &MapSource { map: &map }, &|_| true).unwrap();
+        let (w2, _) = build_world(store2, m, &MapSource::new(&map), &|_| true).unwrap();
         for l in 0..m.levels {
             for tid in m.tiles_of(Layer::Height, l) {
                 assert_eq!(

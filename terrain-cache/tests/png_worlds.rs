@@ -23,7 +23,7 @@ fn png_world(store: Arc<dyn TileStore>, size: UVec2, tile: u32) -> World {
     m.format_version = 1;
     m.tile_format = TileFormat::Png;
     let map = test_map(size);
-    build_world(store, m, &MapSource { map: &map }, &|_| true)
+    build_world(store, m, &MapSource::new(&map), &|_| true)
         .unwrap()
         .0
 }

@@ -43,7 +43,7 @@ fn built(levels: Option<u32>) -> World {
     if let Some(l) = levels {
         m.levels = l;
     }
-    build_world(store, m, &MapSource { map: &map(SIZE) }, &|_| true)
+    build_world(store, m, &MapSource::new(&map(SIZE)), &|_| true)
         .unwrap()
         .0
 }

@@ -313,6 +313,39 @@ fn geotiff_nodata_and_geographic_rasters_are_explained() {
 }
 
 #[test]
+fn a_dems_nodata_becomes_the_streamed_worlds_holes() {
+    let dir = fresh_dir("dem_holes");
+    let n = 260;
+    let mut metres = mountain(n, 300.0, 1200.0);
+    for h in metres.iter_mut().take(n as usize) {
+        *h = -9999.0;
+    }
+    let tif = dir.join("srtm.tif");
+    write_geotiff(&tif, n, &metres, 10.0, Some("-9999"), &PROJECTED);
+    let world = dir.join("world");
+    let (stderr, _) = ok(
+        &dir,
+        &[
+            "--scenario",
+            "flyover",
+            "--world",
+            &s(&world),
+            "--heightmap",
+            &s(&tif),
+        ],
+    );
+    assert!(stderr.contains("left out as holes"), "{stderr}");
+    let store = std::sync::Arc::new(terrain_cache::FsStore::open_read_only(&world).expect("store"));
+    let world = terrain_cache::World::open(store).expect("world");
+    let all = terrain_core::Rect::from_size(world.manifest().world_size);
+    let holes = terrain_cache::read_holes(&world, all).expect("holes");
+    // The first row, and the hole the flyover cuts on its frame 8 not yet (one frame).
+    assert_eq!(terrain_core::count_holes(&holes), u64::from(n));
+    assert!((0..n).all(|x| terrain_core::is_hole(holes.get(x, 0).expect("cell"))));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn bad_dem_files_and_flags_are_one_line_usage_errors() {
     let dir = fresh_dir("dem_bad");
     let n = 32;

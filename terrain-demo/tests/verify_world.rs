@@ -34,7 +34,7 @@ fn build(dir: &Path) {
     let map = CoarseMap::coarse(grid, encoding(), 1.0).expect("map");
     let store: Arc<dyn TileStore> = Arc::new(FsStore::open(dir).expect("store"));
     let m = Manifest::new(size, 32, 1.0, encoding(), WrapMode::Clamp).expect("manifest");
-    build_world(store, m, &MapSource { map: &map }, &|_| true).expect("build");
+    build_world(store, m, &MapSource::new(&map), &|_| true).expect("build");
 }
 
 /// The world in `dir`, opened for `edit` and closed again.

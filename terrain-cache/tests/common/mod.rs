@@ -57,7 +57,7 @@ pub fn test_map(size: UVec2) -> CoarseMap {
 pub fn build(store: Arc<dyn TileStore>, size: UVec2, tile: u32) -> World {
     let map = test_map(size);
     let m = Manifest::new(size, tile, 1.0, encoding(), WrapMode::Repeat).unwrap();
-    build_world(store, m, &MapSource { map: &map }, &|_| true)
+    build_world(store, m, &MapSource::new(&map), &|_| true)
         .unwrap()
         .0
 }

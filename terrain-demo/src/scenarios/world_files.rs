@@ -126,7 +126,12 @@ pub fn open_or_build(
                 WrapMode::Clamp,
             )
             .usage()?;
-            let (world, _) = build_world(store, manifest, &MapSource { map: &map }, &progress)?;
+            // A DEM's nodata goes into the world's hole tiles.
+            let source = MapSource {
+                map: &map,
+                holes: terrain.holes.as_ref(),
+            };
+            let (world, _) = build_world(store, manifest, &source, &progress)?;
             (world, terrain.source, Some(terrain.heights))
         }
         None => {
