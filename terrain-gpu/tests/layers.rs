@@ -10,8 +10,8 @@ use shading::*;
 use terrain_core::{Grid, StampPlacement, WrapMode};
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    ClipmapSurface, GpuError, GpuHoleMask, GpuMaterialLayer, GpuMaterials, OffscreenTarget,
-    SurfaceShading, TerrainStyle, TerrainView, ViewMatrices,
+    ClipmapSurface, GpuColorLayer, GpuError, GpuHoleMask, GpuMaterialLayer, GpuMaterials,
+    OffscreenTarget, SurfaceShading, TerrainStyle, TerrainView, ViewMatrices,
 };
 
 #[test]
@@ -279,4 +279,62 @@ fn a_material_window_shows_its_paint_and_fades_it_towards_its_edges() {
     assert!(GpuMaterialLayer::window(device, queue, 0).is_err());
     let whole = GpuMaterialLayer::new(device, queue, &paint).expect("layer");
     assert!(whole.move_window(queue, glam::IVec2::ZERO, &paint).is_err());
+}
+
+#[test]
+fn a_colour_window_colours_what_it_covers_and_fades_towards_its_edges() {
+    let Some(ctx) = context_or_skip("colour window render") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let map = cliff_map();
+    let gpu = upload(&ctx, &map);
+    let solid = GpuMaterials::new(device, queue, &solid_materials()).expect("upload");
+    // A streamed world's colour: opaque white over the lowland (x < 100), none beyond.
+    let colors =
+        Grid::from_fn(MAP, MAP, |x, _| if x < 100 { [255u8; 4] } else { [0; 4] }).expect("grid");
+    let window = GpuColorLayer::window(device, queue, 128).expect("window");
+    assert!(window.is_window());
+    let l = Vec3::new(-0.8, 0.6, 0.0).normalize();
+    let grass = lit(0, l.y);
+    let white = Vec3::splat(255.0) * (0.28 + 0.8 * l.y);
+    for mut renderer in renderers(&ctx, &map) {
+        let mode = renderer.mode();
+        renderer.set_materials(&solid);
+        renderer.set_color_layer(Some(&window));
+        // Over (60, 128) with room to spare; off it; and 4 cells inside the window's edge,
+        // where the colour has faded to a quarter.
+        for (origin, want) in [
+            (glam::IVec2::new(5, 70), white.min(Vec3::splat(255.0))),
+            (glam::IVec2::new(128, 0), grass),
+            (
+                glam::IVec2::new(56, 70),
+                grass * 0.75 + white.min(Vec3::splat(255.0)) * 0.25,
+            ),
+        ] {
+            let region = colors
+                .copy_rect(terrain_core::Rect::new(origin, UVec2::splat(128)))
+                .expect("inside");
+            window.move_window(queue, origin, &region).expect("move");
+            let image = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Materials);
+            let centre = around(&image, 60.0, 128.0, 1.0);
+            assert!(
+                (centre - want).abs().max_element() <= 3.0 * COLOUR_TOLERANCE,
+                "{mode}: window at {origin}: {centre}, not about {want}"
+            );
+        }
+    }
+    let small = Grid::new(8, 8, [0u8; 4]).expect("grid");
+    assert!(
+        window
+            .move_window(queue, glam::IVec2::ZERO, &small)
+            .is_err()
+    );
+    assert!(GpuColorLayer::window(device, queue, 0).is_err());
+    let whole = GpuColorLayer::new(device, queue, &colors).expect("layer");
+    assert!(
+        whole
+            .move_window(queue, glam::IVec2::ZERO, &colors)
+            .is_err()
+    );
 }

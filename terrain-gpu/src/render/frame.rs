@@ -45,6 +45,8 @@ pub(crate) struct FrameUniform {
     holes: [i32; 4],
     /// The cells the material layer covers, likewise.
     paint: [i32; 4],
+    /// The cells the colour layer covers, likewise.
+    color: [i32; 4],
 }
 
 impl FrameUniform {
@@ -54,11 +56,12 @@ impl FrameUniform {
         self.material[3] = shading.layer_flags();
         self.holes = shading.hole_window;
         self.paint = shading.paint_window;
+        self.color = shading.color_window;
     }
 }
 
 // The WGSL struct's size (WGSL alignment rules): a mismatch fails the build, not a draw.
-const _: () = assert!(std::mem::size_of::<FrameUniform>() == 288);
+const _: () = assert!(std::mem::size_of::<FrameUniform>() == 304);
 
 /// An exclusion rect with min above max: nothing is discarded.
 pub(crate) const NOTHING_EXCLUDED: [f32; 4] = [1.0, 1.0, -1.0, -1.0];
@@ -112,5 +115,6 @@ pub(crate) fn frame_uniform(
         material,
         holes: [0; 4],
         paint: [0; 4],
+        color: [0; 4],
     })
 }

@@ -18,7 +18,7 @@
 use crate::device::download::download_bytes;
 use crate::error::GpuError;
 use crate::resources::maps::map_buffer;
-use crate::resources::materials::rgba8_texture_with;
+use crate::resources::materials::{rgba8_texture_with, write_rgba8};
 use crate::resources::window::{WindowOrigin, covered, planned_move};
 use glam::{IVec2, UVec2};
 use terrain_core::{CoreError, Grid, Rect};
@@ -158,29 +158,7 @@ impl GpuMaterialLayer {
             paint.size(),
         )?;
         for (offset, texels) in pieces {
-            queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &self.texture,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d {
-                        x: texels.min.x as u32,
-                        y: texels.min.y as u32,
-                        z: 0,
-                    },
-                    aspect: wgpu::TextureAspect::All,
-                },
-                bytemuck::cast_slice(paint.as_slice()),
-                wgpu::TexelCopyBufferLayout {
-                    offset: 4 * offset,
-                    bytes_per_row: Some(4 * self.size.x),
-                    rows_per_image: Some(texels.size.y),
-                },
-                wgpu::Extent3d {
-                    width: texels.size.x,
-                    height: texels.size.y,
-                    depth_or_array_layers: 1,
-                },
-            );
+            write_rgba8(queue, &self.texture, paint, offset, texels);
         }
         at.set(origin);
         Ok(())

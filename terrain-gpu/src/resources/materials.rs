@@ -12,6 +12,7 @@ use crate::device::scope::scoped;
 use crate::error::GpuError;
 use crate::resources::hole_mask::GpuHoleMask;
 use crate::resources::material_layer::GpuMaterialLayer;
+use crate::resources::window::{WindowOrigin, covered, planned_move};
 use terrain_core::{AutoshadeParams, CoreError, MATERIALS, MaterialImages, MaterialTextures};
 
 /// How the renderers colour the surface.
@@ -261,6 +262,8 @@ pub(crate) struct ShadingBindings {
     pub(crate) hole_window: [i32; 4],
     /// The world cells the material layer covers, likewise.
     pub(crate) paint_window: [i32; 4],
+    /// The world cells the colour layer covers, likewise.
+    pub(crate) color_window: [i32; 4],
 }
 
 impl ShadingBindings {
@@ -348,7 +351,10 @@ impl MaterialSlot {
         surface_size: glam::UVec2,
     ) -> Result<(ShadingBindings, bool), GpuError> {
         let sizes = [
-            self.color.as_ref().map(|c| c.size),
+            self.color
+                .as_ref()
+                .filter(|c| !c.is_window())
+                .map(|c| c.size),
             self.paint
                 .as_ref()
                 .filter(|p| !p.is_window())
@@ -395,6 +401,7 @@ impl MaterialSlot {
             has_holes: self.holes.is_some(),
             hole_window: self.holes.as_ref().map_or([0; 4], |h| h.covered()),
             paint_window: self.paint.as_ref().map_or([0; 4], |p| p.covered()),
+            color_window: self.color.as_ref().map_or([0; 4], |c| c.covered()),
         };
         Ok((bindings, std::mem::take(&mut self.changed)))
     }
@@ -474,10 +481,17 @@ pub(crate) fn frame_fields(
 /// the ramp's (the materials' normals still bend the light). A texture read texel by texel
 /// (bilinear in the shader, wrapped like the heights): storage buffers per shader stage are
 /// few on some devices, and the detail surface already uses four.
+///
+/// A streamed world's colour (its `Layer::Color` tiles) is drawn through a window of cells
+/// around the camera ([`GpuColorLayer::window`], placed by [`GpuColorLayer::move_window`], as
+/// the material layer's), over the materials by its alpha and faded out towards its edges.
 #[derive(Debug, Clone)]
 pub struct GpuColorLayer {
     view: wgpu::TextureView,
+    texture: wgpu::Texture,
     size: glam::UVec2,
+    /// A window's origin, or `None` for the whole map's layer.
+    origin: Option<WindowOrigin>,
 }
 
 impl GpuColorLayer {
@@ -498,8 +512,74 @@ impl GpuColorLayer {
             }
             .into());
         }
-        let view = rgba8_texture(device, queue, "colour layer", size, colors.as_slice())?;
-        Ok(Self { view, size })
+        let (texture, view) = rgba8_texture_with(
+            device,
+            queue,
+            "colour layer",
+            size,
+            colors.as_slice(),
+            wgpu::TextureUsages::empty(),
+        )?;
+        Ok(Self {
+            view,
+            texture,
+            size,
+            origin: None,
+        })
+    }
+
+    /// A window of `side` x `side` cells over a larger world: transparent, and covering no
+    /// cell until [`GpuColorLayer::move_window`] places it. Fails on a side of 0 or above the
+    /// device's `max_texture_dimension_2d`.
+    pub fn window(device: &wgpu::Device, queue: &wgpu::Queue, side: u32) -> Result<Self, GpuError> {
+        if side == 0 {
+            return Err(CoreError::OutOfRange {
+                what: "colour window side",
+                value: 0.0,
+                expected: "at least 1 cell",
+            }
+            .into());
+        }
+        let clear = terrain_core::Grid::new(side, side, [0u8; 4])?;
+        Ok(Self {
+            origin: Some(WindowOrigin::unset()),
+            ..Self::new(device, queue, &clear)?
+        })
+    }
+
+    /// Whether this is a window ([`GpuColorLayer::window`]).
+    pub fn is_window(&self) -> bool {
+        self.origin.is_some()
+    }
+
+    /// The world cells it covers: origin (x, z) and size. A window covers none (size 0) until
+    /// its first [`GpuColorLayer::move_window`].
+    pub fn covered(&self) -> [i32; 4] {
+        covered(self.origin.as_ref(), self.size)
+    }
+
+    /// Places a window at world cell `origin` with `colors`, the colour layer of the cells
+    /// `origin .. origin + side` (as `terrain_cache::read_color` returns it), drawn from the
+    /// next submission on. Fails, with nothing changed, on the whole map's layer, on colours
+    /// of another size than the window and on an origin whose window would leave `i32`.
+    pub fn move_window(
+        &self,
+        queue: &wgpu::Queue,
+        origin: glam::IVec2,
+        colors: &terrain_core::Grid<[u8; 4]>,
+    ) -> Result<(), GpuError> {
+        let (at, pieces) = planned_move(
+            self.origin.as_ref(),
+            "colour layer to move",
+            self.size,
+            origin,
+            colors.size(),
+        )?;
+        for (offset, texels) in pieces {
+            write_rgba8(queue, &self.texture, colors, offset, texels);
+        }
+        at.set(origin);
+        Ok(())
     }
 
     /// The layer's size in texels (the map's it is drawn over).
@@ -511,6 +591,40 @@ impl GpuColorLayer {
     pub fn bytes(&self) -> u64 {
         4 * u64::from(self.size.x) * u64::from(self.size.y)
     }
+}
+
+/// Writes `texels` (texture coordinates) of `texture`, a square texture of `data`'s side, from
+/// `data`'s row-major cells starting at cell `offset`.
+pub(crate) fn write_rgba8(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    data: &terrain_core::Grid<[u8; 4]>,
+    offset: u64,
+    texels: terrain_core::Rect,
+) {
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d {
+                x: texels.min.x as u32,
+                y: texels.min.y as u32,
+                z: 0,
+            },
+            aspect: wgpu::TextureAspect::All,
+        },
+        bytemuck::cast_slice(data.as_slice()),
+        wgpu::TexelCopyBufferLayout {
+            offset: 4 * offset,
+            bytes_per_row: Some(4 * data.width()),
+            rows_per_image: Some(texels.size.y),
+        },
+        wgpu::Extent3d {
+            width: texels.size.x,
+            height: texels.size.y,
+            depth_or_array_layers: 1,
+        },
+    );
 }
 
 /// A 2D `Rgba8Unorm` texture of `size` holding `texels`, and its view.

@@ -52,6 +52,7 @@ struct Frame {
     // The world cells the hole mask and the material layer cover: origin (x, y) and size (z, w).
     holes: vec4<i32>,
     paint_window: vec4<i32>,
+    color_window: vec4<i32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -199,7 +200,7 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     }
 
     if frame.color_layer.x > 0.5 {
-        albedo = color_layer_at(qs);
+        albedo = colored_albedo(qs, albedo);
     }
 
     let l = normalize(frame.light_dir.xyz);

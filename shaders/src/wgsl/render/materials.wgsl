@@ -24,23 +24,6 @@ fn in_hole(q: vec2<f32>) -> bool {
     return w.z != 0 && textureLoad(hole_mask, w.xy, 0).r > 0.0;
 }
 
-// `layer` at `q` (texels relative to the camera's whole texel), bilinear between the four
-// texels around it, wrapped or clamped like the heights.
-fn layer_at(layer: texture_2d<f32>, q: vec2<f32>) -> vec4<f32> {
-    let p0 = floor(q);
-    let f = q - p0;
-    let t0 = frame.camera_texel + vec2<i32>(p0);
-    let c00 = textureLoad(layer, map_texel(t0), 0);
-    let c10 = textureLoad(layer, map_texel(t0 + vec2<i32>(1, 0)), 0);
-    let c01 = textureLoad(layer, map_texel(t0 + vec2<i32>(0, 1)), 0);
-    let c11 = textureLoad(layer, map_texel(t0 + vec2<i32>(1, 1)), 0);
-    return mix(mix(c00, c10, f.x), mix(c01, c11, f.x), f.y);
-}
-
-fn color_layer_at(q: vec2<f32>) -> vec3<f32> {
-    return layer_at(color_layer, q).rgb;
-}
-
 // Where world cell `t` lies in a layer covering the cells `window` (origin xy, size zw: the
 // whole map, or a window around the camera): its texel (xy) and whether it is covered (z).
 // Cell `c` lies at texel `c mod size`.
@@ -59,41 +42,54 @@ fn window_texel(t: vec2<i32>, window: vec4<i32>) -> vec3<i32> {
     return vec3<i32>(((window.xy + rel) % size + size) % size, 1);
 }
 
-// The material layer's texel at world cell `t`: nothing outside its window.
-fn paint_texel(t: vec2<i32>) -> vec4<f32> {
-    let w = window_texel(t, frame.paint_window);
+// `layer`'s texel at world cell `t`, the layer covering the cells `window`: nothing (zero)
+// outside it. `premultiply`: its colour times its alpha (a colour layer's texels, so that
+// blending them with transparent ones, and fading them, darkens nothing).
+fn window_layer_texel(layer: texture_2d<f32>, window: vec4<i32>, t: vec2<i32>, premultiply: bool) -> vec4<f32> {
+    let w = window_texel(t, window);
     if w.z == 0 {
         return vec4<f32>(0.0, 0.0, 0.0, 0.0);
     }
-    return textureLoad(material_layer, w.xy, 0);
+    let c = textureLoad(layer, w.xy, 0);
+    if premultiply {
+        return vec4<f32>(c.rgb * c.a, c.a);
+    }
+    return c;
 }
 
-// The paint at `q`, bilinear like `layer_at`. A window smaller than the map fades its paint
+// `layer` at `q` (texels relative to the camera's whole texel), bilinear between the four
+// texels around it, the layer covering the cells `window`. A window smaller than the map fades
 // out over its outer eighth, so a move of the window never pops.
-fn paint_at(q: vec2<f32>) -> vec4<f32> {
+fn window_layer_at(layer: texture_2d<f32>, window: vec4<i32>, q: vec2<f32>, premultiply: bool) -> vec4<f32> {
     let p0 = floor(q);
     let f = q - p0;
     let t0 = frame.camera_texel + vec2<i32>(p0);
-    let c00 = paint_texel(t0);
-    let c10 = paint_texel(t0 + vec2<i32>(1, 0));
-    let c01 = paint_texel(t0 + vec2<i32>(0, 1));
-    let c11 = paint_texel(t0 + vec2<i32>(1, 1));
-    let paint = mix(mix(c00, c10, f.x), mix(c01, c11, f.x), f.y);
-    let size = frame.paint_window.zw;
+    let c00 = window_layer_texel(layer, window, t0, premultiply);
+    let c10 = window_layer_texel(layer, window, t0 + vec2<i32>(1, 0), premultiply);
+    let c01 = window_layer_texel(layer, window, t0 + vec2<i32>(0, 1), premultiply);
+    let c11 = window_layer_texel(layer, window, t0 + vec2<i32>(1, 1), premultiply);
+    let value = mix(mix(c00, c10, f.x), mix(c01, c11, f.x), f.y);
+    let size = window.zw;
     if all(size >= vec2<i32>(frame.map_size)) {
-        return paint;
+        return value;
     }
     // Distance (cells) from the fragment to the window's nearest edge.
-    let rel = vec2<f32>(frame.camera_texel - frame.paint_window.xy) + q;
+    let rel = vec2<f32>(frame.camera_texel - window.xy) + q;
     let edge = min(min(rel.x, rel.y), min(f32(size.x) - rel.x, f32(size.y) - rel.y));
     let fade = clamp(edge / max(f32(min(size.x, size.y)) * 0.125, 1.0), 0.0, 1.0);
-    return paint * fade;
+    return value * fade;
+}
+
+// The colour layer at `q` over `albedo`, by its alpha (premultiplied).
+fn colored_albedo(q: vec2<f32>, albedo: vec3<f32>) -> vec3<f32> {
+    let c = window_layer_at(color_layer, frame.color_window, q, true);
+    return albedo * (1.0 - c.a) + c.rgb;
 }
 
 // The weights `w` (the autoshader's or an engine's) with the material layer's paint at `q`
 // over them: all paint where its cover is full, none where it is zero.
 fn painted_weights(q: vec2<f32>, w: vec4<f32>) -> vec4<f32> {
-    let paint = paint_at(q);
+    let paint = window_layer_at(material_layer, frame.paint_window, q, false);
     let cover = paint.x + paint.y + paint.z + paint.w;
     let base = max(w, vec4<f32>(0.0, 0.0, 0.0, 0.0));
     let unpainted = base / max(base.x + base.y + base.z + base.w, 1e-6);
