@@ -261,7 +261,9 @@ impl Manifest {
             Layer::Height if level < self.levels => self.tiles_at(level),
             Layer::Hole if level == 0 => self.tiles_at(0),
             // RGBA tiles have no PNG form here: a version-1 world has no material layer.
-            Layer::Material if level == 0 && self.tile_format == TileFormat::Tile => {
+            Layer::Material | Layer::Color
+                if level == 0 && self.tile_format == TileFormat::Tile =>
+            {
                 self.tiles_at(0)
             }
             Layer::Detail => match &self.detail {
@@ -278,14 +280,14 @@ impl Manifest {
             Layer::Height => self.levels,
             Layer::Detail => u32::from(self.detail.is_some()),
             Layer::Hole => 1,
-            Layer::Material => u32::from(self.tile_format == TileFormat::Tile),
+            Layer::Material | Layer::Color => u32::from(self.tile_format == TileFormat::Tile),
         }
     }
 
     /// Tile side of `layer`.
     pub fn layer_tile_size(&self, layer: Layer) -> Result<u32, CacheError> {
         match layer {
-            Layer::Height | Layer::Hole | Layer::Material => Ok(self.tile_size),
+            Layer::Height | Layer::Hole | Layer::Material | Layer::Color => Ok(self.tile_size),
             Layer::Detail => self
                 .detail
                 .map(|d| d.tile_size)
@@ -297,7 +299,7 @@ impl Manifest {
     pub fn layer_fill(&self, layer: Layer) -> Result<u16, CacheError> {
         match layer {
             Layer::Height => Ok(self.height_fill),
-            Layer::Hole | Layer::Material => Ok(0),
+            Layer::Hole | Layer::Material | Layer::Color => Ok(0),
             Layer::Detail => self
                 .detail
                 .map(|d| u16::from(d.fill))
@@ -324,7 +326,8 @@ impl Manifest {
 
     /// Checks that `id` lies in `layer`'s pyramid.
     pub fn check_tile(&self, layer: Layer, id: TileId) -> Result<(), CacheError> {
-        let material_in_png = layer == Layer::Material && self.tile_format == TileFormat::Png;
+        let material_in_png =
+            matches!(layer, Layer::Material | Layer::Color) && self.tile_format == TileFormat::Png;
         if (layer == Layer::Detail && self.detail.is_none()) || material_in_png {
             return Err(CacheError::NoSuchLayer { layer });
         }
@@ -420,6 +423,8 @@ pub fn parse_tile_key(key: &str) -> Option<(Layer, TileId)> {
         "height" => Layer::Height,
         "detail" => Layer::Detail,
         "hole" => Layer::Hole,
+        "material" => Layer::Material,
+        "color" => Layer::Color,
         _ => return None,
     };
     let level = parts.next()?;

@@ -1,7 +1,7 @@
 //! The layers laid over a streamed world's level 0: its holes ([`Layer::Hole`],
-//! `terrain_core::holes`) and its paint ([`Layer::Material`], `terrain_core::material_effect`).
-//! Read a region of either ([`read_holes`], [`read_paint`]) and write one back
-//! ([`write_holes`], [`write_paint`]).
+//! `terrain_core::holes`), its paint ([`Layer::Material`], `terrain_core::material_effect`) and
+//! its colour ([`Layer::Color`]). Read a region of one ([`read_holes`], [`read_paint`],
+//! [`read_color`]) and write one back ([`write_holes`], [`write_paint`], [`write_color`]).
 //!
 //! They are read and written on the world directly, not through the RAM pool: most tiles have
 //! no file (no hole, no paint), and a cut or a crater's paint changes a few tiles, so a region
@@ -53,6 +53,17 @@ pub fn read_paint(world: &World, rect: Rect) -> Result<Grid<[u8; 4]>, CacheError
 /// writes holes; an unpainted tile loses its file.
 pub fn write_paint(world: &World, rect: Rect, paint: &Grid<[u8; 4]>) -> Result<u32, CacheError> {
     write_region(world, Layer::Material, rect, paint, TileData::as_rgba8_mut)
+}
+
+/// The level-0 colour layer (sRGB, alpha its cover) of `rect`, as [`read_paint`] reads paint.
+pub fn read_color(world: &World, rect: Rect) -> Result<Grid<[u8; 4]>, CacheError> {
+    read_region(world, Layer::Color, rect, [0; 4], TileData::as_rgba8)
+}
+
+/// Writes `colors`, the colour layer of `rect`, into the colour tiles, as [`write_paint`]
+/// writes paint; a transparent tile loses its file.
+pub fn write_color(world: &World, rect: Rect, colors: &Grid<[u8; 4]>) -> Result<u32, CacheError> {
+    write_region(world, Layer::Color, rect, colors, TileData::as_rgba8_mut)
 }
 
 fn read_region<T: Copy>(
@@ -238,6 +249,11 @@ mod tests {
         let none = Grid::new(8, 8, [0u8; 4]).expect("paint");
         assert_eq!(write_paint(&w, rect, &none).expect("write"), 4);
         assert!(w.store().list("material").expect("list").is_empty());
+        // Colour the same way.
+        assert_eq!(write_color(&w, rect, &paint).expect("write"), 4);
+        assert_eq!(read_color(&w3, rect).expect("read"), paint);
+        assert_eq!(write_color(&w, rect, &none).expect("write"), 4);
+        assert!(w.store().list("color").expect("list").is_empty());
         let _ = std::fs::remove_dir_all(dir);
     }
 

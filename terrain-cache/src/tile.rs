@@ -75,11 +75,20 @@ pub enum Layer {
     /// tiles of the height tiles' size. Every world has the layer; an unpainted tile (all zero:
     /// the autoshader shows) is not stored.
     Material,
+    /// The RGBA8 colour layer (an orthophoto beside a DEM: sRGB, alpha its cover) over level
+    /// 0, as the material layer; a transparent tile is not stored.
+    Color,
 }
 
 impl Layer {
     /// Every layer, in the order of their index.
-    pub const ALL: [Layer; 4] = [Layer::Height, Layer::Detail, Layer::Hole, Layer::Material];
+    pub const ALL: [Layer; 5] = [
+        Layer::Height,
+        Layer::Detail,
+        Layer::Hole,
+        Layer::Material,
+        Layer::Color,
+    ];
 }
 
 impl Layer {
@@ -90,15 +99,17 @@ impl Layer {
             Layer::Detail => "detail",
             Layer::Hole => "hole",
             Layer::Material => "material",
+            Layer::Color => "color",
         }
     }
 
-    /// Bits per stored sample: 16 for heights, 8 for detail and holes, 32 for materials.
+    /// Bits per stored sample: 16 for heights, 8 for detail and holes, 32 for materials and
+    /// colours.
     pub const fn bits(self) -> u8 {
         match self {
             Layer::Height => 16,
             Layer::Detail | Layer::Hole => 8,
-            Layer::Material => 32,
+            Layer::Material | Layer::Color => 32,
         }
     }
 
@@ -127,7 +138,9 @@ impl TileData {
             Layer::Detail | Layer::Hole => {
                 TileData::U8(Grid::new(size, size, value.min(255) as u8)?)
             }
-            Layer::Material => TileData::Rgba8(Grid::new(size, size, [value.min(255) as u8; 4])?),
+            Layer::Material | Layer::Color => {
+                TileData::Rgba8(Grid::new(size, size, [value.min(255) as u8; 4])?)
+            }
         })
     }
 

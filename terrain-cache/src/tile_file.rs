@@ -91,6 +91,7 @@ const fn layer_byte(layer: Layer) -> u8 {
         Layer::Detail => 1,
         Layer::Hole => 2,
         Layer::Material => 3,
+        Layer::Color => 4,
     }
 }
 
@@ -126,7 +127,7 @@ impl TileCodec {
         match layer {
             Layer::Height => TileCodec::Raw,
             // Holes are rare: LZ4 keeps a tile with a few of them small.
-            Layer::Detail | Layer::Hole | Layer::Material => TileCodec::Lz4,
+            Layer::Detail | Layer::Hole | Layer::Material | Layer::Color => TileCodec::Lz4,
         }
     }
 }
@@ -208,11 +209,12 @@ pub enum TileFileError {
             1 => "detail",
             2 => "hole",
             3 => "material",
+            4 => "colour",
             _ => "an unknown layer's",
         }
     )]
     Identity {
-        /// The layer byte found (0 heights, 1 detail, 2 holes, 3 materials).
+        /// The layer byte found (0 heights, 1 detail, 2 holes, 3 materials, 4 colours).
         layer: u8,
         /// The level found.
         level: u32,
@@ -468,7 +470,7 @@ fn decode_checked(
     }
     if header == HEADER_LEN_WITH_IDENTITY {
         let found: [u8; 16] = std::array::from_fn(|i| bytes[HEADER_LEN + i]);
-        let known = matches!(found[0], 0..=3) && found[1..4] == [0, 0, 0];
+        let known = matches!(found[0], 0..=4) && found[1..4] == [0, 0, 0];
         if !known || expected.is_some_and(|e| e.to_bytes() != found) {
             return Err(TileFileError::Identity {
                 layer: found[0],
@@ -509,13 +511,13 @@ fn decode_checked(
         (Layer::Detail | Layer::Hole, TileCodec::Lz4) => {
             TileData::U8(grid(side, decompress(payload, n).map_err(|r| bad(n, r))?))
         }
-        (Layer::Material, TileCodec::Raw) => {
+        (Layer::Material | Layer::Color, TileCodec::Raw) => {
             if payload.len() != 4 * n {
                 return Err(bad(4 * n, format!("{} bytes", payload.len())));
             }
             TileData::Rgba8(grid(side, bytemuck::cast_slice(payload).to_vec()))
         }
-        (Layer::Material, TileCodec::Lz4) => {
+        (Layer::Material | Layer::Color, TileCodec::Lz4) => {
             let planes = decompress(payload, 4 * n).map_err(|r| bad(4 * n, r))?;
             let texels = (0..n)
                 .map(|i| {

@@ -267,6 +267,7 @@ fn promised_tiles(m: &Manifest) -> u64 {
         .chain(std::iter::once(count(m.layer_tiles(Layer::Detail, 0))))
         .chain(std::iter::once(count(m.layer_tiles(Layer::Hole, 0))))
         .chain(std::iter::once(count(m.layer_tiles(Layer::Material, 0))))
+        .chain(std::iter::once(count(m.layer_tiles(Layer::Color, 0))))
         .fold(0u64, u64::saturating_add)
 }
 
@@ -399,7 +400,7 @@ impl<'a> Walk<'a> {
                 self.flat_tile(Layer::Detail, id)?;
             }
         }
-        for layer in [Layer::Hole, Layer::Material] {
+        for layer in [Layer::Hole, Layer::Material, Layer::Color] {
             let ids: Vec<TileId> = self.m.tiles_of(layer, 0).collect();
             for id in ids {
                 self.flat_tile(layer, id)?;

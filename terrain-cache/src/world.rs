@@ -28,7 +28,7 @@ pub enum TileRead {
 pub struct World {
     store: Arc<dyn TileStore>,
     manifest: Manifest,
-    zero: Arc<[OnceLock<Arc<TileData>>; 4]>,
+    zero: Arc<[OnceLock<Arc<TileData>>; Layer::ALL.len()]>,
 }
 
 impl World {
@@ -181,7 +181,9 @@ impl World {
                     Layer::Detail | Layer::Hole => {
                         TileData::U8(decode_png8(bytes, &limits).map_err(png)?)
                     }
-                    Layer::Material => return Err(CacheError::NoSuchLayer { layer }),
+                    Layer::Material | Layer::Color => {
+                        return Err(CacheError::NoSuchLayer { layer });
+                    }
                 }
             }
         };

@@ -113,13 +113,13 @@ fn a_built_world_is_valid_and_its_zero_tiles_are_known_empty() {
     )
     .unwrap();
     assert!(report.is_valid(), "{report:#?}");
-    // The height pyramid's tiles, and the 30 hole and 30 material tiles over level 0.
-    assert_eq!(report.tiles, 30 + 9 + 4 + 1 + 30 + 30);
+    // The height pyramid's tiles, and the 30 hole, material and colour tiles each over level 0.
+    assert_eq!(report.tiles, 30 + 9 + 4 + 1 + 3 * 30);
     assert_eq!(report.stored + report.zero, report.tiles);
     assert_eq!(
         report.zero,
-        5 + 60,
-        "4 level-0 tiles and 1 level-1 tile are the zero tile, and no tile has a hole or paint"
+        5 + 90,
+        "4 level-0 tiles and 1 level-1 tile are the zero tile, and no tile has a hole, paint or colour"
     );
     assert_eq!(calls.get(), report.tiles);
     // A repair of a valid world writes nothing.
@@ -424,7 +424,7 @@ fn a_crafted_manifest_promising_billions_of_tiles_is_refused_at_once() {
     // The limit is the caller's: a small world over a small limit is refused the same way.
     let small = built(None);
     let options = VerifyOptions {
-        max_tiles: 103,
+        max_tiles: 133,
         ..VerifyOptions::default()
     };
     let e = verify_world(&small, &options, &cancel, &mut |_| {}).unwrap_err();
@@ -432,8 +432,8 @@ fn a_crafted_manifest_promising_billions_of_tiles_is_refused_at_once() {
         matches!(
             e,
             VerifyError::TooManyTiles {
-                tiles: 104,
-                max: 103
+                tiles: 134,
+                max: 133
             }
         ),
         "{e}"
@@ -450,7 +450,7 @@ fn the_cancel_flag_stops_the_walk() {
             e,
             VerifyError::Cancelled {
                 done: 0,
-                total: 104
+                total: 134
             }
         ),
         "{e}"
@@ -521,7 +521,7 @@ fn detail_tiles_are_checked_and_missing_ones_are_the_zero_deformation() {
     world.write_tile(Layer::Detail, id, &d).unwrap();
     let report = verify(&world);
     assert!(report.is_valid(), "{report:#?}");
-    assert_eq!(report.tiles, 104 + 6 * 5);
+    assert_eq!(report.tiles, 134 + 6 * 5);
     let other = world
         .manifest()
         .tile_key(Layer::Detail, TileId::new(0, 2, 2));

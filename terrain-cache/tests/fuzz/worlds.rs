@@ -152,7 +152,7 @@ pub(crate) fn random_tile(world: &World, layer: Layer, rng: &mut Rng) -> TileDat
         Layer::Detail | Layer::Hole => {
             TileData::U8(Grid::from_vec(size, size, v.iter().map(|&x| x as u8).collect()).unwrap())
         }
-        Layer::Material => TileData::Rgba8(
+        Layer::Material | Layer::Color => TileData::Rgba8(
             Grid::from_vec(
                 size,
                 size,

@@ -239,7 +239,7 @@ pub(super) fn seed_tile(world: &World, layer: Layer, seed: u64) -> TileData {
             let v = v.into_iter().map(|x| x as u8).collect();
             TileData::U8(Grid::from_vec(side, side, v).expect("a tile"))
         }
-        Layer::Material => {
+        Layer::Material | Layer::Color => {
             let v = v
                 .into_iter()
                 .map(|x| (x as u32 * 0x0101_0101).to_le_bytes())
