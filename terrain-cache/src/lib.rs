@@ -83,7 +83,10 @@ pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
 pub use manifest::{DetailLayout, Manifest, TileFormat, tile_key};
 #[cfg(feature = "object-store")]
 pub use object::{ObjectStoreConfig, ObjectTileStore};
-pub use overlays::{MAX_OVERLAY_REGION_CELLS, read_holes, read_paint, write_holes, write_paint};
+pub use overlays::{
+    MAX_OVERLAY_REGION_CELLS, read_color, read_holes, read_paint, write_color, write_holes,
+    write_paint,
+};
 pub use region_bounds::RegionBounds;
 pub use store::{FsStore, TileStore};
 pub use tile::{Layer, TileData, TileId};

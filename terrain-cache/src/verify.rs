@@ -58,7 +58,7 @@ const MAX_REASON: usize = 400;
 /// Limits of a verification.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VerifyOptions {
-    /// The most tiles (height levels and detail layer together) the manifest may promise; a
+    /// The most tiles (height levels and the other layers together) the manifest may promise; a
     /// larger world is refused before anything is read ([`VerifyError::TooManyTiles`]).
     pub max_tiles: u64,
     /// Defects kept in [`VerifyReport::listed`]; every defect is counted regardless.

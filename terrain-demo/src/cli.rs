@@ -59,8 +59,10 @@ pub struct Cli {
     #[arg(long, conflicts_with = "size", help_heading = HEIGHTMAP)]
     pub heightmap: Option<PathBuf>,
     /// A colour image drawn over the heightmap (an orthophoto): 8-bit RGB or RGBA, PNG or
-    /// (Geo)TIFF, the heightmap's size. GPU frames show it; the overview does not.
-    #[arg(long, value_name = "FILE", requires = "heightmap", help_heading = HEIGHTMAP)]
+    /// (Geo)TIFF, the heightmap's size. GPU frames show it; the overview does not. Flyover and
+    /// world: written into the streamed world's colour tiles (the world's size), drawn near the
+    /// camera.
+    #[arg(long, value_name = "FILE", help_heading = HEIGHTMAP)]
     pub color: Option<PathBuf>,
     /// The heightmap's format: `auto` by its extension (else its first bytes, else RAW16 when
     /// --raw-size is given).

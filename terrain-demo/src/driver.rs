@@ -266,8 +266,12 @@ fn open_gpu(
 ) -> Result<Option<GpuScene>> {
     // The flags were checked together before the run (`validate::flags`).
     let tess_config = crate::validate::tess_config(cli).usage()?;
-    // `--color` is read and checked even without a GPU: a wrong file is the user's to fix.
-    let colors = color_layer(cli, scenario.map()).usage()?;
+    // `--color` is read and checked even without a GPU: a wrong file is the user's to fix. A
+    // streamed world took it into its colour tiles when it opened.
+    let colors = match cli.scenario {
+        ScenarioKind::Default => color_layer(cli, scenario.map().size()).usage()?,
+        _ => None,
+    };
     if cli.no_gpu {
         return Ok(None);
     }
@@ -319,15 +323,11 @@ fn open_gpu(
     Ok(Some(scene))
 }
 
-/// `--color`'s image, which must be the map's size.
-fn color_layer(
-    cli: &Cli,
-    map: &terrain_core::CoarseMap,
-) -> Result<Option<terrain_core::Grid<[u8; 4]>>> {
+/// `--color`'s image, which must be `size` (the heightmap's, or the streamed world's).
+pub fn color_layer(cli: &Cli, size: glam::UVec2) -> Result<Option<terrain_core::Grid<[u8; 4]>>> {
     let Some(path) = &cli.color else {
         return Ok(None);
     };
-    let size = map.size();
     let limits = terrain_core::io::ReadLimits {
         max_samples: u64::from(size.x) * u64::from(size.y),
         ..terrain_core::io::ReadLimits::default()

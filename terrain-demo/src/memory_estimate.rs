@@ -131,6 +131,8 @@ pub struct FlyoverShape {
     pub atlas_table: u64,
     /// Whether the world is built first, and from what.
     pub build: Option<WorldBuild>,
+    /// Level-0 size of the world in texels.
+    pub world: UVec2,
 }
 
 impl RunShape {
@@ -162,6 +164,7 @@ impl RunShape {
                     atlas: slots.saturating_mul(slot),
                     atlas_table: layout.table_len().saturating_mul(4),
                     build: planned.build,
+                    world: m.world_size,
                 };
                 (m.level_size(flyover::overview_level(&m)), Some(shape))
             }
@@ -198,8 +201,14 @@ impl RunShape {
             parts.push(("dem_import", import_bytes(planned)));
         }
         if self.color {
-            // `--color`: the file's bytes while read, its RGBA pixels, and the GPU's copy.
-            parts.push(("color_layer", per_texel(if self.gpu { 12 } else { 8 })));
+            let color = match &self.flyover {
+                // A streamed world's: the file's bytes while read and its RGBA pixels, written
+                // into colour tiles (the GPU draws a window of them: `overlays`).
+                Some(f) => area(f.world).saturating_mul(8),
+                // `--color` over a heightmap: the same, and the GPU's copy.
+                None => per_texel(if self.gpu { 12 } else { 8 }),
+            };
+            parts.push(("color_layer", color));
         }
         match self.scenario {
             ScenarioKind::Default => {
@@ -266,13 +275,13 @@ impl RunShape {
                 let window = u64::from(flyover::COLLISION_WINDOW).pow(2);
                 parts.push(("collision", window.saturating_mul(COLLISION_PER_TEXEL)));
                 // Holes in the collision window (its mask and the one read for it); with a
-                // GPU, its hole (1 byte) and paint (4 bytes) windows, and the two read for
-                // them when they move.
+                // GPU, its hole (1 byte), paint and colour (4 bytes each) windows, and the
+                // three read for them when they move.
                 let mut overlays = window.saturating_mul(2);
                 if self.gpu {
                     parts.push(("gpu_map", per_texel(GPU_MAP_PER_TEXEL)));
                     let gpu_window = u64::from(crate::scenarios::GPU_OVERLAY_WINDOW).pow(2);
-                    overlays = overlays.saturating_add(gpu_window.saturating_mul(2 * 5));
+                    overlays = overlays.saturating_add(gpu_window.saturating_mul(2 * 9));
                 }
                 parts.push(("overlays", overlays));
                 if let Some(f) = &self.flyover {

@@ -59,10 +59,15 @@ fn scenario_flags(cli: &Cli) -> Result<()> {
              flyover and world scenarios have no detail layer yet"
         ));
     }
-    if cli.color.is_some() && cli.scenario != ScenarioKind::Default {
+    if cli.color.is_some() && cli.scenario == ScenarioKind::Default && cli.heightmap.is_none() {
         return Err(anyhow!(
-            "--color draws an image over the default scenario's heightmap; the {name} scenario \
-             has no colour layer (a streamed world's is not built yet)"
+            "--color draws an image over the default scenario's --heightmap: give one"
+        ));
+    }
+    if cli.color.is_some() && cli.scenario == ScenarioKind::Snow {
+        return Err(anyhow!(
+            "--color draws an image over a heightmap or a streamed world; the snow scenario \
+             generates its snow field"
         ));
     }
     if cli.heightmap.is_some() && cli.scenario == ScenarioKind::Snow {

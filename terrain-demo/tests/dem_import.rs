@@ -313,7 +313,7 @@ fn geotiff_nodata_and_geographic_rasters_are_explained() {
 }
 
 #[test]
-fn a_dems_nodata_becomes_the_streamed_worlds_holes() {
+fn a_dems_nodata_and_colours_become_the_streamed_worlds_holes_and_colour_tiles() {
     let dir = fresh_dir("dem_holes");
     let n = 260;
     let mut metres = mountain(n, 300.0, 1200.0);
@@ -322,26 +322,45 @@ fn a_dems_nodata_becomes_the_streamed_worlds_holes() {
     }
     let tif = dir.join("srtm.tif");
     write_geotiff(&tif, n, &metres, 10.0, Some("-9999"), &PROJECTED);
-    let world = dir.join("world");
-    let (stderr, _) = ok(
-        &dir,
-        &[
-            "--scenario",
-            "flyover",
-            "--world",
-            &s(&world),
-            "--heightmap",
-            &s(&tif),
-        ],
-    );
+    let color = dir.join("ortho.tif");
+    write_rgb_tiff(&color, n, [200, 150, 90]);
+    let world_dir = dir.join("world");
+    let flyover = ["--scenario", "flyover", "--world"];
+    let mut args = flyover.to_vec();
+    let (world_arg, tif_arg, color_arg) = (s(&world_dir), s(&tif), s(&color));
+    args.extend([
+        world_arg.as_str(),
+        "--heightmap",
+        &tif_arg,
+        "--color",
+        &color_arg,
+    ]);
+    let (stderr, _) = ok(&dir, &args);
     assert!(stderr.contains("left out as holes"), "{stderr}");
-    let store = std::sync::Arc::new(terrain_cache::FsStore::open_read_only(&world).expect("store"));
+    assert!(stderr.contains("colour tiles written"), "{stderr}");
+    let store =
+        std::sync::Arc::new(terrain_cache::FsStore::open_read_only(&world_dir).expect("store"));
     let world = terrain_cache::World::open(store).expect("world");
     let all = terrain_core::Rect::from_size(world.manifest().world_size);
     let holes = terrain_cache::read_holes(&world, all).expect("holes");
     // The first row, and the hole the flyover cuts on its frame 8 not yet (one frame).
     assert_eq!(terrain_core::count_holes(&holes), u64::from(n));
     assert!((0..n).all(|x| terrain_core::is_hole(holes.get(x, 0).expect("cell"))));
+    // The image, opaque, in the colour tiles.
+    let colors = terrain_cache::read_color(&world, all).expect("colours");
+    assert!(colors.as_slice().iter().all(|&c| c == [200, 150, 90, 255]));
+    // A colour image of another size than the world is a usage error.
+    let small = dir.join("small.tif");
+    write_rgb_tiff(&small, 64, [0, 0, 0]);
+    let small_arg = s(&small);
+    let mut args = flyover.to_vec();
+    args.extend([world_arg.as_str(), "--color", &small_arg, "--no-gpu"]);
+    let (code, stderr, _) = run(&dir, &args);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains("--color") && stderr.contains("260x260"),
+        "{stderr}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -176,8 +176,9 @@ fn a_manifest_promising_billions_of_tiles_is_refused_at_once() {
 fn ctrl_c_interrupts_a_long_verification() {
     let root = fresh_dir("verify_world_interrupt");
     let dir = root.join("world");
-    // 2048^2 + 1024^2 + ... = 5.6 M tiles, under the limit: minutes of missing files to probe.
-    crafted(&dir, 1 << 15);
+    // 1024^2 + 512^2 + ... = 1.4 M height tiles and 1024^2 of each of the hole, material and
+    // colour layers: 4.5 M, under the limit, and tens of seconds of missing files to probe.
+    crafted(&dir, 1 << 14);
     let mut child = demo()
         .arg("verify-world")
         .arg(&dir)

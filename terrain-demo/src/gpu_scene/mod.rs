@@ -81,8 +81,9 @@ pub struct GpuScene {
     paint: Option<paint::Paint>,
     /// The hole mask every renderer leaves out, once a hole is cut.
     holes: Option<terrain_gpu::GpuHoleMask>,
-    /// A streamed world's paint around the camera.
+    /// A streamed world's paint and colour around the camera.
     paint_window: Option<terrain_gpu::GpuMaterialLayer>,
+    color_window: Option<terrain_gpu::GpuColorLayer>,
     /// Frames rendered so far.
     frames: u32,
     /// Fault injection for the device-loss test: destroy the device before rendering this
@@ -317,6 +318,7 @@ impl GpuScene {
             paint: None,
             holes: None,
             paint_window: None,
+            color_window: None,
             frames: 0,
             destroy_at: std::env::var(DESTROY_DEVICE_ENV)
                 .ok()

@@ -11,7 +11,9 @@ use anyhow::{Context, Result};
 use glam::IVec2;
 use terrain_core::{DirtyRect, Grid, MaterialEffect, StampPlacement};
 use terrain_gpu::GpuError;
-use terrain_gpu::{EffectOp, GpuHeightMap, GpuHoleMask, GpuMaterialLayer, MaterialEffectPass};
+use terrain_gpu::{
+    EffectOp, GpuColorLayer, GpuHeightMap, GpuHoleMask, GpuMaterialLayer, MaterialEffectPass,
+};
 
 /// The material layer over the coarse-map and the pass that paints it.
 pub struct Paint {
@@ -157,6 +159,32 @@ impl GpuScene {
             }
         };
         layer.move_window(queue, origin, paint)?;
+        Ok(())
+    }
+
+    /// Places the colour window the renderers draw (`side` cells, made on the first call) at
+    /// world cell `origin` with `colors`, the colour layer of its cells: a streamed world's
+    /// colour around the camera.
+    pub fn move_color_window(
+        &mut self,
+        side: u32,
+        origin: IVec2,
+        colors: &Grid<[u8; 4]>,
+    ) -> Result<()> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let layer = match &self.color_window {
+            Some(layer) if layer.size().x == side => layer.clone(),
+            _ => {
+                let layer = GpuColorLayer::window(device, queue, side)?;
+                self.terrain.set_color_layer(Some(&layer));
+                if let Some(refined) = self.refined.as_mut() {
+                    refined.renderer.set_color_layer(Some(&layer));
+                }
+                self.color_window = Some(layer.clone());
+                layer
+            }
+        };
+        layer.move_window(queue, origin, colors)?;
         Ok(())
     }
 

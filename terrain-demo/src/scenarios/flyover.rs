@@ -153,6 +153,7 @@ impl FlyoverScenario {
         let mut spherical = SphericalSelection::for_grid(&grid);
         spherical.lod0_range *= 3.0;
         spherical.view_distance *= 3.0;
+        let overlays = WorldOverlays::new(&world)?;
         let pool = RamPool::with_policy(
             world,
             PoolConfig::new(Layer::Height, budget),
@@ -213,7 +214,7 @@ impl FlyoverScenario {
             written_back: 0,
             window,
             window_coarse: HashSet::new(),
-            overlays: WorldOverlays::default(),
+            overlays,
             gpu_tile_stamps: 0,
             cpu_tile_stamps: 0,
             last_camera: None,

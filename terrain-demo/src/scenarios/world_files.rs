@@ -65,6 +65,27 @@ pub fn open_or_build(
     cli: &Cli,
     heightmap: Option<super::heightmap::PlannedMap>,
 ) -> Result<(World, String, Option<HeightsInfo>)> {
+    let (world, source, heights) = open_or_build_heights(cli, heightmap)?;
+    // `--color`: the image becomes the world's colour tiles (replacing any), tile by tile.
+    let size = world.manifest().world_size;
+    if let Some(colors) = crate::driver::color_layer(cli, size).usage()? {
+        let all = terrain_core::Rect::from_size(size);
+        let tiles = terrain_cache::write_color(&world, all, &colors)?;
+        if !cli.quiet {
+            crate::console::note!(
+                "world {}: {tiles} colour tiles written",
+                cli.world.display()
+            );
+        }
+    }
+    Ok((world, source, heights))
+}
+
+/// [`open_or_build`]'s world, without `--color`.
+fn open_or_build_heights(
+    cli: &Cli,
+    heightmap: Option<super::heightmap::PlannedMap>,
+) -> Result<(World, String, Option<HeightsInfo>)> {
     let store: Arc<dyn TileStore> = Arc::new(
         FsStore::open(&cli.world)
             .with_context(|| format!("cannot use world folder {}", cli.world.display()))

@@ -1,14 +1,15 @@
 //! What a streamed world lays over its heights: holes (`terrain_core::holes`, the world's hole
 //! tiles) and paint (`terrain_core::material_effect`, its material tiles). A hole cut beside
 //! the path, or a crater's dirt, is written into the world at once (atomically, tile by tile),
-//! and the layers around the camera follow: the collision window's holes, and the GPU's hole
-//! and paint windows of [`GPU_WINDOW`] cells.
+//! and the layers around the camera follow: the collision window's holes, and the GPU's hole,
+//! paint and colour windows of [`GPU_WINDOW`] cells (colour where the world has it: an
+//! orthophoto given with `--color`).
 //! A second run reads both back from the world.
 
 use crate::gpu_scene::GpuScene;
 use anyhow::Result;
 use glam::{IVec2, UVec2, Vec2};
-use terrain_cache::{World, read_holes, read_paint, write_holes, write_paint};
+use terrain_cache::{Layer, World, read_color, read_holes, read_paint, write_holes, write_paint};
 use terrain_core::{
     HoleOp, MaterialEffect, Rect, StampPlacement, WrapMode, apply_hole_stamp, apply_material_effect,
 };
@@ -21,12 +22,14 @@ use terrain_physics::CollisionWindow;
 pub const GPU_WINDOW: u32 = 2048;
 
 /// The layers that follow the camera over a streamed world.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct WorldOverlays {
     /// The collision window's rect its holes were read for.
     collision: Option<Rect>,
     /// The GPU windows' origin.
     gpu: Option<IVec2>,
+    /// Whether the world has colour tiles (most have none: no colour window is read then).
+    colored: bool,
 }
 
 /// The cells of a stamp's footprint on the world (clamped to a clamped world; a repeating
@@ -51,6 +54,16 @@ fn footprint(world: &World, placement: &StampPlacement) -> Result<Option<(Rect, 
 }
 
 impl WorldOverlays {
+    /// The layers of `world`, nothing read yet.
+    pub fn new(world: &World) -> Result<Self> {
+        let colored = !world.store().list(Layer::Color.folder())?.is_empty();
+        Ok(Self {
+            collision: None,
+            gpu: None,
+            colored,
+        })
+    }
+
     /// Cuts a hole at `placement` (world metres) into `world`'s hole tiles, and has the masks
     /// read again. Returns the tiles written.
     pub fn cut(&mut self, world: &World, placement: &StampPlacement) -> Result<u32> {
@@ -126,6 +139,9 @@ impl WorldOverlays {
             let rect = Rect::new(origin, side);
             scene.move_hole_window(side.x, origin, &read_holes(world, rect)?)?;
             scene.move_paint_window(side.x, origin, &read_paint(world, rect)?)?;
+            if self.colored {
+                scene.move_color_window(side.x, origin, &read_color(world, rect)?)?;
+            }
             self.gpu = Some(origin);
         }
         Ok(())
