@@ -37,6 +37,10 @@ impl WindowOrigin {
     }
 }
 
+/// The pieces a window's cells are uploaded in: the offset of each piece's first cell in the
+/// window's row-major cells, and the texels it goes to.
+pub(crate) type Pieces = Vec<(u64, Rect)>;
+
 /// A checked move of a layer of `size` cells whose place is `window` (`None`: a whole map's
 /// layer) to world cell `origin`, with new cells of `data` in size: the window's origin to set
 /// once they are uploaded, and the pieces to upload them in ([`window_pieces`]). Fails on a
@@ -48,7 +52,7 @@ pub(crate) fn planned_move<'a>(
     size: UVec2,
     origin: IVec2,
     data: UVec2,
-) -> Result<(&'a WindowOrigin, Vec<(u64, Rect)>), CoreError> {
+) -> Result<(&'a WindowOrigin, Pieces), CoreError> {
     let Some(at) = window else {
         return Err(CoreError::OutOfRange {
             what,
@@ -68,7 +72,7 @@ pub(crate) fn planned_move<'a>(
 /// The pieces a window of `size` at `origin` is uploaded in: for each, the offset of its first
 /// cell in the window's row-major cells, and the texels it goes to. Fails on an origin whose
 /// window would leave the `i32` range of cells.
-fn window_pieces(origin: IVec2, size: UVec2) -> Result<Vec<(u64, Rect)>, CoreError> {
+fn window_pieces(origin: IVec2, size: UVec2) -> Result<Pieces, CoreError> {
     let end = origin.as_i64vec2() + size.as_i64vec2();
     if origin.min_element() == i32::MIN || end.max_element() > i64::from(i32::MAX) {
         return Err(CoreError::OutOfRange {
