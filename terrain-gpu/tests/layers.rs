@@ -187,6 +187,21 @@ fn a_hole_window_shows_its_holes_and_nothing_beyond_it() {
             assert!(!black(around(&image, 84.0, 128.0, 1.0)), "{mode}");
         }
     }
+    // A window placed over ground, then only the disc's rect rewritten (as after a cut).
+    let mut renderer = renderers(&ctx, &map).remove(0);
+    renderer.set_hole_mask(Some(&window));
+    let origin = glam::IVec2::new(37, 101);
+    window
+        .move_window(queue, origin, &Grid::new(48, 48, 0u8).expect("grid"))
+        .expect("move");
+    let disc_rect = terrain_core::Rect::new(glam::IVec2::new(48, 116), UVec2::splat(24));
+    let cut = mask.copy_rect(disc_rect).expect("inside");
+    window
+        .update_window(queue, disc_rect, &cut)
+        .expect("update");
+    let image = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Materials);
+    let inside = around(&image, 60.0, 128.0, 8.0);
+    assert!(black(inside), "an updated window shows {inside}");
     // A whole-map write to a window and a window move of another size are refused.
     let rect = terrain_core::Rect::new(glam::IVec2::ZERO, UVec2::ONE);
     assert!(window.write(queue, &mask, rect).is_err());
@@ -257,6 +272,33 @@ fn a_material_window_shows_its_paint_and_fades_it_towards_its_edges() {
             }
         }
     }
+    // A window placed unpainted, then only the disc's rect rewritten (as after a crater):
+    // the rock shows; a rect it does not cover changes nothing and is no error.
+    let mut renderer = renderers(&ctx, &map).remove(0);
+    renderer.set_materials(&solid);
+    renderer.set_material_layer(Some(&window));
+    let origin = glam::IVec2::new(5, 70);
+    let blank = Grid::new(128, 128, [0u8; 4]).expect("grid");
+    window.move_window(queue, origin, &blank).expect("move");
+    let disc_rect = terrain_core::Rect::new(glam::IVec2::new(46, 114), UVec2::splat(28));
+    let disc_paint = paint.copy_rect(disc_rect).expect("inside");
+    window
+        .update_window(queue, disc_rect, &disc_paint)
+        .expect("update");
+    let far = terrain_core::Rect::new(glam::IVec2::new(200, 0), UVec2::splat(28));
+    window
+        .update_window(queue, far, &disc_paint)
+        .expect("outside the window: nothing");
+    let image = draw(&ctx, &mut renderer, &gpu, SurfaceShading::Materials);
+    let centre = around(&image, 60.0, 128.0, 1.0);
+    assert!(
+        (centre - rock).abs().max_element() <= COLOUR_TOLERANCE + 2.0,
+        "an updated window shows {centre}, not {rock}"
+    );
+    assert!(
+        window.update_window(queue, disc_rect, &blank).is_err(),
+        "another size"
+    );
     // Effect passes and read-back refuse a window; a move of another size too.
     let mut effects = terrain_gpu::MaterialEffectPass::new(device).expect("pass");
     let mut encoder = device.create_command_encoder(&Default::default());

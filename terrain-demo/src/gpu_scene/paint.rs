@@ -9,7 +9,7 @@ use super::GpuScene;
 use crate::frame_plan::StampKind;
 use anyhow::{Context, Result};
 use glam::IVec2;
-use terrain_core::{DirtyRect, Grid, MaterialEffect, StampPlacement};
+use terrain_core::{DirtyRect, Grid, MaterialEffect, Rect, StampPlacement};
 use terrain_gpu::GpuError;
 use terrain_gpu::{
     EffectOp, GpuColorLayer, GpuHeightMap, GpuHoleMask, GpuMaterialLayer, MaterialEffectPass,
@@ -159,6 +159,24 @@ impl GpuScene {
             }
         };
         layer.move_window(queue, origin, paint)?;
+        Ok(())
+    }
+
+    /// Rewrites the cells `rect` of the hole and paint windows (if placed) with `holes` and
+    /// `paint`, theirs after a cut or a crater changed them (`None`: that layer did not change).
+    pub fn update_windows(
+        &mut self,
+        rect: Rect,
+        holes: Option<&Grid<u8>>,
+        paint: Option<&Grid<[u8; 4]>>,
+    ) -> Result<()> {
+        let queue = &self.ctx.queue;
+        if let (Some(window), Some(mask)) = (&self.holes, holes) {
+            window.update_window(queue, rect, mask)?;
+        }
+        if let (Some(window), Some(paint)) = (&self.paint_window, paint) {
+            window.update_window(queue, rect, paint)?;
+        }
         Ok(())
     }
 

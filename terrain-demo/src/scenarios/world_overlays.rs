@@ -30,6 +30,15 @@ pub struct WorldOverlays {
     gpu: Option<IVec2>,
     /// Whether the world has colour tiles (most have none: no colour window is read then).
     colored: bool,
+    /// Rects cut or painted since the GPU's windows were last brought up to date, and which.
+    changed: Vec<(Rect, Changed)>,
+}
+
+/// Which layer a change was made to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Changed {
+    Holes,
+    Paint,
 }
 
 /// The cells of a stamp's footprint on the world (clamped to a clamped world; a repeating
@@ -61,6 +70,7 @@ impl WorldOverlays {
             collision: None,
             gpu: None,
             colored,
+            changed: Vec::new(),
         })
     }
 
@@ -75,7 +85,7 @@ impl WorldOverlays {
         apply_hole_stamp(&mut region, WrapMode::Clamp, ts, &local, HoleOp::Cut)?;
         let written = write_holes(world, rect, &region)?;
         self.collision = None;
-        self.gpu = None;
+        self.changed.push((rect, Changed::Holes));
         Ok(written)
     }
 
@@ -94,13 +104,14 @@ impl WorldOverlays {
         let ts = world.manifest().texel_size;
         apply_material_effect(&mut region, WrapMode::Clamp, ts, &local, effect)?;
         let written = write_paint(world, rect, &region)?;
-        self.gpu = None;
+        self.changed.push((rect, Changed::Paint));
         Ok(written)
     }
 
     /// Brings the layers to the camera at `xz` (world metres): the collision window's holes
-    /// when its rect changed, the GPU's holes and paint when the camera is more than an eighth
-    /// of their side off their centre.
+    /// when its rect changed, the GPU's holes, paint and colour when the place they should be
+    /// (centred on the camera, inside a clamped world) is more than an eighth of their side
+    /// from where they are.
     pub fn follow(
         &mut self,
         world: &World,
@@ -115,27 +126,31 @@ impl WorldOverlays {
             self.collision = Some(rect);
         }
         let Some(scene) = scene else {
+            // Without a GPU there are no windows to bring up to date.
+            self.changed.clear();
             return Ok(());
         };
         let m = world.manifest();
         let side = UVec2::splat(GPU_WINDOW.min(m.world_size.min_element()));
         let cell = (xz / m.texel_size).floor().as_ivec2();
         let centred = cell - (side / 2).as_ivec2();
-        let moved = match self.gpu {
-            None => true,
-            Some(origin) => {
-                let off = (cell - origin - (side / 2).as_ivec2()).abs();
-                off.cmpgt((side / 8).as_ivec2()).any()
-            }
+        // Inside a clamped world; anywhere on a repeating one (the rect wraps).
+        let origin = match m.wrap {
+            WrapMode::Clamp => centred
+                .max(IVec2::ZERO)
+                .min((m.world_size - side).as_ivec2()),
+            WrapMode::Repeat => centred,
         };
-        if moved {
-            // Inside a clamped world; anywhere on a repeating one (the rect wraps).
-            let origin = match m.wrap {
-                WrapMode::Clamp => centred
-                    .max(IVec2::ZERO)
-                    .min((m.world_size - side).as_ivec2()),
-                WrapMode::Repeat => centred,
-            };
+        // Moved once the place it should be is an eighth of a side away: near a clamped
+        // world's edge that place stays put, so the window does too.
+        let moved = self
+            .gpu
+            .is_none_or(|at| (origin - at).abs().cmpgt((side / 8).as_ivec2()).any());
+        // On a repeating world a change's rect and the windows may be a period apart: read
+        // the windows again.
+        let repeat = m.wrap == WrapMode::Repeat && !self.changed.is_empty();
+        if moved || repeat {
+            self.changed.clear();
             let rect = Rect::new(origin, side);
             scene.move_hole_window(side.x, origin, &read_holes(world, rect)?)?;
             scene.move_paint_window(side.x, origin, &read_paint(world, rect)?)?;
@@ -143,6 +158,18 @@ impl WorldOverlays {
                 scene.move_color_window(side.x, origin, &read_color(world, rect)?)?;
             }
             self.gpu = Some(origin);
+        }
+        // What was cut or painted since: only its rect, read again and written into the
+        // windows (the parts they cover).
+        for (rect, layer) in std::mem::take(&mut self.changed) {
+            match layer {
+                Changed::Holes => {
+                    scene.update_windows(rect, Some(&read_holes(world, rect)?), None)?
+                }
+                Changed::Paint => {
+                    scene.update_windows(rect, None, Some(&read_paint(world, rect)?))?
+                }
+            }
         }
         Ok(())
     }

@@ -12,7 +12,7 @@
 
 use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::resources::window::{WindowOrigin, covered, planned_move};
+use crate::resources::window::{WindowOrigin, covered, planned_move, planned_write};
 use glam::{IVec2, UVec2};
 use terrain_core::{CoreError, Grid, Rect};
 
@@ -125,7 +125,7 @@ impl GpuHoleMask {
             mask.size(),
         )?;
         for (offset, texels) in pieces {
-            self.upload(queue, mask.as_slice(), offset, texels);
+            self.upload(queue, mask.as_slice(), offset, texels, self.size.x);
         }
         at.set(origin);
         Ok(())
@@ -162,12 +162,34 @@ impl GpuHoleMask {
             return Ok(());
         }
         let offset = u64::from(rect.min.y as u32) * u64::from(self.size.x) + rect.min.x as u64;
-        self.upload(queue, mask.as_slice(), offset, rect);
+        self.upload(queue, mask.as_slice(), offset, rect, self.size.x);
         Ok(())
     }
 
-    /// Writes `rect` of the texture from `bytes` (rows of the texture's width) from `offset`.
-    fn upload(&self, queue: &wgpu::Queue, bytes: &[u8], offset: u64, rect: Rect) {
+    /// Rewrites the world cells `rect` of a placed window with `mask`, their hole mask (after a
+    /// cut changed them; the cells outside the window are left out). Fails on the whole map's
+    /// mask and on a mask of another size than `rect`.
+    pub fn update_window(
+        &self,
+        queue: &wgpu::Queue,
+        rect: Rect,
+        mask: &Grid<u8>,
+    ) -> Result<(), GpuError> {
+        let pieces = planned_write(
+            self.origin.as_ref(),
+            "hole mask to update",
+            self.size,
+            rect,
+            mask.size(),
+        )?;
+        for (offset, texels) in pieces {
+            self.upload(queue, mask.as_slice(), offset, texels, rect.size.x);
+        }
+        Ok(())
+    }
+
+    /// Writes `rect` of the texture from `bytes` (rows of `row` cells) from `offset`.
+    fn upload(&self, queue: &wgpu::Queue, bytes: &[u8], offset: u64, rect: Rect, row: u32) {
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &self.texture,
@@ -182,7 +204,7 @@ impl GpuHoleMask {
             bytes,
             wgpu::TexelCopyBufferLayout {
                 offset,
-                bytes_per_row: Some(self.size.x),
+                bytes_per_row: Some(row),
                 rows_per_image: Some(rect.size.y),
             },
             wgpu::Extent3d {

@@ -19,7 +19,7 @@ use crate::device::download::download_bytes;
 use crate::error::GpuError;
 use crate::resources::maps::map_buffer;
 use crate::resources::materials::{rgba8_texture_with, write_rgba8};
-use crate::resources::window::{WindowOrigin, covered, planned_move};
+use crate::resources::window::{WindowOrigin, covered, planned_move, planned_write};
 use glam::{IVec2, UVec2};
 use terrain_core::{CoreError, Grid, Rect};
 
@@ -161,6 +161,28 @@ impl GpuMaterialLayer {
             write_rgba8(queue, &self.texture, paint, offset, texels);
         }
         at.set(origin);
+        Ok(())
+    }
+
+    /// Rewrites the world cells `rect` of a placed window with `paint`, their material layer
+    /// (after a crater painted them; the cells outside the window are left out). Fails on the
+    /// whole map's layer and on paint of another size than `rect`.
+    pub fn update_window(
+        &self,
+        queue: &wgpu::Queue,
+        rect: Rect,
+        paint: &Grid<[u8; 4]>,
+    ) -> Result<(), GpuError> {
+        let pieces = planned_write(
+            self.origin.as_ref(),
+            "material layer to update",
+            self.size,
+            rect,
+            paint.size(),
+        )?;
+        for (offset, texels) in pieces {
+            write_rgba8(queue, &self.texture, paint, offset, texels);
+        }
         Ok(())
     }
 

@@ -69,6 +69,47 @@ pub(crate) fn planned_move<'a>(
     Ok((at, window_pieces(origin, size)?))
 }
 
+/// A checked write of the world cells `rect` (in the window's own unwrapped frame, as its
+/// origin was given) with new cells of `data` in size into a window of `size` whose place is
+/// `window`: the pieces of `rect` the window covers, their offsets into `data`'s row-major
+/// cells. None before the window is placed or where `rect` misses it. Fails on a whole map's
+/// layer (`what` names it) and on cells of another size than `rect`.
+pub(crate) fn planned_write(
+    window: Option<&WindowOrigin>,
+    what: &'static str,
+    size: UVec2,
+    rect: Rect,
+    data: UVec2,
+) -> Result<Pieces, CoreError> {
+    let Some(at) = window else {
+        return Err(CoreError::OutOfRange {
+            what,
+            value: 0.0,
+            expected: "a window, not a whole map's layer",
+        });
+    };
+    if data != rect.size {
+        return Err(CoreError::SizeMismatch {
+            expected: rect.size,
+            actual: data,
+        });
+    }
+    let Some(inside) = at.get().and_then(|o| rect.intersect(&Rect::new(o, size))) else {
+        return Ok(Vec::new());
+    };
+    Ok(inside
+        .split_toroidal(size)
+        .into_iter()
+        .map(|piece| {
+            let src = (piece.unwrapped.min - rect.min).as_uvec2();
+            (
+                u64::from(src.y) * u64::from(rect.size.x) + u64::from(src.x),
+                piece.map,
+            )
+        })
+        .collect())
+}
+
 /// The pieces a window of `size` at `origin` is uploaded in: for each, the offset of its first
 /// cell in the window's row-major cells, and the texels it goes to. Fails on an origin whose
 /// window would leave the `i32` range of cells.
