@@ -119,7 +119,7 @@ fn a_built_world_is_valid_and_its_zero_tiles_are_known_empty() {
     assert_eq!(
         report.zero,
         5 + 90,
-        "4 level-0 tiles and 1 level-1 tile are the zero tile, and no tile has a hole, paint or colour"
+        "4 level-0 tiles and 1 level-1 tile are the zero tile; no hole, paint or colour"
     );
     assert_eq!(calls.get(), report.tiles);
     // A repair of a valid world writes nothing.

@@ -46,8 +46,9 @@ const REFINE_STEPS: usize = 100;
 impl HeightField {
     /// The contact of a sphere at local `center` with `radius` (>= 0) against the surface, or
     /// `None` if they do not touch. Cells cut away ([`HeightField::with_holes`]) are no
-    /// surface: a sphere over a hole touches only the ground around it. Inputs must be finite and the radius not negative
-    /// ([`HeightfieldCollider::sphere_contact`] checks them); other inputs give `None`.
+    /// surface: a sphere over a hole touches only the ground around it. Inputs must be finite
+    /// and the radius not negative ([`HeightfieldCollider::sphere_contact`] checks them);
+    /// other inputs give `None`.
     ///
     /// Cost: the cells under the sphere (radius / texel size squared), or for a centre below
     /// ground, the cells within its depth below the surface; at most one period of the

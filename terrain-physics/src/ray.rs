@@ -78,8 +78,8 @@ impl HeightField {
     /// ([`HeightField::with_holes`]) have no surface: rays pass through them, and a ray that
     /// enters the ground beside a hole from below its surface is stopped where it enters
     /// (solid ground, as for an origin below the surface). Below the field's lowest height
-    /// there is nothing to hit. Otherwise the hit is the first crossing of the bilinear surface,
-    /// found exactly cell by cell. Rays cross the map's edges freely (the surface repeats).
+    /// there is nothing to hit. Otherwise the hit is the first crossing of the bilinear
+    /// surface, found exactly cell by cell. Rays cross the map's edges freely (the surface repeats).
     /// `max_dist` must be finite and not negative ([`HeightfieldCollider::raycast`] checks it);
     /// the walk costs one step per cell crossed within the field's height bounds, at most
     /// `4 (width + height) + 4096` cells (four times around the repeating field, and a fixed allowance): a ray still
