@@ -84,7 +84,7 @@ fn read_region<T: Copy>(
             let Some(overlap) = piece_map.intersect(&tile_rect) else {
                 return Ok(());
             };
-            let at = overlap.min - piece_map.min + piece_unwrapped.min - rect.min;
+            let at = (overlap.min - piece_map.min) + (piece_unwrapped.min - rect.min);
             let src = overlap.min - tile_rect.min;
             let w = overlap.size.x as usize;
             for row in 0..overlap.size.y {
@@ -122,7 +122,7 @@ fn write_region<T: Copy + PartialEq>(
             };
             let mut tile = world.load_tile(layer, id)?.as_ref().clone();
             let cells = samples(&mut tile).ok_or(CacheError::NoSuchLayer { layer })?;
-            let at = overlap.min - piece_map.min + piece_unwrapped.min - rect.min;
+            let at = (overlap.min - piece_map.min) + (piece_unwrapped.min - rect.min);
             let dst = overlap.min - tile_rect.min;
             let w = overlap.size.x as usize;
             let mut differs = false;
@@ -274,6 +274,23 @@ mod tests {
         let huge = Rect::new(IVec2::ZERO, UVec2::splat(1 << 15));
         assert!(read_holes(&w, huge).is_err());
         assert!(w.store().list("hole").expect("list").is_empty());
+        // Rects at the ends of the i32 range, on a clamped and a repeating world: an error or
+        // an answer, never a panic.
+        let dir2 = crate::store::tests::temp_dir("overlays-extreme");
+        let wrapped = world(&dir2, WrapMode::Repeat);
+        for min in [
+            IVec2::splat(i32::MIN),
+            IVec2::splat(i32::MAX - 3),
+            IVec2::new(i32::MIN, 7),
+        ] {
+            let rect = Rect::new(min, UVec2::splat(8));
+            assert!(read_holes(&w, rect).is_err(), "{rect:?}");
+            if let Ok(mask) = read_holes(&wrapped, rect) {
+                assert_eq!(mask.size(), rect.size);
+            }
+            let _ = write_holes(&wrapped, rect, &Grid::new(8, 8, 0u8).expect("mask"));
+        }
+        let _ = std::fs::remove_dir_all(dir2);
         // A damaged hole file is an error naming the tile, not a panic.
         let key = w.manifest().tile_key(Layer::Hole, TileId::new(0, 0, 0));
         w.store().write(&key, b"not a tile").expect("write");
