@@ -373,6 +373,10 @@ fn a_colour_window_colours_what_it_covers_and_fades_towards_its_edges() {
             .is_err()
     );
     assert!(GpuColorLayer::window(device, queue, 0).is_err());
+    // A side beyond the device's textures is refused before anything is allocated.
+    assert!(GpuColorLayer::window(device, queue, u32::MAX).is_err());
+    assert!(GpuMaterialLayer::window(device, queue, u32::MAX).is_err());
+    assert!(GpuHoleMask::window(device, u32::MAX).is_err());
     let whole = GpuColorLayer::new(device, queue, &colors).expect("layer");
     assert!(
         whole

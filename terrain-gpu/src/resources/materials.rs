@@ -540,6 +540,15 @@ impl GpuColorLayer {
             }
             .into());
         }
+        // Checked before the cells are allocated.
+        if side > device.limits().max_texture_dimension_2d {
+            return Err(CoreError::OutOfRange {
+                what: "colour window side",
+                value: f64::from(side),
+                expected: "at most the device's max_texture_dimension_2d",
+            }
+            .into());
+        }
         let clear = terrain_core::Grid::new(side, side, [0u8; 4])?;
         Ok(Self {
             origin: Some(WindowOrigin::unset()),
