@@ -9,8 +9,9 @@
 //! else on the CPU in RAM. Changed tiles are written back into the world (atomically, off the
 //! frame thread) when evicted and at the end, so a second run starts from the deformed world.
 //!
-//! On frame [`HOLE_FRAME`] a hole is cut beside the path into the world's hole tiles (saved at
-//! once); collision and the GPU's frames leave it out (`world_holes`), in this run and the next.
+//! On frame [`HOLE_FRAME`] a hole is cut beside the path into the world's hole tiles, and the
+//! craters paint dirt into its material tiles, both written by a thread of their own
+//! (`world_overlays`); collision and the GPU's frames follow, in this run and the next.
 //!
 //! Collision follows the camera: a `CollisionWindow` of [`COLLISION_WINDOW`] texels filled from
 //! the RAM pool (coarser data where a level-0 tile is not loaded yet, refilled when it is)
@@ -579,11 +580,10 @@ impl Scenario for FlyoverScenario {
             } else {
                 crater = self.stamps.push(WorldStamp::Crater, placement)? > 0;
             }
-            // Its dirt goes into the world's material tiles at once.
+            // Its dirt goes into the world's material tiles (on the overlays' writer thread).
             if crater {
-                let world = self.pool()?.world().clone();
                 self.overlays
-                    .paint(&world, &placement, &crate::gpu_scene::CRATER_DIRT)?;
+                    .paint(&placement, &crate::gpu_scene::CRATER_DIRT)?;
             }
         }
         // The world scenario's shockwave beside the path.
@@ -680,7 +680,8 @@ impl Scenario for FlyoverScenario {
         }
         let dirty = self.update_overview(&changed)?;
         self.update_window(xz)?;
-        // The hole: into the world's files at once; the masks around the camera follow.
+        // The hole, written into the world off the frame thread; the layers around the camera
+        // follow.
         let world = self.pool()?.world().clone();
         if self.frame == HOLE_FRAME {
             let ts = self.texel_size;
@@ -688,7 +689,7 @@ impl Scenario for FlyoverScenario {
             let center = reflect_into(travelled + self.heading * HOLE_AHEAD + aside, self.extent);
             let size = HOLE_SIZE.clamp(4.0 * ts, self.tile_size as f32 * ts);
             let placement = StampPlacement::new(center, Vec2::splat(size), 0.0)?;
-            self.overlays.cut(&world, &placement)?;
+            self.overlays.cut(&placement)?;
         }
         self.overlays
             .follow(&world, &self.window, xz, ctx.gpu.as_deref_mut())?;
@@ -753,6 +754,8 @@ impl Scenario for FlyoverScenario {
     }
 
     fn finish(&mut self, gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
+        // The holes and paint still on their way are in the world's files.
+        self.overlays.finish()?;
         // The tiles stamped on the GPU reach RAM before anything is written back.
         let mut gpu = gpu;
         if let Some(scene) = gpu.as_deref_mut() {

@@ -1,17 +1,19 @@
 //! What a streamed world lays over its heights: holes (`terrain_core::holes`, the world's hole
 //! tiles) and paint (`terrain_core::material_effect`, its material tiles). A hole cut beside
-//! the path, or a crater's dirt, is written into the world at once (atomically, tile by tile),
-//! and the layers around the camera follow: the collision window's holes, and the GPU's hole,
-//! paint and colour windows of [`GPU_WINDOW`] cells (colour where the world has it: an
-//! orthophoto given with `--color`).
-//! A second run reads both back from the world.
+//! the path, or a crater's dirt, is written into the world on a thread of its own (in order,
+//! atomically, tile by tile), and the layers around the camera follow: the collision window's
+//! holes, and the GPU's hole, paint and colour windows of [`GPU_WINDOW`] cells (colour where
+//! the world has it: an orthophoto given with `--color`). A second run reads them back from
+//! the world.
 
 use crate::gpu_scene::GpuScene;
-use anyhow::Result;
+use anyhow::{Result, anyhow};
 use glam::{IVec2, UVec2, Vec2};
+use std::sync::mpsc;
 use terrain_cache::{Layer, World, read_color, read_holes, read_paint, write_holes, write_paint};
 use terrain_core::{
-    HoleOp, MaterialEffect, Rect, StampPlacement, WrapMode, apply_hole_stamp, apply_material_effect,
+    Grid, HoleOp, MaterialEffect, Rect, StampPlacement, WrapMode, apply_hole_stamp,
+    apply_material_effect,
 };
 use terrain_physics::CollisionWindow;
 
@@ -20,6 +22,102 @@ use terrain_physics::CollisionWindow;
 /// their edges stay at least 768 cells away: 384 m at the default world's 0.5 m, where the
 /// default fog (0.008 /m) hides 95 % of the ground, and a hole appearing there barely shows.
 pub const GPU_WINDOW: u32 = 2048;
+
+/// A change to make to the world.
+#[derive(Debug, Clone, Copy)]
+enum Job {
+    /// Cut a hole at the placement.
+    Cut(StampPlacement),
+    /// Paint the effect over the placement's footprint.
+    Paint(StampPlacement, MaterialEffect),
+}
+
+/// The cells a job changed, as the world now holds them.
+#[derive(Debug)]
+enum Changed {
+    Holes(Rect, Grid<u8>),
+    Paint(Rect, Grid<[u8; 4]>),
+}
+
+/// The thread that writes the jobs into the world, one after the other: a job reads what the
+/// ones before it wrote.
+#[derive(Debug)]
+struct Writer {
+    jobs: Option<mpsc::Sender<Job>>,
+    done: mpsc::Receiver<Result<Option<Changed>>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Writer {
+    fn start(world: World) -> Result<Self> {
+        let (jobs, queue) = mpsc::channel::<Job>();
+        let (report, done) = mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("world overlays".into())
+            .spawn(move || {
+                for job in queue {
+                    if report.send(apply(&world, job)).is_err() {
+                        return;
+                    }
+                }
+            })?;
+        Ok(Self {
+            jobs: Some(jobs),
+            done,
+            thread: Some(thread),
+        })
+    }
+
+    fn send(&self, job: Job) -> Result<()> {
+        self.jobs
+            .as_ref()
+            .and_then(|jobs| jobs.send(job).ok())
+            .ok_or_else(|| anyhow!("the world overlays' writer has stopped"))
+    }
+
+    /// Waits for every job sent and returns what they changed.
+    fn finish(&mut self) -> Result<Vec<Changed>> {
+        self.jobs = None;
+        if let Some(thread) = self.thread.take() {
+            thread
+                .join()
+                .map_err(|_| anyhow!("the world overlays' writer panicked"))?;
+        }
+        self.done.try_iter().filter_map(Result::transpose).collect()
+    }
+}
+
+impl Drop for Writer {
+    fn drop(&mut self) {
+        // The queued jobs are written before the run ends (their errors were the run's).
+        let _ = self.finish();
+    }
+}
+
+/// Makes `job`'s change in `world`: reads the cells, changes them, writes them back.
+fn apply(world: &World, job: Job) -> Result<Option<Changed>> {
+    let ts = world.manifest().texel_size;
+    let placement = match job {
+        Job::Cut(p) | Job::Paint(p, _) => p,
+    };
+    let Some((rect, local)) = footprint(world, &placement)? else {
+        return Ok(None);
+    };
+    Ok(Some(match job {
+        Job::Cut(_) => {
+            let mut region = read_holes(world, rect)?;
+            apply_hole_stamp(&mut region, WrapMode::Clamp, ts, &local, HoleOp::Cut)?;
+            write_holes(world, rect, &region)?;
+            Changed::Holes(rect, region)
+        }
+        Job::Paint(_, effect) => {
+            let mut region = read_paint(world, rect)?;
+            apply_material_effect(&mut region, WrapMode::Clamp, ts, &local, &effect)?;
+            write_paint(world, rect, &region)?;
+            Changed::Paint(rect, region)
+        }
+    }))
+}
 
 /// The layers that follow the camera over a streamed world.
 #[derive(Debug)]
@@ -30,15 +128,7 @@ pub struct WorldOverlays {
     gpu: Option<IVec2>,
     /// Whether the world has colour tiles (most have none: no colour window is read then).
     colored: bool,
-    /// Rects cut or painted since the GPU's windows were last brought up to date, and which.
-    changed: Vec<(Rect, Changed)>,
-}
-
-/// Which layer a change was made to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Changed {
-    Holes,
-    Paint,
+    writer: Writer,
 }
 
 /// The cells of a stamp's footprint on the world (clamped to a clamped world; a repeating
@@ -63,49 +153,32 @@ fn footprint(world: &World, placement: &StampPlacement) -> Result<Option<(Rect, 
 }
 
 impl WorldOverlays {
-    /// The layers of `world`, nothing read yet.
+    /// The layers of `world`, nothing read yet, and the thread that writes into it.
     pub fn new(world: &World) -> Result<Self> {
         let colored = !world.store().list(Layer::Color.folder())?.is_empty();
         Ok(Self {
             collision: None,
             gpu: None,
             colored,
-            changed: Vec::new(),
+            writer: Writer::start(world.clone())?,
         })
     }
 
-    /// Cuts a hole at `placement` (world metres) into `world`'s hole tiles, and has the masks
-    /// read again. Returns the tiles written.
-    pub fn cut(&mut self, world: &World, placement: &StampPlacement) -> Result<u32> {
-        let Some((rect, local)) = footprint(world, placement)? else {
-            return Ok(0);
-        };
-        let mut region = read_holes(world, rect)?;
-        let ts = world.manifest().texel_size;
-        apply_hole_stamp(&mut region, WrapMode::Clamp, ts, &local, HoleOp::Cut)?;
-        let written = write_holes(world, rect, &region)?;
-        self.collision = None;
-        self.changed.push((rect, Changed::Holes));
-        Ok(written)
+    /// Cuts a hole at `placement` (world metres) into the world's hole tiles, off the frame
+    /// thread; a later [`WorldOverlays::follow`] brings it to collision and the GPU.
+    pub fn cut(&mut self, placement: &StampPlacement) -> Result<()> {
+        self.writer.send(Job::Cut(*placement))
     }
 
-    /// Paints `effect` over the footprint of a stamp at `placement` into `world`'s material
-    /// tiles (the crater's dirt), and has the GPU's paint read again. Returns the tiles written.
-    pub fn paint(
-        &mut self,
-        world: &World,
-        placement: &StampPlacement,
-        effect: &MaterialEffect,
-    ) -> Result<u32> {
-        let Some((rect, local)) = footprint(world, placement)? else {
-            return Ok(0);
-        };
-        let mut region = read_paint(world, rect)?;
-        let ts = world.manifest().texel_size;
-        apply_material_effect(&mut region, WrapMode::Clamp, ts, &local, effect)?;
-        let written = write_paint(world, rect, &region)?;
-        self.changed.push((rect, Changed::Paint));
-        Ok(written)
+    /// Paints `effect` over the footprint of a stamp at `placement` into the world's material
+    /// tiles (the crater's dirt), off the frame thread, as [`WorldOverlays::cut`] cuts.
+    pub fn paint(&mut self, placement: &StampPlacement, effect: &MaterialEffect) -> Result<()> {
+        self.writer.send(Job::Paint(*placement, *effect))
+    }
+
+    /// Waits until every cut and paint is in the world's files (the end of a run).
+    pub fn finish(&mut self) -> Result<()> {
+        self.writer.finish().map(|_| ())
     }
 
     /// Brings the layers to the camera at `xz` (world metres): the collision window's holes
@@ -119,6 +192,16 @@ impl WorldOverlays {
         xz: Vec2,
         scene: Option<&mut GpuScene>,
     ) -> Result<()> {
+        // What the writer has finished since the last frame (a failure ends the run).
+        let mut changed = Vec::new();
+        for done in self.writer.done.try_iter() {
+            if let Some(change) = done? {
+                if matches!(change, Changed::Holes(..)) {
+                    self.collision = None;
+                }
+                changed.push(change);
+            }
+        }
         if let Some(rect) = window.window()
             && self.collision != Some(rect)
         {
@@ -126,8 +209,6 @@ impl WorldOverlays {
             self.collision = Some(rect);
         }
         let Some(scene) = scene else {
-            // Without a GPU there are no windows to bring up to date.
-            self.changed.clear();
             return Ok(());
         };
         let m = world.manifest();
@@ -148,9 +229,9 @@ impl WorldOverlays {
             .is_none_or(|at| (origin - at).abs().cmpgt((side / 8).as_ivec2()).any());
         // On a repeating world a change's rect and the windows may be a period apart: read
         // the windows again.
-        let repeat = m.wrap == WrapMode::Repeat && !self.changed.is_empty();
+        let repeat = m.wrap == WrapMode::Repeat && !changed.is_empty();
         if moved || repeat {
-            self.changed.clear();
+            changed.clear();
             let rect = Rect::new(origin, side);
             scene.move_hole_window(side.x, origin, &read_holes(world, rect)?)?;
             scene.move_paint_window(side.x, origin, &read_paint(world, rect)?)?;
@@ -159,16 +240,12 @@ impl WorldOverlays {
             }
             self.gpu = Some(origin);
         }
-        // What was cut or painted since: only its rect, read again and written into the
-        // windows (the parts they cover).
-        for (rect, layer) in std::mem::take(&mut self.changed) {
-            match layer {
-                Changed::Holes => {
-                    scene.update_windows(rect, Some(&read_holes(world, rect)?), None)?
-                }
-                Changed::Paint => {
-                    scene.update_windows(rect, None, Some(&read_paint(world, rect)?))?
-                }
+        // What was cut or painted since: only its rect, written into the windows (the parts
+        // they cover).
+        for change in changed {
+            match change {
+                Changed::Holes(rect, mask) => scene.update_windows(rect, Some(&mask), None)?,
+                Changed::Paint(rect, paint) => scene.update_windows(rect, None, Some(&paint))?,
             }
         }
         Ok(())
