@@ -12,7 +12,7 @@
 
 use crate::device::scope::scoped;
 use crate::error::GpuError;
-use crate::resources::window::{WindowOrigin, covered, planned_move, planned_write};
+use crate::resources::window::{WindowOrigin, covered, planned_move, planned_write, upload_pieces};
 use glam::{IVec2, UVec2};
 use terrain_core::{CoreError, Grid, Rect};
 
@@ -124,9 +124,7 @@ impl GpuHoleMask {
             origin,
             mask.size(),
         )?;
-        for (offset, texels) in pieces {
-            self.upload(queue, mask.as_slice(), offset, texels, self.size.x);
-        }
+        upload_pieces(queue, &self.texture, mask.as_slice(), self.size.x, &pieces);
         at.set(origin);
         Ok(())
     }
@@ -162,7 +160,13 @@ impl GpuHoleMask {
             return Ok(());
         }
         let offset = u64::from(rect.min.y as u32) * u64::from(self.size.x) + rect.min.x as u64;
-        self.upload(queue, mask.as_slice(), offset, rect, self.size.x);
+        upload_pieces(
+            queue,
+            &self.texture,
+            mask.as_slice(),
+            self.size.x,
+            &[(offset, rect)],
+        );
         Ok(())
     }
 
@@ -182,36 +186,7 @@ impl GpuHoleMask {
             rect,
             mask.size(),
         )?;
-        for (offset, texels) in pieces {
-            self.upload(queue, mask.as_slice(), offset, texels, rect.size.x);
-        }
+        upload_pieces(queue, &self.texture, mask.as_slice(), rect.size.x, &pieces);
         Ok(())
-    }
-
-    /// Writes `rect` of the texture from `bytes` (rows of `row` cells) from `offset`.
-    fn upload(&self, queue: &wgpu::Queue, bytes: &[u8], offset: u64, rect: Rect, row: u32) {
-        queue.write_texture(
-            wgpu::TexelCopyTextureInfo {
-                texture: &self.texture,
-                mip_level: 0,
-                origin: wgpu::Origin3d {
-                    x: rect.min.x as u32,
-                    y: rect.min.y as u32,
-                    z: 0,
-                },
-                aspect: wgpu::TextureAspect::All,
-            },
-            bytes,
-            wgpu::TexelCopyBufferLayout {
-                offset,
-                bytes_per_row: Some(row),
-                rows_per_image: Some(rect.size.y),
-            },
-            wgpu::Extent3d {
-                width: rect.size.x,
-                height: rect.size.y,
-                depth_or_array_layers: 1,
-            },
-        );
     }
 }

@@ -18,8 +18,8 @@
 use crate::device::download::download_bytes;
 use crate::error::GpuError;
 use crate::resources::maps::map_buffer;
-use crate::resources::materials::{rgba8_texture_with, write_rgba8};
-use crate::resources::window::{WindowOrigin, covered, planned_move, planned_write};
+use crate::resources::materials::rgba8_texture_with;
+use crate::resources::window::{WindowOrigin, covered, planned_move, planned_write, upload_pieces};
 use glam::{IVec2, UVec2};
 use terrain_core::{CoreError, Grid, Rect};
 
@@ -157,9 +157,7 @@ impl GpuMaterialLayer {
             origin,
             paint.size(),
         )?;
-        for (offset, texels) in pieces {
-            write_rgba8(queue, &self.texture, paint, offset, texels);
-        }
+        upload_pieces(queue, &self.texture, paint.as_slice(), self.size.x, &pieces);
         at.set(origin);
         Ok(())
     }
@@ -180,9 +178,7 @@ impl GpuMaterialLayer {
             rect,
             paint.size(),
         )?;
-        for (offset, texels) in pieces {
-            write_rgba8(queue, &self.texture, paint, offset, texels);
-        }
+        upload_pieces(queue, &self.texture, paint.as_slice(), rect.size.x, &pieces);
         Ok(())
     }
 

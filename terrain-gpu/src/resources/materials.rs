@@ -12,7 +12,7 @@ use crate::device::scope::scoped;
 use crate::error::GpuError;
 use crate::resources::hole_mask::GpuHoleMask;
 use crate::resources::material_layer::GpuMaterialLayer;
-use crate::resources::window::{WindowOrigin, covered, planned_move};
+use crate::resources::window::{WindowOrigin, covered, planned_move, upload_pieces};
 use terrain_core::{AutoshadeParams, CoreError, MATERIALS, MaterialImages, MaterialTextures};
 
 /// How the renderers colour the surface.
@@ -584,9 +584,13 @@ impl GpuColorLayer {
             origin,
             colors.size(),
         )?;
-        for (offset, texels) in pieces {
-            write_rgba8(queue, &self.texture, colors, offset, texels);
-        }
+        upload_pieces(
+            queue,
+            &self.texture,
+            colors.as_slice(),
+            self.size.x,
+            &pieces,
+        );
         at.set(origin);
         Ok(())
     }
@@ -600,40 +604,6 @@ impl GpuColorLayer {
     pub fn bytes(&self) -> u64 {
         4 * u64::from(self.size.x) * u64::from(self.size.y)
     }
-}
-
-/// Writes `texels` (texture coordinates) of `texture`, a square texture of `data`'s side, from
-/// `data`'s row-major cells starting at cell `offset`.
-pub(crate) fn write_rgba8(
-    queue: &wgpu::Queue,
-    texture: &wgpu::Texture,
-    data: &terrain_core::Grid<[u8; 4]>,
-    offset: u64,
-    texels: terrain_core::Rect,
-) {
-    queue.write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d {
-                x: texels.min.x as u32,
-                y: texels.min.y as u32,
-                z: 0,
-            },
-            aspect: wgpu::TextureAspect::All,
-        },
-        bytemuck::cast_slice(data.as_slice()),
-        wgpu::TexelCopyBufferLayout {
-            offset: 4 * offset,
-            bytes_per_row: Some(4 * data.width()),
-            rows_per_image: Some(texels.size.y),
-        },
-        wgpu::Extent3d {
-            width: texels.size.x,
-            height: texels.size.y,
-            depth_or_array_layers: 1,
-        },
-    );
 }
 
 /// A 2D `Rgba8Unorm` texture of `size` holding `texels`, and its view.

@@ -135,6 +135,43 @@ fn window_pieces(origin: IVec2, size: UVec2) -> Result<Pieces, CoreError> {
         .collect())
 }
 
+/// Uploads `pieces` of `data` (row-major cells of `T`, `row` cells a row) into `texture`, a
+/// texture of one `T` per texel: each piece's cells from its offset to its texels.
+pub(crate) fn upload_pieces<T: bytemuck::Pod>(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    data: &[T],
+    row: u32,
+    pieces: &[(u64, Rect)],
+) {
+    let texel = std::mem::size_of::<T>() as u32;
+    for &(offset, texels) in pieces {
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: texels.min.x as u32,
+                    y: texels.min.y as u32,
+                    z: 0,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytemuck::cast_slice(data),
+            wgpu::TexelCopyBufferLayout {
+                offset: u64::from(texel) * offset,
+                bytes_per_row: Some(texel * row),
+                rows_per_image: Some(texels.size.y),
+            },
+            wgpu::Extent3d {
+                width: texels.size.x,
+                height: texels.size.y,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+}
+
 /// The world cells a layer of `size` covers for the frame uniform: the whole map's (`None`:
 /// origin 0), or a window's (nothing before its first move).
 pub(crate) fn covered(origin: Option<&WindowOrigin>, size: UVec2) -> [i32; 4] {
