@@ -69,6 +69,7 @@ pub mod lock;
 pub mod manifest;
 #[cfg(feature = "object-store")]
 pub mod object;
+mod overlay_pyramid;
 pub mod overlays;
 mod region_bounds;
 pub mod store;

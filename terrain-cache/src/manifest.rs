@@ -260,11 +260,13 @@ impl Manifest {
         match layer {
             Layer::Height if level < self.levels => self.tiles_at(level),
             Layer::Hole if level == 0 => self.tiles_at(0),
-            // RGBA tiles have no PNG form here: a version-1 world has no material layer.
+            // RGBA tiles have no PNG form here: a version-1 world has no material layer. Paint
+            // and colour have a pyramid like the heights (overlay_pyramid), so far ground is
+            // streamed at the level its heights are.
             Layer::Material | Layer::Color
-                if level == 0 && self.tile_format == TileFormat::Tile =>
+                if level < self.levels && self.tile_format == TileFormat::Tile =>
             {
-                self.tiles_at(0)
+                self.tiles_at(level)
             }
             Layer::Detail => match &self.detail {
                 Some(d) if level == 0 => d.tiles,
@@ -274,13 +276,15 @@ impl Manifest {
         }
     }
 
-    /// Levels of `layer` (the detail and hole layers have one).
+    /// Levels of `layer` (the detail and hole layers have one; paint and colour as many as the
+    /// heights, none in a version-1 world).
     pub fn layer_levels(&self, layer: Layer) -> u32 {
         match layer {
             Layer::Height => self.levels,
             Layer::Detail => u32::from(self.detail.is_some()),
             Layer::Hole => 1,
-            Layer::Material | Layer::Color => u32::from(self.tile_format == TileFormat::Tile),
+            Layer::Material | Layer::Color if self.tile_format == TileFormat::Tile => self.levels,
+            Layer::Material | Layer::Color => 0,
         }
     }
 

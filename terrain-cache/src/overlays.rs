@@ -6,9 +6,12 @@
 //! They are read and written on the world directly, not through the RAM pool: most tiles have
 //! no file (no hole, no paint), and a cut or a crater's paint changes a few tiles, so a region
 //! read when the camera moves on and a write of the tiles a change touched cost little. Each
-//! tile is written atomically ([`World::write_tile`]); a tile left empty loses its file.
+//! tile is written atomically ([`World::write_tile`]); a tile left empty loses its file. Paint
+//! and colour have coarser levels, which a write rebuilds above the tiles it changed, so the
+//! VRAM pool streams them with the heights; holes are level 0 only.
 
 use crate::error::CacheError;
+use crate::overlay_pyramid::rebuild_overlay_ancestors;
 use crate::tile::{Layer, TileData, TileId};
 use crate::world::World;
 use glam::{IVec2, UVec2};
@@ -34,12 +37,13 @@ pub fn read_holes(world: &World, rect: Rect) -> Result<Grid<u8>, CacheError> {
 
 /// Writes `mask`, the level-0 hole mask of `rect` (as [`read_holes`] returns it), into the hole
 /// tiles it covers: each tile is read, changed and written back atomically, and one left
-/// without a hole loses its file. Returns the tiles whose content changed.
+/// without a hole loses its file. Returns the tiles whose content changed (holes have level 0
+/// only).
 ///
 /// Fails, before anything is written, on a mask of another size than the rect and on a rect
 /// [`read_holes`] refuses; a tile that does not decode fails the call at that tile (the tiles
 /// before it are written).
-pub fn write_holes(world: &World, rect: Rect, mask: &Grid<u8>) -> Result<u32, CacheError> {
+pub fn write_holes(world: &World, rect: Rect, mask: &Grid<u8>) -> Result<Vec<TileId>, CacheError> {
     write_region(world, Layer::Hole, rect, mask, TileData::as_u8_mut)
 }
 
@@ -50,9 +54,15 @@ pub fn read_paint(world: &World, rect: Rect) -> Result<Grid<[u8; 4]>, CacheError
 }
 
 /// Writes `paint`, the material layer of `rect`, into the material tiles, as [`write_holes`]
-/// writes holes; an unpainted tile loses its file.
-pub fn write_paint(world: &World, rect: Rect, paint: &Grid<[u8; 4]>) -> Result<u32, CacheError> {
-    write_region(world, Layer::Material, rect, paint, TileData::as_rgba8_mut)
+/// writes holes (an unpainted tile loses its file), then the coarser levels' tiles above the
+/// changed ones (`overlay_pyramid`). Returns every tile whose file was rewritten, level 0 first:
+/// a RAM pool of the layer reloads them ([`RamPool::reload`](crate::RamPool::reload)).
+pub fn write_paint(
+    world: &World,
+    rect: Rect,
+    paint: &Grid<[u8; 4]>,
+) -> Result<Vec<TileId>, CacheError> {
+    write_layer(world, Layer::Material, rect, paint)
 }
 
 /// The level-0 colour layer (sRGB, alpha its cover) of `rect`, as [`read_paint`] reads paint.
@@ -60,10 +70,27 @@ pub fn read_color(world: &World, rect: Rect) -> Result<Grid<[u8; 4]>, CacheError
     read_region(world, Layer::Color, rect, [0; 4], TileData::as_rgba8)
 }
 
-/// Writes `colors`, the colour layer of `rect`, into the colour tiles, as [`write_paint`]
-/// writes paint; a transparent tile loses its file.
-pub fn write_color(world: &World, rect: Rect, colors: &Grid<[u8; 4]>) -> Result<u32, CacheError> {
-    write_region(world, Layer::Color, rect, colors, TileData::as_rgba8_mut)
+/// Writes `colors`, the colour layer of `rect`, into the colour tiles and their coarser levels,
+/// as [`write_paint`] writes paint; a transparent tile loses its file.
+pub fn write_color(
+    world: &World,
+    rect: Rect,
+    colors: &Grid<[u8; 4]>,
+) -> Result<Vec<TileId>, CacheError> {
+    write_layer(world, Layer::Color, rect, colors)
+}
+
+/// Writes an RGBA layer's level-0 region and the coarser tiles above what changed.
+fn write_layer(
+    world: &World,
+    layer: Layer,
+    rect: Rect,
+    region: &Grid<[u8; 4]>,
+) -> Result<Vec<TileId>, CacheError> {
+    let mut changed = write_region(world, layer, rect, region, TileData::as_rgba8_mut)?;
+    let coarser = rebuild_overlay_ancestors(world, layer, &changed)?;
+    changed.extend(coarser);
+    Ok(changed)
 }
 
 fn read_region<T: Copy>(
@@ -104,7 +131,7 @@ fn write_region<T: Copy + PartialEq>(
     rect: Rect,
     region: &Grid<T>,
     samples: fn(&mut TileData) -> Option<&mut Grid<T>>,
-) -> Result<u32, CacheError> {
+) -> Result<Vec<TileId>, CacheError> {
     if region.size() != rect.size {
         return Err(CacheError::Core(terrain_core::CoreError::SizeMismatch {
             expected: rect.size,
@@ -112,7 +139,7 @@ fn write_region<T: Copy + PartialEq>(
         }));
     }
     let pieces = pieces(world, layer, rect)?;
-    let mut changed = 0u32;
+    let mut changed = Vec::new();
     for_each_tile(
         world,
         &pieces,
@@ -134,7 +161,7 @@ fn write_region<T: Copy + PartialEq>(
             }
             if differs {
                 world.write_tile(layer, id, &tile)?;
-                changed += 1;
+                changed.push(id);
             }
             Ok(())
         },
@@ -224,7 +251,7 @@ mod tests {
         let rect = Rect::new(IVec2::new(76, 44), UVec2::new(8, 8));
         let mask =
             Grid::from_fn(8, 8, |x, y| if (x + y) % 3 == 0 { 255 } else { 0 }).expect("mask");
-        assert_eq!(write_holes(&w, rect, &mask).expect("write"), 4);
+        assert_eq!(write_holes(&w, rect, &mask).expect("write").len(), 4);
         // Reopened: the same holes, and where nothing was written none.
         let w2 = World::open(w.store().clone()).expect("open");
         assert_eq!(read_holes(&w2, rect).expect("read"), mask);
@@ -237,23 +264,89 @@ mod tests {
         assert_eq!(at(79, 47), mask.get(3, 3).expect("cell"));
         assert_eq!(at(40, 20), 0);
         // The same mask again changes nothing; clearing it removes every hole file.
-        assert_eq!(write_holes(&w, rect, &mask).expect("write"), 0);
+        assert!(write_holes(&w, rect, &mask).expect("write").is_empty());
         let clear = Grid::new(8, 8, 0u8).expect("mask");
-        assert_eq!(write_holes(&w, rect, &clear).expect("write"), 4);
+        assert_eq!(write_holes(&w, rect, &clear).expect("write").len(), 4);
         assert!(w.store().list("hole").expect("list").is_empty());
         // Paint the same way: written across the corner, read back after a reopen, cleared.
         let paint = Grid::from_fn(8, 8, |x, y| [x as u8 * 30, y as u8 * 30, 7, 0]).expect("paint");
-        assert_eq!(write_paint(&w, rect, &paint).expect("write"), 4);
+        let written = write_paint(&w, rect, &paint).expect("write");
+        // The 4 corner tiles, then their coarser ancestors: 4 at level 1, 2 at 2, 1 at 3.
+        let at_level = |l| written.iter().filter(|id| id.level == l).count();
+        assert_eq!([0, 1, 2, 3].map(at_level), [4, 4, 2, 1], "{written:?}");
         let w3 = World::open(w.store().clone()).expect("open");
         assert_eq!(read_paint(&w3, rect).expect("read"), paint);
         let none = Grid::new(8, 8, [0u8; 4]).expect("paint");
-        assert_eq!(write_paint(&w, rect, &none).expect("write"), 4);
+        assert_eq!(write_paint(&w, rect, &none).expect("write").len(), 11);
         assert!(w.store().list("material").expect("list").is_empty());
         // Colour the same way.
-        assert_eq!(write_color(&w, rect, &paint).expect("write"), 4);
+        assert_eq!(write_color(&w, rect, &paint).expect("write").len(), 11);
         assert_eq!(read_color(&w3, rect).expect("read"), paint);
-        assert_eq!(write_color(&w, rect, &none).expect("write"), 4);
+        assert_eq!(write_color(&w, rect, &none).expect("write").len(), 11);
         assert!(w.store().list("color").expect("list").is_empty());
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn coarser_levels_hold_the_reduced_paint_and_colour() {
+        let dir = crate::store::tests::temp_dir("overlays-pyramid");
+        let w = world(&dir, WrapMode::Clamp);
+        // All of level 0 (80 x 48: partial tiles at the right and bottom of coarser levels).
+        let all = Rect::from_size(UVec2::new(80, 48));
+        let paint = Grid::from_fn(80, 48, |x, y| {
+            [
+                ((x * 7 + y * 3) % 256) as u8,
+                (x % 5 * 40) as u8,
+                0,
+                (y * 5) as u8,
+            ]
+        })
+        .expect("paint");
+        write_paint(&w, all, &paint).expect("write");
+        let colors = Grid::from_fn(80, 48, |x, y| {
+            [
+                (x * 3) as u8,
+                (y * 5) as u8,
+                90,
+                if (x / 3 + y) % 4 == 0 { 0 } else { 255 },
+            ]
+        })
+        .expect("colours");
+        write_color(&w, all, &colors).expect("write");
+        let m = *w.manifest();
+        for (layer, level0) in [(Layer::Material, &paint), (Layer::Color, &colors)] {
+            // The CPU reference: each level from the one below, texel by texel.
+            let mut below = level0.clone();
+            for level in 1..m.levels {
+                let size = m.level_size(level);
+                let expected = Grid::from_fn(size.x, size.y, |x, y| {
+                    let mut block = Vec::new();
+                    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        if let Some(t) = below.get(2 * x + dx, 2 * y + dy) {
+                            block.push(t);
+                        }
+                    }
+                    if layer == Layer::Color {
+                        crate::overlay_pyramid::mean_color(&block)
+                    } else {
+                        crate::overlay_pyramid::mean_paint(&block)
+                    }
+                })
+                .expect("level");
+                for id in m.tiles_of(layer, level) {
+                    let tile = w.load_tile(layer, id).expect("tile");
+                    let cells = tile.as_rgba8().expect("rgba");
+                    for y in 0..m.tile_size {
+                        for x in 0..m.tile_size {
+                            let (gx, gy) = (id.x * m.tile_size + x, id.y * m.tile_size + y);
+                            let want = expected.get(gx, gy).unwrap_or([0; 4]);
+                            assert_eq!(cells.get(x, y), Some(want), "{layer:?} {id:?} {x} {y}");
+                        }
+                    }
+                }
+                below = expected;
+            }
+        }
         let _ = std::fs::remove_dir_all(dir);
     }
 

@@ -266,8 +266,10 @@ fn promised_tiles(m: &Manifest) -> u64 {
         .map(|l| count(m.tiles_at(l)))
         .chain(std::iter::once(count(m.layer_tiles(Layer::Detail, 0))))
         .chain(std::iter::once(count(m.layer_tiles(Layer::Hole, 0))))
-        .chain(std::iter::once(count(m.layer_tiles(Layer::Material, 0))))
-        .chain(std::iter::once(count(m.layer_tiles(Layer::Color, 0))))
+        .chain(
+            (0..m.layer_levels(Layer::Material)).map(|l| count(m.layer_tiles(Layer::Material, l))),
+        )
+        .chain((0..m.layer_levels(Layer::Color)).map(|l| count(m.layer_tiles(Layer::Color, l))))
         .fold(0u64, u64::saturating_add)
 }
 
@@ -401,9 +403,11 @@ impl<'a> Walk<'a> {
             }
         }
         for layer in [Layer::Hole, Layer::Material, Layer::Color] {
-            let ids: Vec<TileId> = self.m.tiles_of(layer, 0).collect();
-            for id in ids {
-                self.flat_tile(layer, id)?;
+            for level in 0..self.m.layer_levels(layer) {
+                let ids: Vec<TileId> = self.m.tiles_of(layer, level).collect();
+                for id in ids {
+                    self.flat_tile(layer, id)?;
+                }
             }
         }
         Ok(())

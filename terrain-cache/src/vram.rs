@@ -34,7 +34,7 @@ use crate::pool::RamPool;
 use crate::tile::{Layer, TileData, TileId};
 use glam::{DVec2, DVec3, UVec2};
 use std::collections::HashMap;
-use terrain_core::{Grid, TileLayout, TileUploadTarget, WrapMode};
+use terrain_core::{Grid, OverlayUploadTarget, TileLayout, TileUploadTarget, WrapMode};
 
 /// Default per-frame upload budget: 2 MiB, sixteen 256^2 tiles of 16-bit heights. Fikkan 2013, sec. 5.3
 /// limits transfers to a fixed share of the frame (2 ms of 16.7 ms); the bytes that take depend
@@ -407,6 +407,18 @@ impl VramPool {
         &mut self,
         target: &mut T,
     ) -> Result<(), VramError<T::Error>> {
+        self.clear_slots(&mut HeightSlots(target))
+    }
+
+    /// [`clear`](Self::clear) for a pool filled by [`update_overlay`](Self::update_overlay).
+    pub fn clear_overlay<T: OverlayUploadTarget>(
+        &mut self,
+        target: &mut T,
+    ) -> Result<(), VramError<T::Error>> {
+        self.clear_slots(&mut OverlaySlots(target, Layer::Material))
+    }
+
+    fn clear_slots<S: Slots>(&mut self, target: &mut S) -> Result<(), VramError<S::Error>> {
         let ids: Vec<TileId> = self.resident.keys().copied().collect();
         for id in ids {
             target
@@ -433,6 +445,43 @@ impl VramPool {
     where
         R: RamTiles + ?Sized,
         T: TileUploadTarget,
+    {
+        self.update_slots(camera, ram, &mut HeightSlots(target))
+    }
+
+    /// [`update`](Self::update) for a world's paint or colour (`layer`, [`Layer::Material`] or
+    /// [`Layer::Color`]): the same selection and budget, uploading the RAM pool's RGBA8 tiles
+    /// of that layer into an [`OverlayUploadTarget`] (terrain-gpu's `GpuOverlayAtlas`). Give
+    /// the pool the same slots and selection as the heights' and it holds the look of the
+    /// ground the heights' pool holds the shape of. Tiles without a file arrive from the RAM
+    /// pool as its zero tile and are uploaded like any other: a transparent tile must hide the
+    /// coarser level's paint under it.
+    pub fn update_overlay<R, T>(
+        &mut self,
+        camera: &CameraState,
+        layer: Layer,
+        ram: &R,
+        target: &mut T,
+    ) -> Result<VramReport, VramError<T::Error>>
+    where
+        R: RamTiles + ?Sized,
+        T: OverlayUploadTarget,
+    {
+        if !matches!(layer, Layer::Material | Layer::Color) {
+            return Err(CacheError::NoSuchLayer { layer }.into());
+        }
+        self.update_slots(camera, ram, &mut OverlaySlots(target, layer))
+    }
+
+    fn update_slots<R, S>(
+        &mut self,
+        camera: &CameraState,
+        ram: &R,
+        target: &mut S,
+    ) -> Result<VramReport, VramError<S::Error>>
+    where
+        R: RamTiles + ?Sized,
+        S: Slots,
     {
         camera.validate()?;
         self.check_target(target)?;
@@ -498,7 +547,7 @@ impl VramPool {
                 }
                 continue;
             }
-            let heights = tile_heights(data, self.cfg.tile_size)?;
+            let texels = target.texels(data, self.cfg.tile_size)?;
             let slot = if let Some(e) = self.resident.get(&id) {
                 e.slot
             } else if let Some(s) = self.free.pop() {
@@ -530,7 +579,7 @@ impl VramPool {
                 }
             };
             let xy = UVec2::new(id.x, id.y);
-            let bytes = match target.upload(slot, id.level, xy, heights) {
+            let bytes = match target.upload(slot, id.level, xy, texels) {
                 Ok(b) => b,
                 Err(source) => {
                     if !is_resident {
@@ -582,7 +631,7 @@ impl VramPool {
     }
 
     /// Checks that the target indexes this pool's world with enough slots.
-    fn check_target<T: TileUploadTarget>(&self, target: &T) -> Result<(), CacheError> {
+    fn check_target<S: Slots>(&self, target: &S) -> Result<(), CacheError> {
         let mismatch =
             |what, pool: u64, target: u64| Err(CacheError::TargetMismatch { what, pool, target });
         let layout = target.layout();
@@ -717,21 +766,114 @@ impl VramPool {
     }
 }
 
-/// The u16 heights of a height tile of side `tile_size`, or the mismatch as an error.
-fn tile_heights(data: &TileData, tile_size: u32) -> Result<&Grid<u16>, CacheError> {
-    match data.as_u16() {
-        Some(g) if g.size() == UVec2::splat(tile_size) => Ok(g),
-        _ => {
-            let s = data.size();
-            Err(CacheError::TileDataMismatch {
-                layer: Layer::Height,
-                expected_bits: 16,
-                size: tile_size,
-                found_bits: data.bits(),
-                found_w: s.x,
-                found_h: s.y,
-            })
+/// What the pool uploads into: a height target or an overlay target, behind one interface.
+trait Slots {
+    type Error;
+    /// The samples a slot takes.
+    type Texels: ?Sized;
+    fn layout(&self) -> &TileLayout;
+    fn slot_count(&self) -> u32;
+    fn upload_bytes(&self) -> u64;
+    /// `data`'s samples, or the mismatch with the target's kind and `tile_size` as an error.
+    fn texels<'d>(
+        &self,
+        data: &'d TileData,
+        tile_size: u32,
+    ) -> Result<&'d Self::Texels, CacheError>;
+    fn upload(
+        &mut self,
+        slot: u32,
+        level: u32,
+        tile: UVec2,
+        texels: &Self::Texels,
+    ) -> Result<u64, Self::Error>;
+    fn map(&mut self, level: u32, tile: UVec2, slot: Option<u32>) -> Result<(), Self::Error>;
+}
+
+/// A height target.
+struct HeightSlots<'a, T>(&'a mut T);
+
+/// An overlay target of a layer.
+struct OverlaySlots<'a, T>(&'a mut T, Layer);
+
+impl<T: TileUploadTarget> Slots for HeightSlots<'_, T> {
+    type Error = T::Error;
+    type Texels = Grid<u16>;
+    fn layout(&self) -> &TileLayout {
+        self.0.layout()
+    }
+    fn slot_count(&self) -> u32 {
+        self.0.slot_count()
+    }
+    fn upload_bytes(&self) -> u64 {
+        self.0.upload_bytes()
+    }
+    fn texels<'d>(&self, data: &'d TileData, tile_size: u32) -> Result<&'d Grid<u16>, CacheError> {
+        match data.as_u16() {
+            Some(g) if g.size() == UVec2::splat(tile_size) => Ok(g),
+            _ => Err(mismatch(Layer::Height, data, tile_size)),
         }
+    }
+    fn upload(
+        &mut self,
+        slot: u32,
+        level: u32,
+        tile: UVec2,
+        texels: &Grid<u16>,
+    ) -> Result<u64, T::Error> {
+        self.0.upload(slot, level, tile, texels)
+    }
+    fn map(&mut self, level: u32, tile: UVec2, slot: Option<u32>) -> Result<(), T::Error> {
+        self.0.map(level, tile, slot)
+    }
+}
+
+impl<T: OverlayUploadTarget> Slots for OverlaySlots<'_, T> {
+    type Error = T::Error;
+    type Texels = Grid<[u8; 4]>;
+    fn layout(&self) -> &TileLayout {
+        self.0.layout()
+    }
+    fn slot_count(&self) -> u32 {
+        self.0.slot_count()
+    }
+    fn upload_bytes(&self) -> u64 {
+        self.0.upload_bytes()
+    }
+    fn texels<'d>(
+        &self,
+        data: &'d TileData,
+        tile_size: u32,
+    ) -> Result<&'d Grid<[u8; 4]>, CacheError> {
+        match data.as_rgba8() {
+            Some(g) if g.size() == UVec2::splat(tile_size) => Ok(g),
+            _ => Err(mismatch(self.1, data, tile_size)),
+        }
+    }
+    fn upload(
+        &mut self,
+        slot: u32,
+        level: u32,
+        tile: UVec2,
+        texels: &Grid<[u8; 4]>,
+    ) -> Result<u64, T::Error> {
+        self.0.upload(slot, level, tile, texels)
+    }
+    fn map(&mut self, level: u32, tile: UVec2, slot: Option<u32>) -> Result<(), T::Error> {
+        self.0.map(level, tile, slot)
+    }
+}
+
+/// Tile data of another kind or size than `layer`'s tiles of side `tile_size`.
+fn mismatch(layer: Layer, data: &TileData, tile_size: u32) -> CacheError {
+    let s = data.size();
+    CacheError::TileDataMismatch {
+        layer,
+        expected_bits: layer.bits(),
+        size: tile_size,
+        found_bits: data.bits(),
+        found_w: s.x,
+        found_h: s.y,
     }
 }
 

@@ -438,3 +438,55 @@ fn read_region_takes_level_0_where_loaded_and_the_nearest_coarser_sample_elsewhe
     assert_eq!(pool.generation(id), gen_before);
     pool.shutdown(Duration::from_secs(5)).unwrap();
 }
+
+#[test]
+fn reloaded_tiles_come_back_from_their_rewritten_files() {
+    // Paint written on the world under a material pool (as a writer of the world's paint
+    // does): once named to `reload`, the pool reports the tiles refreshed and holds the new
+    // texels, at level 0 and at the coarser levels the write rebuilt.
+    let world = mem_world(256, 32);
+    let tb = 32 * 32 * 4;
+    let mut pool = RamPool::new(world.clone(), PoolConfig::new(Layer::Material, 200 * tb)).unwrap();
+    let cam = CameraState::at(Vec3::new(20.0, 30.0, 20.0));
+    let (fine, coarse) = (TileId::new(0, 0, 0), TileId::new(1, 0, 0));
+    let loaded = |p: &RamPool, id| p.status(id).is_some_and(|s| s.state == TileState::Loaded);
+    pump(&mut pool, &cam, |p, _| loaded(p, fine) && loaded(p, coarse));
+    assert_eq!(
+        pool.tile(fine)
+            .and_then(|t| t.as_rgba8())
+            .unwrap()
+            .get(3, 3),
+        Some([0; 4])
+    );
+    let rect = terrain_core::Rect::new(glam::IVec2::new(2, 2), UVec2::splat(4));
+    let paint = terrain_core::Grid::new(4, 4, [0, 200, 0, 0]).unwrap();
+    let written = terrain_cache::write_paint(&world, rect, &paint).unwrap();
+    assert!(
+        written.contains(&fine) && written.contains(&coarse),
+        "{written:?}"
+    );
+    // Not named: the pool keeps its copies.
+    pool.update(&cam).unwrap();
+    assert_eq!(
+        pool.tile(fine)
+            .and_then(|t| t.as_rgba8())
+            .unwrap()
+            .get(3, 3),
+        Some([0; 4])
+    );
+    pool.reload(&written);
+    // Tiles of another layer or off the world are ignored.
+    pool.reload(&[TileId::new(9, 0, 0), TileId::new(0, 99, 0)]);
+    let r = pool.update(&cam).unwrap();
+    assert_eq!(r.failed, 0);
+    for id in &written {
+        assert!(pool.refreshed().contains(id), "{id}");
+    }
+    pump(&mut pool, &cam, |p, _| loaded(p, fine) && loaded(p, coarse));
+    let texel = |p: &RamPool, id, x, y| p.tile(id).and_then(|t| t.as_rgba8()).unwrap().get(x, y);
+    assert_eq!(texel(&pool, fine, 3, 3), Some([0, 200, 0, 0]));
+    // Level 1's texel (1, 1) is the mean of level-0 texels 2..4 x 2..4: all painted.
+    assert_eq!(texel(&pool, coarse, 1, 1), Some([0, 200, 0, 0]));
+    assert_eq!(texel(&pool, coarse, 0, 0), Some([0; 4]));
+    pool.shutdown(Duration::from_secs(5)).unwrap();
+}

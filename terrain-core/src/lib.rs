@@ -52,6 +52,7 @@ pub mod map;
 pub mod material;
 pub mod material_effect;
 pub mod normals;
+pub mod overlay_atlas;
 #[doc(hidden)]
 pub mod par;
 pub mod readback;
@@ -88,6 +89,7 @@ pub use normals::{
     DEFAULT_SNORM_MAX_SLOPE, DERIVATIVE_APRON, DerivativeMap, composite_normal, derivative_at,
     derivative_region, normal_from_derivatives,
 };
+pub use overlay_atlas::{OverlayAtlas, OverlayUploadTarget};
 pub use readback::{ArrivedRegion, RegionSource, RequestId};
 pub use rect::{DirtyRect, Rect, WrappedPiece};
 pub use sample::bilinear;

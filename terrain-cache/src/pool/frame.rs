@@ -33,6 +33,7 @@ impl RamPool {
         self.refreshed.clear();
         self.errors.clear();
         self.last_camera = Some(*camera);
+        self.take_reloads();
 
         // 1. Requests from handles.
         for _ in 0..self.cfg.max_requests_per_frame {
@@ -206,7 +207,12 @@ impl RamPool {
                 e.reserved = false;
                 self.ram_bytes -= self.tile_bytes;
             }
+            // Read before its file was rewritten (reload): dropped, loaded again when wanted.
+            let outdated = self.outdated.remove(&ticket);
             match msg {
+                _ if outdated => {
+                    self.entries.remove(&id);
+                }
                 LoadDone::Skipped { .. } => {
                     self.entries.remove(&id);
                 }
@@ -469,10 +475,42 @@ impl RamPool {
         &self.evicted
     }
 
-    /// Coarser tiles rewritten on disk after write-backs in the last update (a VRAM copy of
-    /// them is stale).
+    /// Tiles rewritten on disk under the pool in the last update: coarser tiles after its
+    /// write-backs, and those named by [`reload`](Self::reload) (a VRAM copy of them is stale).
     pub fn refreshed(&self) -> &[TileId] {
         &self.refreshed
+    }
+
+    /// Names tiles whose files were rewritten by someone else (a writer of the world's paint or
+    /// colour, `terrain_cache::overlays`, or another process). At the next update a clean
+    /// loaded copy is dropped and loaded again when wanted, a load in flight is discarded when
+    /// it arrives, a failed tile is retried, and the tiles are listed in
+    /// [`refreshed`](Self::refreshed), so the VRAM pool uploads them again. A copy changed in
+    /// this pool and not yet written back is kept (flagged stale): its write-back would win.
+    /// Tiles outside the pool's layer are ignored.
+    pub fn reload(&mut self, ids: &[TileId]) {
+        let m = *self.world.manifest();
+        let layer = self.cfg.layer;
+        self.to_reload
+            .extend(ids.iter().filter(|&&id| m.check_tile(layer, id).is_ok()));
+    }
+
+    /// Starts the update's handling of the tiles [`reload`](Self::reload) named: the loaded
+    /// copies are dropped with the coarser tiles write-backs refresh (`drain_writes`).
+    fn take_reloads(&mut self) {
+        let ids: Vec<TileId> = self.to_reload.drain().collect();
+        for id in ids {
+            match self.entries.get(&id).map(|e| &e.slot) {
+                Some(Slot::InFlight { ticket, .. }) => {
+                    self.outdated.insert(*ticket);
+                }
+                Some(Slot::Failed { .. }) => {
+                    self.entries.remove(&id);
+                }
+                _ => {}
+            }
+            self.refreshed.push(id);
+        }
     }
 
     /// Errors of the last update, each naming its tile (corrupt files, failed writes,

@@ -39,7 +39,7 @@ use crate::policy::{CameraState, SelectionPolicy, SphericalSelection, TileGrid, 
 use crate::tile::{Layer, TileData, TileId};
 use crate::world::World;
 use crossbeam_channel::{Receiver, Sender, unbounded};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -262,6 +262,10 @@ pub struct RamPool {
     newly_loaded: Vec<TileId>,
     evicted: Vec<TileId>,
     refreshed: Vec<TileId>,
+    /// Tiles [`RamPool::reload`] named, handled at the next update.
+    to_reload: HashSet<TileId>,
+    /// Tickets of loads in flight when their tile was named to reload: discarded on arrival.
+    outdated: HashSet<u64>,
     errors: Vec<(TileId, CacheError)>,
     last_camera: Option<CameraState>,
 }
@@ -392,6 +396,8 @@ impl RamPool {
             newly_loaded: Vec::new(),
             evicted: Vec::new(),
             refreshed: Vec::new(),
+            to_reload: HashSet::new(),
+            outdated: HashSet::new(),
             errors: Vec::new(),
             last_camera: None,
         })

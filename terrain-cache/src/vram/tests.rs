@@ -615,3 +615,87 @@ fn bad_configs_and_mismatched_targets_are_errors() {
     let r = pool.update(&cam, &ram, &mut atlas).unwrap();
     assert_eq!(r.resident, atlas.mapped());
 }
+
+#[test]
+fn an_overlay_pool_streams_paint_where_its_height_pool_streams_heights() {
+    use glam::DVec2;
+    use terrain_core::OverlayAtlas;
+    let m = manifest(WrapMode::Clamp);
+    let heights = MockRam::all(&m);
+    // Paint that names its level and texel; level-0 tiles with x = 3 have no file (the zero
+    // tile the RAM pool gives for them).
+    let texel = |level: u32, c: UVec2| {
+        let v = truth(level, c);
+        [v as u8, (v >> 8) as u8, level as u8, 255]
+    };
+    let mut paint = MockRam::default();
+    for l in 0..m.layer_levels(Layer::Material) {
+        for id in m.tiles_of(Layer::Material, l) {
+            let g = if l == 0 && id.x == 3 {
+                Grid::new(TS, TS, [0; 4]).unwrap()
+            } else {
+                Grid::from_fn(TS, TS, |x, y| {
+                    texel(l, UVec2::new(id.x * TS + x, id.y * TS + y))
+                })
+                .unwrap()
+            };
+            paint.tiles.insert(id, TileData::Rgba8(g));
+        }
+    }
+    let cfg = VramConfig {
+        upload_budget_bytes: 64 * 1024,
+        ..VramConfig::new(&m, 128)
+    };
+    let mut height_pool = VramPool::new(cfg.clone()).unwrap();
+    let mut paint_pool = VramPool::new(cfg).unwrap();
+    let mut height_atlas = TileAtlas::new(m.tile_layout(), 128).unwrap();
+    let mut paint_atlas = OverlayAtlas::new(m.tile_layout(), 128).unwrap();
+    for x in [20.0, 60.0, 130.0, 230.0] {
+        let cam = camera(x, 40.0, 0.4);
+        let mut missing = usize::MAX;
+        for _ in 0..3 {
+            let h = height_pool
+                .update(&cam, &heights, &mut height_atlas)
+                .unwrap();
+            let p = paint_pool
+                .update_overlay(&cam, Layer::Material, &paint, &mut paint_atlas)
+                .unwrap();
+            assert!(p.upload_bytes <= p.budget_bytes);
+            assert_eq!((h.tiles_wanted, h.resident), (p.tiles_wanted, p.resident));
+            missing = p.tiles_missing;
+        }
+        assert_eq!(missing, 0);
+        // Every texel's paint comes from the level its height comes from; at level 0 it is
+        // the tile's texel itself (transparent in the tiles without a file).
+        for y in (0..256).step_by(5) {
+            for x in (0..256).step_by(3) {
+                let t = UVec2::new(x, y);
+                let level = height_atlas.resolve(t).map(|r| r.0);
+                assert_eq!(paint_atlas.resolve(t).map(|r| r.0), level, "{t}");
+                if level == Some(0) {
+                    let want = if x / TS == 3 { [0; 4] } else { texel(0, t) };
+                    let got = paint_atlas.sample(DVec2::new(f64::from(x), f64::from(y)), false);
+                    let got = (got * 255.0).round().to_array().map(|v| v as u8);
+                    assert_eq!(got, want, "{t}");
+                }
+            }
+        }
+    }
+    // A height layer or height tiles are refused, and nothing changes.
+    let cam = camera(20.0, 40.0, 0.4);
+    let before = paint_atlas.clone();
+    assert!(
+        paint_pool
+            .update_overlay(&cam, Layer::Height, &paint, &mut paint_atlas)
+            .is_err()
+    );
+    let mut fresh = VramPool::new(VramConfig::new(&m, 128)).unwrap();
+    assert!(
+        fresh
+            .update_overlay(&cam, Layer::Color, &heights, &mut paint_atlas)
+            .is_err()
+    );
+    assert_eq!(paint_atlas, before);
+    paint_pool.clear_overlay(&mut paint_atlas).unwrap();
+    assert_eq!(paint_atlas.mapped(), 0);
+}

@@ -70,10 +70,10 @@ pub fn open_or_build(
     let size = world.manifest().world_size;
     if let Some(colors) = crate::driver::color_layer(cli, size).usage()? {
         let all = terrain_core::Rect::from_size(size);
-        let tiles = terrain_cache::write_color(&world, all, &colors)?;
+        let tiles = terrain_cache::write_color(&world, all, &colors)?.len();
         if !cli.quiet {
             crate::console::note!(
-                "world {}: {tiles} colour tiles written",
+                "world {}: {tiles} colour tiles written (every level)",
                 cli.world.display()
             );
         }
