@@ -123,6 +123,7 @@ macro_rules! renderer_head {
             include_str!("wgsl/resources/detail_sample.wgsl"),
             include_str!("wgsl/render/materials_common.wgsl"),
             include_str!("wgsl/render/materials.wgsl"),
+            include_str!("wgsl/resources/overlay_atlas.wgsl"),
             include_str!("wgsl/render/surface_weights.wgsl")
         )
     };
@@ -336,6 +337,15 @@ pub const MATERIAL_PROBE: &str = concat!(
     include_str!("wgsl/passes/material_probe.wgsl")
 );
 
+/// A streamed layer's lookup (`GpuOverlayAtlas`, the function every renderer draws a streamed
+/// world's paint and colour with) at a list of points, for the GPU == CPU test against
+/// `terrain_core::OverlayAtlas::sample`.
+pub const OVERLAY_PROBE: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/resources/overlay_atlas.wgsl"),
+    include_str!("wgsl/passes/overlay_probe.wgsl")
+);
+
 /// `MaterialEffectPass`: a stamp's material effect painted on a material layer.
 pub const MATERIAL_EFFECT: &str = concat!(
     wgsl_prelude!(),
@@ -368,6 +378,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("atlas_probe", ATLAS_PROBE),
     ("detail_probe", DETAIL_PROBE),
     ("material_probe", MATERIAL_PROBE),
+    ("overlay_probe", OVERLAY_PROBE),
     ("material_effect", MATERIAL_EFFECT),
     ("granular_penetration", GRANULAR_PENETRATION),
     ("granular_jfa", GRANULAR_JFA),

@@ -69,7 +69,7 @@ pub mod testing;
 use device::{context, download, limits, profiler, readback, region_source, small_readback, timer};
 use passes::{density, detail_probe, material_effect, normals, spill, stamp};
 use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
-use resources::{atlas, detail, hole_mask, maps, material_layer, materials};
+use resources::{atlas, detail, hole_mask, maps, material_layer, materials, overlay_atlas};
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
 pub use camera::{Camera, DepthConvention, RenderView, ViewMatrices};
@@ -93,6 +93,7 @@ pub use materials::{
 };
 pub use normals::NormalPass;
 pub use offscreen::OffscreenTarget;
+pub use overlay_atlas::GpuOverlayAtlas;
 pub use profiler::{
     FrameProfile, GpuProfiler, MAX_PROFILER_FRAMES, MAX_PROFILER_SCOPES, Scope, ScopeTiming,
 };
@@ -130,6 +131,7 @@ const _: () = {
     send_sync::<GpuHeightMap<u16>>();
     send_sync::<GpuDerivativeMap>();
     send_sync::<GpuTileAtlas>();
+    send_sync::<GpuOverlayAtlas>();
     send_sync::<RegionReadback>();
     send_sync::<GpuRegionSource>();
     send_sync::<granular::GpuGranularStep>();

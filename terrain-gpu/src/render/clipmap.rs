@@ -197,6 +197,19 @@ impl ClipmapRenderer {
         self.materials.set_holes(mask);
     }
 
+    /// Draws a streamed world's paint and colour, held around the camera by terrain-cache's
+    /// VRAM pool (`VramPool::update_overlay`) in [`crate::GpuOverlayAtlas`]es, from the next
+    /// prepare (`None`: not streamed): far ground's look at the level its heights are drawn
+    /// from. They replace the material and colour layers; their world must be the drawn
+    /// surface's size, else the prepare fails.
+    pub fn set_streamed_layers(
+        &mut self,
+        paint: Option<&crate::GpuOverlayAtlas>,
+        color: Option<&crate::GpuOverlayAtlas>,
+    ) {
+        self.materials.set_streamed(paint, color);
+    }
+
     /// Computes the material weights with `wgsl_function`, an engine's
     /// `fn surface_weights(p: SurfacePoint) -> vec4<f32>` (see terrain-shaders'
     /// `surface_weights.wgsl` for `SurfacePoint`), or with the autoshader again for `None`.

@@ -502,6 +502,16 @@ impl RefineRenderer {
         self.materials.set_holes(mask);
     }
 
+    /// Draws a streamed world's paint and colour, as
+    /// [`crate::ClipmapRenderer::set_streamed_layers`].
+    pub fn set_streamed_layers(
+        &mut self,
+        paint: Option<&crate::GpuOverlayAtlas>,
+        color: Option<&crate::GpuOverlayAtlas>,
+    ) {
+        self.materials.set_streamed(paint, color);
+    }
+
     /// Computes the material weights with an engine's `surface_weights` function, or the
     /// autoshader for `None` (as [`crate::ClipmapRenderer::set_surface_shader`]).
     pub fn set_surface_shader(

@@ -289,6 +289,22 @@ impl TerrainRenderer {
         }
     }
 
+    /// Draws a streamed world's paint and colour ([`crate::GpuOverlayAtlas`], filled by
+    /// terrain-cache's `VramPool::update_overlay`) in every LOD mode from the next prepare,
+    /// `None` for none, instead of the material and colour layers; their world must be the
+    /// drawn surface's size, else the prepare fails.
+    pub fn set_streamed_layers(
+        &mut self,
+        paint: Option<&crate::GpuOverlayAtlas>,
+        color: Option<&crate::GpuOverlayAtlas>,
+    ) {
+        match &mut self.lod {
+            Lod::Clipmap(c) => c.renderer.set_streamed_layers(paint, color),
+            Lod::Cdlod(c) => c.renderer.set_streamed_layers(paint, color),
+            Lod::Tessellated(t) => t.renderer.set_streamed_layers(paint, color),
+        }
+    }
+
     /// Computes the material weights of [`crate::SurfaceShading::Materials`] with
     /// `wgsl_function`, an engine's `fn surface_weights(p: SurfacePoint) -> vec4<f32>`, or with
     /// the autoshader again for `None`. `SurfacePoint` holds the fragment's world position (x,

@@ -12,7 +12,9 @@ use crate::device::scope::scoped;
 use crate::error::GpuError;
 use crate::resources::hole_mask::GpuHoleMask;
 use crate::resources::material_layer::GpuMaterialLayer;
+use crate::resources::overlay_atlas::GpuOverlayAtlas;
 use crate::resources::window::{WindowOrigin, covered, planned_move, upload_pieces};
+use terrain_core::OverlayUploadTarget;
 use terrain_core::{AutoshadeParams, CoreError, MATERIALS, MaterialImages, MaterialTextures};
 
 /// How the renderers colour the surface.
@@ -264,12 +266,21 @@ pub(crate) struct ShadingBindings {
     pub(crate) paint_window: [i32; 4],
     /// The world cells the colour layer covers, likewise.
     pub(crate) color_window: [i32; 4],
+    /// A streamed world's paint and colour ([`GpuOverlayAtlas`]): slots and table of each, or
+    /// stand-ins (an empty table: nothing resident).
+    pub(crate) streamed: [wgpu::TextureView; 4],
+    /// Which are streamed: bit 1 paint, bit 2 colour (`color_layer.w` in the shader).
+    pub(crate) streamed_bits: u32,
 }
 
 impl ShadingBindings {
-    /// The bind group entries at 10 to 15 of every terrain pipeline.
-    pub(crate) fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 6] {
+    /// The bind group entries at 10 to 19 of every terrain pipeline.
+    pub(crate) fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 10] {
         let [a, n, s] = self.materials.entries();
+        let streamed = |i: usize| wgpu::BindGroupEntry {
+            binding: 16 + i as u32,
+            resource: wgpu::BindingResource::TextureView(&self.streamed[i]),
+        };
         [
             a,
             n,
@@ -286,6 +297,10 @@ impl ShadingBindings {
                 binding: 15,
                 resource: wgpu::BindingResource::TextureView(&self.holes),
             },
+            streamed(0),
+            streamed(1),
+            streamed(2),
+            streamed(3),
         ]
     }
 
@@ -294,10 +309,10 @@ impl ShadingBindings {
     pub(crate) fn layer_flags(&self) -> [f32; 4] {
         let on = |b: bool| f32::from(u8::from(b));
         [
-            on(self.has_color),
-            on(self.has_paint),
+            on(self.has_color || self.streamed_bits & 2 != 0),
+            on(self.has_paint || self.streamed_bits & 1 != 0),
             on(self.has_holes),
-            0.0,
+            self.streamed_bits as f32,
         ]
     }
 }
@@ -310,8 +325,13 @@ pub(crate) struct MaterialSlot {
     color: Option<GpuColorLayer>,
     paint: Option<GpuMaterialLayer>,
     holes: Option<GpuHoleMask>,
+    /// A streamed world's paint and colour.
+    streamed_paint: Option<GpuOverlayAtlas>,
+    streamed_color: Option<GpuOverlayAtlas>,
     /// Bound while no colour or material layer or hole mask is.
     no_color: Option<wgpu::TextureView>,
+    /// Bound while no streamed layer is: an empty slot array and a table of zeros.
+    no_streamed: Option<[wgpu::TextureView; 2]>,
     /// Set since the renderer last bound them.
     changed: bool,
 }
@@ -341,6 +361,18 @@ impl MaterialSlot {
         self.changed = true;
     }
 
+    /// Draws a streamed world's paint and colour (or none) from the next frame on, instead of
+    /// the material and colour layers.
+    pub(crate) fn set_streamed(
+        &mut self,
+        paint: Option<&GpuOverlayAtlas>,
+        color: Option<&GpuOverlayAtlas>,
+    ) {
+        self.streamed_paint = paint.cloned();
+        self.streamed_color = color.cloned();
+        self.changed = true;
+    }
+
     /// What to bind for a surface of `surface_size` texels (the materials made on first use;
     /// clones share the GPU objects), and whether it changed since the last call (the bind
     /// group must be made again). A colour or material layer of another size is refused.
@@ -365,7 +397,14 @@ impl MaterialSlot {
                 .filter(|h| !h.is_window())
                 .map(|h| h.size),
         ];
-        if let Some(actual) = sizes.into_iter().flatten().find(|s| *s != surface_size) {
+        let streamed_sizes = [&self.streamed_paint, &self.streamed_color]
+            .map(|a| a.as_ref().map(|a| a.layout().world_size));
+        if let Some(actual) = sizes
+            .into_iter()
+            .chain(streamed_sizes)
+            .flatten()
+            .find(|s| *s != surface_size)
+        {
             return Err(CoreError::SizeMismatch {
                 expected: surface_size,
                 actual,
@@ -385,6 +424,10 @@ impl MaterialSlot {
                 self.no_color.insert(stand_in).clone()
             }
         };
+        let [no_slots, no_table] = match &self.no_streamed {
+            Some(views) => views.clone(),
+            None => self.no_streamed.insert(no_streamed(device, queue)?).clone(),
+        };
         let bindings = ShadingBindings {
             materials,
             color: self
@@ -402,13 +445,29 @@ impl MaterialSlot {
             hole_window: self.holes.as_ref().map_or([0; 4], |h| h.covered()),
             paint_window: self.paint.as_ref().map_or([0; 4], |p| p.covered()),
             color_window: self.color.as_ref().map_or([0; 4], |c| c.covered()),
+            streamed: [
+                self.streamed_paint
+                    .as_ref()
+                    .map_or(no_slots.clone(), |a| a.texels_view.clone()),
+                self.streamed_paint
+                    .as_ref()
+                    .map_or(no_table.clone(), |a| a.table_view.clone()),
+                self.streamed_color
+                    .as_ref()
+                    .map_or(no_slots, |a| a.texels_view.clone()),
+                self.streamed_color
+                    .as_ref()
+                    .map_or(no_table, |a| a.table_view.clone()),
+            ],
+            streamed_bits: u32::from(self.streamed_paint.is_some())
+                | (u32::from(self.streamed_color.is_some()) << 1),
         };
         Ok((bindings, std::mem::take(&mut self.changed)))
     }
 }
 
 /// The layout entries of [`ShadingBindings::entries`] (fragment stage).
-pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
+pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 10] {
     let texture = |binding, view_dimension| wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::FRAGMENT,
@@ -420,6 +479,16 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
         count: None,
     };
     let layer = |binding| texture(binding, wgpu::TextureViewDimension::D2);
+    let table = |binding| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Uint,
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    };
     [
         texture(10, wgpu::TextureViewDimension::D2Array),
         texture(11, wgpu::TextureViewDimension::D2Array),
@@ -432,7 +501,52 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
         layer(13),
         layer(14),
         layer(15),
+        texture(16, wgpu::TextureViewDimension::D2Array),
+        table(17),
+        texture(18, wgpu::TextureViewDimension::D2Array),
+        table(19),
     ]
+}
+
+/// The stand-ins of a streamed layer: one transparent slot, and a table whose pyramid has no
+/// level (so nothing is ever resident).
+fn no_streamed(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+) -> Result<[wgpu::TextureView; 2], GpuError> {
+    let (slots, _) = rgba8_texture_with(
+        device,
+        queue,
+        "no streamed layer",
+        glam::UVec2::ONE,
+        &[[0; 4]],
+        wgpu::TextureUsages::empty(),
+    )?;
+    let slots = slots.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    });
+    let table = scoped(device, "no streamed table", || {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("no streamed table"),
+            size: wgpu::Extent3d {
+                width: 1,
+                height: 1,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::R32Uint,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        })
+    })?;
+    // A new texture is zero: levels 0.
+    Ok([
+        slots,
+        table.create_view(&wgpu::TextureViewDescriptor::default()),
+    ])
 }
 
 /// The frame uniform's material fields: the camera's whole texel's place in the images'

@@ -130,6 +130,34 @@ pub fn draw(
     image
 }
 
+/// The prepare of a default view of `renderer` over `map`: what a layer it cannot draw fails.
+pub fn try_prepare(
+    ctx: &GpuContext,
+    renderer: &mut TerrainRenderer,
+    gpu: &(GpuHeightMap<u16>, GpuDerivativeMap),
+) -> Result<(), terrain_gpu::GpuError> {
+    let view = ViewMatrices {
+        view: glam::camera::rh::view::look_to_mat4(
+            Vec3::new(128.0, 300.0, 128.0),
+            Vec3::NEG_Y,
+            Vec3::NEG_Z,
+        ),
+        projection: glam::camera::rh::proj::directx::perspective(1.0, 16.0 / 9.0, 1.0, 1000.0),
+    };
+    let style = TerrainStyle::default();
+    let view = TerrainView {
+        surface: ClipmapSurface::Coarse {
+            map: &gpu.0,
+            normals: &gpu.1,
+        },
+        camera: &view,
+        style: &style,
+        target_size: SIZE,
+    };
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    renderer.prepare(&ctx.device, &ctx.queue, &mut encoder, &view)
+}
+
 pub fn renderers(ctx: &GpuContext, map: &CoarseMap) -> Vec<TerrainRenderer> {
     let (device, queue, format) = (&ctx.device, &ctx.queue, &TargetFormat::CAPTURE);
     let cdlod = CdlodConfig {

@@ -16,6 +16,10 @@
 // world cells frame.holes covers (the whole map, or a window around the camera), each cell at
 // its coordinates modulo the mask's size.
 @group(0) @binding(15) var hole_mask: texture_2d<f32>;
+// Which layers are streamed (frame.color_layer.w's bits).
+fn streamed(bit: u32) -> bool {
+    return (u32(frame.color_layer.w + 0.5) & bit) != 0u;
+}
 
 // Whether the cell under `q` (texels relative to the camera's whole texel) is a hole: the cell
 // whose lower corner is floor(q), as collision finds it. Cells outside the mask are ground.
@@ -82,14 +86,24 @@ fn window_layer_at(layer: texture_2d<f32>, window: vec4<i32>, q: vec2<f32>, prem
 
 // The colour layer at `q` over `albedo`, by its alpha (premultiplied).
 fn colored_albedo(q: vec2<f32>, albedo: vec3<f32>) -> vec3<f32> {
-    let c = window_layer_at(color_layer, frame.color_window, q, true);
+    var c: vec4<f32>;
+    if streamed(2u) {
+        c = streamed_layer_at(color_slots, color_table, q, true);
+    } else {
+        c = window_layer_at(color_layer, frame.color_window, q, true);
+    }
     return albedo * (1.0 - c.a) + c.rgb;
 }
 
 // The weights `w` (the autoshader's or an engine's) with the material layer's paint at `q`
 // over them: all paint where its cover is full, none where it is zero.
 fn painted_weights(q: vec2<f32>, w: vec4<f32>) -> vec4<f32> {
-    let paint = window_layer_at(material_layer, frame.paint_window, q, false);
+    var paint: vec4<f32>;
+    if streamed(1u) {
+        paint = streamed_layer_at(paint_slots, paint_table, q, false);
+    } else {
+        paint = window_layer_at(material_layer, frame.paint_window, q, false);
+    }
     let cover = paint.x + paint.y + paint.z + paint.w;
     let base = max(w, vec4<f32>(0.0, 0.0, 0.0, 0.0));
     let unpainted = base / max(base.x + base.y + base.z + base.w, 1e-6);
