@@ -70,6 +70,7 @@ pub mod manifest;
 #[cfg(feature = "object-store")]
 pub mod object;
 mod overlay_pyramid;
+mod overlay_stream;
 pub mod overlays;
 mod region_bounds;
 pub mod store;
@@ -84,6 +85,7 @@ pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
 pub use manifest::{DetailLayout, Manifest, TileFormat, tile_key};
 #[cfg(feature = "object-store")]
 pub use object::{ObjectStoreConfig, ObjectTileStore};
+pub use overlay_stream::OverlayStream;
 pub use overlays::{
     MAX_OVERLAY_REGION_CELLS, read_color, read_holes, read_paint, write_color, write_holes,
     write_paint,

@@ -162,3 +162,118 @@ fn band_selection_holds_the_band_tiles_of_every_level() {
     assert_atlas_matches_world(&vram, &atlas, &ram);
     ram.shutdown(Duration::from_secs(10)).unwrap();
 }
+
+#[test]
+fn an_overlay_stream_holds_the_paint_of_the_tiles_the_heights_hold_and_follows_its_writes() {
+    use glam::DVec2;
+    use terrain_cache::{OverlayStream, write_paint};
+    use terrain_core::{Grid, OverlayAtlas, Rect};
+    let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
+    let world = build(store, UVec2::splat(256), 32);
+    let manifest = *world.manifest();
+    // Paint over the whole world: green where x < 128, else red.
+    let paint = Grid::from_fn(256, 256, |x, _| {
+        if x < 128 {
+            [0, 255, 0, 0]
+        } else {
+            [255, 0, 0, 0]
+        }
+    })
+    .unwrap();
+    write_paint(&world, Rect::from_size(UVec2::splat(256)), &paint).unwrap();
+    // The RAM selection reaches beyond the VRAM pool's (as a streaming app sets it up).
+    let policy = || {
+        let grid = terrain_cache::TileGrid::from_manifest(&manifest, Layer::Height);
+        let mut spherical = SphericalSelection::for_grid(&grid);
+        spherical.lod0_range *= 3.0;
+        spherical.view_distance *= 3.0;
+        Box::new(spherical)
+    };
+    let mut heights = RamPool::with_policy(
+        world.clone(),
+        PoolConfig::new(Layer::Height, 200 * 32 * 32 * 2),
+        policy(),
+    )
+    .unwrap();
+    let cfg = VramConfig::new(&manifest, 60);
+    let mut height_vram = VramPool::new(cfg.clone()).unwrap();
+    let mut height_atlas = TileAtlas::new(manifest.tile_layout(), 60).unwrap();
+    let mut stream = OverlayStream::new(
+        world.clone(),
+        Layer::Material,
+        200 * 32 * 32 * 4,
+        policy(),
+        cfg,
+    )
+    .unwrap();
+    let mut atlas = OverlayAtlas::new(manifest.tile_layout(), 60).unwrap();
+    let camera = CameraState::at(Vec3::new(100.0, 30.0, 100.0));
+    let settle = |heights: &mut RamPool,
+                  height_vram: &mut VramPool,
+                  height_atlas: &mut TileAtlas,
+                  stream: &mut OverlayStream,
+                  atlas: &mut OverlayAtlas| {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            heights.update(&camera).unwrap();
+            let h = height_vram.update(&camera, heights, height_atlas).unwrap();
+            let (_, p) = stream.update(&camera, atlas).unwrap();
+            assert!(p.upload_bytes <= p.budget_bytes);
+            if h.tiles_missing == 0 && p.tiles_missing == 0 && p.uploads == 0 && p.stale == 0 {
+                return;
+            }
+            assert!(Instant::now() < deadline, "did not settle: {p:?}");
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    };
+    settle(
+        &mut heights,
+        &mut height_vram,
+        &mut height_atlas,
+        &mut stream,
+        &mut atlas,
+    );
+    // Every texel's paint comes from the level its height does, and is the world's.
+    for y in (0..256).step_by(7) {
+        for x in (0..256).step_by(5) {
+            let t = UVec2::new(x, y);
+            let level = height_atlas.resolve(t).map(|r| r.0);
+            assert_eq!(atlas.resolve(t).map(|r| r.0), level, "{t}");
+            if level == Some(0) && !(124..=132).contains(&x) {
+                let v = atlas.sample(DVec2::new(f64::from(x), f64::from(y)), false);
+                let want = if x < 128 {
+                    glam::Vec4::Y
+                } else {
+                    glam::Vec4::X
+                };
+                assert_eq!(v, want, "{t}");
+            }
+        }
+    }
+    // Paint written under the stream: blue over a 16 x 16 square under the camera; once the
+    // tiles are named, the atlas shows it.
+    let square = Rect::new(IVec2::new(96, 96), UVec2::splat(16));
+    let blue = Grid::new(16, 16, [0, 0, 255, 0]).unwrap();
+    let written = write_paint(&world, square, &blue).unwrap();
+    stream.reload(&written);
+    settle(
+        &mut heights,
+        &mut height_vram,
+        &mut height_atlas,
+        &mut stream,
+        &mut atlas,
+    );
+    assert_eq!(atlas.resolve(UVec2::new(104, 104)).map(|r| r.0), Some(0));
+    assert_eq!(atlas.sample(DVec2::new(104.0, 104.0), false), glam::Vec4::Z);
+    // Heights are no overlay; a version-1 (PNG) world has no paint.
+    let none = OverlayStream::new(
+        world,
+        Layer::Height,
+        1 << 20,
+        policy(),
+        VramConfig::new(&manifest, 4),
+    );
+    assert!(none.is_err());
+    stream.shutdown(Duration::from_secs(10)).unwrap();
+    heights.shutdown(Duration::from_secs(10)).unwrap();
+}
