@@ -24,6 +24,9 @@
 //! 4. **Indirection.** An evicted tile is unmapped before its slot is reused; an uploaded tile
 //!    is mapped after its upload. A renderer reading the table takes, per texel, the finest
 //!    mapped level, so a missing tile is drawn from a coarser one.
+//!
+//! The same pool streams a world's paint or colour ([`VramPool::update_overlay`] into an
+//! [`OverlayUploadTarget`]; [`crate::OverlayStream`] pairs it with a RAM pool of the layer).
 
 use crate::CacheError;
 use crate::manifest::Manifest;

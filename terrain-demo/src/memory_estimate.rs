@@ -123,11 +123,12 @@ pub struct RunShape {
 /// The memory side of a flyover.
 #[derive(Debug, PartialEq, Eq)]
 pub struct FlyoverShape {
-    /// RAM pool budget in bytes.
+    /// RAM pool budgets in bytes: the heights' and the paint and colour streams'.
     pub ram_budget: u64,
-    /// Bytes of the atlas's tile slots (as many whole tiles as the VRAM budget holds).
+    /// Bytes of the atlases' tile slots (heights, paint and colour: as many whole tiles as the
+    /// VRAM budget holds).
     pub atlas: u64,
-    /// Bytes of the atlas's indirection table.
+    /// Bytes of the atlases' indirection tables.
     pub atlas_table: u64,
     /// Whether the world is built first, and from what.
     pub build: Option<WorldBuild>,
@@ -153,16 +154,25 @@ impl RunShape {
                 let planned = world_files::planned_world(cli)?;
                 let m = planned.manifest;
                 let layout = m.tile_layout();
-                let slot = terrain_gpu::AtlasConfig {
-                    slots: 1,
-                    world: layout,
-                }
-                .slot_bytes();
+                // Colour tiles are streamed where the world has them or `--color` makes them.
+                let colored = cli.color.is_some()
+                    || cli
+                        .world
+                        .join(terrain_cache::Layer::Color.folder())
+                        .is_dir();
+                let slot = flyover::vram_slot_bytes(&m, colored);
                 let slots = cli.vram_budget.saturating_mul(1 << 20) / slot.max(1);
+                let ram = cli.ram_budget.saturating_mul(1 << 20);
+                // The paint stream's RAM pool (as the heights'), the colour's (twice).
+                let overlay_ram = ram + if colored { ram.saturating_mul(2) } else { 0 };
                 let shape = FlyoverShape {
-                    ram_budget: cli.ram_budget.saturating_mul(1 << 20),
+                    ram_budget: ram.saturating_add(overlay_ram),
                     atlas: slots.saturating_mul(slot),
-                    atlas_table: layout.table_len().saturating_mul(4),
+                    // The heights' table, and a table of the same entries per overlay atlas.
+                    atlas_table: layout
+                        .table_len()
+                        .saturating_add(128)
+                        .saturating_mul(4 * (2 + u64::from(colored))),
                     build: planned.build,
                     world: m.world_size,
                 };
@@ -275,13 +285,13 @@ impl RunShape {
                 let window = u64::from(flyover::COLLISION_WINDOW).pow(2);
                 parts.push(("collision", window.saturating_mul(COLLISION_PER_TEXEL)));
                 // Holes in the collision window (its mask and the one read for it); with a
-                // GPU, its hole (1 byte), paint and colour (4 bytes each) windows, and the
-                // three read for them when they move.
+                // GPU, its hole window (1 byte a cell) and the mask read for it when it moves.
+                // (Paint and colour stream in tiles: `ram_pool`, `vram_pool`.)
                 let mut overlays = window.saturating_mul(2);
                 if self.gpu {
                     parts.push(("gpu_map", per_texel(GPU_MAP_PER_TEXEL)));
                     let gpu_window = u64::from(crate::scenarios::GPU_OVERLAY_WINDOW).pow(2);
-                    overlays = overlays.saturating_add(gpu_window.saturating_mul(2 * 9));
+                    overlays = overlays.saturating_add(gpu_window.saturating_mul(2));
                 }
                 parts.push(("overlays", overlays));
                 if let Some(f) = &self.flyover {
@@ -427,11 +437,12 @@ mod tests {
         ]);
         let f = s.flyover.as_ref().expect("flyover");
         assert_eq!(f.build, Some(WorldBuild::Procedural));
-        // 40 whole 256^2 u32 tiles fit 10 MiB.
-        assert_eq!(f.atlas, 40 * 256 * 256 * 4);
+        // 26 whole 256^2 tiles of heights (2 bytes a texel) and paint (4) fit 10 MiB.
+        assert_eq!(f.atlas, 26 * 256 * 256 * 6);
         assert!(f.atlas_table > 0);
         let parts = s.estimate();
-        assert_eq!(part(&parts, "ram_pool"), (100 << 20) + RAM_POOL_SLACK);
+        // The heights' pool and the paint stream's, as large.
+        assert_eq!(part(&parts, "ram_pool"), (200 << 20) + RAM_POOL_SLACK);
         assert_eq!(
             part(&parts, "vram_pool"),
             f.atlas + f.atlas_table + VRAM_POOL_SLACK

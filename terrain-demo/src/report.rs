@@ -597,7 +597,8 @@ pub struct CacheStats {
     /// Tiles the selection wants near the camera that are not in RAM yet (the frame falls back
     /// to coarser data there).
     pub tiles_missing: usize,
-    /// With a GPU: bytes of the tiles resident in the atlas.
+    /// With a GPU: bytes of the tiles resident in the atlases (heights, paint and colour; at
+    /// most the VRAM budget).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub vram_bytes: Option<u64>,
     /// With a GPU: bytes uploaded this frame (never above the per-frame budget).
@@ -606,6 +607,17 @@ pub struct CacheStats {
     /// With a GPU: tiles uploaded this frame.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub uploads: Option<usize>,
+    /// With a GPU: wanted paint (material) tiles not in the GPU's paint atlas (drawn from a
+    /// coarser level's paint there).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub material_tiles_missing: Option<usize>,
+    /// With a GPU and a colour layer: the same for colour tiles.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub color_tiles_missing: Option<usize>,
+    /// With a GPU: bytes of paint and colour tiles uploaded this frame (within their streams'
+    /// per-frame budgets).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub overlay_upload_bytes: Option<u64>,
     /// Tiles the selection wants further out (ahead of the camera) still loading.
     pub prefetching: usize,
     /// Bytes the RAM pool holds, and its budget (never exceeded).

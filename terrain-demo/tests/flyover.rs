@@ -172,9 +172,21 @@ fn with_a_gpu_the_vram_pool_streams_the_world_within_its_budgets() {
             "frame {}: over the upload budget: {cache}",
             f["index"]
         );
+        // Paint streams with the heights, within the same VRAM budget (the slots above) and
+        // its own 2 MiB a frame.
+        let overlay = cache["overlay_upload_bytes"]
+            .as_u64()
+            .expect("overlay uploads");
+        assert!(overlay <= 2 << 20, "frame {}: {cache}", f["index"]);
         if f["index"].as_u64() >= Some(30) {
             assert_eq!(
                 cache["tiles_missing"].as_u64(),
+                Some(0),
+                "frame {}: {cache}",
+                f["index"]
+            );
+            assert_eq!(
+                cache["material_tiles_missing"].as_u64(),
                 Some(0),
                 "frame {}: {cache}",
                 f["index"]

@@ -81,9 +81,9 @@ pub struct GpuScene {
     paint: Option<paint::Paint>,
     /// The hole mask every renderer leaves out, once a hole is cut.
     holes: Option<terrain_gpu::GpuHoleMask>,
-    /// A streamed world's paint and colour around the camera.
-    paint_window: Option<terrain_gpu::GpuMaterialLayer>,
-    color_window: Option<terrain_gpu::GpuColorLayer>,
+    /// A streamed world's paint and colour, in tile slots the scenario's streams fill.
+    streamed_paint: Option<terrain_gpu::GpuOverlayAtlas>,
+    streamed_color: Option<terrain_gpu::GpuOverlayAtlas>,
     /// Frames rendered so far.
     frames: u32,
     /// Fault injection for the device-loss test: destroy the device before rendering this
@@ -317,8 +317,8 @@ impl GpuScene {
             refined: None,
             paint: None,
             holes: None,
-            paint_window: None,
-            color_window: None,
+            streamed_paint: None,
+            streamed_color: None,
             frames: 0,
             destroy_at: std::env::var(DESTROY_DEVICE_ENV)
                 .ok()

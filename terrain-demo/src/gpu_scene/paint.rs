@@ -3,16 +3,17 @@
 //! `MaterialEffectPass`: a crater exposes dirt, a footprint presses the cover down to the dirt
 //! under it, a shockwave scorches the ground around its centre. The snow scenario's granular
 //! steps paint their trails with `TrailEffectPass`: pressed snow darkens. A hole cut into the
-//! ground (`terrain_core::holes`) is left out of every renderer's frame.
+//! ground (`terrain_core::holes`) is left out of every renderer's frame. A streamed world's
+//! paint and colour are drawn from overlay atlases its scenario streams.
 
 use super::GpuScene;
 use crate::frame_plan::StampKind;
 use anyhow::{Context, Result};
 use glam::IVec2;
-use terrain_core::{DirtyRect, Grid, MaterialEffect, Rect, StampPlacement};
+use terrain_core::{DirtyRect, Grid, MaterialEffect, Rect, StampPlacement, TileLayout};
 use terrain_gpu::GpuError;
 use terrain_gpu::{
-    EffectOp, GpuColorLayer, GpuHeightMap, GpuHoleMask, GpuMaterialLayer, MaterialEffectPass,
+    EffectOp, GpuHeightMap, GpuHoleMask, GpuMaterialLayer, GpuOverlayAtlas, MaterialEffectPass,
 };
 
 /// The material layer over the coarse-map and the pass that paints it.
@@ -136,74 +137,47 @@ impl GpuScene {
         Ok(())
     }
 
-    /// Places the paint window the renderers draw (`side` cells, made on the first call) at
-    /// world cell `origin` with `paint`, the material layer of its cells: a streamed world's
-    /// paint around the camera.
-    pub fn move_paint_window(
-        &mut self,
-        side: u32,
-        origin: IVec2,
-        paint: &Grid<[u8; 4]>,
-    ) -> Result<()> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let layer = match &self.paint_window {
-            Some(layer) if layer.size().x == side => layer.clone(),
-            _ => {
-                let layer = GpuMaterialLayer::window(device, queue, side)?;
-                self.terrain.set_material_layer(Some(&layer));
-                if let Some(refined) = self.refined.as_mut() {
-                    refined.renderer.set_material_layer(Some(&layer));
-                }
-                self.paint_window = Some(layer.clone());
-                layer
-            }
-        };
-        layer.move_window(queue, origin, paint)?;
-        Ok(())
-    }
-
-    /// Rewrites the cells `rect` of the hole and paint windows (if placed) with `holes` and
-    /// `paint`, theirs after a cut or a crater changed them (`None`: that layer did not change).
-    pub fn update_windows(
-        &mut self,
-        rect: Rect,
-        holes: Option<&Grid<u8>>,
-        paint: Option<&Grid<[u8; 4]>>,
-    ) -> Result<()> {
-        let queue = &self.ctx.queue;
-        if let (Some(window), Some(mask)) = (&self.holes, holes) {
-            window.update_window(queue, rect, mask)?;
-        }
-        if let (Some(window), Some(paint)) = (&self.paint_window, paint) {
-            window.update_window(queue, rect, paint)?;
+    /// Rewrites the cells `rect` of the hole window (if placed) with `mask`, theirs after a cut
+    /// changed them.
+    pub fn update_hole_window(&mut self, rect: Rect, mask: &Grid<u8>) -> Result<()> {
+        if let Some(window) = &self.holes {
+            window.update_window(&self.ctx.queue, rect, mask)?;
         }
         Ok(())
     }
 
-    /// Places the colour window the renderers draw (`side` cells, made on the first call) at
-    /// world cell `origin` with `colors`, the colour layer of its cells: a streamed world's
-    /// colour around the camera.
-    pub fn move_color_window(
+    /// Draws a streamed world's paint, and its colour with `colored`, from overlay atlases of
+    /// `slots` tile slots over `layout` (made now), which the scenario's overlay streams fill
+    /// ([`GpuScene::streamed_layers_mut`]).
+    pub fn enable_streamed_layers(
         &mut self,
-        side: u32,
-        origin: IVec2,
-        colors: &Grid<[u8; 4]>,
+        layout: TileLayout,
+        slots: u32,
+        colored: bool,
     ) -> Result<()> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let layer = match &self.color_window {
-            Some(layer) if layer.size().x == side => layer.clone(),
-            _ => {
-                let layer = GpuColorLayer::window(device, queue, side)?;
-                self.terrain.set_color_layer(Some(&layer));
-                if let Some(refined) = self.refined.as_mut() {
-                    refined.renderer.set_color_layer(Some(&layer));
-                }
-                self.color_window = Some(layer.clone());
-                layer
-            }
+        let paint = GpuOverlayAtlas::new(device, queue, layout, slots)?;
+        let color = match colored {
+            true => Some(GpuOverlayAtlas::new(device, queue, layout, slots)?),
+            false => None,
         };
-        layer.move_window(queue, origin, colors)?;
+        self.terrain
+            .set_streamed_layers(Some(&paint), color.as_ref());
+        if let Some(refined) = self.refined.as_mut() {
+            refined
+                .renderer
+                .set_streamed_layers(Some(&paint), color.as_ref());
+        }
+        self.streamed_paint = Some(paint);
+        self.streamed_color = color;
         Ok(())
+    }
+
+    /// The streamed paint and colour atlases (`None` until enabled, or without colour).
+    pub fn streamed_layers_mut(
+        &mut self,
+    ) -> (Option<&mut GpuOverlayAtlas>, Option<&mut GpuOverlayAtlas>) {
+        (self.streamed_paint.as_mut(), self.streamed_color.as_mut())
     }
 
     /// Whether the renderers have a hole mask.

@@ -11,7 +11,10 @@
 //!
 //! On frame [`HOLE_FRAME`] a hole is cut beside the path into the world's hole tiles, and the
 //! craters paint dirt into its material tiles, both written by a thread of their own
-//! (`world_overlays`); collision and the GPU's frames follow, in this run and the next.
+//! (`world_overlays`); collision and the GPU's frames follow, in this run and the next. With a
+//! GPU the paint (and a colour layer, where the world has one) streams into overlay atlases
+//! with the heights' selection (`OverlayStream`), the VRAM budget split into slots of heights
+//! and overlays.
 //!
 //! Collision follows the camera: a `CollisionWindow` of [`COLLISION_WINDOW`] texels filled from
 //! the RAM pool (coarser data where a level-0 tile is not loaded yet, refilled when it is)
@@ -40,8 +43,8 @@ use glam::{IVec2, UVec2, Vec2, Vec3};
 use std::collections::HashSet;
 use std::time::{Duration, Instant};
 use terrain_cache::{
-    CameraState, Layer, Manifest, PoolConfig, RamPool, RegionBounds, SphericalSelection, TileGrid,
-    TileId, TileStamps, VramConfig, VramPool, World, reduce_levels,
+    CameraState, Layer, Manifest, OverlayStream, PoolConfig, RamPool, RegionBounds,
+    SphericalSelection, TileGrid, TileId, TileStamps, VramConfig, VramPool, World, reduce_levels,
 };
 use terrain_core::{CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, WrapMode};
 use terrain_lod::{CdlodConfig, CdlodTree};
@@ -93,6 +96,10 @@ pub struct FlyoverScenario {
     pool: Option<RamPool>,
     /// The VRAM pool, with a GPU: which tiles sit in the atlas's slots.
     vram: Option<VramPool>,
+    /// With a GPU: the world's paint, and its colour when it has one, streamed into the GPU's
+    /// overlay atlases with the heights' selection.
+    paint_stream: Option<OverlayStream>,
+    color_stream: Option<OverlayStream>,
     manifest: Manifest,
     vram_budget: u64,
     tile_size: u32,
@@ -148,17 +155,11 @@ impl FlyoverScenario {
         let overview = overview_map(&world, overview_level)?;
         let load_ms = ms_since(t);
         let budget = cli.ram_budget.saturating_mul(1 << 20);
-        // The RAM selection reaches further than the VRAM pool's (3 tiles ahead per level), so
-        // what the GPU wants next is already in RAM (Fikkan 2013, sec. 4.3).
-        let grid = TileGrid::from_manifest(&manifest, Layer::Height);
-        let mut spherical = SphericalSelection::for_grid(&grid);
-        spherical.lod0_range *= 3.0;
-        spherical.view_distance *= 3.0;
         let overlays = WorldOverlays::new(&world)?;
         let pool = RamPool::with_policy(
             world,
             PoolConfig::new(Layer::Height, budget),
-            Box::new(spherical),
+            Box::new(ram_selection(&manifest)),
         )?;
         let extent = manifest.world_size.as_vec2() * manifest.texel_size;
         let tile = manifest.tile_size;
@@ -199,6 +200,8 @@ impl FlyoverScenario {
             },
             pool: Some(pool),
             vram: None,
+            paint_stream: None,
+            color_stream: None,
             manifest,
             vram_budget: cli.vram_budget.saturating_mul(1 << 20),
             tile_size: tile,
@@ -437,6 +440,31 @@ fn overview_map(world: &World, level: u32) -> Result<CoarseMap> {
     )?)
 }
 
+/// Bytes of one tile of `layer` in RAM.
+fn layer_tile_bytes(manifest: &Manifest, layer: Layer) -> u64 {
+    layer.tile_bytes(manifest.tile_size)
+}
+
+/// The RAM pools' selection: further than the VRAM pool's (3 tiles ahead per level), so what
+/// the GPU wants next is already in RAM (Fikkan 2013, sec. 4.3).
+fn ram_selection(manifest: &Manifest) -> SphericalSelection {
+    let grid = TileGrid::from_manifest(manifest, Layer::Height);
+    let mut spherical = SphericalSelection::for_grid(&grid);
+    spherical.lod0_range *= 3.0;
+    spherical.view_distance *= 3.0;
+    spherical
+}
+
+/// GPU bytes of one tile slot of the world `manifest` describes, across its atlases: heights
+/// (2 bytes a texel), paint (4) and, `colored`, colour (4). The VRAM budget holds as many of
+/// these as fit, so paint and colour stream within it.
+pub fn vram_slot_bytes(manifest: &Manifest, colored: bool) -> u64 {
+    let world = manifest.tile_layout();
+    let heights = AtlasConfig { slots: 1, world }.slot_bytes();
+    let overlay = world.tile_texels() * 4;
+    heights + overlay * (1 + u64::from(colored))
+}
+
 /// Bilinear sample of `grid` at texel coordinates `p`, clamped to its edges (raw units).
 fn bilinear_clamped(grid: &Grid<u16>, p: Vec2) -> f64 {
     let max = (grid.size() - UVec2::ONE).as_vec2();
@@ -463,11 +491,17 @@ impl Scenario for FlyoverScenario {
         &self.overview
     }
 
-    /// With a GPU the world is drawn from a tile atlas of as many slots as the VRAM budget
-    /// holds (2 bytes per texel), filled by the VRAM pool.
+    /// With a GPU the world is drawn from a tile atlas, and its paint (and colour) from overlay
+    /// atlases, of as many slots as the VRAM budget holds ([`vram_slot_bytes`]), filled by the
+    /// VRAM pools with one selection.
     fn prepare_gpu(&mut self, scene: &mut GpuScene) -> Result<()> {
         let world = self.manifest.tile_layout();
-        let slot_bytes = AtlasConfig { slots: 1, world }.slot_bytes();
+        let Some(pool) = self.pool.as_ref() else {
+            bail!("the world's pool was shut down");
+        };
+        let files = pool.world().clone();
+        let colored = !files.store().list(Layer::Color.folder())?.is_empty();
+        let slot_bytes = vram_slot_bytes(&self.manifest, colored);
         let slots = u32::try_from(self.vram_budget / slot_bytes).unwrap_or(u32::MAX);
         if slots < 2 {
             return Err(usage(anyhow::anyhow!(
@@ -475,20 +509,41 @@ impl Scenario for FlyoverScenario {
                 slot_bytes >> 10
             )));
         }
+        let too_large = |e: anyhow::Error| {
+            // The adapter's buffers are smaller than the budget asks for: the user's to fix.
+            let too_large = e.downcast_ref::<terrain_gpu::GpuError>().is_some_and(|g| {
+                matches!(
+                    g,
+                    terrain_gpu::GpuError::MapTooLarge { .. } | terrain_gpu::GpuError::Core(_)
+                )
+            });
+            let e = e.context(format!(
+                "--vram-budget {} MiB: the tile atlases do not fit this adapter",
+                self.vram_budget >> 20
+            ));
+            if too_large { usage(e) } else { e }
+        };
         scene
             .enable_atlas(&AtlasConfig { slots, world })
-            .map_err(|e| {
-                // The adapter's buffers are smaller than the budget asks for: the user's to fix.
-                let too_large = e
-                    .downcast_ref::<terrain_gpu::GpuError>()
-                    .is_some_and(|g| matches!(g, terrain_gpu::GpuError::MapTooLarge { .. }));
-                let e = e.context(format!(
-                    "--vram-budget {} MiB: the tile atlas does not fit this adapter",
-                    self.vram_budget >> 20
-                ));
-                if too_large { usage(e) } else { e }
-            })?;
-        self.vram = Some(VramPool::new(VramConfig::new(&self.manifest, slots))?);
+            .map_err(too_large)?;
+        scene
+            .enable_streamed_layers(world, slots, colored)
+            .map_err(too_large)?;
+        let vram = VramConfig::new(&self.manifest, slots);
+        // Paint tiles are mostly empty (the pool's shared zero tile costs nothing), but craters'
+        // and their coarser levels are not: the heights' budget, half their tiles. Colour is
+        // dense, at 4 bytes a texel: twice it, as many tiles.
+        let heights_budget = pool.config().budget_bytes;
+        let stream = |layer, budget: u64| {
+            let budget = budget.max(2 * layer_tile_bytes(&self.manifest, layer));
+            let policy = Box::new(ram_selection(&self.manifest));
+            OverlayStream::new(files.clone(), layer, budget, policy, vram.clone())
+        };
+        self.paint_stream = Some(stream(Layer::Material, heights_budget)?);
+        if colored {
+            self.color_stream = Some(stream(Layer::Color, heights_budget.saturating_mul(2))?);
+        }
+        self.vram = Some(VramPool::new(vram)?);
         Ok(())
     }
 
@@ -621,6 +676,28 @@ impl Scenario for FlyoverScenario {
         {
             vram_report = Some(vram.update(&state, pool, atlas)?);
         }
+        // The paint and colour of the same tiles, each within its own per-frame budget.
+        let mut overlay = None;
+        if let Some(scene) = ctx.gpu.as_deref_mut() {
+            let (paint_atlas, color_atlas) = scene.streamed_layers_mut();
+            let mut streamed = [None, None];
+            for (i, (stream, atlas)) in [
+                (self.paint_stream.as_mut(), paint_atlas),
+                (self.color_stream.as_mut(), color_atlas),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                if let (Some(stream), Some(atlas)) = (stream, atlas) {
+                    let (_, report) = stream.update(&state, atlas)?;
+                    if let Some((id, e)) = stream.ram().errors().first() {
+                        bail!("{:?} tile {id} of the world: {e}", stream.layer());
+                    }
+                    streamed[i] = Some(report);
+                }
+            }
+            overlay = Some(streamed);
+        }
         // Craters on the tiles, after the uploads: a GPU stamp lands on what the slot holds
         // this frame.
         let mut changed = Vec::new();
@@ -691,8 +768,13 @@ impl Scenario for FlyoverScenario {
             let placement = StampPlacement::new(center, Vec2::splat(size), 0.0)?;
             self.overlays.cut(&placement)?;
         }
-        self.overlays
+        let painted = self
+            .overlays
             .follow(&world, &self.window, xz, ctx.gpu.as_deref_mut())?;
+        // Paint the writer put into the world is read again by the paint stream.
+        if let Some(stream) = self.paint_stream.as_mut() {
+            stream.reload(&painted);
+        }
         // CDLOD's quadtree follows the changes (timed as `lod`).
         if let (Some(bounds), Some(pool), Some(tree)) = (
             self.bounds.as_mut(),
@@ -727,9 +809,18 @@ impl Scenario for FlyoverScenario {
                     // With a GPU: wanted tiles drawn from a coarser level; without one, the
                     // tiles under and around the camera not in RAM.
                     tiles_missing: vram_report.map_or(self.tiles_missing(xz), |v| v.tiles_missing),
-                    vram_bytes: vram_report.map(|v| v.vram_bytes),
+                    // The heights' atlas and the paint and colour atlases: one VRAM budget.
+                    vram_bytes: vram_report.map(|v| {
+                        let streamed = overlay.into_iter().flatten().flatten();
+                        v.vram_bytes + streamed.map(|r| r.vram_bytes).sum::<u64>()
+                    }),
                     upload_bytes: vram_report.map(|v| v.upload_bytes),
                     uploads: vram_report.map(|v| v.uploads),
+                    material_tiles_missing: overlay.and_then(|[p, _]| p).map(|r| r.tiles_missing),
+                    color_tiles_missing: overlay.and_then(|[_, c]| c).map(|r| r.tiles_missing),
+                    overlay_upload_bytes: overlay.map(|[p, c]| {
+                        p.map_or(0, |r| r.upload_bytes) + c.map_or(0, |r| r.upload_bytes)
+                    }),
                     prefetching: report.wanted.saturating_sub(report.wanted_resident),
                     ram_bytes: report.ram_bytes,
                     ram_budget_bytes: report.budget_bytes,
@@ -756,6 +847,12 @@ impl Scenario for FlyoverScenario {
     fn finish(&mut self, gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
         // The holes and paint still on their way are in the world's files.
         self.overlays.finish()?;
+        for stream in [self.paint_stream.take(), self.color_stream.take()]
+            .into_iter()
+            .flatten()
+        {
+            stream.shutdown(SHUTDOWN_TIMEOUT)?;
+        }
         // The tiles stamped on the GPU reach RAM before anything is written back.
         let mut gpu = gpu;
         if let Some(scene) = gpu.as_deref_mut() {

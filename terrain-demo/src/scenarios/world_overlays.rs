@@ -1,26 +1,26 @@
 //! What a streamed world lays over its heights: holes (`terrain_core::holes`, the world's hole
 //! tiles) and paint (`terrain_core::material_effect`, its material tiles). A hole cut beside
 //! the path, or a crater's dirt, is written into the world on a thread of its own (in order,
-//! atomically, tile by tile), and the layers around the camera follow: the collision window's
-//! holes, and the GPU's hole, paint and colour windows of [`GPU_WINDOW`] cells (colour where
-//! the world has it: an orthophoto given with `--color`). A second run reads them back from
-//! the world.
+//! atomically, tile by tile, the paint's coarser levels with it), and what draws and collides
+//! follows: the collision window's holes and the GPU's hole window of [`GPU_WINDOW`] cells
+//! around the camera, and the paint tiles the scenario's paint stream must read again
+//! (`terrain_cache::OverlayStream::reload`). A second run reads them back from the world.
 
 use crate::gpu_scene::GpuScene;
 use anyhow::{Result, anyhow};
 use glam::{IVec2, UVec2, Vec2};
 use std::sync::mpsc;
-use terrain_cache::{Layer, World, read_color, read_holes, read_paint, write_holes, write_paint};
+use terrain_cache::{TileId, World, read_holes, read_paint, write_holes, write_paint};
 use terrain_core::{
     Grid, HoleOp, MaterialEffect, Rect, StampPlacement, WrapMode, apply_hole_stamp,
     apply_material_effect,
 };
 use terrain_physics::CollisionWindow;
 
-/// Side of the hole and paint windows the GPU draws (cells): 4 MiB of holes and 16 MiB of
-/// paint. They move when the camera is more than an eighth of a side off their centre, so
-/// their edges stay at least 768 cells away: 384 m at the default world's 0.5 m, where the
-/// default fog (0.008 /m) hides 95 % of the ground, and a hole appearing there barely shows.
+/// Side of the hole window the GPU draws (cells): 4 MiB. It moves when the camera is more than
+/// an eighth of a side off its centre, so its edges stay at least 768 cells away: 384 m at the
+/// default world's 0.5 m, where the default fog (0.008 /m) hides 95 % of the ground, and a
+/// hole appearing there barely shows.
 pub const GPU_WINDOW: u32 = 2048;
 
 /// A change to make to the world.
@@ -32,11 +32,12 @@ enum Job {
     Paint(StampPlacement, MaterialEffect),
 }
 
-/// The cells a job changed, as the world now holds them.
+/// What a job changed: the cells of a cut as the world now holds them, or the paint tiles
+/// (every level) rewritten.
 #[derive(Debug)]
 enum Changed {
     Holes(Rect, Grid<u8>),
-    Paint(Rect, Grid<[u8; 4]>),
+    Paint(Vec<TileId>),
 }
 
 /// The thread that writes the jobs into the world, one after the other: a job reads what the
@@ -113,8 +114,7 @@ fn apply(world: &World, job: Job) -> Result<Option<Changed>> {
         Job::Paint(_, effect) => {
             let mut region = read_paint(world, rect)?;
             apply_material_effect(&mut region, WrapMode::Clamp, ts, &local, &effect)?;
-            write_paint(world, rect, &region)?;
-            Changed::Paint(rect, region)
+            Changed::Paint(write_paint(world, rect, &region)?)
         }
     }))
 }
@@ -124,10 +124,8 @@ fn apply(world: &World, job: Job) -> Result<Option<Changed>> {
 pub struct WorldOverlays {
     /// The collision window's rect its holes were read for.
     collision: Option<Rect>,
-    /// The GPU windows' origin.
+    /// The GPU hole window's origin.
     gpu: Option<IVec2>,
-    /// Whether the world has colour tiles (most have none: no colour window is read then).
-    colored: bool,
     writer: Writer,
 }
 
@@ -155,11 +153,9 @@ fn footprint(world: &World, placement: &StampPlacement) -> Result<Option<(Rect, 
 impl WorldOverlays {
     /// The layers of `world`, nothing read yet, and the thread that writes into it.
     pub fn new(world: &World) -> Result<Self> {
-        let colored = !world.store().list(Layer::Color.folder())?.is_empty();
         Ok(Self {
             collision: None,
             gpu: None,
-            colored,
             writer: Writer::start(world.clone())?,
         })
     }
@@ -181,25 +177,28 @@ impl WorldOverlays {
         self.writer.finish().map(|_| ())
     }
 
-    /// Brings the layers to the camera at `xz` (world metres): the collision window's holes
-    /// when its rect changed, the GPU's holes, paint and colour when the place they should be
-    /// (centred on the camera, inside a clamped world) is more than an eighth of their side
-    /// from where they are.
+    /// Brings the holes to the camera at `xz` (world metres): the collision window's when its
+    /// rect changed, the GPU's window when the place it should be (centred on the camera,
+    /// inside a clamped world) is more than an eighth of its side from where it is. Returns
+    /// the paint tiles the writer rewrote since the last call.
     pub fn follow(
         &mut self,
         world: &World,
         window: &CollisionWindow,
         xz: Vec2,
         scene: Option<&mut GpuScene>,
-    ) -> Result<()> {
+    ) -> Result<Vec<TileId>> {
         // What the writer has finished since the last frame (a failure ends the run).
         let mut changed = Vec::new();
+        let mut painted = Vec::new();
         for done in self.writer.done.try_iter() {
-            if let Some(change) = done? {
-                if matches!(change, Changed::Holes(..)) {
+            match done? {
+                Some(Changed::Holes(rect, mask)) => {
                     self.collision = None;
+                    changed.push((rect, mask));
                 }
-                changed.push(change);
+                Some(Changed::Paint(tiles)) => painted.extend(tiles),
+                None => {}
             }
         }
         if let Some(rect) = window.window()
@@ -209,7 +208,7 @@ impl WorldOverlays {
             self.collision = Some(rect);
         }
         let Some(scene) = scene else {
-            return Ok(());
+            return Ok(painted);
         };
         let m = world.manifest();
         let side = UVec2::splat(GPU_WINDOW.min(m.world_size.min_element()));
@@ -234,20 +233,12 @@ impl WorldOverlays {
             changed.clear();
             let rect = Rect::new(origin, side);
             scene.move_hole_window(side.x, origin, &read_holes(world, rect)?)?;
-            scene.move_paint_window(side.x, origin, &read_paint(world, rect)?)?;
-            if self.colored {
-                scene.move_color_window(side.x, origin, &read_color(world, rect)?)?;
-            }
             self.gpu = Some(origin);
         }
-        // What was cut or painted since: only its rect, written into the windows (the parts
-        // they cover).
-        for change in changed {
-            match change {
-                Changed::Holes(rect, mask) => scene.update_windows(rect, Some(&mask), None)?,
-                Changed::Paint(rect, paint) => scene.update_windows(rect, None, Some(&paint))?,
-            }
+        // What was cut since: only its rect, written into the window (the part it covers).
+        for (rect, mask) in changed {
+            scene.update_hole_window(rect, &mask)?;
         }
-        Ok(())
+        Ok(painted)
     }
 }

@@ -508,8 +508,8 @@ pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 10] {
     ]
 }
 
-/// The stand-ins of a streamed layer: one transparent slot, and a table whose pyramid has no
-/// level (so nothing is ever resident).
+/// The stand-ins of a streamed layer (read only where its flag is set, so never): one
+/// transparent slot, and a table of one level-0 tile with nothing resident.
 fn no_streamed(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
@@ -530,19 +530,38 @@ fn no_streamed(
         device.create_texture(&wgpu::TextureDescriptor {
             label: Some("no streamed table"),
             size: wgpu::Extent3d {
-                width: 1,
-                height: 1,
+                width: 2,
+                height: 2,
                 depth_or_array_layers: 1,
             },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: wgpu::TextureFormat::R32Uint,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             view_formats: &[],
         })
     })?;
-    // A new texture is zero: levels 0.
+    let none = terrain_core::INVALID_SLOT;
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture: &table,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        bytemuck::cast_slice(&[0u32, 1, none, none]),
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(8),
+            rows_per_image: None,
+        },
+        wgpu::Extent3d {
+            width: 2,
+            height: 2,
+            depth_or_array_layers: 1,
+        },
+    );
     Ok([
         slots,
         table.create_view(&wgpu::TextureViewDescriptor::default()),

@@ -9,21 +9,21 @@
 //! - **Slots:** an RGBA8 2D array; each layer a square of `cols x cols` tiles (as many as
 //!   `max_texture_dimension_2d` allows, at most what the slots need), so the slot count is not
 //!   bound by `max_texture_array_layers` alone.
-//! - **Table:** an R32Uint 2D texture read as a list of [`TABLE_WIDTH`] per row. Entries 0..128
-//!   describe the pyramid (levels, log2 tile side, `cols`, slots; per level its tiles across,
-//!   down and first entry from index 4), so the lookup needs no other binding; entry
-//!   `128 + TileLayout::table_index` holds a tile's slot or `INVALID_SLOT`.
+//! - **Table:** an R32Uint 2D texture with one entry per level-0 tile (from row 1; row 0 holds
+//!   log2 of the tile side and `cols`): the finest resident level covering that tile and its
+//!   slot (`level << 27 | slot`), or `INVALID_SLOT`. A level-`l` tile covers whole level-0
+//!   tiles, so every texel of a level-0 tile resolves the same way, and the lookup is one load
+//!   instead of a walk up the levels: lavapipe's compiler took minutes over two more walks in
+//!   the atlas surface's fragment shader, which already walks the heights' pyramid 16 times.
+//!   The atlas keeps the pyramid's table on the CPU and rewrites the entries a `map` changes.
 
 use crate::device::scope::scoped;
 use crate::error::GpuError;
 use glam::UVec2;
 use terrain_core::{CoreError, Grid, INVALID_SLOT, OverlayUploadTarget, TileLayout};
 
-/// Entries per row of the table texture (at most downlevel `max_texture_dimension_2d`).
-pub(crate) const TABLE_WIDTH: u32 = 1024;
-
-/// Table entries before the tiles' (the pyramid's description).
-const TABLE_HEADER: u32 = 128;
+/// Bits of an entry's slot; the level is above them.
+const SLOT_BITS: u32 = 27;
 
 /// A world's paint or colour tiles on the GPU (see the module docs). Cloning shares the
 /// textures: a renderer keeps a clone, and the pool's uploads into the original show in it.
@@ -35,6 +35,9 @@ pub struct GpuOverlayAtlas {
     queue: wgpu::Queue,
     texels: wgpu::Texture,
     table: wgpu::Texture,
+    /// The pyramid's indirection table (slot or `INVALID_SLOT` per tile of every level), from
+    /// which the texture's entries are made.
+    tiles: Vec<u32>,
     pub(crate) texels_view: wgpu::TextureView,
     pub(crate) table_view: wgpu::TextureView,
     bytes: u64,
@@ -86,16 +89,18 @@ impl GpuOverlayAtlas {
                 "at most what the device's 2D array layers hold",
             ));
         }
-        let entries = u64::from(TABLE_HEADER) + layout.table_len();
-        let rows = entries.div_ceil(u64::from(TABLE_WIDTH));
-        if rows > u64::from(limits.max_texture_dimension_2d) {
+        let level0 = layout.tiles_at(0);
+        if level0.x.max(2) > limits.max_texture_dimension_2d
+            || level0.y + 1 > limits.max_texture_dimension_2d
+        {
             return Err(out(
-                "tiles in the pyramid",
-                layout.table_len() as f64,
-                "a table of at most max_texture_dimension_2d rows of 1024",
+                "level-0 tiles across the world",
+                f64::from(level0.max_element()),
+                "a table within the device's max_texture_dimension_2d",
             ));
         }
-        let rows = rows as u32;
+        let tiles = usize::try_from(layout.table_len())
+            .map_err(|_| out("tiles in the pyramid", layout.table_len() as f64, "fewer"))?;
         let side = cols * ts;
         let texels = scoped(device, "GpuOverlayAtlas slots", || {
             device.create_texture(&wgpu::TextureDescriptor {
@@ -117,8 +122,8 @@ impl GpuOverlayAtlas {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("GpuOverlayAtlas table"),
                 size: wgpu::Extent3d {
-                    width: TABLE_WIDTH,
-                    height: rows,
+                    width: level0.x.max(2),
+                    height: level0.y + 1,
                     depth_or_array_layers: 1,
                 },
                 mip_level_count: 1,
@@ -129,22 +134,16 @@ impl GpuOverlayAtlas {
                 view_formats: &[],
             })
         })?;
-        let mut entries = vec![INVALID_SLOT; (rows * TABLE_WIDTH) as usize];
-        entries[..4].copy_from_slice(&[layout.levels, ts.trailing_zeros(), cols, slots]);
-        for l in 0..layout.levels {
-            let t = layout.tiles_at(l);
-            // The table fits a texture (checked), so every offset fits u32.
-            let at = 4 + 3 * l as usize;
-            entries[at..at + 3].copy_from_slice(&[t.x, t.y, layout.level_offset(l) as u32]);
-        }
-        write_table(queue, &table, 0, &entries);
+        write_rows(queue, &table, 0, &[ts.trailing_zeros(), cols], 2);
+        let none = vec![INVALID_SLOT; (level0.x as usize) * (level0.y as usize)];
+        write_rows(queue, &table, 1, &none, level0.x);
         let texels_view = texels.create_view(&wgpu::TextureViewDescriptor {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
         });
         let table_view = table.create_view(&wgpu::TextureViewDescriptor::default());
         let bytes = u64::from(side) * u64::from(side) * u64::from(layers) * 4
-            + u64::from(rows) * u64::from(TABLE_WIDTH) * 4;
+            + u64::from(level0.x.max(2)) * u64::from(level0.y + 1) * 4;
         Ok(Self {
             layout,
             slots,
@@ -152,6 +151,7 @@ impl GpuOverlayAtlas {
             queue: queue.clone(),
             texels,
             table,
+            tiles: vec![INVALID_SLOT; tiles],
             texels_view,
             table_view,
             bytes,
@@ -196,21 +196,13 @@ impl GpuOverlayAtlas {
     }
 }
 
-/// Writes `entries` into the table texture from list index `first` (within one row, or whole
-/// rows from a row's start).
-fn write_table(queue: &wgpu::Queue, table: &wgpu::Texture, first: u64, entries: &[u32]) {
-    let w = u64::from(TABLE_WIDTH);
-    let rows = (entries.len() as u64).div_ceil(w) as u32;
-    let width = (entries.len() as u64).min(w) as u32;
+/// Writes `entries`, whole rows of `width`, into the table texture from row `row`.
+fn write_rows(queue: &wgpu::Queue, table: &wgpu::Texture, row: u32, entries: &[u32], width: u32) {
     queue.write_texture(
         wgpu::TexelCopyTextureInfo {
             texture: table,
             mip_level: 0,
-            origin: wgpu::Origin3d {
-                x: (first % w) as u32,
-                y: (first / w) as u32,
-                z: 0,
-            },
+            origin: wgpu::Origin3d { x: 0, y: row, z: 0 },
             aspect: wgpu::TextureAspect::All,
         },
         bytemuck::cast_slice(entries),
@@ -221,10 +213,27 @@ fn write_table(queue: &wgpu::Queue, table: &wgpu::Texture, first: u64, entries: 
         },
         wgpu::Extent3d {
             width,
-            height: rows,
+            height: entries.len() as u32 / width,
             depth_or_array_layers: 1,
         },
     );
+}
+
+impl GpuOverlayAtlas {
+    /// The finest mapped level covering level-0 tile `t`, with its slot, packed as the shader
+    /// reads it; `INVALID_SLOT` where none is.
+    fn finest_at(&self, t: UVec2) -> u32 {
+        for level in 0..self.layout.levels {
+            let Some(i) = self.layout.table_index(level, t >> level) else {
+                continue;
+            };
+            let slot = self.tiles[i as usize];
+            if slot < self.slots {
+                return level << SLOT_BITS | slot;
+            }
+        }
+        INVALID_SLOT
+    }
 }
 
 impl OverlayUploadTarget for GpuOverlayAtlas {
@@ -288,12 +297,43 @@ impl OverlayUploadTarget for GpuOverlayAtlas {
 
     fn map(&mut self, level: u32, tile: UVec2, slot: Option<u32>) -> Result<(), GpuError> {
         let i = self.check(slot, level, tile)?;
-        let entry = [slot.unwrap_or(INVALID_SLOT)];
-        write_table(
-            &self.queue,
-            &self.table,
-            u64::from(TABLE_HEADER) + i,
-            &entry,
+        self.tiles[i as usize] = slot.unwrap_or(INVALID_SLOT);
+        // The level-0 tiles it covers: their finest level may have changed.
+        let level0 = self.layout.tiles_at(0);
+        let min = (tile << level).min(level0);
+        let max = ((tile + UVec2::ONE) << level).min(level0);
+        if min.x >= max.x || min.y >= max.y {
+            return Ok(());
+        }
+        let width = max.x - min.x;
+        let mut rows = Vec::with_capacity((width * (max.y - min.y)) as usize);
+        for y in min.y..max.y {
+            for x in min.x..max.x {
+                rows.push(self.finest_at(UVec2::new(x, y)));
+            }
+        }
+        self.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.table,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: min.x,
+                    y: min.y + 1,
+                    z: 0,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytemuck::cast_slice(&rows),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(width * 4),
+                rows_per_image: None,
+            },
+            wgpu::Extent3d {
+                width,
+                height: max.y - min.y,
+                depth_or_array_layers: 1,
+            },
         );
         Ok(())
     }
