@@ -113,12 +113,13 @@ fn a_built_world_is_valid_and_its_zero_tiles_are_known_empty() {
     )
     .unwrap();
     assert!(report.is_valid(), "{report:#?}");
-    // The height pyramid's tiles, and the 30 hole, material and colour tiles each over level 0.
-    assert_eq!(report.tiles, 30 + 9 + 4 + 1 + 3 * 30);
+    // The height pyramid's tiles, the 30 hole tiles over level 0, and the material and colour
+    // tiles over every level (their pyramids are the heights').
+    assert_eq!(report.tiles, 3 * (30 + 9 + 4 + 1) + 30);
     assert_eq!(report.stored + report.zero, report.tiles);
     assert_eq!(
         report.zero,
-        5 + 90,
+        5 + 30 + 2 * 44,
         "4 level-0 tiles and 1 level-1 tile are the zero tile; no hole, paint or colour"
     );
     assert_eq!(calls.get(), report.tiles);
@@ -424,7 +425,7 @@ fn a_crafted_manifest_promising_billions_of_tiles_is_refused_at_once() {
     // The limit is the caller's: a small world over a small limit is refused the same way.
     let small = built(None);
     let options = VerifyOptions {
-        max_tiles: 133,
+        max_tiles: 161,
         ..VerifyOptions::default()
     };
     let e = verify_world(&small, &options, &cancel, &mut |_| {}).unwrap_err();
@@ -432,8 +433,8 @@ fn a_crafted_manifest_promising_billions_of_tiles_is_refused_at_once() {
         matches!(
             e,
             VerifyError::TooManyTiles {
-                tiles: 134,
-                max: 133
+                tiles: 162,
+                max: 161
             }
         ),
         "{e}"
@@ -450,7 +451,7 @@ fn the_cancel_flag_stops_the_walk() {
             e,
             VerifyError::Cancelled {
                 done: 0,
-                total: 134
+                total: 162
             }
         ),
         "{e}"
@@ -521,7 +522,7 @@ fn detail_tiles_are_checked_and_missing_ones_are_the_zero_deformation() {
     world.write_tile(Layer::Detail, id, &d).unwrap();
     let report = verify(&world);
     assert!(report.is_valid(), "{report:#?}");
-    assert_eq!(report.tiles, 134 + 6 * 5);
+    assert_eq!(report.tiles, 162 + 6 * 5);
     let other = world
         .manifest()
         .tile_key(Layer::Detail, TileId::new(0, 2, 2));

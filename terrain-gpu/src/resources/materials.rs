@@ -530,7 +530,7 @@ fn no_streamed(
         device.create_texture(&wgpu::TextureDescriptor {
             label: Some("no streamed table"),
             size: wgpu::Extent3d {
-                width: 2,
+                width: 3,
                 height: 2,
                 depth_or_array_layers: 1,
             },
@@ -550,14 +550,14 @@ fn no_streamed(
             origin: wgpu::Origin3d::ZERO,
             aspect: wgpu::TextureAspect::All,
         },
-        bytemuck::cast_slice(&[0u32, 1, none, none]),
+        bytemuck::cast_slice(&[0u32, 1, 1, none, none, none]),
         wgpu::TexelCopyBufferLayout {
             offset: 0,
-            bytes_per_row: Some(8),
+            bytes_per_row: Some(12),
             rows_per_image: None,
         },
         wgpu::Extent3d {
-            width: 2,
+            width: 3,
             height: 2,
             depth_or_array_layers: 1,
         },

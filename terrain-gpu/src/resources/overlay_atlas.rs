@@ -6,11 +6,11 @@
 //!
 //! Textures, not storage buffers: the atlas surface's fragment stage already binds the heights'
 //! three storage buffers, and four is all some devices allow per stage.
-//! - **Slots:** an RGBA8 2D array; each layer a square of `cols x cols` tiles (as many as
-//!   `max_texture_dimension_2d` allows, at most what the slots need), so the slot count is not
-//!   bound by `max_texture_array_layers` alone.
+//! - **Slots:** an RGBA8 2D array; each layer `cols x rows` tiles (no more than
+//!   `max_texture_dimension_2d` allows, and no more rows than the slots fill), so the slot
+//!   count is not bound by `max_texture_array_layers` alone and few texels go unused.
 //! - **Table:** an R32Uint 2D texture with one entry per level-0 tile (from row 1; row 0 holds
-//!   log2 of the tile side and `cols`): the finest resident level covering that tile and its
+//!   log2 of the tile side, `cols` and `rows`): the finest resident level covering that tile and its
 //!   slot (`level << 27 | slot`), or `INVALID_SLOT`. A level-`l` tile covers whole level-0
 //!   tiles, so every texel of a level-0 tile resolves the same way, and the lookup is one load
 //!   instead of a walk up the levels: lavapipe's compiler took minutes over two more walks in
@@ -32,6 +32,7 @@ pub struct GpuOverlayAtlas {
     layout: TileLayout,
     slots: u32,
     cols: u32,
+    rows: u32,
     queue: wgpu::Queue,
     texels: wgpu::Texture,
     table: wgpu::Texture,
@@ -81,7 +82,8 @@ impl GpuOverlayAtlas {
         let fit = limits.max_texture_dimension_2d / ts;
         let need = (f64::from(slots).sqrt().ceil() as u32).max(1);
         let cols = fit.min(need).max(1);
-        let layers = slots.div_ceil(cols * cols);
+        let rows = fit.min(slots.div_ceil(cols)).max(1);
+        let layers = slots.div_ceil(cols * rows);
         if layers > limits.max_texture_array_layers {
             return Err(out(
                 "overlay atlas slots",
@@ -90,7 +92,7 @@ impl GpuOverlayAtlas {
             ));
         }
         let level0 = layout.tiles_at(0);
-        if level0.x.max(2) > limits.max_texture_dimension_2d
+        if level0.x.max(3) > limits.max_texture_dimension_2d
             || level0.y + 1 > limits.max_texture_dimension_2d
         {
             return Err(out(
@@ -101,13 +103,13 @@ impl GpuOverlayAtlas {
         }
         let tiles = usize::try_from(layout.table_len())
             .map_err(|_| out("tiles in the pyramid", layout.table_len() as f64, "fewer"))?;
-        let side = cols * ts;
+        let (width, height) = (cols * ts, rows * ts);
         let texels = scoped(device, "GpuOverlayAtlas slots", || {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("GpuOverlayAtlas slots"),
                 size: wgpu::Extent3d {
-                    width: side,
-                    height: side,
+                    width,
+                    height,
                     depth_or_array_layers: layers,
                 },
                 mip_level_count: 1,
@@ -122,7 +124,7 @@ impl GpuOverlayAtlas {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("GpuOverlayAtlas table"),
                 size: wgpu::Extent3d {
-                    width: level0.x.max(2),
+                    width: level0.x.max(3),
                     height: level0.y + 1,
                     depth_or_array_layers: 1,
                 },
@@ -134,7 +136,7 @@ impl GpuOverlayAtlas {
                 view_formats: &[],
             })
         })?;
-        write_rows(queue, &table, 0, &[ts.trailing_zeros(), cols], 2);
+        write_rows(queue, &table, 0, &[ts.trailing_zeros(), cols, rows], 3);
         let none = vec![INVALID_SLOT; (level0.x as usize) * (level0.y as usize)];
         write_rows(queue, &table, 1, &none, level0.x);
         let texels_view = texels.create_view(&wgpu::TextureViewDescriptor {
@@ -142,12 +144,13 @@ impl GpuOverlayAtlas {
             ..Default::default()
         });
         let table_view = table.create_view(&wgpu::TextureViewDescriptor::default());
-        let bytes = u64::from(side) * u64::from(side) * u64::from(layers) * 4
-            + u64::from(level0.x.max(2)) * u64::from(level0.y + 1) * 4;
+        let bytes = u64::from(width) * u64::from(height) * u64::from(layers) * 4
+            + u64::from(level0.x.max(3)) * u64::from(level0.y + 1) * 4;
         Ok(Self {
             layout,
             slots,
             cols,
+            rows,
             queue: queue.clone(),
             texels,
             table,
@@ -267,16 +270,15 @@ impl OverlayUploadTarget for GpuOverlayAtlas {
                 actual: texels.size(),
             });
         }
-        let per_layer = self.cols * self.cols;
-        let within = slot % per_layer;
+        let (corner, layer) = slot_place(slot, self.cols, self.rows);
         self.queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &self.texels,
                 mip_level: 0,
                 origin: wgpu::Origin3d {
-                    x: within % self.cols * ts,
-                    y: within / self.cols * ts,
-                    z: slot / per_layer,
+                    x: corner.x * ts,
+                    y: corner.y * ts,
+                    z: layer,
                 },
                 aspect: wgpu::TextureAspect::All,
             },
@@ -336,5 +338,31 @@ impl OverlayUploadTarget for GpuOverlayAtlas {
             },
         );
         Ok(())
+    }
+}
+
+/// Where slot `slot` lies in layers of `cols x rows` tiles: its corner in tiles, and its layer
+/// (as `streamed_layer_at` finds it).
+fn slot_place(slot: u32, cols: u32, rows: u32) -> (UVec2, u32) {
+    let per_layer = cols * rows;
+    let within = slot % per_layer;
+    (UVec2::new(within % cols, within / cols), slot / per_layer)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_slot_has_a_place_of_its_own_inside_its_layer() {
+        for (cols, rows, slots) in [(1, 1, 5), (3, 2, 7), (8, 8, 200), (4, 1, 4)] {
+            let mut seen = std::collections::HashSet::new();
+            for slot in 0..slots {
+                let (corner, layer) = slot_place(slot, cols, rows);
+                assert!(corner.x < cols && corner.y < rows, "{slot}");
+                assert!(layer < slots.div_ceil(cols * rows));
+                assert!(seen.insert((corner, layer)), "{slot} shares its place");
+            }
+        }
     }
 }

@@ -3,7 +3,7 @@
 // `map_texel` (clipmap.wgsl's, or the probe's own).
 //
 // Tile slots in a 2D array, and a table texture: row 0 holds log2 of the tile side and the
-// slots per row of an array layer; from row 1, per level-0 tile, the finest resident level
+// slots across and down an array layer; from row 1, per level-0 tile, the finest resident level
 // covering it and its slot (`level << 27 | slot`), or INVALID_SLOT. Drawn instead of the
 // windows at 13 and 14 when frame.color_layer.w says so (bit 1: paint, bit 2: colour).
 @group(0) @binding(16) var paint_slots: texture_2d_array<f32>;
@@ -17,6 +17,7 @@
 fn streamed_layer_at(slots: texture_2d_array<f32>, table: texture_2d<u32>, q: vec2<f32>, premultiply: bool) -> vec4<f32> {
     let shift = textureLoad(table, vec2<u32>(0u, 0u), 0).r;
     let cols = max(textureLoad(table, vec2<u32>(1u, 0u), 0).r, 1u);
+    let rows = max(textureLoad(table, vec2<u32>(2u, 0u), 0).r, 1u);
     let p0 = floor(q);
     let t = map_texel(frame.camera_texel + vec2<i32>(p0));
     let tile0 = t >> vec2<u32>(shift, shift);
@@ -32,7 +33,7 @@ fn streamed_layer_at(slots: texture_2d_array<f32>, table: texture_2d<u32>, q: ve
     let f = at - i0;
     let side = i32(1u << shift);
     let origin = vec2<i32>(((t >> vec2<u32>(level, level)) >> vec2<u32>(shift, shift)) << vec2<u32>(shift, shift));
-    let per_layer = cols * cols;
+    let per_layer = cols * rows;
     let within = slot % per_layer;
     let base = vec2<i32>(i32(within % cols), i32(within / cols)) * side;
     let layer = i32(slot / per_layer);
