@@ -514,14 +514,23 @@ fn no_streamed(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
 ) -> Result<[wgpu::TextureView; 2], GpuError> {
-    let (slots, _) = rgba8_texture_with(
-        device,
-        queue,
-        "no streamed layer",
-        glam::UVec2::ONE,
-        &[[0; 4]],
-        wgpu::TextureUsages::empty(),
-    )?;
+    // Two layers, as GpuOverlayAtlas's (GL reads no array of one); a new texture is zero.
+    let slots = scoped(device, "no streamed layer", || {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("no streamed layer"),
+            size: wgpu::Extent3d {
+                width: 1,
+                height: 1,
+                depth_or_array_layers: 2,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8Unorm,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        })
+    })?;
     let slots = slots.create_view(&wgpu::TextureViewDescriptor {
         dimension: Some(wgpu::TextureViewDimension::D2Array),
         ..Default::default()

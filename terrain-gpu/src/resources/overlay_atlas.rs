@@ -6,9 +6,10 @@
 //!
 //! Textures, not storage buffers: the atlas surface's fragment stage already binds the heights'
 //! three storage buffers, and four is all some devices allow per stage.
-//! - **Slots:** an RGBA8 2D array; each layer `cols x rows` tiles (no more than
-//!   `max_texture_dimension_2d` allows, and no more rows than the slots fill), so the slot
-//!   count is not bound by `max_texture_array_layers` alone and few texels go unused.
+//! - **Slots:** an RGBA8 2D array of at least two layers (GL reads no array of one); each layer
+//!   `cols x rows` tiles (no more than `max_texture_dimension_2d` allows, and no more rows than
+//!   the slots fill), so the slot count is not bound by `max_texture_array_layers` alone and
+//!   few texels go unused.
 //! - **Table:** an R32Uint 2D texture with one entry per level-0 tile (from row 1; row 0 holds
 //!   log2 of the tile side, `cols` and `rows`): the finest resident level covering that tile and its
 //!   slot (`level << 27 | slot`), or `INVALID_SLOT`. A level-`l` tile covers whole level-0
@@ -79,11 +80,15 @@ impl GpuOverlayAtlas {
                 "at most the device's max_texture_dimension_2d",
             ));
         }
+        // At least two layers: wgpu's GL backend makes a texture of one layer a plain 2D
+        // texture, which an array view does not read (every texel reads zero). The slots are
+        // split between the two, so no layer is wasted.
         let fit = limits.max_texture_dimension_2d / ts;
-        let need = (f64::from(slots).sqrt().ceil() as u32).max(1);
+        let half = slots.div_ceil(2);
+        let need = (f64::from(half).sqrt().ceil() as u32).max(1);
         let cols = fit.min(need).max(1);
-        let rows = fit.min(slots.div_ceil(cols)).max(1);
-        let layers = slots.div_ceil(cols * rows);
+        let rows = fit.min(half.div_ceil(cols)).max(1);
+        let layers = slots.div_ceil(cols * rows).max(2);
         if layers > limits.max_texture_array_layers {
             return Err(out(
                 "overlay atlas slots",
