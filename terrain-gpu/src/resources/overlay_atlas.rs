@@ -14,8 +14,8 @@
 //!   log2 of the tile side, `cols` and `rows`): the finest resident level covering that tile and its
 //!   slot (`level << 27 | slot`), or `INVALID_SLOT`. A level-`l` tile covers whole level-0
 //!   tiles, so every texel of a level-0 tile resolves the same way, and the lookup is one load
-//!   instead of a walk up the levels: lavapipe's compiler took minutes over two more walks in
-//!   the atlas surface's fragment shader, which already walks the heights' pyramid 16 times.
+//!   instead of a walk up the levels (lavapipe's compiler took minutes over a version with
+//!   walks in the atlas surface's fragment shader, which already walks the heights 16 times).
 //!   The atlas keeps the pyramid's table on the CPU and rewrites the entries a `map` changes.
 
 use crate::device::scope::scoped;

@@ -37,16 +37,21 @@ fn streamed_layer_at(slots: texture_2d_array<f32>, table: texture_2d<u32>, q: ve
     let within = slot % per_layer;
     let base = vec2<i32>(i32(within % cols), i32(within / cols)) * side;
     let layer = i32(slot / per_layer);
-    var c: array<vec4<f32>, 4>;
-    for (var k = 0; k < 4; k = k + 1) {
-        let d = vec2<i32>(k & 1, k >> 1u);
-        let local = clamp(vec2<i32>(i0) + d - origin, vec2<i32>(0, 0), vec2<i32>(side - 1, side - 1));
-        let v = textureLoad(slots, base + local, layer, 0);
-        if premultiply {
-            c[k] = vec4<f32>(v.rgb * v.a, v.a);
-        } else {
-            c[k] = v;
-        }
+    // The four texels, clamped to the tile, written out: a local array filled in a loop took
+    // lavapipe's and llvmpipe's compilers minutes.
+    let a = vec2<i32>(i0) - origin;
+    let last = vec2<i32>(side - 1, side - 1);
+    let lo = clamp(a, vec2<i32>(0, 0), last);
+    let hi = clamp(a + vec2<i32>(1, 1), vec2<i32>(0, 0), last);
+    var c00 = textureLoad(slots, base + lo, layer, 0);
+    var c10 = textureLoad(slots, base + vec2<i32>(hi.x, lo.y), layer, 0);
+    var c01 = textureLoad(slots, base + vec2<i32>(lo.x, hi.y), layer, 0);
+    var c11 = textureLoad(slots, base + hi, layer, 0);
+    if premultiply {
+        c00 = vec4<f32>(c00.rgb * c00.a, c00.a);
+        c10 = vec4<f32>(c10.rgb * c10.a, c10.a);
+        c01 = vec4<f32>(c01.rgb * c01.a, c01.a);
+        c11 = vec4<f32>(c11.rgb * c11.a, c11.a);
     }
-    return mix(mix(c[0], c[1], f.x), mix(c[2], c[3], f.x), f.y);
+    return mix(mix(c00, c10, f.x), mix(c01, c11, f.x), f.y);
 }
