@@ -5,9 +5,9 @@
 //!
 //! Give it the heights' selection policy and VRAM configuration and it holds the look of the
 //! ground the heights' pools hold the shape of, level for level, within its own budgets. The
-//! layer's files are written by someone else (`terrain_cache::overlays`, on any thread): name
-//! the tiles such a write returns to [`OverlayStream::reload`] and they are read and uploaded
-//! again.
+//! layer's files are written by someone else (`terrain_cache::overlays`, one writer at a time,
+//! on any thread): name the tiles such a write returns to [`OverlayStream::reload`] and they
+//! are read and uploaded again.
 
 use crate::error::CacheError;
 use crate::policy::{CameraState, SelectionPolicy};
@@ -29,7 +29,8 @@ pub struct OverlayStream {
 impl OverlayStream {
     /// Streams `layer` (paint or colour) of `world`: a RAM pool of `ram_budget_bytes` that
     /// selects with `policy`, and a VRAM pool configured by `vram` (the heights', for the same
-    /// tiles). Its tiles never change in RAM, so nothing is written back. Fails on another
+    /// tiles; its per-frame upload budget raised to one RGBA tile if below). Its tiles never
+    /// change in RAM, so nothing is written back. Fails on another
     /// layer, a world without it (a version-1 world), a budget below two tiles, or a bad VRAM
     /// configuration.
     pub fn new(
@@ -45,6 +46,10 @@ impl OverlayStream {
         if world.manifest().layer_levels(layer) == 0 {
             return Err(CacheError::NoSuchLayer { layer });
         }
+        // An RGBA tile is twice a height tile's bytes: the per-frame budget takes at least one.
+        let mut vram = vram;
+        let tile = u64::from(world.manifest().tile_size).pow(2) * 4;
+        vram.upload_budget_bytes = vram.upload_budget_bytes.max(tile);
         let cfg = PoolConfig {
             write_back_idle_frames: None,
             propagate_to_coarser: false,

@@ -55,8 +55,10 @@ pub fn read_paint(world: &World, rect: Rect) -> Result<Grid<[u8; 4]>, CacheError
 
 /// Writes `paint`, the material layer of `rect`, into the material tiles, as [`write_holes`]
 /// writes holes (an unpainted tile loses its file), then the coarser levels' tiles above the
-/// changed ones (`overlay_pyramid`). Returns every tile whose file was rewritten, level 0 first:
-/// a RAM pool of the layer reloads them ([`RamPool::reload`](crate::RamPool::reload)).
+/// region's tiles (`overlay_pyramid`). Returns every tile whose file was rewritten, level 0
+/// first: a RAM pool of the layer reloads them ([`RamPool::reload`](crate::RamPool::reload)).
+/// One writer at a time per layer of a world: two writes under the same coarser tile on
+/// different threads may each rebuild it from the other's old texels.
 pub fn write_paint(
     world: &World,
     rect: Rect,
@@ -80,7 +82,9 @@ pub fn write_color(
     write_layer(world, Layer::Color, rect, colors)
 }
 
-/// Writes an RGBA layer's level-0 region and the coarser tiles above what changed.
+/// Writes an RGBA layer's level-0 region, then the coarser tiles above every level-0 tile the
+/// region touches, changed or not: writing a layer again builds the pyramid of a world written
+/// before it had one, and finishes one a failed write left behind.
 fn write_layer(
     world: &World,
     layer: Layer,
@@ -88,8 +92,14 @@ fn write_layer(
     region: &Grid<[u8; 4]>,
 ) -> Result<Vec<TileId>, CacheError> {
     let mut changed = write_region(world, layer, rect, region, TileData::as_rgba8_mut)?;
-    let coarser = rebuild_overlay_ancestors(world, layer, &changed)?;
-    changed.extend(coarser);
+    let mut touched = Vec::new();
+    for_each_tile(world, &pieces(world, layer, rect)?, |id, _, _, _| {
+        touched.push(id);
+        Ok(())
+    })?;
+    touched.sort();
+    touched.dedup();
+    changed.extend(rebuild_overlay_ancestors(world, layer, &touched)?);
     Ok(changed)
 }
 
@@ -161,7 +171,10 @@ fn write_region<T: Copy + PartialEq>(
             }
             if differs {
                 world.write_tile(layer, id, &tile)?;
-                changed.push(id);
+                // A rect that wraps may reach one tile from two pieces.
+                if !changed.contains(&id) {
+                    changed.push(id);
+                }
             }
             Ok(())
         },
@@ -347,6 +360,22 @@ mod tests {
                 below = expected;
             }
         }
+        // A coarser tile lost (a world written before paint had levels, or a failed write):
+        // writing the same paint again, which changes no level-0 tile, rebuilds it.
+        let lost = TileId::new(1, 0, 0);
+        let key = m.tile_key(Layer::Material, lost);
+        let kept = w
+            .store()
+            .read(&key, u64::MAX)
+            .expect("read")
+            .expect("a stored tile");
+        w.store().remove(&key).expect("remove");
+        let again = write_paint(&w, all, &read_paint(&w, all).expect("read")).expect("write");
+        assert!(
+            again.iter().all(|id| id.level > 0) && again.contains(&lost),
+            "{again:?}"
+        );
+        assert_eq!(w.store().read(&key, u64::MAX).expect("read"), Some(kept));
         let _ = std::fs::remove_dir_all(dir);
     }
 

@@ -375,7 +375,7 @@ impl TileStore for FsStore {
         }
         let mut bytes = Vec::with_capacity(len as usize);
         // `take` bounds the read even if the file grows meanwhile.
-        file.take(max_len + 1)
+        file.take(max_len.saturating_add(1))
             .read_to_end(&mut bytes)
             .map_err(io_err)?;
         if bytes.len() as u64 > max_len {

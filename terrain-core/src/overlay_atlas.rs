@@ -11,8 +11,9 @@
 //!
 //! A renderer reads a layer at a level-0 position `p` (texel `i`'s value at `p = i`): it finds
 //! the finest mapped level `l` of the texel under `p`, and blends the four texels of level `l`
-//! around `p` bilinearly, clamped to that tile (so a lookup reads one tile; the seam this
-//! leaves at tile edges is within one texel's blend). Where no level is mapped the layer is
+//! around `p` bilinearly, clamped to that tile and to the level's texels (so a lookup reads one
+//! tile, never its padding beyond the world; the seam this leaves at tile edges is within one
+//! texel's blend). Where no level is mapped the layer is
 //! transparent (zero).
 
 use crate::error::CoreError;
@@ -46,7 +47,8 @@ pub trait OverlayUploadTarget {
     fn map(&mut self, level: u32, tile: UVec2, slot: Option<u32>) -> Result<(), Self::Error>;
 }
 
-/// Most texels an [`OverlayAtlas`] holds (4 GiB): more slots are refused, not allocated.
+/// Most texels an [`OverlayAtlas`] holds (4 GiB), and most entries its table has: more slots
+/// or tiles are refused, not allocated.
 pub const MAX_OVERLAY_TEXELS: u64 = 1 << 30;
 
 /// Slots of RGBA8 tiles and an indirection table in memory: the CPU reference of terrain-gpu's
@@ -81,11 +83,14 @@ impl OverlayAtlas {
             .filter(|&n| n <= MAX_OVERLAY_TEXELS)
             .and_then(|n| usize::try_from(n).ok())
             .ok_or(too_large)?;
-        let table = usize::try_from(layout.table_len()).map_err(|_| CoreError::OutOfRange {
-            what: "tiles in the pyramid",
-            value: layout.table_len() as f64,
-            expected: "addressable on this machine",
-        })?;
+        let table = usize::try_from(layout.table_len())
+            .ok()
+            .filter(|&n| n as u64 <= MAX_OVERLAY_TEXELS)
+            .ok_or(CoreError::OutOfRange {
+                what: "tiles in the pyramid",
+                value: layout.table_len() as f64,
+                expected: "at most 2^30",
+            })?;
         Ok(Self {
             layout,
             slots,
@@ -146,7 +151,9 @@ impl OverlayAtlas {
         let f = (at - i0).as_vec2();
         let ts = self.layout.tile_size;
         let origin = ((t >> level) / ts * ts).as_ivec2();
-        let last = origin + IVec2::splat(ts as i32 - 1);
+        // The tile's last texel, or the level's where the world ends inside the tile.
+        let end = ((self.layout.world_size - UVec2::ONE) >> level).as_ivec2();
+        let last = (origin + IVec2::splat(ts as i32 - 1)).min(end);
         let texel = |d: IVec2| {
             let c = (i0.as_ivec2() + d).clamp(origin, last) - origin;
             let i = u64::from(slot) * self.layout.tile_texels()
@@ -280,6 +287,17 @@ mod tests {
         assert!(atlas.map(0, UVec2::new(4, 0), Some(0)).is_err());
         let small = Grid::new(2, 2, [0; 4]).expect("tile");
         assert!(atlas.upload(0, 0, UVec2::ZERO, &small).is_err());
+        // A world ending inside a tile: the blend stops at its last texel, not the padding.
+        let narrow = TileLayout {
+            world_size: UVec2::new(10, 8),
+            ..layout()
+        };
+        let mut edge = OverlayAtlas::new(narrow, 1).expect("atlas");
+        let tile =
+            Grid::from_fn(4, 4, |x, _| [if x == 1 { 255 } else { 0 }, 0, 0, 0]).expect("tile");
+        edge.upload(0, 0, UVec2::new(2, 0), &tile).expect("upload");
+        edge.map(0, UVec2::new(2, 0), Some(0)).expect("map");
+        assert_eq!(edge.sample(DVec2::new(9.5, 1.0), false).x, 1.0);
         assert!(OverlayAtlas::new(layout(), 0).is_err());
         assert!(OverlayAtlas::new(layout(), u32::MAX - 1).is_err());
     }

@@ -140,7 +140,7 @@ fn the_streamed_lookup_equals_its_cpu_reference() {
             wrap,
             fill: 0,
         };
-        // 7 slots: a 3 x 3 square of tiles in one array layer.
+        // 7 slots: one a layer of the array.
         let mut cpu = OverlayAtlas::new(layout, 7).expect("cpu atlas");
         let mut gpu = GpuOverlayAtlas::new(&ctx.device, &ctx.queue, layout, 7).expect("gpu atlas");
         let mut rng = 0x9e37_79b9_7f4a_7c15u64;
@@ -174,7 +174,20 @@ fn the_streamed_lookup_equals_its_cpu_reference() {
                 p - camera.as_vec2()
             })
             .collect();
-        for premultiply in [false, true] {
+        // Then tiles unmapped and a slot given to another tile: the table follows.
+        for (round, premultiply) in [(0, false), (0, true), (1, false)] {
+            if round == 1 {
+                for t in [&mut cpu as &mut dyn OverlayUploadTargetDyn, &mut gpu] {
+                    t.unmap(1, UVec2::new(0, 0));
+                    t.unmap(0, UVec2::new(6, 4));
+                    t.unmap(3, UVec2::new(0, 0));
+                    t.unmap(0, UVec2::new(1, 1));
+                }
+                let texels = Grid::new(16, 16, [9, 200, 30, 255]).expect("tile");
+                for t in [&mut cpu as &mut dyn OverlayUploadTargetDyn, &mut gpu] {
+                    t.put(3, 2, UVec2::new(1, 0), &texels);
+                }
+            }
             let got = probe(&ctx, &gpu, camera, &points, premultiply);
             let mut differ = 0;
             for (q, g) in points.iter().zip(&got) {
@@ -186,20 +199,33 @@ fn the_streamed_lookup_equals_its_cpu_reference() {
                     eprintln!("{wrap:?} {p}: gpu {g}, cpu {want}");
                 }
             }
-            assert_eq!(differ, 0, "{wrap:?} premultiply {premultiply}");
+            assert_eq!(
+                differ, 0,
+                "{wrap:?} round {round} premultiply {premultiply}"
+            );
+            // Round 1 leaves texels with nothing resident (transparent), others under the
+            // new level-2 tile.
+            if round == 1 {
+                assert!(got.contains(&Vec4::ZERO));
+                assert!(got.iter().any(|v| (v.y - 200.0 / 255.0).abs() < 1e-6));
+            }
         }
     }
 }
 
-/// Uploads and maps one tile into either atlas.
+/// Uploads and maps, or unmaps, one tile in either atlas.
 trait OverlayUploadTargetDyn {
     fn put(&mut self, slot: u32, level: u32, tile: UVec2, texels: &Grid<[u8; 4]>);
+    fn unmap(&mut self, level: u32, tile: UVec2);
 }
 
 impl<T: OverlayUploadTarget> OverlayUploadTargetDyn for T {
     fn put(&mut self, slot: u32, level: u32, tile: UVec2, texels: &Grid<[u8; 4]>) {
         self.upload(slot, level, tile, texels).expect("upload");
         self.map(level, tile, Some(slot)).expect("map");
+    }
+    fn unmap(&mut self, level: u32, tile: UVec2) {
+        self.map(level, tile, None).expect("unmap");
     }
 }
 

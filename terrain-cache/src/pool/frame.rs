@@ -487,7 +487,8 @@ impl RamPool {
     /// it arrives, a failed tile is retried, and the tiles are listed in
     /// [`refreshed`](Self::refreshed), so the VRAM pool uploads them again. A copy changed in
     /// this pool and not yet written back is kept (flagged stale): its write-back would win.
-    /// Tiles outside the pool's layer are ignored.
+    /// Ids outside the pool's layer's pyramid are ignored (an id names no layer: name only
+    /// this layer's tiles).
     pub fn reload(&mut self, ids: &[TileId]) {
         let m = *self.world.manifest();
         let layer = self.cfg.layer;

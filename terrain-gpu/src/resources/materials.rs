@@ -12,9 +12,8 @@ use crate::device::scope::scoped;
 use crate::error::GpuError;
 use crate::resources::hole_mask::GpuHoleMask;
 use crate::resources::material_layer::GpuMaterialLayer;
-use crate::resources::overlay_atlas::GpuOverlayAtlas;
+use crate::resources::overlay_atlas::{GpuOverlayAtlas, OverlayViews};
 use crate::resources::window::{WindowOrigin, covered, planned_move, upload_pieces};
-use terrain_core::OverlayUploadTarget;
 use terrain_core::{AutoshadeParams, CoreError, MATERIALS, MaterialImages, MaterialTextures};
 
 /// How the renderers colour the surface.
@@ -325,9 +324,9 @@ pub(crate) struct MaterialSlot {
     color: Option<GpuColorLayer>,
     paint: Option<GpuMaterialLayer>,
     holes: Option<GpuHoleMask>,
-    /// A streamed world's paint and colour.
-    streamed_paint: Option<GpuOverlayAtlas>,
-    streamed_color: Option<GpuOverlayAtlas>,
+    /// A streamed world's paint and colour (views of their atlases).
+    streamed_paint: Option<OverlayViews>,
+    streamed_color: Option<OverlayViews>,
     /// Bound while no colour or material layer or hole mask is.
     no_color: Option<wgpu::TextureView>,
     /// Bound while no streamed layer is: an empty slot array and a table of zeros.
@@ -368,8 +367,8 @@ impl MaterialSlot {
         paint: Option<&GpuOverlayAtlas>,
         color: Option<&GpuOverlayAtlas>,
     ) {
-        self.streamed_paint = paint.cloned();
-        self.streamed_color = color.cloned();
+        self.streamed_paint = paint.map(GpuOverlayAtlas::views);
+        self.streamed_color = color.map(GpuOverlayAtlas::views);
         self.changed = true;
     }
 
@@ -397,8 +396,8 @@ impl MaterialSlot {
                 .filter(|h| !h.is_window())
                 .map(|h| h.size),
         ];
-        let streamed_sizes = [&self.streamed_paint, &self.streamed_color]
-            .map(|a| a.as_ref().map(|a| a.layout().world_size));
+        let streamed_sizes =
+            [&self.streamed_paint, &self.streamed_color].map(|a| a.as_ref().map(|a| a.world_size));
         if let Some(actual) = sizes
             .into_iter()
             .chain(streamed_sizes)
@@ -448,16 +447,16 @@ impl MaterialSlot {
             streamed: [
                 self.streamed_paint
                     .as_ref()
-                    .map_or(no_slots.clone(), |a| a.texels_view.clone()),
+                    .map_or(no_slots.clone(), |a| a.slots.clone()),
                 self.streamed_paint
                     .as_ref()
-                    .map_or(no_table.clone(), |a| a.table_view.clone()),
+                    .map_or(no_table.clone(), |a| a.table.clone()),
                 self.streamed_color
                     .as_ref()
-                    .map_or(no_slots, |a| a.texels_view.clone()),
+                    .map_or(no_slots, |a| a.slots.clone()),
                 self.streamed_color
                     .as_ref()
-                    .map_or(no_table, |a| a.table_view.clone()),
+                    .map_or(no_table, |a| a.table.clone()),
             ],
             streamed_bits: u32::from(self.streamed_paint.is_some())
                 | (u32::from(self.streamed_color.is_some()) << 1),

@@ -26,9 +26,9 @@ use terrain_core::{CoreError, Grid, INVALID_SLOT, OverlayUploadTarget, TileLayou
 /// Bits of an entry's slot; the level is above them.
 const SLOT_BITS: u32 = 27;
 
-/// A world's paint or colour tiles on the GPU (see the module docs). Cloning shares the
-/// textures: a renderer keeps a clone, and the pool's uploads into the original show in it.
-#[derive(Debug, Clone)]
+/// A world's paint or colour tiles on the GPU (see the module docs). A renderer given it keeps
+/// its texture views, so the pool's uploads and maps show in the next frame.
+#[derive(Debug)]
 pub struct GpuOverlayAtlas {
     layout: TileLayout,
     slots: u32,
@@ -40,8 +40,10 @@ pub struct GpuOverlayAtlas {
     /// The pyramid's indirection table (slot or `INVALID_SLOT` per tile of every level), from
     /// which the texture's entries are made.
     tiles: Vec<u32>,
-    pub(crate) texels_view: wgpu::TextureView,
-    pub(crate) table_view: wgpu::TextureView,
+    /// The texture's entries (per level-0 tile, row-major), kept to update them in place.
+    finest: Vec<u32>,
+    texels_view: wgpu::TextureView,
+    table_view: wgpu::TextureView,
     bytes: u64,
 }
 
@@ -80,14 +82,18 @@ impl GpuOverlayAtlas {
                 "at most the device's max_texture_dimension_2d",
             ));
         }
-        // At least two layers: wgpu's GL backend makes a texture of one layer a plain 2D
-        // texture, which an array view does not read (every texel reads zero). The slots are
-        // split between the two, so no layer is wasted.
-        let fit = limits.max_texture_dimension_2d / ts;
-        let half = slots.div_ceil(2);
-        let need = (f64::from(half).sqrt().ceil() as u32).max(1);
-        let cols = fit.min(need).max(1);
-        let rows = fit.min(half.div_ceil(cols)).max(1);
+        // One tile a layer where the device has the layers (no texel unused), else layers of
+        // `cols x rows` tiles. At least two layers: wgpu's GL backend makes a texture of one
+        // layer a plain 2D texture, which an array view does not read (every texel reads zero).
+        let max_layers = limits.max_texture_array_layers.max(2);
+        let (cols, rows) = if slots <= max_layers {
+            (1, 1)
+        } else {
+            let fit = limits.max_texture_dimension_2d / ts;
+            let per = slots.div_ceil(max_layers);
+            let cols = fit.min(f64::from(per).sqrt().ceil() as u32).max(1);
+            (cols, fit.min(per.div_ceil(cols)).max(1))
+        };
         let layers = slots.div_ceil(cols * rows).max(2);
         if layers > limits.max_texture_array_layers {
             return Err(out(
@@ -142,8 +148,8 @@ impl GpuOverlayAtlas {
             })
         })?;
         write_rows(queue, &table, 0, &[ts.trailing_zeros(), cols, rows], 3);
-        let none = vec![INVALID_SLOT; (level0.x as usize) * (level0.y as usize)];
-        write_rows(queue, &table, 1, &none, level0.x);
+        let finest = vec![INVALID_SLOT; (level0.x as usize) * (level0.y as usize)];
+        write_rows(queue, &table, 1, &finest, level0.x);
         let texels_view = texels.create_view(&wgpu::TextureViewDescriptor {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
@@ -160,6 +166,7 @@ impl GpuOverlayAtlas {
             texels,
             table,
             tiles: vec![INVALID_SLOT; tiles],
+            finest,
             texels_view,
             table_view,
             bytes,
@@ -227,7 +234,25 @@ fn write_rows(queue: &wgpu::Queue, table: &wgpu::Texture, row: u32, entries: &[u
     );
 }
 
+/// What a renderer binds of a [`GpuOverlayAtlas`]: views of its textures (they share them) and
+/// the world's size, checked against the drawn surface's.
+#[derive(Debug, Clone)]
+pub(crate) struct OverlayViews {
+    pub(crate) slots: wgpu::TextureView,
+    pub(crate) table: wgpu::TextureView,
+    pub(crate) world_size: UVec2,
+}
+
 impl GpuOverlayAtlas {
+    /// The views a renderer binds.
+    pub(crate) fn views(&self) -> OverlayViews {
+        OverlayViews {
+            slots: self.texels_view.clone(),
+            table: self.table_view.clone(),
+            world_size: self.layout.world_size,
+        }
+    }
+
     /// The finest mapped level covering level-0 tile `t`, with its slot, packed as the shader
     /// reads it; `INVALID_SLOT` where none is.
     fn finest_at(&self, t: UVec2) -> u32 {
@@ -305,7 +330,8 @@ impl OverlayUploadTarget for GpuOverlayAtlas {
     fn map(&mut self, level: u32, tile: UVec2, slot: Option<u32>) -> Result<(), GpuError> {
         let i = self.check(slot, level, tile)?;
         self.tiles[i as usize] = slot.unwrap_or(INVALID_SLOT);
-        // The level-0 tiles it covers: their finest level may have changed.
+        // The level-0 tiles it covers: a mapped tile answers where nothing finer does; an
+        // unmapped one leaves those it answered to the next coarser level mapped.
         let level0 = self.layout.tiles_at(0);
         let min = (tile << level).min(level0);
         let max = ((tile + UVec2::ONE) << level).min(level0);
@@ -316,7 +342,16 @@ impl OverlayUploadTarget for GpuOverlayAtlas {
         let mut rows = Vec::with_capacity((width * (max.y - min.y)) as usize);
         for y in min.y..max.y {
             for x in min.x..max.x {
-                rows.push(self.finest_at(UVec2::new(x, y)));
+                let at = (y * level0.x + x) as usize;
+                let e = self.finest[at];
+                let answered_by = (e != INVALID_SLOT).then_some(e >> SLOT_BITS);
+                let e = match slot {
+                    Some(s) if answered_by.is_none_or(|l| l >= level) => level << SLOT_BITS | s,
+                    None if answered_by == Some(level) => self.finest_at(UVec2::new(x, y)),
+                    _ => e,
+                };
+                self.finest[at] = e;
+                rows.push(e);
             }
         }
         self.queue.write_texture(

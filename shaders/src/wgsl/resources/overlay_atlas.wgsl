@@ -40,7 +40,9 @@ fn streamed_layer_at(slots: texture_2d_array<f32>, table: texture_2d<u32>, q: ve
     // The four texels, clamped to the tile, written out: a local array filled in a loop took
     // lavapipe's and llvmpipe's compilers minutes.
     let a = vec2<i32>(i0) - origin;
-    let last = vec2<i32>(side - 1, side - 1);
+    // The tile's last texel, or the level's where the world ends inside the tile.
+    let end = vec2<i32>((frame.map_size - vec2<u32>(1u, 1u)) >> vec2<u32>(level, level)) - origin;
+    let last = min(vec2<i32>(side - 1, side - 1), end);
     let lo = clamp(a, vec2<i32>(0, 0), last);
     let hi = clamp(a + vec2<i32>(1, 1), vec2<i32>(0, 0), last);
     var c00 = textureLoad(slots, base + lo, layer, 0);
