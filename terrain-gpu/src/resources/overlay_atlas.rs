@@ -6,10 +6,9 @@
 //!
 //! Textures, not storage buffers: the atlas surface's fragment stage already binds the heights'
 //! three storage buffers, and four is all some devices allow per stage.
-//! - **Slots:** an RGBA8 2D array of at least two layers (GL reads no array of one); each layer
-//!   `cols x rows` tiles (no more than `max_texture_dimension_2d` allows, and no more rows than
-//!   the slots fill), so the slot count is not bound by `max_texture_array_layers` alone and
-//!   few texels go unused.
+//! - **Slots:** an RGBA8 2D array of at least two layers (GL reads no array of one): one tile a
+//!   layer where the device's `max_texture_array_layers` allows (no texel unused), else layers
+//!   of `cols x rows` tiles.
 //! - **Table:** an R32Uint 2D texture with one entry per level-0 tile (from row 1; row 0 holds
 //!   log2 of the tile side, `cols` and `rows`): the finest resident level covering that tile and its
 //!   slot (`level << 27 | slot`), or `INVALID_SLOT`. A level-`l` tile covers whole level-0
