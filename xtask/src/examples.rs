@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use std::process::Command;
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 12] = [
+const EXAMPLES: [(&str, &str, &[&str]); 13] = [
     (
         "terrain-core",
         "stamp_heightmap",
@@ -35,6 +35,8 @@ const EXAMPLES: [(&str, &str, &[&str]); 12] = [
     ("terrain-cache", "build_world", &["512", "{out}/world"]),
     // Reads the world build_world just wrote.
     ("terrain-cache", "random_blocks", &["{out}/world", "20"]),
+    // Paints into that world and streams the paint beside its heights.
+    ("terrain-cache", "paint_stream", &["{out}/world", "12"]),
     ("terrain-cache", "trace_sim", &[]),
     // The whole frame an engine runs: it joins every library crate, so it lives in the demo.
     (
