@@ -10,8 +10,7 @@ use shading::*;
 use terrain_core::{Grid, StampPlacement, WrapMode};
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    ClipmapSurface, GpuColorLayer, GpuError, GpuHoleMask, GpuMaterialLayer, GpuMaterials,
-    OffscreenTarget, SurfaceShading, TerrainStyle, TerrainView, ViewMatrices,
+    GpuColorLayer, GpuError, GpuHoleMask, GpuMaterialLayer, GpuMaterials, SurfaceShading,
 };
 
 #[test]
@@ -107,29 +106,7 @@ fn a_hole_shows_what_lies_behind_in_every_lod_mode_and_shading() {
         GpuHoleMask::new(device, queue, &Grid::new(8, 8, 0u8).expect("grid")).expect("mask");
     let mut renderer = renderers(&ctx, &map).remove(0);
     renderer.set_hole_mask(Some(&small));
-    let target = OffscreenTarget::new(device, SIZE).expect("target");
-    let view = ViewMatrices {
-        view: glam::camera::rh::view::look_to_mat4(
-            Vec3::new(128.0, 300.0, 128.0),
-            Vec3::NEG_Y,
-            Vec3::NEG_Z,
-        ),
-        projection: glam::camera::rh::proj::directx::perspective(1.0, 16.0 / 9.0, 1.0, 1000.0),
-    };
-    let style = TerrainStyle::default();
-    let view = TerrainView {
-        surface: ClipmapSurface::Coarse {
-            map: &gpu.0,
-            normals: &gpu.1,
-        },
-        camera: &view,
-        style: &style,
-        target_size: target.size(),
-    };
-    let mut encoder = device.create_command_encoder(&Default::default());
-    let err = renderer
-        .prepare(device, queue, &mut encoder, &view)
-        .unwrap_err();
+    let err = try_prepare(&ctx, &mut renderer, &gpu).unwrap_err();
     assert!(
         matches!(
             err,

@@ -12,7 +12,7 @@ use crate::device::scope::scoped;
 use crate::error::GpuError;
 use crate::resources::hole_mask::GpuHoleMask;
 use crate::resources::material_layer::GpuMaterialLayer;
-use crate::resources::overlay_atlas::{GpuOverlayAtlas, OverlayViews};
+use crate::resources::overlay_atlas::{GpuOverlayAtlas, OverlayViews, write_rows};
 use crate::resources::window::{WindowOrigin, covered, planned_move, upload_pieces};
 use terrain_core::{AutoshadeParams, CoreError, MATERIALS, MaterialImages, MaterialTextures};
 
@@ -551,25 +551,7 @@ fn no_streamed(
         })
     })?;
     let none = terrain_core::INVALID_SLOT;
-    queue.write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture: &table,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        bytemuck::cast_slice(&[0u32, 1, 1, none, none, none]),
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(12),
-            rows_per_image: None,
-        },
-        wgpu::Extent3d {
-            width: 3,
-            height: 2,
-            depth_or_array_layers: 1,
-        },
-    );
+    write_rows(queue, &table, 0, &[0u32, 1, 1, none, none, none], 3);
     Ok([
         slots,
         table.create_view(&wgpu::TextureViewDescriptor::default()),

@@ -211,7 +211,13 @@ impl GpuOverlayAtlas {
 }
 
 /// Writes `entries`, whole rows of `width`, into the table texture from row `row`.
-fn write_rows(queue: &wgpu::Queue, table: &wgpu::Texture, row: u32, entries: &[u32], width: u32) {
+pub(crate) fn write_rows(
+    queue: &wgpu::Queue,
+    table: &wgpu::Texture,
+    row: u32,
+    entries: &[u32],
+    width: u32,
+) {
     queue.write_texture(
         wgpu::TexelCopyTextureInfo {
             texture: table,
