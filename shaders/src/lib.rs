@@ -150,6 +150,7 @@ macro_rules! clipmap_atlas {
             include_str!("wgsl/render/clipmap_no_detail.wgsl"),
             include_str!("wgsl/render/clipmap.wgsl"),
             include_str!("wgsl/resources/tile_atlas.wgsl"),
+            include_str!("wgsl/resources/tile_atlas_bind.wgsl"),
             include_str!("wgsl/render/clipmap_surface_atlas.wgsl"),
             include_str!("wgsl/render/surface_curvature_atlas.wgsl")
         )
@@ -167,6 +168,23 @@ macro_rules! clipmap_detail {
             include_str!("wgsl/render/clipmap.wgsl"),
             include_str!("wgsl/render/clipmap_surface_coarse.wgsl"),
             include_str!("wgsl/render/surface_curvature_heights.wgsl")
+        )
+    };
+}
+
+/// [`CLIPMAP_ATLAS_DETAIL`]'s text: the clipmap frame over a tile atlas, shaded with a detail
+/// layer (parallax, composite normals, fade) as [`CLIPMAP_DETAIL`].
+macro_rules! clipmap_atlas_detail {
+    () => {
+        concat!(
+            renderer_head!(),
+            include_str!("wgsl/resources/detail_tiles.wgsl"),
+            include_str!("wgsl/render/clipmap_detail_parallax.wgsl"),
+            include_str!("wgsl/render/clipmap.wgsl"),
+            include_str!("wgsl/resources/tile_atlas.wgsl"),
+            include_str!("wgsl/resources/tile_atlas_bind_high.wgsl"),
+            include_str!("wgsl/render/clipmap_surface_atlas.wgsl"),
+            include_str!("wgsl/render/surface_curvature_atlas.wgsl")
         )
     };
 }
@@ -195,6 +213,13 @@ pub const CDLOD_ATLAS: &str = concat!(clipmap_atlas!(), include_str!("wgsl/rende
 /// `CdlodRenderer` over a coarse-map with a detail layer: the CDLOD vertex shader on the
 /// coarse surface, shaded as [`CLIPMAP_DETAIL`] (composite normals, parallax, fade).
 pub const CDLOD_DETAIL: &str = concat!(clipmap_detail!(), include_str!("wgsl/render/cdlod.wgsl"));
+
+/// `CdlodRenderer` over a tile atlas with a detail layer: a streamed world's level 0 drawn by
+/// CDLOD and shaded as [`CLIPMAP_ATLAS_DETAIL`].
+pub const CDLOD_ATLAS_DETAIL: &str = concat!(
+    clipmap_atlas_detail!(),
+    include_str!("wgsl/render/cdlod.wgsl")
+);
 
 /// `TessellationPass`: adaptive tessellation by longest-edge bisection (Cervin 2012, sec. 2.3),
 /// writing triangles and indirect draw arguments.
@@ -233,6 +258,10 @@ pub const CLIPMAP_ATLAS: &str = clipmap_atlas!();
 /// parallax march through the detail heights finds, the detail faded out with distance.
 pub const CLIPMAP_DETAIL: &str = clipmap_detail!();
 
+/// `ClipmapRenderer` over a tile atlas with a detail layer (a streamed world's footprints,
+/// Flower 2010, sec. 2.3): the atlas surface of [`CLIPMAP_ATLAS`], shaded as [`CLIPMAP_DETAIL`].
+pub const CLIPMAP_ATLAS_DETAIL: &str = clipmap_atlas_detail!();
+
 /// `RefinePass` and `RefineRenderer`: the coarse cells around the camera split by the
 /// refinement patterns of Flower 2010, sec. 2.4.3 into triangles displaced by coarse + detail height
 /// (a compute pass with indirect draw arguments), drawn with the clipmap's frame, surface and
@@ -263,6 +292,7 @@ pub const ATLAS_PROBE: &str = concat!(
     wgsl_prelude!(),
     include_str!("wgsl/resources/packed.wgsl"),
     include_str!("wgsl/resources/tile_atlas.wgsl"),
+    include_str!("wgsl/resources/tile_atlas_bind.wgsl"),
     include_str!("wgsl/render/clipmap_surface_atlas.wgsl"),
     include_str!("wgsl/resources/atlas_probe.wgsl")
 );
@@ -366,6 +396,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("cdlod", CDLOD),
     ("cdlod_atlas", CDLOD_ATLAS),
     ("cdlod_detail", CDLOD_DETAIL),
+    ("cdlod_atlas_detail", CDLOD_ATLAS_DETAIL),
     ("tessellate", TESSELLATE),
     ("tessellated", TESSELLATED),
     ("tessellated_detail", TESSELLATED_DETAIL),
@@ -374,6 +405,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("clipmap_granular", CLIPMAP_GRANULAR),
     ("clipmap_atlas", CLIPMAP_ATLAS),
     ("clipmap_detail", CLIPMAP_DETAIL),
+    ("clipmap_atlas_detail", CLIPMAP_ATLAS_DETAIL),
     ("refine", REFINE),
     ("atlas_probe", ATLAS_PROBE),
     ("detail_probe", DETAIL_PROBE),

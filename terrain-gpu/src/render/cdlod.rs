@@ -46,7 +46,7 @@ pub struct CdlodRenderer {
     lods: wgpu::Buffer,
     instances: wgpu::Buffer,
     instance_count: u32,
-    bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
+    bound: Option<(Vec<(u32, wgpu::Buffer)>, wgpu::BindGroup)>,
     wireframe: bool,
     /// The materials of [`crate::SurfaceShading::Materials`].
     materials: MaterialSlot,
@@ -213,7 +213,7 @@ impl CdlodRenderer {
         if kind == SurfaceKind::Granular {
             return Err(GpuError::Unsupported {
                 what: "CdlodRenderer",
-                reason: "the surface must be a coarse-map (with or without detail) or a tile atlas",
+                reason: "the surface must be a coarse-map or a tile atlas, with or without detail",
             });
         }
         let info = surface.check()?;
@@ -333,6 +333,12 @@ fn surface_pipeline(
             terrain_shaders::CDLOD_ATLAS,
             vec![(both, 1), (both, 2), (both, 3)],
             vec![],
+        ),
+        SurfaceKind::AtlasDetail => (
+            "cdlod atlas detail",
+            terrain_shaders::CDLOD_ATLAS_DETAIL,
+            crate::render::clipmap::atlas_detail_storage().to_vec(),
+            vec![(fragment, 3)],
         ),
         SurfaceKind::Detail => (
             "cdlod detail",

@@ -81,6 +81,12 @@ pub struct ClipmapRenderer {
     granular: SurfacePipeline,
     atlas: SurfacePipeline,
     detail: SurfacePipeline,
+    /// Built on the first frame over an atlas with detail tiles (few renderers draw one, and
+    /// its parallax shader is the slowest to compile).
+    atlas_detail: Option<SurfacePipeline>,
+    /// The engine's `surface_weights` ([`ClipmapRenderer::set_surface_shader`]), for the
+    /// pipelines built later.
+    user_surface: Option<String>,
     target: TargetFormat,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
@@ -92,7 +98,7 @@ pub struct ClipmapRenderer {
     n: u32,
     levels: u32,
     /// The bind group of the last surface drawn, with the buffers it binds and its kind.
-    bound: Option<(Vec<wgpu::Buffer>, SurfaceKind, wgpu::BindGroup)>,
+    bound: Option<(Vec<(u32, wgpu::Buffer)>, SurfaceKind, wgpu::BindGroup)>,
     /// Draws of the prepared frame: (part index, first instance, instance count).
     runs: Vec<(usize, u32, u32)>,
     /// The materials of [`SurfaceShading::Materials`].
@@ -146,6 +152,8 @@ impl ClipmapRenderer {
                 granular,
                 atlas,
                 detail,
+                atlas_detail: None,
+                user_surface: None,
                 target: *target,
                 vertices,
                 indices,
@@ -224,6 +232,8 @@ impl ClipmapRenderer {
             clipmap_pipelines(device, &self.target, wgsl_function)
                 .map_err(GpuError::user_shader)?;
         (self.coarse, self.granular, self.atlas, self.detail) = (coarse, granular, atlas, detail);
+        self.atlas_detail = None;
+        self.user_surface = wgsl_function.map(str::to_owned);
         self.bound = None;
         Ok(())
     }
@@ -286,6 +296,10 @@ impl ClipmapRenderer {
             });
         }
         let info = surface.check()?;
+        if surface.kind() == SurfaceKind::AtlasDetail && self.atlas_detail.is_none() {
+            let user = self.user_surface.as_deref();
+            self.atlas_detail = Some(atlas_detail_pipeline(device, &self.target, user)?);
+        }
         // A detail surface's parallax moves the texels a fragment reads by up to its reach.
         let reach = fragment_reach(&surface);
         let wrap_offset = match info.wrap {
@@ -413,6 +427,8 @@ impl ClipmapRenderer {
             SurfaceKind::Granular => &self.granular,
             SurfaceKind::Atlas => &self.atlas,
             SurfaceKind::Detail => &self.detail,
+            // Built by the prepare that first drew the surface.
+            SurfaceKind::AtlasDetail => self.atlas_detail.as_ref().unwrap_or(&self.atlas),
         }
     }
 }
@@ -447,6 +463,7 @@ pub(crate) enum SurfaceKind {
     Granular,
     Atlas,
     Detail,
+    AtlasDetail,
 }
 
 /// Everything one clipmap frame is drawn from.
@@ -506,6 +523,18 @@ pub enum ClipmapSurface<'a> {
         /// Fade distances and parallax march.
         shading: &'a DetailShading,
     },
+    /// A streamed world's atlas (as [`ClipmapSurface::Atlas`]) with a detail layer over its
+    /// level 0 (as [`ClipmapSurface::Detail`]): footprints in detail tiles drawn on a world
+    /// larger than memory (Flower 2010, sec. 2.3 over Fikkan 2013's cache).
+    AtlasDetail {
+        /// The tile slots and indirection table.
+        atlas: &'a GpuTileAtlas,
+        /// The detail tiles over the world's level 0 (their layout's coarse size and spacing
+        /// are the world's).
+        detail: &'a GpuDetailTiles,
+        /// Fade distances and parallax march.
+        shading: &'a DetailShading,
+    },
 }
 
 /// What the renderer needs to know of a surface.
@@ -536,20 +565,7 @@ impl ClipmapSurface<'_> {
                 shading,
             } => {
                 ClipmapSurface::Coarse { map, normals }.check()?;
-                let layout = detail.layout();
-                if layout.coarse_size() != map.size() {
-                    return Err(GpuError::SizeMismatch {
-                        expected: map.size(),
-                        actual: layout.coarse_size(),
-                    });
-                }
-                if layout.coarse_texel_m() != map.texel_size() {
-                    return Err(GpuError::Unsupported {
-                        what: "ClipmapRenderer",
-                        reason: "the detail layout's coarse texel spacing is not the map's",
-                    });
-                }
-                shading.check(map.texel_size())?;
+                check_detail_over(detail, shading, map.size(), map.texel_size())?;
                 (map.size(), map.encoding(), map.texel_size(), map.wrap())
             }
             ClipmapSurface::Granular { map, surface } => {
@@ -566,6 +582,15 @@ impl ClipmapSurface<'_> {
                 let w = &atlas.config().world;
                 (w.world_size, w.encoding, w.texel_size, w.wrap)
             }
+            ClipmapSurface::AtlasDetail {
+                atlas,
+                detail,
+                shading,
+            } => {
+                let w = &atlas.config().world;
+                check_detail_over(detail, shading, w.world_size, w.texel_size)?;
+                (w.world_size, w.encoding, w.texel_size, w.wrap)
+            }
         };
         Ok(SurfaceInfo {
             size,
@@ -575,31 +600,57 @@ impl ClipmapSurface<'_> {
         })
     }
 
-    /// The storage buffers the surface binds at 1, 2, ... (a detail surface's tiles at 4 and 5,
-    /// after the renderer's own uniform at 3).
-    pub(crate) fn buffers(&self) -> Vec<wgpu::Buffer> {
+    /// The storage buffers the surface binds, with their bindings: a coarse-map's at 1 and 2,
+    /// an atlas's at 1 to 3 (20 to 22 beside detail tiles), detail tiles at 4 and 5 (the
+    /// renderer's detail uniform goes at 3).
+    pub(crate) fn buffers(&self) -> Vec<(u32, wgpu::Buffer)> {
+        let atlas_at = |first: u32, atlas: &GpuTileAtlas| {
+            [
+                (first, atlas.info_buffer().clone()),
+                (first + 1, atlas.heights_buffer().clone()),
+                (first + 2, atlas.table_buffer().clone()),
+            ]
+        };
+        let detail_at = |detail: &GpuDetailTiles| {
+            [
+                (4, detail.table_buffer().clone()),
+                (5, detail.heights_buffer().clone()),
+            ]
+        };
         match *self {
             ClipmapSurface::Coarse { map, normals } => {
-                vec![map.buffer().clone(), normals.buffer().clone()]
+                vec![(1, map.buffer().clone()), (2, normals.buffer().clone())]
             }
-            // The renderer's detail uniform goes between the normals and the tiles.
             ClipmapSurface::Detail {
                 map,
                 normals,
                 detail,
                 ..
-            } => vec![
-                map.buffer().clone(),
-                normals.buffer().clone(),
-                detail.table_buffer().clone(),
-                detail.heights_buffer().clone(),
-            ],
-            ClipmapSurface::Granular { surface, .. } => vec![surface.clone()],
-            ClipmapSurface::Atlas { atlas } => vec![
-                atlas.info_buffer().clone(),
-                atlas.heights_buffer().clone(),
-                atlas.table_buffer().clone(),
-            ],
+            } => {
+                let mut b = vec![(1, map.buffer().clone()), (2, normals.buffer().clone())];
+                b.extend(detail_at(detail));
+                b
+            }
+            ClipmapSurface::Granular { surface, .. } => vec![(1, surface.clone())],
+            ClipmapSurface::Atlas { atlas } => atlas_at(1, atlas).to_vec(),
+            ClipmapSurface::AtlasDetail { atlas, detail, .. } => {
+                let mut b = atlas_at(ATLAS_BESIDE_DETAIL, atlas).to_vec();
+                b.extend(detail_at(detail));
+                b
+            }
+        }
+    }
+
+    /// The detail tiles and their shading, for the surfaces that have them.
+    pub(crate) fn detail(&self) -> Option<(&GpuDetailTiles, &DetailShading)> {
+        match *self {
+            ClipmapSurface::Detail {
+                detail, shading, ..
+            }
+            | ClipmapSurface::AtlasDetail {
+                detail, shading, ..
+            } => Some((detail, shading)),
+            _ => None,
         }
     }
 
@@ -609,8 +660,36 @@ impl ClipmapSurface<'_> {
             ClipmapSurface::Granular { .. } => SurfaceKind::Granular,
             ClipmapSurface::Atlas { .. } => SurfaceKind::Atlas,
             ClipmapSurface::Detail { .. } => SurfaceKind::Detail,
+            ClipmapSurface::AtlasDetail { .. } => SurfaceKind::AtlasDetail,
         }
     }
+}
+
+/// The first binding of an atlas drawn beside detail tiles (`tile_atlas_bind_high.wgsl`).
+pub(crate) const ATLAS_BESIDE_DETAIL: u32 = 20;
+
+/// Checks detail tiles lie over a surface of `size` texels of `texel_m` metres, and their
+/// shading.
+fn check_detail_over(
+    detail: &GpuDetailTiles,
+    shading: &DetailShading,
+    size: UVec2,
+    texel_m: f32,
+) -> Result<(), GpuError> {
+    let layout = detail.layout();
+    if layout.coarse_size() != size {
+        return Err(GpuError::SizeMismatch {
+            expected: size,
+            actual: layout.coarse_size(),
+        });
+    }
+    if layout.coarse_texel_m() != texel_m {
+        return Err(GpuError::Unsupported {
+            what: "ClipmapRenderer",
+            reason: "the detail layout's coarse texel spacing is not the surface's",
+        });
+    }
+    shading.check(texel_m).map(|_| ())
 }
 
 /// The clipmap's pipelines over a coarse-map, a granular map, an atlas and a coarse-map with
@@ -671,6 +750,33 @@ fn clipmap_pipelines(
         &clipmap_shape(),
     )?;
     Ok([coarse, granular, atlas, detail])
+}
+
+/// The clipmap's pipeline over an atlas with detail tiles (atlas at 20 to 22, see
+/// [`ATLAS_BESIDE_DETAIL`]).
+fn atlas_detail_pipeline(
+    device: &wgpu::Device,
+    target: &TargetFormat,
+    user: Option<&str>,
+) -> Result<SurfacePipeline, GpuError> {
+    SurfacePipeline::new(
+        device,
+        target,
+        "clipmap atlas detail",
+        &with_surface_weights(terrain_shaders::CLIPMAP_ATLAS_DETAIL, user),
+        &atlas_detail_storage(),
+        &[(wgpu::ShaderStages::FRAGMENT, 3)],
+        &clipmap_shape(),
+    )
+}
+
+/// The storage bindings of an atlas with detail tiles: the atlas for both stages, the tiles
+/// for the fragments.
+pub(crate) fn atlas_detail_storage() -> [(wgpu::ShaderStages, u32); 5] {
+    let both = wgpu::ShaderStages::VERTEX_FRAGMENT;
+    let fragment = wgpu::ShaderStages::FRAGMENT;
+    let a = ATLAS_BESIDE_DETAIL;
+    [(both, a), (both, a + 1), (both, a + 2), (fragment, 4), (fragment, 5)]
 }
 
 /// The vertex inputs and entry point of a terrain pipeline: the clipmap's, or another
@@ -850,7 +956,7 @@ impl SurfacePipeline {
         }
     }
 
-    /// A bind group of `uniform` at binding 0, the surface's `buffers` at 1, 2, ...,
+    /// A bind group of `uniform` at binding 0, the surface's `buffers` (binding, buffer),
     /// `extra` (binding, buffer) after them and the `shading` (materials, colour layer) at 10
     /// to 13, over this pipeline's layout.
     pub(crate) fn bind_group(
@@ -858,7 +964,7 @@ impl SurfacePipeline {
         device: &wgpu::Device,
         label: &'static str,
         uniform: &wgpu::Buffer,
-        buffers: &[wgpu::Buffer],
+        buffers: &[(u32, wgpu::Buffer)],
         extra: &[(u32, &wgpu::Buffer)],
         shading: &ShadingBindings,
     ) -> Result<wgpu::BindGroup, GpuError> {
@@ -866,15 +972,10 @@ impl SurfacePipeline {
             binding: 0,
             resource: uniform.as_entire_binding(),
         }];
-        entries.extend(
-            buffers
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry {
-                    binding: i as u32 + 1,
-                    resource: b.as_entire_binding(),
-                }),
-        );
+        entries.extend(buffers.iter().map(|(binding, b)| wgpu::BindGroupEntry {
+            binding: *binding,
+            resource: b.as_entire_binding(),
+        }));
         entries.extend(extra.iter().map(|&(binding, b)| wgpu::BindGroupEntry {
             binding,
             resource: b.as_entire_binding(),

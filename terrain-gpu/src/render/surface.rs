@@ -28,25 +28,23 @@ impl DetailUniform {
         }
     }
 
-    /// The buffers `surface` binds at 1, 2, ...: for a detail surface this uniform, written
-    /// for a camera at coarse texel `camera_texel`, goes at 3 between the coarse-map's and the
-    /// tiles'; other surfaces bind their own buffers only. Fails on shading out of range.
+    /// The buffers `surface` binds, with their bindings: for a surface with detail tiles this
+    /// uniform, written for a camera at coarse texel `camera_texel`, goes at 3 beside the
+    /// tiles' 4 and 5; other surfaces bind their own buffers only. Fails on shading out of
+    /// range.
     pub(crate) fn surface_buffers(
         &self,
         queue: &wgpu::Queue,
         surface: &ClipmapSurface<'_>,
         texel_size: f32,
         camera_texel: IVec2,
-    ) -> Result<Vec<wgpu::Buffer>, GpuError> {
+    ) -> Result<Vec<(u32, wgpu::Buffer)>, GpuError> {
         let mut buffers = surface.buffers();
-        if let ClipmapSurface::Detail {
-            detail, shading, ..
-        } = *surface
-        {
+        if let Some((detail, shading)) = surface.detail() {
             let reach = shading.check(texel_size)?;
             let info = detail.info(camera_texel, shading, reach)?;
             queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&info));
-            buffers.insert(2, self.buffer.clone());
+            buffers.push((3, self.buffer.clone()));
         }
         Ok(buffers)
     }
@@ -58,7 +56,9 @@ impl DetailUniform {
 pub(crate) fn fragment_reach(surface: &ClipmapSurface<'_>) -> i32 {
     MATERIAL_REACH
         + match surface {
-            ClipmapSurface::Detail { shading, .. } => shading.max_reach_texels.ceil() as i32 + 1,
+            ClipmapSurface::Detail { shading, .. } | ClipmapSurface::AtlasDetail { shading, .. } => {
+                shading.max_reach_texels.ceil() as i32 + 1
+            }
             _ => 0,
         }
 }

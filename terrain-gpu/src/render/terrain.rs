@@ -48,8 +48,8 @@ pub struct TerrainFrame {
 /// The view of one frame.
 #[derive(Debug, Clone, Copy)]
 pub struct TerrainView<'a> {
-    /// What is drawn: CDLOD draws a coarse, detail or atlas surface, the tessellation a coarse
-    /// or detail surface (of the map it was made of), the clipmap any.
+    /// What is drawn: CDLOD draws a coarse, detail, atlas or atlas-with-detail surface, the
+    /// tessellation a coarse or detail surface (of the map it was made of), the clipmap any.
     pub surface: ClipmapSurface<'a>,
     /// The camera: a [`crate::Camera`], an engine's [`crate::ViewMatrices`], or any
     /// [`RenderView`].
@@ -448,7 +448,9 @@ impl TerrainRenderer {
         match &mut self.lod {
             Lod::Clipmap(c) => {
                 let texel_size = match surface {
-                    ClipmapSurface::Atlas { atlas } => atlas.config().world.texel_size,
+                    ClipmapSurface::Atlas { atlas } | ClipmapSurface::AtlasDetail { atlas, .. } => {
+                        atlas.config().world.texel_size
+                    }
                     ClipmapSurface::Coarse { map, .. } | ClipmapSurface::Detail { map, .. } => {
                         map.texel_size()
                     }

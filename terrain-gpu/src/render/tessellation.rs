@@ -506,7 +506,7 @@ pub struct TessRenderer {
     on_detail: bool,
     target: TargetFormat,
     uniform: wgpu::Buffer,
-    bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
+    bound: Option<(Vec<(u32, wgpu::Buffer)>, wgpu::BindGroup)>,
     wireframe: bool,
     /// The materials of [`crate::SurfaceShading::Materials`].
     materials: MaterialSlot,

@@ -18,9 +18,8 @@ struct AtlasInfo {
     level: array<vec4<u32>, 32>,
 }
 
-@group(0) @binding(1) var<storage, read> atlas: AtlasInfo;
-@group(0) @binding(2) var<storage, read> atlas_heights: array<u32>;
-@group(0) @binding(3) var<storage, read> atlas_table: array<u32>;
+// `atlas`, `atlas_heights` and `atlas_table` are bound by tile_atlas_bind.wgsl (1 to 3) or,
+// beside a detail layer's 3 to 5, by tile_atlas_bind_high.wgsl (20 to 22).
 
 // The stored height at level-0 texel `t`, which lies inside the world. Every invocation walks
 // every level (`found` keeps the finest resident one) rather than returning from inside the
