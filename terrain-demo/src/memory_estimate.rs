@@ -278,6 +278,9 @@ impl RunShape {
                     // per-column buffers (or the GPU's).
                     let side = u64::from(crate::scenarios::trails::WINDOW_SIDE);
                     parts.push(("granular", side * side * GRANULAR_PER_COLUMN));
+                    if self.detail {
+                        parts.push(("detail", crate::scenarios::world_detail_bytes(self.gpu)));
+                    }
                 }
                 // The overview level: made from tiles, kept with its normals, uploaded once.
                 parts.push(("map", per_texel(MAP_PER_TEXEL)));

@@ -53,10 +53,13 @@ fn scenario_flags(cli: &Cli) -> Result<()> {
             "--camera chooses the default scenario's camera; the {name} scenario moves its own"
         ));
     }
-    if cli.detail != DetailArg::None && cli.scenario != ScenarioKind::Default {
+    let world_detail = cli.scenario == ScenarioKind::World && cli.detail == DetailArg::Parallax;
+    if cli.detail != DetailArg::None && cli.scenario != ScenarioKind::Default && !world_detail {
         return Err(anyhow!(
-            "--detail puts the default scenario's footprints into detail tiles; the snow, \
-             flyover and world scenarios have no detail layer yet"
+            "--detail puts the default scenario's footprints into detail tiles, and with \
+             parallax the world scenario's walker's; the snow and flyover scenarios have no \
+             detail layer, and the world draws it by parallax only (refined geometry needs the \
+             default scenario's coarse-map)"
         ));
     }
     if cli.color.is_some() && cli.scenario == ScenarioKind::Default && cli.heightmap.is_none() {
@@ -214,6 +217,8 @@ mod tests {
                 "--no-morph",
             ],
             &["--scenario", "world", "--lod", "cdlod"],
+            &["--scenario", "world", "--detail", "parallax"],
+            &["--scenario", "world", "--lod", "cdlod", "--detail", "parallax"],
             &["--detail", "refine"],
             &["--lod", "cdlod", "--detail", "parallax"],
             &["--lod", "tessellated", "--detail", "parallax"],
@@ -289,6 +294,8 @@ mod tests {
             ),
             (&["--scenario", "flyover", "--lod", "cdlod"], "--lod"),
             (&["--scenario", "world", "--lod", "tessellated"], "--lod"),
+            (&["--scenario", "world", "--detail", "refine"], "--detail"),
+            (&["--scenario", "flyover", "--detail", "parallax"], "--detail"),
             (&["--lod", "cdlod", "--detail", "refine"], "--detail"),
             (&["--lod", "tessellated", "--detail", "refine"], "--detail"),
             (&["--target-error", "1"], "--target-error"),

@@ -212,6 +212,47 @@ impl GpuScene {
         Ok(())
     }
 
+    /// Stamps `placements` (footprints of `stamp`, added) into the detail tiles only, as one
+    /// submit timed as [`Step::Detail`], and requests the stamped rects back: a streamed
+    /// world's footprints, whose excess beyond the tiles' range is not spilled (the world's
+    /// coarse tiles are not a map the spill pass can write). Every tile a footprint covers must
+    /// hold a slot (the cache's `needed` tiles). Returns the detail texels covered.
+    pub fn stamp_detail(
+        &mut self,
+        stamp: &mut terrain_core::GaussianStamp,
+        placements: &[terrain_core::StampPlacement],
+        timings: &mut Timings,
+    ) -> Result<u64> {
+        let Some(detail) = self.detail.as_mut() else {
+            anyhow::bail!("no detail layer to stamp footprints into");
+        };
+        if placements.is_empty() {
+            return Ok(0);
+        }
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let stamps = &mut self.stamps;
+        let mut texels = 0;
+        let time = self.timer.time(device, queue, Step::Detail, |encoder| {
+            let pending = std::mem::take(&mut detail.pending);
+            detail.request(device, encoder, pending)?;
+            for placement in placements {
+                let op = StampOp {
+                    stamp: GpuStamp::Gaussian(stamp),
+                    placement: *placement,
+                    blend: terrain_core::Blend::Add,
+                };
+                let rects = stamps.encode_detail(device, queue, encoder, &mut detail.tiles, &op)?;
+                texels += rects.iter().map(|(_, r)| r.area()).sum::<u64>();
+                detail.request(device, encoder, rects)?;
+            }
+            Ok(())
+        });
+        detail.dirty_texels = texels;
+        self.stamps.recall();
+        time.map_err(|e| self.lost_or(e.into()))?.record(timings);
+        Ok(texels)
+    }
+
     /// The detail tiles with stamped rects not yet back on the CPU: the detail cache must keep
     /// them until they arrive.
     pub fn detail_tiles_in_flight(&self) -> Vec<glam::UVec2> {

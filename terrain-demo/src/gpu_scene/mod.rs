@@ -862,8 +862,15 @@ impl GpuScene {
         let aspect = size.x as f32 / size.y as f32;
         // A streamed world is drawn from its atlas (even while a granular window steps on the
         // GPU: the window's areas reach the atlas through the tiles they are handed back to),
-        // else the granular map, else the coarse-map with its detail layer if any.
+        // and its detail layer if any, else the granular map, else the coarse-map with its
+        // detail layer if any.
         let surface = match (&self.atlas, &self.granular, &self.detail) {
+            // A streamed world's footprints (the world scenario's `--detail parallax`).
+            (Some(atlas), _, Some(d)) => ClipmapSurface::AtlasDetail {
+                atlas,
+                detail: &d.tiles,
+                shading: &d.shading,
+            },
             (Some(atlas), ..) => ClipmapSurface::Atlas { atlas },
             (None, Some(g), _) => ClipmapSurface::Granular {
                 map: &g.map,

@@ -29,6 +29,7 @@
 use super::tile_overlay;
 use super::trails::Trails;
 use super::world_files;
+use super::world_detail::WorldDetail;
 use super::world_overlays::WorldOverlays;
 use super::world_stamps::{WorldDeformer, WorldShock, WorldStamp, reach};
 use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
@@ -75,6 +76,10 @@ const SHUTDOWN_TIMEOUT: Duration = Duration::from_secs(60);
 
 /// How far ahead of the camera the world scenario's vehicle drives (metres).
 const VEHICLE_AHEAD: f32 = 14.0;
+/// How far ahead of the camera, and to the side opposite the craters, the world scenario's
+/// walker leaves footprints (`--detail parallax`; metres).
+const WALKER_AHEAD: f32 = 16.0;
+const WALKER_ASIDE: f32 = 3.0;
 /// The world scenario's eye height above ground (metres): high enough to see the tracks.
 const WORLD_EYE_HEIGHT: f32 = 5.0;
 /// The world scenario's craters land this far to the side of the path (metres), clear of the
@@ -91,6 +96,8 @@ pub struct FlyoverScenario {
     craters_skipped: u32,
     /// The world scenario's shockwave, `None` for the flyover.
     shock: Option<WorldShock>,
+    /// The world scenario's footprints in detail tiles (`--detail parallax`).
+    detail: Option<WorldDetail>,
     /// With `--lod cdlod`: the level-0 bounds the GPU scene's quadtree is kept current from.
     bounds: Option<RegionBounds>,
     pool: Option<RamPool>,
@@ -156,6 +163,10 @@ impl FlyoverScenario {
         let load_ms = ms_since(t);
         let budget = cli.ram_budget.saturating_mul(1 << 20);
         let overlays = WorldOverlays::new(&world)?;
+        let world_scenario = cli.scenario == crate::cli::ScenarioKind::World;
+        let detail = (world_scenario && cli.detail != crate::cli::DetailArg::None)
+            .then(|| WorldDetail::open(&world))
+            .transpose()?;
         let pool = RamPool::with_policy(
             world,
             PoolConfig::new(Layer::Height, budget),
@@ -177,6 +188,7 @@ impl FlyoverScenario {
         Ok(Self {
             trails,
             shock,
+            detail,
             bounds: None,
             craters_skipped: 0,
             info: ScenarioInfo {
@@ -544,6 +556,9 @@ impl Scenario for FlyoverScenario {
             self.color_stream = Some(stream(Layer::Color, heights_budget.saturating_mul(2))?);
         }
         self.vram = Some(VramPool::new(vram)?);
+        if let Some(detail) = &self.detail {
+            scene.enable_detail(detail.layout(), false)?;
+        }
         Ok(())
     }
 
@@ -755,6 +770,19 @@ impl Scenario for FlyoverScenario {
             self.gpu_stamp_ms += frame.step_ms;
             trail = Some(frame);
         }
+        // The walker's footprints into the detail tiles (timed as their own steps).
+        let mut footprints = None;
+        if let Some(detail) = self.detail.as_mut() {
+            let (start, heading, extent) = (self.start, self.heading, self.extent);
+            let line = move |s: f32| {
+                let aside = heading.perp() * WALKER_ASIDE;
+                reflect_into(start + heading * (s + WALKER_AHEAD) - aside, extent)
+            };
+            let t = Instant::now();
+            let walked = self.speed * time;
+            footprints = Some(detail.advance(xz, walked, &line, ctx.gpu.as_deref_mut(), ctx.timings)?);
+            self.gpu_stamp_ms += ms_since(t);
+        }
         let dirty = self.update_overview(&changed)?;
         self.update_window(xz)?;
         // The hole, written into the world off the frame thread; the layers around the camera
@@ -799,6 +827,9 @@ impl Scenario for FlyoverScenario {
             camera,
             camera_clearance_m,
             stats: FrameStats {
+                footprints: footprints.map_or(0, |f| f.footprints),
+                detail_tiles_resident: footprints.map(|f| f.tiles),
+                detail_dirty_texels: footprints.map(|f| f.texels),
                 craters: u32::from(crater),
                 shockwaves: u32::from(shock),
                 dirty_texels: changed.iter().map(Rect::area).sum(),
@@ -858,6 +889,11 @@ impl Scenario for FlyoverScenario {
         if let Some(scene) = gpu.as_deref_mut() {
             self.take_tile_readbacks(scene, true)?;
         }
+        // Every footprint is in the world's detail files.
+        let detail_written = match self.detail.as_mut() {
+            Some(detail) => detail.finish(gpu.as_deref_mut())?,
+            None => 0,
+        };
         // The trails' last areas reach the tiles, and the window's volume is checked.
         if let (Some(trails), Some(pool)) = (self.trails.as_mut(), self.pool.as_mut()) {
             trails.release(pool, gpu)?;
@@ -875,7 +911,7 @@ impl Scenario for FlyoverScenario {
         let world = pool.world().clone();
         let issued = pool.flush();
         pool.shutdown(SHUTDOWN_TIMEOUT)?;
-        let mut written = self.written_back + issued as u64;
+        let mut written = self.written_back + issued as u64 + detail_written;
         // Craters whose tiles never became resident go straight into the world's files.
         let mut timings = crate::timings::Timings::default();
         let mut craters = WorldDeformer {

@@ -11,6 +11,7 @@ mod stamps;
 pub mod tile_overlay;
 pub mod trails;
 pub mod world_files;
+mod world_detail;
 mod world_overlays;
 mod world_stamps;
 
@@ -26,6 +27,7 @@ use terrain_core::{CoarseMap, DirtyRect};
 
 pub use stamps::{DETAIL_REFINE, DETAIL_TILE};
 pub use world_overlays::GPU_WINDOW as GPU_OVERLAY_WINDOW;
+pub use world_detail::memory_bytes as world_detail_bytes;
 
 /// Seconds of scenario time per frame (30 frames per second), whatever the render speed.
 pub const FRAME_DT: f64 = 1.0 / 30.0;

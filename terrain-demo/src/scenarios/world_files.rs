@@ -65,7 +65,13 @@ pub fn open_or_build(
     cli: &Cli,
     heightmap: Option<super::heightmap::PlannedMap>,
 ) -> Result<(World, String, Option<HeightsInfo>)> {
-    let (world, source, heights) = open_or_build_heights(cli, heightmap)?;
+    let (mut world, source, heights) = open_or_build_heights(cli, heightmap)?;
+    // The world scenario's footprints need a detail layer: added once, before the world is
+    // shared.
+    if cli.scenario == crate::cli::ScenarioKind::World && cli.detail != crate::cli::DetailArg::None
+    {
+        super::world_detail::ensure_layer(&mut world)?;
+    }
     // `--color`: the image becomes the world's colour tiles (replacing any), tile by tile.
     let size = world.manifest().world_size;
     if let Some(colors) = crate::driver::color_layer(cli, size).usage()? {
