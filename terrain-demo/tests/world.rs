@@ -1,10 +1,10 @@
 //! The world scenario as a user runs it: a vehicle leaves granular trails on the streamed
 //! world (through a granular window that moves with it), craters and a shockwave land beside
-//! its path; the
-//! granular volume is exact at every frame, collision keeps the camera above ground, every
+//! its path, a walker presses footprints into the world's detail tiles (`--detail parallax`);
+//! the granular volume is exact at every frame, collision keeps the camera above ground, every
 //! wanted tile is resident after the first second, and the world left by a GPU run (granular
-//! steps and craters on the GPU, drawn by CDLOD from the tile atlas) is the one a `--no-gpu`
-//! run leaves, file for file.
+//! steps, craters and footprints on the GPU, drawn by CDLOD from the tile atlas with the
+//! detail layer) is the one a `--no-gpu` run leaves, file for file.
 
 mod common;
 
@@ -14,6 +14,7 @@ use std::process::Command;
 fn run(world: &Path, out: &Path, frames: u32, extra: &[&str]) -> serde_json::Value {
     let status = Command::new(env!("CARGO_BIN_EXE_terrain-demo"))
         .args(["--scenario", "world", "--size", "1024", "--speed", "40"])
+        .args(["--detail", "parallax"])
         .args(extra)
         .args(["--ram-budget", "8", "--overview-size", "64", "-q"])
         .args(["--frames", &frames.to_string()])
@@ -46,6 +47,11 @@ fn check_frames(report: &serde_json::Value) -> &str {
         if i >= 30 {
             assert_eq!(f["cache"]["tiles_missing"].as_u64(), Some(0), "frame {i}");
         }
+        // A footprint or two every frame (0.7 m strides at 40 m/s), each covering detail
+        // texels.
+        let steps = f["footprints"].as_u64().expect("footprints");
+        assert!((1..=2).contains(&steps), "frame {i}: {steps} footprints");
+        assert!(f["detail_dirty_texels"].as_u64() > Some(0), "frame {i}: {f}");
     }
     // The vehicle drove out of its first window: at least two windows, each exact.
     assert!(volumes.len() >= 2, "the granular window never moved");
@@ -93,6 +99,8 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
         .filter(|(k, v)| fresh.get(*k) != Some(v))
         .count();
     assert!(changed >= 2, "tiles changed: {changed}");
+    let detail = cpu_files.keys().filter(|k| k.starts_with("detail")).count();
+    assert!(detail >= 1, "no footprint reached the world's detail files");
     if gpu {
         let report = run(
             &root.join("world_gpu"),

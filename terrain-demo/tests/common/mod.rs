@@ -90,8 +90,9 @@ pub fn report(out: &Path) -> serde_json::Value {
 /// Every tile file of a world (heights, holes, paint): path under the world -> bytes.
 pub fn tile_files(world: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
     let mut out = std::collections::BTreeMap::new();
-    // The heights, and the holes and paint laid over them (folders made on first write).
-    let mut stack: Vec<_> = ["height", "hole", "material"]
+    // The heights, the holes and paint laid over them and the footprints' detail tiles
+    // (folders made on first write).
+    let mut stack: Vec<_> = ["height", "hole", "material", "detail"]
         .iter()
         .map(|l| world.join(l))
         .filter(|d| d.is_dir())
