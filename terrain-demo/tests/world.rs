@@ -51,7 +51,10 @@ fn check_frames(report: &serde_json::Value) -> &str {
         // texels.
         let steps = f["footprints"].as_u64().expect("footprints");
         assert!((1..=2).contains(&steps), "frame {i}: {steps} footprints");
-        assert!(f["detail_dirty_texels"].as_u64() > Some(0), "frame {i}: {f}");
+        assert!(
+            f["detail_dirty_texels"].as_u64() > Some(0),
+            "frame {i}: {f}"
+        );
     }
     // The vehicle drove out of its first window: at least two windows, each exact.
     assert!(volumes.len() >= 2, "the granular window never moved");

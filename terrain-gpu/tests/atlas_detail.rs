@@ -25,8 +25,7 @@ use terrain_core::{Grid, TileLayout, TileUploadTarget, WrapMode};
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
     AtlasConfig, Camera, CdlodDraw, CdlodRenderer, ClipmapSurface, ClipmapView, DetailShading,
-    GpuDetailTiles, GpuError, GpuTileAtlas, OffscreenTarget, SkyColors, TargetFormat,
-    TerrainStyle,
+    GpuDetailTiles, GpuError, GpuTileAtlas, OffscreenTarget, SkyColors, TargetFormat, TerrainStyle,
 };
 use terrain_lod::{CdlodConfig, CdlodMesh, CdlodTree, CdlodView, Frustum};
 
@@ -87,9 +86,11 @@ fn render(
         ramp: (0.0, scene::HEIGHT),
         ..TerrainStyle::default()
     };
-    scene
-        .sky
-        .prepare(queue, camera.view_proj_relative(aspect), &SkyColors::default())?;
+    scene.sky.prepare(
+        queue,
+        camera.view_proj_relative(aspect),
+        &SkyColors::default(),
+    )?;
     let target = OffscreenTarget::new(device, SIZE)?;
     let mut encoder = device.create_command_encoder(&Default::default());
     match lod {
@@ -166,7 +167,13 @@ fn footprints_show_on_the_atlas(name: &str, make: impl Fn(&Scene) -> Lod) {
         shading: &shading,
     };
     let detailed = render(&mut scene, &mut lod, with_detail, &cam).unwrap();
-    let bare = render(&mut scene, &mut lod, ClipmapSurface::Atlas { atlas: &atlas }, &cam).unwrap();
+    let bare = render(
+        &mut scene,
+        &mut lod,
+        ClipmapSurface::Atlas { atlas: &atlas },
+        &cam,
+    )
+    .unwrap();
     let (max, strong) = frame_diff(&detailed, &bare);
     assert!(
         max > 40 && strong > 250,
@@ -184,7 +191,10 @@ fn footprints_show_on_the_atlas(name: &str, make: impl Fn(&Scene) -> Lod) {
     };
     let far = render(&mut scene, &mut lod, far, &cam).unwrap();
     let (max, _) = frame_diff(&far, &bare);
-    assert!(max <= 1, "{name}: a faded-out layer changes the frame by {max}");
+    assert!(
+        max <= 1,
+        "{name}: a faded-out layer changes the frame by {max}"
+    );
 }
 
 #[test]
@@ -203,8 +213,11 @@ fn cdlod_draws_footprints_on_a_streamed_world() {
             ..CdlodConfig::default()
         };
         let tree = CdlodTree::from_map(&scene.map, config).unwrap();
-        let renderer =
-            CdlodRenderer::new(&scene.ctx.device, &TargetFormat::CAPTURE, &CdlodMesh::new(16));
+        let renderer = CdlodRenderer::new(
+            &scene.ctx.device,
+            &TargetFormat::CAPTURE,
+            &CdlodMesh::new(16),
+        );
         Lod::Cdlod(Box::new((tree, renderer.unwrap())))
     });
 }
@@ -229,7 +242,10 @@ fn a_layer_that_does_not_lie_over_the_world_is_refused() {
         };
         let err = render(&mut scene, &mut Lod::Clipmap, surface, &cam).unwrap_err();
         assert!(
-            matches!(err, GpuError::SizeMismatch { .. } | GpuError::Unsupported { .. }),
+            matches!(
+                err,
+                GpuError::SizeMismatch { .. } | GpuError::Unsupported { .. }
+            ),
             "{size} at {texel} m: {err}"
         );
     }

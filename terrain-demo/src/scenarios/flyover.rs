@@ -28,8 +28,8 @@
 
 use super::tile_overlay;
 use super::trails::Trails;
-use super::world_files;
 use super::world_detail::WorldDetail;
+use super::world_files;
 use super::world_overlays::WorldOverlays;
 use super::world_stamps::{WorldDeformer, WorldShock, WorldStamp, reach};
 use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
@@ -780,7 +780,8 @@ impl Scenario for FlyoverScenario {
             };
             let t = Instant::now();
             let walked = self.speed * time;
-            footprints = Some(detail.advance(xz, walked, &line, ctx.gpu.as_deref_mut(), ctx.timings)?);
+            footprints =
+                Some(detail.advance(xz, walked, &line, ctx.gpu.as_deref_mut(), ctx.timings)?);
             self.gpu_stamp_ms += ms_since(t);
         }
         let dirty = self.update_overview(&changed)?;

@@ -10,8 +10,8 @@ mod stamp_script;
 mod stamps;
 pub mod tile_overlay;
 pub mod trails;
-pub mod world_files;
 mod world_detail;
+pub mod world_files;
 mod world_overlays;
 mod world_stamps;
 
@@ -26,8 +26,8 @@ use std::time::Instant;
 use terrain_core::{CoarseMap, DirtyRect};
 
 pub use stamps::{DETAIL_REFINE, DETAIL_TILE};
-pub use world_overlays::GPU_WINDOW as GPU_OVERLAY_WINDOW;
 pub use world_detail::memory_bytes as world_detail_bytes;
+pub use world_overlays::GPU_WINDOW as GPU_OVERLAY_WINDOW;
 
 /// Seconds of scenario time per frame (30 frames per second), whatever the render speed.
 pub const FRAME_DT: f64 = 1.0 / 30.0;

@@ -131,7 +131,11 @@ impl WorldDetail {
             let d = self.next_step_m;
             let at = line(d);
             let dir = (line(d + 0.5) - at).normalize_or(Vec2::X);
-            let side = if self.steps.is_multiple_of(2) { GAIT_M } else { -GAIT_M };
+            let side = if self.steps.is_multiple_of(2) {
+                GAIT_M
+            } else {
+                -GAIT_M
+            };
             let center = at + dir.perp() * side;
             // The foot's long side (its local y) along the walk.
             let rotation = dir.y.atan2(dir.x) - std::f32::consts::FRAC_PI_2;
@@ -154,7 +158,7 @@ impl WorldDetail {
         camera_xz: Vec2,
         walked_m: f32,
         line: &dyn Fn(f32) -> Vec2,
-        mut gpu: Option<&mut GpuScene>,
+        gpu: Option<&mut GpuScene>,
         timings: &mut Timings,
     ) -> Result<DetailStats> {
         let t = Instant::now();
@@ -187,7 +191,7 @@ impl WorldDetail {
             footprints: steps.len() as u32,
             ..DetailStats::default()
         };
-        match gpu.as_deref_mut() {
+        match gpu {
             Some(scene) => {
                 scene.stream_detail(&self.cache, &frame, timings)?;
                 stats.texels = scene.stamp_detail(&mut self.foot, &steps, timings)?;
@@ -258,11 +262,18 @@ mod tests {
         for (i, p) in steps.iter().enumerate() {
             assert!((p.center.x - (10.0 + 0.7 * i as f32)).abs() < 1e-4);
             let side = if i % 2 == 0 { GAIT_M } else { -GAIT_M };
-            assert!((p.center.y - (20.0 + side)).abs() < 1e-4, "{i}: {}", p.center);
+            assert!(
+                (p.center.y - (20.0 + side)).abs() < 1e-4,
+                "{i}: {}",
+                p.center
+            );
         }
         assert!(d.steps(3.0, &line).unwrap().is_empty(), "no step twice");
         // A kilometre in one frame: at most the cap, and the walker goes on from there.
-        assert_eq!(d.steps(1000.0, &line).unwrap().len(), MAX_STEPS_PER_FRAME as usize);
+        assert_eq!(
+            d.steps(1000.0, &line).unwrap().len(),
+            MAX_STEPS_PER_FRAME as usize
+        );
         assert!(d.steps(1000.5, &line).unwrap().is_empty());
         // From 1000.7 m on: 1000.7 and 1001.4.
         assert_eq!(d.steps(1001.5, &line).unwrap().len(), 2);

@@ -12,7 +12,7 @@ use crate::render::clipmap::{
     ClipmapSurface, SurfaceKind, SurfacePipeline, TerrainStyle, VertexShape, check_view,
     check_wireframe, frame_uniform,
 };
-use crate::render::surface::{DetailUniform, fragment_reach, with_surface_weights};
+use crate::render::surface::{BoundBuffers, DetailUniform, fragment_reach, with_surface_weights};
 use crate::render::target::TargetFormat;
 use crate::resources::materials::{GpuColorLayer, GpuMaterials, MaterialSlot};
 use glam::UVec2;
@@ -46,7 +46,7 @@ pub struct CdlodRenderer {
     lods: wgpu::Buffer,
     instances: wgpu::Buffer,
     instance_count: u32,
-    bound: Option<(Vec<(u32, wgpu::Buffer)>, wgpu::BindGroup)>,
+    bound: Option<(BoundBuffers, wgpu::BindGroup)>,
     wireframe: bool,
     /// The materials of [`crate::SurfaceShading::Materials`].
     materials: MaterialSlot,

@@ -29,7 +29,7 @@ use crate::render::clipmap::{
     ClipmapSurface, SurfacePipeline, TerrainStyle, VertexShape, check_view, check_wireframe,
     frame_uniform,
 };
-use crate::render::surface::{DetailUniform, fragment_reach, with_surface_weights};
+use crate::render::surface::{BoundBuffers, DetailUniform, fragment_reach, with_surface_weights};
 use crate::render::target::TargetFormat;
 use crate::resources::materials::{GpuColorLayer, GpuMaterials, MaterialSlot};
 use bytemuck::{Pod, Zeroable};
@@ -506,7 +506,7 @@ pub struct TessRenderer {
     on_detail: bool,
     target: TargetFormat,
     uniform: wgpu::Buffer,
-    bound: Option<(Vec<(u32, wgpu::Buffer)>, wgpu::BindGroup)>,
+    bound: Option<(BoundBuffers, wgpu::BindGroup)>,
     wireframe: bool,
     /// The materials of [`crate::SurfaceShading::Materials`].
     materials: MaterialSlot,
