@@ -343,7 +343,7 @@ impl TileUploadTarget for GpuTileAtlas {
                 actual: heights.size(),
             });
         }
-        self.staging = packing::pack(heights.as_slice().iter().map(|&h| u32::from(h)), ts, 16);
+        packing::pack_into(heights.as_slice(), ts, 16, &mut self.staging);
         let bytes = self.upload_bytes();
         self.queue.write_buffer(
             &self.heights,

@@ -220,7 +220,7 @@ impl GpuDetailTiles {
             _ => self.take_slot(queue, tile)?,
         };
         let side = self.layout.tile_size();
-        self.staging = packing::pack(texels.as_slice().iter().map(|&v| u32::from(v)), side, 8);
+        packing::pack_into(texels.as_slice(), side, 8, &mut self.staging);
         self.write_slot(queue, slot);
         Ok(())
     }

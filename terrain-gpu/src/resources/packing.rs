@@ -51,6 +51,38 @@ pub(crate) fn pack(values: impl IntoIterator<Item = u32>, width: u32, bits: u32)
     out
 }
 
+/// [`pack`] of whole rows of `width` texels from a slice, into `out` (cleared, its capacity
+/// kept): the uploads' path, a word at a time instead of a texel (a 256^2 atlas tile or a
+/// 1024^2 detail tile is packed per upload, on the frame thread).
+pub(crate) fn pack_into<T: Copy + Into<u32>>(
+    values: &[T],
+    width: u32,
+    bits: u32,
+    out: &mut Vec<u32>,
+) {
+    out.clear();
+    let lanes = lanes(bits) as usize;
+    let width = width as usize;
+    if width == 0 {
+        return;
+    }
+    out.reserve(values.len().div_ceil(width) * width.div_ceil(lanes));
+    let word = |texels: &[T]| {
+        texels
+            .iter()
+            .enumerate()
+            .fold(0u32, |w, (lane, &v)| w | (v.into() << (lane as u32 * bits)))
+    };
+    for row in values.chunks(width) {
+        let words = row.chunks_exact(lanes);
+        let rest = words.remainder();
+        out.extend(words.map(word));
+        if !rest.is_empty() {
+            out.push(word(rest));
+        }
+    }
+}
+
 /// The texel values of `words`, rows of `width` texels (the inverse of [`pack`]).
 pub(crate) fn unpack(words: &[u32], width: u32, bits: u32) -> Vec<u32> {
     let pitch = pitch(width, bits) as usize;
@@ -109,6 +141,26 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn pack_into_packs_as_pack_does_and_keeps_its_buffer() {
+        let mut out = vec![7u32; 3];
+        for width in 1..=9u32 {
+            let values: Vec<u8> = (0..width * 3).map(|i| (i * 37 + 5) as u8).collect();
+            pack_into(&values, width, 8, &mut out);
+            let wide = values.iter().map(|&v| u32::from(v));
+            assert_eq!(out, pack(wide, width, 8), "8 bits, width {width}");
+            let values: Vec<u16> = (0..width * 3).map(|i| (i * 40_503 + 11) as u16).collect();
+            pack_into(&values, width, 16, &mut out);
+            let wide = values.iter().map(|&v| u32::from(v));
+            assert_eq!(out, pack(wide, width, 16), "16 bits, width {width}");
+            let values: Vec<u32> = (0..width * 3).map(|i| i.wrapping_mul(2_654_435_761)).collect();
+            pack_into(&values, width, 32, &mut out);
+            assert_eq!(out, pack(values.iter().copied(), width, 32), "32 bits");
+        }
+        pack_into::<u16>(&[], 4, 16, &mut out);
+        assert!(out.is_empty());
     }
 
     #[test]
