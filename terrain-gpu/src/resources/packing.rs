@@ -155,7 +155,9 @@ mod tests {
             pack_into(&values, width, 16, &mut out);
             let wide = values.iter().map(|&v| u32::from(v));
             assert_eq!(out, pack(wide, width, 16), "16 bits, width {width}");
-            let values: Vec<u32> = (0..width * 3).map(|i| i.wrapping_mul(2_654_435_761)).collect();
+            let values: Vec<u32> = (0..width * 3)
+                .map(|i| i.wrapping_mul(2_654_435_761))
+                .collect();
             pack_into(&values, width, 32, &mut out);
             assert_eq!(out, pack(values.iter().copied(), width, 32), "32 bits");
         }
