@@ -276,6 +276,21 @@ pub const REFINE: &str = concat!(
     include_str!("wgsl/render/refine.wgsl")
 );
 
+/// `RefinePass` and `RefineRenderer` over a tile atlas with a detail layer: the refinement of
+/// [`REFINE`] on the atlas surface of [`CLIPMAP_ATLAS_DETAIL`] (a streamed world's footprints
+/// as geometry near the camera).
+pub const REFINE_ATLAS: &str = concat!(
+    renderer_head!(),
+    include_str!("wgsl/resources/detail_tiles.wgsl"),
+    include_str!("wgsl/render/clipmap_detail_refined.wgsl"),
+    include_str!("wgsl/render/clipmap.wgsl"),
+    include_str!("wgsl/resources/tile_atlas.wgsl"),
+    include_str!("wgsl/resources/tile_atlas_bind_high.wgsl"),
+    include_str!("wgsl/render/clipmap_surface_atlas.wgsl"),
+    include_str!("wgsl/render/surface_curvature_atlas.wgsl"),
+    include_str!("wgsl/render/refine.wgsl")
+);
+
 /// `DetailProbe`: the detail layer's height, gradient and composite normal at a list of points
 /// (the same functions the detail clipmap shades with).
 pub const DETAIL_PROBE: &str = concat!(
@@ -407,6 +422,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("clipmap_detail", CLIPMAP_DETAIL),
     ("clipmap_atlas_detail", CLIPMAP_ATLAS_DETAIL),
     ("refine", REFINE),
+    ("refine_atlas", REFINE_ATLAS),
     ("atlas_probe", ATLAS_PROBE),
     ("detail_probe", DETAIL_PROBE),
     ("material_probe", MATERIAL_PROBE),

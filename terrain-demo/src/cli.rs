@@ -121,8 +121,8 @@ pub struct Cli {
     /// mapping, the composite of the coarse and detail normals, faded out with distance;
     /// `refine` (with the clipmap) draws the same tiles as geometry within 9 m of the camera
     /// (each coarse triangle split in up to nine by refinement patterns) and by their normals
-    /// beyond. The world scenario with `parallax`: a walker's footprints in the streamed
-    /// world's detail tiles (refined x8, kept in the world's folder).
+    /// beyond. The world scenario: a walker's footprints in the streamed world's detail tiles
+    /// (refined x8, kept in the world's folder), drawn the same two ways.
     #[arg(long, value_enum, default_value_t = DetailArg::None, help_heading = RENDERING)]
     pub detail: DetailArg,
     /// With `--lod cdlod`: choose the LODs by screen-space error, at most PX pixels, instead

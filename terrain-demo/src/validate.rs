@@ -53,13 +53,11 @@ fn scenario_flags(cli: &Cli) -> Result<()> {
             "--camera chooses the default scenario's camera; the {name} scenario moves its own"
         ));
     }
-    let world_detail = cli.scenario == ScenarioKind::World && cli.detail == DetailArg::Parallax;
-    if cli.detail != DetailArg::None && cli.scenario != ScenarioKind::Default && !world_detail {
+    let with_detail = matches!(cli.scenario, ScenarioKind::Default | ScenarioKind::World);
+    if cli.detail != DetailArg::None && !with_detail {
         return Err(anyhow!(
-            "--detail puts the default scenario's footprints into detail tiles, and with \
-             parallax the world scenario's walker's; the snow and flyover scenarios have no \
-             detail layer, and the world draws it by parallax only (refined geometry needs the \
-             default scenario's coarse-map)"
+            "--detail puts the default scenario's footprints, or the world scenario's walker's, \
+             into detail tiles; the snow and flyover scenarios have no detail layer"
         ));
     }
     if cli.color.is_some() && cli.scenario == ScenarioKind::Default && cli.heightmap.is_none() {
@@ -218,6 +216,7 @@ mod tests {
             ],
             &["--scenario", "world", "--lod", "cdlod"],
             &["--scenario", "world", "--detail", "parallax"],
+            &["--scenario", "world", "--detail", "refine"],
             &[
                 "--scenario",
                 "world",
@@ -281,7 +280,6 @@ mod tests {
     fn each_flag_out_of_place_or_range_is_a_usage_error_naming_it() {
         for (args, flag) in [
             (&["--scenario", "snow", "--camera", "orbit"][..], "--camera"),
-            (&["--scenario", "world", "--detail", "refine"], "--detail"),
             (
                 &["--scenario", "snow", "--heightmap", "x.png"],
                 "--heightmap",
@@ -301,7 +299,17 @@ mod tests {
             ),
             (&["--scenario", "flyover", "--lod", "cdlod"], "--lod"),
             (&["--scenario", "world", "--lod", "tessellated"], "--lod"),
-            (&["--scenario", "world", "--detail", "refine"], "--detail"),
+            (
+                &[
+                    "--scenario",
+                    "world",
+                    "--lod",
+                    "cdlod",
+                    "--detail",
+                    "refine",
+                ],
+                "--detail",
+            ),
             (
                 &["--scenario", "flyover", "--detail", "parallax"],
                 "--detail",

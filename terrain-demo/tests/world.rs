@@ -14,7 +14,12 @@ use std::process::Command;
 fn run(world: &Path, out: &Path, frames: u32, extra: &[&str]) -> serde_json::Value {
     let status = Command::new(env!("CARGO_BIN_EXE_terrain-demo"))
         .args(["--scenario", "world", "--size", "1024", "--speed", "40"])
-        .args(["--detail", "parallax"])
+        // The walker's footprints, by parallax unless the run asks otherwise.
+        .args(if extra.contains(&"--detail") {
+            &[][..]
+        } else {
+            &["--detail", "parallax"]
+        })
         .args(extra)
         .args(["--ram-budget", "8", "--overview-size", "64", "-q"])
         .args(["--frames", &frames.to_string()])
@@ -140,6 +145,29 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
             .map(|(k, _)| k)
             .collect();
         assert!(differ.is_empty(), "tiles that differ: {differ:?}");
+        // The footprints as refined geometry near the camera (the clipmap's finest cells).
+        let refined = run(
+            &root.join("world_refine"),
+            &root.join("out_refine"),
+            8,
+            &[
+                "--resolution",
+                "96x64",
+                "--vram-budget",
+                "8",
+                "--detail",
+                "refine",
+            ],
+        );
+        for f in refined["frames"].as_array().expect("frames") {
+            assert!(f["detail_dirty_texels"].as_u64() > Some(0), "{f}");
+            assert!(
+                !f["timings_ms"]
+                    .as_object()
+                    .expect("timings")
+                    .contains_key("stamp_cpu")
+            );
+        }
     }
     let _ = std::fs::remove_dir_all(&root);
 }

@@ -172,11 +172,13 @@ fn render(c: &mut Criterion, ctx: &GpuContext) {
     let mut refine = RefinePass::new(device, 91).expect("refine pass");
     let mut refined = RefineRenderer::new(device, &target.format()).expect("refine renderer");
     let draw = RefineDraw {
-        map: &gpu_map,
-        normals: &normals,
-        detail: &detail,
+        surface: ClipmapSurface::Detail {
+            map: &gpu_map,
+            normals: &normals,
+            detail: &detail,
+            shading: &normals_only,
+        },
         radius_m: 9.0,
-        shading: &normals_only,
         camera: &camera,
         style: &style,
         target_size: size,

@@ -1,7 +1,9 @@
 //! A streamed world's atlas drawn with a detail layer (`ClipmapSurface::AtlasDetail`) under
 //! the clipmap and CDLOD: the footprints pressed into the detail tiles change the frame as
 //! they do over a coarse-map, a layer faded out before the nearest fragment leaves the frame of
-//! the bare atlas, and a layer that does not lie over the world is refused. On whatever
+//! the bare atlas, and a layer that does not lie over the world is refused; refined geometry
+//! (`--detail refine`) over a fully resident atlas is the coarse-map's, bit for bit (the
+//! same stored heights read through the tile table). On whatever
 //! adapter the machine has (lavapipe in CI); without one they skip, or fail under
 //! `TERRAIN_REQUIRE_GPU=1`.
 //!
@@ -25,7 +27,8 @@ use terrain_core::{Grid, TileLayout, TileUploadTarget, WrapMode};
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
     AtlasConfig, Camera, CdlodDraw, CdlodRenderer, ClipmapSurface, ClipmapView, DetailShading,
-    GpuDetailTiles, GpuError, GpuTileAtlas, OffscreenTarget, SkyColors, TargetFormat, TerrainStyle,
+    GpuDetailTiles, GpuError, GpuTileAtlas, OffscreenTarget, RefineDraw, RefinePass,
+    RefineRenderer, SkyColors, TargetFormat, TerrainStyle,
 };
 use terrain_lod::{CdlodConfig, CdlodMesh, CdlodTree, CdlodView, Frustum};
 
@@ -249,4 +252,76 @@ fn a_layer_that_does_not_lie_over_the_world_is_refused() {
             "{size} at {texel} m: {err}"
         );
     }
+}
+
+#[test]
+fn refined_geometry_over_a_full_atlas_is_the_coarse_maps() {
+    let Some(ctx) = context_or_skip("atlas_detail_refine") else {
+        return;
+    };
+    let (mut scene, _) = scene_with_footprints(ctx, 128);
+    let atlas = full_atlas(&scene);
+    let (tiles, _) = scene.detail.take().unwrap();
+    let shading = DetailShading {
+        parallax_steps: 0,
+        ..DetailShading::default()
+    };
+    let cam = camera(&scene);
+    let style = TerrainStyle::default();
+    let (device, queue) = (scene.ctx.device.clone(), scene.ctx.queue.clone());
+    let mut pass = RefinePass::new(&device, 16).unwrap();
+    let mut renderer = RefineRenderer::new(&device, &TargetFormat::CAPTURE).unwrap();
+    let target = OffscreenTarget::new(&device, SIZE).unwrap();
+    let mut refine = |surface: ClipmapSurface<'_>| {
+        let draw = RefineDraw {
+            surface,
+            radius_m: 6.0,
+            camera: &cam,
+            style: &style,
+            target_size: SIZE,
+        };
+        let mut encoder = device.create_command_encoder(&Default::default());
+        pass.encode(&device, &queue, &mut encoder, &draw).unwrap();
+        renderer.prepare(&device, &queue, &draw, &pass).unwrap();
+        {
+            let mut rp = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
+            renderer.draw(&mut rp, &pass);
+        }
+        queue.submit([encoder.finish()]);
+        let (mut tris, overflow) = pass.read_triangles(&device, &queue).unwrap();
+        assert!(!overflow);
+        // In no particular order: sorted by their bits.
+        let key = |t: &[glam::Vec3; 3]| t.map(|v| v.to_array().map(f32::to_bits));
+        tris.sort_by_key(key);
+        tris.iter().map(key).collect::<Vec<_>>()
+    };
+    let coarse = refine(ClipmapSurface::Detail {
+        map: &scene.gpu_map,
+        normals: &scene.normals,
+        detail: &tiles,
+        shading: &shading,
+    });
+    let from_atlas = refine(ClipmapSurface::AtlasDetail {
+        atlas: &atlas,
+        detail: &tiles,
+        shading: &shading,
+    });
+    // The footprints are within the radius: cells are split (2 x 12^2 = 288 unsplit).
+    assert!(coarse.len() > 400, "{} triangles", coarse.len());
+    assert_eq!(coarse.len(), from_atlas.len());
+    assert!(coarse == from_atlas, "the atlas refines other triangles");
+    // A surface without detail has nothing to refine.
+    let bare = RefineDraw {
+        surface: ClipmapSurface::Atlas { atlas: &atlas },
+        radius_m: 6.0,
+        camera: &cam,
+        style: &style,
+        target_size: SIZE,
+    };
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let err = pass
+        .encode(&device, &queue, &mut encoder, &bare)
+        .unwrap_err();
+    assert!(matches!(err, GpuError::Unsupported { .. }), "{err}");
+    scene.ctx.check().expect("no GPU validation errors");
 }

@@ -17,8 +17,8 @@ use terrain_core::detail::{DetailLayer, DetailLayout};
 use terrain_core::{Blend, GaussianStamp, Grid, StampPlacement};
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
-    Camera, DetailShading, GpuDetailTiles, GpuError, OffscreenTarget, RefineDraw, RefinePass,
-    RefineRenderer, SkyColors, SmallReadback, TargetFormat, TerrainStyle,
+    Camera, ClipmapSurface, DetailShading, GpuDetailTiles, GpuError, OffscreenTarget, RefineDraw,
+    RefinePass, RefineRenderer, SkyColors, SmallReadback, TargetFormat, TerrainStyle,
 };
 use terrain_lod::refine::RefineView;
 
@@ -128,11 +128,13 @@ fn refined_triangles_equal_the_cpu_reference() {
         let eye = Vec3::new(xz.x, scene.ground(xz) + 1.7, xz.y);
         let camera = Camera::looking(eye, Vec3::new(0.6, -0.3, 0.8));
         let draw = RefineDraw {
-            map: &scene.gpu_map,
-            normals: &scene.normals,
-            detail: &tiles,
+            surface: ClipmapSurface::Detail {
+                map: &scene.gpu_map,
+                normals: &scene.normals,
+                detail: &tiles,
+                shading: &shading,
+            },
             radius_m: RADIUS,
-            shading: &shading,
             camera: &camera,
             style: &style,
             target_size: UVec2::new(64, 64),
@@ -223,11 +225,13 @@ fn render_refined(
     let queue = scene.ctx.queue.clone();
     let mut encoder = device.create_command_encoder(&Default::default());
     let draw = RefineDraw {
-        map: &scene.gpu_map,
-        normals: &scene.normals,
-        detail: tiles,
+        surface: ClipmapSurface::Detail {
+            map: &scene.gpu_map,
+            normals: &scene.normals,
+            detail: tiles,
+            shading: &shading,
+        },
         radius_m: RADIUS,
-        shading: &shading,
         camera,
         style: &style,
         target_size: size,
@@ -379,11 +383,13 @@ fn refinement_that_does_not_fit_is_refused() {
     let camera = Camera::looking(Vec3::new(xz.x, scene.ground(xz) + 2.0, xz.y), Vec3::X);
     let shading = shading();
     let draw = |radius_m| RefineDraw {
-        map: &scene.gpu_map,
-        normals: &scene.normals,
-        detail: &tiles,
+        surface: ClipmapSurface::Detail {
+            map: &scene.gpu_map,
+            normals: &scene.normals,
+            detail: &tiles,
+            shading: &shading,
+        },
         radius_m,
-        shading: &shading,
         camera: &camera,
         style: &style,
         target_size: UVec2::new(64, 64),

@@ -89,18 +89,24 @@ pub(super) fn detail_shading() -> DetailShading {
 }
 
 impl GpuScene {
-    /// Draws the coarse-map through a detail layer of `layout` from now on, and stamps the
-    /// footprints into its tiles ([`GpuScene::stream_detail`] keeps them resident). With
-    /// `refine`, the cells near the camera are refined geometry (Flower 2010, sec. 2.4.3) and the
-    /// clipmap shades the rest with the detail normals; else the clipmap draws the detail by
-    /// parallax occlusion mapping.
+    /// Draws the coarse-map (or the world's atlas, once enabled) through a detail layer of
+    /// `layout` from now on, and stamps the footprints into its tiles
+    /// ([`GpuScene::stream_detail`] keeps them resident). With `refine`, the cells near the
+    /// camera are refined geometry (Flower 2010, sec. 2.4.3) and the clipmap shades the rest
+    /// with the detail normals; else the clipmap draws the detail by parallax occlusion
+    /// mapping.
     pub fn enable_detail(&mut self, layout: DetailLayout, refine: bool) -> Result<()> {
         let device = &self.ctx.device;
         let tiles = GpuDetailTiles::new(device, layout, DETAIL_SLOTS)?;
         let mut shading = detail_shading();
         let refine = if refine {
-            let radius_m = refine_radius(self.map.texel_size());
-            let view = terrain_lod::RefineView::new(Vec2::ZERO, self.map.texel_size(), radius_m)?;
+            // The texels refined are the drawn surface's: a streamed world's level 0.
+            let texel = match &self.atlas {
+                Some(atlas) => atlas.config().world.texel_size,
+                None => self.map.texel_size(),
+            };
+            let radius_m = refine_radius(texel);
+            let view = terrain_lod::RefineView::new(Vec2::ZERO, texel, radius_m)?;
             shading.parallax_steps = 0;
             Some(RefinedGeometry {
                 pass: RefinePass::new(device, view.half_cells())?,

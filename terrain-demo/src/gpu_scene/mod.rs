@@ -904,13 +904,11 @@ impl GpuScene {
             // `--detail refine`: the cells near the camera refined first, the clipmap leaving
             // them out.
             let refined = match (self.refined.as_mut(), self.detail.as_ref()) {
-                (Some(r), Some(d)) => {
+                (Some(r), Some(_)) => {
+                    // The frame's surface: the coarse-map's or the world's atlas, with detail.
                     let draw = RefineDraw {
-                        map: &self.map,
-                        normals: &self.normals,
-                        detail: &d.tiles,
+                        surface,
                         radius_m: r.radius_m,
-                        shading: &d.shading,
                         camera,
                         style: &self.style,
                         target_size: size,

@@ -96,8 +96,9 @@ pub struct FlyoverScenario {
     craters_skipped: u32,
     /// The world scenario's shockwave, `None` for the flyover.
     shock: Option<WorldShock>,
-    /// The world scenario's footprints in detail tiles (`--detail parallax`).
+    /// The world scenario's footprints in detail tiles (`--detail`), and how they are drawn.
     detail: Option<WorldDetail>,
+    detail_mode: crate::cli::DetailArg,
     /// With `--lod cdlod`: the level-0 bounds the GPU scene's quadtree is kept current from.
     bounds: Option<RegionBounds>,
     pool: Option<RamPool>,
@@ -189,6 +190,7 @@ impl FlyoverScenario {
             trails,
             shock,
             detail,
+            detail_mode: cli.detail,
             bounds: None,
             craters_skipped: 0,
             info: ScenarioInfo {
@@ -557,7 +559,8 @@ impl Scenario for FlyoverScenario {
         }
         self.vram = Some(VramPool::new(vram)?);
         if let Some(detail) = &self.detail {
-            scene.enable_detail(detail.layout(), false)?;
+            let refine = self.detail_mode == crate::cli::DetailArg::Refine;
+            scene.enable_detail(detail.layout(), refine)?;
         }
         Ok(())
     }

@@ -1,4 +1,4 @@
-//! The world scenario's footprints (`--detail parallax`): a walker beside the vehicle's path
+//! The world scenario's footprints (`--detail parallax|refine`): a walker beside the vehicle's path
 //! presses footprints into the streamed world's detail tiles (Flower 2010, sec. 2.3-2.4), 8-bit
 //! tiles refined x[`REFINE`] over level 0, held by terrain-cache's `DetailCache` (the band
 //! regions of fig. 2.4 around the camera, read and written back on its own threads into the

@@ -21,12 +21,11 @@ use crate::error::GpuError;
 use crate::render::camera::{RenderView, ResolvedView};
 use crate::render::clipmap::{
     ClipmapSurface, FrameUniform, SurfaceInfo, SurfacePipeline, TerrainStyle, VertexShape,
-    check_view, check_wireframe, frame_uniform,
+    atlas_detail_storage, check_view, check_wireframe, frame_uniform,
 };
-use crate::render::surface::with_surface_weights;
+use crate::render::surface::{BoundBuffers, SurfaceKind, with_surface_weights};
 use crate::render::target::TargetFormat;
-use crate::resources::detail::{DetailInfo, DetailShading, GpuDetailTiles};
-use crate::resources::maps::{GpuDerivativeMap, GpuHeightMap};
+use crate::resources::detail::{DetailInfo, DetailShading};
 use crate::resources::materials::{GpuColorLayer, GpuMaterials, MaterialSlot};
 use bytemuck::{Pod, Zeroable};
 use glam::{IVec2, UVec2, Vec2, Vec3};
@@ -58,20 +57,17 @@ const MOST_PER_TRIANGLE: u64 = 9;
 /// Everything one refined frame is made and drawn from.
 #[derive(Debug, Clone, Copy)]
 pub struct RefineDraw<'a> {
-    /// The coarse heights.
-    pub map: &'a GpuHeightMap<u16>,
-    /// Their derivative normals.
-    pub normals: &'a GpuDerivativeMap,
-    /// The detail layer's tiles (tiles without a slot are 0 m and are not refined).
-    pub detail: &'a GpuDetailTiles,
+    /// The coarse heights with their detail layer: a coarse-map's
+    /// ([`ClipmapSurface::Detail`]) or a streamed world's atlas
+    /// ([`ClipmapSurface::AtlasDetail`]). Detail tiles without a slot are 0 m and are not
+    /// refined. The fragments shade with the detail's gradient as its shading fades it (no
+    /// parallax on displaced geometry): with the clipmap outside the region drawn through the
+    /// same shading and no parallax steps, the normals fade alike on both sides of its edge.
+    pub surface: ClipmapSurface<'a>,
     /// Vertices closer than this (metres, horizontally) to the camera may be refined. The
     /// detail displaces them fully up to half this distance from the eye and not at all from
     /// it on, smoothly in between, so the region's edge is the coarse surface.
     pub radius_m: f32,
-    /// How fragments shade with the detail's gradient (its fade; no parallax on displaced
-    /// geometry). With the clipmap outside the region drawn through the same shading and no
-    /// parallax steps, the normals fade alike on both sides of the region's edge.
-    pub shading: &'a DetailShading,
     /// The camera: a [`crate::Camera`], an engine's [`crate::ViewMatrices`], or any
     /// [`RenderView`].
     pub camera: &'a dyn RenderView,
@@ -94,13 +90,8 @@ impl RefineDraw<'_> {
             self.target_size,
             "refine target size (pixels)",
         )?;
-        let info = ClipmapSurface::Detail {
-            map: self.map,
-            normals: self.normals,
-            detail: self.detail,
-            shading: self.shading,
-        }
-        .check()?;
+        self.detail_layer()?;
+        let info = self.surface.check()?;
         let xz = Vec2::new(resolved.eye.x, resolved.eye.z);
         let view = RefineView::new(xz, info.texel_size, self.radius_m)?;
         // Vertices reach one texel past the region, the fragments' differences two more.
@@ -125,15 +116,24 @@ impl RefineDraw<'_> {
         Ok(uniform)
     }
 
+    /// The surface's detail tiles and shading; a surface without them is refused.
+    fn detail_layer(&self) -> Result<(&crate::GpuDetailTiles, &DetailShading), GpuError> {
+        self.surface.detail().ok_or(GpuError::Unsupported {
+            what: "RefineDraw",
+            reason: "the surface has no detail layer to refine: draw a ClipmapSurface::Detail \
+                     or ClipmapSurface::AtlasDetail",
+        })
+    }
+
     fn detail_info(&self, uniform: &FrameUniform, reach: u32) -> Result<DetailInfo, GpuError> {
+        let (detail, shading) = self.detail_layer()?;
         // No parallax on displaced geometry: the hook reads the gradient where it shades.
         let shading = DetailShading {
             parallax_steps: 0,
             max_reach_texels: 0.0,
-            ..*self.shading
+            ..*shading
         };
-        self.detail
-            .info(IVec2::from(uniform.camera_texel), &shading, reach)
+        detail.info(IVec2::from(uniform.camera_texel), &shading, reach)
     }
 }
 
@@ -142,9 +142,8 @@ impl RefineDraw<'_> {
 /// hold; one [`RefinePass::encode`] per submit (its uniforms are written at encode time).
 #[derive(Debug)]
 pub struct RefinePass {
-    layout: wgpu::BindGroupLayout,
-    triangles: wgpu::ComputePipeline,
-    finish: wgpu::ComputePipeline,
+    /// The pipelines of each surface drawn so far (a coarse-map's built with the pass).
+    pipelines: Vec<(SurfaceKind, RefineCompute)>,
     frame: wgpu::Buffer,
     detail_info: wgpu::Buffer,
     params: wgpu::Buffer,
@@ -152,12 +151,66 @@ pub struct RefinePass {
     state: wgpu::Buffer,
     capacity: u32,
     max_half_cells: u32,
-    /// The buffers the bind group binds (map, tile table, tile heights) and the group.
-    bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
+    /// The surface buffers the bind group binds and the group.
+    bound: Option<(BoundBuffers, wgpu::BindGroup)>,
     /// The view of the last encode.
     view: Option<RefineView>,
     /// Triangle counts on their way back without a wait ([`RefinePass::request_count`]).
     counts: SmallReadback,
+}
+
+/// The refinement's compute pipelines over one surface kind: a coarse-map's heights at 1 (and
+/// its normals at 2, unread) or an atlas at 20 to 22, the detail layer at 3 to 5, the pass's
+/// own buffers at 0 and 6 to 8.
+#[derive(Debug)]
+struct RefineCompute {
+    layout: wgpu::BindGroupLayout,
+    triangles: wgpu::ComputePipeline,
+    finish: wgpu::ComputePipeline,
+}
+
+impl RefineCompute {
+    fn new(device: &wgpu::Device, kind: SurfaceKind) -> Result<Self, GpuError> {
+        let (label, source, surface): (_, _, &[u32]) = match kind {
+            SurfaceKind::AtlasDetail => {
+                ("refine atlas", terrain_shaders::REFINE_ATLAS, &[20, 21, 22])
+            }
+            _ => ("refine.wgsl", terrain_shaders::REFINE, &[1, 2]),
+        };
+        let module = shader_module(device, label, source)?;
+        let uniform = wgpu::BufferBindingType::Uniform;
+        let read = wgpu::BufferBindingType::Storage { read_only: true };
+        let write = wgpu::BufferBindingType::Storage { read_only: false };
+        let mut entries: Vec<_> = surface.iter().map(|&b| buffer_entry(b, read)).collect();
+        entries.extend([
+            buffer_entry(0, uniform),
+            buffer_entry(3, uniform),
+            buffer_entry(4, read),
+            buffer_entry(5, read),
+            buffer_entry(6, uniform),
+            buffer_entry(7, write),
+            buffer_entry(8, write),
+        ]);
+        let layout = scoped(device, "RefinePass", || {
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("RefinePass"),
+                entries: &entries,
+            })
+        })?;
+        let triangles = compute_pipeline(
+            device,
+            "refine triangles",
+            &module,
+            &layout,
+            "refine_triangles",
+        )?;
+        let finish = compute_pipeline(device, "refine finish", &module, &layout, "refine_finish")?;
+        Ok(Self {
+            layout,
+            triangles,
+            finish,
+        })
+    }
 }
 
 /// Counts in flight at most: a frame asks for one, and it arrives a frame or two later.
@@ -188,33 +241,7 @@ impl RefinePass {
                          radius",
             });
         }
-        let module = shader_module(device, "refine.wgsl", terrain_shaders::REFINE)?;
-        let uniform = wgpu::BufferBindingType::Uniform;
-        let read = wgpu::BufferBindingType::Storage { read_only: true };
-        let write = wgpu::BufferBindingType::Storage { read_only: false };
-        let layout = scoped(device, "RefinePass", || {
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("RefinePass"),
-                entries: &[
-                    buffer_entry(0, uniform),
-                    buffer_entry(1, read),
-                    buffer_entry(3, uniform),
-                    buffer_entry(4, read),
-                    buffer_entry(5, read),
-                    buffer_entry(6, uniform),
-                    buffer_entry(7, write),
-                    buffer_entry(8, write),
-                ],
-            })
-        })?;
-        let triangles = compute_pipeline(
-            device,
-            "refine triangles",
-            &module,
-            &layout,
-            "refine_triangles",
-        )?;
-        let finish = compute_pipeline(device, "refine finish", &module, &layout, "refine_finish")?;
+        let coarse = RefineCompute::new(device, SurfaceKind::Detail)?;
         let (frame, detail_info, params, output, state) = scoped(device, "RefinePass", || {
             let buffer = |label, size: u64, usage| {
                 device.create_buffer(&wgpu::BufferDescriptor {
@@ -259,9 +286,7 @@ impl RefinePass {
             )
         })?;
         Ok(Self {
-            layout,
-            triangles,
-            finish,
+            pipelines: vec![(SurfaceKind::Detail, coarse)],
             frame,
             detail_info,
             params,
@@ -321,32 +346,40 @@ impl RefinePass {
         queue.write_buffer(&self.frame, 0, bytemuck::bytes_of(&frame));
         queue.write_buffer(&self.detail_info, 0, bytemuck::bytes_of(&detail));
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        let buffers = vec![
-            draw.map.buffer().clone(),
-            draw.detail.table_buffer().clone(),
-            draw.detail.heights_buffer().clone(),
-        ];
+        let kind = draw.surface.kind();
+        if !self.pipelines.iter().any(|(k, _)| *k == kind) {
+            self.pipelines
+                .push((kind, RefineCompute::new(device, kind)?));
+        }
+        let Some((_, compute)) = self.pipelines.iter().find(|(k, _)| *k == kind) else {
+            return Err(GpuError::Unsupported {
+                what: "RefinePass",
+                reason: "no pipeline for the surface",
+            });
+        };
+        let buffers = draw.surface.buffers();
         let group = match &self.bound {
             Some((b, group)) if *b == buffers => group.clone(),
             _ => {
-                let entries = [
+                let own = [
                     (0, &self.frame),
-                    (1, &buffers[0]),
                     (3, &self.detail_info),
-                    (4, &buffers[1]),
-                    (5, &buffers[2]),
                     (6, &self.params),
                     (7, &self.output),
                     (8, &self.state),
-                ]
-                .map(|(binding, b)| wgpu::BindGroupEntry {
-                    binding,
-                    resource: b.as_entire_binding(),
-                });
+                ];
+                let entries: Vec<_> = own
+                    .into_iter()
+                    .chain(buffers.iter().map(|(binding, b)| (*binding, b)))
+                    .map(|(binding, b)| wgpu::BindGroupEntry {
+                        binding,
+                        resource: b.as_entire_binding(),
+                    })
+                    .collect();
                 let group = scoped(device, "RefinePass", || {
                     device.create_bind_group(&wgpu::BindGroupDescriptor {
                         label: Some("RefinePass"),
-                        layout: &self.layout,
+                        layout: &compute.layout,
                         entries: &entries,
                     })
                 })?;
@@ -360,10 +393,10 @@ impl RefinePass {
             timestamp_writes: None,
         });
         pass.set_bind_group(0, &group, &[]);
-        pass.set_pipeline(&self.triangles);
+        pass.set_pipeline(&compute.triangles);
         // At most 2 * 512^2 / 64 = 8192 groups: within every device's dispatch limit.
         pass.dispatch_workgroups(view.base_triangles().div_ceil(64), 1, 1);
-        pass.set_pipeline(&self.finish);
+        pass.set_pipeline(&compute.finish);
         pass.dispatch_workgroups(1, 1, 1);
         drop(pass);
         self.view = Some(view);
@@ -439,11 +472,17 @@ impl RefinePass {
 /// encoded for the same draw (with the clipmap, which leaves the region out).
 #[derive(Debug)]
 pub struct RefineRenderer {
+    /// Over a coarse-map.
     pipeline: SurfacePipeline,
+    /// Over an atlas: built on the first frame that draws one.
+    atlas: Option<SurfacePipeline>,
+    /// The engine's `surface_weights`, for the pipelines built later.
+    user_surface: Option<String>,
     target: TargetFormat,
     uniform: wgpu::Buffer,
     detail_uniform: wgpu::Buffer,
-    bound: Option<(Vec<wgpu::Buffer>, wgpu::BindGroup)>,
+    /// The surface buffers bound, whether over an atlas, and the group.
+    bound: Option<(BoundBuffers, bool, wgpu::BindGroup)>,
     wireframe: bool,
     /// The materials of [`crate::SurfaceShading::Materials`].
     materials: MaterialSlot,
@@ -453,7 +492,7 @@ impl RefineRenderer {
     /// Builds the pipeline.
     pub fn new(device: &wgpu::Device, target: &TargetFormat) -> Result<Self, GpuError> {
         target.validate(device)?;
-        let pipeline = refine_pipeline(device, target, None)?;
+        let pipeline = refine_pipeline(device, target, None, SurfaceKind::Detail)?;
         let (uniform, detail_uniform) = scoped(device, "RefineRenderer", || {
             let buffer = |label, size| {
                 device.create_buffer(&wgpu::BufferDescriptor {
@@ -470,6 +509,8 @@ impl RefineRenderer {
         })?;
         Ok(Self {
             pipeline,
+            atlas: None,
+            user_surface: None,
             target: *target,
             uniform,
             detail_uniform,
@@ -519,8 +560,10 @@ impl RefineRenderer {
         device: &wgpu::Device,
         wgsl_function: Option<&str>,
     ) -> Result<(), GpuError> {
-        self.pipeline =
-            refine_pipeline(device, &self.target, wgsl_function).map_err(GpuError::user_shader)?;
+        self.pipeline = refine_pipeline(device, &self.target, wgsl_function, SurfaceKind::Detail)
+            .map_err(GpuError::user_shader)?;
+        self.atlas = None;
+        self.user_surface = wgsl_function.map(str::to_owned);
         self.bound = None;
         Ok(())
     }
@@ -555,30 +598,25 @@ impl RefineRenderer {
         let detail = draw.detail_info(&frame, reach)?;
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&frame));
         queue.write_buffer(&self.detail_uniform, 0, bytemuck::bytes_of(&detail));
-        let buffers = vec![
-            draw.map.buffer().clone(),
-            draw.normals.buffer().clone(),
-            draw.detail.table_buffer().clone(),
-            draw.detail.heights_buffer().clone(),
-        ];
-        if new_shading || self.bound.as_ref().is_none_or(|(b, _)| *b != buffers) {
-            // The vertices carry their heights; the fragments read the map's (the material
+        let atlas = draw.surface.kind() == SurfaceKind::AtlasDetail;
+        if atlas && self.atlas.is_none() {
+            let user = self.user_surface.as_deref();
+            let kind = SurfaceKind::AtlasDetail;
+            self.atlas = Some(refine_pipeline(device, &self.target, user, kind)?);
+        }
+        let buffers = draw.surface.buffers();
+        if new_shading || self.bound.as_ref().is_none_or(|(b, _, _)| *b != buffers) {
+            // The vertices carry their heights; the fragments read the surface's (the material
             // shading's curvature).
-            let group = self.pipeline.bind_group(
+            let group = self.pipeline_for(atlas).bind_group(
                 device,
                 "RefineRenderer",
                 &self.uniform,
-                &[],
-                &[
-                    (1, &buffers[0]),
-                    (2, &buffers[1]),
-                    (3, &self.detail_uniform),
-                    (4, &buffers[2]),
-                    (5, &buffers[3]),
-                ],
+                &buffers,
+                &[(3, &self.detail_uniform)],
                 &shading,
             )?;
-            self.bound = Some((buffers, group));
+            self.bound = Some((buffers, atlas, group));
         }
         Ok(())
     }
@@ -586,13 +624,21 @@ impl RefineRenderer {
     /// Records the draw of `refine`'s triangles (as many as its last encode wrote) into `pass`.
     /// Draws nothing before the first prepare.
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, refine: &RefinePass) {
-        let Some((_, group)) = &self.bound else {
+        let Some((_, atlas, group)) = &self.bound else {
             return;
         };
-        pass.set_pipeline(self.pipeline.pick(self.wireframe));
+        pass.set_pipeline(self.pipeline_for(*atlas).pick(self.wireframe));
         pass.set_bind_group(0, group, &[]);
         pass.set_vertex_buffer(0, refine.output.slice(..));
         pass.draw_indirect(&refine.state, ARGS_OFFSET);
+    }
+
+    /// The atlas pipeline when `atlas` (and built), else the coarse-map's.
+    fn pipeline_for(&self, atlas: bool) -> &SurfacePipeline {
+        match (&self.atlas, atlas) {
+            (Some(p), true) => p,
+            _ => &self.pipeline,
+        }
     }
 }
 
@@ -602,19 +648,28 @@ fn refine_pipeline(
     device: &wgpu::Device,
     target: &TargetFormat,
     user: Option<&str>,
+    kind: SurfaceKind,
 ) -> Result<SurfacePipeline, GpuError> {
     const ATTRS: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
+    let fragment = wgpu::ShaderStages::FRAGMENT;
+    let (label, source, storage) = match kind {
+        SurfaceKind::AtlasDetail => (
+            "refine atlas",
+            terrain_shaders::REFINE_ATLAS,
+            atlas_detail_storage().to_vec(),
+        ),
+        _ => (
+            "refine.wgsl",
+            terrain_shaders::REFINE,
+            vec![(fragment, 1), (fragment, 2), (fragment, 4), (fragment, 5)],
+        ),
+    };
     SurfacePipeline::new(
         device,
         target,
-        "refine.wgsl",
-        &with_surface_weights(terrain_shaders::REFINE, user),
-        &[
-            (wgpu::ShaderStages::FRAGMENT, 1),
-            (wgpu::ShaderStages::FRAGMENT, 2),
-            (wgpu::ShaderStages::FRAGMENT, 4),
-            (wgpu::ShaderStages::FRAGMENT, 5),
-        ],
+        label,
+        &with_surface_weights(source, user),
+        &storage,
         &[(wgpu::ShaderStages::FRAGMENT, 3)],
         &VertexShape {
             entry: "vs_refined",
