@@ -246,9 +246,15 @@ impl FlyoverScenario {
             .ok_or_else(|| anyhow::anyhow!("the flyover's pool was shut down"))
     }
 
-    /// Ground height (metres) at `xz`: the collision window's, else the finest resident tile
-    /// under it, else the overview's.
+    /// Ground height (metres) at `xz`: the coarse heights plus the footprints' detail, where
+    /// the world scenario has them (the detail cache holds the camera's tiles).
     fn ground(&self, xz: Vec2) -> f32 {
+        self.coarse_ground(xz) + self.detail.as_ref().map_or(0.0, |d| d.height_m(xz))
+    }
+
+    /// The coarse ground (metres) at `xz`: the collision window's, else the finest resident
+    /// tile under it, else the overview's.
+    fn coarse_ground(&self, xz: Vec2) -> f32 {
         let xz = xz.clamp(Vec2::ZERO, self.extent);
         let texel = xz / self.texel_size;
         // The window holds a tile's texels only once it is in RAM (until then, what

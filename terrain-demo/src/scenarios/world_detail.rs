@@ -120,6 +120,12 @@ impl WorldDetail {
         *self.cache.layout()
     }
 
+    /// The detail height (metres) at `xz`: bilinear over the cache's tiles (the band around
+    /// the camera; 0 m over tiles not in RAM). Added to the coarse ground for collision.
+    pub fn height_m(&self, xz: Vec2) -> f32 {
+        self.cache.layer().height_m(xz)
+    }
+
     /// The footprints of a walker who has walked `walked_m` metres along `line` (its position
     /// at a distance, in metres) since the last call, left and right feet in turn.
     fn steps(&mut self, walked_m: f32, line: &dyn Fn(f32) -> Vec2) -> Result<Vec<StampPlacement>> {
@@ -293,6 +299,11 @@ mod tests {
             .unwrap();
         assert_eq!(stats.footprints, 8);
         assert!(stats.texels > 0);
+        // The first foot, left of the line, is pressed in (collision walks on it); the ground
+        // away from the walk is untouched.
+        let first = d.height_m(Vec2::new(40.0, 40.0 + GAIT_M));
+        assert!(first < -0.06, "footprint depth {first}");
+        assert_eq!(d.height_m(Vec2::new(60.0, 60.0)), 0.0);
         assert!(d.finish(None).unwrap() >= 1);
         let files = store.list(terrain_cache::Layer::Detail.folder()).unwrap();
         assert!(!files.is_empty(), "no detail tile written");
