@@ -865,7 +865,7 @@ impl GpuScene {
         // and its detail layer if any, else the granular map, else the coarse-map with its
         // detail layer if any.
         let surface = match (&self.atlas, &self.granular, &self.detail) {
-            // A streamed world's footprints (the world scenario's `--detail parallax`).
+            // A streamed world's footprints (the world scenario's `--detail`).
             (Some(atlas), _, Some(d)) => ClipmapSurface::AtlasDetail {
                 atlas,
                 detail: &d.tiles,

@@ -16,6 +16,9 @@
 //! with the heights' selection (`OverlayStream`), the VRAM budget split into slots of heights
 //! and overlays.
 //!
+//! The world scenario's `--detail`: a walker's footprints in the world's detail tiles
+//! (`world_detail`), under the camera's ground too.
+//!
 //! Collision follows the camera: a `CollisionWindow` of [`COLLISION_WINDOW`] texels filled from
 //! the RAM pool (coarser data where a level-0 tile is not loaded yet, refilled when it is)
 //! and updated by every crater's changed rects; the camera's ground is read from it.
@@ -77,7 +80,7 @@ const SHUTDOWN_TIMEOUT: Duration = Duration::from_secs(60);
 /// How far ahead of the camera the world scenario's vehicle drives (metres).
 const VEHICLE_AHEAD: f32 = 14.0;
 /// How far ahead of the camera, and to the side opposite the craters, the world scenario's
-/// walker leaves footprints (`--detail parallax`; metres).
+/// walker leaves footprints (`--detail`; metres).
 const WALKER_AHEAD: f32 = 16.0;
 const WALKER_ASIDE: f32 = 3.0;
 /// The world scenario's eye height above ground (metres): high enough to see the tracks.

@@ -126,8 +126,9 @@ impl WorldDetail {
         self.cache.layer().height_m(xz)
     }
 
-    /// The footprints of a walker who has walked `walked_m` metres along `line` (its position
-    /// at a distance, in metres) since the last call, left and right feet in turn.
+    /// The footprints a walker left since the last call, having walked `walked_m` metres in
+    /// all along `line` (its position at a distance, in metres): left and right feet in turn,
+    /// at most [`MAX_STEPS_PER_FRAME`].
     fn steps(&mut self, walked_m: f32, line: &dyn Fn(f32) -> Vec2) -> Result<Vec<StampPlacement>> {
         let mut out = Vec::new();
         if !walked_m.is_finite() {
