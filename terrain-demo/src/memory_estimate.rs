@@ -238,7 +238,8 @@ impl RunShape {
                         let tile = u64::from(crate::scenarios::DETAIL_TILE);
                         let slots = u64::from(crate::gpu_scene::DETAIL_SLOTS);
                         let spill = u64::from(crate::gpu_scene::SPILL_WINDOW_TEXELS) * 4;
-                        bytes = bytes.saturating_add(slots * tile * tile * 4 + spill);
+                        // A byte a detail texel (packed four to a u32 word).
+                        bytes = bytes.saturating_add(slots * tile * tile + spill);
                     }
                     parts.push(("detail", bytes));
                 }

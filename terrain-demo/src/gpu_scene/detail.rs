@@ -5,9 +5,9 @@
 
 use super::*;
 
-/// Detail tile slots on the GPU (4 MiB each at 1024^2 u32 texels): the nine of a band and the
-/// tiles beyond it under the walker and this frame's footprints (within 2 m of the walker: at
-/// most four). Only tiles with detail take a slot; the zero tile is shared.
+/// Detail tile slots on the GPU (1 MiB each at 1024^2 texels, packed four to a word): the nine
+/// of a band and the tiles beyond it under the walker and this frame's footprints (within 2 m
+/// of the walker: at most four). Only tiles with detail take a slot; the zero tile is shared.
 pub const DETAIL_SLOTS: u32 = 13;
 
 /// The detail layer on the GPU: tile slots following the scenario's detail cache (footprints

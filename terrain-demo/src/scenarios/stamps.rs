@@ -68,7 +68,7 @@ pub struct StampScenario {
 
 /// Detail texels per coarse texel (Flower 2010's 1/gamma = 3).
 pub const DETAIL_REFINE: u32 = 3;
-/// Detail tile side in detail texels (34 m at 3.3 cm; 4 MiB a GPU slot). The band regions hold
+/// Detail tile side in detail texels (34 m at 3.3 cm; 1 MiB a GPU slot). The band regions hold
 /// the camera's tile and its neighbours on the camera's side, so the detail reaches at least
 /// two thirds of a tile (22 m) in every direction: the demo fades it out by then.
 pub const DETAIL_TILE: u32 = 1024;

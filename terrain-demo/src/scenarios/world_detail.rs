@@ -46,7 +46,8 @@ const READ_AHEAD_M: f32 = 8.0;
 pub fn memory_bytes(gpu: bool) -> u64 {
     let tile = u64::from(TILE) * u64::from(TILE);
     let slots = u64::from(crate::gpu_scene::DETAIL_SLOTS);
-    3 * 9 * tile + if gpu { slots * tile * 4 } else { 0 }
+    // A byte a texel on the GPU too (packed four to a u32 word).
+    3 * 9 * tile + if gpu { slots * tile } else { 0 }
 }
 
 /// The detail layout over `manifest`'s level 0.
