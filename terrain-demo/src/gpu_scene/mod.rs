@@ -28,12 +28,14 @@ use crate::timings::{GpuFigure, Step, Timings};
 
 mod detail;
 mod frame_timer;
+mod granular;
 mod lod;
 mod paint;
 
 pub use detail::{DETAIL_SLOTS, SPILL_WINDOW_TEXELS};
 use detail::{DetailScene, RefinedGeometry};
 use frame_timer::FrameTimer;
+use granular::{GranularPasses, GranularScene};
 pub use paint::CRATER_DIRT;
 
 pub use terrain_gpu::Camera;
@@ -66,6 +68,9 @@ pub struct GpuScene {
     height_range: (f32, f32),
     /// Granular deformation on the GPU (the snow scenario), drawn instead of the coarse-map.
     granular: Option<GranularScene>,
+    /// The passes of a granular scene disabled since (a world's window that moved), kept for
+    /// the next window: building them again took llvmpipe 45-48 ms on the frame thread.
+    granular_passes: Option<GranularPasses>,
     /// A streamed world's tile atlas (the flyover), drawn instead of the coarse-map.
     atlas: Option<GpuTileAtlas>,
     /// The readback of the rects of atlas tiles deformed on the GPU.
@@ -117,34 +122,6 @@ pub use terrain_gpu::{AtlasConfig, GpuTileAtlas, TileSlot};
 /// Readbacks of deformed atlas tiles in flight at most (the ring's staging buffers).
 const TILE_READBACK_RING: usize = 16;
 
-/// The GPU side of the snow scenario: the fixed-point map, the step, the normals and float
-/// heights it is rendered from, the volume sum, and the readback of the areas a step changed.
-struct GranularScene {
-    map: GpuHeightMap<u32>,
-    step: GpuGranularStep,
-    normal_pass: GranularNormalsPass,
-    normals: GpuGranularNormals,
-    blur_iterations: u32,
-    volume: VolumePass,
-    readback: RegionReadback,
-    /// Changed areas not yet requested (the ring was busy).
-    pending: Vec<Rect>,
-    /// The material layer the steps' trails paint (`enable_granular_trails`).
-    trail: Option<GpuMaterialLayer>,
-}
-
-/// What one GPU granular step did.
-pub struct GranularFrame {
-    /// The merged active areas the step ran over.
-    pub areas: Vec<Rect>,
-    /// Material removed by compression this step, in height units.
-    pub removed: u64,
-    /// The u64 sum of all heights after the step (read back as 8 bytes).
-    pub volume: u64,
-    /// Regions of earlier steps that arrived on the CPU: (rect, fixed-point heights).
-    pub arrived: Vec<(Rect, Grid<u32>)>,
-}
-
 /// One rendered frame.
 pub struct RenderedFrame {
     /// The captured image.
@@ -184,19 +161,6 @@ impl GpuScene {
         }
     }
 
-    /// One granular step on the GPU with `objects`: the step, the normals of the changed
-    /// areas, the volume sum, and readback requests for the changed areas (they arrive in a
-    /// later frame's [`GranularFrame::arrived`]). Timed as [`Step::GranularGpu`] and
-    /// [`Step::NormalsGpu`].
-    pub fn granular_step(
-        &mut self,
-        objects: &[GranularObject<'_>],
-        timings: &mut Timings,
-    ) -> Result<GranularFrame> {
-        self.granular_step_inner(objects, timings)
-            .map_err(|e| self.lost_or(e))
-    }
-
     /// Stamps a crater or a texture (a shockwave's change) on the resident atlas tile `tile`
     /// (placement in the tile's frame, added to the heights) and requests the changed rect
     /// back, in one submit timed as [`Step::StampGpu`]. `None` (and nothing done) when the
@@ -216,20 +180,6 @@ impl GpuScene {
     /// for every one in flight (the end of the run).
     pub fn tile_readbacks(&mut self, wait: bool) -> Result<Vec<ArrivedTileRect>> {
         self.tile_readbacks_inner(wait).map_err(|e| self.lost_or(e))
-    }
-
-    /// Ends granular deformation on the GPU: requests the changed areas still waiting for a
-    /// ring slot and waits for every readback in flight, so the CPU copy gets the last steps.
-    pub fn drain_granular(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
-        self.drain_granular_inner().map_err(|e| self.lost_or(e))
-    }
-
-    /// Drains granular deformation ([`drain_granular`](Self::drain_granular)) and frees its
-    /// GPU map: a streamed world's granular window that moves on.
-    pub fn disable_granular(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
-        let arrived = self.drain_granular()?;
-        self.granular = None;
-        Ok(arrived)
     }
 
     /// Applies `plan` on the GPU and regenerates the normals, timed as [`Step::StampGpu`] and
@@ -310,6 +260,7 @@ impl GpuScene {
             timer,
             height_range: (lo, hi),
             granular: None,
+            granular_passes: None,
             atlas: None,
             tile_readback: None,
             tile_texture: None,
@@ -411,134 +362,6 @@ impl GpuScene {
         self.style.ramp = (low, high);
     }
 
-    /// Moves granular deformation onto the GPU: uploads `map` once (after this, the GPU map is
-    /// the one deformed and drawn), builds the passes and computes the first normals.
-    pub fn enable_granular(&mut self, map: &FixedPointMap, params: GranularParams) -> Result<()> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let gpu_map = GpuHeightMap::from_map(device, queue, map)?;
-        let normals = GpuGranularNormals::for_map(device, &gpu_map)?;
-        let mut normal_pass = GranularNormalsPass::new(device)?;
-        let full = Rect::from_size(map.size());
-        let blur_iterations = params.num_iterations_blur_normals;
-        let mut encoder = device.create_command_encoder(&Default::default());
-        normal_pass.encode(device, queue, &mut encoder, &gpu_map, &normals, full)?;
-        normal_pass.encode_blur(device, queue, &mut encoder, &normals, full, blur_iterations)?;
-        queue.submit([encoder.finish()]);
-        normal_pass.recall();
-        // Culling boxes: granular material only moves where objects push it, so the surface
-        // stays within a couple of metres of the initial heights.
-        let enc = map.encoding();
-        let (lo, hi) = map
-            .grid()
-            .as_slice()
-            .iter()
-            .fold((u32::MAX, 0), |(lo, hi), &h| (lo.min(h), hi.max(h)));
-        // A streamed world's granular window is drawn through the atlas: its range stands.
-        if self.atlas.is_none() {
-            self.height_range = (
-                enc.to_metres(f64::from(lo)) - 1.0,
-                enc.to_metres(f64::from(hi)) + 2.0,
-            );
-            self.terrain.set_height_range(self.height_range);
-        }
-        self.granular = Some(GranularScene {
-            step: GpuGranularStep::new(device, params)?,
-            map: gpu_map,
-            normal_pass,
-            normals,
-            blur_iterations,
-            volume: VolumePass::new(device)?,
-            readback: RegionReadback::new(device, 8)?,
-            pending: Vec::new(),
-            trail: None,
-        });
-        Ok(())
-    }
-
-    fn granular_step_inner(
-        &mut self,
-        objects: &[GranularObject<'_>],
-        timings: &mut Timings,
-    ) -> Result<GranularFrame> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let Some(g) = self.granular.as_mut() else {
-            anyhow::bail!("granular deformation was not enabled on the GPU scene");
-        };
-        // Regions requested by earlier frames that have arrived.
-        let arrived: Vec<(Rect, Grid<u32>)> = g
-            .readback
-            .poll(device)?
-            .into_iter()
-            .map(|r| (r.rect, r.raw))
-            .collect();
-        let mut areas = Vec::new();
-        let step_time = self
-            .timer
-            .time(device, queue, Step::GranularGpu, |encoder| {
-                let trail = g.trail.as_ref().map(|layer| Trail {
-                    layer,
-                    effect: paint::TRAIL,
-                });
-                areas = g
-                    .step
-                    .encode_with_trail(device, queue, encoder, &g.map, objects, trail)?;
-                Ok(())
-            })?;
-        g.step.recall();
-        let removed = match g.step.scratch() {
-            Some(s) => s.read_removed(device, queue)?,
-            None => 0,
-        };
-        let areas: Vec<Rect> = areas.iter().map(|a| a.rect).collect();
-        // Normals reach one texel past the heights a step changed, and the blur one more per
-        // iteration.
-        let full = Rect::from_size(g.map.size());
-        let reach = 1 + g.blur_iterations;
-        let normal_time = self
-            .timer
-            .time(device, queue, Step::NormalsGpu, |encoder| {
-                for rect in &areas {
-                    let Some(r) = rect.expand(reach).intersect(&full) else {
-                        continue;
-                    };
-                    g.normal_pass
-                        .encode(device, queue, encoder, &g.map, &g.normals, r)?;
-                    g.normal_pass.encode_blur(
-                        device,
-                        queue,
-                        encoder,
-                        &g.normals,
-                        r,
-                        g.blur_iterations,
-                    )?;
-                }
-                g.volume.encode(device, queue, encoder, &g.map)?;
-                // The changed areas go to the CPU copy behind the overview and collision.
-                g.pending.extend(areas.iter().copied());
-                let mut waiting = Vec::new();
-                for rect in g.pending.drain(..) {
-                    match g.readback.request(device, encoder, &g.map, rect) {
-                        Ok(_) => {}
-                        Err(terrain_gpu::GpuError::ReadbackBusy { .. }) => waiting.push(rect),
-                        Err(e) => return Err(e),
-                    }
-                }
-                g.pending = waiting;
-                Ok(())
-            })?;
-        g.normal_pass.recall();
-        g.volume.recall();
-        let volume = g.volume.read(device)?;
-        step_time.record(timings);
-        normal_time.record(timings);
-        Ok(GranularFrame {
-            areas,
-            removed,
-            volume,
-            arrived,
-        })
-    }
-
     /// Draws a streamed world from now on: a tile atlas of `config` (slots, the world's tile
     /// layout) that a VRAM pool fills through [`GpuScene::atlas_mut`].
     pub fn enable_atlas(&mut self, config: &AtlasConfig) -> Result<()> {
@@ -626,35 +449,6 @@ impl GpuScene {
     /// The tile atlas, when a streamed world is drawn.
     pub fn atlas_mut(&mut self) -> Option<&mut GpuTileAtlas> {
         self.atlas.as_mut()
-    }
-
-    fn drain_granular_inner(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let Some(g) = self.granular.as_mut() else {
-            return Ok(Vec::new());
-        };
-        let mut arrived = Vec::new();
-        // Bounded: each round frees every slot, and the pending list only shrinks.
-        while !g.pending.is_empty() || g.readback.in_flight() > 0 {
-            let mut encoder = device.create_command_encoder(&Default::default());
-            let mut waiting = Vec::new();
-            for rect in std::mem::take(&mut g.pending) {
-                match g.readback.request(device, &mut encoder, &g.map, rect) {
-                    Ok(_) => {}
-                    Err(terrain_gpu::GpuError::ReadbackBusy { .. }) => waiting.push(rect),
-                    Err(e) => return Err(e.into()),
-                }
-            }
-            g.pending = waiting;
-            queue.submit([encoder.finish()]);
-            arrived.extend(
-                g.readback
-                    .wait(device)?
-                    .into_iter()
-                    .map(|r| (r.rect, r.raw)),
-            );
-        }
-        Ok(arrived)
     }
 
     /// The GPU's coarse-map, downloaded (waits for the GPU): for tests that compare the CPU's
