@@ -66,7 +66,10 @@ pub mod testing;
 // The modules sit in folders by role and are private: every public item has one path, at the
 // crate root (the granular passes under `granular`, the test helpers under `testing`). These
 // imports give the crate's own code the short paths `crate::<module>`.
-use device::{context, download, limits, profiler, readback, region_source, small_readback, timer};
+use device::{
+    context, detail_readback, download, limits, profiler, readback, region_source, small_readback,
+    timer,
+};
 use passes::{density, detail_probe, material_effect, normals, spill, stamp};
 use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
 use resources::{atlas, detail, hole_mask, maps, material_layer, materials, overlay_atlas};
@@ -81,6 +84,7 @@ pub use detail::{
     DetailShading, DetailTileState, GpuDetailTiles, MAX_PARALLAX_REACH, MAX_PARALLAX_STEPS,
 };
 pub use detail_probe::{DetailProbe, DetailProbePoint, DetailProbeSample, MAX_PROBE_OFFSET};
+pub use detail_readback::{ArrivedDetail, DetailReadback};
 pub use download::{WAIT_TIMEOUT, download_bytes, read_texture_rgba8, wait_bounded};
 pub use error::GpuError;
 pub use hole_mask::GpuHoleMask;
@@ -133,6 +137,7 @@ const _: () = {
     send_sync::<GpuTileAtlas>();
     send_sync::<GpuOverlayAtlas>();
     send_sync::<RegionReadback>();
+    send_sync::<DetailReadback>();
     send_sync::<GpuRegionSource>();
     send_sync::<granular::GpuGranularStep>();
 };

@@ -4,6 +4,7 @@
 //! a wait.
 
 use super::*;
+use terrain_gpu::DetailReadback;
 
 /// Detail tile slots on the GPU (1 MiB each at 1024^2 texels, packed four to a word): the nine
 /// of a band and the tiles beyond it under the walker and this frame's footprints (within 2 m
@@ -21,37 +22,24 @@ pub(super) struct DetailScene {
     pub(super) shading: DetailShading,
     /// Detail texels inside the rects the last deformation stamped.
     pub(super) dirty_texels: u64,
-    /// The rects (tile, texels of the tile) stamped and not yet requested back (the ring was
-    /// full): requested first in the next deformation's submit, before its stamps.
-    pub(super) pending: Vec<(glam::UVec2, terrain_core::Rect)>,
-    /// The ring the stamped rects come back through, never waiting, and what each ticket is.
-    pub(super) readback: RegionReadback,
-    pub(super) in_flight: std::collections::HashMap<u64, (glam::UVec2, terrain_core::Rect)>,
+    /// The stamped rects on their way back to the cache, never waiting (terrain-gpu's
+    /// protocol: requested after each stamp, in order).
+    pub(super) readback: DetailReadback,
 }
 
 /// Detail rects in flight at most (the ring's limit; a frame's footprints stamp about four).
 pub(super) const DETAIL_READBACK_RING: usize = 16;
 
 impl DetailScene {
-    /// Requests `rects` back in `encoder` (after what it stamped), in order; those the ring
-    /// has no room for wait in `pending`.
+    /// Requests `rects` back in `encoder` (after what it stamped), after the rects earlier
+    /// calls had no room for.
     pub(super) fn request(
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         rects: impl IntoIterator<Item = (glam::UVec2, terrain_core::Rect)>,
     ) -> Result<(), terrain_gpu::GpuError> {
-        for (tile, rect) in rects {
-            if !self.pending.is_empty() || self.readback.in_flight() >= self.readback.ring() {
-                self.pending.push((tile, rect));
-                continue;
-            }
-            let ticket = self
-                .readback
-                .request_detail(device, encoder, &self.tiles, tile, rect)?;
-            self.in_flight.insert(ticket.0, (tile, rect));
-        }
-        Ok(())
+        self.readback.request(device, encoder, &self.tiles, rects)
     }
 }
 
@@ -122,9 +110,7 @@ impl GpuScene {
             spill: SpillPass::new(device, SPILL_WINDOW_TEXELS)?,
             shading,
             dirty_texels: 0,
-            pending: Vec::new(),
-            readback: RegionReadback::new(device, DETAIL_READBACK_RING)?,
-            in_flight: std::collections::HashMap::new(),
+            readback: DetailReadback::new(device, DETAIL_READBACK_RING)?,
         });
         self.refined = refine;
         Ok(())
@@ -178,41 +164,17 @@ impl GpuScene {
         };
         let t = std::time::Instant::now();
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let to_u8 = |r: terrain_gpu::RegionView<'_>| (r.ticket.0, r.rect, r.to_u8());
-        let deadline = t + std::time::Duration::from_secs(60);
-        loop {
-            if wait && !detail.pending.is_empty() {
-                let mut encoder = device.create_command_encoder(&Default::default());
-                let pending = std::mem::take(&mut detail.pending);
-                detail.request(device, &mut encoder, pending)?;
-                queue.submit([encoder.finish()]);
-            }
-            let mut arrived = if wait {
-                detail.readback.wait_with(device, to_u8)?
-            } else {
-                detail.readback.poll_with(device, to_u8)?
-            };
-            // In request order: a later copy of the same texels is the newer one.
-            arrived.sort_by_key(|(ticket, _, _)| *ticket);
-            for (ticket, rect, texels) in arrived {
-                let Some((tile, asked)) = detail.in_flight.remove(&ticket) else {
-                    anyhow::bail!("a detail readback nobody asked for (ticket {ticket})");
-                };
-                anyhow::ensure!(
-                    asked == rect,
-                    "detail tile {tile}: asked {asked:?}, got {rect:?}"
-                );
-                cache.write_rect(tile, rect, &texels?)?;
-            }
-            let done = detail.in_flight.is_empty() && detail.pending.is_empty();
-            if !wait || done {
-                break;
-            }
-            anyhow::ensure!(
-                std::time::Instant::now() < deadline,
-                "{} detail readbacks never arrived",
-                detail.in_flight.len() + detail.pending.len()
-            );
+        // In request order: a later copy of the same texels is the newer one.
+        let arrived = if wait {
+            let timeout = std::time::Duration::from_secs(60);
+            detail
+                .readback
+                .flush(device, queue, &detail.tiles, timeout)?
+        } else {
+            detail.readback.poll(device)?
+        };
+        for (tile, rect, texels) in arrived {
+            cache.write_rect(tile, rect, &texels)?;
         }
         timings.add(Step::Detail, crate::timings::ms_since(t));
         Ok(())
@@ -239,8 +201,6 @@ impl GpuScene {
         let stamps = &mut self.stamps;
         let mut texels = 0;
         let time = self.timer.time(device, queue, Step::Detail, |encoder| {
-            let pending = std::mem::take(&mut detail.pending);
-            detail.request(device, encoder, pending)?;
             for placement in placements {
                 let op = StampOp {
                     stamp: GpuStamp::Gaussian(stamp),
@@ -262,13 +222,9 @@ impl GpuScene {
     /// The detail tiles with stamped rects not yet back on the CPU: the detail cache must keep
     /// them until they arrive.
     pub fn detail_tiles_in_flight(&self) -> Vec<glam::UVec2> {
-        self.detail.as_ref().map_or_else(Vec::new, |d| {
-            d.in_flight
-                .values()
-                .chain(&d.pending)
-                .map(|(t, _)| *t)
-                .collect()
-        })
+        self.detail
+            .as_ref()
+            .map_or_else(Vec::new, |d| d.readback.tiles_in_flight())
     }
 
     /// A resident detail tile's texels on the GPU (waits for the GPU), `None` for a tile

@@ -554,9 +554,6 @@ impl GpuScene {
         if let (Some(detail), Some(foot)) = (self.detail.as_mut(), self.footprint.as_ref()) {
             let mut texels = 0;
             let time = self.timer.time(device, queue, Step::Detail, |encoder| {
-                // Rects stamped earlier that the ring had no room for, before the new stamps.
-                let pending = std::mem::take(&mut detail.pending);
-                detail.request(device, encoder, pending)?;
                 for (i, d) in plan
                     .deformations
                     .iter()

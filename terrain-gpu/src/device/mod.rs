@@ -3,6 +3,7 @@
 
 pub mod compute;
 pub mod context;
+pub mod detail_readback;
 pub mod download;
 pub mod limits;
 pub mod profiler;
