@@ -1,6 +1,6 @@
 //! Tile atlas uploads (Fikkan 2013, sec. 5.3 budgets transfers per frame): one 256^2 tile of u16
-//! heights into a `GpuTileAtlas` slot (widened to u32, `queue.write_buffer`, submitted and
-//! waited for), beside a plain `queue.write_buffer` of the same 256 KiB already widened, and a
+//! heights into a `GpuTileAtlas` slot (packed two to a u32 word, `queue.write_buffer`,
+//! submitted and waited for), beside a plain `queue.write_buffer` of the same 256 KiB already widened, and a
 //! plain CPU copy of those bytes.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
