@@ -1,6 +1,7 @@
 //! [`TerrainRenderer`]: one renderer for every LOD mode (geometry clipmaps, CDLOD, adaptive
 //! tessellation; Cervin 2012) over every surface (a coarse-map with or without its detail
-//! layer, a granular map, a streamed world's atlas), driven the same way each frame:
+//! layer, a granular map, a streamed world's atlas with or without its detail layer; the
+//! tessellation draws the map it was made of), driven the same way each frame:
 //! [`TerrainRenderer::heights_changed`] after deformations, [`TerrainRenderer::prepare`],
 //! [`TerrainRenderer::draw`] inside the caller's pass.
 //!
