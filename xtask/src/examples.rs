@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use std::process::Command;
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 13] = [
+const EXAMPLES: [(&str, &str, &[&str]); 14] = [
     (
         "terrain-core",
         "stamp_heightmap",
@@ -43,6 +43,13 @@ const EXAMPLES: [(&str, &str, &[&str]); 13] = [
         "terrain-demo",
         "engine_frame",
         &["{out}/engine_frame", "24"],
+    ),
+    // Footprints in a streamed world's detail tiles: terrain-cache's detail cache and
+    // terrain-gpu's stamps, readback and renderer together.
+    (
+        "terrain-demo",
+        "world_footprints",
+        &["{out}/world_footprints", "24"],
     ),
 ];
 
