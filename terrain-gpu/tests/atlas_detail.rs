@@ -7,7 +7,7 @@
 //! adapter the machine has (lavapipe in CI); without one they skip, or fail under
 //! `TERRAIN_REQUIRE_GPU=1`.
 //!
-//! Tolerances (as `detail_lod.rs` argues them): the atlas and atlas-with-detail pipelines are
+//! Tolerances (`common/footprints.rs`, shared with `detail_lod.rs`): the atlas and atlas-with-detail pipelines are
 //! two shader modules of the same fragment code; with nothing added by the layer they compute
 //! the same colour, up to a driver contracting the two modules' arithmetic differently (one
 //! 8-bit step). The footprints are 30 cm deep at 3 m from the camera: they must move many
@@ -19,7 +19,7 @@ mod footprints;
 #[allow(dead_code)] // the golden view's parts of the shared scene
 mod scene;
 
-use footprints::{camera, scene_with_footprints};
+use footprints::{assert_footprints_show, camera, faded_shading, scene_with_footprints};
 use glam::{UVec2, Vec2};
 use scene::Scene;
 use terrain_core::detail::DetailLayout;
@@ -143,18 +143,6 @@ fn render(
     Ok(image)
 }
 
-/// The largest channel difference and the pixels that differ by more than 8.
-fn frame_diff(a: &Grid<[u8; 4]>, b: &Grid<[u8; 4]>) -> (u8, usize) {
-    let d = a
-        .as_slice()
-        .iter()
-        .zip(b.as_slice())
-        .map(|(p, q)| (0..4).map(|c| p[c].abs_diff(q[c])).max().unwrap_or(0));
-    d.fold((0, 0), |(max, strong), d| {
-        (max.max(d), strong + usize::from(d > 8))
-    })
-}
-
 fn footprints_show_on_the_atlas(name: &str, make: impl Fn(&Scene) -> Lod) {
     let Some(ctx) = context_or_skip(name) else {
         return;
@@ -177,27 +165,14 @@ fn footprints_show_on_the_atlas(name: &str, make: impl Fn(&Scene) -> Lod) {
         &cam,
     )
     .unwrap();
-    let (max, strong) = frame_diff(&detailed, &bare);
-    assert!(
-        max > 40 && strong > 250,
-        "{name}: the footprints hardly change the frame: max {max}, {strong} pixels"
-    );
-    let faded = DetailShading {
-        fade_start_m: 0.5,
-        fade_end_m: 1.0,
-        ..DetailShading::default()
-    };
+    let faded = faded_shading();
     let far = ClipmapSurface::AtlasDetail {
         atlas: &atlas,
         detail: &tiles,
         shading: &faded,
     };
     let far = render(&mut scene, &mut lod, far, &cam).unwrap();
-    let (max, _) = frame_diff(&far, &bare);
-    assert!(
-        max <= 1,
-        "{name}: a faded-out layer changes the frame by {max}"
-    );
+    assert_footprints_show(name, &detailed, &bare, &far);
 }
 
 #[test]

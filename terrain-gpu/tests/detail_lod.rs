@@ -17,7 +17,9 @@ mod footprints;
 #[allow(dead_code)] // the golden view's parts of the shared scene
 mod scene;
 
-use footprints::{camera, scene_with_footprints};
+use footprints::{
+    assert_footprints_show, camera, faded_shading, frame_diff, scene_with_footprints,
+};
 use glam::UVec2;
 use scene::Scene;
 use terrain_core::Grid;
@@ -152,18 +154,6 @@ impl Lod {
     }
 }
 
-/// The largest channel difference and the pixels that differ by more than 8.
-fn frame_diff(a: &Grid<[u8; 4]>, b: &Grid<[u8; 4]>) -> (u8, usize) {
-    let d = a
-        .as_slice()
-        .iter()
-        .zip(b.as_slice())
-        .map(|(p, q)| (0..4).map(|c| p[c].abs_diff(q[c])).max().unwrap_or(0));
-    d.fold((0, 0), |(max, strong), d| {
-        (max.max(d), strong + usize::from(d > 8))
-    })
-}
-
 fn footprints_show_and_a_faded_layer_draws_the_coarse_frame(
     name: &str,
     lod: impl Fn(&Scene) -> Lod,
@@ -177,23 +167,9 @@ fn footprints_show_and_a_faded_layer_draws_the_coarse_frame(
     let with_detail = lod.render(&scene, &cam);
     let (tiles, _) = scene.detail.take().unwrap();
     let coarse = lod.render(&scene, &cam);
-    let (max, strong) = frame_diff(&with_detail, &coarse);
-    assert!(
-        max > 40 && strong > 250,
-        "{name}: the footprints hardly change the frame: max {max}, {strong} pixels"
-    );
-    let faded = DetailShading {
-        fade_start_m: 0.5,
-        fade_end_m: 1.0,
-        ..DetailShading::default()
-    };
-    scene.detail = Some((tiles, faded));
+    scene.detail = Some((tiles, faded_shading()));
     let far = lod.render(&scene, &cam);
-    let (max, _) = frame_diff(&far, &coarse);
-    assert!(
-        max <= 1,
-        "{name}: a faded-out layer changes the frame by {max}"
-    );
+    assert_footprints_show(name, &with_detail, &coarse, &far);
 }
 
 fn zero_tiles_draw_the_coarse_frame(name: &str, lod: impl Fn(&Scene) -> Lod) {

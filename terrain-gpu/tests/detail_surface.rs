@@ -5,6 +5,7 @@
 //! `TERRAIN_REQUIRE_GPU=1`.
 
 #[path = "common/footprints.rs"]
+#[allow(dead_code)] // the frame comparisons of the LOD tests
 mod footprints;
 #[path = "common/scene.rs"]
 #[allow(dead_code)] // the golden view's parts of the shared scene

@@ -3,6 +3,7 @@
 
 use super::scene::Scene;
 use glam::{Vec2, Vec3};
+use terrain_core::Grid;
 use terrain_core::detail::{DetailLayer, DetailLayout};
 use terrain_core::{Blend, GaussianStamp, StampPlacement};
 use terrain_gpu::{Camera, DetailShading, GpuDetailTiles};
@@ -41,4 +42,46 @@ pub fn camera(scene: &Scene) -> Camera {
     let xz = Vec2::new(120.0, 124.0);
     let eye = Vec3::new(xz.x, scene.ground(xz) + 3.0, xz.y);
     Camera::looking(eye, Vec3::new(0.0, -0.6, 1.0))
+}
+
+/// A layer faded out before the nearest fragment of [`camera`]'s view: it must add nothing.
+pub fn faded_shading() -> DetailShading {
+    DetailShading {
+        fade_start_m: 0.5,
+        fade_end_m: 1.0,
+        ..DetailShading::default()
+    }
+}
+
+/// The largest channel difference and the pixels that differ by more than 8.
+pub fn frame_diff(a: &Grid<[u8; 4]>, b: &Grid<[u8; 4]>) -> (u8, usize) {
+    let d = a
+        .as_slice()
+        .iter()
+        .zip(b.as_slice())
+        .map(|(p, q)| (0..4).map(|c| p[c].abs_diff(q[c])).max().unwrap_or(0));
+    d.fold((0, 0), |(max, strong), d| {
+        (max.max(d), strong + usize::from(d > 8))
+    })
+}
+
+/// The footprints (30 cm deep, 3 m from the camera) change the frame drawn `without` them
+/// a lot, whatever the rasterizer; the `faded` layer's frame is `without`'s, up to a driver
+/// contracting two shader modules' arithmetic differently (one 8-bit step).
+pub fn assert_footprints_show(
+    name: &str,
+    with: &Grid<[u8; 4]>,
+    without: &Grid<[u8; 4]>,
+    faded: &Grid<[u8; 4]>,
+) {
+    let (max, strong) = frame_diff(with, without);
+    assert!(
+        max > 40 && strong > 250,
+        "{name}: the footprints hardly change the frame: max {max}, {strong} pixels"
+    );
+    let (max, _) = frame_diff(faded, without);
+    assert!(
+        max <= 1,
+        "{name}: a faded-out layer changes the frame by {max}"
+    );
 }
