@@ -7,8 +7,8 @@
 //! adapter the machine has (lavapipe in CI); without one they skip, or fail under
 //! `TERRAIN_REQUIRE_GPU=1`.
 //!
-//! Tolerances (`common/footprints.rs`, shared with `detail_lod.rs`): the atlas and atlas-with-detail pipelines are
-//! two shader modules of the same fragment code; with nothing added by the layer they compute
+//! Tolerances (`common/footprints.rs`, shared with `detail_lod.rs`): the atlas and
+//! atlas-with-detail pipelines are two shader modules of the same fragment code; with nothing added by the layer they compute
 //! the same colour, up to a driver contracting the two modules' arithmetic differently (one
 //! 8-bit step). The footprints are 30 cm deep at 3 m from the camera: they must move many
 //! pixels a lot, whatever the rasterizer.
