@@ -19,7 +19,7 @@ mod footprints;
 #[allow(dead_code)] // the golden view's parts of the shared scene
 mod scene;
 
-use footprints::{assert_footprints_show, camera, faded_shading, scene_with_footprints};
+use footprints::{assert_footprints_show, camera, cdlod_for, faded_shading, scene_with_footprints};
 use glam::{UVec2, Vec2};
 use scene::Scene;
 use terrain_core::detail::DetailLayout;
@@ -30,7 +30,7 @@ use terrain_gpu::{
     GpuDetailTiles, GpuError, GpuTileAtlas, OffscreenTarget, RefineDraw, RefinePass,
     RefineRenderer, SkyColors, TargetFormat, TerrainStyle,
 };
-use terrain_lod::{CdlodConfig, CdlodMesh, CdlodTree, CdlodView, Frustum};
+use terrain_lod::{CdlodTree, CdlodView, Frustum};
 
 const SIZE: UVec2 = UVec2::new(256, 160);
 const TILE: u32 = 32;
@@ -183,20 +183,7 @@ fn clipmap_draws_footprints_on_a_streamed_world() {
 #[test]
 fn cdlod_draws_footprints_on_a_streamed_world() {
     footprints_show_on_the_atlas("atlas_detail_cdlod", |scene| {
-        let config = CdlodConfig {
-            leaf_size: 16,
-            grid_size: 16,
-            lod_count: 5,
-            finest_range: 6.0,
-            ..CdlodConfig::default()
-        };
-        let tree = CdlodTree::from_map(&scene.map, config).unwrap();
-        let renderer = CdlodRenderer::new(
-            &scene.ctx.device,
-            &TargetFormat::CAPTURE,
-            &CdlodMesh::new(16),
-        );
-        Lod::Cdlod(Box::new((tree, renderer.unwrap())))
+        Lod::Cdlod(Box::new(cdlod_for(scene)))
     });
 }
 

@@ -18,7 +18,7 @@ mod footprints;
 mod scene;
 
 use footprints::{
-    assert_footprints_show, camera, faded_shading, frame_diff, scene_with_footprints,
+    assert_footprints_show, camera, cdlod_for, faded_shading, frame_diff, scene_with_footprints,
 };
 use glam::UVec2;
 use scene::Scene;
@@ -30,9 +30,7 @@ use terrain_gpu::{
     GpuTessellation, OffscreenTarget, SkyColors, TargetFormat, TerrainStyle, TessDraw,
     TessRenderer, TessellationPass,
 };
-use terrain_lod::{
-    CdlodConfig, CdlodMesh, CdlodTree, CdlodView, Frustum, TessConfig, TessHierarchy,
-};
+use terrain_lod::{CdlodTree, CdlodView, Frustum, TessConfig, TessHierarchy};
 
 const SIZE: UVec2 = UVec2::new(256, 160);
 
@@ -51,17 +49,7 @@ enum Lod {
 
 impl Lod {
     fn cdlod(scene: &Scene) -> Self {
-        let config = CdlodConfig {
-            leaf_size: 16,
-            grid_size: 16,
-            lod_count: 5,
-            finest_range: 6.0,
-            ..CdlodConfig::default()
-        };
-        let tree = CdlodTree::from_map(&scene.map, config).unwrap();
-        let mesh = CdlodMesh::new(16);
-        let renderer = CdlodRenderer::new(&scene.ctx.device, &TargetFormat::CAPTURE, &mesh);
-        Lod::Cdlod(Box::new((tree, renderer.unwrap())))
+        Lod::Cdlod(Box::new(cdlod_for(scene)))
     }
 
     fn tess(scene: &Scene) -> Self {

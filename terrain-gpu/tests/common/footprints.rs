@@ -85,3 +85,20 @@ pub fn assert_footprints_show(
         "{name}: a faded-out layer changes the frame by {max}"
     );
 }
+
+/// CDLOD over the scene's map, fine enough near [`camera`] to show the footprints: the tree and
+/// its renderer.
+pub fn cdlod_for(scene: &Scene) -> (terrain_lod::CdlodTree, terrain_gpu::CdlodRenderer) {
+    let config = terrain_lod::CdlodConfig {
+        leaf_size: 16,
+        grid_size: 16,
+        lod_count: 5,
+        finest_range: 6.0,
+        ..terrain_lod::CdlodConfig::default()
+    };
+    let tree = terrain_lod::CdlodTree::from_map(&scene.map, config).unwrap();
+    let mesh = terrain_lod::CdlodMesh::new(16);
+    let target = terrain_gpu::TargetFormat::CAPTURE;
+    let renderer = terrain_gpu::CdlodRenderer::new(&scene.ctx.device, &target, &mesh).unwrap();
+    (tree, renderer)
+}
