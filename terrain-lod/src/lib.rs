@@ -143,7 +143,9 @@ pub use frustum::Frustum;
 pub use popping::{POPPING_PROBES_PER_SIDE, PoppingView};
 pub use reach::clipmap_levels_to_reach;
 pub use refine::RefineView;
-pub use tessellation::{TessConfig, TessFrame, TessHierarchy, TessTriangle, TessVertex};
+pub use tessellation::{
+    StreamedTessellation, TessConfig, TessFrame, TessHierarchy, TessTriangle, TessVertex,
+};
 
 /// The README's code blocks, compiled and run as doc tests so that they cannot go stale.
 #[cfg(doctest)]

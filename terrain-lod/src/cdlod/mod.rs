@@ -396,6 +396,19 @@ impl CdlodTree {
         self.streamed
     }
 
+    /// Metres per texel.
+    pub fn texel_size(&self) -> f32 {
+        self.texel_size
+    }
+
+    /// The nodes of LOD `lod`: how many per axis and their bounds, row-major (`None` past
+    /// the roots). What a GPU pass that reads the tree uploads.
+    pub fn lod_nodes(&self, lod: u32) -> Option<(UVec2, &[NodeBounds])> {
+        self.levels
+            .get(lod as usize)
+            .map(|(n, b)| (*n, b.as_slice()))
+    }
+
     /// The side of a node of LOD `lod`, in texels.
     pub fn node_size(&self, lod: u32) -> u64 {
         u64::from(self.config.leaf_size) << lod.min(MAX_CDLOD_LODS)

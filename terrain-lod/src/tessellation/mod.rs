@@ -20,6 +20,9 @@
 
 mod build;
 mod select;
+mod streamed;
+
+pub use streamed::StreamedTessellation;
 
 use crate::density::DensityMap;
 use crate::error::LodError;

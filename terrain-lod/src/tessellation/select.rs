@@ -14,19 +14,19 @@ use glam::{IVec2, Vec2, Vec3};
 /// A triangle of the hierarchy while it is refined: right-angle apex `a`, hypotenuse from `l`
 /// to `r` (`(l, r, a)` counter-clockwise seen from above), their drawn heights, its level.
 #[derive(Debug, Clone, Copy)]
-struct Tri {
-    a: IVec2,
-    l: IVec2,
-    r: IVec2,
-    ha: f32,
-    hl: f32,
-    hr: f32,
-    level: u32,
+pub(super) struct Tri {
+    pub(super) a: IVec2,
+    pub(super) l: IVec2,
+    pub(super) r: IVec2,
+    pub(super) ha: f32,
+    pub(super) hl: f32,
+    pub(super) hr: f32,
+    pub(super) level: u32,
 }
 
 impl Tri {
     /// The two children: apex at the hypotenuse's midpoint `v` (drawn at `hv`).
-    fn children(&self, v: IVec2, hv: f32) -> [Tri; 2] {
+    pub(super) fn children(&self, v: IVec2, hv: f32) -> [Tri; 2] {
         let level = self.level + 1;
         [
             Tri {
@@ -50,7 +50,7 @@ impl Tri {
         ]
     }
 
-    fn emit(&self) -> TessTriangle {
+    pub(super) fn emit(&self) -> TessTriangle {
         let v = |p: IVec2, h: f32| TessVertex {
             texel: [p.x as f32, p.y as f32],
             height: h,
@@ -62,49 +62,7 @@ impl Tri {
 impl TessHierarchy {
     /// The frame's decision inputs for `view` (with this hierarchy's config).
     pub fn decision(&self, view: &CdlodView<'_>) -> Result<TessDecision, LodError> {
-        for (what, value) in [
-            ("camera.x", view.camera.x),
-            ("camera.y", view.camera.y),
-            ("camera.z", view.camera.z),
-            ("viewport_width", view.viewport_width),
-            ("hfov", view.hfov),
-        ] {
-            if !value.is_finite() {
-                return Err(LodError::NonFinite { what, value });
-            }
-        }
-        let k = view.k();
-        if !(k.is_finite() && k > 0.0) {
-            return Err(LodError::InvalidTessParam {
-                what: "hfov",
-                value: view.hfov.into(),
-                allowed: "a field of view in (0, pi) and a positive viewport width",
-            });
-        }
-        let c = &self.config;
-        // Split only while the children's hypotenuse (P sqrt(2)^-l texels at level l + 1) is
-        // at least the minimum size.
-        let mut split_levels = 2 * self.p;
-        while split_levels > 0 {
-            let child_hyp = c.patch_size as f32
-                * self.texel_size
-                * std::f32::consts::FRAC_1_SQRT_2.powi(split_levels as i32 - 1);
-            if child_hyp >= c.min_triangle_m {
-                break;
-            }
-            split_levels -= 1;
-        }
-        Ok(TessDecision {
-            camera: view.camera,
-            scale: match c.max_error_px {
-                Some(tau) => k / tau,
-                None => k / (FLAT_SPHERE * c.triangle_width_px),
-            },
-            error_metric: c.max_error_px.is_some(),
-            split_levels,
-            use_density: c.use_density,
-            inv_morph_range: if c.morph { 1.0 / c.morph_range } else { 0.0 },
-        })
+        decision_for(&self.config, self.p, self.texel_size, view)
     }
 
     /// The split ratio `r` of vertex `v` (split in when > 1). Mirrors `tessellate.wgsl`.
@@ -149,34 +107,8 @@ impl TessHierarchy {
 
     /// The two level-0 triangles of patch `(px, py)`.
     fn base(&self, px: i32, py: i32) -> [Tri; 2] {
-        let ps = self.config.patch_size as i32;
-        let o = IVec2::new(px * ps, py * ps);
-        let c00 = o;
-        let c10 = o + IVec2::new(ps, 0);
-        let c01 = o + IVec2::new(0, ps);
-        let c11 = o + IVec2::splat(ps);
-        let (e, apexes) = if (px + py) & 1 == 0 {
-            ([c00, c11], [c10, c01])
-        } else {
-            ([c10, c01], [c00, c11])
-        };
-        apexes.map(|a| {
-            // Counter-clockwise seen from above: (r - l) x (a - l) < 0 in (x, z).
-            let (l, r) = if (e[1] - e[0]).perp_dot(a - e[0]) < 0 {
-                (e[0], e[1])
-            } else {
-                (e[1], e[0])
-            };
-            let h = |p: IVec2| self.heights[self.index(p)];
-            Tri {
-                a,
-                l,
-                r,
-                ha: h(a),
-                hl: h(l),
-                hr: h(r),
-                level: 0,
-            }
+        base_triangles(self.config.patch_size, px, py, |p| {
+            self.heights[self.index(p)]
         })
     }
 
@@ -369,8 +301,93 @@ impl TessHierarchy {
     }
 }
 
+/// The frame's decision inputs for `view`, for patches of `2^p` texels of `texel_size` metres.
+pub(super) fn decision_for(
+    c: &super::TessConfig,
+    p: u32,
+    texel_size: f32,
+    view: &CdlodView<'_>,
+) -> Result<TessDecision, LodError> {
+    for (what, value) in [
+        ("camera.x", view.camera.x),
+        ("camera.y", view.camera.y),
+        ("camera.z", view.camera.z),
+        ("viewport_width", view.viewport_width),
+        ("hfov", view.hfov),
+    ] {
+        if !value.is_finite() {
+            return Err(LodError::NonFinite { what, value });
+        }
+    }
+    let k = view.k();
+    if !(k.is_finite() && k > 0.0) {
+        return Err(LodError::InvalidTessParam {
+            what: "hfov",
+            value: view.hfov.into(),
+            allowed: "a field of view in (0, pi) and a positive viewport width",
+        });
+    }
+    // Split only while the children's hypotenuse (P sqrt(2)^-l texels at level l + 1) is
+    // at least the minimum size.
+    let mut split_levels = 2 * p;
+    while split_levels > 0 {
+        let child_hyp = c.patch_size as f32
+            * texel_size
+            * std::f32::consts::FRAC_1_SQRT_2.powi(split_levels as i32 - 1);
+        if child_hyp >= c.min_triangle_m {
+            break;
+        }
+        split_levels -= 1;
+    }
+    Ok(TessDecision {
+        camera: view.camera,
+        scale: match c.max_error_px {
+            Some(tau) => k / tau,
+            None => k / (FLAT_SPHERE * c.triangle_width_px),
+        },
+        error_metric: c.max_error_px.is_some(),
+        split_levels,
+        use_density: c.use_density,
+        inv_morph_range: if c.morph { 1.0 / c.morph_range } else { 0.0 },
+    })
+}
+
+/// The two level-0 triangles of patch `(px, py)` of `ps` texels, with the heights `h` gives
+/// their corners: the patch's diagonal alternates in a checkerboard, so the patches' triangles
+/// meet edge to edge (a 4-8 mesh).
+pub(super) fn base_triangles(ps: u32, px: i32, py: i32, h: impl Fn(IVec2) -> f32) -> [Tri; 2] {
+    let ps = ps as i32;
+    let o = IVec2::new(px * ps, py * ps);
+    let c00 = o;
+    let c10 = o + IVec2::new(ps, 0);
+    let c01 = o + IVec2::new(0, ps);
+    let c11 = o + IVec2::splat(ps);
+    let (e, apexes) = if (px + py) & 1 == 0 {
+        ([c00, c11], [c10, c01])
+    } else {
+        ([c10, c01], [c00, c11])
+    };
+    apexes.map(|a| {
+        // Counter-clockwise seen from above: (r - l) x (a - l) < 0 in (x, z).
+        let (l, r) = if (e[1] - e[0]).perp_dot(a - e[0]) < 0 {
+            (e[0], e[1])
+        } else {
+            (e[1], e[0])
+        };
+        Tri {
+            a,
+            l,
+            r,
+            ha: h(a),
+            hl: h(l),
+            hr: h(r),
+            level: 0,
+        }
+    })
+}
+
 /// Barycentric weights of `p` for `(l, r, a)`, if `p` lies in `t` (with a small tolerance).
-fn barycentric(t: &Tri, p: Vec2) -> Option<[f32; 3]> {
+pub(super) fn barycentric(t: &Tri, p: Vec2) -> Option<[f32; 3]> {
     let (l, r, a) = (t.l.as_vec2(), t.r.as_vec2(), t.a.as_vec2());
     let area = (r - l).perp_dot(a - l);
     if area == 0.0 {
@@ -383,6 +400,6 @@ fn barycentric(t: &Tri, p: Vec2) -> Option<[f32; 3]> {
     (w0 >= eps && w1 >= eps && w2 >= eps).then_some([w0, w1, w2])
 }
 
-fn contains(t: &Tri, p: Vec2) -> bool {
+pub(super) fn contains(t: &Tri, p: Vec2) -> bool {
     barycentric(t, p).is_some()
 }
