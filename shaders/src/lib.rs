@@ -223,7 +223,22 @@ pub const CDLOD_ATLAS_DETAIL: &str = concat!(
 
 /// `TessellationPass`: adaptive tessellation by longest-edge bisection (Cervin 2012, sec. 2.3),
 /// writing triangles and indirect draw arguments.
-pub const TESSELLATE: &str = concat!(wgsl_prelude!(), include_str!("wgsl/render/tessellate.wgsl"));
+pub const TESSELLATE: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/render/tess_source_hierarchy.wgsl"),
+    include_str!("wgsl/render/tessellate.wgsl")
+);
+
+/// `TessellationPass` over a streamed world: the same bisection, decided from a streamed CDLOD
+/// tree's node bounds with heights from the tile atlas (terrain-lod's `StreamedTessellation`).
+pub const TESSELLATE_STREAMED: &str = concat!(
+    wgsl_prelude!(),
+    include_str!("wgsl/resources/packed.wgsl"),
+    include_str!("wgsl/resources/tile_atlas.wgsl"),
+    include_str!("wgsl/resources/tile_atlas_bind_high.wgsl"),
+    include_str!("wgsl/render/tess_source_streamed.wgsl"),
+    include_str!("wgsl/render/tessellate.wgsl")
+);
 
 /// `TessRenderer`: the tessellation pass's triangles, lit and coloured as the clipmap (its
 /// frame, coarse-map surface and fragment shader).
@@ -236,6 +251,19 @@ pub const TESSELLATED: &str = concat!(
 /// as [`CLIPMAP_DETAIL`] (composite normals, parallax, fade).
 pub const TESSELLATED_DETAIL: &str = concat!(
     clipmap_detail!(),
+    include_str!("wgsl/render/tessellated.wgsl")
+);
+
+/// `TessRenderer` over a tile atlas: a streamed world's tessellated triangles shaded as
+/// [`CLIPMAP_ATLAS`].
+pub const TESSELLATED_ATLAS: &str = concat!(
+    clipmap_atlas!(),
+    include_str!("wgsl/render/tessellated.wgsl")
+);
+
+/// `TessRenderer` over a tile atlas with a detail layer, shaded as [`CLIPMAP_ATLAS_DETAIL`].
+pub const TESSELLATED_ATLAS_DETAIL: &str = concat!(
+    clipmap_atlas_detail!(),
     include_str!("wgsl/render/tessellated.wgsl")
 );
 
@@ -415,6 +443,9 @@ pub const ALL: &[(&str, &str)] = &[
     ("tessellate", TESSELLATE),
     ("tessellated", TESSELLATED),
     ("tessellated_detail", TESSELLATED_DETAIL),
+    ("tessellate_streamed", TESSELLATE_STREAMED),
+    ("tessellated_atlas", TESSELLATED_ATLAS),
+    ("tessellated_atlas_detail", TESSELLATED_ATLAS_DETAIL),
     ("sky", SKY),
     ("clipmap", CLIPMAP),
     ("clipmap_granular", CLIPMAP_GRANULAR),

@@ -117,6 +117,8 @@ pub struct PassBindings<T: Pod> {
     /// Bind groups by the buffers they bind, with the use count of their last use.
     groups: HashMap<Vec<wgpu::Buffer>, (wgpu::BindGroup, u64)>,
     uses: u64,
+    /// The binding number of each storage buffer, in the order `bind` takes them.
+    numbers: Vec<u32>,
     _uniform: PhantomData<T>,
 }
 
@@ -128,6 +130,18 @@ impl<T: Pod> PassBindings<T> {
         label: &'static str,
         uniform_visibility: wgpu::ShaderStages,
         storage: &[StorageBinding],
+    ) -> Self {
+        let numbered: Vec<(u32, StorageBinding)> = (1..).zip(storage.iter().copied()).collect();
+        Self::numbered(device, label, uniform_visibility, &numbered)
+    }
+
+    /// As [`PassBindings::new`], each storage buffer at the binding number given with it (a
+    /// shader that includes a resource file with fixed numbers, as the tile atlas's).
+    pub fn numbered(
+        device: &wgpu::Device,
+        label: &'static str,
+        uniform_visibility: wgpu::ShaderStages,
+        storage: &[(u32, StorageBinding)],
     ) -> Self {
         let mut entries = vec![wgpu::BindGroupLayoutEntry {
             binding: 0,
@@ -142,9 +156,8 @@ impl<T: Pod> PassBindings<T> {
         entries.extend(
             storage
                 .iter()
-                .enumerate()
-                .map(|(i, s)| wgpu::BindGroupLayoutEntry {
-                    binding: i as u32 + 1,
+                .map(|&(binding, s)| wgpu::BindGroupLayoutEntry {
+                    binding,
                     visibility: s.visibility,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Storage {
@@ -171,6 +184,7 @@ impl<T: Pod> PassBindings<T> {
             next: 0,
             groups: HashMap::new(),
             uses: 0,
+            numbers: storage.iter().map(|&(n, _)| n).collect(),
             _uniform: PhantomData,
         }
     }
@@ -250,15 +264,12 @@ impl<T: Pod> PassBindings<T> {
                 size: wgpu::BufferSize::new(std::mem::size_of::<T>() as u64),
             }),
         }];
-        entries.extend(
-            buffers
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry {
-                    binding: i as u32 + 1,
-                    resource: b.as_entire_binding(),
-                }),
-        );
+        entries.extend(buffers.iter().zip(&self.numbers).map(|(b, &binding)| {
+            wgpu::BindGroupEntry {
+                binding,
+                resource: b.as_entire_binding(),
+            }
+        }));
         let group = scoped(device, self.label, || {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some(self.label),

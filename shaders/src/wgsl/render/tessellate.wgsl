@@ -19,8 +19,9 @@
 // triangle that finds no room in the output is dropped; nothing is written out of bounds, and
 // the pass always ends after its fixed number of dispatches.
 //
-// CPU reference: terrain_lod::TessHierarchy::select (same decisions, same f32 operations in
-// the same order; only the order of the emitted triangles differs).
+// CPU reference: terrain_lod::TessHierarchy::select, or StreamedTessellation::select for a
+// streamed world (same decisions, same f32 operations in the same order; only the order of the
+// emitted triangles differs).
 
 struct Params {
     camera: vec4<f32>,
@@ -50,15 +51,6 @@ struct Params {
     max_groups: u32,
 }
 
-// A grid vertex: true height (m), saturated sphere radius (m), saturated density, saturated
-// error (m).
-struct Vertex {
-    h: f32,
-    r: f32,
-    d: f32,
-    e: f32,
-}
-
 struct State {
     count: atomic<u32>,
     overflow: atomic<u32>,
@@ -86,8 +78,10 @@ struct Queued {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> verts: array<Vertex>;
-@group(0) @binding(2) var<storage, read> patch_bounds: array<vec2<f32>>;
+// Bindings 1 and 2 (what the splits are decided from) and the functions `split_ratio`,
+// `vertex_height` and `patch_range` come from the source placed before this file:
+// tess_source_hierarchy.wgsl (a map's hierarchy) or tess_source_streamed.wgsl (a streamed
+// world's tree and tile atlas).
 @group(0) @binding(3) var<storage, read_write> out_vertices: array<f32>;
 @group(0) @binding(4) var<storage, read_write> state: State;
 // Two halves of queue_capacity triangles: level L reads half L % 2 and fills the other.
@@ -114,36 +108,6 @@ struct Tri {
     level: u32,
 }
 
-fn vindex(v: vec2<i32>) -> u32 {
-    let g = vec2<i32>(params.grid);
-    var w: vec2<i32>;
-    if params.wrap == WRAP_REPEAT {
-        w = ((v % g) + g) % g;
-    } else {
-        w = clamp(v, vec2<i32>(0, 0), g - vec2<i32>(1, 1));
-    }
-    return u32(w.y) * params.grid.x + u32(w.x);
-}
-
-fn ratio(v: vec2<i32>) -> f32 {
-    let b = verts[vindex(v)];
-    let ts = params.texel_size;
-    let c = vec3<f32>(
-        f32(v.x) * ts - params.camera.x,
-        b.h - params.camera.y,
-        f32(v.y) * ts - params.camera.z,
-    );
-    let dist = max(sqrt(c.x * c.x + c.y * c.y + c.z * c.z) - b.r, NEAR_M);
-    if params.error_metric != 0u {
-        return params.scale * b.e / dist;
-    }
-    var dens = 1.0;
-    if params.use_density != 0u {
-        dens = b.d;
-    }
-    return params.scale * b.r * dens / dist;
-}
-
 fn visible(t: Tri, pid: u32) -> bool {
     if params.cull == 0u {
         return true;
@@ -151,7 +115,7 @@ fn visible(t: Tri, pid: u32) -> bool {
     let ts = params.texel_size;
     let lo2 = vec2<f32>(min(min(t.a, t.l), t.r)) * ts;
     let hi2 = vec2<f32>(max(max(t.a, t.l), t.r)) * ts;
-    let hb = patch_bounds[pid];
+    let hb = patch_range(pid);
     let lo = vec3<f32>(lo2.x, hb.x, lo2.y);
     let hi = vec3<f32>(hi2.x, hb.y, hi2.y);
     for (var i = 0u; i < 6u; i++) {
@@ -228,9 +192,9 @@ fn base(px: i32, py: i32, which: u32) -> Tri {
         t.l = e1;
         t.r = e0;
     }
-    t.ha = verts[vindex(t.a)].h;
-    t.hl = verts[vindex(t.l)].h;
-    t.hr = verts[vindex(t.r)].h;
+    t.ha = vertex_height(t.a);
+    t.hl = vertex_height(t.l);
+    t.hr = vertex_height(t.r);
     t.level = 0u;
     return t;
 }
@@ -239,11 +203,11 @@ fn base(px: i32, py: i32, which: u32) -> Tri {
 fn refine(t: Tri, pid: u32) {
     if t.level < params.split_levels {
         let v = (t.l + t.r) / 2;
-        let r = ratio(v);
+        let r = split_ratio(v, t.level);
         // terrain_lod::tessellation::split_threshold.
         let threshold = 1.0 - f32(MAX_LEVELS - min(t.level, MAX_LEVELS)) * SPLIT_MARGIN;
         if r > threshold {
-            let h = verts[vindex(v)].h;
+            let h = vertex_height(v);
             var k = 1.0;
             if params.inv_morph_range > 0.0 {
                 k = min((r - threshold) * params.inv_morph_range, 1.0);
