@@ -300,7 +300,7 @@ fn open_gpu(
         LodArg::Tessellated => {
             // The error metric reads no density map.
             let density = !cli.no_density_map && cli.target_error.is_none();
-            scene.enable_tessellation(scenario.map(), tess_config, density)?;
+            scenario.enable_tessellation(&mut scene, tess_config, density)?;
         }
         LodArg::Clipmap => {}
     }

@@ -143,12 +143,12 @@ fn numbers(cli: &Cli) -> Result<()> {
 
 /// The LOD mode and the flags that steer one mode only.
 fn lod_flags(cli: &Cli) -> Result<()> {
-    let cdlod_world = cli.lod == LodArg::Cdlod && cli.scenario == ScenarioKind::World;
-    if cli.lod != LodArg::Clipmap && cli.scenario != ScenarioKind::Default && !cdlod_world {
+    let lod_scenario = matches!(cli.scenario, ScenarioKind::Default | ScenarioKind::World);
+    if cli.lod != LodArg::Clipmap && !lod_scenario {
         return Err(anyhow!(
             "--lod cdlod and --lod tessellated draw the coarse-map of the default scenario (and \
-             of --heightmap), --lod cdlod the world scenario's streamed world too; the snow and \
-             flyover scenarios draw with the clipmap"
+             of --heightmap) and the world scenario's streamed world; the snow and flyover \
+             scenarios draw with the clipmap"
         ));
     }
     if cli.detail == DetailArg::Refine && cli.lod != LodArg::Clipmap {
@@ -161,6 +161,14 @@ fn lod_flags(cli: &Cli) -> Result<()> {
         return Err(anyhow!(
             "--target-error chooses CDLOD's LODs or the tessellation's splits by screen-space \
              error: it needs --lod cdlod or --lod tessellated"
+        ));
+    }
+    let world_tess = cli.lod == LodArg::Tessellated && cli.scenario == ScenarioKind::World;
+    if world_tess && (cli.target_error.is_some() || cli.no_density_map) {
+        return Err(anyhow!(
+            "the streamed world is tessellated by edge size (--triangle-width) alone: its splits \
+             are decided from node bounds, which carry no density map and bound no small \
+             triangle's error (--target-error and --no-density-map are for the default scenario)"
         ));
     }
     if cli.no_morph && cli.lod == LodArg::Clipmap {
@@ -298,7 +306,18 @@ mod tests {
                 "--target-error",
             ),
             (&["--scenario", "flyover", "--lod", "cdlod"], "--lod"),
-            (&["--scenario", "world", "--lod", "tessellated"], "--lod"),
+            (&["--scenario", "snow", "--lod", "tessellated"], "--lod"),
+            (
+                &[
+                    "--scenario",
+                    "world",
+                    "--lod",
+                    "tessellated",
+                    "--target-error",
+                    "1",
+                ],
+                "--triangle-width",
+            ),
             (
                 &[
                     "--scenario",

@@ -215,17 +215,16 @@ fn the_gpu_emits_the_cpu_reference_triangles_before_and_after_a_deformation() {
         (Vec3::new(200.0, 60.0, 20.0), Vec3::new(-0.5, -0.6, 0.8)),
         (Vec3::new(128.0, 300.0, 128.0), Vec3::new(0.0, -1.0, 0.01)),
     ];
-    for (morph, patch_size, max_error_px) in [
-        (true, 32, None),
-        (false, 16, None),
-        (true, 64, None),
-        (true, 32, Some(0.5)),
+    for (morph, patch_size, triangle_width_px) in [
+        (true, 32, 4.0),
+        (false, 16, 4.0),
+        (true, 64, 4.0),
+        (true, 32, 12.0),
     ] {
         let config = TessConfig {
             morph,
             patch_size,
-            triangle_width_px: 4.0,
-            max_error_px,
+            triangle_width_px,
             ..TessConfig::default()
         };
         let tess = StreamedTessellation::new(config, &w.tree).unwrap();

@@ -14,16 +14,38 @@ impl GpuScene {
 
     /// Draws a streamed world's atlas with CDLOD instead of the clipmap: `tree` is the world's
     /// quadtree (terrain-lod's `CdlodTree::from_leaf_bounds`), kept current by the caller
-    /// through [`GpuScene::cdlod_tree_mut`].
+    /// through [`GpuScene::update_streamed_bounds`].
     pub fn enable_cdlod_tree(&mut self, tree: CdlodTree) -> Result<()> {
         let format = self.target.format();
         self.terrain = TerrainRenderer::cdlod_streamed(&self.ctx.device, &format, tree)?;
         Ok(())
     }
 
-    /// The streamed world's CDLOD quadtree, when CDLOD draws one.
-    pub fn cdlod_tree_mut(&mut self) -> Option<&mut CdlodTree> {
-        self.terrain.streamed_tree_mut()
+    /// Draws a streamed world's atlas with adaptive tessellation instead of the clipmap: its
+    /// splits decided from `tree`, the world's quadtree (kept current by the caller through
+    /// [`GpuScene::update_streamed_bounds`]), its heights from the atlas, stored as
+    /// `encoding` says.
+    pub fn enable_tessellation_tree(
+        &mut self,
+        tree: CdlodTree,
+        config: TessConfig,
+        encoding: terrain_core::HeightEncoding,
+    ) -> Result<()> {
+        let (device, queue, format) = (&self.ctx.device, &self.ctx.queue, self.target.format());
+        self.terrain =
+            TerrainRenderer::tessellated_streamed(device, queue, &format, tree, config, encoding)?;
+        Ok(())
+    }
+
+    /// Updates the streamed world's quadtree (CDLOD's or the tessellation's) over `dirty` from
+    /// `leaf_bounds`; nothing when the terrain draws no streamed world.
+    pub fn update_streamed_bounds(
+        &mut self,
+        dirty: Rect,
+        leaf_bounds: impl FnMut(Rect) -> (f32, f32),
+    ) -> Result<()> {
+        self.terrain.update_streamed_bounds(dirty, leaf_bounds)?;
+        Ok(())
     }
 
     /// Draws the coarse-map with adaptive tessellation instead of the clipmap: the hierarchy of

@@ -35,6 +35,9 @@ use super::world_detail::WorldDetail;
 use super::world_files;
 use super::world_overlays::WorldOverlays;
 use super::world_stamps::{WorldDeformer, WorldShock, WorldStamp, reach};
+
+#[path = "world_lod.rs"]
+mod world_lod;
 use super::{FrameContext, FrameOutcome, Scenario, ScenarioInfo};
 use crate::cli::Cli;
 use crate::gpu_scene::{AtlasConfig, Camera, GpuScene};
@@ -51,7 +54,7 @@ use terrain_cache::{
     SphericalSelection, TileGrid, TileId, TileStamps, VramConfig, VramPool, World, reduce_levels,
 };
 use terrain_core::{CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, WrapMode};
-use terrain_lod::{CdlodConfig, CdlodTree};
+use terrain_lod::{CdlodConfig, TessConfig};
 use terrain_physics::CollisionWindow;
 
 /// Longest side of the overview level in texels.
@@ -102,7 +105,8 @@ pub struct FlyoverScenario {
     /// The world scenario's footprints in detail tiles (`--detail`), and how they are drawn.
     detail: Option<WorldDetail>,
     detail_mode: crate::cli::DetailArg,
-    /// With `--lod cdlod`: the level-0 bounds the GPU scene's quadtree is kept current from.
+    /// With `--lod cdlod` or `tessellated`: the level-0 bounds the GPU scene's quadtree is kept
+    /// current from.
     bounds: Option<RegionBounds>,
     pool: Option<RamPool>,
     /// The VRAM pool, with a GPU: which tiles sit in the atlas's slots.
@@ -418,17 +422,6 @@ impl FlyoverScenario {
     }
 }
 
-/// The lowest and highest height (metres) under `rect`, for the CDLOD quadtree.
-fn leaf_metres(
-    bounds: &RegionBounds,
-    pool: &RamPool,
-    rect: Rect,
-    enc: terrain_core::HeightEncoding,
-) -> (f32, f32) {
-    let [lo, hi] = bounds.of(pool, rect).unwrap_or([0, u16::MAX]);
-    (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
-}
-
 /// The level shown in the overview: the finest whose side is at most [`OVERVIEW_MAX`].
 pub fn overview_level(manifest: &Manifest) -> u32 {
     (0..manifest.levels)
@@ -580,28 +573,24 @@ impl Scenario for FlyoverScenario {
         (m.world_size, m.wrap, m.texel_size)
     }
 
-    /// The world's quadtree from its level-0 bounds (exact where tiles are in RAM, the
-    /// pyramid's `bounds.bin` elsewhere), kept current in `advance`.
+    /// CDLOD draws the world's quadtree (`world_lod`).
     fn enable_cdlod(&mut self, scene: &mut GpuScene, config: CdlodConfig) -> Result<()> {
-        if self.manifest.wrap != WrapMode::Clamp {
-            return Err(usage(anyhow::anyhow!(
-                "--lod cdlod draws a streamed world clamped at its edges; this one repeats"
-            )));
-        }
-        let Some(pool) = self.pool.as_ref() else {
-            bail!("the world's pool was shut down");
-        };
-        let bounds = RegionBounds::open(pool.world())?;
-        let enc = self.manifest.encoding;
-        let tree = CdlodTree::from_leaf_bounds(
-            config,
-            self.manifest.world_size,
-            self.manifest.texel_size,
-            |r| leaf_metres(&bounds, pool, r, enc),
+        let tree = self.world_tree(config, "--lod cdlod")?;
+        scene.enable_cdlod_tree(tree)
+    }
+
+    /// The tessellation is decided from the world's quadtree (`world_lod`); no density map.
+    fn enable_tessellation(
+        &mut self,
+        scene: &mut GpuScene,
+        config: TessConfig,
+        _density: bool,
+    ) -> Result<()> {
+        let tree = self.world_tree(
+            world_lod::tess_tree_config(config.patch_size),
+            "--lod tessellated",
         )?;
-        scene.enable_cdlod_tree(tree)?;
-        self.bounds = Some(bounds);
-        Ok(())
+        scene.enable_tessellation_tree(tree, config, self.manifest.encoding)
     }
 
     fn overlay(&self, overview: &Image) -> Option<Image> {
@@ -816,22 +805,8 @@ impl Scenario for FlyoverScenario {
         if let Some(stream) = self.paint_stream.as_mut() {
             stream.reload(&painted);
         }
-        // CDLOD's quadtree follows the changes (timed as `lod`).
-        if let (Some(bounds), Some(pool), Some(tree)) = (
-            self.bounds.as_mut(),
-            self.pool.as_ref(),
-            ctx.gpu.as_deref_mut().and_then(GpuScene::cdlod_tree_mut),
-        ) {
-            let t = Instant::now();
-            let enc = self.manifest.encoding;
-            for rect in &changed {
-                bounds.update(pool, *rect);
-                tree.update_leaf_bounds(*rect, |r| leaf_metres(bounds, pool, r, enc))?;
-            }
-            let ms = ms_since(t);
-            ctx.timings.add(Step::Lod, ms);
-            self.gpu_stamp_ms += ms;
-        }
+        // The streamed LOD's quadtree follows the changes (timed as `lod`).
+        self.gpu_stamp_ms += self.follow_bounds(&changed, ctx)?;
         // The GPU stamps and granular steps are timed as their own steps.
         let cache_ms = (ms_since(t_frame) - self.gpu_stamp_ms).max(0.0);
         ctx.timings.add(Step::Cache, cache_ms);

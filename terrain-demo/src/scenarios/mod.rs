@@ -154,6 +154,17 @@ pub trait Scenario {
         scene.enable_cdlod(self.map(), config)
     }
 
+    /// Makes `scene` draw with adaptive tessellation of `config` (with the curvature density
+    /// map when `density`): by default the hierarchy of [`Scenario::map`].
+    fn enable_tessellation(
+        &mut self,
+        scene: &mut GpuScene,
+        config: terrain_lod::TessConfig,
+        density: bool,
+    ) -> Result<()> {
+        scene.enable_tessellation(self.map(), config, density)
+    }
+
     /// Ends the run: writes back what the scenario keeps outside the report (the flyover's
     /// dirty tiles) and says what it did.
     fn finish(&mut self, _gpu: Option<&mut GpuScene>) -> Result<FinishStats> {

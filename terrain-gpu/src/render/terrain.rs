@@ -19,11 +19,11 @@ use crate::render::clipmap::check_view;
 use crate::render::target::TargetFormat;
 use crate::render::tessellation::{GpuTessellation, TessDraw, TessRenderer, TessellationPass};
 use glam::{IVec2, UVec2, Vec2, Vec3};
-use terrain_core::{CoarseMap, Rect};
+use terrain_core::{CoarseMap, HeightEncoding, Rect};
 use terrain_lod::{
     CdlodConfig, CdlodFrame, CdlodMesh, CdlodTree, CdlodUpdater, CdlodView, ClipmapLayout,
-    DensityMap, DensityParams, Frustum, PoppingView, TessConfig, TessHierarchy, TessState,
-    TessUpdater,
+    DensityMap, DensityParams, Frustum, PoppingView, StreamedTessellation, TessConfig,
+    TessHierarchy, TessState, TessUpdater,
 };
 
 /// Triangles a tessellated frame may hold (72 MiB of vertices).
@@ -108,10 +108,24 @@ struct Tessellated {
     previous_probes: Vec<Vec2>,
 }
 
+/// The tessellation of a streamed world: decided from its quadtree (kept current by its owner
+/// through [`TerrainRenderer::update_streamed_bounds`]), heights from the drawn atlas.
+struct TessStreamed {
+    tess: StreamedTessellation,
+    tree: CdlodTree,
+    encoding: HeightEncoding,
+    gpu: GpuTessellation,
+    pass: TessellationPass,
+    renderer: TessRenderer,
+    /// Rects whose node bounds changed since the last upload.
+    dirty: Vec<Rect>,
+}
+
 enum Lod {
     Clipmap(Clipmap),
     Cdlod(Cdlod),
     Tessellated(Box<Tessellated>),
+    TessStreamed(Box<TessStreamed>),
 }
 
 /// Draws the terrain with one LOD mode (see the module docs).
@@ -238,12 +252,46 @@ impl TerrainRenderer {
         })
     }
 
+    /// Adaptive tessellation of a streamed world with `config` (its triangle bound capped at
+    /// [`TESS_CAPACITY`]): `tree` is the world's quadtree (`CdlodTree::from_leaf_bounds`),
+    /// kept current through [`TerrainRenderer::update_streamed_bounds`]; heights come from
+    /// the atlas drawn ([`ClipmapSurface::Atlas`] or [`ClipmapSurface::AtlasDetail`]), whose
+    /// stored heights are `encoding`'s. No density map (terrain-lod's
+    /// `StreamedTessellation`).
+    pub fn tessellated_streamed(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        target: &TargetFormat,
+        tree: CdlodTree,
+        config: TessConfig,
+        encoding: HeightEncoding,
+    ) -> Result<Self, GpuError> {
+        let config = TessConfig {
+            max_triangles: config.max_triangles.min(TESS_CAPACITY as usize),
+            ..config
+        };
+        let tess = StreamedTessellation::new(config, &tree)?;
+        let capacity = config.max_triangles as u32;
+        let gpu = GpuTessellation::streamed(device, queue, &tess, &tree, encoding, capacity)?;
+        Ok(Self {
+            lod: Lod::TessStreamed(Box::new(TessStreamed {
+                tess,
+                tree,
+                encoding,
+                gpu,
+                pass: TessellationPass::new(device)?,
+                renderer: TessRenderer::new(device, target)?,
+                dirty: Vec::new(),
+            })),
+        })
+    }
+
     /// `"clipmap"`, `"cdlod"` or `"tessellated"`.
     pub fn mode(&self) -> &'static str {
         match self.lod {
             Lod::Clipmap(_) => "clipmap",
             Lod::Cdlod(_) => "cdlod",
-            Lod::Tessellated(_) => "tessellated",
+            Lod::Tessellated(_) | Lod::TessStreamed(_) => "tessellated",
         }
     }
 
@@ -254,6 +302,7 @@ impl TerrainRenderer {
             Lod::Clipmap(c) => c.renderer.set_materials(materials),
             Lod::Cdlod(c) => c.renderer.set_materials(materials),
             Lod::Tessellated(t) => t.renderer.set_materials(materials),
+            Lod::TessStreamed(t) => t.renderer.set_materials(materials),
         }
     }
 
@@ -264,6 +313,7 @@ impl TerrainRenderer {
             Lod::Clipmap(c) => c.renderer.set_color_layer(color),
             Lod::Cdlod(c) => c.renderer.set_color_layer(color),
             Lod::Tessellated(t) => t.renderer.set_color_layer(color),
+            Lod::TessStreamed(t) => t.renderer.set_color_layer(color),
         }
     }
 
@@ -276,6 +326,7 @@ impl TerrainRenderer {
             Lod::Clipmap(c) => c.renderer.set_material_layer(layer),
             Lod::Cdlod(c) => c.renderer.set_material_layer(layer),
             Lod::Tessellated(t) => t.renderer.set_material_layer(layer),
+            Lod::TessStreamed(t) => t.renderer.set_material_layer(layer),
         }
     }
 
@@ -287,6 +338,7 @@ impl TerrainRenderer {
             Lod::Clipmap(c) => c.renderer.set_hole_mask(mask),
             Lod::Cdlod(c) => c.renderer.set_hole_mask(mask),
             Lod::Tessellated(t) => t.renderer.set_hole_mask(mask),
+            Lod::TessStreamed(t) => t.renderer.set_hole_mask(mask),
         }
     }
 
@@ -303,6 +355,7 @@ impl TerrainRenderer {
             Lod::Clipmap(c) => c.renderer.set_streamed_layers(paint, color),
             Lod::Cdlod(c) => c.renderer.set_streamed_layers(paint, color),
             Lod::Tessellated(t) => t.renderer.set_streamed_layers(paint, color),
+            Lod::TessStreamed(t) => t.renderer.set_streamed_layers(paint, color),
         }
     }
 
@@ -322,10 +375,13 @@ impl TerrainRenderer {
             Lod::Clipmap(c) => c.renderer.set_surface_shader(device, wgsl_function),
             Lod::Cdlod(c) => c.renderer.set_surface_shader(device, wgsl_function),
             Lod::Tessellated(t) => t.renderer.set_surface_shader(device, wgsl_function),
+            Lod::TessStreamed(t) => t.renderer.set_surface_shader(device, wgsl_function),
         }
     }
 
-    /// The streamed world's quadtree, when this renderer draws one with CDLOD.
+    /// The streamed world's quadtree, when this renderer draws one with CDLOD. (A streamed
+    /// tessellation's is updated through [`TerrainRenderer::update_streamed_bounds`], which
+    /// also copies the changed nodes to the GPU.)
     pub fn streamed_tree_mut(&mut self) -> Option<&mut CdlodTree> {
         match &mut self.lod {
             Lod::Cdlod(Cdlod {
@@ -334,6 +390,41 @@ impl TerrainRenderer {
             }) => Some(tree),
             _ => None,
         }
+    }
+
+    /// The streamed world's quadtree, when this renderer draws one (CDLOD or tessellation).
+    pub fn streamed_tree(&self) -> Option<&CdlodTree> {
+        match &self.lod {
+            Lod::Cdlod(Cdlod {
+                source: CdlodSource::Streamed(tree),
+                ..
+            }) => Some(tree),
+            Lod::TessStreamed(t) => Some(&t.tree),
+            _ => None,
+        }
+    }
+
+    /// Asks `leaf_bounds` again for the leaves of the streamed world's quadtree that `dirty`
+    /// touches (`CdlodTree::update_leaf_bounds`), after a deformation or when finer tiles
+    /// arrived; a streamed tessellation copies the changed nodes to the GPU at the next
+    /// prepare. Nothing for a renderer that draws no streamed world.
+    pub fn update_streamed_bounds(
+        &mut self,
+        dirty: Rect,
+        leaf_bounds: impl FnMut(Rect) -> (f32, f32),
+    ) -> Result<(), GpuError> {
+        match &mut self.lod {
+            Lod::Cdlod(Cdlod {
+                source: CdlodSource::Streamed(tree),
+                ..
+            }) => tree.update_leaf_bounds(dirty, leaf_bounds)?,
+            Lod::TessStreamed(t) => {
+                t.tree.update_leaf_bounds(dirty, leaf_bounds)?;
+                t.dirty.push(dirty);
+            }
+            _ => {}
+        }
+        Ok(())
     }
 
     /// The clipmap's layout, when this renderer is a clipmap.
@@ -371,7 +462,7 @@ impl TerrainRenderer {
         rects: &[Rect],
     ) -> Result<(), GpuError> {
         match &mut self.lod {
-            Lod::Clipmap(_) => {}
+            Lod::Clipmap(_) | Lod::TessStreamed(_) => {}
             Lod::Cdlod(c) => {
                 if let CdlodSource::Map(updater) = &mut c.source {
                     updater.poll()?;
@@ -400,7 +491,7 @@ impl TerrainRenderer {
     /// run and tests, never inside a frame.
     pub fn flush(&mut self, queue: &wgpu::Queue) -> Result<(), GpuError> {
         match &mut self.lod {
-            Lod::Clipmap(_) => {}
+            Lod::Clipmap(_) | Lod::TessStreamed(_) => {}
             Lod::Cdlod(c) => {
                 if let CdlodSource::Map(updater) = &mut c.source {
                     updater.flush()?;
@@ -422,6 +513,7 @@ impl TerrainRenderer {
     pub fn tessellation(&self) -> Option<&GpuTessellation> {
         match &self.lod {
             Lod::Tessellated(t) => Some(&t.gpu),
+            Lod::TessStreamed(t) => Some(&t.gpu),
             _ => None,
         }
     }
@@ -519,6 +611,36 @@ impl TerrainRenderer {
                 let width = target_size.x as f32;
                 t.previous = t.last.replace((resolved.eye, width, lod_view.hfov));
             }
+            Lod::TessStreamed(t) => {
+                let (ClipmapSurface::Atlas { atlas } | ClipmapSurface::AtlasDetail { atlas, .. }) =
+                    surface
+                else {
+                    return Err(GpuError::Unsupported {
+                        what: "TerrainRenderer (streamed tessellation)",
+                        reason: "the surface must be the world's atlas, with or without detail",
+                    });
+                };
+                if atlas.config().world.encoding != t.encoding {
+                    return Err(GpuError::Unsupported {
+                        what: "TerrainRenderer (streamed tessellation)",
+                        reason: "the atlas stores heights in another encoding than the one the \
+                                 tessellation was made for",
+                    });
+                }
+                if !t.dirty.is_empty() {
+                    t.gpu.upload_tree(queue, &t.tree, &t.dirty)?;
+                    t.dirty.clear();
+                }
+                t.pass
+                    .encode_streamed(device, queue, encoder, &t.gpu, &t.tess, atlas, &lod_view)?;
+                let draw = TessDraw {
+                    surface,
+                    camera,
+                    style,
+                    target_size,
+                };
+                t.renderer.prepare(device, queue, &draw)?;
+            }
         }
         Ok(())
     }
@@ -576,6 +698,17 @@ impl TerrainRenderer {
                     max_screen_error_px: Some(max_screen_error_px),
                 })
             }
+            Lod::TessStreamed(t) => {
+                // The decisions read only the tree: the CPU counts the GPU's triangles without
+                // the heights (which only the atlas holds), and knows no screen error.
+                let frame = t.tess.select(&t.tree, &lod_view, &|_| 0.0)?;
+                Ok(TerrainFrame {
+                    mode: "tessellated",
+                    triangles: frame.triangle_count(),
+                    vertices: frame.vertex_count(),
+                    max_screen_error_px: None,
+                })
+            }
         }
     }
 
@@ -585,14 +718,17 @@ impl TerrainRenderer {
             Lod::Clipmap(c) => c.renderer.draw(pass),
             Lod::Cdlod(c) => c.renderer.draw(pass),
             Lod::Tessellated(t) => t.renderer.draw(pass, &t.gpu),
+            Lod::TessStreamed(t) => t.renderer.draw(pass, &t.gpu),
         }
     }
 
     /// Lets the tessellation's per-frame buffers be reused once the frame's work was
     /// submitted (see [`TessellationPass::recall`]); nothing for the other modes.
     pub fn recall(&mut self) {
-        if let Lod::Tessellated(t) = &mut self.lod {
-            t.pass.recall();
+        match &mut self.lod {
+            Lod::Tessellated(t) => t.pass.recall(),
+            Lod::TessStreamed(t) => t.pass.recall(),
+            _ => {}
         }
     }
 
@@ -611,7 +747,7 @@ impl TerrainRenderer {
         let resolved = ResolvedView::new(camera, target_size).ok()?;
         let view_proj = resolved.view_proj_world;
         match &self.lod {
-            Lod::Clipmap(_) => None,
+            Lod::Clipmap(_) | Lod::TessStreamed(_) => None,
             Lod::Cdlod(c) => {
                 let CdlodSource::Map(_) = c.source else {
                     return None;

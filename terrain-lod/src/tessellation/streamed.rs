@@ -6,17 +6,20 @@
 //! wherever the caller holds them: terrain-gpu's pass samples its tile atlas, the CPU
 //! reference takes a function.
 //!
-//! A vertex split in by triangles of level `l` is decided from a sphere around the box of
-//! the tree's nodes that cover the square of [`StreamedTessellation::reach`] texels around
-//! it: centred on the box's middle height, of radius the flat hierarchy's plus half the box's
-//! height span. A child's square lies inside its parent's and is looked up in the same or finer
-//! nodes, so every child's sphere lies inside its parents': the decisions nest as the
-//! hierarchy's do, and the mesh has no T-junctions (`docs/derivations.md`, "Streamed
-//! tessellation"). On a flat map the spheres are the hierarchy's.
+//! A vertex split in by triangles of level `l` is decided from a box: the square of
+//! [`StreamedTessellation::reach`] texels around it (which holds every vertex split in below
+//! it) between the lowest and highest height of the tree's nodes that cover the square. The
+//! ratio is the level's flat sphere radius (the hierarchy's on a flat map: the triangles'
+//! size) over the camera's distance to the box, so a triangle's edges project to at most the
+//! target width wherever the triangle lies in its box. A child's square lies inside its
+//! parent's and is looked up in the same or finer nodes, so every child's box lies inside its
+//! parents' and its ratio is at most theirs: the decisions nest as the hierarchy's do, and the
+//! mesh has no T-junctions (`docs/derivations.md`, "Streamed tessellation").
 //!
-//! The streamed form has no density map (it would need the curvature of every texel):
-//! [`TessConfig::use_density`] is ignored, and triangles are split by edge size or by
-//! [`TessConfig::max_error_px`] against the nodes' height spans.
+//! The streamed form splits by edge size alone: it has no density map (that needs the
+//! curvature of every texel), so [`TessConfig::use_density`] is ignored, and no error metric
+//! (a node's height span bounds the error of a triangle as large as the node, not of the
+//! smaller ones inside it, which would all split), so [`TessConfig::max_error_px`] is refused.
 
 use super::select::{Tri, base_triangles, decision_for};
 use super::{NEAR_M, TessConfig, TessDecision, TessFrame, split_threshold};
@@ -44,11 +47,18 @@ pub struct StreamedTessellation {
 }
 
 impl StreamedTessellation {
-    /// The tessellation of the world `tree` covers, with `config`. Fails on a bad config, a
-    /// tree not built from leaf bounds, or one whose roots are smaller than the square a
+    /// The tessellation of the world `tree` covers, with `config`. Fails on a bad config, one
+    /// with an error metric, a tree not built from leaf bounds, or one whose roots are smaller than the square a
     /// patch's first split looks at (about 3 patches: use fewer, smaller patches or more LODs).
     pub fn new(config: TessConfig, tree: &CdlodTree) -> Result<Self, LodError> {
         config.validate()?;
+        if let Some(e) = config.max_error_px {
+            return Err(LodError::InvalidTessParam {
+                what: "max_error_px",
+                value: e.into(),
+                allowed: "None: a streamed world is tessellated by edge size",
+            });
+        }
         if !tree.is_streamed() {
             return Err(LodError::InvalidTessParam {
                 what: "tree",
@@ -137,7 +147,8 @@ impl StreamedTessellation {
         &self.reach
     }
 
-    /// Per triangle level, the radius in metres a split's sphere has on a flat map.
+    /// Per triangle level, the radius in metres a split's sphere has on a flat map (the
+    /// ratio's numerator).
     pub fn radius(&self) -> &[f32] {
         &self.radius
     }
@@ -191,22 +202,19 @@ impl StreamedTessellation {
     }
 
     /// The split ratio of vertex `v` split in by triangles of `level` (split when above
-    /// [`split_threshold`]). Mirrors `tessellate_streamed.wgsl`.
+    /// [`split_threshold`]): the flat radius of the level's triangles over the distance from the camera to the box of
+    /// the square of the level's reach and the region's heights. Mirrors
+    /// `tess_source_streamed.wgsl`.
     pub fn ratio(&self, tree: &CdlodTree, d: &TessDecision, v: IVec2, level: u32) -> f32 {
         let (lo, hi) = self.region(tree, v, level);
         let l = (level as usize).min(self.radius.len() - 1);
-        let r = self.radius[l] + 0.5 * (hi - lo);
         let ts = self.texel_size;
-        let c = Vec3::new(
-            v.x as f32 * ts - d.camera.x,
-            0.5 * (lo + hi) - d.camera.y,
-            v.y as f32 * ts - d.camera.z,
-        );
-        let dist = (c.length() - r).max(NEAR_M);
-        if d.error_metric {
-            return d.scale * (hi - lo) / dist;
-        }
-        d.scale * r / dist
+        let r = self.reach[l] as f32 * ts;
+        let dx = ((v.x as f32 * ts - d.camera.x).abs() - r).max(0.0);
+        let dz = ((v.y as f32 * ts - d.camera.z).abs() - r).max(0.0);
+        let dy = (lo - d.camera.y).max(d.camera.y - hi).max(0.0);
+        let dist = (dx * dx + dy * dy + dz * dz).sqrt().max(NEAR_M);
+        d.scale * self.radius[l] / dist
     }
 
     fn split(

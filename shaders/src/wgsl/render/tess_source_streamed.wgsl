@@ -1,6 +1,6 @@
 // TessellationPass's source for a streamed world (terrain_lod::StreamedTessellation): splits
-// decided from a streamed CDLOD tree's node bounds (a sphere around the box of the nodes that
-// cover a square of the level's reach around the vertex), heights from the tile atlas
+// decided from a streamed CDLOD tree's node bounds (the camera's distance to the box of a square
+// of the level's reach around the vertex and its nodes' heights), heights from the tile atlas
 // (tile_atlas.wgsl and tile_atlas_bind_high.wgsl, placed before this file). Placed before
 // tessellate.wgsl.
 
@@ -40,20 +40,19 @@ fn region(v: vec2<i32>, level: u32) -> vec2<f32> {
     return b;
 }
 
+// The level's flat radius (the triangles' size) over the camera's distance to the box
+// of the square of the level's reach and the region's heights. Mirrors
+// StreamedTessellation::ratio.
 fn split_ratio(v: vec2<i32>, level: u32) -> f32 {
     let b = region(v, level);
-    let r = bitcast<f32>(tree.level[min(level, 15u)].z) + 0.5 * (b.y - b.x);
+    let info = tree.level[min(level, 15u)];
     let ts = params.texel_size;
-    let c = vec3<f32>(
-        f32(v.x) * ts - params.camera.x,
-        0.5 * (b.x + b.y) - params.camera.y,
-        f32(v.y) * ts - params.camera.z,
-    );
-    let dist = max(sqrt(c.x * c.x + c.y * c.y + c.z * c.z) - r, NEAR_M);
-    if params.error_metric != 0u {
-        return params.scale * (b.y - b.x) / dist;
-    }
-    return params.scale * r / dist;
+    let r = f32(info.x) * ts;
+    let dx = max(abs(f32(v.x) * ts - params.camera.x) - r, 0.0);
+    let dz = max(abs(f32(v.y) * ts - params.camera.z) - r, 0.0);
+    let dy = max(max(b.x - params.camera.y, params.camera.y - b.y), 0.0);
+    let dist = max(sqrt(dx * dx + dy * dy + dz * dz), NEAR_M);
+    return params.scale * bitcast<f32>(info.z) / dist;
 }
 
 fn vertex_height(v: vec2<i32>) -> f32 {
