@@ -145,6 +145,32 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
             .map(|(k, _)| k)
             .collect();
         assert!(differ.is_empty(), "tiles that differ: {differ:?}");
+        // The streamed tessellation (decided from the world's quadtree, heights from the
+        // atlas) with the footprints by parallax.
+        let tessellated = run(
+            &root.join("world_tess"),
+            &root.join("out_tess"),
+            8,
+            &[
+                "--resolution",
+                "96x64",
+                "--vram-budget",
+                "8",
+                "--lod",
+                "tessellated",
+            ],
+        );
+        for f in tessellated["frames"].as_array().expect("frames") {
+            assert_eq!(f["lod"], "tessellated", "{f}");
+            assert!(f["triangles"].as_u64() > Some(0), "{f}");
+            assert!(f["camera_clearance_m"].as_f64() >= Some(0.0), "{f}");
+            assert!(
+                !f["timings_ms"]
+                    .as_object()
+                    .expect("timings")
+                    .contains_key("stamp_cpu")
+            );
+        }
         // The footprints as refined geometry near the camera (the clipmap's finest cells).
         let refined = run(
             &root.join("world_refine"),

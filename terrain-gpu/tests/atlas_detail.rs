@@ -1,5 +1,5 @@
 //! A streamed world's atlas drawn with a detail layer (`ClipmapSurface::AtlasDetail`) under
-//! the clipmap and CDLOD: the footprints pressed into the detail tiles change the frame as
+//! the clipmap, CDLOD and the streamed tessellation: the footprints pressed into the detail tiles change the frame as
 //! they do over a coarse-map, a layer faded out before the nearest fragment leaves the frame of
 //! the bare atlas, and a layer that does not lie over the world is refused; refined geometry
 //! (`--detail refine`) over a fully resident atlas is the coarse-map's, bit for bit (the
@@ -27,10 +27,11 @@ use terrain_core::{Grid, TileLayout, TileUploadTarget, WrapMode};
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
     AtlasConfig, Camera, CdlodDraw, CdlodRenderer, ClipmapSurface, ClipmapView, DetailShading,
-    GpuDetailTiles, GpuError, GpuTileAtlas, OffscreenTarget, RefineDraw, RefinePass,
-    RefineRenderer, SkyColors, TargetFormat, TerrainStyle,
+    GpuDetailTiles, GpuError, GpuTessellation, GpuTileAtlas, OffscreenTarget, RefineDraw,
+    RefinePass, RefineRenderer, SkyColors, TargetFormat, TerrainStyle, TessDraw, TessRenderer,
+    TessellationPass,
 };
-use terrain_lod::{CdlodTree, CdlodView, Frustum};
+use terrain_lod::{CdlodConfig, CdlodTree, CdlodView, Frustum, StreamedTessellation, TessConfig};
 
 const SIZE: UVec2 = UVec2::new(256, 160);
 const TILE: u32 = 32;
@@ -73,6 +74,40 @@ fn full_atlas(scene: &Scene) -> GpuTileAtlas {
 enum Lod {
     Clipmap,
     Cdlod(Box<(CdlodTree, CdlodRenderer)>),
+    Tessellated(Box<Tessellated>),
+}
+
+/// A streamed tessellation of the scene's world and what draws it.
+struct Tessellated {
+    tess: StreamedTessellation,
+    gpu: GpuTessellation,
+    pass: TessellationPass,
+    renderer: TessRenderer,
+}
+
+fn tessellated_for(scene: &Scene) -> Tessellated {
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let enc = scene.map.encoding();
+    let config = CdlodConfig {
+        leaf_size: 16,
+        grid_size: 16,
+        lod_count: 5,
+        ..CdlodConfig::default()
+    };
+    let tree = CdlodTree::from_leaf_bounds(config, scene.map.size(), 1.0, |r| {
+        let g = scene.map.grid().copy_rect(r).unwrap();
+        let lo = *g.as_slice().iter().min().unwrap();
+        let hi = *g.as_slice().iter().max().unwrap();
+        (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
+    })
+    .unwrap();
+    let tess = StreamedTessellation::new(TessConfig::default(), &tree).unwrap();
+    Tessellated {
+        gpu: GpuTessellation::streamed(device, queue, &tess, &tree, enc, 1 << 20).unwrap(),
+        tess,
+        pass: TessellationPass::new(device).unwrap(),
+        renderer: TessRenderer::new(device, &TargetFormat::CAPTURE).unwrap(),
+    }
 }
 
 /// One frame of `camera` over `surface` with `lod`.
@@ -136,8 +171,36 @@ fn render(
             scene.sky.draw(&mut pass);
             renderer.draw(&mut pass);
         }
+        Lod::Tessellated(t) => {
+            let (ClipmapSurface::Atlas { atlas } | ClipmapSurface::AtlasDetail { atlas, .. }) =
+                surface
+            else {
+                unreachable!("the tessellation draws the atlas")
+            };
+            let view = CdlodView {
+                camera: camera.position,
+                frustum: Some(&frustum),
+                viewport_width: SIZE.x as f32,
+                hfov: 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan(),
+            };
+            t.pass
+                .encode_streamed(device, queue, &mut encoder, &t.gpu, &t.tess, atlas, &view)?;
+            let draw = TessDraw {
+                surface,
+                camera,
+                style: &style,
+                target_size: SIZE,
+            };
+            t.renderer.prepare(device, queue, &draw)?;
+            let mut pass = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
+            scene.sky.draw(&mut pass);
+            t.renderer.draw(&mut pass, &t.gpu);
+        }
     }
     queue.submit([encoder.finish()]);
+    if let Lod::Tessellated(t) = lod {
+        t.pass.recall();
+    }
     let image = target.read_rgba8(device, queue)?;
     scene.ctx.check().expect("no GPU validation errors");
     Ok(image)
@@ -184,6 +247,13 @@ fn clipmap_draws_footprints_on_a_streamed_world() {
 fn cdlod_draws_footprints_on_a_streamed_world() {
     footprints_show_on_the_atlas("atlas_detail_cdlod", |scene| {
         Lod::Cdlod(Box::new(cdlod_for(scene)))
+    });
+}
+
+#[test]
+fn the_streamed_tessellation_draws_footprints_on_a_streamed_world() {
+    footprints_show_on_the_atlas("atlas_detail_tessellated", |scene| {
+        Lod::Tessellated(Box::new(tessellated_for(scene)))
     });
 }
 
