@@ -110,18 +110,19 @@ pub struct Cli {
     /// Write top-down overview frames only, without the GPU (as when no adapter exists).
     #[arg(long, help_heading = RENDERING)]
     pub no_gpu: bool,
-    /// Level of detail of the default scenario's 3D frames: geometry clipmaps, CDLOD
-    /// (quadtree selection with per-vertex morphing), or adaptive tessellation (edges split by
-    /// their projected size and the density map, as a compute pass).
+    /// Level of detail of the 3D frames of the default and world scenarios: geometry
+    /// clipmaps, CDLOD (quadtree selection with per-vertex morphing), or adaptive tessellation
+    /// (edges split by their projected size and, in the default scenario, the density map, as
+    /// a compute pass; the streamed world's splits are decided from its quadtree's bounds).
     #[arg(long, value_enum, default_value_t = LodArg::Clipmap, help_heading = RENDERING)]
     pub lod: LodArg,
     /// The default scenario's detail layer: `none` stamps footprints into the coarse-map;
     /// `parallax` stamps them into 8-bit detail tiles refined x3 (streamed around the camera)
     /// and shades the terrain through them under every `--lod` mode: parallax occlusion
     /// mapping, the composite of the coarse and detail normals, faded out with distance;
-    /// `refine` (with the clipmap) draws the same tiles as geometry within 9 m of the camera
-    /// (each coarse triangle split in up to nine by refinement patterns) and by their normals
-    /// beyond. The world scenario: a walker's footprints in the streamed world's detail tiles
+    /// `refine` draws the same tiles as geometry within 9 m of the camera (each coarse
+    /// triangle split in up to nine by refinement patterns; the LOD mode leaves it the texels
+    /// there) and by their normals beyond. The world scenario: a walker's footprints in the streamed world's detail tiles
     /// (refined x8, kept in the world's folder), drawn the same two ways.
     #[arg(long, value_enum, default_value_t = DetailArg::None, help_heading = RENDERING)]
     pub detail: DetailArg,
@@ -345,8 +346,8 @@ pub enum DetailArg {
     /// Detail tiles, drawn by parallax occlusion mapping on the unrefined mesh (any LOD mode).
     Parallax,
     /// Detail tiles, drawn as refined geometry near the camera (refinement patterns, a compute
-    /// pass drawn indirectly) and by their normals beyond, in place of the clipmap's finest
-    /// cells (`--lod clipmap` only).
+    /// pass drawn indirectly) and by their normals beyond, in place of the LOD mode's finest
+    /// cells (any LOD mode).
     Refine,
 }
 

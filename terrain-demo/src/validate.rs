@@ -151,12 +151,6 @@ fn lod_flags(cli: &Cli) -> Result<()> {
              scenarios draw with the clipmap"
         ));
     }
-    if cli.detail == DetailArg::Refine && cli.lod != LodArg::Clipmap {
-        return Err(anyhow!(
-            "--detail refine draws refined geometry in place of the clipmap's finest cells: it \
-             needs --lod clipmap (--detail parallax draws the detail layer under every LOD mode)"
-        ));
-    }
     if cli.target_error.is_some() && cli.lod == LodArg::Clipmap {
         return Err(anyhow!(
             "--target-error chooses CDLOD's LODs or the tessellation's splits by screen-space \
@@ -236,6 +230,18 @@ mod tests {
             &["--detail", "refine"],
             &["--lod", "cdlod", "--detail", "parallax"],
             &["--lod", "tessellated", "--detail", "parallax"],
+            &["--lod", "cdlod", "--detail", "refine"],
+            &["--lod", "tessellated", "--detail", "refine"],
+            &[
+                "--scenario",
+                "world",
+                "--lod",
+                "tessellated",
+                "--detail",
+                "refine",
+                "--triangle-width",
+                "12",
+            ],
             &[
                 "--camera",
                 "orbit",
@@ -319,22 +325,9 @@ mod tests {
                 "--triangle-width",
             ),
             (
-                &[
-                    "--scenario",
-                    "world",
-                    "--lod",
-                    "cdlod",
-                    "--detail",
-                    "refine",
-                ],
-                "--detail",
-            ),
-            (
                 &["--scenario", "flyover", "--detail", "parallax"],
                 "--detail",
             ),
-            (&["--lod", "cdlod", "--detail", "refine"], "--detail"),
-            (&["--lod", "tessellated", "--detail", "refine"], "--detail"),
             (&["--target-error", "1"], "--target-error"),
             (&["--no-morph"], "--no-morph"),
             (&["--no-density-map"], "--no-density-map"),

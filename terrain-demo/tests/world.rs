@@ -4,7 +4,8 @@
 //! the granular volume is exact at every frame, collision keeps the camera above ground, every
 //! wanted tile is resident after the first second, and the world left by a GPU run (granular
 //! steps, craters and footprints on the GPU, drawn by CDLOD from the tile atlas with the
-//! detail layer) is the one a `--no-gpu` run leaves, file for file.
+//! detail layer) is the one a `--no-gpu` run leaves, file for file. Short GPU runs draw the
+//! world with the streamed tessellation and with refined footprints.
 
 mod common;
 
@@ -146,7 +147,8 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
             .collect();
         assert!(differ.is_empty(), "tiles that differ: {differ:?}");
         // The streamed tessellation (decided from the world's quadtree, heights from the
-        // atlas) with the footprints by parallax.
+        // atlas) with the footprints as refined geometry, which it leaves the texels near the
+        // camera.
         let tessellated = run(
             &root.join("world_tess"),
             &root.join("out_tess"),
@@ -158,6 +160,8 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
                 "8",
                 "--lod",
                 "tessellated",
+                "--detail",
+                "refine",
             ],
         );
         for f in tessellated["frames"].as_array().expect("frames") {

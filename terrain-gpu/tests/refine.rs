@@ -1,6 +1,7 @@
 //! Refined geometry (`--detail refine`, Flower 2010, sec. 2.4.3): `RefinePass`'s triangles against
 //! the CPU reference `terrain_lod::refine` (same patterns, same positions, heights of coarse +
-//! faded detail), no cracks from grazing views where the refined region meets the clipmap, and
+//! faded detail), no cracks from grazing views where the refined region meets the clipmap,
+//! CDLOD or the tessellation, and
 //! a refined region without detail drawing the coarse frame. On whatever adapter the machine
 //! has (lavapipe in CI); without one they skip, or fail under `TERRAIN_REQUIRE_GPU=1`.
 
@@ -18,9 +19,11 @@ use terrain_core::{Blend, GaussianStamp, Grid, StampPlacement};
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
     Camera, ClipmapSurface, DetailShading, GpuDetailTiles, GpuError, OffscreenTarget, RefineDraw,
-    RefinePass, RefineRenderer, SkyColors, SmallReadback, TargetFormat, TerrainStyle,
+    RefinePass, RefineRenderer, SkyColors, SmallReadback, TargetFormat, TerrainRenderer,
+    TerrainStyle, TerrainView,
 };
 use terrain_lod::refine::RefineView;
+use terrain_lod::{CdlodConfig, TessConfig};
 
 /// 256 x 256 coarse texels at 1 m refined x3, in 16 x 16 tiles of 48 detail texels.
 fn layout(scene: &Scene) -> DetailLayout {
@@ -505,4 +508,135 @@ fn counts_ride_the_ring_without_a_wait_and_unsubmitted_requests_free_their_buffe
     assert!(ring.request(&mut encoder, &source, 2).is_err());
     assert!(SmallReadback::new(device, 0, 8).is_err());
     assert!(SmallReadback::new(device, 2, 6).is_err());
+}
+
+/// Renders `camera` with `terrain` (any LOD mode, detail surface) leaving the refined region
+/// to the refined mesh through `TerrainRenderer::exclude`.
+fn render_refined_with(
+    scene: &Scene,
+    parts: &mut (RefinePass, RefineRenderer),
+    tiles: &GpuDetailTiles,
+    terrain: &mut TerrainRenderer,
+    camera: &Camera,
+    sky: &SkyColors,
+) -> Result<(Grid<[u8; 4]>, usize, usize), GpuError> {
+    let size = UVec2::new(320, 200);
+    let (pass, renderer) = parts;
+    let (style, shading) = (style(), shading());
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let surface = ClipmapSurface::Detail {
+        map: &scene.gpu_map,
+        normals: &scene.normals,
+        detail: tiles,
+        shading: &shading,
+    };
+    let draw = RefineDraw {
+        surface,
+        radius_m: RADIUS,
+        camera,
+        style: &style,
+        target_size: size,
+    };
+    let view = pass.encode(device, queue, &mut encoder, &draw)?;
+    renderer.prepare(device, queue, &draw, pass)?;
+    terrain.exclude(Some(view.region()));
+    let frame = TerrainView {
+        surface,
+        camera,
+        style: &style,
+        target_size: size,
+    };
+    terrain.prepare(device, queue, &mut encoder, &frame)?;
+    let aspect = size.x as f32 / size.y as f32;
+    scene
+        .sky
+        .prepare(queue, camera.view_proj_relative(aspect), sky)?;
+    let target = OffscreenTarget::new(device, size)?;
+    {
+        let mut rp = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
+        scene.sky.draw(&mut rp);
+        terrain.draw(&mut rp);
+        renderer.draw(&mut rp, pass);
+    }
+    queue.submit([encoder.finish()]);
+    terrain.recall();
+    let image = target.read_rgba8(device, queue)?;
+    let (tris, overflow) = pass.read_triangles(device, queue)?;
+    assert!(!overflow);
+    scene.ctx.check().expect("no GPU validation errors");
+    Ok((image, tris.len(), view.base_triangles() as usize))
+}
+
+/// The refined region meets CDLOD's LOD 0 and the tessellation (which draws the region at full
+/// resolution, whatever its triangle width) as it meets the clipmap: no sky through the
+/// terrain from grazing views across its edge. A tessellation whose triangles stop short of
+/// the texels is refused, not drawn cracked.
+#[test]
+fn no_cracks_at_the_edge_of_the_refined_region_under_cdlod_and_the_tessellation() {
+    let Some(ctx) = context_or_skip("refine_cracks_lod") else {
+        return;
+    };
+    let scene = Scene::new(ctx, 63, 4);
+    let (_, tiles) = footprints(&scene);
+    let mut parts = refine_parts(&scene);
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let map = &scene.map;
+    let target = TargetFormat::CAPTURE;
+    let cdlod = CdlodConfig::for_map(map.size(), map.wrap(), map.texel_size(), 300.0).unwrap();
+    // The region's edge, up to 23 m away, is finer than the view asks at the default width
+    // (texel-sized triangles reach about 7 m on this 320-pixel target): drawn at full
+    // resolution all the same, also at a width that asks for almost nothing.
+    let coarse = TessConfig {
+        triangle_width_px: 500.0,
+        ..TessConfig::default()
+    };
+    let magenta = SkyColors {
+        horizon: Vec3::new(1.0, 0.0, 1.0),
+        zenith: Vec3::new(1.0, 0.0, 1.0),
+    };
+    let mut lods = [
+        TerrainRenderer::cdlod(device, &target, map, cdlod).unwrap(),
+        TerrainRenderer::tessellated(device, queue, &target, map, TessConfig::default(), true)
+            .unwrap(),
+        TerrainRenderer::tessellated(device, queue, &target, map, coarse, true).unwrap(),
+    ];
+    for terrain in &mut lods {
+        for (i, xz) in [Vec2::new(93.3, 94.6), Vec2::new(40.9, 180.1)]
+            .iter()
+            .enumerate()
+        {
+            for (j, yaw) in [0.0f32, 1.6, 3.9].iter().enumerate() {
+                let eye = Vec3::new(xz.x, scene.ground(*xz) + 0.8 + 0.4 * i as f32, xz.y);
+                let camera = Camera::looking(eye, Vec3::new(yaw.cos(), 0.0, yaw.sin()));
+                let (image, refined, base) =
+                    render_refined_with(&scene, &mut parts, &tiles, terrain, &camera, &magenta)
+                        .unwrap();
+                let mode = terrain.mode();
+                assert!(refined >= base, "{mode} view {i}/{j}: the region is drawn");
+                let (holes, ground) = holes(&image);
+                assert!(ground > 320 * 200 / 4);
+                if holes > 0 {
+                    let path =
+                        std::env::temp_dir().join(format!("refine_crack_{mode}_{i}_{j}.png"));
+                    let _ = terrain_core::io::write_png_rgba8(&path, &image);
+                    panic!("{mode} view {i}/{j}: {holes} sky pixels inside the terrain");
+                }
+            }
+        }
+    }
+    // Triangles kept above 4 m cannot meet the refined texels: refused.
+    let capped = TessConfig {
+        min_triangle_m: 4.0,
+        ..TessConfig::default()
+    };
+    let mut terrain =
+        TerrainRenderer::tessellated(device, queue, &target, map, capped, true).unwrap();
+    let camera = Camera::looking(Vec3::new(93.3, 40.0, 94.6), Vec3::X);
+    let err = render_refined_with(&scene, &mut parts, &tiles, &mut terrain, &camera, &magenta);
+    assert!(
+        matches!(err, Err(GpuError::Unsupported { .. })),
+        "{:?}",
+        err.map(|_| ())
+    );
 }

@@ -338,15 +338,17 @@ fn uploaded_updates_keep_the_gpu_equal_to_the_cpu() {
 /// The constants the shader repeats from terrain-lod.
 #[test]
 fn the_shader_repeats_the_libraries_constants() {
-    use terrain_lod::tessellation::{MAX_LEVELS, NEAR_M, SPLIT_MARGIN};
+    use terrain_lod::tessellation::{FORCED_RATIO, MAX_LEVELS, NEAR_M, SPLIT_MARGIN};
     let src = terrain_shaders::TESSELLATE;
     assert_eq!(NEAR_M, 1e-3);
     assert_eq!(SPLIT_MARGIN, 1e-4);
     assert_eq!(MAX_LEVELS, 16);
+    assert_eq!(FORCED_RATIO, 1e30);
     for line in [
         "const NEAR_M: f32 = 1e-3;",
         "const SPLIT_MARGIN: f32 = 1e-4;",
         "const MAX_LEVELS: u32 = 16u;",
+        "const FORCED_RATIO: f32 = 1e30;",
     ] {
         assert!(src.contains(line), "tessellate.wgsl lacks `{line}`");
     }

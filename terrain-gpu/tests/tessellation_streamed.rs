@@ -246,6 +246,25 @@ fn the_gpu_emits_the_cpu_reference_triangles_before_and_after_a_deformation() {
     }
     assert!(compared > 50_000, "{compared} triangles compared");
 
+    // A rect at full resolution (what another renderer takes over), far from the camera.
+    let tess = StreamedTessellation::new(TessConfig::default(), &w.tree).unwrap();
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let enc = scene.map.encoding();
+    let gpu = GpuTessellation::streamed(device, queue, &tess, &w.tree, enc, 1 << 20).unwrap();
+    let full = (IVec2::new(170, 150), IVec2::new(206, 186));
+    pass.set_full_resolution(Some(full));
+    for (eye, dir) in views {
+        let view = view_of(&Camera::looking(eye, dir), size, None);
+        let cpu = tess
+            .select_with(&w.tree, &view, &w.height(), Some(full))
+            .unwrap();
+        let tris = tessellate(&scene, &mut pass, &gpu, &tess, &w.gpu, &view);
+        assert_same(&cpu.triangles, &tris, &format!("full resolution {eye}"));
+        let plain = tess.select(&w.tree, &view, &w.height()).unwrap();
+        assert!(cpu.triangle_count() > plain.triangle_count(), "{eye}");
+    }
+    pass.set_full_resolution(None);
+
     // A 30 m deep crater across both levels' tiles: the atlas and the tree follow it (the
     // tree's changed nodes uploaded alone), and the GPU still emits the CPU's triangles.
     let tess = StreamedTessellation::new(TessConfig::default(), &w.tree).unwrap();

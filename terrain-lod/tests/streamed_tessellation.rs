@@ -256,3 +256,49 @@ fn bad_trees_views_and_budgets_are_refused() {
         2 * u64::from(tess.patches().element_product())
     );
 }
+
+/// A rect another mesh takes over (refined geometry near the camera) is drawn at full
+/// resolution whatever the view asks: every texel on its edge is a vertex at its true height
+/// (so the two meshes meet), 60 m away and at a huge triangle width too, and the mesh stays
+/// conforming; the hierarchy does the same.
+#[test]
+fn a_full_resolution_rect_is_drawn_through_every_texel() {
+    let m = map(256, 192, true);
+    let t = tree(&m);
+    let h = heights(&m);
+    let config = TessConfig {
+        triangle_width_px: 500.0,
+        ..TessConfig::default()
+    };
+    let hierarchy = TessHierarchy::from_map(&m, None, config).unwrap();
+    let streamed = StreamedTessellation::new(config, &t).unwrap();
+    let camera = Vec3::new(45.2, 40.0, 35.1);
+    let (lo, hi) = (IVec2::new(200, 150), IVec2::new(218, 168));
+    let assert_edge_drawn = |frame: &terrain_lod::TessFrame| {
+        let mut at = std::collections::HashMap::new();
+        for v in frame.triangles.iter().flatten() {
+            at.insert(IVec2::new(v.texel[0] as i32, v.texel[1] as i32), v.height);
+        }
+        for y in lo.y..=hi.y {
+            for x in lo.x..=hi.x {
+                let p = IVec2::new(x, y);
+                if x == lo.x || x == hi.x || y == lo.y || y == hi.y {
+                    assert_eq!(at.get(&p), Some(&h(p)), "edge texel {p}");
+                }
+            }
+        }
+    };
+    let extent = streamed.patches() * 32;
+    let plain = streamed.select(&t, &view(camera), &h).unwrap();
+    let full = streamed
+        .select_with(&t, &view(camera), &h, Some((lo, hi)))
+        .unwrap();
+    assert!(full.triangle_count() > plain.triangle_count() + 600);
+    assert_edge_drawn(&full);
+    assert_conforming(&full, extent);
+    let full = hierarchy
+        .select_with(&view(camera), Some((lo, hi)))
+        .unwrap();
+    assert_edge_drawn(&full);
+    assert_conforming(&full, extent);
+}

@@ -52,6 +52,8 @@ pub struct CdlodRenderer {
     materials: MaterialSlot,
     /// An engine's `surface_weights` ([`CdlodRenderer::set_surface_shader`]).
     user_surface: Option<String>,
+    /// Texels another renderer draws (see [`CdlodRenderer::exclude`]).
+    excluded: Option<(glam::IVec2, glam::IVec2)>,
 }
 
 /// Everything one CDLOD frame is drawn from.
@@ -131,7 +133,18 @@ impl CdlodRenderer {
             wireframe: false,
             materials: MaterialSlot::default(),
             user_surface: None,
+            excluded: None,
         })
+    }
+
+    /// Leaves the texels `region` (first and one-past-last vertex, relative to the camera's
+    /// whole texel, as [`crate::RefinePass::region`] gives them) to another renderer from the
+    /// next [`CdlodRenderer::prepare`] on: their fragments are discarded. `None` draws
+    /// everything again. Every node the region meets must be of LOD 0 with a vertex on every
+    /// texel, and the region must end before LOD 0 starts to morph (so its edge vertices are
+    /// the stored heights the refined mesh meets); prepare refuses it otherwise.
+    pub fn exclude(&mut self, region: Option<(glam::IVec2, glam::IVec2)>) {
+        self.excluded = region;
     }
 
     /// Shades [`crate::SurfaceShading::Materials`] frames with `materials` from the next
@@ -245,6 +258,10 @@ impl CdlodRenderer {
         };
         let mut uniform =
             frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset)?;
+        if let Some((lo, hi)) = self.excluded {
+            check_exclusion(frame, &view, info.texel_size, (lo, hi))?;
+            uniform.excluded = crate::render::frame::exclusion_rect(lo, hi)?;
+        }
         let (shading, new_shading) = self.materials.get(device, queue, info.size)?;
         uniform.set_layers(&shading);
         let mut lods: LodsUniform = [[0.0, -1.0, 0.0, 0.0]; MAX_CDLOD_LODS as usize];
@@ -310,6 +327,43 @@ impl CdlodRenderer {
         pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
         pass.draw_indexed(0..self.index_count, 0, 0..self.instance_count);
     }
+}
+
+/// Fails unless every node of `frame` that meets the texels `lo .. hi` (relative to the
+/// camera's whole texel) is of LOD 0 with a vertex on every texel, and every point of their
+/// edge lies nearer the camera (at any height of those nodes) than where LOD 0 starts to
+/// morph.
+fn check_exclusion(
+    frame: &CdlodFrame,
+    view: &crate::render::camera::ResolvedView,
+    texel_size: f32,
+    (lo, hi): (glam::IVec2, glam::IVec2),
+) -> Result<(), GpuError> {
+    let refuse = GpuError::Unsupported {
+        what: "CdlodRenderer::exclude",
+        reason: "the excluded region reaches beyond LOD 0's unmorphed range (or LOD 0 has no \
+                 vertex on every texel): refine a smaller radius or use a larger finest range",
+    };
+    let eye = glam::Vec2::new(view.eye.x, view.eye.z) / texel_size;
+    let base = eye.floor().as_ivec2();
+    let (lo, hi) = (base + lo, base + hi);
+    let morph_start = frame.ranges.morph.first().map_or(f32::INFINITY, |m| m.0);
+    let full = frame.instances.iter().all(|i| i.lod != 0 || i.step == 1);
+    // The edge's farthest point horizontally (texels) from the eye.
+    let far = (lo.as_vec2() - eye).abs().max((hi.as_vec2() - eye).abs()) * texel_size;
+    for node in &frame.nodes {
+        let end = node.origin + node.size as i32;
+        if node.origin.cmpgt(hi).any() || end.cmplt(lo).any() {
+            continue;
+        }
+        let dy = (view.eye.y - node.bounds.min)
+            .abs()
+            .max((node.bounds.max - view.eye.y).abs());
+        if node.lod != 0 || !full || far.length_squared() + dy * dy >= morph_start * morph_start {
+            return Err(refuse);
+        }
+    }
+    Ok(())
 }
 
 /// The binding of the LOD uniform (`cdlod.wgsl`), after every surface's bindings.

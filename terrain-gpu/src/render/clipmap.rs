@@ -396,9 +396,8 @@ impl ClipmapRenderer {
 }
 
 impl ClipmapRenderer {
-    /// The exclusion rect of `(lo, hi)` for a camera `frac` into its whole texel, shrunk by a
-    /// thousandth of a texel: fragments on the region's edge stay drawn by both renderers
-    /// (the same surface there) rather than by neither.
+    /// The exclusion rect of `(lo, hi)` for a camera `frac` into its whole texel
+    /// ([`crate::render::frame::exclusion_rect`]), refused where the finest level morphs.
     fn exclusion(&self, (lo, hi): (IVec2, IVec2), frac: Vec2) -> Result<[f32; 4], GpuError> {
         let half = (self.n - 1) as f32 * 0.5;
         let unmorphed = half - 1.0 - terrain_lod::morph::default_morph_width(self.n);
@@ -413,13 +412,7 @@ impl ClipmapRenderer {
                          refine a smaller radius or use a larger clipmap",
             });
         }
-        const EDGE: f32 = 1e-3;
-        Ok([
-            lo.x as f32 + EDGE,
-            lo.y as f32 + EDGE,
-            hi.x as f32 - EDGE,
-            hi.y as f32 - EDGE,
-        ])
+        crate::render::frame::exclusion_rect(lo, hi)
     }
 
     fn pipeline(&self, kind: SurfaceKind) -> &SurfacePipeline {

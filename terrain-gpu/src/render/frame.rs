@@ -66,6 +66,25 @@ const _: () = assert!(std::mem::size_of::<FrameUniform>() == 304);
 /// An exclusion rect with min above max: nothing is discarded.
 pub(crate) const NOTHING_EXCLUDED: [f32; 4] = [1.0, 1.0, -1.0, -1.0];
 
+/// The `excluded` rect of the texels from `lo` to `hi` (relative to the camera's whole
+/// texel), shrunk by a thousandth of a texel: fragments on the region's edge stay drawn by both
+/// renderers (the same surface there) rather than by neither. Fails for an empty region.
+pub(crate) fn exclusion_rect(lo: glam::IVec2, hi: glam::IVec2) -> Result<[f32; 4], GpuError> {
+    if lo.cmpge(hi).any() {
+        return Err(GpuError::Unsupported {
+            what: "exclude",
+            reason: "the excluded region is empty",
+        });
+    }
+    const EDGE: f32 = 1e-3;
+    Ok([
+        lo.x as f32 + EDGE,
+        lo.y as f32 + EDGE,
+        hi.x as f32 - EDGE,
+        hi.y as f32 - EDGE,
+    ])
+}
+
 /// The frame uniform of a view of `info` by `view` on `target`, with the clipmap's
 /// `(n, levels)` (ignored by other renderers) and the wrap offset of the texels the frame
 /// reads.

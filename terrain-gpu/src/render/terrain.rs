@@ -106,6 +106,10 @@ struct Tessellated {
     previous: Option<(Vec3, f32, f32)>,
     probes: Vec<Vec2>,
     previous_probes: Vec<Vec2>,
+    /// The region left to another renderer (see [`TerrainRenderer::exclude`]).
+    excluded: Option<(IVec2, IVec2)>,
+    /// The last prepared frame's full-resolution rect (map texels): the excluded region.
+    full: Option<(IVec2, IVec2)>,
 }
 
 /// The tessellation of a streamed world: decided from its quadtree (kept current by its owner
@@ -119,6 +123,10 @@ struct TessStreamed {
     renderer: TessRenderer,
     /// Rects whose node bounds changed since the last upload.
     dirty: Vec<Rect>,
+    /// The region left to another renderer (see [`TerrainRenderer::exclude`]).
+    excluded: Option<(IVec2, IVec2)>,
+    /// The last prepared frame's full-resolution rect (map texels): the excluded region.
+    full: Option<(IVec2, IVec2)>,
 }
 
 enum Lod {
@@ -248,6 +256,8 @@ impl TerrainRenderer {
                 previous: None,
                 probes: Vec::new(),
                 previous_probes: Vec::new(),
+                excluded: None,
+                full: None,
             })),
         })
     }
@@ -282,6 +292,8 @@ impl TerrainRenderer {
                 pass: TessellationPass::new(device)?,
                 renderer: TessRenderer::new(device, target)?,
                 dirty: Vec::new(),
+                excluded: None,
+                full: None,
             })),
         })
     }
@@ -443,11 +455,25 @@ impl TerrainRenderer {
         }
     }
 
-    /// Leaves `region` to another renderer (the refined cells of a detail layer): see
-    /// [`ClipmapRenderer::exclude`]. Only the clipmap excludes.
+    /// Leaves `region` to another renderer (the refined cells of a detail layer, relative to
+    /// the camera's whole texel as [`crate::RefinePass::region`] gives them) from the next
+    /// prepare on, in every mode: see [`ClipmapRenderer::exclude`] and
+    /// [`crate::CdlodRenderer::exclude`]. The tessellation draws the region at full resolution
+    /// whatever the view asks ([`TessellationPass::set_full_resolution`]), so its edge meets
+    /// the other mesh; the prepare fails where a minimum triangle size keeps it from the
+    /// texels.
     pub fn exclude(&mut self, region: Option<(IVec2, IVec2)>) {
-        if let Lod::Clipmap(c) = &mut self.lod {
-            c.renderer.exclude(region);
+        match &mut self.lod {
+            Lod::Clipmap(c) => c.renderer.exclude(region),
+            Lod::Cdlod(c) => c.renderer.exclude(region),
+            Lod::Tessellated(t) => {
+                t.renderer.exclude(region);
+                t.excluded = region;
+            }
+            Lod::TessStreamed(t) => {
+                t.renderer.exclude(region);
+                t.excluded = region;
+            }
         }
     }
 
@@ -599,6 +625,14 @@ impl TerrainRenderer {
             }
             Lod::Tessellated(t) => {
                 let hierarchy = &t.updater.state().hierarchy;
+                t.full = t
+                    .excluded
+                    .map(|r| absolute(r, resolved.eye, hierarchy.texel_size()));
+                if t.full.is_some() {
+                    let levels = hierarchy.decision(&lod_view)?.split_levels;
+                    check_full(levels + 1 == hierarchy.level_count())?;
+                }
+                t.pass.set_full_resolution(t.full);
                 t.pass
                     .encode(device, queue, encoder, &t.gpu, hierarchy, &lod_view)?;
                 let draw = TessDraw {
@@ -631,6 +665,14 @@ impl TerrainRenderer {
                     t.gpu.upload_tree(queue, &t.tree, &t.dirty)?;
                     t.dirty.clear();
                 }
+                t.full = t
+                    .excluded
+                    .map(|r| absolute(r, resolved.eye, t.tree.texel_size()));
+                if t.full.is_some() {
+                    let levels = t.tess.decision(&lod_view)?.split_levels;
+                    check_full(levels == 2 * t.tess.config().patch_size.trailing_zeros())?;
+                }
+                t.pass.set_full_resolution(t.full);
                 t.pass
                     .encode_streamed(device, queue, encoder, &t.gpu, &t.tess, atlas, &lod_view)?;
                 let draw = TessDraw {
@@ -681,7 +723,7 @@ impl TerrainRenderer {
             }
             Lod::Tessellated(t) => {
                 let hierarchy = &t.updater.state().hierarchy;
-                let frame = hierarchy.select(&lod_view)?;
+                let frame = hierarchy.select_with(&lod_view, t.full)?;
                 let max_screen_error_px = hierarchy.max_screen_error_px(&frame, &lod_view);
                 let stride = (frame.triangles.len() / JUMP_PROBES).max(1);
                 let probes = frame
@@ -701,7 +743,7 @@ impl TerrainRenderer {
             Lod::TessStreamed(t) => {
                 // The decisions read only the tree: the CPU counts the GPU's triangles without
                 // the heights (which only the atlas holds), and knows no screen error.
-                let frame = t.tess.select(&t.tree, &lod_view, &|_| 0.0)?;
+                let frame = t.tess.select_with(&t.tree, &lod_view, &|_| 0.0, t.full)?;
                 Ok(TerrainFrame {
                     mode: "tessellated",
                     triangles: frame.triangle_count(),
@@ -785,6 +827,26 @@ impl TerrainRenderer {
             }
         }
     }
+}
+
+/// `region` (texels relative to the camera's whole texel, as the frame uniform has it) in
+/// texels of the map.
+fn absolute((lo, hi): (IVec2, IVec2), eye: Vec3, texel_size: f32) -> (IVec2, IVec2) {
+    let base = (Vec2::new(eye.x, eye.z) / texel_size).floor().as_ivec2();
+    (base + lo, base + hi)
+}
+
+/// Refuses to leave a region to another renderer when the tessellation's triangles stop short
+/// of the texels (a minimum triangle size): its edge would not meet the other mesh.
+fn check_full(reaches_texels: bool) -> Result<(), GpuError> {
+    if reaches_texels {
+        return Ok(());
+    }
+    Err(GpuError::Unsupported {
+        what: "TerrainRenderer::exclude",
+        reason: "the tessellation's minimum triangle size keeps it from the texels the excluded \
+                 region's edge must be drawn through",
+    })
 }
 
 /// What CDLOD's and the tessellation's decisions are made for: the eye, the frustum and the

@@ -215,6 +215,40 @@ pub struct TessDecision {
     pub use_density: bool,
     /// `1 / morph_range`, or 0 with the morph off (vertices drawn at their true height).
     pub inv_morph_range: f32,
+    /// Texels drawn at full resolution whatever the view asks: every vertex whose
+    /// descendants' square ([`descendant_reach`]) meets the rect from the first to the last
+    /// corner (both included) is split in and drawn at its true height. Nested like the
+    /// ratios (a child's square lies in its parents'), so the mesh stays conforming; another
+    /// renderer can take over the rect and meet this mesh along its edge (the refined geometry
+    /// of a detail layer, as the clipmap leaves it its finest cells).
+    pub full_resolution: Option<(IVec2, IVec2)>,
+}
+
+/// The ratio of a vertex [`TessDecision::full_resolution`] forces: past every threshold and
+/// morph range.
+pub const FORCED_RATIO: f32 = 1e30;
+
+/// The half side, in texels, of the square around a vertex split in by triangles of `level`
+/// (of patches of `patch_size` texels) that holds every vertex split in below it: the sum of
+/// the per-axis offsets from a vertex to those its triangles split in, level by level down
+/// to the last that splits (0 from level `2 log2 patch_size - 1` on).
+pub fn descendant_reach(patch_size: u32, level: u32) -> u32 {
+    let levels = 2 * patch_size.trailing_zeros();
+    (level..levels.saturating_sub(1))
+        .map(|l| patch_size >> (l.div_ceil(2) + 1))
+        .sum()
+}
+
+impl TessDecision {
+    /// Whether [`TessDecision::full_resolution`] forces vertex `v`, split in by triangles of
+    /// `level` of patches of `patch_size` texels.
+    pub fn forces(&self, v: IVec2, level: u32, patch_size: u32) -> bool {
+        let Some((lo, hi)) = self.full_resolution else {
+            return false;
+        };
+        let r = descendant_reach(patch_size, level) as i32;
+        (v - r).cmple(hi).all() && (v + r).cmpge(lo).all()
+    }
 }
 
 /// The saturated bounds of every grid vertex of a heightfield's patches, kept current after

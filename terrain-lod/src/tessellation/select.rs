@@ -4,8 +4,8 @@
 //! height, its screen-space error, the popping between two frames).
 
 use super::{
-    FLAT_SPHERE, NEAR_M, TessDecision, TessFrame, TessHierarchy, TessTriangle, TessVertex,
-    split_threshold,
+    FLAT_SPHERE, FORCED_RATIO, NEAR_M, TessDecision, TessFrame, TessHierarchy, TessTriangle,
+    TessVertex, split_threshold,
 };
 use crate::cdlod::CdlodView;
 use crate::error::LodError;
@@ -89,7 +89,11 @@ impl TessHierarchy {
             return None;
         }
         let v = (t.l + t.r) / 2;
-        let r = self.ratio(d, v);
+        let r = if d.forces(v, t.level, self.config.patch_size) {
+            FORCED_RATIO
+        } else {
+            self.ratio(d, v)
+        };
         let threshold = split_threshold(t.level);
         // NaN splits nothing, as on the GPU (`r > threshold` there).
         if r.is_nan() || r <= threshold {
@@ -130,7 +134,21 @@ impl TessHierarchy {
     /// Fails on a non-finite camera or field of view, or when more than
     /// [`TessConfig::max_triangles`](super::TessConfig::max_triangles) would be emitted.
     pub fn select(&self, view: &CdlodView<'_>) -> Result<TessFrame, LodError> {
-        let d = self.decision(view)?;
+        self.select_with(view, None)
+    }
+
+    /// As [`TessHierarchy::select`], with the texels from the first to the last corner of
+    /// `full_resolution` (both included) drawn at full resolution whatever the view asks (see
+    /// [`TessDecision::full_resolution`]).
+    pub fn select_with(
+        &self,
+        view: &CdlodView<'_>,
+        full_resolution: Option<(IVec2, IVec2)>,
+    ) -> Result<TessFrame, LodError> {
+        let d = TessDecision {
+            full_resolution,
+            ..self.decision(view)?
+        };
         let limit = self.config.max_triangles;
         let emitted = std::sync::atomic::AtomicUsize::new(0);
         let rows: Vec<u32> = (0..self.patches.y).collect();
@@ -349,6 +367,7 @@ pub(super) fn decision_for(
         split_levels,
         use_density: c.use_density,
         inv_morph_range: if c.morph { 1.0 / c.morph_range } else { 0.0 },
+        full_resolution: None,
     })
 }
 

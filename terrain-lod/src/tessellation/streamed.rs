@@ -22,7 +22,7 @@
 //! smaller ones inside it, which would all split), so [`TessConfig::max_error_px`] is refused.
 
 use super::select::{Tri, base_triangles, decision_for};
-use super::{NEAR_M, TessConfig, TessDecision, TessFrame, split_threshold};
+use super::{FORCED_RATIO, NEAR_M, TessConfig, TessDecision, TessFrame, split_threshold};
 use crate::cdlod::{CdlodTree, CdlodView};
 use crate::error::LodError;
 use glam::{IVec2, UVec2, Vec3};
@@ -87,14 +87,15 @@ impl StreamedTessellation {
         // Per-axis offset from a level-l vertex to those its triangles split in, and the
         // distance: along an axis for even l, diagonal for odd l.
         let offset = |l: usize| ps >> (l.div_ceil(2) + 1);
-        let mut reach = vec![0u32; levels];
+        let reach: Vec<u32> = (0..levels as u32)
+            .map(|l| super::descendant_reach(ps, l))
+            .collect();
         let mut radius = vec![0.0f32; levels];
         let ts = tree.texel_size();
         for l in (0..levels).rev() {
             let half_hyp = ps as f32 * std::f32::consts::SQRT_2.powi(1 - l as i32) * 0.5 * ts;
             if l + 1 < levels {
                 let o = offset(l);
-                reach[l] = o + reach[l + 1];
                 let d = if l % 2 == 0 {
                     o as f32
                 } else {
@@ -228,7 +229,11 @@ impl StreamedTessellation {
             return None;
         }
         let v = (t.l + t.r) / 2;
-        let r = self.ratio(tree, d, v, t.level);
+        let r = if d.forces(v, t.level, self.config.patch_size) {
+            FORCED_RATIO
+        } else {
+            self.ratio(tree, d, v, t.level)
+        };
         let threshold = split_threshold(t.level);
         if r.is_nan() || r <= threshold {
             return None;
@@ -255,8 +260,24 @@ impl StreamedTessellation {
         view: &CdlodView<'_>,
         height: &(dyn Fn(IVec2) -> f32 + Sync),
     ) -> Result<TessFrame, LodError> {
+        self.select_with(tree, view, height, None)
+    }
+
+    /// As [`StreamedTessellation::select`], with the texels from the first to the last corner
+    /// of `full_resolution` (both included) drawn at full resolution whatever the view asks
+    /// (see [`TessDecision::full_resolution`]).
+    pub fn select_with(
+        &self,
+        tree: &CdlodTree,
+        view: &CdlodView<'_>,
+        height: &(dyn Fn(IVec2) -> f32 + Sync),
+        full_resolution: Option<(IVec2, IVec2)>,
+    ) -> Result<TessFrame, LodError> {
         self.check(tree)?;
-        let d = self.decision(view)?;
+        let d = TessDecision {
+            full_resolution,
+            ..self.decision(view)?
+        };
         let limit = self.config.max_triangles;
         let ps = self.config.patch_size as i32;
         let ts = self.texel_size;

@@ -49,6 +49,16 @@ struct Params {
     queue_capacity: u32,
     // The device's max_compute_workgroups_per_dimension.
     max_groups: u32,
+    // TessDecision::full_resolution: texels drawn at full resolution (corners included) when
+    // `full` is 1.
+    full_lo: vec2<i32>,
+    full_hi: vec2<i32>,
+    full: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+    // descendant_reach of each level, four to a vector.
+    reach: array<vec4<u32>, 4>,
 }
 
 struct State {
@@ -199,11 +209,28 @@ fn base(px: i32, py: i32, which: u32) -> Tri {
     return t;
 }
 
+// terrain_lod::tessellation::FORCED_RATIO.
+const FORCED_RATIO: f32 = 1e30;
+
+// Whether TessDecision::full_resolution forces v (split in by triangles of `level`): the square
+// of its descendants meets the rect. Mirrors TessDecision::forces.
+fn forced(v: vec2<i32>, level: u32) -> bool {
+    if params.full == 0u {
+        return false;
+    }
+    let l = min(level, 15u);
+    let r = i32(params.reach[l / 4u][l % 4u]);
+    return all(v - vec2<i32>(r, r) <= params.full_hi) && all(v + vec2<i32>(r, r) >= params.full_lo);
+}
+
 // A visible triangle of this level: emitted, or its visible children queued for the next.
 fn refine(t: Tri, pid: u32) {
     if t.level < params.split_levels {
         let v = (t.l + t.r) / 2;
-        let r = split_ratio(v, t.level);
+        var r = split_ratio(v, t.level);
+        if forced(v, t.level) {
+            r = FORCED_RATIO;
+        }
         // terrain_lod::tessellation::split_threshold.
         let threshold = 1.0 - f32(MAX_LEVELS - min(t.level, MAX_LEVELS)) * SPLIT_MARGIN;
         if r > threshold {

@@ -38,7 +38,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::UVec2;
 use terrain_core::WrapMode;
 use terrain_lod::tessellation::MAX_LEVELS;
-use terrain_lod::tessellation::TessDecision;
+use terrain_lod::tessellation::{TessDecision, descendant_reach};
 use terrain_lod::{CdlodView, StreamedTessellation, TessHierarchy, TessTriangle, TessVertex};
 
 mod buffers;
@@ -67,9 +67,16 @@ struct Params {
     error_metric: u32,
     queue_capacity: u32,
     max_groups: u32,
+    /// TessDecision::full_resolution's corners, and whether there is one.
+    full_lo: [i32; 2],
+    full_hi: [i32; 2],
+    full: u32,
+    _pad: [u32; 3],
+    /// descendant_reach of each level, four to a vector.
+    reach: [[u32; 4]; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<Params>() == 176);
+const _: () = assert!(std::mem::size_of::<Params>() == 272);
 
 /// Bytes of the counter block: count, overflow, the level, a pad, the four `draw_indirect`
 /// arguments, the two queues' counts and two pads.
@@ -98,6 +105,8 @@ const GROUP: u64 = 64;
 pub struct TessellationPass {
     hierarchy: Pipelines,
     streamed: Option<Pipelines>,
+    /// See [`TessellationPass::set_full_resolution`].
+    full_resolution: Option<(glam::IVec2, glam::IVec2)>,
 }
 
 /// The pipelines of one source (`tess_source_*.wgsl`) and their bindings.
@@ -228,7 +237,17 @@ fn frame_params(
             *p = q.to_array();
         }
     }
+    let (full_lo, full_hi) = d.full_resolution.unwrap_or_default();
+    let mut reach = [[0u32; 4]; 4];
+    for (l, r) in reach.iter_mut().flatten().enumerate() {
+        *r = descendant_reach(patch_size, l as u32);
+    }
     Params {
+        full_lo: full_lo.to_array(),
+        full_hi: full_hi.to_array(),
+        full: u32::from(d.full_resolution.is_some()),
+        _pad: [0; 3],
+        reach,
         camera: d.camera.extend(0.0).to_array(),
         planes,
         texel_size,
@@ -255,7 +274,16 @@ impl TessellationPass {
         Ok(Self {
             hierarchy: Pipelines::new(device, "tessellate.wgsl", terrain_shaders::TESSELLATE, &[])?,
             streamed: None,
+            full_resolution: None,
         })
+    }
+
+    /// Draws the texels from the first to the last corner of `region` (map texels, both
+    /// included) at full resolution whatever the view asks, in the tessellations encoded from
+    /// now on (terrain-lod's `TessDecision::full_resolution`; the CPU references'
+    /// `select_with`); `None` for none.
+    pub fn set_full_resolution(&mut self, region: Option<(glam::IVec2, glam::IVec2)>) {
+        self.full_resolution = region;
     }
 
     /// Records the tessellation of `gpu` (uploaded from `hierarchy`) for `view` into
@@ -278,7 +306,10 @@ impl TessellationPass {
                 actual: hierarchy.grid_size(),
             });
         }
-        let d = hierarchy.decision(view)?;
+        let d = TessDecision {
+            full_resolution: self.full_resolution,
+            ..hierarchy.decision(view)?
+        };
         let c = hierarchy.config();
         let params = frame_params(
             device,
@@ -318,7 +349,10 @@ impl TessellationPass {
                 actual: world.world_size,
             });
         }
-        let d = tess.decision(view)?;
+        let d = TessDecision {
+            full_resolution: self.full_resolution,
+            ..tess.decision(view)?
+        };
         let params = frame_params(
             device,
             gpu,

@@ -39,6 +39,8 @@ pub struct TessRenderer {
     materials: MaterialSlot,
     /// An engine's `surface_weights` ([`TessRenderer::set_surface_shader`]).
     user_surface: Option<String>,
+    /// Texels another renderer draws (see [`TessRenderer::exclude`]).
+    excluded: Option<(glam::IVec2, glam::IVec2)>,
 }
 
 impl TessRenderer {
@@ -64,7 +66,18 @@ impl TessRenderer {
             wireframe: false,
             materials: MaterialSlot::default(),
             user_surface: None,
+            excluded: None,
         })
+    }
+
+    /// Leaves the texels `region` (first and one-past-last vertex, relative to the camera's
+    /// whole texel, as [`crate::RefinePass::region`] gives them) to another renderer from the
+    /// next [`TessRenderer::prepare`] on: their fragments are discarded. `None` draws
+    /// everything again. The meshes meet only where the tessellation draws the region's edge
+    /// through every texel at its true height: tessellate with the region at full resolution
+    /// ([`TessellationPass::set_full_resolution`], as [`crate::TerrainRenderer`] does).
+    pub fn exclude(&mut self, region: Option<(glam::IVec2, glam::IVec2)>) {
+        self.excluded = region;
     }
 
     /// Shades [`crate::SurfaceShading::Materials`] frames with `materials` from the next
@@ -164,6 +177,9 @@ impl TessRenderer {
         };
         let mut uniform =
             frame_uniform(&info, &view, draw.style, &self.target, (0, 0), wrap_offset)?;
+        if let Some((lo, hi)) = self.excluded {
+            uniform.excluded = crate::render::frame::exclusion_rect(lo, hi)?;
+        }
         let (shading, new_shading) = self.materials.get(device, queue, info.size)?;
         uniform.set_layers(&shading);
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
