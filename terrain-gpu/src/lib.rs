@@ -110,7 +110,7 @@ pub use spill::{SpillPass, SpillTargets, SpilledStamp};
 pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampOp, StampPass};
 pub use target::TargetFormat;
 pub use terrain::{TESS_CAPACITY, TerrainFrame, TerrainRenderer, TerrainView};
-pub use tessellation::{GpuTessellation, TessDraw, TessRenderer, TessellationPass};
+pub use tessellation::{GpuTessellation, TessDraw, TessRenderer, TessWorld, TessellationPass};
 pub use timer::{GpuTimer, GpuTiming};
 
 /// The glam of this crate's public API.

@@ -29,7 +29,7 @@ use terrain_gpu::{
     AtlasConfig, Camera, CdlodDraw, CdlodRenderer, ClipmapSurface, ClipmapView, DetailShading,
     GpuDetailTiles, GpuError, GpuTessellation, GpuTileAtlas, OffscreenTarget, RefineDraw,
     RefinePass, RefineRenderer, SkyColors, TargetFormat, TerrainStyle, TessDraw, TessRenderer,
-    TessellationPass,
+    TessWorld, TessellationPass,
 };
 use terrain_lod::{CdlodConfig, CdlodTree, CdlodView, Frustum, StreamedTessellation, TessConfig};
 
@@ -183,8 +183,17 @@ fn render(
                 viewport_width: SIZE.x as f32,
                 hfov: 2.0 * ((camera.fov_y * 0.5).tan() * aspect).atan(),
             };
-            t.pass
-                .encode_streamed(device, queue, &mut encoder, &t.gpu, &t.tess, atlas, &view)?;
+            t.pass.encode_streamed(
+                device,
+                queue,
+                &mut encoder,
+                &t.gpu,
+                &TessWorld {
+                    tess: &t.tess,
+                    atlas,
+                },
+                &view,
+            )?;
             let draw = TessDraw {
                 surface,
                 camera,

@@ -27,7 +27,7 @@ use terrain_core::{CoarseMap, Grid, Rect, TileAtlas, TileLayout, TileUploadTarge
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{
     AtlasConfig, Camera, ClipmapSurface, GpuTessellation, GpuTileAtlas, OffscreenTarget, SkyColors,
-    TargetFormat, TerrainStyle, TessDraw, TessRenderer, TessellationPass,
+    TargetFormat, TerrainStyle, TessDraw, TessRenderer, TessWorld, TessellationPass,
 };
 use terrain_lod::{
     CdlodConfig, CdlodTree, CdlodView, Frustum, StreamedTessellation, TessConfig, TessTriangle,
@@ -191,8 +191,15 @@ fn tessellate(
 ) -> Vec<TessTriangle> {
     let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
     let mut encoder = device.create_command_encoder(&Default::default());
-    pass.encode_streamed(device, queue, &mut encoder, gpu, tess, atlas, view)
-        .unwrap();
+    pass.encode_streamed(
+        device,
+        queue,
+        &mut encoder,
+        gpu,
+        &TessWorld { tess, atlas },
+        view,
+    )
+    .unwrap();
     queue.submit([encoder.finish()]);
     pass.recall();
     let (tris, overflow) = gpu.read_triangles(device, queue).unwrap();
@@ -328,8 +335,18 @@ fn a_tree_or_atlas_of_another_world_is_refused() {
         None,
     );
     assert!(
-        pass.encode_streamed(device, queue, &mut encoder, &gpu, &tess, &small, &view)
-            .is_err()
+        pass.encode_streamed(
+            device,
+            queue,
+            &mut encoder,
+            &gpu,
+            &TessWorld {
+                tess: &tess,
+                atlas: &small
+            },
+            &view
+        )
+        .is_err()
     );
 }
 
@@ -388,8 +405,18 @@ fn no_cracks_from_grazing_views_over_tiles_of_two_levels() {
             renderer.prepare(device, queue, &draw).unwrap();
             let target = OffscreenTarget::new(device, size).unwrap();
             let mut encoder = device.create_command_encoder(&Default::default());
-            pass.encode_streamed(device, queue, &mut encoder, &gpu, &tess, &w.gpu, &view)
-                .unwrap();
+            pass.encode_streamed(
+                device,
+                queue,
+                &mut encoder,
+                &gpu,
+                &TessWorld {
+                    tess: &tess,
+                    atlas: &w.gpu,
+                },
+                &view,
+            )
+            .unwrap();
             {
                 let mut rp = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
                 scene.sky.draw(&mut rp);

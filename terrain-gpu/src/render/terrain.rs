@@ -17,7 +17,9 @@ use crate::render::camera::{RenderView, ResolvedView};
 use crate::render::cdlod::{CdlodDraw, CdlodRenderer};
 use crate::render::clipmap::check_view;
 use crate::render::target::TargetFormat;
-use crate::render::tessellation::{GpuTessellation, TessDraw, TessRenderer, TessellationPass};
+use crate::render::tessellation::{
+    GpuTessellation, TessDraw, TessRenderer, TessWorld, TessellationPass,
+};
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use terrain_core::{CoarseMap, HeightEncoding, Rect};
 use terrain_lod::{
@@ -673,8 +675,17 @@ impl TerrainRenderer {
                     check_full(levels == 2 * t.tess.config().patch_size.trailing_zeros())?;
                 }
                 t.pass.set_full_resolution(t.full);
-                t.pass
-                    .encode_streamed(device, queue, encoder, &t.gpu, &t.tess, atlas, &lod_view)?;
+                t.pass.encode_streamed(
+                    device,
+                    queue,
+                    encoder,
+                    &t.gpu,
+                    &TessWorld {
+                        tess: &t.tess,
+                        atlas,
+                    },
+                    &lod_view,
+                )?;
                 let draw = TessDraw {
                     surface,
                     camera,

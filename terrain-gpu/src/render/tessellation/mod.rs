@@ -97,6 +97,16 @@ const DISPATCH_BYTES: u64 = 16;
 /// Invocations per workgroup of `generate`.
 const GROUP: u64 = 64;
 
+/// A streamed world as [`TessellationPass::encode_streamed`] tessellates it: the decisions
+/// and the atlas the heights are read from.
+#[derive(Debug, Clone, Copy)]
+pub struct TessWorld<'a> {
+    /// The tessellation (terrain-lod), made for the world's quadtree.
+    pub tess: &'a StreamedTessellation,
+    /// The world's tile atlas.
+    pub atlas: &'a GpuTileAtlas,
+}
+
 /// The compute pass that tessellates a [`GpuTessellation`] for a view, one dispatch per
 /// level: of a map's hierarchy ([`TessellationPass::encode`]) or of a streamed world
 /// ([`TessellationPass::encode_streamed`], its pipelines built on first use). Build it once
@@ -325,20 +335,19 @@ impl TessellationPass {
     }
 
     /// Records the tessellation of a streamed world for `view` into `encoder`: `gpu` made by
-    /// [`GpuTessellation::streamed`] from `tess` and the tree (its bounds uploaded since the
-    /// tree last changed), heights read from `atlas` (the world's: the tree's size). Checks
-    /// the view as [`StreamedTessellation::select`] does.
-    #[allow(clippy::too_many_arguments)]
+    /// [`GpuTessellation::streamed`] from `world.tess` and the tree (its bounds uploaded since
+    /// the tree last changed), heights read from `world.atlas` (the world's: the tree's size).
+    /// Checks the view as [`StreamedTessellation::select`] does.
     pub fn encode_streamed(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         gpu: &GpuTessellation,
-        tess: &StreamedTessellation,
-        atlas: &GpuTileAtlas,
+        world: &TessWorld<'_>,
         view: &CdlodView<'_>,
     ) -> Result<(), GpuError> {
+        let TessWorld { tess, atlas } = *world;
         let world = &atlas.config().world;
         if gpu.source != Source::Streamed
             || world.world_size != gpu.grid
