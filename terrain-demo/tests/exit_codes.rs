@@ -29,8 +29,16 @@ fn usage_errors_exit_with_2() {
     let cases: [&[&str]; 17] = [
         &["--scenario", "snow", "--lod", "cdlod", "--no-gpu"],
         &["--scenario", "snow", "--detail", "parallax", "--no-gpu"],
-        &["--lod", "cdlod", "--detail", "refine", "--no-gpu"],
-        &["--lod", "tessellated", "--detail", "refine", "--no-gpu"],
+        &["--scenario", "flyover", "--detail", "refine", "--no-gpu"],
+        &[
+            "--scenario",
+            "world",
+            "--lod",
+            "tessellated",
+            "--target-error",
+            "1",
+            "--no-gpu",
+        ],
         &["--lod", "cdlod", "--target-error", "0", "--no-gpu"],
         &["--target-error", "2", "--no-gpu"],
         &["--no-morph", "--no-gpu"],
