@@ -578,6 +578,11 @@ pub struct FrameStats {
     /// `--no-gpu`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub granular_backend: Option<&'static str>,
+    /// World scenario, on a frame where the granular window moved on: whether the move waited
+    /// for writes on their way (areas stepped on the GPU, craters read back). It waits for
+    /// nothing unless the vehicle reaches the window's edge before they land.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub granular_move_waited: Option<bool>,
     /// Snow scenario: material removed by compression so far, in height units.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub granular_removed: Option<u64>,

@@ -125,6 +125,18 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
             ],
         );
         assert_eq!(check_frames(&report), "gpu");
+        // Every window move waited for nothing: the areas stepped on the GPU and the craters
+        // were back before the wheels reached the window's edge.
+        let moves: Vec<bool> = report["frames"]
+            .as_array()
+            .expect("frames")
+            .iter()
+            .filter_map(|f| f["granular_move_waited"].as_bool())
+            .collect();
+        assert!(
+            !moves.is_empty() && moves.iter().all(|w| !w),
+            "moves: {moves:?}"
+        );
         for f in report["frames"].as_array().expect("frames") {
             // CDLOD draws the streamed world from its atlas.
             assert_eq!(f["lod"], "cdlod", "{f}");

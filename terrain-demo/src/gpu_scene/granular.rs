@@ -1,7 +1,8 @@
 //! Granular deformation on the GPU scene (Persson 2019): the snow scenario's field or a
 //! streamed world's granular window, stepped on the GPU with its normals and volume, the
-//! changed areas read back without a wait (a window that moves on drains them first); the
-//! passes outlive a window, so the next one compiles nothing.
+//! changed areas read back without a wait (a window moves on once they are back, or drains
+//! them when the vehicle forces it); the passes outlive a window, so the next one compiles
+//! nothing.
 
 use super::*;
 
@@ -56,6 +57,27 @@ impl GpuScene {
     ) -> Result<GranularFrame> {
         self.granular_step_inner(objects, timings)
             .map_err(|e| self.lost_or(e))
+    }
+
+    /// The granular areas stepped in earlier frames whose readbacks have arrived (never waits),
+    /// and whether any is still on its way (requested, or waiting for a ring slot): a window
+    /// that moves on once nothing is on its way drains without a wait.
+    pub fn poll_granular(&mut self) -> Result<(Vec<(Rect, Grid<u32>)>, bool)> {
+        let device = &self.ctx.device;
+        let Some(g) = self.granular.as_mut() else {
+            return Ok((Vec::new(), false));
+        };
+        let arrived = g
+            .readback
+            .poll(device)
+            .map_err(|e| self.lost_or(e.into()))?
+            .into_iter()
+            .map(|r| (r.rect, r.raw))
+            .collect();
+        let Some(g) = self.granular.as_ref() else {
+            return Ok((arrived, false));
+        };
+        Ok((arrived, !g.pending.is_empty() || g.readback.in_flight() > 0))
     }
 
     /// Ends granular deformation on the GPU: requests the changed areas still waiting for a

@@ -751,19 +751,22 @@ impl Scenario for FlyoverScenario {
                 self.extent,
             );
             let vehicle = (vehicle, (next - vehicle).normalize_or(self.heading));
-            // A window that moves takes its tiles with every crater in them: those on their
-            // way back from the GPU land first.
+            // A window that moves takes its tiles with every crater in them: it waits for
+            // those on their way back from the GPU, unless the wheels force it (they land
+            // first, waited for).
             if let Some(scene) = ctx.gpu.as_deref_mut()
                 && self.stamps.in_flight() > 0
-                && self.trails.as_ref().is_some_and(|t| t.will_move(vehicle))
+                && self.trails.as_ref().is_some_and(|t| t.must_move(vehicle))
             {
                 changed.extend(self.take_tile_readbacks(scene, true)?);
             }
+            let craters_in_flight = self.stamps.in_flight() > 0;
             let (Some(trails), Some(pool)) = (self.trails.as_mut(), self.pool.as_mut()) else {
                 bail!("the world's pool was shut down");
             };
+            let gpu = ctx.gpu.as_deref_mut();
             let frame =
-                trails.advance(pool, ctx.gpu.as_deref_mut(), vehicle, &state, ctx.timings)?;
+                trails.advance(pool, gpu, vehicle, &state, craters_in_flight, ctx.timings)?;
             for (rect, heights) in &frame.changed {
                 self.window.apply(*rect, heights)?;
                 changed.push(*rect);
@@ -824,6 +827,7 @@ impl Scenario for FlyoverScenario {
                 granular_volume: trail.as_ref().and_then(|t| t.volume),
                 granular_volume_taken: trail.as_ref().and_then(|t| t.volume_taken),
                 granular_backend: trail.as_ref().and_then(|t| t.backend),
+                granular_move_waited: trail.as_ref().and_then(|t| t.move_waited),
                 cache: Some(CacheStats {
                     // With a GPU: wanted tiles drawn from a coarser level; without one, the
                     // tiles under and around the camera not in RAM.

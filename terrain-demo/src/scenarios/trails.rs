@@ -29,6 +29,9 @@ pub const TAKE_TIMEOUT: Duration = Duration::from_secs(10);
 /// Metres the wheels keep from the window's edge before it moves on (the step's active area
 /// reaches a few texels past an object).
 const EDGE_MARGIN: f32 = 8.0;
+/// Metres from the window's edge past which it moves even with writes on their way (waiting
+/// for them): between the two margins a move waits for them to land, a frame or two.
+const FORCED_MARGIN: f32 = 4.0;
 
 /// What the trails did in one frame.
 #[derive(Debug, Default)]
@@ -43,6 +46,9 @@ pub struct TrailFrame {
     pub backend: Option<&'static str>,
     /// Milliseconds of the step itself (timed as `granular_gpu` or `granular_cpu`).
     pub step_ms: f64,
+    /// On a frame where the window moved on: whether it had to wait for writes on their way
+    /// (the wheels reached [`FORCED_MARGIN`] before they landed).
+    pub move_waited: Option<bool>,
 }
 
 /// The vehicle's granular trails over a streamed world.
@@ -89,34 +95,61 @@ impl Trails {
     }
 
     /// Whether the next [`advance`](Self::advance) with the vehicle at `centre` heading
-    /// `heading` moves the window (every write to the world must have landed by then).
-    pub fn will_move(&self, (centre, heading): (Vec2, Vec2)) -> bool {
-        !self
-            .window
-            .covers(&wheel_positions(centre, heading), EDGE_MARGIN)
+    /// `heading` must move the window whatever is on its way (every write to the world must
+    /// have landed by then: the caller waits for its own).
+    pub fn must_move(&self, (centre, heading): (Vec2, Vec2)) -> bool {
+        self.window.rect().is_some()
+            && !self
+                .window
+                .covers(&wheel_positions(centre, heading), FORCED_MARGIN)
     }
 
     /// One frame with the vehicle at `centre` heading `heading` (metres, X Z): moves the
-    /// window when the wheels near its edge (waiting, up to [`TAKE_TIMEOUT`], for its tiles to
-    /// load as `camera` wants them: the trails do not depend on load timing), steps, and hands
-    /// the changed areas back into `pool`'s tiles. The caller keeps every other write out of
-    /// the window ([`Trails::window`]) and has none on its way when the window moves
-    /// ([`Trails::will_move`]).
+    /// window when the wheels near its edge, steps, and hands the changed areas back into
+    /// `pool`'s tiles. A move waits for nothing: it comes once the areas stepped on the GPU
+    /// are back and the caller has no write on its way (`others_in_flight` false), a frame or
+    /// two after the wheels pass [`EDGE_MARGIN`]; only wheels past [`FORCED_MARGIN`] force it
+    /// (the caller lands its writes first, [`Trails::must_move`], and the drain waits). The
+    /// new window's tiles are waited for (up to [`TAKE_TIMEOUT`]) as `camera` wants them: the
+    /// trails do not depend on load timing. The caller keeps every other write out of the
+    /// window ([`Trails::window`]).
     pub fn advance(
         &mut self,
         pool: &mut RamPool,
         scene: Option<&mut GpuScene>,
         (centre, heading): (Vec2, Vec2),
         camera: &CameraState,
+        others_in_flight: bool,
         timings: &mut Timings,
     ) -> Result<TrailFrame> {
         let wheels = wheel_positions(centre, heading);
         let mut frame = TrailFrame::default();
         let mut scene = scene;
-        if !self.window.covers(&wheels, EDGE_MARGIN) {
-            if self.window.rect().is_some() {
-                frame.changed = self.release(pool, scene.as_deref_mut())?;
+        let leaving = !self.window.covers(&wheels, EDGE_MARGIN);
+        let mut move_now = leaving && self.window.rect().is_none();
+        if leaving && self.window.rect().is_some() {
+            // Areas stepped in earlier frames that are back go into the tiles now.
+            let mut settled = !others_in_flight;
+            if let Some(s) = scene.as_deref_mut()
+                && self.on_gpu
+            {
+                let (arrived, in_flight) = s.poll_granular()?;
+                for (area, heights) in arrived {
+                    frame
+                        .changed
+                        .push(self.window.hand_back(pool, area, &heights)?);
+                }
+                settled &= !in_flight;
             }
+            let forced = !self.window.covers(&wheels, FORCED_MARGIN);
+            if settled || forced {
+                frame.move_waited = Some(!settled);
+                let released = self.release(pool, scene.as_deref_mut())?;
+                frame.changed.extend(released);
+                move_now = true;
+            }
+        }
+        if move_now {
             // A quarter of the window ahead of the vehicle: it drives through the middle half.
             let ahead = centre + heading * (self.window.side() as f32 * self.texel_size * 0.25);
             let rect = self.window.placement(ahead);
