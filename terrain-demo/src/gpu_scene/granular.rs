@@ -6,6 +6,9 @@
 
 use super::*;
 
+/// Granular areas read back: world-window rects and their fixed-point heights.
+pub type ArrivedAreas = Vec<(Rect, Grid<u32>)>;
+
 /// The GPU side of the snow scenario: the fixed-point map, the step, the normals and float
 /// heights it is rendered from, the volume sum, and the readback of the areas a step changed.
 pub(super) struct GranularScene {
@@ -62,7 +65,7 @@ impl GpuScene {
     /// The granular areas stepped in earlier frames whose readbacks have arrived (never waits),
     /// and whether any is still on its way (requested, or waiting for a ring slot): a window
     /// that moves on once nothing is on its way drains without a wait.
-    pub fn poll_granular(&mut self) -> Result<(Vec<(Rect, Grid<u32>)>, bool)> {
+    pub fn poll_granular(&mut self) -> Result<(ArrivedAreas, bool)> {
         let device = &self.ctx.device;
         let Some(g) = self.granular.as_mut() else {
             return Ok((Vec::new(), false));
