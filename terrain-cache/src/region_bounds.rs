@@ -68,6 +68,15 @@ impl RegionBounds {
         Some([min, max])
     }
 
+    /// [`RegionBounds::of`] in metres (the world's encoding), the whole stored range where
+    /// nothing of `rect` is inside: what a quadtree's leaves are built and updated from
+    /// (`CdlodTree::from_leaf_bounds` and `update_leaf_bounds` in terrain-lod).
+    pub fn metres(&self, pool: &RamPool, rect: Rect) -> (f32, f32) {
+        let [lo, hi] = self.of(pool, rect).unwrap_or([0, u16::MAX]);
+        let enc = self.manifest.encoding;
+        (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
+    }
+
     /// Recomputes the bounds of the level-0 tiles `changed` (world texels) touches from their
     /// resident data in `pool` (a tile not resident keeps its bounds): after a deformation,
     /// so the tile's bounds hold once it is evicted.

@@ -58,9 +58,16 @@ fn bounds_are_exact_in_ram_covering_elsewhere_and_follow_changes() {
         pool.update(&camera).unwrap();
         std::thread::sleep(Duration::from_millis(5));
     }
+    let enc = world.manifest().encoding;
     for r in rects {
         assert_eq!(bounds.of(&pool, r), Some(exact(r)), "{r:?}");
+        let [lo, hi] = exact(r).map(|v| enc.to_metres(f64::from(v)));
+        assert_eq!(bounds.metres(&pool, r), (lo, hi), "{r:?} in metres");
     }
+    // Nothing inside: the whole stored range, in metres.
+    let off = Rect::new(IVec2::splat(-20), UVec2::splat(10));
+    let whole = (enc.to_metres(0.0), enc.to_metres(f64::from(u16::MAX)));
+    assert_eq!(bounds.metres(&pool, off), whole);
     // A deep hole in tile (1, 1): exact at once from RAM, and in the tile's own bounds after
     // `update` (what stands in once the tile is evicted).
     pool.write_rect(

@@ -302,3 +302,22 @@ fn a_full_resolution_rect_is_drawn_through_every_texel() {
     assert_edge_drawn(&full);
     assert_conforming(&full, extent);
 }
+
+/// The quadtree `tree_config` proposes holds every patch size's first split, and is small.
+#[test]
+fn the_proposed_tree_fits_every_patch_size() {
+    for patch_size in [2u32, 8, 32, 128, 256] {
+        let config = StreamedTessellation::tree_config(patch_size);
+        let size = UVec2::splat(4096);
+        let t = CdlodTree::from_leaf_bounds(config, size, 0.5, |_| (0.0, 10.0)).unwrap();
+        let tess = TessConfig {
+            patch_size,
+            ..TessConfig::default()
+        };
+        assert!(
+            StreamedTessellation::new(tess, &t).is_ok(),
+            "patch {patch_size}"
+        );
+        assert_eq!(config.leaf_size, 16);
+    }
+}

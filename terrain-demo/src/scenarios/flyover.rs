@@ -586,10 +586,8 @@ impl Scenario for FlyoverScenario {
         config: TessConfig,
         _density: bool,
     ) -> Result<()> {
-        let tree = self.world_tree(
-            world_lod::tess_tree_config(config.patch_size),
-            "--lod tessellated",
-        )?;
+        let tree_config = terrain_lod::StreamedTessellation::tree_config(config.patch_size);
+        let tree = self.world_tree(tree_config, "--lod tessellated")?;
         scene.enable_tessellation_tree(tree, config, self.manifest.encoding)
     }
 

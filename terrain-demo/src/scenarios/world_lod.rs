@@ -6,34 +6,6 @@
 
 use super::*;
 
-/// The lowest and highest height (metres) under `rect`, for the quadtree.
-fn leaf_metres(
-    bounds: &RegionBounds,
-    pool: &RamPool,
-    rect: Rect,
-    enc: terrain_core::HeightEncoding,
-) -> (f32, f32) {
-    let [lo, hi] = bounds.of(pool, rect).unwrap_or([0, u16::MAX]);
-    (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
-}
-
-/// The quadtree a tessellation with patches of `patch_size` texels is decided from: leaves of
-/// 16 texels (the splits of the finest triangles see the heights of a few leaves: coarser
-/// leaves split them far beyond where their edges ask), and the LODs it takes for a node to
-/// hold the square a patch's first split looks at (about 3 patches).
-pub(super) fn tess_tree_config(patch_size: u32) -> CdlodConfig {
-    const LEAF: u32 = 16;
-    let lod_count = (1..terrain_lod::cdlod::MAX_CDLOD_LODS)
-        .find(|&n| u64::from(LEAF) << (n - 1) >= 3 * u64::from(patch_size))
-        .unwrap_or(terrain_lod::cdlod::MAX_CDLOD_LODS);
-    CdlodConfig {
-        leaf_size: LEAF,
-        grid_size: LEAF,
-        lod_count,
-        ..CdlodConfig::default()
-    }
-}
-
 impl FlyoverScenario {
     /// The world's quadtree of `config`; keeps the bounds it was built from for
     /// [`FlyoverScenario::follow_bounds`]. `flag` names the option in errors.
@@ -51,12 +23,11 @@ impl FlyoverScenario {
             bail!("the world's pool was shut down");
         };
         let bounds = RegionBounds::open(pool.world())?;
-        let enc = self.manifest.encoding;
         let tree = terrain_lod::CdlodTree::from_leaf_bounds(
             config,
             self.manifest.world_size,
             self.manifest.texel_size,
-            |r| leaf_metres(&bounds, pool, r, enc),
+            |r| bounds.metres(pool, r),
         )?;
         self.bounds = Some(bounds);
         Ok(tree)
@@ -77,10 +48,9 @@ impl FlyoverScenario {
             return Ok(0.0);
         };
         let t = Instant::now();
-        let enc = self.manifest.encoding;
         for rect in changed {
             bounds.update(pool, *rect);
-            scene.update_streamed_bounds(*rect, |r| leaf_metres(bounds, pool, r, enc))?;
+            scene.update_streamed_bounds(*rect, |r| bounds.metres(pool, r))?;
         }
         let ms = ms_since(t);
         ctx.timings.add(Step::Lod, ms);

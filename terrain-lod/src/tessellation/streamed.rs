@@ -23,7 +23,7 @@
 
 use super::select::{Tri, base_triangles, decision_for};
 use super::{FORCED_RATIO, NEAR_M, TessConfig, TessDecision, TessFrame, split_threshold};
-use crate::cdlod::{CdlodTree, CdlodView};
+use crate::cdlod::{CdlodConfig, CdlodTree, CdlodView};
 use crate::error::LodError;
 use glam::{IVec2, UVec2, Vec3};
 
@@ -130,6 +130,24 @@ impl StreamedTessellation {
             radius,
             lookup,
         })
+    }
+
+    /// The streamed quadtree a tessellation with patches of `patch_size` texels is best
+    /// decided from (build it with `CdlodTree::from_leaf_bounds`): leaves of 16 texels (the
+    /// finest triangles' boxes take their heights from a few leaves; larger leaves put them
+    /// nearer the camera) and the LODs it takes for a node to hold the square a patch's first
+    /// split looks at (about 3 patches). 1.4 million nodes for a 16384^2 world.
+    pub fn tree_config(patch_size: u32) -> CdlodConfig {
+        const LEAF: u32 = 16;
+        let lod_count = (1..crate::cdlod::MAX_CDLOD_LODS)
+            .find(|&n| u64::from(LEAF) << (n - 1) >= 3 * u64::from(patch_size))
+            .unwrap_or(crate::cdlod::MAX_CDLOD_LODS);
+        CdlodConfig {
+            leaf_size: LEAF,
+            grid_size: LEAF,
+            lod_count,
+            ..CdlodConfig::default()
+        }
     }
 
     /// The configuration.
