@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{area, assert_conforming};
+use common::{area, assert_conforming, view};
 use glam::camera::rh::{proj::directx, view::look_at_mat4};
 use glam::{IVec2, UVec2, Vec3};
 use terrain_core::{Grid, HeightEncoding, HeightMap, Rect, WrapMode};
@@ -69,15 +69,6 @@ fn heights(m: &HeightMap<u16>) -> impl Fn(IVec2) -> f32 + Sync + '_ {
         let c = t.clamp(IVec2::ZERO, m.size().as_ivec2() - 1);
         m.encoding()
             .to_metres(f64::from(m.grid().get_wrapped(c, WrapMode::Clamp)))
-    }
-}
-
-fn view(camera: Vec3) -> CdlodView<'static> {
-    CdlodView {
-        camera,
-        frustum: None,
-        viewport_width: 1280.0,
-        hfov: 1.2,
     }
 }
 

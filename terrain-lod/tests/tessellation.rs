@@ -13,7 +13,7 @@ use terrain_lod::{
 
 mod common;
 
-use common::{area, assert_conforming};
+use common::{area, assert_conforming, view};
 
 const TS: f32 = 0.5;
 
@@ -30,15 +30,6 @@ fn map(w: u32, h: u32, wrap: WrapMode) -> HeightMap<u16> {
     })
     .unwrap();
     HeightMap::new(grid, HeightEncoding::new(0.001, 0.0).unwrap(), TS, wrap).unwrap()
-}
-
-fn view(camera: Vec3) -> CdlodView<'static> {
-    CdlodView {
-        camera,
-        frustum: None,
-        viewport_width: 1280.0,
-        hfov: 1.2,
-    }
 }
 
 #[test]

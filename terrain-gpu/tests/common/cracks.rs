@@ -27,3 +27,23 @@ pub fn holes(image: &Grid<[u8; 4]>) -> (usize, usize) {
     }
     (holes, terrain)
 }
+
+/// Fails when the terrain fills less than a quarter of `image` or sky shows inside it (see
+/// [`holes`]), writing the image to the temp directory as `{name}.png` for a look.
+#[allow(dead_code)] // not every test binary that shares the file checks whole frames
+pub fn assert_no_holes(image: &Grid<[u8; 4]>, name: &str) {
+    let (holes, terrain) = holes(image);
+    let quarter = (image.width() * image.height() / 4) as usize;
+    assert!(
+        terrain > quarter,
+        "{name}: the terrain fills {terrain} pixels only"
+    );
+    if holes > 0 {
+        let path = std::env::temp_dir().join(format!("{name}.png"));
+        let _ = terrain_core::io::write_png_rgba8(&path, image);
+        panic!(
+            "{name}: {holes} sky pixels inside the terrain (image: {})",
+            path.display()
+        );
+    }
+}

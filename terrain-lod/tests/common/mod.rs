@@ -1,8 +1,9 @@
-//! What the tessellation tests share: the conformity check of a drawn mesh and its area.
+//! What the tessellation tests share: the conformity check of a drawn mesh and its area, and
+//! an unculled 1280-pixel view.
 
-use glam::{UVec2, Vec2};
+use glam::{UVec2, Vec2, Vec3};
 use std::collections::HashMap;
-use terrain_lod::TessFrame;
+use terrain_lod::{CdlodView, TessFrame};
 
 /// Every directed edge `(from, to)` with its endpoint heights must meet its reverse in exactly
 /// one other triangle, unless it lies on the border of the `extent` texels drawn (a repeating
@@ -62,4 +63,14 @@ pub fn area(frame: &TessFrame) -> f64 {
             f64::from((b - a).perp_dot(c - a).abs() * 0.5)
         })
         .sum()
+}
+
+/// An unculled view from `camera` on a 1280-pixel-wide target.
+pub fn view(camera: Vec3) -> CdlodView<'static> {
+    CdlodView {
+        camera,
+        frustum: None,
+        viewport_width: 1280.0,
+        hfov: 1.2,
+    }
 }
