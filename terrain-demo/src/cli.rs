@@ -117,13 +117,13 @@ pub struct Cli {
     #[arg(long, value_enum, default_value_t = LodArg::Clipmap, help_heading = RENDERING)]
     pub lod: LodArg,
     /// The default scenario's detail layer: `none` stamps footprints into the coarse-map;
-    /// `parallax` stamps them into 8-bit detail tiles refined x3 (streamed around the camera)
-    /// and shades the terrain through them under every `--lod` mode: parallax occlusion
-    /// mapping, the composite of the coarse and detail normals, faded out with distance;
-    /// `refine` draws the same tiles as geometry within 9 m of the camera (each coarse
-    /// triangle split in up to nine by refinement patterns; the LOD mode leaves it the texels
-    /// there) and by their normals beyond. The world scenario: a walker's footprints in the streamed world's detail tiles
-    /// (refined x8, kept in the world's folder), drawn the same two ways.
+    /// `parallax` stamps them into 8-bit detail tiles refined x3 (streamed around the camera) and
+    /// shades the terrain through them under every `--lod` mode: parallax occlusion mapping, the
+    /// composite of the coarse and detail normals, faded out with distance; `refine` draws the same
+    /// tiles as geometry within 9 m of the camera (each coarse triangle split in up to nine by
+    /// refinement patterns; the LOD mode leaves it the texels there) and by their normals beyond.
+    /// The world scenario: a walker's footprints in the streamed world's detail tiles (refined x8,
+    /// kept in the world's folder), drawn the same two ways.
     #[arg(long, value_enum, default_value_t = DetailArg::None, help_heading = RENDERING)]
     pub detail: DetailArg,
     /// With `--lod cdlod`: choose the LODs by screen-space error, at most PX pixels, instead

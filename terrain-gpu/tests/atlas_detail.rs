@@ -1,11 +1,10 @@
-//! A streamed world's atlas drawn with a detail layer (`ClipmapSurface::AtlasDetail`) under
-//! the clipmap, CDLOD and the streamed tessellation: the footprints pressed into the detail tiles change the frame as
-//! they do over a coarse-map, a layer faded out before the nearest fragment leaves the frame of
-//! the bare atlas, and a layer that does not lie over the world is refused; refined geometry
-//! (`--detail refine`) over a fully resident atlas is the coarse-map's, bit for bit (the
-//! same stored heights read through the tile table). On whatever
-//! adapter the machine has (lavapipe in CI); without one they skip, or fail under
-//! `TERRAIN_REQUIRE_GPU=1`.
+//! A streamed world's atlas drawn with a detail layer (`ClipmapSurface::AtlasDetail`) under the
+//! clipmap, CDLOD and the streamed tessellation: the footprints pressed into the detail tiles
+//! change the frame as they do over a coarse-map, a layer faded out before the nearest fragment
+//! leaves the frame of the bare atlas, and a layer that does not lie over the world is refused;
+//! refined geometry (`--detail refine`) over a fully resident atlas is the coarse-map's, bit for
+//! bit (the same stored heights read through the tile table). On whatever adapter the machine has
+//! (lavapipe in CI); without one they skip, or fail under `TERRAIN_REQUIRE_GPU=1`.
 //!
 //! Tolerances (`common/footprints.rs`, shared with `detail_lod.rs`): the atlas and
 //! atlas-with-detail pipelines are two shader modules of the same fragment code; with nothing added by the layer they compute

@@ -48,8 +48,9 @@ pub struct StreamedTessellation {
 
 impl StreamedTessellation {
     /// The tessellation of the world `tree` covers, with `config`. Fails on a bad config, one
-    /// with an error metric, a tree not built from leaf bounds, or one whose roots are smaller than the square a
-    /// patch's first split looks at (about 3 patches: use fewer, smaller patches or more LODs).
+    /// with an error metric, a tree not built from leaf bounds, or one whose roots are smaller
+    /// than the square a patch's first split looks at (about 3 patches: use smaller patches or
+    /// more LODs; [`StreamedTessellation::tree_config`] proposes a tree).
     pub fn new(config: TessConfig, tree: &CdlodTree) -> Result<Self, LodError> {
         config.validate()?;
         if let Some(e) = config.max_error_px {
@@ -221,8 +222,8 @@ impl StreamedTessellation {
     }
 
     /// The split ratio of vertex `v` split in by triangles of `level` (split when above
-    /// [`split_threshold`]): the flat radius of the level's triangles over the distance from the camera to the box of
-    /// the square of the level's reach and the region's heights. Mirrors
+    /// [`split_threshold`]): the flat radius of the level's triangles over the distance from the
+    /// camera to the box of the square of the level's reach and the region's heights. Mirrors
     /// `tess_source_streamed.wgsl`.
     pub fn ratio(&self, tree: &CdlodTree, d: &TessDecision, v: IVec2, level: u32) -> f32 {
         let (lo, hi) = self.region(tree, v, level);
