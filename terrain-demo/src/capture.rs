@@ -76,6 +76,8 @@ impl<'a> Capture<'a> {
         // GPU timestamps of earlier frames that arrived during this one go to their frames
         // (in report.json; their lines in frames.jsonl are written already).
         crate::report::credit_gpu(&mut self.frames, &timings.take_late_gpu());
+        // As are granular steps' measures (read back without a wait).
+        crate::report::credit_granular(&mut self.frames, &timings.take_late_granular());
         if index % self.thumb_every == self.thumb_every - 1 || index + 1 == self.total {
             let size = images::fit_within(image.size(), summary::THUMB_SIDE);
             self.thumbs.push(Thumb {
@@ -91,6 +93,12 @@ impl<'a> Capture<'a> {
             .with_context(|| format!("writing {}", self.out.join(FRAMES_JSONL).display()))?;
         self.frames.push(frame);
         Ok(())
+    }
+
+    /// Credits granular measures that arrived after the run's last frame (the scenario's
+    /// `finish`) to their frames in report.json.
+    pub fn credit_granular(&mut self, figures: &[crate::timings::GranularFigure]) {
+        crate::report::credit_granular(&mut self.frames, figures);
     }
 
     /// Credits GPU timestamps that arrived after the run's last frame (the GPU scene's

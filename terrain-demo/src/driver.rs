@@ -87,7 +87,9 @@ pub fn run(
             Default::default()
         }
     };
-    // The GPU timestamps still on their way go to the frames they belong to.
+    // The last granular measures and the GPU timestamps still on their way go to the frames
+    // they belong to.
+    capture.credit_granular(&finish.granular);
     if let Some(scene) = gpu.as_mut() {
         match scene.flush_gpu_timings() {
             Ok(figures) => capture.credit_gpu(&figures),

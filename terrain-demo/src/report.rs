@@ -527,6 +527,22 @@ pub fn credit_gpu(frames: &mut [FrameReport], figures: &[GpuFigure]) {
     }
 }
 
+/// Credits granular measures that arrived after their frames were captured to those frames
+/// (`frames[i]` is frame `i`); measures of frames not captured are left out.
+pub fn credit_granular(frames: &mut [FrameReport], figures: &[crate::timings::GranularFigure]) {
+    for figure in figures {
+        let Some(frame) = usize::try_from(figure.frame)
+            .ok()
+            .and_then(|i| frames.get_mut(i))
+        else {
+            continue;
+        };
+        frame.stats.granular_volume = Some(figure.volume);
+        frame.stats.granular_volume_taken = figure.volume_taken;
+        frame.stats.granular_removed = figure.removed;
+    }
+}
+
 /// Live GPU objects of the device, from wgpu's internal counters (`counters` feature).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
@@ -564,7 +580,9 @@ pub struct FrameStats {
     #[schemars(with = "Ms")]
     pub readback_ms: Option<f64>,
     /// Snow scenario: the u64 sum of the granular heights after the frame (constant with
-    /// compression 0: the volume is preserved).
+    /// compression 0: the volume is preserved). The granular fields of a GPU step are read back
+    /// without a wait and credited to their frame in report.json a frame or more later: its
+    /// `frames.jsonl` line (written as the frame completes) lacks them.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub granular_volume: Option<u64>,
     /// World scenario: the units the granular window held when it was taken, less those

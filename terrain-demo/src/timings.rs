@@ -113,6 +113,20 @@ pub struct GpuFigure {
     pub ms: f64,
 }
 
+/// A granular step's measures that arrived in a later frame (GPU steps are read back without
+/// a wait: see `gpu_scene::measures`), to be credited to the frame that stepped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GranularFigure {
+    /// The frame's index.
+    pub frame: u64,
+    /// The map's volume after the step (the report's `granular_volume`).
+    pub volume: u64,
+    /// The world scenario's `granular_volume_taken`.
+    pub volume_taken: Option<u64>,
+    /// The snow scenario's `granular_removed` (so far).
+    pub removed: Option<u64>,
+}
+
 /// One frame's timings: wall-clock milliseconds per step (a step timed twice adds up), and GPU
 /// timestamp spans where the adapter has them; and the GPU figures of earlier frames that
 /// arrived during this one.
@@ -121,6 +135,7 @@ pub struct Timings {
     wall: BTreeMap<Step, f64>,
     gpu: BTreeMap<Step, f64>,
     late_gpu: Vec<GpuFigure>,
+    late_granular: Vec<GranularFigure>,
 }
 
 impl Timings {
@@ -160,6 +175,17 @@ impl Timings {
     /// to their frames.
     pub fn take_late_gpu(&mut self) -> Vec<GpuFigure> {
         std::mem::take(&mut self.late_gpu)
+    }
+
+    /// Keeps a granular step's measures of an earlier frame that arrived in this one.
+    pub fn add_late_granular(&mut self, figure: GranularFigure) {
+        self.late_granular.push(figure);
+    }
+
+    /// The granular measures of earlier frames that arrived in this one, for the capture to
+    /// credit to their frames.
+    pub fn take_late_granular(&mut self) -> Vec<GranularFigure> {
+        std::mem::take(&mut self.late_granular)
     }
 
     /// Wall-clock milliseconds by report key.

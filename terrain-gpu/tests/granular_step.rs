@@ -289,3 +289,64 @@ fn a_trail_painted_on_the_gpu_equals_the_cpu_reference() {
     assert!(layer.read(device, queue).expect("read") == expected);
     ctx.check().expect("validation");
 }
+
+/// A step's volume sum and removed material, copied into small readback rings in the step's
+/// own submit, come back without a wait equal to the blocking reads (what the demo reports a
+/// frame later instead of stalling each frame on the GPU).
+#[test]
+fn volume_and_removed_ride_the_small_readback_rings() {
+    let Some(ctx) = context_or_skip("volume_and_removed_ride_the_small_readback_rings") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let m = meshes();
+    let map = bumpy_map(96, 0.05);
+    let p = GranularParams {
+        compression: 0.3,
+        ..small_params()
+    };
+    let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
+    let mut step = GpuGranularStep::new(device, p).expect("step");
+    let mut volume = VolumePass::new(device).expect("volume");
+    let mut volumes = terrain_gpu::SmallReadback::new(device, 4, 8).expect("ring");
+    let mut removals = terrain_gpu::SmallReadback::new(device, 4, 8).expect("ring");
+    let mut removed_any = false;
+    for frame in 0..12u32 {
+        let objs = objects_at(&m, frame * 5, 96.0 * 0.05);
+        let mut encoder = device.create_command_encoder(&Default::default());
+        step.encode(device, queue, &mut encoder, &gmap, &objs)
+            .expect("step");
+        volume
+            .encode(device, queue, &mut encoder, &gmap)
+            .expect("volume");
+        let v = volume.request(&mut encoder, &mut volumes).expect("request");
+        let r = step
+            .scratch()
+            .expect("scratch after a step")
+            .request_removed(&mut encoder, &mut removals)
+            .expect("request");
+        queue.submit([encoder.finish()]);
+        step.recall();
+        volume.recall();
+        // The blocking reads wait for the submit, so both rings' copies have landed too.
+        let scratch = step.scratch().expect("scratch after a step");
+        let (sum, removed) = (
+            volume.read(device).expect("read"),
+            scratch.read_removed(device, queue).expect("read"),
+        );
+        let got_v = volumes.poll(device).expect("poll");
+        let got_r = removals.poll(device).expect("poll");
+        assert_eq!(got_v.len(), 1, "frame {frame}");
+        assert_eq!(got_r.len(), 1, "frame {frame}");
+        assert_eq!(Some(got_v[0].0), v);
+        assert_eq!(Some(got_r[0].0), r);
+        assert_eq!(VolumePass::sum_of(&got_v[0].1), sum, "frame {frame}");
+        assert_eq!(VolumePass::sum_of(&got_r[0].1), removed, "frame {frame}");
+        removed_any |= removed > 0;
+    }
+    assert!(
+        removed_any,
+        "compression removed nothing: the removed counter went untested"
+    );
+    ctx.check().expect("validation");
+}

@@ -4,6 +4,8 @@
 //! them when the vehicle forces it); the passes outlive a window, so the next one compiles
 //! nothing.
 
+pub use super::measures::GranularMeasure;
+use super::measures::Measures;
 use super::*;
 
 /// Granular areas read back: world-window rects and their fixed-point heights.
@@ -22,6 +24,8 @@ pub(super) struct GranularScene {
     pub(super) params: GranularParams,
     /// Changed areas not yet requested (the ring was busy).
     pub(super) pending: Vec<Rect>,
+    /// The steps' volumes and removed material, on their way back.
+    pub(super) measures: Measures,
     /// The material layer the steps' trails paint (`enable_granular_trails`).
     pub(super) trail: Option<GpuMaterialLayer>,
 }
@@ -34,18 +38,28 @@ pub(super) struct GranularPasses {
     pub(super) volume: VolumePass,
     pub(super) readback: RegionReadback,
     pub(super) params: GranularParams,
+    pub(super) measures: Measures,
 }
 
 /// What one GPU granular step did.
 pub struct GranularFrame {
     /// The merged active areas the step ran over.
     pub areas: Vec<Rect>,
-    /// Material removed by compression this step, in height units.
-    pub removed: u64,
-    /// The u64 sum of all heights after the step (read back as 8 bytes).
-    pub volume: u64,
+    /// The measures (volume after the step, material removed) of earlier steps that arrived,
+    /// oldest first, tagged with their frames: this step's come in a later frame.
+    pub measured: Vec<GranularMeasure>,
     /// Regions of earlier steps that arrived on the CPU: (rect, fixed-point heights).
     pub arrived: Vec<(Rect, Grid<u32>)>,
+}
+
+/// What a granular scene still had on its way, handed over without a wait or drained.
+pub struct GranularArrivals {
+    /// Changed areas: (rect, fixed-point heights).
+    pub areas: ArrivedAreas,
+    /// Steps' measures, oldest first.
+    pub measured: Vec<GranularMeasure>,
+    /// Whether anything (an area or a measure) is still on its way.
+    pub in_flight: bool,
 }
 
 impl GpuScene {
@@ -62,44 +76,57 @@ impl GpuScene {
             .map_err(|e| self.lost_or(e))
     }
 
-    /// The granular areas stepped in earlier frames whose readbacks have arrived (never waits),
-    /// and whether any is still on its way (requested, or waiting for a ring slot): a window
-    /// that moves on once nothing is on its way drains without a wait.
-    pub fn poll_granular(&mut self) -> Result<(ArrivedAreas, bool)> {
+    /// The granular areas and measures of earlier steps that have arrived (never waits), and
+    /// whether any is still on its way: a window that moves on once nothing is on its way
+    /// drains without a wait.
+    pub fn poll_granular(&mut self) -> Result<GranularArrivals> {
+        self.poll_granular_inner().map_err(|e| self.lost_or(e))
+    }
+
+    fn poll_granular_inner(&mut self) -> Result<GranularArrivals> {
         let device = &self.ctx.device;
         let Some(g) = self.granular.as_mut() else {
-            return Ok((Vec::new(), false));
+            return Ok(GranularArrivals {
+                areas: Vec::new(),
+                measured: Vec::new(),
+                in_flight: false,
+            });
         };
-        let arrived = g
+        let areas = g
             .readback
-            .poll(device)
-            .map_err(|e| self.lost_or(e.into()))?
+            .poll(device)?
             .into_iter()
             .map(|r| (r.rect, r.raw))
             .collect();
-        let Some(g) = self.granular.as_ref() else {
-            return Ok((arrived, false));
-        };
-        Ok((arrived, !g.pending.is_empty() || g.readback.in_flight() > 0))
+        let measured = g.measures.poll(device)?;
+        let in_flight =
+            !g.pending.is_empty() || g.readback.in_flight() > 0 || g.measures.in_flight();
+        Ok(GranularArrivals {
+            areas,
+            measured,
+            in_flight,
+        })
     }
 
     /// Ends granular deformation on the GPU: requests the changed areas still waiting for a
-    /// ring slot and waits for every readback in flight, so the CPU copy gets the last steps.
-    pub fn drain_granular(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
+    /// ring slot and waits for every readback and measure in flight, so the CPU copy gets the
+    /// last steps.
+    pub fn drain_granular(&mut self) -> Result<GranularArrivals> {
         self.drain_granular_inner().map_err(|e| self.lost_or(e))
     }
 
     /// Drains granular deformation ([`drain_granular`](Self::drain_granular)) and frees its
     /// GPU map: a streamed world's granular window that moves on.
-    pub fn disable_granular(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
+    pub fn disable_granular(&mut self) -> Result<GranularArrivals> {
         let arrived = self.drain_granular()?;
-        // Nothing is in flight now: the passes and the ring serve the next map.
+        // Nothing is in flight now: the passes and the rings serve the next map.
         self.granular_passes = self.granular.take().map(|g| GranularPasses {
             step: g.step,
             normal_pass: g.normal_pass,
             volume: g.volume,
             readback: g.readback,
             params: g.params,
+            measures: g.measures,
         });
         Ok(arrived)
     }
@@ -118,6 +145,7 @@ impl GpuScene {
                 volume: VolumePass::new(device)?,
                 readback: RegionReadback::new(device, 8)?,
                 params,
+                measures: Measures::new(device)?,
             },
         };
         let mut normal_pass = passes.normal_pass;
@@ -154,6 +182,7 @@ impl GpuScene {
             readback: passes.readback,
             params,
             pending: Vec::new(),
+            measures: passes.measures,
             trail: None,
         });
         Ok(())
@@ -165,9 +194,12 @@ impl GpuScene {
         timings: &mut Timings,
     ) -> Result<GranularFrame> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        // The frame being stepped (the scene counts the frames it renders).
+        let frame = u64::from(self.frames);
         let Some(g) = self.granular.as_mut() else {
             anyhow::bail!("granular deformation was not enabled on the GPU scene");
         };
+        let measured = g.measures.poll(device)?;
         // Regions requested by earlier frames that have arrived.
         let arrived: Vec<(Rect, Grid<u32>)> = g
             .readback
@@ -189,10 +221,6 @@ impl GpuScene {
                 Ok(())
             })?;
         g.step.recall();
-        let removed = match g.step.scratch() {
-            Some(s) => s.read_removed(device, queue)?,
-            None => 0,
-        };
         let areas: Vec<Rect> = areas.iter().map(|a| a.rect).collect();
         // Normals reach one texel past the heights a step changed, and the blur one more per
         // iteration.
@@ -217,6 +245,10 @@ impl GpuScene {
                     )?;
                 }
                 g.volume.encode(device, queue, encoder, &g.map)?;
+                // The volume and removed material come back without a wait, a frame or more
+                // later.
+                g.measures
+                    .request(device, encoder, frame, &g.volume, g.step.scratch())?;
                 // The changed areas go to the CPU copy behind the overview and collision.
                 g.pending.extend(areas.iter().copied());
                 let mut waiting = Vec::new();
@@ -232,21 +264,23 @@ impl GpuScene {
             })?;
         g.normal_pass.recall();
         g.volume.recall();
-        let volume = g.volume.read(device)?;
         step_time.record(timings);
         normal_time.record(timings);
         Ok(GranularFrame {
             areas,
-            removed,
-            volume,
+            measured,
             arrived,
         })
     }
 
-    fn drain_granular_inner(&mut self) -> Result<Vec<(Rect, Grid<u32>)>> {
+    fn drain_granular_inner(&mut self) -> Result<GranularArrivals> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let Some(g) = self.granular.as_mut() else {
-            return Ok(Vec::new());
+            return Ok(GranularArrivals {
+                areas: Vec::new(),
+                measured: Vec::new(),
+                in_flight: false,
+            });
         };
         let mut arrived = Vec::new();
         // Bounded: each round frees every slot, and the pending list only shrinks.
@@ -269,6 +303,10 @@ impl GpuScene {
                     .map(|r| (r.rect, r.raw)),
             );
         }
-        Ok(arrived)
+        Ok(GranularArrivals {
+            areas: arrived,
+            measured: g.measures.flush(device)?,
+            in_flight: false,
+        })
     }
 }

@@ -769,6 +769,9 @@ impl Scenario for FlyoverScenario {
                 self.window.apply(*rect, heights)?;
                 changed.push(*rect);
             }
+            for figure in &frame.measured {
+                ctx.timings.add_late_granular(*figure);
+            }
             self.gpu_stamp_ms += frame.step_ms;
             trail = Some(frame);
         }
@@ -885,8 +888,9 @@ impl Scenario for FlyoverScenario {
             None => 0,
         };
         // The trails' last areas reach the tiles, and the window's volume is checked.
+        let mut granular = Vec::new();
         if let (Some(trails), Some(pool)) = (self.trails.as_mut(), self.pool.as_mut()) {
-            trails.release(pool, gpu)?;
+            (_, granular) = trails.release(pool, gpu)?;
         }
         if self.stamps.in_flight() > 0 {
             bail!(
@@ -895,7 +899,10 @@ impl Scenario for FlyoverScenario {
             );
         }
         let Some(mut pool) = self.pool.take() else {
-            return Ok(FinishStats::default());
+            return Ok(FinishStats {
+                granular,
+                ..FinishStats::default()
+            });
         };
         // Every dirty tile goes back into the world before the run ends.
         let world = pool.world().clone();
@@ -918,6 +925,7 @@ impl Scenario for FlyoverScenario {
         // The overview as the world now holds it (`terrain_final.png`).
         self.overview = overview_map(&world, self.overview_level)?;
         Ok(FinishStats {
+            granular,
             written_back_tiles: Some(written),
         })
     }

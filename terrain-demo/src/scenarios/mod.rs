@@ -98,10 +98,13 @@ pub struct FrameOutcome {
 }
 
 /// What a scenario did at the end of the run.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct FinishStats {
     /// Flyover: tiles written back into the world during and at the end of the run.
     pub written_back_tiles: Option<u64>,
+    /// The last GPU granular steps' measures, which arrived at the end (credited to their
+    /// frames).
+    pub granular: Vec<crate::timings::GranularFigure>,
 }
 
 /// One scenario: its terrain, what deforms it and what moves over it.

@@ -12,9 +12,9 @@ use super::{FRAME_DT, FinishStats, FrameContext, FrameOutcome, Scenario, Scenari
 use crate::camera_rig::CameraRig;
 use crate::cli::Cli;
 use crate::config::DemoParams;
-use crate::gpu_scene::GpuScene;
+use crate::gpu_scene::{GpuScene, GranularMeasure};
 use crate::report::FrameStats;
-use crate::timings::{Step, ms_since};
+use crate::timings::{GranularFigure, Step, ms_since};
 use crate::usage_error::UsageExt;
 use anyhow::Result;
 use glam::{UVec2, Vec2};
@@ -79,6 +79,23 @@ impl SnowScenario {
             on_gpu: false,
         })
     }
+
+    /// The report's figures of GPU steps' measures, in step order: the volume and the material
+    /// removed so far.
+    fn figures(&mut self, measured: &[GranularMeasure]) -> Vec<GranularFigure> {
+        measured
+            .iter()
+            .map(|m| {
+                self.gpu_removed += m.removed;
+                GranularFigure {
+                    frame: m.frame,
+                    volume: m.volume,
+                    volume_taken: None,
+                    removed: Some(self.gpu_removed),
+                }
+            })
+            .collect()
+    }
 }
 
 impl Scenario for SnowScenario {
@@ -105,15 +122,21 @@ impl Scenario for SnowScenario {
 
     /// The last steps' areas come back from the GPU before `terrain_final.png` is written.
     fn finish(&mut self, gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
+        let mut granular = Vec::new();
         if let Some(scene) = gpu
             && self.on_gpu
         {
-            for (rect, heights) in scene.drain_granular()? {
+            let drained = scene.drain_granular()?;
+            for (rect, heights) in drained.areas {
                 self.field.write_region(rect, &heights)?;
                 self.field.copy_to_coarse(&mut self.coarse, rect)?;
             }
+            granular = self.figures(&drained.measured);
         }
-        Ok(FinishStats::default())
+        Ok(FinishStats {
+            granular,
+            ..FinishStats::default()
+        })
     }
 
     fn advance(&mut self, ctx: &mut FrameContext<'_>) -> Result<FrameOutcome> {
@@ -124,7 +147,10 @@ impl Scenario for SnowScenario {
             Some(scene) if self.on_gpu => {
                 let objects = self.field.objects(&poses);
                 let frame = scene.granular_step(&objects, ctx.timings)?;
-                self.gpu_removed += frame.removed;
+                // The volumes of earlier steps, read back without a wait, go to their frames.
+                for figure in self.figures(&frame.measured) {
+                    ctx.timings.add_late_granular(figure);
+                }
                 let mut dirty = Vec::with_capacity(frame.arrived.len());
                 for (rect, heights) in &frame.arrived {
                     self.field.write_region(*rect, heights)?;
@@ -132,7 +158,7 @@ impl Scenario for SnowScenario {
                     dirty.push(*rect);
                 }
                 let deformed: u64 = frame.areas.iter().map(Rect::area).sum();
-                (frame.volume, self.gpu_removed, deformed, dirty, "gpu")
+                (None, None, deformed, dirty, "gpu")
             }
             _ => ctx.timings.time(Step::GranularCpu, || -> Result<_> {
                 let report = self.field.step(&poses)?;
@@ -141,7 +167,8 @@ impl Scenario for SnowScenario {
                     self.field.copy_to_coarse(&mut self.coarse, *rect)?;
                 }
                 let deformed = dirty.iter().map(Rect::area).sum();
-                Ok((report.volume, self.field.removed(), deformed, dirty, "cpu"))
+                let removed = Some(self.field.removed());
+                Ok((Some(report.volume), removed, deformed, dirty, "cpu"))
             })?,
         };
 
@@ -165,8 +192,8 @@ impl Scenario for SnowScenario {
             camera_clearance_m,
             stats: FrameStats {
                 dirty_texels: deformed_texels,
-                granular_volume: Some(volume),
-                granular_removed: Some(removed),
+                granular_volume: volume,
+                granular_removed: removed,
                 granular_backend: Some(backend),
                 ..FrameStats::default()
             },

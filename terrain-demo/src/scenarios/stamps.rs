@@ -276,6 +276,7 @@ impl Scenario for StampScenario {
         };
         Ok(FinishStats {
             written_back_tiles: written,
+            ..FinishStats::default()
         })
     }
 

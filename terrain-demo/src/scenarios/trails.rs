@@ -6,8 +6,8 @@
 //! pool re-uploads them. When the vehicle nears the window's edge, the window is drained,
 //! released (its volume checked) and taken again ahead of the vehicle.
 
-use crate::gpu_scene::GpuScene;
-use crate::timings::{Step, Timings};
+use crate::gpu_scene::{GpuScene, GranularMeasure};
+use crate::timings::{GranularFigure, Step, Timings};
 use anyhow::{Context, Result, bail};
 use glam::{Affine3A, Quat, Vec2, Vec3};
 use std::time::{Duration, Instant};
@@ -37,7 +37,7 @@ const FORCED_MARGIN: f32 = 4.0;
 #[derive(Debug, Default)]
 pub struct TrailFrame {
     /// Areas handed back into the tiles this frame: world texels and stored heights.
-    pub changed: Vec<(Rect, Grid<u16>)>,
+    pub changed: HandedBack,
     /// The scratch map's units after the step (`None` while no window is taken).
     pub volume: Option<u64>,
     /// The units the window held when taken, less compression's (equal to `volume`).
@@ -49,7 +49,13 @@ pub struct TrailFrame {
     /// On a frame where the window moved on: whether it had to wait for writes on their way
     /// (the wheels reached [`FORCED_MARGIN`] before they landed).
     pub move_waited: Option<bool>,
+    /// The measures of earlier GPU steps that arrived (read back without a wait), for the
+    /// report to credit to their frames; a GPU step's own `volume` is not known in its frame.
+    pub measured: Vec<GranularFigure>,
 }
+
+/// Areas handed back into the tiles: world texels and stored heights.
+pub type HandedBack = Vec<(Rect, Grid<u16>)>;
 
 /// The vehicle's granular trails over a streamed world.
 #[derive(Debug)]
@@ -133,19 +139,21 @@ impl Trails {
             if let Some(s) = scene.as_deref_mut()
                 && self.on_gpu
             {
-                let (arrived, in_flight) = s.poll_granular()?;
-                for (area, heights) in arrived {
+                let arrivals = s.poll_granular()?;
+                for (area, heights) in arrivals.areas {
                     frame
                         .changed
                         .push(self.window.hand_back(pool, area, &heights)?);
                 }
-                settled &= !in_flight;
+                frame.measured = self.figures(&arrivals.measured);
+                settled &= !arrivals.in_flight;
             }
             let forced = !self.window.covers(&wheels, FORCED_MARGIN);
             if settled || forced {
                 frame.move_waited = Some(!settled);
-                let released = self.release(pool, scene.as_deref_mut())?;
+                let (released, measured) = self.release(pool, scene.as_deref_mut())?;
                 frame.changed.extend(released);
+                frame.measured.extend(measured);
                 move_now = true;
             }
         }
@@ -204,8 +212,8 @@ impl Trails {
         match (scene, &mut self.sim) {
             (Some(s), _) if self.on_gpu => {
                 let step = s.granular_step(&objects, timings)?;
-                self.removed += step.removed;
-                frame.volume = Some(step.volume);
+                let measured = self.figures(&step.measured);
+                frame.measured.extend(measured);
                 frame.backend = Some("gpu");
                 arrived = step.arrived;
             }
@@ -221,7 +229,9 @@ impl Trails {
             _ => return Ok(frame),
         }
         frame.step_ms = crate::timings::ms_since(t);
-        frame.volume_taken = self.window.volume_taken().checked_sub(self.removed);
+        if frame.volume.is_some() {
+            frame.volume_taken = self.window.volume_taken().checked_sub(self.removed);
+        }
         for (area, heights) in arrived {
             frame
                 .changed
@@ -230,23 +240,44 @@ impl Trails {
         Ok(frame)
     }
 
+    /// The report's figures of GPU steps' measures, in step order: the volume and the units the
+    /// window held when taken less those compression removed since (equal at every step).
+    fn figures(&mut self, measured: &[GranularMeasure]) -> Vec<GranularFigure> {
+        measured
+            .iter()
+            .map(|m| {
+                self.removed += m.removed;
+                GranularFigure {
+                    frame: m.frame,
+                    volume: m.volume,
+                    volume_taken: self.window.volume_taken().checked_sub(self.removed),
+                    removed: None,
+                }
+            })
+            .collect()
+    }
+
     /// Hands the last areas back and releases the window (its volume checked): when it moves
-    /// on and at the end of the run. Returns the areas handed back.
+    /// on and at the end of the run. Returns the areas handed back and the last GPU steps'
+    /// measures.
     pub fn release(
         &mut self,
         pool: &mut RamPool,
         scene: Option<&mut GpuScene>,
-    ) -> Result<Vec<(Rect, Grid<u16>)>> {
+    ) -> Result<(HandedBack, Vec<GranularFigure>)> {
         let mut changed = Vec::new();
+        let mut measured = Vec::new();
         if self.window.rect().is_none() {
-            return Ok(changed);
+            return Ok((changed, measured));
         }
         if let Some(s) = scene
             && self.on_gpu
         {
-            for (area, heights) in s.disable_granular()? {
+            let drained = s.disable_granular()?;
+            for (area, heights) in drained.areas {
                 changed.push(self.window.hand_back(pool, area, &heights)?);
             }
+            measured = self.figures(&drained.measured);
         }
         self.on_gpu = false;
         self.sim = None;
@@ -255,7 +286,7 @@ impl Trails {
             .release(pool, self.removed)
             .context("the granular window's volume after its hand-backs")?;
         self.windows_released += 1;
-        Ok(changed)
+        Ok((changed, measured))
     }
 }
 

@@ -6,6 +6,7 @@ use crate::device::compute::{
 };
 use crate::device::download::map_and_read;
 use crate::device::scope::scoped;
+use crate::device::small_readback::SmallReadback;
 use crate::error::GpuError;
 use crate::resources::maps::GpuHeightMap;
 use bytemuck::{Pod, Zeroable};
@@ -146,6 +147,26 @@ impl VolumePass {
         );
         encoder.copy_buffer_to_buffer(&self.total, 0, &self.readback, 0, 8);
         Ok(())
+    }
+
+    /// Records the copy of the sum the last [`Self::encode`] (in this encoder or an earlier
+    /// one) wrote into `ring` (a [`SmallReadback`] of 8 bytes), to be read without a wait by
+    /// its later poll ([`VolumePass::sum_of`] decodes it). `None` when every buffer of the
+    /// ring is in flight.
+    pub fn request(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        ring: &mut SmallReadback,
+    ) -> Result<Option<u64>, GpuError> {
+        ring.request(encoder, &self.total, 0)
+    }
+
+    /// The sum in the 8 bytes a [`VolumePass::request`] brought back (as [`Self::read`]).
+    pub fn sum_of(bytes: &[u8]) -> u64 {
+        bytes
+            .get(..8)
+            .and_then(|b| <[u8; 8]>::try_from(b).ok())
+            .map_or(0, u64::from_le_bytes)
     }
 
     /// Maps the readback buffer and returns the sum recorded by the last [`Self::encode`]
