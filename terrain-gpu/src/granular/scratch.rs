@@ -171,10 +171,10 @@ impl GranularScratch {
         Ok(w.iter().rev().fold(0u64, |a, &v| (a << 32) | u64::from(v)))
     }
 
-    /// Records the copy of the removed counter (of the steps recorded so far) into `ring` (a
-    /// [`SmallReadback`] of 8 bytes), to be read without a wait by its later poll (little-endian
-    /// u64, as [`crate::VolumePass::sum_of`] decodes it). `None` when every buffer of the ring
-    /// is in flight.
+    /// Records the copy of the removed counter (of the step recorded last) into `ring` (a
+    /// [`crate::SmallReadback`] of 8 bytes), to be read without a wait by its later poll
+    /// (little-endian u64, as [`crate::granular::VolumePass::sum_of`] decodes it). `None` when
+    /// every buffer of the ring is in flight.
     pub fn request_removed(
         &self,
         encoder: &mut wgpu::CommandEncoder,
