@@ -299,6 +299,21 @@ impl RunShape {
                 }
                 parts.push(("overlays", overlays));
                 if let Some(f) = &self.flyover {
+                    // The world's quadtree with a streamed LOD (node bounds on the CPU, and the
+                    // tessellation's on the GPU with its output and queues).
+                    let tree = |leaf: u64, per_node: u64| {
+                        let leaves = f.world.as_u64vec2().map(|s| s.div_ceil(leaf));
+                        (leaves.x.saturating_mul(leaves.y) * 4 / 3).saturating_mul(per_node)
+                    };
+                    if self.gpu {
+                        match self.lod {
+                            crate::cli::LodArg::Cdlod => parts.push(("lod", tree(32, 12))),
+                            crate::cli::LodArg::Tessellated => {
+                                parts.push(("lod", tree(16, 12 + 8).saturating_add(TESS_FIXED)));
+                            }
+                            crate::cli::LodArg::Clipmap => {}
+                        }
+                    }
                     parts.push(("ram_pool", f.ram_budget.saturating_add(RAM_POOL_SLACK)));
                     if self.gpu {
                         let vram = f.atlas.saturating_add(f.atlas_table);
@@ -454,5 +469,14 @@ mod tests {
         // The default 16384^2 world is shown at its 1024^2 level.
         assert_eq!(s.map, UVec2::splat(1024));
         assert_eq!(part(&parts, "world_build"), WORLD_BUILD);
+        assert_eq!(part(&parts, "lod"), 0, "the clipmap keeps no tree");
+        // A streamed LOD counts the world's quadtree: 4 / 3 of its leaves' nodes (and the
+        // tessellation's GPU copy, output and queues).
+        let lod = |mode: &str| {
+            let args = ["--scenario", "world", "--world", &world, "--lod", mode];
+            part(&shape(&args).estimate(), "lod")
+        };
+        assert_eq!(lod("cdlod"), 512 * 512 * 4 / 3 * 12);
+        assert_eq!(lod("tessellated"), 1024 * 1024 * 4 / 3 * 20 + TESS_FIXED);
     }
 }
