@@ -2,13 +2,17 @@
 //! texels): building the hierarchy (with and without the density map), a frame's triangles
 //! (edge size with the density map, and the error metric), the frame's screen-space error, and
 //! bringing the hierarchy up to date after a crater (200 x 200 texels) and after a change of the
-//! whole map.
+//! whole map; and the streamed world's form on the same map: its quadtree of 16-texel leaves
+//! built, a frame's triangles decided from it, and a crater's leaves updated.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::{IVec2, UVec2, Vec3};
 use std::hint::black_box;
 use terrain_core::{HeightEncoding, Rect, TerrainParams, generate_coarse_map};
-use terrain_lod::{CdlodView, DensityMap, DensityParams, Frustum, TessConfig, TessHierarchy};
+use terrain_lod::{
+    CdlodTree, CdlodView, DensityMap, DensityParams, Frustum, StreamedTessellation, TessConfig,
+    TessHierarchy,
+};
 
 fn bench(c: &mut Criterion) {
     let params = TerrainParams {
@@ -73,6 +77,42 @@ fn bench(c: &mut Criterion) {
     group.bench_function("update_rect/2048x2048", |b| {
         b.iter(|| {
             tess.update_rect(black_box(&map), Some(&density), Rect::from_size(map.size()))
+                .expect("update")
+        })
+    });
+    // The streamed form: the map as a world the CPU would not hold whole.
+    let leaf_bounds = |r: Rect| {
+        let g = map.grid().copy_rect(r).expect("rect");
+        let (lo, hi) = g
+            .as_slice()
+            .iter()
+            .fold((u16::MAX, 0), |(a, b), &v| (a.min(v), b.max(v)));
+        (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
+    };
+    let tree_config = StreamedTessellation::tree_config(config.patch_size);
+    let ts = map.texel_size();
+    group.bench_function("streamed_tree/2048", |b| {
+        b.iter(|| CdlodTree::from_leaf_bounds(tree_config, map.size(), ts, leaf_bounds))
+    });
+    let mut tree =
+        CdlodTree::from_leaf_bounds(tree_config, map.size(), ts, leaf_bounds).expect("tree");
+    let streamed = StreamedTessellation::new(config, &tree).expect("streamed");
+    let height = |t: IVec2| {
+        let c = t.clamp(IVec2::ZERO, map.size().as_ivec2() - 1);
+        enc.to_metres(f64::from(
+            map.grid().get(c.x as u32, c.y as u32).unwrap_or(0),
+        ))
+    };
+    group.bench_function("streamed_select/2048", |b| {
+        b.iter(|| {
+            streamed
+                .select(&tree, black_box(&v), &height)
+                .expect("select")
+        })
+    });
+    group.bench_function("streamed_update/200x200", |b| {
+        b.iter(|| {
+            tree.update_leaf_bounds(black_box(crater), leaf_bounds)
                 .expect("update")
         })
     });
