@@ -312,3 +312,25 @@ fn the_proposed_tree_fits_every_patch_size() {
         assert_eq!(config.leaf_size, 16);
     }
 }
+
+/// The forced rect's test and the reach answer for every integer input, without overflow.
+#[test]
+fn the_full_resolution_test_takes_any_integers() {
+    use terrain_lod::tessellation::descendant_reach;
+    assert_eq!(descendant_reach(32, 0), 46);
+    assert_eq!(descendant_reach(32, 9), 0);
+    assert_eq!(descendant_reach(32, 40), 0);
+    assert!(descendant_reach(1 << 31, 0) > 0);
+    let m = map(256, 192, true);
+    let t = tree(&m);
+    let tess = StreamedTessellation::new(TessConfig::default(), &t).unwrap();
+    let extreme = IVec2::new(i32::MIN, i32::MAX);
+    let d = terrain_lod::tessellation::TessDecision {
+        full_resolution: Some((IVec2::MIN, IVec2::MAX)),
+        ..tess.decision(&view(Vec3::ONE)).unwrap()
+    };
+    for v in [IVec2::MIN, IVec2::MAX, IVec2::ZERO, extreme] {
+        let _ = d.forces(v, 0, 32);
+    }
+    assert!(d.forces(IVec2::new(-5, 5), 3, 32), "inside the rect");
+}

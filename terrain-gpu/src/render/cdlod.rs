@@ -346,7 +346,7 @@ fn check_exclusion(
     };
     let eye = glam::Vec2::new(view.eye.x, view.eye.z) / texel_size;
     let base = eye.floor().as_ivec2();
-    let (lo, hi) = (base + lo, base + hi);
+    let (lo, hi) = (base.saturating_add(lo), base.saturating_add(hi));
     let morph_start = frame.ranges.morph.first().map_or(f32::INFINITY, |m| m.0);
     let full = frame.instances.iter().all(|i| i.lod != 0 || i.step == 1);
     // The edge's farthest point horizontally (texels) from the eye.

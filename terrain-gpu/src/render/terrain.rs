@@ -844,7 +844,7 @@ impl TerrainRenderer {
 /// texels of the map.
 fn absolute((lo, hi): (IVec2, IVec2), eye: Vec3, texel_size: f32) -> (IVec2, IVec2) {
     let base = (Vec2::new(eye.x, eye.z) / texel_size).floor().as_ivec2();
-    (base + lo, base + hi)
+    (base.saturating_add(lo), base.saturating_add(hi))
 }
 
 /// Refuses to leave a region to another renderer when the tessellation's triangles stop short

@@ -236,7 +236,7 @@ pub fn descendant_reach(patch_size: u32, level: u32) -> u32 {
     let levels = 2 * patch_size.trailing_zeros();
     (level..levels.saturating_sub(1))
         .map(|l| patch_size >> (l.div_ceil(2) + 1))
-        .sum()
+        .fold(0u32, u32::saturating_add)
 }
 
 impl TessDecision {
@@ -246,7 +246,8 @@ impl TessDecision {
         let Some((lo, hi)) = self.full_resolution else {
             return false;
         };
-        let r = descendant_reach(patch_size, level) as i32;
+        let r = i64::from(descendant_reach(patch_size, level));
+        let (v, lo, hi) = (v.as_i64vec2(), lo.as_i64vec2(), hi.as_i64vec2());
         (v - r).cmple(hi).all() && (v + r).cmpge(lo).all()
     }
 }
