@@ -4,7 +4,9 @@
 
 use terrain_core::granular::*;
 use terrain_core::{Grid, MaterialEffect, apply_trail_effect};
-use terrain_gpu::granular::{DepthSource, GpuGranularStep, Trail, VolumePass};
+use terrain_gpu::granular::{
+    DepthSource, GpuGranularStep, StepMeasure, StepMeasures, Trail, VolumePass,
+};
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{GpuHeightMap, GpuMaterialLayer};
 use terrain_test_support::granular::{bumpy_map, empty_pen, meshes, objects_at, small_params};
@@ -291,8 +293,9 @@ fn a_trail_painted_on_the_gpu_equals_the_cpu_reference() {
 }
 
 /// A step's volume sum and removed material, copied into small readback rings in the step's
-/// own submit, come back without a wait equal to the blocking reads (what the demo reports a
-/// frame later instead of stalling each frame on the GPU).
+/// own submit (`StepMeasures`), come back without a wait equal to the blocking reads, in step
+/// order with their tags; a flush hands over the last ones (what the demo reports a frame
+/// later instead of stalling each frame on the GPU).
 #[test]
 fn volume_and_removed_ride_the_small_readback_rings() {
     let Some(ctx) = context_or_skip("volume_and_removed_ride_the_small_readback_rings") else {
@@ -308,44 +311,60 @@ fn volume_and_removed_ride_the_small_readback_rings() {
     let gmap = GpuHeightMap::from_map(device, queue, &map).expect("upload");
     let mut step = GpuGranularStep::new(device, p).expect("step");
     let mut volume = VolumePass::new(device).expect("volume");
-    let mut volumes = terrain_gpu::SmallReadback::new(device, 4, 8).expect("ring");
-    let mut removals = terrain_gpu::SmallReadback::new(device, 4, 8).expect("ring");
-    let mut removed_any = false;
-    for frame in 0..12u32 {
-        let objs = objects_at(&m, frame * 5, 96.0 * 0.05);
+    let mut measures = StepMeasures::new(device).expect("rings");
+    let mut expected = Vec::new();
+    let mut arrived = Vec::new();
+    for frame in 0..24u64 {
+        let objs = objects_at(&m, frame as u32 * 5, 96.0 * 0.05);
         let mut encoder = device.create_command_encoder(&Default::default());
         step.encode(device, queue, &mut encoder, &gmap, &objs)
             .expect("step");
         volume
             .encode(device, queue, &mut encoder, &gmap)
             .expect("volume");
-        let v = volume.request(&mut encoder, &mut volumes).expect("request");
-        let r = step
-            .scratch()
-            .expect("scratch after a step")
-            .request_removed(&mut encoder, &mut removals)
+        measures
+            .request(device, &mut encoder, 100 + frame, &volume, step.scratch())
             .expect("request");
         queue.submit([encoder.finish()]);
         step.recall();
         volume.recall();
-        // The blocking reads wait for the submit, so both rings' copies have landed too.
+        // The blocking reads of the same counters, for reference.
         let scratch = step.scratch().expect("scratch after a step");
-        let (sum, removed) = (
-            volume.read(device).expect("read"),
-            scratch.read_removed(device, queue).expect("read"),
-        );
-        let got_v = volumes.poll(device).expect("poll");
-        let got_r = removals.poll(device).expect("poll");
-        assert_eq!(got_v.len(), 1, "frame {frame}");
-        assert_eq!(got_r.len(), 1, "frame {frame}");
-        assert_eq!(Some(got_v[0].0), v);
-        assert_eq!(Some(got_r[0].0), r);
-        assert_eq!(VolumePass::sum_of(&got_v[0].1), sum, "frame {frame}");
-        assert_eq!(VolumePass::sum_of(&got_r[0].1), removed, "frame {frame}");
-        removed_any |= removed > 0;
+        expected.push(StepMeasure {
+            tag: 100 + frame,
+            volume: volume.read(device).expect("read"),
+            removed: scratch.read_removed(device, queue).expect("read"),
+        });
+        // Every other frame polls: nothing waits, and what arrived comes in order.
+        if frame % 2 == 1 {
+            arrived.extend(measures.poll(device).expect("poll"));
+        }
     }
+    arrived.extend(measures.flush(device).expect("flush"));
+    assert!(!measures.in_flight());
+    assert_eq!(arrived, expected);
+    // More steps than the rings hold, never polled: a full ring waits for the GPU instead of
+    // losing a step, and the flush hands every one over in order.
+    for tag in 0..40u64 {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        volume
+            .encode(device, queue, &mut encoder, &gmap)
+            .expect("volume");
+        measures
+            .request(device, &mut encoder, tag, &volume, None)
+            .expect("request");
+        queue.submit([encoder.finish()]);
+        volume.recall();
+    }
+    let tags: Vec<u64> = measures
+        .flush(device)
+        .expect("flush")
+        .iter()
+        .map(|m| m.tag)
+        .collect();
+    assert_eq!(tags, (0..40).collect::<Vec<_>>());
     assert!(
-        removed_any,
+        expected.iter().any(|m| m.removed > 0),
         "compression removed nothing: the removed counter went untested"
     );
     ctx.check().expect("validation");

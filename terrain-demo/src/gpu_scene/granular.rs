@@ -4,9 +4,8 @@
 //! them when the vehicle forces it); the passes outlive a window, so the next one compiles
 //! nothing.
 
-pub use super::measures::GranularMeasure;
-use super::measures::Measures;
 use super::*;
+use terrain_gpu::granular::StepMeasures;
 
 /// Granular areas read back: world-window rects and their fixed-point heights.
 pub type ArrivedAreas = Vec<(Rect, Grid<u32>)>;
@@ -25,7 +24,7 @@ pub(super) struct GranularScene {
     /// Changed areas not yet requested (the ring was busy).
     pub(super) pending: Vec<Rect>,
     /// The steps' volumes and removed material, on their way back.
-    pub(super) measures: Measures,
+    pub(super) measures: StepMeasures,
     /// The material layer the steps' trails paint (`enable_granular_trails`).
     pub(super) trail: Option<GpuMaterialLayer>,
 }
@@ -38,7 +37,7 @@ pub(super) struct GranularPasses {
     pub(super) volume: VolumePass,
     pub(super) readback: RegionReadback,
     pub(super) params: GranularParams,
-    pub(super) measures: Measures,
+    pub(super) measures: StepMeasures,
 }
 
 /// What one GPU granular step did.
@@ -47,7 +46,7 @@ pub struct GranularFrame {
     pub areas: Vec<Rect>,
     /// The measures (volume after the step, material removed) of earlier steps that arrived,
     /// oldest first, tagged with their frames: this step's come in a later frame.
-    pub measured: Vec<GranularMeasure>,
+    pub measured: Vec<StepMeasure>,
     /// Regions of earlier steps that arrived on the CPU: (rect, fixed-point heights).
     pub arrived: Vec<(Rect, Grid<u32>)>,
 }
@@ -57,7 +56,7 @@ pub struct GranularArrivals {
     /// Changed areas: (rect, fixed-point heights).
     pub areas: ArrivedAreas,
     /// Steps' measures, oldest first.
-    pub measured: Vec<GranularMeasure>,
+    pub measured: Vec<StepMeasure>,
     /// Whether anything (an area or a measure) is still on its way.
     pub in_flight: bool,
 }
@@ -145,7 +144,7 @@ impl GpuScene {
                 volume: VolumePass::new(device)?,
                 readback: RegionReadback::new(device, 8)?,
                 params,
-                measures: Measures::new(device)?,
+                measures: StepMeasures::new(device)?,
             },
         };
         let mut normal_pass = passes.normal_pass;

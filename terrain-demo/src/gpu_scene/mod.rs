@@ -30,15 +30,14 @@ mod detail;
 mod frame_timer;
 mod granular;
 mod lod;
-mod measures;
 mod paint;
 
 pub use detail::{DETAIL_SLOTS, SPILL_WINDOW_TEXELS};
 use detail::{DetailScene, RefinedGeometry};
 use frame_timer::FrameTimer;
 use granular::{GranularPasses, GranularScene};
-pub use measures::GranularMeasure;
 pub use paint::CRATER_DIRT;
+pub use terrain_gpu::granular::StepMeasure;
 
 pub use terrain_gpu::Camera;
 

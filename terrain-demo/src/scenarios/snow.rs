@@ -12,7 +12,7 @@ use super::{FRAME_DT, FinishStats, FrameContext, FrameOutcome, Scenario, Scenari
 use crate::camera_rig::CameraRig;
 use crate::cli::Cli;
 use crate::config::DemoParams;
-use crate::gpu_scene::{GpuScene, GranularMeasure};
+use crate::gpu_scene::{GpuScene, StepMeasure};
 use crate::report::FrameStats;
 use crate::timings::{GranularFigure, Step, ms_since};
 use crate::usage_error::UsageExt;
@@ -82,13 +82,13 @@ impl SnowScenario {
 
     /// The report's figures of GPU steps' measures, in step order: the volume and the material
     /// removed so far.
-    fn figures(&mut self, measured: &[GranularMeasure]) -> Vec<GranularFigure> {
+    fn figures(&mut self, measured: &[StepMeasure]) -> Vec<GranularFigure> {
         measured
             .iter()
             .map(|m| {
                 self.gpu_removed += m.removed;
                 GranularFigure {
-                    frame: m.frame,
+                    frame: m.tag,
                     volume: m.volume,
                     volume_taken: None,
                     removed: Some(self.gpu_removed),

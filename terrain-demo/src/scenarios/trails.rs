@@ -6,7 +6,7 @@
 //! pool re-uploads them. When the vehicle nears the window's edge, the window is drained,
 //! released (its volume checked) and taken again ahead of the vehicle.
 
-use crate::gpu_scene::{GpuScene, GranularMeasure};
+use crate::gpu_scene::{GpuScene, StepMeasure};
 use crate::timings::{GranularFigure, Step, Timings};
 use anyhow::{Context, Result, bail};
 use glam::{Affine3A, Quat, Vec2, Vec3};
@@ -242,13 +242,13 @@ impl Trails {
 
     /// The report's figures of GPU steps' measures, in step order: the volume and the units the
     /// window held when taken less those compression removed since (equal at every step).
-    fn figures(&mut self, measured: &[GranularMeasure]) -> Vec<GranularFigure> {
+    fn figures(&mut self, measured: &[StepMeasure]) -> Vec<GranularFigure> {
         measured
             .iter()
             .map(|m| {
                 self.removed += m.removed;
                 GranularFigure {
-                    frame: m.frame,
+                    frame: m.tag,
                     volume: m.volume,
                     volume_taken: self.window.volume_taken().checked_sub(self.removed),
                     removed: None,

@@ -16,6 +16,7 @@
 //! call `recall()` on it after the submit that carries them.
 
 mod depth;
+mod measures;
 mod normals;
 mod passes;
 mod scratch;
@@ -27,6 +28,7 @@ mod volume;
 pub use depth::{
     DepthArea, DepthFromBelowPass, MAX_RECORDS_PER_DISPATCH, MAX_TILE_SIDE, RECORD_TILE,
 };
+pub use measures::{StepMeasure, StepMeasures};
 pub use normals::{GpuGranularNormals, GranularNormalsPass};
 pub use passes::{
     DisplacePass, FloodedArea, JumpFloodPass, PenetrationPass, SlopePass, SlopeSettings,

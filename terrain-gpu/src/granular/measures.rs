@@ -1,40 +1,45 @@
-//! Each GPU granular step's volume sum and removed material, read back without a wait: the
-//! step's submit copies both counters into two rings of small staging buffers, and a later
-//! frame's poll hands them over in step order, tagged with the frame that stepped (the report
-//! credits them there). A blocking read of each would stall every frame on the GPU.
+//! [`StepMeasures`]: each granular step's volume sum and removed material, read back without
+//! a wait. The step's submit copies both counters into two rings of small staging buffers, and
+//! a later poll hands them over in step order, tagged as the caller asked (its frame, say). A
+//! blocking read of each ([`VolumePass::read`], [`GranularScratch::read_removed`]) would stall
+//! every frame on the GPU.
 
-use anyhow::Result;
+use crate::device::small_readback::SmallReadback;
+use crate::error::GpuError;
+use crate::granular::{GranularScratch, VolumePass};
 use std::collections::{HashMap, VecDeque};
-use terrain_gpu::granular::{GranularScratch, VolumePass};
-use terrain_gpu::{GpuError, SmallReadback};
 
 /// Steps whose counters may be on their way at once.
 const RING: usize = 16;
 
 /// What one step measured.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct GranularMeasure {
-    /// The scene frame that stepped.
-    pub frame: u64,
+pub struct StepMeasure {
+    /// The tag the step was requested with (the frame that stepped, say).
+    pub tag: u64,
     /// The u64 sum of the map's heights after the step.
     pub volume: u64,
     /// Material the step's compression removed, in height units.
     pub removed: u64,
 }
 
-/// The two rings and the steps on their way (see the module docs).
-pub(super) struct Measures {
+/// The two rings and the steps on their way (see the module docs): [`StepMeasures::request`]
+/// in each step's submit, [`StepMeasures::poll`] any time after, [`StepMeasures::flush`] at the
+/// end of a map's steps.
+#[derive(Debug)]
+pub struct StepMeasures {
     volume: SmallReadback,
     removed: SmallReadback,
-    /// Steps requested, oldest first: frame, volume request, removed request (`None`: a step
+    /// Steps requested, oldest first: tag, volume request, removed request (`None`: a step
     /// without a scratch removes nothing).
     steps: VecDeque<(u64, u64, Option<u64>)>,
     volumes: HashMap<u64, u64>,
     removals: HashMap<u64, u64>,
 }
 
-impl Measures {
-    pub(super) fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
+impl StepMeasures {
+    /// The two rings (16 steps may be on their way), made now.
+    pub fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
         Ok(Self {
             volume: SmallReadback::new(device, RING, 8)?,
             removed: SmallReadback::new(device, RING, 8)?,
@@ -44,14 +49,15 @@ impl Measures {
         })
     }
 
-    /// Records the copies of the counters of the step of `frame` (the volume pass's last sum,
-    /// the scratch's removed counter) into `encoder`. With every ring buffer on its way (16
-    /// steps unread) it waits for the oldest first, so no step goes unmeasured.
-    pub(super) fn request(
+    /// Records the copies of a step's counters (the volume pass's last sum, the scratch's
+    /// removed counter; `None`: nothing removed) into `encoder`, after the step and the volume
+    /// pass were recorded; `tag` comes back with them. With every ring buffer on its way (16
+    /// steps unread) it waits for the GPU first, so no step goes unmeasured.
+    pub fn request(
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
-        frame: u64,
+        tag: u64,
         volume: &VolumePass,
         scratch: Option<&GranularScratch>,
     ) -> Result<(), GpuError> {
@@ -70,17 +76,17 @@ impl Measures {
             }),
             None => None,
         };
-        self.steps.push_back((frame, v, r));
+        self.steps.push_back((tag, v, r));
         Ok(())
     }
 
     /// Whether a step's counters are still on their way.
-    pub(super) fn in_flight(&self) -> bool {
+    pub fn in_flight(&self) -> bool {
         !self.steps.is_empty()
     }
 
     /// The steps whose counters have both arrived, oldest first, never waiting.
-    pub(super) fn poll(&mut self, device: &wgpu::Device) -> Result<Vec<GranularMeasure>, GpuError> {
+    pub fn poll(&mut self, device: &wgpu::Device) -> Result<Vec<StepMeasure>, GpuError> {
         for (seq, bytes) in self.volume.poll(device)? {
             self.volumes.insert(seq, VolumePass::sum_of(&bytes));
         }
@@ -88,7 +94,7 @@ impl Measures {
             self.removals.insert(seq, VolumePass::sum_of(&bytes));
         }
         let mut out = Vec::new();
-        while let Some(&(frame, v, r)) = self.steps.front() {
+        while let Some(&(tag, v, r)) = self.steps.front() {
             let removed = match r {
                 Some(r) if !self.removals.contains_key(&r) => break,
                 Some(r) => self.removals.get(&r).copied().unwrap_or(0),
@@ -101,8 +107,8 @@ impl Measures {
                 self.removals.remove(&r);
             }
             self.steps.pop_front();
-            out.push(GranularMeasure {
-                frame,
+            out.push(StepMeasure {
+                tag,
                 volume,
                 removed,
             });
@@ -110,9 +116,9 @@ impl Measures {
         Ok(out)
     }
 
-    /// Waits (bounded) for every step on its way and hands them over: the end of a window or
-    /// of the run.
-    pub(super) fn flush(&mut self, device: &wgpu::Device) -> Result<Vec<GranularMeasure>> {
+    /// Waits (bounded: 60 s a wait) for every step on its way and hands them over, at the end
+    /// of a map's steps. Fails when some never arrive (a lost device).
+    pub fn flush(&mut self, device: &wgpu::Device) -> Result<Vec<StepMeasure>, GpuError> {
         let mut out = Vec::new();
         // Bounded: each wait lands every submitted copy.
         for _ in 0..2 {
@@ -123,20 +129,15 @@ impl Measures {
             self.wait(device)?;
         }
         out.extend(self.poll(device)?);
-        anyhow::ensure!(
-            !self.in_flight(),
-            "{} granular steps' volumes never came back from the GPU",
-            self.steps.len()
-        );
+        if self.in_flight() {
+            return Err(GpuError::SmallReadbackFailed);
+        }
         Ok(out)
     }
 
     /// Waits for the GPU and takes in what arrived (the rings' buffers are free again).
     fn wait(&mut self, device: &wgpu::Device) -> Result<(), GpuError> {
-        device.poll(wgpu::PollType::Wait {
-            submission_index: None,
-            timeout: Some(std::time::Duration::from_secs(60)),
-        })?;
+        device.poll(crate::device::download::wait_bounded())?;
         for (seq, bytes) in self.volume.poll(device)? {
             self.volumes.insert(seq, VolumePass::sum_of(&bytes));
         }
