@@ -67,8 +67,8 @@ pub mod testing;
 // crate root (the granular passes under `granular`, the test helpers under `testing`). These
 // imports give the crate's own code the short paths `crate::<module>`.
 use device::{
-    context, detail_readback, download, limits, profiler, readback, region_source, small_readback,
-    timer,
+    context, detail_readback, download, limits, profiler, queued_readback, readback, region_source,
+    small_readback, timer,
 };
 use passes::{density, detail_probe, material_effect, normals, spill, stamp};
 use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
@@ -101,6 +101,7 @@ pub use overlay_atlas::GpuOverlayAtlas;
 pub use profiler::{
     FrameProfile, GpuProfiler, MAX_PROFILER_FRAMES, MAX_PROFILER_SCOPES, Scope, ScopeTiming,
 };
+pub use queued_readback::QueuedReadback;
 pub use readback::{MAX_READBACK_RING, ReadbackTicket, RegionData, RegionReadback, RegionView};
 pub use refine::{RefineDraw, RefinePass, RefineRenderer};
 pub use region_source::GpuRegionSource;

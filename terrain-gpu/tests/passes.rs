@@ -498,6 +498,48 @@ fn readback_delivers_regions_without_waiting_and_equals_the_map() {
     ctx.check().expect("no GPU validation errors");
 }
 
+/// More rects than the ring holds: those without room wait in the queue and go with the next
+/// request, every one arrives once and in request order, equal to the map, and the flush
+/// leaves nothing on its way.
+#[test]
+fn queued_readback_keeps_order_and_drops_nothing() {
+    let Some(ctx) = context_or_skip("queued_readback") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let map = readback_map();
+    let gpu = GpuHeightMap::from_map(device, queue, &map).unwrap();
+    let mut readback = terrain_gpu::QueuedReadback::new(device, 2).unwrap();
+    let rects: Vec<Rect> = (0..7)
+        .map(|i| Rect::new(IVec2::new(3 * i, 60 - 5 * i), UVec2::new(9 + i as u32, 4)))
+        .collect();
+    let mut arrived = Vec::new();
+    for batch in rects.chunks(3) {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        readback
+            .request(device, &mut encoder, &gpu, batch.iter().copied())
+            .unwrap();
+        queue.submit([encoder.finish()]);
+        assert!(readback.in_flight());
+        // What the ring had room for arrives; the rest waits (the poll never blocks).
+        device
+            .poll(wgpu::PollType::Wait {
+                submission_index: None,
+                timeout: Some(std::time::Duration::from_secs(60)),
+            })
+            .unwrap();
+        arrived.extend(readback.poll(device).unwrap());
+    }
+    arrived.extend(readback.flush(device, queue, &gpu).unwrap());
+    assert!(!readback.in_flight());
+    let got: Vec<Rect> = arrived.iter().map(|r| r.rect).collect();
+    assert_eq!(got, rects);
+    for data in &arrived {
+        assert_rows_are_the_map(&data.to_u16(), data.rect, &map);
+    }
+    ctx.check().expect("no GPU validation errors");
+}
+
 /// Full-width rects (one copy for all their rows), a band across the map's wrap (two pieces
 /// of whole rows) and the whole map, read with `wait_with` straight into u16 rows and
 /// metres: equal to the map, and to what `wait` hands over.

@@ -5,6 +5,7 @@
 //! nothing.
 
 use super::*;
+use terrain_gpu::QueuedReadback;
 use terrain_gpu::granular::StepMeasures;
 
 /// Granular areas read back: world-window rects and their fixed-point heights.
@@ -19,10 +20,8 @@ pub(super) struct GranularScene {
     pub(super) normals: GpuGranularNormals,
     pub(super) blur_iterations: u32,
     pub(super) volume: VolumePass,
-    pub(super) readback: RegionReadback,
+    pub(super) readback: QueuedReadback,
     pub(super) params: GranularParams,
-    /// Changed areas not yet requested (the ring was busy).
-    pub(super) pending: Vec<Rect>,
     /// The steps' volumes and removed material, on their way back.
     pub(super) measures: StepMeasures,
     /// The material layer the steps' trails paint (`enable_granular_trails`).
@@ -35,7 +34,7 @@ pub(super) struct GranularPasses {
     pub(super) step: GpuGranularStep,
     pub(super) normal_pass: GranularNormalsPass,
     pub(super) volume: VolumePass,
-    pub(super) readback: RegionReadback,
+    pub(super) readback: QueuedReadback,
     pub(super) params: GranularParams,
     pub(super) measures: StepMeasures,
 }
@@ -98,8 +97,7 @@ impl GpuScene {
             .map(|r| (r.rect, r.raw))
             .collect();
         let measured = g.measures.poll(device)?;
-        let in_flight =
-            !g.pending.is_empty() || g.readback.in_flight() > 0 || g.measures.in_flight();
+        let in_flight = g.readback.in_flight() || g.measures.in_flight();
         Ok(GranularArrivals {
             areas,
             measured,
@@ -142,7 +140,7 @@ impl GpuScene {
                 step: GpuGranularStep::new(device, params)?,
                 normal_pass: GranularNormalsPass::new(device)?,
                 volume: VolumePass::new(device)?,
-                readback: RegionReadback::new(device, 8)?,
+                readback: QueuedReadback::new(device, 8)?,
                 params,
                 measures: StepMeasures::new(device)?,
             },
@@ -180,7 +178,6 @@ impl GpuScene {
             volume: passes.volume,
             readback: passes.readback,
             params,
-            pending: Vec::new(),
             measures: passes.measures,
             trail: None,
         });
@@ -249,17 +246,8 @@ impl GpuScene {
                 g.measures
                     .request(device, encoder, frame, &g.volume, g.step.scratch())?;
                 // The changed areas go to the CPU copy behind the overview and collision.
-                g.pending.extend(areas.iter().copied());
-                let mut waiting = Vec::new();
-                for rect in g.pending.drain(..) {
-                    match g.readback.request(device, encoder, &g.map, rect) {
-                        Ok(_) => {}
-                        Err(terrain_gpu::GpuError::ReadbackBusy { .. }) => waiting.push(rect),
-                        Err(e) => return Err(e),
-                    }
-                }
-                g.pending = waiting;
-                Ok(())
+                g.readback
+                    .request(device, encoder, &g.map, areas.iter().copied())
             })?;
         g.normal_pass.recall();
         g.volume.recall();
@@ -281,27 +269,12 @@ impl GpuScene {
                 in_flight: false,
             });
         };
-        let mut arrived = Vec::new();
-        // Bounded: each round frees every slot, and the pending list only shrinks.
-        while !g.pending.is_empty() || g.readback.in_flight() > 0 {
-            let mut encoder = device.create_command_encoder(&Default::default());
-            let mut waiting = Vec::new();
-            for rect in std::mem::take(&mut g.pending) {
-                match g.readback.request(device, &mut encoder, &g.map, rect) {
-                    Ok(_) => {}
-                    Err(terrain_gpu::GpuError::ReadbackBusy { .. }) => waiting.push(rect),
-                    Err(e) => return Err(e.into()),
-                }
-            }
-            g.pending = waiting;
-            queue.submit([encoder.finish()]);
-            arrived.extend(
-                g.readback
-                    .wait(device)?
-                    .into_iter()
-                    .map(|r| (r.rect, r.raw)),
-            );
-        }
+        let arrived = g
+            .readback
+            .flush(device, queue, &g.map)?
+            .into_iter()
+            .map(|r| (r.rect, r.raw))
+            .collect();
         Ok(GranularArrivals {
             areas: arrived,
             measured: g.measures.flush(device)?,

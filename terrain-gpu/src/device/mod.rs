@@ -7,6 +7,7 @@ pub mod detail_readback;
 pub mod download;
 pub mod limits;
 pub mod profiler;
+pub mod queued_readback;
 pub mod readback;
 pub mod region_source;
 pub mod scope;
