@@ -87,12 +87,7 @@ impl StepMeasures {
 
     /// The steps whose counters have both arrived, oldest first, never waiting.
     pub fn poll(&mut self, device: &wgpu::Device) -> Result<Vec<StepMeasure>, GpuError> {
-        for (seq, bytes) in self.volume.poll(device)? {
-            self.volumes.insert(seq, VolumePass::sum_of(&bytes));
-        }
-        for (seq, bytes) in self.removed.poll(device)? {
-            self.removals.insert(seq, VolumePass::sum_of(&bytes));
-        }
+        self.take_in(device)?;
         let mut out = Vec::new();
         while let Some(&(tag, v, r)) = self.steps.front() {
             let removed = match r {
@@ -138,6 +133,11 @@ impl StepMeasures {
     /// Waits for the GPU and takes in what arrived (the rings' buffers are free again).
     fn wait(&mut self, device: &wgpu::Device) -> Result<(), GpuError> {
         device.poll(crate::device::download::wait_bounded())?;
+        self.take_in(device)
+    }
+
+    /// Keeps the counters that have arrived (freeing their ring buffers), never waiting.
+    fn take_in(&mut self, device: &wgpu::Device) -> Result<(), GpuError> {
         for (seq, bytes) in self.volume.poll(device)? {
             self.volumes.insert(seq, VolumePass::sum_of(&bytes));
         }
