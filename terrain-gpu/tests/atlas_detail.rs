@@ -93,13 +93,8 @@ fn tessellated_for(scene: &Scene) -> Tessellated {
         lod_count: 5,
         ..CdlodConfig::default()
     };
-    let tree = CdlodTree::from_leaf_bounds(config, scene.map.size(), 1.0, |r| {
-        let g = scene.map.grid().copy_rect(r).unwrap();
-        let lo = *g.as_slice().iter().min().unwrap();
-        let hi = *g.as_slice().iter().max().unwrap();
-        (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
-    })
-    .unwrap();
+    let bounds = terrain_test_support::heights::exact_bounds(&scene.map);
+    let tree = CdlodTree::from_leaf_bounds(config, scene.map.size(), 1.0, bounds).unwrap();
     let tess = StreamedTessellation::new(TessConfig::default(), &tree).unwrap();
     Tessellated {
         gpu: GpuTessellation::streamed(device, queue, &tess, &tree, enc, 1 << 20).unwrap(),

@@ -32,6 +32,7 @@ use terrain_gpu::{
 use terrain_lod::{
     CdlodConfig, CdlodTree, CdlodView, Frustum, StreamedTessellation, TessConfig, TessTriangle,
 };
+use terrain_test_support::heights::exact_bounds;
 
 const TILE: u32 = 32;
 
@@ -90,16 +91,6 @@ fn tree_config() -> CdlodConfig {
     }
 }
 
-fn leaf_bounds(map: &CoarseMap) -> impl FnMut(Rect) -> (f32, f32) + '_ {
-    move |r: Rect| {
-        let g = map.grid().copy_rect(r).unwrap();
-        let lo = *g.as_slice().iter().min().unwrap();
-        let hi = *g.as_slice().iter().max().unwrap();
-        let enc = map.encoding();
-        (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
-    }
-}
-
 /// The world as the GPU and the CPU reference hold it.
 struct World {
     gpu: GpuTileAtlas,
@@ -125,7 +116,7 @@ impl World {
             tree_config(),
             scene.map.size(),
             1.0,
-            leaf_bounds(&scene.map),
+            exact_bounds(&scene.map),
         )
         .unwrap();
         World { gpu, cpu, tree }
@@ -290,7 +281,7 @@ fn the_gpu_emits_the_cpu_reference_triangles_before_and_after_a_deformation() {
     upload(&mut w.gpu, &scene.map, crater);
     upload(&mut w.cpu, &scene.map, crater);
     w.tree
-        .update_leaf_bounds(crater, leaf_bounds(&scene.map))
+        .update_leaf_bounds(crater, exact_bounds(&scene.map))
         .unwrap();
     gpu.upload_tree(queue, &w.tree, &[crater]).unwrap();
     let after = tess.select(&w.tree, &view, &w.height()).unwrap();

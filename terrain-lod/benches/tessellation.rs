@@ -81,21 +81,14 @@ fn bench(c: &mut Criterion) {
         })
     });
     // The streamed form: the map as a world the CPU would not hold whole.
-    let leaf_bounds = |r: Rect| {
-        let g = map.grid().copy_rect(r).expect("rect");
-        let (lo, hi) = g
-            .as_slice()
-            .iter()
-            .fold((u16::MAX, 0), |(a, b), &v| (a.min(v), b.max(v)));
-        (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
-    };
+    let mut leaf_bounds = terrain_test_support::heights::exact_bounds(&map);
     let tree_config = StreamedTessellation::tree_config(config.patch_size);
     let ts = map.texel_size();
     group.bench_function("streamed_tree/2048", |b| {
-        b.iter(|| CdlodTree::from_leaf_bounds(tree_config, map.size(), ts, leaf_bounds))
+        b.iter(|| CdlodTree::from_leaf_bounds(tree_config, map.size(), ts, &mut leaf_bounds))
     });
     let mut tree =
-        CdlodTree::from_leaf_bounds(tree_config, map.size(), ts, leaf_bounds).expect("tree");
+        CdlodTree::from_leaf_bounds(tree_config, map.size(), ts, &mut leaf_bounds).expect("tree");
     let streamed = StreamedTessellation::new(config, &tree).expect("streamed");
     let height = |t: IVec2| {
         let c = t.clamp(IVec2::ZERO, map.size().as_ivec2() - 1);
@@ -112,7 +105,7 @@ fn bench(c: &mut Criterion) {
     });
     group.bench_function("streamed_update/200x200", |b| {
         b.iter(|| {
-            tree.update_leaf_bounds(black_box(crater), leaf_bounds)
+            tree.update_leaf_bounds(black_box(crater), &mut leaf_bounds)
                 .expect("update")
         })
     });

@@ -6,6 +6,8 @@
 
 mod common;
 
+use terrain_test_support::heights::exact_bounds;
+
 use common::{area, assert_conforming, view};
 use glam::camera::rh::{proj::directx, view::look_at_mat4};
 use glam::{IVec2, UVec2, Vec3};
@@ -50,17 +52,7 @@ fn tree_config() -> CdlodConfig {
 
 /// The streamed tree of `m`, its leaves bounded exactly (as resident tiles give them).
 fn tree(m: &HeightMap<u16>) -> CdlodTree {
-    CdlodTree::from_leaf_bounds(tree_config(), m.size(), m.texel_size(), leaf_bounds(m)).unwrap()
-}
-
-fn leaf_bounds(m: &HeightMap<u16>) -> impl FnMut(Rect) -> (f32, f32) + '_ {
-    move |r: Rect| {
-        let g = m.grid().copy_rect(r).unwrap();
-        let lo = *g.as_slice().iter().min().unwrap();
-        let hi = *g.as_slice().iter().max().unwrap();
-        let enc = m.encoding();
-        (enc.to_metres(f64::from(lo)), enc.to_metres(f64::from(hi)))
-    }
+    CdlodTree::from_leaf_bounds(tree_config(), m.size(), m.texel_size(), exact_bounds(m)).unwrap()
 }
 
 /// The map's height at a texel, clamped at its edges (as the GPU's atlas addresses it).
@@ -159,7 +151,7 @@ fn ground_raised_towards_the_camera_splits_further() {
             *m.grid_mut().get_mut(x, y).unwrap() = 65_000;
         }
     }
-    t.update_leaf_bounds(block, leaf_bounds(&m)).unwrap();
+    t.update_leaf_bounds(block, exact_bounds(&m)).unwrap();
     let (after, frame) = count(&t, &m);
     assert!(
         after > before,

@@ -17,6 +17,8 @@
 //!   writer with GeoTIFF tags, written without the tiff crate.
 //! - [`granular`]: the granular test rig (bumpy map, moving objects, parameters) that
 //!   terrain-core's CPU reference tests and terrain-gpu's GPU step tests both run.
+//! - [`heights`]: a map's exact height bounds over a rect, which the streamed quadtree and
+//!   tessellation tests of terrain-lod and terrain-gpu build their trees from.
 //!
 //! The crates take it as a dev-dependency and use it from their integration tests (`tests/`)
 //! only. It depends on terrain-core and terrain-cache, so a `#[cfg(test)]` unit test inside terrain-core (or a
@@ -26,6 +28,7 @@
 pub mod decoders;
 pub mod fuzz;
 pub mod granular;
+pub mod heights;
 pub mod png;
 pub mod png_encoder;
 pub mod tiff;
