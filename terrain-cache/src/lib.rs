@@ -64,6 +64,7 @@
 mod convert;
 pub mod detail;
 pub mod error;
+mod granular_trails;
 mod granular_window;
 pub mod lock;
 pub mod manifest;
@@ -81,6 +82,10 @@ pub mod world;
 
 pub use convert::{ConvertReport, convert_world};
 pub use error::CacheError;
+pub use granular_trails::{
+    CpuOnly, GranularStepper, GranularTrails, HandedBack, TrailConfig, TrailFrame, TrailMeasure,
+    TrailsError,
+};
 pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
 pub use manifest::{DetailLayout, Manifest, TileFormat, tile_key};
 #[cfg(feature = "object-store")]

@@ -5,7 +5,7 @@
 use terrain_core::granular::*;
 use terrain_core::{Grid, MaterialEffect, apply_trail_effect};
 use terrain_gpu::granular::{
-    DepthSource, GpuGranularStep, StepMeasure, StepMeasures, Trail, VolumePass,
+    DepthSource, GpuGranularStep, GranularField, StepMeasure, StepMeasures, Trail, VolumePass,
 };
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{GpuHeightMap, GpuMaterialLayer};
@@ -367,5 +367,74 @@ fn volume_and_removed_ride_the_small_readback_rings() {
         expected.iter().any(|m| m.removed > 0),
         "compression removed nothing: the removed counter went untested"
     );
+    ctx.check().expect("validation");
+}
+
+/// `GranularField`, the whole of a granular map on the GPU: its steps equal the CPU
+/// simulation's; the areas it reads back, applied to a CPU copy as they arrive, leave the copy
+/// equal to the simulation's map after a drain; every step's measures come back in order, equal
+/// to the simulation's; and a field built from the last one's passes hands over nothing of it.
+#[test]
+fn a_granular_field_reads_back_what_the_cpu_simulation_computes() {
+    let Some(ctx) = context_or_skip("a_granular_field_reads_back_what_the_cpu_simulation_computes")
+    else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let m = meshes();
+    let map = bumpy_map(96, 0.05);
+    let p = GranularParams {
+        compression: 0.3,
+        ..small_params()
+    };
+    let mut field = GranularField::new(device, queue, &map, p, None).expect("field");
+    // The CPU rasterizer's depth, so that the steps compare bit for bit.
+    field.step_pass_mut().depth_source = DepthSource::Cpu;
+    let mut sim = GranularSim::new(map.clone(), p).expect("sim");
+    let mut copy = map.grid().clone();
+    let mut expected = Vec::new();
+    let mut measured = Vec::new();
+    let apply = |copy: &mut Grid<u32>, arrivals: GranularArrivals| {
+        for (rect, heights) in arrivals.areas {
+            copy.paste(&heights, rect.min).expect("area inside the map");
+        }
+        arrivals.measured
+    };
+    for frame in 0..30u64 {
+        let objs = objects_at(&m, frame as u32 * 5, 96.0 * 0.05);
+        let areas = field.step(device, queue, &objs, frame).expect("gpu step");
+        let c = sim.step(&objs).expect("cpu step");
+        let cpu_areas: Vec<_> = c.active_areas.iter().map(|a| a.rect).collect();
+        assert_eq!(areas, cpu_areas, "frame {frame}");
+        expected.push(StepMeasure {
+            tag: frame,
+            volume: c.volume,
+            removed: c.removed,
+        });
+        if frame % 3 == 2 {
+            let arrivals = field.poll(device).expect("poll");
+            measured.extend(apply(&mut copy, arrivals));
+        }
+    }
+    measured.extend(apply(&mut copy, field.drain(device, queue).expect("drain")));
+    assert_eq!(measured, expected);
+    assert!(
+        copy == *sim.map().grid(),
+        "the areas read back miss a change"
+    );
+    assert!(
+        expected.iter().any(|m| m.removed > 0),
+        "compression untested"
+    );
+    // The passes serve another map; nothing of the first comes with it.
+    let objs = objects_at(&m, 7, 96.0 * 0.05);
+    field
+        .step(device, queue, &objs, 99)
+        .expect("a step left in flight");
+    let (last, passes) = field.finish(device, queue).expect("finish");
+    assert_eq!(last.measured.len(), 1);
+    let mut next = GranularField::new(device, queue, &map, p, Some(passes)).expect("field");
+    let nothing = next.drain(device, queue).expect("drain");
+    assert!(nothing.areas.is_empty() && nothing.measured.is_empty());
     ctx.check().expect("validation");
 }

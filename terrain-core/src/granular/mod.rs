@@ -32,6 +32,7 @@
 //! ```
 
 mod active;
+mod arrivals;
 mod depth;
 mod displace;
 mod edt;
@@ -46,6 +47,7 @@ mod sim;
 mod slope;
 
 pub use active::{ActiveArea, merge_active_areas, object_active_area};
+pub use arrivals::{GranularArrivals, StepMeasure};
 pub use depth::{
     DepthTriangle, MAX_HEIGHT_FRAC_BITS, MAX_TRIANGLE_SPAN, NO_OBJECT, SUBTEXEL_BITS,
     depth_from_below, depth_from_below_into, depth_triangle, depth_triangles, object_footprint,

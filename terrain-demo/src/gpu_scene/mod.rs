@@ -10,14 +10,12 @@ use terrain_core::detail::DetailLayout;
 use terrain_core::granular::{GranularObject, GranularParams};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_core::{FixedPointMap, Rect, StampPlacement};
-use terrain_gpu::granular::{
-    GpuGranularNormals, GpuGranularStep, GranularNormalsPass, Trail, VolumePass,
-};
+use terrain_gpu::granular::{GranularField, GranularPasses};
 use terrain_gpu::{
     ClipmapSurface, DetailShading, GpuContext, GpuDerivativeMap, GpuDetailTiles, GpuHeightMap,
-    GpuMaterialLayer, GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass, OffscreenTarget,
-    RefineDraw, RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp,
-    StampPass, TerrainRenderer, TerrainStyle, TerrainView,
+    GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass, OffscreenTarget, RefineDraw,
+    RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp, StampPass,
+    TerrainRenderer, TerrainStyle, TerrainView,
 };
 use terrain_lod::{CdlodConfig, CdlodTree, ClipmapLayout, TessConfig};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
@@ -35,9 +33,8 @@ mod paint;
 pub use detail::{DETAIL_SLOTS, SPILL_WINDOW_TEXELS};
 use detail::{DetailScene, RefinedGeometry};
 use frame_timer::FrameTimer;
-use granular::{GranularPasses, GranularScene};
+pub use granular::TimedGranular;
 pub use paint::CRATER_DIRT;
-pub use terrain_gpu::granular::StepMeasure;
 
 pub use terrain_gpu::Camera;
 
@@ -68,7 +65,7 @@ pub struct GpuScene {
     /// Lowest and highest height the map can hold (metres): the culling boxes' vertical extent.
     height_range: (f32, f32),
     /// Granular deformation on the GPU (the snow scenario), drawn instead of the coarse-map.
-    granular: Option<GranularScene>,
+    granular: Option<GranularField>,
     /// The passes of a granular scene disabled since (a world's window that moved), kept for
     /// the next window: building them again took llvmpipe 45-48 ms on the frame thread.
     granular_passes: Option<GranularPasses>,
@@ -487,6 +484,11 @@ impl GpuScene {
             .map_err(|e| self.lost_or(e))
     }
 
+    /// Frames rendered so far: the index of the frame being prepared.
+    pub fn frames_rendered(&self) -> u64 {
+        u64::from(self.frames)
+    }
+
     /// The adapter's name and backend.
     pub fn adapter(&self) -> (String, String) {
         let r = self.ctx.report();
@@ -665,8 +667,8 @@ impl GpuScene {
             },
             (Some(atlas), ..) => ClipmapSurface::Atlas { atlas },
             (None, Some(g), _) => ClipmapSurface::Granular {
-                map: &g.map,
-                surface: g.normals.buffer(),
+                map: g.map(),
+                surface: g.normals().buffer(),
             },
             (None, None, Some(d)) => ClipmapSurface::Detail {
                 map: &self.map,

@@ -196,13 +196,13 @@ impl GpuScene {
             .granular
             .as_mut()
             .context("granular deformation was not enabled on the GPU scene")?;
-        let size = g.map.size();
+        let size = g.map().size();
         let layer = GpuMaterialLayer::new(device, queue, &Grid::new(size.x, size.y, [0; 4])?)?;
         self.terrain.set_material_layer(Some(&layer));
         if let Some(refined) = self.refined.as_mut() {
             refined.renderer.set_material_layer(Some(&layer));
         }
-        g.trail = Some(layer);
+        g.set_trail(Some((layer, TRAIL)));
         Ok(())
     }
 }

@@ -763,16 +763,16 @@ impl Scenario for FlyoverScenario {
                 bail!("the world's pool was shut down");
             };
             let gpu = ctx.gpu.as_deref_mut();
-            let frame =
+            let (frame, step_ms) =
                 trails.advance(pool, gpu, vehicle, &state, craters_in_flight, ctx.timings)?;
             for (rect, heights) in &frame.changed {
                 self.window.apply(*rect, heights)?;
                 changed.push(*rect);
             }
-            for figure in &frame.measured {
-                ctx.timings.add_late_granular(*figure);
+            for figure in super::trails::figures(&frame.measured) {
+                ctx.timings.add_late_granular(figure);
             }
-            self.gpu_stamp_ms += frame.step_ms;
+            self.gpu_stamp_ms += step_ms;
             trail = Some(frame);
         }
         // The walker's footprints into the detail tiles (timed as their own steps).
@@ -827,7 +827,10 @@ impl Scenario for FlyoverScenario {
                 dirty_texels: changed.iter().map(Rect::area).sum(),
                 granular_volume: trail.as_ref().and_then(|t| t.volume),
                 granular_volume_taken: trail.as_ref().and_then(|t| t.volume_taken),
-                granular_backend: trail.as_ref().and_then(|t| t.backend),
+                granular_backend: trail.as_ref().and_then(|t| t.on_gpu).map(|gpu| match gpu {
+                    true => "gpu",
+                    false => "cpu",
+                }),
                 granular_move_waited: trail.as_ref().and_then(|t| t.move_waited),
                 cache: Some(CacheStats {
                     // With a GPU: wanted tiles drawn from a coarser level; without one, the
@@ -890,7 +893,8 @@ impl Scenario for FlyoverScenario {
         // The trails' last areas reach the tiles, and the window's volume is checked.
         let mut granular = Vec::new();
         if let (Some(trails), Some(pool)) = (self.trails.as_mut(), self.pool.as_mut()) {
-            (_, granular) = trails.release(pool, gpu)?;
+            let mut timings = crate::timings::Timings::default();
+            (_, granular) = trails.release(pool, gpu, &mut timings)?;
         }
         if self.stamps.in_flight() > 0 {
             bail!(

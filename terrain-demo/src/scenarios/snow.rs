@@ -12,13 +12,14 @@ use super::{FRAME_DT, FinishStats, FrameContext, FrameOutcome, Scenario, Scenari
 use crate::camera_rig::CameraRig;
 use crate::cli::Cli;
 use crate::config::DemoParams;
-use crate::gpu_scene::{GpuScene, StepMeasure};
+use crate::gpu_scene::GpuScene;
 use crate::report::FrameStats;
 use crate::timings::{GranularFigure, Step, ms_since};
 use crate::usage_error::UsageExt;
 use anyhow::Result;
 use glam::{UVec2, Vec2};
 use std::time::Instant;
+use terrain_core::granular::StepMeasure;
 use terrain_core::{CoarseMap, Rect, bilinear};
 use terrain_physics::CollisionMirror;
 
@@ -146,18 +147,18 @@ impl Scenario for SnowScenario {
         let (volume, removed, deformed_texels, dirty, backend) = match ctx.gpu.as_deref_mut() {
             Some(scene) if self.on_gpu => {
                 let objects = self.field.objects(&poses);
-                let frame = scene.granular_step(&objects, ctx.timings)?;
+                let (areas, arrived) = scene.granular_step(&objects, ctx.timings)?;
                 // The volumes of earlier steps, read back without a wait, go to their frames.
-                for figure in self.figures(&frame.measured) {
+                for figure in self.figures(&arrived.measured) {
                     ctx.timings.add_late_granular(figure);
                 }
-                let mut dirty = Vec::with_capacity(frame.arrived.len());
-                for (rect, heights) in &frame.arrived {
+                let mut dirty = Vec::with_capacity(arrived.areas.len());
+                for (rect, heights) in &arrived.areas {
                     self.field.write_region(*rect, heights)?;
                     self.field.copy_to_coarse(&mut self.coarse, *rect)?;
                     dirty.push(*rect);
                 }
-                let deformed: u64 = frame.areas.iter().map(Rect::area).sum();
+                let deformed: u64 = areas.iter().map(Rect::area).sum();
                 (None, None, deformed, dirty, "gpu")
             }
             _ => ctx.timings.time(Step::GranularCpu, || -> Result<_> {

@@ -8,20 +8,10 @@ use crate::device::small_readback::SmallReadback;
 use crate::error::GpuError;
 use crate::granular::{GranularScratch, VolumePass};
 use std::collections::{HashMap, VecDeque};
+pub use terrain_core::granular::StepMeasure;
 
 /// Steps whose counters may be on their way at once.
 const RING: usize = 16;
-
-/// What one step measured.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct StepMeasure {
-    /// The tag the step was requested with (the frame that stepped, say).
-    pub tag: u64,
-    /// The u64 sum of the map's heights after the step.
-    pub volume: u64,
-    /// Material the step's compression removed, in height units.
-    pub removed: u64,
-}
 
 /// The two rings and the steps on their way (see the module docs): [`StepMeasures::request`]
 /// in each step's submit, [`StepMeasures::poll`] any time after, [`StepMeasures::flush`] at the

@@ -10,12 +10,16 @@
 //! [`GpuGranularStep`] chains the passes over the merged active areas of a list of objects, as
 //! `terrain_core::granular::GranularSim`.
 //!
+//! [`GranularField`] composes them into what an application drives once per frame: a map
+//! stepped, shaded and measured, the changed areas read back without a wait.
+//!
 //! Every pass is built once with `new(&wgpu::Device)` (one shader module, its pipelines, bind
 //! group layouts and a uniform ring) and records with `encode(&mut self, device, queue,
 //! encoder, ..)`, which writes uniforms into the next slots of its ring and records commands;
 //! call `recall()` on it after the submit that carries them.
 
 mod depth;
+mod field;
 mod measures;
 mod normals;
 mod passes;
@@ -28,6 +32,7 @@ mod volume;
 pub use depth::{
     DepthArea, DepthFromBelowPass, MAX_RECORDS_PER_DISPATCH, MAX_TILE_SIDE, RECORD_TILE,
 };
+pub use field::{GranularField, GranularPasses};
 pub use measures::{StepMeasure, StepMeasures};
 pub use normals::{GpuGranularNormals, GranularNormalsPass};
 pub use passes::{
@@ -35,6 +40,7 @@ pub use passes::{
 };
 pub use scratch::{GranularArea, GranularScratch};
 pub use step::{DepthSource, GpuGranularStep, GpuStepReport};
+pub use terrain_core::granular::GranularArrivals;
 pub use trail::{Trail, TrailEffectPass};
 pub use volume::VolumePass;
 

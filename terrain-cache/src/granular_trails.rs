@@ -1,0 +1,416 @@
+//! Granular trails that follow moving objects over a streamed world (Persson 2019, ch. 4):
+//! a [`GranularWindow`] kept around the objects, stepped on the CPU or, through a
+//! [`GranularStepper`] the application provides, on the GPU, every changed area handed back
+//! into the tiles, and the window moved on ahead of the objects when they near its edge.
+//!
+//! **Moving without a wait.** Areas stepped on a GPU come back a frame or more later. Once the
+//! objects are within [`TrailConfig::edge_margin_m`] of the window's edge, each frame hands
+//! back what has arrived and moves the window on the first frame where nothing is on its way
+//! (neither the GPU's areas nor the caller's own writes into the world, `others_in_flight`),
+//! usually a frame or two later. Only objects within [`TrailConfig::forced_margin_m`] force a
+//! move that waits: the stepper's `stop` drains what is left. This needs each frame's GPU work
+//! back by the next frame's poll (as where a frame waits for its capture): with results two or
+//! more frames late, a step is on its way at every poll while the objects step every frame, so
+//! every move is forced and waits for the last steps. Handing the windows' overlap over on the
+//! GPU would remove that wait; it is not built.
+//!
+//! **Volume.** The window holds the world's stored units (see [`GranularWindow`]); the units
+//! it held when taken, less what compression removed since, equal the scratch map's sum at
+//! every step ([`TrailFrame::volume`] against [`TrailFrame::volume_taken`], and each
+//! [`TrailMeasure`] of a GPU step), and the window's release checks the tiles against them.
+
+use crate::{CacheError, CameraState, GranularWindow, Manifest, RamPool};
+use glam::Vec2;
+use std::time::{Duration, Instant};
+use terrain_core::granular::{
+    GranularArrivals, GranularObject, GranularParams, GranularSim, StepMeasure,
+};
+use terrain_core::{FixedPointMap, Grid, Rect};
+
+/// The GPU side of [`GranularTrails`]: a granular map stepped on the GPU, what comes back read
+/// without a wait. terrain-gpu's `granular::GranularField` does each of these in a call or two;
+/// the application implements this over it, submitting and timing the GPU work its own way.
+pub trait GranularStepper {
+    /// What a failed call reports (an application may use `anyhow::Error`).
+    type Error: std::fmt::Display + std::fmt::Debug;
+
+    /// Uploads `map` (the window's scratch map): its steps run on the GPU from now on.
+    fn start(&mut self, map: &FixedPointMap, params: GranularParams) -> Result<(), Self::Error>;
+
+    /// One step with `objects` (in the map's frame), its measures tagged `tag`; returns what
+    /// has arrived of earlier steps, never waiting.
+    fn step(
+        &mut self,
+        objects: &[GranularObject<'_>],
+        tag: u64,
+    ) -> Result<GranularArrivals, Self::Error>;
+
+    /// What has arrived of earlier steps, never waiting.
+    fn poll(&mut self) -> Result<GranularArrivals, Self::Error>;
+
+    /// Waits (bounded) for everything on its way and frees the map.
+    fn stop(&mut self) -> Result<GranularArrivals, Self::Error>;
+}
+
+/// The stepper type of a [`GranularTrails`] that never steps on a GPU: pass
+/// `None::<&mut CpuOnly>`. Every call fails, as there is no GPU behind it.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct CpuOnly;
+
+impl GranularStepper for CpuOnly {
+    type Error = &'static str;
+
+    fn start(&mut self, _: &FixedPointMap, _: GranularParams) -> Result<(), Self::Error> {
+        Err(CPU_ONLY)
+    }
+
+    fn step(&mut self, _: &[GranularObject<'_>], _: u64) -> Result<GranularArrivals, Self::Error> {
+        Err(CPU_ONLY)
+    }
+
+    fn poll(&mut self) -> Result<GranularArrivals, Self::Error> {
+        Err(CPU_ONLY)
+    }
+
+    fn stop(&mut self) -> Result<GranularArrivals, Self::Error> {
+        Err(CPU_ONLY)
+    }
+}
+
+const CPU_ONLY: &str = "CpuOnly has no GPU: pass None as the stepper";
+
+/// Where and when the window moves.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrailConfig {
+    /// Side of the window in level-0 texels (at most [`crate::MAX_WINDOW_SIDE`], clipped to the
+    /// world).
+    pub side: u32,
+    /// Metres the objects keep from the window's edge before it moves on without a wait (the
+    /// step's active area reaches a few texels past an object).
+    pub edge_margin_m: f32,
+    /// Metres from the edge past which the window moves even with writes on their way,
+    /// waiting for them (smaller than `edge_margin_m`).
+    pub forced_margin_m: f32,
+    /// How long a new window may wait for its tiles to load.
+    pub take_timeout: Duration,
+}
+
+impl Default for TrailConfig {
+    /// 128 texels (64 m at 0.5 m), moving 8 m from the edge, forced at 4 m, 10 s for tiles.
+    fn default() -> Self {
+        Self {
+            side: 128,
+            edge_margin_m: 8.0,
+            forced_margin_m: 4.0,
+            take_timeout: Duration::from_secs(10),
+        }
+    }
+}
+
+/// Why a [`GranularTrails`] call failed.
+#[derive(Debug, thiserror::Error)]
+pub enum TrailsError<E> {
+    /// The pool, the window or the step refused (a tile not resident, a volume that does not
+    /// add up, bad parameters).
+    #[error(transparent)]
+    Cache(#[from] CacheError),
+    /// The GPU stepper failed.
+    #[error("the granular step on the GPU failed: {0}")]
+    Stepper(E),
+    /// A new window's tiles did not reach RAM in time.
+    #[error("the granular window's tiles ({rect:?}) did not load within {timeout:?}")]
+    TilesLate {
+        /// The window asked for (level-0 texels).
+        rect: Rect,
+        /// [`TrailConfig::take_timeout`].
+        timeout: Duration,
+    },
+}
+
+/// A GPU step's measures, for the frame that stepped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TrailMeasure {
+    /// The tag the step was given.
+    pub tag: u64,
+    /// The scratch map's units after the step.
+    pub volume: u64,
+    /// The units the window held when taken, less compression's (equal to `volume`).
+    pub volume_taken: Option<u64>,
+}
+
+/// Areas handed back into the tiles: level-0 texels and their stored heights.
+pub type HandedBack = Vec<(Rect, Grid<u16>)>;
+
+/// What the trails did in one frame.
+#[derive(Debug, Default)]
+pub struct TrailFrame {
+    /// Areas handed back into the tiles.
+    pub changed: HandedBack,
+    /// A CPU step's scratch-map units after it (a GPU step's come later, in `measured`).
+    pub volume: Option<u64>,
+    /// The units the window held when taken, less compression's (equal to `volume`).
+    pub volume_taken: Option<u64>,
+    /// Whether this frame's step ran on the GPU (`None`: no step).
+    pub on_gpu: Option<bool>,
+    /// On a frame where the window moved on: whether the move had to wait (forced).
+    pub move_waited: Option<bool>,
+    /// Measures of earlier GPU steps that arrived, oldest first.
+    pub measured: Vec<TrailMeasure>,
+}
+
+/// Granular trails over a streamed world (module docs).
+#[derive(Debug)]
+pub struct GranularTrails {
+    window: GranularWindow,
+    config: TrailConfig,
+    params: GranularParams,
+    /// The CPU simulation of the taken window (no GPU stepper).
+    sim: Option<GranularSim>,
+    /// Whether the taken window steps on the GPU.
+    on_gpu: bool,
+    /// The window's heights when taken.
+    ground: Option<FixedPointMap>,
+    /// Units removed by compression in the taken window.
+    removed: u64,
+    windows_released: u32,
+}
+
+impl GranularTrails {
+    /// Trails on the world of `manifest`, of material `params` (checked), moving as `config`
+    /// says (margins finite, `0 <= forced <= edge`).
+    pub fn new(
+        manifest: &Manifest,
+        params: GranularParams,
+        config: TrailConfig,
+    ) -> Result<Self, CacheError> {
+        params.validate()?;
+        let (forced, edge) = (config.forced_margin_m, config.edge_margin_m);
+        // Written so that a NaN fails.
+        if !(forced >= 0.0 && forced <= edge && edge.is_finite()) {
+            return Err(CacheError::OutOfRange {
+                what: "granular trail margins (metres)",
+                value: f64::from(config.forced_margin_m),
+                expected: "0 <= forced_margin_m <= edge_margin_m, both finite",
+            });
+        }
+        let side = config.side.min(manifest.world_size.min_element());
+        Ok(Self {
+            window: GranularWindow::new(manifest, side)?,
+            config,
+            params,
+            sim: None,
+            on_gpu: false,
+            ground: None,
+            removed: 0,
+            windows_released: 0,
+        })
+    }
+
+    /// The taken window (level-0 texels), where no other write may go until it moves.
+    pub fn window(&self) -> Option<Rect> {
+        self.window.rect()
+    }
+
+    /// The window's heights when taken (the scratch map's encoding, its origin at the
+    /// window's corner): a reference ground to place objects on, whatever their trails did.
+    pub fn ground(&self) -> Option<&FixedPointMap> {
+        self.ground.as_ref()
+    }
+
+    /// `transform` in world metres, in the window's frame (see [`GranularWindow::to_local`]).
+    pub fn to_local(&self, transform: glam::Affine3A) -> glam::Affine3A {
+        self.window.to_local(transform)
+    }
+
+    /// Windows released so far, each with its volume checked.
+    pub fn windows_released(&self) -> u32 {
+        self.windows_released
+    }
+
+    /// Whether the next [`follow`](Self::follow) with objects at `points` (metres, X Z) moves
+    /// the window whatever is on its way: the caller lands its own writes first.
+    pub fn must_move(&self, points: &[Vec2]) -> bool {
+        self.window.rect().is_some() && !self.window.covers(points, self.config.forced_margin_m)
+    }
+
+    /// Keeps the window around `points` (the objects, metres X Z): once they near its edge
+    /// it hands back what arrived and moves on (module docs) to a window centred on `ahead`,
+    /// whose tiles it waits for (up to the timeout, updating `pool` for `camera`).
+    /// `others_in_flight`: the caller still has writes on their way into the world.
+    pub fn follow<G: GranularStepper>(
+        &mut self,
+        pool: &mut RamPool,
+        mut gpu: Option<&mut G>,
+        points: &[Vec2],
+        ahead: Vec2,
+        camera: &CameraState,
+        others_in_flight: bool,
+    ) -> Result<TrailFrame, TrailsError<G::Error>> {
+        let mut frame = TrailFrame::default();
+        let leaving = !self.window.covers(points, self.config.edge_margin_m);
+        let mut move_now = leaving && self.window.rect().is_none();
+        if leaving && self.window.rect().is_some() {
+            let mut settled = !others_in_flight;
+            if let Some(g) = gpu.as_deref_mut()
+                && self.on_gpu
+            {
+                let arrivals = g.poll().map_err(TrailsError::Stepper)?;
+                self.hand_back(pool, &arrivals, &mut frame)?;
+                settled &= !arrivals.in_flight;
+            }
+            if settled || self.must_move(points) {
+                frame.move_waited = Some(!settled);
+                let (changed, measured) = self.release(pool, gpu.as_deref_mut())?;
+                frame.changed.extend(changed);
+                frame.measured.extend(measured);
+                move_now = true;
+            }
+        }
+        if move_now {
+            self.take(pool, gpu, ahead, camera)?;
+        }
+        Ok(frame)
+    }
+
+    fn take<G: GranularStepper>(
+        &mut self,
+        pool: &mut RamPool,
+        gpu: Option<&mut G>,
+        ahead: Vec2,
+        camera: &CameraState,
+    ) -> Result<(), TrailsError<G::Error>> {
+        let rect = self.window.placement(ahead);
+        let deadline = Instant::now() + self.config.take_timeout;
+        let map = loop {
+            if let Some(map) = self.window.take(pool, rect)? {
+                break map;
+            }
+            if Instant::now() > deadline {
+                let timeout = self.config.take_timeout;
+                return Err(TrailsError::TilesLate { rect, timeout });
+            }
+            std::thread::sleep(Duration::from_millis(2));
+            pool.update(camera)?;
+        };
+        match gpu {
+            Some(g) => {
+                g.start(&map, self.params).map_err(TrailsError::Stepper)?;
+                self.on_gpu = true;
+            }
+            None => {
+                let sim = GranularSim::new(map.clone(), self.params).map_err(CacheError::from)?;
+                self.sim = Some(sim);
+            }
+        }
+        self.ground = Some(map);
+        self.removed = 0;
+        Ok(())
+    }
+
+    /// One step of the window with `objects` (in its frame: [`Self::to_local`]) on the GPU
+    /// when it was taken with one, else on the CPU, tagged `tag`; hands the changed areas
+    /// back into `pool`'s tiles (a GPU step's when they arrive). Nothing without a window.
+    pub fn step<G: GranularStepper>(
+        &mut self,
+        pool: &mut RamPool,
+        gpu: Option<&mut G>,
+        objects: &[GranularObject<'_>],
+        tag: u64,
+        frame: &mut TrailFrame,
+    ) -> Result<(), TrailsError<G::Error>> {
+        match (gpu, &mut self.sim) {
+            (Some(g), _) if self.on_gpu => {
+                let arrivals = g.step(objects, tag).map_err(TrailsError::Stepper)?;
+                frame.on_gpu = Some(true);
+                self.hand_back(pool, &arrivals, frame)
+            }
+            (_, Some(sim)) => {
+                let report = sim.step(objects).map_err(CacheError::from)?;
+                self.removed += report.removed;
+                frame.on_gpu = Some(false);
+                frame.volume = Some(report.volume);
+                frame.volume_taken = self.window.volume_taken().checked_sub(self.removed);
+                for area in report.active_areas {
+                    let heights = sim
+                        .map()
+                        .grid()
+                        .copy_rect(area.rect)
+                        .map_err(CacheError::from)?;
+                    let back = self.window.hand_back(pool, area.rect, &heights)?;
+                    frame.changed.push(back);
+                }
+                Ok(())
+            }
+            (None, None) if self.on_gpu => Err(CacheError::OutOfRange {
+                what: "granular steppers given to a window taken on the GPU",
+                value: 0.0,
+                expected: "the stepper the window was taken with",
+            }
+            .into()),
+            _ => Ok(()),
+        }
+    }
+
+    /// Hands back the areas that arrived and turns the measures into the report's figures.
+    fn hand_back<E>(
+        &mut self,
+        pool: &mut RamPool,
+        arrivals: &GranularArrivals,
+        frame: &mut TrailFrame,
+    ) -> Result<(), TrailsError<E>> {
+        for (area, heights) in &arrivals.areas {
+            frame
+                .changed
+                .push(self.window.hand_back(pool, *area, heights)?);
+        }
+        frame.measured.extend(self.measures(&arrivals.measured));
+        Ok(())
+    }
+
+    /// GPU steps' measures with the volume the window should hold after each.
+    fn measures(&mut self, measured: &[StepMeasure]) -> Vec<TrailMeasure> {
+        measured
+            .iter()
+            .map(|m| {
+                self.removed += m.removed;
+                TrailMeasure {
+                    tag: m.tag,
+                    volume: m.volume,
+                    volume_taken: self.window.volume_taken().checked_sub(self.removed),
+                }
+            })
+            .collect()
+    }
+
+    /// Hands the last areas back (waiting for the GPU's) and releases the window, its volume
+    /// checked: when it moves on, and at the end. Returns the areas handed back and the last
+    /// GPU steps' measures.
+    pub fn release<G: GranularStepper>(
+        &mut self,
+        pool: &mut RamPool,
+        gpu: Option<&mut G>,
+    ) -> Result<(HandedBack, Vec<TrailMeasure>), TrailsError<G::Error>> {
+        let mut frame = TrailFrame::default();
+        if self.window.rect().is_none() {
+            return Ok((frame.changed, frame.measured));
+        }
+        if self.on_gpu {
+            let Some(g) = gpu else {
+                return Err(CacheError::OutOfRange {
+                    what: "granular steppers given to release a window taken on the GPU",
+                    value: 0.0,
+                    expected: "the stepper the window was taken with",
+                }
+                .into());
+            };
+            let drained = g.stop().map_err(TrailsError::Stepper)?;
+            self.hand_back(pool, &drained, &mut frame)?;
+        }
+        self.on_gpu = false;
+        self.sim = None;
+        self.ground = None;
+        self.window.release(pool, self.removed)?;
+        self.windows_released += 1;
+        Ok((frame.changed, frame.measured))
+    }
+}

@@ -1,0 +1,248 @@
+//! A granular map on the GPU, whole (Persson 2019, ch. 4): the fixed-point heights that the
+//! step deforms, the normals and float heights they are drawn with, the volume sum, and the
+//! readback of the areas each step changed, all without a wait. This is what an application
+//! drives once per frame; the passes it chains are this module's siblings.
+//!
+//! A frame is two submits, so that an application can time the step apart from what follows
+//! it: [`GranularField::encode_step`] and [`GranularField::encode_follow_up`] (normals of the
+//! changed areas, volume sum, readback requests), each followed by its `recall_*` once
+//! submitted; [`GranularField::step`] does both with plain submits. What comes back arrives
+//! in a later frame's [`GranularField::poll`]; [`GranularField::drain`] waits for the rest.
+//! [`GranularField::finish`] drains it and keeps the compiled passes for the next map (building them
+//! again took llvmpipe 45-48 ms).
+
+use super::{
+    GpuGranularNormals, GpuGranularStep, GranularNormalsPass, StepMeasures, Trail, VolumePass,
+};
+use crate::{GpuError, GpuHeightMap, GpuMaterialLayer, QueuedReadback};
+use terrain_core::granular::{GranularArrivals, GranularObject, GranularParams};
+use terrain_core::{FixedPointMap, MaterialEffect, Rect};
+
+/// Readbacks of changed areas in flight at most (staging buffers of the ring).
+const AREA_RING: usize = 8;
+
+/// A granular map on the GPU and the passes that step, shade and measure it (module docs).
+#[derive(Debug)]
+pub struct GranularField {
+    map: GpuHeightMap<u32>,
+    normals: GpuGranularNormals,
+    passes: GranularPasses,
+    /// The material layer the steps paint where they press (`set_trail`).
+    trail: Option<(GpuMaterialLayer, MaterialEffect)>,
+}
+
+/// What a [`GranularField`] keeps from one map to the next: its compiled passes and its
+/// readback rings (drained), for one set of parameters.
+#[derive(Debug)]
+pub struct GranularPasses {
+    step: GpuGranularStep,
+    normal_pass: GranularNormalsPass,
+    volume: VolumePass,
+    readback: QueuedReadback,
+    measures: StepMeasures,
+    params: GranularParams,
+}
+
+impl GranularPasses {
+    /// Builds every pass for `params` (checked) and the readback rings.
+    pub fn new(device: &wgpu::Device, params: GranularParams) -> Result<Self, GpuError> {
+        Ok(Self {
+            step: GpuGranularStep::new(device, params)?,
+            normal_pass: GranularNormalsPass::new(device)?,
+            volume: VolumePass::new(device)?,
+            readback: QueuedReadback::new(device, AREA_RING)?,
+            measures: StepMeasures::new(device)?,
+            params,
+        })
+    }
+
+    /// The parameters the passes step with.
+    pub fn params(&self) -> GranularParams {
+        self.params
+    }
+}
+
+impl GranularField {
+    /// Uploads `map` (after this, the GPU map is the one deformed and drawn) and computes its
+    /// first normals in one submit, with `passes` when they step with `params` (else new ones).
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        map: &FixedPointMap,
+        params: GranularParams,
+        passes: Option<GranularPasses>,
+    ) -> Result<Self, GpuError> {
+        let gpu_map = GpuHeightMap::from_map(device, queue, map)?;
+        let normals = GpuGranularNormals::for_map(device, &gpu_map)?;
+        let mut passes = match passes {
+            Some(p) if p.params == params => p,
+            _ => GranularPasses::new(device, params)?,
+        };
+        let full = Rect::from_size(map.size());
+        let blur = params.num_iterations_blur_normals;
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let pass = &mut passes.normal_pass;
+        pass.encode(device, queue, &mut encoder, &gpu_map, &normals, full)?;
+        pass.encode_blur(device, queue, &mut encoder, &normals, full, blur)?;
+        queue.submit([encoder.finish()]);
+        pass.recall();
+        Ok(Self {
+            map: gpu_map,
+            normals,
+            passes,
+            trail: None,
+        })
+    }
+
+    /// The fixed-point heights, deformed in place by each step.
+    pub fn map(&self) -> &GpuHeightMap<u32> {
+        &self.map
+    }
+
+    /// The normals and float heights the map is drawn with.
+    pub fn normals(&self) -> &GpuGranularNormals {
+        &self.normals
+    }
+
+    /// The step pass, to choose its methods (displacement, slope, depth source).
+    pub fn step_pass_mut(&mut self) -> &mut GpuGranularStep {
+        &mut self.passes.step
+    }
+
+    /// The parameters the field steps with.
+    pub fn params(&self) -> GranularParams {
+        self.passes.params
+    }
+
+    /// Paints `effect` on `layer` where later steps press the material down; `None` stops.
+    /// A layer of another size than the map is refused at the next step.
+    pub fn set_trail(&mut self, trail: Option<(GpuMaterialLayer, MaterialEffect)>) {
+        self.trail = trail;
+    }
+
+    /// The trail's material layer, if any (for the renderer that shades with it).
+    pub fn trail_layer(&self) -> Option<&GpuMaterialLayer> {
+        self.trail.as_ref().map(|(layer, _)| layer)
+    }
+
+    /// Records one step with `objects` into `encoder` and returns the merged active areas it
+    /// runs over. Submit, then [`Self::recall_step`].
+    pub fn encode_step(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        objects: &[GranularObject<'_>],
+    ) -> Result<Vec<Rect>, GpuError> {
+        let trail = self.trail.as_ref().map(|(layer, effect)| Trail {
+            layer,
+            effect: *effect,
+        });
+        let areas = self
+            .passes
+            .step
+            .encode_with_trail(device, queue, encoder, &self.map, objects, trail)?;
+        Ok(areas.iter().map(|a| a.rect).collect())
+    }
+
+    /// Frees the step's uniform slots once its submit is done.
+    pub fn recall_step(&mut self) {
+        self.passes.step.recall();
+    }
+
+    /// Records what follows the step whose `areas` [`Self::encode_step`] returned: the normals
+    /// there (one texel past them, and one more per blur iteration), the volume sum, the
+    /// measures' and the areas' readback requests, the measures tagged `tag` (the frame, say).
+    /// Record it after the step's commands; submit, then [`Self::recall_follow_up`].
+    pub fn encode_follow_up(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        areas: &[Rect],
+        tag: u64,
+    ) -> Result<(), GpuError> {
+        let p = &mut self.passes;
+        let full = Rect::from_size(self.map.size());
+        let blur = p.params.num_iterations_blur_normals;
+        for rect in areas {
+            let Some(r) = rect.expand(1 + blur).intersect(&full) else {
+                continue;
+            };
+            p.normal_pass
+                .encode(device, queue, encoder, &self.map, &self.normals, r)?;
+            p.normal_pass
+                .encode_blur(device, queue, encoder, &self.normals, r, blur)?;
+        }
+        p.volume.encode(device, queue, encoder, &self.map)?;
+        p.measures
+            .request(device, encoder, tag, &p.volume, p.step.scratch())?;
+        p.readback
+            .request(device, encoder, &self.map, areas.iter().copied())
+    }
+
+    /// Frees the follow-up's uniform slots once its submit is done.
+    pub fn recall_follow_up(&mut self) {
+        self.passes.normal_pass.recall();
+        self.passes.volume.recall();
+    }
+
+    /// One whole step with `objects` in two plain submits: [`Self::encode_step`], then
+    /// [`Self::encode_follow_up`] tagged `tag`. Returns the step's areas.
+    pub fn step(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        objects: &[GranularObject<'_>],
+        tag: u64,
+    ) -> Result<Vec<Rect>, GpuError> {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let areas = self.encode_step(device, queue, &mut encoder, objects)?;
+        queue.submit([encoder.finish()]);
+        self.recall_step();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        self.encode_follow_up(device, queue, &mut encoder, &areas, tag)?;
+        queue.submit([encoder.finish()]);
+        self.recall_follow_up();
+        Ok(areas)
+    }
+
+    /// The areas and measures of earlier steps that have arrived, never waiting.
+    pub fn poll(&mut self, device: &wgpu::Device) -> Result<GranularArrivals, GpuError> {
+        let p = &mut self.passes;
+        let areas = p.readback.poll(device)?;
+        let measured = p.measures.poll(device)?;
+        Ok(GranularArrivals {
+            areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),
+            measured,
+            in_flight: p.readback.in_flight() || p.measures.in_flight(),
+        })
+    }
+
+    /// Requests the areas still waiting for a ring slot and waits (bounded) for every area
+    /// and measure on its way: the end of the field's steps.
+    pub fn drain(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<GranularArrivals, GpuError> {
+        let p = &mut self.passes;
+        let areas = p.readback.flush(device, queue, &self.map)?;
+        Ok(GranularArrivals {
+            areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),
+            measured: p.measures.flush(device)?,
+            in_flight: false,
+        })
+    }
+
+    /// Drains the field ([`Self::drain`]) and frees its map, keeping the passes for the next
+    /// one (nothing of this map's can then arrive with the next map's).
+    pub fn finish(
+        mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<(GranularArrivals, GranularPasses), GpuError> {
+        let arrivals = self.drain(device, queue)?;
+        Ok((arrivals, self.passes))
+    }
+}
