@@ -59,13 +59,16 @@ fn heights(pool: &RamPool) -> Grid<u16> {
     g
 }
 
+/// Areas a step changed, with their heights.
+type Areas = Vec<(Rect, Grid<u32>)>;
+
 /// A GPU stand-in: terrain-core's simulation, whose areas and measures arrive `delay` polls
 /// after their step, as a readback ring hands them over.
 struct LateStepper {
     sim: Option<GranularSim>,
     delay: usize,
     /// Steps' results on their way: polls left, areas, measure.
-    queue: VecDeque<(usize, Vec<(Rect, Grid<u32>)>, StepMeasure)>,
+    queue: VecDeque<(usize, Areas, StepMeasure)>,
     removed: u64,
     /// The heights of each map when it was stopped.
     stopped: Vec<Grid<u32>>,

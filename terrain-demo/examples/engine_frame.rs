@@ -25,9 +25,9 @@ use terrain_core::{
     TextureStamp, WrapMode, apply_stamp,
 };
 use terrain_gpu::{
-    AtlasConfig, Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DepthConvention, GpuStamp,
-    GpuTextureStamp, GpuTileAtlas, RegionReadback, SkyColors, SkyPass, StampOp, StampPass,
-    TargetFormat, TerrainStyle, TileSlot, wgpu,
+    AtlasConfig, AtlasStamp, AtlasStampOp, AtlasStamper, Camera, ClipmapRenderer, ClipmapSurface,
+    ClipmapView, DepthConvention, GpuTextureStamp, GpuTileAtlas, SkyColors, SkyPass, TargetFormat,
+    TerrainStyle, TileSlot, wgpu,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 use terrain_physics::{CameraBody, CollisionWindow};
@@ -46,17 +46,16 @@ enum Kind {
     Footprint,
 }
 
-/// The stamps of each `Kind` (GPU and CPU) and the passes that apply them to tiles.
+/// The stamps of each `Kind` (GPU and CPU) and the stamper that adds them to atlas tiles.
 struct TileGpu {
-    stamps: StampPass,
-    readback: RegionReadback,
+    stamper: AtlasStamper,
     crater: GaussianStamp,
     foot: TextureStamp,
     foot_gpu: GpuTextureStamp,
 }
 
 /// Applies a `Kind` to one tile: in its atlas slot on the GPU (the changed rects requested
-/// back through the readback ring), or in RAM on the CPU with the same stamps' references.
+/// back through the stamper's ring), or in RAM on the CPU with the same stamps' references.
 struct Deformer<'a> {
     device: &'a wgpu::Device,
     queue: &'a wgpu::Queue,
@@ -73,35 +72,19 @@ impl TileDeformer<Kind> for Deformer<'_> {
         kind: &Kind,
         placement: &StampPlacement,
     ) -> Result<Option<Vec<(u64, Rect)>>> {
-        // A tile is clamped: a stamp changes one rect of it, so one free ring slot is enough.
-        let t = &mut *self.t;
-        if t.readback.in_flight() >= t.readback.ring() {
-            return Ok(None);
-        }
         let stamp = match kind {
-            Kind::Crater => GpuStamp::Gaussian(&t.crater),
-            Kind::Footprint => GpuStamp::Texture(&t.foot_gpu),
+            Kind::Crater => AtlasStamp::Gaussian(&self.t.crater),
+            Kind::Footprint => AtlasStamp::Uploaded(&self.t.foot_gpu),
         };
-        let op = StampOp {
-            stamp,
+        let op = AtlasStampOp {
+            tile: TileSlot { slot, level: 0 },
             placement: *placement,
-            blend: Blend::Add,
+            stamp,
         };
-        let tile = TileSlot { slot, level: 0 };
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        let rects =
-            t.stamps
-                .encode_tile(self.device, self.queue, &mut encoder, self.atlas, tile, &op)?;
-        let mut tickets = Vec::new();
-        for r in rects {
-            let ticket = t
-                .readback
-                .request_tile(self.device, &mut encoder, self.atlas, tile, r)?;
-            tickets.push((ticket.0, r));
-        }
-        self.queue.submit([encoder.finish()]);
-        t.stamps.recall();
-        Ok(Some(tickets))
+        Ok(self
+            .t
+            .stamper
+            .stamp(self.device, self.queue, self.atlas, op)?)
     }
 
     fn stamp_ram(
@@ -210,8 +193,7 @@ fn main() -> Result<()> {
         -(1.0 - (u * u + v * v)).max(0.0)
     })?)?;
     let mut tiles = TileGpu {
-        stamps: StampPass::new(&device)?,
-        readback: RegionReadback::new(&device, 16)?,
+        stamper: AtlasStamper::new(&device, 16)?,
         crater: GaussianStamp::default(),
         foot_gpu: GpuTextureStamp::new(&device, &foot)?,
         foot,
@@ -262,19 +244,15 @@ fn main() -> Result<()> {
             window.apply(*rect, heights)?;
         }
         // The GPU's changed rects that have arrived (never waiting) go to RAM and collision.
-        let arrived = tiles
-            .readback
-            .poll_with(&device, |r| r.to_u16().map(|h| (r.ticket.0, r.rect, h)))?;
-        for item in arrived {
-            let (ticket, rect, heights) = item?;
+        for a in tiles.stamper.poll(&device)? {
             let (_, world_rect) = tile_stamps.receive::<anyhow::Error>(
                 &mut ram,
                 Some(&mut vram),
-                ticket,
-                rect,
-                &heights,
+                a.ticket,
+                a.rect,
+                &a.heights,
             )?;
-            window.apply(world_rect, &heights)?;
+            window.apply(world_rect, &a.heights)?;
             arrived_rects += 1;
         }
 
@@ -359,17 +337,13 @@ fn main() -> Result<()> {
             std::time::Instant::now() < deadline,
             "tile readbacks never arrived"
         );
-        for item in tiles
-            .readback
-            .wait_with(&device, |r| r.to_u16().map(|h| (r.ticket.0, r.rect, h)))?
-        {
-            let (ticket, rect, heights) = item?;
+        for a in tiles.stamper.wait(&device)? {
             tile_stamps.receive::<anyhow::Error>(
                 &mut ram,
                 Some(&mut vram),
-                ticket,
-                rect,
-                &heights,
+                a.ticket,
+                a.rect,
+                &a.heights,
             )?;
             arrived_rects += 1;
         }

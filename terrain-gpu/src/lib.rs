@@ -70,11 +70,12 @@ use device::{
     context, detail_readback, download, limits, profiler, queued_readback, readback, region_source,
     small_readback, timer,
 };
-use passes::{density, detail_probe, material_effect, normals, spill, stamp};
+use passes::{atlas_stamper, density, detail_probe, material_effect, normals, spill, stamp};
 use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
 use resources::{atlas, detail, hole_mask, maps, material_layer, materials, overlay_atlas};
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
+pub use atlas_stamper::{ArrivedTileRect, AtlasStamp, AtlasStampOp, AtlasStamper};
 pub use camera::{Camera, DepthConvention, RenderView, ViewMatrices};
 pub use cdlod::{CdlodDraw, CdlodRenderer};
 pub use clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};

@@ -758,3 +758,95 @@ fn stamps_on_atlas_tiles_match_the_cpu_stamp_on_each_tile_and_read_back_by_rect(
     pass.recall();
     ctx.check().expect("no GPU validation errors");
 }
+
+/// `AtlasStamper`, the GPU half of the tile stamping protocol: Gaussian, texture (rewritten in
+/// place between stamps) and uploaded stamps on atlas tiles come back, rect by rect, equal to
+/// the CPU stamp of each tile; a full ring refuses a stamp with nothing recorded.
+#[test]
+fn the_atlas_stamper_reads_back_what_the_cpu_stamps() {
+    use terrain_core::{Blend, GaussianStamp, Stamp, StampPlacement, TextureStamp, apply_stamp};
+    use terrain_gpu::{AtlasStamp, AtlasStampOp, AtlasStamper, GpuTextureStamp, TileSlot};
+    let Some(ctx) = context_or_skip("the_atlas_stamper_reads_back_what_the_cpu_stamps") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let layout = TileLayout {
+        world_size: UVec2::new(96, 32),
+        tile_size: 32,
+        levels: 1,
+        texel_size: 0.5,
+        encoding: HeightEncoding::new(0.01, -100.0).unwrap(),
+        wrap: WrapMode::Clamp,
+        fill: 7,
+    };
+    let config = AtlasConfig {
+        slots: 3,
+        world: layout,
+    };
+    let mut atlas = GpuTileAtlas::new(device, queue, &config).unwrap();
+    let mut tiles = Vec::new();
+    for i in 0..3u32 {
+        let g = noise_grid(UVec2::splat(32), 70 + u64::from(i)).map(|&v| 20_000 + v / 4);
+        atlas.upload(i, 0, UVec2::new(i, 0), &g).unwrap();
+        atlas.map(0, UVec2::new(i, 0), Some(i)).unwrap();
+        tiles.push(tile_map(&g, &layout, 0));
+    }
+    let texture = |seed: u32| {
+        let image = Grid::from_fn(7, 5, |x, y| (x * 31 + y * 17 + seed) as u8).unwrap();
+        TextureStamp::from_gray8(&image)
+    };
+    let (mut tex_a, mut tex_b, mut tex_up) = (texture(0), texture(90), texture(200));
+    let uploaded = GpuTextureStamp::new(device, &tex_up).unwrap();
+    let mut crater = GaussianStamp::default();
+    let mut stamper = AtlasStamper::new(device, 2).unwrap();
+    let at = |x, y| StampPlacement::new(Vec2::new(x, y), Vec2::splat(6.0), -2.0).unwrap();
+    // Each stamp on the GPU and on the tile's CPU copy: its tickets and the rects as the copy
+    // has them right after it.
+    let mut want = Vec::new();
+    let mut stamp = |stamper: &mut AtlasStamper,
+                     slot: u32,
+                     p: StampPlacement,
+                     gpu: AtlasStamp<'_>,
+                     cpu: &mut dyn Stamp| {
+        let tile = TileSlot { slot, level: 0 };
+        let op = AtlasStampOp {
+            tile,
+            placement: p,
+            stamp: gpu,
+        };
+        let tickets = stamper.stamp(device, queue, &atlas, op).unwrap()?;
+        let map = &mut tiles[slot as usize];
+        let rects = apply_stamp(map, cpu, &p, Blend::Add).unwrap();
+        assert_eq!(tickets.iter().map(|t| t.1).collect::<Vec<_>>(), rects);
+        for (ticket, r) in tickets {
+            want.push((ticket, r, map.grid().copy_rect(r).unwrap()));
+        }
+        Some(())
+    };
+    let gauss = AtlasStamp::Gaussian(&GaussianStamp::default());
+    stamp(&mut stamper, 0, at(5.0, 5.0), gauss, &mut crater).unwrap();
+    stamp(
+        &mut stamper,
+        1,
+        at(8.0, 3.0),
+        AtlasStamp::Texture(&tex_a.clone()),
+        &mut tex_a,
+    )
+    .unwrap();
+    assert_eq!(stamper.in_flight(), 2);
+    assert!(stamp(&mut stamper, 2, at(4.0, 4.0), gauss, &mut crater).is_none());
+    let mut arrived = stamper.wait(device).unwrap();
+    assert_eq!(stamper.in_flight(), 0);
+    let tex = AtlasStamp::Texture(&tex_b.clone());
+    stamp(&mut stamper, 2, at(10.0, 12.0), tex, &mut tex_b).unwrap();
+    let up = AtlasStamp::Uploaded(&uploaded);
+    stamp(&mut stamper, 0, at(9.0, 9.0), up, &mut tex_up).unwrap();
+    arrived.extend(stamper.wait(device).unwrap());
+    assert_eq!(arrived.len(), want.len());
+    assert_eq!(want.len(), 4);
+    for (a, (ticket, rect, heights)) in arrived.iter().zip(&want) {
+        assert_eq!((a.ticket, a.rect), (*ticket, *rect));
+        assert_eq!(a.heights, *heights, "ticket {ticket}: GPU and CPU stamps");
+    }
+    ctx.check().expect("no GPU validation errors");
+}

@@ -12,10 +12,10 @@ use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_core::{FixedPointMap, Rect, StampPlacement};
 use terrain_gpu::granular::{GranularField, GranularPasses};
 use terrain_gpu::{
-    ClipmapSurface, DetailShading, GpuContext, GpuDerivativeMap, GpuDetailTiles, GpuHeightMap,
-    GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass, OffscreenTarget, RefineDraw,
-    RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp, StampPass,
-    TerrainRenderer, TerrainStyle, TerrainView,
+    AtlasStamp, AtlasStampOp, AtlasStamper, ClipmapSurface, DetailShading, GpuContext,
+    GpuDerivativeMap, GpuDetailTiles, GpuHeightMap, GpuRegionSource, GpuStamp, GpuTextureStamp,
+    NormalPass, OffscreenTarget, RefineDraw, RefinePass, RefineRenderer, RegionReadback, SkyColors,
+    SkyPass, SpillPass, StampOp, StampPass, TerrainRenderer, TerrainStyle, TerrainView,
 };
 use terrain_lod::{CdlodConfig, CdlodTree, ClipmapLayout, TessConfig};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
@@ -71,10 +71,8 @@ pub struct GpuScene {
     granular_passes: Option<GranularPasses>,
     /// A streamed world's tile atlas (the flyover), drawn instead of the coarse-map.
     atlas: Option<GpuTileAtlas>,
-    /// The readback of the rects of atlas tiles deformed on the GPU.
-    tile_readback: Option<RegionReadback>,
-    /// The texture of the last texture stamp on an atlas tile, rewritten in place.
-    tile_texture: Option<GpuTextureStamp>,
+    /// Stamps on atlas tiles, their changed rects read back.
+    tile_stamper: Option<AtlasStamper>,
     /// The detail layer's tiles (`--detail parallax|refine`), drawn with the coarse-map.
     detail: Option<DetailScene>,
     /// `--detail refine`: the refined geometry near the camera (the clipmap shades the rest
@@ -110,9 +108,7 @@ pub enum TileStamp<'a> {
 /// the tile's texels.
 pub type TileTicket = (u64, DirtyRect);
 
-/// A rect of a deformed atlas tile that arrived: the ticket it was requested with, the rect
-/// (tile texels) and its heights.
-pub type ArrivedTileRect = (u64, Rect, Grid<u16>);
+pub use terrain_gpu::ArrivedTileRect;
 
 /// The streamed world's tiles on the GPU: slots, indirection table, coarser fallback.
 pub use terrain_gpu::{AtlasConfig, GpuTileAtlas, TileSlot};
@@ -260,8 +256,7 @@ impl GpuScene {
             granular: None,
             granular_passes: None,
             atlas: None,
-            tile_readback: None,
-            tile_texture: None,
+            tile_stamper: None,
             detail: None,
             refined: None,
             paint: None,
@@ -368,7 +363,7 @@ impl GpuScene {
         self.height_range = (enc.to_metres(0.0), enc.to_metres(f64::from(u16::MAX)));
         self.terrain.set_height_range(self.height_range);
         self.atlas = Some(atlas);
-        self.tile_readback = Some(RegionReadback::new(&self.ctx.device, TILE_READBACK_RING)?);
+        self.tile_stamper = Some(AtlasStamper::new(&self.ctx.device, TILE_READBACK_RING)?);
         Ok(())
     }
 
@@ -380,68 +375,43 @@ impl GpuScene {
         timings: &mut Timings,
     ) -> Result<Option<Vec<TileTicket>>> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        // A texture goes into the scene's texture stamp, rewritten in place (the queue orders
-        // the write before this stamp's submit and after the last one's).
-        if let TileStamp::Texture(texture) = stamp {
-            match &mut self.tile_texture {
-                Some(t) => t.update(device, queue, texture)?,
-                None => self.tile_texture = Some(GpuTextureStamp::new(device, texture)?),
-            }
-        }
-        let (Some(atlas), Some(readback)) = (&self.atlas, self.tile_readback.as_mut()) else {
+        let (Some(atlas), Some(stamper)) = (&self.atlas, self.tile_stamper.as_mut()) else {
             anyhow::bail!("stamp_tile needs the tile atlas (enable_atlas)");
         };
-        // A clamped tile: the stamp covers at most one rect, so one ring slot is enough.
-        if readback.in_flight() >= readback.ring() {
-            return Ok(None);
-        }
-        let gpu_stamp = match (stamp, &self.tile_texture) {
-            (TileStamp::Gaussian(g), _) => GpuStamp::Gaussian(g),
-            (TileStamp::Texture(_), Some(t)) => GpuStamp::Texture(t),
-            (TileStamp::Texture(_), None) => anyhow::bail!("no texture stamp was uploaded"),
+        let stamp = match stamp {
+            TileStamp::Gaussian(g) => AtlasStamp::Gaussian(g),
+            TileStamp::Texture(t) => AtlasStamp::Texture(t),
         };
-        let op = StampOp {
-            stamp: gpu_stamp,
+        let op = AtlasStampOp {
+            tile,
             placement,
-            blend: terrain_core::Blend::Add,
+            stamp,
         };
-        let mut tickets = Vec::new();
+        let mut tickets = None;
         let time = self.timer.time(device, queue, Step::StampGpu, |encoder| {
-            let rects = self
-                .stamps
-                .encode_tile(device, queue, encoder, atlas, tile, &op)?;
-            for r in rects {
-                let t = readback.request_tile(device, encoder, atlas, tile, r)?;
-                tickets.push((t.0, r));
-            }
+            tickets = stamper.encode(device, queue, encoder, atlas, op)?;
             Ok(())
         })?;
-        self.stamps.recall();
+        stamper.recall();
         // wgpu maps a staging buffer even when the commands before it were invalid: the
         // tickets would then deliver stale bytes into the world. Refuse the frame instead.
         self.ctx
             .check()
             .context("stamping a tile of the streamed world")?;
         time.record(timings);
-        Ok(Some(tickets))
+        Ok(tickets)
     }
 
     fn tile_readbacks_inner(&mut self, wait: bool) -> Result<Vec<ArrivedTileRect>> {
         let device = &self.ctx.device;
-        let Some(readback) = self.tile_readback.as_mut() else {
+        let Some(stamper) = self.tile_stamper.as_mut() else {
             return Ok(Vec::new());
         };
-        // u16 rows straight from the staging buffers (no u32 copy in between).
-        let to_u16 = |r: terrain_gpu::RegionView<'_>| Ok((r.ticket.0, r.rect, r.to_u16()?));
-        let arrived = if wait {
-            readback.wait_with(device, to_u16)?
+        Ok(if wait {
+            stamper.wait(device)?
         } else {
-            readback.poll_with(device, to_u16)?
-        };
-        arrived
-            .into_iter()
-            .collect::<Result<_, terrain_gpu::GpuError>>()
-            .map_err(Into::into)
+            stamper.poll(device)?
+        })
     }
 
     /// The tile atlas, when a streamed world is drawn.

@@ -320,7 +320,12 @@ impl FlyoverScenario {
     /// collision window; returns them in world texels.
     fn take_tile_readbacks(&mut self, scene: &mut GpuScene, wait: bool) -> Result<Vec<Rect>> {
         let mut arrived = Vec::new();
-        for (ticket, rect, heights) in scene.tile_readbacks(wait)? {
+        for arrived_rect in scene.tile_readbacks(wait)? {
+            let crate::gpu_scene::ArrivedTileRect {
+                ticket,
+                rect,
+                heights,
+            } = arrived_rect;
             let Some(pool) = self.pool.as_mut() else {
                 bail!("the flyover's pool was shut down");
             };

@@ -1,6 +1,7 @@
-//! Compute passes that change or derive terrain data on the GPU: stamps and their spill,
-//! normals, density maps, material effects, and the detail probe.
+//! Compute passes that change or derive terrain data on the GPU: stamps (on a map, and on a
+//! streamed world's atlas tiles with their readback) and their spill, normals, density maps, material effects, and the detail probe.
 
+pub mod atlas_stamper;
 pub mod density;
 pub mod detail_probe;
 pub mod material_effect;

@@ -1,0 +1,152 @@
+//! [`AtlasStamper`]: stamps on a streamed world's resident tiles, where they are drawn (the
+//! tile atlas's slots), each changed rect requested back in the same submit (Flower 2010, sec.
+//! 3.4: the CPU sees the heights only through readback). What the tiles' RAM copies and the
+//! pools do with the rects (terrain-cache's `TileStamps`: hold, pin, receive, release) is the
+//! caller's; this is the GPU half of that protocol.
+
+use crate::{
+    GpuError, GpuStamp, GpuTextureStamp, GpuTileAtlas, RegionReadback, StampOp, StampPass, TileSlot,
+};
+use terrain_core::{Blend, GaussianStamp, Grid, Rect, StampPlacement, TextureStamp};
+
+/// What [`AtlasStamper`] adds to a tile.
+#[derive(Debug, Clone, Copy)]
+pub enum AtlasStamp<'a> {
+    /// A Gaussian (a crater, with a negative intensity).
+    Gaussian(&'a GaussianStamp),
+    /// A texture stamp, uploaded into the stamper's own texture (rewritten in place: a
+    /// shockwave's change, say).
+    Texture(&'a TextureStamp),
+    /// A texture stamp already on the GPU (a footprint uploaded once).
+    Uploaded(&'a GpuTextureStamp),
+}
+
+/// One stamp on one atlas tile.
+#[derive(Debug, Clone, Copy)]
+pub struct AtlasStampOp<'a> {
+    /// The tile's slot (and level) in the atlas.
+    pub tile: TileSlot,
+    /// Where, in the tile's frame: metres from its first texel at its level's texel size.
+    pub placement: StampPlacement,
+    /// What is added.
+    pub stamp: AtlasStamp<'a>,
+}
+
+/// A rect of a stamped tile that came back: the ticket [`AtlasStamper::encode`] gave it, the
+/// rect in the tile's texels, and its stored heights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArrivedTileRect {
+    /// The request's ticket.
+    pub ticket: u64,
+    /// The rect, tile texels.
+    pub rect: Rect,
+    /// Its heights, row-major.
+    pub heights: Grid<u16>,
+}
+
+/// Stamps added to atlas tiles and the readback ring of their changed rects (module docs).
+#[derive(Debug)]
+pub struct AtlasStamper {
+    stamps: StampPass,
+    readback: RegionReadback,
+    texture: Option<GpuTextureStamp>,
+}
+
+impl AtlasStamper {
+    /// The stamp pass and a ring of `ring` (1 to [`crate::MAX_READBACK_RING`]) readbacks: the
+    /// stamps whose rects may be on their way at once.
+    pub fn new(device: &wgpu::Device, ring: usize) -> Result<Self, GpuError> {
+        Ok(Self {
+            stamps: StampPass::new(device)?,
+            readback: RegionReadback::new(device, ring)?,
+            texture: None,
+        })
+    }
+
+    /// Records `op`'s stamp added to its tile, and the copies of the rects it changed for
+    /// readback. Returns a ticket and tile rect for each, or `None` with nothing recorded when
+    /// the ring is full (stamp it in a later frame). Submit, then [`Self::recall`]. A texture
+    /// is written through `queue`, ahead of the submit: one [`AtlasStamp::Texture`] per submit.
+    pub fn encode(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        atlas: &GpuTileAtlas,
+        op: AtlasStampOp<'_>,
+    ) -> Result<Option<Vec<(u64, Rect)>>, GpuError> {
+        // A tile is clamped: a stamp changes one rect of it, so one free slot is enough.
+        if self.readback.in_flight() >= self.readback.ring() {
+            return Ok(None);
+        }
+        let stamp = match op.stamp {
+            AtlasStamp::Gaussian(g) => GpuStamp::Gaussian(g),
+            AtlasStamp::Uploaded(t) => GpuStamp::Texture(t),
+            AtlasStamp::Texture(texture) => GpuStamp::Texture(match &mut self.texture {
+                Some(t) => {
+                    t.update(device, queue, texture)?;
+                    t
+                }
+                None => self.texture.insert(GpuTextureStamp::new(device, texture)?),
+            }),
+        };
+        let stamp_op = StampOp {
+            stamp,
+            placement: op.placement,
+            blend: Blend::Add,
+        };
+        let rects = (self.stamps).encode_tile(device, queue, encoder, atlas, op.tile, &stamp_op)?;
+        let mut tickets = Vec::with_capacity(rects.len());
+        for r in rects {
+            let ticket = (self.readback).request_tile(device, encoder, atlas, op.tile, r)?;
+            tickets.push((ticket.0, r));
+        }
+        Ok(Some(tickets))
+    }
+
+    /// Frees the stamp pass's uniform slots once the submit that carried the stamps is done.
+    pub fn recall(&mut self) {
+        self.stamps.recall();
+    }
+
+    /// [`Self::encode`] in a submit of its own.
+    pub fn stamp(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        atlas: &GpuTileAtlas,
+        op: AtlasStampOp<'_>,
+    ) -> Result<Option<Vec<(u64, Rect)>>, GpuError> {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let tickets = self.encode(device, queue, &mut encoder, atlas, op)?;
+        queue.submit([encoder.finish()]);
+        self.recall();
+        Ok(tickets)
+    }
+
+    /// Stamps whose rects are on their way.
+    pub fn in_flight(&self) -> usize {
+        self.readback.in_flight()
+    }
+
+    /// The rects that have arrived, never waiting.
+    pub fn poll(&mut self, device: &wgpu::Device) -> Result<Vec<ArrivedTileRect>, GpuError> {
+        let arrived = self.readback.poll_with(device, to_arrived)?;
+        arrived.into_iter().collect()
+    }
+
+    /// Waits (bounded) for the rects on their way: the end of a run.
+    pub fn wait(&mut self, device: &wgpu::Device) -> Result<Vec<ArrivedTileRect>, GpuError> {
+        let arrived = self.readback.wait_with(device, to_arrived)?;
+        arrived.into_iter().collect()
+    }
+}
+
+/// u16 rows straight from the staging buffer (no u32 copy in between).
+fn to_arrived(r: crate::RegionView<'_>) -> Result<ArrivedTileRect, GpuError> {
+    Ok(ArrivedTileRect {
+        ticket: r.ticket.0,
+        rect: r.rect,
+        heights: r.to_u16()?,
+    })
+}
