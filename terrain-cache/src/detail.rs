@@ -90,7 +90,7 @@ use glam::{DVec2, UVec2, Vec2};
 use std::collections::{HashMap, HashSet};
 use stream::{Streams, Texels, Written, read_now};
 use terrain_core::detail::{
-    DETAIL_ZERO_RAW, DetailChange, DetailLayer, DetailLayout, detail_encoding,
+    DETAIL_ZERO_RAW, DetailChange, DetailLayer, DetailLayout, detail_encoding, tiles_of_pieces,
 };
 use terrain_core::{Blend, DirtyRect, Grid, HeightMap, HeightSample, Rect, Stamp, StampPlacement};
 
@@ -497,6 +497,35 @@ impl DetailCache {
         self.io.write(t, generation, texels)
     }
 
+    /// [`DetailCache::update_ahead`] for a frame that stamps `stamps` on the GPU: the tiles
+    /// their footprints cover and `keep` (the tiles whose stamped rects are still on their way
+    /// back) are needed; the tiles within `read_ahead_m` of each stamp are read ahead. Fails as
+    /// `update_ahead` does, or on a stamp whose footprint cannot be placed on the layer.
+    pub fn update_for_stamps(
+        &mut self,
+        camera_xz: Vec2,
+        stamps: &[StampPlacement],
+        keep: &[UVec2],
+        read_ahead_m: f32,
+    ) -> Result<DetailFrame, CacheError> {
+        let layout = *self.layout();
+        let mut needed = keep.to_vec();
+        let mut ahead = Vec::new();
+        for p in stamps {
+            let footprint = p.footprint(layout.detail_texel_m())?;
+            if !footprint.is_empty() {
+                let pieces = layout.footprint_pieces(footprint)?;
+                needed.extend(tiles_of_pieces(&pieces).into_iter().map(|(t, _)| t));
+            }
+            ahead.extend(layout.tiles_within(p.center, read_ahead_m)?);
+        }
+        for list in [&mut needed, &mut ahead] {
+            list.sort_unstable_by_key(|t| (t.y, t.x));
+            list.dedup();
+        }
+        self.update_ahead(camera_xz, &needed, &ahead)
+    }
+
     /// Applies a stamp to the detail layer (as [`DetailLayer::apply_stamp`]), reading the tiles
     /// it covers from the world first if they are not in RAM (on the caller's thread); they
     /// become dirty. Tiles outside the working set are written back from the next update.
@@ -538,7 +567,7 @@ impl DetailCache {
         let footprint = placement.footprint(layout.detail_texel_m())?;
         if !footprint.is_empty() {
             let pieces = layout.footprint_pieces(footprint)?;
-            for (t, _) in terrain_core::detail::tiles_of_pieces(&pieces) {
+            for (t, _) in tiles_of_pieces(&pieces) {
                 if !self.read.contains(&t) {
                     self.read_into_ram(t)?;
                 }

@@ -714,3 +714,35 @@ fn flush_waits_for_the_writes() {
         assert!(gate.inner.read(&key, 1 << 20).unwrap().is_some(), "{key}");
     }
 }
+
+/// `update_for_stamps`: the tiles a frame's stamps cover are loaded (across a tile corner,
+/// four), those it is told to keep stay and leave once not asked for; a read-ahead reach of
+/// any size is bounded by the grid, and a tile to keep off the grid is refused.
+#[test]
+fn a_frame_of_stamps_loads_the_tiles_they_cover_and_keeps_those_asked() {
+    let s = store();
+    let mut cache =
+        DetailCache::open(world(&s), layout(), BandSelection::default(), 1 << 20).unwrap();
+    let here = Vec2::new(44.0, 60.0);
+    // Far from the band, on the corner of tiles (12, 2), (13, 2), (12, 3), (13, 3).
+    let corner = StampPlacement::new(Vec2::new(104.0, 24.0), Vec2::splat(1.0), -0.1).unwrap();
+    let kept = UVec2::new(0, 15);
+    let f = cache
+        .update_for_stamps(here, &[corner], &[kept], 4.0)
+        .unwrap();
+    for t in [(12, 2), (13, 2), (12, 3), (13, 3)] {
+        assert!(f.load.contains(&UVec2::new(t.0, t.1)), "{t:?} not loaded");
+    }
+    assert!(f.load.contains(&kept));
+    // Released once neither stamped nor kept.
+    let f = cache.update_for_stamps(here, &[], &[], 4.0).unwrap();
+    assert!(f.unload.contains(&kept) && f.unload.contains(&UVec2::new(12, 2)));
+    // Any reach reads at most the grid.
+    let f = cache.update_for_stamps(here, &[corner], &[], 1e30).unwrap();
+    assert!(f.failed.is_empty());
+    assert!(
+        cache
+            .update_for_stamps(here, &[], &[UVec2::new(99, 0)], 1.0)
+            .is_err()
+    );
+}

@@ -3,7 +3,7 @@
 //! its detail layer every stride. terrain-cache's `DetailCache` holds the band regions of
 //! tiles around the camera (read and written back on its threads), terrain-gpu stamps the
 //! footprints into its detail slots and brings the stamped rects back to the cache without a
-//! wait (`DetailReadback`), and the clipmap draws the world's atlas with the detail layer
+//! wait (`GpuDetailStream`), and the clipmap draws the world's atlas with the detail layer
 //! (`ClipmapSurface::AtlasDetail`). At the end the last rects land, the cache writes the
 //! deformed tiles into the world, and the tiles still in RAM are checked against the same
 //! footprints stamped on the CPU (`DetailLayer`).
@@ -21,14 +21,14 @@ use terrain_cache::{
     BandSelection, Layer, Manifest, ObjectTileStore, ProceduralSource, TileId, TileStore,
     build_world,
 };
-use terrain_core::detail::{DetailLayer, DetailLayout, tiles_of_pieces};
+use terrain_core::detail::{DetailLayer, DetailLayout};
 use terrain_core::{
     Blend, GaussianStamp, HeightEncoding, StampPlacement, TerrainParams, TileUploadTarget, WrapMode,
 };
 use terrain_gpu::{
-    AtlasConfig, Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DetailReadback,
-    DetailShading, GpuContext, GpuDetailTiles, GpuStamp, GpuTileAtlas, OffscreenTarget, SkyColors,
-    SkyPass, StampOp, StampPass, TargetFormat, TerrainStyle,
+    AtlasConfig, Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DetailShading, GpuContext,
+    GpuDetailStream, GpuStamp, GpuTileAtlas, OffscreenTarget, SkyColors, SkyPass, TargetFormat,
+    TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -89,9 +89,7 @@ fn main() -> Result<()> {
     };
 
     let mut cache = DetailCache::open(world, layout, BandSelection::default(), 9 << 16)?;
-    let mut tiles = GpuDetailTiles::new(device, layout, 13)?;
-    let mut stamps = StampPass::new(device)?;
-    let mut readback = DetailReadback::new(device, 16)?;
+    let mut detail = GpuDetailStream::new(device, layout, 13, 16)?;
     let shading = DetailShading {
         fade_start_m: 8.0,
         fade_end_m: 12.0,
@@ -126,33 +124,18 @@ fn main() -> Result<()> {
 
         // The band around the camera, plus the tiles this footprint and the rects still on
         // their way back need; the GPU's slots follow the cache.
-        let pieces = layout.footprint_pieces(p.footprint(layout.detail_texel_m())?)?;
-        let mut needed: Vec<UVec2> = tiles_of_pieces(&pieces)
-            .into_iter()
-            .map(|(t, _)| t)
-            .collect();
-        needed.extend(readback.tiles_in_flight());
-        let band = cache.update(Vec2::new(eye.x, eye.z), &needed)?;
+        let keep = detail.tiles_in_flight();
+        let band = cache.update_for_stamps(Vec2::new(eye.x, eye.z), &[p], &keep, 0.0)?;
         ensure!(band.failed.is_empty(), "a detail tile could not be read");
         read_now += band.read_now;
-        for t in &band.unload {
-            tiles.unload(queue, *t);
-        }
-        for t in &band.load {
-            tiles.load(queue, *t, cache.tile(*t))?;
-        }
+        let load = band.load.iter().map(|&t| (t, cache.tile(t)));
+        detail.follow(queue, &band.unload, load)?;
 
         // The footprint on the GPU (the truth), its rects requested back after it; the CPU
         // reference stamps the same footprint for the check at the end.
         cpu.apply_stamp(&mut foot, &p, Blend::Add)?;
         let mut encoder = device.create_command_encoder(&Default::default());
-        let op = StampOp {
-            stamp: GpuStamp::Gaussian(&foot),
-            placement: p,
-            blend: Blend::Add,
-        };
-        let rects = stamps.encode_detail(device, queue, &mut encoder, &mut tiles, &op)?;
-        readback.request(device, &mut encoder, &tiles, rects)?;
+        detail.encode_stamps(device, queue, &mut encoder, GpuStamp::Gaussian(&foot), &[p])?;
 
         let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
         let placed = layout3d.place(Vec2::new(eye.x, eye.z), TEXEL, (0.0, 40.0), Some(&frustum))?;
@@ -163,7 +146,7 @@ fn main() -> Result<()> {
         )?;
         let surface = ClipmapSurface::AtlasDetail {
             atlas: &atlas,
-            detail: &tiles,
+            detail: detail.tiles(),
             shading: &shading,
         };
         let view = ClipmapView {
@@ -180,8 +163,8 @@ fn main() -> Result<()> {
             renderer.draw(&mut pass);
         }
         queue.submit([encoder.finish()]);
-        stamps.recall();
-        for (t, rect, texels) in readback.poll(device)? {
+        detail.recall();
+        for (t, rect, texels) in detail.poll(device)? {
             cache.write_rect(t, rect, &texels)?;
             arrived += 1;
         }
@@ -189,7 +172,7 @@ fn main() -> Result<()> {
 
     // The last rects land, every deformed tile goes into the world, and the tiles the cache
     // still holds are the CPU reference's, texel for texel.
-    for (t, rect, texels) in readback.flush(device, queue, &tiles, Duration::from_secs(60))? {
+    for (t, rect, texels) in detail.flush(device, queue, Duration::from_secs(60))? {
         cache.write_rect(t, rect, &texels)?;
         arrived += 1;
     }

@@ -67,8 +67,8 @@ pub mod testing;
 // crate root (the granular passes under `granular`, the test helpers under `testing`). These
 // imports give the crate's own code the short paths `crate::<module>`.
 use device::{
-    context, detail_readback, download, limits, profiler, queued_readback, readback, region_source,
-    small_readback, timer,
+    context, detail_readback, detail_stream, download, limits, profiler, queued_readback, readback,
+    region_source, small_readback, timer,
 };
 use passes::{atlas_stamper, density, detail_probe, material_effect, normals, spill, stamp};
 use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
@@ -86,6 +86,7 @@ pub use detail::{
 };
 pub use detail_probe::{DetailProbe, DetailProbePoint, DetailProbeSample, MAX_PROBE_OFFSET};
 pub use detail_readback::{ArrivedDetail, DetailReadback};
+pub use detail_stream::GpuDetailStream;
 pub use download::{WAIT_TIMEOUT, download_bytes, read_texture_rgba8, wait_bounded};
 pub use error::GpuError;
 pub use hole_mask::GpuHoleMask;

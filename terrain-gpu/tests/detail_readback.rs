@@ -3,8 +3,9 @@
 //! stamped the same way, bit for bit (the stamps are the same integer program): with a ring
 //! far smaller than the rects (they wait in order), overlapping footprints (the later copy
 //! wins), rects read while others are still on their way, and a refused rect that loses none
-//! of the others. On whatever adapter the machine has (lavapipe in CI); without one it skips,
-//! or fails under `TERRAIN_REQUIRE_GPU=1`.
+//! of the others; and `GpuDetailStream`, which composes them with the tile slots. On whatever
+//! adapter the machine has (lavapipe in CI); without one it skips, or fails under
+//! `TERRAIN_REQUIRE_GPU=1`.
 
 use glam::{UVec2, Vec2};
 use std::collections::HashMap;
@@ -126,4 +127,98 @@ fn stamped_rects_come_back_in_order_and_equal_the_cpu_layer() {
         "the walk crosses a tile edge: {compared} tiles"
     );
     ctx.check().expect("no GPU validation errors");
+}
+
+/// `GpuDetailStream`, the detail layer's GPU side whole: a walker's footprints across tiles,
+/// two a frame, into a working set of eight slots that follows them (tiles with rects still on
+/// their way kept in it, tiles leaving it reloaded from the CPU's copy when they come back);
+/// the CPU's copy, fed only by the rects read back, equals `DetailLayer` after the flush.
+#[test]
+fn a_detail_stream_follows_its_working_set_and_reads_back_the_cpu_layer() {
+    use terrain_core::detail::tiles_of_pieces;
+    use terrain_gpu::GpuDetailStream;
+    let Some(ctx) = context_or_skip("detail_stream") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let layout = DetailLayout::new(UVec2::splat(64), 0.5, 4, 64).unwrap();
+    let side = layout.tile_size();
+    let mut layer = DetailLayer::new(layout).unwrap();
+    let mut stream = GpuDetailStream::new(device, layout, 8, 3).unwrap();
+    let mut cpu = CpuTiles::default();
+    let mut loaded: Vec<UVec2> = Vec::new();
+    let mut foot = GaussianStamp::default();
+    let mut unloads = 0;
+    for frame in 0..24 {
+        // Along a diagonal that crosses three tiles, and back over the first.
+        let t = if frame < 16 {
+            frame as f32
+        } else {
+            32.0 - frame as f32
+        };
+        let steps: Vec<StampPlacement> = (0..2)
+            .map(|k| {
+                let c = Vec2::splat(6.0 + 1.9 * t + 0.6 * k as f32);
+                StampPlacement::new(c, Vec2::new(0.5, 0.9), -0.1).unwrap()
+            })
+            .collect();
+        let mut needed = stream.tiles_in_flight();
+        for p in &steps {
+            let pieces = layout
+                .footprint_pieces(p.footprint(layout.detail_texel_m()).unwrap())
+                .unwrap();
+            needed.extend(tiles_of_pieces(&pieces).into_iter().map(|(t, _)| t));
+        }
+        needed.sort_unstable_by_key(|t| (t.y, t.x));
+        needed.dedup();
+        let unload: Vec<UVec2> = loaded
+            .iter()
+            .filter(|t| !needed.contains(t))
+            .copied()
+            .collect();
+        unloads += unload.len();
+        let load: Vec<UVec2> = needed
+            .iter()
+            .filter(|t| !loaded.contains(t))
+            .copied()
+            .collect();
+        stream
+            .follow(queue, &unload, load.iter().map(|t| (*t, cpu.0.get(t))))
+            .unwrap();
+        loaded = needed;
+        for p in &steps {
+            layer.apply_stamp(&mut foot, p, Blend::Add).unwrap();
+        }
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let texels = stream
+            .encode_stamps(
+                device,
+                queue,
+                &mut encoder,
+                GpuStamp::Gaussian(&foot),
+                &steps,
+            )
+            .unwrap();
+        assert!(texels > 0);
+        queue.submit([encoder.finish()]);
+        stream.recall();
+        for (tile, rect, texels) in stream.poll(device).unwrap() {
+            cpu.write(side, tile, rect, &texels);
+        }
+    }
+    for (tile, rect, texels) in stream
+        .flush(device, queue, Duration::from_secs(30))
+        .unwrap()
+    {
+        cpu.write(side, tile, rect, &texels);
+    }
+    assert!(unloads > 0, "the working set never moved");
+    assert!(cpu.0.len() >= 3);
+    for (tile, grid) in &cpu.0 {
+        assert!(
+            layer.tile(*tile) == Some(grid),
+            "tile {tile}: GPU and CPU differ"
+        );
+    }
+    ctx.check().expect("validation");
 }

@@ -4,44 +4,28 @@
 //! a wait.
 
 use super::*;
-use terrain_gpu::DetailReadback;
+use terrain_gpu::GpuDetailStream;
 
 /// Detail tile slots on the GPU (1 MiB each at 1024^2 texels, packed four to a word): the nine
 /// of a band and the tiles beyond it under the walker and this frame's footprints (within 2 m
 /// of the walker: at most four). Only tiles with detail take a slot; the zero tile is shared.
 pub const DETAIL_SLOTS: u32 = 13;
 
-/// The detail layer on the GPU: tile slots following the scenario's detail cache (footprints
-/// are stamped here and their rects read back into the cache, whose copy is the one written
-/// back) and how the renderer shades them.
+/// The detail layer on the GPU: terrain-gpu's stream (tile slots following the scenario's
+/// detail cache, footprints stamped there and their rects read back into the cache, whose copy
+/// is the one written back), the spill pass and how the renderer shades the tiles.
 pub(super) struct DetailScene {
-    pub(super) tiles: GpuDetailTiles,
-    /// Footprints are stamped through it: what leaves the tiles' range spills into the
-    /// coarse-map.
+    pub(super) stream: GpuDetailStream,
+    /// The coarse-map's footprints are stamped through it: what leaves the tiles' range
+    /// spills into the coarse-map.
     pub(super) spill: SpillPass,
     pub(super) shading: DetailShading,
     /// Detail texels inside the rects the last deformation stamped.
     pub(super) dirty_texels: u64,
-    /// The stamped rects on their way back to the cache, never waiting (terrain-gpu's
-    /// protocol: requested after each stamp, in order).
-    pub(super) readback: DetailReadback,
 }
 
 /// Detail rects in flight at most (the ring's limit; a frame's footprints stamp about four).
-pub(super) const DETAIL_READBACK_RING: usize = 16;
-
-impl DetailScene {
-    /// Requests `rects` back in `encoder` (after what it stamped), after the rects earlier
-    /// calls had no room for.
-    pub(super) fn request(
-        &mut self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        rects: impl IntoIterator<Item = (glam::UVec2, terrain_core::Rect)>,
-    ) -> Result<(), terrain_gpu::GpuError> {
-        self.readback.request(device, encoder, &self.tiles, rects)
-    }
-}
+const DETAIL_READBACK_RING: usize = 16;
 
 /// The refinement pass and its renderer, with the radius they refine.
 pub(super) struct RefinedGeometry {
@@ -85,7 +69,7 @@ impl GpuScene {
     /// mapping.
     pub fn enable_detail(&mut self, layout: DetailLayout, refine: bool) -> Result<()> {
         let device = &self.ctx.device;
-        let tiles = GpuDetailTiles::new(device, layout, DETAIL_SLOTS)?;
+        let stream = GpuDetailStream::new(device, layout, DETAIL_SLOTS, DETAIL_READBACK_RING)?;
         let mut shading = detail_shading();
         let refine = if refine {
             // The texels refined are the drawn surface's: a streamed world's level 0.
@@ -106,11 +90,10 @@ impl GpuScene {
             None
         };
         self.detail = Some(DetailScene {
-            tiles,
+            stream,
             spill: SpillPass::new(device, SPILL_WINDOW_TEXELS)?,
             shading,
             dirty_texels: 0,
-            readback: DetailReadback::new(device, DETAIL_READBACK_RING)?,
         });
         self.refined = refine;
         Ok(())
@@ -121,7 +104,7 @@ impl GpuScene {
     pub fn detail_stats(&self) -> Option<(u32, u64)> {
         self.detail
             .as_ref()
-            .map(|d| (d.tiles.resident(), d.dirty_texels))
+            .map(|d| (d.stream.tiles().resident(), d.dirty_texels))
     }
 
     /// Makes the GPU's detail slots follow `frame` of `cache` (the detail cache the footprints
@@ -139,12 +122,8 @@ impl GpuScene {
             return Ok(());
         };
         let t = std::time::Instant::now();
-        for &tile in &frame.unload {
-            detail.tiles.unload(&self.ctx.queue, tile);
-        }
-        for &tile in &frame.load {
-            detail.tiles.load(&self.ctx.queue, tile, cache.tile(tile))?;
-        }
+        let load = frame.load.iter().map(|&tile| (tile, cache.tile(tile)));
+        detail.stream.follow(&self.ctx.queue, &frame.unload, load)?;
         timings.add(Step::Detail, crate::timings::ms_since(t));
         Ok(())
     }
@@ -167,11 +146,9 @@ impl GpuScene {
         // In request order: a later copy of the same texels is the newer one.
         let arrived = if wait {
             let timeout = std::time::Duration::from_secs(60);
-            detail
-                .readback
-                .flush(device, queue, &detail.tiles, timeout)?
+            detail.stream.flush(device, queue, timeout)?
         } else {
-            detail.readback.poll(device)?
+            detail.stream.poll(device)?
         };
         for (tile, rect, texels) in arrived {
             cache.write_rect(tile, rect, &texels)?;
@@ -198,23 +175,14 @@ impl GpuScene {
             return Ok(0);
         }
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let stamps = &mut self.stamps;
         let mut texels = 0;
         let time = self.timer.time(device, queue, Step::Detail, |encoder| {
-            for placement in placements {
-                let op = StampOp {
-                    stamp: GpuStamp::Gaussian(stamp),
-                    placement: *placement,
-                    blend: terrain_core::Blend::Add,
-                };
-                let rects = stamps.encode_detail(device, queue, encoder, &mut detail.tiles, &op)?;
-                texels += rects.iter().map(|(_, r)| r.area()).sum::<u64>();
-                detail.request(device, encoder, rects)?;
-            }
+            let foot = GpuStamp::Gaussian(stamp);
+            texels = (detail.stream).encode_stamps(device, queue, encoder, foot, placements)?;
             Ok(())
         });
         detail.dirty_texels = texels;
-        self.stamps.recall();
+        detail.stream.recall();
         time.map_err(|e| self.lost_or(e.into()))?.record(timings);
         Ok(texels)
     }
@@ -224,7 +192,7 @@ impl GpuScene {
     pub fn detail_tiles_in_flight(&self) -> Vec<glam::UVec2> {
         self.detail
             .as_ref()
-            .map_or_else(Vec::new, |d| d.readback.tiles_in_flight())
+            .map_or_else(Vec::new, |d| d.stream.tiles_in_flight())
     }
 
     /// A resident detail tile's texels on the GPU (waits for the GPU), `None` for a tile
@@ -234,12 +202,13 @@ impl GpuScene {
         let Some(detail) = self.detail.as_ref() else {
             return Ok(None);
         };
-        if detail.tiles.slot_of(tile).is_none() {
+        let tiles = detail.stream.tiles();
+        if tiles.slot_of(tile).is_none() {
             return Ok(None);
         }
-        let side = detail.tiles.layout().tile_size();
+        let side = tiles.layout().tile_size();
         let all = Rect::from_size(UVec2::splat(side));
-        Ok(Some(detail.tiles.read(
+        Ok(Some(tiles.read(
             &self.ctx.device,
             &self.ctx.queue,
             tile,

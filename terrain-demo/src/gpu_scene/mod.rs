@@ -13,9 +13,9 @@ use terrain_core::{FixedPointMap, Rect, StampPlacement};
 use terrain_gpu::granular::{GranularField, GranularPasses};
 use terrain_gpu::{
     AtlasStamp, AtlasStampOp, AtlasStamper, ClipmapSurface, DetailShading, GpuContext,
-    GpuDerivativeMap, GpuDetailTiles, GpuHeightMap, GpuRegionSource, GpuStamp, GpuTextureStamp,
-    NormalPass, OffscreenTarget, RefineDraw, RefinePass, RefineRenderer, RegionReadback, SkyColors,
-    SkyPass, SpillPass, StampOp, StampPass, TerrainRenderer, TerrainStyle, TerrainView,
+    GpuDerivativeMap, GpuHeightMap, GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass,
+    OffscreenTarget, RefineDraw, RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass,
+    SpillPass, StampOp, StampPass, TerrainRenderer, TerrainStyle, TerrainView,
 };
 use terrain_lod::{CdlodConfig, CdlodTree, ClipmapLayout, TessConfig};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
@@ -546,7 +546,7 @@ impl GpuScene {
                         encoder,
                         &mut self.stamps,
                         terrain_gpu::SpillTargets {
-                            tiles: &mut detail.tiles,
+                            tiles: detail.stream.tiles_mut(),
                             coarse: &self.map,
                         },
                         &op,
@@ -556,7 +556,7 @@ impl GpuScene {
                         paint.encode(device, queue, encoder, &self.map, d.kind, &d.placement)?;
                     }
                     // Back to the CPU through the ring, recorded after the stamp.
-                    detail.request(device, encoder, out.detail)?;
+                    detail.stream.request(device, encoder, out.detail)?;
                     for r in out.coarse {
                         self.normal_pass.encode(
                             device,
@@ -632,7 +632,7 @@ impl GpuScene {
             // A streamed world's footprints (the world scenario's `--detail`).
             (Some(atlas), _, Some(d)) => ClipmapSurface::AtlasDetail {
                 atlas,
-                detail: &d.tiles,
+                detail: d.stream.tiles(),
                 shading: &d.shading,
             },
             (Some(atlas), ..) => ClipmapSurface::Atlas { atlas },
@@ -643,7 +643,7 @@ impl GpuScene {
             (None, None, Some(d)) => ClipmapSurface::Detail {
                 map: &self.map,
                 normals: &self.normals,
-                detail: &d.tiles,
+                detail: d.stream.tiles(),
                 shading: &d.shading,
             },
             (None, None, None) => ClipmapSurface::Coarse {

@@ -15,11 +15,11 @@ use crate::gpu_scene::GpuScene;
 use crate::timings::{Step, Timings, ms_since};
 use crate::usage_error::usage;
 use anyhow::{Context, Result, anyhow};
-use glam::{UVec2, Vec2};
+use glam::Vec2;
 use std::time::Instant;
 use terrain_cache::detail::{DetailCache, detail_manifest_layout};
 use terrain_cache::{BandSelection, Manifest, World};
-use terrain_core::detail::{DetailLayout, tiles_of_pieces};
+use terrain_core::detail::DetailLayout;
 use terrain_core::{Blend, GaussianStamp, StampPlacement};
 
 /// Detail texels per level-0 texel: 6.25 cm texels on the default 0.5 m world.
@@ -171,26 +171,11 @@ impl WorldDetail {
     ) -> Result<DetailStats> {
         let t = Instant::now();
         let steps = self.steps(walked_m, line)?;
-        let layout = self.layout();
-        let mut needed = Vec::new();
-        let mut ahead = Vec::new();
-        for p in &steps {
-            let footprint = p.footprint(layout.detail_texel_m())?;
-            if !footprint.is_empty() {
-                let pieces = layout.footprint_pieces(footprint)?;
-                needed.extend(tiles_of_pieces(&pieces).into_iter().map(|(t, _)| t));
-            }
-            ahead.extend(layout.tiles_within(p.center, READ_AHEAD_M)?);
-        }
         // Tiles whose stamped rects are still on their way back stay in RAM for them.
-        if let Some(scene) = gpu.as_deref() {
-            needed.extend(scene.detail_tiles_in_flight());
-        }
-        for list in [&mut needed, &mut ahead] {
-            list.sort_unstable_by_key(|t: &UVec2| (t.y, t.x));
-            list.dedup();
-        }
-        let frame = self.cache.update_ahead(camera_xz, &needed, &ahead)?;
+        let keep = gpu
+            .as_deref()
+            .map_or_else(Vec::new, GpuScene::detail_tiles_in_flight);
+        let frame = (self.cache).update_for_stamps(camera_xz, &steps, &keep, READ_AHEAD_M)?;
         if let Some((tile, e)) = frame.failed.first() {
             return Err(anyhow!("detail tile {tile}: {e}"));
         }
@@ -233,6 +218,7 @@ impl WorldDetail {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::UVec2;
     use std::sync::Arc;
     use terrain_cache::{ObjectTileStore, TileStore};
     use terrain_core::{HeightEncoding, WrapMode};

@@ -4,6 +4,7 @@
 pub mod compute;
 pub mod context;
 pub mod detail_readback;
+pub mod detail_stream;
 pub mod download;
 pub mod limits;
 pub mod profiler;
