@@ -188,3 +188,55 @@ fn bounds_and_misuse_are_errors_not_panics() {
     ctx.queue.submit([encoder.finish()]);
     assert!(p.flush(&ctx.device).unwrap().is_empty());
 }
+
+/// `StepTimer`: in wall mode each step is timed by its submit and wait and nothing comes later;
+/// in timestamp mode (forced, where the device has the queries) each frame's steps come back
+/// later, one figure per step and frame, a step timed twice added up; a failing step is an
+/// error with nothing submitted.
+#[test]
+fn the_step_timer_times_steps_in_either_mode() {
+    use terrain_gpu::{StepTimer, TimingMode};
+    let Some(ctx) = context_or_skip("the_step_timer_times_steps_in_either_mode") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let info = ctx.adapter.get_info();
+    let buffer = work(&ctx);
+    let clear = |e: &mut wgpu::CommandEncoder| {
+        e.clear_buffer(&buffer, 0, None);
+        Ok(())
+    };
+    let mut wall = StepTimer::new(&info, device, queue, Some(TimingMode::Wall));
+    assert_eq!(wall.mode(), TimingMode::Wall);
+    let span = wall.time(device, queue, "clear", clear).unwrap();
+    assert!(span.wall_ms >= 0.0 && !span.includes_recording);
+    wall.end_frame(device, queue).unwrap();
+    assert!(wall.flush(device, queue).unwrap().is_empty());
+    let failed = wall.time(device, queue, "fails", |_| {
+        Err(GpuError::Unsupported {
+            what: "a step",
+            reason: "it fails",
+        })
+    });
+    assert!(failed.is_err());
+    let mut stamps = StepTimer::new(&info, device, queue, Some(TimingMode::Timestamps));
+    if !device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+        assert_eq!(stamps.mode(), TimingMode::Wall, "no queries: wall time");
+        return;
+    }
+    assert_eq!(stamps.mode(), TimingMode::Timestamps);
+    for _ in 0..3 {
+        for name in ["clear", "clear", "other"] {
+            let span = stamps.time(device, queue, name, clear).unwrap();
+            assert!(span.includes_recording && span.timestamp_ms.is_none());
+        }
+        stamps.end_frame(device, queue).unwrap();
+    }
+    let mut figures = stamps.poll(device).unwrap();
+    figures.extend(stamps.flush(device, queue).unwrap());
+    let frames: Vec<u64> = figures.iter().map(|f| f.frame).collect();
+    assert_eq!(frames, [0, 0, 1, 1, 2, 2]);
+    assert!(figures.iter().all(|f| f.ms.is_finite() && f.ms >= 0.0));
+    assert!(figures.iter().step_by(2).all(|f| f.name == "clear"));
+    ctx.check().unwrap();
+}

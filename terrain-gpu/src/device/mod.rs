@@ -13,5 +13,6 @@ pub mod readback;
 pub mod region_source;
 pub mod scope;
 pub mod small_readback;
+pub mod step_timer;
 pub mod timer;
 pub(crate) mod trace;
