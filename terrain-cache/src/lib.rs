@@ -112,7 +112,9 @@ pub use policy::{
     BandSelection, CameraState, FrustumSelection, SelectionPolicy, SphericalSelection, TileGrid,
     Want,
 };
-pub use pool::{FrameReport, PoolConfig, RamPool, RequestHandle, TileState, TileStatus};
+pub use pool::{
+    FrameReport, PoolConfig, RamPool, RequestHandle, TileState, TileStatus, WindowFill,
+};
 pub mod vram;
 pub use vram::{
     DEFAULT_UPLOAD_BUDGET_BYTES, RamTiles, VramConfig, VramError, VramPool, VramReport,

@@ -18,7 +18,7 @@ use std::time::Duration;
 use terrain_cache::{
     CameraState, Layer, Manifest, ObjectTileStore, PoolConfig, ProceduralSource, RamPool,
     SphericalSelection, TileDeformer, TileGrid, TileStamps, TileStore, VramConfig, VramPool,
-    build_world, rebuild_ancestors,
+    WindowFill, build_world, rebuild_ancestors,
 };
 use terrain_core::{
     Blend, CoarseMap, GaussianStamp, Grid, HeightEncoding, Rect, StampPlacement, TerrainParams,
@@ -199,6 +199,7 @@ fn main() -> Result<()> {
         foot,
     };
     let mut window = CollisionWindow::new(256, manifest.world_size, encoding, TEXEL)?;
+    let mut fill = WindowFill::new(&manifest);
     let extent = manifest.world_size.as_vec2() * TEXEL;
     let start = extent * 0.3;
     let mut walker = CameraBody::new(Vec3::new(start.x, 60.0, start.y));
@@ -257,7 +258,11 @@ fn main() -> Result<()> {
         }
 
         // Collide: the window follows the walker; it walks on what the window holds.
-        window.recenter(xz, |rect, out| ram.read_region(rect, out).map(|_| ()))?;
+        // What coarser data stood in for is filled again once its level-0 tile is in RAM.
+        window.recenter(xz, |rect, out| fill.fill(&ram, rect, out))?;
+        for rect in fill.ready(&ram, window.window()) {
+            window.refresh(rect, |r, out| fill.fill(&ram, r, out))?;
+        }
         let collider = window.collider();
         walker.step(DT, Vec3::new(heading.x, 0.0, heading.y) * 6.0, &collider)?;
         let feet = Vec2::new(walker.position.x, walker.position.z);

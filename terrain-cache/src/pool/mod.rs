@@ -32,7 +32,10 @@
 mod frame;
 pub(crate) mod journal;
 mod tiles;
+mod window_fill;
 pub(crate) mod workers;
+
+pub use window_fill::WindowFill;
 
 use crate::CacheError;
 use crate::policy::{CameraState, SelectionPolicy, SphericalSelection, TileGrid, Want};

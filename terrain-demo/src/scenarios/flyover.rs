@@ -47,11 +47,11 @@ use crate::timings::{Step, ms_since};
 use crate::usage_error::usage;
 use anyhow::{Result, bail};
 use glam::{IVec2, UVec2, Vec2, Vec3};
-use std::collections::HashSet;
 use std::time::{Duration, Instant};
 use terrain_cache::{
     CameraState, Layer, Manifest, OverlayStream, PoolConfig, RamPool, RegionBounds,
-    SphericalSelection, TileGrid, TileId, TileStamps, VramConfig, VramPool, World, reduce_levels,
+    SphericalSelection, TileGrid, TileId, TileStamps, VramConfig, VramPool, WindowFill, World,
+    reduce_levels,
 };
 use terrain_core::{CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, WrapMode};
 use terrain_lod::{CdlodConfig, TessConfig};
@@ -135,8 +135,8 @@ pub struct FlyoverScenario {
     written_back: u64,
     /// Collision around the camera.
     window: CollisionWindow,
-    /// Level-0 tiles in the window filled from coarser data (refilled once loaded).
-    window_coarse: HashSet<TileId>,
+    /// Fills the window from the pool, refilling what coarser data stood in for.
+    window_fill: WindowFill,
     /// The world's holes and paint around the camera.
     overlays: WorldOverlays,
     /// Tile stamps done on the GPU and on the CPU so far.
@@ -238,7 +238,7 @@ impl FlyoverScenario {
             stamps: TileStamps::new(&manifest)?,
             written_back: 0,
             window,
-            window_coarse: HashSet::new(),
+            window_fill: WindowFill::new(&manifest),
             overlays,
             gpu_tile_stamps: 0,
             cpu_tile_stamps: 0,
@@ -263,56 +263,27 @@ impl FlyoverScenario {
     /// tile under it, else the overview's.
     fn coarse_ground(&self, xz: Vec2) -> f32 {
         let xz = xz.clamp(Vec2::ZERO, self.extent);
-        let texel = xz / self.texel_size;
         // The window holds a tile's texels only once it is in RAM (until then, what
         // `read_region` filled in: not the ground).
-        let t = texel.as_uvec2() / self.tile_size;
-        if !self.window_coarse.contains(&TileId::new(0, t.x, t.y))
+        if !self
+            .window_fill
+            .is_stand_in((xz / self.texel_size).as_uvec2())
             && let Ok(Some(h)) = self.window.height(xz)
         {
             return h;
         }
-        if let Some(pool) = &self.pool {
-            let id = TileId::new(0, t.x, t.y);
-            if let Some((found, data)) = pool.best_available(id)
-                && let Some(grid) = data.as_u16()
-            {
-                let scale = (1u32 << found.level.min(31)) as f32;
-                let origin = UVec2::new(found.x, found.y).as_vec2() * self.tile_size as f32;
-                let local = texel / scale - origin;
-                let raw = bilinear_clamped(grid, local);
-                return self.overview.encoding().to_metres(raw);
-            }
-        }
-        terrain_core::bilinear(&self.overview, xz).unwrap_or(0.0)
+        let pool = self.pool.as_ref().and_then(|pool| pool.ground_m(xz));
+        pool.unwrap_or_else(|| terrain_core::bilinear(&self.overview, xz).unwrap_or(0.0))
     }
 
     /// Level-0 tiles the frame needs now (those within half a tile of the camera: under it
     /// and what the near view and collision read) that are not in RAM, so coarser data stands
     /// in. Tiles further out that the selection wants are prefetches, not missing.
     fn tiles_missing(&self, xz: Vec2) -> usize {
-        let Some(pool) = &self.pool else {
-            return 0;
-        };
-        let tile_m = self.tile_size as f32 * self.texel_size;
-        let tiles = (self.extent / tile_m).ceil().as_ivec2();
-        let here = (xz / tile_m).floor().as_ivec2();
-        let mut missing = 0;
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                let t = here + IVec2::new(dx, dy);
-                if t.x < 0 || t.y < 0 || t.x >= tiles.x || t.y >= tiles.y {
-                    continue;
-                }
-                let lo = t.as_vec2() * tile_m;
-                let nearest = xz.clamp(lo, lo + tile_m);
-                let id = TileId::new(0, t.x as u32, t.y as u32);
-                if nearest.distance(xz) <= 0.5 * tile_m && pool.tile(id).is_none() {
-                    missing += 1;
-                }
-            }
-        }
-        missing
+        let half_tile = 0.5 * self.tile_size as f32 * self.texel_size;
+        self.pool
+            .as_ref()
+            .map_or(0, |pool| pool.missing_near(xz, half_tile))
     }
 
     /// Hands the rects of GPU-stamped tiles that arrived to the RAM pool through the tile
@@ -379,50 +350,12 @@ impl FlyoverScenario {
         let Some(pool) = self.pool.as_ref() else {
             return Ok(());
         };
-        let ts = self.tile_size;
-        let coarse = &mut self.window_coarse;
-        let mut fill = |rect: Rect, out: &mut Grid<u16>| -> Result<(), terrain_cache::CacheError> {
-            pool.read_region(rect, out)?;
-            let (lo, hi) = (rect.min.as_uvec2() / ts, (rect.max().as_uvec2() - 1) / ts);
-            for ty in lo.y..=hi.y {
-                for tx in lo.x..=hi.x {
-                    let id = TileId::new(0, tx, ty);
-                    if pool.tile(id).is_none() {
-                        coarse.insert(id);
-                    }
-                }
-            }
-            Ok(())
-        };
-        self.window.recenter(xz, &mut fill)?;
-        // Tiles that loaded since: refill (the tile may still be missing: it stays listed).
-        let window = self.window.window();
-        let ready: Vec<TileId> = self
-            .window_coarse
-            .iter()
-            .copied()
-            .filter(|&id| pool.tile(id).is_some())
-            .collect();
-        for id in ready {
-            self.window_coarse.remove(&id);
-            let rect = self
-                .stamps
-                .world_rect(id, Rect::from_size(UVec2::splat(ts)));
-            let coarse = &mut self.window_coarse;
+        let fill = &mut self.window_fill;
+        self.window.recenter(xz, |r, out| fill.fill(pool, r, out))?;
+        for rect in fill.ready(pool, self.window.window()) {
             self.window
-                .refresh(rect, |r, out| -> Result<(), terrain_cache::CacheError> {
-                    pool.read_region(r, out)?;
-                    if pool.tile(id).is_none() {
-                        coarse.insert(id);
-                    }
-                    Ok(())
-                })?;
+                .refresh(rect, |r, out| fill.fill(pool, r, out))?;
         }
-        // Forget tiles that left the window.
-        self.window_coarse.retain(|&id| {
-            let r = Rect::new((UVec2::new(id.x, id.y) * ts).as_ivec2(), UVec2::splat(ts));
-            window.is_some_and(|w| w.intersect(&r).is_some())
-        });
         Ok(())
     }
 }
@@ -484,23 +417,6 @@ pub fn vram_slot_bytes(manifest: &Manifest, colored: bool) -> u64 {
     let heights = AtlasConfig { slots: 1, world }.slot_bytes();
     let overlay = world.tile_texels() * 4;
     heights + overlay * (1 + u64::from(colored))
-}
-
-/// Bilinear sample of `grid` at texel coordinates `p`, clamped to its edges (raw units).
-fn bilinear_clamped(grid: &Grid<u16>, p: Vec2) -> f64 {
-    let max = (grid.size() - UVec2::ONE).as_vec2();
-    let p = p.clamp(Vec2::ZERO, max);
-    let p0 = p.floor();
-    let f = p - p0;
-    let (x0, y0) = (p0.x as u32, p0.y as u32);
-    let (x1, y1) = (
-        (x0 + 1).min(grid.width() - 1),
-        (y0 + 1).min(grid.height() - 1),
-    );
-    let at = |x, y| f64::from(grid.get(x, y).unwrap_or(0));
-    let top = at(x0, y0) + (at(x1, y0) - at(x0, y0)) * f64::from(f.x);
-    let bottom = at(x0, y1) + (at(x1, y1) - at(x0, y1)) * f64::from(f.x);
-    top + (bottom - top) * f64::from(f.y)
 }
 
 impl Scenario for FlyoverScenario {
@@ -867,7 +783,7 @@ impl Scenario for FlyoverScenario {
                         .window
                         .window()
                         .map(|w| [w.min.x, w.min.y, w.size.x as i32, w.size.y as i32]),
-                    collision_coarse_tiles: self.window_coarse.len(),
+                    collision_coarse_tiles: self.window_fill.stand_ins(),
                     frame_thread_ms: cache_ms,
                 }),
                 ..FrameStats::default()
@@ -978,13 +894,5 @@ mod tests {
             reflect_into(Vec2::new(120.0, 10.0), e),
             Vec2::new(80.0, 10.0)
         );
-    }
-
-    #[test]
-    fn bilinear_sampling_clamps_at_tile_edges() {
-        let g = Grid::from_vec(2, 2, vec![0u16, 100, 200, 300]).unwrap();
-        assert_eq!(bilinear_clamped(&g, Vec2::new(0.5, 0.5)), 150.0);
-        assert_eq!(bilinear_clamped(&g, Vec2::new(-5.0, -5.0)), 0.0);
-        assert_eq!(bilinear_clamped(&g, Vec2::new(9.0, 9.0)), 300.0);
     }
 }
