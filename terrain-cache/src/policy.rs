@@ -37,6 +37,17 @@ impl CameraState {
         }
     }
 
+    /// This camera looking along `forward` with a vertical field of view of `fov_y` radians
+    /// and `aspect` (checked where the policies use it: [`Self::validate`]).
+    pub fn looking(self, forward: Vec3, fov_y: f32, aspect: f32) -> Self {
+        Self {
+            forward,
+            fov_y,
+            aspect,
+            ..self
+        }
+    }
+
     /// Checks for non-finite values and an out-of-range field of view.
     pub fn validate(&self) -> Result<(), CacheError> {
         let check = |what, v: f32, ok: bool| {

@@ -32,32 +32,8 @@ use terrain_core::{CoarseMap, Grid, Rect, StampPlacement, WrapMode};
 /// at most 4; the limit keeps a huge footprint's work bounded).
 pub const MAX_TILES_PER_STAMP: usize = 64;
 
-/// What applies one kind of stamp `K` to one level-0 tile: in its VRAM slot on the GPU, or on
-/// the CPU in RAM. Placements are in the tile's own frame (metres from its corner).
-pub trait TileDeformer<K> {
-    /// What a failed stamp reports (an application may use `anyhow::Error`).
-    type Error: std::fmt::Display + std::fmt::Debug;
-
-    /// Stamps `kind` at `placement` into the VRAM slot `slot` (level 0) and requests the
-    /// changed rects back (tile texels): a ticket and rect each, the tickets unique among
-    /// those in flight. `None` when no readback can be taken now (nothing stamped: the tile is
-    /// tried again next frame).
-    fn stamp_slot(
-        &mut self,
-        slot: u32,
-        kind: &K,
-        placement: &StampPlacement,
-    ) -> Result<Option<Vec<(u64, Rect)>>, Self::Error>;
-
-    /// Stamps `kind` at `placement` into `tile` (a clamped map of one level-0 tile, the
-    /// world's encoding and texel size) and returns the rects it changed.
-    fn stamp_ram(
-        &mut self,
-        kind: &K,
-        tile: &mut CoarseMap,
-        placement: &StampPlacement,
-    ) -> Result<Vec<Rect>, Self::Error>;
-}
+/// The deformer contract, in terrain-core (terrain-gpu implements it without naming this crate).
+pub use terrain_core::TileDeformer;
 
 /// Why a [`TileStamps`] call failed.
 #[derive(Debug, thiserror::Error)]

@@ -63,6 +63,7 @@ pub mod slope_code;
 pub mod stamp;
 pub mod terrain_gen;
 pub mod tile_atlas;
+pub mod tile_deformer;
 pub mod tile_upload;
 
 pub use error::CoreError;
@@ -102,6 +103,7 @@ pub use stamp::{
 };
 pub use terrain_gen::{TerrainParams, generate_coarse_map, generate_heights};
 pub use tile_atlas::TileAtlas;
+pub use tile_deformer::{RamDeformer, TileDeformer, TileStamp};
 pub use tile_upload::{INVALID_SLOT, MAX_TILE_LEVELS, TileLayout, TileUploadTarget};
 
 /// The README's code blocks, compiled and run as doc tests so that they cannot go stale.

@@ -1,33 +1,39 @@
-//! The frame an engine runs, on its own device and in its own render pass, with the library
-//! crates alone (no demo code): a streamed world (terrain-cache's RAM and VRAM pools filling
-//! terrain-gpu's tile atlas), deformed on the GPU where the tiles are resident (craters and
-//! footprints through terrain-cache's `TileStamps`, the changed rects read back into RAM and
-//! collision without a stall), a walker colliding with a window of the world around it
-//! (terrain-physics), the clipmap placed and culled (terrain-lod) and drawn with the sky into
-//! the engine's pass (terrain-gpu). At the end the last readbacks land, the deformed tiles are
-//! written back into the world and the last frame is saved.
+//! The frame an engine runs, on its own device and render pass, with the library crates alone,
+//! every kind of deformation on one streamed world. Stream: terrain-cache's pools fill
+//! terrain-gpu's tile atlas. Deform: craters and a shockwave on the resident tiles on the GPU
+//! (`TileStamps` through `AtlasDeformer`, the rects read back without a stall), footprints in
+//! detail tiles streamed by band regions (`DetailCache`, `GpuDetailStream`), a sledge's
+//! volume-preserving granular trail (`GranularTrails` stepping `GranularField`). Collide: a
+//! walker on a window of the world, refilled where coarser data stood in (`WindowFill`).
+//! Select LOD and draw: the clipmap placed and culled over the atlas and its detail, drawn with
+//! the sky into the engine's pass. At the end every readback lands, the trail's volume is
+//! checked, the deformed tiles go back into the world, and the last frame is saved.
 //!
 //! ```sh
 //! cargo run --release -p terrain-demo --example engine_frame -- [OUT_DIR] [FRAMES]
 //! ```
 
-use anyhow::{Context, Result};
-use glam::{UVec2, Vec2, Vec3};
+use anyhow::{Result, ensure};
+use glam::{Affine3A, UVec2, Vec2, Vec3};
 use std::sync::Arc;
 use std::time::Duration;
+use terrain_cache::detail::{DetailCache, detail_manifest_layout};
 use terrain_cache::{
-    CameraState, Layer, Manifest, ObjectTileStore, PoolConfig, ProceduralSource, RamPool,
-    SphericalSelection, TileDeformer, TileGrid, TileStamps, TileStore, VramConfig, VramPool,
-    WindowFill, build_world, rebuild_ancestors,
+    BandSelection, CameraState, GranularStepper, GranularTrails, Layer, Manifest, ObjectTileStore,
+    PoolConfig, ProceduralSource, RamPool, SphericalSelection, TileGrid, TileStamps, TileStore,
+    TrailConfig, VramConfig, VramPool, WindowFill, build_world, rebuild_ancestors,
 };
+use terrain_core::detail::DetailLayout;
+use terrain_core::granular::{GranularArrivals, GranularObject, GranularParams, TriMesh};
 use terrain_core::{
-    Blend, CoarseMap, GaussianStamp, Grid, HeightEncoding, Rect, StampPlacement, TerrainParams,
-    TextureStamp, WrapMode, apply_stamp,
+    FixedPointMap, GaussianStamp, HeightEncoding, RamDeformer, Shockwave, ShockwaveParams,
+    StampPlacement, TerrainParams, TileStamp, WrapMode,
 };
+use terrain_gpu::granular::{GranularField, GranularPasses};
 use terrain_gpu::{
-    AtlasConfig, AtlasStamp, AtlasStampOp, AtlasStamper, Camera, ClipmapRenderer, ClipmapSurface,
-    ClipmapView, DepthConvention, GpuTextureStamp, GpuTileAtlas, SkyColors, SkyPass, TargetFormat,
-    TerrainStyle, TileSlot, wgpu,
+    AtlasConfig, AtlasDeformer, AtlasStamper, Camera, ClipmapRenderer, ClipmapSurface, ClipmapView,
+    DepthConvention, DetailShading, GpuDetailStream, GpuError, GpuStamp, GpuTileAtlas, MapUse,
+    SkyColors, SkyPass, TargetFormat, TerrainStyle, wgpu,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 use terrain_physics::{CameraBody, CollisionWindow};
@@ -39,77 +45,60 @@ const SLOTS: u32 = 64;
 const FRAME: UVec2 = UVec2::new(480, 270);
 const DT: f32 = 1.0 / 30.0;
 
-/// The deformations of this game: what `TileStamps` carries to each tile.
-#[derive(Debug, Clone, Copy)]
-enum Kind {
-    Crater,
-    Footprint,
-}
-
-/// The stamps of each `Kind` (GPU and CPU) and the stamper that adds them to atlas tiles.
-struct TileGpu {
-    stamper: AtlasStamper,
-    crater: GaussianStamp,
-    foot: TextureStamp,
-    foot_gpu: GpuTextureStamp,
-}
-
-/// Applies a `Kind` to one tile: in its atlas slot on the GPU (the changed rects requested
-/// back through the stamper's ring), or in RAM on the CPU with the same stamps' references.
-struct Deformer<'a> {
+/// The trail's GPU side: terrain-gpu's granular field, stepped in plain submits (an engine
+/// that times its passes calls `encode_step` and `encode_follow_up` in its own).
+struct Snow<'a> {
     device: &'a wgpu::Device,
     queue: &'a wgpu::Queue,
-    atlas: &'a GpuTileAtlas,
-    t: &'a mut TileGpu,
+    field: Option<GranularField>,
+    passes: Option<GranularPasses>,
 }
 
-impl TileDeformer<Kind> for Deformer<'_> {
-    type Error = anyhow::Error;
+impl GranularStepper for Snow<'_> {
+    type Error = GpuError;
 
-    fn stamp_slot(
-        &mut self,
-        slot: u32,
-        kind: &Kind,
-        placement: &StampPlacement,
-    ) -> Result<Option<Vec<(u64, Rect)>>> {
-        let stamp = match kind {
-            Kind::Crater => AtlasStamp::Gaussian(&self.t.crater),
-            Kind::Footprint => AtlasStamp::Uploaded(&self.t.foot_gpu),
-        };
-        let op = AtlasStampOp {
-            tile: TileSlot { slot, level: 0 },
-            placement: *placement,
-            stamp,
-        };
-        Ok(self
-            .t
-            .stamper
-            .stamp(self.device, self.queue, self.atlas, op)?)
+    fn start(&mut self, map: &FixedPointMap, p: GranularParams) -> Result<(), Self::Error> {
+        let passes = self.passes.take();
+        self.field = Some(GranularField::new(self.device, self.queue, map, p, passes)?);
+        Ok(())
     }
 
-    fn stamp_ram(
+    fn step(
         &mut self,
-        kind: &Kind,
-        tile: &mut CoarseMap,
-        placement: &StampPlacement,
-    ) -> Result<Vec<Rect>> {
-        Ok(match kind {
-            Kind::Crater => apply_stamp(tile, &mut self.t.crater, placement, Blend::Add)?,
-            Kind::Footprint => apply_stamp(tile, &mut self.t.foot, placement, Blend::Add)?,
-        })
+        o: &[GranularObject<'_>],
+        tag: u64,
+    ) -> Result<GranularArrivals, Self::Error> {
+        let field = self
+            .field
+            .as_mut()
+            .ok_or(terrain_gpu::GpuError::Unsupported {
+                what: "a granular step",
+                reason: "no window was started",
+            })?;
+        let arrived = field.poll(self.device)?;
+        field.step(self.device, self.queue, o, tag)?;
+        Ok(arrived)
+    }
+
+    fn poll(&mut self) -> Result<GranularArrivals, Self::Error> {
+        let field = self.field.as_mut();
+        field.map_or(Ok(GranularArrivals::default()), |f| f.poll(self.device))
+    }
+
+    fn stop(&mut self) -> Result<GranularArrivals, Self::Error> {
+        let Some(field) = self.field.take() else {
+            return Ok(GranularArrivals::default());
+        };
+        let (arrived, passes) = field.finish(self.device, self.queue)?;
+        self.passes = Some(passes);
+        Ok(arrived)
     }
 }
 
 fn main() -> Result<()> {
     let mut args = std::env::args().skip(1);
-    let out = args
-        .next()
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| std::env::temp_dir().join("terrain_engine_frame"));
-    let frames: u32 = match args.next() {
-        Some(n) => n.parse().context("FRAMES: a number of frames")?,
-        None => 48,
-    };
+    let out = std::path::PathBuf::from(args.next().unwrap_or("terrain_engine_frame".into()));
+    let frames: u32 = args.next().map_or(Ok(48), |n| n.parse())?;
     std::fs::create_dir_all(&out)?;
 
     // --- The engine's device and frame (as terrain-gpu's `own_device` example makes them). ---
@@ -120,10 +109,12 @@ fn main() -> Result<()> {
         ..wgpu::InstanceDescriptor::new_without_display_handle()
     });
     let adapter = pollster::block_on(instance.request_adapter(&Default::default()))?;
+    let base = wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits());
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         label: Some("engine device"),
         required_features: adapter.features() & terrain_gpu::OPTIONAL_FEATURES,
-        required_limits: wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits()),
+        // The trail's granular passes bind 7 storage buffers (downlevel defaults allow 4).
+        required_limits: terrain_gpu::required_limits(UVec2::splat(128), MapUse::Granular, base)?,
         ..Default::default()
     }))?;
     let format = TargetFormat {
@@ -132,29 +123,29 @@ fn main() -> Result<()> {
         sample_count: 1,
         depth_convention: DepthConvention::Forward,
     };
-    let target = |fmt, usage| {
+    let target = |format, usage| {
+        let size = wgpu::Extent3d {
+            width: FRAME.x,
+            height: FRAME.y,
+            depth_or_array_layers: 1,
+        };
         device.create_texture(&wgpu::TextureDescriptor {
             label: Some("engine target"),
-            size: wgpu::Extent3d {
-                width: FRAME.x,
-                height: FRAME.y,
-                depth_or_array_layers: 1,
-            },
+            size,
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
-            format: fmt,
+            format,
             usage,
             view_formats: &[],
         })
     };
-    let color = target(
-        format.color,
-        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-    );
-    let depth = target(format.depth, wgpu::TextureUsages::RENDER_ATTACHMENT);
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT;
+    let color = target(format.color, usage | wgpu::TextureUsages::COPY_SRC);
+    let depth = target(format.depth, usage);
 
-    // --- The world: built once (here in memory; `FsStore::open` for a folder). ---
+    // --- The world: built once (here in memory; `FsStore::open` for a folder), with a detail
+    // layer of 8 texels per world texel in 256^2 tiles (16 m). ---
     let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory()?);
     let base = TerrainParams {
         size: UVec2::splat(256),
@@ -163,10 +154,13 @@ fn main() -> Result<()> {
     };
     let source = ProceduralSource::new(UVec2::splat(WORLD), &base, 2, 0.004)?;
     let encoding = HeightEncoding::spanning::<u16>(0.0, 60.0)?;
-    let manifest = Manifest::new(UVec2::splat(WORLD), TILE, TEXEL, encoding, WrapMode::Clamp)?;
+    let size = UVec2::splat(WORLD);
+    let mut manifest = Manifest::new(size, TILE, TEXEL, encoding, WrapMode::Clamp)?;
+    let detail_layout = DetailLayout::new(size, TEXEL, 8, 256)?;
+    manifest.detail = Some(detail_manifest_layout(&detail_layout)?);
     let (world, _) = build_world(store, manifest, &source, &|_| true)?;
 
-    // --- Built once: pools, atlas, passes, renderer, collision. ---
+    // --- Built once: pools, atlas, stamps, detail, trail, collision, renderer. ---
     // RAM reaches further than the VRAM pool's frustum, so what the GPU wants next is in RAM
     // (Fikkan 2013, sec. 4.3).
     let mut spherical =
@@ -176,68 +170,70 @@ fn main() -> Result<()> {
     let config = PoolConfig::new(Layer::Height, 64 << 20);
     let mut ram = RamPool::with_policy(world.clone(), config, Box::new(spherical))?;
     let mut vram = VramPool::new(VramConfig::new(&manifest, SLOTS))?;
-    let mut atlas = GpuTileAtlas::new(
-        &device,
-        &queue,
-        &AtlasConfig {
-            slots: SLOTS,
-            world: manifest.tile_layout(),
-        },
-    )?;
+    let atlas_config = AtlasConfig {
+        slots: SLOTS,
+        world: manifest.tile_layout(),
+    };
+    let mut atlas = GpuTileAtlas::new(&device, &queue, &atlas_config)?;
+    let mut stamper = AtlasStamper::new(&device, 16)?;
+    let mut tile_stamps = TileStamps::<TileStamp>::new(&manifest)?;
+    let crater = TileStamp::Gaussian(GaussianStamp::default());
+    let mut shock = Shockwave::new(ShockwaveParams::default())?;
+    let detail_world = terrain_cache::World::open(world.store().clone())?;
+    let band = BandSelection::default();
+    let mut detail = DetailCache::open(detail_world, detail_layout, band, 9 << 16)?;
+    let mut detail_gpu = GpuDetailStream::new(&device, detail_layout, 13, 16)?;
+    let foot = GaussianStamp::default();
+    let trail = TrailConfig::default();
+    let mut trails = GranularTrails::new(&manifest, GranularParams::snow(), trail)?;
+    let mut snow = Snow {
+        device: &device,
+        queue: &queue,
+        field: None,
+        passes: None,
+    };
+    let runner = TriMesh::wheel(0.6, 0.4, 16)?;
+    let mut window = CollisionWindow::new(256, manifest.world_size, encoding, TEXEL)?;
+    let mut fill = WindowFill::new(&manifest);
     let layout = ClipmapLayout::new(127, 5)?;
     let mut renderer = ClipmapRenderer::new(&device, &format, &layout)?;
     let sky = SkyPass::new(&device, &format)?;
-    let mut tile_stamps = TileStamps::<Kind>::new(&manifest)?;
-    let foot = TextureStamp::from_values(Grid::from_fn(8, 16, |x, y| {
-        let (u, v) = ((x as f32 + 0.5) / 4.0 - 1.0, (y as f32 + 0.5) / 8.0 - 1.0);
-        -(1.0 - (u * u + v * v)).max(0.0)
-    })?)?;
-    let mut tiles = TileGpu {
-        stamper: AtlasStamper::new(&device, 16)?,
-        crater: GaussianStamp::default(),
-        foot_gpu: GpuTextureStamp::new(&device, &foot)?,
-        foot,
-    };
-    let mut window = CollisionWindow::new(256, manifest.world_size, encoding, TEXEL)?;
-    let mut fill = WindowFill::new(&manifest);
-    let extent = manifest.world_size.as_vec2() * TEXEL;
-    let start = extent * 0.3;
-    let mut walker = CameraBody::new(Vec3::new(start.x, 60.0, start.y));
     let style = TerrainStyle {
         ramp: (0.0, 60.0),
         ..TerrainStyle::default()
     };
+    let start = manifest.world_size.as_vec2() * TEXEL * 0.3;
+    let mut walker = CameraBody::new(Vec3::new(start.x, 60.0, start.y));
     let heading = Vec2::new(1.0, 0.4).normalize();
+    let aspect = FRAME.x as f32 / FRAME.y as f32;
     let (mut gpu_tiles, mut cpu_tiles, mut arrived_rects, mut missing) = (0, 0, 0, 0);
+    let mut trail_texels = 0;
 
     for frame in 0..frames {
         // Stream: RAM around the walker (worker threads), the nearest tiles into the atlas.
         let xz = Vec2::new(walker.position.x, walker.position.z);
         let look = Vec3::new(heading.x, -0.25, heading.y);
         let camera = Camera::looking(walker.position + Vec3::Y * 6.0 - look * 12.0, look);
-        let state = CameraState {
-            position: camera.position,
-            forward: look,
-            fov_y: camera.fov_y,
-            aspect: FRAME.x as f32 / FRAME.y as f32,
-        };
+        let state = CameraState::at(camera.position).looking(look, camera.fov_y, aspect);
         ram.update(&state)?;
         let streamed = vram.update(&state, &ram, &mut atlas)?;
 
-        // Deform: a footprint under the walker every frame, a crater ahead every 8th.
-        let side = if frame % 2 == 0 { 0.3 } else { -0.3 };
-        let foot_at = xz + heading.perp() * side;
-        let p = StampPlacement::new(foot_at, Vec2::new(0.3, 0.6), 0.15)?;
-        tile_stamps.push(Kind::Footprint, p)?;
+        // Deform the tiles: a crater ahead every 8th frame, the shockwave's change, both 50 m
+        // aside, clear of the trail's window (a write there would break its volume).
+        let aside = heading.perp() * 50.0;
         if frame % 8 == 0 {
-            let p = StampPlacement::new(xz + heading * 25.0, Vec2::splat(10.0), -3.0)?;
-            tile_stamps.push(Kind::Crater, p)?;
+            let p = StampPlacement::new(xz + heading * 25.0 + aside, Vec2::splat(10.0), -3.0)?;
+            tile_stamps.push(crater.clone(), p)?;
         }
-        let mut deformer = Deformer {
+        shock.step();
+        let wave_at = start + heading * 60.0 + aside;
+        let p = StampPlacement::new(wave_at, Vec2::splat(30.0), 1.5)?;
+        tile_stamps.push(TileStamp::Texture(Arc::new(shock.take_delta()?)), p)?;
+        let mut deformer = AtlasDeformer {
             device: &device,
             queue: &queue,
             atlas: &atlas,
-            t: &mut tiles,
+            stamper: &mut stamper,
         };
         let report = tile_stamps.apply(&mut ram, Some(&mut vram), &mut deformer)?;
         (gpu_tiles, cpu_tiles) = (gpu_tiles + report.gpu_tiles, cpu_tiles + report.cpu_tiles);
@@ -245,64 +241,96 @@ fn main() -> Result<()> {
             window.apply(*rect, heights)?;
         }
         // The GPU's changed rects that have arrived (never waiting) go to RAM and collision.
-        for a in tiles.stamper.poll(&device)? {
-            let (_, world_rect) = tile_stamps.receive::<anyhow::Error>(
-                &mut ram,
-                Some(&mut vram),
-                a.ticket,
-                a.rect,
-                &a.heights,
-            )?;
+        for a in stamper.poll(&device)? {
+            let vram = Some(&mut vram);
+            let (_, world_rect) =
+                tile_stamps.receive::<GpuError>(&mut ram, vram, a.ticket, a.rect, &a.heights)?;
             window.apply(world_rect, &a.heights)?;
             arrived_rects += 1;
         }
 
-        // Collide: the window follows the walker; it walks on what the window holds.
-        // What coarser data stood in for is filled again once its level-0 tile is in RAM.
+        // A footprint under the walker, in the detail tiles of the band around the camera.
+        let side = if frame % 2 == 0 { 0.3 } else { -0.3 };
+        let step = StampPlacement::new(xz + heading.perp() * side, Vec2::new(0.3, 0.6), -0.1)?;
+        let keep = detail_gpu.tiles_in_flight();
+        let band = detail.update_for_stamps(Vec2::new(xz.x, xz.y), &[step], &keep, 4.0)?;
+        ensure!(band.failed.is_empty(), "a detail tile could not be read");
+        let load = band.load.iter().map(|&t| (t, detail.tile(t)));
+        detail_gpu.follow(&queue, &band.unload, load)?;
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let gpu_foot = GpuStamp::Gaussian(&foot);
+        detail_gpu.encode_stamps(&device, &queue, &mut encoder, gpu_foot, &[step])?;
+        queue.submit([encoder.finish()]);
+        detail_gpu.recall();
+        for (tile, rect, texels) in detail_gpu.poll(&device)? {
+            detail.write_rect(tile, rect, &texels)?;
+        }
+
+        // The sledge beside the walker ploughs the snow; its window keeps clear of the stamps.
+        let sledge = xz - heading.perp() * 6.0;
+        let others = tile_stamps.in_flight() > 0;
+        let ahead = sledge + heading * 8.0;
+        let points = [sledge];
+        let mut trail = trails.follow(&mut ram, Some(&mut snow), &points, ahead, &state, others)?;
+        if let (Some(ground), Some(w)) = (trails.ground(), trails.window()) {
+            let local = sledge - w.min.as_vec2() * TEXEL;
+            let y = terrain_core::bilinear(ground, local)? + 0.45;
+            let pose = Affine3A::from_translation(Vec3::new(local.x, y, local.y));
+            let objects = [GranularObject::new(&runner, pose)];
+            trails.step(
+                &mut ram,
+                Some(&mut snow),
+                &objects,
+                u64::from(frame),
+                &mut trail,
+            )?;
+        }
+        for (rect, heights) in &trail.changed {
+            window.apply(*rect, heights)?;
+            trail_texels += rect.area();
+        }
+        for m in &trail.measured {
+            ensure!(Some(m.volume) == m.volume_taken, "step {}: volume", m.tag);
+        }
+
+        // Collide: the window follows the walker, refilled where coarser data stood in.
         window.recenter(xz, |rect, out| fill.fill(&ram, rect, out))?;
         for rect in fill.ready(&ram, window.window()) {
             window.refresh(rect, |r, out| fill.fill(&ram, r, out))?;
         }
-        let collider = window.collider();
-        walker.step(DT, Vec3::new(heading.x, 0.0, heading.y) * 6.0, &collider)?;
+        walker.step(
+            DT,
+            Vec3::new(heading.x, 0.0, heading.y) * 6.0,
+            &window.collider(),
+        )?;
         let feet = Vec2::new(walker.position.x, walker.position.z);
         if let Some(ground) = window.height(feet)? {
-            anyhow::ensure!(
-                walker.position.y >= ground,
-                "frame {frame}: the walker fell through"
-            );
+            ensure!(walker.position.y >= ground, "frame {frame}: fell through");
         }
 
         // Select LOD and draw into the engine's pass.
-        let aspect = FRAME.x as f32 / FRAME.y as f32;
-        let placed = layout.place(
-            Vec2::new(camera.position.x, camera.position.z),
-            TEXEL,
-            (0.0, 60.0),
-            Some(&Frustum::from_view_proj(camera.view_proj_world(aspect))),
-        )?;
-        sky.prepare(
-            &queue,
-            camera.view_proj_relative(aspect),
-            &SkyColors::default(),
-        )?;
-        renderer.prepare(
-            &device,
-            &queue,
-            &ClipmapView {
-                surface: ClipmapSurface::Atlas { atlas: &atlas },
-                frame: &placed,
-                camera: &camera,
-                style: &style,
-                target_size: FRAME,
-            },
-        )?;
+        let eye = Vec2::new(camera.position.x, camera.position.z);
+        let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
+        let placed = layout.place(eye, TEXEL, (0.0, 60.0), Some(&frustum))?;
+        let sky_view = camera.view_proj_relative(aspect);
+        sky.prepare(&queue, sky_view, &SkyColors::default())?;
+        let surface = ClipmapSurface::AtlasDetail {
+            atlas: &atlas,
+            detail: detail_gpu.tiles(),
+            shading: &DetailShading::default(),
+        };
+        let view = ClipmapView {
+            surface,
+            frame: &placed,
+            camera: &camera,
+            style: &style,
+            target_size: FRAME,
+        };
+        renderer.prepare(&device, &queue, &view)?;
         let mut encoder = device.create_command_encoder(&Default::default());
         {
-            let (color_view, depth_view) = (
-                color.create_view(&Default::default()),
-                depth.create_view(&Default::default()),
-            );
+            let color_view = color.create_view(&Default::default());
+            let depth_view = depth.create_view(&Default::default());
             // The engine's own pass: colour kept for the capture, depth for this frame only.
             let depth_ops = wgpu::Operations {
                 load: wgpu::LoadOp::Clear(1.0),
@@ -335,45 +363,38 @@ fn main() -> Result<()> {
         missing = missing.max(streamed.tiles_missing * usize::from(frame >= 30));
     }
 
-    // The end: the last rects come back (bounded wait), dirty tiles go back into the world.
-    let deadline = std::time::Instant::now() + Duration::from_secs(30);
-    while tile_stamps.in_flight() > 0 {
-        anyhow::ensure!(
-            std::time::Instant::now() < deadline,
-            "tile readbacks never arrived"
-        );
-        for a in tiles.stamper.wait(&device)? {
-            tile_stamps.receive::<anyhow::Error>(
-                &mut ram,
-                Some(&mut vram),
-                a.ticket,
-                a.rect,
-                &a.heights,
-            )?;
-            arrived_rects += 1;
-        }
+    // The end: the last rects come back (bounded waits), the trail's window is released (its
+    // volume checked), the detail and the dirty tiles go back into the world.
+    for a in stamper.wait(&device)? {
+        let vram = Some(&mut vram);
+        tile_stamps.receive::<GpuError>(&mut ram, vram, a.ticket, a.rect, &a.heights)?;
+        arrived_rects += 1;
     }
+    ensure!(tile_stamps.in_flight() == 0, "tile readbacks never came");
+    trails.release(&mut ram, Some(&mut snow))?;
+    for (tile, rect, texels) in detail_gpu.flush(&device, &queue, Duration::from_secs(30))? {
+        detail.write_rect(tile, rect, &texels)?;
+    }
+    let detail_tiles = detail.flush()?;
     ram.flush();
     ram.shutdown(Duration::from_secs(30))?;
-    let mut deformer = Deformer {
-        device: &device,
-        queue: &queue,
-        atlas: &atlas,
-        t: &mut tiles,
-    };
-    let late = tile_stamps.finish_into_world(&world, &mut deformer)?;
+    let late = tile_stamps.finish_into_world(&world, &mut RamDeformer)?;
     rebuild_ancestors(&world, &late)?;
     let image = terrain_gpu::read_texture_rgba8(&device, &queue, &color)?;
     let png = out.join("engine_frame.png");
     terrain_core::io::write_png_rgba8(&png, &image)?;
     println!(
         "{frames} frames on {}: {gpu_tiles} tile stamps on the GPU ({arrived_rects} rects read \
-         back), {cpu_tiles} in RAM, {} written straight into the world; at most {missing} \
-         tiles missing after the first second; wrote {}",
+         back), {cpu_tiles} in RAM, {} written straight into the world; {detail_tiles} detail \
+         tiles and a {trail_texels}-texel trail written back; at most {missing} tiles missing \
+         after the first second; wrote {}",
         adapter.get_info().name,
         late.len(),
         png.display()
     );
-    anyhow::ensure!(gpu_tiles + cpu_tiles > 0, "nothing was deformed");
+    ensure!(
+        gpu_tiles > 0 && trail_texels > 0,
+        "no deformation on the GPU"
+    );
     Ok(())
 }

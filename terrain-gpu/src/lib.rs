@@ -75,7 +75,7 @@ use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, te
 use resources::{atlas, detail, hole_mask, maps, material_layer, materials, overlay_atlas};
 
 pub use atlas::{AtlasConfig, AtlasProbe, GpuTileAtlas, PROBE_TEXEL_LIMIT, ProbeSample, TileSlot};
-pub use atlas_stamper::{ArrivedTileRect, AtlasStamp, AtlasStampOp, AtlasStamper};
+pub use atlas_stamper::{ArrivedTileRect, AtlasDeformer, AtlasStamp, AtlasStampOp, AtlasStamper};
 pub use camera::{Camera, DepthConvention, RenderView, ViewMatrices};
 pub use cdlod::{CdlodDraw, CdlodRenderer};
 pub use clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};

@@ -95,15 +95,6 @@ pub struct GpuScene {
 /// The environment variable of [`GpuScene`]'s device-loss fault injection.
 pub const DESTROY_DEVICE_ENV: &str = "TERRAIN_DEMO_DESTROY_DEVICE_AT_FRAME";
 
-/// What [`GpuScene::stamp_tile`] adds to an atlas tile.
-#[derive(Debug, Clone, Copy)]
-pub enum TileStamp<'a> {
-    /// A Gaussian (a crater, with a negative intensity).
-    Gaussian(&'a terrain_core::GaussianStamp),
-    /// A texture stamp (a shockwave's change since it was last applied).
-    Texture(&'a terrain_core::TextureStamp),
-}
-
 /// A rect of a deformed atlas tile on its way back to the CPU: the ticket, and the rect in
 /// the tile's texels.
 pub type TileTicket = (u64, DirtyRect);
@@ -163,7 +154,7 @@ impl GpuScene {
         &mut self,
         tile: TileSlot,
         placement: StampPlacement,
-        stamp: TileStamp<'_>,
+        stamp: &terrain_core::TileStamp,
         timings: &mut Timings,
     ) -> Result<Option<Vec<TileTicket>>> {
         self.stamp_tile_inner(tile, placement, stamp, timings)
@@ -371,7 +362,7 @@ impl GpuScene {
         &mut self,
         tile: TileSlot,
         placement: StampPlacement,
-        stamp: TileStamp<'_>,
+        stamp: &terrain_core::TileStamp,
         timings: &mut Timings,
     ) -> Result<Option<Vec<TileTicket>>> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
@@ -379,8 +370,8 @@ impl GpuScene {
             anyhow::bail!("stamp_tile needs the tile atlas (enable_atlas)");
         };
         let stamp = match stamp {
-            TileStamp::Gaussian(g) => AtlasStamp::Gaussian(g),
-            TileStamp::Texture(t) => AtlasStamp::Texture(t),
+            terrain_core::TileStamp::Gaussian(g) => AtlasStamp::Gaussian(g),
+            terrain_core::TileStamp::Texture(t) => AtlasStamp::Texture(t),
         };
         let op = AtlasStampOp {
             tile,

@@ -34,7 +34,7 @@ use super::trails::Trails;
 use super::world_detail::WorldDetail;
 use super::world_files;
 use super::world_overlays::WorldOverlays;
-use super::world_stamps::{WorldDeformer, WorldShock, WorldStamp, reach};
+use super::world_stamps::{WorldDeformer, WorldShock, reach};
 
 #[path = "world_lod.rs"]
 mod world_lod;
@@ -53,7 +53,9 @@ use terrain_cache::{
     SphericalSelection, TileGrid, TileId, TileStamps, VramConfig, VramPool, WindowFill, World,
     reduce_levels,
 };
-use terrain_core::{CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, WrapMode};
+use terrain_core::{
+    CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, TileStamp, WrapMode,
+};
 use terrain_lod::{CdlodConfig, TessConfig};
 use terrain_physics::CollisionWindow;
 
@@ -129,9 +131,8 @@ pub struct FlyoverScenario {
     heading: Vec2,
     speed: f32,
     frame: u32,
-    gauss: GaussianStamp,
     /// Craters on their way into every level-0 tile they touch.
-    stamps: TileStamps<WorldStamp>,
+    stamps: TileStamps<TileStamp>,
     written_back: u64,
     /// Collision around the camera.
     window: CollisionWindow,
@@ -234,7 +235,6 @@ impl FlyoverScenario {
             heading: Vec2::new(1.0, 0.6).normalize(),
             speed: cli.speed,
             frame: 0,
-            gauss: GaussianStamp::default(),
             stamps: TileStamps::new(&manifest)?,
             written_back: 0,
             window,
@@ -568,7 +568,10 @@ impl Scenario for FlyoverScenario {
             if keep_out.is_some_and(|w| w.intersect(&reach(&placement, ts)).is_some()) {
                 self.craters_skipped += 1;
             } else {
-                crater = self.stamps.push(WorldStamp::Crater, placement)? > 0;
+                crater = self
+                    .stamps
+                    .push(TileStamp::Gaussian(GaussianStamp::default()), placement)?
+                    > 0;
             }
             // Its dirt goes into the world's material tiles (on the overlays' writer thread).
             if crater {
@@ -638,7 +641,6 @@ impl Scenario for FlyoverScenario {
         let mut changed = Vec::new();
         {
             let mut craters = WorldDeformer {
-                gauss: &mut self.gauss,
                 scene: ctx.gpu.as_deref_mut(),
                 timings: ctx.timings,
                 gpu_ms: 0.0,
@@ -837,7 +839,6 @@ impl Scenario for FlyoverScenario {
         // Craters whose tiles never became resident go straight into the world's files.
         let mut timings = crate::timings::Timings::default();
         let mut craters = WorldDeformer {
-            gauss: &mut self.gauss,
             scene: None,
             timings: &mut timings,
             gpu_ms: 0.0,

@@ -1,35 +1,21 @@
 //! What the streamed world's level-0 tiles are stamped with (through terrain-cache's
 //! `TileStamps`): the flyover's craters, and the world scenario's shockwave (Flower 2010, sec.
 //! 3.4.3: the wave texture stepped each frame and stamped as its change since the last
-//! stamp). [`WorldDeformer`] puts either into a tile's atlas slot on the GPU or into its RAM
-//! copy on the CPU.
+//! stamp), both terrain-core `TileStamp`s. [`WorldDeformer`] puts either into a tile's atlas
+//! slot on the GPU (timed) or into its RAM copy on the CPU.
 
 use crate::config::DemoParams;
-use crate::gpu_scene::{GpuScene, TileSlot, TileStamp};
+use crate::gpu_scene::{GpuScene, TileSlot};
 use crate::timings::{Timings, ms_since};
 use anyhow::Result;
 use glam::Vec2;
 use std::sync::Arc;
 use std::time::Instant;
-use terrain_cache::TileDeformer;
-use terrain_core::{
-    Blend, CoarseMap, GaussianStamp, Rect, Shockwave, StampPlacement, TextureStamp, apply_stamp,
-};
+use terrain_core::{CoarseMap, Rect, Shockwave, StampPlacement, TileDeformer, TileStamp};
 
-/// A stamp on the world's tiles.
-#[derive(Debug, Clone)]
-pub enum WorldStamp {
-    /// A Gaussian crater (the placement's intensity is its depth, negative).
-    Crater,
-    /// A shockwave's change since its last stamp.
-    Shock(Arc<TextureStamp>),
-}
-
-/// Puts [`WorldStamp`]s into one level-0 tile: its atlas slot on the GPU (the scene reads the
-/// changed rects back), or its RAM copy on the CPU.
+/// Puts terrain-core's `TileStamp`s into one level-0 tile: its atlas slot on the GPU (the
+/// scene times the submit and reads the changed rects back), or its RAM copy on the CPU.
 pub struct WorldDeformer<'a> {
-    /// The crater's shape.
-    pub gauss: &'a mut GaussianStamp,
     /// The GPU, when there is one.
     pub scene: Option<&'a mut GpuScene>,
     /// The frame's timings (the GPU stamps time themselves as `stamp_gpu`).
@@ -38,13 +24,13 @@ pub struct WorldDeformer<'a> {
     pub gpu_ms: f64,
 }
 
-impl TileDeformer<WorldStamp> for WorldDeformer<'_> {
+impl TileDeformer<TileStamp> for WorldDeformer<'_> {
     type Error = anyhow::Error;
 
     fn stamp_slot(
         &mut self,
         slot: u32,
-        kind: &WorldStamp,
+        kind: &TileStamp,
         placement: &StampPlacement,
     ) -> Result<Option<Vec<(u64, Rect)>>> {
         let Some(scene) = self.scene.as_deref_mut() else {
@@ -52,27 +38,18 @@ impl TileDeformer<WorldStamp> for WorldDeformer<'_> {
         };
         let t = Instant::now();
         let tile = TileSlot { slot, level: 0 };
-        let stamp = match kind {
-            WorldStamp::Crater => TileStamp::Gaussian(self.gauss),
-            WorldStamp::Shock(texture) => TileStamp::Texture(texture),
-        };
-        let stamped = scene.stamp_tile(tile, *placement, stamp, self.timings);
+        let stamped = scene.stamp_tile(tile, *placement, kind, self.timings);
         self.gpu_ms += ms_since(t);
         stamped
     }
 
     fn stamp_ram(
         &mut self,
-        kind: &WorldStamp,
+        kind: &TileStamp,
         tile: &mut CoarseMap,
         placement: &StampPlacement,
     ) -> Result<Vec<Rect>> {
-        Ok(match kind {
-            WorldStamp::Crater => apply_stamp(tile, self.gauss, placement, Blend::Add)?,
-            WorldStamp::Shock(texture) => {
-                apply_stamp(tile, &mut (**texture).clone(), placement, Blend::Add)?
-            }
-        })
+        Ok(kind.apply(tile, placement)?)
     }
 }
 
@@ -128,7 +105,7 @@ impl WorldShock {
         (path, heading): (Vec2, Vec2),
         texel_size: f32,
         keep_out: Option<Rect>,
-    ) -> Result<Option<(WorldStamp, StampPlacement)>> {
+    ) -> Result<Option<(TileStamp, StampPlacement)>> {
         if frame == SHOCK_START && self.amplitude_m != 0.0 {
             self.wave = Some(Shockwave::new(self.params)?);
             self.center = path + heading * SHOCK_AHEAD + heading.perp() * SHOCK_ASIDE;
@@ -146,6 +123,6 @@ impl WorldShock {
             return Ok(None);
         }
         let delta = wave.take_delta()?;
-        Ok(Some((WorldStamp::Shock(Arc::new(delta)), placement)))
+        Ok(Some((TileStamp::Texture(Arc::new(delta)), placement)))
     }
 }

@@ -7,7 +7,10 @@
 use crate::{
     GpuError, GpuStamp, GpuTextureStamp, GpuTileAtlas, RegionReadback, StampOp, StampPass, TileSlot,
 };
-use terrain_core::{Blend, GaussianStamp, Grid, Rect, StampPlacement, TextureStamp};
+use terrain_core::{
+    Blend, CoarseMap, GaussianStamp, Grid, Rect, StampPlacement, TextureStamp, TileDeformer,
+    TileStamp,
+};
 
 /// What [`AtlasStamper`] adds to a tile.
 #[derive(Debug, Clone, Copy)]
@@ -139,6 +142,52 @@ impl AtlasStamper {
     pub fn wait(&mut self, device: &wgpu::Device) -> Result<Vec<ArrivedTileRect>, GpuError> {
         let arrived = self.readback.wait_with(device, to_arrived)?;
         arrived.into_iter().collect()
+    }
+}
+
+/// The [`TileDeformer`] of [`TileStamp`]s on a streamed world's atlas: each stamp in a submit
+/// of its own through `stamper` on the GPU, or [`TileStamp::apply`] in RAM. An application
+/// that times or batches its submits writes its own over [`AtlasStamper::encode`].
+#[derive(Debug)]
+pub struct AtlasDeformer<'a> {
+    /// The device the atlas lives on.
+    pub device: &'a wgpu::Device,
+    /// Its queue.
+    pub queue: &'a wgpu::Queue,
+    /// The tiles stamped.
+    pub atlas: &'a GpuTileAtlas,
+    /// The stamper whose ring brings the changed rects back ([`AtlasStamper::poll`]).
+    pub stamper: &'a mut AtlasStamper,
+}
+
+impl TileDeformer<TileStamp> for AtlasDeformer<'_> {
+    type Error = GpuError;
+
+    fn stamp_slot(
+        &mut self,
+        slot: u32,
+        kind: &TileStamp,
+        placement: &StampPlacement,
+    ) -> Result<Option<Vec<(u64, Rect)>>, GpuError> {
+        let stamp = match kind {
+            TileStamp::Gaussian(g) => AtlasStamp::Gaussian(g),
+            TileStamp::Texture(t) => AtlasStamp::Texture(t),
+        };
+        let op = AtlasStampOp {
+            tile: TileSlot { slot, level: 0 },
+            placement: *placement,
+            stamp,
+        };
+        self.stamper.stamp(self.device, self.queue, self.atlas, op)
+    }
+
+    fn stamp_ram(
+        &mut self,
+        kind: &TileStamp,
+        tile: &mut CoarseMap,
+        placement: &StampPlacement,
+    ) -> Result<Vec<Rect>, GpuError> {
+        Ok(kind.apply(tile, placement)?)
     }
 }
 
