@@ -72,6 +72,7 @@ pub mod manifest;
 pub mod object;
 mod overlay_pyramid;
 mod overlay_stream;
+mod overlay_writer;
 pub mod overlays;
 mod region_bounds;
 pub mod store;
@@ -91,6 +92,7 @@ pub use manifest::{DetailLayout, Manifest, TileFormat, tile_key};
 #[cfg(feature = "object-store")]
 pub use object::{ObjectStoreConfig, ObjectTileStore};
 pub use overlay_stream::OverlayStream;
+pub use overlay_writer::{OverlayChange, OverlayJob, OverlayWriter};
 pub use overlays::{
     MAX_OVERLAY_REGION_CELLS, read_color, read_holes, read_paint, write_color, write_holes,
     write_paint,

@@ -1,20 +1,16 @@
 //! What a streamed world lays over its heights: holes (`terrain_core::holes`, the world's hole
 //! tiles) and paint (`terrain_core::material_effect`, its material tiles). A hole cut beside
-//! the path, or a crater's dirt, is written into the world on a thread of its own (in order,
-//! atomically, tile by tile, the paint's coarser levels with it), and what draws and collides
+//! the path, or a crater's dirt, is written into the world by terrain-cache's `OverlayWriter`
+//! (on a thread of its own, in order, atomically tile by tile), and what draws and collides
 //! follows: the collision window's holes and the GPU's hole window of [`GPU_WINDOW`] cells
 //! around the camera, and the paint tiles the scenario's paint stream must read again
 //! (`terrain_cache::OverlayStream::reload`). A second run reads them back from the world.
 
 use crate::gpu_scene::GpuScene;
-use anyhow::{Result, anyhow};
+use anyhow::Result;
 use glam::{IVec2, UVec2, Vec2};
-use std::sync::mpsc;
-use terrain_cache::{TileId, World, read_holes, read_paint, write_holes, write_paint};
-use terrain_core::{
-    Grid, HoleOp, MaterialEffect, Rect, StampPlacement, WrapMode, apply_hole_stamp,
-    apply_material_effect,
-};
+use terrain_cache::{OverlayChange, OverlayJob, OverlayWriter, TileId, World, read_holes};
+use terrain_core::{MaterialEffect, Rect, StampPlacement, WrapMode};
 use terrain_physics::CollisionWindow;
 
 /// Side of the hole window the GPU draws (cells): 4 MiB. It moves when the camera is more than
@@ -23,102 +19,6 @@ use terrain_physics::CollisionWindow;
 /// hole appearing there barely shows.
 pub const GPU_WINDOW: u32 = 2048;
 
-/// A change to make to the world.
-#[derive(Debug, Clone, Copy)]
-enum Job {
-    /// Cut a hole at the placement.
-    Cut(StampPlacement),
-    /// Paint the effect over the placement's footprint.
-    Paint(StampPlacement, MaterialEffect),
-}
-
-/// What a job changed: the cells of a cut as the world now holds them, or the paint tiles
-/// (every level) rewritten.
-#[derive(Debug)]
-enum Changed {
-    Holes(Rect, Grid<u8>),
-    Paint(Vec<TileId>),
-}
-
-/// The thread that writes the jobs into the world, one after the other: a job reads what the
-/// ones before it wrote.
-#[derive(Debug)]
-struct Writer {
-    jobs: Option<mpsc::Sender<Job>>,
-    done: mpsc::Receiver<Result<Option<Changed>>>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl Writer {
-    fn start(world: World) -> Result<Self> {
-        let (jobs, queue) = mpsc::channel::<Job>();
-        let (report, done) = mpsc::channel();
-        let thread = std::thread::Builder::new()
-            .name("world overlays".into())
-            .spawn(move || {
-                for job in queue {
-                    if report.send(apply(&world, job)).is_err() {
-                        return;
-                    }
-                }
-            })?;
-        Ok(Self {
-            jobs: Some(jobs),
-            done,
-            thread: Some(thread),
-        })
-    }
-
-    fn send(&self, job: Job) -> Result<()> {
-        self.jobs
-            .as_ref()
-            .and_then(|jobs| jobs.send(job).ok())
-            .ok_or_else(|| anyhow!("the world overlays' writer has stopped"))
-    }
-
-    /// Waits for every job sent and returns what they changed.
-    fn finish(&mut self) -> Result<Vec<Changed>> {
-        self.jobs = None;
-        if let Some(thread) = self.thread.take() {
-            thread
-                .join()
-                .map_err(|_| anyhow!("the world overlays' writer panicked"))?;
-        }
-        self.done.try_iter().filter_map(Result::transpose).collect()
-    }
-}
-
-impl Drop for Writer {
-    fn drop(&mut self) {
-        // The queued jobs are written before the run ends (their errors were the run's).
-        let _ = self.finish();
-    }
-}
-
-/// Makes `job`'s change in `world`: reads the cells, changes them, writes them back.
-fn apply(world: &World, job: Job) -> Result<Option<Changed>> {
-    let ts = world.manifest().texel_size;
-    let placement = match job {
-        Job::Cut(p) | Job::Paint(p, _) => p,
-    };
-    let Some((rect, local)) = footprint(world, &placement)? else {
-        return Ok(None);
-    };
-    Ok(Some(match job {
-        Job::Cut(_) => {
-            let mut region = read_holes(world, rect)?;
-            apply_hole_stamp(&mut region, WrapMode::Clamp, ts, &local, HoleOp::Cut)?;
-            write_holes(world, rect, &region)?;
-            Changed::Holes(rect, region)
-        }
-        Job::Paint(_, effect) => {
-            let mut region = read_paint(world, rect)?;
-            apply_material_effect(&mut region, WrapMode::Clamp, ts, &local, &effect)?;
-            Changed::Paint(write_paint(world, rect, &region)?)
-        }
-    }))
-}
-
 /// The layers that follow the camera over a streamed world.
 #[derive(Debug)]
 pub struct WorldOverlays {
@@ -126,28 +26,7 @@ pub struct WorldOverlays {
     collision: Option<Rect>,
     /// The GPU hole window's origin.
     gpu: Option<IVec2>,
-    writer: Writer,
-}
-
-/// The cells of a stamp's footprint on the world (clamped to a clamped world; a repeating
-/// world's rect wraps in the region reads and writes), and the placement in those cells' own
-/// frame; `None` for a footprint off a clamped world.
-fn footprint(world: &World, placement: &StampPlacement) -> Result<Option<(Rect, StampPlacement)>> {
-    let m = world.manifest();
-    let footprint = placement.footprint(m.texel_size)?;
-    let rect = match m.wrap {
-        WrapMode::Clamp => match footprint.intersect(&Rect::from_size(m.world_size)) {
-            Some(r) => r,
-            None => return Ok(None),
-        },
-        WrapMode::Repeat => footprint,
-    };
-    let local = StampPlacement {
-        center: placement.center - rect.min.as_vec2() * m.texel_size,
-        ..*placement
-    };
-    local.validate()?;
-    Ok(Some((rect, local)))
+    writer: OverlayWriter,
 }
 
 impl WorldOverlays {
@@ -156,25 +35,26 @@ impl WorldOverlays {
         Ok(Self {
             collision: None,
             gpu: None,
-            writer: Writer::start(world.clone())?,
+            writer: OverlayWriter::start(world.clone())?,
         })
     }
 
     /// Cuts a hole at `placement` (world metres) into the world's hole tiles, off the frame
     /// thread; a later [`WorldOverlays::follow`] brings it to collision and the GPU.
     pub fn cut(&mut self, placement: &StampPlacement) -> Result<()> {
-        self.writer.send(Job::Cut(*placement))
+        Ok(self.writer.send(OverlayJob::Cut(*placement))?)
     }
 
     /// Paints `effect` over the footprint of a stamp at `placement` into the world's material
     /// tiles (the crater's dirt), off the frame thread, as [`WorldOverlays::cut`] cuts.
     pub fn paint(&mut self, placement: &StampPlacement, effect: &MaterialEffect) -> Result<()> {
-        self.writer.send(Job::Paint(*placement, *effect))
+        Ok(self.writer.send(OverlayJob::Paint(*placement, *effect))?)
     }
 
     /// Waits until every cut and paint is in the world's files (the end of a run).
     pub fn finish(&mut self) -> Result<()> {
-        self.writer.finish().map(|_| ())
+        self.writer.finish()?;
+        Ok(())
     }
 
     /// Brings the holes to the camera at `xz` (world metres): the collision window's when its
@@ -191,13 +71,13 @@ impl WorldOverlays {
         // What the writer has finished since the last frame (a failure ends the run).
         let mut changed = Vec::new();
         let mut painted = Vec::new();
-        for done in self.writer.done.try_iter() {
+        for done in self.writer.poll() {
             match done? {
-                Some(Changed::Holes(rect, mask)) => {
+                Some(OverlayChange::Holes(rect, mask)) => {
                     self.collision = None;
                     changed.push((rect, mask));
                 }
-                Some(Changed::Paint(tiles)) => painted.extend(tiles),
+                Some(OverlayChange::Paint(tiles)) => painted.extend(tiles),
                 None => {}
             }
         }
