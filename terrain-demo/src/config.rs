@@ -343,9 +343,6 @@ impl DemoParams {
     }
 }
 
-/// The most collision readbacks in flight (the GPU scene's ring of readback buffers).
-pub const MAX_READBACK_RING: usize = 16;
-
 /// The error `e` of reading `text`, with the key it is about: `[section] line: message`.
 fn locate(text: &str, e: &toml::de::Error) -> anyhow::Error {
     let Some(span) = e.span() else {

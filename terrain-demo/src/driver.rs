@@ -13,7 +13,7 @@ use crate::memory_limit::format_bytes;
 use crate::overview::Overview;
 use crate::progress::Progress;
 use crate::report::{FrameReport, MemoryReport, Report, SCHEMA_VERSION, ToolInfo};
-use crate::scenarios::{FRAME_DT, FrameContext, Scenario};
+use crate::scenarios::{FRAME_DT, FrameContext, Scenario, heightmap};
 use crate::timings::{Step, Timings};
 use crate::usage_error::UsageExt;
 use anyhow::{Context, Result};
@@ -271,7 +271,7 @@ fn open_gpu(
     // `--color` is read and checked even without a GPU: a wrong file is the user's to fix. A
     // streamed world took it into its colour tiles when it opened.
     let colors = match cli.scenario {
-        ScenarioKind::Default => color_layer(cli, scenario.map().size()).usage()?,
+        ScenarioKind::Default => heightmap::color_layer(cli, scenario.map().size()).usage()?,
         _ => None,
     };
     if cli.no_gpu {
@@ -323,31 +323,6 @@ fn open_gpu(
         }
     }
     Ok(Some(scene))
-}
-
-/// `--color`'s image, which must be `size` (the heightmap's, or the streamed world's).
-pub fn color_layer(cli: &Cli, size: glam::UVec2) -> Result<Option<terrain_core::Grid<[u8; 4]>>> {
-    let Some(path) = &cli.color else {
-        return Ok(None);
-    };
-    let limits = terrain_core::io::ReadLimits {
-        max_samples: u64::from(size.x) * u64::from(size.y),
-        ..terrain_core::io::ReadLimits::default()
-    };
-    let colors = terrain_core::io::read_color_image(path, &limits)
-        .with_context(|| format!("--color {}", path.display()))?;
-    let found = glam::UVec2::new(colors.width(), colors.height());
-    if found != size {
-        anyhow::bail!(
-            "--color {} is {}x{}; it must be the heightmap's size, {}x{}",
-            path.display(),
-            found.x,
-            found.y,
-            size.x,
-            size.y
-        );
-    }
-    Ok(Some(colors))
 }
 
 /// The CDLOD quadtree for a heightfield of `size` texels that draws as far as `reach_m` (the clipmap's reach, so both

@@ -10,8 +10,10 @@
 //! bound through wgpu's u32 binding sizes (under 4 GiB), and frame and step counts that bound
 //! the work of a run.
 
-use crate::config::MAX_READBACK_RING;
 use anyhow::{Result, anyhow};
+
+/// The most collision readbacks in flight (the GPU scene's ring of readback buffers).
+pub const MAX_READBACK_RING: usize = 16;
 
 /// A closed or half-open range of a flag's or key's values.
 #[derive(Debug, Clone, Copy, PartialEq)]

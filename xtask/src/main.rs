@@ -9,6 +9,7 @@ mod examples;
 mod fuzz;
 mod golden;
 mod gpu_report;
+mod import_cycles;
 mod libfuzzer;
 mod msrv;
 mod mutants;

@@ -2,7 +2,8 @@
 //! neither the compiler nor clippy checks, each a cheap text scan. It keeps clippy's
 //! argument-count lint unsilenced, the fuzz harness in one shared crate instead of copies, the
 //! repository standing alone (crates are top-level folders, nothing outside it is named),
-//! source files small enough to read, and the theses cited by author and year. Every problem is reported as `file:line: why`.
+//! source files small enough to read, terrain-demo's modules free of import cycles, and the
+//! theses cited by author and year. Every problem is reported as `file:line: why`.
 
 use crate::util::root;
 use anyhow::{Context, Result, bail};
@@ -123,6 +124,7 @@ pub fn check(files: &[TrackedFile]) -> Vec<Problem> {
         }
     }
     problems.extend(harness_copies(&others));
+    problems.extend(crate::import_cycles::import_cycles(&others));
     for f in files {
         problems.extend(long_file(&f.path, &f.text));
     }

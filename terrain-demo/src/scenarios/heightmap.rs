@@ -385,3 +385,27 @@ fn texel_size(cli: &Cli, path: &Path, dem: &Dem) -> (f32, &'static str) {
         None => (DEFAULT_TEXEL_SIZE, "the default: give --texel-size"),
     }
 }
+/// `--color`'s image, which must be `size` (the heightmap's, or the streamed world's).
+pub fn color_layer(cli: &Cli, size: glam::UVec2) -> Result<Option<terrain_core::Grid<[u8; 4]>>> {
+    let Some(path) = &cli.color else {
+        return Ok(None);
+    };
+    let limits = terrain_core::io::ReadLimits {
+        max_samples: u64::from(size.x) * u64::from(size.y),
+        ..terrain_core::io::ReadLimits::default()
+    };
+    let colors = terrain_core::io::read_color_image(path, &limits)
+        .with_context(|| format!("--color {}", path.display()))?;
+    let found = glam::UVec2::new(colors.width(), colors.height());
+    if found != size {
+        anyhow::bail!(
+            "--color {} is {}x{}; it must be the heightmap's size, {}x{}",
+            path.display(),
+            found.x,
+            found.y,
+            size.x,
+            size.y
+        );
+    }
+    Ok(Some(colors))
+}

@@ -74,7 +74,7 @@ pub fn open_or_build(
     }
     // `--color`: the image becomes the world's colour tiles (replacing any), tile by tile.
     let size = world.manifest().world_size;
-    if let Some(colors) = crate::driver::color_layer(cli, size).usage()? {
+    if let Some(colors) = super::heightmap::color_layer(cli, size).usage()? {
         let all = terrain_core::Rect::from_size(size);
         let tiles = terrain_cache::write_color(&world, all, &colors)?.len();
         if !cli.quiet {
