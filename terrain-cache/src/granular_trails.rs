@@ -79,6 +79,9 @@ impl GranularStepper for CpuOnly {
 
 const CPU_ONLY: &str = "CpuOnly has no GPU: pass None as the stepper";
 
+/// The longest [`TrailConfig::take_timeout`]: a frame must end in bounded time.
+pub const MAX_TAKE_TIMEOUT: Duration = Duration::from_secs(3600);
+
 /// Where and when the window moves.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrailConfig {
@@ -91,7 +94,7 @@ pub struct TrailConfig {
     /// Metres from the edge past which the window moves even with writes on their way,
     /// waiting for them (smaller than `edge_margin_m`).
     pub forced_margin_m: f32,
-    /// How long a new window may wait for its tiles to load.
+    /// How long a new window may wait for its tiles to load (at most [`MAX_TAKE_TIMEOUT`]).
     pub take_timeout: Duration,
 }
 
@@ -191,6 +194,13 @@ impl GranularTrails {
                 what: "granular trail margins (metres)",
                 value: f64::from(config.forced_margin_m),
                 expected: "0 <= forced_margin_m <= edge_margin_m, both finite",
+            });
+        }
+        if config.take_timeout > MAX_TAKE_TIMEOUT {
+            return Err(CacheError::OutOfRange {
+                what: "granular trail tile timeout (seconds)",
+                value: config.take_timeout.as_secs_f64(),
+                expected: "at most an hour",
             });
         }
         let side = config.side.min(manifest.world_size.min_element());

@@ -84,8 +84,8 @@ pub mod world;
 pub use convert::{ConvertReport, convert_world};
 pub use error::CacheError;
 pub use granular_trails::{
-    CpuOnly, GranularStepper, GranularTrails, HandedBack, TrailConfig, TrailFrame, TrailMeasure,
-    TrailsError,
+    CpuOnly, GranularStepper, GranularTrails, HandedBack, MAX_TAKE_TIMEOUT, TrailConfig,
+    TrailFrame, TrailMeasure, TrailsError,
 };
 pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
 pub use manifest::{DetailLayout, Manifest, TileFormat, tile_key};

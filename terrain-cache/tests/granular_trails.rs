@@ -297,6 +297,11 @@ fn bad_settings_and_a_missing_stepper_are_refused() {
     let mut bad = params;
     bad.compression = f32::NAN;
     assert!(GranularTrails::new(m, bad, config()).is_err());
+    let forever = TrailConfig {
+        take_timeout: Duration::MAX,
+        ..config()
+    };
+    assert!(GranularTrails::new(m, params, forever).is_err());
     // A window taken on the "GPU" is stepped and released with it, never without.
     let mut pool = loaded_pool(&world);
     let mut trails = GranularTrails::new(m, params, config()).unwrap();
