@@ -10,10 +10,10 @@ use common::build;
 use glam::{Affine3A, UVec2, Vec2, Vec3};
 use std::collections::VecDeque;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use terrain_cache::{
     CameraState, CpuOnly, GranularStepper, GranularTrails, Layer, ObjectTileStore, PoolConfig,
-    RamPool, TileId, TileStore, TrailConfig, TrailFrame, TrailsError, World,
+    RamPool, TileStore, TrailConfig, TrailFrame, TrailsError, World,
 };
 use terrain_core::granular::{
     GranularArrivals, GranularObject, GranularParams, GranularSim, StepMeasure, TriMesh,
@@ -35,18 +35,8 @@ fn camera() -> CameraState {
 /// A pool with every level-0 tile of the world loaded.
 fn loaded_pool(world: &World) -> RamPool {
     let mut pool = RamPool::new(world.clone(), PoolConfig::new(Layer::Height, 64 << 20)).unwrap();
-    let deadline = Instant::now() + Duration::from_secs(20);
-    let tiles = WORLD / TILE;
-    loop {
-        pool.update(&camera()).unwrap();
-        let all =
-            (0..tiles * tiles).all(|i| pool.tile(TileId::new(0, i % tiles, i / tiles)).is_some());
-        if all {
-            return pool;
-        }
-        assert!(Instant::now() < deadline, "the pool never loaded level 0");
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    common::load_level0(&mut pool);
+    pool
 }
 
 fn heights(pool: &RamPool) -> Grid<u16> {

@@ -8,10 +8,9 @@ mod common;
 use common::build;
 use glam::{Affine3A, UVec2, Vec2, Vec3};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
 use terrain_cache::{
-    CacheError, CameraState, GranularWindow, Layer, ObjectTileStore, PoolConfig, RamPool, TileId,
-    TileStore, World,
+    CacheError, GranularWindow, Layer, ObjectTileStore, PoolConfig, RamPool, TileId, TileStore,
+    World,
 };
 use terrain_core::granular::{GranularObject, GranularParams, GranularSim, TriMesh};
 use terrain_core::{Grid, Rect};
@@ -27,19 +26,8 @@ fn world() -> World {
 /// A pool with every level-0 tile of the world loaded.
 fn loaded_pool(world: &World) -> RamPool {
     let mut pool = RamPool::new(world.clone(), PoolConfig::new(Layer::Height, 64 << 20)).unwrap();
-    let camera = CameraState::at(Vec3::new(64.0, 5.0, 64.0));
-    let deadline = Instant::now() + Duration::from_secs(20);
-    let tiles = WORLD / TILE;
-    loop {
-        pool.update(&camera).unwrap();
-        let all =
-            (0..tiles * tiles).all(|i| pool.tile(TileId::new(0, i % tiles, i / tiles)).is_some());
-        if all {
-            return pool;
-        }
-        assert!(Instant::now() < deadline, "the pool never loaded level 0");
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    common::load_level0(&mut pool);
+    pool
 }
 
 fn units(pool: &RamPool, rect: Rect) -> u64 {

@@ -7,12 +7,9 @@
 mod common;
 
 use common::build;
-use glam::{IVec2, UVec2, Vec2, Vec3};
+use glam::{IVec2, UVec2, Vec2};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
-use terrain_cache::{
-    CameraState, Layer, ObjectTileStore, PoolConfig, RamPool, TileId, TileStore, WindowFill, World,
-};
+use terrain_cache::{Layer, ObjectTileStore, PoolConfig, RamPool, TileStore, WindowFill, World};
 use terrain_core::{Grid, Rect};
 
 const WORLD: u32 = 128;
@@ -21,22 +18,6 @@ const TILE: u32 = 32;
 fn world() -> World {
     let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
     build(store, UVec2::splat(WORLD), TILE)
-}
-
-fn load_all(pool: &mut RamPool) {
-    let camera = CameraState::at(Vec3::new(64.0, 5.0, 64.0));
-    let deadline = Instant::now() + Duration::from_secs(20);
-    let tiles = WORLD / TILE;
-    loop {
-        pool.update(&camera).unwrap();
-        let all =
-            (0..tiles * tiles).all(|i| pool.tile(TileId::new(0, i % tiles, i / tiles)).is_some());
-        if all {
-            return;
-        }
-        assert!(Instant::now() < deadline, "the pool never loaded level 0");
-        std::thread::sleep(Duration::from_millis(5));
-    }
 }
 
 #[test]
@@ -57,7 +38,7 @@ fn stand_ins_are_refilled_once_level_0_loads() {
         fill.ready(&pool, Some(window)).is_empty(),
         "nothing loaded yet"
     );
-    load_all(&mut pool);
+    common::load_level0(&mut pool);
     // Loaded: every stand-in is handed back, whole tiles, once; the refill is exact.
     let ready = fill.ready(&pool, Some(window));
     assert_eq!(ready.len(), 4);

@@ -62,6 +62,30 @@ pub fn build(store: Arc<dyn TileStore>, size: UVec2, tile: u32) -> World {
         .0
 }
 
+/// Updates `pool` with a camera over the world's middle until every level-0 tile is in RAM
+/// (at most 20 s): a pool tests can read and write anywhere.
+pub fn load_level0(pool: &mut terrain_cache::RamPool) {
+    use std::time::Instant;
+    use terrain_cache::{CameraState, TileId};
+    let m = *pool.world().manifest();
+    let mid = m.world_size.as_vec2() * m.texel_size * 0.5;
+    let camera = CameraState::at(glam::Vec3::new(mid.x, 5.0, mid.y));
+    let tiles = (m.world_size + (m.tile_size - 1)) / m.tile_size;
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        pool.update(&camera).unwrap();
+        let all = (0..tiles.x * tiles.y).all(|i| {
+            pool.tile(TileId::new(0, i % tiles.x, i / tiles.x))
+                .is_some()
+        });
+        if all {
+            return;
+        }
+        assert!(Instant::now() < deadline, "the pool never loaded level 0");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 /// A store wrapper that delays reads by a pseudo-random 0..max_delay and tracks reads in flight
 /// per key (the largest overlap seen for any one key) and reads in all.
 #[derive(Debug)]
