@@ -246,7 +246,8 @@ impl GranularTrails {
     /// Keeps the window around `points` (the objects, metres X Z): once they near its edge
     /// it hands back what arrived and moves on (module docs) to a window centred on `ahead`,
     /// whose tiles it waits for (up to the timeout, updating `pool` for `camera`).
-    /// `others_in_flight`: the caller still has writes on their way into the world.
+    /// `others_in_flight`: the caller still has writes on their way into the world. A
+    /// non-finite position is refused, nothing changed.
     pub fn follow<G: GranularStepper>(
         &mut self,
         pool: &mut RamPool,
@@ -256,6 +257,14 @@ impl GranularTrails {
         camera: &CameraState,
         others_in_flight: bool,
     ) -> Result<TrailFrame, TrailsError<G::Error>> {
+        if let Some(p) = points.iter().chain([&ahead]).find(|p| !p.is_finite()) {
+            return Err(CacheError::OutOfRange {
+                what: "granular trail object position (metres)",
+                value: f64::from(if p.x.is_finite() { p.y } else { p.x }),
+                expected: "finite coordinates",
+            }
+            .into());
+        }
         let mut frame = TrailFrame::default();
         let leaving = !self.window.covers(points, self.config.edge_margin_m);
         let mut move_now = leaving && self.window.rect().is_none();

@@ -300,6 +300,16 @@ fn bad_settings_and_a_missing_stepper_are_refused() {
     trails
         .follow(&mut pool, Some(&mut late), &[xz], xz, &camera(), false)
         .unwrap();
+    let nan = Vec2::new(f32::NAN, 1.0);
+    let late_again = Some(&mut late);
+    let refused = trails.follow(&mut pool, late_again, &[nan], xz, &camera(), false);
+    assert!(matches!(refused, Err(TrailsError::Cache(_))));
+    let far = Vec2::splat(f32::MAX);
+    assert!(
+        trails
+            .follow(&mut pool, Some(&mut late), &[xz], far, &camera(), false)
+            .is_ok()
+    );
     let mut frame = TrailFrame::default();
     let err = trails.step(&mut pool, None::<&mut CpuOnly>, &[], 0, &mut frame);
     assert!(matches!(err, Err(TrailsError::Cache(_))));

@@ -844,6 +844,14 @@ fn the_atlas_stamper_reads_back_what_the_cpu_stamps() {
     arrived.extend(stamper.wait(device).unwrap());
     assert_eq!(arrived.len(), want.len());
     assert_eq!(want.len(), 4);
+    // A slot past the atlas's is an error, nothing left in flight.
+    let op = AtlasStampOp {
+        tile: TileSlot { slot: 99, level: 0 },
+        placement: at(5.0, 5.0),
+        stamp: gauss,
+    };
+    assert!(stamper.stamp(device, queue, &atlas, op).is_err());
+    assert_eq!(stamper.in_flight(), 0);
     for (a, (ticket, rect, heights)) in arrived.iter().zip(&want) {
         assert_eq!((a.ticket, a.rect), (*ticket, *rect));
         assert_eq!(a.heights, *heights, "ticket {ticket}: GPU and CPU stamps");
