@@ -90,3 +90,24 @@ fn stand_ins_outside_the_window_are_forgotten() {
     fill.ready(&pool, None);
     assert_eq!(fill.stand_ins(), 0);
 }
+
+#[test]
+fn a_changed_rect_reduces_to_whole_texels_of_a_coarser_level() {
+    let world = world();
+    let mut pool = RamPool::new(world.clone(), PoolConfig::new(Layer::Height, 64 << 20)).unwrap();
+    common::load_level0(&mut pool);
+    // (5, 6) 10 x 3 at level 2 grows to (4, 4)..(16, 12): 3 x 2 texels from (1, 1).
+    let rect = Rect::new(IVec2::new(5, 6), UVec2::new(10, 3));
+    let (at, reduced) = pool.read_reduced(rect, 2).unwrap().unwrap();
+    assert_eq!(at, Rect::new(IVec2::new(1, 1), UVec2::new(3, 2)));
+    let block = Rect::new(IVec2::new(4, 4), UVec2::new(12, 8));
+    let mut level0 = Grid::new(12, 8, 0u16).unwrap();
+    pool.read_region(block, &mut level0).unwrap();
+    assert_eq!(reduced, terrain_cache::reduce_levels(&level0, 2).unwrap());
+    // Off the world, or a level the world does not have.
+    let off = Rect::new(IVec2::splat(-40), UVec2::splat(8));
+    assert!(pool.read_reduced(off, 2).unwrap().is_none());
+    let huge = Rect::new(IVec2::splat(i32::MAX - 4), UVec2::splat(u32::MAX));
+    assert!(pool.read_reduced(huge, 1).unwrap().is_none());
+    assert!(pool.read_reduced(rect, 40).is_err());
+}

@@ -3,7 +3,8 @@
 //! tile was not in RAM is filled from the finest coarser level loaded (Fikkan 2013, sec. 4.3:
 //! coarser data stands in for a tile on its way), and must not stay that way once the tile
 //! is in. Also the pool's queries a frame asks of what is loaded: the ground at a point
-//! ([`RamPool::ground_m`]) and the level-0 tiles missing around it ([`RamPool::missing_near`]).
+//! ([`RamPool::ground_m`]), the level-0 tiles missing around it ([`RamPool::missing_near`]),
+//! and a changed rect reduced to a coarser level ([`RamPool::read_reduced`]).
 
 use super::RamPool;
 use crate::tile::TileId;
@@ -138,6 +139,43 @@ impl RamPool {
             }
         }
         missing
+    }
+}
+
+impl RamPool {
+    /// The level-`level` texels over the level-0 `rect` (world texels; grown to whole
+    /// level-`level` texels, cut to those wholly inside the world) reduced from what is in RAM
+    /// as the pyramid is built (`crate::reduce_levels`): where a world's changed rect reaches a
+    /// coarser level (an overview, a minimap) without reading its files. Returns the rect at
+    /// that level and its heights; `None` when no whole texel is left. A tile not in RAM gives
+    /// its coarser stand-in ([`RamPool::read_region`]).
+    pub fn read_reduced(
+        &self,
+        rect: Rect,
+        level: u32,
+    ) -> Result<Option<(Rect, Grid<u16>)>, CacheError> {
+        let m = *self.world.manifest();
+        if level >= m.levels {
+            return Err(CacheError::OutOfRange {
+                what: "level to reduce to",
+                value: f64::from(level),
+                expected: "below the world's levels",
+            });
+        }
+        let step = 1i32 << level;
+        let full = (m.world_size.as_ivec2() / step) * step;
+        let lo = rect.min.div_euclid(IVec2::splat(step)) * step;
+        let hi = rect.max().saturating_add(IVec2::splat(step - 1));
+        let hi = (hi.div_euclid(IVec2::splat(step)) * step).min(full);
+        let lo = lo.max(IVec2::ZERO);
+        if hi.cmple(lo).any() {
+            return Ok(None);
+        }
+        let block = Rect::from_min_max(lo, hi);
+        let mut level0 = Grid::new(block.size.x, block.size.y, 0u16)?;
+        self.read_region(block, &mut level0)?;
+        let reduced = crate::reduce_levels(&level0, level)?;
+        Ok(Some((Rect::new(block.min / step, reduced.size()), reduced)))
     }
 }
 

@@ -51,7 +51,6 @@ use std::time::{Duration, Instant};
 use terrain_cache::{
     CameraState, Layer, Manifest, OverlayStream, PoolConfig, RamPool, RegionBounds,
     SphericalSelection, TileGrid, TileId, TileStamps, VramConfig, VramPool, WindowFill, World,
-    reduce_levels,
 };
 use terrain_core::{
     CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, TileStamp, WrapMode,
@@ -322,24 +321,12 @@ impl FlyoverScenario {
         let Some(pool) = self.pool.as_ref() else {
             return Ok(Vec::new());
         };
-        let step = 1i32 << self.overview_level;
-        // Whole overview texels inside the world only (a last partial one is left as loaded).
-        let full = (self.manifest.world_size.as_ivec2() / step) * step;
         let mut redrawn = Vec::new();
         for r in changed {
-            let lo = r.min.div_euclid(IVec2::splat(step)) * step;
-            let hi = ((r.max() + IVec2::splat(step - 1)).div_euclid(IVec2::splat(step)) * step)
-                .min(full);
-            if hi.cmple(lo).any() {
-                continue;
+            if let Some((at, reduced)) = pool.read_reduced(*r, self.overview_level)? {
+                self.overview.grid_mut().paste(&reduced, at.min)?;
+                redrawn.push(at);
             }
-            let block = Rect::from_min_max(lo.max(IVec2::ZERO), hi);
-            let mut level0 = Grid::new(block.size.x, block.size.y, 0u16)?;
-            pool.read_region(block, &mut level0)?;
-            let reduced = reduce_levels(&level0, self.overview_level)?;
-            let at = block.min / step;
-            self.overview.grid_mut().paste(&reduced, at)?;
-            redrawn.push(Rect::new(at, reduced.size()));
         }
         Ok(redrawn)
     }
