@@ -218,7 +218,7 @@ impl StepTimer {
 
 /// The top-level scopes of `profiles`, a step timed twice in a frame added up; nested scopes
 /// (parts of a step) are inside their step's figure already.
-pub fn figures(profiles: &[FrameProfile]) -> Vec<StepFigure> {
+fn figures(profiles: &[FrameProfile]) -> Vec<StepFigure> {
     let mut out: Vec<StepFigure> = Vec::new();
     for profile in profiles {
         let first = out.len();
