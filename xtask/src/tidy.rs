@@ -20,6 +20,10 @@ const TEXT_EXTENSIONS: [&str; 7] = ["rs", "md", "toml", "wgsl", "sh", "json", "y
 /// The most lines a `.rs` file may have.
 const MAX_RS_LINES: usize = 1000;
 
+/// The example of the whole frame an engine runs, and the most lines it may have (issue 33).
+const ENGINE_FRAME: &str = "terrain-demo/examples/engine_frame.rs";
+const ENGINE_FRAME_MAX_LINES: usize = 400;
+
 /// Two `.rs` files this long or longer with the same content are a copy.
 const MIN_COPY_LINES: usize = 40;
 
@@ -353,6 +357,16 @@ fn code_blocks<'a>(comment: &[(usize, &'a str)]) -> Vec<CodeBlock<'a>> {
 /// in its first lines, is exempt). Split it into modules of one purpose each.
 fn long_file(path: &str, text: &str) -> Option<Problem> {
     let lines = text.lines().count();
+    if path == ENGINE_FRAME && lines > ENGINE_FRAME_MAX_LINES {
+        return Some(Problem {
+            path: path.to_owned(),
+            line: ENGINE_FRAME_MAX_LINES + 1,
+            message: format!(
+                "{lines} lines, over {ENGINE_FRAME_MAX_LINES}: the whole frame an engine copies \
+                 must stay short (move what it repeats into the libraries)"
+            ),
+        });
+    }
     let generated = text.lines().take(5).any(|l| l.contains("@generated"));
     (path.ends_with(".rs") && lines > MAX_RS_LINES && !generated).then(|| Problem {
         path: path.to_owned(),
@@ -516,5 +530,13 @@ mod tests {
             assert_eq!(found.len(), 1, "{text}");
             assert_eq!(found[0].line, line, "{text}");
         }
+    }
+
+    #[test]
+    fn the_engine_frame_example_stays_within_its_lines() {
+        assert!(long_file(ENGINE_FRAME, &lines(400)).is_none());
+        let p = long_file(ENGINE_FRAME, &lines(401)).unwrap();
+        assert_eq!(p.line, 401);
+        assert!(long_file("terrain-demo/examples/other.rs", &lines(401)).is_none());
     }
 }
