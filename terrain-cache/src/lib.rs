@@ -55,6 +55,13 @@
 //! goes into RAM with [`RamPool::write_rect`] (or a whole tile with [`RamPool::write`]) and
 //! [`VramPool::release`] ends the hold. [`RamPool::read_region`] copies any level-0 rect out
 //! of the loaded tiles (coarser data where a tile is missing), e.g. to fill a collision window.
+//!
+//! What a streamed world's frame drives once each, their GPU sides behind terrain-core's
+//! contracts (this crate names no GPU type): [`TileStamps`] (stamps on resident tiles, through
+//! a [`TileDeformer`]), [`detail::DetailCache::update_for_stamps`] (footprints in detail
+//! tiles), [`GranularTrails`] (granular trails around moving objects, stepped on the CPU or
+//! through a [`GranularStepper`]), [`WindowFill`] (a collision window refilled where coarser
+//! data stood in) and [`OverlayWriter`] (holes and paint written on a thread of their own).
 
 // docs.rs: label feature-gated items with the features they need.
 #![cfg_attr(docsrs, feature(doc_cfg))]

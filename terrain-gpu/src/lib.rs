@@ -17,6 +17,13 @@
 //! terrain-core and a test comparing the two. Architecture: `docs/ARCHITECTURE.md`; the
 //! theses: `docs/REFERENCES.md`.
 //!
+//! The GPU sides of a streamed world's subsystems compose those passes into what a frame drives
+//! once each: [`AtlasStamper`] and [`AtlasDeformer`] (stamps on atlas tiles, the changed rects
+//! read back), [`GpuDetailStream`] (detail tiles following a working set, footprints, readback),
+//! [`granular::GranularField`] (a granular map stepped, shaded and measured) and [`StepTimer`]
+//! (GPU time per step without a stall where timestamps are trusted). Each records into the
+//! caller's encoder (`encode_*`, then `recall`) or submits on its own.
+//!
 //! ```no_run
 //! use glam::Vec2;
 //! use terrain_core::{Blend, CoarseMap, GaussianStamp, Grid, HeightEncoding, StampPlacement};

@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use std::process::Command;
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 14] = [
+const EXAMPLES: [(&str, &str, &[&str]); 15] = [
     (
         "terrain-core",
         "stamp_heightmap",
@@ -38,6 +38,7 @@ const EXAMPLES: [(&str, &str, &[&str]); 14] = [
     // Paints into that world and streams the paint beside its heights.
     ("terrain-cache", "paint_stream", &["{out}/world", "12"]),
     ("terrain-cache", "trace_sim", &[]),
+    ("terrain-cache", "granular_trails", &["120"]),
     // The whole frame an engine runs: it joins every library crate, so it lives in the demo.
     (
         "terrain-demo",
