@@ -95,6 +95,30 @@ impl Rect {
         Rect::from_min_max(self.min.min(other.min), self.max().max(other.max()))
     }
 
+    /// `self` less `other`, as at most four disjoint rects (none when `other` covers it): the
+    /// rows above and below the overlap, then the columns left and right of it.
+    pub fn minus(&self, other: &Rect) -> Vec<Rect> {
+        let Some(inner) = self.intersect(other) else {
+            return if self.is_empty() {
+                Vec::new()
+            } else {
+                vec![*self]
+            };
+        };
+        let mut out = Vec::with_capacity(4);
+        let (o0, o1, i0, i1) = (self.min, self.max(), inner.min, inner.max());
+        let mut push = |min: IVec2, max: IVec2| {
+            if max.x > min.x && max.y > min.y {
+                out.push(Rect::from_min_max(min, max));
+            }
+        };
+        push(o0, IVec2::new(o1.x, i0.y));
+        push(IVec2::new(o0.x, i1.y), o1);
+        push(IVec2::new(o0.x, i0.y), IVec2::new(i0.x, i1.y));
+        push(IVec2::new(i1.x, i0.y), IVec2::new(o1.x, i1.y));
+        out
+    }
+
     /// The rect grown by `margin` texels on every side (the 2-texel apron of the normal map).
     pub fn expand(&self, margin: u32) -> Rect {
         let m = margin.min(i32::MAX as u32) as i32;
@@ -146,6 +170,31 @@ fn split_axis(start: i32, len: u32, n: u32) -> Vec<(i32, i32, u32)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn minus_covers_each_texel_outside_the_other_exactly_once() {
+        let a = Rect::new(IVec2::new(2, 3), UVec2::new(6, 5));
+        for (x, y, w, h) in [
+            (0, 0, 3, 3),
+            (4, 4, 2, 2),
+            (-5, -5, 30, 30),
+            (9, 9, 2, 2),
+            (5, 1, 9, 4),
+        ] {
+            let b = Rect::new(IVec2::new(x, y), UVec2::new(w, h));
+            let pieces = a.minus(&b);
+            assert!(pieces.len() <= 4);
+            for py in -6..16 {
+                for px in -6..16 {
+                    let p = IVec2::new(px, py);
+                    let n = pieces.iter().filter(|r| r.contains(p)).count();
+                    let want = usize::from(a.contains(p) && !b.contains(p));
+                    assert_eq!(n, want, "{p} in {a:?} minus {b:?}");
+                }
+            }
+        }
+        assert!(Rect::new(IVec2::ZERO, UVec2::ZERO).minus(&a).is_empty());
+    }
 
     #[test]
     fn inside_is_one_piece() {

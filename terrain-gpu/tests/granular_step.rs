@@ -3,7 +3,7 @@
 //! step, no GPU objects made per frame once the step has run, and the trail it paints.
 
 use terrain_core::granular::*;
-use terrain_core::{Grid, MaterialEffect, apply_trail_effect};
+use terrain_core::{FixedPointMap, Grid, MaterialEffect, apply_trail_effect};
 use terrain_gpu::granular::{
     DepthSource, GpuGranularStep, GranularField, StepMeasure, StepMeasures, Trail, VolumePass,
 };
@@ -436,5 +436,97 @@ fn a_granular_field_reads_back_what_the_cpu_simulation_computes() {
     let mut next = GranularField::new(device, queue, &map, p, Some(passes)).expect("field");
     let nothing = next.drain(device, queue).expect("drain");
     assert!(nothing.areas.is_empty() && nothing.measured.is_empty());
+    ctx.check().expect("validation");
+}
+
+/// A window moved on by `GranularField::shift`, whose steps were still on their way: the
+/// shared columns come from the GPU's map (the CPU map it was given there is stale), so the
+/// moved field steps exactly as a CPU simulation taken from the world after the old window's
+/// last step; the old map's areas and measures all arrive through the retired field, the new
+/// map's sum comes back tagged, and the shared texels are read back.
+#[test]
+fn a_shifted_field_steps_as_a_window_taken_after_the_last_step() {
+    let Some(ctx) = context_or_skip("a_shifted_field_steps_as_a_window_taken_after_the_last_step")
+    else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let m = meshes();
+    let (side, texel) = (64u32, 0.05);
+    let world = bumpy_map(112, texel);
+    let window = |grid: &Grid<u32>, min: glam::IVec2| {
+        let r = terrain_core::Rect::new(min, glam::UVec2::splat(side));
+        let part = grid.copy_rect(r).expect("inside the world");
+        FixedPointMap::new(part, world.encoding(), texel, world.wrap()).expect("map")
+    };
+    let p = small_params();
+    let a_min = glam::IVec2::new(8, 4);
+    let b_min = glam::IVec2::new(30, 40);
+    let map_a = window(world.grid(), a_min);
+    let mut field = GranularField::new(device, queue, &map_a, p, None).expect("field");
+    field.step_pass_mut().depth_source = DepthSource::Cpu;
+    let mut sim_a = GranularSim::new(map_a.clone(), p).expect("sim");
+    let extent = side as f32 * texel;
+    let mut expected_a = Vec::new();
+    for frame in 0..8u64 {
+        let objs = objects_at(&m, frame as u32 * 9, extent);
+        field.step(device, queue, &objs, frame).expect("gpu step");
+        expected_a.push(sim_a.step(&objs).expect("cpu step").volume);
+    }
+    // The CPU world after the old window's last step, and the stale window the GPU is given.
+    let mut settled = world.grid().clone();
+    settled.paste(sim_a.map().grid(), a_min).expect("paste");
+    let stale_b = window(world.grid(), b_min);
+    let (mut retired, shared) = field
+        .shift(device, queue, &stale_b, b_min - a_min, 1000)
+        .expect("shift");
+    let shared = shared.expect("the windows overlap");
+    assert_eq!(shared.min, glam::IVec2::ZERO);
+    let mut sim_b = GranularSim::new(window(&settled, b_min), p).expect("sim");
+    let start_b: u64 = sim_b
+        .map()
+        .grid()
+        .as_slice()
+        .iter()
+        .map(|&u| u64::from(u))
+        .sum();
+    let mut copy_b = stale_b.grid().clone();
+    let mut measured_b = Vec::new();
+    let mut expected_b = vec![(1000, start_b)];
+    for frame in 8..14u64 {
+        let objs = objects_at(&m, frame as u32 * 9, extent);
+        field.step(device, queue, &objs, frame).expect("gpu step");
+        expected_b.push((frame, sim_b.step(&objs).expect("cpu step").volume));
+    }
+    let mut copy_a = map_a.grid().clone();
+    let old = retired.drain(device, queue).expect("drain retired");
+    for (rect, heights) in old.areas {
+        copy_a
+            .paste(&heights, rect.min)
+            .expect("area inside the old map");
+    }
+    assert!(copy_a == *sim_a.map().grid(), "an old area never arrived");
+    let old_volumes: Vec<u64> = old.measured.iter().map(|m| m.volume).collect();
+    assert_eq!(old_volumes, expected_a);
+    let new = field.drain(device, queue).expect("drain");
+    assert_eq!(new.areas.first().map(|a| a.0), Some(shared));
+    for (rect, heights) in new.areas {
+        copy_b
+            .paste(&heights, rect.min)
+            .expect("area inside the new map");
+    }
+    measured_b.extend(new.measured.iter().map(|m| (m.tag, m.volume)));
+    assert_eq!(measured_b, expected_b);
+    assert!(
+        copy_b == *sim_b.map().grid(),
+        "the moved window differs from one taken after the last step"
+    );
+    // A map of another size, or a trail layer, is refused, the field unchanged.
+    let small = bumpy_map(32, texel);
+    assert!(
+        field
+            .shift(device, queue, &small, glam::IVec2::ONE, 0)
+            .is_err()
+    );
     ctx.check().expect("validation");
 }

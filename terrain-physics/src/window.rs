@@ -138,7 +138,7 @@ impl CollisionWindow {
             return Ok(0);
         }
         let strips = match self.window.and_then(|old| old.intersect(&new)) {
-            Some(keep) => difference(new, keep),
+            Some(keep) => new.minus(&keep),
             None => vec![new],
         };
         // Until every strip is in, the window is what the old one and the new share.
@@ -280,23 +280,6 @@ impl CollisionWindow {
             rect.size,
         )
     }
-}
-
-/// `outer` minus `inner` (which lies inside it) as at most four rects: the rows above and
-/// below `inner`, then the columns left and right of it.
-fn difference(outer: Rect, inner: Rect) -> Vec<Rect> {
-    let mut out = Vec::with_capacity(4);
-    let (o0, o1, i0, i1) = (outer.min, outer.max(), inner.min, inner.max());
-    let mut push = |min: IVec2, max: IVec2| {
-        if max.x > min.x && max.y > min.y {
-            out.push(Rect::new(min, (max - min).as_uvec2()));
-        }
-    };
-    push(o0, IVec2::new(o1.x, i0.y));
-    push(IVec2::new(o0.x, i1.y), o1);
-    push(IVec2::new(o0.x, i0.y), IVec2::new(i0.x, i1.y));
-    push(IVec2::new(i1.x, i0.y), IVec2::new(o1.x, i1.y));
-    out
 }
 
 #[cfg(test)]

@@ -10,11 +10,18 @@
 //! in a later frame's [`GranularField::poll`]; [`GranularField::drain`] waits for the rest.
 //! [`GranularField::finish`] drains it and keeps the compiled passes for the next map (building them
 //! again took llvmpipe 45-48 ms).
+//!
+//! **Moving on without a wait.** A window that follows moving objects moves on while steps are
+//! still on their way. [`GranularField::shift`] moves the field onto the next window in one
+//! submit: the columns the two windows share are copied from the current map on the GPU, after
+//! every step recorded so far, so nothing is waited for; the old map's readbacks go on arriving
+//! through the [`RetiredField`] it returns.
 
 use super::{
     GpuGranularNormals, GpuGranularStep, GranularNormalsPass, StepMeasures, Trail, VolumePass,
 };
 use crate::{GpuError, GpuHeightMap, GpuMaterialLayer, QueuedReadback};
+use glam::{IVec2, UVec2};
 use terrain_core::granular::{GranularArrivals, GranularObject, GranularParams};
 use terrain_core::{FixedPointMap, MaterialEffect, Rect};
 
@@ -235,6 +242,74 @@ impl GranularField {
         })
     }
 
+    /// Moves the field onto `map`, the next window: same size and encoding, its origin at
+    /// `offset` texels from the current map's. In one submit: uploads `map`, copies the texels
+    /// the two windows share from the current map over it (the GPU's heights after every step
+    /// recorded so far, whatever `map` holds there), computes its normals, and requests its
+    /// volume sum (a measure tagged `tag`) and the shared texels back, so that what the old
+    /// steps did there reaches the caller through this field. Never waits: the old map's areas
+    /// and measures still on their way arrive through the returned [`RetiredField`]. Returns it
+    /// and the shared texels (in `map`'s frame), if any. Refused while a trail layer is set (it
+    /// does not move with the map).
+    pub fn shift(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        map: &FixedPointMap,
+        offset: IVec2,
+        tag: u64,
+    ) -> Result<(RetiredField, Option<Rect>), GpuError> {
+        let size = self.map.size();
+        if map.size() != size {
+            return Err(GpuError::SizeMismatch {
+                expected: size,
+                actual: map.size(),
+            });
+        }
+        if self.trail.is_some() {
+            return Err(GpuError::Unsupported {
+                what: "GranularField::shift",
+                reason: "a trail layer is set, and it does not move with the map",
+            });
+        }
+        let new_map = GpuHeightMap::from_map(device, queue, map)?;
+        let new_normals = GpuGranularNormals::for_map(device, &new_map)?;
+        let shared = shared_texels(size, offset);
+        let mut encoder = device.create_command_encoder(&Default::default());
+        if let Some(r) = shared {
+            // One row at a time: u32 columns, row-major, so each row is one contiguous range.
+            let bytes = u64::from(r.size.x) * 4;
+            for y in r.min.y..r.max().y {
+                let to = (y as u64 * u64::from(size.x) + r.min.x as u64) * 4;
+                let from_y = (y + offset.y) as u64;
+                let from = (from_y * u64::from(size.x) + (r.min.x + offset.x) as u64) * 4;
+                encoder.copy_buffer_to_buffer(self.map.buffer(), from, new_map.buffer(), to, bytes);
+            }
+        }
+        let old_map = std::mem::replace(&mut self.map, new_map);
+        self.normals = new_normals;
+        let p = &mut self.passes;
+        let retired = RetiredField {
+            map: old_map,
+            readback: std::mem::replace(&mut p.readback, QueuedReadback::new(device, AREA_RING)?),
+            measures: std::mem::replace(&mut p.measures, StepMeasures::new(device)?),
+        };
+        let full = Rect::from_size(size);
+        let blur = p.params.num_iterations_blur_normals;
+        let pass = &mut p.normal_pass;
+        pass.encode(device, queue, &mut encoder, &self.map, &self.normals, full)?;
+        pass.encode_blur(device, queue, &mut encoder, &self.normals, full, blur)?;
+        p.volume.encode(device, queue, &mut encoder, &self.map)?;
+        p.measures
+            .request(device, &mut encoder, tag, &p.volume, None)?;
+        p.readback
+            .request(device, &mut encoder, &self.map, shared)?;
+        queue.submit([encoder.finish()]);
+        p.normal_pass.recall();
+        p.volume.recall();
+        Ok((retired, shared))
+    }
+
     /// Drains the field ([`Self::drain`]) and frees its map, keeping the passes for the next
     /// one (nothing of this map's can then arrive with the next map's).
     pub fn finish(
@@ -244,5 +319,69 @@ impl GranularField {
     ) -> Result<(GranularArrivals, GranularPasses), GpuError> {
         let arrivals = self.drain(device, queue)?;
         Ok((arrivals, self.passes))
+    }
+}
+
+/// The texels a window of `size` shares with the one whose origin lies `offset` texels before
+/// it, in its own frame (`None` when they do not overlap, however far apart).
+fn shared_texels(size: UVec2, offset: IVec2) -> Option<Rect> {
+    let far = |d: i32, side: u32| d.unsigned_abs() >= side;
+    if far(offset.x, size.x) || far(offset.y, size.y) {
+        return None;
+    }
+    // Both within the side, so the negation and the sums fit.
+    Rect::from_size(size).intersect(&Rect::new(-offset, size))
+}
+
+/// The readbacks a [`GranularField`] left on their way when it moved onto another map
+/// ([`GranularField::shift`]): the old map's areas and measures, in step order. Poll it each
+/// frame until nothing is in flight, then drop it (the old map is freed with it).
+#[derive(Debug)]
+pub struct RetiredField {
+    map: GpuHeightMap<u32>,
+    readback: QueuedReadback,
+    measures: StepMeasures,
+}
+
+impl RetiredField {
+    /// The old map's areas (in its own frame) and measures that have arrived, never waiting;
+    /// `in_flight` is false once all have.
+    pub fn poll(&mut self, device: &wgpu::Device) -> Result<GranularArrivals, GpuError> {
+        let areas = self.readback.poll(device)?;
+        let measured = self.measures.poll(device)?;
+        Ok(GranularArrivals {
+            areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),
+            measured,
+            in_flight: self.readback.in_flight() || self.measures.in_flight(),
+        })
+    }
+
+    /// Waits (bounded) for everything still on its way.
+    pub fn drain(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<GranularArrivals, GpuError> {
+        let areas = self.readback.flush(device, queue, &self.map)?;
+        Ok(GranularArrivals {
+            areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),
+            measured: self.measures.flush(device)?,
+            in_flight: false,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shared_texels_of_near_and_far_windows() {
+        let s = UVec2::splat(8);
+        assert_eq!(shared_texels(s, IVec2::ZERO), Some(Rect::from_size(s)));
+        let r = shared_texels(s, IVec2::new(3, -2)).unwrap();
+        assert_eq!(r, Rect::new(IVec2::new(0, 2), UVec2::new(5, 6)));
+        assert_eq!(shared_texels(s, IVec2::new(8, 0)), None);
+        assert_eq!(shared_texels(s, IVec2::new(i32::MIN, i32::MAX)), None);
     }
 }

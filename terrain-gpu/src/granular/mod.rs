@@ -32,7 +32,7 @@ mod volume;
 pub use depth::{
     DepthArea, DepthFromBelowPass, MAX_RECORDS_PER_DISPATCH, MAX_TILE_SIDE, RECORD_TILE,
 };
-pub use field::{GranularField, GranularPasses};
+pub use field::{GranularField, GranularPasses, RetiredField};
 pub use measures::{StepMeasure, StepMeasures};
 pub use normals::{GpuGranularNormals, GranularNormalsPass};
 pub use passes::{
