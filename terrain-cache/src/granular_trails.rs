@@ -4,15 +4,16 @@
 //! into the tiles, and the window moved on ahead of the objects when they near its edge.
 //!
 //! **Moving without a wait.** Areas stepped on a GPU come back a frame or more later. Once the
-//! objects are within [`TrailConfig::edge_margin_m`] of the window's edge, each frame hands
-//! back what has arrived and moves the window on the first frame where nothing is on its way
-//! (neither the GPU's areas nor the caller's own writes into the world, `others_in_flight`),
-//! usually a frame or two later. Only objects within [`TrailConfig::forced_margin_m`] force a
-//! move that waits: the stepper's `stop` drains what is left. This needs each frame's GPU work
-//! back by the next frame's poll (as where a frame waits for its capture): with results two or
-//! more frames late, a step is on its way at every poll while the objects step every frame, so
-//! every move is forced and waits for the last steps. Handing the windows' overlap over on the
-//! GPU would remove that wait; it is not built.
+//! objects are within [`TrailConfig::edge_margin_m`] of the window's edge, the window moves on
+//! to one centred ahead of them on the first frame where the caller has none of its own writes
+//! on their way into the world (`others_in_flight`). A stepper that
+//! [`shifts`](GranularStepper::shifts) (terrain-gpu's `GranularField::shift`) moves its map on
+//! the GPU without waiting for the steps still on their way: the old window retires, its late
+//! areas landing through [`GranularStepper::poll_retired`] on the following frames, the volume
+//! exact across the hand-over ([`GranularWindow::shift`]). Only objects within
+//! [`TrailConfig::forced_margin_m`] of the edge while something is still on its way force a
+//! move that waits (the stepper's `drain_retired` and `stop`): writes of the caller's own, a
+//! window that moved a frame or two earlier, or a stepper that does not shift.
 //!
 //! **Volume.** The window holds the world's stored units (see [`GranularWindow`]); the units
 //! it held when taken, less what compression removed since, equal the scratch map's sum at
@@ -20,11 +21,9 @@
 //! [`TrailMeasure`] of a GPU step), and the window's release checks the tiles against them.
 
 use crate::{CacheError, CameraState, GranularWindow, Manifest, RamPool};
-use glam::Vec2;
+use glam::{IVec2, Vec2};
 use std::time::{Duration, Instant};
-use terrain_core::granular::{
-    GranularArrivals, GranularObject, GranularParams, GranularSim, StepMeasure,
-};
+use terrain_core::granular::{GranularArrivals, GranularObject, GranularParams, GranularSim};
 use terrain_core::{FixedPointMap, Grid, Rect};
 
 /// The GPU side of [`GranularTrails`]: a granular map stepped on the GPU, what comes back read
@@ -50,7 +49,39 @@ pub trait GranularStepper {
 
     /// Waits (bounded) for everything on its way and frees the map.
     fn stop(&mut self) -> Result<GranularArrivals, Self::Error>;
+
+    /// Whether [`shift`](Self::shift) moves the map on without a wait. `false` (the default):
+    /// a window that moves on is stopped first, waiting for what is on its way.
+    fn shifts(&self) -> bool {
+        false
+    }
+
+    /// Moves the steps onto `map`, the next window, whose origin lies `offset` texels from the
+    /// current map's, without a wait: the columns the two share become the GPU map's own
+    /// (after every step so far), whatever `map` holds there. The first arrivals of the new
+    /// map, before any step's: its sum (a measure tagged `tag`, nothing removed) and its shared
+    /// texels. The old map's areas and measures arrive through [`poll_retired`](Self::poll_retired).
+    /// Only called when [`shifts`](Self::shifts) says so and nothing of an earlier shift is
+    /// still on its way; returns whether it moved (the default: never).
+    fn shift(&mut self, map: &FixedPointMap, offset: IVec2, tag: u64) -> Result<bool, Self::Error> {
+        let _ = (map, offset, tag);
+        Ok(false)
+    }
+
+    /// What has arrived of the map the last [`shift`](Self::shift) moved away from (areas in
+    /// its own frame), never waiting; `in_flight` false once all of it has.
+    fn poll_retired(&mut self) -> Result<GranularArrivals, Self::Error> {
+        Ok(GranularArrivals::default())
+    }
+
+    /// Waits (bounded) for everything of that map still on its way.
+    fn drain_retired(&mut self) -> Result<GranularArrivals, Self::Error> {
+        Ok(GranularArrivals::default())
+    }
 }
+
+/// The tag of the measure a [`GranularStepper::shift`] returns first: the moved map's sum.
+pub const SHIFT_TAG: u64 = u64::MAX;
 
 /// The stepper type of a [`GranularTrails`] that never steps on a GPU: pass
 /// `None::<&mut CpuOnly>`. Every call fails, as there is no GPU behind it.
@@ -171,10 +202,15 @@ pub struct GranularTrails {
     sim: Option<GranularSim>,
     /// Whether the taken window steps on the GPU.
     on_gpu: bool,
-    /// The window's heights when taken.
-    ground: Option<FixedPointMap>,
+    /// The ground objects are placed on, and the window it was taken for (kept past a release
+    /// so the next window carries it over where the two overlap).
+    ground: Option<(Rect, FixedPointMap)>,
     /// Units removed by compression in the taken window.
     removed: u64,
+    /// Units removed by compression in the retiring window (its late measures add to it).
+    retired_removed: u64,
+    /// Whether every area and measure of the retiring window has arrived.
+    retired_done: bool,
     windows_released: u32,
 }
 
@@ -212,6 +248,8 @@ impl GranularTrails {
             on_gpu: false,
             ground: None,
             removed: 0,
+            retired_removed: 0,
+            retired_done: false,
             windows_released: 0,
         })
     }
@@ -221,10 +259,23 @@ impl GranularTrails {
         self.window.rect()
     }
 
-    /// The window's heights when taken (the scratch map's encoding, its origin at the
-    /// window's corner): a reference ground to place objects on, whatever their trails did.
+    /// The window's ground as taken (the scratch map's encoding, its origin at the window's
+    /// corner): a reference ground to place objects on, whatever their trails did. Where a
+    /// window overlaps the last one, it keeps the last one's ground, so objects are placed alike
+    /// whether a move waited for the GPU or not (and on the CPU).
     pub fn ground(&self) -> Option<&FixedPointMap> {
-        self.ground.as_ref()
+        let rect = self.window.rect()?;
+        self.ground
+            .as_ref()
+            .filter(|(r, _)| *r == rect)
+            .map(|(_, map)| map)
+    }
+
+    /// Where no other write may go: the taken window and, while one retires, the window it
+    /// moved away from (the smallest rect holding both).
+    pub fn keep_out(&self) -> Option<Rect> {
+        let now = self.window.rect()?;
+        Some(self.window.retiring_rect().map_or(now, |r| r.union(&now)))
     }
 
     /// `transform` in world metres, in the window's frame (see [`GranularWindow::to_local`]).
@@ -266,18 +317,34 @@ impl GranularTrails {
             .into());
         }
         let mut frame = TrailFrame::default();
+        if let Some(g) = gpu.as_deref_mut()
+            && self.window.retiring_rect().is_some()
+        {
+            let arrivals = g.poll_retired().map_err(TrailsError::Stepper)?;
+            self.land_retired(pool, &arrivals, &mut frame)?;
+            self.retired_done = !arrivals.in_flight;
+            self.try_retire(pool)?;
+        }
         let leaving = !self.window.covers(points, self.config.edge_margin_m);
         let mut move_now = leaving && self.window.rect().is_none();
         if leaving && self.window.rect().is_some() {
+            let shifting = self.on_gpu && gpu.as_deref().is_some_and(|g| g.shifts());
             let mut settled = !others_in_flight;
             if let Some(g) = gpu.as_deref_mut()
                 && self.on_gpu
             {
                 let arrivals = g.poll().map_err(TrailsError::Stepper)?;
                 self.hand_back(pool, &arrivals, &mut frame)?;
-                settled &= !arrivals.in_flight;
+                // A shifting stepper's steps on their way move on with its map.
+                settled &= match shifting {
+                    true => self.window.retiring_rect().is_none(),
+                    false => !arrivals.in_flight,
+                };
             }
-            if settled || self.must_move(points) {
+            if let (true, true, Some(g)) = (settled, shifting, gpu.as_deref_mut()) {
+                frame.move_waited = Some(false);
+                self.shift(pool, g, ahead, camera)?;
+            } else if settled || self.must_move(points) {
                 frame.move_waited = Some(!settled);
                 let (changed, measured) = self.release(pool, gpu.as_deref_mut())?;
                 frame.changed.extend(changed);
@@ -291,6 +358,29 @@ impl GranularTrails {
         Ok(frame)
     }
 
+    /// Waits (up to the timeout, updating `pool` for `camera`) until `read` finds the tiles of
+    /// `rect` in RAM.
+    fn wait_for_tiles<T, E>(
+        &mut self,
+        pool: &mut RamPool,
+        camera: &CameraState,
+        rect: Rect,
+        mut read: impl FnMut(&mut GranularWindow, &mut RamPool) -> Result<Option<T>, CacheError>,
+    ) -> Result<T, TrailsError<E>> {
+        let deadline = Instant::now() + self.config.take_timeout;
+        loop {
+            if let Some(got) = read(&mut self.window, pool)? {
+                return Ok(got);
+            }
+            if Instant::now() > deadline {
+                let timeout = self.config.take_timeout;
+                return Err(TrailsError::TilesLate { rect, timeout });
+            }
+            std::thread::sleep(Duration::from_millis(2));
+            pool.update(camera)?;
+        }
+    }
+
     fn take<G: GranularStepper>(
         &mut self,
         pool: &mut RamPool,
@@ -299,18 +389,7 @@ impl GranularTrails {
         camera: &CameraState,
     ) -> Result<(), TrailsError<G::Error>> {
         let rect = self.window.placement(ahead);
-        let deadline = Instant::now() + self.config.take_timeout;
-        let map = loop {
-            if let Some(map) = self.window.take(pool, rect)? {
-                break map;
-            }
-            if Instant::now() > deadline {
-                let timeout = self.config.take_timeout;
-                return Err(TrailsError::TilesLate { rect, timeout });
-            }
-            std::thread::sleep(Duration::from_millis(2));
-            pool.update(camera)?;
-        };
+        let map = self.wait_for_tiles(pool, camera, rect, |w, p| w.take(p, rect))?;
         match gpu {
             Some(g) => {
                 g.start(&map, self.params).map_err(TrailsError::Stepper)?;
@@ -321,8 +400,84 @@ impl GranularTrails {
                 self.sim = Some(sim);
             }
         }
-        self.ground = Some(map);
+        self.carry_ground(rect, map)?;
         self.removed = 0;
+        Ok(())
+    }
+
+    /// Moves the window on to one centred on `ahead` with its map on the GPU, without a wait
+    /// (module docs): the old one retires.
+    fn shift<G: GranularStepper>(
+        &mut self,
+        pool: &mut RamPool,
+        g: &mut G,
+        ahead: Vec2,
+        camera: &CameraState,
+    ) -> Result<(), TrailsError<G::Error>> {
+        let rect = self.window.placement(ahead);
+        let (map, offset) = self.wait_for_tiles(pool, camera, rect, |w, p| w.shift(p, rect))?;
+        if !g
+            .shift(&map, offset, SHIFT_TAG)
+            .map_err(TrailsError::Stepper)?
+        {
+            return Err(CacheError::OutOfRange {
+                what: "granular steppers that say they shift but did not",
+                value: 0.0,
+                expected: "a stepper whose shift moves its map when shifts() is true",
+            }
+            .into());
+        }
+        self.carry_ground(rect, map)?;
+        self.retired_removed = std::mem::take(&mut self.removed);
+        self.retired_done = false;
+        Ok(())
+    }
+
+    /// Keeps `map` (the window at `rect` as taken) as the ground, the last ground where the
+    /// two overlap.
+    fn carry_ground(&mut self, rect: Rect, mut map: FixedPointMap) -> Result<(), CacheError> {
+        if let Some((last, ground)) = &self.ground
+            && let Some(shared) = last.intersect(&rect)
+        {
+            let from = Rect::new(shared.min - last.min, shared.size);
+            let part = ground.grid().copy_rect(from)?;
+            map.grid_mut().paste(&part, shared.min - rect.min)?;
+        }
+        self.ground = Some((rect, map));
+        Ok(())
+    }
+
+    /// Lands what arrived of the retiring window: its areas outside the taken window, and its
+    /// measures against the units it held.
+    fn land_retired<E>(
+        &mut self,
+        pool: &mut RamPool,
+        arrivals: &GranularArrivals,
+        frame: &mut TrailFrame,
+    ) -> Result<(), TrailsError<E>> {
+        for (area, heights) in &arrivals.areas {
+            let parts = self.window.hand_back_retired(pool, *area, heights)?;
+            frame.changed.extend(parts);
+        }
+        let held = self.window.retiring_volume();
+        for m in &arrivals.measured {
+            self.retired_removed += m.removed;
+            frame.measured.push(TrailMeasure {
+                tag: m.tag,
+                volume: m.volume,
+                volume_taken: held.and_then(|v| v.checked_sub(self.retired_removed)),
+            });
+        }
+        Ok(())
+    }
+
+    /// Retires the retiring window once all of it has arrived and the moved window's sum is
+    /// known, its hand-over checked.
+    fn try_retire(&mut self, pool: &mut RamPool) -> Result<(), CacheError> {
+        if self.retired_done && self.window.retiring_rect().is_some() && !self.window.awaits_sum() {
+            self.window.retire(pool, self.retired_removed)?;
+            self.windows_released += 1;
+        }
         Ok(())
     }
 
@@ -370,7 +525,8 @@ impl GranularTrails {
         }
     }
 
-    /// Hands back the areas that arrived and turns the measures into the report's figures.
+    /// Hands back the areas that arrived and turns the measures into the report's figures;
+    /// the first measure after a shift is the moved map's sum.
     fn hand_back<E>(
         &mut self,
         pool: &mut RamPool,
@@ -382,27 +538,32 @@ impl GranularTrails {
                 .changed
                 .push(self.window.hand_back(pool, *area, heights)?);
         }
-        frame.measured.extend(self.measures(&arrivals.measured));
+        for m in &arrivals.measured {
+            if self.window.awaits_sum() {
+                if m.tag != SHIFT_TAG {
+                    return Err(CacheError::OutOfRange {
+                        what: "tag of the first measure after a granular shift",
+                        value: m.tag as f64,
+                        expected: "SHIFT_TAG: the moved map's sum comes before any step's",
+                    }
+                    .into());
+                }
+                self.window.shifted_sum(m.volume)?;
+                self.try_retire(pool)?;
+                continue;
+            }
+            self.removed += m.removed;
+            frame.measured.push(TrailMeasure {
+                tag: m.tag,
+                volume: m.volume,
+                volume_taken: self.window.volume_taken().checked_sub(self.removed),
+            });
+        }
         Ok(())
     }
 
-    /// GPU steps' measures with the volume the window should hold after each.
-    fn measures(&mut self, measured: &[StepMeasure]) -> Vec<TrailMeasure> {
-        measured
-            .iter()
-            .map(|m| {
-                self.removed += m.removed;
-                TrailMeasure {
-                    tag: m.tag,
-                    volume: m.volume,
-                    volume_taken: self.window.volume_taken().checked_sub(self.removed),
-                }
-            })
-            .collect()
-    }
-
-    /// Hands the last areas back (waiting for the GPU's) and releases the window, its volume
-    /// checked: when it moves on, and at the end. Returns the areas handed back and the last
+    /// Hands the last areas back (waiting for the GPU's, a retiring window's too) and releases
+    /// the window, its volume checked: when it moves on waiting, and at the end. Returns the areas handed back and the last
     /// GPU steps' measures.
     pub fn release<G: GranularStepper>(
         &mut self,
@@ -422,12 +583,17 @@ impl GranularTrails {
                 }
                 .into());
             };
+            if self.window.retiring_rect().is_some() {
+                let drained = g.drain_retired().map_err(TrailsError::Stepper)?;
+                self.land_retired(pool, &drained, &mut frame)?;
+                self.retired_done = true;
+            }
             let drained = g.stop().map_err(TrailsError::Stepper)?;
             self.hand_back(pool, &drained, &mut frame)?;
+            self.try_retire(pool)?;
         }
         self.on_gpu = false;
         self.sim = None;
-        self.ground = None;
         self.window.release(pool, self.removed)?;
         self.windows_released += 1;
         Ok((frame.changed, frame.measured))

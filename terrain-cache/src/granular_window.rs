@@ -18,6 +18,18 @@
 //! need them resident) and nothing else may write into its rect: a tile stamp there would be
 //! overwritten by the next hand-back. [`GranularWindow::rect`] says where it is so callers keep
 //! other deformations out until [`GranularWindow::release`].
+//!
+//! **Moving on while the GPU's areas are on their way.** A window stepped on the GPU may move
+//! on without waiting for its last steps' areas ([`GranularWindow::shift`]): the new window's
+//! map is read from the tiles, and the GPU copies its own columns over the part the two
+//! windows share (terrain-gpu's `GranularField::shift`). The old window then retires: its
+//! tiles stay pinned, its late areas land only where it does not overlap the new window
+//! (the shared part's tiles get the new window's areas, newer), and the volume stays exact
+//! across the hand-over: with `V` the units the old window held less compression's, `S` the
+//! GPU's sum of the new map right after the copy and `N` the units of the new window's strips
+//! read from the tiles, `S - N` units crossed over, and once its last area has landed,
+//! [`GranularWindow::retire`] checks that the old window's tiles outside the new one hold
+//! `V - (S - N)`: no unit lost or counted twice.
 
 use crate::error::CacheError;
 use crate::manifest::Manifest;
@@ -39,6 +51,22 @@ struct Taken {
     volume: u64,
 }
 
+/// A window's pinned tiles and its columns in scratch units, as read from them.
+type Pinned = (Vec<TileId>, Grid<u32>);
+
+/// A window that moved on while its map's last areas were on their way: it keeps its tiles
+/// pinned, and the parts outside the taken window take those areas, until it retires.
+#[derive(Debug, Clone)]
+struct Retiring {
+    old: Taken,
+    /// The old window less the new one (level-0 texels): where its areas still land.
+    leaving: Vec<Rect>,
+    /// Units of the new window outside the shared texels, read from the tiles.
+    strips: u64,
+    /// Units of the shared texels at the shift: the new window's sum less `strips`.
+    shared_units: Option<u64>,
+}
+
 /// A square of a streamed world's level 0 handed to granular deformation (see the module
 /// docs for the encoding rule and the protocol).
 #[derive(Debug)]
@@ -48,6 +76,7 @@ pub struct GranularWindow {
     handover: Handover,
     scratch: HeightEncoding,
     taken: Option<Taken>,
+    retiring: Option<Retiring>,
 }
 
 impl GranularWindow {
@@ -70,6 +99,7 @@ impl GranularWindow {
             handover,
             scratch,
             taken: None,
+            retiring: None,
         })
     }
 
@@ -125,13 +155,187 @@ impl GranularWindow {
         pool: &mut RamPool,
         rect: Rect,
     ) -> Result<Option<FixedPointMap>, CacheError> {
-        if self.taken.is_some() {
+        if self.taken.is_some() || self.retiring.is_some() {
             return Err(CacheError::OutOfRange {
                 what: "granular windows taken at once",
                 value: 2.0,
                 expected: "one: release the window before taking another",
             });
         }
+        let Some((tiles, fixed)) = self.pin_and_read(pool, rect)? else {
+            return Ok(None);
+        };
+        let volume = fixed.as_slice().iter().map(|&u| u64::from(u)).sum();
+        self.taken = Some(Taken {
+            rect,
+            tiles,
+            volume,
+        });
+        self.scratch_map(fixed).map(Some)
+    }
+
+    /// Moves the taken window to `rect` while its map stays on the GPU (module docs, "Moving
+    /// on"): pins `rect`'s tiles and returns its scratch map, read from the tiles (where it
+    /// overlaps the old window the GPU copies its own columns over these), and its origin's
+    /// offset from the old one's. The old window retires: its tiles stay pinned and the parts
+    /// outside `rect` still take its areas ([`Self::hand_back_retired`]) until
+    /// [`Self::retire`]. `None`, nothing changed, while a tile of `rect` is not in RAM.
+    pub fn shift(
+        &mut self,
+        pool: &mut RamPool,
+        rect: Rect,
+    ) -> Result<Option<(FixedPointMap, IVec2)>, CacheError> {
+        let (Some(old), None) = (&self.taken, &self.retiring) else {
+            return Err(CacheError::OutOfRange {
+                what: "granular windows retiring at once",
+                value: 2.0,
+                expected: "a taken window, none retiring: retire the last one first",
+            });
+        };
+        let Some((tiles, fixed)) = self.pin_and_read(pool, rect)? else {
+            return Ok(None);
+        };
+        let mut strips = 0u64;
+        for part in rect.minus(&old.rect) {
+            let local = Rect::new(part.min - rect.min, part.size);
+            let units = fixed.copy_rect(local)?;
+            strips += units.as_slice().iter().map(|&u| u64::from(u)).sum::<u64>();
+        }
+        let offset = rect.min - old.rect.min;
+        let old = self.taken.replace(Taken {
+            rect,
+            tiles,
+            volume: strips,
+        });
+        self.retiring = old.map(|old| Retiring {
+            leaving: old.rect.minus(&rect),
+            strips,
+            shared_units: None,
+            old,
+        });
+        self.scratch_map(fixed).map(|map| Some((map, offset)))
+    }
+
+    /// The moved window's sum right after [`Self::shift`] (the GPU's, the first measure after
+    /// the shift): the window holds `sum` units from now on, and the retiring window's shared
+    /// part the units beyond the strips read from the tiles. Refused when `sum` is less than
+    /// those strips (the hand-over lost units).
+    pub fn shifted_sum(&mut self, sum: u64) -> Result<(), CacheError> {
+        let (Some(t), Some(r)) = (self.taken.as_mut(), self.retiring.as_mut()) else {
+            return Err(CacheError::OutOfRange {
+                what: "granular windows retiring",
+                value: 0.0,
+                expected: "one: a sum only follows a shift",
+            });
+        };
+        let Some(shared) = sum.checked_sub(r.strips) else {
+            return Err(CacheError::OutOfRange {
+                what: "units in the moved granular window",
+                value: sum as f64,
+                expected: "at least those of the strips read from the tiles",
+            });
+        };
+        t.volume = sum;
+        r.shared_units = Some(shared);
+        Ok(())
+    }
+
+    /// The retiring window (level-0 texels), whose tiles outside the taken window still take
+    /// its areas: keep other writes out of it too.
+    pub fn retiring_rect(&self) -> Option<Rect> {
+        self.retiring.as_ref().map(|r| r.old.rect)
+    }
+
+    /// The units the retiring window held when taken (or moved onto).
+    pub fn retiring_volume(&self) -> Option<u64> {
+        self.retiring.as_ref().map(|r| r.old.volume)
+    }
+
+    /// Whether [`Self::shifted_sum`] is still awaited.
+    pub fn awaits_sum(&self) -> bool {
+        self.retiring
+            .as_ref()
+            .is_some_and(|r| r.shared_units.is_none())
+    }
+
+    /// Hands the retiring window's `area` (its own texels) with its `heights` back into the
+    /// tiles, where it lies outside the taken window (the taken window's map holds the rest,
+    /// newer); returns the parts written, in world texels with their stored heights.
+    pub fn hand_back_retired(
+        &self,
+        pool: &mut RamPool,
+        area: Rect,
+        heights: &Grid<u32>,
+    ) -> Result<Vec<(Rect, Grid<u16>)>, CacheError> {
+        let Some(r) = &self.retiring else {
+            return Err(CacheError::OutOfRange {
+                what: "granular windows retiring",
+                value: 0.0,
+                expected: "one: shift the window before handing its old areas back",
+            });
+        };
+        check_area(r.old.rect, area, heights)?;
+        let world = Rect::new(r.old.rect.min + area.min, area.size);
+        let mut out = Vec::new();
+        for part in r.leaving.iter().filter_map(|l| l.intersect(&world)) {
+            let local = Rect::new(part.min - world.min, part.size);
+            let stored = self.handover.from_fixed(&heights.copy_rect(local)?)?;
+            self.write(pool, part, &stored)?;
+            out.push((part, stored));
+        }
+        Ok(out)
+    }
+
+    /// Releases the retiring window once every area of its map is back and the moved
+    /// window's sum is known: unpins its tiles and checks the hand-over, exactly: the units
+    /// its tiles now hold outside the taken window, and those the taken window received where
+    /// they overlap, add up to the units it held less `removed` (by compression). Returns the
+    /// units; [`CacheError::OutOfRange`] when they differ (the window retires anyway).
+    pub fn retire(&mut self, pool: &mut RamPool, removed: u64) -> Result<u64, CacheError> {
+        let Some(r) = self.retiring.take_if(|r| r.shared_units.is_some()) else {
+            return Err(CacheError::OutOfRange {
+                what: "granular windows ready to retire",
+                value: 0.0,
+                expected: "one, whose moved window's sum has arrived",
+            });
+        };
+        let mut leaving = 0u64;
+        let mut read = Ok(());
+        for part in &r.leaving {
+            let mut heights = Grid::new(part.size.x, part.size.y, 0u16)?;
+            match pool.read_region(*part, &mut heights) {
+                Ok(_) => {
+                    leaving += heights
+                        .as_slice()
+                        .iter()
+                        .map(|&h| u64::from(h))
+                        .sum::<u64>()
+                }
+                Err(e) => read = Err(e),
+            }
+        }
+        for &id in &r.old.tiles {
+            pool.unpin(id);
+        }
+        read?;
+        let now = leaving + r.shared_units.unwrap_or(0);
+        if Some(now) != r.old.volume.checked_sub(removed) {
+            return Err(CacheError::OutOfRange {
+                what: "stored units handed over by the retired granular window",
+                value: now as f64,
+                expected: "the units it held less those removed: every unit in one window or its tiles",
+            });
+        }
+        Ok(now)
+    }
+
+    /// Checks `rect` as a window, pins the tiles it touches and reads it from them, in
+    /// scratch units (`None`, nothing pinned, while one is not resident).
+    fn pin_and_read(
+        &self,
+        pool: &mut RamPool,
+        rect: Rect,
+    ) -> Result<Option<Pinned>, CacheError> {
         let world = Rect::from_size(self.manifest.world_size);
         if rect.size != UVec2::splat(self.side) || !world.contains_rect(&rect) {
             return Err(terrain_core::CoreError::RegionOutOfBounds {
@@ -151,19 +355,17 @@ impl GranularWindow {
         for &id in &tiles {
             pool.pin(id);
         }
-        let fixed = self.handover.to_fixed(&heights);
-        let volume = fixed.as_slice().iter().map(|&u| u64::from(u)).sum();
-        self.taken = Some(Taken {
-            rect,
-            tiles,
-            volume,
-        });
-        Ok(Some(HeightMap::new(
+        Ok(Some((tiles, self.handover.to_fixed(&heights))))
+    }
+
+    /// The scratch map over `fixed` (clamped edges, the world's texel size).
+    fn scratch_map(&self, fixed: Grid<u32>) -> Result<FixedPointMap, CacheError> {
+        Ok(HeightMap::new(
             fixed,
             self.scratch,
             self.manifest.texel_size,
             WrapMode::Clamp,
-        )?))
+        )?)
     }
 
     /// `transform` of an object in world metres (X Z over the world, Y the world's heights) in
@@ -199,14 +401,7 @@ impl GranularWindow {
                 expected: "one: take a window before handing areas back",
             });
         };
-        let local = Rect::from_size(t.rect.size);
-        if heights.size() != area.size || !local.contains_rect(&area) {
-            return Err(terrain_core::CoreError::RegionOutOfBounds {
-                rect: area,
-                map_size: t.rect.size,
-            }
-            .into());
-        }
+        check_area(t.rect, area, heights)?;
         let stored = self.handover.from_fixed(heights)?;
         let world = Rect::new(t.rect.min + area.min, area.size);
         self.write(pool, world, &stored)?;
@@ -217,8 +412,15 @@ impl GranularWindow {
     /// less `removed` (what compression removed while the window lived; 0 for the
     /// volume-preserving default): every area the steps changed handed back, nothing else
     /// written there. Returns the units; [`CacheError::OutOfRange`] when they differ (the
-    /// window is released anyway).
+    /// window is released anyway). Refused while a window is retiring.
     pub fn release(&mut self, pool: &mut RamPool, removed: u64) -> Result<u64, CacheError> {
+        if self.retiring.is_some() {
+            return Err(CacheError::OutOfRange {
+                what: "granular windows retiring",
+                value: 1.0,
+                expected: "none: retire the last one before releasing the window",
+            });
+        }
         let Some(t) = self.taken.take() else {
             return Ok(0);
         };
@@ -272,4 +474,17 @@ impl GranularWindow {
         }
         Ok(())
     }
+}
+
+/// Checks that `area` (window texels) with `heights` lies in a window at `rect`.
+fn check_area(rect: Rect, area: Rect, heights: &Grid<u32>) -> Result<(), CacheError> {
+    let local = Rect::from_size(rect.size);
+    if heights.size() != area.size || !local.contains_rect(&area) {
+        return Err(terrain_core::CoreError::RegionOutOfBounds {
+            rect: area,
+            map_size: rect.size,
+        }
+        .into());
+    }
+    Ok(())
 }

@@ -91,7 +91,7 @@ pub mod world;
 pub use convert::{ConvertReport, convert_world};
 pub use error::CacheError;
 pub use granular_trails::{
-    CpuOnly, GranularStepper, GranularTrails, HandedBack, MAX_TAKE_TIMEOUT, TrailConfig,
+    CpuOnly, GranularStepper, GranularTrails, HandedBack, MAX_TAKE_TIMEOUT, SHIFT_TAG, TrailConfig,
     TrailFrame, TrailMeasure, TrailsError,
 };
 pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};

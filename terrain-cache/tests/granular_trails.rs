@@ -1,13 +1,14 @@
 //! `GranularTrails` on a real RAM pool: a wheel driven across the world, the window moved on
 //! ahead of it, stepped on the CPU or through a stepper whose results come back frames late
-//! (as a GPU's do). The volume is exact at every step, every area of a late stepper reaches the
-//! tiles before its window moves on, an unforced move waits for nothing, and bad settings are
-//! refused.
+//! (as a GPU's do), which either stops its map at each move or shifts it on without a wait.
+//! The volume is exact at every step and across each hand-over, every area of a late stepper
+//! reaches the tiles, the world ends as on the CPU, an unforced move waits for nothing, and bad
+//! settings are refused.
 
 mod common;
 
 use common::build;
-use glam::{Affine3A, UVec2, Vec2, Vec3};
+use glam::{Affine3A, IVec2, UVec2, Vec2, Vec3};
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Duration;
@@ -58,11 +59,18 @@ struct LateStepper {
     sim: Option<GranularSim>,
     delay: usize,
     /// Steps' results on their way: polls left, areas, measure.
-    queue: VecDeque<(usize, Areas, StepMeasure)>,
-    removed: u64,
+    queue: Queue,
+    /// Whether it moves its map on without a wait (as terrain-gpu's `GranularField::shift`).
+    shifting: bool,
+    /// The old map's results still on their way after a shift.
+    retired: Queue,
+    shifts: u32,
     /// The heights of each map when it was stopped.
     stopped: Vec<Grid<u32>>,
 }
+
+/// Results on their way: polls left, areas, measure.
+type Queue = VecDeque<(usize, Areas, StepMeasure)>;
 
 impl LateStepper {
     fn new(delay: usize) -> Self {
@@ -70,24 +78,42 @@ impl LateStepper {
             sim: None,
             delay,
             queue: VecDeque::new(),
-            removed: 0,
+            shifting: false,
+            retired: VecDeque::new(),
+            shifts: 0,
             stopped: Vec::new(),
         }
     }
 
-    fn take_arrived(&mut self) -> GranularArrivals {
-        let mut out = GranularArrivals::default();
-        for entry in &mut self.queue {
-            entry.0 = entry.0.saturating_sub(1);
+    fn shifting(delay: usize) -> Self {
+        Self {
+            shifting: true,
+            ..Self::new(delay)
         }
-        while self.queue.front().is_some_and(|e| e.0 == 0) {
-            let (_, areas, measure) = self.queue.pop_front().unwrap();
-            out.areas.extend(areas);
-            out.measured.push(measure);
-        }
-        out.in_flight = !self.queue.is_empty();
-        out
     }
+}
+
+fn take_arrived(queue: &mut Queue) -> GranularArrivals {
+    let mut out = GranularArrivals::default();
+    for entry in queue.iter_mut() {
+        entry.0 = entry.0.saturating_sub(1);
+    }
+    while queue.front().is_some_and(|e| e.0 == 0) {
+        let (_, areas, measure) = queue.pop_front().unwrap();
+        out.areas.extend(areas);
+        out.measured.push(measure);
+    }
+    out.in_flight = !queue.is_empty();
+    out
+}
+
+fn drain(queue: &mut Queue) -> GranularArrivals {
+    let mut out = GranularArrivals::default();
+    for (_, areas, measure) in queue.drain(..) {
+        out.areas.extend(areas);
+        out.measured.push(measure);
+    }
+    out
 }
 
 impl GranularStepper for LateStepper {
@@ -99,7 +125,6 @@ impl GranularStepper for LateStepper {
             "a new map while the last one's are on their way"
         );
         self.sim = Some(GranularSim::new(map.clone(), params).map_err(|e| e.to_string())?);
-        self.removed = 0;
         Ok(())
     }
 
@@ -108,7 +133,7 @@ impl GranularStepper for LateStepper {
         objects: &[GranularObject<'_>],
         tag: u64,
     ) -> Result<GranularArrivals, String> {
-        let arrived = self.take_arrived();
+        let arrived = take_arrived(&mut self.queue);
         let sim = self.sim.as_mut().ok_or("not started")?;
         let report = sim.step(objects).map_err(|e| e.to_string())?;
         let areas = report
@@ -126,19 +151,64 @@ impl GranularStepper for LateStepper {
     }
 
     fn poll(&mut self) -> Result<GranularArrivals, String> {
-        Ok(self.take_arrived())
+        Ok(take_arrived(&mut self.queue))
     }
 
     fn stop(&mut self) -> Result<GranularArrivals, String> {
-        let mut out = GranularArrivals::default();
-        for (_, areas, measure) in self.queue.drain(..) {
-            out.areas.extend(areas);
-            out.measured.push(measure);
-        }
+        let out = drain(&mut self.queue);
         if let Some(sim) = self.sim.take() {
             self.stopped.push(sim.map().grid().clone());
         }
         Ok(out)
+    }
+
+    fn shifts(&self) -> bool {
+        self.shifting
+    }
+
+    fn shift(&mut self, map: &FixedPointMap, offset: IVec2, tag: u64) -> Result<bool, String> {
+        assert!(
+            self.retired.is_empty(),
+            "a shift while the last is on its way"
+        );
+        let old = self.sim.take().ok_or("not started")?;
+        let size = map.size();
+        // The shared columns are the old map's now (as a GPU copy after every step).
+        let shared = Rect::from_size(size).intersect(&Rect::new(-offset, size));
+        let mut grid = map.grid().clone();
+        if let Some(r) = shared {
+            let from = Rect::new(r.min + offset, r.size);
+            grid.paste(&old.map().grid().copy_rect(from).unwrap(), r.min)
+                .unwrap();
+        }
+        let moved = FixedPointMap::new(grid, map.encoding(), map.texel_size(), map.wrap()).unwrap();
+        let sum = moved.grid().as_slice().iter().map(|&u| u64::from(u)).sum();
+        let areas = shared
+            .map(|r| vec![(r, moved.grid().copy_rect(r).unwrap())])
+            .unwrap_or_default();
+        self.retired = std::mem::take(&mut self.queue);
+        // The old map's last areas come after the new map's first (a full readback ring
+        // requests them late): the shared part must not take them.
+        for entry in &mut self.retired {
+            entry.0 += 3;
+        }
+        let first = StepMeasure {
+            tag,
+            volume: sum,
+            removed: 0,
+        };
+        self.queue.push_back((self.delay + 1, areas, first));
+        self.sim = Some(GranularSim::new(moved, *old.params()).map_err(|e| e.to_string())?);
+        self.shifts += 1;
+        Ok(true)
+    }
+
+    fn poll_retired(&mut self) -> Result<GranularArrivals, String> {
+        Ok(take_arrived(&mut self.retired))
+    }
+
+    fn drain_retired(&mut self) -> Result<GranularArrivals, String> {
+        Ok(drain(&mut self.retired))
     }
 }
 
@@ -165,6 +235,7 @@ fn drive(mut gpu: Option<&mut LateStepper>) -> (Vec<TrailFrame>, Grid<u16>, u32)
         let xz = Vec2::new(10.0 + 1.5 * i as f32, 60.0);
         let ahead = xz + Vec2::X * 10.0;
         let before = trails.window();
+        let stops = gpu.as_deref().map_or(0, |late| late.stopped.len());
         let mut frame = trails
             .follow(
                 &mut pool,
@@ -176,7 +247,9 @@ fn drive(mut gpu: Option<&mut LateStepper>) -> (Vec<TrailFrame>, Grid<u16>, u32)
             )
             .unwrap();
         // A window that moved on left the tiles with its map's last heights, every one.
-        if let (Some(late), Some(rect), Some(_)) = (gpu.as_deref(), before, frame.move_waited) {
+        if let (Some(late), Some(rect)) = (gpu.as_deref(), before)
+            && late.stopped.len() > stops
+        {
             let mut now = Grid::new(rect.size.x, rect.size.y, 0u16).unwrap();
             assert_eq!(pool.read_region(rect, &mut now).unwrap(), 0);
             let last = late.stopped.last().expect("the window's map was stopped");
@@ -266,6 +339,37 @@ fn results_that_come_later_force_a_move_that_drains_them() {
     assert!(moves.contains(&true), "{moves:?}");
     let measured = frames.iter().map(|f| f.measured.len()).sum::<usize>();
     assert_eq!(measured, frames.len(), "a step's measure was lost");
+}
+
+#[test]
+fn a_shifting_stepper_moves_on_without_a_wait_and_leaves_the_cpu_world() {
+    // Results two frames late, which forced every move to wait for a stepper that cannot
+    // shift (the test above): moved on the "GPU", nothing waits, every unit is accounted
+    // for across each hand-over, and the world ends as on the CPU.
+    let (_, on_cpu, _) = drive(None);
+    let mut late = LateStepper::shifting(2);
+    let (frames, after, released) = drive(Some(&mut late));
+    assert!(late.shifts >= 2, "{} shifts", late.shifts);
+    assert_eq!(late.stopped.len(), 1, "only the end stops the map");
+    assert_eq!(
+        released,
+        late.shifts + 1,
+        "a retired window was never checked"
+    );
+    let moves: Vec<bool> = frames.iter().filter_map(|f| f.move_waited).collect();
+    assert!(moves.iter().all(|waited| !waited), "{moves:?}");
+    let measured: Vec<_> = frames.iter().flat_map(|f| f.measured.iter()).collect();
+    assert_eq!(measured.len(), frames.len(), "a step's measure was lost");
+    for m in &measured {
+        assert_eq!(Some(m.volume), m.volume_taken, "step {}", m.tag);
+    }
+    assert!(
+        after.as_slice() == on_cpu.as_slice(),
+        "the world differs from the CPU's"
+    );
+    // The waiting stepper leaves the same world too.
+    let (_, waited, _) = drive(Some(&mut LateStepper::new(0)));
+    assert!(waited.as_slice() == on_cpu.as_slice());
 }
 
 #[test]
