@@ -331,11 +331,7 @@ impl GranularWindow {
 
     /// Checks `rect` as a window, pins the tiles it touches and reads it from them, in
     /// scratch units (`None`, nothing pinned, while one is not resident).
-    fn pin_and_read(
-        &self,
-        pool: &mut RamPool,
-        rect: Rect,
-    ) -> Result<Option<Pinned>, CacheError> {
+    fn pin_and_read(&self, pool: &mut RamPool, rect: Rect) -> Result<Option<Pinned>, CacheError> {
         let world = Rect::from_size(self.manifest.world_size);
         if rect.size != UVec2::splat(self.side) || !world.contains_rect(&rect) {
             return Err(terrain_core::CoreError::RegionOutOfBounds {

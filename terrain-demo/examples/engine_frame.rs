@@ -3,11 +3,12 @@
 //! terrain-gpu's tile atlas. Deform: craters and a shockwave on the resident tiles on the GPU
 //! (`TileStamps` through `AtlasDeformer`, the rects read back without a stall), footprints in
 //! detail tiles streamed by band regions (`DetailCache`, `GpuDetailStream`), a sledge's
-//! volume-preserving granular trail (`GranularTrails` stepping `GranularField`). Collide: a
-//! walker on a window of the world, refilled where coarser data stood in (`WindowFill`).
-//! Select LOD and draw: the clipmap placed and culled over the atlas and its detail, drawn with
-//! the sky into the engine's pass. At the end every readback lands, the trail's volume is
-//! checked, the deformed tiles go back into the world, and the last frame is saved.
+//! volume-preserving granular trail (`GranularTrails` stepping a `FieldStepper`, each window
+//! moved on without a wait). Collide: a walker on a window of the world, refilled where
+//! coarser data stood in (`WindowFill`). Select LOD and draw: the clipmap placed and culled
+//! over the atlas and its detail, drawn with the sky into the engine's pass. At the end every
+//! readback lands, the trail's volume is checked, the deformed tiles go back into the world,
+//! and the last frame is saved.
 //!
 //! ```sh
 //! cargo run --release -p terrain-demo --example engine_frame -- [OUT_DIR] [FRAMES]
@@ -19,17 +20,17 @@ use std::sync::Arc;
 use std::time::Duration;
 use terrain_cache::detail::{DetailCache, detail_manifest_layout};
 use terrain_cache::{
-    BandSelection, CameraState, GranularStepper, GranularTrails, Layer, Manifest, ObjectTileStore,
-    PoolConfig, ProceduralSource, RamPool, SphericalSelection, TileGrid, TileStamps, TileStore,
-    TrailConfig, VramConfig, VramPool, WindowFill, build_world, rebuild_ancestors,
+    BandSelection, CameraState, GranularTrails, Layer, Manifest, ObjectTileStore, PoolConfig,
+    ProceduralSource, RamPool, SphericalSelection, TileGrid, TileStamps, TileStore, TrailConfig,
+    VramConfig, VramPool, WindowFill, build_world, rebuild_ancestors,
 };
 use terrain_core::detail::DetailLayout;
-use terrain_core::granular::{GranularArrivals, GranularObject, GranularParams, TriMesh};
+use terrain_core::granular::{GranularObject, GranularParams, TriMesh};
 use terrain_core::{
-    FixedPointMap, GaussianStamp, HeightEncoding, RamDeformer, Shockwave, ShockwaveParams,
-    StampPlacement, TerrainParams, TileStamp, WrapMode,
+    GaussianStamp, HeightEncoding, RamDeformer, Shockwave, ShockwaveParams, StampPlacement,
+    TerrainParams, TileStamp, WrapMode,
 };
-use terrain_gpu::granular::{GranularField, GranularPasses};
+use terrain_gpu::granular::FieldStepper;
 use terrain_gpu::{
     AtlasConfig, AtlasDeformer, AtlasStamper, Camera, ClipmapRenderer, ClipmapSurface, ClipmapView,
     DepthConvention, DetailShading, GpuDetailStream, GpuError, GpuStamp, GpuTileAtlas, MapUse,
@@ -44,56 +45,6 @@ const TEXEL: f32 = 0.5;
 const SLOTS: u32 = 64;
 const FRAME: UVec2 = UVec2::new(480, 270);
 const DT: f32 = 1.0 / 30.0;
-
-/// The trail's GPU side: terrain-gpu's granular field, stepped in plain submits (an engine
-/// that times its passes calls `encode_step` and `encode_follow_up` in its own).
-struct Snow<'a> {
-    device: &'a wgpu::Device,
-    queue: &'a wgpu::Queue,
-    field: Option<GranularField>,
-    passes: Option<GranularPasses>,
-}
-
-impl GranularStepper for Snow<'_> {
-    type Error = GpuError;
-
-    fn start(&mut self, map: &FixedPointMap, p: GranularParams) -> Result<(), Self::Error> {
-        let passes = self.passes.take();
-        self.field = Some(GranularField::new(self.device, self.queue, map, p, passes)?);
-        Ok(())
-    }
-
-    fn step(
-        &mut self,
-        o: &[GranularObject<'_>],
-        tag: u64,
-    ) -> Result<GranularArrivals, Self::Error> {
-        let field = self
-            .field
-            .as_mut()
-            .ok_or(terrain_gpu::GpuError::Unsupported {
-                what: "a granular step",
-                reason: "no window was started",
-            })?;
-        let arrived = field.poll(self.device)?;
-        field.step(self.device, self.queue, o, tag)?;
-        Ok(arrived)
-    }
-
-    fn poll(&mut self) -> Result<GranularArrivals, Self::Error> {
-        let field = self.field.as_mut();
-        field.map_or(Ok(GranularArrivals::default()), |f| f.poll(self.device))
-    }
-
-    fn stop(&mut self) -> Result<GranularArrivals, Self::Error> {
-        let Some(field) = self.field.take() else {
-            return Ok(GranularArrivals::default());
-        };
-        let (arrived, passes) = field.finish(self.device, self.queue)?;
-        self.passes = Some(passes);
-        Ok(arrived)
-    }
-}
 
 fn main() -> Result<()> {
     let mut args = std::env::args().skip(1);
@@ -186,12 +137,8 @@ fn main() -> Result<()> {
     let foot = GaussianStamp::default();
     let trail = TrailConfig::default();
     let mut trails = GranularTrails::new(&manifest, GranularParams::snow(), trail)?;
-    let mut snow = Snow {
-        device: &device,
-        queue: &queue,
-        field: None,
-        passes: None,
-    };
+    // The trail's GPU side: terrain-gpu's granular field, each window moved on without a wait.
+    let mut snow = FieldStepper::new(&device, &queue);
     let runner = TriMesh::wheel(0.6, 0.4, 16)?;
     let mut window = CollisionWindow::new(256, manifest.world_size, encoding, TEXEL)?;
     let mut fill = WindowFill::new(&manifest);

@@ -45,6 +45,7 @@ mod params;
 mod penetration;
 mod sim;
 mod slope;
+mod stepper;
 
 pub use active::{ActiveArea, merge_active_areas, object_active_area};
 pub use arrivals::{GranularArrivals, StepMeasure};
@@ -77,6 +78,7 @@ pub use slope::{
     column_outflow, even_out_slopes_interleaved, even_out_slopes_scatter, slope_amounts_pass,
     slope_apply_pass, slope_scatter_pass,
 };
+pub use stepper::{CpuOnly, GranularStepper, SHIFT_TAG};
 
 use crate::Rect;
 use glam::UVec2;

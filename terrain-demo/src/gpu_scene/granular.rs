@@ -35,6 +35,23 @@ impl terrain_cache::GranularStepper for TimedGranular<'_> {
     fn stop(&mut self) -> Result<GranularArrivals> {
         self.scene.disable_granular()
     }
+
+    fn shifts(&self) -> bool {
+        true
+    }
+
+    fn shift(&mut self, map: &FixedPointMap, offset: glam::IVec2, tag: u64) -> Result<bool> {
+        self.scene.shift_granular(map, offset, tag)?;
+        Ok(true)
+    }
+
+    fn poll_retired(&mut self) -> Result<GranularArrivals> {
+        self.scene.retired_granular(false)
+    }
+
+    fn drain_retired(&mut self) -> Result<GranularArrivals> {
+        self.scene.retired_granular(true)
+    }
 }
 
 impl GpuScene {
@@ -97,6 +114,46 @@ impl GpuScene {
             }
             Err(e) => Err(self.lost_or(e.into())),
         }
+    }
+
+    /// Moves the granular field onto the next window of a world's trails without a wait
+    /// (terrain-gpu's `GranularField::shift`); the old map's readbacks go on arriving through
+    /// [`Self::retired_granular`].
+    pub fn shift_granular(
+        &mut self,
+        map: &FixedPointMap,
+        offset: glam::IVec2,
+        tag: u64,
+    ) -> Result<()> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let Some(g) = self.granular.as_mut() else {
+            anyhow::bail!("granular deformation was not enabled on the GPU scene");
+        };
+        match g.shift(device, queue, map, offset, tag) {
+            Ok((retired, _)) => {
+                self.granular_retired = Some(retired);
+                Ok(())
+            }
+            Err(e) => Err(self.lost_or(e.into())),
+        }
+    }
+
+    /// What arrived of the map the granular field moved away from (`wait`: all of it); the
+    /// readbacks are freed once nothing is in flight.
+    pub fn retired_granular(&mut self, wait: bool) -> Result<GranularArrivals> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let Some(r) = self.granular_retired.as_mut() else {
+            return Ok(GranularArrivals::default());
+        };
+        let arrived = match wait {
+            true => r.drain(device, queue),
+            false => r.poll(device),
+        };
+        let arrived = arrived.map_err(|e| self.lost_or(e.into()))?;
+        if !arrived.in_flight {
+            self.granular_retired = None;
+        }
+        Ok(arrived)
     }
 
     /// Moves granular deformation onto the GPU: uploads `map` once (after this, the GPU map is

@@ -69,6 +69,8 @@ pub struct GpuScene {
     /// The passes of a granular scene disabled since (a world's window that moved), kept for
     /// the next window: building them again took llvmpipe 45-48 ms on the frame thread.
     granular_passes: Option<GranularPasses>,
+    /// The readbacks of the map a world's granular window moved away from (`shift`).
+    granular_retired: Option<terrain_gpu::granular::RetiredField>,
     /// A streamed world's tile atlas (the flyover), drawn instead of the coarse-map.
     atlas: Option<GpuTileAtlas>,
     /// Stamps on atlas tiles, their changed rects read back.
@@ -246,6 +248,7 @@ impl GpuScene {
             height_range: (lo, hi),
             granular: None,
             granular_passes: None,
+            granular_retired: None,
             atlas: None,
             tile_stamper: None,
             detail: None,

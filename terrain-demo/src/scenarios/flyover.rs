@@ -551,7 +551,7 @@ impl Scenario for FlyoverScenario {
             let size = CRATER_SIZE.clamp(8.0 * ts, self.tile_size as f32 * ts);
             let placement = StampPlacement::new(center, Vec2::splat(size), CRATER_DEPTH)?;
             // A granular window's tiles take no other writes while it lives.
-            let keep_out = self.trails.as_ref().and_then(Trails::window);
+            let keep_out = self.trails.as_ref().and_then(Trails::keep_out);
             if keep_out.is_some_and(|w| w.intersect(&reach(&placement, ts)).is_some()) {
                 self.craters_skipped += 1;
             } else {
@@ -569,7 +569,7 @@ impl Scenario for FlyoverScenario {
         // The world scenario's shockwave beside the path.
         let mut shock = false;
         if let Some(wave) = self.shock.as_mut() {
-            let keep_out = self.trails.as_ref().and_then(Trails::window);
+            let keep_out = self.trails.as_ref().and_then(Trails::keep_out);
             let path = (xz, forward2);
             if let Some((stamp, placement)) =
                 wave.next(self.frame, path, self.texel_size, keep_out)?

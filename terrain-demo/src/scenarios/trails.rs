@@ -44,9 +44,9 @@ impl Trails {
         })
     }
 
-    /// The taken window (level-0 texels), where no tile stamp may go.
-    pub fn window(&self) -> Option<Rect> {
-        self.trails.window()
+    /// Where no tile stamp may go (level-0 texels): the taken window, and the one retiring.
+    pub fn keep_out(&self) -> Option<Rect> {
+        self.trails.keep_out()
     }
 
     /// Whether the next [`advance`](Self::advance) with the vehicle at `centre` heading

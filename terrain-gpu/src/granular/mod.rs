@@ -11,7 +11,9 @@
 //! `terrain_core::granular::GranularSim`.
 //!
 //! [`GranularField`] composes them into what an application drives once per frame: a map
-//! stepped, shaded and measured, the changed areas read back without a wait.
+//! stepped, shaded and measured, the changed areas read back without a wait, moved on to the
+//! next window without one. [`FieldStepper`] steps a streamed world's granular trails with it
+//! (terrain-core's `GranularStepper`).
 //!
 //! Every pass is built once with `new(&wgpu::Device)` (one shader module, its pipelines, bind
 //! group layouts and a uniform ring) and records with `encode(&mut self, device, queue,
@@ -25,6 +27,7 @@ mod normals;
 mod passes;
 mod scratch;
 mod step;
+mod stepper;
 mod trail;
 mod upload;
 mod volume;
@@ -40,6 +43,7 @@ pub use passes::{
 };
 pub use scratch::{GranularArea, GranularScratch};
 pub use step::{DepthSource, GpuGranularStep, GpuStepReport};
+pub use stepper::FieldStepper;
 pub use terrain_core::granular::GranularArrivals;
 pub use trail::{Trail, TrailEffectPass};
 pub use volume::VolumePass;

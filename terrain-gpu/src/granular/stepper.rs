@@ -1,0 +1,131 @@
+//! [`FieldStepper`]: terrain-core's `GranularStepper` over [`GranularField`]s, so that granular
+//! trails on a streamed world (terrain-cache's `GranularTrails`) step on the GPU with no code
+//! of the application's: plain submits, each window's map moved on to the next without a wait
+//! ([`GranularField::shift`]), the compiled passes kept from one window to the next. An
+//! application that times or batches its submits implements the trait over the field's
+//! `encode_*` calls instead.
+
+use super::{DepthSource, GranularField, GranularPasses, RetiredField};
+use crate::GpuError;
+use glam::IVec2;
+use terrain_core::FixedPointMap;
+use terrain_core::granular::{GranularArrivals, GranularObject, GranularParams, GranularStepper};
+
+/// Steps a granular window on the GPU for its CPU owner (module docs).
+#[derive(Debug)]
+pub struct FieldStepper {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    field: Option<GranularField>,
+    passes: Option<GranularPasses>,
+    retired: Option<RetiredField>,
+    depth_source: DepthSource,
+}
+
+const NOT_STARTED: GpuError = GpuError::Unsupported {
+    what: "FieldStepper",
+    reason: "no window was started",
+};
+
+impl FieldStepper {
+    /// A stepper on `device` and `queue` (the application's own), no window yet.
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Self {
+        Self {
+            device: device.clone(),
+            queue: queue.clone(),
+            field: None,
+            passes: None,
+            retired: None,
+            depth_source: DepthSource::default(),
+        }
+    }
+
+    /// Where the steps' depth from below comes from, for this window and the next ones
+    /// (`DepthSource::Cpu` makes them equal the CPU simulation bit for bit).
+    pub fn set_depth_source(&mut self, source: DepthSource) {
+        self.depth_source = source;
+        if let Some(f) = self.field.as_mut() {
+            f.step_pass_mut().depth_source = source;
+        }
+    }
+
+    /// The field of the window being stepped, if any (to draw it, say).
+    pub fn field(&self) -> Option<&GranularField> {
+        self.field.as_ref()
+    }
+
+    fn field_mut(&mut self) -> Result<&mut GranularField, GpuError> {
+        self.field.as_mut().ok_or(NOT_STARTED)
+    }
+}
+
+impl GranularStepper for FieldStepper {
+    type Error = GpuError;
+
+    fn start(&mut self, map: &FixedPointMap, params: GranularParams) -> Result<(), GpuError> {
+        let passes = self.passes.take();
+        let mut field = GranularField::new(&self.device, &self.queue, map, params, passes)?;
+        field.step_pass_mut().depth_source = self.depth_source;
+        self.field = Some(field);
+        Ok(())
+    }
+
+    fn step(
+        &mut self,
+        objects: &[GranularObject<'_>],
+        tag: u64,
+    ) -> Result<GranularArrivals, GpuError> {
+        let (device, queue) = (self.device.clone(), self.queue.clone());
+        let field = self.field_mut()?;
+        let arrived = field.poll(&device)?;
+        field.step(&device, &queue, objects, tag)?;
+        Ok(arrived)
+    }
+
+    fn poll(&mut self) -> Result<GranularArrivals, GpuError> {
+        let device = self.device.clone();
+        match self.field.as_mut() {
+            Some(f) => f.poll(&device),
+            None => Ok(GranularArrivals::default()),
+        }
+    }
+
+    fn stop(&mut self) -> Result<GranularArrivals, GpuError> {
+        let Some(field) = self.field.take() else {
+            return Ok(GranularArrivals::default());
+        };
+        let (arrived, passes) = field.finish(&self.device, &self.queue)?;
+        self.passes = Some(passes);
+        Ok(arrived)
+    }
+
+    fn shifts(&self) -> bool {
+        true
+    }
+
+    fn shift(&mut self, map: &FixedPointMap, offset: IVec2, tag: u64) -> Result<bool, GpuError> {
+        let (device, queue) = (self.device.clone(), self.queue.clone());
+        let field = self.field_mut()?;
+        let (retired, _) = field.shift(&device, &queue, map, offset, tag)?;
+        self.retired = Some(retired);
+        Ok(true)
+    }
+
+    fn poll_retired(&mut self) -> Result<GranularArrivals, GpuError> {
+        let Some(r) = self.retired.as_mut() else {
+            return Ok(GranularArrivals::default());
+        };
+        let arrived = r.poll(&self.device)?;
+        if !arrived.in_flight {
+            self.retired = None;
+        }
+        Ok(arrived)
+    }
+
+    fn drain_retired(&mut self) -> Result<GranularArrivals, GpuError> {
+        let Some(mut r) = self.retired.take() else {
+            return Ok(GranularArrivals::default());
+        };
+        r.drain(&self.device, &self.queue)
+    }
+}
