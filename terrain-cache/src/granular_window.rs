@@ -133,14 +133,23 @@ impl GranularWindow {
 
     /// Whether the taken window holds the square of `margin_m` metres around each of `points`
     /// (metres, X Z) inside it: `false` when there is no window or one point is nearer its
-    /// edge (the caller then releases it and takes one around the points).
+    /// edge (the caller then releases it and takes one around the points). An edge on the
+    /// world's edge needs no margin: no window reaches further (else objects beside the
+    /// world's edge would move the window every frame).
     pub fn covers(&self, points: &[Vec2], margin_m: f32) -> bool {
         let Some(t) = &self.taken else {
             return false;
         };
         let ts = self.manifest.texel_size;
-        let lo = t.rect.min.as_vec2() * ts + margin_m;
-        let hi = t.rect.max().as_vec2() * ts - margin_m;
+        let world = self.manifest.world_size.as_ivec2();
+        let (min, max) = (t.rect.min, t.rect.max());
+        let at_min = min.cmple(IVec2::ZERO);
+        let lo = Vec2::select(at_min, Vec2::NEG_INFINITY, min.as_vec2() * ts + margin_m);
+        let hi = Vec2::select(
+            max.cmpge(world),
+            Vec2::INFINITY,
+            max.as_vec2() * ts - margin_m,
+        );
         points
             .iter()
             .all(|p| p.cmpge(lo).all() && p.cmple(hi).all())

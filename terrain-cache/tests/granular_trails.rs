@@ -224,16 +224,26 @@ fn config() -> TrailConfig {
 /// Drives a wheel from x = 10 to x = 110 m along z = 60, 1.5 m a frame, on the CPU
 /// (`gpu` none) or through `gpu`; returns the frames, the world's heights after release and
 /// the windows released.
-fn drive(mut gpu: Option<&mut LateStepper>) -> (Vec<TrailFrame>, Grid<u16>, u32) {
+fn drive(gpu: Option<&mut LateStepper>) -> (Vec<TrailFrame>, Grid<u16>, u32) {
+    let path: Vec<(Vec2, Vec2)> = (0..68)
+        .map(|i| (Vec2::new(10.0 + 1.5 * i as f32, 60.0), Vec2::X))
+        .collect();
+    drive_along(gpu, &path)
+}
+
+/// [`drive`] along `path`: the wheel's position and heading (the window moves on 10 m ahead).
+fn drive_along(
+    mut gpu: Option<&mut LateStepper>,
+    path: &[(Vec2, Vec2)],
+) -> (Vec<TrailFrame>, Grid<u16>, u32) {
     let world = world();
     let mut pool = loaded_pool(&world);
     let mut trails =
         GranularTrails::new(world.manifest(), GranularParams::snow(), config()).unwrap();
     let wheel = TriMesh::wheel(2.0, 1.0, 16).unwrap();
     let mut frames = Vec::new();
-    for i in 0..68u64 {
-        let xz = Vec2::new(10.0 + 1.5 * i as f32, 60.0);
-        let ahead = xz + Vec2::X * 10.0;
+    for (i, &(xz, heading)) in (0u64..).zip(path) {
+        let ahead = xz + heading * 10.0;
         let before = trails.window();
         let stops = gpu.as_deref().map_or(0, |late| late.stopped.len());
         let mut frame = trails
@@ -370,6 +380,38 @@ fn a_shifting_stepper_moves_on_without_a_wait_and_leaves_the_cpu_world() {
     // The waiting stepper leaves the same world too.
     let (_, waited, _) = drive(Some(&mut LateStepper::new(0)));
     assert!(waited.as_slice() == on_cpu.as_slice());
+}
+
+#[test]
+fn shifting_along_the_world_edge_and_after_a_jump_keeps_every_unit() {
+    // Along the world's edge (the window clamped there needs no margin on that side, or it
+    // would move every frame), then a jump to the far corner (windows that share nothing)
+    // and back along the other edge, off the world for a while.
+    let mut path: Vec<(Vec2, Vec2)> = (0..40)
+        .map(|i| (Vec2::new(6.0 + 2.5 * i as f32, 1.5), Vec2::X))
+        .collect();
+    path.extend((0..40).map(|i| (Vec2::new(126.0, 124.0 - 3.5 * i as f32), Vec2::NEG_Y)));
+    path.extend((0..12).map(|i| (Vec2::new(140.0 + i as f32, 10.0), Vec2::X)));
+    let (_, on_cpu, cpu_windows) = drive_along(None, &path);
+    let mut late = LateStepper::shifting(2);
+    let (frames, after, released) = drive_along(Some(&mut late), &path);
+    assert!(late.shifts >= 3, "{} shifts", late.shifts);
+    // One window along the bottom edge beyond the first moves, then the jump.
+    assert!(
+        cpu_windows <= 12,
+        "{cpu_windows} windows: moved every frame at the edge"
+    );
+    let forced = frames
+        .iter()
+        .filter(|f| f.move_waited == Some(true))
+        .count() as u32;
+    assert_eq!(released, late.shifts + forced + 1);
+    let measured: Vec<_> = frames.iter().flat_map(|f| f.measured.iter()).collect();
+    assert_eq!(measured.len(), frames.len(), "a step's measure was lost");
+    for m in &measured {
+        assert_eq!(Some(m.volume), m.volume_taken, "step {}", m.tag);
+    }
+    assert!(after.as_slice() == on_cpu.as_slice(), "the world differs");
 }
 
 #[test]
