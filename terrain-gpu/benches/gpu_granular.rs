@@ -2,7 +2,8 @@
 //! 10 scatter slope iterations) and of the whole step over one active area of about 3 774, 15 100, 60 398 and
 //! 241 591 columns on maps of 512 to 4096 a side (the setting of Persson 2019, table 5.4), as the
 //! wall time of submit + wait measured by `GpuTimer`; then whole steps with 1 to 8 vehicles,
-//! active areas versus the full map (table 5.7). Prints the adapter first.
+//! active areas versus the full map (table 5.7); then a streamed world's granular window moving
+//! on, shifted on the GPU or stopped and started again. Prints the adapter first.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use glam::{Affine3A, Vec3};
@@ -13,8 +14,8 @@ use terrain_core::granular::{
 };
 use terrain_core::{FixedPointMap, Grid, Rect};
 use terrain_gpu::granular::{
-    DisplacePass, GpuGranularStep, GranularArea, GranularScratch, JumpFloodPass, PenetrationPass,
-    SlopePass, SlopeSettings,
+    DisplacePass, GpuGranularStep, GranularArea, GranularField, GranularScratch, JumpFloodPass,
+    PenetrationPass, SlopePass, SlopeSettings,
 };
 use terrain_gpu::{GpuContext, GpuError, GpuHeightMap, GpuTimer};
 
@@ -184,6 +185,7 @@ fn bench(c: &mut Criterion) {
     }
     group.finish();
     vehicles(c, &ctx);
+    window_moves(c, &ctx);
     ctx.check().expect("validation");
 }
 
@@ -247,6 +249,61 @@ fn vehicles(c: &mut Criterion, ctx: &GpuContext) {
             gmap.write(queue, &snow).expect("reset");
         }
     }
+    g.finish();
+}
+
+/// A streamed world's granular window (128^2, a wheel's step just submitted) moving on, as the
+/// frame thread sees it: `GranularField::shift` (the shared columns copied on the GPU, nothing
+/// waited for) against stopping the map (`finish`, which waits for the step's readbacks) and
+/// starting the next from its passes. Only the move is timed; the drains after it are not.
+fn window_moves(c: &mut Criterion, ctx: &GpuContext) {
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let mut g = c.benchmark_group("gpu_granular_window_move_128");
+    g.sample_size(10);
+    g.warm_up_time(Duration::from_millis(200));
+    g.measurement_time(Duration::from_secs(2));
+    let map =
+        FixedPointMap::fixed_point(Grid::new(128, 128, 10_000u32).expect("grid"), 10_000, 0.5)
+            .expect("map");
+    let wheel = TriMesh::wheel(0.6, 0.3, 24).expect("wheel");
+    let at = Affine3A::from_translation(Vec3::new(40.0, 1.5, 32.0));
+    let objs = [GranularObject::new(&wheel, at)];
+    let params = GranularParams::snow();
+    let mut field = Some(GranularField::new(device, queue, &map, params, None).expect("field"));
+    g.bench_function("shift", |b| {
+        b.iter_custom(|iters| {
+            let f = field.as_mut().expect("field");
+            (0..iters)
+                .map(|i| {
+                    f.step(device, queue, &objs, i).expect("step");
+                    let t = std::time::Instant::now();
+                    let (mut retired, _) = f
+                        .shift(device, queue, &map, IVec2::new(32, 0), u64::MAX)
+                        .expect("shift");
+                    let spent = t.elapsed();
+                    retired.drain(device, queue).expect("drain retired");
+                    f.drain(device, queue).expect("drain");
+                    spent
+                })
+                .sum()
+        })
+    });
+    g.bench_function("stop_and_start", |b| {
+        b.iter_custom(|iters| {
+            (0..iters)
+                .map(|i| {
+                    let mut f = field.take().expect("field");
+                    f.step(device, queue, &objs, i).expect("step");
+                    let t = std::time::Instant::now();
+                    let (_, passes) = f.finish(device, queue).expect("finish");
+                    let next = GranularField::new(device, queue, &map, params, Some(passes));
+                    let spent = t.elapsed();
+                    field = Some(next.expect("field"));
+                    spent
+                })
+                .sum()
+        })
+    });
     g.finish();
 }
 
