@@ -75,7 +75,7 @@ pub mod testing;
 // imports give the crate's own code the short paths `crate::<module>`.
 use device::{
     context, detail_readback, detail_stream, download, limits, profiler, queued_readback, readback,
-    region_source, small_readback, step_timer, timer,
+    region_source, small_readback, step_timer, submit, timer,
 };
 use passes::{atlas_stamper, density, detail_probe, material_effect, normals, spill, stamp};
 use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
@@ -119,6 +119,7 @@ pub use small_readback::{MAX_SMALL_READBACK_BYTES, MAX_SMALL_READBACK_RING, Smal
 pub use spill::{SpillPass, SpillTargets, SpilledStamp};
 pub use stamp::{GpuProceduralStamp, GpuStamp, GpuTextureStamp, StampOp, StampPass};
 pub use step_timer::{StepFigure, StepTimer, TimedSpan, TimingMode};
+pub use submit::{PlainSubmit, Submit};
 pub use target::TargetFormat;
 pub use terrain::{TESS_CAPACITY, TerrainFrame, TerrainRenderer, TerrainView};
 pub use tessellation::{GpuTessellation, TessDraw, TessRenderer, TessWorld, TessellationPass};

@@ -1,56 +1,37 @@
 //! Granular deformation in the GPU scene: terrain-gpu's `GranularField` (the snow scenario's
-//! field, or a streamed world's granular window), its two submits timed as the frame's steps,
-//! and terrain-cache's `GranularStepper` over it for the world's trails.
+//! field, drawn) and `FieldStepper` (a streamed world's granular trails), their two submits
+//! timed as the frame's steps through [`TimedSubmit`].
 
 use super::*;
 use terrain_core::granular::GranularArrivals;
-use terrain_gpu::granular::GranularField;
+use terrain_gpu::granular::{FieldStepper, GranularField, Submitting};
 
-/// The scene as the world trails' GPU side, each step timed into `timings`.
-pub struct TimedGranular<'a> {
-    /// The scene whose granular field steps.
-    pub scene: &'a mut GpuScene,
-    /// The frame's timings.
-    pub timings: &'a mut Timings,
+/// terrain-gpu's `Submit` through the scene's timer: each submit timed as the frame's step of
+/// its name (a granular step's two as [`Step::GranularGpu`] and [`Step::NormalsGpu`]).
+pub struct TimedSubmit<'a> {
+    ctx: &'a GpuContext,
+    timer: &'a mut FrameTimer,
+    timings: &'a mut Timings,
 }
 
-impl terrain_cache::GranularStepper for TimedGranular<'_> {
-    type Error = anyhow::Error;
-
-    fn start(&mut self, map: &FixedPointMap, params: GranularParams) -> Result<()> {
-        self.scene.enable_granular(map, params)
-    }
-
-    fn step(&mut self, objects: &[GranularObject<'_>], tag: u64) -> Result<GranularArrivals> {
-        let (_, arrivals) = self
-            .scene
-            .granular_step_tagged(objects, tag, self.timings)?;
-        Ok(arrivals)
-    }
-
-    fn poll(&mut self) -> Result<GranularArrivals> {
-        self.scene.poll_granular()
-    }
-
-    fn stop(&mut self) -> Result<GranularArrivals> {
-        self.scene.disable_granular()
-    }
-
-    fn shifts(&self) -> bool {
-        true
-    }
-
-    fn shift(&mut self, map: &FixedPointMap, offset: glam::IVec2, tag: u64) -> Result<bool> {
-        self.scene.shift_granular(map, offset, tag)?;
-        Ok(true)
-    }
-
-    fn poll_retired(&mut self) -> Result<GranularArrivals> {
-        self.scene.retired_granular(false)
-    }
-
-    fn drain_retired(&mut self) -> Result<GranularArrivals> {
-        self.scene.retired_granular(true)
+impl terrain_gpu::Submit for TimedSubmit<'_> {
+    fn submit(
+        &mut self,
+        name: &'static str,
+        work: &mut dyn FnMut(&mut wgpu::CommandEncoder) -> Result<(), terrain_gpu::GpuError>,
+    ) -> Result<(), terrain_gpu::GpuError> {
+        let step = match name {
+            GranularField::STEP => Step::GranularGpu,
+            GranularField::FOLLOW_UP => Step::NormalsGpu,
+            _ => Step::ALL
+                .into_iter()
+                .find(|s| s.name() == name)
+                .unwrap_or(Step::Render),
+        };
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let span = self.timer.time(device, queue, step, work)?;
+        span.record(self.timings);
+        Ok(())
     }
 }
 
@@ -65,28 +46,8 @@ impl GpuScene {
     ) -> Result<(Vec<Rect>, GranularArrivals)> {
         // The frame being stepped (the scene counts the frames it renders).
         let tag = u64::from(self.frames);
-        self.granular_step_tagged(objects, tag, timings)
-    }
-
-    fn granular_step_tagged(
-        &mut self,
-        objects: &[GranularObject<'_>],
-        tag: u64,
-        timings: &mut Timings,
-    ) -> Result<(Vec<Rect>, GranularArrivals)> {
         self.granular_step_inner(objects, tag, timings)
             .map_err(|e| self.lost_or(e))
-    }
-
-    /// The granular areas and measures of earlier steps that have arrived (never waits), and
-    /// whether any is still on its way.
-    pub fn poll_granular(&mut self) -> Result<GranularArrivals> {
-        let device = &self.ctx.device;
-        let polled = match self.granular.as_mut() {
-            Some(g) => g.poll(device),
-            None => Ok(GranularArrivals::default()),
-        };
-        polled.map_err(|e| self.lost_or(e.into()))
     }
 
     /// Waits for every granular area and measure still on its way, so the CPU copy gets the
@@ -100,68 +61,24 @@ impl GpuScene {
         drained.map_err(|e| self.lost_or(e.into()))
     }
 
-    /// Drains the granular field and frees its GPU map, keeping its passes for the next one:
-    /// a streamed world's granular window that moves on.
-    pub fn disable_granular(&mut self) -> Result<GranularArrivals> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let Some(field) = self.granular.take() else {
-            return Ok(GranularArrivals::default());
-        };
-        match field.finish(device, queue) {
-            Ok((arrivals, passes)) => {
-                self.granular_passes = Some(passes);
-                Ok(arrivals)
-            }
-            Err(e) => Err(self.lost_or(e.into())),
-        }
-    }
-
-    /// Moves the granular field onto the next window of a world's trails without a wait
-    /// (terrain-gpu's `GranularField::shift`); the old map's readbacks go on arriving through
-    /// [`Self::retired_granular`].
-    pub fn shift_granular(
-        &mut self,
-        map: &FixedPointMap,
-        offset: glam::IVec2,
-        tag: u64,
-    ) -> Result<()> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let Some(g) = self.granular.as_mut() else {
-            anyhow::bail!("granular deformation was not enabled on the GPU scene");
-        };
-        match g.shift(device, queue, map, offset, tag) {
-            Ok((retired, _)) => {
-                self.granular_retired = Some(retired);
-                Ok(())
-            }
-            Err(e) => Err(self.lost_or(e.into())),
-        }
-    }
-
-    /// What arrived of the map the granular field moved away from (`wait`: all of it); the
-    /// readbacks are freed once nothing is in flight.
-    pub fn retired_granular(&mut self, wait: bool) -> Result<GranularArrivals> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let Some(r) = self.granular_retired.as_mut() else {
-            return Ok(GranularArrivals::default());
-        };
-        let arrived = match wait {
-            true => r.drain(device, queue),
-            false => r.poll(device),
-        };
-        let arrived = arrived.map_err(|e| self.lost_or(e.into()))?;
-        if !arrived.in_flight {
-            self.granular_retired = None;
-        }
-        Ok(arrived)
+    /// The world trails' GPU side (terrain-gpu's `FieldStepper`, made on first use), each
+    /// step timed into `timings`.
+    pub fn trails<'s>(&'s mut self, timings: &'s mut Timings) -> Submitting<'s, TimedSubmit<'s>> {
+        let ctx = &self.ctx;
+        let stepper =
+            (self.trails).get_or_insert_with(|| FieldStepper::new(&ctx.device, &ctx.queue));
+        stepper.submitting(TimedSubmit {
+            ctx,
+            timer: &mut self.timer,
+            timings,
+        })
     }
 
     /// Moves granular deformation onto the GPU: uploads `map` once (after this, the GPU map is
     /// the one deformed and drawn) with the passes kept from the last field if they fit.
     pub fn enable_granular(&mut self, map: &FixedPointMap, params: GranularParams) -> Result<()> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let passes = self.granular_passes.take();
-        let field = GranularField::new(device, queue, map, params, passes)?;
+        let field = GranularField::new(device, queue, map, params, None)?;
         // Culling boxes: granular material only moves where objects push it, so the surface
         // stays within a couple of metres of the initial heights. A streamed world's granular
         // window is drawn through the atlas: its range stands.
@@ -188,27 +105,17 @@ impl GpuScene {
         tag: u64,
         timings: &mut Timings,
     ) -> Result<(Vec<Rect>, GranularArrivals)> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let (ctx, timer) = (&self.ctx, &mut self.timer);
         let Some(g) = self.granular.as_mut() else {
             anyhow::bail!("granular deformation was not enabled on the GPU scene");
         };
-        let arrivals = g.poll(device)?;
-        let mut areas = Vec::new();
-        let step_time = self
-            .timer
-            .time(device, queue, Step::GranularGpu, |encoder| {
-                areas = g.encode_step(device, queue, encoder, objects)?;
-                Ok(())
-            })?;
-        g.recall_step();
-        let normal_time = self
-            .timer
-            .time(device, queue, Step::NormalsGpu, |encoder| {
-                g.encode_follow_up(device, queue, encoder, &areas, tag)
-            })?;
-        g.recall_follow_up();
-        step_time.record(timings);
-        normal_time.record(timings);
+        let arrivals = g.poll(&ctx.device)?;
+        let mut timed = TimedSubmit {
+            ctx,
+            timer,
+            timings,
+        };
+        let areas = g.step_with(&ctx.device, &ctx.queue, &mut timed, objects, tag)?;
         Ok((areas, arrivals))
     }
 }

@@ -10,7 +10,7 @@ use terrain_core::detail::DetailLayout;
 use terrain_core::granular::{GranularObject, GranularParams};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_core::{FixedPointMap, Rect, StampPlacement};
-use terrain_gpu::granular::{GranularField, GranularPasses};
+use terrain_gpu::granular::GranularField;
 use terrain_gpu::{
     AtlasStamp, AtlasStampOp, AtlasStamper, ClipmapSurface, DetailShading, GpuContext,
     GpuDerivativeMap, GpuHeightMap, GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass,
@@ -33,7 +33,6 @@ mod paint;
 pub use detail::{DETAIL_SLOTS, SPILL_WINDOW_TEXELS};
 use detail::{DetailScene, RefinedGeometry};
 use frame_timer::FrameTimer;
-pub use granular::TimedGranular;
 pub use paint::CRATER_DIRT;
 
 pub use terrain_gpu::Camera;
@@ -66,11 +65,8 @@ pub struct GpuScene {
     height_range: (f32, f32),
     /// Granular deformation on the GPU (the snow scenario), drawn instead of the coarse-map.
     granular: Option<GranularField>,
-    /// The passes of a granular scene disabled since (a world's window that moved), kept for
-    /// the next window: building them again took llvmpipe 45-48 ms on the frame thread.
-    granular_passes: Option<GranularPasses>,
-    /// The readbacks of the map a world's granular window moved away from (`shift`).
-    granular_retired: Option<terrain_gpu::granular::RetiredField>,
+    /// A streamed world's granular trails on the GPU (made on first use).
+    trails: Option<terrain_gpu::granular::FieldStepper>,
     /// A streamed world's tile atlas (the flyover), drawn instead of the coarse-map.
     atlas: Option<GpuTileAtlas>,
     /// Stamps on atlas tiles, their changed rects read back.
@@ -247,8 +243,7 @@ impl GpuScene {
             timer,
             height_range: (lo, hi),
             granular: None,
-            granular_passes: None,
-            granular_retired: None,
+            trails: None,
             atlas: None,
             tile_stamper: None,
             detail: None,

@@ -1,9 +1,9 @@
 //! The world scenario's vehicle: four wheels that push the ground aside as granular material
 //! (Persson 2019, ch. 4) inside terrain-cache's `GranularTrails`, which keeps its window
-//! around them, steps it (on the GPU scene through `TimedGranular`, or on the CPU) and hands
+//! around them, steps it (on the GPU scene's `FieldStepper`, timed, or on the CPU) and hands
 //! the changed areas back into the RAM tiles, from where the VRAM pool re-uploads them.
 
-use crate::gpu_scene::{GpuScene, TimedGranular};
+use crate::gpu_scene::GpuScene;
 use crate::timings::{GranularFigure, Step, Timings};
 use anyhow::{Context, Result};
 use glam::{Affine3A, Quat, Vec2, Vec3};
@@ -71,10 +71,9 @@ impl Trails {
         let wheels = wheel_positions(centre, heading);
         let side_m = WINDOW_SIDE as f32 * pool.world().manifest().texel_size;
         let ahead = centre + heading * (side_m * 0.25);
-        let mut gpu = scene.as_deref_mut().map(|scene| TimedGranular {
-            scene,
-            timings: &mut *timings,
-        });
+        let mut gpu = scene
+            .as_deref_mut()
+            .map(|scene| scene.trails(&mut *timings));
         let mut frame =
             (self.trails).follow(pool, gpu.as_mut(), &wheels, ahead, camera, others_in_flight)?;
         let (Some(ground), Some(window)) = (self.trails.ground(), self.trails.window()) else {
@@ -97,10 +96,7 @@ impl Trails {
             .collect();
         let tag = scene.as_deref().map_or(0, GpuScene::frames_rendered);
         let t = std::time::Instant::now();
-        let mut gpu = scene.map(|scene| TimedGranular {
-            scene,
-            timings: &mut *timings,
-        });
+        let mut gpu = scene.map(|scene| scene.trails(&mut *timings));
         (self.trails).step(pool, gpu.as_mut(), &objects, tag, &mut frame)?;
         let step_ms = crate::timings::ms_since(t);
         if frame.on_gpu == Some(false) {
@@ -117,7 +113,7 @@ impl Trails {
         scene: Option<&mut GpuScene>,
         timings: &mut Timings,
     ) -> Result<(HandedBack, Vec<GranularFigure>)> {
-        let mut gpu = scene.map(|scene| TimedGranular { scene, timings });
+        let mut gpu = scene.map(|scene| scene.trails(timings));
         let (changed, measured) = self.trails.release(pool, gpu.as_mut())?;
         Ok((changed, figures(&measured)))
     }

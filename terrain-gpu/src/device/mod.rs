@@ -14,5 +14,6 @@ pub mod region_source;
 pub mod scope;
 pub mod small_readback;
 pub mod step_timer;
+pub mod submit;
 pub mod timer;
 pub(crate) mod trace;

@@ -20,7 +20,7 @@
 use super::{
     GpuGranularNormals, GpuGranularStep, GranularNormalsPass, StepMeasures, Trail, VolumePass,
 };
-use crate::{GpuError, GpuHeightMap, GpuMaterialLayer, QueuedReadback};
+use crate::{GpuError, GpuHeightMap, GpuMaterialLayer, PlainSubmit, QueuedReadback, Submit};
 use glam::{IVec2, UVec2};
 use terrain_core::granular::{GranularArrivals, GranularObject, GranularParams};
 use terrain_core::{FixedPointMap, MaterialEffect, Rect};
@@ -70,6 +70,11 @@ impl GranularPasses {
 }
 
 impl GranularField {
+    /// The name of a step's first submit ([`Self::step_with`]): the step itself.
+    pub const STEP: &'static str = "granular_step";
+    /// The name of a step's second submit: normals, volume sum, readback requests.
+    pub const FOLLOW_UP: &'static str = "granular_follow_up";
+
     /// Uploads `map` (after this, the GPU map is the one deformed and drawn) and computes its
     /// first normals in one submit, with `passes` when they step with `params` (else new ones).
     pub fn new(
@@ -203,13 +208,29 @@ impl GranularField {
         objects: &[GranularObject<'_>],
         tag: u64,
     ) -> Result<Vec<Rect>, GpuError> {
-        let mut encoder = device.create_command_encoder(&Default::default());
-        let areas = self.encode_step(device, queue, &mut encoder, objects)?;
-        queue.submit([encoder.finish()]);
+        let mut plain = PlainSubmit { device, queue };
+        self.step_with(device, queue, &mut plain, objects, tag)
+    }
+
+    /// [`Self::step`] with its two submits, named [`Self::STEP`] and [`Self::FOLLOW_UP`], made
+    /// through `submit` (to time them, say).
+    pub fn step_with(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        submit: &mut dyn Submit,
+        objects: &[GranularObject<'_>],
+        tag: u64,
+    ) -> Result<Vec<Rect>, GpuError> {
+        let mut areas = Vec::new();
+        submit.submit(Self::STEP, &mut |encoder| {
+            areas = self.encode_step(device, queue, encoder, objects)?;
+            Ok(())
+        })?;
         self.recall_step();
-        let mut encoder = device.create_command_encoder(&Default::default());
-        self.encode_follow_up(device, queue, &mut encoder, &areas, tag)?;
-        queue.submit([encoder.finish()]);
+        submit.submit(Self::FOLLOW_UP, &mut |encoder| {
+            self.encode_follow_up(device, queue, encoder, &areas, tag)
+        })?;
         self.recall_follow_up();
         Ok(areas)
     }

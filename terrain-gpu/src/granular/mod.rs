@@ -43,7 +43,7 @@ pub use passes::{
 };
 pub use scratch::{GranularArea, GranularScratch};
 pub use step::{DepthSource, GpuGranularStep, GpuStepReport};
-pub use stepper::FieldStepper;
+pub use stepper::{FieldStepper, Submitting};
 pub use terrain_core::granular::GranularArrivals;
 pub use trail::{Trail, TrailEffectPass};
 pub use volume::VolumePass;

@@ -2,11 +2,11 @@
 //! trails on a streamed world (terrain-cache's `GranularTrails`) step on the GPU with no code
 //! of the application's: plain submits, each window's map moved on to the next without a wait
 //! ([`GranularField::shift`]), the compiled passes kept from one window to the next. An
-//! application that times or batches its submits implements the trait over the field's
-//! `encode_*` calls instead.
+//! application that times its submits steps through [`FieldStepper::submitting`], with its
+//! own [`Submit`].
 
 use super::{DepthSource, GranularField, GranularPasses, RetiredField};
-use crate::GpuError;
+use crate::{GpuError, PlainSubmit, Submit};
 use glam::IVec2;
 use terrain_core::FixedPointMap;
 use terrain_core::granular::{GranularArrivals, GranularObject, GranularParams, GranularStepper};
@@ -54,8 +54,78 @@ impl FieldStepper {
         self.field.as_ref()
     }
 
+    /// This stepper with its steps' two submits made through `submit` (to time them, say:
+    /// [`GranularField::step_with`]), for a frame's calls.
+    pub fn submitting<S: Submit>(&mut self, submit: S) -> Submitting<'_, S> {
+        Submitting {
+            stepper: self,
+            submit,
+        }
+    }
+
     fn field_mut(&mut self) -> Result<&mut GranularField, GpuError> {
         self.field.as_mut().ok_or(NOT_STARTED)
+    }
+
+    /// What arrived, then one step through `submit`.
+    fn step_via(
+        &mut self,
+        submit: &mut dyn Submit,
+        objects: &[GranularObject<'_>],
+        tag: u64,
+    ) -> Result<GranularArrivals, GpuError> {
+        let (device, queue) = (self.device.clone(), self.queue.clone());
+        let field = self.field_mut()?;
+        let arrived = field.poll(&device)?;
+        field.step_with(&device, &queue, submit, objects, tag)?;
+        Ok(arrived)
+    }
+}
+
+/// A [`FieldStepper`] whose steps submit through `S` ([`FieldStepper::submitting`]).
+#[derive(Debug)]
+pub struct Submitting<'a, S: Submit> {
+    stepper: &'a mut FieldStepper,
+    submit: S,
+}
+
+impl<S: Submit> GranularStepper for Submitting<'_, S> {
+    type Error = GpuError;
+
+    fn start(&mut self, map: &FixedPointMap, params: GranularParams) -> Result<(), GpuError> {
+        self.stepper.start(map, params)
+    }
+
+    fn step(
+        &mut self,
+        objects: &[GranularObject<'_>],
+        tag: u64,
+    ) -> Result<GranularArrivals, GpuError> {
+        self.stepper.step_via(&mut self.submit, objects, tag)
+    }
+
+    fn poll(&mut self) -> Result<GranularArrivals, GpuError> {
+        self.stepper.poll()
+    }
+
+    fn stop(&mut self) -> Result<GranularArrivals, GpuError> {
+        self.stepper.stop()
+    }
+
+    fn shifts(&self) -> bool {
+        self.stepper.shifts()
+    }
+
+    fn shift(&mut self, map: &FixedPointMap, offset: IVec2, tag: u64) -> Result<bool, GpuError> {
+        self.stepper.shift(map, offset, tag)
+    }
+
+    fn poll_retired(&mut self) -> Result<GranularArrivals, GpuError> {
+        self.stepper.poll_retired()
+    }
+
+    fn drain_retired(&mut self) -> Result<GranularArrivals, GpuError> {
+        self.stepper.drain_retired()
     }
 }
 
@@ -76,10 +146,14 @@ impl GranularStepper for FieldStepper {
         tag: u64,
     ) -> Result<GranularArrivals, GpuError> {
         let (device, queue) = (self.device.clone(), self.queue.clone());
-        let field = self.field_mut()?;
-        let arrived = field.poll(&device)?;
-        field.step(&device, &queue, objects, tag)?;
-        Ok(arrived)
+        self.step_via(
+            &mut PlainSubmit {
+                device: &device,
+                queue: &queue,
+            },
+            objects,
+            tag,
+        )
     }
 
     fn poll(&mut self) -> Result<GranularArrivals, GpuError> {
