@@ -181,6 +181,7 @@ fn main() -> Result<()> {
             queue: &queue,
             atlas: &atlas,
             stamper: &mut stamper,
+            submit: None,
         };
         let report = tile_stamps.apply(&mut ram, Some(&mut vram), &mut deformer)?;
         (gpu_tiles, cpu_tiles) = (gpu_tiles + report.gpu_tiles, cpu_tiles + report.cpu_tiles);

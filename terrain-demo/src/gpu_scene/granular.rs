@@ -7,11 +7,30 @@ use terrain_core::granular::GranularArrivals;
 use terrain_gpu::granular::{FieldStepper, GranularField, Submitting};
 
 /// terrain-gpu's `Submit` through the scene's timer: each submit timed as the frame's step of
-/// its name (a granular step's two as [`Step::GranularGpu`] and [`Step::NormalsGpu`]).
+/// its name (a granular step's two as [`Step::GranularGpu`] and [`Step::NormalsGpu`], a tile
+/// stamp's as [`Step::StampGpu`]; a name of no step is submitted untimed).
 pub struct TimedSubmit<'a> {
     ctx: &'a GpuContext,
     timer: &'a mut FrameTimer,
     timings: &'a mut Timings,
+    spent_ms: f64,
+}
+
+impl<'a> TimedSubmit<'a> {
+    /// Submits on `ctx`, timed by `timer` into `timings`.
+    pub fn new(ctx: &'a GpuContext, timer: &'a mut FrameTimer, timings: &'a mut Timings) -> Self {
+        Self {
+            ctx,
+            timer,
+            timings,
+            spent_ms: 0.0,
+        }
+    }
+
+    /// Wall milliseconds spent in its submits so far (work the frame thread did not do).
+    pub fn spent_ms(&self) -> f64 {
+        self.spent_ms
+    }
 }
 
 impl terrain_gpu::Submit for TimedSubmit<'_> {
@@ -21,16 +40,25 @@ impl terrain_gpu::Submit for TimedSubmit<'_> {
         work: &mut dyn FnMut(&mut wgpu::CommandEncoder) -> Result<(), terrain_gpu::GpuError>,
     ) -> Result<(), terrain_gpu::GpuError> {
         let step = match name {
-            GranularField::STEP => Step::GranularGpu,
-            GranularField::FOLLOW_UP => Step::NormalsGpu,
-            _ => Step::ALL
-                .into_iter()
-                .find(|s| s.name() == name)
-                .unwrap_or(Step::Render),
+            GranularField::STEP => Some(Step::GranularGpu),
+            GranularField::FOLLOW_UP => Some(Step::NormalsGpu),
+            terrain_gpu::AtlasStamper::STAMP => Some(Step::StampGpu),
+            _ => Step::ALL.into_iter().find(|s| s.name() == name),
         };
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let span = self.timer.time(device, queue, step, work)?;
-        span.record(self.timings);
+        let t = std::time::Instant::now();
+        match step {
+            Some(step) => self
+                .timer
+                .time(device, queue, step, work)?
+                .record(self.timings),
+            None => terrain_gpu::Submit::submit(
+                &mut terrain_gpu::PlainSubmit { device, queue },
+                name,
+                work,
+            )?,
+        }
+        self.spent_ms += crate::timings::ms_since(t);
         Ok(())
     }
 }
@@ -67,15 +95,11 @@ impl GpuScene {
         let ctx = &self.ctx;
         let stepper =
             (self.trails).get_or_insert_with(|| FieldStepper::new(&ctx.device, &ctx.queue));
-        stepper.submitting(TimedSubmit {
-            ctx,
-            timer: &mut self.timer,
-            timings,
-        })
+        stepper.submitting(TimedSubmit::new(ctx, &mut self.timer, timings))
     }
 
     /// Moves granular deformation onto the GPU: uploads `map` once (after this, the GPU map is
-    /// the one deformed and drawn) with the passes kept from the last field if they fit.
+    /// the one deformed and drawn)
     pub fn enable_granular(&mut self, map: &FixedPointMap, params: GranularParams) -> Result<()> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let field = GranularField::new(device, queue, map, params, None)?;
@@ -110,11 +134,7 @@ impl GpuScene {
             anyhow::bail!("granular deformation was not enabled on the GPU scene");
         };
         let arrivals = g.poll(&ctx.device)?;
-        let mut timed = TimedSubmit {
-            ctx,
-            timer,
-            timings,
-        };
+        let mut timed = TimedSubmit::new(ctx, timer, timings);
         let areas = g.step_with(&ctx.device, &ctx.queue, &mut timed, objects, tag)?;
         Ok((areas, arrivals))
     }

@@ -9,13 +9,13 @@ use terrain_cache::detail::{DetailCache, DetailFrame};
 use terrain_core::detail::DetailLayout;
 use terrain_core::granular::{GranularObject, GranularParams};
 use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
-use terrain_core::{FixedPointMap, Rect, StampPlacement};
+use terrain_core::{FixedPointMap, Rect};
 use terrain_gpu::granular::GranularField;
 use terrain_gpu::{
-    AtlasStamp, AtlasStampOp, AtlasStamper, ClipmapSurface, DetailShading, GpuContext,
-    GpuDerivativeMap, GpuHeightMap, GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass,
-    OffscreenTarget, RefineDraw, RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass,
-    SpillPass, StampOp, StampPass, TerrainRenderer, TerrainStyle, TerrainView,
+    AtlasStamper, ClipmapSurface, DetailShading, GpuContext, GpuDerivativeMap, GpuHeightMap,
+    GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass, OffscreenTarget, RefineDraw,
+    RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp, StampPass,
+    TerrainRenderer, TerrainStyle, TerrainView,
 };
 use terrain_lod::{CdlodConfig, CdlodTree, ClipmapLayout, TessConfig};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
@@ -93,14 +93,10 @@ pub struct GpuScene {
 /// The environment variable of [`GpuScene`]'s device-loss fault injection.
 pub const DESTROY_DEVICE_ENV: &str = "TERRAIN_DEMO_DESTROY_DEVICE_AT_FRAME";
 
-/// A rect of a deformed atlas tile on its way back to the CPU: the ticket, and the rect in
-/// the tile's texels.
-pub type TileTicket = (u64, DirtyRect);
-
 pub use terrain_gpu::ArrivedTileRect;
 
 /// The streamed world's tiles on the GPU: slots, indirection table, coarser fallback.
-pub use terrain_gpu::{AtlasConfig, GpuTileAtlas, TileSlot};
+pub use terrain_gpu::{AtlasConfig, GpuTileAtlas};
 
 /// Readbacks of deformed atlas tiles in flight at most (the ring's staging buffers).
 const TILE_READBACK_RING: usize = 16;
@@ -144,19 +140,36 @@ impl GpuScene {
         }
     }
 
-    /// Stamps a crater or a texture (a shockwave's change) on the resident atlas tile `tile`
-    /// (placement in the tile's frame, added to the heights) and requests the changed rect
-    /// back, in one submit timed as [`Step::StampGpu`]. `None` (and nothing done) when the
-    /// readback ring is full: the caller stamps it in a later frame.
-    pub fn stamp_tile(
+    /// Runs `apply` (terrain-cache's `TileStamps::apply`, say) with the atlas's deformer
+    /// (terrain-gpu's `AtlasDeformer`: each stamp in its tile's slot, the changed rect read
+    /// back), its submits timed as [`Step::StampGpu`]. Returns what `apply` returned and the
+    /// milliseconds spent in those submits.
+    pub fn with_tile_deformer<R>(
         &mut self,
-        tile: TileSlot,
-        placement: StampPlacement,
-        stamp: &terrain_core::TileStamp,
         timings: &mut Timings,
-    ) -> Result<Option<Vec<TileTicket>>> {
-        self.stamp_tile_inner(tile, placement, stamp, timings)
-            .map_err(|e| self.lost_or(e))
+        apply: impl FnOnce(&mut terrain_gpu::AtlasDeformer<'_>) -> R,
+    ) -> Result<(R, f64)> {
+        let ctx = &self.ctx;
+        let (Some(atlas), Some(stamper)) = (&self.atlas, self.tile_stamper.as_mut()) else {
+            anyhow::bail!("stamping tiles needs the tile atlas (enable_atlas)");
+        };
+        let mut submit = granular::TimedSubmit::new(ctx, &mut self.timer, timings);
+        let mut deformer = terrain_gpu::AtlasDeformer {
+            device: &ctx.device,
+            queue: &ctx.queue,
+            atlas,
+            stamper,
+            submit: Some(&mut submit),
+        };
+        let applied = apply(&mut deformer);
+        let spent = submit.spent_ms();
+        // wgpu maps a staging buffer even when the commands before it were invalid: the
+        // stamps' rects would then deliver stale bytes into the world. Refuse the frame.
+        let checked = self.ctx.check();
+        checked
+            .map_err(|e| self.lost_or(e.into()))
+            .context("stamping a tile of the streamed world")?;
+        Ok((applied, spent))
     }
 
     /// The rects of deformed atlas tiles that have arrived, never waiting; with `wait`, waits
@@ -354,41 +367,6 @@ impl GpuScene {
         self.atlas = Some(atlas);
         self.tile_stamper = Some(AtlasStamper::new(&self.ctx.device, TILE_READBACK_RING)?);
         Ok(())
-    }
-
-    fn stamp_tile_inner(
-        &mut self,
-        tile: TileSlot,
-        placement: StampPlacement,
-        stamp: &terrain_core::TileStamp,
-        timings: &mut Timings,
-    ) -> Result<Option<Vec<TileTicket>>> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let (Some(atlas), Some(stamper)) = (&self.atlas, self.tile_stamper.as_mut()) else {
-            anyhow::bail!("stamp_tile needs the tile atlas (enable_atlas)");
-        };
-        let stamp = match stamp {
-            terrain_core::TileStamp::Gaussian(g) => AtlasStamp::Gaussian(g),
-            terrain_core::TileStamp::Texture(t) => AtlasStamp::Texture(t),
-        };
-        let op = AtlasStampOp {
-            tile,
-            placement,
-            stamp,
-        };
-        let mut tickets = None;
-        let time = self.timer.time(device, queue, Step::StampGpu, |encoder| {
-            tickets = stamper.encode(device, queue, encoder, atlas, op)?;
-            Ok(())
-        })?;
-        stamper.recall();
-        // wgpu maps a staging buffer even when the commands before it were invalid: the
-        // tickets would then deliver stale bytes into the world. Refuse the frame instead.
-        self.ctx
-            .check()
-            .context("stamping a tile of the streamed world")?;
-        time.record(timings);
-        Ok(tickets)
     }
 
     fn tile_readbacks_inner(&mut self, wait: bool) -> Result<Vec<ArrivedTileRect>> {

@@ -34,7 +34,7 @@ use super::trails::Trails;
 use super::world_detail::WorldDetail;
 use super::world_files;
 use super::world_overlays::WorldOverlays;
-use super::world_stamps::{WorldDeformer, WorldShock, reach};
+use super::world_stamps::{WorldShock, reach};
 
 #[path = "world_lod.rs"]
 mod world_lod;
@@ -53,7 +53,8 @@ use terrain_cache::{
     SphericalSelection, TileGrid, TileId, TileStamps, VramConfig, VramPool, WindowFill, World,
 };
 use terrain_core::{
-    CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, TileStamp, WrapMode,
+    CoarseMap, DirtyRect, GaussianStamp, Grid, RamDeformer, Rect, StampPlacement, TileStamp,
+    WrapMode,
 };
 use terrain_lod::{CdlodConfig, TessConfig};
 use terrain_physics::CollisionWindow;
@@ -627,18 +628,21 @@ impl Scenario for FlyoverScenario {
         // this frame.
         let mut changed = Vec::new();
         {
-            let mut craters = WorldDeformer {
-                scene: ctx.gpu.as_deref_mut(),
-                timings: ctx.timings,
-                gpu_ms: 0.0,
-            };
-            // Slots are stamped only where there is a GPU to stamp them.
-            let vram = self.vram.as_mut().filter(|_| craters.scene.is_some());
             let Some(pool) = self.pool.as_mut() else {
                 bail!("the flyover's pool was shut down");
             };
-            let report = self.stamps.apply(pool, vram, &mut craters)?;
-            self.gpu_stamp_ms += craters.gpu_ms;
+            // Slots are stamped only where there is a GPU to stamp them.
+            let report = match ctx.gpu.as_deref_mut() {
+                Some(scene) => {
+                    let (stamps, vram) = (&mut self.stamps, self.vram.as_mut());
+                    let (report, ms) = scene.with_tile_deformer(ctx.timings, |deformer| {
+                        stamps.apply(pool, vram, deformer)
+                    })?;
+                    self.gpu_stamp_ms += ms;
+                    report?
+                }
+                None => self.stamps.apply(pool, None, &mut RamDeformer)?,
+            };
             self.gpu_tile_stamps += u64::from(report.gpu_tiles);
             self.cpu_tile_stamps += u64::from(report.cpu_tiles);
             for (rect, heights) in &report.changed {
@@ -824,13 +828,7 @@ impl Scenario for FlyoverScenario {
         pool.shutdown(SHUTDOWN_TIMEOUT)?;
         let mut written = self.written_back + issued as u64 + detail_written;
         // Craters whose tiles never became resident go straight into the world's files.
-        let mut timings = crate::timings::Timings::default();
-        let mut craters = WorldDeformer {
-            scene: None,
-            timings: &mut timings,
-            gpu_ms: 0.0,
-        };
-        let changed = self.stamps.finish_into_world(&world, &mut craters)?;
+        let changed = self.stamps.finish_into_world(&world, &mut RamDeformer)?;
         if !changed.is_empty() {
             written += changed.len() as u64;
             terrain_cache::rebuild_ancestors(&world, &changed)?;

@@ -1,57 +1,15 @@
 //! What the streamed world's level-0 tiles are stamped with (through terrain-cache's
 //! `TileStamps`): the flyover's craters, and the world scenario's shockwave (Flower 2010, sec.
 //! 3.4.3: the wave texture stepped each frame and stamped as its change since the last
-//! stamp), both terrain-core `TileStamp`s. [`WorldDeformer`] puts either into a tile's atlas
-//! slot on the GPU (timed) or into its RAM copy on the CPU.
+//! stamp), both terrain-core `TileStamp`s, which terrain-gpu's `AtlasDeformer` puts into a
+//! tile's atlas slot (`GpuScene::with_tile_deformer`, timed) and terrain-core's `RamDeformer`
+//! into its RAM copy.
 
 use crate::config::DemoParams;
-use crate::gpu_scene::{GpuScene, TileSlot};
-use crate::timings::{Timings, ms_since};
 use anyhow::Result;
 use glam::Vec2;
 use std::sync::Arc;
-use std::time::Instant;
-use terrain_core::{CoarseMap, Rect, Shockwave, StampPlacement, TileDeformer, TileStamp};
-
-/// Puts terrain-core's `TileStamp`s into one level-0 tile: its atlas slot on the GPU (the
-/// scene times the submit and reads the changed rects back), or its RAM copy on the CPU.
-pub struct WorldDeformer<'a> {
-    /// The GPU, when there is one.
-    pub scene: Option<&'a mut GpuScene>,
-    /// The frame's timings (the GPU stamps time themselves as `stamp_gpu`).
-    pub timings: &'a mut Timings,
-    /// Milliseconds spent in GPU stamp submits (not cache work).
-    pub gpu_ms: f64,
-}
-
-impl TileDeformer<TileStamp> for WorldDeformer<'_> {
-    type Error = anyhow::Error;
-
-    fn stamp_slot(
-        &mut self,
-        slot: u32,
-        kind: &TileStamp,
-        placement: &StampPlacement,
-    ) -> Result<Option<Vec<(u64, Rect)>>> {
-        let Some(scene) = self.scene.as_deref_mut() else {
-            return Ok(None);
-        };
-        let t = Instant::now();
-        let tile = TileSlot { slot, level: 0 };
-        let stamped = scene.stamp_tile(tile, *placement, kind, self.timings);
-        self.gpu_ms += ms_since(t);
-        stamped
-    }
-
-    fn stamp_ram(
-        &mut self,
-        kind: &TileStamp,
-        tile: &mut CoarseMap,
-        placement: &StampPlacement,
-    ) -> Result<Vec<Rect>> {
-        Ok(kind.apply(tile, placement)?)
-    }
-}
+use terrain_core::{Rect, Shockwave, StampPlacement, TileStamp};
 
 /// The level-0 texels (`texel_size` metres each) a stamp at `placement` may change (its
 /// footprint's circumscribed square, whatever its rotation).

@@ -5,7 +5,8 @@
 //! caller's; this is the GPU half of that protocol.
 
 use crate::{
-    GpuError, GpuStamp, GpuTextureStamp, GpuTileAtlas, RegionReadback, StampOp, StampPass, TileSlot,
+    GpuError, GpuStamp, GpuTextureStamp, GpuTileAtlas, PlainSubmit, RegionReadback, StampOp,
+    StampPass, Submit, TileSlot,
 };
 use terrain_core::{
     Blend, CoarseMap, GaussianStamp, Grid, Rect, StampPlacement, TextureStamp, TileDeformer,
@@ -56,6 +57,9 @@ pub struct AtlasStamper {
 }
 
 impl AtlasStamper {
+    /// The name of a stamp's submit ([`Self::stamp_with`]).
+    pub const STAMP: &'static str = "tile_stamp";
+
     /// The stamp pass and a ring of `ring` (1 to [`crate::MAX_READBACK_RING`]) readbacks: the
     /// stamps whose rects may be on their way at once.
     pub fn new(device: &wgpu::Device, ring: usize) -> Result<Self, GpuError> {
@@ -120,9 +124,27 @@ impl AtlasStamper {
         atlas: &GpuTileAtlas,
         op: AtlasStampOp<'_>,
     ) -> Result<Option<Vec<(u64, Rect)>>, GpuError> {
-        let mut encoder = device.create_command_encoder(&Default::default());
-        let tickets = self.encode(device, queue, &mut encoder, atlas, op)?;
-        queue.submit([encoder.finish()]);
+        self.stamp_with(device, queue, &mut PlainSubmit { device, queue }, atlas, op)
+    }
+
+    /// [`Self::stamp`] with its submit, named [`Self::STAMP`], made through `submit` (to time
+    /// it, say).
+    pub fn stamp_with(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        submit: &mut dyn Submit,
+        atlas: &GpuTileAtlas,
+        op: AtlasStampOp<'_>,
+    ) -> Result<Option<Vec<(u64, Rect)>>, GpuError> {
+        let mut tickets = None;
+        let mut op = Some(op);
+        submit.submit(Self::STAMP, &mut |encoder| {
+            if let Some(op) = op.take() {
+                tickets = self.encode(device, queue, encoder, atlas, op)?;
+            }
+            Ok(())
+        })?;
         self.recall();
         Ok(tickets)
     }
@@ -148,7 +170,6 @@ impl AtlasStamper {
 /// The [`TileDeformer`] of [`TileStamp`]s on a streamed world's atlas: each stamp in a submit
 /// of its own through `stamper` on the GPU, or [`TileStamp::apply`] in RAM. An application
 /// that times or batches its submits writes its own over [`AtlasStamper::encode`].
-#[derive(Debug)]
 pub struct AtlasDeformer<'a> {
     /// The device the atlas lives on.
     pub device: &'a wgpu::Device,
@@ -158,6 +179,17 @@ pub struct AtlasDeformer<'a> {
     pub atlas: &'a GpuTileAtlas,
     /// The stamper whose ring brings the changed rects back ([`AtlasStamper::poll`]).
     pub stamper: &'a mut AtlasStamper,
+    /// Where each stamp's submit goes (`None`: a plain submit; see [`AtlasStamper::stamp_with`]).
+    pub submit: Option<&'a mut dyn Submit>,
+}
+
+impl std::fmt::Debug for AtlasDeformer<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AtlasDeformer")
+            .field("stamper", &self.stamper)
+            .field("plain_submit", &self.submit.is_none())
+            .finish_non_exhaustive()
+    }
 }
 
 impl TileDeformer<TileStamp> for AtlasDeformer<'_> {
@@ -178,7 +210,14 @@ impl TileDeformer<TileStamp> for AtlasDeformer<'_> {
             placement: *placement,
             stamp,
         };
-        self.stamper.stamp(self.device, self.queue, self.atlas, op)
+        let (device, queue) = (self.device, self.queue);
+        let mut plain = PlainSubmit { device, queue };
+        let submit: &mut dyn Submit = match self.submit.as_deref_mut() {
+            Some(s) => s,
+            None => &mut plain,
+        };
+        self.stamper
+            .stamp_with(device, queue, submit, self.atlas, op)
     }
 
     fn stamp_ram(
