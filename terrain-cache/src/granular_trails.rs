@@ -103,9 +103,14 @@ pub struct TrailFrame {
     pub volume_taken: Option<u64>,
     /// Whether this frame's step ran on the GPU (`None`: no step).
     pub on_gpu: Option<bool>,
-    /// On a frame where the window moved on: whether the move had to wait (forced).
+    /// On a frame where the window moved on: whether the move had to wait (forced, or after a
+    /// failed shift).
     pub move_waited: Option<bool>,
-    /// Measures of earlier GPU steps that arrived, oldest first.
+    /// The stepper's error when it could not shift its map this frame (the window then moved
+    /// the waiting way: stopped, released, taken again).
+    pub shift_failed: Option<String>,
+    /// Measures of earlier GPU steps that arrived, in arrival order (a retiring window's last
+    /// ones may come after the moved window's first).
     pub measured: Vec<TrailMeasure>,
 }
 
@@ -171,7 +176,8 @@ impl GranularTrails {
         })
     }
 
-    /// The taken window (level-0 texels), where no other write may go until it moves.
+    /// The taken window (level-0 texels), where objects are stepped. Other writes must keep out
+    /// of [`Self::keep_out`], which also holds a retiring window.
     pub fn window(&self) -> Option<Rect> {
         self.window.rect()
     }
@@ -242,7 +248,10 @@ impl GranularTrails {
             self.retired_done = !arrivals.in_flight;
             self.try_retire(pool)?;
         }
-        let leaving = !self.window.covers(points, self.config.edge_margin_m);
+        // Objects spread wider than a window are never covered: a move to where the window
+        // already is would do nothing but wait.
+        let stays = self.window.rect() == Some(self.window.placement(ahead));
+        let leaving = !stays && !self.window.covers(points, self.config.edge_margin_m);
         let mut move_now = leaving && self.window.rect().is_none();
         if leaving && self.window.rect().is_some() {
             let shifting = self.on_gpu && gpu.as_deref().is_some_and(|g| g.shifts());
@@ -258,11 +267,17 @@ impl GranularTrails {
                     false => !arrivals.in_flight,
                 };
             }
+            let mut moved = false;
             if let (true, true, Some(g)) = (settled, shifting, gpu.as_deref_mut()) {
-                frame.move_waited = Some(false);
-                self.shift(pool, g, ahead, camera)?;
-            } else if settled || self.must_move(points) {
-                frame.move_waited = Some(!settled);
+                match self.shift(pool, g, ahead, camera) {
+                    Ok(()) => (frame.move_waited, moved) = (Some(false), true),
+                    // The stepper could not move its map: the window moves the waiting way.
+                    Err(TrailsError::Stepper(e)) => frame.shift_failed = Some(e.to_string()),
+                    Err(e) => return Err(e),
+                }
+            }
+            if !moved && (settled || self.must_move(points)) {
+                frame.move_waited = Some(!settled || frame.shift_failed.is_some());
                 let (changed, measured) = self.release(pool, gpu.as_deref_mut())?;
                 frame.changed.extend(changed);
                 frame.measured.extend(measured);
@@ -333,16 +348,22 @@ impl GranularTrails {
     ) -> Result<(), TrailsError<G::Error>> {
         let rect = self.window.placement(ahead);
         let (map, offset) = self.wait_for_tiles(pool, camera, rect, |w, p| w.shift(p, rect))?;
-        if !g
-            .shift(&map, offset, SHIFT_TAG)
-            .map_err(TrailsError::Stepper)?
-        {
-            return Err(CacheError::OutOfRange {
-                what: "granular steppers that say they shift but did not",
-                value: 0.0,
-                expected: "a stepper whose shift moves its map when shifts() is true",
+        // A stepper that could not move keeps stepping the old window: so does this.
+        match g.shift(&map, offset, SHIFT_TAG) {
+            Ok(true) => {}
+            Ok(false) => {
+                self.window.undo_shift(pool);
+                return Err(CacheError::OutOfRange {
+                    what: "granular steppers that say they shift but did not",
+                    value: 0.0,
+                    expected: "a stepper whose shift moves its map when shifts() is true",
+                }
+                .into());
             }
-            .into());
+            Err(e) => {
+                self.window.undo_shift(pool);
+                return Err(TrailsError::Stepper(e));
+            }
         }
         self.carry_ground(rect, map)?;
         self.retired_removed = std::mem::take(&mut self.removed);
@@ -372,9 +393,12 @@ impl GranularTrails {
         arrivals: &GranularArrivals,
         frame: &mut TrailFrame,
     ) -> Result<(), TrailsError<E>> {
+        let mut first = None;
         for (area, heights) in &arrivals.areas {
-            let parts = self.window.hand_back_retired(pool, *area, heights)?;
-            frame.changed.extend(parts);
+            match self.window.hand_back_retired(pool, *area, heights) {
+                Ok(parts) => frame.changed.extend(parts),
+                Err(e) => first = first.or(Some(e)),
+            }
         }
         let held = self.window.retiring_volume();
         for m in &arrivals.measured {
@@ -385,7 +409,7 @@ impl GranularTrails {
                 volume_taken: held.and_then(|v| v.checked_sub(self.retired_removed)),
             });
         }
-        Ok(())
+        first.map_or(Ok(()), |e| Err(e.into()))
     }
 
     /// Retires the retiring window once all of it has arrived and the moved window's sum is
@@ -450,23 +474,26 @@ impl GranularTrails {
         arrivals: &GranularArrivals,
         frame: &mut TrailFrame,
     ) -> Result<(), TrailsError<E>> {
+        // Everything that arrived is taken in, the first failure returned at the end.
+        let mut first = None;
         for (area, heights) in &arrivals.areas {
-            frame
-                .changed
-                .push(self.window.hand_back(pool, *area, heights)?);
+            match self.window.hand_back(pool, *area, heights) {
+                Ok(back) => frame.changed.push(back),
+                Err(e) => first = first.or(Some(e)),
+            }
         }
         for m in &arrivals.measured {
             if self.window.awaits_sum() {
-                if m.tag != SHIFT_TAG {
-                    return Err(CacheError::OutOfRange {
+                let taken = match m.tag {
+                    SHIFT_TAG => self.window.shifted_sum(m.volume),
+                    _ => Err(CacheError::OutOfRange {
                         what: "tag of the first measure after a granular shift",
                         value: m.tag as f64,
                         expected: "SHIFT_TAG: the moved map's sum comes before any step's",
-                    }
-                    .into());
-                }
-                self.window.shifted_sum(m.volume)?;
-                self.try_retire(pool)?;
+                    }),
+                };
+                let retired = taken.and_then(|()| self.try_retire(pool));
+                first = first.or(retired.err());
                 continue;
             }
             self.removed += m.removed;
@@ -476,12 +503,13 @@ impl GranularTrails {
                 volume_taken: self.window.volume_taken().checked_sub(self.removed),
             });
         }
-        Ok(())
+        first.map_or(Ok(()), |e| Err(e.into()))
     }
 
     /// Hands the last areas back (waiting for the GPU's, a retiring window's too) and releases
-    /// the window, its volume checked: when it moves on waiting, and at the end. Returns the areas handed back and the last
-    /// GPU steps' measures.
+    /// the window, its volume checked: when it moves on waiting, and at the end. Returns the
+    /// areas handed back and the last GPU steps' measures. Whatever fails, the window is
+    /// released (its tiles unpinned) and the stepper stopped; the first failure is returned.
     pub fn release<G: GranularStepper>(
         &mut self,
         pool: &mut RamPool,
@@ -491,6 +519,7 @@ impl GranularTrails {
         if self.window.rect().is_none() {
             return Ok((frame.changed, frame.measured));
         }
+        let mut first = None;
         if self.on_gpu {
             let Some(g) = gpu else {
                 return Err(CacheError::OutOfRange {
@@ -500,19 +529,30 @@ impl GranularTrails {
                 }
                 .into());
             };
+            // Every step runs whatever failed before it, the first failure returned at the
+            // end: the window is released and the stepper stopped in any case.
             if self.window.retiring_rect().is_some() {
-                let drained = g.drain_retired().map_err(TrailsError::Stepper)?;
-                self.land_retired(pool, &drained, &mut frame)?;
+                let landed = match g.drain_retired() {
+                    Ok(drained) => self.land_retired(pool, &drained, &mut frame),
+                    Err(e) => Err(TrailsError::Stepper(e)),
+                };
                 self.retired_done = true;
+                first = landed.err();
             }
-            let drained = g.stop().map_err(TrailsError::Stepper)?;
-            self.hand_back(pool, &drained, &mut frame)?;
-            self.try_retire(pool)?;
+            let stopped = match g.stop() {
+                Ok(drained) => self.hand_back(pool, &drained, &mut frame),
+                Err(e) => Err(TrailsError::Stepper(e)),
+            };
+            first = first.or(stopped.err());
+            first = first.or(self.try_retire(pool).err().map(TrailsError::from));
         }
         self.on_gpu = false;
         self.sim = None;
-        self.window.release(pool, self.removed)?;
+        let released = self.window.release(pool, self.removed);
         self.windows_released += 1;
-        Ok((frame.changed, frame.measured))
+        match first.or(released.err().map(TrailsError::from)) {
+            Some(e) => Err(e),
+            None => Ok((frame.changed, frame.measured)),
+        }
     }
 }

@@ -225,6 +225,18 @@ impl GranularWindow {
         self.scratch_map(fixed).map(|map| Some((map, offset)))
     }
 
+    /// Undoes the last [`Self::shift`], before anything arrived for it (its stepper could not
+    /// move): the new window's tiles unpinned, the old one taken again.
+    pub fn undo_shift(&mut self, pool: &mut RamPool) {
+        if let Some(r) = self.retiring.take_if(|r| r.shared_units.is_none())
+            && let Some(new) = self.taken.replace(r.old)
+        {
+            for &id in &new.tiles {
+                pool.unpin(id);
+            }
+        }
+    }
+
     /// The moved window's sum right after [`Self::shift`] (the GPU's, the first measure after
     /// the shift): the window holds `sum` units from now on, and the retiring window's shared
     /// part the units beyond the strips read from the tiles. Refused when `sum` is less than
@@ -417,13 +429,19 @@ impl GranularWindow {
     /// less `removed` (what compression removed while the window lived; 0 for the
     /// volume-preserving default): every area the steps changed handed back, nothing else
     /// written there. Returns the units; [`CacheError::OutOfRange`] when they differ (the
-    /// window is released anyway). Refused while a window is retiring.
+    /// window is released anyway). With a window still retiring both are released, unchecked,
+    /// and an error returned.
     pub fn release(&mut self, pool: &mut RamPool, removed: u64) -> Result<u64, CacheError> {
-        if self.retiring.is_some() {
+        if let Some(r) = self.retiring.take() {
+            // Its check can no longer be made: its tiles are freed all the same.
+            for &id in &r.old.tiles {
+                pool.unpin(id);
+            }
+            let _ = self.release(pool, removed);
             return Err(CacheError::OutOfRange {
-                what: "granular windows retiring",
+                what: "granular windows retiring at the release",
                 value: 1.0,
-                expected: "none: retire the last one before releasing the window",
+                expected: "none: retire the last one first (both were released unchecked)",
             });
         }
         let Some(t) = self.taken.take() else {

@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::time::Duration;
 use terrain_cache::{
     CameraState, CpuOnly, GranularStepper, GranularTrails, Layer, ObjectTileStore, PoolConfig,
-    RamPool, TileStore, TrailConfig, TrailFrame, TrailsError, World,
+    RamPool, TileId, TileState, TileStore, TrailConfig, TrailFrame, TrailsError, World,
 };
 use terrain_core::granular::{
     GranularArrivals, GranularObject, GranularParams, GranularSim, StepMeasure, TriMesh,
@@ -65,6 +65,9 @@ struct LateStepper {
     /// The old map's results still on their way after a shift.
     retired: Queue,
     shifts: u32,
+    /// The shift (counted from 0) that fails, as a lost device's would.
+    fail_shift: Option<u32>,
+    failed: u32,
     /// The heights of each map when it was stopped.
     stopped: Vec<Grid<u32>>,
 }
@@ -81,6 +84,8 @@ impl LateStepper {
             shifting: false,
             retired: VecDeque::new(),
             shifts: 0,
+            fail_shift: None,
+            failed: 0,
             stopped: Vec::new(),
         }
     }
@@ -171,6 +176,10 @@ impl GranularStepper for LateStepper {
             self.retired.is_empty(),
             "a shift while the last is on its way"
         );
+        if self.fail_shift == Some(self.shifts + self.failed) {
+            self.failed += 1;
+            return Err(INJECTED.into());
+        }
         let old = self.sim.take().ok_or("not started")?;
         let size = map.size();
         // The shared columns are the old map's now (as a GPU copy after every step).
@@ -211,6 +220,9 @@ impl GranularStepper for LateStepper {
         Ok(drain(&mut self.retired))
     }
 }
+
+/// The error of a shift made to fail.
+const INJECTED: &str = "injected shift failure";
 
 fn config() -> TrailConfig {
     TrailConfig {
@@ -282,6 +294,11 @@ fn drive_along(
     }
     let (_, measured) = trails.release(&mut pool, gpu).unwrap();
     assert!(trails.window().is_none());
+    let tiles = WORLD / TILE;
+    for id in (0..tiles * tiles).map(|k| TileId::new(0, k % tiles, k / tiles)) {
+        let state = pool.status(id).map(|s| s.state);
+        assert_ne!(state, Some(TileState::InUse), "{id:?} still pinned");
+    }
     if let Some(last) = frames.last_mut() {
         last.measured.extend(measured);
     }
@@ -412,6 +429,54 @@ fn shifting_along_the_world_edge_and_after_a_jump_keeps_every_unit() {
         assert_eq!(Some(m.volume), m.volume_taken, "step {}", m.tag);
     }
     assert!(after.as_slice() == on_cpu.as_slice(), "the world differs");
+}
+
+#[test]
+fn a_failed_shift_falls_back_to_a_move_that_waits_and_loses_nothing() {
+    let (_, on_cpu, _) = drive(None);
+    let mut late = LateStepper::shifting(2);
+    late.fail_shift = Some(1);
+    let (frames, after, released) = drive(Some(&mut late));
+    assert_eq!(late.failed, 1);
+    assert!(late.shifts >= 2, "{} shifts", late.shifts);
+    let failed: Vec<_> = frames
+        .iter()
+        .filter_map(|f| f.shift_failed.as_ref())
+        .collect();
+    assert_eq!(failed, [&INJECTED.to_string()]);
+    // The failed shift's move stopped the map and took the next window.
+    assert_eq!(late.stopped.len(), 2);
+    assert_eq!(released, late.shifts + 2);
+    assert!(after.as_slice() == on_cpu.as_slice(), "the world differs");
+    let measured: Vec<_> = frames.iter().flat_map(|f| f.measured.iter()).collect();
+    assert_eq!(measured.len(), frames.len(), "a step's measure was lost");
+    for m in &measured {
+        assert_eq!(Some(m.volume), m.volume_taken, "step {}", m.tag);
+    }
+}
+
+#[test]
+fn objects_wider_than_the_window_do_not_move_it_every_frame() {
+    let world = world();
+    let mut pool = loaded_pool(&world);
+    let mut trails =
+        GranularTrails::new(world.manifest(), GranularParams::snow(), config()).unwrap();
+    for i in 0..30 {
+        let centre = Vec2::new(40.0 + 0.5 * i as f32, 64.0);
+        let points = [centre - Vec2::X * 22.5, centre + Vec2::X * 22.5];
+        let stepper = None::<&mut CpuOnly>;
+        trails
+            .follow(&mut pool, stepper, &points, centre, &camera(), false)
+            .unwrap();
+    }
+    // One window taken; it moves only when the place it would take changes (a texel each
+    // other frame here), not every frame.
+    assert!(
+        trails.windows_released() <= 16,
+        "{}",
+        trails.windows_released()
+    );
+    trails.release(&mut pool, None::<&mut CpuOnly>).unwrap();
 }
 
 #[test]

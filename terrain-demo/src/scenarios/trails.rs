@@ -76,6 +76,9 @@ impl Trails {
             .map(|scene| scene.trails(&mut *timings));
         let mut frame =
             (self.trails).follow(pool, gpu.as_mut(), &wheels, ahead, camera, others_in_flight)?;
+        if let Some(e) = &frame.shift_failed {
+            tracing::warn!("the granular window moved waiting: its GPU map could not shift ({e})");
+        }
         let (Some(ground), Some(window)) = (self.trails.ground(), self.trails.window()) else {
             return Ok((frame, 0.0));
         };

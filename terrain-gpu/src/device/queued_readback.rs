@@ -61,6 +61,11 @@ impl QueuedReadback {
         self.ring.poll(device)
     }
 
+    /// Rects waiting for a free buffer of the ring (requested by the next `request`).
+    pub fn waiting(&self) -> usize {
+        self.waiting.len()
+    }
+
     /// Whether a rect is still waiting or on its way.
     pub fn in_flight(&self) -> bool {
         !self.waiting.is_empty() || self.ring.in_flight() > 0

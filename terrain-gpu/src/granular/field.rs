@@ -287,14 +287,27 @@ impl GranularField {
                 actual: map.size(),
             });
         }
+        let old = &self.map;
+        if (map.encoding(), map.texel_size(), map.wrap())
+            != (old.encoding(), old.texel_size(), old.wrap())
+        {
+            return Err(GpuError::Unsupported {
+                what: "GranularField::shift",
+                reason: "the next map's encoding, texel size or wrap differs from the field's",
+            });
+        }
         if self.trail.is_some() {
             return Err(GpuError::Unsupported {
                 what: "GranularField::shift",
                 reason: "a trail layer is set, and it does not move with the map",
             });
         }
+        // Everything is made and recorded first, and the field changes only once submitted:
+        // a failure leaves it stepping the current map.
         let new_map = GpuHeightMap::from_map(device, queue, map)?;
         let new_normals = GpuGranularNormals::for_map(device, &new_map)?;
+        let mut readback = QueuedReadback::new(device, AREA_RING)?;
+        let mut measures = StepMeasures::new(device)?;
         let shared = shared_texels(size, offset);
         let mut encoder = device.create_command_encoder(&Default::default());
         if let Some(r) = shared {
@@ -304,30 +317,34 @@ impl GranularField {
                 let to = (y as u64 * u64::from(size.x) + r.min.x as u64) * 4;
                 let from_y = (y + offset.y) as u64;
                 let from = (from_y * u64::from(size.x) + (r.min.x + offset.x) as u64) * 4;
-                encoder.copy_buffer_to_buffer(self.map.buffer(), from, new_map.buffer(), to, bytes);
+                encoder.copy_buffer_to_buffer(old.buffer(), from, new_map.buffer(), to, bytes);
             }
         }
-        let old_map = std::mem::replace(&mut self.map, new_map);
-        self.normals = new_normals;
         let p = &mut self.passes;
-        let retired = RetiredField {
-            map: old_map,
-            readback: std::mem::replace(&mut p.readback, QueuedReadback::new(device, AREA_RING)?),
-            measures: std::mem::replace(&mut p.measures, StepMeasures::new(device)?),
-        };
         let full = Rect::from_size(size);
         let blur = p.params.num_iterations_blur_normals;
-        let pass = &mut p.normal_pass;
-        pass.encode(device, queue, &mut encoder, &self.map, &self.normals, full)?;
-        pass.encode_blur(device, queue, &mut encoder, &self.normals, full, blur)?;
-        p.volume.encode(device, queue, &mut encoder, &self.map)?;
-        p.measures
-            .request(device, &mut encoder, tag, &p.volume, None)?;
-        p.readback
-            .request(device, &mut encoder, &self.map, shared)?;
-        queue.submit([encoder.finish()]);
+        let recorded = (|| {
+            let (n, enc) = (&new_normals, &mut encoder);
+            p.normal_pass
+                .encode(device, queue, enc, &new_map, n, full)?;
+            p.normal_pass
+                .encode_blur(device, queue, enc, n, full, blur)?;
+            p.volume.encode(device, queue, enc, &new_map)?;
+            measures.request(device, enc, tag, &p.volume, None)?;
+            readback.request(device, enc, &new_map, shared)
+        })();
+        if recorded.is_ok() {
+            queue.submit([encoder.finish()]);
+        }
         p.normal_pass.recall();
         p.volume.recall();
+        recorded?;
+        let retired = RetiredField {
+            map: std::mem::replace(&mut self.map, new_map),
+            readback: std::mem::replace(&mut p.readback, readback),
+            measures: std::mem::replace(&mut p.measures, measures),
+        };
+        self.normals = new_normals;
         Ok((retired, shared))
     }
 
@@ -366,9 +383,19 @@ pub struct RetiredField {
 
 impl RetiredField {
     /// The old map's areas (in its own frame) and measures that have arrived, never waiting;
-    /// `in_flight` is false once all have.
-    pub fn poll(&mut self, device: &wgpu::Device) -> Result<GranularArrivals, GpuError> {
+    /// `in_flight` is false once all have. Areas that waited for a free readback buffer are
+    /// requested as buffers free up (a small submit of copies).
+    pub fn poll(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<GranularArrivals, GpuError> {
         let areas = self.readback.poll(device)?;
+        if self.readback.waiting() > 0 {
+            let mut encoder = device.create_command_encoder(&Default::default());
+            self.readback.request(device, &mut encoder, &self.map, [])?;
+            queue.submit([encoder.finish()]);
+        }
         let measured = self.measures.poll(device)?;
         Ok(GranularArrivals {
             areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),

@@ -133,6 +133,12 @@ impl GranularStepper for FieldStepper {
     type Error = GpuError;
 
     fn start(&mut self, map: &FixedPointMap, params: GranularParams) -> Result<(), GpuError> {
+        if self.field.is_some() {
+            return Err(GpuError::Unsupported {
+                what: "FieldStepper::start",
+                reason: "a window is being stepped: stop it first, or its readbacks are lost",
+            });
+        }
         let passes = self.passes.take();
         let mut field = GranularField::new(&self.device, &self.queue, map, params, passes)?;
         field.step_pass_mut().depth_source = self.depth_source;
@@ -178,6 +184,12 @@ impl GranularStepper for FieldStepper {
     }
 
     fn shift(&mut self, map: &FixedPointMap, offset: IVec2, tag: u64) -> Result<bool, GpuError> {
+        if self.retired.is_some() {
+            return Err(GpuError::Unsupported {
+                what: "FieldStepper::shift",
+                reason: "the last shift's readbacks are still on their way: poll or drain them",
+            });
+        }
         let (device, queue) = (self.device.clone(), self.queue.clone());
         let field = self.field_mut()?;
         let (retired, _) = field.shift(&device, &queue, map, offset, tag)?;
@@ -189,7 +201,7 @@ impl GranularStepper for FieldStepper {
         let Some(r) = self.retired.as_mut() else {
             return Ok(GranularArrivals::default());
         };
-        let arrived = r.poll(&self.device)?;
+        let arrived = r.poll(&self.device, &self.queue)?;
         if !arrived.in_flight {
             self.retired = None;
         }
