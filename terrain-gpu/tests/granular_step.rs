@@ -1,8 +1,11 @@
 //! The chained GPU granular step: volume conservation over 500 frames with three moving
 //! objects (checked every frame by the GPU sum), equality with the CPU `GranularSim` step by
-//! step, no GPU objects made per frame once the step has run, and the trail it paints.
+//! step, no GPU objects made per frame once the step has run, and the trail it paints; the
+//! whole field (`GranularField`), moved on to another window without a wait (`shift`), and
+//! `FieldStepper` over it.
 
 use terrain_core::granular::*;
+use terrain_core::granular::{GranularStepper as _, SHIFT_TAG};
 use terrain_core::{FixedPointMap, Grid, MaterialEffect, apply_trail_effect};
 use terrain_gpu::granular::{
     DepthSource, GpuGranularStep, GranularField, StepMeasure, StepMeasures, Trail, VolumePass,
@@ -551,5 +554,110 @@ fn a_shifted_field_steps_as_a_window_taken_after_the_last_step() {
             .shift(device, queue, &small, glam::IVec2::ONE, 0)
             .is_err()
     );
+    ctx.check().expect("validation");
+}
+
+/// A `Submit` that counts the submits by name, around plain ones.
+struct Counting<'a> {
+    plain: terrain_gpu::PlainSubmit<'a>,
+    names: Vec<&'static str>,
+}
+
+impl terrain_gpu::Submit for Counting<'_> {
+    fn submit(
+        &mut self,
+        name: &'static str,
+        work: &mut dyn FnMut(&mut wgpu::CommandEncoder) -> Result<(), terrain_gpu::GpuError>,
+    ) -> Result<(), terrain_gpu::GpuError> {
+        self.names.push(name);
+        self.plain.submit(name, work)
+    }
+}
+
+/// `FieldStepper`, terrain-core's `GranularStepper` over `GranularField`, driven as a granular
+/// window's owner drives it: steps (through the application's `Submit`), a shift with steps on
+/// their way, the retired map polled to the end, a stop. Everything that comes back equals the
+/// CPU simulation's, and what the contract forbids is refused.
+#[test]
+fn a_field_stepper_steps_shifts_and_stops_as_the_cpu_simulation() {
+    let Some(ctx) = context_or_skip("a_field_stepper_steps_shifts_and_stops_as_the_cpu_simulation")
+    else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let m = meshes();
+    let texel = 0.05;
+    let map = bumpy_map(64, texel);
+    let p = small_params();
+    let mut stepper = terrain_gpu::granular::FieldStepper::new(device, queue);
+    stepper.set_depth_source(DepthSource::Cpu);
+    assert!(stepper.step(&[], 0).is_err(), "a step before start");
+    stepper.start(&map, p).expect("start");
+    assert!(
+        stepper.start(&map, p).is_err(),
+        "a second start drops the first"
+    );
+    let mut sim = GranularSim::new(map.clone(), p).expect("sim");
+    let mut copy = map.grid().clone();
+    let extent = 64.0 * texel;
+    let mut counting = Counting {
+        plain: terrain_gpu::PlainSubmit { device, queue },
+        names: Vec::new(),
+    };
+    for frame in 0..5u64 {
+        let objs = objects_at(&m, frame as u32 * 9, extent);
+        let arrived = stepper
+            .submitting(&mut counting)
+            .step(&objs, frame)
+            .expect("step");
+        for (rect, heights) in arrived.areas {
+            copy.paste(&heights, rect.min).expect("inside");
+        }
+        sim.step(&objs).expect("cpu step");
+    }
+    assert_eq!(counting.names.len(), 10);
+    assert_eq!(
+        &counting.names[..2],
+        [GranularField::STEP, GranularField::FOLLOW_UP]
+    );
+    assert!(stepper.shifts());
+    // The same window again (a shift of nothing): the map carries over whole.
+    assert!(
+        stepper
+            .shift(&map, glam::IVec2::ZERO, SHIFT_TAG)
+            .expect("shift")
+    );
+    assert!(
+        stepper.shift(&map, glam::IVec2::ZERO, SHIFT_TAG).is_err(),
+        "a shift while the last one's readbacks are on their way"
+    );
+    for _ in 0..100 {
+        let old = stepper.poll_retired().expect("poll retired");
+        for (rect, heights) in old.areas {
+            copy.paste(&heights, rect.min).expect("inside");
+        }
+        if !old.in_flight {
+            break;
+        }
+        device.poll(terrain_gpu::wait_bounded()).expect("wait");
+    }
+    assert!(
+        copy == *sim.map().grid(),
+        "an area of the old map never arrived"
+    );
+    let objs = objects_at(&m, 77, extent);
+    stepper.step(&objs, 5).expect("step after the shift");
+    sim.step(&objs).expect("cpu step");
+    let last = stepper.stop().expect("stop");
+    let sum: u64 = map.grid().as_slice().iter().map(|&u| u64::from(u)).sum();
+    assert_eq!(
+        last.measured.first().map(|m| (m.tag, m.volume)),
+        Some((SHIFT_TAG, sum))
+    );
+    for (rect, heights) in last.areas {
+        copy.paste(&heights, rect.min).expect("inside");
+    }
+    assert!(copy == *sim.map().grid(), "the moved map's areas differ");
+    assert!(stepper.field().is_none());
     ctx.check().expect("validation");
 }

@@ -36,3 +36,14 @@ impl Submit for PlainSubmit<'_> {
         Ok(())
     }
 }
+
+/// A borrowed submitter submits as the one it borrows (so `submitting(&mut mine)` keeps it).
+impl<S: Submit + ?Sized> Submit for &mut S {
+    fn submit(
+        &mut self,
+        name: &'static str,
+        work: &mut dyn FnMut(&mut wgpu::CommandEncoder) -> Result<(), GpuError>,
+    ) -> Result<(), GpuError> {
+        (**self).submit(name, work)
+    }
+}
