@@ -5,7 +5,6 @@
 //! `FieldStepper` over it.
 
 use terrain_core::granular::*;
-use terrain_core::granular::{GranularStepper as _, SHIFT_TAG};
 use terrain_core::{FixedPointMap, Grid, MaterialEffect, apply_trail_effect};
 use terrain_gpu::granular::{
     DepthSource, GpuGranularStep, GranularField, StepMeasure, StepMeasures, Trail, VolumePass,
