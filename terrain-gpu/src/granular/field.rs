@@ -45,9 +45,50 @@ pub struct GranularPasses {
     step: GpuGranularStep,
     normal_pass: GranularNormalsPass,
     volume: VolumePass,
+    rings: Rings,
+    params: GranularParams,
+}
+
+/// A map's two readback rings: the areas its steps changed, and their measures.
+#[derive(Debug)]
+struct Rings {
     readback: QueuedReadback,
     measures: StepMeasures,
-    params: GranularParams,
+}
+
+impl Rings {
+    fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
+        Ok(Self {
+            readback: QueuedReadback::new(device, AREA_RING)?,
+            measures: StepMeasures::new(device)?,
+        })
+    }
+
+    /// What has arrived, never waiting.
+    fn poll(&mut self, device: &wgpu::Device) -> Result<GranularArrivals, GpuError> {
+        let areas = self.readback.poll(device)?;
+        let measured = self.measures.poll(device)?;
+        Ok(GranularArrivals {
+            areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),
+            measured,
+            in_flight: self.readback.in_flight() || self.measures.in_flight(),
+        })
+    }
+
+    /// Requests the areas of `map` still waiting for a buffer and waits (bounded) for all.
+    fn drain(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        map: &GpuHeightMap<u32>,
+    ) -> Result<GranularArrivals, GpuError> {
+        let areas = self.readback.flush(device, queue, map)?;
+        Ok(GranularArrivals {
+            areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),
+            measured: self.measures.flush(device)?,
+            in_flight: false,
+        })
+    }
 }
 
 impl GranularPasses {
@@ -57,8 +98,7 @@ impl GranularPasses {
             step: GpuGranularStep::new(device, params)?,
             normal_pass: GranularNormalsPass::new(device)?,
             volume: VolumePass::new(device)?,
-            readback: QueuedReadback::new(device, AREA_RING)?,
-            measures: StepMeasures::new(device)?,
+            rings: Rings::new(device)?,
             params,
         })
     }
@@ -187,9 +227,11 @@ impl GranularField {
                 .encode_blur(device, queue, encoder, &self.normals, r, blur)?;
         }
         p.volume.encode(device, queue, encoder, &self.map)?;
-        p.measures
+        p.rings
+            .measures
             .request(device, encoder, tag, &p.volume, p.step.scratch())?;
-        p.readback
+        p.rings
+            .readback
             .request(device, encoder, &self.map, areas.iter().copied())
     }
 
@@ -237,14 +279,7 @@ impl GranularField {
 
     /// The areas and measures of earlier steps that have arrived, never waiting.
     pub fn poll(&mut self, device: &wgpu::Device) -> Result<GranularArrivals, GpuError> {
-        let p = &mut self.passes;
-        let areas = p.readback.poll(device)?;
-        let measured = p.measures.poll(device)?;
-        Ok(GranularArrivals {
-            areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),
-            measured,
-            in_flight: p.readback.in_flight() || p.measures.in_flight(),
-        })
+        self.passes.rings.poll(device)
     }
 
     /// Requests the areas still waiting for a ring slot and waits (bounded) for every area
@@ -254,13 +289,7 @@ impl GranularField {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<GranularArrivals, GpuError> {
-        let p = &mut self.passes;
-        let areas = p.readback.flush(device, queue, &self.map)?;
-        Ok(GranularArrivals {
-            areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),
-            measured: p.measures.flush(device)?,
-            in_flight: false,
-        })
+        self.passes.rings.drain(device, queue, &self.map)
     }
 
     /// Moves the field onto `map`, the next window: same size and encoding, its origin at
@@ -306,8 +335,7 @@ impl GranularField {
         // a failure leaves it stepping the current map.
         let new_map = GpuHeightMap::from_map(device, queue, map)?;
         let new_normals = GpuGranularNormals::for_map(device, &new_map)?;
-        let mut readback = QueuedReadback::new(device, AREA_RING)?;
-        let mut measures = StepMeasures::new(device)?;
+        let mut rings = Rings::new(device)?;
         let shared = shared_texels(size, offset);
         let mut encoder = device.create_command_encoder(&Default::default());
         if let Some(r) = shared {
@@ -330,8 +358,8 @@ impl GranularField {
             p.normal_pass
                 .encode_blur(device, queue, enc, n, full, blur)?;
             p.volume.encode(device, queue, enc, &new_map)?;
-            measures.request(device, enc, tag, &p.volume, None)?;
-            readback.request(device, enc, &new_map, shared)
+            rings.measures.request(device, enc, tag, &p.volume, None)?;
+            rings.readback.request(device, enc, &new_map, shared)
         })();
         if recorded.is_ok() {
             queue.submit([encoder.finish()]);
@@ -341,8 +369,7 @@ impl GranularField {
         recorded?;
         let retired = RetiredField {
             map: std::mem::replace(&mut self.map, new_map),
-            readback: std::mem::replace(&mut p.readback, readback),
-            measures: std::mem::replace(&mut p.measures, measures),
+            rings: std::mem::replace(&mut p.rings, rings),
         };
         self.normals = new_normals;
         Ok((retired, shared))
@@ -377,8 +404,7 @@ fn shared_texels(size: UVec2, offset: IVec2) -> Option<Rect> {
 #[derive(Debug)]
 pub struct RetiredField {
     map: GpuHeightMap<u32>,
-    readback: QueuedReadback,
-    measures: StepMeasures,
+    rings: Rings,
 }
 
 impl RetiredField {
@@ -390,18 +416,13 @@ impl RetiredField {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<GranularArrivals, GpuError> {
-        let areas = self.readback.poll(device)?;
-        if self.readback.waiting() > 0 {
+        let arrived = self.rings.poll(device)?;
+        if self.rings.readback.waiting() > 0 {
             let mut encoder = device.create_command_encoder(&Default::default());
-            self.readback.request(device, &mut encoder, &self.map, [])?;
+            (self.rings.readback).request(device, &mut encoder, &self.map, [])?;
             queue.submit([encoder.finish()]);
         }
-        let measured = self.measures.poll(device)?;
-        Ok(GranularArrivals {
-            areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),
-            measured,
-            in_flight: self.readback.in_flight() || self.measures.in_flight(),
-        })
+        Ok(arrived)
     }
 
     /// Waits (bounded) for everything still on its way.
@@ -410,12 +431,7 @@ impl RetiredField {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<GranularArrivals, GpuError> {
-        let areas = self.readback.flush(device, queue, &self.map)?;
-        Ok(GranularArrivals {
-            areas: areas.into_iter().map(|r| (r.rect, r.raw)).collect(),
-            measured: self.measures.flush(device)?,
-            in_flight: false,
-        })
+        self.rings.drain(device, queue, &self.map)
     }
 }
 
