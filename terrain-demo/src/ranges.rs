@@ -13,7 +13,7 @@
 use anyhow::{Result, anyhow};
 
 /// The most collision readbacks in flight (the GPU scene's ring of readback buffers).
-pub const MAX_READBACK_RING: usize = 16;
+use terrain_gpu::MAX_READBACK_RING;
 
 /// A closed or half-open range of a flag's or key's values.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -214,7 +214,7 @@ impl FlyoverScenario {
                 heights: Some(built_from.unwrap_or_else(|| {
                     super::heightmap::HeightsInfo::of_encoding(
                         overview.encoding(),
-                        super::heightmap::stored_range(&overview),
+                        terrain_core::hillshade_range(&overview),
                         "world",
                     )
                 })),

@@ -208,21 +208,11 @@ fn procedural(cli: &Cli, range: HeightRange) -> Result<Terrain> {
         "height-range"
     };
     Ok(Terrain {
-        heights: HeightsInfo::of_encoding(encoding, stored_range(&map), source),
+        heights: HeightsInfo::of_encoding(encoding, terrain_core::hillshade_range(&map), source),
         map,
         source: "procedural".into(),
         holes: None,
     })
-}
-
-/// The lowest and highest stored value of `map`.
-pub fn stored_range(map: &CoarseMap) -> (f64, f64) {
-    let (lo, hi) = map
-        .grid()
-        .as_slice()
-        .iter()
-        .fold((u16::MAX, 0), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-    (f64::from(lo), f64::from(hi))
 }
 
 fn encoding_report(

@@ -67,7 +67,7 @@ impl SnowScenario {
                 initial_normals_ms: 0.0,
                 heights: Some(super::heightmap::HeightsInfo::of_encoding(
                     coarse.encoding(),
-                    super::heightmap::stored_range(&coarse),
+                    terrain_core::hillshade_range(&coarse),
                     "snow field",
                 )),
                 camera: None,

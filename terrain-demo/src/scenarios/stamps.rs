@@ -127,7 +127,7 @@ impl StampScenario {
                 )
             }
             CameraMode::Orbit | CameraMode::Flyover => {
-                let (lo, hi) = heightmap::stored_range(&map);
+                let (lo, hi) = terrain_core::hillshade_range(&map);
                 let frame = MapFrame {
                     extent: map.extent_m(),
                     low: map.encoding().to_metres(lo),
