@@ -47,7 +47,8 @@ pub struct ArrivedRegion {
 /// - `poll` never blocks: it returns the regions that have arrived since the last call (possibly
 ///   none), each exactly once, in any order.
 /// - Failures are reported as the implementation's own [`RegionSource::Error`], which callers
-///   (terrain-physics' scheduler) hand back unchanged.
+///   (terrain-physics' scheduler) hand back unchanged; a request refused only because the
+///   source is busy is told apart by [`RegionSource::is_busy`].
 pub trait RegionSource {
     /// What a failed request or poll reports.
     type Error: std::error::Error + Send + Sync + 'static;
@@ -56,4 +57,12 @@ pub trait RegionSource {
     fn request(&mut self, rect: Rect) -> Result<RequestId, Self::Error>;
     /// Hands over the regions that have arrived, without waiting for the others.
     fn poll(&mut self) -> Result<Vec<ArrivedRegion>, Self::Error>;
+
+    /// Whether `error`, returned by [`request`](Self::request), only says the source is busy
+    /// (every staging buffer still on its way): back-pressure, not a failure. The caller keeps
+    /// the rect and asks again later (terrain-physics' scheduler does). `false` by default.
+    fn is_busy(&self, error: &Self::Error) -> bool {
+        let _ = error;
+        false
+    }
 }

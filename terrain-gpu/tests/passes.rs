@@ -439,10 +439,16 @@ fn readback_delivers_regions_without_waiting_and_equals_the_map() {
         .iter()
         .map(|r| readback.request(device, &mut encoder, &gpu, *r).unwrap())
         .collect();
-    // The ring is full until these arrive.
-    assert!(matches!(
-        readback.request(device, &mut encoder, &gpu, rects[0]),
-        Err(GpuError::ReadbackBusy { ring: 2 })
+    // The ring is full until these arrive: back-pressure, as the region source says.
+    let busy = readback.request(device, &mut encoder, &gpu, rects[0]);
+    assert!(matches!(busy, Err(GpuError::ReadbackBusy { ring: 2 })));
+    let busy = busy.expect_err("busy");
+    let mut other = RegionReadback::new(device, 1).unwrap();
+    let source = terrain_gpu::GpuRegionSource::new(device, queue, &gpu, &mut other);
+    assert!(terrain_core::RegionSource::is_busy(&source, &busy));
+    assert!(!terrain_core::RegionSource::is_busy(
+        &source,
+        &GpuError::MapDropped
     ));
     // Nothing can arrive before the copies are submitted, and poll does not wait.
     assert!(readback.poll(device).unwrap().is_empty());

@@ -515,10 +515,13 @@ impl ReadbackScheduler {
                 }
                 Err(e) => {
                     // Keep the rest dirty and every bound of the batch pending; retry later.
+                    // A busy source is back-pressure, not a failure: nothing to report.
                     for r in &rects[k..] {
                         self.dirty.insert(*r);
                     }
-                    first_error.get_or_insert(UpdateError::Source(e));
+                    if !source.is_busy(&e) {
+                        first_error.get_or_insert(UpdateError::Source(e));
+                    }
                     return;
                 }
             }

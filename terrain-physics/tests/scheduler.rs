@@ -387,6 +387,37 @@ fn source_failures_are_errors_and_keep_the_rects_dirty() {
 }
 
 #[test]
+fn a_busy_source_is_back_pressure_not_a_failure() {
+    // Every staging buffer on its way: the request is refused as busy. The update reports no
+    // error (and what it did report is kept), the rect stays dirty and is asked for again.
+    struct Busy;
+    impl RegionSource for Busy {
+        type Error = SourceFailed;
+
+        fn request(&mut self, _rect: Rect) -> Result<RequestId, SourceFailed> {
+            Err(SourceFailed("busy"))
+        }
+        fn poll(&mut self) -> Result<Vec<ArrivedRegion>, SourceFailed> {
+            Ok(Vec::new())
+        }
+        fn is_busy(&self, error: &SourceFailed) -> bool {
+            error.0 == "busy"
+        }
+    }
+    let mut r = rig(common::hills(32), 1);
+    let t0 = Instant::now();
+    r.stamp(Vec2::new(4.0, 4.0), 2.0, 1.0, t0);
+    let rep = r.scheduler.update(ms(t0, 25), &mut Busy, &r.mirror);
+    let rep = rep.expect("busy is no error");
+    assert!(rep.requested.is_empty());
+    assert_eq!(r.scheduler.dirty_rects().len(), 1);
+    let rep = r.update(ms(t0, 26));
+    assert_eq!(rep.requested.len(), 1);
+    r.update(ms(t0, 27));
+    assert!(r.mirror_equals_source());
+}
+
+#[test]
 fn the_deformation_bound_keeps_bodies_above_the_raised_ground_until_the_readback() {
     let mut r = rig(common::flat(64, 10.0), 4);
     let t0 = Instant::now();

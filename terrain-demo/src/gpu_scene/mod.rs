@@ -569,15 +569,10 @@ impl GpuScene {
         mirror: &CollisionMirror,
         now: std::time::Instant,
     ) -> Result<UpdateReport> {
+        // A busy readback ring is back-pressure: the rects stay dirty and are requested
+        // once a buffer is free (`RegionSource::is_busy`).
         let mut source = self.map_source();
-        match scheduler.update(now, &mut source, mirror) {
-            // Every staging buffer still waits for a slow mapping: back-pressure, not a
-            // failure. The rects stay dirty and are requested once a buffer is free.
-            Err(terrain_physics::UpdateError::Source(terrain_gpu::GpuError::ReadbackBusy {
-                ..
-            })) => Ok(UpdateReport::default()),
-            r => Ok(r?),
-        }
+        Ok(scheduler.update(now, &mut source, mirror)?)
     }
 
     fn render_inner(&mut self, camera: &Camera, timings: &mut Timings) -> Result<RenderedFrame> {

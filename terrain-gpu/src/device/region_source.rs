@@ -48,6 +48,11 @@ impl RegionSource for GpuRegionSource<'_> {
         Ok(RequestId(ticket.0))
     }
 
+    /// Every staging buffer of the ring still on its way ([`GpuError::ReadbackBusy`]).
+    fn is_busy(&self, error: &GpuError) -> bool {
+        matches!(error, GpuError::ReadbackBusy { .. })
+    }
+
     /// The arrived regions as u16 rows, converted straight from the staging buffers.
     fn poll(&mut self) -> Result<Vec<ArrivedRegion>, GpuError> {
         self.readback

@@ -425,13 +425,8 @@ impl Gpu {
     ) -> Result<UpdateReport> {
         let mut source =
             GpuRegionSource::new(&self.device, &self.queue, &self.map, &mut self.readback);
-        match scheduler.update(now, &mut source, mirror) {
-            // Every staging buffer still waits for a mapping: the rects stay dirty.
-            Err(terrain_physics::UpdateError::Source(terrain_gpu::GpuError::ReadbackBusy {
-                ..
-            })) => Ok(UpdateReport::default()),
-            r => Ok(r?),
-        }
+        // A busy ring keeps the rects dirty (`RegionSource::is_busy`).
+        Ok(scheduler.update(now, &mut source, mirror)?)
     }
 
     /// Draws the frame seen by `camera` and presents it; `None` when the window has no
