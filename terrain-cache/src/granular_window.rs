@@ -17,7 +17,8 @@
 //! **Protocol.** While a window is taken, its level-0 tiles are pinned in RAM (the hand-backs
 //! need them resident) and nothing else may write into its rect: a tile stamp there would be
 //! overwritten by the next hand-back. [`GranularWindow::rect`] says where it is so callers keep
-//! other deformations out until [`GranularWindow::release`].
+//! other deformations out until [`GranularWindow::release`] (and out of
+//! [`GranularWindow::retiring_rect`] while a window retires, below).
 //!
 //! **Moving on while the GPU's areas are on their way.** A window stepped on the GPU may move
 //! on without waiting for its last steps' areas ([`GranularWindow::shift`]): the new window's
