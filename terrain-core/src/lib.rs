@@ -53,6 +53,7 @@ pub mod material;
 pub mod material_effect;
 pub mod normals;
 pub mod overlay_atlas;
+pub mod overview;
 #[doc(hidden)]
 pub mod par;
 pub mod readback;
@@ -91,6 +92,7 @@ pub use normals::{
     derivative_region, normal_from_derivatives,
 };
 pub use overlay_atlas::{OverlayAtlas, OverlayUploadTarget};
+pub use overview::{HOLE_COLOUR, HillshadeOverview};
 pub use readback::{ArrivedRegion, RegionSource, RequestId};
 pub use rect::{DirtyRect, Rect, WrappedPiece};
 pub use sample::bilinear;

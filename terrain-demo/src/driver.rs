@@ -10,7 +10,6 @@ use crate::gpu_scene::GpuScene;
 use crate::images;
 use crate::interrupt;
 use crate::memory_limit::format_bytes;
-use crate::overview::Overview;
 use crate::progress::Progress;
 use crate::report::{FrameReport, MemoryReport, Report, SCHEMA_VERSION, ToolInfo};
 use crate::scenarios::{FRAME_DT, FrameContext, Scenario, heightmap};
@@ -20,6 +19,7 @@ use anyhow::{Context, Result};
 use glam::Vec2;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
+use terrain_core::HillshadeOverview;
 use terrain_core::io;
 use terrain_lod::{CdlodConfig, LodMetric};
 
@@ -53,7 +53,8 @@ pub fn run(
     let overview_px = scenario.overview_size(cli.overview_size);
     // The overview (the frames without a GPU) shades like the frames: materials or the ramp.
     let materials = params.style.shading == crate::config::ShadingParam::Materials;
-    let mut overview = Overview::new(scenario.map(), overview_px, materials, scenario.holes())?;
+    let mut overview =
+        crate::overview::overview(scenario.map(), overview_px, materials, scenario.holes())?;
     // Scenario time: 30 frames per second whatever the render speed.
     let sim_start = Instant::now();
     let mut progress = Progress::new(cli.frames, cli.quiet);
@@ -194,7 +195,7 @@ struct FrameStep<'a, 'c> {
     now: Instant,
     scenario: &'a mut dyn Scenario,
     gpu: Option<&'a mut GpuScene>,
-    overview: &'a mut Overview,
+    overview: &'a mut HillshadeOverview,
     capture: &'a mut Capture<'c>,
 }
 
