@@ -115,6 +115,22 @@ pub fn detail_manifest_layout(layout: &DetailLayout) -> Result<manifest::DetailL
     })
 }
 
+/// Gives `world` the detail layer `layout` when it has none (its manifest rewritten
+/// atomically): call it before anything else opens the world. `Ok` when the world already has
+/// this layer; a world whose detail layer is another is refused, nothing changed.
+pub fn ensure_detail_layer(world: &mut World, layout: &DetailLayout) -> Result<(), CacheError> {
+    let wanted = detail_manifest_layout(layout)?;
+    match world.manifest().detail {
+        None => world.update_manifest(|m| m.detail = Some(wanted)),
+        Some(d) if d == wanted => Ok(()),
+        Some(d) => Err(CacheError::OutOfRange {
+            what: "the world's detail layer (its tile side)",
+            value: f64::from(d.tile_size),
+            expected: "the layer asked for: another world, or the same tiles and spacing",
+        }),
+    }
+}
+
 /// A tile of the camera's band: loaded, and active or not.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BandTile {

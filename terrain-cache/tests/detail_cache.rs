@@ -746,3 +746,32 @@ fn a_frame_of_stamps_loads_the_tiles_they_cover_and_keeps_those_asked() {
             .is_err()
     );
 }
+
+#[test]
+fn a_world_gets_a_detail_layer_once_and_another_is_refused() {
+    let store = store();
+    let mut manifest = Manifest::new(
+        UVec2::splat(256),
+        64,
+        0.5,
+        HeightEncoding::spanning::<u16>(0.0, 50.0).unwrap(),
+        WrapMode::Repeat,
+    )
+    .unwrap();
+    manifest.detail = None;
+    let mut w = World::create(store.clone(), manifest).unwrap();
+    terrain_cache::detail::ensure_detail_layer(&mut w, &layout()).unwrap();
+    let wanted = detail_manifest_layout(&layout()).unwrap();
+    assert_eq!(w.manifest().detail, Some(wanted));
+    // Written: a world opened again has it; asking again changes nothing.
+    let mut again = World::open(store.clone()).unwrap();
+    assert_eq!(again.manifest().detail, Some(wanted));
+    let generation = again.manifest().generation;
+    terrain_cache::detail::ensure_detail_layer(&mut again, &layout()).unwrap();
+    assert_eq!(again.manifest().generation, generation);
+    // Another layer (tiles of 128) is refused, the manifest as it was.
+    let other = DetailLayout::new(UVec2::splat(256), 0.5, 4, 128).unwrap();
+    let refused = terrain_cache::detail::ensure_detail_layer(&mut again, &other);
+    assert!(matches!(refused, Err(CacheError::OutOfRange { .. })));
+    assert_eq!(World::open(store).unwrap().manifest().detail, Some(wanted));
+}

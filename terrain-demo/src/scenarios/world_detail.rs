@@ -17,7 +17,7 @@ use crate::usage_error::usage;
 use anyhow::{Context, Result, anyhow};
 use glam::Vec2;
 use std::time::Instant;
-use terrain_cache::detail::{DetailCache, detail_manifest_layout};
+use terrain_cache::detail::DetailCache;
 use terrain_cache::{BandSelection, Manifest, World};
 use terrain_core::detail::DetailLayout;
 use terrain_core::{Blend, GaussianStamp, StampPlacement};
@@ -59,18 +59,14 @@ pub fn layout_for(manifest: &Manifest) -> Result<DetailLayout> {
 /// Gives `world` a detail layer if it has none (its manifest rewritten atomically): call it
 /// before anything else opens the world. A world whose detail layer is another is refused.
 pub fn ensure_layer(world: &mut World) -> Result<()> {
-    let wanted = detail_manifest_layout(&layout_for(world.manifest())?)?;
-    match world.manifest().detail {
-        None => world.update_manifest(|m| m.detail = Some(wanted))?,
-        Some(d) if d == wanted => {}
-        Some(_) => {
-            return Err(usage(anyhow!(
-                "--detail: this world's detail layer is not the demo's ({REFINE} texels per \
-                 level-0 texel, {TILE}-texel tiles): use another --world"
-            )));
-        }
+    let layout = layout_for(world.manifest())?;
+    match terrain_cache::detail::ensure_detail_layer(world, &layout) {
+        Err(e @ terrain_cache::CacheError::OutOfRange { .. }) => Err(usage(anyhow!(
+            "--detail: this world's detail layer is not the demo's ({REFINE} texels per \
+             level-0 texel, {TILE}-texel tiles; {e}): use another --world"
+        ))),
+        done => Ok(done?),
     }
-    Ok(())
 }
 
 /// What the footprints did this frame, for the report.
