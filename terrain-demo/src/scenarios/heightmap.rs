@@ -375,6 +375,7 @@ fn texel_size(cli: &Cli, path: &Path, dem: &Dem) -> (f32, &'static str) {
         None => (DEFAULT_TEXEL_SIZE, "the default: give --texel-size"),
     }
 }
+
 /// `--color`'s image, which must be `size` (the heightmap's, or the streamed world's).
 pub fn color_layer(cli: &Cli, size: glam::UVec2) -> Result<Option<terrain_core::Grid<[u8; 4]>>> {
     let Some(path) = &cli.color else {
