@@ -1,7 +1,8 @@
 //! `GranularWindow` on a real RAM pool: columns taken from the resident tiles, stepped by
 //! terrain-core's granular simulation, handed back area by area; the tiles hold exactly the
 //! units taken after every step, a foreign write into the window is caught on release, and the
-//! placement, take and hand-back refuse what they cannot do.
+//! placement, take and hand-back refuse what they cannot do, as do a shift, its sum, the old
+//! window's late areas and its retirement.
 
 mod common;
 
@@ -184,4 +185,64 @@ fn take_waits_for_tiles_and_refuses_what_it_cannot_do() {
         assert!(full.contains_rect(&window.placement(c)), "{c}");
     }
     assert!(!window.covers(&[Vec2::ZERO], 0.0), "no window taken");
+}
+
+#[test]
+fn a_shift_refuses_what_it_cannot_do_and_its_hand_over_is_checked() {
+    let world = world();
+    let mut pool = loaded_pool(&world);
+    let mut window = GranularWindow::new(world.manifest(), 32).unwrap();
+    let a = window.placement(Vec2::new(40.0, 40.0));
+    let b = Rect::new(a.min + glam::IVec2::new(8, -4), a.size);
+    // No window to move, a sum with no shift, nothing retiring.
+    assert!(window.shift(&mut pool, b).is_err());
+    assert!(window.shifted_sum(1).is_err());
+    let empty = Grid::new(4, 4, 0u32).unwrap();
+    let small = Rect::from_size(UVec2::splat(4));
+    assert!(window.hand_back_retired(&mut pool, small, &empty).is_err());
+    assert!(window.retire(&mut pool, 0).is_err());
+    let held = units(&pool, a);
+    window.take(&mut pool, a).unwrap().unwrap();
+    // Off the world, or of another size: refused, nothing changed.
+    let off = Rect::new(glam::IVec2::new(110, 0), UVec2::splat(32));
+    assert!(window.shift(&mut pool, off).is_err());
+    assert!(window.shift(&mut pool, small).is_err());
+    assert_eq!(window.rect(), Some(a));
+    let (map, offset) = window.shift(&mut pool, b).unwrap().unwrap();
+    assert_eq!(offset, glam::IVec2::new(8, -4));
+    assert_eq!((window.rect(), window.retiring_rect()), (Some(b), Some(a)));
+    assert!(window.shift(&mut pool, a).is_err(), "two windows retiring");
+    // The strips (the new window less the old) came from the tiles: a sum below them lost
+    // units and is refused; the right one is the tiles' own here (nothing was stepped).
+    let strips: u64 = b.minus(&a).iter().map(|r| units(&pool, *r)).sum();
+    assert!(window.awaits_sum());
+    assert!(window.shifted_sum(strips - 1).is_err());
+    let sum: u64 = map.grid().as_slice().iter().map(|&u| u64::from(u)).sum();
+    window.shifted_sum(sum).unwrap();
+    // An area of the old window outside the new one lands; a wrong size is refused.
+    assert!(
+        window
+            .hand_back_retired(&mut pool, small, &Grid::new(3, 3, 0u32).unwrap())
+            .is_err()
+    );
+    // A retire that finds a unit missing is refused, and the old window is freed anyway.
+    assert!(window.retire(&mut pool, 1).is_err());
+    assert_eq!(window.retiring_rect(), None);
+    assert_eq!(units(&pool, a), held);
+    assert_eq!(window.release(&mut pool, 0).unwrap(), units(&pool, b));
+    // A release while a window retires frees both, unchecked, and says so: no tile stays
+    // pinned.
+    window.take(&mut pool, a).unwrap().unwrap();
+    window.shift(&mut pool, b).unwrap().unwrap();
+    assert!(window.release(&mut pool, 0).is_err());
+    assert_eq!((window.rect(), window.retiring_rect()), (None, None));
+    for t in 0..(WORLD / TILE).pow(2) {
+        let id = TileId::new(0, t % (WORLD / TILE), t / (WORLD / TILE));
+        let state = pool.status(id).map(|s| s.state);
+        assert_ne!(
+            state,
+            Some(terrain_cache::TileState::InUse),
+            "{id:?} pinned"
+        );
+    }
 }
