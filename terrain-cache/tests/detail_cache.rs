@@ -23,7 +23,8 @@ fn layout() -> DetailLayout {
     DetailLayout::new(UVec2::splat(256), 0.5, 4, 64).unwrap()
 }
 
-fn world(store: &Arc<dyn TileStore>) -> World {
+/// The world's manifest without a detail layer.
+fn manifest() -> Manifest {
     let mut manifest = Manifest::new(
         UVec2::splat(256),
         64,
@@ -32,6 +33,12 @@ fn world(store: &Arc<dyn TileStore>) -> World {
         WrapMode::Repeat,
     )
     .unwrap();
+    manifest.detail = None;
+    manifest
+}
+
+fn world(store: &Arc<dyn TileStore>) -> World {
+    let mut manifest = manifest();
     manifest.detail = Some(detail_manifest_layout(&layout()).unwrap());
     World::create(store.clone(), manifest).unwrap()
 }
@@ -750,16 +757,7 @@ fn a_frame_of_stamps_loads_the_tiles_they_cover_and_keeps_those_asked() {
 #[test]
 fn a_world_gets_a_detail_layer_once_and_another_is_refused() {
     let store = store();
-    let mut manifest = Manifest::new(
-        UVec2::splat(256),
-        64,
-        0.5,
-        HeightEncoding::spanning::<u16>(0.0, 50.0).unwrap(),
-        WrapMode::Repeat,
-    )
-    .unwrap();
-    manifest.detail = None;
-    let mut w = World::create(store.clone(), manifest).unwrap();
+    let mut w = World::create(store.clone(), manifest()).unwrap();
     terrain_cache::detail::ensure_detail_layer(&mut w, &layout()).unwrap();
     let wanted = detail_manifest_layout(&layout()).unwrap();
     assert_eq!(w.manifest().detail, Some(wanted));
