@@ -118,13 +118,7 @@ fn canonical(cycle: &[String]) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn file(path: &str, text: &str) -> TrackedFile {
-        TrackedFile {
-            path: path.into(),
-            text: text.into(),
-        }
-    }
+    use crate::tidy::tests::file;
 
     #[test]
     fn a_cycle_between_demo_modules_is_reported_once() {

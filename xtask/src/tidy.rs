@@ -378,10 +378,11 @@ fn long_file(path: &str, text: &str) -> Option<Problem> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn file(path: &str, text: &str) -> TrackedFile {
+    /// A tracked file of `path` holding `text` (the import-cycle tests use it too).
+    pub(crate) fn file(path: &str, text: &str) -> TrackedFile {
         TrackedFile {
             path: path.into(),
             text: text.into(),
