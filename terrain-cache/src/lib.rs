@@ -83,6 +83,7 @@ mod overlay_writer;
 pub mod overlays;
 mod region_bounds;
 pub mod store;
+mod streamed_world;
 pub mod tile;
 pub mod tile_file;
 pub mod tile_stamps;
@@ -106,6 +107,7 @@ pub use overlays::{
 };
 pub use region_bounds::RegionBounds;
 pub use store::{FsStore, TileStore};
+pub use streamed_world::{OverlayUploadError, StreamedWorld, StreamedWorldError, WorldWritten};
 pub use tile::{Layer, TileData, TileId};
 pub use tile_file::{TileCodec, TileFileError};
 pub use tile_stamps::{TileDeformer, TileStampError, TileStampReport, TileStamps};

@@ -1,0 +1,380 @@
+//! A streamed world driven once per frame: the pools and the stamps an engine otherwise wires
+//! together itself.
+//!
+//! [`StreamedWorld`] owns the world's height tiles in a RAM pool (worker threads, a selection
+//! reaching three times the VRAM pool's, so what the GPU wants next is already in RAM:
+//! Fikkan 2013, sec. 4.3), with a GPU the VRAM pool that fills the caller's tile atlas and the
+//! streams of the world's paint and colour, and the stamps queued on its level-0 tiles with
+//! their hold / pin / read back / release protocol ([`TileStamps`]). A frame is:
+//!
+//! 1. [`update`](StreamedWorld::update): the RAM pools follow the camera (loads and write-backs
+//!    on worker threads); a tile that cannot be read fails the frame;
+//! 2. [`upload`](StreamedWorld::upload) and [`upload_overlays`](StreamedWorld::upload_overlays)
+//!    with a GPU: the nearest wanted tiles into the atlases, within the per-frame budget;
+//! 3. [`push`](StreamedWorld::push) stamps, then [`deform`](StreamedWorld::deform) (the GPU's
+//!    deformer stamps the slots, RAM the rest) or [`deform_in_ram`](StreamedWorld::deform_in_ram)
+//!    without a GPU, after the uploads so a GPU stamp lands on what the slot holds this frame;
+//! 4. [`receive`](StreamedWorld::receive) each rect the GPU read back (never waited for).
+//!
+//! [`finish`](StreamedWorld::finish) ends it: every dirty tile goes back into the world, stamps
+//! whose tiles never became resident are written straight into its files, and the coarser
+//! levels follow. Granular trails, the detail layer and collision use the RAM pool
+//! ([`ram_mut`](StreamedWorld::ram_mut)) beside it. terrain-cache names no GPU type: the
+//! atlases and the deformer are the caller's, through terrain-core's contracts.
+
+use crate::error::CacheError;
+use crate::overlay_stream::OverlayStream;
+use crate::policy::{CameraState, SphericalSelection, TileGrid};
+use crate::pool::{FrameReport, PoolConfig, RamPool};
+use crate::tile::{Layer, TileId};
+use crate::tile_stamps::{TileStampError, TileStampReport, TileStamps};
+use crate::vram::{VramConfig, VramError, VramPool, VramReport};
+use crate::world::World;
+use std::time::Duration;
+use terrain_core::{
+    CoreError, Grid, OverlayUploadTarget, RamDeformer, Rect, StampPlacement, TileDeformer,
+    TileStamp, TileUploadTarget,
+};
+
+/// Why a [`StreamedWorld`] call failed.
+#[derive(Debug, thiserror::Error)]
+pub enum StreamedWorldError {
+    /// The pools or the world refused (a bad camera, a write, a file).
+    #[error(transparent)]
+    Cache(#[from] CacheError),
+    /// A tile of the world could not be read (corrupt, unreadable): the frame would draw and
+    /// deform a stand-in in its place.
+    #[error("{layer:?} tile {id} of the world: {message}")]
+    Tile {
+        /// The tile's layer.
+        layer: Layer,
+        /// The tile.
+        id: TileId,
+        /// The pool's error.
+        message: String,
+    },
+    /// A stamp applied in RAM (or in the world's files at the end) failed.
+    #[error(transparent)]
+    Stamp(#[from] TileStampError<CoreError>),
+    /// [`StreamedWorld::enable_gpu`] was called a second time.
+    #[error("the streamed world's GPU side is already enabled")]
+    GpuEnabled,
+    /// [`StreamedWorld::finish`] was called with GPU-stamped rects still on their way back.
+    #[error("{count} tile readbacks never arrived: those stamps are not saved")]
+    ReadbacksOutstanding {
+        /// Rects in flight.
+        count: usize,
+    },
+}
+
+/// The GPU side of a [`StreamedWorld`]: its VRAM pool and the overlays' streams.
+#[derive(Debug)]
+struct GpuSide {
+    vram: VramPool,
+    paint: Option<OverlayStream>,
+    color: Option<OverlayStream>,
+}
+
+/// What [`StreamedWorld::finish`] wrote.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct WorldWritten {
+    /// Level-0 tiles written back by the RAM pool over the whole run.
+    pub written_back: u64,
+    /// Level-0 tiles stamped straight in the world's files at the end (never resident).
+    pub stamped_at_finish: u64,
+}
+
+/// A streamed world's pools and stamps, driven once per frame (see the module docs).
+#[derive(Debug)]
+pub struct StreamedWorld {
+    ram: RamPool,
+    gpu: Option<GpuSide>,
+    stamps: TileStamps<TileStamp>,
+    written_back: u64,
+    gpu_tiles: u64,
+    cpu_tiles: u64,
+}
+
+/// The RAM pools' selection: three times the VRAM pool's reach (3 tiles ahead per level).
+fn ram_selection(world: &World) -> Box<SphericalSelection> {
+    let grid = TileGrid::from_manifest(world.manifest(), Layer::Height);
+    let mut spherical = SphericalSelection::for_grid(&grid);
+    spherical.lod0_range *= 3.0;
+    spherical.view_distance *= 3.0;
+    Box::new(spherical)
+}
+
+impl StreamedWorld {
+    /// Streams `world`'s heights through a RAM pool of `ram_budget_bytes`, with no GPU side.
+    /// Fails on a budget below the pool's minimum.
+    pub fn open(world: World, ram_budget_bytes: u64) -> Result<Self, CacheError> {
+        let manifest = *world.manifest();
+        let policy = ram_selection(&world);
+        let ram = RamPool::with_policy(
+            world,
+            PoolConfig::new(Layer::Height, ram_budget_bytes),
+            policy,
+        )?;
+        Ok(Self {
+            ram,
+            gpu: None,
+            stamps: TileStamps::new(&manifest)?,
+            written_back: 0,
+            gpu_tiles: 0,
+            cpu_tiles: 0,
+        })
+    }
+
+    /// Adds the GPU side: a VRAM pool of `slots` tile slots (the caller's atlases have as many)
+    /// and, with `paint` / `color`, the streams of the world's paint and colour with the
+    /// heights' selection. Paint tiles are mostly empty (the pool's shared zero tile costs
+    /// nothing), so its RAM budget is the heights'; colour is dense, at 4 bytes a texel, so
+    /// twice it. Fails on 0 slots, on a layer the world does not have, or when called twice;
+    /// on failure the world is as before.
+    pub fn enable_gpu(
+        &mut self,
+        slots: u32,
+        paint: bool,
+        color: bool,
+    ) -> Result<(), StreamedWorldError> {
+        if self.gpu.is_some() {
+            return Err(StreamedWorldError::GpuEnabled);
+        }
+        let manifest = *self.ram.world().manifest();
+        let vram = VramConfig::new(&manifest, slots);
+        let heights_budget = self.ram.config().budget_bytes;
+        let stream = |on: bool, layer: Layer, budget: u64| {
+            on.then(|| {
+                let budget = budget.max(2 * layer.tile_bytes(manifest.tile_size));
+                let world = self.ram.world().clone();
+                let policy = ram_selection(&world);
+                OverlayStream::new(world, layer, budget, policy, vram.clone())
+            })
+            .transpose()
+        };
+        let paint = stream(paint, Layer::Material, heights_budget)?;
+        let color = stream(color, Layer::Color, heights_budget.saturating_mul(2))?;
+        self.gpu = Some(GpuSide {
+            vram: VramPool::new(vram)?,
+            paint,
+            color,
+        });
+        Ok(())
+    }
+
+    /// The world streamed.
+    pub fn world(&self) -> &World {
+        self.ram.world()
+    }
+
+    /// The heights' RAM pool (ground queries, collision fills, overviews).
+    pub fn ram(&self) -> &RamPool {
+        &self.ram
+    }
+
+    /// The heights' RAM pool, for what writes into it beside the stamps (granular trails).
+    pub fn ram_mut(&mut self) -> &mut RamPool {
+        &mut self.ram
+    }
+
+    /// The VRAM pool, once [`enable_gpu`](Self::enable_gpu) added it.
+    pub fn vram(&self) -> Option<&VramPool> {
+        self.gpu.as_ref().map(|g| &g.vram)
+    }
+
+    /// The paint's and the colour's streams, where enabled.
+    pub fn overlay_streams(&self) -> [Option<&OverlayStream>; 2] {
+        match &self.gpu {
+            Some(g) => [g.paint.as_ref(), g.color.as_ref()],
+            None => [None, None],
+        }
+    }
+
+    /// One frame of the RAM pools for `camera`: loads and write-backs on the workers. Fails on
+    /// a bad camera or a height tile that could not be read.
+    pub fn update(&mut self, camera: &CameraState) -> Result<FrameReport, StreamedWorldError> {
+        let report = self.ram.update(camera)?;
+        self.written_back += report.written as u64;
+        if let Some((id, e)) = self.ram.errors().first() {
+            return Err(StreamedWorldError::Tile {
+                layer: Layer::Height,
+                id: *id,
+                message: e.to_string(),
+            });
+        }
+        Ok(report)
+    }
+
+    /// Uploads the nearest wanted height tiles in RAM into `atlas`, within the per-frame
+    /// budget. Without a GPU side, `None`.
+    pub fn upload<T: TileUploadTarget>(
+        &mut self,
+        camera: &CameraState,
+        atlas: &mut T,
+    ) -> Result<Option<VramReport>, VramError<T::Error>> {
+        match self.gpu.as_mut() {
+            Some(g) => g.vram.update(camera, &self.ram, atlas).map(Some),
+            None => Ok(None),
+        }
+    }
+
+    /// One frame of the paint's and the colour's streams into their atlases (RAM loads, then
+    /// uploads within each one's budget); a layer not enabled or without an atlas reports
+    /// `None`. Fails as [`update`](Self::update) does, on an overlay tile.
+    pub fn upload_overlays<T: OverlayUploadTarget>(
+        &mut self,
+        camera: &CameraState,
+        paint: Option<&mut T>,
+        color: Option<&mut T>,
+    ) -> Result<[Option<VramReport>; 2], OverlayUploadError<T::Error>> {
+        let mut reports = [None, None];
+        let Some(g) = self.gpu.as_mut() else {
+            return Ok(reports);
+        };
+        for (report, (stream, atlas)) in reports
+            .iter_mut()
+            .zip([(g.paint.as_mut(), paint), (g.color.as_mut(), color)])
+        {
+            if let (Some(stream), Some(atlas)) = (stream, atlas) {
+                let (_, uploaded) = stream.update(camera, atlas)?;
+                if let Some((id, e)) = stream.ram().errors().first() {
+                    return Err(OverlayUploadError::World(StreamedWorldError::Tile {
+                        layer: stream.layer(),
+                        id: *id,
+                        message: e.to_string(),
+                    }));
+                }
+                *report = Some(uploaded);
+            }
+        }
+        Ok(reports)
+    }
+
+    /// Paint tiles whose files were rewritten (what `write_paint` returned): read again and
+    /// uploaded again.
+    pub fn reload_paint(&mut self, ids: &[TileId]) {
+        if let Some(paint) = self.gpu.as_mut().and_then(|g| g.paint.as_mut()) {
+            paint.reload(ids);
+        }
+    }
+
+    /// Queues `stamp` at `placement` (world metres) on every level-0 tile it touches; returns
+    /// how many (0 off the world). See [`TileStamps::push`].
+    pub fn push(
+        &mut self,
+        stamp: TileStamp,
+        placement: StampPlacement,
+    ) -> Result<usize, CacheError> {
+        self.stamps.push(stamp, placement)
+    }
+
+    /// Applies the queued stamps to their resident tiles: on the GPU through `deformer` where
+    /// the VRAM pool holds the tile (its rects come back through [`receive`](Self::receive)),
+    /// else in RAM. Call after [`upload`](Self::upload).
+    pub fn deform<D: TileDeformer<TileStamp>>(
+        &mut self,
+        deformer: &mut D,
+    ) -> Result<TileStampReport, TileStampError<D::Error>> {
+        let vram = self.gpu.as_mut().map(|g| &mut g.vram);
+        let report = self.stamps.apply(&mut self.ram, vram, deformer)?;
+        self.count(&report);
+        Ok(report)
+    }
+
+    /// Applies the queued stamps to their resident tiles in RAM (no GPU, or a frame without
+    /// one): the VRAM pool uploads the changed tiles again.
+    pub fn deform_in_ram(&mut self) -> Result<TileStampReport, TileStampError<CoreError>> {
+        let report = self.stamps.apply(&mut self.ram, None, &mut RamDeformer)?;
+        self.count(&report);
+        Ok(report)
+    }
+
+    fn count(&mut self, report: &TileStampReport) {
+        self.gpu_tiles += u64::from(report.gpu_tiles);
+        self.cpu_tiles += u64::from(report.cpu_tiles);
+    }
+
+    /// A rect the deformer read back arrived (`ticket` and `rect` as it gave them): into the
+    /// RAM tile, its pin and hold released. Returns the rect in world texels (level 0).
+    pub fn receive<E>(
+        &mut self,
+        ticket: u64,
+        rect: Rect,
+        heights: &Grid<u16>,
+    ) -> Result<Rect, TileStampError<E>> {
+        let vram = self.gpu.as_mut().map(|g| &mut g.vram);
+        let (_, world) = self
+            .stamps
+            .receive(&mut self.ram, vram, ticket, rect, heights)?;
+        Ok(world)
+    }
+
+    /// Stamps queued and not yet on every tile they touch.
+    pub fn stamps_pending(&self) -> usize {
+        self.stamps.pending()
+    }
+
+    /// GPU-stamped rects on their way back.
+    pub fn readbacks_in_flight(&self) -> usize {
+        self.stamps.in_flight()
+    }
+
+    /// Level-0 tiles stamped on the GPU and in RAM so far.
+    pub fn tiles_stamped(&self) -> (u64, u64) {
+        (self.gpu_tiles, self.cpu_tiles)
+    }
+
+    /// Level-0 tiles written back so far.
+    pub fn written_back(&self) -> u64 {
+        self.written_back
+    }
+
+    /// Ends the run, every readback received: the overlays' streams stop, every dirty tile is
+    /// written back (waiting at most `timeout`), stamps whose tiles never became resident go
+    /// straight into the world's files, and their coarser levels are rebuilt. Returns what was
+    /// written and the world.
+    pub fn finish(self, timeout: Duration) -> Result<(WorldWritten, World), StreamedWorldError> {
+        let Self {
+            mut ram,
+            gpu,
+            mut stamps,
+            written_back,
+            ..
+        } = self;
+        if stamps.in_flight() > 0 {
+            let count = stamps.in_flight();
+            // The pools still stop, and what RAM holds is still written back.
+            ram.flush();
+            ram.shutdown(timeout)?;
+            return Err(StreamedWorldError::ReadbacksOutstanding { count });
+        }
+        if let Some(g) = gpu {
+            for stream in [g.paint, g.color].into_iter().flatten() {
+                stream.shutdown(timeout)?;
+            }
+        }
+        let world = ram.world().clone();
+        let issued = ram.flush() as u64;
+        ram.shutdown(timeout)?;
+        let late = stamps.finish_into_world(&world, &mut RamDeformer)?;
+        if !late.is_empty() {
+            crate::build::rebuild_ancestors(&world, &late)?;
+        }
+        let written = WorldWritten {
+            written_back: written_back + issued,
+            stamped_at_finish: late.len() as u64,
+        };
+        Ok((written, world))
+    }
+}
+
+/// Why [`StreamedWorld::upload_overlays`] failed.
+#[derive(Debug, thiserror::Error)]
+pub enum OverlayUploadError<E> {
+    /// The world's side: a bad camera, a tile that could not be read.
+    #[error(transparent)]
+    World(#[from] StreamedWorldError),
+    /// The VRAM pool or the atlas refused.
+    #[error(transparent)]
+    Upload(#[from] VramError<E>),
+}
