@@ -1,14 +1,14 @@
 //! The frame an engine runs, on its own device and render pass, with the library crates alone,
-//! every kind of deformation on one streamed world. Stream: terrain-cache's pools fill
-//! terrain-gpu's tile atlas. Deform: craters and a shockwave on the resident tiles on the GPU
-//! (`TileStamps` through `AtlasDeformer`, the rects read back without a stall), footprints in
-//! detail tiles streamed by band regions (`DetailCache`, `GpuDetailStream`), a sledge's
-//! volume-preserving granular trail (`GranularTrails` stepping a `FieldStepper`, each window
-//! moved on without a wait). Collide: a walker on a window of the world, refilled where
-//! coarser data stood in (`WindowFill`). Select LOD and draw: the clipmap placed and culled
-//! over the atlas and its detail, drawn with the sky into the engine's pass. At the end every
-//! readback lands, the trail's volume is checked, the deformed tiles go back into the world,
-//! and the last frame is saved.
+//! every kind of deformation on one streamed world. Stream: terrain-cache's `StreamedWorld`
+//! (its RAM and VRAM pools) fills terrain-gpu's tile atlas. Deform: craters and a shockwave on
+//! the resident tiles on the GPU (the world's stamps through `AtlasDeformer`, the rects read
+//! back without a stall), footprints in detail tiles streamed by band regions (`DetailCache`,
+//! `GpuDetailStream`), a sledge's volume-preserving granular trail (`GranularTrails` stepping a
+//! `FieldStepper`, each window moved on without a wait). Collide: a walker on a window of the
+//! world, refilled where coarser data stood in (`WindowFill`). Select LOD and draw: the
+//! clipmap placed and culled over the atlas and its detail, drawn with the sky into the
+//! engine's pass. At the end every readback lands, the trail's volume is checked, the deformed
+//! tiles go back into the world, and the last frame is saved.
 //!
 //! ```sh
 //! cargo run --release -p terrain-demo --example engine_frame -- [OUT_DIR] [FRAMES]
@@ -20,15 +20,14 @@ use std::sync::Arc;
 use std::time::Duration;
 use terrain_cache::detail::{DetailCache, detail_manifest_layout};
 use terrain_cache::{
-    BandSelection, CameraState, GranularTrails, Layer, Manifest, ObjectTileStore, PoolConfig,
-    ProceduralSource, RamPool, SphericalSelection, TileGrid, TileStamps, TileStore, TrailConfig,
-    VramConfig, VramPool, WindowFill, build_world, rebuild_ancestors,
+    BandSelection, CameraState, GranularTrails, Manifest, ObjectTileStore, ProceduralSource,
+    StreamedWorld, TileStore, TrailConfig, WindowFill, build_world,
 };
 use terrain_core::detail::DetailLayout;
 use terrain_core::granular::{GranularObject, GranularParams, TriMesh};
 use terrain_core::{
-    GaussianStamp, HeightEncoding, RamDeformer, Shockwave, ShockwaveParams, StampPlacement,
-    TerrainParams, TileStamp, WrapMode,
+    GaussianStamp, HeightEncoding, Shockwave, ShockwaveParams, StampPlacement, TerrainParams,
+    TileStamp, WrapMode,
 };
 use terrain_gpu::granular::FieldStepper;
 use terrain_gpu::{
@@ -112,22 +111,15 @@ fn main() -> Result<()> {
     let (world, _) = build_world(store, manifest, &source, &|_| true)?;
 
     // --- Built once: pools, atlas, stamps, detail, trail, collision, renderer. ---
-    // RAM reaches further than the VRAM pool's frustum, so what the GPU wants next is in RAM
-    // (Fikkan 2013, sec. 4.3).
-    let mut spherical =
-        SphericalSelection::for_grid(&TileGrid::from_manifest(&manifest, Layer::Height));
-    spherical.lod0_range *= 3.0;
-    spherical.view_distance *= 3.0;
-    let config = PoolConfig::new(Layer::Height, 64 << 20);
-    let mut ram = RamPool::with_policy(world.clone(), config, Box::new(spherical))?;
-    let mut vram = VramPool::new(VramConfig::new(&manifest, SLOTS))?;
+    // The world's RAM and VRAM pools and the stamps on its tiles, driven once per frame.
+    let mut streamed = StreamedWorld::open(world.clone(), 64 << 20)?;
+    streamed.enable_gpu(SLOTS, false, false)?;
     let atlas_config = AtlasConfig {
         slots: SLOTS,
         world: manifest.tile_layout(),
     };
     let mut atlas = GpuTileAtlas::new(&device, &queue, &atlas_config)?;
     let mut stamper = AtlasStamper::new(&device, 16)?;
-    let mut tile_stamps = TileStamps::<TileStamp>::new(&manifest)?;
     let crater = TileStamp::Gaussian(GaussianStamp::default());
     let mut shock = Shockwave::new(ShockwaveParams::default())?;
     let detail_world = terrain_cache::World::open(world.store().clone())?;
@@ -162,20 +154,20 @@ fn main() -> Result<()> {
         let look = Vec3::new(heading.x, -0.25, heading.y);
         let camera = Camera::looking(walker.position + Vec3::Y * 6.0 - look * 12.0, look);
         let state = CameraState::at(camera.position).looking(look, camera.fov_y, aspect);
-        ram.update(&state)?;
-        let streamed = vram.update(&state, &ram, &mut atlas)?;
+        streamed.update(&state)?;
+        let uploaded = streamed.upload(&state, &mut atlas)?;
 
         // Deform the tiles: a crater ahead every 8th frame, the shockwave's change, both 50 m
         // aside, clear of the trail's window (a write there would break its volume).
         let aside = heading.perp() * 50.0;
         if frame % 8 == 0 {
             let p = StampPlacement::new(xz + heading * 25.0 + aside, Vec2::splat(10.0), -3.0)?;
-            tile_stamps.push(crater.clone(), p)?;
+            streamed.push(crater.clone(), p)?;
         }
         shock.step();
         let wave_at = start + heading * 60.0 + aside;
         let p = StampPlacement::new(wave_at, Vec2::splat(30.0), 1.5)?;
-        tile_stamps.push(TileStamp::Texture(Arc::new(shock.take_delta()?)), p)?;
+        streamed.push(TileStamp::Texture(Arc::new(shock.take_delta()?)), p)?;
         let mut deformer = AtlasDeformer {
             device: &device,
             queue: &queue,
@@ -183,16 +175,14 @@ fn main() -> Result<()> {
             stamper: &mut stamper,
             submit: None,
         };
-        let report = tile_stamps.apply(&mut ram, Some(&mut vram), &mut deformer)?;
+        let report = streamed.deform(&mut deformer)?;
         (gpu_tiles, cpu_tiles) = (gpu_tiles + report.gpu_tiles, cpu_tiles + report.cpu_tiles);
         for (rect, heights) in &report.changed {
             window.apply(*rect, heights)?;
         }
         // The GPU's changed rects that have arrived (never waiting) go to RAM and collision.
         for a in stamper.poll(&device)? {
-            let vram = Some(&mut vram);
-            let (_, world_rect) =
-                tile_stamps.receive::<GpuError>(&mut ram, vram, a.ticket, a.rect, &a.heights)?;
+            let world_rect = streamed.receive::<GpuError>(a.ticket, a.rect, &a.heights)?;
             window.apply(world_rect, &a.heights)?;
             arrived_rects += 1;
         }
@@ -216,17 +206,18 @@ fn main() -> Result<()> {
 
         // The sledge beside the walker ploughs the snow; its window keeps clear of the stamps.
         let sledge = xz - heading.perp() * 6.0;
-        let others = tile_stamps.in_flight() > 0;
+        let others = streamed.readbacks_in_flight() > 0;
         let ahead = sledge + heading * 8.0;
         let points = [sledge];
-        let mut trail = trails.follow(&mut ram, Some(&mut snow), &points, ahead, &state, others)?;
+        let ram = streamed.ram_mut();
+        let mut trail = trails.follow(ram, Some(&mut snow), &points, ahead, &state, others)?;
         if let (Some(ground), Some(w)) = (trails.ground(), trails.window()) {
             let local = sledge - w.min.as_vec2() * TEXEL;
             let y = terrain_core::bilinear(ground, local)? + 0.45;
             let pose = Affine3A::from_translation(Vec3::new(local.x, y, local.y));
             let objects = [GranularObject::new(&runner, pose)];
             trails.step(
-                &mut ram,
+                streamed.ram_mut(),
                 Some(&mut snow),
                 &objects,
                 u64::from(frame),
@@ -242,9 +233,10 @@ fn main() -> Result<()> {
         }
 
         // Collide: the window follows the walker, refilled where coarser data stood in.
-        window.recenter(xz, |rect, out| fill.fill(&ram, rect, out))?;
-        for rect in fill.ready(&ram, window.window()) {
-            window.refresh(rect, |r, out| fill.fill(&ram, r, out))?;
+        let ram = streamed.ram();
+        window.recenter(xz, |rect, out| fill.fill(ram, rect, out))?;
+        for rect in fill.ready(ram, window.window()) {
+            window.refresh(rect, |r, out| fill.fill(ram, r, out))?;
         }
         walker.step(
             DT,
@@ -308,26 +300,24 @@ fn main() -> Result<()> {
         }
         queue.submit([encoder.finish()]);
         // Tiles drawn from a coarser level after the first second (30 frames).
-        missing = missing.max(streamed.tiles_missing * usize::from(frame >= 30));
+        let streamed_missing = uploaded.map_or(0, |u| u.tiles_missing);
+        missing = missing.max(streamed_missing * usize::from(frame >= 30));
     }
 
     // The end: the last rects come back (bounded waits), the trail's window is released (its
     // volume checked), the detail and the dirty tiles go back into the world.
     for a in stamper.wait(&device)? {
-        let vram = Some(&mut vram);
-        tile_stamps.receive::<GpuError>(&mut ram, vram, a.ticket, a.rect, &a.heights)?;
+        streamed.receive::<GpuError>(a.ticket, a.rect, &a.heights)?;
         arrived_rects += 1;
     }
-    ensure!(tile_stamps.in_flight() == 0, "tile readbacks never came");
-    trails.release(&mut ram, Some(&mut snow))?;
+    trails.release(streamed.ram_mut(), Some(&mut snow))?;
     for (tile, rect, texels) in detail_gpu.flush(&device, &queue, Duration::from_secs(30))? {
         detail.write_rect(tile, rect, &texels)?;
     }
     let detail_tiles = detail.flush()?;
-    ram.flush();
-    ram.shutdown(Duration::from_secs(30))?;
-    let late = tile_stamps.finish_into_world(&world, &mut RamDeformer)?;
-    rebuild_ancestors(&world, &late)?;
+    // Every readback has landed (else this fails): the dirty tiles go back, and the stamps
+    // whose tiles never became resident go straight into the files.
+    let (written, _) = streamed.finish(Duration::from_secs(30))?;
     let image = terrain_gpu::read_texture_rgba8(&device, &queue, &color)?;
     let png = out.join("engine_frame.png");
     terrain_core::io::write_png_rgba8(&png, &image)?;
@@ -337,7 +327,7 @@ fn main() -> Result<()> {
          tiles and a {trail_texels}-texel trail written back; at most {missing} tiles missing \
          after the first second; wrote {}",
         adapter.get_info().name,
-        late.len(),
+        written.stamped_at_finish,
         png.display()
     );
     ensure!(

@@ -45,16 +45,14 @@ use crate::images::Image;
 use crate::report::{CacheStats, FrameStats};
 use crate::timings::{Step, ms_since};
 use crate::usage_error::usage;
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use glam::{IVec2, UVec2, Vec2, Vec3};
 use std::time::{Duration, Instant};
 use terrain_cache::{
-    CameraState, Layer, Manifest, OverlayStream, PoolConfig, RamPool, RegionBounds,
-    SphericalSelection, TileGrid, TileId, TileStamps, VramConfig, VramPool, WindowFill, World,
+    CameraState, Layer, Manifest, RamPool, RegionBounds, StreamedWorld, TileId, WindowFill, World,
 };
 use terrain_core::{
-    CoarseMap, DirtyRect, GaussianStamp, Grid, RamDeformer, Rect, StampPlacement, TileStamp,
-    WrapMode,
+    CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, TileStamp, WrapMode,
 };
 use terrain_lod::{CdlodConfig, TessConfig};
 use terrain_physics::CollisionWindow;
@@ -110,13 +108,9 @@ pub struct FlyoverScenario {
     /// With `--lod cdlod` or `tessellated`: the level-0 bounds the GPU scene's quadtree is kept
     /// current from.
     bounds: Option<RegionBounds>,
-    pool: Option<RamPool>,
-    /// The VRAM pool, with a GPU: which tiles sit in the atlas's slots.
-    vram: Option<VramPool>,
-    /// With a GPU: the world's paint, and its colour when it has one, streamed into the GPU's
-    /// overlay atlases with the heights' selection.
-    paint_stream: Option<OverlayStream>,
-    color_stream: Option<OverlayStream>,
+    /// The world's pools (with a GPU, its VRAM pool and its paint's and colour's streams) and
+    /// the craters on their way into its tiles; `None` once finished.
+    streamed: Option<StreamedWorld>,
     manifest: Manifest,
     vram_budget: u64,
     tile_size: u32,
@@ -131,18 +125,12 @@ pub struct FlyoverScenario {
     heading: Vec2,
     speed: f32,
     frame: u32,
-    /// Craters on their way into every level-0 tile they touch.
-    stamps: TileStamps<TileStamp>,
-    written_back: u64,
     /// Collision around the camera.
     window: CollisionWindow,
     /// Fills the window from the pool, refilling what coarser data stood in for.
     window_fill: WindowFill,
     /// The world's holes and paint around the camera.
     overlays: WorldOverlays,
-    /// Tile stamps done on the GPU and on the CPU so far.
-    gpu_tile_stamps: u64,
-    cpu_tile_stamps: u64,
     /// The camera of the last frame, for the overview's view lines.
     last_camera: Option<CameraState>,
     /// Milliseconds of this frame timed as their own steps (GPU stamps and granular steps,
@@ -176,11 +164,7 @@ impl FlyoverScenario {
         let detail = (world_scenario && cli.detail != crate::cli::DetailArg::None)
             .then(|| WorldDetail::open(&world))
             .transpose()?;
-        let pool = RamPool::with_policy(
-            world,
-            PoolConfig::new(Layer::Height, budget),
-            Box::new(ram_selection(&manifest)),
-        )?;
+        let streamed = StreamedWorld::open(world, budget)?;
         let extent = manifest.world_size.as_vec2() * manifest.texel_size;
         let tile = manifest.tile_size;
         let window = CollisionWindow::new(
@@ -220,10 +204,7 @@ impl FlyoverScenario {
                 })),
                 camera: None,
             },
-            pool: Some(pool),
-            vram: None,
-            paint_stream: None,
-            color_stream: None,
+            streamed: Some(streamed),
             manifest,
             vram_budget: cli.vram_budget.saturating_mul(1 << 20),
             tile_size: tile,
@@ -235,22 +216,22 @@ impl FlyoverScenario {
             heading: Vec2::new(1.0, 0.6).normalize(),
             speed: cli.speed,
             frame: 0,
-            stamps: TileStamps::new(&manifest)?,
-            written_back: 0,
             window,
             window_fill: WindowFill::new(&manifest),
             overlays,
-            gpu_tile_stamps: 0,
-            cpu_tile_stamps: 0,
             last_camera: None,
             gpu_stamp_ms: 0.0,
         })
     }
 
-    fn pool(&mut self) -> Result<&mut RamPool> {
-        self.pool
+    fn streamed(&mut self) -> Result<&mut StreamedWorld> {
+        self.streamed
             .as_mut()
-            .ok_or_else(|| anyhow::anyhow!("the flyover's pool was shut down"))
+            .ok_or_else(|| anyhow::anyhow!("the world's pools were shut down"))
+    }
+
+    fn pool(&self) -> Option<&RamPool> {
+        self.streamed.as_ref().map(StreamedWorld::ram)
     }
 
     /// Ground height (metres) at `xz`: the coarse heights plus the footprints' detail, where
@@ -272,7 +253,7 @@ impl FlyoverScenario {
         {
             return h;
         }
-        let pool = self.pool.as_ref().and_then(|pool| pool.ground_m(xz));
+        let pool = self.pool().and_then(|pool| pool.ground_m(xz));
         pool.unwrap_or_else(|| terrain_core::bilinear(&self.overview, xz).unwrap_or(0.0))
     }
 
@@ -281,8 +262,7 @@ impl FlyoverScenario {
     /// in. Tiles further out that the selection wants are prefetches, not missing.
     fn tiles_missing(&self, xz: Vec2) -> usize {
         let half_tile = 0.5 * self.tile_size as f32 * self.texel_size;
-        self.pool
-            .as_ref()
+        self.pool()
             .map_or(0, |pool| pool.missing_near(xz, half_tile))
     }
 
@@ -297,16 +277,9 @@ impl FlyoverScenario {
                 rect,
                 heights,
             } = arrived_rect;
-            let Some(pool) = self.pool.as_mut() else {
-                bail!("the flyover's pool was shut down");
-            };
-            let (_, world) = self.stamps.receive::<anyhow::Error>(
-                pool,
-                self.vram.as_mut(),
-                ticket,
-                rect,
-                &heights,
-            )?;
+            let world = self
+                .streamed()?
+                .receive::<anyhow::Error>(ticket, rect, &heights)?;
             self.window.apply(world, &heights)?;
             arrived.push(world);
         }
@@ -319,7 +292,7 @@ impl FlyoverScenario {
     /// RAM reads its coarser stand-in there; the overview is reloaded from the world at the
     /// end.)
     fn update_overview(&mut self, changed: &[Rect]) -> Result<Vec<DirtyRect>> {
-        let Some(pool) = self.pool.as_ref() else {
+        let Some(pool) = self.streamed.as_ref().map(StreamedWorld::ram) else {
             return Ok(Vec::new());
         };
         let mut redrawn = Vec::new();
@@ -335,7 +308,7 @@ impl FlyoverScenario {
     /// Moves the collision window with the camera, filling what comes into it from the RAM
     /// pool, and refills the parts filled from coarser data whose level-0 tile has loaded.
     fn update_window(&mut self, xz: Vec2) -> Result<()> {
-        let Some(pool) = self.pool.as_ref() else {
+        let Some(pool) = self.streamed.as_ref().map(StreamedWorld::ram) else {
             return Ok(());
         };
         let fill = &mut self.window_fill;
@@ -382,21 +355,6 @@ fn overview_map(world: &World, level: u32) -> Result<CoarseMap> {
     )?)
 }
 
-/// Bytes of one tile of `layer` in RAM.
-fn layer_tile_bytes(manifest: &Manifest, layer: Layer) -> u64 {
-    layer.tile_bytes(manifest.tile_size)
-}
-
-/// The RAM pools' selection: further than the VRAM pool's (3 tiles ahead per level), so what
-/// the GPU wants next is already in RAM (Fikkan 2013, sec. 4.3).
-fn ram_selection(manifest: &Manifest) -> SphericalSelection {
-    let grid = TileGrid::from_manifest(manifest, Layer::Height);
-    let mut spherical = SphericalSelection::for_grid(&grid);
-    spherical.lod0_range *= 3.0;
-    spherical.view_distance *= 3.0;
-    spherical
-}
-
 /// GPU bytes of one tile slot of the world `manifest` describes, across its atlases: heights
 /// (2 bytes a texel), paint (4) and, `colored`, colour (4). The VRAM budget holds as many of
 /// these as fit, so paint and colour stream within it.
@@ -421,10 +379,7 @@ impl Scenario for FlyoverScenario {
     /// VRAM pools with one selection.
     fn prepare_gpu(&mut self, scene: &mut GpuScene) -> Result<()> {
         let world = self.manifest.tile_layout();
-        let Some(pool) = self.pool.as_ref() else {
-            bail!("the world's pool was shut down");
-        };
-        let files = pool.world().clone();
+        let files = self.streamed()?.world().clone();
         let colored = !files.store().list(Layer::Color.folder())?.is_empty();
         let slot_bytes = vram_slot_bytes(&self.manifest, colored);
         let slots = u32::try_from(self.vram_budget / slot_bytes).unwrap_or(u32::MAX);
@@ -454,21 +409,8 @@ impl Scenario for FlyoverScenario {
         scene
             .enable_streamed_layers(world, slots, colored)
             .map_err(too_large)?;
-        let vram = VramConfig::new(&self.manifest, slots);
-        // Paint tiles are mostly empty (the pool's shared zero tile costs nothing), but craters'
-        // and their coarser levels are not: the heights' budget, half their tiles. Colour is
-        // dense, at 4 bytes a texel: twice it, as many tiles.
-        let heights_budget = pool.config().budget_bytes;
-        let stream = |layer, budget: u64| {
-            let budget = budget.max(2 * layer_tile_bytes(&self.manifest, layer));
-            let policy = Box::new(ram_selection(&self.manifest));
-            OverlayStream::new(files.clone(), layer, budget, policy, vram.clone())
-        };
-        self.paint_stream = Some(stream(Layer::Material, heights_budget)?);
-        if colored {
-            self.color_stream = Some(stream(Layer::Color, heights_budget.saturating_mul(2))?);
-        }
-        self.vram = Some(VramPool::new(vram)?);
+        // The paint streams with the heights; the colour too, where the world has one.
+        self.streamed()?.enable_gpu(slots, true, colored)?;
         if let Some(detail) = &self.detail {
             let refine = self.detail_mode == crate::cli::DetailArg::Refine;
             scene.enable_detail(detail.layout(), refine)?;
@@ -501,9 +443,10 @@ impl Scenario for FlyoverScenario {
     }
 
     fn overlay(&self, overview: &Image) -> Option<Image> {
-        let pool = self.pool.as_ref()?;
-        let statuses = pool.statuses();
-        let active = |id: TileId| self.vram.as_ref().is_some_and(|v| v.slot_of(id).is_some());
+        let streamed = self.streamed.as_ref()?;
+        let statuses = streamed.ram().statuses();
+        let vram = streamed.vram();
+        let active = |id: TileId| vram.is_some_and(|v| v.slot_of(id).is_some());
         Some(tile_overlay::draw(
             overview,
             &tile_overlay::OverlayInput {
@@ -556,10 +499,8 @@ impl Scenario for FlyoverScenario {
             if keep_out.is_some_and(|w| w.intersect(&reach(&placement, ts)).is_some()) {
                 self.craters_skipped += 1;
             } else {
-                crater = self
-                    .stamps
-                    .push(TileStamp::Gaussian(GaussianStamp::default()), placement)?
-                    > 0;
+                let crater_stamp = TileStamp::Gaussian(GaussianStamp::default());
+                crater = self.streamed()?.push(crater_stamp, placement)? > 0;
             }
             // Its dirt goes into the world's material tiles (on the overlays' writer thread).
             if crater {
@@ -575,7 +516,7 @@ impl Scenario for FlyoverScenario {
             if let Some((stamp, placement)) =
                 wave.next(self.frame, path, self.texel_size, keep_out)?
             {
-                shock = self.stamps.push(stamp, placement)? > 0;
+                shock = self.streamed()?.push(stamp, placement)? > 0;
             }
         }
         let state = CameraState {
@@ -585,66 +526,34 @@ impl Scenario for FlyoverScenario {
             aspect: 16.0 / 9.0,
         };
         self.last_camera = Some(state);
-        let report = self.pool()?.update(&state)?;
         // A tile that could not be read (corrupt, unreadable) or written back ends the run;
         // the driver still writes the report of the frames done.
-        if let Some((id, e)) = self.pool()?.errors().first() {
-            bail!("tile {id} of the world: {e}");
-        }
-        self.written_back += report.written as u64;
-        // The VRAM pool uploads the nearest wanted tiles in RAM, within the per-frame budget.
-        let mut vram_report = None;
-        if let (Some(vram), Some(pool), Some(scene)) = (
-            self.vram.as_mut(),
-            self.pool.as_ref(),
-            ctx.gpu.as_deref_mut(),
-        ) && let Some(atlas) = scene.atlas_mut()
-        {
-            vram_report = Some(vram.update(&state, pool, atlas)?);
-        }
-        // The paint and colour of the same tiles, each within its own per-frame budget.
-        let mut overlay = None;
+        let streamed = self.streamed.as_mut().context("the world was finished")?;
+        let report = streamed.update(&state)?;
+        // The VRAM pool uploads the nearest wanted tiles in RAM, within the per-frame budget,
+        // and the paint and colour of the same tiles, each within its own budget.
+        let (mut vram_report, mut overlay) = (None, None);
         if let Some(scene) = ctx.gpu.as_deref_mut() {
-            let (paint_atlas, color_atlas) = scene.streamed_layers_mut();
-            let mut streamed = [None, None];
-            for (i, (stream, atlas)) in [
-                (self.paint_stream.as_mut(), paint_atlas),
-                (self.color_stream.as_mut(), color_atlas),
-            ]
-            .into_iter()
-            .enumerate()
-            {
-                if let (Some(stream), Some(atlas)) = (stream, atlas) {
-                    let (_, report) = stream.update(&state, atlas)?;
-                    if let Some((id, e)) = stream.ram().errors().first() {
-                        bail!("{:?} tile {id} of the world: {e}", stream.layer());
-                    }
-                    streamed[i] = Some(report);
-                }
+            if let Some(atlas) = scene.atlas_mut() {
+                vram_report = streamed.upload(&state, atlas)?;
             }
-            overlay = Some(streamed);
+            let (paint, color) = scene.streamed_layers_mut();
+            overlay = Some(streamed.upload_overlays(&state, paint, color)?);
         }
         // Craters on the tiles, after the uploads: a GPU stamp lands on what the slot holds
         // this frame.
         let mut changed = Vec::new();
         {
-            let Some(pool) = self.pool.as_mut() else {
-                bail!("the flyover's pool was shut down");
-            };
             // Slots are stamped only where there is a GPU to stamp them.
             let report = match ctx.gpu.as_deref_mut() {
                 Some(scene) => {
-                    let (stamps, vram) = (&mut self.stamps, self.vram.as_mut());
-                    let (report, ms) = scene.with_tile_deformer(ctx.timings, |deformer| {
-                        stamps.apply(pool, vram, deformer)
-                    })?;
+                    let (report, ms) = scene
+                        .with_tile_deformer(ctx.timings, |deformer| streamed.deform(deformer))?;
                     self.gpu_stamp_ms += ms;
                     report?
                 }
-                None => self.stamps.apply(pool, None, &mut RamDeformer)?,
+                None => streamed.deform_in_ram()?,
             };
-            self.gpu_tile_stamps += u64::from(report.gpu_tiles);
-            self.cpu_tile_stamps += u64::from(report.cpu_tiles);
             for (rect, heights) in &report.changed {
                 self.window.apply(*rect, heights)?;
                 changed.push(*rect);
@@ -667,15 +576,17 @@ impl Scenario for FlyoverScenario {
             // those on their way back from the GPU, unless the wheels force it (they land
             // first, waited for).
             if let Some(scene) = ctx.gpu.as_deref_mut()
-                && self.stamps.in_flight() > 0
+                && self.streamed()?.readbacks_in_flight() > 0
                 && self.trails.as_ref().is_some_and(|t| t.must_move(vehicle))
             {
                 changed.extend(self.take_tile_readbacks(scene, true)?);
             }
-            let craters_in_flight = self.stamps.in_flight() > 0;
-            let (Some(trails), Some(pool)) = (self.trails.as_mut(), self.pool.as_mut()) else {
+            let craters_in_flight = self.streamed()?.readbacks_in_flight() > 0;
+            let (Some(trails), Some(streamed)) = (self.trails.as_mut(), self.streamed.as_mut())
+            else {
                 bail!("the world's pool was shut down");
             };
+            let pool = streamed.ram_mut();
             let gpu = ctx.gpu.as_deref_mut();
             let (frame, step_ms) =
                 trails.advance(pool, gpu, vehicle, &state, craters_in_flight, ctx.timings)?;
@@ -707,7 +618,7 @@ impl Scenario for FlyoverScenario {
         self.update_window(xz)?;
         // The hole, written into the world off the frame thread; the layers around the camera
         // follow.
-        let world = self.pool()?.world().clone();
+        let world = self.streamed()?.world().clone();
         if self.frame == HOLE_FRAME {
             let ts = self.texel_size;
             let aside = -self.heading.perp() * HOLE_ASIDE;
@@ -720,15 +631,16 @@ impl Scenario for FlyoverScenario {
             .overlays
             .follow(&world, &self.window, xz, ctx.gpu.as_deref_mut())?;
         // Paint the writer put into the world is read again by the paint stream.
-        if let Some(stream) = self.paint_stream.as_mut() {
-            stream.reload(&painted);
-        }
+        self.streamed()?.reload_paint(&painted);
         // The streamed LOD's quadtree follows the changes (timed as `lod`).
         self.gpu_stamp_ms += self.follow_bounds(&changed, ctx)?;
         // The GPU stamps and granular steps are timed as their own steps.
         let cache_ms = (ms_since(t_frame) - self.gpu_stamp_ms).max(0.0);
         ctx.timings.add(Step::Cache, cache_ms);
         let camera_clearance_m = eye.y - self.ground(xz);
+        let tiles_missing = vram_report.map_or(self.tiles_missing(xz), |v| v.tiles_missing);
+        let streamed = self.streamed()?;
+        let (gpu_tile_stamps, cpu_tile_stamps) = streamed.tiles_stamped();
         Ok(FrameOutcome {
             camera,
             camera_clearance_m,
@@ -749,7 +661,7 @@ impl Scenario for FlyoverScenario {
                 cache: Some(CacheStats {
                     // With a GPU: wanted tiles drawn from a coarser level; without one, the
                     // tiles under and around the camera not in RAM.
-                    tiles_missing: vram_report.map_or(self.tiles_missing(xz), |v| v.tiles_missing),
+                    tiles_missing,
                     // The heights' atlas and the paint and colour atlases: one VRAM budget.
                     vram_bytes: vram_report.map(|v| {
                         let streamed = overlay.into_iter().flatten().flatten();
@@ -768,10 +680,10 @@ impl Scenario for FlyoverScenario {
                     loads: report.loads,
                     evictions: report.evictions,
                     dirty_tiles: report.dirty,
-                    pending_craters: self.stamps.pending(),
-                    gpu_tile_stamps: self.gpu_tile_stamps,
-                    cpu_tile_stamps: self.cpu_tile_stamps,
-                    tile_readbacks_in_flight: self.stamps.in_flight(),
+                    pending_craters: streamed.stamps_pending(),
+                    gpu_tile_stamps,
+                    cpu_tile_stamps,
+                    tile_readbacks_in_flight: streamed.readbacks_in_flight(),
                     collision_window: self
                         .window
                         .window()
@@ -788,12 +700,6 @@ impl Scenario for FlyoverScenario {
     fn finish(&mut self, gpu: Option<&mut GpuScene>) -> Result<FinishStats> {
         // The holes and paint still on their way are in the world's files.
         self.overlays.finish()?;
-        for stream in [self.paint_stream.take(), self.color_stream.take()]
-            .into_iter()
-            .flatten()
-        {
-            stream.shutdown(SHUTDOWN_TIMEOUT)?;
-        }
         // The tiles stamped on the GPU reach RAM before anything is written back.
         let mut gpu = gpu;
         if let Some(scene) = gpu.as_deref_mut() {
@@ -806,38 +712,26 @@ impl Scenario for FlyoverScenario {
         };
         // The trails' last areas reach the tiles, and the window's volume is checked.
         let mut granular = Vec::new();
-        if let (Some(trails), Some(pool)) = (self.trails.as_mut(), self.pool.as_mut()) {
+        if let (Some(trails), Some(streamed)) = (self.trails.as_mut(), self.streamed.as_mut()) {
             let mut timings = crate::timings::Timings::default();
-            (_, granular) = trails.release(pool, gpu, &mut timings)?;
+            (_, granular) = trails.release(streamed.ram_mut(), gpu, &mut timings)?;
         }
-        if self.stamps.in_flight() > 0 {
-            bail!(
-                "{} tile readbacks never arrived: those craters are not saved",
-                self.stamps.in_flight()
-            );
-        }
-        let Some(mut pool) = self.pool.take() else {
+        let Some(streamed) = self.streamed.take() else {
             return Ok(FinishStats {
                 granular,
                 ..FinishStats::default()
             });
         };
-        // Every dirty tile goes back into the world before the run ends.
-        let world = pool.world().clone();
-        let issued = pool.flush();
-        pool.shutdown(SHUTDOWN_TIMEOUT)?;
-        let mut written = self.written_back + issued as u64 + detail_written;
-        // Craters whose tiles never became resident go straight into the world's files.
-        let changed = self.stamps.finish_into_world(&world, &mut RamDeformer)?;
-        if !changed.is_empty() {
-            written += changed.len() as u64;
-            terrain_cache::rebuild_ancestors(&world, &changed)?;
-        }
+        // Every dirty tile goes back into the world, and craters whose tiles never became
+        // resident go straight into its files.
+        let (written, world) = streamed.finish(SHUTDOWN_TIMEOUT)?;
         // The overview as the world now holds it (`terrain_final.png`).
         self.overview = overview_map(&world, self.overview_level)?;
         Ok(FinishStats {
             granular,
-            written_back_tiles: Some(written),
+            written_back_tiles: Some(
+                written.written_back + written.stamped_at_finish + detail_written,
+            ),
         })
     }
 }

@@ -19,7 +19,7 @@ impl FlyoverScenario {
                 "{flag} draws a streamed world clamped at its edges; this one repeats"
             )));
         }
-        let Some(pool) = self.pool.as_ref() else {
+        let Some(pool) = self.pool() else {
             bail!("the world's pool was shut down");
         };
         let bounds = RegionBounds::open(pool.world())?;
@@ -42,7 +42,7 @@ impl FlyoverScenario {
     ) -> Result<f64> {
         let (Some(bounds), Some(pool), Some(scene)) = (
             self.bounds.as_mut(),
-            self.pool.as_ref(),
+            self.streamed.as_ref().map(StreamedWorld::ram),
             ctx.gpu.as_deref_mut(),
         ) else {
             return Ok(0.0);
