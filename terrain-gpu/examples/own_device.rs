@@ -17,9 +17,8 @@ use terrain_core::{
     generate_coarse_map,
 };
 use terrain_gpu::{
-    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, GpuDerivativeMap, GpuHeightMap, GpuStamp,
-    GpuTextureStamp, MapUse, NormalPass, SkyColors, SkyPass, StampOp, StampPass, SurfaceShading,
-    TerrainStyle, wgpu,
+    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DeformableMap, GpuStamp, GpuTextureStamp,
+    MapUse, SkyColors, SkyPass, StampOp, SurfaceShading, TerrainStyle, wgpu,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 
@@ -68,10 +67,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..TerrainParams::default()
     };
     let map = generate_coarse_map(&params, HeightEncoding::spanning::<u16>(0.0, 30.0)?, TEXEL)?;
-    let gpu_map = GpuHeightMap::from_map(&device, &queue, &map)?;
-    let normals = GpuDerivativeMap::for_map(&device, &gpu_map)?;
-    let mut stamps = StampPass::new(&device)?;
-    let mut normal_pass = NormalPass::new(&device)?;
+    // The map on the GPU with its normals, and the passes that deform it.
+    let mut ground = DeformableMap::new(&device, &queue, &map)?;
     let layout = ClipmapLayout::new(63, 4)?;
     let mut renderer = ClipmapRenderer::new(&device, &format, &layout)?;
     let sky = SkyPass::new(&device, &format)?;
@@ -82,11 +79,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut encoder = device.create_command_encoder(&Default::default());
     let gauss = GaussianStamp::default();
     let crater = StampPlacement::new(centre + Vec2::new(8.0, 4.0), Vec2::splat(10.0), -4.0)?;
-    let mut dirty = stamps.encode(
+    let mut dirty = ground.encode_stamp(
         &device,
         &queue,
         &mut encoder,
-        &gpu_map,
         &StampOp {
             stamp: GpuStamp::Gaussian(&gauss),
             placement: crater,
@@ -94,23 +90,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
     )?;
     let wall = StampPlacement::new(centre + Vec2::new(-6.0, 10.0), Vec2::new(20.0, 3.0), 2.0)?;
-    dirty.extend(stamps.encode(
+    dirty.extend(ground.encode_stamp(
         &device,
         &queue,
         &mut encoder,
-        &gpu_map,
         &StampOp {
             stamp: GpuStamp::Texture(&ridge),
             placement: wall,
             blend: Blend::Add,
         },
     )?);
-    normal_pass.encode_full(&device, &queue, &mut encoder, &gpu_map, &normals)?;
+    // The normals of the stamped rects only, after every stamp (they read neighbours).
+    ground.encode_normals(&device, &queue, &mut encoder, &dirty)?;
 
     let eye_xz = centre - Vec2::new(18.0, 18.0);
-    let ground = terrain_core::bilinear(&map, eye_xz)?;
+    let eye_ground = terrain_core::bilinear(&map, eye_xz)?;
     let camera = Camera::looking(
-        Vec3::new(eye_xz.x, ground + 12.0, eye_xz.y),
+        Vec3::new(eye_xz.x, eye_ground + 12.0, eye_xz.y),
         Vec3::new(1.0, -0.45, 1.0),
     );
     let aspect = FRAME.x as f32 / FRAME.y as f32;
@@ -137,8 +133,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &queue,
         &ClipmapView {
             surface: ClipmapSurface::Coarse {
-                map: &gpu_map,
-                normals: &normals,
+                map: ground.heights(),
+                normals: ground.normals(),
             },
             frame: &frame,
             camera: &camera,
@@ -155,8 +151,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     queue.submit([encoder.finish()]);
     // The submit carried every recorded dispatch: their uniform slots are free again.
-    stamps.recall();
-    normal_pass.recall();
+    ground.recall();
     // Read the "swap chain" back (an engine would present it instead).
     let image = terrain_gpu::read_texture_rgba8(&device, &queue, &targets.resolved)?;
     terrain_core::io::write_png_rgba8(&out, &image)?;

@@ -77,7 +77,9 @@ use device::{
     context, detail_readback, detail_stream, download, limits, profiler, queued_readback, readback,
     region_source, small_readback, step_timer, submit, timer,
 };
-use passes::{atlas_stamper, density, detail_probe, material_effect, normals, spill, stamp};
+use passes::{
+    atlas_stamper, deformable_map, density, detail_probe, material_effect, normals, spill, stamp,
+};
 use render::{camera, cdlod, clipmap, offscreen, refine, sky, target, terrain, tessellation};
 use resources::{atlas, detail, hole_mask, maps, material_layer, materials, overlay_atlas};
 
@@ -87,6 +89,7 @@ pub use camera::{Camera, DepthConvention, RenderView, ViewMatrices};
 pub use cdlod::{CdlodDraw, CdlodRenderer};
 pub use clipmap::{ClipmapRenderer, ClipmapSurface, ClipmapView, TerrainStyle};
 pub use context::{AdapterReport, GpuContext};
+pub use deformable_map::DeformableMap;
 pub use density::{DensityPass, GpuDensityMap};
 pub use detail::{
     DetailShading, DetailTileState, GpuDetailTiles, MAX_PARALLAX_REACH, MAX_PARALLAX_STEPS,

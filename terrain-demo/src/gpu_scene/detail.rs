@@ -75,7 +75,7 @@ impl GpuScene {
             // The texels refined are the drawn surface's: a streamed world's level 0.
             let texel = match &self.atlas {
                 Some(atlas) => atlas.config().world.texel_size,
-                None => self.map.texel_size(),
+                None => self.ground.heights().texel_size(),
             };
             let radius_m = refine_radius(texel);
             let view = terrain_lod::RefineView::new(Vec2::ZERO, texel, radius_m)?;

@@ -12,10 +12,10 @@ use terrain_core::{CoarseMap, DirtyRect, Grid, TextureStamp};
 use terrain_core::{FixedPointMap, Rect};
 use terrain_gpu::granular::GranularField;
 use terrain_gpu::{
-    AtlasStamper, ClipmapSurface, DetailShading, GpuContext, GpuDerivativeMap, GpuHeightMap,
-    GpuRegionSource, GpuStamp, GpuTextureStamp, NormalPass, OffscreenTarget, RefineDraw,
-    RefinePass, RefineRenderer, RegionReadback, SkyColors, SkyPass, SpillPass, StampOp, StampPass,
-    TerrainRenderer, TerrainStyle, TerrainView,
+    AtlasStamper, ClipmapSurface, DeformableMap, DetailShading, GpuContext, GpuRegionSource,
+    GpuStamp, GpuTextureStamp, OffscreenTarget, RefineDraw, RefinePass, RefineRenderer,
+    RegionReadback, SkyColors, SkyPass, SpillPass, StampOp, TerrainRenderer, TerrainStyle,
+    TerrainView,
 };
 use terrain_lod::{CdlodConfig, CdlodTree, ClipmapLayout, TessConfig};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
@@ -46,10 +46,8 @@ pub const CLIPMAP_LEVELS: u32 = 5;
 /// Everything that lives on the GPU for the demo.
 pub struct GpuScene {
     ctx: GpuContext,
-    map: GpuHeightMap<u16>,
-    normals: GpuDerivativeMap,
-    stamps: StampPass,
-    normal_pass: NormalPass,
+    /// The in-memory map, its normals and the passes that deform it.
+    ground: DeformableMap,
     sky: SkyPass,
     /// The terrain in its LOD mode (the clipmap unless `--lod` says otherwise).
     terrain: TerrainRenderer,
@@ -230,23 +228,14 @@ impl GpuScene {
     pub fn new(map: &CoarseMap, resolution: UVec2, readback_ring: usize) -> Result<Self> {
         let ctx = GpuContext::new_headless().context("no GPU adapter for the 3D frames")?;
         let (device, queue) = (&ctx.device, &ctx.queue);
-        let gpu_map = GpuHeightMap::from_map(device, queue, map)?;
-        let normals = GpuDerivativeMap::for_map(device, &gpu_map)?;
-        let mut normal_pass = NormalPass::new(device)?;
-        let mut encoder = device.create_command_encoder(&Default::default());
-        normal_pass.encode_full(device, queue, &mut encoder, &gpu_map, &normals)?;
-        queue.submit([encoder.finish()]);
-        normal_pass.recall();
+        let ground = DeformableMap::new(device, queue, map)?;
         let target = OffscreenTarget::new(device, resolution)?;
         let layout = ClipmapLayout::new(CLIPMAP_N, CLIPMAP_LEVELS)?;
         let (lo, hi) = map.encoding().range::<u16>();
         let timer = FrameTimer::new(&ctx);
         tracing::info!(mode = ?timer.mode(), "GPU steps timed");
         Ok(Self {
-            map: gpu_map,
-            normals,
-            stamps: StampPass::new(device)?,
-            normal_pass,
+            ground,
             sky: SkyPass::new(device, &target.format())?,
             terrain: TerrainRenderer::clipmap(device, &target.format(), layout, (lo, hi))?,
             target,
@@ -329,7 +318,9 @@ impl GpuScene {
             .terrain
             .clipmap_layout()
             .map_or(CLIPMAP_LEVELS, ClipmapLayout::levels);
-        (CLIPMAP_N - 1) as f32 / 2.0 * (1u32 << (levels - 1)) as f32 * self.map.texel_size()
+        (CLIPMAP_N - 1) as f32 / 2.0
+            * (1u32 << (levels - 1)) as f32
+            * self.ground.heights().texel_size()
     }
 
     /// Makes the clipmap reach `radius` metres around the camera (its coarsest level's half
@@ -339,7 +330,7 @@ impl GpuScene {
         let levels = terrain_lod::clipmap_levels_to_reach(
             CLIPMAP_N,
             radius,
-            self.map.texel_size(),
+            self.ground.heights().texel_size(),
             CLIPMAP_LEVELS,
         );
         let now = self.terrain.clipmap_layout().map(ClipmapLayout::levels);
@@ -390,7 +381,7 @@ impl GpuScene {
     /// copy with the truth.
     #[cfg(test)]
     pub fn read_map(&self) -> Result<CoarseMap> {
-        Ok(self.map.read(&self.ctx.device, &self.ctx.queue)?)
+        Ok(self.ground.read(&self.ctx.device, &self.ctx.queue)?)
     }
 
     /// The GPU objects alive on the device now.
@@ -467,9 +458,10 @@ impl GpuScene {
                     placement: d.placement,
                     blend: terrain_core::Blend::Add,
                 };
-                let rects = self.stamps.encode(device, queue, encoder, &self.map, &op)?;
+                let rects = self.ground.encode_stamp(device, queue, encoder, &op)?;
                 if let Some(paint) = self.paint.as_mut() {
-                    paint.encode(device, queue, encoder, &self.map, d.kind, &d.placement)?;
+                    let map = self.ground.heights();
+                    paint.encode(device, queue, encoder, map, d.kind, &d.placement)?;
                 }
                 dirty.extend(rects.into_iter().map(|r| (i, r)));
             }
@@ -478,17 +470,8 @@ impl GpuScene {
         let normal_time = self
             .timer
             .time(device, queue, Step::NormalsGpu, |encoder| {
-                for (_, r) in &dirty {
-                    self.normal_pass.encode(
-                        device,
-                        queue,
-                        encoder,
-                        &self.map,
-                        &self.normals,
-                        *r,
-                    )?;
-                }
-                Ok(())
+                let rects: Vec<DirtyRect> = dirty.iter().map(|(_, r)| *r).collect();
+                self.ground.encode_normals(device, queue, encoder, &rects)
             })?;
         // Footprints into the detail tiles, as one more submit.
         if let (Some(detail), Some(foot)) = (self.detail.as_mut(), self.footprint.as_ref()) {
@@ -507,34 +490,28 @@ impl GpuScene {
                     };
                     // What leaves the tiles' range spills into the coarse-map, whose
                     // normals follow it; its rects go to collision with the others.
+                    let (coarse, stamps) = self.ground.stamp_target();
                     let out = detail.spill.encode(
                         device,
                         queue,
                         encoder,
-                        &mut self.stamps,
+                        stamps,
                         terrain_gpu::SpillTargets {
                             tiles: detail.stream.tiles_mut(),
-                            coarse: &self.map,
+                            coarse,
                         },
                         &op,
                     )?;
                     texels += out.detail.iter().map(|(_, r)| r.area()).sum::<u64>();
                     if let Some(paint) = self.paint.as_mut() {
-                        paint.encode(device, queue, encoder, &self.map, d.kind, &d.placement)?;
+                        let map = self.ground.heights();
+                        paint.encode(device, queue, encoder, map, d.kind, &d.placement)?;
                     }
                     // Back to the CPU through the ring, recorded after the stamp.
                     detail.stream.request(device, encoder, out.detail)?;
-                    for r in out.coarse {
-                        self.normal_pass.encode(
-                            device,
-                            queue,
-                            encoder,
-                            &self.map,
-                            &self.normals,
-                            r,
-                        )?;
-                        dirty.push((i, r));
-                    }
+                    self.ground
+                        .encode_normals(device, queue, encoder, &out.coarse)?;
+                    dirty.extend(out.coarse.into_iter().map(|r| (i, r)));
                 }
                 Ok(())
             })?;
@@ -543,8 +520,7 @@ impl GpuScene {
             time.record(timings);
         }
         // Every submit is done: the passes' uniform slots are free again.
-        self.stamps.recall();
-        self.normal_pass.recall();
+        self.ground.recall();
         if let Some(paint) = self.paint.as_mut() {
             paint.recall();
         }
@@ -558,7 +534,7 @@ impl GpuScene {
         GpuRegionSource::new(
             &self.ctx.device,
             &self.ctx.queue,
-            &self.map,
+            self.ground.heights(),
             &mut self.readback,
         )
     }
@@ -603,14 +579,14 @@ impl GpuScene {
                 surface: g.normals().buffer(),
             },
             (None, None, Some(d)) => ClipmapSurface::Detail {
-                map: &self.map,
-                normals: &self.normals,
+                map: self.ground.heights(),
+                normals: self.ground.normals(),
                 detail: d.stream.tiles(),
                 shading: &d.shading,
             },
             (None, None, None) => ClipmapSurface::Coarse {
-                map: &self.map,
-                normals: &self.normals,
+                map: self.ground.heights(),
+                normals: self.ground.normals(),
             },
         };
         let view = TerrainView {

@@ -81,7 +81,7 @@ impl GpuScene {
     /// layer (4 bytes per texel in one storage buffer, and a texture as large).
     pub fn enable_material_effects(&mut self) -> Result<()> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let size = self.map.size();
+        let size = self.ground.heights().size();
         let layer = GpuMaterialLayer::new(device, queue, &Grid::new(size.x, size.y, [0; 4])?)?;
         self.terrain.set_material_layer(Some(&layer));
         if let Some(refined) = self.refined.as_mut() {

@@ -1,5 +1,5 @@
 //! The viewer's GPU side: the device on an adapter that can present to the window, the
-//! terrain on the GPU (height map, derivative normals, stamp and normal passes), and each
+//! terrain on the GPU (terrain-gpu's `DeformableMap`: heights, derivative normals, the passes), and each
 //! frame drawn by terrain-gpu's caller's-pass renderers (`SkyPass`, `ClipmapRenderer`) into
 //! the viewer's own colour and depth textures, the overlay on top, then copied to the window.
 //! The colour texture is also what `--screenshot` reads back.
@@ -13,9 +13,9 @@ use std::time::Instant;
 use terrain_core::DirtyRect;
 use terrain_core::{CoarseMap, Grid, TextureStamp};
 use terrain_gpu::{
-    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DepthConvention, GpuDerivativeMap,
-    GpuHeightMap, GpuRegionSource, GpuTextureStamp, GpuTimer, MapUse, NormalPass, RegionReadback,
-    SkyColors, SkyPass, StampOp, StampPass, TargetFormat, TerrainStyle,
+    Camera, ClipmapRenderer, ClipmapSurface, ClipmapView, DeformableMap, DepthConvention,
+    GpuRegionSource, GpuTextureStamp, GpuTimer, MapUse, RegionReadback, SkyColors, SkyPass,
+    StampOp, TargetFormat, TerrainStyle,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 use terrain_physics::{CollisionMirror, ReadbackScheduler, UpdateReport};
@@ -112,10 +112,8 @@ pub struct Gpu {
     frame: FrameTextures,
     present: Present,
     overlay: Overlay,
-    map: GpuHeightMap<u16>,
-    normals: GpuDerivativeMap,
-    stamps: StampPass,
-    normal_pass: NormalPass,
+    /// The map, its normals and the passes that deform it.
+    ground: DeformableMap,
     footprint: GpuTextureStamp,
     sky: SkyPass,
     renderer: ClipmapRenderer,
@@ -257,13 +255,7 @@ impl Gpu {
             sample_count: 1,
             depth_convention: DepthConvention::Forward,
         };
-        let gpu_map = GpuHeightMap::from_map(&device, &queue, map)?;
-        let normals = GpuDerivativeMap::for_map(&device, &gpu_map)?;
-        let mut normal_pass = NormalPass::new(&device)?;
-        let mut encoder = device.create_command_encoder(&Default::default());
-        normal_pass.encode_full(&device, &queue, &mut encoder, &gpu_map, &normals)?;
-        queue.submit([encoder.finish()]);
-        normal_pass.recall();
+        let ground = DeformableMap::new(&device, &queue, map)?;
         let layout = ClipmapLayout::new(CLIPMAP_N, options.levels)?;
         let (lo, hi) = map.encoding().range::<u16>();
         let frame = FrameTextures::new(&device, UVec2::new(config.width, config.height));
@@ -271,16 +263,13 @@ impl Gpu {
         present.set_source(&device, &frame.color_view);
         let gpu = Self {
             overlay: Overlay::new(&device, FRAME_COLOR)?,
-            stamps: StampPass::new(&device)?,
             footprint: GpuTextureStamp::new(&device, footprint)?,
             sky: SkyPass::new(&device, &target)?,
             renderer: ClipmapRenderer::new(&device, &target, &layout)?,
             timer: GpuTimer::new(&device, &queue),
             readback: RegionReadback::new(&device, READBACK_RING)?,
             layout,
-            map: gpu_map,
-            normals,
-            normal_pass,
+            ground,
             style: TerrainStyle {
                 ramp: (lo, hi),
                 fog_density: 0.008,
@@ -399,18 +388,13 @@ impl Gpu {
         };
         let mut dirty = Vec::new();
         let stamp = self.timer.time(device, queue, |encoder| {
-            dirty = self.stamps.encode(device, queue, encoder, &self.map, &op)?;
+            dirty = self.ground.encode_stamp(device, queue, encoder, &op)?;
             Ok(())
         })?;
         let normals = self.timer.time(device, queue, |encoder| {
-            for rect in &dirty {
-                self.normal_pass
-                    .encode(device, queue, encoder, &self.map, &self.normals, *rect)?;
-            }
-            Ok(())
+            self.ground.encode_normals(device, queue, encoder, &dirty)
         })?;
-        self.stamps.recall();
-        self.normal_pass.recall();
+        self.ground.recall();
         self.check()?;
         Ok((stamp.ms, normals.ms, dirty))
     }
@@ -423,8 +407,12 @@ impl Gpu {
         mirror: &CollisionMirror,
         now: Instant,
     ) -> Result<UpdateReport> {
-        let mut source =
-            GpuRegionSource::new(&self.device, &self.queue, &self.map, &mut self.readback);
+        let mut source = GpuRegionSource::new(
+            &self.device,
+            &self.queue,
+            self.ground.heights(),
+            &mut self.readback,
+        );
         // A busy ring keeps the rects dirty (`RegionSource::is_busy`).
         Ok(scheduler.update(now, &mut source, mirror)?)
     }
@@ -439,15 +427,15 @@ impl Gpu {
         let frustum = Frustum::from_view_proj(camera.view_proj_world(aspect));
         let placement = self.layout.place(
             Vec2::new(camera.position.x, camera.position.z),
-            self.map.texel_size(),
+            self.ground.heights().texel_size(),
             self.height_range,
             Some(&frustum),
         )?;
         let lod_ms = t.elapsed().as_secs_f64() * 1e3;
         let view = ClipmapView {
             surface: ClipmapSurface::Coarse {
-                map: &self.map,
-                normals: &self.normals,
+                map: self.ground.heights(),
+                normals: self.ground.normals(),
             },
             frame: &placement,
             camera,
