@@ -43,12 +43,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let ahead = sledge + Vec2::X * 16.0;
         let cpu = None::<&mut CpuOnly>;
         let mut trail = trails.follow(&mut pool, cpu, &[sledge], ahead, &camera, false)?;
-        let (Some(ground), Some(window)) = (trails.ground(), trails.window()) else {
+        let Some((local, ground)) = trails.ground_at(sledge) else {
             continue;
         };
         // The runner's bottom 0.15 m under the ground the window was taken with.
-        let local = sledge - window.min.as_vec2() * 0.5;
-        let y = terrain_core::bilinear(ground, local)? + 0.45;
+        let y = ground + 0.45;
         let pose = Affine3A::from_translation(Vec3::new(local.x, y, local.y));
         let objects = [GranularObject::new(&runner, pose)];
         let cpu = None::<&mut CpuOnly>;

@@ -194,6 +194,17 @@ impl GranularTrails {
             .map(|(_, map)| map)
     }
 
+    /// Where an object at `xz` (world metres, X Z) stands in the taken window: its position in
+    /// the window's frame (metres from the window's corner) and the height of the window's
+    /// [`ground`](Self::ground) under it (bilinear; a point off the window reads its nearest
+    /// edge), to pose objects on. `None` without a window, or for a point not finite.
+    pub fn ground_at(&self, xz: Vec2) -> Option<(Vec2, f32)> {
+        let (ground, window) = (self.ground()?, self.window()?);
+        let local = xz - window.min.as_vec2() * ground.texel_size();
+        let height = terrain_core::bilinear(ground, local).ok()?;
+        Some((local, height))
+    }
+
     /// Where no other write may go: the taken window and, while one retires, the window it
     /// moved away from (the smallest rect holding both).
     pub fn keep_out(&self) -> Option<Rect> {

@@ -283,9 +283,11 @@ fn drive_along(
         }
         let ground = trails.ground().expect("a window around the wheel");
         let corner = trails.window().unwrap().min.as_vec2();
-        let below = terrain_core::bilinear(ground, xz - corner).unwrap();
+        let (local, below) = trails.ground_at(xz).expect("a window around the wheel");
+        assert_eq!(local, xz - corner, "texels of 1 m");
+        assert_eq!(below, terrain_core::bilinear(ground, local).unwrap());
         // The wheel's bottom 0.5 m under the ground the window was taken with.
-        let at = Vec3::new(xz.x - corner.x, below + 1.5, xz.y - corner.y);
+        let at = Vec3::new(local.x, below + 1.5, local.y);
         let wheel_at = [GranularObject::new(&wheel, Affine3A::from_translation(at))];
         trails
             .step(&mut pool, gpu.as_deref_mut(), &wheel_at, i, &mut frame)
@@ -294,6 +296,7 @@ fn drive_along(
     }
     let (_, measured) = trails.release(&mut pool, gpu).unwrap();
     assert!(trails.window().is_none());
+    assert_eq!(trails.ground_at(Vec2::ZERO), None, "no window, no ground");
     let tiles = WORLD / TILE;
     for id in (0..tiles * tiles).map(|k| TileId::new(0, k % tiles, k / tiles)) {
         let state = pool.status(id).map(|s| s.state);

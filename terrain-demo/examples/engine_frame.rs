@@ -211,10 +211,8 @@ fn main() -> Result<()> {
         let points = [sledge];
         let ram = streamed.ram_mut();
         let mut trail = trails.follow(ram, Some(&mut snow), &points, ahead, &state, others)?;
-        if let (Some(ground), Some(w)) = (trails.ground(), trails.window()) {
-            let local = sledge - w.min.as_vec2() * TEXEL;
-            let y = terrain_core::bilinear(ground, local)? + 0.45;
-            let pose = Affine3A::from_translation(Vec3::new(local.x, y, local.y));
+        if let Some((local, ground)) = trails.ground_at(sledge) {
+            let pose = Affine3A::from_translation(Vec3::new(local.x, ground + 0.45, local.y));
             let objects = [GranularObject::new(&runner, pose)];
             trails.step(
                 streamed.ram_mut(),

@@ -35,8 +35,8 @@ const EXAMPLES: [(&str, &str, &[&str]); 15] = [
     ("terrain-cache", "build_world", &["512", "{out}/world"]),
     // Reads the world build_world just wrote.
     ("terrain-cache", "random_blocks", &["{out}/world", "20"]),
-    // Paints into that world and streams the paint beside its heights.
-    ("terrain-cache", "paint_stream", &["{out}/world", "12"]),
+    // Paints and stamps into that world and streams both (`StreamedWorld`).
+    ("terrain-cache", "streamed_world", &["{out}/world", "12"]),
     ("terrain-cache", "trace_sim", &[]),
     ("terrain-cache", "granular_trails", &["120"]),
     // The whole frame an engine runs: it joins every library crate, so it lives in the demo.

@@ -79,16 +79,15 @@ impl Trails {
         if let Some(e) = &frame.shift_failed {
             tracing::warn!("the granular window moved waiting: its GPU map could not shift ({e})");
         }
-        let (Some(ground), Some(window)) = (self.trails.ground(), self.trails.window()) else {
+        if self.trails.window().is_none() {
             return Ok((frame, 0.0));
-        };
+        }
         let rotation = Quat::from_rotation_y(heading.x.atan2(heading.y));
-        let corner = window.min.as_vec2() * ground.texel_size();
+        // Each wheel on the ground the window was taken with.
         let poses: Vec<Affine3A> = wheels
             .iter()
-            .map(|&xz| {
-                let local = xz - corner;
-                let ground = terrain_core::bilinear(ground, local).unwrap_or(0.0);
+            .filter_map(|&xz| self.trails.ground_at(xz))
+            .map(|(local, ground)| {
                 let at = Vec3::new(local.x, ground - WHEEL_SINK + WHEEL_RADIUS, local.y);
                 Affine3A::from_rotation_translation(rotation, at)
             })
