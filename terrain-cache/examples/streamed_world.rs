@@ -70,7 +70,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let h = streamed
             .upload(&camera, &mut heights)?
             .ok_or("no VRAM pool")?;
-        let [p, _] = streamed.upload_overlays(&camera, Some(&mut colours), None)?;
+        let p = streamed.upload_paint(&camera, &mut colours)?;
         let p = p.ok_or("no paint stream")?;
         let stamped = streamed.deform_in_ram()?;
         let shown = colours.sample(at.as_dvec2(), false);

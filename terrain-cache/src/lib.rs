@@ -83,7 +83,7 @@ mod overlay_writer;
 pub mod overlays;
 mod region_bounds;
 pub mod store;
-mod streamed_world;
+pub mod streamed_world;
 pub mod tile;
 pub mod tile_file;
 pub mod tile_stamps;

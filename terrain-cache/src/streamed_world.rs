@@ -1,35 +1,42 @@
 //! A streamed world driven once per frame: the pools and the stamps an engine otherwise wires
 //! together itself.
 //!
-//! [`StreamedWorld`] owns the world's height tiles in a RAM pool (worker threads, a selection
-//! reaching three times the VRAM pool's, so what the GPU wants next is already in RAM:
-//! Fikkan 2013, sec. 4.3), with a GPU the VRAM pool that fills the caller's tile atlas and the
-//! streams of the world's paint and colour, and the stamps queued on its level-0 tiles with
-//! their hold / pin / read back / release protocol ([`TileStamps`]). A frame is:
+//! [`StreamedWorld`] owns the world's height tiles in a RAM pool (worker threads; a spherical
+//! selection three times the default's reach, beyond the VRAM pool's frustum, so what the GPU
+//! wants next is already in RAM: Fikkan 2013, sec. 4.3), with a GPU the VRAM pool that fills
+//! the caller's tile atlas and the streams of the world's paint and colour, and the stamps
+//! queued on its level-0 tiles with their hold / pin / read back / release protocol
+//! ([`TileStamps`]). A frame is:
 //!
-//! 1. [`update`](StreamedWorld::update): the RAM pools follow the camera (loads and write-backs
-//!    on worker threads); a tile that cannot be read fails the frame;
-//! 2. [`upload`](StreamedWorld::upload) and [`upload_overlays`](StreamedWorld::upload_overlays)
-//!    with a GPU: the nearest wanted tiles into the atlases, within the per-frame budget;
+//! 1. [`update`](StreamedWorld::update): the heights' RAM pool follows the camera (loads and
+//!    write-backs on worker threads); a tile that failed fails the frame;
+//! 2. with a GPU, [`upload`](StreamedWorld::upload) the nearest wanted tiles into the atlas,
+//!    within the per-frame budget, and [`upload_paint`](StreamedWorld::upload_paint) /
+//!    [`upload_color`](StreamedWorld::upload_color) the overlays' (their RAM pools follow the
+//!    camera there);
 //! 3. [`push`](StreamedWorld::push) stamps, then [`deform`](StreamedWorld::deform) (the GPU's
-//!    deformer stamps the slots, RAM the rest) or [`deform_in_ram`](StreamedWorld::deform_in_ram)
-//!    without a GPU, after the uploads so a GPU stamp lands on what the slot holds this frame;
+//!    deformer stamps the slots, RAM the rest) or, without a GPU,
+//!    [`deform_in_ram`](StreamedWorld::deform_in_ram), after the uploads so a GPU stamp lands on
+//!    what the slot holds this frame;
 //! 4. [`receive`](StreamedWorld::receive) each rect the GPU read back (never waited for).
 //!
 //! [`finish`](StreamedWorld::finish) ends it: every dirty tile goes back into the world, stamps
 //! whose tiles never became resident are written straight into its files, and the coarser
-//! levels follow. Granular trails, the detail layer and collision use the RAM pool
+//! levels follow. Granular trails and collision use the RAM pool
 //! ([`ram_mut`](StreamedWorld::ram_mut)) beside it. terrain-cache names no GPU type: the
 //! atlases and the deformer are the caller's, through terrain-core's contracts.
 
+use crate::build::rebuild_ancestors_shared;
 use crate::error::CacheError;
 use crate::overlay_stream::OverlayStream;
 use crate::policy::{CameraState, SphericalSelection, TileGrid};
+use crate::pool::journal;
 use crate::pool::{FrameReport, PoolConfig, RamPool};
 use crate::tile::{Layer, TileId};
 use crate::tile_stamps::{TileStampError, TileStampReport, TileStamps};
 use crate::vram::{VramConfig, VramError, VramPool, VramReport};
 use crate::world::World;
+use std::convert::Infallible;
 use std::time::Duration;
 use terrain_core::{
     CoreError, Grid, OverlayUploadTarget, RamDeformer, Rect, StampPlacement, TileDeformer,
@@ -42,8 +49,8 @@ pub enum StreamedWorldError {
     /// The pools or the world refused (a bad camera, a write, a file).
     #[error(transparent)]
     Cache(#[from] CacheError),
-    /// A tile of the world could not be read (corrupt, unreadable): the frame would draw and
-    /// deform a stand-in in its place.
+    /// A tile of the world could not be read (corrupt, unreadable: the frame would draw and
+    /// deform a stand-in in its place) or written back; the pool's error, as text.
     #[error("{layer:?} tile {id} of the world: {message}")]
     Tile {
         /// The tile's layer.
@@ -53,14 +60,16 @@ pub enum StreamedWorldError {
         /// The pool's error.
         message: String,
     },
-    /// A stamp applied in RAM (or in the world's files at the end) failed.
+    /// A stamp applied in RAM (or in the world's files at the end) failed, or
+    /// [`StreamedWorld::deform_in_ram`] was called while GPU stamps are on their way back.
     #[error(transparent)]
     Stamp(#[from] TileStampError<CoreError>),
     /// [`StreamedWorld::enable_gpu`] was called a second time.
     #[error("the streamed world's GPU side is already enabled")]
     GpuEnabled,
-    /// [`StreamedWorld::finish`] was called with GPU-stamped rects still on their way back.
-    #[error("{count} tile readbacks never arrived: those stamps are not saved")]
+    /// [`StreamedWorld::finish`] found GPU-stamped rects still on their way back (everything
+    /// else was written), or [`StreamedWorld::deform_in_ram`] would stamp under them.
+    #[error("{count} tile readbacks have not arrived: their stamps are not in RAM")]
     ReadbacksOutstanding {
         /// Rects in flight.
         count: usize,
@@ -78,7 +87,8 @@ struct GpuSide {
 /// What [`StreamedWorld::finish`] wrote.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct WorldWritten {
-    /// Level-0 tiles written back by the RAM pool over the whole run.
+    /// Write-backs of level-0 tiles the RAM pool finished over the run (a tile written back
+    /// twice counts twice), and those it issued at the end.
     pub written_back: u64,
     /// Level-0 tiles stamped straight in the world's files at the end (never resident).
     pub stamped_at_finish: u64,
@@ -95,7 +105,7 @@ pub struct StreamedWorld {
     cpu_tiles: u64,
 }
 
-/// The RAM pools' selection: three times the VRAM pool's reach (3 tiles ahead per level).
+/// The RAM pools' selection: the spherical default's reach three times over.
 fn ram_selection(world: &World) -> Box<SphericalSelection> {
     let grid = TileGrid::from_manifest(world.manifest(), Layer::Height);
     let mut spherical = SphericalSelection::for_grid(&grid);
@@ -108,13 +118,22 @@ impl StreamedWorld {
     /// Streams `world`'s heights through a RAM pool of `ram_budget_bytes`, with no GPU side.
     /// Fails on a budget below the pool's minimum.
     pub fn open(world: World, ram_budget_bytes: u64) -> Result<Self, CacheError> {
+        let config = PoolConfig::new(Layer::Height, ram_budget_bytes);
+        Self::open_with(world, config)
+    }
+
+    /// [`open`](Self::open) with the heights' pool configured by `config` (its budget, workers,
+    /// idle write-back); the selection is the module's. Fails on a configuration the pool
+    /// refuses, or one of another layer than the heights.
+    pub fn open_with(world: World, config: PoolConfig) -> Result<Self, CacheError> {
+        if config.layer != Layer::Height {
+            return Err(CacheError::NoSuchLayer {
+                layer: config.layer,
+            });
+        }
         let manifest = *world.manifest();
         let policy = ram_selection(&world);
-        let ram = RamPool::with_policy(
-            world,
-            PoolConfig::new(Layer::Height, ram_budget_bytes),
-            policy,
-        )?;
+        let ram = RamPool::with_policy(world, config, policy)?;
         Ok(Self {
             ram,
             gpu: None,
@@ -218,36 +237,26 @@ impl StreamedWorld {
         }
     }
 
-    /// One frame of the paint's and the colour's streams into their atlases (RAM loads, then
-    /// uploads within each one's budget); a layer not enabled or without an atlas reports
-    /// `None`. Fails as [`update`](Self::update) does, on an overlay tile.
-    pub fn upload_overlays<T: OverlayUploadTarget>(
+    /// One frame of the paint's stream for `camera` (its RAM pool's loads, then uploads into
+    /// `atlas` within its budget); `None` when the paint is not streamed. Fails as
+    /// [`update`](Self::update) does, on a paint tile.
+    pub fn upload_paint<T: OverlayUploadTarget>(
         &mut self,
         camera: &CameraState,
-        paint: Option<&mut T>,
-        color: Option<&mut T>,
-    ) -> Result<[Option<VramReport>; 2], OverlayUploadError<T::Error>> {
-        let mut reports = [None, None];
-        let Some(g) = self.gpu.as_mut() else {
-            return Ok(reports);
-        };
-        for (report, (stream, atlas)) in reports
-            .iter_mut()
-            .zip([(g.paint.as_mut(), paint), (g.color.as_mut(), color)])
-        {
-            if let (Some(stream), Some(atlas)) = (stream, atlas) {
-                let (_, uploaded) = stream.update(camera, atlas)?;
-                if let Some((id, e)) = stream.ram().errors().first() {
-                    return Err(OverlayUploadError::World(StreamedWorldError::Tile {
-                        layer: stream.layer(),
-                        id: *id,
-                        message: e.to_string(),
-                    }));
-                }
-                *report = Some(uploaded);
-            }
-        }
-        Ok(reports)
+        atlas: &mut T,
+    ) -> Result<Option<VramReport>, OverlayUploadError<T::Error>> {
+        let stream = self.gpu.as_mut().and_then(|g| g.paint.as_mut());
+        stream.map(|s| upload_overlay(s, camera, atlas)).transpose()
+    }
+
+    /// [`upload_paint`](Self::upload_paint) for the world's colour.
+    pub fn upload_color<T: OverlayUploadTarget>(
+        &mut self,
+        camera: &CameraState,
+        atlas: &mut T,
+    ) -> Result<Option<VramReport>, OverlayUploadError<T::Error>> {
+        let stream = self.gpu.as_mut().and_then(|g| g.color.as_mut());
+        stream.map(|s| upload_overlay(s, camera, atlas)).transpose()
     }
 
     /// Paint tiles whose files were rewritten (what `write_paint` returned): read again and
@@ -255,6 +264,13 @@ impl StreamedWorld {
     pub fn reload_paint(&mut self, ids: &[TileId]) {
         if let Some(paint) = self.gpu.as_mut().and_then(|g| g.paint.as_mut()) {
             paint.reload(ids);
+        }
+    }
+
+    /// [`reload_paint`](Self::reload_paint) for colour tiles (what `write_color` returned).
+    pub fn reload_color(&mut self, ids: &[TileId]) {
+        if let Some(color) = self.gpu.as_mut().and_then(|g| g.color.as_mut()) {
+            color.reload(ids);
         }
     }
 
@@ -281,9 +297,14 @@ impl StreamedWorld {
         Ok(report)
     }
 
-    /// Applies the queued stamps to their resident tiles in RAM (no GPU, or a frame without
-    /// one): the VRAM pool uploads the changed tiles again.
-    pub fn deform_in_ram(&mut self) -> Result<TileStampReport, TileStampError<CoreError>> {
+    /// Applies the queued stamps to their resident tiles in RAM, without a GPU; with one the
+    /// VRAM pool uploads the changed tiles again. Refused while GPU-stamped rects are on their
+    /// way back: an arriving rect would overwrite the RAM stamp under it.
+    pub fn deform_in_ram(&mut self) -> Result<TileStampReport, StreamedWorldError> {
+        let count = self.stamps.in_flight();
+        if count > 0 {
+            return Err(StreamedWorldError::ReadbacksOutstanding { count });
+        }
         let report = self.stamps.apply(&mut self.ram, None, &mut RamDeformer)?;
         self.count(&report);
         Ok(report)
@@ -295,18 +316,27 @@ impl StreamedWorld {
     }
 
     /// A rect the deformer read back arrived (`ticket` and `rect` as it gave them): into the
-    /// RAM tile, its pin and hold released. Returns the rect in world texels (level 0).
-    pub fn receive<E>(
+    /// RAM tile, its pin and hold released. Returns the rect in world texels (level 0). A rect
+    /// nobody asked for, or of another size, is refused and changes nothing.
+    pub fn receive(
         &mut self,
         ticket: u64,
         rect: Rect,
         heights: &Grid<u16>,
-    ) -> Result<Rect, TileStampError<E>> {
+    ) -> Result<Rect, TileStampError<Infallible>> {
         let vram = self.gpu.as_mut().map(|g| &mut g.vram);
         let (_, world) = self
             .stamps
             .receive(&mut self.ram, vram, ticket, rect, heights)?;
         Ok(world)
+    }
+
+    /// Gives up on every GPU-stamped rect still on its way back (the device was lost): pins and
+    /// holds end, the slots are uploaded again from RAM, and those rects' stamps are not in
+    /// the world. Returns how many were given up; [`finish`](Self::finish) can follow.
+    pub fn abandon_readbacks(&mut self) -> usize {
+        let vram = self.gpu.as_mut().map(|g| &mut g.vram);
+        self.stamps.abandon(&mut self.ram, vram)
     }
 
     /// Stamps queued and not yet on every tile they touch.
@@ -329,10 +359,13 @@ impl StreamedWorld {
         self.written_back
     }
 
-    /// Ends the run, every readback received: the overlays' streams stop, every dirty tile is
-    /// written back (waiting at most `timeout`), stamps whose tiles never became resident go
-    /// straight into the world's files, and their coarser levels are rebuilt. Returns what was
-    /// written and the world.
+    /// Ends the run: release the granular trails first, and receive every readback (or
+    /// [`abandon_readbacks`](Self::abandon_readbacks)). Every dirty tile is written back
+    /// (waiting at most `timeout` for the heights' pool, and as long again for each overlay's),
+    /// stamps whose tiles never became resident go straight into the world's files, and their
+    /// coarser levels are rebuilt (journalled, as the pool's write-backs are). Each step runs
+    /// whatever an earlier one reported; the first failure is returned, after everything else
+    /// was written. Returns what was written and the world.
     pub fn finish(self, timeout: Duration) -> Result<(WorldWritten, World), StreamedWorldError> {
         let Self {
             mut ram,
@@ -341,40 +374,85 @@ impl StreamedWorld {
             written_back,
             ..
         } = self;
+        let mut first: Option<StreamedWorldError> = None;
+        let mut keep = |r: Result<(), StreamedWorldError>| {
+            if let Err(e) = r {
+                first.get_or_insert(e);
+            }
+        };
         if stamps.in_flight() > 0 {
             let count = stamps.in_flight();
-            // The pools still stop, and what RAM holds is still written back.
-            ram.flush();
-            ram.shutdown(timeout)?;
-            return Err(StreamedWorldError::ReadbacksOutstanding { count });
-        }
-        if let Some(g) = gpu {
-            for stream in [g.paint, g.color].into_iter().flatten() {
-                stream.shutdown(timeout)?;
-            }
+            keep(Err(StreamedWorldError::ReadbacksOutstanding { count }));
         }
         let world = ram.world().clone();
         let issued = ram.flush() as u64;
-        ram.shutdown(timeout)?;
-        let late = stamps.finish_into_world(&world, &mut RamDeformer)?;
-        if !late.is_empty() {
-            crate::build::rebuild_ancestors(&world, &late)?;
+        // Stopped even when a write-back (or a read of the last frames) failed: its threads
+        // are joined, so nothing races the writes below.
+        keep(ram.shutdown(timeout).map_err(Into::into));
+        let late = write_late_stamps(&world, &mut stamps);
+        let stamped_at_finish = late.as_ref().map_or(0, |l| l.len() as u64);
+        keep(late.map(drop));
+        if let Some(g) = gpu {
+            for stream in [g.paint, g.color].into_iter().flatten() {
+                keep(stream.shutdown(timeout).map_err(Into::into));
+            }
         }
-        let written = WorldWritten {
-            written_back: written_back + issued,
-            stamped_at_finish: late.len() as u64,
-        };
-        Ok((written, world))
+        match first {
+            Some(e) => Err(e),
+            None => Ok((
+                WorldWritten {
+                    written_back: written_back + issued,
+                    stamped_at_finish,
+                },
+                world,
+            )),
+        }
     }
 }
 
-/// Why [`StreamedWorld::upload_overlays`] failed.
+/// One frame of an overlay's stream into `atlas`, failing on a tile its pool could not read.
+fn upload_overlay<T: OverlayUploadTarget>(
+    stream: &mut OverlayStream,
+    camera: &CameraState,
+    atlas: &mut T,
+) -> Result<VramReport, OverlayUploadError<T::Error>> {
+    let (_, uploaded) = stream.update(camera, atlas)?;
+    if let Some((id, e)) = stream.ram().errors().first() {
+        return Err(OverlayUploadError::Tile(StreamedWorldError::Tile {
+            layer: stream.layer(),
+            id: *id,
+            message: e.to_string(),
+        }));
+    }
+    Ok(uploaded)
+}
+
+/// The queued stamps into the files of the tiles they have not reached, each tile journalled
+/// until its coarser levels are rebuilt (a process killed in between leaves the journal entry
+/// the next writer recovers from); returns the tiles written.
+fn write_late_stamps(
+    world: &World,
+    stamps: &mut TileStamps<TileStamp>,
+) -> Result<Vec<TileId>, StreamedWorldError> {
+    let tiles = stamps.pending_tiles();
+    for id in &tiles {
+        journal::begin(world, *id)?;
+    }
+    let late = stamps.finish_into_world(world, &mut RamDeformer)?;
+    rebuild_ancestors_shared(world, &late)?;
+    for id in &tiles {
+        journal::end(world, *id)?;
+    }
+    Ok(late)
+}
+
+/// Why [`StreamedWorld::upload_paint`] or [`StreamedWorld::upload_color`] failed.
 #[derive(Debug, thiserror::Error)]
 pub enum OverlayUploadError<E> {
-    /// The world's side: a bad camera, a tile that could not be read.
+    /// A tile of the overlay could not be read ([`StreamedWorldError::Tile`]).
     #[error(transparent)]
-    World(#[from] StreamedWorldError),
-    /// The VRAM pool or the atlas refused.
+    Tile(StreamedWorldError),
+    /// A bad camera, or the VRAM pool or the atlas refused.
     #[error(transparent)]
     Upload(#[from] VramError<E>),
 }

@@ -141,6 +141,17 @@ impl<K> TileStamps<K> {
         self.pending.len()
     }
 
+    /// The tiles queued stamps have not reached yet (sorted, each once): what
+    /// [`TileStamps::finish_into_world`] would write.
+    pub(crate) fn pending_tiles(&self) -> Vec<TileId> {
+        let mut tiles: Vec<TileId> = (self.pending.iter())
+            .flat_map(|p| p.tiles.iter().filter(|(_, done)| !done).map(|(id, _)| *id))
+            .collect();
+        tiles.sort_unstable_by_key(|id| (id.level, id.y, id.x));
+        tiles.dedup();
+        tiles
+    }
+
     /// Rects stamped on the GPU whose readback has not arrived.
     pub fn in_flight(&self) -> usize {
         self.in_flight.len()
@@ -328,6 +339,21 @@ impl<K> TileStamps<K> {
         }
         written?;
         Ok((id, self.world_rect(id, rect)))
+    }
+
+    /// Gives up on every rect still on its way back (the device was lost, or a readback will
+    /// never come): each tile's pin and slot hold end, the slot marked out of date so that the
+    /// RAM tile is uploaded again. Those rects' stamps stay out of the RAM tiles (and so out of
+    /// the world). Returns how many rects were given up.
+    pub fn abandon(&mut self, pool: &mut RamPool, mut vram: Option<&mut VramPool>) -> usize {
+        let n = self.in_flight.len();
+        for (_, (id, _)) in self.in_flight.drain() {
+            pool.unpin(id);
+            if let Some(v) = vram.as_deref_mut() {
+                v.abandon(id);
+            }
+        }
+        n
     }
 
     /// Applies the stamps still queued to the tiles they have not reached, straight in the

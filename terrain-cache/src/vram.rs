@@ -389,6 +389,15 @@ impl VramPool {
         }
     }
 
+    /// Ends one [`hold`](Self::hold) of `id` whose readback will never come: the slot may hold
+    /// a change RAM does not, so it is marked out of date and uploaded again from RAM.
+    pub fn abandon(&mut self, id: TileId) {
+        self.release(id, None);
+        if let Some(e) = self.resident.get_mut(&id) {
+            e.stale = true;
+        }
+    }
+
     /// Tiles held by [`hold`](Self::hold) now.
     pub fn held(&self) -> usize {
         self.resident.values().filter(|e| e.holds > 0).count()

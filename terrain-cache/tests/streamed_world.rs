@@ -12,12 +12,13 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 use terrain_cache::{
-    CameraState, Layer, ObjectTileStore, StreamedWorld, StreamedWorldError, TileId, TileStore,
-    World,
+    CameraState, Layer, ObjectTileStore, StreamedWorld, StreamedWorldError, TileId, TileState,
+    TileStore, World,
 };
 use terrain_core::{
-    CoarseMap, CoreError, GaussianStamp, Grid, Rect, StampPlacement, TileAtlas, TileDeformer,
-    TileLayout, TileStamp, TileUploadTarget, WrapMode,
+    CoarseMap, CoreError, GaussianStamp, Grid, MaterialEffect, OverlayAtlas, Rect, StampPlacement,
+    TileAtlas, TileDeformer, TileLayout, TileStamp, TileUploadTarget, WrapMode,
+    apply_material_effect,
 };
 
 const SLOTS: u32 = 24;
@@ -141,9 +142,7 @@ fn run(gpu: bool) -> ((u64, u64), terrain_cache::WorldWritten, World) {
         }
         // Last frame's rects arrive now; this frame's wait for the next.
         for (ticket, rect, heights) in late.drain(..) {
-            streamed
-                .receive::<CoreError>(ticket, rect, &heights)
-                .unwrap();
+            streamed.receive(ticket, rect, &heights).unwrap();
         }
         if gpu {
             streamed.upload(&camera, &mut fake).unwrap().unwrap();
@@ -156,9 +155,7 @@ fn run(gpu: bool) -> ((u64, u64), terrain_cache::WorldWritten, World) {
         std::thread::sleep(Duration::from_millis(3));
     }
     for (ticket, rect, heights) in late {
-        streamed
-            .receive::<CoreError>(ticket, rect, &heights)
-            .unwrap();
+        streamed.receive(ticket, rect, &heights).unwrap();
     }
     assert_eq!(streamed.readbacks_in_flight(), 0);
     let stamped = streamed.tiles_stamped();
@@ -229,9 +226,29 @@ fn what_a_streamed_world_cannot_do_is_refused_and_loses_nothing() {
     assert_eq!(streamed.push(stamp, off).unwrap(), 0);
     let bogus = Grid::new(2, 2, 0u16).unwrap();
     let rect = Rect::from_size(UVec2::splat(2));
-    assert!(streamed.receive::<CoreError>(7, rect, &bogus).is_err());
+    assert!(streamed.receive(7, rect, &bogus).is_err());
 
-    // A readback still on its way when the run ends is named, and RAM is still written back.
+    // With a crater's rects on their way back, a RAM stamp (which they would overwrite) is
+    // refused; a run that ends so names them, and still writes the rest: a crater whose tiles
+    // never became resident reaches the files.
+    let (mut streamed, _, count) = stamped_on_the_gpu(streamed);
+    let e = streamed.deform_in_ram().unwrap_err();
+    assert!(
+        matches!(e, StreamedWorldError::ReadbacksOutstanding { .. }),
+        "{e}"
+    );
+    let far = crater(Vec2::new(500.0, 20.0), 9.0);
+    assert!(streamed.push(far.0, far.1).unwrap() > 0);
+    let e = streamed.finish(TIMEOUT).unwrap_err();
+    assert!(
+        matches!(e, StreamedWorldError::ReadbacksOutstanding { count: c } if c == count),
+        "{e}"
+    );
+}
+
+/// Streams `streamed` around a crater stamped on a GPU stand-in until its rects are on their
+/// way back (never received); returns it, the stand-in and how many rects are.
+fn stamped_on_the_gpu(mut streamed: StreamedWorld) -> (StreamedWorld, FakeGpu, usize) {
     let mut fake = FakeGpu::new(streamed.world().manifest().tile_layout());
     let camera = CameraState::at(Vec3::new(100.0, 30.0, 100.0));
     let (stamp, p) = crater(Vec2::new(100.0, 100.0), 10.0);
@@ -247,11 +264,85 @@ fn what_a_streamed_world_cannot_do_is_refused_and_loses_nothing() {
     }
     let count = streamed.readbacks_in_flight();
     assert!(count > 0, "the crater was stamped on the GPU stand-in");
-    let e = streamed.finish(TIMEOUT).unwrap_err();
+    assert!(streamed.vram().unwrap().held() > 0, "its slots held");
+    (streamed, fake, count)
+}
+
+#[test]
+fn readbacks_given_up_free_their_tiles_and_the_rest_is_written() {
+    let world = world();
+    let untouched = tiles(&world);
+    let mut streamed = StreamedWorld::open(world, BUDGET).unwrap();
+    streamed.enable_gpu(SLOTS, false, false).unwrap();
+    let (mut streamed, mut fake, count) = stamped_on_the_gpu(streamed);
+    let far = crater(Vec2::new(500.0, 20.0), 9.0);
+    assert!(streamed.push(far.0, far.1).unwrap() > 0);
+    assert_eq!(streamed.abandon_readbacks(), count);
+    assert_eq!(streamed.readbacks_in_flight(), 0);
+    assert_eq!(streamed.vram().unwrap().held(), 0, "every hold ended");
+    let pinned = streamed.ram().statuses().into_iter();
+    let pinned = pinned.filter(|(_, s)| s.state == TileState::InUse).count();
+    assert_eq!(pinned, 0, "every pin ended");
+    // The slots given up hold a change RAM does not: uploaded again from RAM.
+    let camera = CameraState::at(Vec3::new(100.0, 30.0, 100.0));
+    streamed.update(&camera).unwrap();
+    let again = streamed.upload(&camera, &mut fake).unwrap().unwrap();
+    assert!(again.uploads > 0, "{again:?}");
+    let (written, world) = streamed.finish(TIMEOUT).unwrap();
+    // The near crater's rects were given up; the far one went into its tiles' files.
+    assert!(written.stamped_at_finish > 0);
+    let changed: Vec<TileId> = (tiles(&world).into_iter().zip(&untouched))
+        .filter(|((_, a), (_, b))| a != b)
+        .map(|((id, _), _)| id)
+        .collect();
+    assert!(!changed.is_empty());
     assert!(
-        matches!(e, StreamedWorldError::ReadbacksOutstanding { count: c } if c == count),
-        "{e}"
+        changed.iter().all(|id| id.x >= 14 >> id.level),
+        "only the far crater's tiles (x >= 14 at level 0) changed: {changed:?}"
     );
+}
+
+#[test]
+fn paint_streams_into_its_atlas_and_follows_a_rewrite() {
+    let world = world();
+    let m = *world.manifest();
+    let mut streamed = StreamedWorld::open(world.clone(), BUDGET).unwrap();
+    streamed.enable_gpu(SLOTS, true, false).unwrap();
+    let mut atlas = OverlayAtlas::new(m.tile_layout(), SLOTS).unwrap();
+    let camera = CameraState::at(Vec3::new(100.0, 30.0, 100.0));
+    let at = glam::DVec2::splat(100.0);
+    let mut color = OverlayAtlas::new(m.tile_layout(), SLOTS).unwrap();
+    // No colour streamed: nothing uploaded, and no error.
+    assert!(
+        streamed
+            .upload_color(&camera, &mut color)
+            .unwrap()
+            .is_none()
+    );
+    let mut paint_shown = |streamed: &mut StreamedWorld, want: f32| {
+        for _ in 0..400 {
+            streamed.update(&camera).unwrap();
+            let r = streamed.upload_paint(&camera, &mut atlas).unwrap().unwrap();
+            // Settled, with the level-0 tile under `at` (32 m tiles) in the atlas.
+            let finest = atlas.slot_of(0, UVec2::splat(3)).is_some();
+            if r.uploads == 0 && finest && (atlas.sample(at, false).y - want).abs() < 0.01 {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        panic!("the atlas never showed paint {want}");
+    };
+    paint_shown(&mut streamed, 0.0);
+    // Dirt painted into the world's files while it streams: shown once reloaded.
+    let rect = Rect::new(glam::IVec2::splat(90), UVec2::splat(20));
+    let mut paint = terrain_cache::read_paint(&world, rect).unwrap();
+    let local = StampPlacement::new(Vec2::splat(10.0), Vec2::splat(12.0), -1.0).unwrap();
+    let dirt = MaterialEffect::new(1, 0.9).unwrap();
+    apply_material_effect(&mut paint, WrapMode::Clamp, m.texel_size, &local, &dirt).unwrap();
+    let rewritten = terrain_cache::write_paint(&world, rect, &paint).unwrap();
+    streamed.reload_paint(&rewritten);
+    paint_shown(&mut streamed, 0.9);
+    streamed.finish(TIMEOUT).unwrap();
 }
 
 #[test]

@@ -32,8 +32,8 @@ use terrain_core::{
 use terrain_gpu::granular::FieldStepper;
 use terrain_gpu::{
     AtlasConfig, AtlasDeformer, AtlasStamper, Camera, ClipmapRenderer, ClipmapSurface, ClipmapView,
-    DepthConvention, DetailShading, GpuDetailStream, GpuError, GpuStamp, GpuTileAtlas, MapUse,
-    SkyColors, SkyPass, TargetFormat, TerrainStyle, wgpu,
+    DepthConvention, DetailShading, GpuDetailStream, GpuStamp, GpuTileAtlas, MapUse, SkyColors,
+    SkyPass, TargetFormat, TerrainStyle, wgpu,
 };
 use terrain_lod::{ClipmapLayout, Frustum};
 use terrain_physics::{CameraBody, CollisionWindow};
@@ -182,7 +182,7 @@ fn main() -> Result<()> {
         }
         // The GPU's changed rects that have arrived (never waiting) go to RAM and collision.
         for a in stamper.poll(&device)? {
-            let world_rect = streamed.receive::<GpuError>(a.ticket, a.rect, &a.heights)?;
+            let world_rect = streamed.receive(a.ticket, a.rect, &a.heights)?;
             window.apply(world_rect, &a.heights)?;
             arrived_rects += 1;
         }
@@ -305,7 +305,7 @@ fn main() -> Result<()> {
     // The end: the last rects come back (bounded waits), the trail's window is released (its
     // volume checked), the detail and the dirty tiles go back into the world.
     for a in stamper.wait(&device)? {
-        streamed.receive::<GpuError>(a.ticket, a.rect, &a.heights)?;
+        streamed.receive(a.ticket, a.rect, &a.heights)?;
         arrived_rects += 1;
     }
     trails.release(streamed.ram_mut(), Some(&mut snow))?;

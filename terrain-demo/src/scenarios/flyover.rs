@@ -277,9 +277,7 @@ impl FlyoverScenario {
                 rect,
                 heights,
             } = arrived_rect;
-            let world = self
-                .streamed()?
-                .receive::<anyhow::Error>(ticket, rect, &heights)?;
+            let world = self.streamed()?.receive(ticket, rect, &heights)?;
             self.window.apply(world, &heights)?;
             arrived.push(world);
         }
@@ -538,7 +536,13 @@ impl Scenario for FlyoverScenario {
                 vram_report = streamed.upload(&state, atlas)?;
             }
             let (paint, color) = scene.streamed_layers_mut();
-            overlay = Some(streamed.upload_overlays(&state, paint, color)?);
+            let paint = paint
+                .map(|a| streamed.upload_paint(&state, a))
+                .transpose()?;
+            let color = color
+                .map(|a| streamed.upload_color(&state, a))
+                .transpose()?;
+            overlay = Some([paint.flatten(), color.flatten()]);
         }
         // Craters on the tiles, after the uploads: a GPU stamp lands on what the slot holds
         // this frame.

@@ -103,7 +103,8 @@ impl DeformableMap {
     }
 
     /// Stamps `ops` in order and regenerates the normals of every rect they changed, in one
-    /// submit; returns the rects. Nothing is waited for.
+    /// submit; returns the rects. Nothing is waited for. It recalls the passes' uniform slots
+    /// after its submit: call it with no encoder of yours holding `encode_*` calls unsubmitted.
     pub fn deform(
         &mut self,
         device: &wgpu::Device,
