@@ -536,13 +536,14 @@ impl Scenario for FlyoverScenario {
                 vram_report = streamed.upload(&state, atlas)?;
             }
             let (paint, color) = scene.streamed_layers_mut();
-            let paint = paint
-                .map(|a| streamed.upload_paint(&state, a))
-                .transpose()?;
-            let color = color
-                .map(|a| streamed.upload_color(&state, a))
-                .transpose()?;
-            overlay = Some([paint.flatten(), color.flatten()]);
+            let mut streamed_layers = [None, None];
+            if let Some(atlas) = paint {
+                streamed_layers[0] = streamed.upload_paint(&state, atlas)?;
+            }
+            if let Some(atlas) = color {
+                streamed_layers[1] = streamed.upload_color(&state, atlas)?;
+            }
+            overlay = Some(streamed_layers);
         }
         // Craters on the tiles, after the uploads: a GPU stamp lands on what the slot holds
         // this frame.
