@@ -147,9 +147,9 @@ impl StreamedWorld {
     /// Adds the GPU side: a VRAM pool of `slots` tile slots (the caller's atlases have as many)
     /// and, with `paint` / `color`, the streams of the world's paint and colour with the
     /// heights' selection. Paint tiles are mostly empty (the pool's shared zero tile costs
-    /// nothing), so its RAM budget is the heights'; colour is dense, at 4 bytes a texel, so
-    /// twice it. Fails on 0 slots, on a layer the world does not have, or when called twice;
-    /// on failure the world is as before.
+    /// nothing), so its RAM budget is the heights' (half as many tiles, at 4 bytes a texel);
+    /// colour is dense, so twice it (as many tiles). Fails on 0 slots, on a layer the world
+    /// does not have, or when called twice; on failure the world is as before.
     pub fn enable_gpu(
         &mut self,
         slots: u32,
@@ -209,8 +209,8 @@ impl StreamedWorld {
         }
     }
 
-    /// One frame of the RAM pools for `camera`: loads and write-backs on the workers. Fails on
-    /// a bad camera or a height tile that could not be read.
+    /// One frame of the heights' RAM pool for `camera`: loads and write-backs on its workers.
+    /// Fails on a bad camera, or on a height tile that could not be read or written back.
     pub fn update(&mut self, camera: &CameraState) -> Result<FrameReport, StreamedWorldError> {
         let report = self.ram.update(camera)?;
         self.written_back += report.written as u64;
