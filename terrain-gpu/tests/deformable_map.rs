@@ -102,3 +102,51 @@ fn a_deformed_map_and_its_normals_equal_the_cpu_reference() {
     assert_eq!(gpu.read(device, queue).unwrap().grid(), cpu.grid());
     ctx.check().expect("no GPU validation errors");
 }
+
+#[test]
+fn stamps_recorded_into_the_callers_encoder_on_a_clamped_map_equal_the_cpu() {
+    let Some(ctx) = context_or_skip("stamps_recorded_into_the_callers_encoder") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let params = TerrainParams {
+        size: UVec2::new(96, 64),
+        seed: 9,
+        ..TerrainParams::default()
+    };
+    let enc = HeightEncoding::spanning::<u16>(0.0, 30.0).unwrap();
+    let repeating = generate_coarse_map(&params, enc, 0.5).unwrap();
+    let grid = repeating.grid().clone();
+    let mut cpu = terrain_core::CoarseMap::new(grid, enc, 0.5, WrapMode::Clamp).unwrap();
+    let mut gpu = DeformableMap::new(device, queue, &cpu).unwrap();
+    let gauss = GaussianStamp::default();
+    // Across the corner: clipped to one rect on a clamped map; and one off the map: none.
+    let corner = StampPlacement::new(Vec2::new(1.0, 0.5), Vec2::splat(8.0), -2.5).unwrap();
+    let off = StampPlacement::new(Vec2::new(-40.0, 10.0), Vec2::splat(4.0), 1.0).unwrap();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let mut dirty = Vec::new();
+    let mut want = Vec::new();
+    for placement in [corner, off] {
+        let op = StampOp {
+            stamp: GpuStamp::Gaussian(&gauss),
+            placement,
+            blend: Blend::Add,
+        };
+        dirty.extend(gpu.encode_stamp(device, queue, &mut encoder, &op).unwrap());
+        want.extend(apply_stamp(&mut cpu, &mut gauss.clone(), &placement, Blend::Add).unwrap());
+    }
+    gpu.encode_normals(device, queue, &mut encoder, &dirty)
+        .unwrap();
+    queue.submit([encoder.finish()]);
+    gpu.recall();
+    assert_eq!(dirty, want);
+    assert_eq!(
+        dirty.len(),
+        1,
+        "the corner crater clipped, the other off the map"
+    );
+    assert_eq!(gpu.read(device, queue).unwrap().grid(), cpu.grid());
+    let codes = gpu.normals().read_codes(device, queue).unwrap();
+    assert_eq!(codes, SlopeCodec::for_map(&cpu).codes(&cpu));
+    ctx.check().expect("no GPU validation errors");
+}
