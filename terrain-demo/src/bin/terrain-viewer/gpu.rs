@@ -1,7 +1,8 @@
 //! The viewer's GPU side: the device on an adapter that can present to the window, the
-//! terrain on the GPU (terrain-gpu's `DeformableMap`: heights, derivative normals, the passes), and each
-//! frame drawn by terrain-gpu's caller's-pass renderers (`SkyPass`, `ClipmapRenderer`) into
-//! the viewer's own colour and depth textures, the overlay on top, then copied to the window.
+//! terrain on the GPU (terrain-gpu's `DeformableMap`: heights, derivative normals, the
+//! passes), and each frame drawn by terrain-gpu's caller's-pass renderers (`SkyPass`,
+//! `ClipmapRenderer`) into the viewer's own colour and depth textures, the overlay on top,
+//! then copied to the window.
 //! The colour texture is also what `--screenshot` reads back.
 
 use crate::overlay::Overlay;
