@@ -6,8 +6,8 @@
 
 use glam::{UVec2, Vec2};
 use terrain_core::{
-    Blend, GaussianStamp, Grid, HeightEncoding, SlopeCodec, StampPlacement, TerrainParams,
-    TextureStamp, WrapMode, apply_stamp, generate_coarse_map,
+    Blend, CoarseMap, GaussianStamp, Grid, HeightEncoding, SlopeCodec, StampPlacement,
+    TerrainParams, TextureStamp, WrapMode, apply_stamp, generate_coarse_map,
 };
 use terrain_gpu::testing::context_or_skip;
 use terrain_gpu::{DeformableMap, GpuError, GpuStamp, GpuTextureStamp, StampOp, Submit};
@@ -33,20 +33,25 @@ impl Submit for Counting<'_> {
     }
 }
 
+/// A procedural map of `size` at 0.5 m, 0-30 m in u16, repeating or clamped at its edges.
+fn terrain(size: UVec2, seed: u64, wrap: WrapMode) -> CoarseMap {
+    let params = TerrainParams {
+        size,
+        seed,
+        ..TerrainParams::default()
+    };
+    let enc = HeightEncoding::spanning::<u16>(0.0, 30.0).unwrap();
+    let map = generate_coarse_map(&params, enc, 0.5).unwrap();
+    CoarseMap::new(map.grid().clone(), enc, 0.5, wrap).unwrap()
+}
+
 #[test]
 fn a_deformed_map_and_its_normals_equal_the_cpu_reference() {
     let Some(ctx) = context_or_skip("a_deformed_map_and_its_normals_equal_the_cpu") else {
         return;
     };
     let (device, queue) = (&ctx.device, &ctx.queue);
-    let params = TerrainParams {
-        size: UVec2::new(120, 90),
-        seed: 5,
-        ..TerrainParams::default()
-    };
-    let enc = HeightEncoding::spanning::<u16>(0.0, 30.0).unwrap();
-    let mut cpu = generate_coarse_map(&params, enc, 0.5).unwrap();
-    assert_eq!(cpu.wrap(), WrapMode::Repeat);
+    let mut cpu = terrain(UVec2::new(120, 90), 5, WrapMode::Repeat);
     let mut gpu = DeformableMap::new(device, queue, &cpu).unwrap();
     let codec = SlopeCodec::for_map(&cpu);
     assert_eq!(
@@ -109,15 +114,7 @@ fn stamps_recorded_into_the_callers_encoder_on_a_clamped_map_equal_the_cpu() {
         return;
     };
     let (device, queue) = (&ctx.device, &ctx.queue);
-    let params = TerrainParams {
-        size: UVec2::new(96, 64),
-        seed: 9,
-        ..TerrainParams::default()
-    };
-    let enc = HeightEncoding::spanning::<u16>(0.0, 30.0).unwrap();
-    let repeating = generate_coarse_map(&params, enc, 0.5).unwrap();
-    let grid = repeating.grid().clone();
-    let mut cpu = terrain_core::CoarseMap::new(grid, enc, 0.5, WrapMode::Clamp).unwrap();
+    let mut cpu = terrain(UVec2::new(96, 64), 9, WrapMode::Clamp);
     let mut gpu = DeformableMap::new(device, queue, &cpu).unwrap();
     let gauss = GaussianStamp::default();
     // Across the corner: clipped to one rect on a clamped map; and one off the map: none.
