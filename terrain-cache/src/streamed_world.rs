@@ -145,14 +145,28 @@ impl StreamedWorld {
     }
 
     /// Adds the GPU side: a VRAM pool of `slots` tile slots (the caller's atlases have as many)
-    /// and, with `paint` / `color`, the streams of the world's paint and colour with the
-    /// heights' selection. Paint tiles are mostly empty (the pool's shared zero tile costs
-    /// nothing), so its RAM budget is the heights' (half as many tiles, at 4 bytes a texel);
-    /// colour is dense, so twice it (as many tiles). Fails on 0 slots, on a layer the world
-    /// does not have, or when called twice; on failure the world is as before.
+    /// with the default upload budget and selection, and, with `paint` / `color`, the streams
+    /// of the world's paint and colour with the heights' selection. Paint tiles are mostly
+    /// empty (the pool's shared zero tile costs nothing), so its RAM budget is the heights'
+    /// (half as many tiles, at 4 bytes a texel); colour is dense, so twice it (as many tiles).
+    /// Fails on 0 slots, on a layer the world does not have, or when called twice; on failure
+    /// the world is as before.
     pub fn enable_gpu(
         &mut self,
         slots: u32,
+        paint: bool,
+        color: bool,
+    ) -> Result<(), StreamedWorldError> {
+        let vram = VramConfig::new(self.ram.world().manifest(), slots);
+        self.enable_gpu_with(vram, paint, color)
+    }
+
+    /// [`enable_gpu`](Self::enable_gpu) with the VRAM pool configured by `vram` (its slots,
+    /// per-frame upload budget and selection), which the overlays' pools share. Fails as
+    /// `enable_gpu` does, or on a configuration of another world.
+    pub fn enable_gpu_with(
+        &mut self,
+        vram: VramConfig,
         paint: bool,
         color: bool,
     ) -> Result<(), StreamedWorldError> {
@@ -160,7 +174,15 @@ impl StreamedWorld {
             return Err(StreamedWorldError::GpuEnabled);
         }
         let manifest = *self.ram.world().manifest();
-        let vram = VramConfig::new(&manifest, slots);
+        let own = VramConfig::new(&manifest, vram.slots);
+        if vram.grid != own.grid || vram.tile_size != own.tile_size {
+            return Err(CacheError::TargetMismatch {
+                what: "VRAM configuration's tile grid or size",
+                pool: u64::from(own.tile_size),
+                target: u64::from(vram.tile_size),
+            }
+            .into());
+        }
         let heights_budget = self.ram.config().budget_bytes;
         let stream = |on: bool, layer: Layer, budget: u64| {
             on.then(|| {

@@ -13,7 +13,7 @@ use std::sync::Arc;
 use std::time::Duration;
 use terrain_cache::{
     CameraState, Layer, ObjectTileStore, StreamedWorld, StreamedWorldError, TileId, TileState,
-    TileStore, World,
+    TileStore, VramConfig, World,
 };
 use terrain_core::{
     CoarseMap, CoreError, GaussianStamp, Grid, MaterialEffect, OverlayAtlas, Rect, StampPlacement,
@@ -215,6 +215,16 @@ fn what_a_streamed_world_cannot_do_is_refused_and_loses_nothing() {
     let e = streamed.enable_gpu(0, true, false).unwrap_err();
     assert!(matches!(e, StreamedWorldError::Cache(_)), "{e}");
     assert!(streamed.vram().is_none());
+    // A VRAM configuration of another world's tiles is refused.
+    let other = build(
+        Arc::new(ObjectTileStore::in_memory().unwrap()),
+        UVec2::splat(256),
+        16,
+    );
+    let foreign = VramConfig::new(other.manifest(), SLOTS);
+    let e = streamed.enable_gpu_with(foreign, false, false).unwrap_err();
+    assert!(matches!(e, StreamedWorldError::Cache(_)), "{e}");
+    assert!(streamed.vram().is_none());
     streamed.enable_gpu(SLOTS, false, false).unwrap();
     let e = streamed.enable_gpu(SLOTS, false, false).unwrap_err();
     assert!(matches!(e, StreamedWorldError::GpuEnabled), "{e}");
@@ -266,6 +276,28 @@ fn stamped_on_the_gpu(mut streamed: StreamedWorld) -> (StreamedWorld, FakeGpu, u
     assert!(count > 0, "the crater was stamped on the GPU stand-in");
     assert!(streamed.vram().unwrap().held() > 0, "its slots held");
     (streamed, fake, count)
+}
+
+#[test]
+fn a_vram_configuration_of_its_own_is_kept() {
+    let mut streamed = StreamedWorld::open(world(), BUDGET).unwrap();
+    // An upload budget of one 32^2 tile a frame.
+    let mut vram = VramConfig::new(streamed.world().manifest(), SLOTS);
+    vram.upload_budget_bytes = 32 * 32 * 2;
+    streamed.enable_gpu_with(vram, false, false).unwrap();
+    let mut fake = FakeGpu::new(streamed.world().manifest().tile_layout());
+    let camera = CameraState::at(Vec3::new(100.0, 30.0, 100.0));
+    let mut uploads = 0;
+    for _ in 0..20 {
+        streamed.update(&camera).unwrap();
+        let r = streamed.upload(&camera, &mut fake).unwrap().unwrap();
+        assert_eq!(r.budget_bytes, 32 * 32 * 2);
+        assert!(r.uploads <= 1, "{r:?}");
+        uploads += r.uploads;
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    assert!(uploads > 0);
+    streamed.finish(TIMEOUT).unwrap();
 }
 
 #[test]
