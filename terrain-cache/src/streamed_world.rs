@@ -29,7 +29,7 @@
 use crate::build::rebuild_ancestors_shared;
 use crate::error::CacheError;
 use crate::overlay_stream::OverlayStream;
-use crate::policy::{CameraState, SphericalSelection, TileGrid};
+use crate::policy::{CameraState, SelectionPolicy, SphericalSelection, TileGrid};
 use crate::pool::journal;
 use crate::pool::{FrameReport, PoolConfig, RamPool};
 use crate::tile::{Layer, TileId};
@@ -107,11 +107,7 @@ pub struct StreamedWorld {
 
 /// The RAM pools' selection: the spherical default's reach three times over.
 fn ram_selection(world: &World) -> Box<SphericalSelection> {
-    let grid = TileGrid::from_manifest(world.manifest(), Layer::Height);
-    let mut spherical = SphericalSelection::for_grid(&grid);
-    spherical.lod0_range *= 3.0;
-    spherical.view_distance *= 3.0;
-    Box::new(spherical)
+    Box::new(StreamedWorld::default_selection(world))
 }
 
 impl StreamedWorld {
@@ -119,20 +115,25 @@ impl StreamedWorld {
     /// Fails on a budget below the pool's minimum.
     pub fn open(world: World, ram_budget_bytes: u64) -> Result<Self, CacheError> {
         let config = PoolConfig::new(Layer::Height, ram_budget_bytes);
-        Self::open_with(world, config)
+        let policy = ram_selection(&world);
+        Self::open_with(world, config, policy)
     }
 
     /// [`open`](Self::open) with the heights' pool configured by `config` (its budget, workers,
-    /// idle write-back); the selection is the module's. Fails on a configuration the pool
+    /// idle write-back) and selecting with `policy` (the overlays' pools keep the
+    /// [`default_selection`](Self::default_selection)). Fails on a configuration the pool
     /// refuses, or one of another layer than the heights.
-    pub fn open_with(world: World, config: PoolConfig) -> Result<Self, CacheError> {
+    pub fn open_with(
+        world: World,
+        config: PoolConfig,
+        policy: Box<dyn SelectionPolicy>,
+    ) -> Result<Self, CacheError> {
         if config.layer != Layer::Height {
             return Err(CacheError::NoSuchLayer {
                 layer: config.layer,
             });
         }
         let manifest = *world.manifest();
-        let policy = ram_selection(&world);
         let ram = RamPool::with_policy(world, config, policy)?;
         Ok(Self {
             ram,
@@ -142,6 +143,18 @@ impl StreamedWorld {
             gpu_tiles: 0,
             cpu_tiles: 0,
         })
+    }
+
+    /// The RAM selection [`open`](Self::open) gives the heights' and the overlays' pools: the
+    /// spherical selection of the world's height tiles with three times its default reach,
+    /// beyond the VRAM pool's frustum, so what the GPU wants next is already in RAM (Fikkan
+    /// 2013, sec. 4.3).
+    pub fn default_selection(world: &World) -> SphericalSelection {
+        let grid = TileGrid::from_manifest(world.manifest(), Layer::Height);
+        let mut spherical = SphericalSelection::for_grid(&grid);
+        spherical.lod0_range *= 3.0;
+        spherical.view_distance *= 3.0;
+        spherical
     }
 
     /// Adds the GPU side: a VRAM pool of `slots` tile slots (the caller's atlases have as many)

@@ -12,8 +12,8 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 use terrain_cache::{
-    CameraState, Layer, ObjectTileStore, StreamedWorld, StreamedWorldError, TileId, TileState,
-    TileStore, VramConfig, World,
+    CameraState, Layer, ObjectTileStore, PoolConfig, StreamedWorld, StreamedWorldError, TileId,
+    TileState, TileStore, VramConfig, World,
 };
 use terrain_core::{
     CoarseMap, CoreError, GaussianStamp, Grid, MaterialEffect, OverlayAtlas, Rect, StampPlacement,
@@ -279,8 +279,17 @@ fn stamped_on_the_gpu(mut streamed: StreamedWorld) -> (StreamedWorld, FakeGpu, u
 }
 
 #[test]
-fn a_vram_configuration_of_its_own_is_kept() {
-    let mut streamed = StreamedWorld::open(world(), BUDGET).unwrap();
+fn configurations_of_its_own_are_kept_and_others_refused() {
+    let world = world();
+    // A pool of another layer than the heights: refused.
+    let paint = PoolConfig::new(Layer::Material, BUDGET);
+    let policy = Box::new(StreamedWorld::default_selection(&world));
+    assert!(StreamedWorld::open_with(world.clone(), paint, policy).is_err());
+    // The heights' pool with a selection of the caller's (a narrower reach).
+    let mut selection = StreamedWorld::default_selection(&world);
+    selection.lod0_range /= 3.0;
+    let config = PoolConfig::new(Layer::Height, BUDGET);
+    let mut streamed = StreamedWorld::open_with(world, config, Box::new(selection)).unwrap();
     // An upload budget of one 32^2 tile a frame.
     let mut vram = VramConfig::new(streamed.world().manifest(), SLOTS);
     vram.upload_budget_bytes = 32 * 32 * 2;
