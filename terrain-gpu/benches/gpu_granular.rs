@@ -288,6 +288,30 @@ fn window_moves(c: &mut Criterion, ctx: &GpuContext) {
                 .sum()
         })
     });
+    // The same, each retired field handed back once drained: the next shift writes into its
+    // buffers and the replaced normals instead of allocating.
+    g.bench_function("shift_recycled", |b| {
+        b.iter_custom(|iters| {
+            let f = field.as_mut().expect("field");
+            (0..iters)
+                .map(|i| {
+                    f.step(device, queue, &objs, i).expect("step");
+                    let t = std::time::Instant::now();
+                    let (mut retired, _) = f
+                        .shift(device, queue, &map, IVec2::new(32, 0), u64::MAX)
+                        .expect("shift");
+                    let spent = t.elapsed();
+                    retired.drain(device, queue).expect("drain retired");
+                    assert!(
+                        f.recycle(retired).is_none(),
+                        "a drained field is taken back"
+                    );
+                    f.drain(device, queue).expect("drain");
+                    spent
+                })
+                .sum()
+        })
+    });
     g.bench_function("stop_and_start", |b| {
         b.iter_custom(|iters| {
             (0..iters)

@@ -539,6 +539,40 @@ fn a_shifted_field_steps_as_a_window_taken_after_the_last_step() {
         copy_b == *sim_b.map().grid(),
         "the moved window differs from one taken after the last step"
     );
+    // The retired field, everything arrived, is taken back (one with readbacks on their way
+    // would not be), and a second move runs on its buffers and the replaced normals: still
+    // the window taken after the last step.
+    let kept = field.recycle(retired);
+    assert!(kept.is_none(), "a field with nothing in flight is kept");
+    // One more step of the window, its areas on their way at the move.
+    let objs = objects_at(&m, 18 * 9, extent);
+    field.step(device, queue, &objs, 18).expect("gpu step");
+    sim_b.step(&objs).expect("cpu step");
+    let c_min = glam::IVec2::new(34, 40);
+    let stale_c = window(&settled, c_min);
+    settled.paste(sim_b.map().grid(), b_min).expect("paste");
+    let (retired_c, _) = field
+        .shift(device, queue, &stale_c, c_min - b_min, 2000)
+        .expect("shift onto recycled buffers");
+    // That step's readbacks are on their way: not taken, given back to poll on.
+    let mut retired_c = field.recycle(retired_c).expect("in flight: given back");
+    let mut sim_c = GranularSim::new(window(&settled, c_min), p).expect("sim");
+    for frame in 19..23u64 {
+        let objs = objects_at(&m, frame as u32 * 9, extent);
+        field.step(device, queue, &objs, frame).expect("gpu step");
+        sim_c.step(&objs).expect("cpu step");
+    }
+    retired_c.drain(device, queue).expect("drain retired");
+    let mut copy_c = stale_c.grid().clone();
+    for (rect, heights) in field.drain(device, queue).expect("drain").areas {
+        copy_c
+            .paste(&heights, rect.min)
+            .expect("area inside the map");
+    }
+    assert!(
+        copy_c == *sim_c.map().grid(),
+        "a move onto recycled buffers differs from a window taken after the last step"
+    );
     // A map of another size or texel size is refused, the field unchanged.
     let coarser = FixedPointMap::new(stale_b.grid().clone(), world.encoding(), 0.1, world.wrap());
     let coarser = coarser.expect("map");

@@ -36,6 +36,10 @@ pub struct GranularField {
     passes: GranularPasses,
     /// The material layer the steps paint where they press (`set_trail`).
     trail: Option<(GpuMaterialLayer, MaterialEffect)>,
+    /// A retired map whose readbacks have all arrived, and the normals a shift replaced: the
+    /// next shift writes into them instead of allocating (`recycle`).
+    spare: Option<RetiredField>,
+    spare_normals: Option<GpuGranularNormals>,
 }
 
 /// What a [`GranularField`] keeps from one map to the next: its compiled passes and its
@@ -143,6 +147,8 @@ impl GranularField {
             normals,
             passes,
             trail: None,
+            spare: None,
+            spare_normals: None,
         })
     }
 
@@ -332,10 +338,23 @@ impl GranularField {
             });
         }
         // Everything is made and recorded first, and the field changes only once submitted:
-        // a failure leaves it stepping the current map.
-        let new_map = GpuHeightMap::from_map(device, queue, map)?;
-        let new_normals = GpuGranularNormals::for_map(device, &new_map)?;
-        let mut rings = Rings::new(device)?;
+        // a failure leaves it stepping the current map. A recycled map and its rings, and the
+        // normals the last shift replaced, are written over instead of allocated anew: queue
+        // order puts these writes after every frame already submitted that read them.
+        let (new_map, mut rings) = match self.spare.take() {
+            Some(spare) => {
+                spare.map.write(queue, map)?;
+                (spare.map, spare.rings)
+            }
+            None => (
+                GpuHeightMap::from_map(device, queue, map)?,
+                Rings::new(device)?,
+            ),
+        };
+        let new_normals = match self.spare_normals.take() {
+            Some(normals) => normals,
+            None => GpuGranularNormals::for_map(device, &new_map)?,
+        };
         let shared = shared_texels(size, offset);
         let mut encoder = device.create_command_encoder(&Default::default());
         if let Some(r) = shared {
@@ -371,8 +390,25 @@ impl GranularField {
             map: std::mem::replace(&mut self.map, new_map),
             rings: std::mem::replace(&mut p.rings, rings),
         };
-        self.normals = new_normals;
+        self.spare_normals = Some(std::mem::replace(&mut self.normals, new_normals));
         Ok((retired, shared))
+    }
+
+    /// Takes back a [`RetiredField`] whose readbacks have all arrived (its `poll` says nothing
+    /// is in flight, or it was drained): the next [`Self::shift`] writes its map into the
+    /// retired buffers and reuses its readback rings instead of allocating. One with something
+    /// still on its way, or of another size, is not kept: it comes back, to poll on.
+    #[must_use = "a retired field not kept still has readbacks to poll"]
+    pub fn recycle(&mut self, retired: RetiredField) -> Option<RetiredField> {
+        let idle = !retired.rings.readback.in_flight()
+            && retired.rings.readback.waiting() == 0
+            && !retired.rings.measures.in_flight();
+        if idle && retired.map.size() == self.map.size() {
+            self.spare = Some(retired);
+            None
+        } else {
+            Some(retired)
+        }
     }
 
     /// Drains the field ([`Self::drain`]) and frees its map, keeping the passes for the next
@@ -400,7 +436,8 @@ fn shared_texels(size: UVec2, offset: IVec2) -> Option<Rect> {
 
 /// The readbacks a [`GranularField`] left on their way when it moved onto another map
 /// ([`GranularField::shift`]): the old map's areas and measures, in step order. Poll it each
-/// frame until nothing is in flight, then drop it (the old map is freed with it).
+/// frame until nothing is in flight, then hand it back ([`GranularField::recycle`]: the next
+/// shift reuses its buffers) or drop it (the old map is freed with it).
 #[derive(Debug)]
 pub struct RetiredField {
     map: GpuHeightMap<u32>,

@@ -63,6 +63,14 @@ impl FieldStepper {
         }
     }
 
+    /// Hands the retired field, all its readbacks arrived, back to the field for its next
+    /// shift; one the field will not take (or without a field) is dropped.
+    fn recycle(&mut self) {
+        if let (Some(r), Some(field)) = (self.retired.take(), self.field.as_mut()) {
+            drop(field.recycle(r));
+        }
+    }
+
     fn field_mut(&mut self) -> Result<&mut GranularField, GpuError> {
         self.field.as_mut().ok_or(NOT_STARTED)
     }
@@ -203,15 +211,17 @@ impl GranularStepper for FieldStepper {
         };
         let arrived = r.poll(&self.device, &self.queue)?;
         if !arrived.in_flight {
-            self.retired = None;
+            self.recycle();
         }
         Ok(arrived)
     }
 
     fn drain_retired(&mut self) -> Result<GranularArrivals, GpuError> {
-        let Some(mut r) = self.retired.take() else {
+        let Some(r) = self.retired.as_mut() else {
             return Ok(GranularArrivals::default());
         };
-        r.drain(&self.device, &self.queue)
+        let arrived = r.drain(&self.device, &self.queue);
+        self.recycle();
+        arrived
     }
 }
