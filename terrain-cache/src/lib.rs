@@ -81,6 +81,7 @@ mod overlay_pyramid;
 mod overlay_stream;
 mod overlay_writer;
 pub mod overlays;
+mod overview;
 mod region_bounds;
 pub mod store;
 pub mod streamed_world;

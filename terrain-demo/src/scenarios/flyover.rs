@@ -46,13 +46,13 @@ use crate::report::{CacheStats, FrameStats};
 use crate::timings::{Step, ms_since};
 use crate::usage_error::usage;
 use anyhow::{Context, Result, bail};
-use glam::{IVec2, UVec2, Vec2, Vec3};
+use glam::{UVec2, Vec2, Vec3};
 use std::time::{Duration, Instant};
 use terrain_cache::{
-    CameraState, Layer, Manifest, RamPool, RegionBounds, StreamedWorld, TileId, WindowFill, World,
+    CameraState, Layer, Manifest, RamPool, RegionBounds, StreamedWorld, TileId, WindowFill,
 };
 use terrain_core::{
-    CoarseMap, DirtyRect, GaussianStamp, Grid, Rect, StampPlacement, TileStamp, WrapMode,
+    CoarseMap, DirtyRect, GaussianStamp, Rect, StampPlacement, TileStamp, WrapMode,
 };
 use terrain_lod::{CdlodConfig, TessConfig};
 use terrain_physics::CollisionWindow;
@@ -156,7 +156,7 @@ impl FlyoverScenario {
             );
         }
         let overview_level = overview_level(&manifest);
-        let overview = overview_map(&world, overview_level)?;
+        let overview = world.read_level(overview_level)?;
         let load_ms = ms_since(t);
         let budget = cli.ram_budget.saturating_mul(1 << 20);
         let overlays = WorldOverlays::new(&world)?;
@@ -321,36 +321,7 @@ impl FlyoverScenario {
 
 /// The level shown in the overview: the finest whose side is at most [`OVERVIEW_MAX`].
 pub fn overview_level(manifest: &Manifest) -> u32 {
-    (0..manifest.levels)
-        .find(|&l| manifest.level_size(l).max_element() <= OVERVIEW_MAX)
-        .unwrap_or(manifest.levels.saturating_sub(1))
-}
-
-/// The level `level` of `world` as one clamped coarse-map.
-fn overview_map(world: &World, level: u32) -> Result<CoarseMap> {
-    let m = world.manifest();
-    let size = m.level_size(level);
-    let mut grid = Grid::new(size.x, size.y, 0u16)?;
-    let tiles = m.tiles_at(level);
-    for ty in 0..tiles.y {
-        for tx in 0..tiles.x {
-            let data = world.load_tile(Layer::Height, TileId::new(level, tx, ty))?;
-            let Some(tile) = data.as_u16() else {
-                bail!("tile ({level}, {tx}, {ty}) is not a height tile");
-            };
-            let origin = UVec2::new(tx, ty) * m.tile_size;
-            let part = (size - origin).min(tile.size());
-            let piece = tile.copy_rect(Rect::new(IVec2::ZERO, part))?;
-            grid.paste(&piece, origin.as_ivec2())?;
-        }
-    }
-    let scale = (1u32 << level) as f32;
-    Ok(CoarseMap::new(
-        grid,
-        m.encoding,
-        m.texel_size * scale,
-        WrapMode::Clamp,
-    )?)
+    manifest.finest_level_within(OVERVIEW_MAX)
 }
 
 /// GPU bytes of one tile slot of the world `manifest` describes, across its atlases: heights
@@ -731,7 +702,7 @@ impl Scenario for FlyoverScenario {
         // resident go straight into its files.
         let (written, world) = streamed.finish(SHUTDOWN_TIMEOUT)?;
         // The overview as the world now holds it (`terrain_final.png`).
-        self.overview = overview_map(&world, self.overview_level)?;
+        self.overview = world.read_level(self.overview_level)?;
         Ok(FinishStats {
             granular,
             written_back_tiles: Some(
