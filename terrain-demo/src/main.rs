@@ -2,7 +2,6 @@
 //! `report.json` with per-frame timings. Everything it does is glue over the library crates:
 //! `scenarios` says what happens, `driver` runs the frames, `gpu_scene` is the GPU side.
 
-mod camera_path;
 mod camera_rig;
 mod capture;
 mod cli;

@@ -64,7 +64,9 @@
 //! [`RegionSource`] (terrain-core's readback contract, re-exported here), and hands a source's
 //! failure back in the source's own error type ([`UpdateError`]); [`CameraBody`] and
 //! [`SphereBody`] move over any [`GroundQuery`], such as the [`BoundedGround`] that covers the
-//! gap between a deformation and its readback.
+//! gap between a deformation and its readback. [`CameraRig`] is a camera built on the body: a
+//! follower behind a moving subject, or a [`CameraPath`] (orbit, flyover) sized from a map's
+//! extent that frames any terrain, for repeatable captures and benchmark flights.
 //!
 //! Surface model: the bilinear patch of listing 3.2 over every cell; heights, normals,
 //! raycasts and contacts all use it.
@@ -80,6 +82,8 @@
 #![warn(clippy::unwrap_used)]
 
 pub mod camera;
+pub mod camera_path;
+pub mod camera_rig;
 pub mod collider;
 pub mod contact;
 pub mod detail_ground;
@@ -97,6 +101,8 @@ pub mod sphere;
 pub mod window;
 
 pub use camera::{CameraBody, GroundClamp, STANDARD_GRAVITY};
+pub use camera_path::{CameraPath, MAX_FRAME_M, MapFrame, PathParams, Pose};
+pub use camera_rig::{CameraRig, FollowShape, RigView};
 pub use collider::{GroundQuery, HeightfieldCollider};
 pub use contact::Contact;
 pub use detail_ground::DetailGround;

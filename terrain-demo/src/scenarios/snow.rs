@@ -57,7 +57,7 @@ impl SnowScenario {
             bilinear(&coarse, start)?,
             coarse.extent_m().max_element(),
             &params.camera,
-        );
+        )?;
         Ok(Self {
             info: ScenarioInfo {
                 name: "snow",

@@ -15,8 +15,7 @@
 use super::FinishStats;
 use super::stamp_script::{DetailTarget, StampScript};
 use super::{FRAME_DT, FrameContext, FrameOutcome, Scenario, ScenarioInfo, heightmap};
-use crate::camera_path::{CameraPath, MapFrame};
-use crate::camera_rig::CameraRig;
+use crate::camera_rig::{CameraRig, path_params};
 use crate::cli::{CameraMode, Cli};
 use crate::config::DemoParams;
 use crate::frame_plan::{FramePlan, StampKind};
@@ -35,6 +34,7 @@ use terrain_core::detail::{DetailLayout, tiles_of_pieces};
 use terrain_core::{
     CoarseMap, DerivativeMap, Grid, HoleOp, StampPlacement, apply_hole_stamp, bilinear,
 };
+use terrain_physics::{CameraPath, MapFrame};
 use terrain_physics::{
     CollisionMirror, CpuRegionSource, DetailGround, ReadbackScheduler, RequestId,
 };
@@ -124,7 +124,7 @@ impl StampScenario {
                     bilinear(&map, start)?,
                     map.extent_m().max_element(),
                     &params.camera,
-                )
+                )?
             }
             CameraMode::Orbit | CameraMode::Flyover => {
                 let (lo, hi) = terrain_core::hillshade_range(&map);
@@ -133,10 +133,11 @@ impl StampScenario {
                     low: map.encoding().to_metres(lo),
                     high: map.encoding().to_metres(hi),
                 };
+                let shape = path_params(&params.camera);
                 let path = if mode == CameraMode::Orbit {
-                    CameraPath::orbit(frame, (&params.camera).into())
+                    CameraPath::orbit(frame, shape)?
                 } else {
-                    CameraPath::flyover(frame, (&params.camera).into())
+                    CameraPath::flyover(frame, shape)?
                 };
                 CameraRig::on_path(path, |p| bilinear(&map, p).unwrap_or(frame.low))
             }

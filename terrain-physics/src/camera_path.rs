@@ -1,8 +1,11 @@
-//! The paths of the cameras that show a whole map (`--camera orbit` and `--camera flyover`):
-//! where the eye should be and what it looks at, at a time, sized from the map's extent and
-//! height range so a 200 m procedural map and a 50 km DEM are framed alike. The rig
-//! (`camera_rig`) moves a physics body along them, which keeps the eye above the ground.
+//! Camera paths that show a whole map (an orbit and a flyover): where the eye should be and
+//! what it looks at, at a time, sized from the map's extent and height range so a 200 m map
+//! and a 50 km DEM are framed alike. For repeatable captures and benchmark flights over any
+//! terrain; [`crate::CameraRig`] moves a [`crate::CameraBody`] along them, which keeps the eye
+//! above the ground.
 
+use crate::PhysicsError;
+use crate::error::{check_finite, check_finite2};
 use glam::{Vec2, Vec3};
 use std::f32::consts::TAU;
 
@@ -31,6 +34,9 @@ const FLYOVER_PITCH: f32 = 25.0 * std::f32::consts::PI / 180.0;
 /// Ground samples the flyover takes along its next stretch to clear the highest.
 const FLYOVER_GROUND_SAMPLES: u32 = 6;
 
+/// The largest extent and height (metres) a [`MapFrame`] takes.
+pub const MAX_FRAME_M: f32 = 1.0e15;
+
 /// The shape of the paths (`[camera]` of `--config`; the defaults are the constants above).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PathParams {
@@ -58,15 +64,39 @@ impl Default for PathParams {
     }
 }
 
-impl From<&crate::config::CameraParams> for PathParams {
-    fn from(c: &crate::config::CameraParams) -> Self {
-        Self {
-            orbit_pitch: c.orbit_pitch_deg.to_radians(),
-            orbit_period_s: c.orbit_period_s,
-            flyover_period_s: c.flyover_period_s,
-            flyover_height: c.flyover_height,
-            flyover_pitch: c.flyover_pitch_deg.to_radians(),
+impl PathParams {
+    /// Refuses a shape no path can take: non-finite values, periods and heights not above
+    /// zero, pitches outside (0, 90) degrees.
+    pub fn validate(&self) -> Result<(), PhysicsError> {
+        let positive = [
+            ("orbit_period_s", self.orbit_period_s),
+            ("flyover_period_s", self.flyover_period_s),
+            ("flyover_height", self.flyover_height),
+        ];
+        for (what, v) in positive {
+            check_finite(what, v)?;
+            if v <= 0.0 {
+                return Err(out_of_range(what, v, "above zero"));
+            }
         }
+        for (what, v) in [
+            ("orbit_pitch", self.orbit_pitch),
+            ("flyover_pitch", self.flyover_pitch),
+        ] {
+            check_finite(what, v)?;
+            if v <= 0.0 || v >= std::f32::consts::FRAC_PI_2 {
+                return Err(out_of_range(what, v, "between 0 and pi / 2 radians"));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn out_of_range(what: &'static str, value: f32, expected: &'static str) -> PhysicsError {
+    PhysicsError::OutOfRange {
+        what,
+        value: f64::from(value),
+        expected,
     }
 }
 
@@ -83,6 +113,32 @@ pub struct MapFrame {
 }
 
 impl MapFrame {
+    /// Refuses a map no path can frame: a non-finite or non-positive extent, non-finite
+    /// heights, `low` above `high`, sizes beyond [`MAX_FRAME_M`] (where the paths' distances
+    /// would leave f32).
+    pub fn validate(&self) -> Result<(), PhysicsError> {
+        check_finite2("map extent", self.extent)?;
+        let (small, large) = (self.extent.min_element(), self.extent.max_element());
+        if small <= 0.0 || large > MAX_FRAME_M {
+            let v = if small <= 0.0 { small } else { large };
+            return Err(out_of_range("map extent", v, "above zero, at most 1e15 m"));
+        }
+        for (what, v) in [("lowest height", self.low), ("highest height", self.high)] {
+            check_finite(what, v)?;
+            if v.abs() > MAX_FRAME_M {
+                return Err(out_of_range(what, v, "within +-1e15 m"));
+            }
+        }
+        if self.low > self.high {
+            return Err(out_of_range(
+                "lowest height",
+                self.low,
+                "at most the highest height",
+            ));
+        }
+        Ok(())
+    }
+
     /// The map's centre at mid height.
     fn centre(&self) -> Vec3 {
         Vec3::new(
@@ -141,18 +197,22 @@ pub enum CameraPath {
 }
 
 impl CameraPath {
-    /// The orbit around `frame`.
-    pub fn orbit(frame: MapFrame, params: PathParams) -> Self {
-        CameraPath::Orbit {
+    /// The orbit around `frame`, framing it for a vertical field of view of 60 degrees.
+    pub fn orbit(frame: MapFrame, params: PathParams) -> Result<Self, PhysicsError> {
+        frame.validate()?;
+        params.validate()?;
+        Ok(CameraPath::Orbit {
             frame,
             distance: ORBIT_FILL * frame.radius() / (FOV_Y * 0.5).sin(),
             params,
-        }
+        })
     }
 
     /// The flyover over `frame`.
-    pub fn flyover(frame: MapFrame, params: PathParams) -> Self {
-        CameraPath::Flyover { frame, params }
+    pub fn flyover(frame: MapFrame, params: PathParams) -> Result<Self, PhysicsError> {
+        frame.validate()?;
+        params.validate()?;
+        Ok(CameraPath::Flyover { frame, params })
     }
 
     fn frame(&self) -> &MapFrame {
@@ -161,15 +221,18 @@ impl CameraPath {
         }
     }
 
-    /// The pose at `t` seconds; `ground` gives the terrain's height at a point (X, Z).
+    /// The pose at `t` seconds (a non-finite `t` gives the start pose); `ground` gives the
+    /// terrain's height at a point (X, Z).
     pub fn pose(&self, t: f32, ground: impl Fn(Vec2) -> f32) -> Pose {
+        let t = if t.is_finite() { t } else { 0.0 };
         match *self {
             CameraPath::Orbit {
                 frame,
                 distance,
                 params,
             } => {
-                let a = ORBIT_START + TAU * t / params.orbit_period_s;
+                // Whole turns dropped first: an angle of a huge time stays finite.
+                let a = ORBIT_START + TAU * (t / params.orbit_period_s).fract();
                 let centre = frame.centre();
                 let horizontal = distance * params.orbit_pitch.cos();
                 let eye = centre
@@ -188,7 +251,7 @@ impl CameraPath {
                 let centre = Vec2::new(frame.extent.x, frame.extent.y) * 0.5;
                 let radii = frame.extent * FLYOVER_RADIUS;
                 let at = |t: f32| {
-                    let a = TAU * t / params.flyover_period_s;
+                    let a = TAU * (t / params.flyover_period_s).fract();
                     centre + Vec2::new(a.cos(), a.sin()) * radii
                 };
                 let xz = at(t);
@@ -242,12 +305,6 @@ impl CameraPath {
     pub fn clearance(&self) -> f32 {
         (self.frame().side() * 0.01).max(2.0)
     }
-
-    /// Fog density per metre: light at the subject, the repeats of the toroidal map beyond
-    /// it fading out.
-    pub fn fog_density(&self) -> f32 {
-        0.25 / self.subject_distance().max(1.0)
-    }
 }
 
 #[cfg(test)]
@@ -266,7 +323,7 @@ mod tests {
     fn the_orbit_frames_the_whole_map_and_looks_at_its_centre() {
         for side in [200.0, 2560.0, 50_000.0] {
             let f = frame(side);
-            let path = CameraPath::orbit(f, PathParams::default());
+            let path = CameraPath::orbit(f, PathParams::default()).unwrap();
             for t in [0.0, 7.0, 23.0] {
                 let pose = path.pose(t, |_| 0.0);
                 assert_eq!(pose.look_at, f.centre());
@@ -296,13 +353,17 @@ mod tests {
             (Vec2::splat(1000.0), 0.0, 800.0),
         ];
         for (extent, low, high) in maps {
-            let path = CameraPath::orbit(MapFrame { extent, low, high }, PathParams::default());
+            let frame = MapFrame { extent, low, high };
+            let path = CameraPath::orbit(frame, PathParams::default()).unwrap();
             for aspect in [16.0 / 9.0, 1.0] {
                 for i in 0..72 {
                     let pose = path.pose(i as f32 / 72.0 * ORBIT_PERIOD_S, |_| 0.0);
-                    let camera =
-                        crate::gpu_scene::Camera::looking(pose.eye, pose.look_at - pose.eye);
-                    let m = camera.view_proj_world(aspect);
+                    // A right-handed perspective of the framed field of view, Y up.
+                    let proj =
+                        glam::camera::rh::proj::directx::perspective(FOV_Y, aspect, 0.25, 1e6);
+                    let view =
+                        glam::camera::rh::view::look_at_mat4(pose.eye, pose.look_at, Vec3::Y);
+                    let m = proj * view;
                     for x in [0.0, extent.x] {
                         for y in [low, high] {
                             for z in [0.0, extent.y] {
@@ -322,7 +383,7 @@ mod tests {
     #[test]
     fn the_flyover_keeps_its_height_above_the_highest_ground_ahead() {
         let f = frame(2560.0);
-        let path = CameraPath::flyover(f, PathParams::default());
+        let path = CameraPath::flyover(f, PathParams::default()).unwrap();
         // A ridge along x = 1800 m.
         let ground = |p: Vec2| {
             if (p.x - 1800.0).abs() < 100.0 {
@@ -344,6 +405,91 @@ mod tests {
             assert!(pose.look_at.y < pose.eye.y);
         }
         assert!(path.clearance() >= 2.0);
-        assert!(path.fog_density() > 0.0 && path.fog_density() < 0.01);
+    }
+
+    #[test]
+    fn shapes_and_maps_no_path_can_take_are_refused() {
+        let ok = frame(100.0);
+        let bad_frames = [
+            MapFrame {
+                extent: Vec2::new(f32::NAN, 1.0),
+                ..ok
+            },
+            MapFrame {
+                extent: Vec2::new(0.0, 1.0),
+                ..ok
+            },
+            MapFrame {
+                low: f32::INFINITY,
+                ..ok
+            },
+            MapFrame {
+                low: 10.0,
+                high: 5.0,
+                ..ok
+            },
+        ];
+        for f in bad_frames {
+            assert!(
+                CameraPath::orbit(f, PathParams::default()).is_err(),
+                "{f:?}"
+            );
+            assert!(
+                CameraPath::flyover(f, PathParams::default()).is_err(),
+                "{f:?}"
+            );
+        }
+        let d = PathParams::default();
+        let bad_params = [
+            PathParams {
+                orbit_period_s: 0.0,
+                ..d
+            },
+            PathParams {
+                flyover_period_s: f32::NAN,
+                ..d
+            },
+            PathParams {
+                flyover_height: -1.0,
+                ..d
+            },
+            PathParams {
+                orbit_pitch: std::f32::consts::FRAC_PI_2,
+                ..d
+            },
+            PathParams {
+                flyover_pitch: 0.0,
+                ..d
+            },
+        ];
+        for p in bad_params {
+            assert!(CameraPath::orbit(ok, p).is_err(), "{p:?}");
+        }
+        // Extreme but finite maps and times give finite poses.
+        let huge = MapFrame {
+            extent: Vec2::splat(MAX_FRAME_M),
+            low: -MAX_FRAME_M,
+            high: MAX_FRAME_M,
+        };
+        let beyond = MapFrame {
+            extent: Vec2::splat(3.0e38),
+            ..ok
+        };
+        assert!(CameraPath::orbit(beyond, d).is_err());
+        for path in [
+            CameraPath::orbit(ok, d).unwrap(),
+            CameraPath::flyover(ok, d).unwrap(),
+            CameraPath::orbit(huge, d).unwrap(),
+            CameraPath::flyover(huge, d).unwrap(),
+        ] {
+            for t in [f32::MAX, -f32::MAX, f32::NAN] {
+                let pose = path.pose(t, |_| 0.0);
+                assert!(
+                    pose.eye.is_finite() && pose.look_at.is_finite(),
+                    "{t}: {pose:?}"
+                );
+            }
+            assert!(path.view_radius().is_finite() && path.subject_distance().is_finite());
+        }
     }
 }
