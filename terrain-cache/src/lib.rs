@@ -61,7 +61,8 @@
 //! a [`TileDeformer`]), [`detail::DetailCache::update_for_stamps`] (footprints in detail
 //! tiles), [`GranularTrails`] (granular trails around moving objects, stepped on the CPU or
 //! through a [`GranularStepper`]), [`WindowFill`] (a collision window refilled where coarser
-//! data stood in) and [`OverlayWriter`] (holes and paint written on a thread of their own).
+//! data stood in; [`WindowFill::over`] is terrain-core's `WindowSource`, which
+//! terrain-physics' `CollisionWindow::follow` takes) and [`OverlayWriter`] (holes and paint written on a thread of their own).
 
 // docs.rs: label feature-gated items with the features they need.
 #![cfg_attr(docsrs, feature(doc_cfg))]
@@ -125,7 +126,8 @@ pub use policy::{
     Want,
 };
 pub use pool::{
-    FrameReport, PoolConfig, RamPool, RequestHandle, TileState, TileStatus, WindowFill,
+    FrameReport, PoolConfig, PoolWindowSource, RamPool, RequestHandle, TileState, TileStatus,
+    WindowFill,
 };
 pub mod vram;
 pub use vram::{

@@ -111,3 +111,24 @@ fn a_changed_rect_reduces_to_whole_texels_of_a_coarser_level() {
     assert!(pool.read_reduced(huge, 1).unwrap().is_none());
     assert!(pool.read_reduced(rect, 40).is_err());
 }
+
+#[test]
+fn the_pool_is_a_window_source() {
+    use terrain_core::WindowSource;
+    let world = world();
+    let mut pool = RamPool::new(world.clone(), PoolConfig::new(Layer::Height, 64 << 20)).unwrap();
+    let mut fill = WindowFill::new(world.manifest());
+    let window = Rect::new(IVec2::new(20, 20), UVec2::splat(40));
+    let mut out = Grid::new(40, 40, 0u16).unwrap();
+    let mut source = fill.over(&pool);
+    source.fill(window, &mut out).unwrap();
+    assert!(source.is_stand_in(UVec2::new(20, 20)));
+    assert!(source.improved(Some(window)).is_empty());
+    common::load_level0(&mut pool);
+    let mut source = fill.over(&pool);
+    assert_eq!(source.improved(Some(window)).len(), 4);
+    assert!(!source.is_stand_in(UVec2::new(20, 20)));
+    // A rect off the world is the pool's error, not a panic.
+    let off = Rect::new(IVec2::new(WORLD as i32, 0), UVec2::splat(40));
+    assert!(source.fill(off, &mut out).is_err());
+}

@@ -66,6 +66,7 @@ pub mod terrain_gen;
 pub mod tile_atlas;
 pub mod tile_deformer;
 pub mod tile_upload;
+pub mod window_source;
 
 pub use error::CoreError;
 pub use grid::{Grid, WrapMode};
@@ -107,6 +108,7 @@ pub use terrain_gen::{TerrainParams, generate_coarse_map, generate_heights};
 pub use tile_atlas::TileAtlas;
 pub use tile_deformer::{RamDeformer, TileDeformer, TileStamp};
 pub use tile_upload::{INVALID_SLOT, MAX_TILE_LEVELS, TileLayout, TileUploadTarget};
+pub use window_source::WindowSource;
 
 /// The README's code blocks, compiled and run as doc tests so that they cannot go stale.
 #[cfg(doctest)]

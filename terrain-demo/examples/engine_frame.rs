@@ -231,11 +231,7 @@ fn main() -> Result<()> {
         }
 
         // Collide: the window follows the walker, refilled where coarser data stood in.
-        let ram = streamed.ram();
-        window.recenter(xz, |rect, out| fill.fill(ram, rect, out))?;
-        for rect in fill.ready(ram, window.window()) {
-            window.refresh(rect, |r, out| fill.fill(ram, r, out))?;
-        }
+        window.follow(xz, &mut fill.over(streamed.ram()))?;
         walker.step(
             DT,
             Vec3::new(heading.x, 0.0, heading.y) * 6.0,

@@ -15,7 +15,7 @@ use crate::field::{HeightField, MAX_FIELD_SIDE};
 use crate::mirror::CollisionMirror;
 use glam::{IVec2, UVec2, Vec2};
 use std::sync::Arc;
-use terrain_core::{Grid, HeightEncoding, Rect};
+use terrain_core::{Grid, HeightEncoding, Rect, WindowSource};
 
 /// The window's corner moves in multiples of this many texels.
 pub const WINDOW_STEP: u32 = 16;
@@ -150,6 +150,41 @@ impl CollisionWindow {
         }
         self.window = Some(new);
         Ok(filled)
+    }
+
+    /// Moves the window to the camera at `center` as [`recenter`](Self::recenter) does, filled
+    /// by `source` (terrain-core's [`WindowSource`]: terrain-cache's RAM pool, say), then fills
+    /// again what the source has improved since (a tile that arrived where coarser data stood
+    /// in). Returns the texels filled.
+    pub fn follow<S: WindowSource>(
+        &mut self,
+        center: Vec2,
+        source: &mut S,
+    ) -> Result<u64, WindowError<S::Error>> {
+        let mut filled = self.recenter(center, |r, out| source.fill(r, out))?;
+        for rect in source.improved(self.window) {
+            filled += self.refresh(rect, |r, out| source.fill(r, out))?;
+        }
+        Ok(filled)
+    }
+
+    /// Ground height at world `pos` (metres) where the window holds real data: `None` outside
+    /// the window and where `stand_in` says the texel under `pos` was filled with a stand-in
+    /// (its source's [`WindowSource::is_stand_in`]; the caller asks something coarser there).
+    pub fn ground(
+        &self,
+        pos: Vec2,
+        stand_in: impl Fn(UVec2) -> bool,
+    ) -> Result<Option<f32>, PhysicsError> {
+        if !self.contains(pos) {
+            return Ok(None);
+        }
+        let last = self.world_size.saturating_sub(UVec2::ONE);
+        let texel = (pos / self.texel_size).max(Vec2::ZERO).as_uvec2().min(last);
+        if stand_in(texel) {
+            return Ok(None);
+        }
+        self.height(pos)
     }
 
     /// Fills again the part of `rect` (world texels) inside the window: for data that got
@@ -318,6 +353,92 @@ mod tests {
                     .expect("inside");
                 assert_eq!(got, truth(x, y), "texel ({x}, {y}) of {rect:?}");
             }
+        }
+    }
+
+    /// A source whose tiles of `TILE` texels are "loaded" or stand in with zeros until loaded.
+    struct Tiles {
+        loaded: std::collections::HashSet<(i32, i32)>,
+        stand_ins: std::collections::HashSet<(i32, i32)>,
+    }
+
+    const TILE: i32 = 32;
+
+    impl WindowSource for Tiles {
+        type Error = std::convert::Infallible;
+
+        fn fill(&mut self, rect: Rect, out: &mut Grid<u16>) -> Result<(), Self::Error> {
+            fill_truth(rect, out)?;
+            for y in 0..rect.size.y {
+                for x in 0..rect.size.x {
+                    let (wx, wy) = (rect.min.x + x as i32, rect.min.y + y as i32);
+                    let tile = (wx / TILE, wy / TILE);
+                    if !self.loaded.contains(&tile) {
+                        *out.get_mut(x, y).expect("inside") = 0;
+                        self.stand_ins.insert(tile);
+                    }
+                }
+            }
+            Ok(())
+        }
+
+        fn improved(&mut self, _window: Option<Rect>) -> Vec<Rect> {
+            let ready: Vec<_> = (self.stand_ins.iter())
+                .filter(|t| self.loaded.contains(t))
+                .copied()
+                .collect();
+            ready
+                .into_iter()
+                .map(|t| {
+                    self.stand_ins.remove(&t);
+                    let side = TILE as u32;
+                    Rect::new(IVec2::new(t.0, t.1) * TILE, UVec2::splat(side))
+                })
+                .collect()
+        }
+
+        fn is_stand_in(&self, texel: UVec2) -> bool {
+            let t = texel.as_ivec2() / TILE;
+            self.stand_ins.contains(&(t.x, t.y))
+        }
+    }
+
+    #[test]
+    fn following_a_source_refills_its_stand_ins_once_their_tiles_load() {
+        let mut w = CollisionWindow::new(64, UVec2::new(1000, 700), enc(), 1.0).expect("window");
+        let mut source = Tiles {
+            loaded: std::collections::HashSet::new(),
+            stand_ins: std::collections::HashSet::new(),
+        };
+        let at = Vec2::new(100.0, 100.0);
+        assert_eq!(w.follow(at, &mut source).expect("follow"), 64 * 64);
+        // Nothing is loaded: every texel is a stand-in, no ground is answered.
+        assert_eq!(
+            w.ground(at, |t| source.is_stand_in(t)).expect("ground"),
+            None
+        );
+        assert!(w.height(at).expect("height").is_some());
+        // Every tile arrives: the next follow, without a move, fills them all again.
+        let rect = w.window().expect("filled");
+        for ty in rect.min.y / TILE..=(rect.max().y - 1) / TILE {
+            for tx in rect.min.x / TILE..=(rect.max().x - 1) / TILE {
+                source.loaded.insert((tx, ty));
+            }
+        }
+        assert_eq!(w.follow(at, &mut source).expect("follow"), 64 * 64);
+        assert_window_true(&w);
+        let ground = w
+            .ground(at, |t| source.is_stand_in(t))
+            .expect("ground")
+            .expect("answered");
+        assert_eq!(Some(ground), w.height(at).expect("height"));
+        // Outside the window, and at positions no texel has, nothing is answered.
+        for far in [Vec2::new(900.0, 600.0), Vec2::NAN, Vec2::splat(f32::MAX)] {
+            assert_eq!(
+                w.ground(far, |t| source.is_stand_in(t)).expect("ground"),
+                None,
+                "{far}"
+            );
         }
     }
 

@@ -35,7 +35,7 @@ mod tiles;
 mod window_fill;
 pub(crate) mod workers;
 
-pub use window_fill::WindowFill;
+pub use window_fill::{PoolWindowSource, WindowFill};
 
 use crate::CacheError;
 use crate::policy::{CameraState, SelectionPolicy, SphericalSelection, TileGrid, Want};

@@ -11,7 +11,7 @@ use crate::tile::TileId;
 use crate::{CacheError, Manifest};
 use glam::{IVec2, UVec2, Vec2};
 use std::collections::HashSet;
-use terrain_core::{Grid, Rect};
+use terrain_core::{Grid, Rect, WindowSource};
 
 /// Fills a moving window from a [`RamPool`] and remembers which level-0 tiles it filled with
 /// coarser stand-ins (see the module docs).
@@ -55,6 +55,12 @@ impl WindowFill {
         Ok(())
     }
 
+    /// This fill over `pool` as terrain-core's [`WindowSource`], for a window that fills
+    /// itself (terrain-physics' `CollisionWindow::follow`).
+    pub fn over<'a>(&'a mut self, pool: &'a RamPool) -> PoolWindowSource<'a> {
+        PoolWindowSource { fill: self, pool }
+    }
+
     /// Level-0 tiles the window holds stand-ins for.
     pub fn stand_ins(&self) -> usize {
         self.stand_ins.len()
@@ -86,6 +92,30 @@ impl WindowFill {
             self.stand_ins.remove(id);
         }
         ready.iter().map(rect_of).collect()
+    }
+}
+
+/// A [`WindowFill`] over its [`RamPool`]: terrain-core's [`WindowSource`] contract
+/// ([`WindowFill::over`]).
+#[derive(Debug)]
+pub struct PoolWindowSource<'a> {
+    fill: &'a mut WindowFill,
+    pool: &'a RamPool,
+}
+
+impl WindowSource for PoolWindowSource<'_> {
+    type Error = CacheError;
+
+    fn fill(&mut self, rect: Rect, out: &mut Grid<u16>) -> Result<(), CacheError> {
+        self.fill.fill(self.pool, rect, out)
+    }
+
+    fn improved(&mut self, window: Option<Rect>) -> Vec<Rect> {
+        self.fill.ready(self.pool, window)
+    }
+
+    fn is_stand_in(&self, texel: UVec2) -> bool {
+        self.fill.is_stand_in(texel)
     }
 }
 

@@ -244,13 +244,9 @@ impl FlyoverScenario {
     /// tile under it, else the overview's.
     fn coarse_ground(&self, xz: Vec2) -> f32 {
         let xz = xz.clamp(Vec2::ZERO, self.extent);
-        // The window holds a tile's texels only once it is in RAM (until then, what
-        // `read_region` filled in: not the ground).
-        if !self
-            .window_fill
-            .is_stand_in((xz / self.texel_size).as_uvec2())
-            && let Ok(Some(h)) = self.window.height(xz)
-        {
+        // The window's texels where their tile is in RAM, else the finest level loaded.
+        let stand_in = |t| self.window_fill.is_stand_in(t);
+        if let Ok(Some(h)) = self.window.ground(xz, stand_in) {
             return h;
         }
         let pool = self.pool().and_then(|pool| pool.ground_m(xz));
@@ -309,12 +305,7 @@ impl FlyoverScenario {
         let Some(pool) = self.streamed.as_ref().map(StreamedWorld::ram) else {
             return Ok(());
         };
-        let fill = &mut self.window_fill;
-        self.window.recenter(xz, |r, out| fill.fill(pool, r, out))?;
-        for rect in fill.ready(pool, self.window.window()) {
-            self.window
-                .refresh(rect, |r, out| fill.fill(pool, r, out))?;
-        }
+        self.window.follow(xz, &mut self.window_fill.over(pool))?;
         Ok(())
     }
 }
