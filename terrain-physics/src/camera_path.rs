@@ -34,6 +34,9 @@ const FLYOVER_PITCH: f32 = 25.0 * std::f32::consts::PI / 180.0;
 /// Ground samples the flyover takes along its next stretch to clear the highest.
 const FLYOVER_GROUND_SAMPLES: u32 = 6;
 
+/// The highest flyover a [`PathParams`] takes, in map sides above the ground.
+pub const MAX_FLYOVER_HEIGHT: f32 = 100.0;
+
 /// The largest extent and height (metres) a [`MapFrame`] takes.
 pub const MAX_FRAME_M: f32 = 1.0e15;
 
@@ -65,19 +68,24 @@ impl Default for PathParams {
 }
 
 impl PathParams {
-    /// Refuses a shape no path can take: non-finite values, periods and heights not above
-    /// zero, pitches outside (0, 90) degrees.
+    /// Refuses a shape no path can take: non-finite values, periods not above zero, a
+    /// flyover height outside (0, [`MAX_FLYOVER_HEIGHT`]], pitches outside (0, 90) degrees.
     pub fn validate(&self) -> Result<(), PhysicsError> {
         let positive = [
             ("orbit_period_s", self.orbit_period_s),
             ("flyover_period_s", self.flyover_period_s),
-            ("flyover_height", self.flyover_height),
         ];
         for (what, v) in positive {
             check_finite(what, v)?;
             if v <= 0.0 {
                 return Err(out_of_range(what, v, "above zero"));
             }
+        }
+        let h = self.flyover_height;
+        check_finite("flyover_height", h)?;
+        if h <= 0.0 || h > MAX_FLYOVER_HEIGHT {
+            let expected = "above zero, at most 100 (times the map's longer side)";
+            return Err(out_of_range("flyover_height", h, expected));
         }
         for (what, v) in [
             ("orbit_pitch", self.orbit_pitch),
@@ -90,6 +98,12 @@ impl PathParams {
         }
         Ok(())
     }
+}
+
+/// The fraction of a turn of `period` seconds at `t` seconds, in [0, 1): whole turns dropped
+/// first, so a huge time or a tiny period still gives a finite angle.
+fn turn(t: f32, period: f32) -> f32 {
+    (t.rem_euclid(period) / period).clamp(0.0, 1.0)
 }
 
 fn out_of_range(what: &'static str, value: f32, expected: &'static str) -> PhysicsError {
@@ -231,8 +245,7 @@ impl CameraPath {
                 distance,
                 params,
             } => {
-                // Whole turns dropped first: an angle of a huge time stays finite.
-                let a = ORBIT_START + TAU * (t / params.orbit_period_s).fract();
+                let a = ORBIT_START + TAU * turn(t, params.orbit_period_s);
                 let centre = frame.centre();
                 let horizontal = distance * params.orbit_pitch.cos();
                 let eye = centre
@@ -251,7 +264,7 @@ impl CameraPath {
                 let centre = Vec2::new(frame.extent.x, frame.extent.y) * 0.5;
                 let radii = frame.extent * FLYOVER_RADIUS;
                 let at = |t: f32| {
-                    let a = TAU * (t / params.flyover_period_s).fract();
+                    let a = TAU * turn(t, params.flyover_period_s);
                     centre + Vec2::new(a.cos(), a.sin()) * radii
                 };
                 let xz = at(t);
@@ -260,12 +273,21 @@ impl CameraPath {
                 // Clear the highest ground under the next stretch, not only the ground below:
                 // the camera rises before a ridge instead of after it.
                 let reach = side * FLYOVER_LOOK_AHEAD;
+                // Heights the ground cannot have are left out (a frame's are within
+                // MAX_FRAME_M), so every pose is finite.
                 let highest = (0..=FLYOVER_GROUND_SAMPLES)
                     .map(|i| {
                         let f = i as f32 / FLYOVER_GROUND_SAMPLES as f32;
                         ground(xz + ahead * reach * f)
                     })
+                    .filter(|h| h.is_finite())
+                    .map(|h| h.clamp(-MAX_FRAME_M, MAX_FRAME_M))
                     .fold(f32::NEG_INFINITY, f32::max);
+                let highest = if highest.is_finite() {
+                    highest
+                } else {
+                    frame.low
+                };
                 let eye = Vec3::new(xz.x, highest + side * params.flyover_height, xz.y);
                 let look = Vec3::new(ahead.x, -params.flyover_pitch.tan(), ahead.y) * reach;
                 Pose {
@@ -454,6 +476,10 @@ mod tests {
                 ..d
             },
             PathParams {
+                flyover_height: MAX_FLYOVER_HEIGHT * 1.5,
+                ..d
+            },
+            PathParams {
                 orbit_pitch: std::f32::consts::FRAC_PI_2,
                 ..d
             },
@@ -482,8 +508,13 @@ mod tests {
             CameraPath::orbit(huge, d).unwrap(),
             CameraPath::flyover(huge, d).unwrap(),
         ] {
-            for t in [f32::MAX, -f32::MAX, f32::NAN] {
-                let pose = path.pose(t, |_| 0.0);
+            for (t, ground) in [
+                (f32::MAX, 0.0),
+                (-f32::MAX, f32::MAX),
+                (f32::NAN, f32::NAN),
+                (1.0, -f32::MAX),
+            ] {
+                let pose = path.pose(t, |_| ground);
                 assert!(
                     pose.eye.is_finite() && pose.look_at.is_finite(),
                     "{t}: {pose:?}"

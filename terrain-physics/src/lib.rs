@@ -101,7 +101,7 @@ pub mod sphere;
 pub mod window;
 
 pub use camera::{CameraBody, GroundClamp, STANDARD_GRAVITY};
-pub use camera_path::{CameraPath, MAX_FRAME_M, MapFrame, PathParams, Pose};
+pub use camera_path::{CameraPath, MAX_FLYOVER_HEIGHT, MAX_FRAME_M, MapFrame, PathParams, Pose};
 pub use camera_rig::{CameraRig, FollowShape, RigView};
 pub use collider::{GroundQuery, HeightfieldCollider};
 pub use contact::Contact;

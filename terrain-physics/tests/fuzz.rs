@@ -1,6 +1,6 @@
 //! Fuzz target `physics`: every public query of terrain-physics (HeightfieldCollider height,
 //! normal, raycast and sphere contact; BoundedGround; CameraBody and SphereBody steps;
-//! CollisionWindow; field construction) with inputs over the whole finite f32 range, NaN and
+//! CameraPath and CameraRig; CollisionWindow; field construction) with inputs over the whole finite f32 range, NaN and
 //! infinities, positions far outside the map, huge distances and radii, and texel sizes from
 //! `f32::MIN_POSITIVE` to `f32::MAX`. Every call must return `Ok` or `Err` (`Err` whenever an
 //! input is not finite) within [`CALL_LIMIT`]; a call that takes longer twice in a row fails,
@@ -24,6 +24,8 @@ mod collider;
 mod fields;
 #[path = "fuzz/inputs.rs"]
 mod inputs;
+#[path = "fuzz/rigs.rs"]
+mod rigs;
 #[path = "fuzz/window.rs"]
 mod window;
 
@@ -85,6 +87,8 @@ fn fuzz_physics() {
                 c("camera_bounded_ground", bodies::camera_bounded_ground),
                 c("sphere_body_near", bodies::sphere_body_near),
                 c("sphere_body_whole_range", bodies::sphere_body_whole_range),
+                c("camera_path", rigs::camera_path),
+                c("camera_follower", rigs::camera_follower),
                 c("collision_window", window::collision_window),
                 c("field_construction", window::field_construction),
             ],
