@@ -74,6 +74,7 @@ pub mod detail;
 pub mod error;
 mod granular_trails;
 mod granular_window;
+mod hole_window;
 pub mod lock;
 pub mod manifest;
 #[cfg(feature = "object-store")]
@@ -98,6 +99,7 @@ pub use granular_trails::{
     TrailFrame, TrailMeasure, TrailsError,
 };
 pub use granular_window::{GranularWindow, MAX_WINDOW_SIDE};
+pub use hole_window::{HoleWindow, HoleWindowError, MAX_HOLE_WINDOW_SIDE};
 pub use manifest::{DetailLayout, Manifest, TileFormat, tile_key};
 #[cfg(feature = "object-store")]
 pub use object::{ObjectStoreConfig, ObjectTileStore};

@@ -91,6 +91,28 @@ pub fn count_holes(mask: &Grid<u8>) -> u64 {
     mask.as_slice().iter().filter(|&&v| is_hole(v)).count() as u64
 }
 
+/// Where a window of a streamed world's holes is drawn (terrain-gpu's hole mask window): a
+/// square of cells that terrain-cache's `HoleWindow` places around the camera and keeps
+/// current.
+///
+/// Contract for implementers:
+/// - `place` makes the window cover the cells `origin .. origin + mask.size()` (world cells;
+///   on a repeating world they may cross its edges) and hold `mask`, their hole mask,
+///   row-major; every later call keeps that size.
+/// - `update` rewrites the cells of `rect` that lie in the placed window with `mask`, their
+///   hole mask (of `rect`'s size); cells outside the window are left out.
+/// - Failures are the implementation's own [`HoleWindowTarget::Error`], never a panic.
+pub trait HoleWindowTarget {
+    /// Why an upload failed.
+    type Error;
+
+    /// Places the window (see the trait docs).
+    fn place(&mut self, origin: glam::IVec2, mask: &Grid<u8>) -> Result<(), Self::Error>;
+
+    /// Rewrites the cells of `rect` in the window (see the trait docs).
+    fn update(&mut self, rect: crate::Rect, mask: &Grid<u8>) -> Result<(), Self::Error>;
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

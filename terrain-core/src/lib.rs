@@ -74,7 +74,7 @@ pub use hillshade::{
     HillshadeMaterials, HillshadeParams, hillshade, hillshade_from_heights, hillshade_range,
     update_hillshade, update_hillshade_from_heights,
 };
-pub use holes::{GROUND, HOLE, HoleOp, apply_hole_stamp, count_holes, is_hole};
+pub use holes::{GROUND, HOLE, HoleOp, HoleWindowTarget, apply_hole_stamp, count_holes, is_hole};
 pub use io::MapIoError;
 pub use map::{
     CoarseMap, DEFAULT_FIXED_POINT_UNITS_PER_M, DETAIL_MAX_RANGE_M, DetailTile, FixedPointMap,

@@ -99,7 +99,7 @@ pub use detail_readback::{ArrivedDetail, DetailReadback};
 pub use detail_stream::GpuDetailStream;
 pub use download::{WAIT_TIMEOUT, download_bytes, read_texture_rgba8, wait_bounded};
 pub use error::GpuError;
-pub use hole_mask::GpuHoleMask;
+pub use hole_mask::{GpuHoleMask, HoleWindowUpload};
 pub use limits::{MapUse, OPTIONAL_FEATURES, check_limits, required_limits};
 pub use maps::{ExactInF32, GpuDerivativeMap, GpuHeightMap};
 pub use material_effect::{EffectOp, MaterialEffectPass};

@@ -361,3 +361,37 @@ fn a_colour_window_colours_what_it_covers_and_fades_towards_its_edges() {
             .is_err()
     );
 }
+
+#[test]
+fn a_hole_window_upload_places_and_updates_through_the_contract() {
+    use terrain_core::HoleWindowTarget;
+    let Some(ctx) = context_or_skip("hole window contract") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let window = GpuHoleMask::window(device, 32).expect("window");
+    let mut target = terrain_gpu::HoleWindowUpload {
+        queue,
+        mask: &window,
+    };
+    let mask = Grid::new(32, 32, terrain_core::HOLE).expect("grid");
+    target
+        .place(glam::IVec2::new(100, 40), &mask)
+        .expect("place");
+    assert_eq!(window.covered(), [100, 40, 32, 32]);
+    let rect = terrain_core::Rect::new(glam::IVec2::new(110, 50), UVec2::splat(4));
+    let cut = Grid::new(4, 4, terrain_core::GROUND).expect("grid");
+    target.update(rect, &cut).expect("update");
+    // The window's own errors come back unchanged: a mask of another size than the window.
+    let small = Grid::new(8, 8, 0u8).expect("grid");
+    assert!(matches!(
+        target.place(glam::IVec2::ZERO, &small),
+        Err(GpuError::Core(_))
+    ));
+    assert_eq!(
+        window.covered(),
+        [100, 40, 32, 32],
+        "a refused move moves nothing"
+    );
+    ctx.check().expect("no GPU error");
+}

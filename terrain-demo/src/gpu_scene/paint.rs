@@ -9,8 +9,7 @@
 use super::GpuScene;
 use crate::frame_plan::StampKind;
 use anyhow::{Context, Result};
-use glam::IVec2;
-use terrain_core::{DirtyRect, Grid, MaterialEffect, Rect, StampPlacement, TileLayout};
+use terrain_core::{DirtyRect, Grid, MaterialEffect, StampPlacement, TileLayout};
 use terrain_gpu::GpuError;
 use terrain_gpu::{
     EffectOp, GpuHeightMap, GpuHoleMask, GpuMaterialLayer, GpuOverlayAtlas, MaterialEffectPass,
@@ -116,34 +115,28 @@ impl GpuScene {
         Ok(())
     }
 
-    /// Places the hole window the renderers draw (`side` cells, made on the first call) at
-    /// world cell `origin` with `mask`, the hole mask of its cells: a streamed world's holes
-    /// around the camera.
-    pub fn move_hole_window(&mut self, side: u32, origin: IVec2, mask: &Grid<u8>) -> Result<()> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let holes = match &self.holes {
-            Some(holes) if holes.is_window() && holes.size().x == side => holes.clone(),
-            _ => {
-                let holes = GpuHoleMask::window(device, side)?;
-                self.terrain.set_hole_mask(Some(&holes));
-                if let Some(refined) = self.refined.as_mut() {
-                    refined.renderer.set_hole_mask(Some(&holes));
-                }
-                self.holes = Some(holes.clone());
-                holes
+    /// The hole window the renderers draw (`side` cells, made on the first call) as
+    /// terrain-core's `HoleWindowTarget`: a streamed world's holes around the camera, placed
+    /// by terrain-cache's `HoleWindow`.
+    pub fn hole_window(&mut self, side: u32) -> Result<terrain_gpu::HoleWindowUpload<'_>> {
+        let device = &self.ctx.device;
+        if !self
+            .holes
+            .as_ref()
+            .is_some_and(|h| h.is_window() && h.size().x == side)
+        {
+            let holes = GpuHoleMask::window(device, side)?;
+            self.terrain.set_hole_mask(Some(&holes));
+            if let Some(refined) = self.refined.as_mut() {
+                refined.renderer.set_hole_mask(Some(&holes));
             }
-        };
-        holes.move_window(queue, origin, mask)?;
-        Ok(())
-    }
-
-    /// Rewrites the cells `rect` of the hole window (if placed) with `mask`, theirs after a cut
-    /// changed them.
-    pub fn update_hole_window(&mut self, rect: Rect, mask: &Grid<u8>) -> Result<()> {
-        if let Some(window) = &self.holes {
-            window.update_window(&self.ctx.queue, rect, mask)?;
+            self.holes = Some(holes);
         }
-        Ok(())
+        let mask = self.holes.as_ref().context("the hole window")?;
+        Ok(terrain_gpu::HoleWindowUpload {
+            queue: &self.ctx.queue,
+            mask,
+        })
     }
 
     /// Draws a streamed world's paint, and its colour with `colored`, from overlay atlases of

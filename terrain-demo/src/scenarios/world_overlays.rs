@@ -3,14 +3,16 @@
 //! the path, or a crater's dirt, is written into the world by terrain-cache's `OverlayWriter`
 //! (on a thread of its own, in order, atomically tile by tile), and what draws and collides
 //! follows: the collision window's holes and the GPU's hole window of [`GPU_WINDOW`] cells
-//! around the camera, and the paint tiles the scenario's paint stream must read again
+//! around the camera (terrain-cache's `HoleWindow`), and the paint tiles the scenario's paint stream must read again
 //! (`terrain_cache::OverlayStream::reload`). A second run reads them back from the world.
 
 use crate::gpu_scene::GpuScene;
 use anyhow::Result;
-use glam::{IVec2, UVec2, Vec2};
-use terrain_cache::{OverlayChange, OverlayJob, OverlayWriter, TileId, World, read_holes};
-use terrain_core::{MaterialEffect, Rect, StampPlacement, WrapMode};
+use glam::Vec2;
+use terrain_cache::{
+    HoleWindow, OverlayChange, OverlayJob, OverlayWriter, TileId, World, read_holes,
+};
+use terrain_core::{MaterialEffect, Rect, StampPlacement};
 use terrain_physics::CollisionWindow;
 
 /// Side of the hole window the GPU draws (cells): 4 MiB. It moves when the camera is more than
@@ -24,8 +26,8 @@ pub const GPU_WINDOW: u32 = 2048;
 pub struct WorldOverlays {
     /// The collision window's rect its holes were read for.
     collision: Option<Rect>,
-    /// The GPU hole window's origin.
-    gpu: Option<IVec2>,
+    /// The GPU's hole window.
+    gpu: HoleWindow,
     writer: OverlayWriter,
 }
 
@@ -34,7 +36,7 @@ impl WorldOverlays {
     pub fn new(world: &World) -> Result<Self> {
         Ok(Self {
             collision: None,
-            gpu: None,
+            gpu: HoleWindow::new(GPU_WINDOW)?,
             writer: OverlayWriter::start(world.clone())?,
         })
     }
@@ -58,9 +60,8 @@ impl WorldOverlays {
     }
 
     /// Brings the holes to the camera at `xz` (world metres): the collision window's when its
-    /// rect changed, the GPU's window when the place it should be (centred on the camera,
-    /// inside a clamped world) is more than an eighth of its side from where it is. Returns
-    /// the paint tiles the writer rewrote since the last call.
+    /// rect changed, the GPU's window as `HoleWindow::follow` places it. Returns the paint
+    /// tiles the writer rewrote since the last call.
     pub fn follow(
         &mut self,
         world: &World,
@@ -90,35 +91,9 @@ impl WorldOverlays {
         let Some(scene) = scene else {
             return Ok(painted);
         };
-        let m = world.manifest();
-        let side = UVec2::splat(GPU_WINDOW.min(m.world_size.min_element()));
-        let cell = (xz / m.texel_size).floor().as_ivec2();
-        let centred = cell - (side / 2).as_ivec2();
-        // Inside a clamped world; anywhere on a repeating one (the rect wraps).
-        let origin = match m.wrap {
-            WrapMode::Clamp => centred
-                .max(IVec2::ZERO)
-                .min((m.world_size - side).as_ivec2()),
-            WrapMode::Repeat => centred,
-        };
-        // Moved once the place it should be is an eighth of a side away: near a clamped
-        // world's edge that place stays put, so the window does too.
-        let moved = self
-            .gpu
-            .is_none_or(|at| (origin - at).abs().cmpgt((side / 8).as_ivec2()).any());
-        // On a repeating world a change's rect and the windows may be a period apart: read
-        // the windows again.
-        let repeat = m.wrap == WrapMode::Repeat && !changed.is_empty();
-        if moved || repeat {
-            changed.clear();
-            let rect = Rect::new(origin, side);
-            scene.move_hole_window(side.x, origin, &read_holes(world, rect)?)?;
-            self.gpu = Some(origin);
-        }
-        // What was cut since: only its rect, written into the window (the part it covers).
-        for (rect, mask) in changed {
-            scene.update_hole_window(rect, &mask)?;
-        }
+        let side = GPU_WINDOW.min(world.manifest().world_size.min_element());
+        let mut target = scene.hole_window(side)?;
+        self.gpu.follow(world, xz, &changed, &mut target)?;
         Ok(painted)
     }
 }

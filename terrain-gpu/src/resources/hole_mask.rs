@@ -14,7 +14,7 @@ use crate::device::scope::scoped;
 use crate::error::GpuError;
 use crate::resources::window::{WindowOrigin, covered, planned_move, planned_write, upload_pieces};
 use glam::{IVec2, UVec2};
-use terrain_core::{CoreError, Grid, Rect};
+use terrain_core::{CoreError, Grid, HoleWindowTarget, Rect};
 
 /// A hole mask on the GPU: an R8 texture of one texel per cell, nonzero where the ground is
 /// cut away. Cloning shares the texture and the window's place.
@@ -25,6 +25,30 @@ pub struct GpuHoleMask {
     pub(crate) size: UVec2,
     /// A window's origin, or `None` for the whole map's mask.
     origin: Option<WindowOrigin>,
+}
+
+/// A hole mask window with the queue its uploads go through: terrain-core's
+/// [`HoleWindowTarget`], which terrain-cache's `HoleWindow` places around the camera.
+#[derive(Debug, Clone, Copy)]
+pub struct HoleWindowUpload<'a> {
+    /// The queue the uploads are written through.
+    pub queue: &'a wgpu::Queue,
+    /// The window ([`GpuHoleMask::window`]).
+    pub mask: &'a GpuHoleMask,
+}
+
+impl HoleWindowTarget for HoleWindowUpload<'_> {
+    type Error = GpuError;
+
+    /// [`GpuHoleMask::move_window`].
+    fn place(&mut self, origin: IVec2, mask: &Grid<u8>) -> Result<(), GpuError> {
+        self.mask.move_window(self.queue, origin, mask)
+    }
+
+    /// [`GpuHoleMask::update_window`].
+    fn update(&mut self, rect: Rect, mask: &Grid<u8>) -> Result<(), GpuError> {
+        self.mask.update_window(self.queue, rect, mask)
+    }
 }
 
 impl GpuHoleMask {
