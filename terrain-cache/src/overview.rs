@@ -3,6 +3,7 @@
 //! The level is chosen before anything is read, so the memory it takes is bounded by the side
 //! asked for (or the coarsest level's, one tile, where even that is larger).
 
+use crate::overlays::MAX_OVERLAY_REGION_CELLS;
 use crate::tile::{Layer, TileId};
 use crate::world::World;
 use crate::{CacheError, Manifest};
@@ -24,7 +25,9 @@ impl World {
     /// Level `level` of the heights as one coarse-map (texels `2^level` times level 0's,
     /// clamped at the edges: an overview is one picture, not a repeat). Tiles without a file
     /// read as the zero tile. Reads every tile of the level: pick it with
-    /// [`Manifest::finest_level_within`] to bound what it takes.
+    /// [`Manifest::finest_level_within`] to bound what it takes. Fails on a level the world
+    /// does not have, one of more than [`MAX_OVERLAY_REGION_CELLS`] texels, and a tile that
+    /// does not read.
     pub fn read_level(&self, level: u32) -> Result<CoarseMap, CacheError> {
         let m = *self.manifest();
         if level >= m.levels {
@@ -35,6 +38,14 @@ impl World {
             });
         }
         let size = m.level_size(level);
+        let texels = u64::from(size.x) * u64::from(size.y);
+        if texels > MAX_OVERLAY_REGION_CELLS {
+            return Err(CacheError::OutOfRange {
+                what: "level texels",
+                value: texels as f64,
+                expected: "at most 2^28 (read a coarser level: Manifest::finest_level_within)",
+            });
+        }
         let mut grid = Grid::new(size.x, size.y, 0u16)?;
         for id in m.tiles_of(Layer::Height, level) {
             let data = self.load_tile(Layer::Height, id)?;
@@ -109,6 +120,27 @@ mod tests {
             matches!(past, Err(CacheError::OutOfRange { .. })),
             "{past:?}"
         );
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn a_level_too_large_to_hold_is_refused_before_anything_is_read() {
+        let dir = temp_dir("overview-huge");
+        let store: Arc<dyn crate::TileStore> = Arc::new(FsStore::open(&dir).expect("store"));
+        let enc = HeightEncoding::spanning::<u16>(0.0, 100.0).expect("encoding");
+        let mut m =
+            Manifest::new(UVec2::splat(1 << 20), 256, 1.0, enc, WrapMode::Clamp).expect("manifest");
+        m.levels = m.max_levels();
+        // Only a manifest: every tile reads as the zero tile.
+        let world = World::create(store, m).expect("world");
+        let level0 = world.read_level(0);
+        assert!(
+            matches!(level0, Err(CacheError::OutOfRange { .. })),
+            "{level0:?}"
+        );
+        let fits = m.finest_level_within(1024);
+        let overview = world.read_level(fits).expect("overview");
+        assert_eq!(overview.grid().size(), UVec2::splat(1024));
         let _ = std::fs::remove_dir_all(dir);
     }
 }
