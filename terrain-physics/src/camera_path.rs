@@ -9,7 +9,8 @@ use crate::error::{check_finite, check_finite2};
 use glam::{Vec2, Vec3};
 use std::f32::consts::TAU;
 
-/// Vertical field of view the cameras are framed for (that of `Camera::looking`).
+/// Vertical field of view the orbit frames the map for (60 degrees, terrain-gpu's
+/// `Camera::looking`).
 const FOV_Y: f32 = 60.0 * std::f32::consts::PI / 180.0;
 /// The orbit looks down this far below the horizon.
 const ORBIT_PITCH: f32 = 35.0 * std::f32::consts::PI / 180.0;
@@ -40,7 +41,8 @@ pub const MAX_FLYOVER_HEIGHT: f32 = 100.0;
 /// The largest extent and height (metres) a [`MapFrame`] takes.
 pub const MAX_FRAME_M: f32 = 1.0e15;
 
-/// The shape of the paths (`[camera]` of `--config`; the defaults are the constants above).
+/// The shape of the paths (the defaults: an orbit 35 degrees down, 40 s a turn; a flyover
+/// 0.08 map sides above the ground, 25 degrees down, 30 s a loop).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PathParams {
     /// The orbit looks down this far below the horizon (radians).
@@ -187,27 +189,24 @@ pub struct Pose {
     pub look_at: Vec3,
 }
 
-/// A camera path over a map.
+/// A camera path over a map: an orbit or a flyover ([`CameraPath::orbit`],
+/// [`CameraPath::flyover`]), checked when made.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum CameraPath {
+pub struct CameraPath(Path);
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Path {
     /// Circles the map's centre at a distance and height that frame the whole map, looking at
     /// the centre.
     Orbit {
-        /// The map.
         frame: MapFrame,
         /// Distance from the eye to the centre.
         distance: f32,
-        /// The shape.
         params: PathParams,
     },
     /// Loops over the map at a height above the ground proportional to its extent, looking
     /// ahead and down.
-    Flyover {
-        /// The map.
-        frame: MapFrame,
-        /// The shape.
-        params: PathParams,
-    },
+    Flyover { frame: MapFrame, params: PathParams },
 }
 
 impl CameraPath {
@@ -215,23 +214,23 @@ impl CameraPath {
     pub fn orbit(frame: MapFrame, params: PathParams) -> Result<Self, PhysicsError> {
         frame.validate()?;
         params.validate()?;
-        Ok(CameraPath::Orbit {
+        Ok(CameraPath(Path::Orbit {
             frame,
             distance: ORBIT_FILL * frame.radius() / (FOV_Y * 0.5).sin(),
             params,
-        })
+        }))
     }
 
     /// The flyover over `frame`.
     pub fn flyover(frame: MapFrame, params: PathParams) -> Result<Self, PhysicsError> {
         frame.validate()?;
         params.validate()?;
-        Ok(CameraPath::Flyover { frame, params })
+        Ok(CameraPath(Path::Flyover { frame, params }))
     }
 
     fn frame(&self) -> &MapFrame {
-        match self {
-            CameraPath::Orbit { frame, .. } | CameraPath::Flyover { frame, .. } => frame,
+        match &self.0 {
+            Path::Orbit { frame, .. } | Path::Flyover { frame, .. } => frame,
         }
     }
 
@@ -239,8 +238,8 @@ impl CameraPath {
     /// terrain's height at a point (X, Z).
     pub fn pose(&self, t: f32, ground: impl Fn(Vec2) -> f32) -> Pose {
         let t = if t.is_finite() { t } else { 0.0 };
-        match *self {
-            CameraPath::Orbit {
+        match self.0 {
+            Path::Orbit {
                 frame,
                 distance,
                 params,
@@ -259,7 +258,7 @@ impl CameraPath {
                     look_at: centre,
                 }
             }
-            CameraPath::Flyover { frame, params } => {
+            Path::Flyover { frame, params } => {
                 let side = frame.side();
                 let centre = Vec2::new(frame.extent.x, frame.extent.y) * 0.5;
                 let radii = frame.extent * FLYOVER_RADIUS;
@@ -303,22 +302,20 @@ impl CameraPath {
     pub fn view_radius(&self) -> f32 {
         let frame = self.frame();
         let half_diagonal = frame.extent.length() * 0.5;
-        match *self {
-            CameraPath::Orbit {
+        match self.0 {
+            Path::Orbit {
                 distance, params, ..
             } => distance * params.orbit_pitch.cos() + half_diagonal,
-            CameraPath::Flyover { .. } => {
-                FLYOVER_RADIUS * frame.extent.max_element() + half_diagonal
-            }
+            Path::Flyover { .. } => FLYOVER_RADIUS * frame.extent.max_element() + half_diagonal,
         }
     }
 
     /// The distance at which the view's subject sits (the orbit's centre, the flyover's look
     /// ahead): fog and planes are set from it.
     pub fn subject_distance(&self) -> f32 {
-        match *self {
-            CameraPath::Orbit { distance, .. } => distance,
-            CameraPath::Flyover { frame, .. } => frame.side() * FLYOVER_LOOK_AHEAD,
+        match self.0 {
+            Path::Orbit { distance, .. } => distance,
+            Path::Flyover { frame, .. } => frame.side() * FLYOVER_LOOK_AHEAD,
         }
     }
 
