@@ -3,8 +3,9 @@
 //! window). The window is centred on the camera (inside a clamped world), moved only once the
 //! place it should be is an eighth of its side away (so a walking camera re-reads it every few
 //! hundred cells, not every frame), and kept current with the cuts terrain-cache's
-//! `OverlayWriter` reports in between. Its edges stay at least three eighths of a side from
-//! the camera: make it wide enough that a hole appearing there is lost in the fog.
+//! `OverlayWriter` reports in between. Its edges inside the world stay at least three eighths
+//! of a side from the camera: make it wide enough that a hole appearing there is lost in the
+//! fog.
 
 use crate::overlays::read_holes;
 use crate::{CacheError, World};
