@@ -124,19 +124,30 @@ impl CameraRig {
         look_height: impl Fn(Vec2) -> f32,
     ) -> Result<RigView, PhysicsError> {
         check_finite("camera time step", dt)?;
+        if dt < 0.0 {
+            return Err(PhysicsError::OutOfRange {
+                what: "camera time step",
+                value: f64::from(dt),
+                expected: "at least 0 s",
+            });
+        }
+        // The body moves on a copy, kept only when every step succeeded: a failed step leaves
+        // the rig as it was.
+        let mut body = self.body;
         if let Some((path, t)) = self.path.as_mut() {
-            *t += dt;
-            let Pose { eye, look_at } = path.pose(*t, &look_height);
+            let at = *t + dt;
+            let Pose { eye, look_at } = path.pose(at, &look_height);
             if dt > 0.0 {
                 // The velocity that reaches the path's point in one step; the ground clamp
                 // then lifts the eye if the terrain (or a deformation pending readback) is
                 // closer than the clearance.
-                self.body.velocity = (eye - self.body.position) / dt;
-                self.body.step(dt, Vec3::ZERO, ground)?;
+                body.velocity = (eye - body.position) / dt;
+                body.step(dt, Vec3::ZERO, ground)?;
             }
+            (self.body, *t) = (body, at);
             let (near, far) = planes(path);
             let pose = Pose {
-                eye: self.body.position,
+                eye: body.position,
                 look_at,
             };
             return Ok(RigView { pose, near, far });
@@ -147,10 +158,11 @@ impl CameraRig {
         let target = pos - heading * self.shape.behind;
         let h = dt / SUBSTEPS as f32;
         for _ in 0..SUBSTEPS {
-            let xz = Vec2::new(self.body.position.x, self.body.position.z);
-            let pull = (target - xz) * STIFFNESS * self.body.mass;
-            self.body.step(h, Vec3::new(pull.x, 0.0, pull.y), ground)?;
+            let xz = Vec2::new(body.position.x, body.position.z);
+            let pull = (target - xz) * STIFFNESS * body.mass;
+            body.step(h, Vec3::new(pull.x, 0.0, pull.y), ground)?;
         }
+        self.body = body;
         let ahead = pos + heading * self.shape.ahead;
         let look_at = Vec3::new(ahead.x, look_height(ahead), ahead.y);
         let pose = Pose {
@@ -251,5 +263,11 @@ mod tests {
         assert!(rig.step(nan, 0.1, &flat(0.0), |_| 0.0).is_err());
         let ok = (Vec2::ZERO, Vec2::X);
         assert!(rig.step(ok, f32::INFINITY, &flat(0.0), |_| 0.0).is_err());
+        assert!(rig.step(ok, -0.1, &flat(0.0), |_| 0.0).is_err());
+        // A subject so far that the pull leaves f32 on the way: refused, the rig unchanged.
+        let eye = rig.eye();
+        let far = (Vec2::splat(3.0e38), Vec2::X);
+        assert!(rig.step(far, 1.0, &flat(0.0), |_| 0.0).is_err());
+        assert_eq!(rig.eye(), eye);
     }
 }

@@ -109,9 +109,16 @@ pub(crate) fn camera_follower(ctx: &Ctx, case: &mut Case) -> Result<(), String> 
         return Ok(());
     };
     let look = |p: Vec2| f.collider.ground_height(p).unwrap_or(0.0);
+    let before = rig.eye();
     let stepped = timed("CameraRig::step (follower)", || {
         rig.step(subject, dt, &f.collider, look)
     })?;
+    if stepped.is_err() && rig.eye() != before {
+        return Err(format!(
+            "a failed step moved the rig: {before} -> {}",
+            rig.eye()
+        ));
+    }
     if stepped.is_ok() && !(dt.is_finite() && subject.0.is_finite() && subject.1.is_finite()) {
         return Err("a follower step of non-finite input was accepted".into());
     }
