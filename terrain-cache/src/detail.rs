@@ -90,7 +90,7 @@ use glam::{DVec2, UVec2, Vec2};
 use std::collections::{HashMap, HashSet};
 use stream::{Streams, Texels, Written, read_now};
 use terrain_core::detail::{
-    DETAIL_ZERO_RAW, DetailChange, DetailLayer, DetailLayout, detail_encoding, tiles_of_pieces,
+    DETAIL_ZERO_RAW, DetailChange, DetailLayer, DetailLayout, detail_encoding,
 };
 use terrain_core::{Blend, DirtyRect, Grid, HeightMap, HeightSample, Rect, Stamp, StampPlacement};
 
@@ -528,11 +528,7 @@ impl DetailCache {
         let mut needed = keep.to_vec();
         let mut ahead = Vec::new();
         for p in stamps {
-            let footprint = p.footprint(layout.detail_texel_m())?;
-            if !footprint.is_empty() {
-                let pieces = layout.footprint_pieces(footprint)?;
-                needed.extend(tiles_of_pieces(&pieces).into_iter().map(|(t, _)| t));
-            }
+            needed.extend(layout.tiles_under(p)?);
             ahead.extend(layout.tiles_within(p.center, read_ahead_m)?);
         }
         for list in [&mut needed, &mut ahead] {
@@ -579,14 +575,9 @@ impl DetailCache {
 
     /// Reads every tile a stamp at `placement` covers from the world, if not in RAM yet.
     fn read_footprint(&mut self, placement: &StampPlacement) -> Result<(), CacheError> {
-        let layout = *self.layout();
-        let footprint = placement.footprint(layout.detail_texel_m())?;
-        if !footprint.is_empty() {
-            let pieces = layout.footprint_pieces(footprint)?;
-            for (t, _) in tiles_of_pieces(&pieces) {
-                if !self.read.contains(&t) {
-                    self.read_into_ram(t)?;
-                }
+        for t in self.layout().tiles_under(placement)? {
+            if !self.read.contains(&t) {
+                self.read_into_ram(t)?;
             }
         }
         Ok(())

@@ -333,6 +333,21 @@ impl DetailLayout {
             .flat_map(|&y| xs.iter().map(move |&x| UVec2::new(x, y)))
             .collect())
     }
+
+    /// The tiles a stamp at `placement` covers (its footprint's pieces), in row-major order:
+    /// those that must be resident to stamp it. Fails as [`StampPlacement::footprint`] and
+    /// [`DetailLayout::footprint_pieces`] do.
+    pub fn tiles_under(&self, placement: &StampPlacement) -> Result<Vec<UVec2>, CoreError> {
+        let footprint = placement.footprint(self.detail_texel_m())?;
+        if footprint.is_empty() {
+            return Ok(Vec::new());
+        }
+        let pieces = self.footprint_pieces(footprint)?;
+        Ok(tiles_of_pieces(&pieces)
+            .into_iter()
+            .map(|(t, _)| t)
+            .collect())
+    }
 }
 
 /// The part of a stamp footprint inside one detail tile ([`DetailLayout::footprint_pieces`]).

@@ -410,6 +410,25 @@ fn the_tiles_within_a_band_are_those_holding_its_texels() {
     assert!(l.tiles_within(Vec2::ZERO, f32::INFINITY).is_err());
 }
 
+/// The tiles under a stamp are those its stamp writes (the dirty tiles a CPU stamp reports),
+/// across the wrap.
+#[test]
+fn the_tiles_under_a_stamp_are_those_it_writes() {
+    let l = DetailLayout::new(UVec2::new(25, 18), 0.5, 2, 8).unwrap();
+    for (centre, size) in [
+        (Vec2::new(3.1, 2.2), Vec2::splat(0.9)),
+        (Vec2::new(0.1, 0.1), Vec2::new(2.0, 1.0)),
+        (Vec2::new(12.4, 8.9), Vec2::splat(4.0)),
+    ] {
+        let p = StampPlacement::new(centre, size, -0.1).unwrap();
+        let mut layer = DetailLayer::new(l).unwrap();
+        let mut stamp = GaussianStamp::default();
+        let change = layer.apply_stamp(&mut stamp, &p, Blend::Add).unwrap();
+        let written: Vec<UVec2> = change.tiles.iter().map(|(t, _)| *t).collect();
+        assert_eq!(l.tiles_under(&p).unwrap(), written, "{centre} {size}");
+    }
+}
+
 /// A large mark over tiny tiles would be cut into millions of pieces: refused up front, the
 /// layer untouched; the same mark over larger tiles is taken.
 #[test]

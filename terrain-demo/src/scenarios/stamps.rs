@@ -30,7 +30,7 @@ use std::sync::Arc;
 use std::time::Instant;
 use terrain_cache::detail::{DetailCache, detail_manifest_layout};
 use terrain_cache::{BandSelection, FsStore, Manifest, TileStore, World};
-use terrain_core::detail::{DetailLayout, tiles_of_pieces};
+use terrain_core::detail::DetailLayout;
 use terrain_core::{
     CoarseMap, DerivativeMap, Grid, HoleOp, StampPlacement, apply_hole_stamp, bilinear,
 };
@@ -209,15 +209,9 @@ fn detail_cache(
 /// GPU refuses stamps over tiles it does not hold) and those under the walker (collision).
 fn needed_detail_tiles(layout: &DetailLayout, plan: &FramePlan) -> Result<Vec<glam::UVec2>> {
     let mut needed = layout.tiles_within(plan.walker.0, 2.0)?;
-    for d in plan
-        .deformations
-        .iter()
-        .filter(|d| d.kind == StampKind::Footprint)
-    {
-        let footprint = d.placement.footprint(layout.detail_texel_m())?;
-        if !footprint.is_empty() {
-            let pieces = layout.footprint_pieces(footprint)?;
-            needed.extend(tiles_of_pieces(&pieces).into_iter().map(|(t, _)| t));
+    for d in plan.deformations.iter() {
+        if d.kind == StampKind::Footprint {
+            needed.extend(layout.tiles_under(&d.placement)?);
         }
     }
     needed.sort_unstable_by_key(|t| (t.y, t.x));
