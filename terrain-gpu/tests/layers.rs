@@ -116,6 +116,56 @@ fn a_hole_shows_what_lies_behind_in_every_lod_mode_and_shading() {
     );
 }
 
+/// A renderer made to switch the LOD mode takes the layers of the one it replaces
+/// (`adopt_layers`): the hole and the materials show in every mode; without it they do not.
+#[test]
+fn a_renderer_switching_the_lod_mode_keeps_the_layers() {
+    let Some(ctx) = context_or_skip("adopt layers") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let map = cliff_map();
+    let gpu = upload(&ctx, &map);
+    let mut mask = Grid::new(MAP, MAP, terrain_core::GROUND).expect("grid");
+    let disc =
+        StampPlacement::new(Vec2::new(60.0, 128.0), Vec2::splat(20.0), -1.0).expect("placement");
+    terrain_core::apply_hole_stamp(
+        &mut mask,
+        WrapMode::Clamp,
+        1.0,
+        &disc,
+        terrain_core::HoleOp::Cut,
+    )
+    .expect("cut");
+    let holes = GpuHoleMask::new(device, queue, &mask).expect("mask");
+    let materials = GpuMaterials::new(device, queue, &solid_materials()).expect("upload");
+    let mut previous = renderers(&ctx, &map).remove(0);
+    previous.set_hole_mask(Some(&holes));
+    previous.set_materials(&materials);
+    let black = |c: Vec3| c.max_element() <= 1.0;
+    for (mut fresh, mut adopted) in renderers(&ctx, &map).into_iter().zip(renderers(&ctx, &map)) {
+        let mode = adopted.mode();
+        adopted.adopt_layers(&previous);
+        let image = draw(&ctx, &mut adopted, &gpu, SurfaceShading::Materials);
+        let inside = around(&image, 60.0, 128.0, 10.0);
+        assert!(black(inside), "{mode}: the adopted hole shows {inside}");
+        // The solid materials, not the procedural set a fresh renderer makes.
+        let ground = around(&image, 84.0, 128.0, 1.0);
+        let plain = draw(&ctx, &mut fresh, &gpu, SurfaceShading::Materials);
+        assert!(
+            !black(around(&plain, 60.0, 128.0, 3.0)),
+            "{mode}: no hole without it"
+        );
+        let differs = (ground - around(&plain, 84.0, 128.0, 1.0))
+            .abs()
+            .max_element();
+        assert!(
+            differs > COLOUR_TOLERANCE,
+            "{mode}: the materials were not adopted"
+        );
+    }
+}
+
 #[test]
 fn a_hole_window_shows_its_holes_and_nothing_beyond_it() {
     let Some(ctx) = context_or_skip("hole window render") else {

@@ -4,11 +4,19 @@
 use super::*;
 
 impl GpuScene {
+    /// Draws with `terrain` from now on, every layer the one it replaces had (holes, paint,
+    /// colour, materials) bound to it too.
+    pub(super) fn set_terrain(&mut self, mut terrain: TerrainRenderer) {
+        terrain.adopt_layers(&self.terrain);
+        self.terrain = terrain;
+    }
+
     /// Draws the coarse-map with CDLOD instead of the clipmap: the quadtree of `map` with
     /// `config`, kept current by [`GpuScene::update_lod`].
     pub fn enable_cdlod(&mut self, map: &CoarseMap, config: CdlodConfig) -> Result<()> {
         let format = self.target.format();
-        self.terrain = TerrainRenderer::cdlod(&self.ctx.device, &format, map, config)?;
+        let terrain = TerrainRenderer::cdlod(&self.ctx.device, &format, map, config)?;
+        self.set_terrain(terrain);
         Ok(())
     }
 
@@ -17,7 +25,8 @@ impl GpuScene {
     /// through [`GpuScene::update_streamed_bounds`].
     pub fn enable_cdlod_tree(&mut self, tree: CdlodTree) -> Result<()> {
         let format = self.target.format();
-        self.terrain = TerrainRenderer::cdlod_streamed(&self.ctx.device, &format, tree)?;
+        let terrain = TerrainRenderer::cdlod_streamed(&self.ctx.device, &format, tree)?;
+        self.set_terrain(terrain);
         Ok(())
     }
 
@@ -32,8 +41,9 @@ impl GpuScene {
         encoding: terrain_core::HeightEncoding,
     ) -> Result<()> {
         let (device, queue, format) = (&self.ctx.device, &self.ctx.queue, self.target.format());
-        self.terrain =
+        let terrain =
             TerrainRenderer::tessellated_streamed(device, queue, &format, tree, config, encoding)?;
+        self.set_terrain(terrain);
         Ok(())
     }
 
@@ -58,7 +68,8 @@ impl GpuScene {
         density: bool,
     ) -> Result<()> {
         let (device, queue, format) = (&self.ctx.device, &self.ctx.queue, self.target.format());
-        self.terrain = TerrainRenderer::tessellated(device, queue, &format, map, config, density)?;
+        let terrain = TerrainRenderer::tessellated(device, queue, &format, map, config, density)?;
+        self.set_terrain(terrain);
         Ok(())
     }
 

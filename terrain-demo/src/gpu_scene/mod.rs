@@ -337,7 +337,8 @@ impl GpuScene {
         if now.is_some_and(|n| n != levels) {
             let layout = ClipmapLayout::new(CLIPMAP_N, levels)?;
             let (device, format) = (&self.ctx.device, self.target.format());
-            self.terrain = TerrainRenderer::clipmap(device, &format, layout, self.height_range)?;
+            let terrain = TerrainRenderer::clipmap(device, &format, layout, self.height_range)?;
+            self.set_terrain(terrain);
         }
         Ok(())
     }

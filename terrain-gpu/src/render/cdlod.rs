@@ -74,6 +74,15 @@ pub struct CdlodDraw<'a> {
 }
 
 impl CdlodRenderer {
+    /// The layers it binds (`TerrainRenderer::adopt_layers` copies them).
+    pub(crate) fn layers(&self) -> &MaterialSlot {
+        &self.materials
+    }
+
+    /// The layers it binds, to change.
+    pub(crate) fn layers_mut(&mut self) -> &mut MaterialSlot {
+        &mut self.materials
+    }
     /// Uploads `mesh` (the quadrant mesh of the tree's grid size) and builds the pipeline.
     pub fn new(
         device: &wgpu::Device,

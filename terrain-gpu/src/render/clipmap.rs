@@ -111,6 +111,15 @@ pub struct ClipmapRenderer {
 }
 
 impl ClipmapRenderer {
+    /// The layers it binds (`TerrainRenderer::adopt_layers` copies them).
+    pub(crate) fn layers(&self) -> &MaterialSlot {
+        &self.materials
+    }
+
+    /// The layers it binds, to change.
+    pub(crate) fn layers_mut(&mut self) -> &mut MaterialSlot {
+        &mut self.materials
+    }
     /// Uploads the shared mesh of `layout` and builds the pipeline for passes of `target`.
     pub fn new(
         device: &wgpu::Device,

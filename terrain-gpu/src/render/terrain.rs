@@ -320,6 +320,29 @@ impl TerrainRenderer {
         }
     }
 
+    /// Binds the layers `previous` binds (materials, colour and material layers, hole mask, a
+    /// streamed world's paint and colour) from the next prepare: for a renderer made to draw
+    /// the same surface in another LOD mode (or with other clipmap levels), so switching
+    /// modes keeps every layer. A surface shader set on `previous` is not carried over.
+    pub fn adopt_layers(&mut self, previous: &TerrainRenderer) {
+        let from = previous.layers();
+        match &mut self.lod {
+            Lod::Clipmap(c) => c.renderer.layers_mut().adopt(from),
+            Lod::Cdlod(c) => c.renderer.layers_mut().adopt(from),
+            Lod::Tessellated(t) => t.renderer.layers_mut().adopt(from),
+            Lod::TessStreamed(t) => t.renderer.layers_mut().adopt(from),
+        }
+    }
+
+    fn layers(&self) -> &crate::resources::materials::MaterialSlot {
+        match &self.lod {
+            Lod::Clipmap(c) => c.renderer.layers(),
+            Lod::Cdlod(c) => c.renderer.layers(),
+            Lod::Tessellated(t) => t.renderer.layers(),
+            Lod::TessStreamed(t) => t.renderer.layers(),
+        }
+    }
+
     /// Draws `color` (an orthophoto over the map) as the surface's albedo from the next
     /// prepare, `None` for none; its size must be the drawn surface's, else the prepare fails.
     pub fn set_color_layer(&mut self, color: Option<&crate::GpuColorLayer>) {

@@ -336,6 +336,19 @@ pub(crate) struct MaterialSlot {
 }
 
 impl MaterialSlot {
+    /// Binds what `other` binds (materials, colour and material layers, hole mask, streamed
+    /// paint and colour) from the next frame on: a renderer that replaces another over the
+    /// same surface.
+    pub(crate) fn adopt(&mut self, other: &MaterialSlot) {
+        self.materials.clone_from(&other.materials);
+        self.color.clone_from(&other.color);
+        self.paint.clone_from(&other.paint);
+        self.holes.clone_from(&other.holes);
+        self.streamed_paint.clone_from(&other.streamed_paint);
+        self.streamed_color.clone_from(&other.streamed_color);
+        self.changed = true;
+    }
+
     /// Binds `materials` from the next frame on.
     pub(crate) fn set(&mut self, materials: &GpuMaterials) {
         self.materials = Some(materials.clone());

@@ -44,6 +44,15 @@ pub struct TessRenderer {
 }
 
 impl TessRenderer {
+    /// The layers it binds (`TerrainRenderer::adopt_layers` copies them).
+    pub(crate) fn layers(&self) -> &MaterialSlot {
+        &self.materials
+    }
+
+    /// The layers it binds, to change.
+    pub(crate) fn layers_mut(&mut self) -> &mut MaterialSlot {
+        &mut self.materials
+    }
     /// Builds the pipeline.
     pub fn new(device: &wgpu::Device, target: &TargetFormat) -> Result<Self, GpuError> {
         target.validate(device)?;
