@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use std::process::Command;
 
 /// The library examples `examples` runs, with tiny arguments (`{out}`: a folder under target).
-const EXAMPLES: [(&str, &str, &[&str]); 15] = [
+const EXAMPLES: [(&str, &str, &[&str]); 16] = [
     (
         "terrain-core",
         "stamp_heightmap",
@@ -22,6 +22,11 @@ const EXAMPLES: [(&str, &str, &[&str]); 15] = [
         "terrain-physics",
         "drop_spheres",
         &["--size", "64", "--spheres", "2", "--steps", "90"],
+    ),
+    (
+        "terrain-physics",
+        "camera_flight",
+        &["--size", "64", "--frames", "60"],
     ),
     ("terrain-gpu", "own_device", &["{out}/own_device.png"]),
     ("terrain-gpu", "gpu_memory", &["64"]),
