@@ -1,11 +1,11 @@
 //! [`HoleWindow`]: a streamed world's holes around the camera, for a renderer that draws them
 //! from a window of cells (terrain-core's [`HoleWindowTarget`]; terrain-gpu's hole mask
 //! window). The window is centred on the camera (inside a clamped world), moved only once the
-//! place it should be is an eighth of its side away (so a walking camera re-reads it every few
-//! hundred cells, not every frame), and kept current with the cuts terrain-cache's
-//! `OverlayWriter` reports in between. Its edges inside the world stay at least three eighths
-//! of a side from the camera: make it wide enough that a hole appearing there is lost in the
-//! fog.
+//! place it should be is more than an eighth of its side away (so a walking camera re-reads
+//! it every few hundred cells, not every frame), and kept current with the cuts
+//! terrain-cache's `OverlayWriter` reports in between. Its edges inside the world stay about
+//! three eighths of a side (less a cell) from the camera: make it wide enough that a hole
+//! appearing there is lost in the fog.
 
 use crate::overlays::read_holes;
 use crate::{CacheError, World};
@@ -58,7 +58,8 @@ impl HoleWindow {
     /// an `OverlayWriter`). Places the window when it must move (reading its holes from the
     /// world: the cuts are in them), else writes the cuts into it. Returns whether it was
     /// placed. Fails on a camera position that is not finite, a hole tile that does not read,
-    /// or the target's error; the window is then where it was.
+    /// or the target's error: a failed placement leaves the window where it was, a failed
+    /// update of a cut has the next call place it again (reading every cut from the world).
     pub fn follow<T: HoleWindowTarget>(
         &mut self,
         world: &World,
@@ -90,8 +91,8 @@ impl HoleWindow {
             WrapMode::Repeat => centred,
         }
         .as_ivec2();
-        // Moved once the place it should be is an eighth of a side away: near a clamped
-        // world's edge that place stays put, so the window does too.
+        // Moved once the place it should be is more than an eighth of a side away: near a
+        // clamped world's edge that place stays put, so the window does too.
         let eighth = I64Vec2::from(side / 8);
         let moved = self.origin.is_none_or(|at| {
             let off = (origin.as_i64vec2() - at.as_i64vec2()).abs();
@@ -109,9 +110,11 @@ impl HoleWindow {
             return Ok(true);
         }
         for (rect, mask) in cuts {
-            target
-                .update(*rect, mask)
-                .map_err(HoleWindowError::Target)?;
+            if let Err(e) = target.update(*rect, mask) {
+                // The cuts after it are lost to the window: the next call reads it whole.
+                self.origin = None;
+                return Err(HoleWindowError::Target(e));
+            }
         }
         Ok(false)
     }

@@ -1,7 +1,8 @@
 //! A world's overview: one whole level of its pyramid as one [`CoarseMap`], the finest that
 //! fits a given side (a minimap, a hillshade of the whole world, the heights a server reports).
-//! The level is chosen before anything is read, so the memory it takes is bounded by the side
-//! asked for (or the coarsest level's, one tile, where even that is larger).
+//! Pick the level with [`Manifest::finest_level_within`] before anything is read: the memory
+//! it takes is then bounded by the side asked for, where the pyramid reaches that far, and
+//! [`World::read_level`] refuses a level of more than 2^28 texels whatever the pyramid.
 
 use crate::overlays::MAX_OVERLAY_REGION_CELLS;
 use crate::tile::{Layer, TileId};

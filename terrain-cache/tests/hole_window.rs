@@ -51,6 +51,9 @@ impl HoleWindowTarget for Window {
     }
 
     fn update(&mut self, rect: Rect, mask: &Grid<u8>) -> Result<(), String> {
+        if self.fail {
+            return Err("refused".into());
+        }
         let (origin, cells) = (self.origin.unwrap(), self.cells.as_mut().unwrap());
         for y in 0..rect.size.y {
             for x in 0..rect.size.x {
@@ -192,5 +195,64 @@ fn on_a_repeating_world_it_goes_anywhere_and_rereads_on_a_cut() {
             .as_slice()
             .iter()
             .all(|&c| c == GROUND || c == HOLE)
+    );
+}
+
+#[test]
+fn the_window_moves_past_an_eighth_of_a_side_and_rereads_after_a_failed_cut() {
+    let world = world(WrapMode::Clamp);
+    let mut holes = HoleWindow::new(128).unwrap();
+    let mut gpu = Window::default();
+    holes
+        .follow(&world, Vec2::splat(200.0), &[], &mut gpu)
+        .unwrap();
+    assert_eq!(gpu.origin, Some(IVec2::splat(136)));
+    // Exactly an eighth (16 cells) off: it stays; one cell more: it moves.
+    assert!(
+        !holes
+            .follow(&world, Vec2::new(216.0, 200.0), &[], &mut gpu)
+            .unwrap()
+    );
+    assert!(
+        holes
+            .follow(&world, Vec2::new(217.0, 200.0), &[], &mut gpu)
+            .unwrap()
+    );
+    assert_eq!(gpu.origin, Some(IVec2::new(153, 136)));
+    // A move that also brings cuts reads them from the world with the rest.
+    let change = cut(&world, IVec2::new(250, 150), 2);
+    assert!(
+        holes
+            .follow(&world, Vec2::new(260.0, 200.0), &[change], &mut gpu)
+            .unwrap()
+    );
+    assert_eq!(gpu.updates, 0);
+    let rect = holes.rect(&world).unwrap();
+    assert_eq!(
+        gpu.cells.as_ref().unwrap(),
+        &read_holes(&world, rect).unwrap()
+    );
+    // A cut the target refuses: the next call places the window again, the cut in it.
+    let change = cut(&world, IVec2::new(255, 190), 3);
+    gpu.fail = true;
+    let r = holes.follow(&world, Vec2::new(260.0, 200.0), &[change], &mut gpu);
+    assert!(matches!(r, Err(HoleWindowError::Target(_))));
+    gpu.fail = false;
+    assert!(
+        holes
+            .follow(&world, Vec2::new(260.0, 200.0), &[], &mut gpu)
+            .unwrap()
+    );
+    assert_eq!(
+        gpu.cells.as_ref().unwrap(),
+        &read_holes(&world, rect).unwrap()
+    );
+    assert_eq!(
+        gpu.cells
+            .as_ref()
+            .unwrap()
+            .get(255 - 196, 190 - 136)
+            .unwrap(),
+        HOLE
     );
 }

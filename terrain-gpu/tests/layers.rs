@@ -142,6 +142,11 @@ fn a_renderer_switching_the_lod_mode_keeps_the_layers() {
     let mut previous = renderers(&ctx, &map).remove(0);
     previous.set_hole_mask(Some(&holes));
     previous.set_materials(&materials);
+    // A magenta colour layer over the whole map.
+    let magenta = Grid::new(MAP, MAP, [255, 0, 255, 255]).expect("grid");
+    let colors = GpuColorLayer::new(device, queue, &magenta).expect("layer");
+    let mut coloured = renderers(&ctx, &map).remove(0);
+    coloured.set_color_layer(Some(&colors));
     let black = |c: Vec3| c.max_element() <= 1.0;
     for (mut fresh, mut adopted) in renderers(&ctx, &map).into_iter().zip(renderers(&ctx, &map)) {
         let mode = adopted.mode();
@@ -162,6 +167,18 @@ fn a_renderer_switching_the_lod_mode_keeps_the_layers() {
         assert!(
             differs > COLOUR_TOLERANCE,
             "{mode}: the materials were not adopted"
+        );
+        // The colour layer: magenta ground, no green in it.
+        adopted.adopt_layers(&coloured);
+        let image = draw(&ctx, &mut adopted, &gpu, SurfaceShading::Materials);
+        let c = around(&image, 84.0, 128.0, 1.0);
+        assert!(
+            c.y < 0.5 * c.x && c.y < 0.5 * c.z,
+            "{mode}: the colour layer shows {c}"
+        );
+        assert!(
+            !black(around(&image, 60.0, 128.0, 3.0)),
+            "{mode}: the hole went with it"
         );
     }
 }

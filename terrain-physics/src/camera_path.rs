@@ -272,8 +272,8 @@ impl CameraPath {
                 // Clear the highest ground under the next stretch, not only the ground below:
                 // the camera rises before a ridge instead of after it.
                 let reach = side * FLYOVER_LOOK_AHEAD;
-                // Heights the ground cannot have are left out (a frame's are within
-                // MAX_FRAME_M), so every pose is finite.
+                // Non-finite ground heights are left out and the rest clamped to a frame's
+                // +-MAX_FRAME_M, so every pose is finite.
                 let highest = (0..=FLYOVER_GROUND_SAMPLES)
                     .map(|i| {
                         let f = i as f32 / FLYOVER_GROUND_SAMPLES as f32;

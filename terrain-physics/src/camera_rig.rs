@@ -69,7 +69,9 @@ impl CameraRig {
                 });
             }
         }
-        let mut body = CameraBody::new(Vec3::new(xz.x, ground_y + shape.eye_height, xz.y));
+        let eye_y = ground_y + shape.eye_height;
+        check_finite("follower eye height above the origin", eye_y)?;
+        let mut body = CameraBody::new(Vec3::new(xz.x, eye_y, xz.y));
         body.eye_height = shape.eye_height;
         body.mass = 1.0;
         body.friction = 2.0 * STIFFNESS.sqrt();
@@ -143,6 +145,7 @@ impl CameraRig {
                 // closer than the clearance.
                 body.velocity = (eye - body.position) / dt;
                 body.step(dt, Vec3::ZERO, ground)?;
+                check_eye(body.position)?;
             }
             (self.body, *t) = (body, at);
             let (near, far) = planes(path);
@@ -162,9 +165,13 @@ impl CameraRig {
             let pull = (target - xz) * STIFFNESS * body.mass;
             body.step(h, Vec3::new(pull.x, 0.0, pull.y), ground)?;
         }
-        self.body = body;
+        check_eye(body.position)?;
         let ahead = pos + heading * self.shape.ahead;
         let look_at = Vec3::new(ahead.x, look_height(ahead), ahead.y);
+        for v in look_at.to_array() {
+            check_finite("the point the follower looks at", v)?;
+        }
+        self.body = body;
         let pose = Pose {
             eye: self.body.position,
             look_at,
@@ -180,6 +187,15 @@ impl CameraRig {
     pub fn eye(&self) -> Vec3 {
         self.body.position
     }
+}
+
+/// The body's position after a step: finite, or the step is refused (a ground clamp at an
+/// absurd height can leave f32).
+fn check_eye(eye: Vec3) -> Result<(), PhysicsError> {
+    for v in eye.to_array() {
+        check_finite("camera eye after the step", v)?;
+    }
+    Ok(())
 }
 
 /// Near and far planes for a path camera: the far plane past the farthest point of the map
@@ -269,5 +285,14 @@ mod tests {
         let far = (Vec2::splat(3.0e38), Vec2::X);
         assert!(rig.step(far, 1.0, &flat(0.0), |_| 0.0).is_err());
         assert_eq!(rig.eye(), eye);
+        assert!(rig.step(ok, 0.1, &flat(0.0), |_| f32::NAN).is_err());
+        let huge = (Vec2::ZERO, Vec2::splat(1e38));
+        assert!(rig.step(huge, 0.1, &flat(0.0), |_| 0.0).is_err());
+        assert_eq!(rig.eye(), eye);
+        let high = FollowShape {
+            eye_height: 3e38,
+            ..SHAPE
+        };
+        assert!(CameraRig::follower(Vec2::ZERO, 3e38, high).is_err());
     }
 }

@@ -45,6 +45,9 @@ pub struct CollisionWindow {
     texel_size: f32,
     /// World texels the mirror holds now; `None` until the first [`recenter`](Self::recenter).
     window: Option<Rect>,
+    /// Rects a [`WindowSource`] reported improved that [`follow`](Self::follow) has not filled
+    /// again yet (a fill failed): still stand-ins, retried first by the next `follow`.
+    pending: Vec<Rect>,
 }
 
 impl CollisionWindow {
@@ -80,6 +83,7 @@ impl CollisionWindow {
             world_size,
             texel_size,
             window: None,
+            pending: Vec::new(),
         })
     }
 
@@ -155,22 +159,35 @@ impl CollisionWindow {
     /// Moves the window to the camera at `center` as [`recenter`](Self::recenter) does, filled
     /// by `source` (terrain-core's [`WindowSource`]: terrain-cache's RAM pool, say), then fills
     /// again what the source has improved since (a tile that arrived where coarser data stood
-    /// in). Returns the texels filled.
+    /// in). Returns the texels filled. On a failed fill the window keeps what was filled; the
+    /// improved rects not filled yet stay stand-ins for [`ground`](Self::ground) and are
+    /// filled first by the next call.
     pub fn follow<S: WindowSource>(
         &mut self,
         center: Vec2,
         source: &mut S,
     ) -> Result<u64, WindowError<S::Error>> {
         let mut filled = self.recenter(center, |r, out| source.fill(r, out))?;
-        for rect in source.improved(self.window) {
+        // Each rect once, and only while it meets the window: at most the window's tiles.
+        let window = self.window;
+        let meets = |r: &Rect| window.is_some_and(|w| w.intersect(r).is_some());
+        self.pending.retain(meets);
+        for rect in source.improved(window) {
+            if meets(&rect) && !self.pending.contains(&rect) {
+                self.pending.push(rect);
+            }
+        }
+        while let Some(&rect) = self.pending.last() {
             filled += self.refresh(rect, |r, out| source.fill(r, out))?;
+            self.pending.pop();
         }
         Ok(filled)
     }
 
     /// Ground height at world `pos` (metres) where the window holds real data: `None` outside
     /// the window and where `stand_in` says the texel under `pos` was filled with a stand-in
-    /// (its source's [`WindowSource::is_stand_in`]; the caller asks something coarser there).
+    /// (its source's [`WindowSource::is_stand_in`]), or a failed [`follow`](Self::follow) left
+    /// one; the caller asks something coarser there.
     pub fn ground(
         &self,
         pos: Vec2,
@@ -181,7 +198,8 @@ impl CollisionWindow {
         }
         let last = self.world_size.saturating_sub(UVec2::ONE);
         let texel = (pos / self.texel_size).max(Vec2::ZERO).as_uvec2().min(last);
-        if stand_in(texel) {
+        let waiting = self.pending.iter().any(|r| r.contains(texel.as_ivec2()));
+        if waiting || stand_in(texel) {
             return Ok(None);
         }
         self.height(pos)
@@ -440,6 +458,73 @@ mod tests {
                 "{far}"
             );
         }
+    }
+
+    /// A source whose fills fail (a tile that cannot be read) while `broken`.
+    struct Flaky {
+        tiles: Tiles,
+        broken: bool,
+    }
+
+    impl WindowSource for Flaky {
+        type Error = &'static str;
+
+        fn fill(&mut self, rect: Rect, out: &mut Grid<u16>) -> Result<(), Self::Error> {
+            if self.broken {
+                return Err("unreadable");
+            }
+            let Ok(()) = self.tiles.fill(rect, out);
+            Ok(())
+        }
+
+        fn improved(&mut self, window: Option<Rect>) -> Vec<Rect> {
+            self.tiles.improved(window)
+        }
+
+        fn is_stand_in(&self, texel: UVec2) -> bool {
+            self.tiles.is_stand_in(texel)
+        }
+    }
+
+    #[test]
+    fn a_failed_refill_stays_a_stand_in_until_the_next_follow_fills_it() {
+        let mut w = CollisionWindow::new(64, UVec2::new(1000, 700), enc(), 1.0).expect("window");
+        let mut source = Flaky {
+            tiles: Tiles {
+                loaded: std::collections::HashSet::new(),
+                stand_ins: std::collections::HashSet::new(),
+            },
+            broken: false,
+        };
+        let at = Vec2::new(100.0, 100.0);
+        w.follow(at, &mut source).expect("follow");
+        let rect = w.window().expect("filled");
+        for ty in rect.min.y / TILE..=(rect.max().y - 1) / TILE {
+            for tx in rect.min.x / TILE..=(rect.max().x - 1) / TILE {
+                source.tiles.loaded.insert((tx, ty));
+            }
+        }
+        // The tiles arrived, but their refill fails: the source has forgotten them, the
+        // window has not; they still answer no ground.
+        source.broken = true;
+        assert!(matches!(
+            w.follow(at, &mut source),
+            Err(WindowError::Fill("unreadable"))
+        ));
+        assert!(!source.is_stand_in(UVec2::new(100, 100)));
+        assert_eq!(
+            w.ground(at, |t| source.is_stand_in(t)).expect("ground"),
+            None
+        );
+        // Readable again: the next follow fills them first.
+        source.broken = false;
+        assert_eq!(w.follow(at, &mut source).expect("follow"), 64 * 64);
+        assert_window_true(&w);
+        assert!(
+            w.ground(at, |t| source.is_stand_in(t))
+                .expect("ground")
+                .is_some()
+        );
     }
 
     #[test]

@@ -80,9 +80,12 @@ impl GpuScene {
             let radius_m = refine_radius(texel);
             let view = terrain_lod::RefineView::new(Vec2::ZERO, texel, radius_m)?;
             shading.parallax_steps = 0;
+            // The layers bound so far (a streamed world's paint and colour) draw on it too.
+            let mut renderer = RefineRenderer::new(device, &self.target.format())?;
+            renderer.adopt_layers(&self.terrain);
             Some(RefinedGeometry {
                 pass: RefinePass::new(device, view.half_cells())?,
-                renderer: RefineRenderer::new(device, &self.target.format())?,
+                renderer,
                 radius_m,
                 last_count: 0,
             })

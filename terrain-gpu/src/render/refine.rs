@@ -520,6 +520,13 @@ impl RefineRenderer {
         })
     }
 
+    /// Binds the layers `terrain` binds (materials, colour and material layers, hole mask, a
+    /// streamed world's paint and colour) from the next prepare: a refined renderer made after
+    /// they were bound draws its cells as the terrain around them.
+    pub fn adopt_layers(&mut self, terrain: &crate::TerrainRenderer) {
+        self.materials.adopt(terrain.layers());
+    }
+
     /// Shades [`crate::SurfaceShading::Materials`] frames with `materials` from the next
     /// prepare (until then, and without a call, with [`GpuMaterials::procedural`]).
     pub fn set_materials(&mut self, materials: &GpuMaterials) {

@@ -334,7 +334,8 @@ impl TerrainRenderer {
         }
     }
 
-    fn layers(&self) -> &crate::resources::materials::MaterialSlot {
+    /// The layers its LOD mode's renderer binds.
+    pub(crate) fn layers(&self) -> &crate::resources::materials::MaterialSlot {
         match &self.lod {
             Lod::Clipmap(c) => c.renderer.layers(),
             Lod::Cdlod(c) => c.renderer.layers(),

@@ -80,6 +80,11 @@ pub(crate) fn camera_path(ctx: &Ctx, case: &mut Case) -> Result<(), String> {
     if stepped.is_ok() && !dt.is_finite() {
         return Err(format!("a step of dt {dt} was accepted"));
     }
+    if let Ok(view) = stepped
+        && !(view.pose.eye.is_finite() && view.pose.look_at.is_finite())
+    {
+        return Err(format!("a path step gave {view:?}"));
+    }
     Ok(())
 }
 
@@ -121,6 +126,11 @@ pub(crate) fn camera_follower(ctx: &Ctx, case: &mut Case) -> Result<(), String> 
     }
     if stepped.is_ok() && !(dt.is_finite() && subject.0.is_finite() && subject.1.is_finite()) {
         return Err("a follower step of non-finite input was accepted".into());
+    }
+    if let Ok(view) = stepped
+        && !(view.pose.eye.is_finite() && view.pose.look_at.is_finite())
+    {
+        return Err(format!("a follower step gave {view:?}"));
     }
     Ok(())
 }
