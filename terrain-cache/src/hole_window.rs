@@ -47,9 +47,16 @@ impl HoleWindow {
         Ok(Self { side, origin: None })
     }
 
+    /// The side, in cells, of the masks this window places on `world`: the side it was made
+    /// with, or the world's shorter side where that is smaller. Make the target's window this
+    /// size (terrain-gpu's `GpuHoleMask::window(device, side)`).
+    pub fn side_on(&self, world: &World) -> u32 {
+        self.side.min(world.manifest().world_size.min_element())
+    }
+
     /// The world cells the window covers now (`None` before it is placed).
     pub fn rect(&self, world: &World) -> Option<Rect> {
-        let side = self.side.min(world.manifest().world_size.min_element());
+        let side = self.side_on(world);
         self.origin.map(|o| Rect::new(o, UVec2::splat(side)))
     }
 
@@ -58,8 +65,8 @@ impl HoleWindow {
     /// an `OverlayWriter`). Places the window when it must move (reading its holes from the
     /// world: the cuts are in them), else writes the cuts into it. Returns whether it was
     /// placed. Fails on a camera position that is not finite, a hole tile that does not read,
-    /// or the target's error: a failed placement leaves the window where it was, a failed
-    /// update of a cut has the next call place it again (reading every cut from the world).
+    /// or the target's error: after a failed placement or update the next call places the
+    /// window again (reading every cut from the world, so none is lost).
     pub fn follow<T: HoleWindowTarget>(
         &mut self,
         world: &World,
@@ -76,7 +83,7 @@ impl HoleWindow {
             .into());
         }
         let m = world.manifest();
-        let side = UVec2::splat(self.side.min(m.world_size.min_element()));
+        let side = UVec2::splat(self.side_on(world));
         // In i64: a camera far off the world must not overflow the cell arithmetic.
         let cell = (xz.as_dvec2() / f64::from(m.texel_size)).floor();
         let limit = f64::from(i32::MAX / 2);
@@ -102,6 +109,9 @@ impl HoleWindow {
         // window again.
         let repeat = m.wrap == WrapMode::Repeat && !cuts.is_empty();
         if moved || repeat {
+            // Until a placement succeeds the target may lack `cuts` (the caller has them no
+            // more): the next call places the window again, reading them from the world.
+            self.origin = None;
             let mask = read_holes(world, Rect::new(origin, side))?;
             target
                 .place(origin, &mask)

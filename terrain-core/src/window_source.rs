@@ -18,7 +18,10 @@ use glam::UVec2;
 ///   arrived since, forgetting them as it returns them (filling them again remembers what is
 ///   still a stand-in then); stand-ins outside `window` (the window's rect now, if any) are
 ///   forgotten.
-/// - `is_stand_in` says whether the last fill of `texel` was a stand-in.
+/// - `is_stand_in` says whether `texel` was filled with a stand-in the source still
+///   remembers: once `improved` has returned its rect it answers `false`, so the window keeps
+///   the rects `improved` returned as stand-ins itself until it has filled them again
+///   (`CollisionWindow::follow` does).
 pub trait WindowSource {
     /// Why a fill failed (a tile that could not be read, say).
     type Error;

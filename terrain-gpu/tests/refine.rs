@@ -2,7 +2,8 @@
 //! the CPU reference `terrain_lod::refine` (same patterns, same positions, heights of coarse +
 //! faded detail), no cracks from grazing views where the refined region meets the clipmap,
 //! CDLOD or the tessellation, and
-//! a refined region without detail drawing the coarse frame. On whatever adapter the machine
+//! a refined region without detail drawing the coarse frame, and the layers (a hole mask) a
+//! refine renderer adopts from the terrain it refines drawn on its cells. On whatever adapter the machine
 //! has (lavapipe in CI); without one they skip, or fail under `TERRAIN_REQUIRE_GPU=1`.
 
 #[path = "common/cracks.rs"]
@@ -366,6 +367,45 @@ fn refined_footprints_change_the_frame_and_no_detail_draws_the_coarse_frame() {
             "yaw {yaw}: an unrefined region draws the coarse frame (max {max})"
         );
     }
+}
+
+#[test]
+fn a_refine_renderer_draws_the_layers_it_adopts() {
+    let Some(ctx) = context_or_skip("refine_adopt") else {
+        return;
+    };
+    let mut scene = Scene::new(ctx, 63, 4);
+    let (_, tiles) = footprints(&scene);
+    let mut parts = refine_parts(&scene);
+    let magenta = SkyColors {
+        horizon: Vec3::new(1.0, 0.0, 1.0),
+        zenith: Vec3::new(1.0, 0.0, 1.0),
+    };
+    let size = UVec2::new(256, 160);
+    let xz = Vec2::new(91.0, 91.5);
+    let eye = Vec3::new(xz.x, scene.ground(xz) + 2.5, xz.y);
+    let camera = Camera::looking(eye, Vec3::new(0.8, -0.5, 0.6));
+    let sky_pixels = |image: &Grid<[u8; 4]>| {
+        let sky = image.as_slice().iter().filter(|&&p| cracks::is_sky(p));
+        sky.count()
+    };
+    let (plain, ..) = render_refined(&mut scene, &mut parts, &tiles, &camera, size, &magenta);
+    // The terrain the refined cells replace leaves every cell out: the refined cells that
+    // adopt its layers leave them out too, so the sky shows where they were.
+    let (device, queue) = (&scene.ctx.device, &scene.ctx.queue);
+    let all_holes = Grid::new(256, 256, terrain_core::HOLE).unwrap();
+    let mask = terrain_gpu::GpuHoleMask::new(device, queue, &all_holes).unwrap();
+    let layout = terrain_lod::ClipmapLayout::new(63, 4).unwrap();
+    let mut terrain =
+        TerrainRenderer::clipmap(device, &TargetFormat::CAPTURE, layout, (0.0, HEIGHT)).unwrap();
+    terrain.set_hole_mask(Some(&mask));
+    parts.1.adopt_layers(&terrain);
+    let (holed, ..) = render_refined(&mut scene, &mut parts, &tiles, &camera, size, &magenta);
+    let (before, after) = (sky_pixels(&plain), sky_pixels(&holed));
+    assert!(
+        after > before + (size.x * size.y / 8) as usize,
+        "the refined cells ignored the adopted hole mask: {before} -> {after} sky pixels"
+    );
 }
 
 #[test]

@@ -228,6 +228,14 @@ impl CameraPath {
         Ok(CameraPath(Path::Flyover { frame, params }))
     }
 
+    /// Seconds of one loop: the pose at `t` and at `t` plus this are the same.
+    pub(crate) fn period(&self) -> f32 {
+        match &self.0 {
+            Path::Orbit { params, .. } => params.orbit_period_s,
+            Path::Flyover { params, .. } => params.flyover_period_s,
+        }
+    }
+
     fn frame(&self) -> &MapFrame {
         match &self.0 {
             Path::Orbit { frame, .. } | Path::Flyover { frame, .. } => frame,
@@ -262,13 +270,11 @@ impl CameraPath {
                 let side = frame.side();
                 let centre = Vec2::new(frame.extent.x, frame.extent.y) * 0.5;
                 let radii = frame.extent * FLYOVER_RADIUS;
-                let at = |t: f32| {
-                    let a = TAU * turn(t, params.flyover_period_s);
-                    centre + Vec2::new(a.cos(), a.sin()) * radii
-                };
-                let xz = at(t);
-                // Tangent of the loop, numerically (any ellipse, any period).
-                let ahead = (at(t + 0.05) - xz).normalize_or(Vec2::X);
+                let a = TAU * turn(t, params.flyover_period_s);
+                let xz = centre + Vec2::new(a.cos(), a.sin()) * radii;
+                // The loop's tangent, d/da of the point: exact for any period (a step ahead in
+                // time is half a loop at a short period, and nothing at a huge time).
+                let ahead = (Vec2::new(-a.sin(), a.cos()) * radii).normalize_or(Vec2::X);
                 // Clear the highest ground under the next stretch, not only the ground below:
                 // the camera rises before a ridge instead of after it.
                 let reach = side * FLYOVER_LOOK_AHEAD;
@@ -411,10 +417,15 @@ mod tests {
                 150.0
             }
         };
+        let mut risen_before = 0;
         for i in 0..300 {
             let t = i as f32 * 0.1;
             let pose = path.pose(t, ground);
             let xz = Vec2::new(pose.eye.x, pose.eye.z);
+            // Off the ridge, but already above it: it rose before the ridge.
+            if xz.x < 1700.0 && pose.eye.y >= 850.0 + 2560.0 * FLYOVER_HEIGHT - 1e-3 {
+                risen_before += 1;
+            }
             assert!(xz.x >= 0.0 && xz.y >= 0.0 && xz.x <= f.extent.x && xz.y <= f.extent.y);
             assert!(
                 pose.eye.y >= ground(xz) + 2560.0 * FLYOVER_HEIGHT - 1e-3,
@@ -423,6 +434,7 @@ mod tests {
             // Looks ahead and down.
             assert!(pose.look_at.y < pose.eye.y);
         }
+        assert!(risen_before > 0, "the camera rose only over the ridge");
         assert!(path.clearance() >= 2.0);
     }
 

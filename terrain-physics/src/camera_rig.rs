@@ -115,7 +115,7 @@ impl CameraRig {
     }
 
     /// Advances `dt` seconds: a follower follows the subject at `subject.0` heading along
-    /// `subject.1`; a path camera moves to the path's next pose. Both stand on `ground` (the
+    /// `subject.1` (a direction, of any length); a path camera moves to the path's next pose. Both stand on `ground` (the
     /// collision ground, with the bounds of pending deformations). `look_height` gives the
     /// terrain's height at a point (where the follower looks, what the flyover clears).
     pub fn step(
@@ -137,7 +137,9 @@ impl CameraRig {
         // the rig as it was.
         let mut body = self.body;
         if let Some((path, t)) = self.path.as_mut() {
-            let at = *t + dt;
+            // Time within the loop (the poses repeat): an f32 that kept growing would stop
+            // advancing after days of running.
+            let at = (*t + dt).rem_euclid(path.period());
             let Pose { eye, look_at } = path.pose(at, &look_height);
             if dt > 0.0 {
                 // The velocity that reaches the path's point in one step; the ground clamp
@@ -158,6 +160,10 @@ impl CameraRig {
         let (pos, heading) = subject;
         check_finite2("subject position", pos)?;
         check_finite2("subject heading", heading)?;
+        // A direction: `behind` and `ahead` are metres whatever the heading's length (scaled
+        // first so a huge or tiny heading normalises in f32).
+        let heading =
+            (heading / heading.abs().max_element().max(f32::MIN_POSITIVE)).normalize_or_zero();
         let target = pos - heading * self.shape.behind;
         let h = dt / SUBSTEPS as f32;
         for _ in 0..SUBSTEPS {
@@ -267,6 +273,32 @@ mod tests {
     }
 
     #[test]
+    fn a_path_camera_keeps_moving_after_any_time() {
+        let frame = MapFrame {
+            extent: Vec2::splat(200.0),
+            low: 0.0,
+            high: 10.0,
+        };
+        let path = CameraPath::orbit(frame, PathParams::default()).unwrap();
+        let mut rig = CameraRig::on_path(path, |_| 0.0);
+        let ground = flat(0.0);
+        // A billion seconds in: one f32 step there is 64 s, so a clock that kept the whole
+        // time would stand still.
+        rig.step((Vec2::ZERO, Vec2::X), 1e9, &ground, |_| 0.0)
+            .unwrap();
+        let before = rig.eye();
+        let after = (rig
+            .step((Vec2::ZERO, Vec2::X), 1.0, &ground, |_| 0.0)
+            .unwrap())
+        .pose;
+        assert!(
+            (after.eye - before).length() > 1e-3,
+            "{before} {}",
+            after.eye
+        );
+    }
+
+    #[test]
     fn bad_input_is_refused() {
         let bad = FollowShape {
             eye_height: -1.0,
@@ -286,9 +318,17 @@ mod tests {
         assert!(rig.step(far, 1.0, &flat(0.0), |_| 0.0).is_err());
         assert_eq!(rig.eye(), eye);
         assert!(rig.step(ok, 0.1, &flat(0.0), |_| f32::NAN).is_err());
-        let huge = (Vec2::ZERO, Vec2::splat(1e38));
-        assert!(rig.step(huge, 0.1, &flat(0.0), |_| 0.0).is_err());
         assert_eq!(rig.eye(), eye);
+        // A heading of any length is a direction: the distances stay the shape's metres.
+        let mut unit = rig.clone();
+        let huge = (Vec2::ZERO, Vec2::splat(1e38));
+        let a = rig.step(huge, 0.1, &flat(0.0), |_| 0.0).unwrap();
+        let b = (unit.step((Vec2::ZERO, Vec2::ONE), 0.1, &flat(0.0), |_| 0.0)).unwrap();
+        assert!((a.pose.eye - b.pose.eye).length() < 1e-4, "{a:?} {b:?}");
+        assert!((a.pose.look_at - b.pose.look_at).length() < 1e-4);
+        let tiny = (Vec2::ZERO, Vec2::splat(1e-30));
+        let c = rig.step(tiny, 0.1, &flat(0.0), |_| 0.0).unwrap();
+        assert!((c.pose.look_at - b.pose.look_at).length() < 1e-4);
         let high = FollowShape {
             eye_height: 3e38,
             ..SHAPE

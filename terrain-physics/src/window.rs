@@ -46,7 +46,7 @@ pub struct CollisionWindow {
     /// World texels the mirror holds now; `None` until the first [`recenter`](Self::recenter).
     window: Option<Rect>,
     /// Rects a [`WindowSource`] reported improved that [`follow`](Self::follow) has not filled
-    /// again yet (a fill failed): still stand-ins, retried first by the next `follow`.
+    /// again yet (a fill failed): still stand-ins, filled again by the next `follow`.
     pending: Vec<Rect>,
 }
 
@@ -161,7 +161,7 @@ impl CollisionWindow {
     /// again what the source has improved since (a tile that arrived where coarser data stood
     /// in). Returns the texels filled. On a failed fill the window keeps what was filled; the
     /// improved rects not filled yet stay stand-ins for [`ground`](Self::ground) and are
-    /// filled first by the next call.
+    /// filled by the next call (after its move, with what the source has improved since).
     pub fn follow<S: WindowSource>(
         &mut self,
         center: Vec2,
@@ -185,9 +185,9 @@ impl CollisionWindow {
     }
 
     /// Ground height at world `pos` (metres) where the window holds real data: `None` outside
-    /// the window and where `stand_in` says the texel under `pos` was filled with a stand-in
-    /// (its source's [`WindowSource::is_stand_in`]), or a failed [`follow`](Self::follow) left
-    /// one; the caller asks something coarser there.
+    /// the window and where `stand_in` says a texel the lookup reads (the four around `pos`)
+    /// was filled with a stand-in (its source's [`WindowSource::is_stand_in`]), or a failed
+    /// [`follow`](Self::follow) left one; the caller asks something coarser there.
     pub fn ground(
         &self,
         pos: Vec2,
@@ -196,11 +196,16 @@ impl CollisionWindow {
         if !self.contains(pos) {
             return Ok(None);
         }
+        // Every tap of the bilinear lookup (`cell` and `cell + 1` on each axis): a height
+        // next to a stand-in is part stand-in.
         let last = self.world_size.saturating_sub(UVec2::ONE);
-        let texel = (pos / self.texel_size).max(Vec2::ZERO).as_uvec2().min(last);
-        let waiting = self.pending.iter().any(|r| r.contains(texel.as_ivec2()));
-        if waiting || stand_in(texel) {
-            return Ok(None);
+        let cell = (pos / self.texel_size).floor().max(Vec2::ZERO).as_uvec2();
+        for d in [UVec2::ZERO, UVec2::X, UVec2::Y, UVec2::ONE] {
+            let texel = cell.saturating_add(d).min(last);
+            let waiting = self.pending.iter().any(|r| r.contains(texel.as_ivec2()));
+            if waiting || stand_in(texel) {
+                return Ok(None);
+            }
         }
         self.height(pos)
     }
@@ -458,6 +463,28 @@ mod tests {
                 "{far}"
             );
         }
+    }
+
+    #[test]
+    fn no_ground_is_answered_where_the_lookup_reads_a_stand_in() {
+        let mut w = CollisionWindow::new(64, UVec2::new(1000, 700), enc(), 1.0).expect("window");
+        let mut source = Tiles {
+            loaded: std::collections::HashSet::new(),
+            stand_ins: std::collections::HashSet::new(),
+        };
+        // Every tile but the column x in 96..128 is loaded.
+        for ty in 0..8 {
+            for tx in (0..8).filter(|&tx| tx != 3) {
+                source.loaded.insert((tx, ty));
+            }
+        }
+        w.follow(Vec2::new(100.0, 100.0), &mut source)
+            .expect("follow");
+        let ground = |x: f32| w.ground(Vec2::new(x, 100.0), |t| source.is_stand_in(t));
+        assert!(ground(94.5).expect("ground").is_some());
+        // In the last texel of a real tile the lookup blends in the stand-in beside it.
+        assert_eq!(ground(95.5).expect("ground"), None);
+        assert_eq!(ground(96.5).expect("ground"), None);
     }
 
     /// A source whose fills fail (a tile that cannot be read) while `broken`.

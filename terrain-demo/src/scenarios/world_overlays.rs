@@ -91,8 +91,7 @@ impl WorldOverlays {
         let Some(scene) = scene else {
             return Ok(painted);
         };
-        let side = GPU_WINDOW.min(world.manifest().world_size.min_element());
-        let mut target = scene.hole_window(side)?;
+        let mut target = scene.hole_window(self.gpu.side_on(world))?;
         self.gpu.follow(world, xz, &changed, &mut target)?;
         Ok(painted)
     }

@@ -74,11 +74,18 @@ pub(crate) fn camera_path(ctx: &Ctx, case: &mut Case) -> Result<(), String> {
         return Err("an accepted path has non-finite distances".into());
     }
     let mut rig = CameraRig::on_path(path, ground);
+    let before = rig.eye();
     let stepped = timed("CameraRig::step (path)", || {
         rig.step((Vec2::ZERO, Vec2::X), dt, &f.collider, ground)
     })?;
-    if stepped.is_ok() && !dt.is_finite() {
+    if stepped.is_ok() && !(dt.is_finite() && dt >= 0.0) {
         return Err(format!("a step of dt {dt} was accepted"));
+    }
+    if stepped.is_err() && rig.eye() != before {
+        return Err(format!(
+            "a failed path step moved the eye {before} -> {}",
+            rig.eye()
+        ));
     }
     if let Ok(view) = stepped
         && !(view.pose.eye.is_finite() && view.pose.look_at.is_finite())
@@ -124,8 +131,9 @@ pub(crate) fn camera_follower(ctx: &Ctx, case: &mut Case) -> Result<(), String> 
             rig.eye()
         ));
     }
-    if stepped.is_ok() && !(dt.is_finite() && subject.0.is_finite() && subject.1.is_finite()) {
-        return Err("a follower step of non-finite input was accepted".into());
+    let valid = dt.is_finite() && dt >= 0.0 && subject.0.is_finite() && subject.1.is_finite();
+    if stepped.is_ok() && !valid {
+        return Err("a follower step of non-finite input or negative dt was accepted".into());
     }
     if let Ok(view) = stepped
         && !(view.pose.eye.is_finite() && view.pose.look_at.is_finite())
