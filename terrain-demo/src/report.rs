@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 
 /// The version of report.json's layout (`docs/report.schema.json`): raised when a field is
 /// renamed, removed or changes meaning (adding one does not).
-pub const SCHEMA_VERSION: u32 = 3;
+pub const SCHEMA_VERSION: u32 = 4;
 
 /// What a terrain-demo run rendered and how long each step of each frame took.
 /// `schema_version` is raised when a field is renamed, removed or changes meaning; new optional
@@ -475,13 +475,15 @@ pub struct FrameReport {
     /// is a body on the collision mirror, kept above pending deformations by their bounds).
     pub camera_clearance_m: f32,
     /// Milliseconds per step, keyed by the step's name:
-    /// `stamp_gpu`, `normals_gpu`, `granular_gpu`, `detail` and `render` (sky + terrain) are,
-    /// with `gpu_timing` `wall`, the wall time of submitting the GPU work and waiting for it,
-    /// and with `timestamps` the CPU time of recording and submitting it (no wait: its GPU time
-    /// is in `gpu_timestamps_ms`); `stamp_cpu`, `normals_cpu`,
-    /// `granular_cpu` the same work on the CPU (without a GPU); `lod` (clipmap placement and culling), `capture` (image readback),
-    /// `physics` (collision, the camera, and with a GPU the regions read back copied into the
-    /// CPU's map), `overview` (hillshade), `write` (PNG), `cache` (flyover).
+    /// `stamp_gpu` (the footprints' in detail tiles too), `normals_gpu`, `granular_gpu` and
+    /// `render` (sky + terrain) are, with `gpu_timing` `wall`, the wall time of submitting the
+    /// GPU work and waiting for it, and with `timestamps` the CPU time of recording and
+    /// submitting it (no wait: its GPU time is in `gpu_timestamps_ms`); `stamp_cpu`,
+    /// `normals_cpu`, `granular_cpu` the same work on the CPU (without a GPU); `lod` (clipmap
+    /// placement and culling), `capture` (image readback), `physics` (collision, the camera,
+    /// and with a GPU the regions read back copied into the CPU's map), `overview` (hillshade),
+    /// `write` (PNG), `cache` (flyover), `detail` (the detail cache, its tiles streamed to the
+    /// GPU and its stamped rects read back).
     #[schemars(schema_with = "by_step::<Ms>")]
     pub timings_ms: BTreeMap<&'static str, f64>,
     /// GPU timestamp spans of the GPU steps, where the adapter has timestamp queries. With

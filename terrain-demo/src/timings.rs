@@ -7,7 +7,8 @@ use std::time::Instant;
 /// One timed step of a frame. [`Step::name`] is its key in `report.json`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Step {
-    /// Stamps on the GPU map (submit and wait).
+    /// Stamps on the GPU: the map's, a streamed world's tiles', the detail tiles' footprints
+    /// (recording, submit and, in wall-time mode, the wait).
     StampGpu,
     /// Stamps on the CPU map, without a GPU.
     StampCpu,
@@ -34,8 +35,9 @@ pub enum Step {
     /// The frame thread's work with the tile cache (flyover): craters on resident tiles and
     /// the pool's update; the loading happens on worker threads.
     Cache,
-    /// The detail layer (`--detail`): its tiles streamed to the GPU around the camera and the
-    /// footprints stamped into them there.
+    /// The detail layer (`--detail`) on the CPU: the detail cache's update, its tiles
+    /// streamed to the GPU's slots and the stamped rects read back into it (the footprints'
+    /// GPU stamps are [`Step::StampGpu`]).
     Detail,
 }
 

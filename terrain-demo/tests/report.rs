@@ -287,7 +287,7 @@ fn reports_of_every_scenario_validate_against_the_schema() {
         }
         // Every flag is recorded.
         assert_eq!(r["config"]["flags"]["out"], out.to_string_lossy().as_ref());
-        assert_eq!(r["schema_version"], 3);
+        assert_eq!(r["schema_version"], 4);
         if name == "schema_heightmap" {
             assert_eq!(r["heightmap"]["format"], "PNG");
         }

@@ -13,15 +13,8 @@ use terrain_gpu::{
     GpuColorLayer, GpuError, GpuHoleMask, GpuMaterialLayer, GpuMaterials, SurfaceShading,
 };
 
-#[test]
-fn a_hole_shows_what_lies_behind_in_every_lod_mode_and_shading() {
-    let Some(ctx) = context_or_skip("hole render") else {
-        return;
-    };
-    let (device, queue) = (&ctx.device, &ctx.queue);
-    let map = cliff_map();
-    let gpu = upload(&ctx, &map);
-    // A 20 m disc cut from the lowland at (60, 128), and one cell at (30, 100) alone.
+/// The whole map's hole mask with a 20 m disc cut from the lowland at (60, 128).
+fn disc_mask() -> Grid<u8> {
     let mut mask = Grid::new(MAP, MAP, terrain_core::GROUND).expect("grid");
     let disc =
         StampPlacement::new(Vec2::new(60.0, 128.0), Vec2::splat(20.0), -1.0).expect("placement");
@@ -33,6 +26,19 @@ fn a_hole_shows_what_lies_behind_in_every_lod_mode_and_shading() {
         terrain_core::HoleOp::Cut,
     )
     .expect("cut");
+    mask
+}
+
+#[test]
+fn a_hole_shows_what_lies_behind_in_every_lod_mode_and_shading() {
+    let Some(ctx) = context_or_skip("hole render") else {
+        return;
+    };
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let map = cliff_map();
+    let gpu = upload(&ctx, &map);
+    // A 20 m disc cut from the lowland at (60, 128), and one cell at (30, 100) alone.
+    let mut mask = disc_mask();
     let holes =
         GpuHoleMask::new(device, queue, &Grid::new(MAP, MAP, 0u8).expect("grid")).expect("mask");
     // Uploaded by rect, as an engine updates it after a stamp: the disc's, then the cell's.
@@ -126,17 +132,7 @@ fn a_renderer_switching_the_lod_mode_keeps_the_layers() {
     let (device, queue) = (&ctx.device, &ctx.queue);
     let map = cliff_map();
     let gpu = upload(&ctx, &map);
-    let mut mask = Grid::new(MAP, MAP, terrain_core::GROUND).expect("grid");
-    let disc =
-        StampPlacement::new(Vec2::new(60.0, 128.0), Vec2::splat(20.0), -1.0).expect("placement");
-    terrain_core::apply_hole_stamp(
-        &mut mask,
-        WrapMode::Clamp,
-        1.0,
-        &disc,
-        terrain_core::HoleOp::Cut,
-    )
-    .expect("cut");
+    let mask = disc_mask();
     let holes = GpuHoleMask::new(device, queue, &mask).expect("mask");
     let materials = GpuMaterials::new(device, queue, &solid_materials()).expect("upload");
     let mut previous = renderers(&ctx, &map).remove(0);
@@ -191,18 +187,8 @@ fn a_hole_window_shows_its_holes_and_nothing_beyond_it() {
     let (device, queue) = (&ctx.device, &ctx.queue);
     let map = cliff_map();
     let gpu = upload(&ctx, &map);
-    // The whole map's mask with a 20 m disc at (60, 128), as a streamed world stores it.
-    let mut mask = Grid::new(MAP, MAP, terrain_core::GROUND).expect("grid");
-    let disc =
-        StampPlacement::new(Vec2::new(60.0, 128.0), Vec2::splat(20.0), -1.0).expect("placement");
-    terrain_core::apply_hole_stamp(
-        &mut mask,
-        WrapMode::Clamp,
-        1.0,
-        &disc,
-        terrain_core::HoleOp::Cut,
-    )
-    .expect("cut");
+    // The whole map's mask with the disc, as a streamed world stores it.
+    let mask = disc_mask();
     let window = GpuHoleMask::window(device, 48).expect("window");
     assert!(window.is_window());
     assert_eq!(

@@ -70,6 +70,12 @@ fn style() -> TerrainStyle {
     }
 }
 
+/// A magenta sky: a pixel of it where terrain should be is a crack (`cracks::is_sky`).
+const MAGENTA_SKY: SkyColors = SkyColors {
+    horizon: Vec3::new(1.0, 0.0, 1.0),
+    zenith: Vec3::new(1.0, 0.0, 1.0),
+};
+
 /// The refined radius: the detail displaces vertices fully to 8 m, not at all from 16 m.
 const RADIUS: f32 = 16.0;
 
@@ -275,10 +281,7 @@ fn no_cracks_from_grazing_views_at_the_edge_of_the_refined_region() {
     let mut scene = Scene::new(ctx, 63, 4);
     let (_, tiles) = footprints(&scene);
     let mut parts = refine_parts(&scene);
-    let magenta = SkyColors {
-        horizon: Vec3::new(1.0, 0.0, 1.0),
-        zenith: Vec3::new(1.0, 0.0, 1.0),
-    };
+    let magenta = MAGENTA_SKY;
     let size = UVec2::new(320, 200);
     let positions = [
         Vec2::new(93.3, 94.6),
@@ -377,10 +380,7 @@ fn a_refine_renderer_draws_the_layers_it_adopts() {
     let mut scene = Scene::new(ctx, 63, 4);
     let (_, tiles) = footprints(&scene);
     let mut parts = refine_parts(&scene);
-    let magenta = SkyColors {
-        horizon: Vec3::new(1.0, 0.0, 1.0),
-        zenith: Vec3::new(1.0, 0.0, 1.0),
-    };
+    let magenta = MAGENTA_SKY;
     let size = UVec2::new(256, 160);
     let xz = Vec2::new(91.0, 91.5);
     let eye = Vec3::new(xz.x, scene.ground(xz) + 2.5, xz.y);
@@ -631,10 +631,7 @@ fn no_cracks_at_the_edge_of_the_refined_region_under_cdlod_and_the_tessellation(
         triangle_width_px: 500.0,
         ..TessConfig::default()
     };
-    let magenta = SkyColors {
-        horizon: Vec3::new(1.0, 0.0, 1.0),
-        zenith: Vec3::new(1.0, 0.0, 1.0),
-    };
+    let magenta = MAGENTA_SKY;
     let mut lods = [
         TerrainRenderer::cdlod(device, &target, map, cdlod).unwrap(),
         TerrainRenderer::tessellated(device, queue, &target, map, TessConfig::default(), true)

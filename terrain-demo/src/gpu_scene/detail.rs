@@ -161,7 +161,7 @@ impl GpuScene {
     }
 
     /// Stamps `placements` (footprints of `stamp`, added) into the detail tiles only, as one
-    /// submit timed as [`Step::Detail`], and requests the stamped rects back: a streamed
+    /// submit timed as [`Step::StampGpu`] (GPU work, as the other stamps), and requests the stamped rects back: a streamed
     /// world's footprints, whose excess beyond the tiles' range is not spilled (the world's
     /// coarse tiles are not a map the spill pass can write). Every tile a footprint covers must
     /// hold a slot (the cache's `needed` tiles). Returns the detail texels covered.
@@ -179,7 +179,7 @@ impl GpuScene {
         }
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let mut texels = 0;
-        let time = self.timer.time(device, queue, Step::Detail, |encoder| {
+        let time = self.timer.time(device, queue, Step::StampGpu, |encoder| {
             let foot = GpuStamp::Gaussian(stamp);
             texels = (detail.stream).encode_stamps(device, queue, encoder, foot, placements)?;
             Ok(())

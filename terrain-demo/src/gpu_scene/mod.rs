@@ -474,10 +474,11 @@ impl GpuScene {
                 let rects: Vec<DirtyRect> = dirty.iter().map(|(_, r)| *r).collect();
                 self.ground.encode_normals(device, queue, encoder, &rects)
             })?;
-        // Footprints into the detail tiles, as one more submit.
+        // Footprints into the detail tiles, as one more submit (a stamp on the GPU, timed as
+        // the others).
         if let (Some(detail), Some(foot)) = (self.detail.as_mut(), self.footprint.as_ref()) {
             let mut texels = 0;
-            let time = self.timer.time(device, queue, Step::Detail, |encoder| {
+            let time = self.timer.time(device, queue, Step::StampGpu, |encoder| {
                 for (i, d) in plan
                     .deformations
                     .iter()
