@@ -161,9 +161,9 @@ impl GpuScene {
     }
 
     /// Stamps `placements` (footprints of `stamp`, added) into the detail tiles only, as one
-    /// submit timed as [`Step::StampGpu`] (GPU work, as the other stamps), and requests the stamped rects back: a streamed
-    /// world's footprints, whose excess beyond the tiles' range is not spilled (the world's
-    /// coarse tiles are not a map the spill pass can write). Every tile a footprint covers must
+    /// submit timed as [`Step::StampGpu`] (GPU work, as the other stamps), and requests the
+    /// stamped rects back: a streamed world's footprints, whose excess beyond the tiles' range
+    /// is not spilled (the world's coarse tiles are not a map the spill pass can write). Every tile a footprint covers must
     /// hold a slot (the cache's `needed` tiles). Returns the detail texels covered.
     pub fn stamp_detail(
         &mut self,

@@ -1,17 +1,19 @@
-//! Classes of `CollisionWindow` (any world size, centre and update rect, a fill callback that
-//! sometimes fails) and of field construction (any grid, encoding and texel size).
+//! Classes of `CollisionWindow` (any world size, centre and update rect, a fill callback or a
+//! `WindowSource` that sometimes fails) and of field construction (any grid, encoding and
+//! texel size).
 
 use crate::REACH_TEXELS;
 use crate::fields::{Ctx, Field};
 use crate::inputs::{any_f32, near_pos, sphere_reach, timed};
 use glam::{IVec2, UVec2, Vec2, Vec3};
-use terrain_core::{CoarseMap, Grid, HeightEncoding, Rect};
+use terrain_core::{CoarseMap, Grid, HeightEncoding, Rect, WindowSource};
 use terrain_physics::{CollisionMirror, CollisionWindow, HeightField};
 use terrain_test_support::fuzz::{Case, Rng, finite_f32};
 
-/// A window over a world of any valid or invalid size, moved to any finite centre, refreshed
-/// and updated with rects anywhere in `i32` of any size, filled by a callback that sometimes
-/// fails; its height and `contains` asked anywhere.
+/// A window over a world of any valid or invalid size, moved to any finite centre (by
+/// `recenter`, or `follow` with stand-ins and improved rects anywhere), refreshed and updated
+/// with rects anywhere in `i32` of any size, filled by a callback that sometimes fails; its
+/// height, `contains` and `ground` asked anywhere (a ground is a height inside the window).
 pub(crate) fn collision_window(_: &Ctx, case: &mut Case) -> Result<(), String> {
     let verbose = case.verbose();
     let rng = &mut case.rng;
@@ -63,10 +65,15 @@ pub(crate) fn collision_window(_: &Ctx, case: &mut Case) -> Result<(), String> {
         };
         Rect::new(min, size)
     };
+    let mut source = FlakySource {
+        fail: false,
+        stand_in_below: 0,
+        improved: Vec::new(),
+    };
     for _ in 0..rng.range_u32(1, 5) {
         let center = Vec2::new(any_f32(rng), any_f32(rng));
         let fail = rng.chance(1, 6);
-        match rng.below(5) {
+        match rng.below(6) {
             0 | 1 => {
                 let r = timed("recenter", || {
                     w.recenter(center, |rect, out: &mut Grid<u16>| {
@@ -104,8 +111,17 @@ pub(crate) fn collision_window(_: &Ctx, case: &mut Case) -> Result<(), String> {
                 };
                 let _ = timed("apply", || w.apply(rect, &grid))?;
             }
-            _ => {
+            4 => {
                 let _ = timed("window_at", || w.window_at(center))?;
+            }
+            _ => {
+                source.fail = fail;
+                source.stand_in_below = rng.range_u32(0, 500) as i32 - 50;
+                source.improved = (0..rng.below(4)).map(|_| any_rect(rng)).collect();
+                let r = timed("follow", || w.follow(center, &mut source))?;
+                if let Err(terrain_physics::WindowError::Fill("wrong out size")) = r {
+                    return Err("follow handed a buffer of the wrong size".into());
+                }
             }
         }
         let p = Vec2::new(any_f32(rng), any_f32(rng));
@@ -115,8 +131,44 @@ pub(crate) fn collision_window(_: &Ctx, case: &mut Case) -> Result<(), String> {
         if h.is_some() != inside {
             return Err(format!("height at {p} is {h:?} but contains says {inside}"));
         }
+        let ground = timed("ground", || w.ground(p, |t| source.is_stand_in(t)))?
+            .map_err(|e| format!("window ground at {p}: finite input refused: {e}"))?;
+        if ground.is_some() && (!inside || ground != h) {
+            return Err(format!("ground at {p} is {ground:?}, height {h:?}"));
+        }
     }
     Ok(())
+}
+
+/// A source for `CollisionWindow::follow`: stand-ins left of a column, improved rects handed
+/// once, fills that fail while `fail`.
+struct FlakySource {
+    fail: bool,
+    stand_in_below: i32,
+    improved: Vec<Rect>,
+}
+
+impl WindowSource for FlakySource {
+    type Error = &'static str;
+
+    fn fill(&mut self, rect: Rect, out: &mut Grid<u16>) -> Result<(), Self::Error> {
+        if self.fail {
+            return Err("fill failed");
+        }
+        if out.size() != rect.size {
+            return Err("wrong out size");
+        }
+        out.as_mut_slice().fill((rect.min.y as u16) ^ 0x3c3c);
+        Ok(())
+    }
+
+    fn improved(&mut self, _window: Option<Rect>) -> Vec<Rect> {
+        std::mem::take(&mut self.improved)
+    }
+
+    fn is_stand_in(&self, texel: UVec2) -> bool {
+        i64::from(texel.x) < i64::from(self.stand_in_below)
+    }
 }
 
 /// Fields built from small random grids with any texel size and encoding (invalid ones must
