@@ -142,6 +142,12 @@ impl<'a> Capture<'a> {
         drop(sheet);
         report.warmup_frames = warmup;
         report.steps_ms = step_stats(&self.frames[warmup as usize..]);
+        let mut cpu: Vec<f64> = self.frames[warmup as usize..]
+            .iter()
+            .filter_map(|f| f.frame_thread_cpu_ms)
+            .collect();
+        cpu.sort_by(f64::total_cmp);
+        report.frame_thread_cpu_ms = (!cpu.is_empty()).then(|| StepStats::of_sorted(&cpu));
         let mut totals: BTreeMap<&'static str, f64> = BTreeMap::new();
         for f in &self.frames {
             for (k, v) in &f.timings_ms {

@@ -143,6 +143,7 @@ pub fn run(
         totals_ms: BTreeMap::new(),
         warmup_frames: 0,
         steps_ms: BTreeMap::new(),
+        frame_thread_cpu_ms: None,
     });
     let report = match (report, failure) {
         (Ok(_), Some(e)) => {
@@ -209,6 +210,8 @@ impl FrameStep<'_, '_> {
             overview,
             capture,
         } = self;
+        // The frame thread's CPU clock, from here to the capture.
+        let clock = crate::timings::Clock::start();
         let mut timings = Timings::default();
         let frame = scenario.advance(&mut FrameContext {
             now,
@@ -232,6 +235,7 @@ impl FrameStep<'_, '_> {
             camera_clearance_m: frame.camera_clearance_m,
             timings_ms: BTreeMap::new(),
             gpu_timestamps_ms: BTreeMap::new(),
+            frame_thread_cpu_ms: None,
             gpu_objects: None,
         };
         match gpu {
@@ -239,6 +243,9 @@ impl FrameStep<'_, '_> {
             Some(scene) => {
                 scene.update_lod(scenario.map(), &frame.dirty, &mut timings)?;
                 let mut rendered = scene.render(&frame.camera, &mut timings)?;
+                // The frame's work ends here: the popping probe and the inset are the
+                // capture's.
+                let frame_thread_cpu_ms = own_cpu_ms(clock, &timings);
                 let max_vertex_jump_px = scene.lod_jump_px(scenario.map(), &frame.camera);
                 let eye = frame.camera.position;
                 let uv = Vec2::new(eye.x, eye.z) / scenario.map().extent_m();
@@ -250,12 +257,19 @@ impl FrameStep<'_, '_> {
                     max_screen_error_px: rendered.lod.max_screen_error_px,
                     max_vertex_jump_px,
                     gpu_objects: Some(scene.live_objects()),
+                    frame_thread_cpu_ms,
                     ..report
                 };
                 capture.push(&rendered.image, report, timings)
             }
             // Without a GPU the overview is the frame.
-            None => capture.push(overview_image, report, timings),
+            None => {
+                let report = FrameReport {
+                    frame_thread_cpu_ms: own_cpu_ms(clock, &timings),
+                    ..report
+                };
+                capture.push(overview_image, report, timings)
+            }
         }
     }
 }
@@ -346,4 +360,12 @@ fn cdlod_config(
     };
     config.validate().context("--target-error").usage()?;
     Ok(config)
+}
+
+/// The frame thread's own CPU milliseconds since `clock` started: its CPU time less what
+/// `timings` holds of steps that are not its own work (report.json's `frame_thread_cpu_ms`).
+fn own_cpu_ms(clock: crate::timings::Clock, timings: &Timings) -> Option<f64> {
+    clock
+        .cpu_ms()
+        .map(|ms| (ms - timings.cpu_not_own_ms()).max(0.0))
 }

@@ -101,6 +101,10 @@ pub struct Report {
     /// and maximum in milliseconds.
     #[schemars(schema_with = "by_step::<StepStats>")]
     pub steps_ms: BTreeMap<&'static str, StepStats>,
+    /// The frames' `frame_thread_cpu_ms` over the frames after warm-up: mean, median, 95th
+    /// percentile and maximum. Absent where the platform has no thread CPU clock.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frame_thread_cpu_ms: Option<StepStats>,
 }
 
 /// The JSON Schema (draft 2020-12) of report.json, derived from [`Report`] and the types in
@@ -282,6 +286,7 @@ mod tests {
             camera_clearance_m: 1.0,
             timings_ms: BTreeMap::from([("render", 0.5)]),
             gpu_timestamps_ms: BTreeMap::new(),
+            frame_thread_cpu_ms: Some(0.25),
             gpu_objects: None,
         }
     }
@@ -493,6 +498,16 @@ pub struct FrameReport {
     /// work: see terrain-gpu's `timer`).
     #[schemars(schema_with = "by_step::<Ms>")]
     pub gpu_timestamps_ms: BTreeMap<&'static str, f64>,
+    /// The frame thread's own CPU work in the frame, in milliseconds of its CPU clock: the
+    /// thread's CPU time from the start of the frame to its capture, less its CPU time in GPU
+    /// submits and waits (`stamp_gpu`, `normals_gpu`, `granular_gpu`, `render`) and in the
+    /// capture's readback; the frame's PNG write comes after. Unlike the wall figures of
+    /// `timings_ms` it leaves out the time the thread waited or was preempted (on a software
+    /// adapter, whose threads share the cores). Absent where the platform has no thread CPU
+    /// clock (Linux and Android have one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<Ms>")]
+    pub frame_thread_cpu_ms: Option<f64>,
     /// GPU objects alive after the frame (wgpu's internal counters), with a GPU: they stop
     /// changing after the first frames, since passes allocate only when built.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -1,8 +1,8 @@
-//! The steps a frame is timed in ([`Step`], named once for the report and the plot) and one
-//! frame's measurements ([`Timings`]).
+//! The steps a frame is timed in ([`Step`], named once for the report and the plot), one
+//! frame's measurements ([`Timings`]) and the frame thread's CPU clock ([`Clock`]).
 
 use std::collections::BTreeMap;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// One timed step of a frame. [`Step::name`] is its key in `report.json`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -60,6 +60,21 @@ impl Step {
         Step::Write,
     ];
 
+    /// Whether the step is the frame thread's own CPU work. Not so: GPU submits and the waits
+    /// for them (`stamp_gpu`, `normals_gpu`, `granular_gpu`, `render`), the capture's readback
+    /// and the frame's file write. The frame's `frame_thread_cpu_ms` leaves these out.
+    pub const fn is_frame_thread_work(self) -> bool {
+        !matches!(
+            self,
+            Step::StampGpu
+                | Step::NormalsGpu
+                | Step::GranularGpu
+                | Step::Render
+                | Step::Capture
+                | Step::Write
+        )
+    }
+
     /// The report key: where a step can run on either side, the key says which
     /// (`stamp_gpu`, `stamp_cpu`).
     pub const fn name(self) -> &'static str {
@@ -103,6 +118,53 @@ pub fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
+/// The CPU time the calling thread has run, where the platform has a per-thread CPU clock
+/// (Linux and Android; `None` elsewhere).
+pub fn thread_cpu() -> Option<Duration> {
+    #[cfg(any(target_os = "linux", target_os = "android"))]
+    {
+        use rustix::time::{ClockId, clock_gettime};
+        let t = clock_gettime(ClockId::ThreadCPUTime);
+        let secs = u64::try_from(t.tv_sec).ok()?;
+        let nanos = u32::try_from(t.tv_nsec).ok()?;
+        Some(Duration::new(secs, nanos))
+    }
+    #[cfg(not(any(target_os = "linux", target_os = "android")))]
+    None
+}
+
+/// A start on both clocks a step is timed on: the wall clock, and the frame thread's CPU
+/// clock. On a machine whose cores are shared (a software GPU adapter's threads run on the
+/// same two cores as the frame thread) wall time counts the time the thread was preempted;
+/// its CPU time does not.
+#[derive(Debug, Clone, Copy)]
+pub struct Clock {
+    wall: Instant,
+    cpu: Option<Duration>,
+}
+
+impl Clock {
+    /// Now, on both clocks.
+    pub fn start() -> Self {
+        Self {
+            wall: Instant::now(),
+            cpu: thread_cpu(),
+        }
+    }
+
+    /// Wall milliseconds since the start.
+    pub fn wall_ms(&self) -> f64 {
+        ms_since(self.wall)
+    }
+
+    /// Milliseconds of this thread's CPU time since the start (`None` without a thread CPU
+    /// clock). Call it on the thread that started the clock.
+    pub fn cpu_ms(&self) -> Option<f64> {
+        let now = thread_cpu()?;
+        Some(now.checked_sub(self.cpu?)?.as_secs_f64() * 1e3)
+    }
+}
+
 /// A GPU timestamp figure of `step` in frame `frame` that arrived in a later frame (GPU timing
 /// in timestamp mode: see `gpu_scene::frame_timer`), to be credited to its own frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -136,6 +198,9 @@ pub struct GranularFigure {
 pub struct Timings {
     wall: BTreeMap<Step, f64>,
     gpu: BTreeMap<Step, f64>,
+    /// The frame thread's CPU milliseconds in steps that are not its own work
+    /// ([`Step::is_frame_thread_work`]).
+    cpu_not_own: f64,
     late_gpu: Vec<GpuFigure>,
     late_granular: Vec<GranularFigure>,
 }
@@ -146,11 +211,31 @@ impl Timings {
         *self.wall.entry(step).or_default() += ms;
     }
 
-    /// Runs `f`, adding its wall time to `step`.
+    /// Adds the time since `clock` started to `step`: its wall time, and its CPU time where
+    /// the step is not the frame thread's own work.
+    pub fn add_since(&mut self, step: Step, clock: Clock) {
+        self.add(step, clock.wall_ms());
+        self.add_cpu(step, clock.cpu_ms());
+    }
+
+    /// Records `ms` of the frame thread's CPU time in `step` (kept where the step is not the
+    /// frame thread's own work, to be left out of its figure).
+    pub fn add_cpu(&mut self, step: Step, ms: Option<f64>) {
+        if !step.is_frame_thread_work() {
+            self.cpu_not_own += ms.unwrap_or(0.0);
+        }
+    }
+
+    /// The frame thread's CPU milliseconds in steps that are not its own work.
+    pub fn cpu_not_own_ms(&self) -> f64 {
+        self.cpu_not_own
+    }
+
+    /// Runs `f`, adding its time to `step` ([`Timings::add_since`]).
     pub fn time<T>(&mut self, step: Step, f: impl FnOnce() -> T) -> T {
-        let t = Instant::now();
+        let clock = Clock::start();
         let out = f();
-        self.add(step, ms_since(t));
+        self.add_since(step, clock);
         out
     }
 
@@ -218,5 +303,36 @@ mod tests {
         assert_eq!(t.gpu_by_name().len(), 1);
         let names: std::collections::BTreeSet<_> = Step::ALL.map(Step::name).into_iter().collect();
         assert_eq!(names.len(), Step::ALL.len(), "names are distinct");
+    }
+
+    #[test]
+    fn only_cpu_time_outside_the_frame_threads_work_is_kept() {
+        let mut t = Timings::default();
+        t.add_cpu(Step::Render, Some(2.0));
+        t.add_cpu(Step::Capture, Some(0.5));
+        t.add_cpu(Step::Cache, Some(7.0));
+        t.add_cpu(Step::Write, None);
+        assert_eq!(t.cpu_not_own_ms(), 2.5);
+    }
+
+    /// Where the platform has a thread CPU clock, a thread that sleeps spends no CPU time in
+    /// the wait, and one that spins spends about its wall time.
+    #[test]
+    #[cfg(any(target_os = "linux", target_os = "android"))]
+    fn the_cpu_clock_counts_work_not_waits() {
+        let clock = Clock::start();
+        std::thread::sleep(std::time::Duration::from_millis(30));
+        let slept = clock.cpu_ms().expect("Linux has a thread CPU clock");
+        assert!(clock.wall_ms() >= 30.0);
+        assert!(slept < 10.0, "{slept} ms of CPU while asleep");
+        let clock = Clock::start();
+        let mut x = 0u64;
+        while clock.cpu_ms().expect("thread CPU clock") < 20.0 {
+            x = std::hint::black_box(x.wrapping_add(1));
+        }
+        assert!(
+            clock.wall_ms() >= 20.0,
+            "CPU time never exceeds wall time on one thread"
+        );
     }
 }

@@ -264,6 +264,29 @@ fn reports_of_every_scenario_validate_against_the_schema() {
             let max = timed.iter().copied().fold(0.0, f64::max);
             assert_eq!(stats["max"].as_f64(), Some(max), "{name} {step}");
         }
+        // Linux has a thread CPU clock: every frame has the frame thread's own CPU time, and
+        // the statistics cover the frames after warm-up.
+        if cfg!(target_os = "linux") {
+            let cpu: Vec<f64> = frames
+                .iter()
+                .map(|f| {
+                    f["frame_thread_cpu_ms"]
+                        .as_f64()
+                        .expect("frame_thread_cpu_ms")
+                })
+                .collect();
+            assert!(
+                cpu.iter().all(|c| c.is_finite() && *c >= 0.0),
+                "{name}: {cpu:?}"
+            );
+            let stats = &r["frame_thread_cpu_ms"];
+            assert_eq!(
+                stats["frames"].as_u64(),
+                Some((frames.len() - warmup) as u64)
+            );
+            let max = cpu[warmup..].iter().copied().fold(0.0, f64::max);
+            assert_eq!(stats["max"].as_f64(), Some(max), "{name}");
+        }
         // Where each step ran is in its key.
         let keys: Vec<&str> = frames[0]["timings_ms"]
             .as_object()

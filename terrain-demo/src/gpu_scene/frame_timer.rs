@@ -7,7 +7,7 @@
 //! timestamp queries).
 
 use crate::report::GpuTiming;
-use crate::timings::{GpuFigure, Step, Timings};
+use crate::timings::{Clock, GpuFigure, Step, Timings};
 use terrain_gpu::{GpuContext, GpuError, StepFigure, StepTimer, TimedSpan, TimingMode};
 
 /// The environment variable that forces a timing mode.
@@ -19,14 +19,18 @@ pub const GPU_TIMING_ENV: &str = "TERRAIN_DEMO_GPU_TIMING";
 pub struct Span {
     step: Step,
     span: TimedSpan,
+    /// The frame thread's CPU milliseconds in the span (`None` without a thread CPU clock).
+    cpu_ms: Option<f64>,
 }
 
 impl Span {
-    /// Takes `ms` of CPU work timed as another step out of the wall figure, where the wall
-    /// figure includes the recording it happened in (timestamp mode).
-    pub fn excluding(self, ms: f64) -> Self {
+    /// Takes work timed as another step out of the figures, where they include the recording
+    /// it happened in: `ms` of wall time (timestamp mode) and `cpu_ms` of the frame thread's
+    /// CPU time.
+    pub fn excluding(self, ms: f64, cpu_ms: Option<f64>) -> Self {
         Self {
             span: self.span.excluding(ms),
+            cpu_ms: self.cpu_ms.map(|c| (c - cpu_ms.unwrap_or(0.0)).max(0.0)),
             ..self
         }
     }
@@ -34,6 +38,7 @@ impl Span {
     /// Adds the span to `timings` (its GPU figure, in timestamp mode, comes later).
     pub fn record(self, timings: &mut Timings) {
         timings.add_gpu(self.step, self.span.wall_ms, self.span.timestamp_ms);
+        timings.add_cpu(self.step, self.cpu_ms);
     }
 }
 
@@ -73,8 +78,13 @@ impl FrameTimer {
         step: Step,
         work: impl FnOnce(&mut wgpu::CommandEncoder) -> Result<(), GpuError>,
     ) -> Result<Span, GpuError> {
+        let clock = Clock::start();
         let span = self.timer.time(device, queue, step.name(), work)?;
-        Ok(Span { step, span })
+        Ok(Span {
+            step,
+            span,
+            cpu_ms: clock.cpu_ms(),
+        })
     }
 
     /// Ends the scene's frame (after its last timed step).

@@ -598,7 +598,7 @@ impl GpuScene {
             target_size: size,
         };
         let mut drawn = None;
-        let mut lod_ms = 0.0;
+        let (mut lod_ms, mut lod_cpu_ms) = (0.0, None);
         let timing = self.timer.time(device, queue, Step::Render, |encoder| {
             self.sky.prepare(
                 queue,
@@ -628,9 +628,9 @@ impl GpuScene {
             };
             // The LOD's selection is CPU work: timed as `lod`, not in the GPU's `render`; the
             // report's figures (the tessellation's CPU reference) are not timed.
-            let t = std::time::Instant::now();
+            let clock = crate::timings::Clock::start();
             self.terrain.prepare(device, queue, encoder, &view)?;
-            lod_ms = crate::timings::ms_since(t);
+            (lod_ms, lod_cpu_ms) = (clock.wall_ms(), clock.cpu_ms());
             timings.add(Step::Lod, lod_ms);
             drawn = Some(self.terrain.figures(&view)?);
             let mut pass = self.target.begin_pass(encoder, wgpu::Color::BLACK);
@@ -644,11 +644,11 @@ impl GpuScene {
         self.terrain.recall();
         // The render was the frame's last timed step.
         self.timer.end_frame(device, queue)?;
-        let t = std::time::Instant::now();
+        let clock = crate::timings::Clock::start();
         let image = self.target.read_rgba8(device, queue)?;
         self.ctx.check()?;
-        timings.add(Step::Capture, crate::timings::ms_since(t));
-        timing.excluding(lod_ms).record(timings);
+        timings.add_since(Step::Capture, clock);
+        timing.excluding(lod_ms, lod_cpu_ms).record(timings);
         // The capture has waited for the GPU, so this frame's timestamps have usually arrived
         // too (else a later frame credits them to this one).
         self.timer.poll(device, index, timings)?;
