@@ -24,7 +24,7 @@ use glam::{IVec2, UVec2};
 pub use procedural::ProceduralSource;
 use rayon::prelude::*;
 use std::fs::File;
-use std::io::{Read, Seek, SeekFrom};
+use std::io::{ErrorKind, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -127,6 +127,8 @@ impl TileSource for Raw16Source {
         self.size
     }
     fn region(&self, rect: Rect) -> Result<Grid<u16>, Self::Error> {
+        check_region(rect, self.size)
+            .map_err(|e| std::io::Error::new(ErrorKind::InvalidInput, e))?;
         let mut f = File::open(&self.path)?;
         let w = rect.size.x as usize;
         let mut row = vec![0u8; w * 2];
@@ -143,6 +145,31 @@ impl TileSource for Raw16Source {
         }
         Grid::from_vec(rect.size.x, rect.size.y, data).map_err(std::io::Error::other)
     }
+}
+
+/// Most texels one region of this crate's sources may have (512 MiB of u16): a builder asks
+/// for a tile at a time.
+pub const MAX_SOURCE_REGION_TEXELS: u64 = 1 << 28;
+
+/// Refuses a rect that is empty, reaches outside `0..size` or has more than
+/// [`MAX_SOURCE_REGION_TEXELS`] texels, before anything is read or allocated.
+fn check_region(rect: Rect, size: UVec2) -> Result<(), CacheError> {
+    if rect.is_empty() || !Rect::from_size(size).contains_rect(&rect) {
+        return Err(CacheError::Core(
+            terrain_core::CoreError::RegionOutOfBounds {
+                rect,
+                map_size: size,
+            },
+        ));
+    }
+    if rect.area() > MAX_SOURCE_REGION_TEXELS {
+        return Err(CacheError::OutOfRange {
+            what: "source region (texels)",
+            value: rect.area() as f64,
+            expected: "at most 2^28",
+        });
+    }
+    Ok(())
 }
 
 #[cold]
@@ -805,6 +832,34 @@ mod tests {
         }
         let top = world.bounds(m.levels - 1).unwrap().unwrap();
         assert_eq!(top.min_max, vec![[1, 5000]]);
+    }
+
+    /// A RAW16 file is read where asked, and rects off it, empty or too large are refused
+    /// before a row is allocated.
+    #[test]
+    fn raw16_regions_are_read_inside_the_file_only() {
+        let dir = std::env::temp_dir().join(format!("raw16-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("dem.raw");
+        let samples: Vec<u8> = (0u16..6 * 4)
+            .flat_map(|v| (v * 300).to_le_bytes())
+            .collect();
+        std::fs::write(&path, samples).unwrap();
+        let src = Raw16Source::open(&path, UVec2::new(6, 4)).unwrap();
+        let got = src
+            .region(Rect::new(IVec2::new(4, 2), UVec2::new(2, 2)))
+            .unwrap();
+        assert_eq!(got.as_slice(), &[16 * 300, 17 * 300, 22 * 300, 23 * 300]);
+        for rect in [
+            Rect::new(IVec2::new(5, 0), UVec2::new(2, 1)),
+            Rect::new(IVec2::new(0, -1), UVec2::new(1, 1)),
+            Rect::new(IVec2::ZERO, UVec2::ZERO),
+            Rect::new(IVec2::ZERO, UVec2::splat(u32::MAX)),
+        ] {
+            let e = src.region(rect).unwrap_err();
+            assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput, "{rect:?}: {e}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

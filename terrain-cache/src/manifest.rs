@@ -53,6 +53,10 @@ pub const DEFAULT_TILE_SIZE: u32 = 256;
 /// Most tiles along one side of a level: four hex digits in a file name (Fikkan 2013, sec. 5.1:
 /// "the current limit of blocks are 65536").
 pub const MAX_TILES_PER_SIDE: u32 = 65536;
+/// Most tiles in one level (level 0 has the most): the tables kept per tile (bounds, a
+/// build's progress, a verification's marks) stay within a few hundred MiB, whatever a
+/// manifest says. 2^24 tiles of 256^2 texels are a world of 1 048 576^2 texels.
+pub const MAX_LEVEL_TILES: u64 = 1 << 24;
 /// Smallest accepted tile side.
 pub const MIN_TILE_SIZE: u32 = 16;
 /// Largest accepted tile side (Flower 2010's 2048 detail tiles fit).
@@ -200,6 +204,14 @@ impl Manifest {
                 expected: "at most 65536 (four hex digits)",
             });
         }
+        let level_tiles = u64::from(tiles0.x) * u64::from(tiles0.y);
+        if level_tiles > MAX_LEVEL_TILES {
+            return Err(CacheError::OutOfRange {
+                what: "level-0 tiles",
+                value: level_tiles as f64,
+                expected: "at most 2^24 (16 777 216)",
+            });
+        }
         if self.levels == 0 || self.levels > self.max_levels() {
             return Err(CacheError::OutOfRange {
                 what: "levels",
@@ -226,6 +238,14 @@ impl Manifest {
                     what: "detail tiles per side",
                     value: f64::from(d.tiles.max_element().max(d.tiles.min_element())),
                     expected: "1 ..= 65536",
+                });
+            }
+            let detail_tiles = u64::from(d.tiles.x) * u64::from(d.tiles.y);
+            if detail_tiles > MAX_LEVEL_TILES {
+                return Err(CacheError::OutOfRange {
+                    what: "detail tiles",
+                    value: detail_tiles as f64,
+                    expected: "at most 2^24 (16 777 216)",
                 });
             }
         }
@@ -627,8 +647,9 @@ mod tests {
         assert_eq!(one.levels, 1);
         let huge = Manifest::new(UVec2::splat(u32::MAX), 4096, 1.0, enc(), WrapMode::Clamp);
         assert!(matches!(huge, Err(CacheError::OutOfRange { .. })));
-        let big = Manifest::new(UVec2::splat(1 << 24), 256, 1.0, enc(), WrapMode::Clamp).unwrap();
-        assert_eq!(big.levels, 17);
+        // The largest level 0 accepted: 4096^2 tiles (MAX_LEVEL_TILES).
+        let big = Manifest::new(UVec2::splat(1 << 20), 256, 1.0, enc(), WrapMode::Clamp).unwrap();
+        assert_eq!(big.levels, 13);
     }
 
     #[test]
@@ -679,6 +700,37 @@ mod tests {
         ));
         let nan = text.replace("\"texel_size\": 0.25", "\"texel_size\": -1.0");
         assert!(Manifest::from_json(&nan).is_err());
+    }
+
+    /// A manifest of a few hundred bytes cannot ask for tables of billions of tiles: 65536^2
+    /// tiles of 16 texels pass the per-side limit but not the per-level one, nor do detail
+    /// tiles as many; 2^24 tiles still open.
+    #[test]
+    fn a_level_holds_at_most_2_pow_24_tiles() {
+        let huge = Manifest::new(UVec2::splat(1 << 20), 16, 0.5, enc(), WrapMode::Clamp);
+        assert!(
+            matches!(
+                huge,
+                Err(CacheError::OutOfRange {
+                    what: "level-0 tiles",
+                    ..
+                })
+            ),
+            "{huge:?}"
+        );
+        let most = Manifest::new(UVec2::splat(1 << 16), 16, 0.5, enc(), WrapMode::Clamp).unwrap();
+        assert_eq!(most.tiles_at(0), UVec2::splat(4096));
+        let mut m = Manifest::new(UVec2::new(300, 200), 64, 0.25, enc(), WrapMode::Clamp).unwrap();
+        let mut detail = DetailLayout::covering(glam::Vec2::new(75.0, 50.0), 128, 0.05).unwrap();
+        detail.tiles = UVec2::splat(65536);
+        m.detail = Some(detail);
+        assert!(matches!(
+            Manifest::from_json(&m.to_json()),
+            Err(CacheError::OutOfRange {
+                what: "detail tiles",
+                ..
+            })
+        ));
     }
 
     #[test]

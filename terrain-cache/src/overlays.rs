@@ -199,7 +199,8 @@ fn pieces(world: &World, layer: Layer, rect: Rect) -> Result<Vec<(Rect, Rect)>, 
     }
     match m.wrap {
         WrapMode::Repeat => {
-            if rect.size.cmpgt(size).any() {
+            // A rect past i32::MAX would leave its data's last columns or rows unplaced.
+            if rect.size.cmpgt(size).any() || !rect.is_representable() {
                 return Err(region_off(rect, size));
             }
             Ok(rect
@@ -412,6 +413,26 @@ mod tests {
             }
             let _ = write_holes(&wrapped, rect, &Grid::new(8, 8, 0u8).expect("mask"));
         }
+        // A rect past i32::MAX is refused on a repeating world: its last columns have no
+        // place (they were written into the wrong ones). One just inside is written where its
+        // cells are, across the world's edge.
+        let past = Rect::new(IVec2::new(i32::MAX - 2, 0), UVec2::new(40, 8));
+        let mask = Grid::from_fn(40, 8, |x, _| u8::from(x % 3 == 0) * 255).expect("mask");
+        assert!(write_holes(&wrapped, past, &mask).is_err());
+        assert!(read_holes(&wrapped, past).is_err());
+        let inside = Rect::new(IVec2::new(i32::MAX - 40, 0), UVec2::new(40, 8));
+        write_holes(&wrapped, inside, &mask).expect("write inside i32");
+        assert_eq!(read_holes(&wrapped, inside).expect("read back"), mask);
+        let size = wrapped.manifest().world_size;
+        let at = |x: i64| x.rem_euclid(i64::from(size.x)) as i32;
+        let one = Rect::new(
+            IVec2::new(at(i64::from(i32::MAX) - 40), 0),
+            UVec2::new(1, 8),
+        );
+        assert_eq!(
+            read_holes(&wrapped, one).expect("first column").get(0, 0),
+            Some(255)
+        );
         let _ = std::fs::remove_dir_all(dir2);
         // A damaged hole file is an error naming the tile, not a panic.
         let key = w.manifest().tile_key(Layer::Hole, TileId::new(0, 0, 0));

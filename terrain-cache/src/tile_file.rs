@@ -45,6 +45,7 @@
 //! with 40 footprints shrinks from 4 MiB to 3 % and decodes in about 1 ms; a delta filter
 //! saved another 15 % of the size but made decoding 4x slower.
 
+use crate::manifest::{MAX_TILE_SIZE, MIN_TILE_SIZE};
 use crate::tile::{Layer, TileData, TileId};
 use terrain_core::Grid;
 use terrain_core::io::MapIoError;
@@ -173,6 +174,13 @@ pub enum TileFileError {
         found: u8,
         /// The layer's.
         expected: u8,
+    },
+    /// The tile side asked for is no world's: tiles are a power of two in 16..=4096 (checked
+    /// before anything is read, since allocation is bounded by the side).
+    #[error("tiles of side {side} do not exist: a side is a power of two in 16..=4096")]
+    Side {
+        /// The side asked for.
+        side: u32,
     },
     /// The header's size differs from the world's tile size (checked before any allocation).
     #[error("{found_w}x{found_h} samples, the world's tiles are {expected}x{expected}")]
@@ -383,7 +391,11 @@ fn compress_into(filtered: &[u8], out: &mut Vec<u8>) {
 }
 
 /// The largest file a tile of `side` x `side` samples of `bits` can take in this format.
+/// A side no world has (over 2^20) answers `u64::MAX`.
 pub fn max_file_len(side: u32, bits: u8) -> u64 {
+    if side > 1 << 20 {
+        return u64::MAX;
+    }
     let raw = u64::from(side) * u64::from(side) * u64::from(bits / 8);
     let lz4_worst = lz4_flex::block::get_maximum_output_size(raw as usize) as u64;
     HEADER_LEN_WITH_IDENTITY as u64 + raw.max(lz4_worst)
@@ -414,6 +426,9 @@ fn decode_checked(
     side: u32,
     expected: Option<TileIdentity>,
 ) -> Result<TileData, TileFileError> {
+    if !side.is_power_of_two() || !(MIN_TILE_SIZE..=MAX_TILE_SIZE).contains(&side) {
+        return Err(TileFileError::Side { side });
+    }
     if bytes.len() < HEADER_LEN {
         return Err(TileFileError::Truncated { len: bytes.len() });
     }
@@ -696,6 +711,19 @@ mod tests {
             decode(&good, Layer::Height, 64).unwrap_err(),
             TileFileError::Shape { found_w: 32, .. }
         ));
+        // A side no world has is refused before the header is read: a crafted file of
+        // 65536^2 samples with a valid checksum cannot make a caller allocate 8 GiB.
+        for side in [0, 17, 8, 8192, 65536, u32::MAX] {
+            assert!(
+                matches!(
+                    decode(&good, Layer::Height, side).unwrap_err(),
+                    TileFileError::Side { side: s } if s == side
+                ),
+                "{side}"
+            );
+        }
+        assert_eq!(max_file_len(u32::MAX, 32), u64::MAX);
+        assert_eq!(max_file_len(1 << 31, 32), u64::MAX);
         // An absurd size is refused from the header, before anything is allocated.
         let mut b = good.clone();
         b[8..12].copy_from_slice(&u32::MAX.to_le_bytes());

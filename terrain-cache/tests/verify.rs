@@ -10,8 +10,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use terrain_cache::manifest::{MANIFEST_KEY, bounds_key};
 use terrain_cache::{
-    DefectKind, Layer, LevelBounds, Manifest, MapSource, ObjectTileStore, TileData, TileId,
-    TileRead, TileStore, VerifyError, VerifyOptions, VerifyReport, World, build_world,
+    CacheError, DefectKind, Layer, LevelBounds, Manifest, MapSource, ObjectTileStore, TileData,
+    TileId, TileRead, TileStore, VerifyError, VerifyOptions, VerifyReport, World, build_world,
     repair_world, verify_world,
 };
 use terrain_core::{CoarseMap, Grid, HeightEncoding, WrapMode};
@@ -408,15 +408,34 @@ fn repair_rebuilds_around_level0_damage_and_leaves_it_reported() {
 
 #[test]
 fn a_crafted_manifest_promising_billions_of_tiles_is_refused_at_once() {
+    // 65536^2 level-0 tiles in a few hundred bytes: the world does not open (a level holds at
+    // most 2^24 tiles), so nothing sized by its tiles is allocated.
     let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
-    let m = Manifest::new(UVec2::splat(1 << 24), 256, 1.0, encoding(), WrapMode::Clamp).unwrap();
+    let m = Manifest::new(UVec2::splat(1 << 20), 256, 1.0, encoding(), WrapMode::Clamp).unwrap();
+    let crafted = m.to_json().replace("1048576", "16777216");
+    assert_ne!(crafted, m.to_json());
+    store.write(MANIFEST_KEY, crafted.as_bytes()).unwrap();
+    let start = Instant::now();
+    let e = World::open(store).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            CacheError::OutOfRange {
+                what: "level-0 tiles",
+                ..
+            }
+        ),
+        "{e}"
+    );
+    // The largest world that opens (4096^2 level-0 tiles, 22 M in all) is over verification's
+    // default limit, refused at once.
+    let store: Arc<dyn TileStore> = Arc::new(ObjectTileStore::in_memory().unwrap());
     store.write(MANIFEST_KEY, m.to_json().as_bytes()).unwrap();
     let world = World::open(store).unwrap();
-    let start = Instant::now();
     let cancel = AtomicBool::new(false);
     let e = verify_world(&world, &VerifyOptions::default(), &cancel, &mut |_| {}).unwrap_err();
     assert!(
-        matches!(e, VerifyError::TooManyTiles { tiles, .. } if tiles > 1 << 32),
+        matches!(e, VerifyError::TooManyTiles { tiles, .. } if tiles > 1 << 24),
         "{e}"
     );
     let e = repair_world(&world, &VerifyOptions::default(), &cancel, &mut |_| {}).unwrap_err();

@@ -58,6 +58,14 @@ impl Rect {
         IVec2::new(end(self.min.x, self.size.x), end(self.min.y, self.size.y))
     }
 
+    /// Whether every texel of `size` has coordinates in `i32` (`min + size` does not pass
+    /// `i32::MAX`). Where not, [`Rect::max`] saturates and the texels past it do not exist:
+    /// an API that takes data of `size` for the rect refuses it.
+    pub fn is_representable(&self) -> bool {
+        let fits = |m: i32, s: u32| i64::from(m) + i64::from(s) <= i64::from(i32::MAX);
+        fits(self.min.x, self.size.x) && fits(self.min.y, self.size.y)
+    }
+
     /// Whether the rect holds no texel.
     pub fn is_empty(&self) -> bool {
         self.size.x == 0 || self.size.y == 0
@@ -131,12 +139,22 @@ impl Rect {
     /// Cuts a rect on a toroidally addressed map of `map_size` texels into the (up to 4) pieces
     /// that lie inside it: one if it is inside, two across an edge, four across a corner
     /// (Flower 2010, sec. 3.2.1). A rect wider than the map is first limited to one period, so every
-    /// map texel appears at most once.
+    /// map texel appears at most once. A rect past `i32::MAX` holds the texels up to
+    /// [`Rect::max`] (see [`Rect::is_representable`]), so every piece's `unwrapped` is exact.
     pub fn split_toroidal(&self, map_size: UVec2) -> Vec<WrappedPiece> {
         if self.is_empty() || map_size.x == 0 || map_size.y == 0 {
             return Vec::new();
         }
-        let size = self.size.min(map_size);
+        let existing =
+            |m: i32, s: u32| (i64::from(i32::MAX) - i64::from(m)).min(i64::from(s)) as u32;
+        let size = UVec2::new(
+            existing(self.min.x, self.size.x),
+            existing(self.min.y, self.size.y),
+        )
+        .min(map_size);
+        if size.x == 0 || size.y == 0 {
+            return Vec::new();
+        }
         let xs = split_axis(self.min.x, size.x, map_size.x);
         let ys = split_axis(self.min.y, size.y, map_size.y);
         let mut pieces = Vec::with_capacity(xs.len() * ys.len());
@@ -159,6 +177,8 @@ fn split_axis(start: i32, len: u32, n: u32) -> Vec<(i32, i32, u32)> {
     let n_i = n as i64;
     let m = (start as i64).rem_euclid(n_i) as u32;
     let first = len.min(n - m);
+    // `m < n <= u32::MAX`, but a map coordinate is an i32; and `start + len <= i32::MAX`
+    // (split_toroidal's rects end at `Rect::max`), so the second span's start is exact.
     let to_i32 = |v: i64| v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
     let mut spans = vec![(to_i32(i64::from(m)), start, first)];
     if first < len {
@@ -194,6 +214,32 @@ mod tests {
             }
         }
         assert!(Rect::new(IVec2::ZERO, UVec2::ZERO).minus(&a).is_empty());
+    }
+
+    /// A rect reaching past `i32::MAX` is cut at `Rect::max`: each piece's unwrapped place
+    /// is where its texels are in the rect (they used to be clamped, misplacing the second).
+    #[test]
+    fn rects_past_i32_max_keep_exact_unwrapped_places() {
+        let map = UVec2::new(80, 48);
+        let r = Rect::new(IVec2::new(i32::MAX - 2, 0), UVec2::new(40, 8));
+        assert!(!r.is_representable());
+        assert!(Rect::new(IVec2::new(i32::MAX - 40, 0), UVec2::new(40, 8)).is_representable());
+        let pieces = r.split_toroidal(map);
+        let cols: u32 = pieces
+            .iter()
+            .filter(|p| p.map.min.y == 0)
+            .map(|p| p.map.size.x)
+            .sum();
+        assert_eq!(cols, 2, "only the texels before i32::MAX exist");
+        for p in &pieces {
+            let m = (i64::from(p.unwrapped.min.x)).rem_euclid(80);
+            assert_eq!(m, i64::from(p.map.min.x), "{p:?}");
+            assert!(p.unwrapped.min.x >= r.min.x);
+        }
+        let edge = Rect::new(IVec2::new(i32::MAX - 1, 0), UVec2::new(1, 1));
+        assert_eq!(edge.split_toroidal(map).len(), 1);
+        let none = Rect::new(IVec2::new(i32::MAX, 0), UVec2::new(5, 1));
+        assert!(none.split_toroidal(map).is_empty());
     }
 
     #[test]

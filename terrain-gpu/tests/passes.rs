@@ -500,6 +500,17 @@ fn readback_delivers_regions_without_waiting_and_equals_the_map() {
             )
             .is_err()
     );
+    // On the repeating map too, a rect past i32::MAX is refused: its last columns have no
+    // place in the rows read back.
+    assert!(matches!(
+        readback.request(
+            device,
+            &mut encoder,
+            &gpu,
+            Rect::new(IVec2::new(i32::MAX - 2, 0), UVec2::new(8, 2))
+        ),
+        Err(GpuError::BadRegion { .. })
+    ));
     assert!(RegionReadback::new(device, 0).is_err());
     ctx.check().expect("no GPU validation errors");
 }

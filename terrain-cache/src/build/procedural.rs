@@ -4,7 +4,7 @@
 //! (268 M samples) take seconds instead of most of the build; [`ProceduralSource::sample`] is
 //! the per-texel reference it equals bit for bit.
 
-use super::{TileSource, unreachable_grid};
+use super::{TileSource, check_region, unreachable_grid};
 use crate::CacheError;
 use glam::{IVec2, UVec2};
 use terrain_core::{CoarseMap, Grid, Rect, TerrainParams, WrapMode, generate_coarse_map};
@@ -194,42 +194,67 @@ impl ProceduralSource {
     }
 }
 
-/// One octave's lattice values over the cells a region touches (and one more each way).
+/// One octave's lattice values over the cells a region's texels read: each texel its cell and
+/// the next, per axis. Only those cells are kept, so the table has at most (2 cols) x (2 rows)
+/// values however fine the octave is against the texels (a small world under a large base has
+/// many cells per texel).
 struct Lattice {
-    first: [u64; 2],
+    /// Per column / row of the region: the index of its cell in the table's axis (the next
+    /// cell is the index after it).
+    col_at: Vec<usize>,
+    row_at: Vec<usize>,
     width: usize,
     values: Vec<f64>,
 }
 
+/// The cells an axis's texels read, increasing, and where each texel's pair starts. The cells
+/// do not decrease along the axis, so a texel shares its pair with the one before or adds one
+/// or two cells.
+fn axis_cells(p: &[AxisPos], o: usize) -> (Vec<u64>, Vec<usize>) {
+    let mut cells: Vec<u64> = Vec::with_capacity(2 * p.len());
+    let mut at = Vec::with_capacity(p.len());
+    for a in p {
+        let c = a.cell[o];
+        let n = cells.len();
+        if n >= 2 && cells[n - 2] == c {
+            // The same pair as the texel before.
+        } else if cells.last() == Some(&c) {
+            cells.push(c + 1);
+        } else {
+            cells.extend([c, c + 1]);
+        }
+        at.push(cells.len() - 2);
+    }
+    (cells, at)
+}
+
 impl Lattice {
     fn new(src: &ProceduralSource, o: u32, cols: &[AxisPos], rows: &[AxisPos]) -> Self {
-        let span = |p: &[AxisPos]| {
-            let first = p.first().map_or(0, |a| a.cell[o as usize]);
-            let last = p.last().map_or(0, |a| a.cell[o as usize]);
-            (first, (last - first) as usize + 2)
-        };
-        let ((cx, w), (cy, h)) = (span(cols), span(rows));
+        let (xs, col_at) = axis_cells(cols, o as usize);
+        let (ys, row_at) = axis_cells(rows, o as usize);
         let period = src.period(o);
-        let mut values = Vec::with_capacity(w * h);
-        for j in 0..h as u64 {
-            for i in 0..w as u64 {
-                values.push(lattice(src.seed, o, cx + i, cy + j, period));
+        let mut values = Vec::with_capacity(xs.len() * ys.len());
+        for &j in &ys {
+            for &i in &xs {
+                values.push(lattice(src.seed, o, i, j, period));
             }
         }
         Self {
-            first: [cx, cy],
-            width: w,
+            col_at,
+            row_at,
+            width: xs.len(),
             values,
         }
     }
 }
 
 impl TileSource for ProceduralSource {
-    type Error = std::convert::Infallible;
+    type Error = CacheError;
     fn size(&self) -> UVec2 {
         self.size
     }
     fn region(&self, rect: Rect) -> Result<Grid<u16>, Self::Error> {
+        check_region(rect, self.size)?;
         let (x0, y0) = (rect.min.x as u32, rect.min.y as u32);
         let cols: Vec<AxisPos> = (0..rect.size.x).map(|x| self.axis_pos(x0 + x, 0)).collect();
         let rows: Vec<AxisPos> = (0..rect.size.y).map(|y| self.axis_pos(y0 + y, 1)).collect();
@@ -241,27 +266,26 @@ impl TileSource for ProceduralSource {
         let g = self.base.grid().as_slice();
         let bw = self.base.size().x as usize;
         let mut data = Vec::with_capacity(cols.len() * rows.len());
-        for r in &rows {
+        for (y, r) in rows.iter().enumerate() {
             let (row0, row1) = (&g[r.b0 * bw..][..bw], &g[r.b1 * bw..][..bw]);
             // Each octave's two lattice rows of this texel row.
             let lat_rows: Vec<(&[f64], &[f64])> = lattices
                 .iter()
-                .enumerate()
-                .map(|(o, l)| {
-                    let j = (r.cell[o] - l.first[1]) as usize;
+                .map(|l| {
+                    let j = l.row_at[y];
                     (
                         &l.values[j * l.width..][..l.width],
                         &l.values[(j + 1) * l.width..][..l.width],
                     )
                 })
                 .collect();
-            for c in &cols {
+            for (x, c) in cols.iter().enumerate() {
                 let at = |row: &[u16], i: usize| f64::from(row[i]);
                 let top = at(row0, c.b0) + (at(row0, c.b1) - at(row0, c.b0)) * c.bf;
                 let bot = at(row1, c.b0) + (at(row1, c.b1) - at(row1, c.b0)) * c.bf;
                 let mut h = (top + (bot - top) * r.bf) / 65535.0;
                 for (o, (l0, l1)) in lat_rows.iter().enumerate() {
-                    let i = (c.cell[o] - lattices[o].first[0]) as usize;
+                    let i = lattices[o].col_at[x];
                     let (sx, sy) = (c.s[o], r.s[o]);
                     let top = l0[i] + (l0[i + 1] - l0[i]) * sx;
                     let bot = l1[i] + (l1[i + 1] - l1[i]) * sx;
@@ -305,6 +329,46 @@ mod tests {
             let corner = Rect::new((s - UVec2::splat(5)).as_ivec2(), UVec2::splat(5));
             let got = src.region(corner).unwrap();
             assert_eq!(got.get(4, 4), Some(src.sample(s.x - 1, s.y - 1)));
+        }
+    }
+
+    /// A world smaller than its base has many lattice cells per texel in its finest octaves
+    /// (here 131 072 cells across 256 texels): a tile's table keeps only the cells its texels
+    /// read (it used to span every cell between them, about 136 GB), and equals the reference.
+    #[test]
+    fn fine_octaves_over_a_small_world_keep_the_table_small() {
+        let params = TerrainParams {
+            size: UVec2::splat(512),
+            ..TerrainParams::default()
+        };
+        let src = ProceduralSource::new(UVec2::splat(256), &params, 8, 0.1).unwrap();
+        let rect = Rect::from_size(UVec2::splat(256));
+        let got = src.region(rect).unwrap();
+        for (x, y) in [(0, 0), (1, 0), (255, 3), (128, 255), (255, 255)] {
+            assert_eq!(got.get(x, y), Some(src.sample(x, y)), "({x}, {y})");
+        }
+        let cols: Vec<AxisPos> = (0..256).map(|x| src.axis_pos(x, 0)).collect();
+        let rows: Vec<AxisPos> = (0..256).map(|y| src.axis_pos(y, 1)).collect();
+        let l = Lattice::new(&src, 7, &cols, &rows);
+        assert!(l.values.len() <= 512 * 512, "{} values", l.values.len());
+    }
+
+    /// Rects off the world, empty or too large are refused before anything is computed.
+    #[test]
+    fn regions_off_the_world_are_refused() {
+        let params = TerrainParams {
+            size: UVec2::splat(32),
+            ..TerrainParams::default()
+        };
+        let src = ProceduralSource::new(UVec2::splat(100), &params, 2, 0.1).unwrap();
+        for rect in [
+            Rect::new(IVec2::new(-1, 0), UVec2::splat(4)),
+            Rect::new(IVec2::new(98, 0), UVec2::splat(4)),
+            Rect::new(IVec2::ZERO, UVec2::ZERO),
+            Rect::new(IVec2::ZERO, UVec2::splat(u32::MAX)),
+            Rect::new(IVec2::splat(i32::MAX), UVec2::splat(1)),
+        ] {
+            assert!(src.region(rect).is_err(), "{rect:?}");
         }
     }
 }

@@ -278,7 +278,7 @@ impl RegionReadback {
         let size = map.size;
         let valid = !rect.is_empty()
             && match map.wrap {
-                WrapMode::Repeat => rect.size.cmple(size).all(),
+                WrapMode::Repeat => rect.size.cmple(size).all() && rect.is_representable(),
                 WrapMode::Clamp => Rect::from_size(size).contains_rect(&rect),
             };
         if !valid {
