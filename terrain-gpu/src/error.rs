@@ -160,6 +160,17 @@ pub enum GpuError {
         /// Why.
         reason: &'static str,
     },
+    /// A region left to another renderer (the refined cells of a detail layer) cannot be left
+    /// out this frame: it reaches where the LOD morphs, or where its triangles stop short of
+    /// the texels, so its edge would not meet the other mesh. [`crate::TerrainRenderer`] then
+    /// draws the frame whole ([`crate::TerrainRenderer::excluding`]).
+    #[error("{what}: {reason}")]
+    CannotExclude {
+        /// What refused it.
+        what: &'static str,
+        /// Why.
+        reason: &'static str,
+    },
     /// A user's WGSL (a procedural stamp's, or a renderer's `surface_weights`) did not compile
     /// into its shader.
     #[error("user shader rejected: {source}")]

@@ -486,7 +486,7 @@ fn refinement_that_does_not_fit_is_refused() {
         target_size: UVec2::new(64, 64),
     };
     let err = scene.renderer.prepare(&device, &queue, &view).unwrap_err();
-    assert!(matches!(err, GpuError::Unsupported { .. }), "{err}");
+    assert!(matches!(err, GpuError::CannotExclude { .. }), "{err}");
     scene
         .renderer
         .exclude(Some((IVec2::splat(3), IVec2::splat(3))));
@@ -551,7 +551,8 @@ fn counts_ride_the_ring_without_a_wait_and_unsubmitted_requests_free_their_buffe
 }
 
 /// Renders `camera` with `terrain` (any LOD mode, detail surface) leaving the refined region
-/// to the refined mesh through `TerrainRenderer::exclude`.
+/// to the refined mesh through `TerrainRenderer::exclude`; the refined mesh is drawn only where
+/// the terrain left its region out (`TerrainRenderer::excluding`), as an engine would.
 fn render_refined_with(
     scene: &Scene,
     parts: &mut (RefinePass, RefineRenderer),
@@ -597,7 +598,9 @@ fn render_refined_with(
         let mut rp = target.begin_pass(&mut encoder, wgpu::Color::BLACK);
         scene.sky.draw(&mut rp);
         terrain.draw(&mut rp);
-        renderer.draw(&mut rp, pass);
+        if terrain.excluding() {
+            renderer.draw(&mut rp, pass);
+        }
     }
     queue.submit([encoder.finish()]);
     terrain.recall();
@@ -651,22 +654,40 @@ fn no_cracks_at_the_edge_of_the_refined_region_under_cdlod_and_the_tessellation(
                         .unwrap();
                 let mode = terrain.mode();
                 assert!(refined >= base, "{mode} view {i}/{j}: the region is drawn");
+                assert!(
+                    terrain.excluding(),
+                    "{mode} view {i}/{j}: left to the refined mesh"
+                );
                 assert_no_holes(&image, &format!("refine_crack_{mode}_{i}_{j}"));
             }
         }
     }
-    // Triangles kept above 4 m cannot meet the refined texels: refused.
+    // Where the region cannot be left out (tessellation triangles kept above 4 m cannot meet
+    // the refined texels; CDLOD's LOD 0 morphing from 10.6 m, inside the 16 m radius, as it
+    // does where a leaf's bounds span a cliff or a whole tile), the frame is drawn whole, no
+    // refined mesh over it and no hole, and the next frame tries again.
     let capped = TessConfig {
         min_triangle_m: 4.0,
         ..TessConfig::default()
     };
-    let mut terrain =
-        TerrainRenderer::tessellated(device, queue, &target, map, capped, true).unwrap();
-    let camera = Camera::looking(Vec3::new(93.3, 40.0, 94.6), Vec3::X);
-    let err = render_refined_with(&scene, &mut parts, &tiles, &mut terrain, &camera, &magenta);
-    assert!(
-        matches!(err, Err(GpuError::Unsupported { .. })),
-        "{:?}",
-        err.map(|_| ())
-    );
+    let short = CdlodConfig {
+        finest_range: RADIUS,
+        ..cdlod
+    };
+    let mut refused = [
+        TerrainRenderer::tessellated(device, queue, &target, map, capped, true).unwrap(),
+        TerrainRenderer::cdlod(device, &target, map, short).unwrap(),
+    ];
+    let xz = Vec2::new(93.3, 94.6);
+    let camera = Camera::looking(Vec3::new(xz.x, scene.ground(xz) + 0.8, xz.y), Vec3::X);
+    for terrain in &mut refused {
+        let mode = terrain.mode();
+        for frame in 0..2 {
+            let (image, ..) =
+                render_refined_with(&scene, &mut parts, &tiles, terrain, &camera, &magenta)
+                    .unwrap();
+            assert!(!terrain.excluding(), "{mode} frame {frame}: drawn whole");
+            assert_no_holes(&image, &format!("refine_refused_{mode}_{frame}"));
+        }
+    }
 }

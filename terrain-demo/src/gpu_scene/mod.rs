@@ -636,7 +636,9 @@ impl GpuScene {
             let mut pass = self.target.begin_pass(encoder, wgpu::Color::BLACK);
             self.sky.draw(&mut pass);
             self.terrain.draw(&mut pass);
-            if let Some(r) = refined {
+            // A frame whose LOD could not leave the cells out (near a cliff, or where a streamed
+            // quadtree's bounds are still a tile's) draws them itself.
+            if let Some(r) = refined.filter(|_| self.terrain.excluding()) {
                 r.renderer.draw(&mut pass, &r.pass);
             }
             Ok(())

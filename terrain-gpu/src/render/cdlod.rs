@@ -348,7 +348,7 @@ fn check_exclusion(
     texel_size: f32,
     (lo, hi): (glam::IVec2, glam::IVec2),
 ) -> Result<(), GpuError> {
-    let refuse = GpuError::Unsupported {
+    let refuse = GpuError::CannotExclude {
         what: "CdlodRenderer::exclude",
         reason: "the excluded region reaches beyond LOD 0's unmorphed range (or LOD 0 has no \
                  vertex on every texel): refine a smaller radius or use a larger finest range",

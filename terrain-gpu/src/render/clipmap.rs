@@ -414,11 +414,17 @@ impl ClipmapRenderer {
             .abs()
             .max((hi.as_vec2() - frac).abs())
             .max_element();
-        if lo.cmpge(hi).any() || reach + 1.0 > unmorphed {
+        if lo.cmpge(hi).any() {
             return Err(GpuError::Unsupported {
                 what: "ClipmapRenderer::exclude",
-                reason: "the excluded region is empty or reaches where the finest level morphs: \
-                         refine a smaller radius or use a larger clipmap",
+                reason: "the excluded region is empty",
+            });
+        }
+        if reach + 1.0 > unmorphed {
+            return Err(GpuError::CannotExclude {
+                what: "ClipmapRenderer::exclude",
+                reason: "the excluded region reaches where the finest level morphs: refine a \
+                         smaller radius or use a larger clipmap",
             });
         }
         crate::render::frame::exclusion_rect(lo, hi)

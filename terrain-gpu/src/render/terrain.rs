@@ -141,6 +141,10 @@ enum Lod {
 /// Draws the terrain with one LOD mode (see the module docs).
 pub struct TerrainRenderer {
     lod: Lod,
+    /// The region left to another renderer ([`TerrainRenderer::exclude`]).
+    excluded: Option<(IVec2, IVec2)>,
+    /// Whether the last prepare left it out.
+    excluding: bool,
 }
 
 impl std::fmt::Debug for TerrainRenderer {
@@ -175,6 +179,8 @@ impl TerrainRenderer {
             })
             .collect();
         Ok(Self {
+            excluded: None,
+            excluding: false,
             lod: Lod::Clipmap(Clipmap {
                 layout,
                 renderer,
@@ -216,6 +222,8 @@ impl TerrainRenderer {
         let mesh = CdlodMesh::new(source.tree().config().grid_size);
         let renderer = CdlodRenderer::new(device, target, &mesh)?;
         Ok(Self {
+            excluded: None,
+            excluding: false,
             lod: Lod::Cdlod(Cdlod {
                 source,
                 renderer,
@@ -249,6 +257,8 @@ impl TerrainRenderer {
         let hierarchy = TessHierarchy::from_map(map, density.as_ref(), config)?;
         let gpu = GpuTessellation::new(device, queue, &hierarchy, config.max_triangles as u32)?;
         Ok(Self {
+            excluded: None,
+            excluding: false,
             lod: Lod::Tessellated(Box::new(Tessellated {
                 updater: TessUpdater::spawn(TessState { hierarchy, density }, map)?,
                 gpu,
@@ -286,6 +296,8 @@ impl TerrainRenderer {
         let capacity = config.max_triangles as u32;
         let gpu = GpuTessellation::streamed(device, queue, &tess, &tree, encoding, capacity)?;
         Ok(Self {
+            excluded: None,
+            excluding: false,
             lod: Lod::TessStreamed(Box::new(TessStreamed {
                 tess,
                 tree,
@@ -486,9 +498,23 @@ impl TerrainRenderer {
     /// prepare on, in every mode: see [`ClipmapRenderer::exclude`] and
     /// [`crate::CdlodRenderer::exclude`]. The tessellation draws the region at full resolution
     /// whatever the view asks ([`TessellationPass::set_full_resolution`]), so its edge meets
-    /// the other mesh; the prepare fails where a minimum triangle size keeps it from the
-    /// texels.
+    /// the other mesh. A frame where the region cannot be left out is drawn whole: see
+    /// [`TerrainRenderer::excluding`].
     pub fn exclude(&mut self, region: Option<(IVec2, IVec2)>) {
+        self.excluded = region;
+        self.exclude_in_lod(region);
+    }
+
+    /// Whether the last [`TerrainRenderer::prepare`] left the excluded region out. Not so
+    /// without a region, or where it could not be left out that frame
+    /// ([`GpuError::CannotExclude`]: it reached where the LOD morphs, as near a cliff or where
+    /// CDLOD's bounds are a tile's, or the tessellation's triangles stop short of the texels):
+    /// the frame draws it with the rest, and the caller draws no refined cells over it.
+    pub fn excluding(&self) -> bool {
+        self.excluding
+    }
+
+    fn exclude_in_lod(&mut self, region: Option<(IVec2, IVec2)>) {
         match &mut self.lod {
             Lod::Clipmap(c) => c.renderer.exclude(region),
             Lod::Cdlod(c) => c.renderer.exclude(region),
@@ -575,6 +601,31 @@ impl TerrainRenderer {
     /// before, the pass that draws). What a frame needs and no more: the figures a report
     /// wants are [`TerrainRenderer::figures`].
     pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        view: &TerrainView<'_>,
+    ) -> Result<(), GpuError> {
+        self.excluding = false;
+        match self.prepare_lod(device, queue, encoder, view) {
+            Ok(()) => {
+                self.excluding = self.excluded.is_some();
+                Ok(())
+            }
+            // The region cannot be left out this frame: drawn whole (see `excluding`), and
+            // tried again next frame. Nothing was recorded or written before the refusal.
+            Err(GpuError::CannotExclude { .. }) if self.excluded.is_some() => {
+                self.exclude_in_lod(None);
+                let drawn = self.prepare_lod(device, queue, encoder, view);
+                self.exclude_in_lod(self.excluded);
+                drawn
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    fn prepare_lod(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
@@ -877,7 +928,7 @@ fn check_full(reaches_texels: bool) -> Result<(), GpuError> {
     if reaches_texels {
         return Ok(());
     }
-    Err(GpuError::Unsupported {
+    Err(GpuError::CannotExclude {
         what: "TerrainRenderer::exclude",
         reason: "the tessellation's minimum triangle size keeps it from the texels the excluded \
                  region's edge must be drawn through",
