@@ -119,3 +119,66 @@ fn a_second_writer_is_refused_and_a_killed_owners_world_is_taken_over() {
     verify_passes(&world, &dir, "the run that took over");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A folder without a manifest is built into only when it is empty, new, or holds an
+/// unfinished build of the demo's (its marker): a user's folder, or a world whose manifest was
+/// lost (its tiles hold deformations the rebuild would overwrite, its holes and paint would
+/// stay), is refused untouched with exit code 2. A world smaller than a tile is refused before
+/// anything is built.
+#[test]
+fn only_empty_folders_and_unfinished_builds_become_worlds() {
+    let dir = fresh_dir("world_folders");
+    let out = dir.join("out");
+    let run = |world: &Path| run_within(flyover(world, &out, 1), &dir, LIMIT);
+    // A user's folder.
+    let user = dir.join("user");
+    std::fs::create_dir_all(user.join("photos")).unwrap();
+    std::fs::write(user.join("notes.txt"), "mine").unwrap();
+    let done = run(&user);
+    assert_eq!(done.status.code(), Some(2), "{}", done.stderr);
+    assert!(done.stderr.contains("no manifest.json"), "{}", done.stderr);
+    assert_eq!(
+        std::fs::read_to_string(user.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    assert!(!user.join("height").exists() && !user.join("manifest.json").exists());
+    // A world whose manifest was lost.
+    let world = dir.join("world");
+    let done = run(&world);
+    assert!(done.status.success(), "{}", done.stderr);
+    std::fs::remove_file(world.join("manifest.json")).unwrap();
+    let done = run(&world);
+    assert_eq!(done.status.code(), Some(2), "{}", done.stderr);
+    assert!(world.join("height").is_dir(), "its tiles are kept");
+    // An unfinished build: its leftovers are cleared and the world is built.
+    let unfinished = dir.join("unfinished");
+    std::fs::create_dir_all(unfinished.join("hole/00/0000")).unwrap();
+    std::fs::write(unfinished.join("hole/00/0000/0000.tile"), "stale").unwrap();
+    std::fs::write(unfinished.join(".terrain-build"), "").unwrap();
+    let done = run(&unfinished);
+    assert!(done.status.success(), "{}", done.stderr);
+    assert!(!unfinished.join("hole/00/0000/0000.tile").exists());
+    assert!(!unfinished.join(".terrain-build").exists());
+    verify_passes(&unfinished, &dir, "an unfinished build");
+    // Too small for a tile: refused before anything is built.
+    let small = dir.join("small");
+    let mut cmd = demo();
+    cmd.args([
+        "--scenario",
+        "world",
+        "--no-gpu",
+        "--size",
+        "100",
+        "--frames",
+        "1",
+    ])
+    .arg("--world")
+    .arg(&small)
+    .arg("--out")
+    .arg(&out);
+    let done = run_within(cmd, &dir, LIMIT);
+    assert_eq!(done.status.code(), Some(2), "{}", done.stderr);
+    assert!(done.stderr.contains("one tile"), "{}", done.stderr);
+    assert!(!small.join("height").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

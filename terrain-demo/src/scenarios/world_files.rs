@@ -116,6 +116,12 @@ fn open_or_build_heights(
         }
         return Ok((world, format!("world {}", cli.world.display()), None));
     }
+    // No manifest: built here, into an empty folder or over an unfinished build of this
+    // program's (its marker is written first and removed after the manifest).
+    let marker = cli.world.join(BUILD_MARKER);
+    clear_for_build(&cli.world)?;
+    terrain_core::io::write_atomic(&marker, b"a world is being built here\n")
+        .with_context(|| format!("cannot write {}", marker.display()))?;
     let started = Instant::now();
     let last = AtomicU64::new(0);
     // On a terminal one line rewritten in place; in a log a line per 5 %; nothing with -q.
@@ -177,7 +183,61 @@ fn open_or_build_heights(
     if terminal && !cli.quiet {
         crate::console::note!();
     }
+    std::fs::remove_file(&marker).with_context(|| format!("cannot remove {}", marker.display()))?;
     Ok((world, source, heights))
+}
+
+/// The file that marks a folder as holding an unfinished build of this program's.
+const BUILD_MARKER: &str = ".terrain-build";
+
+/// The folders a build writes into (and a run adds to); an unfinished build's are removed
+/// before it starts again, so no tile of it (a hole, a stroke of paint) outlives it.
+const BUILD_FOLDERS: [&str; 6] = ["height", "hole", "material", "color", "detail", "journal"];
+
+/// Makes `dir` (which has no manifest) ready for a build: an empty folder is; one that holds
+/// an unfinished build of this program's (its marker) has that build's folders removed; any
+/// other content is refused untouched, since it is not a world (a world whose manifest was
+/// lost would be rebuilt over its deformations, and a user's folder filled with tiles).
+fn clear_for_build(dir: &Path) -> Result<()> {
+    let entries = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read world folder {}", dir.display()))
+        .usage()?;
+    let mut others = Vec::new();
+    for entry in entries {
+        let name = entry?.file_name();
+        if name != terrain_cache::lock::LOCK_FILE && name != BUILD_MARKER {
+            others.push(name.to_string_lossy().into_owned());
+        }
+    }
+    if others.is_empty() {
+        return Ok(());
+    }
+    if std::fs::symlink_metadata(dir.join(BUILD_MARKER)).is_ok_and(|m| m.is_file()) {
+        for name in BUILD_FOLDERS {
+            let path = dir.join(name);
+            if std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir()) {
+                std::fs::remove_dir_all(&path).with_context(|| {
+                    format!("cannot clear the unfinished build's {}", path.display())
+                })?;
+            }
+        }
+        return Ok(());
+    }
+    others.sort();
+    let shown = others
+        .iter()
+        .take(3)
+        .cloned()
+        .collect::<Vec<_>>()
+        .join(", ");
+    Err(usage(anyhow::anyhow!(
+        "{} holds {} entries ({shown}{}) but no world (no manifest.json): a world is built only \
+         into an empty or new folder. If it was a world whose manifest was lost, its tiles \
+         cannot be trusted without it; choose another folder for a new one",
+        dir.display(),
+        others.len(),
+        if others.len() > 3 { ", ..." } else { "" },
+    )))
 }
 
 /// What a run says about a world of PNG tiles (format version 1): it works as it is, and how
@@ -208,6 +268,28 @@ fn procedural_manifest(size: u32) -> Result<Manifest> {
 /// in `--world`, else the one building it will write (from `--heightmap`'s size, or the
 /// procedural world's). Says whether it must be built, and from a heightmap of which size.
 pub fn planned_world(cli: &Cli) -> Result<PlannedWorld> {
+    let planned = planned_layout(cli)?;
+    // Checked before anything is built: the flyover streams tiles, so a world needs one.
+    let size = planned.manifest.world_size;
+    if size.max_element() < planned.manifest.tile_size {
+        let from = match (&planned.build, &cli.heightmap) {
+            (None, _) => format!("the world in {}", cli.world.display()),
+            (Some(_), Some(path)) => format!("the heightmap {}", path.display()),
+            (Some(_), None) => "--size".to_string(),
+        };
+        return Err(usage(anyhow::anyhow!(
+            "{from} gives a world of {}x{} texels: a streamed world needs at least {} texels on \
+             its longer side (one tile)",
+            size.x,
+            size.y,
+            planned.manifest.tile_size
+        )));
+    }
+    Ok(planned)
+}
+
+/// [`planned_world`]'s layout, unchecked.
+fn planned_layout(cli: &Cli) -> Result<PlannedWorld> {
     if let Some(manifest) = existing_manifest(&cli.world)? {
         return Ok(PlannedWorld {
             manifest,
