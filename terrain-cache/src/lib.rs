@@ -144,7 +144,7 @@ pub use trace_sim::{CameraPath, SimConfig, SimPolicy, SimResult, comparison_tabl
 pub mod verify;
 pub use verify::{
     Defect, DefectKind, RepairReport, VerifyError, VerifyOptions, VerifyProgress, VerifyReport,
-    repair_world, verify_world,
+    check_before_use, repair_world, verify_world,
 };
 
 /// The README's code blocks, compiled and run as doc tests so that they cannot go stale.

@@ -259,6 +259,72 @@ pub fn repair_world(
     })
 }
 
+/// The defects a run must not start over, found without decoding a tile (milliseconds, where
+/// [`verify_world`] reads everything): a height level whose `bounds.bin` is missing or does
+/// not decode (a run's write-backs would merge into an empty one and record every other tile
+/// as empty), and a level-0 tile without a file whose recorded bounds are not the zero tile's
+/// (a lost tile a run would read as flat, then write its flat ancestors and bounds over the
+/// last record of it). Listed as [`verify_world`] lists them, at most `max_listed`; never
+/// writes. A store that cannot be listed or read is an error.
+pub fn check_before_use(world: &World, max_listed: usize) -> Result<Vec<Defect>, CacheError> {
+    let m = *world.manifest();
+    let mut found = Vec::new();
+    let mut push = |key: String, kind: DefectKind, repairable: bool, reason: String| {
+        if found.len() < max_listed {
+            found.push(Defect {
+                key,
+                kind,
+                repairable,
+                reason,
+            });
+        }
+    };
+    let mut level0 = None;
+    for level in 0..m.levels {
+        let key = bounds_key(Layer::Height, level);
+        match world.bounds(level) {
+            Ok(Some(b)) => {
+                if level == 0 {
+                    level0 = Some(b);
+                }
+            }
+            Ok(None) => push(key, DefectKind::BoundsMissing, true, "no file".into()),
+            Err(CacheError::Manifest { reason, .. }) => {
+                push(key, DefectKind::BoundsUnreadable, true, cut(reason));
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    let Some(bounds) = level0 else {
+        return Ok(found);
+    };
+    let stored: std::collections::HashSet<String> = world
+        .store()
+        .list(&format!("{}/{:02x}", Layer::Height.folder(), 0))?
+        .into_iter()
+        .collect();
+    let fill = m.height_fill;
+    for id in m.tiles_of(Layer::Height, 0) {
+        let Some(r) = bounds.get(id.x, id.y) else {
+            continue;
+        };
+        let key = m.tile_key(Layer::Height, id);
+        if r != [fill, fill] && r != [u16::MAX, 0] && !stored.contains(&key) {
+            push(
+                key,
+                DefectKind::Missing,
+                false,
+                format!(
+                    "no file, but level 0's bounds.bin records heights {}..={} (a missing tile \
+                     is the zero tile, all {fill})",
+                    r[0], r[1]
+                ),
+            );
+        }
+    }
+    Ok(found)
+}
+
 /// Tiles `m` promises, every layer, saturating.
 fn promised_tiles(m: &Manifest) -> u64 {
     let count = |t: glam::UVec2| u64::from(t.x).saturating_mul(u64::from(t.y));

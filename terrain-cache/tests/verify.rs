@@ -566,3 +566,45 @@ fn detail_tiles_are_checked_and_missing_ones_are_the_zero_deformation() {
         vec![(copied, DefectKind::Unreadable, false)]
     );
 }
+
+/// The check a run makes before it uses a world finds, without decoding a tile, what a run
+/// would make worse: a lost level-0 tile (its bounds say it held heights) and a missing or
+/// damaged bounds.bin; a valid world, and a missing tile that is rightly the zero tile, pass.
+#[test]
+fn the_check_before_use_finds_lost_tiles_and_missing_bounds() {
+    let world = built(None);
+    assert_eq!(terrain_cache::check_before_use(&world, 10).unwrap(), vec![]);
+    // (1, 0) is in the corner of fill, rightly not stored; (3, 0) holds heights.
+    let empty = TileId::new(0, 1, 0);
+    assert!(!world.store().exists(&key(&world, empty)).unwrap());
+    let lost = TileId::new(0, 3, 0);
+    world.store().remove(&key(&world, lost)).unwrap();
+    let found = terrain_cache::check_before_use(&world, 10).unwrap();
+    let kinds: Vec<_> = found
+        .iter()
+        .map(|d| (d.key.clone(), d.kind, d.repairable))
+        .collect();
+    assert_eq!(kinds, vec![(key(&world, lost), DefectKind::Missing, false)]);
+    // As verify_world says.
+    assert!(defects(&verify(&world)).contains(&(key(&world, lost), DefectKind::Missing, false)));
+    let bounds1 = bounds_key(Layer::Height, 1);
+    world.store().remove(&bounds1).unwrap();
+    world
+        .store()
+        .write(&bounds_key(Layer::Height, 0), b"TCBN garbage")
+        .unwrap();
+    let found = terrain_cache::check_before_use(&world, 10).unwrap();
+    let kinds: Vec<_> = found.iter().map(|d| (d.key.clone(), d.kind)).collect();
+    assert_eq!(
+        kinds,
+        vec![
+            (bounds_key(Layer::Height, 0), DefectKind::BoundsUnreadable),
+            (bounds1, DefectKind::BoundsMissing)
+        ]
+    );
+    assert_eq!(
+        terrain_cache::check_before_use(&world, 1).unwrap().len(),
+        1,
+        "at most listed"
+    );
+}

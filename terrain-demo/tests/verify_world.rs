@@ -155,12 +155,24 @@ fn crafted(dir: &Path, side: u32) {
 fn a_manifest_promising_billions_of_tiles_is_refused_at_once() {
     let root = fresh_dir("verify_world_huge");
     let dir = root.join("world");
-    crafted(&dir, 1 << 20);
+    // 4096^2 level-0 tiles (the most a manifest may have) and their levels: more than a
+    // verification walks.
+    crafted(&dir, 1 << 16);
     let started = Instant::now();
     let out = verify(&dir, &[]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out));
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("more than the"),
+        "{}",
+        text(&out)
+    );
+    // 65536^2 level-0 tiles: the manifest itself is refused.
+    let text0 = std::fs::read_to_string(dir.join(MANIFEST_KEY)).expect("manifest");
+    std::fs::write(dir.join(MANIFEST_KEY), text0.replace("65536", "1048576")).expect("write");
+    let out = verify(&dir, &[]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("level-0 tiles"),
         "{}",
         text(&out)
     );

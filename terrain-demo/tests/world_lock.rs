@@ -182,3 +182,49 @@ fn only_empty_folders_and_unfinished_builds_become_worlds() {
     assert!(!small.join("height").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A world a run would make worse is refused untouched with exit code 2: a lost level-0 tile
+/// (read as flat, its ancestors and bounds would be rewritten over the last record of it) and a
+/// missing bounds.bin (a write-back would record every other tile as empty); once repaired,
+/// the run goes ahead.
+#[test]
+fn a_damaged_world_is_refused_before_it_is_written() {
+    let dir = fresh_dir("world_damaged");
+    let (world, out) = (dir.join("world"), dir.join("out"));
+    let done = run_within(flyover(&world, &out, 1), &dir, LIMIT);
+    assert!(done.status.success(), "{}", done.stderr);
+    let bounds = world.join("height/00/bounds.bin");
+    let level1 = world.join("height/01/0000/0000.tile");
+    let before = (
+        std::fs::read(&bounds).unwrap(),
+        std::fs::read(&level1).unwrap(),
+    );
+    let tile = world.join("height/00/0000/0000.tile");
+    let kept = std::fs::read(&tile).unwrap();
+    std::fs::remove_file(&tile).unwrap();
+    let done = run_within(flyover(&world, &out, 2), &dir, LIMIT);
+    assert_eq!(done.status.code(), Some(2), "{}", done.stderr);
+    assert!(
+        done.stderr.contains("0000.tile: missing"),
+        "{}",
+        done.stderr
+    );
+    let after = (
+        std::fs::read(&bounds).unwrap(),
+        std::fs::read(&level1).unwrap(),
+    );
+    assert!(before == after, "nothing written");
+    std::fs::write(&tile, kept).unwrap();
+    std::fs::remove_file(&bounds).unwrap();
+    let done = run_within(flyover(&world, &out, 2), &dir, LIMIT);
+    assert_eq!(done.status.code(), Some(2), "{}", done.stderr);
+    assert!(done.stderr.contains("--repair"), "{}", done.stderr);
+    assert!(!bounds.exists());
+    let mut repair = demo();
+    repair.args(["verify-world", "--repair", "-q"]).arg(&world);
+    assert!(run_within(repair, &dir, LIMIT).status.success());
+    let done = run_within(flyover(&world, &out, 2), &dir, LIMIT);
+    assert!(done.status.success(), "{}", done.stderr);
+    verify_passes(&world, &dir, "a repaired world's run");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -108,6 +108,30 @@ fn sync_dir(dir: &Path) -> io::Result<()> {
     }
 }
 
+/// What a file that is not a regular one is, in words.
+fn special_kind(kind: &fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if kind.is_char_device() || kind.is_block_device() {
+            return "a device";
+        }
+        if kind.is_fifo() {
+            return "a named pipe";
+        }
+        if kind.is_socket() {
+            return "a socket";
+        }
+    }
+    if kind.is_dir() {
+        "a folder"
+    } else if kind.is_symlink() {
+        "a symbolic link"
+    } else {
+        "something"
+    }
+}
+
 /// What a successful atomic write leaves to say.
 #[derive(Debug)]
 pub struct AtomicWrite {
@@ -124,7 +148,10 @@ pub struct AtomicWrite {
 /// (see [`write_atomic_report`] for a failed directory sync after it).
 ///
 /// Readers of `path` see either the old content or the new one, never a partial file. The
-/// parent directory must exist; it is not created. File names up to the file system's limit
+/// parent directory must exist; it is not created. Only a regular file is replaced: a device,
+/// a named pipe, a socket, a folder or a symbolic link at `path` is refused untouched (the
+/// rename would put a file in place of `/dev/null`, or of a link instead of writing through
+/// it). File names up to the file system's limit
 /// (255 bytes on most) work: the temp file's name repeats at most the first 128 bytes.
 pub fn write_atomic(path: impl AsRef<Path>, bytes: &[u8]) -> Result<(), MapIoError> {
     write_atomic_with(path.as_ref(), bytes, &OS_STEPS).map(|_| ())
@@ -161,6 +188,20 @@ fn write_atomic_with(
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
+    match fs::symlink_metadata(path) {
+        Ok(meta) if !meta.file_type().is_file() => {
+            return Err(io_err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "{} is there, not a regular file: it is not replaced",
+                    special_kind(&meta.file_type())
+                ),
+            )));
+        }
+        Ok(_) => {}
+        Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+        Err(e) => return Err(io_err(e)),
+    }
 
     let (temp, file) = create_temp_file(dir, &file_name).map_err(io_err)?;
     if let Err(e) = write_and_replace(&temp, file, bytes, path, steps) {
@@ -210,6 +251,50 @@ mod tests {
 
     fn fails<T>() -> io::Result<T> {
         Err(io::Error::other("injected failure"))
+    }
+
+    /// Only regular files are replaced: a folder, a link and (on unix) a named pipe at the
+    /// path are refused and left as they were; the device test reads /dev/null's type only.
+    #[test]
+    fn only_a_regular_file_is_replaced() {
+        let dir = Scratch::new("special");
+        let folder = dir.0.join("folder");
+        fs::create_dir(&folder).unwrap();
+        let e = write_atomic(&folder, b"x").unwrap_err();
+        assert!(e.to_string().contains("a folder"), "{e}");
+        assert!(folder.is_dir());
+        #[cfg(unix)]
+        {
+            let target = dir.0.join("target");
+            fs::write(&target, b"kept").unwrap();
+            let link = dir.0.join("link");
+            std::os::unix::fs::symlink(&target, &link).unwrap();
+            let e = write_atomic(&link, b"x").unwrap_err();
+            assert!(e.to_string().contains("symbolic link"), "{e}");
+            assert!(
+                fs::symlink_metadata(&link)
+                    .unwrap()
+                    .file_type()
+                    .is_symlink()
+            );
+            assert_eq!(fs::read(&target).unwrap(), b"kept");
+            let null = Path::new("/dev/null");
+            if let Ok(meta) = fs::symlink_metadata(null) {
+                use std::os::unix::fs::FileTypeExt;
+                if meta.file_type().is_char_device() {
+                    assert_eq!(special_kind(&meta.file_type()), "a device");
+                }
+            }
+        }
+        assert_eq!(
+            dir.names().len(),
+            if cfg!(unix) { 3 } else { 1 },
+            "no temp file left"
+        );
+        let file = dir.0.join("file");
+        write_atomic(&file, b"one").unwrap();
+        write_atomic(&file, b"two").unwrap();
+        assert_eq!(fs::read(&file).unwrap(), b"two");
     }
 
     #[test]

@@ -103,6 +103,7 @@ fn open_or_build_heights(
         let world = World::open(store.clone())
             .with_context(|| format!("the world in {} cannot be opened", cli.world.display()))
             .usage()?;
+        refuse_damaged(&world, &cli.world)?;
         if !cli.quiet {
             crate::console::note!(
                 "world {}: {} texels, {} levels (deformations of earlier runs included)",
@@ -185,6 +186,31 @@ fn open_or_build_heights(
     }
     std::fs::remove_file(&marker).with_context(|| format!("cannot remove {}", marker.display()))?;
     Ok((world, source, heights))
+}
+
+/// Refuses a world a run would make worse: a `bounds.bin` missing or damaged, or a level-0
+/// tile lost (terrain-cache's `check_before_use`; milliseconds, no tile decoded).
+fn refuse_damaged(world: &World, dir: &Path) -> Result<()> {
+    let found = terrain_cache::check_before_use(world, 5)?;
+    if found.is_empty() {
+        return Ok(());
+    }
+    let listed: Vec<String> = found.iter().map(|d| format!("  {d}")).collect();
+    let advice = if found.iter().all(|d| d.repairable) {
+        format!(
+            "`terrain-demo verify-world --repair {}` rebuilds them from level 0",
+            dir.display()
+        )
+    } else {
+        "level-0 tiles are the world's only record of its heights: restore them from a copy \
+         of the world (`verify-world` lists every defect)"
+            .to_string()
+    };
+    Err(usage(anyhow::anyhow!(
+        "the world in {} is damaged; a run would write over what is left:\n{}\n{advice}",
+        dir.display(),
+        listed.join("\n")
+    )))
 }
 
 /// The file that marks a folder as holding an unfinished build of this program's.
