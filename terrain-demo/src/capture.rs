@@ -135,11 +135,18 @@ impl<'a> Capture<'a> {
                     .collect(),
             })
             .collect();
-        let sheet = summary::render(&self.thumbs, &series, self.frames.len(), warmup as usize)?;
+        // A contact sheet that cannot be written (a full disk, a folder in its place) still
+        // leaves report.json, which records why.
         let summary = self.out.join("summary.png");
-        write_file(&summary, &io::encode_png_rgba8(&sheet)?)
-            .with_context(|| format!("writing {}", summary.display()))?;
-        drop(sheet);
+        let written = summary::render(&self.thumbs, &series, self.frames.len(), warmup as usize)
+            .and_then(|sheet| Ok(write_file(&summary, &io::encode_png_rgba8(&sheet)?)?))
+            .with_context(|| format!("writing {}", summary.display()));
+        let summary_error = written.err();
+        if let Some(e) = &summary_error
+            && report.error.is_none()
+        {
+            report.error = Some(format!("{e:#}"));
+        }
         report.warmup_frames = warmup;
         report.steps_ms = step_stats(&self.frames[warmup as usize..]);
         let mut cpu: Vec<f64> = self.frames[warmup as usize..]
@@ -161,13 +168,18 @@ impl<'a> Capture<'a> {
         report.memory.peak_rss_bytes = memory_limit::peak_resident();
         let json = serde_json::to_vec_pretty(&report)?;
         write_file(&self.out.join("report.json"), &json)?;
-        Ok(report)
+        match summary_error {
+            Some(e) => Err(e),
+            None => Ok(report),
+        }
     }
 }
 
 /// Removes what an earlier run wrote into `out` and this run may not overwrite: its frames
 /// (`frame_NNNN.png`, any count), `summary.png`, `terrain_final.png`, `report.json`, so a
-/// folder never mixes two runs. Other files are left alone. Returns how many were removed.
+/// folder never mixes two runs. Only files that are what those names say are removed (a PNG,
+/// a report): a user's file under such a name, and everything else, is left alone. Returns
+/// how many were removed.
 pub fn remove_old_outputs(out: &Path) -> Result<usize> {
     let is_ours = |name: &str| {
         let frame = name
@@ -186,13 +198,32 @@ pub fn remove_old_outputs(out: &Path) -> Result<usize> {
         let is_file = entry
             .file_type()
             .is_ok_and(|t| t.is_file() || t.is_symlink());
-        if is_file && is_ours(name) {
+        if is_file
+            && is_ours(name)
+            && (entry.file_type()?.is_symlink() || written_by_a_run(&entry.path()))
+        {
             let path = entry.path();
             std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
             removed += 1;
         }
     }
     Ok(removed)
+}
+
+/// Whether the file at `path` holds what a run writes under its name: a PNG's signature, or a
+/// report's first field (the first 4 KiB are read; an unreadable file is not the run's).
+fn written_by_a_run(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = Vec::with_capacity(4096);
+    let read = File::open(path).and_then(|f| f.take(4096).read_to_end(&mut head));
+    if read.is_err() {
+        return false;
+    }
+    if path.extension().is_some_and(|e| e == "png") {
+        head.starts_with(b"\x89PNG\r\n\x1a\n")
+    } else {
+        head.starts_with(b"{") && head.windows(16).any(|w| w == b"\"schema_version\"")
+    }
 }
 
 /// Mean, median, 95th percentile and maximum of every step over `frames` (the frames after

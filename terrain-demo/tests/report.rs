@@ -454,6 +454,9 @@ fn an_earlier_longer_run_leaves_no_frames_behind() {
     );
     std::fs::write(out.join("notes.txt"), "mine").unwrap();
     std::fs::create_dir(out.join("frame_9999.png")).unwrap();
+    // A user's files under the run's names but not what the run writes there stay too.
+    std::fs::write(out.join("frame_0100.png"), "a note, not a PNG").unwrap();
+    std::fs::write(out.join("frame_00001.png"), "mine").unwrap();
     let mut cmd = demo();
     cmd.args(["--size", "64", "--frames", "2", "--no-gpu", "-q", "--out"])
         .arg(&out);
@@ -466,7 +469,19 @@ fn an_earlier_longer_run_leaves_no_frames_behind() {
         .filter(|n| n.starts_with("frame_"))
         .collect();
     frames.sort();
-    assert_eq!(frames, ["frame_0000.png", "frame_0001.png"]);
+    assert_eq!(
+        frames,
+        [
+            "frame_0000.png",
+            "frame_00001.png",
+            "frame_0001.png",
+            "frame_0100.png"
+        ]
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("frame_0100.png")).unwrap(),
+        "a note, not a PNG"
+    );
     // Files and folders the demo did not write stay.
     assert!(out.join("notes.txt").is_file());
     assert!(out.join("frame_9999.png").is_dir());
@@ -539,4 +554,23 @@ fn a_config_file_sets_the_scenario_and_print_config_round_trips() {
         .output()
         .unwrap();
     assert_eq!(done.status.code(), Some(2));
+}
+
+/// A contact sheet that cannot be written (here a folder stands where it goes) fails the run,
+/// and report.json is still written, with every frame and the reason.
+#[test]
+fn a_summary_that_cannot_be_written_still_leaves_the_report() {
+    let out = common::fresh_dir("summary_blocked");
+    std::fs::create_dir(out.join("summary.png")).unwrap();
+    let mut cmd = demo();
+    cmd.args(["--size", "64", "--frames", "2", "--no-gpu", "-q", "--out"])
+        .arg(&out);
+    let done = run_within(cmd, &out, LIMIT);
+    assert_eq!(done.status.code(), Some(1), "{}", done.stderr);
+    let r: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(r["frames"].as_array().unwrap().len(), 2);
+    assert!(r["error"].as_str().unwrap().contains("summary.png"), "{r}");
+    assert!(out.join("summary.png").is_dir(), "left as it was");
+    let _ = std::fs::remove_dir_all(&out);
 }

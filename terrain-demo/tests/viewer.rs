@@ -321,3 +321,37 @@ fn without_a_display_the_viewer_fails_with_one_clear_line() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A script that is a named pipe or a device is refused at once (opening a pipe blocked until
+/// a writer came; /dev/zero was read until memory ran out), before any window is opened.
+#[test]
+fn a_script_that_is_no_regular_file_is_refused_at_once() {
+    let dir = common::fresh_dir("viewer_special_script");
+    let pipe = dir.join("pipe");
+    let made = Command::new("mkfifo").arg(&pipe).status();
+    let mut specials = vec![PathBuf::from("/dev/zero")];
+    if made.is_ok_and(|s| s.success()) {
+        specials.push(pipe);
+    }
+    for (i, special) in specials.iter().enumerate() {
+        let path = special.to_str().unwrap();
+        let run = viewer(
+            None,
+            &["--frames", "1", "--script", path],
+            &dir,
+            &format!("s{i}"),
+        );
+        assert!(!run.success, "{path}");
+        assert!(
+            run.stderr.contains("not a regular file"),
+            "{path}: {}",
+            run.stderr
+        );
+        assert!(
+            run.elapsed < Duration::from_secs(10),
+            "{path}: {:?}",
+            run.elapsed
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

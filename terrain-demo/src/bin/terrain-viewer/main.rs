@@ -97,7 +97,7 @@ fn run(args: Args) -> Result<()> {
     }
     let script = match (&args.script, args.script_builtin) {
         (Some(path), _) => {
-            let text = std::fs::read_to_string(path)
+            let text = read_script(path)
                 .with_context(|| format!("cannot read the script {}", path.display()))?;
             Some(
                 input_script::InputScript::parse(&text)
@@ -146,4 +146,24 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// The largest input script read (a million events is about 30 MB).
+const MAX_SCRIPT_BYTES: u64 = 256 << 20;
+
+/// The text of a script file: a regular file (a named pipe would block, a device never end)
+/// of at most [`MAX_SCRIPT_BYTES`], read through a bound in case it grows meanwhile.
+fn read_script(path: &std::path::Path) -> Result<String> {
+    use std::io::Read;
+    // Checked before opening: opening a named pipe blocks until a writer comes.
+    if !std::fs::metadata(path)?.is_file() {
+        bail!("not a regular file");
+    }
+    let file = std::fs::File::open(path)?;
+    let mut bytes = Vec::new();
+    file.take(MAX_SCRIPT_BYTES + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > MAX_SCRIPT_BYTES {
+        bail!("longer than {MAX_SCRIPT_BYTES} bytes");
+    }
+    Ok(String::from_utf8(bytes)?)
 }
