@@ -114,6 +114,29 @@ pub(crate) fn lock_world(dir: &Path) -> Result<Arc<WorldLock>, CacheError> {
     }
 }
 
+/// Who holds the lock of the world folder `dir`, if another process does: its lock file as
+/// written by it (pid, host, start time). Only reads: nothing is created, taken or written, so
+/// a checking tool can say a world is being written meanwhile. `None` where no one holds it,
+/// or where there is no lock file to tell.
+pub fn lock_holder(dir: &Path) -> Option<String> {
+    let mut options = OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc_flags::NOFOLLOW | libc_flags::NONBLOCK);
+    }
+    let mut file = options.open(dir.join(LOCK_FILE)).ok()?;
+    if !file.metadata().ok()?.is_file() {
+        return None;
+    }
+    match file.try_lock_shared() {
+        Ok(()) => None,
+        Err(TryLockError::WouldBlock) => Some(read_owner(&mut file)),
+        Err(TryLockError::Error(_)) => None,
+    }
+}
+
 /// Opens (creating) the lock file without following a link there and refusing anything but a
 /// regular file (a named pipe would block, a link could point anywhere).
 fn open_lock_file(path: &Path) -> io::Result<File> {
@@ -266,8 +289,17 @@ mod tests {
             !msg.contains('\x1b'),
             "control characters are dropped: {msg:?}"
         );
+        // A checking tool learns the owner without taking or writing anything.
+        let before = std::fs::read(dir.0.join(LOCK_FILE)).unwrap();
+        let holder = lock_holder(dir.0.as_path()).expect("held");
+        assert!(holder.contains("pid 4242"), "{holder}");
+        assert_eq!(std::fs::read(dir.0.join(LOCK_FILE)).unwrap(), before);
         other.unlock().unwrap();
+        assert_eq!(lock_holder(dir.0.as_path()), None);
         lock_world(dir.0.as_path()).unwrap();
+        let empty = TempDir::new();
+        assert_eq!(lock_holder(empty.0.as_path()), None);
+        assert!(!empty.0.join(LOCK_FILE).exists(), "nothing created");
     }
 
     #[cfg(unix)]

@@ -381,8 +381,10 @@ pub fn verify_command(dir: &Path, repair: bool, quiet: bool) -> Result<bool> {
     }
     // The manifest alone first: anything but a regular file (a pipe would block) is refused.
     existing_manifest(dir)?;
-    // Checking only reads: no lock, so a world in use by a run can be verified meanwhile. A
+    // Checking only reads: no lock, so a world in use by a run can be verified meanwhile (its
+    // owner is named with any defect found: a write-back in progress may show as one). A
     // repair writes, so it takes the world's lock (exit 2 naming the owner while a run has it).
+    let in_use = terrain_cache::lock::lock_holder(dir).filter(|_| !repair);
     let store = if repair {
         FsStore::open(dir)
     } else {
@@ -466,6 +468,14 @@ pub fn verify_command(dir: &Path, repair: bool, quiet: bool) -> Result<bool> {
         return valid(dir, &report);
     }
     print_defects(&report)?;
+    if let Some(owner) =
+        in_use.or_else(|| terrain_cache::lock::lock_holder(dir).filter(|_| !repair))
+    {
+        crate::console::note!(
+            "note: a run was writing this world meanwhile ({owner}): a tile or bounds.bin it \
+             was writing back may show as a defect; verify again once it has ended"
+        );
+    }
     crate::console::note!(
         "world {}: {} defect(s), {} of them not repairable from level 0{}",
         dir.display(),
