@@ -364,6 +364,9 @@ fn locate(text: &str, e: &toml::de::Error) -> anyhow::Error {
 }
 
 /// Writes `given` over `base`, table by table; `at` is the key path for errors.
+/// The arrays whose default is absent (so the defaults do not show their length).
+const OPTIONAL_ARRAYS: [(&str, usize); 1] = [("style.ramp_m", 2)];
+
 fn merge(base: &mut toml::Table, given: toml::Table, at: &str) -> Result<()> {
     for (key, value) in given {
         let path = if at.is_empty() {
@@ -371,6 +374,21 @@ fn merge(base: &mut toml::Table, given: toml::Table, at: &str) -> Result<()> {
         } else {
             format!("{at}.{key}")
         };
+        // A fixed-size array takes exactly its values: the reader would drop extra ones.
+        if let toml::Value::Array(g) = &value {
+            let want = match base.get(&key) {
+                Some(toml::Value::Array(b)) => Some(b.len()),
+                _ => OPTIONAL_ARRAYS
+                    .iter()
+                    .find(|(k, _)| *k == path)
+                    .map(|(_, n)| *n),
+            };
+            if let Some(n) = want
+                && g.len() != n
+            {
+                bail!("`{path}` has {} values: it takes {n}", g.len());
+            }
+        }
         match (base.get_mut(&key), value) {
             (Some(toml::Value::Table(b)), toml::Value::Table(g)) => merge(b, g, &path)?,
             (Some(slot), v) => *slot = v,
@@ -387,6 +405,28 @@ fn merge(base: &mut toml::Table, given: toml::Table, at: &str) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An array of the wrong length is refused, naming the key (extra values were dropped).
+    #[test]
+    fn arrays_take_exactly_their_values() {
+        for (text, key) in [
+            (
+                "[stamps]\nfoot_size_m = [1.0, 0.5, 99.0]",
+                "stamps.foot_size_m",
+            ),
+            ("[stamps]\nfoot_size_m = [1.0]", "stamps.foot_size_m"),
+            (
+                "[style]\nlight_dir = [1.0, 1.0, 1.0, 1.0]",
+                "style.light_dir",
+            ),
+            ("[style]\nramp_m = [1.0, 2.0, 3.0]", "style.ramp_m"),
+        ] {
+            let e = DemoParams::from_toml(text).unwrap_err();
+            assert!(format!("{e:#}").contains(key), "{text}: {e:#}");
+        }
+        let p = DemoParams::from_toml("[style]\nramp_m = [1.0, 2.0]").unwrap();
+        assert_eq!(p.style.ramp_m, Some(glam::Vec2::new(1.0, 2.0)));
+    }
 
     #[test]
     fn the_printed_defaults_read_back_as_the_defaults() {

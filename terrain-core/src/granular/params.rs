@@ -207,7 +207,14 @@ impl GranularParams {
             1e6,
             "[0, 1e6]",
         )?;
-        check_range("d", f64::from(self.slope_d), 1e-6, 1e6, "[1e-6, 1e6]")?;
+        // The bound as an f32 holds it: 1e-6 written in a file is read as 9.99999997e-7.
+        check_range(
+            "d",
+            f64::from(self.slope_d),
+            f64::from(1e-6f32),
+            1e6,
+            "[1e-6, 1e6]",
+        )?;
         check_range(
             "obstacle_margin_m",
             f64::from(self.obstacle_margin_m),
@@ -313,5 +320,23 @@ mod tests {
         assert!(a > 0 && b > a);
         p.slope_threshold = 8.0;
         assert_eq!(p.slope_thresholds_units(0.1, 10_000.0), [u32::MAX; 2]);
+    }
+
+    /// The documented bounds are accepted as an f32 field holds them (1e-6 is 9.99999997e-7),
+    /// and a value below them is not.
+    #[test]
+    fn the_range_ends_of_d_are_accepted() {
+        for d in [1e-6f32, 1e6] {
+            let p = GranularParams {
+                slope_d: d,
+                ..GranularParams::default()
+            };
+            assert!(p.validate().is_ok(), "{d}");
+        }
+        let below = GranularParams {
+            slope_d: 9e-7,
+            ..GranularParams::default()
+        };
+        assert!(below.validate().is_err());
     }
 }
