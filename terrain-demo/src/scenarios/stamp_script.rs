@@ -91,7 +91,10 @@ impl StampScript {
             let pos = self.extent * 0.5
                 + Vec2::new(angle.cos(), angle.sin()) * radius
                 + heading.perp() * side;
-            let placement = StampPlacement::new(pos, p.foot_size_m, -p.foot_depth_m)?
+            // At most half the map, as craters and the hole (a footprint larger than a small
+            // repeating map would overlap itself).
+            let foot = p.foot_size_m.min(Vec2::splat(min_side * 0.5));
+            let placement = StampPlacement::new(pos, foot, -p.foot_depth_m)?
                 .with_rotation(heading.y.atan2(heading.x))?;
             plan.deformations.push(Deformation {
                 kind: StampKind::Footprint,
@@ -222,4 +225,36 @@ pub enum DetailTarget<'a> {
     /// Stamped into this detail cache on the CPU (beside a GPU too: the GPU's tiles are read
     /// back over it afterwards), spilling into the map.
     Cpu(&'a mut terrain_cache::detail::DetailCache),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// On a map smaller than the stamps asked for (0.64 m, footprints of 7 m), every stamp is
+    /// at most half the map, so none overlaps itself on a repeating map: each fits a 64^2
+    /// map at 0.01 m.
+    #[test]
+    fn stamps_fit_a_map_smaller_than_they_ask() {
+        let params = StampParams {
+            foot_size_m: Vec2::splat(7.0),
+            ..StampParams::default()
+        };
+        let mut script = StampScript::new(Vec2::splat(0.64), 1, params).unwrap();
+        for _ in 0..12 {
+            let plan = script.plan_next_frame().unwrap();
+            for d in &plan.deformations {
+                if d.kind != StampKind::Shockwave {
+                    assert!(d.placement.scale.max_element() <= 0.32, "{d:?}");
+                }
+                let region = terrain_core::stamp_region(
+                    glam::UVec2::splat(64),
+                    terrain_core::WrapMode::Repeat,
+                    0.01,
+                    &d.placement,
+                );
+                assert!(region.is_ok(), "{d:?}: {region:?}");
+            }
+        }
+    }
 }
