@@ -147,7 +147,7 @@ fn run(cli: &Cli) -> Result<Ended> {
     }
     // What the run needs, from its flags and input headers, before anything large exists.
     let limit = cli.max_memory.unwrap_or_else(memory_limit::default_limit);
-    let shape = RunShape::of(cli)?;
+    let shape = RunShape::of(cli)?.with_params(&params);
     let needed = shape.estimate();
     memory_limit::check(&needed, limit).usage()?;
     // The heightmap is read only as it was measured for the estimate (the default scenario's,

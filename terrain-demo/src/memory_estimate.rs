@@ -88,6 +88,10 @@ const RAM_POOL_SLACK: u64 = 16 << 20;
 /// The VRAM pool beyond its atlas: uploads staged for a few frames (2 MiB a frame) and the
 /// ring of 16 tile readbacks.
 const VRAM_POOL_SLACK: u64 = 16 << 20;
+/// Bytes per sample of the shockwave (`[stamps.shockwave] resolution` squared): its three
+/// f32 grids (previous, current, applied), a step's next grid and the change taken each
+/// frame, and with a GPU its f32 texture and upload staging.
+const SHOCKWAVE_PER_SAMPLE: u64 = 5 * 4 + 2 * 4;
 /// Building a world: tiles in flight on each building thread and their pyramid levels.
 const WORLD_BUILD: u64 = 64 << 20;
 
@@ -118,6 +122,9 @@ pub struct RunShape {
     pub frames: u32,
     /// The flyover's world, budgets and atlas.
     pub flyover: Option<FlyoverShape>,
+    /// Samples per side of the shockwave's texture, where the scenario has one
+    /// ([`RunShape::with_params`]; 0 until then).
+    pub shockwave: u32,
 }
 
 /// The memory side of a flyover.
@@ -196,7 +203,23 @@ impl RunShape {
             overview,
             frames: cli.frames,
             flyover,
+            shockwave: 0,
         })
+    }
+
+    /// The shape with what the scenario's parameters add: the default and world scenarios'
+    /// shockwave (unless its amplitude or size makes it none).
+    pub fn with_params(self, params: &crate::config::DemoParams) -> Self {
+        let s = &params.stamps;
+        let waves = match self.scenario {
+            ScenarioKind::Default => s.shock_size_fraction > 0.0,
+            ScenarioKind::World => s.shock_amplitude_m != 0.0,
+            ScenarioKind::Snow | ScenarioKind::Flyover => false,
+        };
+        Self {
+            shockwave: if waves { s.shockwave.resolution } else { 0 },
+            ..self
+        }
     }
 
     /// The parts of the run's memory, in bytes, named as report.json names them.
@@ -219,6 +242,10 @@ impl RunShape {
                 None => per_texel(if self.gpu { 12 } else { 8 }),
             };
             parts.push(("color_layer", color));
+        }
+        if self.shockwave > 0 {
+            let samples = area(UVec2::splat(self.shockwave));
+            parts.push(("shockwave", samples.saturating_mul(SHOCKWAVE_PER_SAMPLE)));
         }
         match self.scenario {
             ScenarioKind::Default => {
@@ -397,6 +424,26 @@ mod tests {
         assert_eq!(part(&gpu, "frames"), 1920 * 1080 * GPU_FRAME_PER_PIXEL);
         let frames = shape(&["--no-gpu", "--frames", "100000"]).estimate();
         assert_eq!(part(&frames, "report"), 100_000 * REPORT_PER_FRAME);
+    }
+
+    /// The shockwave's texture is counted where the scenario has one, by its resolution (a
+    /// 4096-sample wave peaked 270 MiB above an estimate that left it out).
+    #[test]
+    fn the_shockwave_is_counted_by_its_resolution() {
+        let mut params = crate::config::DemoParams::default();
+        params.stamps.shockwave.resolution = 4096;
+        let default = shape(&["--no-gpu"]).with_params(&params).estimate();
+        assert_eq!(
+            part(&default, "shockwave"),
+            4096 * 4096 * SHOCKWAVE_PER_SAMPLE
+        );
+        let snow = shape(&["--no-gpu", "--scenario", "snow"])
+            .with_params(&params)
+            .estimate();
+        assert_eq!(part(&snow, "shockwave"), 0);
+        params.stamps.shock_size_fraction = 0.0;
+        let none = shape(&["--no-gpu"]).with_params(&params).estimate();
+        assert_eq!(part(&none, "shockwave"), 0);
     }
 
     #[test]
