@@ -146,6 +146,14 @@ pub struct Dem {
 pub enum HeightRange {
     /// The heights' own lowest to highest value (bare integers taken as metres).
     Auto,
+    /// The heights' own span widened by `fraction` of it below and above (at least 1 m each
+    /// way; bare integers taken as metres): room for deformations to dig below the lowest
+    /// ground and pile above the highest (granular trails on a world's highest plateau would
+    /// otherwise rise past what u16 stores). `fraction` in `0..=1`.
+    Padded {
+        /// Of the data's span, added below and above.
+        fraction: f32,
+    },
     /// `min_m ..= max_m`: bare integers map linearly onto it (0 to `min_m`, full scale to
     /// `max_m`); metres outside it are clamped to it.
     Span {
@@ -453,6 +461,17 @@ impl Dem {
             HeightRange::Auto => {
                 HeightEncoding::spanning::<u16>(data_min as f32 - 0.5, data_min as f32 + 0.5)?
             }
+            HeightRange::Padded { fraction } => {
+                if !(fraction.is_finite() && (0.0..=1.0).contains(&fraction)) {
+                    return Err(CoreError::OutOfRange {
+                        what: "height range padding (fraction of the span)",
+                        value: f64::from(fraction),
+                        expected: "0 to 1",
+                    });
+                }
+                let pad = ((data_max - data_min) * f64::from(fraction)).max(1.0);
+                HeightEncoding::spanning::<u16>((data_min - pad) as f32, (data_max + pad) as f32)?
+            }
         };
         let (span_lo, span_hi) = encoding.range::<u16>();
         let mut clamped = 0u64;
@@ -473,7 +492,7 @@ impl Dem {
             }),
         };
         // Under `Auto` nothing lies outside the span but f32 rounding of its ends.
-        if range == HeightRange::Auto {
+        if matches!(range, HeightRange::Auto | HeightRange::Padded { .. }) {
             clamped = 0;
         }
         Ok(CoarseHeights {
@@ -594,6 +613,40 @@ mod tests {
         let flat = dem(vec![42.0; 3], HeightUnits::Metres);
         let q = flat.to_coarse_heights(HeightRange::Auto).unwrap();
         assert!((q.encoding.to_metres(f64::from(q.grid.as_slice()[0])) - 42.0).abs() < 1e-3);
+    }
+
+    /// Padded leaves room above the highest and below the lowest height: a sixteenth of the
+    /// span, or 1 m where the span is small; a bad fraction is refused.
+    #[test]
+    fn padded_leaves_room_to_deform_beyond_the_data() {
+        let d = dem(vec![100.0, 500.0, 900.0], HeightUnits::Metres);
+        let q = d
+            .to_coarse_heights(HeightRange::Padded {
+                fraction: 1.0 / 16.0,
+            })
+            .unwrap();
+        let (lo, hi) = q.encoding.range::<u16>();
+        assert!(
+            (lo - 50.0).abs() < 0.01 && (hi - 950.0).abs() < 0.01,
+            "{lo}..{hi}"
+        );
+        let top = q.grid.as_slice()[2];
+        assert!(top < 65535 - 3000, "{top}: room above the highest ground");
+        let flat = dem(vec![42.0; 3], HeightUnits::Metres);
+        let q = flat
+            .to_coarse_heights(HeightRange::Padded { fraction: 0.1 })
+            .unwrap();
+        let (lo, hi) = q.encoding.range::<u16>();
+        assert!(
+            (lo - 41.0).abs() < 1e-3 && (hi - 43.0).abs() < 1e-3,
+            "{lo}..{hi}"
+        );
+        for fraction in [f32::NAN, -0.1, 1.5] {
+            assert!(
+                d.to_coarse_heights(HeightRange::Padded { fraction })
+                    .is_err()
+            );
+        }
     }
 
     #[test]

@@ -679,3 +679,47 @@ fn an_rgb_geotiff_over_a_dem_colours_every_lod_mode() {
     assert_eq!(code, Some(2), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A heightmap whose ground is its highest value almost everywhere (a plateau at the top of
+/// the data) becomes a streamed world with room above it: the world scenario's trails pile
+/// material there (they failed on frame 0, the rims past what u16 stores), the volume exact.
+#[test]
+fn a_world_from_a_plateau_at_the_datas_top_leaves_room_for_the_trails() {
+    let dir = fresh_dir("dem_plateau");
+    let n = 512;
+    let mut metres = vec![300.0f32; (n * n) as usize];
+    metres[0] = 0.0;
+    let tif = dir.join("plateau.tif");
+    write_geotiff(&tif, n, &metres, 0.5, None, &PROJECTED);
+    let world_dir = dir.join("world");
+    let (world_arg, tif_arg) = (s(&world_dir), s(&tif));
+    let args = [
+        "--no-gpu",
+        "--frames",
+        "20",
+        "--overview-size",
+        "32",
+        "--scenario",
+        "world",
+        "--world",
+        &world_arg,
+        "--heightmap",
+        &tif_arg,
+    ];
+    let (code, stderr, report) = run(&dir, &args);
+    assert_eq!(code, Some(0), "{stderr}");
+    let report = report.expect("report.json");
+    let frames = report["frames"].as_array().unwrap();
+    assert!(
+        frames
+            .iter()
+            .any(|f| f["granular_volume"].as_u64().is_some()),
+        "the trails ran"
+    );
+    for f in frames {
+        assert_eq!(f["granular_volume"], f["granular_volume_taken"], "{f}");
+    }
+    let enc = &report["height_encoding"];
+    assert!(f(&enc["max_m"]) > 310.0, "room above the plateau: {enc}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

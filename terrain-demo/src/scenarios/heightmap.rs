@@ -4,7 +4,7 @@
 //! `--max-height`), at `--texel-size` or the GeoTIFF's own pixel scale. What was chosen is
 //! printed as one line and returned for report.json.
 
-use crate::cli::{ByteOrderArg, Cli, FormatArg, HeightRangeArg};
+use crate::cli::{ByteOrderArg, Cli, FormatArg, HeightRangeArg, ScenarioKind};
 use crate::report::{HeightEncodingReport, HeightmapReport, NodataReport};
 use crate::usage_error::UsageExt;
 use anyhow::{Context, Result, bail};
@@ -144,6 +144,10 @@ pub fn load_planned(cli: &Cli, planned: Option<PlannedMap>) -> Result<Terrain> {
     make(cli, planned).usage()
 }
 
+/// The room a streamed world's encoding leaves above and below a heightmap's heights with
+/// `--height-range auto`: a sixteenth of their span (at least 1 m) each way.
+const WORLD_HEADROOM: f32 = 1.0 / 16.0;
+
 /// The range `cli` asks for and the name report.json gives its source.
 fn height_range(cli: &Cli) -> Result<(HeightRange, &'static str)> {
     Ok(match (cli.height_range, cli.max_height) {
@@ -158,7 +162,17 @@ fn height_range(cli: &Cli) -> Result<(HeightRange, &'static str)> {
             },
             "max-height",
         ),
-        (Some(HeightRangeArg::Auto) | None, None) => (HeightRange::Auto, "data"),
+        // A streamed world is deformed where its ground is highest too (granular trails pile
+        // material): its encoding leaves room above and below the data.
+        (Some(HeightRangeArg::Auto) | None, None) => match cli.scenario {
+            ScenarioKind::World | ScenarioKind::Flyover => (
+                HeightRange::Padded {
+                    fraction: WORLD_HEADROOM,
+                },
+                "data",
+            ),
+            ScenarioKind::Default | ScenarioKind::Snow => (HeightRange::Auto, "data"),
+        },
     })
 }
 
@@ -182,7 +196,7 @@ fn make(cli: &Cli, planned: Option<PlannedMap>) -> Result<Terrain> {
 /// The procedural terrain of `--size`, spanning `--height-range` (0..12 m by default).
 fn procedural(cli: &Cli, range: HeightRange) -> Result<Terrain> {
     let (lo, hi) = match range {
-        HeightRange::Auto => PROCEDURAL_RANGE,
+        HeightRange::Auto | HeightRange::Padded { .. } => PROCEDURAL_RANGE,
         HeightRange::Span { min_m, max_m } => (min_m, max_m),
     };
     let encoding = HeightEncoding::spanning::<u16>(lo, hi)?;
@@ -202,7 +216,7 @@ fn procedural(cli: &Cli, range: HeightRange) -> Result<Terrain> {
     };
     let texel = cli.texel_size.unwrap_or(DEFAULT_TEXEL_SIZE);
     let map = generate_coarse_map(&params, encoding, texel)?;
-    let source = if matches!(range, HeightRange::Auto) {
+    let source = if matches!(range, HeightRange::Auto | HeightRange::Padded { .. }) {
         "procedural"
     } else {
         "height-range"
@@ -258,7 +272,9 @@ fn from_dem(
     let sample = dem.sample.name();
     let units = match (dem.units, range) {
         (HeightUnits::Metres, _) => "metres",
-        (HeightUnits::Stored { .. }, HeightRange::Auto) => "integers taken as metres",
+        (HeightUnits::Stored { .. }, HeightRange::Auto | HeightRange::Padded { .. }) => {
+            "integers taken as metres"
+        }
         (HeightUnits::Stored { .. }, HeightRange::Span { .. }) => "integers mapped onto the range",
     };
     let encoding = encoding_report(q.encoding, q.data_min_m, q.data_max_m, range_source);
@@ -274,6 +290,10 @@ fn from_dem(
         encoding.max_m,
         encoding.scale,
         match range_source {
+            "data" if matches!(range, HeightRange::Padded { .. }) => {
+                "--height-range auto: the data's range and a sixteenth of it above and below, \
+                 room for the world's deformations"
+            }
             "data" => "--height-range auto: the data's range",
             "max-height" => "--max-height",
             _ => "--height-range",
