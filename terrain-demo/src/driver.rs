@@ -232,6 +232,7 @@ impl FrameStep<'_, '_> {
             vertices: None,
             max_screen_error_px: None,
             max_vertex_jump_px: None,
+            refined: None,
             camera_clearance_m: frame.camera_clearance_m,
             timings_ms: BTreeMap::new(),
             gpu_timestamps_ms: BTreeMap::new(),
@@ -256,6 +257,7 @@ impl FrameStep<'_, '_> {
                     vertices: Some(rendered.lod.vertices),
                     max_screen_error_px: rendered.lod.max_screen_error_px,
                     max_vertex_jump_px,
+                    refined: rendered.lod.refined,
                     gpu_objects: Some(scene.live_objects()),
                     frame_thread_cpu_ms,
                     ..report

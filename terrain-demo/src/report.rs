@@ -283,6 +283,7 @@ mod tests {
             vertices: None,
             max_screen_error_px: None,
             max_vertex_jump_px: None,
+            refined: None,
             camera_clearance_m: 1.0,
             timings_ms: BTreeMap::from([("render", 0.5)]),
             gpu_timestamps_ms: BTreeMap::new(),
@@ -476,6 +477,12 @@ pub struct FrameReport {
     /// today's camera), pixels: the popping metric.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_vertex_jump_px: Option<f32>,
+    /// `--detail refine`: whether the refined cells near the camera were drawn. Not on a frame
+    /// whose LOD could not leave their region out (it reached where the LOD morphs: near a
+    /// cliff, or where a streamed quadtree's bounds were still a whole tile's); the LOD drew
+    /// the region itself, and `triangles` leaves the refined ones out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refined: Option<bool>,
     /// Height of the camera's eye above the true surface under it (never negative: the camera
     /// is a body on the collision mirror, kept above pending deformations by their bounds).
     pub camera_clearance_m: f32,

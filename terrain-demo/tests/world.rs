@@ -178,6 +178,7 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
         );
         for f in tessellated["frames"].as_array().expect("frames") {
             assert_eq!(f["lod"], "tessellated", "{f}");
+            assert_eq!(f["refined"], true, "{f}");
             assert!(f["triangles"].as_u64() > Some(0), "{f}");
             assert!(f["camera_clearance_m"].as_f64() >= Some(0.0), "{f}");
             assert!(
@@ -202,6 +203,10 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
             ],
         );
         for f in refined["frames"].as_array().expect("frames") {
+            assert_eq!(
+                f["refined"], true,
+                "the clipmap always leaves the cells out: {f}"
+            );
             assert!(f["detail_dirty_texels"].as_u64() > Some(0), "{f}");
             assert!(
                 !f["timings_ms"]
@@ -210,6 +215,27 @@ fn trails_and_craters_persist_with_the_volume_exact_and_the_gpu_equal_to_the_cpu
                     .contains_key("stamp_cpu")
             );
         }
+        // CDLOD on this small, steep world: a frame whose LOD 0 may morph inside the refined
+        // region (on frame 0 the quadtree's bounds near the camera are still whole tiles')
+        // draws the region itself, and later frames refine it. (The run failed on frame 0.)
+        let cdlod = run(
+            &root.join("world_cdlod_refine"),
+            &root.join("out_cdlod_refine"),
+            12,
+            &[
+                "--resolution",
+                "96x64",
+                "--vram-budget",
+                "8",
+                "--lod",
+                "cdlod",
+                "--detail",
+                "refine",
+            ],
+        );
+        let frames = cdlod["frames"].as_array().expect("frames");
+        assert!(frames.iter().all(|f| f["refined"].is_boolean()), "{cdlod}");
+        assert_eq!(frames.last().expect("frames")["refined"], true, "{cdlod}");
     }
     let _ = std::fs::remove_dir_all(&root);
 }

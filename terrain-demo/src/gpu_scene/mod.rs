@@ -118,6 +118,9 @@ pub struct LodStats {
     pub vertices: u64,
     /// CDLOD: the largest projected geometric error of the drawn nodes, pixels.
     pub max_screen_error_px: Option<f32>,
+    /// `--detail refine`: whether the refined cells were drawn (the LOD left their region
+    /// out); `None` without refinement.
+    pub refined: Option<bool>,
 }
 
 impl GpuScene {
@@ -658,12 +661,17 @@ impl GpuScene {
         // The refined cells are drawn instead of the clipmap's (which still counts them).
         // The capture has waited for the frame, so its count has usually arrived; else the
         // last one that did.
+        let drew_refined = self.terrain.excluding();
         let refined = match self.refined.as_mut() {
             Some(r) => {
                 if let Some((count, _)) = r.pass.poll_count(device)? {
                     r.last_count = count;
                 }
-                u64::from(r.last_count)
+                if drew_refined {
+                    u64::from(r.last_count)
+                } else {
+                    0
+                }
             }
             None => 0,
         };
@@ -674,6 +682,7 @@ impl GpuScene {
                 mode: drawn.mode,
                 vertices: drawn.vertices,
                 max_screen_error_px: drawn.max_screen_error_px,
+                refined: self.refined.as_ref().map(|_| drew_refined),
             },
         })
     }
