@@ -6,7 +6,7 @@
 
 use crate::cli::{ByteOrderArg, Cli, FormatArg, HeightRangeArg, ScenarioKind};
 use crate::report::{HeightEncodingReport, HeightmapReport, NodataReport};
-use crate::usage_error::UsageExt;
+use crate::usage_error::{UsageExt, usage};
 use anyhow::{Context, Result, bail};
 use glam::UVec2;
 use std::path::Path;
@@ -148,6 +148,11 @@ pub fn load_planned(cli: &Cli, planned: Option<PlannedMap>) -> Result<Terrain> {
 /// `--height-range auto`: a sixteenth of their span (at least 1 m) each way.
 const WORLD_HEADROOM: f32 = 1.0 / 16.0;
 
+/// The farthest from 0 a heightmap's heights may lie, in metres (the Earth's radius is
+/// 6.4e6 m): beyond, the values are not metres (raw integers of a u32 file, say), and no
+/// camera frames them.
+const MAX_TERRAIN_M: f64 = 1e7;
+
 /// The range `cli` asks for and the name report.json gives its source.
 fn height_range(cli: &Cli) -> Result<(HeightRange, &'static str)> {
     Ok(match (cli.height_range, cli.max_height) {
@@ -267,7 +272,20 @@ fn from_dem(
         );
     }
     let (texel, texel_source) = texel_size(cli, path, &dem);
-    let q: CoarseHeights = dem.to_coarse_heights(range)?;
+    // Heights no u16 encoding can span (beyond +-1e15 m, or a constant too large for f32 to
+    // step) are the file's fault: a usage error that names it.
+    let q: CoarseHeights = dem
+        .to_coarse_heights(range)
+        .with_context(|| format!("the heights of {}", path.display()))
+        .usage()?;
+    let far = f64::from(q.data_min_m.abs().max(q.data_max_m.abs()));
+    if far > MAX_TERRAIN_M {
+        return Err(usage(anyhow::anyhow!(
+            "the heights of {} reach {far:.3e} m, beyond the +-{MAX_TERRAIN_M:.0e} m of any \
+             terrain: give --height-range MIN:MAX to map the file's values onto metres",
+            path.display()
+        )));
+    }
     let format = dem.format.name();
     let sample = dem.sample.name();
     let units = match (dem.units, range) {

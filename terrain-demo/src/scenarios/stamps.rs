@@ -22,6 +22,7 @@ use crate::frame_plan::{FramePlan, StampKind};
 use crate::gpu_scene::GpuScene;
 use crate::report::FrameStats;
 use crate::timings::{Step, ms_since};
+use crate::usage_error::UsageExt;
 use anyhow::Context as _;
 use anyhow::Result;
 use glam::Vec2;
@@ -134,11 +135,16 @@ impl StampScenario {
                     high: map.encoding().to_metres(hi),
                 };
                 let shape = path_params(&params.camera);
+                // The map's heights and extent come from the user's file or flags: a frame no
+                // camera can fly (heights of 1e29 m) is theirs to fix.
                 let path = if mode == CameraMode::Orbit {
-                    CameraPath::orbit(frame, shape)?
+                    CameraPath::orbit(frame, shape)
                 } else {
-                    CameraPath::flyover(frame, shape)?
+                    CameraPath::flyover(frame, shape)
                 };
+                let path = path
+                    .with_context(|| format!("the {} camera over {}", mode.name(), terrain.source))
+                    .usage()?;
                 CameraRig::on_path(path, |p| bilinear(&map, p).unwrap_or(frame.low))
             }
         };
