@@ -57,6 +57,8 @@ pub const MAX_TILES_PER_SIDE: u32 = 65536;
 /// build's progress, a verification's marks) stay within a few hundred MiB, whatever a
 /// manifest says. 2^24 tiles of 256^2 texels are a world of 1 048 576^2 texels.
 pub const MAX_LEVEL_TILES: u64 = 1 << 24;
+/// The most metres the u16 heights of a world may span.
+const MAX_HEIGHT_SPAN_M: f64 = 1e9;
 /// Smallest accepted tile side.
 pub const MIN_TILE_SIZE: u32 = 16;
 /// Largest accepted tile side (Flower 2010's 2048 detail tiles fit).
@@ -221,6 +223,16 @@ impl Manifest {
         }
         check_positive("texel_size", self.texel_size)?;
         HeightEncoding::new(self.encoding.scale, self.encoding.offset)?;
+        // Heights a world can hold and deform: a stored unit of 1 nm at least (finer steps
+        // have no fixed-point scale for granular trails) and a u16 span of at most 1e9 m.
+        let scale = f64::from(self.encoding.scale);
+        if !(1e-9..=MAX_HEIGHT_SPAN_M / 65535.0).contains(&scale) {
+            return Err(CacheError::OutOfRange {
+                what: "height encoding scale (metres per stored unit)",
+                value: scale,
+                expected: "1e-9 to 1e9 / 65535 (a u16 span of at most 1e9 m)",
+            });
+        }
         if let Some(d) = &self.detail {
             check_tile_size(d.tile_size)?;
             check_positive("detail texel_size", d.texel_size)?;
@@ -700,6 +712,21 @@ mod tests {
         ));
         let nan = text.replace("\"texel_size\": 0.25", "\"texel_size\": -1.0");
         assert!(Manifest::from_json(&nan).is_err());
+        // Encodings no world can hold or deform (a denormal step, a span past 1e9 m).
+        for scale in ["1e-45", "1e38"] {
+            let bad = text.replace(
+                &format!("\"height_scale\": {}", m.encoding.scale),
+                &format!("\"height_scale\": {scale}"),
+            );
+            assert_ne!(bad, text);
+            assert!(
+                matches!(
+                    Manifest::from_json(&bad),
+                    Err(CacheError::OutOfRange { what, .. }) if what.starts_with("height encoding")
+                ),
+                "{scale}"
+            );
+        }
     }
 
     /// A manifest of a few hundred bytes cannot ask for tables of billions of tiles: 65536^2
