@@ -259,13 +259,21 @@ pub fn repair_world(
     })
 }
 
+/// Most level-0 tiles [`check_before_use`] looks for lost files among (2^16: a world of
+/// 65536^2 texels in 256^2 tiles); a larger world has its `bounds.bin` files checked only
+/// (`verify_world` walks every tile).
+pub const CHECK_BEFORE_USE_MAX_TILES: u64 = 1 << 16;
+
 /// The defects a run must not start over, found without decoding a tile (milliseconds, where
 /// [`verify_world`] reads everything): a height level whose `bounds.bin` is missing or does
-/// not decode (a run's write-backs would merge into an empty one and record every other tile
+/// not read (a run's write-backs would merge into an empty one and record every other tile
 /// as empty), and a level-0 tile without a file whose recorded bounds are not the zero tile's
 /// (a lost tile a run would read as flat, then write its flat ancestors and bounds over the
-/// last record of it). Listed as [`verify_world`] lists them, at most `max_listed`; never
-/// writes. A store that cannot be listed or read is an error.
+/// last record of it). A tile whose write-back the journal says was in progress is left to
+/// the journal's recovery (its file and bounds may rightly disagree). Lost tiles are looked
+/// for in worlds of at most [`CHECK_BEFORE_USE_MAX_TILES`] level-0 tiles, a row of files
+/// listed at a time. Listed as [`verify_world`] lists them, at most `max_listed`; never
+/// writes. A store that cannot be listed is an error.
 pub fn check_before_use(world: &World, max_listed: usize) -> Result<Vec<Defect>, CacheError> {
     let m = *world.manifest();
     let mut found = Vec::new();
@@ -275,7 +283,7 @@ pub fn check_before_use(world: &World, max_listed: usize) -> Result<Vec<Defect>,
                 key,
                 kind,
                 repairable,
-                reason,
+                reason: cut(reason),
             });
         }
     };
@@ -283,43 +291,54 @@ pub fn check_before_use(world: &World, max_listed: usize) -> Result<Vec<Defect>,
     for level in 0..m.levels {
         let key = bounds_key(Layer::Height, level);
         match world.bounds(level) {
-            Ok(Some(b)) => {
-                if level == 0 {
-                    level0 = Some(b);
-                }
-            }
+            Ok(Some(b)) if level == 0 => level0 = Some(b),
+            Ok(Some(_)) => {}
             Ok(None) => push(key, DefectKind::BoundsMissing, true, "no file".into()),
-            Err(CacheError::Manifest { reason, .. }) => {
-                push(key, DefectKind::BoundsUnreadable, true, cut(reason));
-            }
-            Err(e) => return Err(e),
+            // Damaged, too large, a folder in its place: unreadable, rebuilt from level 0.
+            Err(e) => push(key, DefectKind::BoundsUnreadable, true, e.to_string()),
         }
     }
-    let Some(bounds) = level0 else {
+    let tiles = m.tiles_at(0);
+    let Some(bounds) =
+        level0.filter(|_| u64::from(tiles.x) * u64::from(tiles.y) <= CHECK_BEFORE_USE_MAX_TILES)
+    else {
         return Ok(found);
     };
-    let stored: std::collections::HashSet<String> = world
-        .store()
-        .list(&format!("{}/{:02x}", Layer::Height.folder(), 0))?
+    let pending: std::collections::HashSet<TileId> = crate::pool::journal::pending_level0(world)?
         .into_iter()
         .collect();
     let fill = m.height_fill;
-    for id in m.tiles_of(Layer::Height, 0) {
-        let Some(r) = bounds.get(id.x, id.y) else {
+    let held = |r: [u16; 2]| r != [fill, fill] && r != [u16::MAX, 0];
+    for y in 0..tiles.y {
+        let lost: Vec<(TileId, [u16; 2])> = (0..tiles.x)
+            .map(|x| TileId::new(0, x, y))
+            .filter_map(|id| bounds.get(id.x, id.y).map(|r| (id, r)))
+            .filter(|&(id, r)| held(r) && !pending.contains(&id))
+            .collect();
+        if lost.is_empty() {
             continue;
-        };
-        let key = m.tile_key(Layer::Height, id);
-        if r != [fill, fill] && r != [u16::MAX, 0] && !stored.contains(&key) {
-            push(
-                key,
-                DefectKind::Missing,
-                false,
-                format!(
-                    "no file, but level 0's bounds.bin records heights {}..={} (a missing tile \
-                     is the zero tile, all {fill})",
-                    r[0], r[1]
-                ),
-            );
+        }
+        // The row's folder: the key of its first tile without the file name.
+        let first = m.tile_key(Layer::Height, lost[0].0);
+        let row = first
+            .rsplit_once('/')
+            .map_or(first.as_str(), |(dir, _)| dir);
+        let stored: std::collections::HashSet<String> =
+            world.store().list(row)?.into_iter().collect();
+        for (id, r) in lost {
+            let key = m.tile_key(Layer::Height, id);
+            if !stored.contains(&key) {
+                push(
+                    key,
+                    DefectKind::Missing,
+                    false,
+                    format!(
+                        "no file, but level 0's bounds.bin records heights {}..={} (a missing \
+                         tile is the zero tile, all {fill})",
+                        r[0], r[1]
+                    ),
+                );
+            }
         }
     }
     Ok(found)

@@ -178,8 +178,9 @@ impl<'a> Capture<'a> {
 /// Removes what an earlier run wrote into `out` and this run may not overwrite: its frames
 /// (`frame_NNNN.png`, any count), `summary.png`, `terrain_final.png`, `report.json`, so a
 /// folder never mixes two runs. Only files that are what those names say are removed (a PNG,
-/// a report): a user's file under such a name, and everything else, is left alone. Returns
-/// how many were removed.
+/// a report): a user's file under such a name is left alone (unless this run writes that
+/// name itself: its first frames, the summary and the report replace what is there), and so
+/// is everything else. Returns how many were removed.
 pub fn remove_old_outputs(out: &Path) -> Result<usize> {
     let is_ours = |name: &str| {
         let frame = name

@@ -363,10 +363,10 @@ fn locate(text: &str, e: &toml::de::Error) -> anyhow::Error {
     }
 }
 
-/// Writes `given` over `base`, table by table; `at` is the key path for errors.
 /// The arrays whose default is absent (so the defaults do not show their length).
 const OPTIONAL_ARRAYS: [(&str, usize); 1] = [("style.ramp_m", 2)];
 
+/// Writes `given` over `base`, table by table; `at` is the key path for errors.
 fn merge(base: &mut toml::Table, given: toml::Table, at: &str) -> Result<()> {
     for (key, value) in given {
         let path = if at.is_empty() {

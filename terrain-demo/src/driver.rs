@@ -371,3 +371,27 @@ fn own_cpu_ms(clock: crate::timings::Clock, timings: &Timings) -> Option<f64> {
         .cpu_ms()
         .map(|ms| (ms - timings.cpu_not_own_ms()).max(0.0))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::timings::{Clock, Step};
+
+    /// The frame thread's own CPU time leaves out what it spent in GPU submits and the
+    /// capture, and keeps its own steps.
+    #[test]
+    #[cfg(any(target_os = "linux", target_os = "android"))]
+    fn the_frame_threads_own_cpu_leaves_out_gpu_submits() {
+        let clock = Clock::start();
+        let mut x = 0u64;
+        while clock.cpu_ms().expect("thread CPU clock") < 20.0 {
+            x = std::hint::black_box(x.wrapping_add(1));
+        }
+        let mut timings = Timings::default();
+        timings.add_cpu(Step::Render, Some(12.0));
+        timings.add_cpu(Step::Capture, Some(3.0));
+        timings.add_cpu(Step::Cache, Some(4.0));
+        let own = own_cpu_ms(clock, &timings).expect("thread CPU clock");
+        assert!((5.0..12.0).contains(&own), "{own} ms: about 20 - 15");
+    }
+}

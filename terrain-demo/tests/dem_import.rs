@@ -387,12 +387,17 @@ fn bad_dem_files_and_flags_are_one_line_usage_errors() {
     std::fs::write(&unknown, [0u8; 64]).unwrap();
     let nan = dir.join("nan.r32");
     std::fs::write(&nan, f32::NAN.to_le_bytes().repeat(32 * 32)).unwrap();
-    // Heights no encoding spans: +-1e29 m (below the 1e30 nodata cut).
+    // Heights no encoding spans: +-1e29 m (below the 1e30 nodata cut); and heights an
+    // encoding spans but no terrain has (+-1e8 m, raw values of a u32 file, say).
+    let extremes = |h: f32| -> Vec<u8> {
+        (0..32 * 32)
+            .flat_map(|i| if i % 2 == 0 { h } else { -h }.to_le_bytes())
+            .collect()
+    };
     let huge = dir.join("huge.r32");
-    let extremes: Vec<u8> = (0..32 * 32)
-        .flat_map(|i| if i % 2 == 0 { 1e29f32 } else { -1e29 }.to_le_bytes())
-        .collect();
-    std::fs::write(&huge, extremes).unwrap();
+    std::fs::write(&huge, extremes(1e29)).unwrap();
+    let far = dir.join("far.r32");
+    std::fs::write(&far, extremes(1e8)).unwrap();
     let cases: Vec<(Vec<String>, &str)> = vec![
         (vec!["--heightmap".into(), s(&cut)], "truncated"),
         (vec!["--heightmap".into(), s(&rgb)], "one band"),
@@ -439,6 +444,15 @@ fn bad_dem_files_and_flags_are_one_line_usage_errors() {
                 "32x32".into(),
             ],
             "huge.r32",
+        ),
+        (
+            vec![
+                "--heightmap".into(),
+                s(&far),
+                "--raw-size".into(),
+                "32x32".into(),
+            ],
+            "--height-range MIN:MAX",
         ),
         (
             vec![

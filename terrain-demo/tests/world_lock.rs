@@ -142,10 +142,16 @@ fn only_empty_folders_and_unfinished_builds_become_worlds() {
         "mine"
     );
     assert!(!user.join("height").exists() && !user.join("manifest.json").exists());
+    assert!(!user.join(".terrain-lock").exists(), "not even a lock file");
     // A world whose manifest was lost.
     let world = dir.join("world");
     let done = run(&world);
     assert!(done.status.success(), "{}", done.stderr);
+    // A marker a build killed after its manifest left is removed by the next run, so a later
+    // loss of the manifest is not taken for a build of ours to clear.
+    std::fs::write(world.join(".terrain-build"), "").unwrap();
+    assert!(run(&world).status.success());
+    assert!(!world.join(".terrain-build").exists());
     std::fs::remove_file(world.join("manifest.json")).unwrap();
     let done = run(&world);
     assert_eq!(done.status.code(), Some(2), "{}", done.stderr);

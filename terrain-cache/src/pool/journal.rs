@@ -63,6 +63,18 @@ pub(crate) fn recover(world: &World) -> Result<usize, CacheError> {
     Ok(recovered)
 }
 
+/// The level-0 tiles whose write-back a journal entry says was in progress: their files and
+/// bounds may disagree until [`recover`] has run.
+pub(crate) fn pending_level0(world: &World) -> Result<Vec<TileId>, CacheError> {
+    Ok(world
+        .store()
+        .list(PREFIX)?
+        .iter()
+        .filter_map(|k| parse(k))
+        .filter(|id| id.level == 0)
+        .collect())
+}
+
 /// Removes every entry (after a repair that rebuilt every coarser level).
 pub(crate) fn clear(world: &World) -> Result<(), CacheError> {
     for entry in world.store().list(PREFIX)? {

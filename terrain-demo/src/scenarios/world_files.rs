@@ -92,6 +92,15 @@ fn open_or_build_heights(
     cli: &Cli,
     heightmap: Option<super::heightmap::PlannedMap>,
 ) -> Result<(World, String, Option<HeightsInfo>)> {
+    // A folder that is no world and no build of ours is refused before anything (the lock
+    // file included) is made in it; checked again under the lock.
+    if !cli
+        .world
+        .join(terrain_cache::manifest::MANIFEST_KEY)
+        .exists()
+    {
+        build_folder_state(&cli.world)?;
+    }
     let store: Arc<dyn TileStore> = Arc::new(
         FsStore::open(&cli.world)
             .with_context(|| format!("cannot use world folder {}", cli.world.display()))
@@ -100,6 +109,10 @@ fn open_or_build_heights(
     // A folder with a manifest is a world: opened, or its error reported; never rebuilt over
     // (it may hold deformations of earlier runs).
     if store.exists(terrain_cache::manifest::MANIFEST_KEY)? {
+        // A build killed between its manifest and the marker's removal left the marker: the
+        // world is whole, and the marker must not make a later loss of its manifest look like
+        // a build of ours to clear.
+        remove_marker(&cli.world)?;
         let world = World::open(store.clone())
             .with_context(|| format!("the world in {} cannot be opened", cli.world.display()))
             .usage()?;
@@ -184,7 +197,7 @@ fn open_or_build_heights(
     if terminal && !cli.quiet {
         crate::console::note!();
     }
-    std::fs::remove_file(&marker).with_context(|| format!("cannot remove {}", marker.display()))?;
+    remove_marker(&cli.world)?;
     Ok((world, source, heights))
 }
 
@@ -220,34 +233,33 @@ const BUILD_MARKER: &str = ".terrain-build";
 /// before it starts again, so no tile of it (a hole, a stroke of paint) outlives it.
 const BUILD_FOLDERS: [&str; 6] = ["height", "hole", "material", "color", "detail", "journal"];
 
-/// Makes `dir` (which has no manifest) ready for a build: an empty folder is; one that holds
-/// an unfinished build of this program's (its marker) has that build's folders removed; any
-/// other content is refused untouched, since it is not a world (a world whose manifest was
-/// lost would be rebuilt over its deformations, and a user's folder filled with tiles).
-fn clear_for_build(dir: &Path) -> Result<()> {
-    let entries = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read world folder {}", dir.display()))
-        .usage()?;
-    let mut others = Vec::new();
+/// Whether the manifest-less folder `dir` may be built into, reading only: `Ok(false)` where
+/// it is new or empty (the lock file apart), `Ok(true)` where it holds an unfinished build of
+/// this program's (its marker, or the marker's temp file from a write cut short); any other
+/// content is refused, since it is not a world (a world whose manifest was lost would be
+/// rebuilt over its deformations, a user's folder filled with tiles).
+fn build_folder_state(dir: &Path) -> Result<bool> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
+        Err(e) => {
+            return Err(usage(
+                anyhow::Error::new(e)
+                    .context(format!("cannot read world folder {}", dir.display())),
+            ));
+        }
+    };
+    let (mut others, mut ours) = (Vec::new(), false);
     for entry in entries {
-        let name = entry?.file_name();
-        if name != terrain_cache::lock::LOCK_FILE && name != BUILD_MARKER {
-            others.push(name.to_string_lossy().into_owned());
+        let name = entry?.file_name().to_string_lossy().into_owned();
+        if name.starts_with(BUILD_MARKER) || name.starts_with(&format!(".{BUILD_MARKER}")) {
+            ours = true;
+        } else if name != terrain_cache::lock::LOCK_FILE {
+            others.push(name);
         }
     }
-    if others.is_empty() {
-        return Ok(());
-    }
-    if std::fs::symlink_metadata(dir.join(BUILD_MARKER)).is_ok_and(|m| m.is_file()) {
-        for name in BUILD_FOLDERS {
-            let path = dir.join(name);
-            if std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir()) {
-                std::fs::remove_dir_all(&path).with_context(|| {
-                    format!("cannot clear the unfinished build's {}", path.display())
-                })?;
-            }
-        }
-        return Ok(());
+    if others.is_empty() || ours {
+        return Ok(ours);
     }
     others.sort();
     let shown = others
@@ -264,6 +276,41 @@ fn clear_for_build(dir: &Path) -> Result<()> {
         others.len(),
         if others.len() > 3 { ", ..." } else { "" },
     )))
+}
+
+/// Makes `dir` (which has no manifest, and is locked) ready for a build: an unfinished build
+/// of this program's has its folders removed, so no tile of it (a hole, a stroke of paint)
+/// outlives it; see [`build_folder_state`] for what is refused.
+fn clear_for_build(dir: &Path) -> Result<()> {
+    if !build_folder_state(dir)? {
+        return Ok(());
+    }
+    for name in BUILD_FOLDERS {
+        let path = dir.join(name);
+        if std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir()) {
+            std::fs::remove_dir_all(&path).with_context(|| {
+                format!("cannot clear the unfinished build's {}", path.display())
+            })?;
+        }
+    }
+    Ok(())
+}
+
+/// Removes the build marker of `dir`, if any, durably (the folder synced after).
+fn remove_marker(dir: &Path) -> Result<()> {
+    let marker = dir.join(BUILD_MARKER);
+    match std::fs::remove_file(&marker) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => {
+            return Err(
+                anyhow::Error::new(e).context(format!("cannot remove {}", marker.display()))
+            );
+        }
+    }
+    std::fs::File::open(dir)
+        .and_then(|d| d.sync_all())
+        .with_context(|| format!("cannot sync {}", dir.display()))
 }
 
 /// What a run says about a world of PNG tiles (format version 1): it works as it is, and how

@@ -145,7 +145,14 @@ pub struct TerrainRenderer {
     excluded: Option<(IVec2, IVec2)>,
     /// Whether the last prepare left it out.
     excluding: bool,
+    /// Frames in a row the region could not be left out (a warning at [`REFUSALS_WARNED`]).
+    refused: u32,
 }
+
+/// Frames in a row whose refined region is drawn by the LOD before a warning says why: a
+/// configuration that can never leave it out (a CDLOD finest range or a tessellation minimum
+/// triangle too large for the radius) would otherwise refine nothing, silently.
+const REFUSALS_WARNED: u32 = 120;
 
 impl std::fmt::Debug for TerrainRenderer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -181,6 +188,7 @@ impl TerrainRenderer {
         Ok(Self {
             excluded: None,
             excluding: false,
+            refused: 0,
             lod: Lod::Clipmap(Clipmap {
                 layout,
                 renderer,
@@ -224,6 +232,7 @@ impl TerrainRenderer {
         Ok(Self {
             excluded: None,
             excluding: false,
+            refused: 0,
             lod: Lod::Cdlod(Cdlod {
                 source,
                 renderer,
@@ -259,6 +268,7 @@ impl TerrainRenderer {
         Ok(Self {
             excluded: None,
             excluding: false,
+            refused: 0,
             lod: Lod::Tessellated(Box::new(Tessellated {
                 updater: TessUpdater::spawn(TessState { hierarchy, density }, map)?,
                 gpu,
@@ -298,6 +308,7 @@ impl TerrainRenderer {
         Ok(Self {
             excluded: None,
             excluding: false,
+            refused: 0,
             lod: Lod::TessStreamed(Box::new(TessStreamed {
                 tess,
                 tree,
@@ -611,11 +622,20 @@ impl TerrainRenderer {
         match self.prepare_lod(device, queue, encoder, view) {
             Ok(()) => {
                 self.excluding = self.excluded.is_some();
+                self.refused = 0;
                 Ok(())
             }
             // The region cannot be left out this frame: drawn whole (see `excluding`), and
-            // tried again next frame. Nothing was recorded or written before the refusal.
-            Err(GpuError::CannotExclude { .. }) if self.excluded.is_some() => {
+            // tried again next frame. Nothing was recorded before the refusal (a streamed
+            // tessellation's quadtree upload may have been: it is the same again).
+            Err(GpuError::CannotExclude { what, reason }) if self.excluded.is_some() => {
+                self.refused = self.refused.saturating_add(1);
+                if self.refused == REFUSALS_WARNED {
+                    tracing::warn!(
+                        frames = REFUSALS_WARNED,
+                        "{what}: {reason}; the refined region has been drawn by the LOD instead"
+                    );
+                }
                 self.exclude_in_lod(None);
                 let drawn = self.prepare_lod(device, queue, encoder, view);
                 self.exclude_in_lod(self.excluded);
