@@ -108,30 +108,6 @@ fn sync_dir(dir: &Path) -> io::Result<()> {
     }
 }
 
-/// What a file that is not a regular one is, in words.
-fn special_kind(kind: &fs::FileType) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if kind.is_char_device() || kind.is_block_device() {
-            return "a device";
-        }
-        if kind.is_fifo() {
-            return "a named pipe";
-        }
-        if kind.is_socket() {
-            return "a socket";
-        }
-    }
-    if kind.is_dir() {
-        "a folder"
-    } else if kind.is_symlink() {
-        "a symbolic link"
-    } else {
-        "something"
-    }
-}
-
 /// What a successful atomic write leaves to say.
 #[derive(Debug)]
 pub struct AtomicWrite {
@@ -193,8 +169,8 @@ fn write_atomic_with(
             return Err(io_err(io::Error::new(
                 io::ErrorKind::InvalidInput,
                 format!(
-                    "{} is there, not a regular file: it is not replaced",
-                    special_kind(&meta.file_type())
+                    "a {} is there, not a regular file: it is not replaced",
+                    super::guard::file_kind(&meta.file_type())
                 ),
             )));
         }
@@ -261,7 +237,7 @@ mod tests {
         let folder = dir.0.join("folder");
         fs::create_dir(&folder).unwrap();
         let e = write_atomic(&folder, b"x").unwrap_err();
-        assert!(e.to_string().contains("a folder"), "{e}");
+        assert!(e.to_string().contains("a directory"), "{e}");
         assert!(folder.is_dir());
         #[cfg(unix)]
         {
@@ -282,7 +258,10 @@ mod tests {
             if let Ok(meta) = fs::symlink_metadata(null) {
                 use std::os::unix::fs::FileTypeExt;
                 if meta.file_type().is_char_device() {
-                    assert_eq!(special_kind(&meta.file_type()), "a device");
+                    assert_eq!(
+                        super::super::guard::file_kind(&meta.file_type()),
+                        "character device"
+                    );
                 }
             }
         }

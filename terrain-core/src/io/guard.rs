@@ -7,7 +7,7 @@ use std::fs::{self, File};
 use std::path::Path;
 
 /// What a file type is, in words.
-fn file_kind(ft: &fs::FileType) -> &'static str {
+pub(super) fn file_kind(ft: &fs::FileType) -> &'static str {
     #[cfg(unix)]
     {
         use std::os::unix::fs::FileTypeExt;
@@ -26,6 +26,8 @@ fn file_kind(ft: &fs::FileType) -> &'static str {
     }
     if ft.is_dir() {
         "directory"
+    } else if ft.is_symlink() {
+        "symbolic link"
     } else if ft.is_file() {
         "regular file"
     } else {
