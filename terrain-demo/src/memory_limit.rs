@@ -13,7 +13,7 @@ pub const DEFAULT_FRACTION: (u64, u64) = (1, 2);
 pub const FALLBACK_MACHINE_MEMORY: u64 = 4 << 30;
 
 /// Parses a byte count as `--max-memory` takes it: a number with an optional binary unit,
-/// `K`, `M`, `G` or `T` (KiB, MiB, GiB, TiB; `MB`, `MiB` and lower case are read the same),
+/// `K`, `M`, `G`, `T`, `P` or `E` (KiB to EiB; `MB`, `MiB` and lower case are read the same),
 /// as `1536M`, `8G`, `1.5G` or `1073741824`.
 pub fn parse_bytes(s: &str) -> Result<u64, String> {
     let t = s.trim();
@@ -27,9 +27,11 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         "m" | "mb" | "mib" => 20,
         "g" | "gb" | "gib" => 30,
         "t" | "tb" | "tib" => 40,
+        "p" | "pb" | "pib" => 50,
+        "e" | "eb" | "eib" => 60,
         _ => {
             return Err(format!(
-                "`{s}`: the unit must be K, M, G or T (as 1536M or 8G)"
+                "`{s}`: the unit must be K, M, G, T, P or E (as 1536M or 8G)"
             ));
         }
     };
@@ -132,6 +134,9 @@ mod tests {
         assert_eq!(parse_bytes("512K"), Ok(512 << 10));
         assert_eq!(parse_bytes("1T"), Ok(1 << 40));
         assert_eq!(parse_bytes("1000"), Ok(1000));
+        // The top of the range, as the help gives it (8E itself is past it).
+        assert_eq!(parse_bytes("7E"), Ok(7 << 60));
+        assert_eq!(parse_bytes("2P"), Ok(2 << 50));
         for bad in [
             "",
             "G",
@@ -143,6 +148,7 @@ mod tests {
             "NaNG",
             "inf",
             "9999999999T",
+            "8E",
         ] {
             assert!(parse_bytes(bad).is_err(), "{bad}");
         }

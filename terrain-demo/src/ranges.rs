@@ -101,7 +101,7 @@ pub const FLAGS: &[Range] = &[
         "--max-memory",
         1.0,
         9_223_372_036_854_775_808.0,
-        "bytes (1 to 8E)",
+        "bytes (1 to 8E, 8E itself excluded)",
     ),
 ];
 

@@ -354,20 +354,31 @@ impl App {
         };
         let s = self.run;
         let size = gpu.size();
-        println!(
-            "viewer: {} frames at {}x{} on {}: mean frame {:.1} ms ({:.1} fps), render {:.1} ms, \
+        if s.frames == 0 {
+            // Every frame was warm-up: no mean to give.
+            println!(
+                "viewer: {} frames at {}x{} on {}: all warm-up ({WARMUP_FRAMES}), none timed",
+                self.frame,
+                size.x,
+                size.y,
+                gpu.adapter()
+            );
+        } else {
+            println!(
+                "viewer: {} frames at {}x{} on {}: mean frame {:.1} ms ({:.1} fps), render {:.1} ms, \
              lod {:.2} ms, present {:.1} ms (over {} frames after {WARMUP_FRAMES} warm-up)",
-            self.frame,
-            size.x,
-            size.y,
-            gpu.adapter(),
-            s.mean(s.frame_ms),
-            1e3 / s.mean(s.frame_ms).max(1e-9),
-            s.mean(s.render_ms),
-            s.mean(s.lod_ms),
-            s.mean(s.present_ms),
-            s.frames
-        );
+                self.frame,
+                size.x,
+                size.y,
+                gpu.adapter(),
+                s.mean(s.frame_ms),
+                1e3 / s.mean(s.frame_ms).max(1e-9),
+                s.mean(s.render_ms),
+                s.mean(s.lod_ms),
+                s.mean(s.present_ms),
+                s.frames
+            );
+        }
         if let Some(path) = &self.settings.screenshot {
             let image = gpu.read_frame()?;
             terrain_core::io::write_png_rgba8(path, &image)

@@ -155,11 +155,24 @@ const MAX_SCRIPT_BYTES: u64 = 256 << 20;
 /// of at most [`MAX_SCRIPT_BYTES`], read through a bound in case it grows meanwhile.
 fn read_script(path: &std::path::Path) -> Result<String> {
     use std::io::Read;
-    // Checked before opening: opening a named pipe blocks until a writer comes.
-    if !std::fs::metadata(path)?.is_file() {
+    // Opened without blocking (opening a named pipe would wait for a writer), then checked.
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        // O_NONBLOCK, by value: std has no name for it.
+        let nonblock = if cfg!(any(target_os = "linux", target_os = "android")) {
+            0o4000
+        } else {
+            0x0004
+        };
+        options.custom_flags(nonblock);
+    }
+    let file = options.open(path)?;
+    if !file.metadata()?.is_file() {
         bail!("not a regular file");
     }
-    let file = std::fs::File::open(path)?;
     let mut bytes = Vec::new();
     file.take(MAX_SCRIPT_BYTES + 1).read_to_end(&mut bytes)?;
     if bytes.len() as u64 > MAX_SCRIPT_BYTES {
