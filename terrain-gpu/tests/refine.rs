@@ -690,4 +690,37 @@ fn no_cracks_at_the_edge_of_the_refined_region_under_cdlod_and_the_tessellation(
             assert_no_holes(&image, &format!("refine_refused_{mode}_{frame}"));
         }
     }
+    // A refusal keeps the region for the next frame: excluded once, a camera twice LOD 0's
+    // range up (it morphs within its reach of every node) draws the region whole, and the
+    // next, near the ground, leaves it out again without being told anew.
+    let terrain = &mut lods[0];
+    terrain.exclude(Some((IVec2::splat(-4), IVec2::splat(4))));
+    let style = style();
+    // Looking down at the region (culled from view, no node would meet it).
+    let prepare = |terrain: &mut TerrainRenderer, eye: Vec3| {
+        let camera = Camera::looking(eye, Vec3::new(0.3, -1.0, 0.0));
+        let view = TerrainView {
+            surface: ClipmapSurface::Coarse {
+                map: &scene.gpu_map,
+                normals: &scene.normals,
+            },
+            camera: &camera,
+            style: &style,
+            target_size: UVec2::new(320, 200),
+        };
+        let mut encoder = device.create_command_encoder(&Default::default());
+        terrain.prepare(device, queue, &mut encoder, &view).unwrap();
+        terrain.recall();
+        terrain.excluding()
+    };
+    let ground = scene.ground(xz);
+    let high = ground + 2.0 * cdlod.finest_range;
+    assert!(
+        !prepare(terrain, Vec3::new(xz.x, high, xz.y)),
+        "too high to leave out"
+    );
+    assert!(
+        prepare(terrain, Vec3::new(xz.x, ground + 0.8, xz.y)),
+        "left out again"
+    );
 }

@@ -156,6 +156,11 @@ impl CdlodRenderer {
         self.excluded = region;
     }
 
+    /// The region the next prepare leaves out (what [`Self::exclude`] set last).
+    pub(crate) fn excluded(&self) -> Option<(glam::IVec2, glam::IVec2)> {
+        self.excluded
+    }
+
     /// Shades [`crate::SurfaceShading::Materials`] frames with `materials` from the next
     /// prepare (until then, and without a call, with [`GpuMaterials::procedural`]).
     pub fn set_materials(&mut self, materials: &GpuMaterials) {

@@ -272,6 +272,11 @@ impl ClipmapRenderer {
         self.excluded = region;
     }
 
+    /// The region the next prepare leaves out (what [`Self::exclude`] set last).
+    pub(crate) fn excluded(&self) -> Option<(IVec2, IVec2)> {
+        self.excluded
+    }
+
     /// The formats this renderer draws into.
     pub fn target(&self) -> &TargetFormat {
         &self.target

@@ -525,6 +525,16 @@ impl TerrainRenderer {
         self.excluding
     }
 
+    /// The region the LOD's renderer leaves out at its next prepare.
+    fn lod_excluded(&self) -> Option<(IVec2, IVec2)> {
+        match &self.lod {
+            Lod::Clipmap(c) => c.renderer.excluded(),
+            Lod::Cdlod(c) => c.renderer.excluded(),
+            Lod::Tessellated(t) => t.excluded,
+            Lod::TessStreamed(t) => t.excluded,
+        }
+    }
+
     fn exclude_in_lod(&mut self, region: Option<(IVec2, IVec2)>) {
         match &mut self.lod {
             Lod::Clipmap(c) => c.renderer.exclude(region),
@@ -621,7 +631,9 @@ impl TerrainRenderer {
         self.excluding = false;
         match self.prepare_lod(device, queue, encoder, view) {
             Ok(()) => {
-                self.excluding = self.excluded.is_some();
+                // What the LOD itself was told to leave out, not what was asked last: the two
+                // differ only if a refusal failed to hand the region back.
+                self.excluding = self.lod_excluded().is_some();
                 self.refused = 0;
                 Ok(())
             }
